@@ -243,8 +243,13 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
 @nb.njit(cache=True)
 def _substep(t, h, state, t_ref, p, pair_k, period_k, fp, fg, work, first, trial):
     """Advance ``state`` in place over [t, t+h] (one smooth stiffness branch),
-    splitting once at a contact boundary crossing."""
-    rhs(t, state, t_ref, p, pair_k, period_k, fp, fg, first)
+    splitting once at a contact boundary crossing.
+
+    Returns the mesh force, first-stage accelerations of y1 and y2 at ``t``.
+    """
+    force, _, _ = rhs(t, state, t_ref, p, pair_k, period_k, fp, fg, first)
+    a1 = first[3]
+    a2 = first[4]
     _rk4(t, h, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
     b = p[HALF_BACKLASH]
     before = contact_region(state[2], b)
@@ -264,6 +269,7 @@ def _substep(t, h, state, t_ref, p, pair_k, period_k, fp, fg, work, first, trial
             _rk4(t + h_a, h - h_a, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
     for j in range(6):
         state[j] = trial[j]
+    return force, a1, a2
 
 
 @nb.njit(cache=True)
@@ -271,7 +277,8 @@ def step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, tri
     """Advance one grid step [t, t+h], splitting at known stiffness breakpoints.
 
     ``breakpoints`` holds mesh phases in (0, 1) where the stiffness or the
-    friction direction jumps (phase 0 is a grid point already).
+    friction direction jumps (phase 0 is a grid point already). Returns the
+    mesh force and the accelerations of y1, y2 at ``t`` (first RK4 stage).
     """
     cycles0 = p[OMEGA_MESH] * t / TWO_PI
     base = math.floor(cycles0 + 1e-9)
@@ -279,14 +286,24 @@ def step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, tri
     du = p[OMEGA_MESH] * h / TWO_PI
     t_now = t
     remaining_end = t + h
+    started = False
+    force = 0.0
+    a1 = 0.0
+    a2 = 0.0
     for bp in breakpoints:
         if u0 + 1e-12 < bp < u0 + du - 1e-12:
             t_break = (base + bp) * TWO_PI / p[OMEGA_MESH]
-            _substep(t_now, t_break - t_now, state, 0.5 * (t_now + t_break), p, pair_k, period_k,
-                     fp, fg, work, first, trial)
+            f_, b1_, b2_ = _substep(t_now, t_break - t_now, state, 0.5 * (t_now + t_break), p, pair_k,
+                                    period_k, fp, fg, work, first, trial)
+            if not started:
+                force, a1, a2 = f_, b1_, b2_
+                started = True
             t_now = t_break
-    _substep(t_now, remaining_end - t_now, state, 0.5 * (t_now + remaining_end), p, pair_k,
-             period_k, fp, fg, work, first, trial)
+    f_, b1_, b2_ = _substep(t_now, remaining_end - t_now, state, 0.5 * (t_now + remaining_end), p, pair_k,
+                            period_k, fp, fg, work, first, trial)
+    if not started:
+        force, a1, a2 = f_, b1_, b2_
+    return force, a1, a2
 
 
 @nb.njit(cache=True)
@@ -343,7 +360,6 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
     work = np.empty((4, 6))
     first = np.empty(6)
     trial = np.empty(6)
-    deriv = np.empty(6)
     shadow = np.empty(6)
     period = TWO_PI / p[OMEGA_MESH]
     h = period / steps_per_period
@@ -367,9 +383,9 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
             poincare[n - first_kept, 1] = state[5]
         for j in range(steps_per_period):
             t = (n * steps_per_period + j) * h
+            x = state[2]
+            force, a1, a2 = step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
             if kept:
-                force, k, ste = record(t, state, p, pair_k, period_k, fp, fg, deriv)
-                x = state[2]
                 acc[Q_X_SUM] += x
                 acc[Q_X_SQ] += x * x
                 if x < acc[Q_X_MIN]:
@@ -380,8 +396,8 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
                     acc[Q_F_MAX] = force
                 if force < acc[Q_F_MIN]:
                     acc[Q_F_MIN] = force
-                acc[Q_A1_SQ] += deriv[3] * deriv[3]
-                acc[Q_A2_SQ] += deriv[4] * deriv[4]
+                acc[Q_A1_SQ] += a1 * a1
+                acc[Q_A2_SQ] += a2 * a2
                 region = contact_region(x, b)
                 if region == 1:
                     acc[Q_N_DRIVE] += 1.0
@@ -393,7 +409,6 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
                 if history_stride > 0 and j % history_stride == 0:
                     history[row] = x
                     row += 1
-            step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
             if lyapunov:
                 step(t, h, shadow, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
         if lyapunov:

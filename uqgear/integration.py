@@ -107,7 +107,7 @@ def _attrs(setup: ModelSetup, method: str, n_periods: int, keep_periods: int, st
         "half_backlash": float(p[K.HALF_BACKLASH]), "z1": setup.design.z1, "z2": setup.design.z2,
         "method": method, "n_periods": n_periods, "keep_periods": keep_periods,
         "steps_per_period": steps, "damping_in_separation": int(p[K.DAMP_IN_SEPARATION]),
-        "stiffness": "fourier" if p[K.USE_PERIOD_TABLE] else "ishikawa",
+        "stiffness": setup.stiffness,
         "mesh_damping": float(p[K.CM]), "effects": "; ".join(repr(e) for e in setup.effects) or "none",
         "units_note": "SI units; pinion_speed in rpm",
     })

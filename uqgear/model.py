@@ -27,7 +27,7 @@ from .errors import OperatingPointError
 from .geometry import pair_geometry
 from .stiffness import StiffnessTables, stiffness_tables
 
-STIFFNESS_MODES = ("ishikawa", "fourier")
+STIFFNESS_MODES = ("ishikawa", "fourier", "constant")
 
 
 @lru_cache(maxsize=64)
@@ -97,6 +97,7 @@ class ModelSetup:
     breakpoints: np.ndarray
     derived: dict[str, float] = field(default_factory=dict)
     effects: tuple = ()
+    stiffness: str = "ishikawa"
 
     def slot(self, name: str) -> float:
         """Value of a parameter slot by name."""
@@ -163,8 +164,9 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
         Unmodelled-effect extensions (:mod:`uqgear.effects`).
     damping_in_separation : bool
         Keep mesh damping while the teeth are apart (classical form, default).
-    stiffness : {"ishikawa", "fourier"}
-        Raw Ishikawa curve or its truncated Fourier series.
+    stiffness : {"ishikawa", "fourier", "constant"}
+        Raw Ishikawa curve, its truncated Fourier series, or the constant
+        mean k_mean (linear-limit checks).
 
     Returns
     -------
@@ -178,8 +180,13 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
         raise OperatingPointError(f"stiffness: expected one of {', '.join(STIFFNESS_MODES)}; got {stiffness!r}")
     geometry = pair_geometry(design)
     tables = _cached_tables(design, "ishikawa")
-    period_table = _cached_tables(design, "fourier").period_stiffness if stiffness == "fourier" \
-        else tables.period_stiffness
+    if stiffness == "fourier":
+        period_table = _cached_tables(design, "fourier").period_stiffness
+    elif stiffness == "constant":
+        # linear-limit studies: k(t) = k_mean through the smooth-table path
+        period_table = np.full_like(tables.period_stiffness, tables.k_mean)
+    else:
+        period_table = tables.period_stiffness
     me = equivalent_mass(design)
     r1, r2 = geometry.pinion.base_radius, geometry.gear.base_radius
     k_mean = tables.k_mean
@@ -202,7 +209,7 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     p[K.LOA_LENGTH] = geometry.line_of_action_length
     p[K.PITCH_POSITION] = (geometry.pitch_point - geometry.contact_start) / geometry.base_pitch
     p[K.CONTACT_RATIO] = geometry.contact_ratio
-    p[K.USE_PERIOD_TABLE] = 1.0 if stiffness == "fourier" else 0.0
+    p[K.USE_PERIOD_TABLE] = 0.0 if stiffness == "ishikawa" else 1.0
     p[K.Z1], p[K.Z2] = design.z1, design.z2
     static_force = me * (r1 * drive_torque / design.I1 + r2 * adhesion_torque / design.I2)
     derived = {
@@ -214,10 +221,10 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     setup = ModelSetup(design=design, parameters=p, pair_stiffness=tables.pair_stiffness,
                        period_stiffness=period_table, factor_pinion=np.ones(design.z1),
                        factor_gear=np.ones(design.z2), breakpoints=np.empty(0), derived=derived,
-                       effects=tuple(effects))
+                       effects=tuple(effects), stiffness=stiffness)
     for effect in effects:
         effect.apply(setup)
-    setup.breakpoints = _breakpoints(setup)
+    setup.breakpoints = _breakpoints(setup) if stiffness == "ishikawa" or effects else np.empty(0)
     return setup
 
 
