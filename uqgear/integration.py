@@ -488,5 +488,57 @@ def samples_from_mapping(values: Mapping[str, Sequence[float] | np.ndarray]) -> 
     return xr.Dataset({name: ("sample", a) for name, a in arrays.items()})
 
 
-__all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period",
+
+
+class BatchEvaluator:
+    """The gear model as an ``evaluate(samples) -> Dataset`` function.
+
+    A picklable callable (settings in ``__init__``) so the runner can ship it
+    to dask workers; every uncertainty analysis takes a model of this form.
+
+    Parameters
+    ----------
+    design : Design
+    fixed : mapping, optional
+        Sample variables held constant (added to every sample unless the
+        samples carry them).
+    n_periods, keep_periods, history_per_period, lyapunov, effects,
+    damping_in_separation, stiffness, steps_per_mode
+        As in :func:`simulate_batch`.
+    """
+
+    def __init__(self, design: Design, *, fixed: Mapping[str, float] | None = None, n_periods: int = 400,
+                 keep_periods: int = 200, history_per_period: int = 0, lyapunov: bool = False,
+                 effects: Sequence[Effect] = (), damping_in_separation: bool = True,
+                 stiffness: str = "ishikawa", steps_per_mode: int = 32) -> None:
+        _check_counts(n_periods, keep_periods)
+        self.design = design
+        self.fixed = dict(fixed or {})
+        self.n_periods = n_periods
+        self.keep_periods = keep_periods
+        self.history_per_period = history_per_period
+        self.lyapunov = lyapunov
+        self.effects = tuple(effects)
+        self.damping_in_separation = damping_in_separation
+        self.stiffness = stiffness
+        self.steps_per_mode = steps_per_mode
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        samples = samples.copy()
+        for name, value in self.fixed.items():
+            if name not in samples.data_vars:
+                samples[name] = ("sample", np.full(samples.sizes["sample"], float(value)))
+        return simulate_batch(self.design, samples, n_periods=self.n_periods, keep_periods=self.keep_periods,
+                              history_per_period=self.history_per_period, lyapunov=self.lyapunov,
+                              effects=self.effects, damping_in_separation=self.damping_in_separation,
+                              stiffness=self.stiffness, steps_per_mode=self.steps_per_mode)
+
+    def key(self) -> str:
+        """A text identifying the settings (for checkpoint hashing)."""
+        return repr((self.design.to_json(), sorted(self.fixed.items()), self.n_periods, self.keep_periods,
+                     self.history_per_period, self.lyapunov, [repr(e) for e in self.effects],
+                     self.damping_in_separation, self.stiffness, self.steps_per_mode))
+
+
+__all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period", "BatchEvaluator",
            "QOI_INFO", "METHODS"]
