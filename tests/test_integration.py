@@ -89,7 +89,8 @@ def test_fast_matches_scipy_reference(design, speed, drive, adhesion):
 def test_batch_equals_single_runs(design):
     samples = uqgear.samples_from_mapping({"pinion_speed": [900.0, 4400.0], "adhesion_torque": [25e3, 40e3],
                                            "k1": [1.0e9, 1.3e9]})
-    batch = uqgear.simulate_batch(design, samples, n_periods=120, keep_periods=40, history_per_period=8)
+    batch = uqgear.simulate_batch(design, samples, n_periods=120, keep_periods=40, history_per_period=8,
+                                  rig_channels=True)
     for i in range(2):
         steps = int(batch["steps_per_period"].values[i])
         one = uqgear.simulate(design.replace(k1=float(samples.k1[i])), float(samples.pinion_speed[i]),
@@ -101,6 +102,9 @@ def test_batch_equals_single_runs(design):
         assert batch["dte_rms"].values[i] == pytest.approx(x.std(), rel=1e-6)
         assert batch["dte_peak_to_peak"].values[i] == pytest.approx(np.ptp(x), rel=1e-9)
         assert batch["x_history"].values[i] == pytest.approx(x[::steps // 8], rel=1e-12)
+        assert batch["te_history"].values[i] == pytest.approx(one["te"].values[::steps // 8], rel=1e-9)
+        assert batch["acc_gear_history"].values[i] == pytest.approx(
+            one["y2_acceleration"].values[::steps // 8], rel=1e-9)
         assert batch["fraction_separation"].values[i] == pytest.approx(np.mean(one["contact"].values == 0))
         assert batch["acc_pinion_rms"].values[i] == pytest.approx(
             np.sqrt(np.mean(one["y1_acceleration"].values ** 2)), rel=1e-6)

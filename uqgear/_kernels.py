@@ -145,6 +145,15 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     return k * scale, arm_pinion * scale, arm_gear * scale
 
 
+@nb.njit(cache=True, inline="always")
+def static_transmission_error(t, p):
+    """e(t): mesh-periodic STE plus any shaft run-out term, m."""
+    ste = p[STE_AMPLITUDE] * math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
+    if p[ECC_AMPLITUDE] != 0.0:
+        ste += p[ECC_AMPLITUDE] * math.sin(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    return ste
+
+
 @nb.njit(cache=True)
 def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     """Right-hand side of the 3-DOF model (model.md section 2) plus effect slots.
@@ -356,7 +365,11 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
 @nb.njit(cache=True)
 def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, n_periods,
                    keep_periods, history_stride, acc, poincare, history, lyapunov, scale):
-    """Integrate one run keeping only accumulators, Poincare points and a decimated x history."""
+    """Integrate one run keeping only accumulators, Poincare points and decimated histories.
+
+    ``history`` has shape (channels, points): channel 0 is x; with 4 channels
+    also te, y1'' and y2'' (the rig's channels).
+    """
     work = np.empty((4, 6))
     first = np.empty(6)
     trial = np.empty(6)
@@ -384,6 +397,8 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
         for j in range(steps_per_period):
             t = (n * steps_per_period + j) * h
             x = state[2]
+            state_y1 = state[0]
+            state_y2 = state[1]
             force, a1, a2 = step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
             if kept:
                 acc[Q_X_SUM] += x
@@ -407,7 +422,12 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
                     acc[Q_N_BACK] += 1.0
                 acc[Q_COUNT] += 1.0
                 if history_stride > 0 and j % history_stride == 0:
-                    history[row] = x
+                    history[0, row] = x
+                    if history.shape[0] >= 4:
+                        # the rig's channels: te = x - y1 + y2 + e, and the bearing accelerations
+                        history[1, row] = x - state_y1 + state_y2 + static_transmission_error(t, p)
+                        history[2, row] = a1
+                        history[3, row] = a2
                     row += 1
             if lyapunov:
                 step(t, h, shadow, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)

@@ -356,7 +356,8 @@ def build_batch(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect
 
 
 def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400, keep_periods: int = 200,
-                   history_per_period: int = 0, lyapunov: bool = False, effects: Sequence[Effect] = (),
+                   history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
+                   effects: Sequence[Effect] = (),
                    damping_in_separation: bool = True, stiffness: str = "ishikawa",
                    steps_per_mode: int = 32, threads: int | None = None) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
@@ -376,6 +377,9 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     history_per_period : int
         If > 0, also keep the DTE ``x`` at this many points per kept mesh
         period (variable ``x_history`` on dim ``mesh_cycle``).
+    rig_channels : bool
+        With ``history_per_period``: also keep ``te`` (x - y1 + y2 + e),
+        ``acc_pinion`` (y1'') and ``acc_gear`` (y2'') histories, the rig's channels.
     lyapunov : bool
         Also estimate the largest Lyapunov exponent (doubles the cost).
     effects, damping_in_separation, stiffness, steps_per_mode
@@ -419,7 +423,8 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     history_stride = (steps // history_per_period) if history_per_period > 0 else np.zeros(n, dtype=np.int64)
     accumulators = np.zeros((n, K.N_ACCUMULATORS))
     poincare = np.empty((n, keep_periods, 2))
-    history = np.empty((n, keep_periods * history_per_period if history_per_period > 0 else 0))
+    channels = 4 if rig_channels and history_per_period > 0 else 1
+    history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
     previous_threads = numba.get_num_threads()
     if threads is not None:
         numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
@@ -463,7 +468,14 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         if samples[name].dims == ("sample",) and name not in coords:
             coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
     if history_per_period > 0:
-        data["x_history"] = (("sample", "mesh_cycle"), history, {"units": "m", "long_name": "decimated DTE history"})
+        data["x_history"] = (("sample", "mesh_cycle"), history[:, 0], {"units": "m", "long_name": "decimated DTE history"})
+        if channels == 4:
+            data["te_history"] = (("sample", "mesh_cycle"), history[:, 1],
+                                  {"units": "m", "long_name": _LONG_NAMES["te"]})
+            data["acc_pinion_history"] = (("sample", "mesh_cycle"), history[:, 2],
+                                          {"units": "m s-2", "long_name": _LONG_NAMES["y1_acceleration"]})
+            data["acc_gear_history"] = (("sample", "mesh_cycle"), history[:, 3],
+                                        {"units": "m s-2", "long_name": _LONG_NAMES["y2_acceleration"]})
         coords["mesh_cycle"] = ("mesh_cycle", n_periods - keep_periods
                                 + np.arange(keep_periods * history_per_period) / history_per_period,
                                 {"units": "1", "long_name": "time in mesh periods"})
@@ -502,14 +514,14 @@ class BatchEvaluator:
     fixed : mapping, optional
         Sample variables held constant (added to every sample unless the
         samples carry them).
-    n_periods, keep_periods, history_per_period, lyapunov, effects,
+    n_periods, keep_periods, history_per_period, rig_channels, lyapunov, effects,
     damping_in_separation, stiffness, steps_per_mode
         As in :func:`simulate_batch`.
     """
 
     def __init__(self, design: Design, *, fixed: Mapping[str, float] | None = None, n_periods: int = 400,
-                 keep_periods: int = 200, history_per_period: int = 0, lyapunov: bool = False,
-                 effects: Sequence[Effect] = (), damping_in_separation: bool = True,
+                 keep_periods: int = 200, history_per_period: int = 0, rig_channels: bool = False,
+                 lyapunov: bool = False, effects: Sequence[Effect] = (), damping_in_separation: bool = True,
                  stiffness: str = "ishikawa", steps_per_mode: int = 32) -> None:
         _check_counts(n_periods, keep_periods)
         self.design = design
@@ -517,6 +529,7 @@ class BatchEvaluator:
         self.n_periods = n_periods
         self.keep_periods = keep_periods
         self.history_per_period = history_per_period
+        self.rig_channels = rig_channels
         self.lyapunov = lyapunov
         self.effects = tuple(effects)
         self.damping_in_separation = damping_in_separation
@@ -529,14 +542,15 @@ class BatchEvaluator:
             if name not in samples.data_vars:
                 samples[name] = ("sample", np.full(samples.sizes["sample"], float(value)))
         return simulate_batch(self.design, samples, n_periods=self.n_periods, keep_periods=self.keep_periods,
-                              history_per_period=self.history_per_period, lyapunov=self.lyapunov,
+                              history_per_period=self.history_per_period, rig_channels=self.rig_channels,
+                              lyapunov=self.lyapunov,
                               effects=self.effects, damping_in_separation=self.damping_in_separation,
                               stiffness=self.stiffness, steps_per_mode=self.steps_per_mode)
 
     def key(self) -> str:
         """A text identifying the settings (for checkpoint hashing)."""
         return repr((self.design.to_json(), sorted(self.fixed.items()), self.n_periods, self.keep_periods,
-                     self.history_per_period, self.lyapunov, [repr(e) for e in self.effects],
+                     self.history_per_period, self.rig_channels, self.lyapunov, [repr(e) for e in self.effects],
                      self.damping_in_separation, self.stiffness, self.steps_per_mode))
 
 
