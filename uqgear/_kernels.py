@@ -34,8 +34,8 @@ import numpy as np
  ECC_AMPLITUDE, ECC_OMEGA, ECC_PHASE, ECC_KAPPA,
  FRICTION, CLEARANCE1, CLEARANCE2,
  PATH_START, BASE_PITCH, LOA_LENGTH, PITCH_POSITION, CONTACT_RATIO,
- USE_PERIOD_TABLE, Z1, Z2) = range(41)
-N_PARAMS = 41
+ USE_PERIOD_TABLE, Z1, Z2, TOOTH_FACTORS) = range(42)
+N_PARAMS = 42
 
 #: Names of the parameter slots, in order (for error messages and tests).
 PARAMETER_SLOTS = (
@@ -45,6 +45,7 @@ PARAMETER_SLOTS = (
     "adhesion_amplitude", "adhesion_omega", "adhesion_phase", "ecc_amplitude", "ecc_omega",
     "ecc_phase", "ecc_kappa", "friction", "clearance1", "clearance2", "path_start",
     "base_pitch", "loa_length", "pitch_position", "contact_ratio", "use_period_table", "z1", "z2",
+    "tooth_factors",
 )
 
 # QoI accumulator layout of the batch kernel
@@ -55,7 +56,7 @@ N_ACCUMULATORS = 13
 TWO_PI = 2.0 * math.pi
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
 def dead_zone(x, half_width):
     """Backlash function f(x): x - b above b, x + b below -b, 0 between."""
     if x > half_width:
@@ -65,7 +66,7 @@ def dead_zone(x, half_width):
     return 0.0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
 def contact_region(x, half_width):
     """1 drive-side contact, 0 separation, -1 back-side contact."""
     if x > half_width:
@@ -75,7 +76,7 @@ def contact_region(x, half_width):
     return 0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
 def _interp_uniform(table, position, span):
     """Linear interpolation on a uniform grid over [0, span], clamped at the ends."""
     n = table.shape[0]
@@ -89,7 +90,7 @@ def _interp_uniform(table, position, span):
     return table[i] * (1.0 - w) + table[i + 1] * w
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     """Mesh stiffness and friction moment-arm sums at time ``t``.
 
@@ -108,17 +109,17 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     u_ref = cycles_ref - n_ref
     u = p[OMEGA_MESH] * t / TWO_PI - n_ref
     eps = p[CONTACT_RATIO]
-    z1 = int(p[Z1])
-    z2 = int(p[Z2])
     friction = p[FRICTION]
+    damaged = p[TOOTH_FACTORS] != 0.0
     k = 0.0
     arm_pinion = 0.0
     arm_gear = 0.0
     i = 0
     while u_ref + i < eps:
         kp = _interp_uniform(pair_k, u + i, eps)
-        tooth = int(n_ref) - i
-        kp *= factor_pinion[tooth % z1] * factor_gear[tooth % z2]
+        if damaged:
+            tooth = int(n_ref) - i
+            kp *= factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
         k += kp
         if friction != 0.0:
             # sliding reverses at the pitch point: beyond it (recess) the
@@ -129,8 +130,8 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
             arm_gear += kp * sign * (p[LOA_LENGTH] - s)
         i += 1
     if p[USE_PERIOD_TABLE] != 0.0:
-        # smooth Fourier-series curve; tooth factors act through the pair sum above,
-        # so only the healthy part is replaced by the series
+        # smooth Fourier-series (or constant) curve; tooth factors act through
+        # the pair sum above, so only its healthy part is replaced
         healthy = 0.0
         i = 0
         while u_ref + i < eps:
@@ -145,7 +146,7 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     return k * scale, arm_pinion * scale, arm_gear * scale
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
 def static_transmission_error(t, p):
     """e(t): mesh-periodic STE plus any shaft run-out term, m."""
     ste = p[STE_AMPLITUDE] * math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
@@ -154,80 +155,107 @@ def static_transmission_error(t, p):
     return ste
 
 
-@nb.njit(cache=True)
-def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
-    """Right-hand side of the 3-DOF model (model.md section 2) plus effect slots.
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, terms):
+    """Time-only terms of the right-hand side, written into ``terms``.
 
-    ``state`` = (y1, y2, x, y1', y2', x'); writes the derivative into ``out``
-    and returns (mesh force F, mesh stiffness k, static transmission error e).
+    ``terms`` = (k, arm_pinion, arm_gear, relative drive acceleration
+    R1 T1(t)/I1 + R2 T2(t)/I2, e(t), e''(t)). RK4's two midpoint stages
+    share one evaluation.
     """
-    y1 = state[0]
-    y2 = state[1]
-    x = state[2]
-    v1 = state[3]
-    v2 = state[4]
-    vx = state[5]
-    b = p[HALF_BACKLASH]
     k, arm_pinion, arm_gear = mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
-    fx = dead_zone(x, b)
-    damping = p[CM]
-    if p[DAMP_IN_SEPARATION] == 0.0 and fx == 0.0:
-        damping = 0.0
-    force = k * fx + damping * vx
-    bearing1 = p[K1] * dead_zone(y1, p[CLEARANCE1])
-    bearing2 = p[K2] * dead_zone(y2, p[CLEARANCE2])
-    a1 = (-p[C1] * v1 - bearing1 - force) / p[M1]
-    a2 = (-p[C2] * v2 - bearing2 + force) / p[M2]
     drive = p[T1]
     if p[RIPPLE_AMPLITUDE] != 0.0:
         drive *= 1.0 + p[RIPPLE_AMPLITUDE] * math.cos(p[RIPPLE_OMEGA] * t + p[RIPPLE_PHASE])
     adhesion = p[T2]
     if p[ADHESION_AMPLITUDE] != 0.0:
         adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
+    sine = math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
+    ste = p[STE_AMPLITUDE] * sine
+    ste_acc = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    if p[ECC_AMPLITUDE] != 0.0:
+        ecc = p[ECC_AMPLITUDE] * math.sin(p[ECC_OMEGA] * t + p[ECC_PHASE])
+        ste += ecc
+        ste_acc -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
+    terms[0] = k
+    terms[1] = arm_pinion
+    terms[2] = arm_gear
+    terms[3] = p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2]
+    terms[4] = ste
+    terms[5] = ste_acc
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def dynamics(state, terms, p, out):
+    """State-dependent part of the right-hand side; returns the mesh force F."""
+    x = state[2]
+    vx = state[5]
+    b = p[HALF_BACKLASH]
+    fx = dead_zone(x, b)
+    damping = p[CM]
+    if p[DAMP_IN_SEPARATION] == 0.0 and fx == 0.0:
+        damping = 0.0
+    force = terms[0] * fx + damping * vx
+    bearing1 = p[K1] * dead_zone(state[0], p[CLEARANCE1])
+    bearing2 = p[K2] * dead_zone(state[1], p[CLEARANCE2])
+    a1 = (-p[C1] * state[3] - bearing1 - force) / p[M1]
+    a2 = (-p[C2] * state[4] - bearing2 + force) / p[M2]
     # R1 theta1'' - R2 theta2'' with the rigid-body rotation eliminated
-    relative = p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2] - force / p[ME]
+    relative = terms[3] - force / p[ME]
     if p[FRICTION] != 0.0:
         # pinion: -mu f(x) sum k_i s_i sign_i ; gear: +mu f(x) sum k_i (L - s_i) sign_i
-        friction_pinion = -p[FRICTION] * fx * arm_pinion
-        friction_gear = p[FRICTION] * fx * arm_gear
+        friction_pinion = -p[FRICTION] * fx * terms[1]
+        friction_gear = p[FRICTION] * fx * terms[2]
         relative += p[R1] * friction_pinion / p[I1] - p[R2] * friction_gear / p[I2]
-    mesh_angle = p[OMEGA_MESH] * t + p[STE_PHASE]
-    ste = p[STE_AMPLITUDE] * math.sin(mesh_angle)
-    ste_acc = -p[STE_AMPLITUDE] * p[OMEGA_MESH] ** 2 * math.sin(mesh_angle)
-    if p[ECC_AMPLITUDE] != 0.0:
-        ecc_angle = p[ECC_OMEGA] * t + p[ECC_PHASE]
-        ste += p[ECC_AMPLITUDE] * math.sin(ecc_angle)
-        ste_acc -= p[ECC_AMPLITUDE] * p[ECC_OMEGA] ** 2 * math.sin(ecc_angle)
-    out[0] = v1
-    out[1] = v2
+    out[0] = state[3]
+    out[1] = state[4]
     out[2] = vx
     out[3] = a1
     out[4] = a2
-    out[5] = a1 - a2 + relative - ste_acc
-    return force, k, ste
+    out[5] = a1 - a2 + relative - terms[5]
+    return force
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
+def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
+    """Right-hand side of the 3-DOF model (model.md section 2) plus effect slots.
+
+    ``state`` = (y1, y2, x, y1', y2', x'); writes the derivative into ``out``
+    and returns (mesh force F, mesh stiffness k, static transmission error e).
+    """
+    terms = np.empty(6)
+    forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, terms)
+    force = dynamics(state, terms, p, out)
+    return force, terms[0], terms[4]
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def _rk4(t, h, state, first, t_ref, p, pair_k, period_k, fp, fg, work, out):
-    """One RK4 step from ``state`` (first stage ``first`` given) into ``out``."""
+    """One RK4 step from ``state`` (first stage ``first`` given) into ``out``.
+
+    ``work`` holds rows k2, k3, k4, tmp, terms.
+    """
     k2 = work[0]
     k3 = work[1]
     k4 = work[2]
     tmp = work[3]
+    terms = work[4]
+    forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg, terms)
     for j in range(6):
         tmp[j] = state[j] + 0.5 * h * first[j]
-    rhs(t + 0.5 * h, tmp, t_ref, p, pair_k, period_k, fp, fg, k2)
+    dynamics(tmp, terms, p, k2)
     for j in range(6):
         tmp[j] = state[j] + 0.5 * h * k2[j]
-    rhs(t + 0.5 * h, tmp, t_ref, p, pair_k, period_k, fp, fg, k3)
+    dynamics(tmp, terms, p, k3)
+    forcing(t + h, t_ref, p, pair_k, period_k, fp, fg, terms)
     for j in range(6):
         tmp[j] = state[j] + h * k3[j]
-    rhs(t + h, tmp, t_ref, p, pair_k, period_k, fp, fg, k4)
+    dynamics(tmp, terms, p, k4)
     for j in range(6):
         out[j] = state[j] + h / 6.0 * (first[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def _crossing_fraction(x0, v0, x1, v1, h, level):
     """Fraction of a step where the cubic Hermite interpolant of x reaches ``level``."""
     lo = 0.0
@@ -249,14 +277,16 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
     return 0.5 * (lo + hi)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def _substep(t, h, state, t_ref, p, pair_k, period_k, fp, fg, work, first, trial):
     """Advance ``state`` in place over [t, t+h] (one smooth stiffness branch),
     splitting once at a contact boundary crossing.
 
     Returns the mesh force, first-stage accelerations of y1 and y2 at ``t``.
     """
-    force, _, _ = rhs(t, state, t_ref, p, pair_k, period_k, fp, fg, first)
+    terms = work[4]
+    forcing(t, t_ref, p, pair_k, period_k, fp, fg, terms)
+    force = dynamics(state, terms, p, first)
     a1 = first[3]
     a2 = first[4]
     _rk4(t, h, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
@@ -274,14 +304,15 @@ def _substep(t, h, state, t_ref, p, pair_k, period_k, fp, fg, work, first, trial
             _rk4(t, h_a, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
             for j in range(6):
                 state[j] = trial[j]
-            rhs(t + h_a, state, t_ref, p, pair_k, period_k, fp, fg, first)
+            forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg, terms)
+            dynamics(state, terms, p, first)
             _rk4(t + h_a, h - h_a, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
     for j in range(6):
         state[j] = trial[j]
     return force, a1, a2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial):
     """Advance one grid step [t, t+h], splitting at known stiffness breakpoints.
 
@@ -315,14 +346,14 @@ def step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, tri
     return force, a1, a2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def record(t, state, p, pair_k, period_k, fp, fg, deriv):
     """Evaluate derivative and mesh quantities at a grid point (pairs taken just after ``t``)."""
     t_ref = t + 1e-9 * TWO_PI / p[OMEGA_MESH]
     return rhs(t, state, t_ref, p, pair_k, period_k, fp, fg, deriv)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period,
                       n_periods, keep_periods, stride, history, poincare):
     """Integrate one run, storing histories of the kept periods.
@@ -332,7 +363,7 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
     (keep_periods, 6): the state at each kept period start.
     """
     state = state0.copy()
-    work = np.empty((4, 6))
+    work = np.empty((5, 6))
     first = np.empty(6)
     trial = np.empty(6)
     deriv = np.empty(6)
@@ -362,7 +393,7 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
     return state
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
 def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, n_periods,
                    keep_periods, history_stride, acc, poincare, history, lyapunov, scale):
     """Integrate one run keeping only accumulators, Poincare points and decimated histories.
@@ -370,7 +401,7 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
     ``history`` has shape (channels, points): channel 0 is x; with 4 channels
     also te, y1'' and y2'' (the rig's channels).
     """
-    work = np.empty((4, 6))
+    work = np.empty((5, 6))
     first = np.empty(6)
     trial = np.empty(6)
     shadow = np.empty(6)
@@ -450,7 +481,7 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
         acc[Q_LYAPUNOV] = np.nan
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, parallel=True, error_model="numpy", fastmath=True)
 def integrate_batch(states, params, pair_tables, period_tables, table_index, factor_pinion,
                     factor_gear, breakpoints, steps_per_period, n_periods, keep_periods,
                     history_stride, lyapunov, scales, accumulators, poincare, history):

@@ -82,7 +82,7 @@ def _highest_mode(design: Design, stiffness_scale: float) -> float:
     return float(natural_frequencies(design, k_peak)[-1])
 
 
-def steps_per_period(setup: ModelSetup, steps_per_mode: int = 32, minimum: int = 32,
+def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int = 32,
                      multiple_of: int = 1) -> int:
     """Grid steps per mesh period for the fast integrator.
 
@@ -210,7 +210,7 @@ def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_
              method: str = "fast", n_periods: int = 400, keep_periods: int = 200,
              samples_per_period: int = 64, mesh_stiffness_scale: float = 1.0,
              effects: Sequence[Effect] = (), damping_in_separation: bool = True,
-             stiffness: str = "ishikawa", steps_per_mode: int = 32, rtol: float = 1e-10,
+             stiffness: str = "ishikawa", steps_per_mode: int = 24, rtol: float = 1e-10,
              atol: float | None = None, initial_state: np.ndarray | None = None) -> xr.Dataset:
     """Simulate one operating point of the gear pair.
 
@@ -359,7 +359,7 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
                    history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
                    effects: Sequence[Effect] = (),
                    damping_in_separation: bool = True, stiffness: str = "ishikawa",
-                   steps_per_mode: int = 32, threads: int | None = None) -> xr.Dataset:
+                   steps_per_mode: int = 24, threads: int | None = None) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
 
     Parameters
@@ -522,7 +522,7 @@ class BatchEvaluator:
     def __init__(self, design: Design, *, fixed: Mapping[str, float] | None = None, n_periods: int = 400,
                  keep_periods: int = 200, history_per_period: int = 0, rig_channels: bool = False,
                  lyapunov: bool = False, effects: Sequence[Effect] = (), damping_in_separation: bool = True,
-                 stiffness: str = "ishikawa", steps_per_mode: int = 32) -> None:
+                 stiffness: str = "ishikawa", steps_per_mode: int = 24) -> None:
         _check_counts(n_periods, keep_periods)
         self.design = design
         self.fixed = dict(fixed or {})

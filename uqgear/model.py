@@ -224,6 +224,8 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
                        effects=tuple(effects), stiffness=stiffness)
     for effect in effects:
         effect.apply(setup)
+    # the kernel skips per-tooth lookups unless some tooth differs
+    p[K.TOOTH_FACTORS] = float(np.any(setup.factor_pinion != 1.0) or np.any(setup.factor_gear != 1.0))
     setup.breakpoints = _breakpoints(setup) if stiffness == "ishikawa" or effects else np.empty(0)
     return setup
 
