@@ -162,3 +162,20 @@ def test_dimensionless_records_characteristic_length(design):
 def test_bad_operating_input(design, call, message):
     with pytest.raises(OperatingPointError, match=message):
         call(design)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("speed, drive, adhesion, expected", [
+    (4200.0, 7000.0, 46520.0, "period-1"),   # dry rail: separating but period-1
+    (4400.0, 7000.0, 33000.0, "period-17"),  # rated torque, mid interval: a period-17 window
+    (4750.0, 1000.0, 4810.0, "period-2"),    # light load: period-2 of the doubling cascade
+])
+def test_fast_and_scipy_classify_alike(design, speed, drive, adhesion, expected):
+    from uqgear.dynamics import classify_dataset
+
+    kw = dict(n_periods=500, keep_periods=100, samples_per_period=32)
+    ref = uqgear.simulate(design, speed, drive, adhesion, method="scipy", **kw)
+    fast = uqgear.simulate(design, speed, drive, adhesion, **kw)
+    assert classify_dataset(ref).label == classify_dataset(fast).label == expected
+    x_ref, x_fast = ref["x"].values, fast["x"].values
+    assert np.sqrt(np.mean((x_fast - x_ref) ** 2)) / np.std(x_ref) <= 1e-3
