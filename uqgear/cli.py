@@ -1,0 +1,304 @@
+"""The ``uqgear`` command line.
+
+::
+
+    uqgear validate STUDY.yaml
+    uqgear run STUDY.yaml --out DIR [--scheduler ADDRESS] [--workers N] [--resume] [--quiet]
+    uqgear report DIR
+    uqgear simulate --speed RPM [--drive-torque NM] [--adhesion-torque NM] [--design NAME|FILE]
+                    [--out FILE.png|FILE.nc]
+
+A user mistake (a study that breaks the schema, a missing file, bad YAML, an
+unreachable scheduler) ends with exit status 2 and a one-line message on
+standard error, without a traceback, and leaves no partial output: ``run``
+writes into a hidden sibling folder ``.DIR.partial`` and renames it to
+``DIR`` only when everything is written. An interrupted run (Ctrl-C, a killed
+job) keeps that folder, with its chunk checkpoints, so that ``--resume``
+continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NoReturn
+
+from .errors import UqgearError
+
+#: Exit status of a user mistake.
+EXIT_USER_ERROR = 2
+#: Exit status after Ctrl-C.
+EXIT_INTERRUPTED = 130
+
+PARTIAL_SUFFIX = ".partial"
+#: Folder of chunk checkpoints inside the work folder.
+CHECKPOINTS = ".checkpoints"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line error messages and exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USER_ERROR, f"uqgear: error: {message} (see '{self.prog} --help')\n")
+
+
+def _one_line(message: object) -> str:
+    return " ".join(str(message).split())
+
+
+def _fail(message: object) -> int:
+    print(f"uqgear: error: {_one_line(message)}", file=sys.stderr)
+    return EXIT_USER_ERROR
+
+
+# ---------------------------------------------------------------------------- validate
+
+
+def _command_validate(args: argparse.Namespace) -> int:
+    from .study import load_study
+
+    study = load_study(args.study)
+    kinds = ", ".join(f"{spec.name} ({spec.type})" for spec in study.analyses)
+    print(f"{args.study}: valid study {study.name!r} with {len(study.analyses)} analyses: {kinds}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- run
+
+
+def _partial_dir(out: Path) -> Path:
+    return out.parent / f".{out.name}{PARTIAL_SUFFIX}"
+
+
+def _is_empty_dir(path: Path) -> bool:
+    return path.is_dir() and not any(path.iterdir())
+
+
+def _copy_previous(out: Path, work: Path) -> None:
+    """Copy a finished run's results and checkpoints into the work folder (for --resume)."""
+    for item in out.iterdir():
+        target = work / item.name
+        if target.exists():
+            continue
+        if item.is_dir():
+            shutil.copytree(item, target)
+        elif item.suffix == ".nc":
+            shutil.copy2(item, target)
+
+
+def _publish(work: Path, out: Path) -> None:
+    """Move the finished work folder to ``out`` (replacing a previous run's folder)."""
+    if out.exists():
+        if _is_empty_dir(out):
+            out.rmdir()
+        else:
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+            old.rmdir()
+            out.rename(old)
+            work.rename(out)
+            shutil.rmtree(old, ignore_errors=True)
+            return
+    work.rename(out)
+
+
+def _command_run(args: argparse.Namespace) -> int:
+    from .study import load_study
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        return _fail(f"--out {out}: exists and is not a folder; expected a new or empty folder")
+    if out.is_dir() and not _is_empty_dir(out) and not args.resume:
+        return _fail(f"--out {out}: folder exists and is not empty; choose a new folder, remove it, "
+                     "or pass --resume to continue or update that run")
+    if not out.parent.is_dir():
+        return _fail(f"--out {out}: the parent folder {out.parent} does not exist")
+    if args.workers is not None and args.workers < 1:
+        return _fail(f"--workers: expected a positive integer; got {args.workers}")
+    # the study is validated completely before anything is created
+    study = load_study(args.study)
+
+    from .analyses import run_study
+    from .report import write_report
+
+    work = _partial_dir(out)
+    created = False
+    if work.exists() and not args.resume:
+        shutil.rmtree(work)  # left by an interrupted run; a fresh run was asked for
+    if not work.exists():
+        work.mkdir()
+        created = True
+    try:
+        if args.resume and out.is_dir():
+            _copy_previous(out, work)
+        run_study(study, work, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                  show_progress=not args.quiet, checkpoint_dir=work / CHECKPOINTS)
+        if study.outputs.report:
+            write_report(work, dpi=study.outputs.dpi)
+        # chunk checkpoints only serve an interrupted run; a finished analysis is reused
+        # from its result file on --resume
+        shutil.rmtree(work / CHECKPOINTS, ignore_errors=True)
+        _publish(work, out)
+    except KeyboardInterrupt:
+        print(f"uqgear: interrupted; finished work is kept in {work}; run again with --resume "
+              "to continue", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BaseException:
+        # no partial output: drop what this invocation created; a folder left by an earlier
+        # interrupted run stays for --resume
+        if created or not args.resume:
+            shutil.rmtree(work, ignore_errors=True)
+        raise
+    if not args.quiet:
+        print(f"results written to {out}" + (f" (report: {out / 'report.html'})"
+                                              if study.outputs.report else ""))
+    return 0
+
+
+# ---------------------------------------------------------------------------- report
+
+
+def _command_report(args: argparse.Namespace) -> int:
+    from .report import write_report
+
+    path = write_report(Path(args.directory), dpi=args.dpi)
+    print(f"report written to {path}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- simulate
+
+
+def _command_simulate(args: argparse.Namespace) -> int:
+    from .design import load_design
+    from .errors import OperatingPointError
+
+    design = load_design(args.design)
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        if out.suffix.lower() not in (".png", ".nc"):
+            return _fail(f"--out {out}: expected a file name ending in .png (figure) or .nc (data)")
+        if not out.parent.is_dir():
+            return _fail(f"--out {out}: the folder {out.parent} does not exist")
+    if args.speed <= 0:
+        raise OperatingPointError(f"--speed: expected a pinion speed > 0 rpm; got {args.speed:g}")
+    if args.keep_periods > args.n_periods:
+        raise OperatingPointError(f"--keep-periods: expected at most --n-periods ({args.n_periods}); "
+                                  f"got {args.keep_periods}")
+
+    from .analyses import quick_run
+    from .report import simulation_figure_png
+    from .results import save_result
+
+    drive = args.drive_torque if args.drive_torque is not None else design.operation.drive_torque
+    adhesion = args.adhesion_torque if args.adhesion_torque is not None else drive * design.z2 / design.z1
+    run = quick_run(design, args.speed, drive, adhesion, n_periods=args.n_periods,
+                    keep_periods=args.keep_periods)
+    print(f"pinion speed {args.speed:g} rpm, T1 {drive / 1e3:.4g} kN m, T2 {adhesion / 1e3:.4g} kN m "
+          f"({design.name}): {run.attrs['regime']} ({run.attrs['regime_reason']})")
+    print(f"  DTE RMS {run.attrs['dte_rms'] * 1e6:.4g} um, peak-to-peak "
+          f"{run.attrs['dte_peak_to_peak'] * 1e6:.4g} um, dynamic load factor "
+          f"{run.attrs['dynamic_load_factor']:.4g}, separated {100 * run.attrs['fraction_separation']:.3g} % "
+          f"of the time, back-side contact {100 * run.attrs['fraction_back_contact']:.3g} %")
+    if out is not None:
+        if out.suffix.lower() == ".png":
+            data = simulation_figure_png(run, dpi=args.dpi)
+            handle, temporary = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".partial")
+            try:
+                with os.fdopen(handle, "wb") as stream:
+                    stream.write(data)
+                mask = os.umask(0)
+                os.umask(mask)
+                os.chmod(temporary, 0o666 & ~mask)
+                os.replace(temporary, out)
+            finally:
+                if os.path.exists(temporary):
+                    os.unlink(temporary)
+        else:
+            save_result(run, out, design=design)
+        print(f"written to {out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- main
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``uqgear`` command."""
+    parser = _Parser(prog="uqgear", description="Dynamics of railway traction gears under uncertainty: "
+                     "run YAML studies, write netCDF results and self-contained HTML reports.")
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"uqgear {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    commands.required = True
+
+    validate = commands.add_parser("validate", help="check a study file against the schema",
+                                   description="Check a study file; print a summary or the first problem.")
+    validate.add_argument("study", metavar="STUDY.yaml")
+    validate.set_defaults(handler=_command_validate)
+
+    run = commands.add_parser("run", help="run a study, write DIR/<analysis>.nc and DIR/report.html",
+                              description="Run every analysis of a study. Results appear in DIR only "
+                              "when the whole run has succeeded.")
+    run.add_argument("study", metavar="STUDY.yaml")
+    run.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, "
+                     "or an earlier run's folder with --resume)")
+    run.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler address (tcp://host:8786); "
+                     "default: in-process on all local cores")
+    run.add_argument("--workers", type=int, metavar="N", help="with --scheduler: use N of its workers; "
+                     "without: N threads for the in-process integrator")
+    run.add_argument("--resume", action="store_true", help="reuse finished analyses and chunk "
+                     "checkpoints of an interrupted or earlier run into DIR")
+    run.add_argument("--quiet", action="store_true", help="no progress bars or summary line")
+    run.set_defaults(handler=_command_run)
+
+    report = commands.add_parser("report", help="rebuild DIR/report.html from the saved results",
+                                 description="Rebuild the HTML report from the .nc files in DIR alone.")
+    report.add_argument("directory", metavar="DIR")
+    report.add_argument("--dpi", type=int, default=110, help="figure resolution (default 110)")
+    report.set_defaults(handler=_command_report)
+
+    simulate = commands.add_parser("simulate", help="one quick run with a plot",
+                                   description="Simulate one operating point; print its regime and QoIs; "
+                                   "optionally write a figure (time history, phase plane, Poincare map, "
+                                   "spectrum) or the data.")
+    simulate.add_argument("--speed", type=float, required=True, metavar="RPM", help="pinion speed in rpm")
+    simulate.add_argument("--drive-torque", type=float, metavar="NM",
+                          help="drive torque T1 in N m (default: the design's rated torque)")
+    simulate.add_argument("--adhesion-torque", type=float, metavar="NM",
+                          help="adhesion torque T2 in N m (default: T1 z2/z1, balancing T1)")
+    simulate.add_argument("--design", default="locomotive", metavar="NAME|FILE",
+                          help="bundled design name or design YAML file (default: locomotive)")
+    simulate.add_argument("--out", metavar="FILE.png|FILE.nc", help="write a figure or the data")
+    simulate.add_argument("--n-periods", type=int, default=400, help="mesh periods integrated (default 400)")
+    simulate.add_argument("--keep-periods", type=int, default=200,
+                          help="mesh periods kept after the transient (default 200)")
+    simulate.add_argument("--dpi", type=int, default=110, help="figure resolution (default 110)")
+    simulate.set_defaults(handler=_command_simulate)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``uqgear`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except UqgearError as exc:
+        return _fail(exc)
+    except FileNotFoundError as exc:
+        return _fail(f"{exc.filename}: no such file or folder")
+    except PermissionError as exc:
+        return _fail(f"{exc.filename}: permission denied")
+    except KeyboardInterrupt:
+        print("uqgear: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
