@@ -263,36 +263,15 @@ def _grid_samples(axes: Mapping[str, np.ndarray], fixed: Mapping[str, float]) ->
     return xr.Dataset(data)
 
 
-def _unstack_grid(result: xr.Dataset, axes: Mapping[str, np.ndarray]) -> xr.Dataset:
-    """Reshape the ``sample`` dim of a grid run into one dim per axis."""
-    shape = tuple(len(values) for values in axes.values())
-    names = list(axes)
-    data = {}
-    for name, variable in result.data_vars.items():
-        if "sample" not in variable.dims:
-            data[name] = variable
-            continue
-        variable = variable.transpose("sample", ...)
-        rest = variable.dims[1:]
-        data[name] = ((*names, *rest), np.asarray(variable.values).reshape(*shape, *variable.shape[1:]),
-                      dict(variable.attrs))
-    coords = {name: _coordinate(name, values) for name, values in axes.items()}
-    for name, coordinate in result.coords.items():
-        if "sample" not in coordinate.dims and name not in coords:
-            coords[name] = coordinate
-    return xr.Dataset(data, coords=coords, attrs=dict(result.attrs))
-
-
 def _grid_run(context: AnalysisContext, axes: Mapping[str, np.ndarray], *,
               lyapunov: bool | None = None) -> xr.Dataset:
     """Run and classify the model on a grid; dims are the axes (in order) and ``period``."""
     fixed = context.fixed_values(exclude=list(axes))
-    samples = _grid_samples(axes, fixed)
-    model = context.model(classify=True, lyapunov=lyapunov)
-    result = model(samples)
-    result = result.drop_vars([name for name in result.coords if "sample" in result[name].dims])
-    gridded = _unstack_grid(result, axes)
-    gridded.attrs.update(model_runs=int(samples.sizes["sample"]),
+    model = context.model(lyapunov=lyapunov)
+    gridded = dynamics.sweep_grid(context.design, axes, fixed=fixed, seed=context.stage_seed(99), evaluate=model)
+    for name in axes:
+        gridded[name].attrs.update({"units": variable_units_short(name), "long_name": name.replace("_", " ")})
+    gridded.attrs.update(model_runs=int(np.prod([len(values) for values in axes.values()])),
                          fixed_inputs=json.dumps(fixed))
     return gridded
 

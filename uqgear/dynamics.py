@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 import types
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -906,14 +906,18 @@ def _check_fixed(fixed: Mapping[str, float] | None, swept: Sequence[str]) -> dic
 
 
 def _run_and_classify(design: Any, samples: xr.Dataset, n_periods: int, keep_periods: int,
-                      lyapunov: bool, max_period: int | None, rtol: float, seed: Seed) -> xr.Dataset:
-    # Imported here: the integrators are a heavier module (numba kernels) and
-    # the analysis functions must stay importable and testable on their own.
-    from .design import load_design
-    from .integration import simulate_batch
+                      lyapunov: bool, max_period: int | None, rtol: float, seed: Seed,
+                      evaluate: Callable[[xr.Dataset], xr.Dataset] | None = None) -> xr.Dataset:
+    if evaluate is not None:
+        result = evaluate(samples)
+    else:
+        # Imported here: the integrators are a heavier module (numba kernels) and
+        # the analysis functions must stay importable and testable on their own.
+        from .design import load_design
+        from .integration import simulate_batch
 
-    result = simulate_batch(load_design(design), samples, n_periods=n_periods, keep_periods=keep_periods,
-                            lyapunov=bool(lyapunov))
+        result = simulate_batch(load_design(design), samples, n_periods=n_periods, keep_periods=keep_periods,
+                                lyapunov=bool(lyapunov))
     classes = classify_batch(result, max_period=max_period, rtol=rtol, seed=seed)
     return result.merge(classes, compat="override")
 
@@ -966,7 +970,7 @@ def bifurcation(design: Any, parameter: str, values: Sequence[float], *,
 def sweep_grid(design: Any, parameters: Mapping[str, Sequence[float]], *,
                fixed: Mapping[str, float] | None = None, n_periods: int = 400, keep_periods: int = 200,
                lyapunov: bool = True, max_period: int | None = None, rtol: float = 1e-3,
-               seed: Seed = 0) -> xr.Dataset:
+               seed: Seed = 0, evaluate: Callable[[xr.Dataset], xr.Dataset] | None = None) -> xr.Dataset:
     """Regime map over the full grid of several parameters (e.g. speed x adhesion torque).
 
     Parameters
@@ -978,6 +982,11 @@ def sweep_grid(design: Any, parameters: Mapping[str, Sequence[float]], *,
         product, run as one simulate_batch call.
     fixed, n_periods, keep_periods, lyapunov, max_period, rtol, seed
         As in :func:`bifurcation`.
+    evaluate : callable, optional
+        The model as ``evaluate(samples) -> Dataset`` (e.g. a batch evaluator
+        run through a :class:`~uqgear.runner.Runner`); its own settings then
+        replace ``n_periods``, ``keep_periods`` and ``lyapunov``. Default:
+        :func:`~uqgear.integration.simulate_batch` in-process.
 
     Returns
     -------
@@ -1001,7 +1010,8 @@ def sweep_grid(design: Any, parameters: Mapping[str, Sequence[float]], *,
     data = {name: ("sample", index.get_level_values(name).to_numpy(dtype=float)) for name in names}
     data.update({name: ("sample", np.full(n_samples, value)) for name, value in constants.items()})
     samples = xr.Dataset(data)
-    result = _run_and_classify(design, samples, n_periods, keep_periods, lyapunov, max_period, rtol, seed)
+    result = _run_and_classify(design, samples, n_periods, keep_periods, lyapunov, max_period, rtol, seed,
+                               evaluate)
     result = result.drop_vars([name for name in names if name in result.variables])
     if "sample" in result.variables:
         result = result.drop_vars("sample")

@@ -26,11 +26,10 @@ import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-import pandas as pd
 import xarray as xr
 
 from .design import Design
-from .dynamics import classify_batch
+from .dynamics import sweep_grid
 from .errors import OperatingPointError
 from .integration import BatchEvaluator
 from .runner import Runner
@@ -84,22 +83,14 @@ def speed_adhesion_grid(design: Design, pinion_speed: Sequence[float], adhesion_
         raise OperatingPointError(f"{SPEED}: expected values > 0 rpm; got min {speeds.min():g}")
     if np.any(torques < 0):
         raise OperatingPointError(f"{ADHESION}: expected values >= 0 N m; got min {torques.min():g}")
-    grid_speed, grid_torque = np.meshgrid(speeds, torques, indexing="ij")
-    samples = xr.Dataset({SPEED: ("sample", grid_speed.ravel(), {"units": "rpm"}),
-                          ADHESION: ("sample", grid_torque.ravel(), {"units": "N m"})})
-    evaluator = BatchEvaluator(design, fixed=fixed, n_periods=n_periods, keep_periods=keep_periods,
+    evaluator = BatchEvaluator(design, n_periods=n_periods, keep_periods=keep_periods,
                                history_per_period=history_per_period, lyapunov=lyapunov, effects=effects)
-    runner = runner or Runner(chunk_size=max(64, samples.sizes["sample"] // 8))
-    result = runner.run(evaluator, samples, key=evaluator.key(), resume=resume)
-    classes = classify_batch(result, seed=seed)
-    result = result.merge(classes.drop_vars([c for c in classes.coords if c in result.coords]),
-                          compat="override")
-    drop = [name for name in (SPEED, ADHESION) if name in result.coords]
-    result = result.drop_vars(drop).assign_coords(sample=np.arange(result.sizes["sample"]))
-    stacked_index = xr.Coordinates.from_pandas_multiindex(
-        pd.MultiIndex.from_arrays([grid_speed.ravel(), grid_torque.ravel()],
-                                                      names=[SPEED, ADHESION]), "sample")
-    grid = result.assign_coords(stacked_index).unstack("sample")
+    runner = runner or Runner(chunk_size=max(64, speeds.size * torques.size // 8))
+
+    def evaluate(samples: xr.Dataset) -> xr.Dataset:
+        return runner.run(evaluator, samples, key=evaluator.key(), resume=resume)
+
+    grid = sweep_grid(design, {SPEED: speeds, ADHESION: torques}, fixed=fixed, seed=seed, evaluate=evaluate)
     grid[SPEED].attrs.update(units="rpm", long_name="pinion speed")
     grid[ADHESION].attrs.update(units="N m", long_name="adhesion torque T2")
     grid.attrs.update(analysis="speed_adhesion_grid", fixed=repr(dict(fixed or {})),

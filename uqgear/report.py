@@ -29,8 +29,6 @@ import html
 import io
 import json
 import math
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -44,6 +42,7 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib import colormaps
 
+from .fileio import write_text_atomic
 from .errors import UqgearError
 from .dynamics import UNDETERMINED
 from .interval import (FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR,
@@ -1200,27 +1199,12 @@ def load_results(directory: str | Path) -> list[xr.Dataset]:
     return sorted(results, key=lambda ds: int(ds.attrs.get("analysis_index", 0)))
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def write_report(directory: str | Path, *, dpi: int = 110) -> Path:
     """Build ``<directory>/report.html`` from the result files in the folder (written atomically)."""
     folder = Path(directory)
     text = build_report(load_results(folder), dpi=dpi)
     target = folder / REPORT_NAME
-    handle, temporary = tempfile.mkstemp(dir=folder, prefix=f".{REPORT_NAME}.", suffix=".partial")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text)
-        # mkstemp makes the file private; a report is meant to be shared like any file the user writes
-        os.chmod(temporary, 0o666 & ~_umask())
-        os.replace(temporary, target)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
+    write_text_atomic(target, text)
     return target
 
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import tempfile
 from collections.abc import Hashable, Mapping
 from datetime import datetime, timezone
 from importlib import metadata
@@ -31,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import xarray as xr
 
+from .fileio import atomic_path
 from .errors import UqgearError
 
 if TYPE_CHECKING:
@@ -252,22 +252,12 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     if target.is_dir():
         raise UqgearError(f"{target}: is a folder; expected a file path for the netCDF output")
     encoded = _encode_dataset(ds)
-    handle, temporary_name = tempfile.mkstemp(dir=folder, prefix=f".{target.name}.",
-                                              suffix=".partial")
-    os.close(handle)
-    temporary = Path(temporary_name)
     try:
-        encoded.to_netcdf(temporary, engine=_NETCDF_ENGINE)
-        # flush to disk before the rename so the new name never points at a partial file
-        with open(temporary, "rb") as written:
-            os.fsync(written.fileno())
-        os.replace(temporary, target)
+        with atomic_path(target) as temporary:
+            encoded.to_netcdf(temporary, engine=_NETCDF_ENGINE)
     except (OSError, ValueError, TypeError, RuntimeError) as exc:
         raise UqgearError(f"{target}: could not write the netCDF file ({type(exc).__name__}: "
                           f"{exc})") from exc
-    finally:
-        if temporary.exists():
-            temporary.unlink()
     return target
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -27,6 +26,7 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from .design import Design, design_from_json
+from .fileio import atomic_path
 from .errors import DesignError, RigDataError
 from .features import SIGNAL_CHANNELS, sampling_rate
 
@@ -349,14 +349,8 @@ def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
     encoding: dict[str, dict[str, object]] = {name: {"dtype": "float32", "_FillValue": np.float32(np.nan)}
                                               for name in out.data_vars}
     encoding.update({name: {"dtype": "float64", "_FillValue": None} for name in RIG_COORDINATES})
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(handle)
-    try:
+    with atomic_path(path) as temporary:
         out.to_netcdf(temporary, format="NETCDF4", engine="netcdf4", encoding=encoding)
-        os.replace(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.remove(temporary)
     return path
 
 
