@@ -54,6 +54,8 @@ PARAMETER_SLOTS = (
 N_ACCUMULATORS = 13
 
 TWO_PI = 2.0 * math.pi
+#: Rows of the scratch array ``work`` that :func:`step` needs (k2, k3, k4, tmp, forcing terms).
+WORK_ROWS = 5
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
@@ -363,7 +365,7 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
     (keep_periods, 6): the state at each kept period start.
     """
     state = state0.copy()
-    work = np.empty((5, 6))
+    work = np.empty((WORK_ROWS, 6))
     first = np.empty(6)
     trial = np.empty(6)
     deriv = np.empty(6)
@@ -401,7 +403,7 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
     ``history`` has shape (channels, points): channel 0 is x; with 4 channels
     also te, y1'' and y2'' (the rig's channels).
     """
-    work = np.empty((5, 6))
+    work = np.empty((WORK_ROWS, 6))
     first = np.empty(6)
     trial = np.empty(6)
     shadow = np.empty(6)

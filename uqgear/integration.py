@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from functools import lru_cache
 
 import numpy as np
 import xarray as xr
@@ -74,12 +73,20 @@ def _check_counts(n_periods: int, keep_periods: int) -> None:
                                   f"got {keep_periods!r}")
 
 
-@lru_cache(maxsize=256)
+_HIGHEST_MODES: dict[tuple, float] = {}
+
+
 def _highest_mode(design: Design, stiffness_scale: float) -> float:
-    from .model import _cached_tables
+    """Highest natural frequency (Hz) at the peak mesh stiffness, cached on the values it depends on."""
+    from .model import _cached_tables, geometry_key
 
     k_peak = float(np.max(_cached_tables(design, "ishikawa").period_stiffness)) * stiffness_scale
-    return float(natural_frequencies(design, k_peak)[-1])
+    key = (geometry_key(design), design.m1, design.m2, design.I1, design.I2, design.k1, design.k2, k_peak)
+    if key not in _HIGHEST_MODES:
+        if len(_HIGHEST_MODES) >= 4096:
+            _HIGHEST_MODES.clear()
+        _HIGHEST_MODES[key] = float(natural_frequencies(design, k_peak)[-1])
+    return _HIGHEST_MODES[key]
 
 
 def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int = 32,

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 import xarray as xr
@@ -30,9 +29,28 @@ from .stiffness import StiffnessTables, stiffness_tables
 STIFFNESS_MODES = ("ishikawa", "fourier", "constant")
 
 
-@lru_cache(maxsize=64)
+#: Design keys that determine the tooth geometry and hence the stiffness tables.
+GEOMETRY_KEYS = ("z1", "z2", "module", "pressure_angle", "x1", "x2", "addendum_coefficient",
+                 "dedendum_coefficient", "face_width", "youngs_modulus", "poisson_ratio")
+
+
+def geometry_key(design: Design) -> tuple:
+    """The design keys the stiffness depends on (batches varying k1, zeta, ... share tables)."""
+    return tuple(getattr(design, key) for key in GEOMETRY_KEYS)
+
+
+_TABLES: dict[tuple, StiffnessTables] = {}
+_TABLES_MAX = 64
+
+
 def _cached_tables(design: Design, mode: str) -> StiffnessTables:
-    return stiffness_tables(design, mode=mode)
+    """Stiffness tables cached on the geometry alone (a batch over k1, zeta, ... reuses them)."""
+    entry = (geometry_key(design), mode)
+    if entry not in _TABLES:
+        if len(_TABLES) >= _TABLES_MAX:
+            _TABLES.pop(next(iter(_TABLES)))
+        _TABLES[entry] = stiffness_tables(design, mode=mode)
+    return _TABLES[entry]
 
 
 def equivalent_mass(design: Design) -> float:

@@ -1,0 +1,87 @@
+"""Calibration benchmark: one 8-op campaign calibrated end to end, timed.
+
+For each public healthy campaign in ``data/rig/`` it runs the default
+calibration (6 global parameters + 8 latent adhesion torques, staged
+emulators on real model runs, emcee to convergence, posterior predictive
+check with the real model) and prints
+
+* wall-clock and CPU time (CPU time summed over threads), model runs, steps;
+* the posterior 90 % interval of every parameter against the true value of
+  ``data/rig/README.md``;
+* the convergence diagnostics and the posterior predictive check.
+
+Target (issue 5.6): <= 3 min per calibration on 2 cores.
+
+Usage: ``python benchmarks/calibration.py [--files healthy.nc healthy_b.nc] [--threads N] [--seed S]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numba
+
+from uqgear.calibration import Calibration
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
+
+# data/rig/README.md: true parameters of the labelled healthy campaigns
+TRUTH = {
+    "healthy.nc": {"mesh_stiffness_scale": 0.970, "zeta_mesh": 0.052, "backlash": 0.300e-3,
+                   "ste_amplitude": 16.07e-6, "k1": 1.010e9, "k2": 1.889e9,
+                   "adhesion_torque": [29780.0, 26120.0, 30700.0, 38230.0, 39380.0, 27090.0, 25820.0, 21300.0]},
+    "healthy_b.nc": {"mesh_stiffness_scale": 0.982, "zeta_mesh": 0.061, "backlash": 0.315e-3,
+                     "ste_amplitude": 17.67e-6, "k1": 0.902e9, "k2": 1.984e9,
+                     "adhesion_torque": [37260.0, 24610.0, 29480.0, 42940.0, 40720.0, 34090.0, 25030.0, 21390.0]},
+}
+
+
+def run(name: str, threads: int | None, seed: int) -> bool:
+    start_wall, start_cpu = time.perf_counter(), time.process_time()
+    calibration = Calibration(seed=seed, threads=threads).fit(DATA / name)
+    wall, cpu = time.perf_counter() - start_wall, time.process_time() - start_cpu
+    diagnostics = calibration.diagnostics_
+    print(f"\n=== {name}: wall {wall:.1f} s, CPU {cpu:.1f} s ({numba.get_num_threads()} threads), "
+          f"{calibration.timing_['model_runs']} model runs, {len(calibration.emulator_['stages'])} emulator stages, "
+          f"{diagnostics['n_steps']} final emcee steps x {diagnostics['n_walkers']} walkers")
+    print(f"converged: {calibration.converged_}  tau_max {diagnostics['tau_max']:.1f}  "
+          f"R-hat max {diagnostics['rhat_max']:.4f}  ESS min {diagnostics['ess_min']:.0f}  "
+          f"acceptance {diagnostics['acceptance_mean']:.3f}  {'; '.join(diagnostics['reasons'])}")
+    truth = TRUTH[name]
+    all_inside = True
+    print(f"{'parameter':22s} {'true':>11s} {'q05':>11s} {'q50':>11s} {'q95':>11s}  inside")
+    for parameter, entry in calibration.summary_["parameters"].items():
+        value = truth[parameter]
+        inside = entry["q05"] <= value <= entry["q95"]
+        all_inside &= inside
+        print(f"{parameter:22s} {value:11.4g} {entry['q05']:11.4g} {entry['q50']:11.4g} {entry['q95']:11.4g}  "
+              f"{'yes' if inside else 'NO'}")
+    for entry, value in zip(calibration.summary_["adhesion_torque"], truth["adhesion_torque"]):
+        inside = entry["q05"] <= value <= entry["q95"]
+        print(f"{'T2 at ' + format(entry['pinion_speed'], '.0f') + ' rpm':22s} {value:11.4g} {entry['q05']:11.4g} "
+              f"{entry['q50']:11.4g} {entry['q95']:11.4g}  {'yes' if inside else 'NO'}")
+    check = calibration.predictive_check_
+    print(f"predictive check (real model, {check['draws']} draws, {check['features_used']} features): "
+          f"{100 * check['fraction_within_2_sigma']:.0f} % within 2 sigma (noise + model error), "
+          f"max |z| {check['max_abs_z']:.2f}, {100 * check['fraction_within_2_noise_sigma']:.0f} % within 2 sigma "
+          f"of sensor noise alone, median |relative difference| "
+          f"{100 * check['median_abs_relative_difference']:.2f} %, emulator error / LOO estimate "
+          f"{check['emulator_error_over_loo']:.2f}; passed: {check['passed']}")
+    return all_inside and calibration.converged_ and check["passed"] and wall <= 180.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--files", nargs="+", default=list(TRUTH), choices=list(TRUTH))
+    parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--seed", type=int, default=0)
+    arguments = parser.parse_args()
+    results = {name: run(name, arguments.threads, arguments.seed) for name in arguments.files}
+    print("\nall criteria met (truth in 90 % CI, converged, predictive check, <= 180 s):",
+          {name: ok for name, ok in results.items()})
+
+
+if __name__ == "__main__":
+    main()
