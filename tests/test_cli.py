@@ -303,3 +303,62 @@ def test_same_seed_gives_the_same_numbers():
     np.testing.assert_array_equal(first["input_adhesion_torque"], second["input_adhesion_torque"])
     np.testing.assert_array_equal(first["dte_rms_samples"], second["dte_rms_samples"])
     assert not np.array_equal(first["input_adhesion_torque"], other["input_adhesion_torque"])
+
+
+# ---------------------------------------------------------------------------- rig data commands
+
+
+def _uqgear(*args, cwd=None):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "uqgear", *args], capture_output=True, text=True, cwd=cwd,
+                          env={**__import__("os").environ, "UQGEAR_PROGRESS": "0"})
+
+
+@pytest.mark.parametrize("args, message", [
+    (["synth-rig", "--out", "{tmp}/x.nc", "--effect", "eccentric:amplitude=1e-6"], "effect 'eccentric': unknown"),
+    (["synth-rig", "--out", "{tmp}/x.nc", "--effect", "friction:coefficient=2"],
+     r"friction.coefficient: expected a value in \[0, 0.3\]"),
+    (["synth-rig", "--out", "{tmp}/x.nc", "--true", "k1"], "--true 'k1': expected KEY=VALUE"),
+    (["synth-rig", "--out", "{tmp}/x.txt"], "expected a file name ending in .nc"),
+    (["synth-rig", "--out", "{tmp}/missing/x.nc"], "does not exist"),
+    (["calibrate", "{tmp}/none.nc", "--out", "{tmp}/cal"], "rig data file not found"),
+])
+def test_rig_commands_reject_bad_input(tmp_path, args, message):
+    completed = _uqgear(*[a.format(tmp=tmp_path) for a in args])
+    assert completed.returncode == 2
+    assert message.replace("\\", "") in completed.stderr or __import__("re").search(message, completed.stderr)
+    assert len(completed.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.nc").exists() and not (tmp_path / "cal").exists()
+
+
+def test_calibrate_rejects_a_file_that_is_not_rig_data(tmp_path):
+    import xarray as xr
+
+    xr.Dataset({"a": ("t", [1.0])}).to_netcdf(tmp_path / "other.nc")
+    completed = _uqgear("calibrate", str(tmp_path / "other.nc"), "--out", str(tmp_path / "cal"))
+    assert completed.returncode == 2
+    assert "conventions" in completed.stderr
+    assert not (tmp_path / "cal").exists()
+    assert not any(p.name.startswith(".cal") for p in tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
+    import json
+
+    rig = tmp_path / "campaign.nc"
+    made = _uqgear("synth-rig", "--out", str(rig), "--true", "mesh_stiffness_scale=1.05", "--true", "k1=1.1e9",
+                   "--true", "zeta_mesh=0.06", "--seed", "4")
+    assert made.returncode == 0, made.stderr
+    done = _uqgear("calibrate", str(rig), "--out", str(tmp_path / "cal"), "--params", "mesh_stiffness_scale",
+                   "zeta_mesh", "ste_amplitude", "k1", "k2")
+    assert done.returncode == 0, done.stderr
+    result = json.loads((tmp_path / "cal" / "calibration.json").read_text())
+    assert result["converged"]
+    truth = {"mesh_stiffness_scale": 1.05, "k1": 1.1e9, "zeta_mesh": 0.06, "ste_amplitude": 15e-6, "k2": 2e9}
+    for name, value in truth.items():
+        estimate = result["parameters"][name]
+        assert estimate["q05"] <= value <= estimate["q95"], (name, estimate)
+    assert {p.name for p in (tmp_path / "cal").iterdir()} == {"posterior.nc", "calibration.json", "report.html"}

@@ -168,10 +168,10 @@ def test_unknown_analysis_type_gets_a_generic_section(smoke_report, tmp_path):
     folder = smoke_report[0]
     results = load_results(folder)[:1]
     future = xr.Dataset({"posterior": ("draw", np.arange(5.0), {"units": "N m"})},
-                        attrs={**results[0].attrs, "analysis_type": "calibrate", "analysis_name": "fit",
+                        attrs={**results[0].attrs, "analysis_type": "design_optimisation", "analysis_name": "fit",
                                "analysis_index": 1})
     text = build_report([results[0], future], dpi=50)
-    assert 'id="analysis-fit" data-type="calibrate"' in text and "posterior" in text
+    assert 'id="analysis-fit" data-type="design_optimisation"' in text and "posterior" in text
 
 
 def test_load_results_rejects_foreign_files(tmp_path):

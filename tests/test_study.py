@@ -7,6 +7,7 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
 import pytest
 
 from uqgear.design import STANDARD_GRAVITY
@@ -48,8 +49,31 @@ def test_shipped_studies_validate():
 
 
 def test_smoke_study_covers_every_analysis_type():
+    from uqgear.study import RIG_TYPES
+
+    # analyses of rig data take a minute each: they have their own studies and slow end-to-end tests
     study = load_study(ROOT / "studies" / "smoke.yaml")
-    assert {spec.type for spec in study.analyses} == set(ANALYSIS_SCHEMAS)
+    assert {spec.type for spec in study.analyses} == set(ANALYSIS_SCHEMAS) - set(RIG_TYPES)
+    covered = {spec.type for path in (ROOT / "studies").glob("*.yaml") for spec in load_study(path).analyses}
+    assert set(RIG_TYPES) <= covered
+
+
+@pytest.mark.slow
+def test_calibrate_study_end_to_end(tmp_path):
+    from uqgear.analyses import run_study
+    from uqgear.report import write_report
+
+    study = load_study(ROOT / "studies" / "calibrate_healthy.yaml")
+    run_study(study, tmp_path, show_progress=False)
+    write_report(tmp_path)
+    result = xr.open_dataset(tmp_path / "calibration.nc")
+    assert result.attrs["converged"] == 1
+    # data/rig/README.md: true mesh_stiffness_scale 0.970, k1 1.010e9 on healthy.nc
+    for name, truth in (("mesh_stiffness_scale", 0.970), ("k1", 1.010e9)):
+        low, high = np.quantile(result[name].values, [0.05, 0.95])
+        assert low <= truth <= high
+    text = (tmp_path / "report.html").read_text()
+    assert 'data-type="calibrate"' in text and "posterior predictive check with the real model passed" in text
 
 
 def test_t2_envelope_study_uses_rail_condition_interval():
@@ -300,3 +324,16 @@ def test_reference_documents_every_key_and_variable():
     keys.update(VARIABLES)
     missing = sorted(key for key in keys if f"`{key}`" not in text)
     assert not missing, f"docs/study-reference.md does not document {missing}"
+
+
+def test_calibrate_analysis_needs_an_existing_rig_file(tmp_path):
+    from uqgear.study import parse_study
+
+    text = "name: c\nseed: 1\ndesign: locomotive\nanalyses:\n  - type: calibrate\n    rig: nothere.nc\n"
+    with pytest.raises(StudyError, match=r"analyses\[0\].rig: file .*nothere.nc not found"):
+        parse_study(text, base_dir=tmp_path)
+    with pytest.raises(StudyError, match=r"analyses\[0\].parameters\[0\]: expected one of"):
+        parse_study(text.replace("rig: nothere.nc", "rig: x.nc\n    parameters: [stiffness]"), base_dir=tmp_path)
+    (tmp_path / "x.nc").write_bytes(b"")
+    study = parse_study(text.replace("nothere.nc", "x.nc"), base_dir=tmp_path)
+    assert study.analyses[0].options["parameters"][0] == "mesh_stiffness_scale"

@@ -593,6 +593,29 @@ def sobol_analysis(context: AnalysisContext) -> xr.Dataset:
     return result
 
 
+@register("calibrate")
+def calibrate_analysis(context: AnalysisContext) -> xr.Dataset:
+    """Bayesian calibration (emcee) of the study's design against a rig file.
+
+    The result holds the posterior draws (dims ``chain``, ``draw``; per-run
+    ``adhesion_torque`` adds ``op``) and, in attribute ``calibration``, the
+    content of ``calibration.json`` (estimates, diagnostics, predictive check).
+    A posterior that has not converged is stored with ``converged = 0`` and
+    no estimates.
+    """
+    from .calibration import Calibration
+    from .study import rig_path
+
+    names = list(context.options["parameters"])
+    calibration = Calibration(parameters=names, design=context.design, seed=context.stage_seed(0),
+                              threads=context.threads).fit(rig_path(context.study, context.spec))
+    result = calibration.posterior_.copy()
+    summary = calibration.to_dict()
+    result.attrs.update(calibration=json.dumps(summary, default=float), converged=int(bool(summary["converged"])),
+                        parameters=json.dumps(names), rig=str(summary["rig"]))
+    return result
+
+
 # ---------------------------------------------------------------------------- running a study
 
 

@@ -7,6 +7,8 @@
     uqgear report DIR
     uqgear simulate --speed RPM [--drive-torque NM] [--adhesion-torque NM] [--design NAME|FILE]
                     [--out FILE.png|FILE.nc]
+    uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
+    uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler) ends with exit status 2 and a one-line message on
@@ -20,7 +22,6 @@ continues where it stopped.
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import sys
 import tempfile
@@ -206,21 +207,96 @@ def _command_simulate(args: argparse.Namespace) -> int:
           f"of the time, back-side contact {100 * run.attrs['fraction_back_contact']:.3g} %")
     if out is not None:
         if out.suffix.lower() == ".png":
+            from .fileio import atomic_path
+
             data = simulation_figure_png(run, dpi=args.dpi)
-            handle, temporary = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".partial")
-            try:
-                with os.fdopen(handle, "wb") as stream:
-                    stream.write(data)
-                mask = os.umask(0)
-                os.umask(mask)
-                os.chmod(temporary, 0o666 & ~mask)
-                os.replace(temporary, out)
-            finally:
-                if os.path.exists(temporary):
-                    os.unlink(temporary)
+            with atomic_path(out) as temporary:
+                temporary.write_bytes(data)
         else:
             save_result(run, out, design=design)
         print(f"written to {out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- rig data
+
+
+def _parse_assignments(items: Sequence[str], option: str) -> dict[str, float]:
+    """``KEY=VALUE`` pairs of a repeated option, values as floats."""
+    values: dict[str, float] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise UqgearError(f"{option} {item!r}: expected KEY=VALUE")
+        try:
+            values[key.strip()] = float(raw)
+        except ValueError:
+            raise UqgearError(f"{option} {item!r}: expected a number after '='") from None
+    return values
+
+
+def _new_output_folder(out: Path, option: str = "--out") -> Path:
+    """Check ``out`` can become a results folder; return the hidden work folder to fill first."""
+    if out.exists() and not _is_empty_dir(out):
+        raise UqgearError(f"{option} {out}: exists and is not an empty folder; choose a new folder")
+    if not out.parent.is_dir():
+        raise UqgearError(f"{option} {out}: the parent folder {out.parent} does not exist")
+    work = _partial_dir(out)
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir()
+    return work
+
+
+def _finish_output_folder(work: Path, out: Path, failed: bool) -> None:
+    if failed:
+        shutil.rmtree(work, ignore_errors=True)
+    else:
+        _publish(work, out)
+
+
+def _command_synth_rig(args: argparse.Namespace) -> int:
+    from .design import load_design
+    from .effects import parse_effect
+    from .virtual_rig import synth_rig
+
+    design = load_design(args.design)
+    effects = [parse_effect(text) for text in args.effect]
+    true_parameters = _parse_assignments(args.true, "--true")
+    out = Path(args.out)
+    if out.suffix != ".nc":
+        return _fail(f"--out {out}: expected a file name ending in .nc")
+    if not out.parent.is_dir():
+        return _fail(f"--out {out}: the folder {out.parent} does not exist")
+    if args.noise < 0:
+        return _fail(f"--noise: expected a relative noise level >= 0; got {args.noise:g}")
+    synth_rig(design, out, effects=effects, true_parameters=true_parameters, seed=args.seed,
+              relative_noise=args.noise)
+    described = "; ".join(repr(effect) for effect in effects) or "no effect"
+    print(f"virtual rig campaign written to {out} ({design.name}, {described}, seed {args.seed})")
+    return 0
+
+
+def _command_calibrate(args: argparse.Namespace) -> int:
+    from .calibration import calibrate
+
+    rig = Path(args.rig)
+    if not rig.is_file():
+        return _fail(f"{rig}: rig data file not found")
+    out = Path(args.out)
+    params = [name for item in args.params for name in item.split(",") if name] if args.params else None
+    work = _new_output_folder(out)
+    failed = True
+    try:
+        result = calibrate(rig, work, design=args.design, params=params, seed=args.seed, threads=args.workers)
+        failed = False
+    finally:
+        _finish_output_folder(work, out, failed)
+    summary = result.to_dict()
+    state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
+    print(f"calibration of {rig} {state}; results in {out}")
+    for name, values in (summary.get("parameters") or {}).items():
+        if isinstance(values, dict) and "q05" in values:
+            print(f"  {name:22s} median {values['q50']:.6g}   90 % interval [{values['q05']:.6g}, {values['q95']:.6g}]")
     return 0
 
 
@@ -280,6 +356,38 @@ def build_parser() -> argparse.ArgumentParser:
                           help="mesh periods kept after the transient (default 200)")
     simulate.add_argument("--dpi", type=int, default=110, help="figure resolution (default 110)")
     simulate.set_defaults(handler=_command_simulate)
+
+    synth = commands.add_parser("synth-rig", help="simulate a virtual-rig campaign in the rig format",
+                                description="Simulate a test-rig campaign (8 operating points by default) "
+                                "with chosen true parameters, sensor noise and unmodelled effects, and write "
+                                "it as a uqgear-rig/1 netCDF file.")
+    synth.add_argument("--design", default="locomotive", metavar="NAME|FILE",
+                       help="nominal design (bundled name or YAML file; default: locomotive)")
+    synth.add_argument("--out", required=True, metavar="FILE.nc", help="rig file to write")
+    synth.add_argument("--effect", action="append", default=[], metavar="NAME:param=value,...",
+                       help="add an unmodelled effect, e.g. eccentricity:amplitude=12e-6,kappa=0.03 "
+                       "(repeatable)")
+    synth.add_argument("--true", action="append", default=[], metavar="KEY=VALUE",
+                       help="true value differing from the nominal design, e.g. mesh_stiffness_scale=0.97 "
+                       "or k1=1.05e9 (repeatable)")
+    synth.add_argument("--seed", type=int, default=0, help="seed of noise and record starts (default 0)")
+    synth.add_argument("--noise", type=float, default=0.02,
+                       help="sensor noise as a fraction of each record's RMS (default 0.02)")
+    synth.set_defaults(handler=_command_synth_rig)
+
+    calibrate = commands.add_parser("calibrate", help="Bayesian calibration of the model against rig data",
+                                    description="Calibrate mesh stiffness scale, mesh damping, backlash, STE "
+                                    "amplitude and bearing stiffness (and T2 per run) against a rig file with "
+                                    "emcee; write DIR/posterior.nc, DIR/calibration.json, DIR/report.html.")
+    calibrate.add_argument("rig", metavar="RIG.nc")
+    calibrate.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
+    calibrate.add_argument("--design", metavar="FILE", help="nominal design (default: the rig file's design)")
+    calibrate.add_argument("--params", nargs="+", metavar="NAME",
+                           help="parameters to calibrate (default: mesh_stiffness_scale zeta_mesh backlash "
+                           "ste_amplitude k1 k2)")
+    calibrate.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    calibrate.add_argument("--workers", type=int, metavar="N", help="integrator threads (default: all cores)")
+    calibrate.set_defaults(handler=_command_calibrate)
     return parser
 
 

@@ -957,6 +957,47 @@ def _sobol_findings(ds: xr.Dataset, name: str, sweep: str | None, parameters: Se
     return sentences
 
 
+@renderer("calibrate")
+def _render_calibrate(ds: xr.Dataset, dpi: int) -> Section:
+    section = _section(ds)
+    summary = _json_attr(ds, "calibration", {})
+    converged = bool(summary.get("converged"))
+    estimates = summary.get("parameters") if converged else (summary.get("unconverged_estimates") or {}).get(
+        "parameters", {})
+    rows = "".join(f"<tr><td>{html.escape(name)}</td><td>{values['q50']:.6g}</td><td>{values['q05']:.6g}</td>"
+                   f"<td>{values['q95']:.6g}</td></tr>" for name, values in (estimates or {}).items())
+    section.tables.append("<table><tr><th>parameter</th><th>median</th><th>5 %</th><th>95 %</th></tr>"
+                          f"{rows}</table>")
+    diagnostics = summary.get("diagnostics", {})
+    section.facts.append(("rig file", str(summary.get("rig", ds.attrs.get("rig", "")))))
+    section.facts.append(("converged", "yes" if converged else "NO: estimates are not a result"))
+    for key, label in (("tau_max", "largest integrated autocorrelation time (steps)"),
+                       ("rhat_max", "largest split R-hat"), ("ess_min", "smallest effective sample size"),
+                       ("acceptance_mean", "mean acceptance fraction")):
+        if key in diagnostics:
+            section.facts.append((label, f"{float(diagnostics[key]):.4g}"))
+    names = [name for name in ds.data_vars if set(ds[name].dims) == {"chain", "draw"}]
+    if names:
+        figure = _new_figure(9.0, 1.9 * ((len(names) + 2) // 3))
+        axes = np.atleast_1d(figure.subplots((len(names) + 2) // 3, 3)).ravel()
+        for ax, name in zip(axes, names):
+            ax.hist(ds[name].values.ravel(), bins=40, color="0.35")
+            ax.set_xlabel(axis_label(name), fontsize=8)
+            ax.tick_params(labelsize=7)
+        for ax in axes[len(names):]:
+            ax.set_visible(False)
+        _add_figure(section, figure, "Posterior marginals of the calibrated parameters.", dpi)
+    check = summary.get("predictive_check") or {}
+    if "fraction_within_2_sigma" in check:
+        verdict = "passed" if check.get("passed") else "FAILED: the model does not explain these data"
+        section.findings.append(f"posterior predictive check with the real model {verdict}: "
+                                f"{100 * float(check['fraction_within_2_sigma']):.0f} % of the features within "
+                                f"2 sigma (noise and model error), largest |z| {float(check['max_abs_z']):.3g}")
+    if not converged:
+        section.caveats.append("the sampler did not converge: the estimates shown are not a result")
+    return section
+
+
 @renderer("sobol")
 def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)

@@ -580,6 +580,11 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "bootstrap": number("resamples", 10, 100_000, integer=True),
         "qois": _qoi_list(),
     },
+    "calibrate": {
+        "rig": string(),
+        "parameters": list_of(choice("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2",
+                                     "k1_scale", "k2_scale", "zeta1", "zeta2", "m1", "m2"), unique=True),
+    },
 }
 
 #: Default option values per analysis type (applied after validation).
@@ -596,8 +601,12 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
             "qois": DEFAULT_QOIS},
     "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200,
               "qois": DEFAULT_QOIS},
+    "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2")},
 }
-_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",)}
+_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
+                                              "calibrate": ("rig",)}
+#: Analysis types that read a rig data file (key ``rig``, relative to the study file).
+RIG_TYPES: tuple[str, ...] = ("calibrate",)
 #: Analysis types that propagate uncertain parameters (``parameters`` key).
 PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol")
 #: Cap on single simulate() runs in one ``simulate`` analysis (they keep full histories).
@@ -700,6 +709,16 @@ class Study:
                 return spec
         raise StudyError(f"analysis {name!r}: not in the study; expected one of "
                          f"{', '.join(spec.name for spec in self.analyses)}")
+
+
+def _resolve(path: str, base_dir: Path | None) -> Path:
+    candidate = Path(path)
+    return candidate if candidate.is_absolute() or base_dir is None else base_dir / candidate
+
+
+def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
+    """The rig file of a ``calibrate``/``diagnose`` analysis, relative to the study file's folder."""
+    return _resolve(spec.options["rig"], Path(study.path).parent if study.path else None)
 
 
 _TOP_LEVEL_KEYS = ("name", "description", "seed", "design", "operating_points", "uncertain",
@@ -921,6 +940,12 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "",
         if names.count(spec.name) > 1:
             raise StudyError(f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
                              "expected unique names (give each a 'name')")
+    for spec in analyses:
+        if spec.type in RIG_TYPES:
+            rig = _resolve(spec.options["rig"], Path(base_dir) if base_dir else None)
+            if not rig.is_file():
+                raise StudyError(f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
+                                 "netCDF file (relative paths start at the study file's folder)")
     return Study(name=name, description=description, seed=seed, design=design,
                  design_source=design_source, design_overrides=overrides, operating_points=points,
                  uncertain=uncertain, simulation=simulation, analyses=analyses, outputs=outputs,
@@ -983,5 +1008,5 @@ __all__ = [
     "Study", "AnalysisSpec", "ValueSpec", "UncertainParameter", "SimulationSettings", "Outputs",
     "load_study", "parse_study", "study_from_mapping", "ANALYSIS_SCHEMAS", "ANALYSIS_DEFAULTS",
     "INTERVAL_METHODS", "SAMPLING_METHODS", "DISTRIBUTIONS", "QOIS", "VARIABLES",
-    "OPERATING_VARIABLES", "variable_unit", "variable_units_short",
+    "OPERATING_VARIABLES", "variable_unit", "variable_units_short", "rig_path", "RIG_TYPES",
 ]
