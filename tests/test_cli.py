@@ -362,3 +362,18 @@ def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
         estimate = result["parameters"][name]
         assert estimate["q05"] <= value <= estimate["q95"], (name, estimate)
     assert {p.name for p in (tmp_path / "cal").iterdir()} == {"posterior.nc", "calibration.json", "report.html"}
+
+
+@pytest.mark.parametrize("args, message", [
+    (["diagnose", "{tmp}/none.nc", "--out", "{tmp}/d"], "rig data file not found"),
+    (["diagnose", "{root}/data/rig/healthy.nc", "--out", "{tmp}/d", "--effects", "nonsense"],
+     "'nonsense' is not a library effect"),
+    (["blindtest", "--out", "{tmp}/d", "--n-per-effect", "0"], "--n-per-effect: expected a positive integer"),
+])
+def test_diagnosis_commands_reject_bad_input(tmp_path, args, message):
+    root = Path(__file__).resolve().parent.parent
+    completed = _uqgear(*[a.format(tmp=tmp_path, root=root) for a in args])
+    assert completed.returncode == 2
+    assert message in completed.stderr
+    assert len(completed.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists() and not any(p.name.startswith(".d") for p in tmp_path.iterdir())

@@ -9,6 +9,8 @@
                     [--out FILE.png|FILE.nc]
     uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
+    uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...]
+    uqgear blindtest --out DIR [--n-per-effect N] [--seed S]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler) ends with exit status 2 and a one-line message on
@@ -300,6 +302,45 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_diagnose(args: argparse.Namespace) -> int:
+    from .diagnosis import diagnose
+
+    rig = Path(args.rig)
+    if not rig.is_file():
+        return _fail(f"{rig}: rig data file not found")
+    effects = [name for item in args.effects for name in item.split(",") if name] if args.effects else None
+    out = Path(args.out)
+    work = _new_output_folder(out)
+    failed = True
+    try:
+        result = diagnose(rig, work, design=args.design, effects=effects, seed=args.seed, workers=args.workers)
+        failed = False
+    finally:
+        _finish_output_folder(work, out, failed)
+    gap = result.get("gap", {})
+    print(f"diagnosis of {rig}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
+          f"{gap.get('baseline')} -> {gap.get('with_effect')} (shrink {gap.get('shrink_fraction')}); results in {out}")
+    return 0
+
+
+def _command_blindtest(args: argparse.Namespace) -> int:
+    from .blindtest import blindtest
+
+    if args.n_per_effect < 1:
+        return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
+    out = Path(args.out)
+    work = _new_output_folder(out)
+    failed = True
+    try:
+        result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers)
+        failed = False
+    finally:
+        _finish_output_folder(work, out, failed)
+    print(f"blind test: {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f}, "
+          f"false alarms on healthy controls {result['false_alarms']}; results in {out}")
+    return 0
+
+
 # ---------------------------------------------------------------------------- main
 
 
@@ -388,6 +429,31 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     calibrate.add_argument("--workers", type=int, metavar="N", help="integrator threads (default: all cores)")
     calibrate.set_defaults(handler=_command_calibrate)
+
+    diagnose = commands.add_parser("diagnose", help="where model and rig disagree, which unmodelled effect "
+                                   "causes it, how far the gap shrinks",
+                                   description="Calibrate the nominal model, map the standardised gap over "
+                                   "op x channel x feature family, fit each candidate effect and score it on "
+                                   "held-out operating points; write DIR/diagnosis.json, DIR/diagnosis.nc, "
+                                   "DIR/report.html.")
+    diagnose.add_argument("rig", metavar="RIG.nc")
+    diagnose.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
+    diagnose.add_argument("--design", metavar="FILE", help="nominal design (default: the rig file's design)")
+    diagnose.add_argument("--effects", nargs="+", metavar="NAME",
+                          help="candidate effects (default: all six of the library)")
+    diagnose.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    diagnose.add_argument("--workers", type=int, metavar="N", help="worker processes/threads (default: all cores)")
+    diagnose.set_defaults(handler=_command_diagnose)
+
+    blind = commands.add_parser("blindtest", help="blind check of the diagnosis on virtual-rig campaigns",
+                                description="Generate campaigns with withheld effects (and healthy controls), "
+                                "diagnose them, write the confusion matrix, shrink statistics and detection "
+                                "thresholds (DIR/blindtest.json, DIR/blindtest.nc, DIR/report.html).")
+    blind.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
+    blind.add_argument("--n-per-effect", type=int, default=3, metavar="N", help="campaigns per effect (default 3)")
+    blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    blind.add_argument("--workers", type=int, metavar="N", help="worker processes (default: all cores)")
+    blind.set_defaults(handler=_command_blindtest)
     return parser
 
 

@@ -1,0 +1,105 @@
+"""Tests of the blind checks of the gap diagnosis (uqgear.blindtest).
+
+The scoring (confusion matrix, accuracies, false alarms, thresholds) is
+checked on hand-made verdicts; the campaign plan on its counts and ladder;
+a small blind test (slow) generates campaigns with the virtual rig, withholds
+their labels and checks the verdicts against the truth.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from uqgear import blindtest as B
+from uqgear.design import load_design
+from uqgear.diagnosis import EFFECT_NAMES, DiagnosisError
+
+
+def test_second_design_is_the_one_asked_for():
+    design = B.second_design(load_design("locomotive"))
+    assert (design.z1, design.z2, design.module, design.x1, design.x2, design.face_width) == \
+        (17, 88, 0.010, 0.3, -0.3, 0.130)
+
+
+def test_plan_covers_every_effect_strength_and_design():
+    specs = B.plan_campaigns(3, np.random.default_rng(4))
+    assert len(specs) == 3 * (len(EFFECT_NAMES) + 1)
+    for effect in EFFECT_NAMES:
+        mine = [s for s in specs if s.truth == effect]
+        assert {s.strength for s in mine} == set(B.STRENGTHS)
+        assert {s.design_name for s in mine} == {"reference", "second"}
+        # the effect is buildable with its drawn values
+        assert all(len(s.effects()) == 1 for s in mine)
+    healthy = [s for s in specs if s.truth == B.HEALTHY]
+    assert len(healthy) == 3 and all(s.effects() == [] for s in healthy)
+    again = B.plan_campaigns(3, np.random.default_rng(4))
+    assert [s.effect_values for s in again] == [s.effect_values for s in specs]
+
+
+def test_plan_rejects_bad_requests():
+    rng = np.random.default_rng(0)
+    with pytest.raises(DiagnosisError, match="n_per_effect: expected an integer >= 1"):
+        B.plan_campaigns(0, rng)
+    with pytest.raises(DiagnosisError, match="effects: 'gear_whine' is not a library effect"):
+        B.plan_campaigns(1, rng, effects=["gear_whine"])
+    with pytest.raises(DiagnosisError, match="designs: 'third' unknown"):
+        B.plan_campaigns(1, rng, designs=["third"])
+    with pytest.raises(DiagnosisError, match="n_ops: expected an integer >= 3"):
+        B.blindtest("unused", n_ops=2)
+
+
+def _campaign(truth, verdict, strength_value=1.0, detectable=True, shrink=None):
+    return {"id": f"{truth}-{verdict}-{strength_value}", "truth": truth, "verdict": verdict,
+            "strength": "-", "strength_value": strength_value, "design": "reference",
+            "correct": truth == verdict,
+            "correct_detectable": truth == verdict or (not detectable and verdict == B.HEALTHY),
+            "detectable": detectable, "oracle_gap": 1.0, "nominal_gap": 1.0, "shrink_fraction": shrink,
+            "seconds": 1.0}
+
+
+def test_summary_counts_confusion_accuracy_and_false_alarms():
+    campaigns = [_campaign("friction", "friction", 0.1, shrink=0.9),
+                 _campaign("friction", "none", 0.02, detectable=False),
+                 _campaign("friction", "friction", 0.05, shrink=0.7),
+                 _campaign("eccentricity", "tooth_damage", 5e-6),
+                 _campaign(B.HEALTHY, "none"), _campaign(B.HEALTHY, "torque_ripple")]
+    content = B.summarise(campaigns, ["friction", "eccentricity"])
+    counts = np.array(content["confusion"]["counts"])
+    labels, verdicts = content["labels"], content["confusion"]["verdicts"]
+    assert counts.sum() == 6
+    assert counts[labels.index("friction"), verdicts.index("friction")] == 2
+    assert counts[labels.index("eccentricity"), verdicts.index("tooth_damage")] == 1
+    assert content["accuracy"] == pytest.approx(3 / 6)
+    assert content["accuracy_detectable"] == pytest.approx(4 / 6)
+    assert content["false_alarms"] == 1
+    assert content["shrink"]["median"] == pytest.approx(0.8)
+    friction = next(t for t in content["thresholds"] if t["effect"] == "friction")
+    assert friction["detected_from"] == pytest.approx(0.05) and friction["missed_up_to"] == pytest.approx(0.02)
+    assert "below detectability" in friction["note"]
+    ds = B.blindtest_dataset(content)
+    assert ds["confusion"].dims == ("truth", "verdict") and int(ds["confusion"].sum()) == 6
+
+
+@pytest.mark.slow
+def test_small_blind_test(tmp_path):
+    """Two withheld campaigns (a torque ripple and a healthy control, 4 runs) get the right verdicts."""
+    content = B.blindtest(tmp_path, n_per_effect=1, effects=["torque_ripple"], n_healthy=1, n_ops=4,
+                          duration=0.5, seed=3)
+    assert content["n_campaigns"] == 2
+    verdicts = {c["truth"]: c["verdict"] for c in content["campaigns"]}
+    assert verdicts == {"torque_ripple": "torque_ripple", "none": "none"}
+    assert content["false_alarms"] == 0
+    ripple = next(c for c in content["campaigns"] if c["truth"] == "torque_ripple")
+    assert ripple["oracle_gap"] > 1.0 and ripple["shrink_fraction"] >= 0.7
+    on_disk = json.loads((tmp_path / "blindtest.json").read_text())
+    assert on_disk["accuracy"] == pytest.approx(1.0)
+    assert (tmp_path / "report.html").read_text().startswith("<!DOCTYPE html>")
+    ds = xr.open_dataset(tmp_path / "blindtest.nc")
+    assert int(ds["confusion"].sum()) == 2
+    ds.close()
+    # the diagnosis saw no label: the rig file it read carries the truth only in our copy
+    assert (tmp_path / "campaigns" / ripple["id"] / "rig.nc").is_file()

@@ -1,0 +1,356 @@
+"""Tests of the sim-to-real gap diagnosis (uqgear.diagnosis).
+
+Fast tests check the pieces against independent truths: Rice-distributed
+line amplitudes drawn from complex Gaussian noise, closed-form Rice moments,
+white-noise statistics, synthetic rig records with a known fixed-frequency
+line, the periodic tiling against a full simulation, the verdict rules on
+hand-made rankings, and the model with the README's true parameters against
+a labelled campaign. The slow tests run the whole diagnosis on every
+labelled campaign in data/rig/ and compare the verdict with the README's label.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.stats
+import xarray as xr
+
+from uqgear import diagnosis as D
+from uqgear.design import load_design
+from uqgear.errors import RigDataError, UqgearError
+from uqgear.features import extract_features
+from uqgear.rig import make_rig_dataset, read_rig, rig_design
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
+
+# Labels of the campaigns in data/rig/ (data/rig/README.md): file -> verdict
+LABELLED = {"healthy.nc": "none", "healthy_b.nc": "none", "eccentricity.nc": "eccentricity",
+            "tooth_damage.nc": "tooth_damage", "torque_ripple.nc": "torque_ripple",
+            "adhesion_oscillation.nc": "adhesion_oscillation", "friction.nc": "friction"}
+
+# True parameters of healthy.nc (data/rig/README.md)
+HEALTHY_TRUTH = {"mesh_stiffness_scale": 0.970, "zeta_mesh": 0.052, "backlash": 0.300e-3,
+                 "ste_amplitude": 16.07e-6, "k1": 1.010e9, "k2": 1.889e9}
+HEALTHY_T2 = [29.78e3, 26.12e3, 30.70e3, 38.23e3, 39.38e3, 27.09e3, 25.82e3, 21.30e3]
+
+
+@pytest.fixture(scope="module")
+def design():
+    return load_design("locomotive")
+
+
+@pytest.fixture(scope="module")
+def healthy_case():
+    rig = read_rig(DATA / "healthy.nc")
+    return D.prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
+
+
+def _layout_for_lines(n: int) -> D.FeatureLayout:
+    return D.FeatureLayout(tuple(f"line{i}" for i in range(n)), ("mesh_harmonic",) * n, ("line",) * n,
+                           np.arange(n))
+
+
+# ---------------------------------------------------------------------------------------------- discrepancies
+
+def test_rice_moments_match_scipy_and_the_normal_limit():
+    sigma = np.full(5, 2.0)
+    nu = np.array([0.0, 0.5, 2.0, 6.0, 30.0])
+    mean, spread = D._rice_moments(nu, sigma)
+    for k in range(nu.size):
+        assert mean[k] == pytest.approx(scipy.stats.rice.mean(nu[k] / sigma[k], scale=sigma[k]), rel=1e-7)
+        assert spread[k] == pytest.approx(scipy.stats.rice.std(nu[k] / sigma[k], scale=sigma[k]), rel=1e-5)
+    # far above the noise (where scipy's series overflows): mean nu + s^2/(2 nu), spread s (1 - s^2/(8 nu^2))
+    mean, spread = D._rice_moments(np.array([3000.0]), np.array([2.0]))
+    assert mean[0] == pytest.approx(3000.0 + 4.0 / 6000.0, rel=1e-12)
+    assert spread[0] == pytest.approx(2.0 * (1.0 - 4.0 / (8.0 * 3000.0 ** 2)), rel=1e-6)
+
+
+@pytest.mark.parametrize("nu_over_s", [0.0, 1.5, 8.0, 400.0])
+def test_line_discrepancy_is_standard_normal_for_noisy_lines(nu_over_s):
+    # amplitude of a line nu plus complex Gaussian noise of s per quadrature: Rice(nu, s) by construction
+    rng = np.random.default_rng(3)
+    s = 0.7
+    n = 40000
+    observed = np.abs(nu_over_s * s + s * (rng.standard_normal(n) + 1j * rng.standard_normal(n)))
+    noise = D.NoiseModel(line_scale=np.array([s]), band_power=np.array([1.0, 0.1]),
+                         total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
+    z, scale = D.standardised_discrepancy(observed.reshape(n, 1, 1, 1), np.full((n, 1, 1, 1), nu_over_s * s),
+                                          np.ones((1, 1)), [noise], _layout_for_lines(1),
+                                          {"line": 0.0, "band": 0.0, "rms": 0.0, "kurtosis": 0.0})
+    z = z.ravel()
+    assert abs(z.mean()) < 0.03
+    assert z.std() == pytest.approx(1.0, abs=0.03)
+    # tail calibration: the Rayleigh floor must not produce excess 3-sigma alarms
+    assert np.mean(np.abs(z) > 3.0) < 0.0045
+    assert scale.ravel()[0] == pytest.approx(1.0)
+
+
+def test_model_error_widens_large_lines_only():
+    noise = D.NoiseModel(line_scale=np.array([1.0, 1.0]), band_power=np.array([1.0, 0.1]),
+                         total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
+    model = np.array([0.0, 1000.0]).reshape(1, 1, 2)
+    observed = np.array([1.2, 1100.0]).reshape(1, 1, 2)   # a 10 % high line
+    errors = {"line": 0.05, "band": 0.0, "rms": 0.0, "kurtosis": 0.0}
+    z, scale = D.standardised_discrepancy(observed, model, np.ones((1, 1)), [noise], _layout_for_lines(2), errors)
+    # 100 above a model of 1000 with a 5 % relative error: about 2 sigma, not 100 (the Rice mean
+    # sits sigma^2/(2 nu) above nu)
+    sigma = math.hypot(1.0, 50.0)
+    assert z[0, 0, 1] == pytest.approx((100.0 - sigma ** 2 / 2000.0) / sigma, rel=2e-3)
+    assert scale[0, 0, 1] == pytest.approx(math.hypot(1.0, 50.0), rel=1e-6)
+    assert scale[0, 0, 0] == pytest.approx(1.0)
+
+
+def test_band_power_discrepancy_adds_noise_power():
+    layout = D.FeatureLayout(("low_band_rms",), ("low_frequency",), ("band",), np.array([0]))
+    noise = D.NoiseModel(line_scale=np.array([np.nan]), band_power=np.array([0.01, 0.002]),
+                         total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
+    sigma = 3.0
+    # a model band RMS of 0.4 plus the noise's 0.01 sigma^2 of mean square: rig value sqrt(0.16 + 0.09)
+    observed = np.full((1, 1, 1), math.sqrt(0.16 + 0.01 * sigma ** 2))
+    z, _ = D.standardised_discrepancy(observed, np.full((1, 1, 1), 0.4), np.full((1, 1), sigma), [noise], layout,
+                                      {"line": 0.0, "band": 0.1, "rms": 0.0, "kurtosis": 0.0})
+    assert abs(z.item()) < 1e-9
+
+
+def test_robust_log_density_has_normal_core_and_flat_floor():
+    core = D.robust_log_density(np.array([0.0]), np.array([1.0]))
+    assert core.item() == pytest.approx(math.log(0.99 / math.sqrt(2 * math.pi) + 0.01 / 200.0), rel=1e-12)
+    far = D.robust_log_density(np.array([50.0, 5000.0]), np.array([1.0, 1.0]))
+    assert far[0] == pytest.approx(far[1])
+    assert far[0] == pytest.approx(math.log(0.01 / 200.0), abs=1e-9)
+    # a wider prediction pays near the data
+    assert D.robust_log_density(np.array([0.0]), np.array([4.0])).item() < core.item() - 1.0
+
+
+# ---------------------------------------------------------------------------------------------- gap metric
+
+def test_gap_metric_is_zero_for_noise_and_known_for_offsets():
+    rng = np.random.default_rng(0)
+    # mean z^2 - 1 scatters by sqrt(2/n) about 0; the square root makes that 0.05 at n = 2e5
+    assert D.gap_metric(rng.standard_normal(200000)) < 0.1
+    assert D.gap_metric(np.full(100, 3.0)) == pytest.approx(math.sqrt(8.0))
+    # each feature counts at most 10 sigma
+    assert D.gap_metric(np.full(10, 1e6)) == pytest.approx(math.sqrt(99.0))
+    assert D.gap_metric(np.array([np.nan, 3.0])) == pytest.approx(math.sqrt(8.0))
+    assert math.isnan(D.gap_metric(np.array([np.nan])))
+
+
+def test_shrink_fraction_and_bootstrap():
+    assert D.shrink_fraction(2.0, 0.5) == pytest.approx(0.75)
+    assert D.shrink_fraction(0.0, 0.5) == 0.0
+    rng = np.random.default_rng(1)
+    before = np.full((8, 3, 20), 4.0)
+    after = rng.standard_normal((8, 3, 20))
+    central, low, high = D.bootstrap_shrink(before, after, rng)
+    assert central > 0.9 and low > 0.85 and high <= 1.0
+    # a gap left as it was does not shrink
+    central, low, high = D.bootstrap_shrink(before, before, rng)
+    assert central == pytest.approx(0.0) and low == pytest.approx(0.0) and high == pytest.approx(0.0)
+
+
+# ---------------------------------------------------------------------------------------------- verdict rules
+
+def _entry(effect, score, shrink, low=None):
+    return {"effect": effect, "score": score, "shrink_fraction": shrink,
+            "shrink_interval": [shrink - 0.1 if low is None else low, min(shrink + 0.1, 1.0)]}
+
+
+def test_verdict_none_when_nominal_within_noise():
+    verdict, reason = D.decide_verdict(0.2, [_entry("friction", 4.0, 0.3)])
+    assert verdict == "none" and "within noise" in reason
+    assert D.decide_verdict(0.2, [])[0] == "none"
+
+
+def test_verdict_names_effect_with_score_and_shrink():
+    verdict, reason = D.decide_verdict(3.0, [_entry("tooth_damage", 120.0, 0.95), _entry("friction", 20.0, 0.1)])
+    assert verdict == "tooth_damage" and "shrinks" in reason
+    # strong evidence names the effect even when the omnibus gap is small
+    assert D.decide_verdict(0.4, [_entry("torque_ripple", 40.0, 0.8)])[0] == "torque_ripple"
+
+
+def test_verdict_unexplained_when_no_candidate_removes_the_gap():
+    assert D.decide_verdict(3.0, [_entry("eccentricity", 200.0, 0.2)])[0] == "unexplained"
+    assert D.decide_verdict(3.0, [_entry("eccentricity", 5.0, 0.9)])[0] == "unexplained"
+    # a shrink whose interval reaches below zero is not evidence
+    assert D.decide_verdict(3.0, [_entry("friction", 50.0, 0.6, low=-0.2)])[0] == "unexplained"
+    assert D.decide_verdict(3.0, [])[0] == "unexplained"
+
+
+# ---------------------------------------------------------------------------------------------- processing
+
+@pytest.fixture(scope="module")
+def short_processor(design):
+    options = dict(D.FEATURE_OPTIONS, band_limit=20480.0 / 2.56)
+    return D.RunProcessor(design, 1250.0, 20480.0, 4096, options)
+
+
+def test_model_features_match_extract_features(design, short_processor):
+    rng = np.random.default_rng(5)
+    time = np.arange(4096) / 20480.0
+    record = (1e-6 * np.cos(2 * np.pi * 437.5 * time + 0.3) + 2e-7 * np.sin(2 * np.pi * 20.83 * time)
+              + 1e-8 * rng.standard_normal(time.size))
+    signals = xr.Dataset({"te": (("op", "time"), record[None], {"units": "m"})},
+                         coords={"time": time, "pinion_speed": ("op", [1250.0])})
+    reference = extract_features(signals, design)["te"].values[0]
+    ours = short_processor.model_features(record[None])[0]
+    both = np.isfinite(ours)
+    assert np.allclose(ours[both], reference[both], rtol=1e-10, atol=0.0)
+    assert np.allclose(short_processor.features(record[None])[0], reference, rtol=1e-10, equal_nan=True)
+
+
+def test_line_noise_scale_matches_monte_carlo(short_processor):
+    rng = np.random.default_rng(11)
+    noise = rng.standard_normal((3000, 4096))
+    amplitudes = short_processor.features(noise)[:, short_processor.line_columns]
+    # E[A^2] = 2 s^2 for a Rayleigh amplitude of per-quadrature scale s
+    monte_carlo = np.sqrt(np.mean(amplitudes ** 2, axis=0) / 2.0)
+    exact = short_processor.line_noise[short_processor.line_columns]
+    fitted = np.isfinite(exact)
+    assert np.allclose(monte_carlo[fitted], exact[fitted], rtol=0.06)
+
+
+def test_periodic_tiling_matches_full_simulation(design):
+    simulator = D.CampaignSimulator(design, [1250.0], [6000.0], 20480.0, 4096, ("te", "acc_pinion", "acc_gear"))
+    periodic = simulator.run(0, design, 1.0, 30000.0, (), "pinion")
+    full = simulator.run(0, design, 1.0, 30000.0, (), "free")
+    assert periodic.periodic and not full.periodic
+    processor = D.RunProcessor(design, 1250.0, 20480.0, 4096, dict(D.FEATURE_OPTIONS, band_limit=8000.0))
+    names = processor.names
+    for channel in ("te", "acc_pinion"):
+        a = processor.model_features(periodic.records[channel][None])[0]
+        b = processor.model_features(full.records[channel][None])[0]
+        for feature in ("mesh1", "mesh2", "mesh3", "rms"):
+            k = names.index(feature)
+            assert a[k] == pytest.approx(b[k], rel=2e-3), (channel, feature)
+
+
+def test_frequency_locked_line_found_and_order_lines_ignored(design):
+    fs, n = 20480.0, 8192
+    time = np.arange(n) / fs
+    speeds = np.array([600.0, 1300.0, 2100.0, 3100.0])
+    rng = np.random.default_rng(2)
+    te = np.stack([2e-6 * np.cos(2 * np.pi * 21 * s / 60 * time) + 3e-7 * np.sin(2 * np.pi * 15.0 * time + s)
+                   + 2e-7 * np.cos(2 * np.pi * s / 60 * time)          # order-locked 1x line
+                   + 1e-9 * rng.standard_normal(n) for s in speeds])
+    lower = speeds * 0 + 25000.0
+    rig = make_rig_dataset(time=time, pinion_speed=speeds, drive_torque=np.full(4, 6000.0),
+                           adhesion_torque_lower=lower, adhesion_torque_upper=lower + 5000.0,
+                           channels={"te": te}, design=design, title="synthetic", source="test", history="test")
+    case = D.prepare_case(rig, design, seed=np.random.SeedSequence(0))
+    lines = D.frequency_locked_lines(case)
+    assert [round(line["frequency"]) for line in lines] == [15]
+    assert lines[0]["ops"] == [0, 1, 2, 3]
+    assert D.signature_hints(case, lines)["adhesion_frequency"] == pytest.approx(15.0, abs=2.5)
+
+
+def test_true_parameters_reproduce_healthy_campaign(healthy_case):
+    """With the README's true parameters the model is within noise of healthy.nc (no fit)."""
+    case = healthy_case
+    problem = D.FitProblem(case, None)
+    lower, upper = case.adhesion_lower, case.adhesion_upper
+    vector = problem.vector(HEALTHY_TRUTH, (np.array(HEALTHY_T2) - lower) / (upper - lower))
+    vector = vector.copy()
+    model, _ = problem.model_features([vector])
+    z, _ = problem.discrepancy(model[0])
+    z = np.where(case.mask(), z, np.nan)
+    assert D.gap_metric(z) < 0.2
+    assert np.nanmax(np.abs(z)) < 5.0
+
+
+def test_calibration_posterior_gives_the_nominal_start(healthy_case):
+    case = healthy_case
+    rng = np.random.default_rng(0)
+    draws = {"mesh_stiffness_scale": 0.97, "zeta_mesh": 0.052, "k1": 1.01e9, "backlash": 3.1e-4}
+    t2 = case.adhesion_lower + np.linspace(0.1, 0.9, case.n_op) * (case.adhesion_upper - case.adhesion_lower)
+    posterior = xr.Dataset({name: (("chain", "draw"), value * (1 + 0.01 * rng.standard_normal((4, 51))))
+                            for name, value in draws.items()})
+    posterior["adhesion_torque"] = (("chain", "draw", "op"), np.broadcast_to(t2, (4, 51, case.n_op)).copy())
+    start, positions = D.calibration_start(posterior, case)
+    assert set(start) == set(draws)
+    for name, value in draws.items():
+        assert start[name] == pytest.approx(value, rel=0.01)
+    assert np.allclose(positions, np.linspace(0.1, 0.9, case.n_op))
+    with pytest.raises(D.DiagnosisError, match="calibration: the posterior has none of the parameters"):
+        D.calibration_start(xr.Dataset({"other": ("draw", [1.0])}), case)
+    with pytest.raises(D.DiagnosisError, match="calibration: .*no such file"):
+        D.load_calibration(DATA / "no_such_calibration")
+
+
+def test_adhesion_profile_finds_each_runs_torque(healthy_case):
+    """From the bottom of every interval, the grid profile puts T2 within a grid step of the truth."""
+    case = healthy_case
+    problem = D.FitProblem(case, None)
+    lower, upper = case.adhesion_lower, case.adhesion_upper
+    truth = (np.array(HEALTHY_T2) - lower) / (upper - lower)
+    profiled = D.profile_adhesion(problem, problem.vector(HEALTHY_TRUTH, 0.0))
+    found = profiled[problem.n_global:]
+    step = D._T2_GRID[1] - D._T2_GRID[0]
+    assert np.all(np.abs(found - truth) <= step), (found, truth)
+
+
+# ---------------------------------------------------------------------------------------------- bad input
+
+def test_unknown_effect_is_rejected(tmp_path):
+    with pytest.raises(D.DiagnosisError, match="effects: 'gear_whine' is not a library effect"):
+        D.diagnose(DATA / "healthy.nc", tmp_path, effects=["gear_whine"])
+    with pytest.raises(UqgearError, match="effects"):
+        D.candidates_for("wear", load_design("locomotive"))
+
+
+def test_invalid_rig_inputs_are_rejected(tmp_path):
+    with pytest.raises(RigDataError, match="rig data file not found"):
+        D.diagnose(tmp_path / "missing.nc", tmp_path / "out")
+    broken = tmp_path / "broken.nc"
+    broken.write_text("not a netCDF file")
+    with pytest.raises(RigDataError, match="broken.nc"):
+        D.diagnose(broken, tmp_path / "out")
+    rig = read_rig(DATA / "healthy.nc")
+    rig.attrs["conventions"] = "other/1"
+    with pytest.raises(RigDataError, match="conventions: expected 'uqgear-rig/1'"):
+        D.diagnose(rig, tmp_path / "out")
+    with pytest.raises(RigDataError, match="expected a uqgear-rig/1 file path or an xarray Dataset"):
+        D.diagnose(42, tmp_path / "out")
+
+
+def test_bad_options_are_rejected(tmp_path):
+    with pytest.raises(D.DiagnosisError, match="seed: expected a non-negative integer"):
+        D.diagnose(DATA / "healthy.nc", tmp_path, seed=-1)
+    with pytest.raises(D.DiagnosisError, match="workers: expected an integer >= 1"):
+        D.diagnose(DATA / "healthy.nc", tmp_path, workers=0)
+    with pytest.raises(D.DiagnosisError, match="design: expected a Design"):
+        D.diagnose(DATA / "healthy.nc", tmp_path, design=3.5)
+    with pytest.raises(D.DiagnosisError, match="effects: expected at least one"):
+        D.diagnose(DATA / "healthy.nc", tmp_path, effects=[])
+    with pytest.raises(D.DiagnosisError, match="model_error.wobble: unknown feature kind"):
+        D.prepare_case(read_rig(DATA / "healthy.nc"), load_design("locomotive"), seed=np.random.SeedSequence(0),
+                       model_error={"wobble": 0.1})
+
+
+# ---------------------------------------------------------------------------------------------- labelled campaigns
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(LABELLED))
+def test_labelled_campaign_verdict(name, tmp_path):
+    """The diagnosis names each labelled campaign's effect (none for the healthy ones)."""
+    content = D.diagnose(DATA / name, tmp_path, seed=0)
+    assert content["verdict"] == LABELLED[name], content["reason"]
+    on_disk = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert on_disk["verdict"] == content["verdict"]
+    assert set(on_disk) >= {"verdict", "gap", "where", "ranking"}
+    assert set(on_disk["gap"]) >= {"metric", "baseline", "with_effect", "shrink_fraction", "evaluated_on"}
+    assert (tmp_path / "report.html").read_text().startswith("<!DOCTYPE html>")
+    maps = xr.open_dataset(tmp_path / "diagnosis.nc")
+    assert maps["gap_map_nominal"].dims == ("op", "channel", "family")
+    maps.close()
+    ranking = content["ranking"]
+    assert [entry["score"] for entry in ranking] == sorted((entry["score"] for entry in ranking), reverse=True)
+    if LABELLED[name] == "none":
+        assert content["gap"]["baseline"] <= D.NOISE_GAP_THRESHOLD
+    else:
+        assert ranking[0]["effect"] == LABELLED[name]
+        assert content["gap"]["shrink_fraction"] >= 0.7
