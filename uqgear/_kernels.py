@@ -54,8 +54,6 @@ PARAMETER_SLOTS = (
 N_ACCUMULATORS = 13
 
 TWO_PI = 2.0 * math.pi
-#: Rows of the scratch array ``work`` that :func:`step` needs (k2, k3, k4, tmp, forcing terms).
-WORK_ROWS = 5
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
@@ -157,104 +155,114 @@ def static_transmission_error(t, p):
     return ste
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
-def forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, terms):
-    """Time-only terms of the right-hand side, written into ``terms``.
+# The stepping code below keeps the state, stage derivatives and forcing terms in tuples
+# (registers) rather than scratch arrays: slicing rows out of a work array costs reference
+# counting on every stage, which made an RK4 step about ten times slower.
 
-    ``terms`` = (k, arm_pinion, arm_gear, relative drive acceleration
-    R1 T1(t)/I1 + R2 T2(t)/I2, e(t), e''(t)). RK4's two midpoint stages
-    share one evaluation.
-    """
-    k, arm_pinion, arm_gear = mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def _time_terms(t, sine, p):
+    """(relative drive acceleration, e(t), e''(t)) given sin(omega t + STE phase)."""
     drive = p[T1]
     if p[RIPPLE_AMPLITUDE] != 0.0:
         drive *= 1.0 + p[RIPPLE_AMPLITUDE] * math.cos(p[RIPPLE_OMEGA] * t + p[RIPPLE_PHASE])
     adhesion = p[T2]
     if p[ADHESION_AMPLITUDE] != 0.0:
         adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
-    sine = math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
     ste = p[STE_AMPLITUDE] * sine
     ste_acc = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
     if p[ECC_AMPLITUDE] != 0.0:
         ecc = p[ECC_AMPLITUDE] * math.sin(p[ECC_OMEGA] * t + p[ECC_PHASE])
         ste += ecc
         ste_acc -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
-    terms[0] = k
-    terms[1] = arm_pinion
-    terms[2] = arm_gear
-    terms[3] = p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2]
-    terms[4] = ste
-    terms[5] = ste_acc
+    return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
+def forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
+    """Time-only terms of the right-hand side at any time.
+
+    Returns (k, friction term, relative drive acceleration
+    R1 T1(t)/I1 + R2 T2(t)/I2, e(t), e''(t)); the friction term times the
+    backlash function f(x) is the relative acceleration tooth friction takes
+    away (see :func:`_friction_term`).
+    """
+    k, arm_pinion, arm_gear = mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
+    drive, ste, ste_acc = _time_terms(t, math.sin(p[OMEGA_MESH] * t + p[STE_PHASE]), p)
+    return k, _friction_term(arm_pinion, arm_gear, p), drive, ste, ste_acc
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
-def dynamics(state, terms, p, out):
-    """State-dependent part of the right-hand side; returns the mesh force F."""
-    x = state[2]
-    vx = state[5]
-    b = p[HALF_BACKLASH]
-    fx = dead_zone(x, b)
+def _friction_term(arm_pinion, arm_gear, p):
+    """mu (R1 sum_i k_i s_i sign_i / I1 + R2 sum_i k_i (L - s_i) sign_i / I2).
+
+    The friction moments are -mu f(x) sum k_i s_i sign_i on the pinion and
+    +mu f(x) sum k_i (L - s_i) sign_i on the gear, so R1 theta1'' - R2 theta2''
+    loses f(x) times this term.
+    """
+    if p[FRICTION] == 0.0:
+        return 0.0
+    return p[FRICTION] * (p[R1] * arm_pinion / p[I1] + p[R2] * arm_gear / p[I2])
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def derivative(s, terms, p):
+    """State-dependent part of the right-hand side.
+
+    ``s`` = (y1, y2, x, y1', y2', x'), ``terms`` from :func:`forcing`.
+    Returns (ds/dt as a 6-tuple, mesh force F).
+    """
+    x = s[2]
+    vx = s[5]
+    fx = dead_zone(x, p[HALF_BACKLASH])
     damping = p[CM]
     if p[DAMP_IN_SEPARATION] == 0.0 and fx == 0.0:
         damping = 0.0
-    force = terms[0] * fx + damping * vx
-    bearing1 = p[K1] * dead_zone(state[0], p[CLEARANCE1])
-    bearing2 = p[K2] * dead_zone(state[1], p[CLEARANCE2])
-    a1 = (-p[C1] * state[3] - bearing1 - force) / p[M1]
-    a2 = (-p[C2] * state[4] - bearing2 + force) / p[M2]
-    # R1 theta1'' - R2 theta2'' with the rigid-body rotation eliminated
-    relative = terms[3] - force / p[ME]
-    if p[FRICTION] != 0.0:
-        # pinion: -mu f(x) sum k_i s_i sign_i ; gear: +mu f(x) sum k_i (L - s_i) sign_i
-        friction_pinion = -p[FRICTION] * fx * terms[1]
-        friction_gear = p[FRICTION] * fx * terms[2]
-        relative += p[R1] * friction_pinion / p[I1] - p[R2] * friction_gear / p[I2]
-    out[0] = state[3]
-    out[1] = state[4]
-    out[2] = vx
-    out[3] = a1
-    out[4] = a2
-    out[5] = a1 - a2 + relative - terms[5]
-    return force
+    k = terms[0]
+    force = k * fx + damping * vx
+    bearing1 = p[K1] * dead_zone(s[0], p[CLEARANCE1])
+    bearing2 = p[K2] * dead_zone(s[1], p[CLEARANCE2])
+    a1 = (-p[C1] * s[3] - bearing1 - force) / p[M1]
+    a2 = (-p[C2] * s[4] - bearing2 + force) / p[M2]
+    # R1 theta1'' - R2 theta2'' with the rigid-body rotation eliminated; tooth friction
+    # (zero unless the friction effect is on) is linear in f(x), its time part precomputed
+    relative = terms[2] - force / p[ME] - fx * terms[1]
+    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - terms[4]), force
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def _shifted(s, h, d):
+    return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4],
+            s[5] + h * d[5])
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def _rk4(s, h, d1, mid, end, p):
+    """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
+    d2, _ = derivative(_shifted(s, 0.5 * h, d1), mid, p)
+    d3, _ = derivative(_shifted(s, 0.5 * h, d2), mid, p)
+    d4, _ = derivative(_shifted(s, h, d3), end, p)
+    w = h / 6.0
+    return (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
+            s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
+            s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
+            s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
+            s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
+            s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
 def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     """Right-hand side of the 3-DOF model (model.md section 2) plus effect slots.
 
-    ``state`` = (y1, y2, x, y1', y2', x'); writes the derivative into ``out``
-    and returns (mesh force F, mesh stiffness k, static transmission error e).
+    ``state`` = (y1, y2, x, y1', y2', x') as an array; writes the derivative
+    into ``out`` and returns (mesh force F, mesh stiffness k, static
+    transmission error e).
     """
-    terms = np.empty(6)
-    forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, terms)
-    force = dynamics(state, terms, p, out)
-    return force, terms[0], terms[4]
-
-
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
-def _rk4(t, h, state, first, t_ref, p, pair_k, period_k, fp, fg, work, out):
-    """One RK4 step from ``state`` (first stage ``first`` given) into ``out``.
-
-    ``work`` holds rows k2, k3, k4, tmp, terms.
-    """
-    k2 = work[0]
-    k3 = work[1]
-    k4 = work[2]
-    tmp = work[3]
-    terms = work[4]
-    forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg, terms)
+    terms = forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
+    d, force = derivative((state[0], state[1], state[2], state[3], state[4], state[5]), terms, p)
     for j in range(6):
-        tmp[j] = state[j] + 0.5 * h * first[j]
-    dynamics(tmp, terms, p, k2)
-    for j in range(6):
-        tmp[j] = state[j] + 0.5 * h * k2[j]
-    dynamics(tmp, terms, p, k3)
-    forcing(t + h, t_ref, p, pair_k, period_k, fp, fg, terms)
-    for j in range(6):
-        tmp[j] = state[j] + h * k3[j]
-    dynamics(tmp, terms, p, k4)
-    for j in range(6):
-        out[j] = state[j] + h / 6.0 * (first[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+        out[j] = d[j]
+    return force, terms[0], terms[3]
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
@@ -280,72 +288,206 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
-def _substep(t, h, state, t_ref, p, pair_k, period_k, fp, fg, work, first, trial):
-    """Advance ``state`` in place over [t, t+h] (one smooth stiffness branch),
-    splitting once at a contact boundary crossing.
-
-    Returns the mesh force, first-stage accelerations of y1 and y2 at ``t``.
-    """
-    terms = work[4]
-    forcing(t, t_ref, p, pair_k, period_k, fp, fg, terms)
-    force = dynamics(state, terms, p, first)
-    a1 = first[3]
-    a2 = first[4]
-    _rk4(t, h, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
+def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
+    """``trial`` (the step from ``s`` over [t, t+h]), redone in two parts where it changes the
+    contact region, split where the cubic Hermite interpolant of x crosses the boundary."""
     b = p[HALF_BACKLASH]
-    before = contact_region(state[2], b)
+    before = contact_region(s[2], b)
     after = contact_region(trial[2], b)
-    if before != after:
-        if before == 1 or (before == 0 and after == -1):
-            level = b if before == 1 else -b
-        else:
-            level = -b if before == -1 else b
-        theta = _crossing_fraction(state[2], state[5], trial[2], trial[5], h, level)
-        if 1e-9 < theta < 1.0 - 1e-9:
-            h_a = theta * h
-            _rk4(t, h_a, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
-            for j in range(6):
-                state[j] = trial[j]
-            forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg, terms)
-            dynamics(state, terms, p, first)
-            _rk4(t + h_a, h - h_a, state, first, t_ref, p, pair_k, period_k, fp, fg, work, trial)
-    for j in range(6):
-        state[j] = trial[j]
-    return force, a1, a2
+    if before == after:
+        return trial
+    if before == 1 or (before == 0 and after == -1):
+        level = b if before == 1 else -b
+    else:
+        level = -b if before == -1 else b
+    theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, level)
+    if not 1e-9 < theta < 1.0 - 1e-9:
+        return trial
+    h_a = theta * h
+    h_b = h - h_a
+    middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
+    part = _rk4(s, h_a, d1, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p)
+    d_middle, _ = derivative(part, middle, p)
+    return _rk4(part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg),
+                forcing(t + h, t_ref, p, pair_k, period_k, fp, fg), p)
+
+
+# ---------------------------------------------------------------- one mesh period tabulated
+#: Most tooth pairs in contact at once that a schedule holds (spur gears have at most 3).
+MAX_PAIRS = 4
+# fields of a tabulated stage: healthy k, friction arm sums, sin(omega t + STE phase), then
+# per pair in contact its healthy stiffness and friction arms (for tooth factors)
+(F_K, F_ARM_PINION, F_ARM_GEAR, F_SINE) = range(4)
+N_FIELDS = 4 + 3 * MAX_PAIRS
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
-def step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial):
-    """Advance one grid step [t, t+h], splitting at known stiffness breakpoints.
+def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
+    """The mesh-periodic forcing at local time ``t`` (first mesh period) into ``row``; returns the pair count."""
+    cycles_ref = p[OMEGA_MESH] * t_ref / TWO_PI
+    n_ref = math.floor(cycles_ref)
+    u_ref = cycles_ref - n_ref
+    u = p[OMEGA_MESH] * t / TWO_PI - n_ref
+    eps = p[CONTACT_RATIO]
+    k = 0.0
+    arm_pinion = 0.0
+    arm_gear = 0.0
+    i = 0
+    while u_ref + i < eps:
+        if i >= MAX_PAIRS:
+            raise ValueError("more tooth pairs in contact than a schedule holds")
+        kp = _interp_uniform(pair_k, u + i, eps)
+        sign = 1.0 if u_ref + i > p[PITCH_POSITION] else -1.0
+        s = p[PATH_START] + p[BASE_PITCH] * (u + i)
+        row[4 + 3 * i] = kp
+        row[5 + 3 * i] = kp * sign * s
+        row[6 + 3 * i] = kp * sign * (p[LOA_LENGTH] - s)
+        k += kp
+        arm_pinion += kp * sign * s
+        arm_gear += kp * sign * (p[LOA_LENGTH] - s)
+        i += 1
+    if p[USE_PERIOD_TABLE] != 0.0:
+        phase = p[OMEGA_MESH] * t / TWO_PI
+        phase -= math.floor(phase)
+        k = _interp_uniform(period_k, phase, 1.0)
+    row[F_K] = k
+    row[F_ARM_PINION] = arm_pinion
+    row[F_ARM_GEAR] = arm_gear
+    row[F_SINE] = math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
+    return i
 
-    ``breakpoints`` holds mesh phases in (0, 1) where the stiffness or the
-    friction direction jumps (phase 0 is a grid point already). Returns the
-    mesh force and the accelerations of y1, y2 at ``t`` (first RK4 stage).
+
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
+def build_schedule(p, pair_k, period_k, breakpoints, steps_per_period):
+    """Sub-steps of one mesh period and their forcing at RK4's three stage times.
+
+    Everything in the forcing that repeats every mesh period (pair
+    stiffnesses, friction arms, the STE phase) is evaluated here once per
+    run instead of three times per step; the effect slots that do not repeat
+    (run-out, tooth factors, torque ripple, adhesion oscillation) are applied
+    on top in :func:`_forcing_row`. Grid step ``j`` of any period is made of
+    sub-steps ``first_sub[j]`` to ``first_sub[j + 1] - 1`` (split at the
+    stiffness breakpoints exactly as the generic stepping would).
+
+    Returns
+    -------
+    first_sub, offsets, widths, refs, pairs, table
+        ``offsets``/``widths``/``refs``: sub-step start, length and reference
+        time (its midpoint) within the period; ``pairs``: pairs in contact;
+        ``table``: (sub-step, stage, field) forcing values.
     """
-    cycles0 = p[OMEGA_MESH] * t / TWO_PI
-    base = math.floor(cycles0 + 1e-9)
-    u0 = cycles0 - base
+    period = TWO_PI / p[OMEGA_MESH]
+    h = period / steps_per_period
+    capacity = steps_per_period * (breakpoints.size + 1)
+    offsets = np.empty(capacity)
+    widths = np.empty(capacity)
+    refs = np.empty(capacity)
+    pairs = np.empty(capacity, dtype=np.int64)
+    table = np.zeros((capacity, 3, N_FIELDS))
+    first_sub = np.empty(steps_per_period + 1, dtype=np.int64)
     du = p[OMEGA_MESH] * h / TWO_PI
-    t_now = t
-    remaining_end = t + h
-    started = False
+    count = 0
+    for j in range(steps_per_period):
+        first_sub[j] = count
+        t_now = j * h
+        end = (j + 1) * h
+        cycles0 = p[OMEGA_MESH] * t_now / TWO_PI
+        base = math.floor(cycles0 + 1e-9)
+        u0 = cycles0 - base
+        for bp in breakpoints:
+            if u0 + 1e-12 < bp < u0 + du - 1e-12:
+                t_break = (base + bp) * TWO_PI / p[OMEGA_MESH]
+                count = _add_substep(t_now, t_break, count, p, pair_k, period_k, offsets, widths, refs, pairs,
+                                     table)
+                t_now = t_break
+        count = _add_substep(t_now, end, count, p, pair_k, period_k, offsets, widths, refs, pairs, table)
+    first_sub[steps_per_period] = count
+    return first_sub, offsets, widths, refs, pairs, table
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
+def _add_substep(start, end, count, p, pair_k, period_k, offsets, widths, refs, pairs, table):
+    t_ref = 0.5 * (start + end)
+    offsets[count] = start
+    widths[count] = end - start
+    refs[count] = t_ref
+    pairs[count] = _tabulate_stage(start, t_ref, p, pair_k, period_k, table[count, 0])
+    _tabulate_stage(0.5 * (start + end), t_ref, p, pair_k, period_k, table[count, 1])
+    _tabulate_stage(end, t_ref, p, pair_k, period_k, table[count, 2])
+    return count + 1
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def _forcing_row(t, n, table, sub, stage, n_pairs, p, factor_pinion, factor_gear):
+    """:func:`forcing` at absolute time ``t`` in mesh period ``n`` from a tabulated stage."""
+    k = table[sub, stage, F_K]
+    arm_pinion = table[sub, stage, F_ARM_PINION]
+    arm_gear = table[sub, stage, F_ARM_GEAR]
+    if p[TOOTH_FACTORS] != 0.0:
+        z1 = int(p[Z1])
+        z2 = int(p[Z2])
+        for i in range(n_pairs):
+            tooth = n - i
+            extra = factor_pinion[tooth % z1] * factor_gear[tooth % z2] - 1.0
+            k += table[sub, stage, 4 + 3 * i] * extra
+            arm_pinion += table[sub, stage, 5 + 3 * i] * extra
+            arm_gear += table[sub, stage, 6 + 3 * i] * extra
+    scale = p[STIFFNESS_SCALE]
+    if p[ECC_KAPPA] != 0.0:
+        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
+    return k * scale, _friction_term(arm_pinion * scale, arm_gear * scale, p), drive, ste, ste_acc
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
+    """Advance the state tuple ``s`` over grid step ``j`` of mesh period ``n``.
+
+    ``schedule`` comes from :func:`build_schedule`: the step is split at the
+    stiffness breakpoints, and each sub-step, which sees one smooth
+    stiffness branch, is split once more where it crosses a contact
+    boundary.
+
+    Returns
+    -------
+    state, force, a1, a2
+        The new state tuple, and the mesh force and accelerations of y1, y2
+        at the step's start (first RK4 stage).
+    """
+    first_sub, offsets, widths, refs, pairs, table = schedule
+    start = n * period
     force = 0.0
     a1 = 0.0
     a2 = 0.0
-    for bp in breakpoints:
-        if u0 + 1e-12 < bp < u0 + du - 1e-12:
-            t_break = (base + bp) * TWO_PI / p[OMEGA_MESH]
-            f_, b1_, b2_ = _substep(t_now, t_break - t_now, state, 0.5 * (t_now + t_break), p, pair_k,
-                                    period_k, fp, fg, work, first, trial)
-            if not started:
-                force, a1, a2 = f_, b1_, b2_
-                started = True
-            t_now = t_break
-    f_, b1_, b2_ = _substep(t_now, remaining_end - t_now, state, 0.5 * (t_now + remaining_end), p, pair_k,
-                            period_k, fp, fg, work, first, trial)
-    if not started:
-        force, a1, a2 = f_, b1_, b2_
-    return force, a1, a2
+    for sub in range(first_sub[j], first_sub[j + 1]):
+        t = start + offsets[sub]
+        h = widths[sub]
+        n_pairs = pairs[sub]
+        d1, f = derivative(s, _forcing_row(t, n, table, sub, 0, n_pairs, p, fp, fg), p)
+        if sub == first_sub[j]:
+            force = f
+            a1 = d1[3]
+            a2 = d1[4]
+        trial = _rk4(s, h, d1, _forcing_row(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
+                     _forcing_row(t + h, n, table, sub, 2, n_pairs, p, fp, fg), p)
+        if contact_region(s[2], p[HALF_BACKLASH]) == contact_region(trial[2], p[HALF_BACKLASH]):
+            s = trial
+        else:
+            s = _split_at_contact(t, h, s, d1, trial, start + refs[sub], p, pair_k, period_k, fp, fg)
+    return s, force, a1, a2
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=True)
+def advance(state, first_period, n_periods, p, pair_k, period_k, fp, fg, schedule):
+    """Advance the state array in place over whole mesh periods."""
+    steps = schedule[0].size - 1
+    period = TWO_PI / p[OMEGA_MESH]
+    s = (state[0], state[1], state[2], state[3], state[4], state[5])
+    for n in range(first_period, first_period + n_periods):
+        for j in range(steps):
+            s, _, _, _ = scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
+    for c in range(6):
+        state[c] = s[c]
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
@@ -365,33 +507,37 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
     (keep_periods, 6): the state at each kept period start.
     """
     state = state0.copy()
-    work = np.empty((WORK_ROWS, 6))
-    first = np.empty(6)
-    trial = np.empty(6)
-    deriv = np.empty(6)
     period = TWO_PI / p[OMEGA_MESH]
-    h = period / steps_per_period
+    schedule = build_schedule(p, pair_k, period_k, breakpoints, steps_per_period)
+    first_sub, offsets, _, _, pairs, table = schedule
     first_kept = n_periods - keep_periods
     row = 0
     for n in range(n_periods):
+        if n < first_kept:
+            advance(state, n, 1, p, pair_k, period_k, fp, fg, schedule)
+            continue
+        s = (state[0], state[1], state[2], state[3], state[4], state[5])
         for j in range(steps_per_period):
-            t = (n * steps_per_period + j) * h
-            if n >= first_kept:
-                if j == 0:
-                    for c in range(6):
-                        poincare[n - first_kept, c] = state[c]
-                if j % stride == 0:
-                    force, k, ste = record(t, state, p, pair_k, period_k, fp, fg, deriv)
-                    for c in range(6):
-                        history[row, c] = state[c]
-                    history[row, 6] = deriv[3]
-                    history[row, 7] = deriv[4]
-                    history[row, 8] = force
-                    history[row, 9] = k
-                    history[row, 10] = ste
-                    history[row, 11] = contact_region(state[2], p[HALF_BACKLASH])
-                    row += 1
-            step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
+            if j == 0:
+                for c in range(6):
+                    poincare[n - first_kept, c] = s[c]
+            if j % stride == 0:
+                # the forcing at a grid point is the first tabulated stage of its step
+                sub = first_sub[j]
+                terms = _forcing_row(n * period + offsets[sub], n, table, sub, 0, pairs[sub], p, fp, fg)
+                deriv, force = derivative(s, terms, p)
+                for c in range(6):
+                    history[row, c] = s[c]
+                history[row, 6] = deriv[3]
+                history[row, 7] = deriv[4]
+                history[row, 8] = force
+                history[row, 9] = terms[0]
+                history[row, 10] = terms[3]
+                history[row, 11] = contact_region(s[2], p[HALF_BACKLASH])
+                row += 1
+            s, _, _, _ = scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
+        for c in range(6):
+            state[c] = s[c]
     return state
 
 
@@ -403,12 +549,9 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
     ``history`` has shape (channels, points): channel 0 is x; with 4 channels
     also te, y1'' and y2'' (the rig's channels).
     """
-    work = np.empty((WORK_ROWS, 6))
-    first = np.empty(6)
-    trial = np.empty(6)
-    shadow = np.empty(6)
     period = TWO_PI / p[OMEGA_MESH]
     h = period / steps_per_period
+    schedule = build_schedule(p, pair_k, period_k, breakpoints, steps_per_period)
     first_kept = n_periods - keep_periods
     b = p[HALF_BACKLASH]
     acc[Q_X_MIN] = np.inf
@@ -416,23 +559,20 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
     acc[Q_F_MAX] = -np.inf
     acc[Q_F_MIN] = np.inf
     separation = 1e-7
-    if lyapunov:
-        for c in range(6):
-            shadow[c] = state[c]
-        shadow[2] += separation * scale[2]
+    s = (state[0], state[1], state[2], state[3], state[4], state[5])
+    shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
     log_growth = 0.0
     row = 0
     for n in range(n_periods):
         kept = n >= first_kept
         if kept:
-            poincare[n - first_kept, 0] = state[2]
-            poincare[n - first_kept, 1] = state[5]
+            poincare[n - first_kept, 0] = s[2]
+            poincare[n - first_kept, 1] = s[5]
         for j in range(steps_per_period):
-            t = (n * steps_per_period + j) * h
-            x = state[2]
-            state_y1 = state[0]
-            state_y2 = state[1]
-            force, a1, a2 = step(t, h, state, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
+            x = s[2]
+            state_y1 = s[0]
+            state_y2 = s[1]
+            s, force, a1, a2 = scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
             if kept:
                 acc[Q_X_SUM] += x
                 acc[Q_X_SQ] += x * x
@@ -458,25 +598,30 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
                     history[0, row] = x
                     if history.shape[0] >= 4:
                         # the rig's channels: te = x - y1 + y2 + e, and the bearing accelerations
+                        t = n * period + j * h
                         history[1, row] = x - state_y1 + state_y2 + static_transmission_error(t, p)
                         history[2, row] = a1
                         history[3, row] = a2
                     row += 1
             if lyapunov:
-                step(t, h, shadow, p, pair_k, period_k, fp, fg, breakpoints, work, first, trial)
+                shadow, _, _, _ = scheduled_step(n, j, period, shadow, p, pair_k, period_k, fp, fg, schedule)
         if lyapunov:
             # Benettin renormalisation once per mesh period in scaled coordinates
             distance = 0.0
             for c in range(6):
-                distance += ((shadow[c] - state[c]) / scale[c]) ** 2
+                distance += ((shadow[c] - s[c]) / scale[c]) ** 2
             distance = math.sqrt(distance)
             if distance > 0.0:
                 if kept:
                     log_growth += math.log(distance / separation)
-                for c in range(6):
-                    shadow[c] = state[c] + (shadow[c] - state[c]) * separation / distance
+                ratio = separation / distance
+                shadow = (s[0] + (shadow[0] - s[0]) * ratio, s[1] + (shadow[1] - s[1]) * ratio,
+                          s[2] + (shadow[2] - s[2]) * ratio, s[3] + (shadow[3] - s[3]) * ratio,
+                          s[4] + (shadow[4] - s[4]) * ratio, s[5] + (shadow[5] - s[5]) * ratio)
             else:
-                shadow[2] = state[2] + separation * scale[2]
+                shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
+    for c in range(6):
+        state[c] = s[c]
     if lyapunov:
         acc[Q_LYAPUNOV] = log_growth / (keep_periods * period)
     else:

@@ -246,18 +246,6 @@ def parameter_units(name: str) -> str:
 # model features: steady mesh-harmonic amplitudes of te and the accelerations
 # ---------------------------------------------------------------------------
 
-# rows of the RK4 scratch array passed to ``_kernels.step`` (it uses 5)
-_WORK_ROWS = K.WORK_ROWS
-
-
-@nb.njit(cache=True)
-def _advance(state, first_period, n_periods, p, pair_k, period_k, fp, fg, bps, steps, work, first, trial):
-    h = K.TWO_PI / p[K.OMEGA_MESH] / steps
-    for n in range(first_period, first_period + n_periods):
-        for j in range(steps):
-            K.step((n * steps + j) * h, h, state, p, pair_k, period_k, fp, fg, bps, work, first, trial)
-
-
 @nb.njit(cache=True)
 def _scaled_change(a, b, scale):
     worst = 0.0
@@ -269,7 +257,7 @@ def _scaled_change(a, b, scale):
 
 
 @nb.njit(cache=True)
-def _shoot(state, p, pair_k, period_k, fp, fg, bps, steps, scale, tolerance, max_newton, work, first, trial):
+def _shoot(state, p, pair_k, period_k, fp, fg, schedule, scale, tolerance, max_newton):
     """Newton iteration on the one-period map from t = 0; 1 if a stable periodic orbit is found."""
     base = np.empty(6)
     probe = np.empty(6)
@@ -278,7 +266,7 @@ def _shoot(state, p, pair_k, period_k, fp, fg, bps, steps, scale, tolerance, max
     for iteration in range(max_newton):
         for c in range(6):
             base[c] = state[c]
-        _advance(base, 0, 1, p, pair_k, period_k, fp, fg, bps, steps, work, first, trial)
+        K.advance(base, 0, 1, p, pair_k, period_k, fp, fg, schedule)
         if iteration > 0 and _scaled_change(base, state, scale) < tolerance:
             return 1
         for c in range(6):
@@ -286,7 +274,7 @@ def _shoot(state, p, pair_k, period_k, fp, fg, bps, steps, scale, tolerance, max
                 probe[r] = state[r]
             delta = 1e-6 * scale[c]
             probe[c] += delta
-            _advance(probe, 0, 1, p, pair_k, period_k, fp, fg, bps, steps, work, first, trial)
+            K.advance(probe, 0, 1, p, pair_k, period_k, fp, fg, schedule)
             for r in range(6):
                 jacobian[r, c] = (probe[r] - base[r]) / delta
         # an orbit that the transient would not reach (a Floquet multiplier
@@ -311,12 +299,7 @@ def _shoot(state, p, pair_k, period_k, fp, fg, bps, steps, scale, tolerance, max
 @nb.njit(cache=True)
 def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, transient_periods, min_periods,
                       max_periods, tolerance, scale, n_harmonics, shoot, out, info):
-    # scratch rows of the kernel's RK4 step (k2, k3, k4, stage state, forcing
-    # terms); spare rows keep this safe should the kernel use more
-    work = np.empty((_WORK_ROWS, 6))
-    first = np.empty(6)
-    trial = np.empty(6)
-    deriv = np.empty(6)
+    schedule = K.build_schedule(p, pair_k, period_k, bps, steps)
     previous = np.empty(6)
     start = np.empty(6)
     omega = p[K.OMEGA_MESH]
@@ -333,13 +316,13 @@ def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, tr
     found = 0
     if shoot:
         candidate = state.copy()
-        found = _shoot(candidate, p, pair_k, period_k, fp, fg, bps, steps, scale, tolerance, 4, work, first, trial)
+        found = _shoot(candidate, p, pair_k, period_k, fp, fg, schedule, scale, tolerance, 4)
         if found == 1:
             for c in range(6):
                 state[c] = candidate[c]
     offset = 0
     if found == 0:
-        _advance(state, 0, transient_periods, p, pair_k, period_k, fp, fg, bps, steps, work, first, trial)
+        K.advance(state, 0, transient_periods, p, pair_k, period_k, fp, fg, schedule)
         offset = transient_periods
     sums = np.zeros((3, n_harmonics, 2))
     for c in range(6):
@@ -349,20 +332,22 @@ def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, tr
     periodic = 0
     for m in range(max_periods):
         n = offset + m
+        s = (state[0], state[1], state[2], state[3], state[4], state[5])
         for j in range(steps):
-            t = (n * steps + j) * h
             if j % stride == 0:
-                _, _, ste = K.record(t, state, p, pair_k, period_k, fp, fg, deriv)
+                ste = K.static_transmission_error(n * period + j * h, p)
                 sample = j // stride
                 for channel in range(3):
                     if channel == 0:
-                        value = state[2] - state[0] + state[1] + ste
+                        value = s[2] - s[0] + s[1] + ste
                     else:
-                        value = state[channel - 1]
+                        value = s[channel - 1]
                     for k in range(n_harmonics):
                         sums[channel, k, 0] += value * cosines[k, sample]
                         sums[channel, k, 1] -= value * sines[k, sample]
-            K.step(t, h, state, p, pair_k, period_k, fp, fg, bps, work, first, trial)
+            s, _, _, _ = K.scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
+        for c in range(6):
+            state[c] = s[c]
         used += 1
         if _scaled_change(state, previous, scale) < tolerance:
             periodic += 1
