@@ -38,12 +38,17 @@ def single_run(design) -> None:
     kw = dict(n_periods=400, keep_periods=200)
     uqgear.simulate(design, speed, drive, adhesion, n_periods=4, keep_periods=2)  # compile
     tight = uqgear.simulate(design, speed, drive, adhesion, method="scipy", rtol=1e-12, **kw)["x"].values
-    start = time.perf_counter()
-    fast = uqgear.simulate(design, speed, drive, adhesion, **kw)
-    fast_time = time.perf_counter() - start
+    # the fast run is short enough for timer noise to matter: median of five
+    times = []
+    for _ in range(5):
+        start = time.perf_counter()
+        fast = uqgear.simulate(design, speed, drive, adhesion, **kw)
+        times.append(time.perf_counter() - start)
+    fast_time = float(np.median(times))
     fast_error = _relative_rms(fast["x"].values, tight)
     print(f"single run at {speed:.0f} rpm, 400 mesh periods ({fast.attrs['steps_per_period']} RK4 steps/period)")
-    print(f"  fast  : {fast_time * 1e3:8.1f} ms   rel. RMS error vs scipy(rtol=1e-12) = {fast_error:.1e}")
+    print(f"  fast  : {fast_time * 1e3:8.1f} ms   rel. RMS error vs scipy(rtol=1e-12) = {fast_error:.1e}"
+          "   (median of 5 runs)")
     chosen = None
     for rtol in (1e-5, 1e-6, 1e-7, 1e-8, 1e-9):
         start = time.perf_counter()
