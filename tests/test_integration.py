@@ -65,6 +65,18 @@ def test_static_equilibrium_without_excitation(design):
                                         + ds.attrs["gear_base_radius"] * 30000 / quiet.I2))
 
 
+def test_static_state_sits_beyond_bearing_clearance(design):
+    """With a bearing dead zone the static state is shifted by the clearance, so a run starting there
+    has no start-up transient: the loaded bearings never enter the dead zone at this operating point
+    and the response equals the healthy one shifted by the clearance."""
+    clearance = [make_effect("bearing_clearance", {"clearance": 2e-4, "bearing": "pinion"})]
+    kw = dict(n_periods=60, keep_periods=60)
+    plain = uqgear.simulate(design, 1500.0, 7000.0, 33000.0, **kw)
+    loose = uqgear.simulate(design, 1500.0, 7000.0, 33000.0, effects=clearance, **kw)
+    assert np.allclose(loose["y1"].values, plain["y1"].values - 2e-4, rtol=0, atol=1e-12)
+    assert np.allclose(loose["x"].values, plain["x"].values, rtol=0, atol=1e-12)
+
+
 def test_natural_frequencies_as_model_md(design):
     f = uqgear.natural_frequencies(design)
     assert f == pytest.approx([270.0, 430.0, 1550.0], rel=0.03)

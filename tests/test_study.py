@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import re
 import textwrap
 from pathlib import Path
+
+import json
 
 import numpy as np
 import xarray as xr
@@ -74,6 +77,26 @@ def test_calibrate_study_end_to_end(tmp_path):
         assert low <= truth <= high
     text = (tmp_path / "report.html").read_text()
     assert 'data-type="calibrate"' in text and "posterior predictive check with the real model passed" in text
+
+
+@pytest.mark.slow
+def test_diagnose_study_end_to_end(tmp_path):
+    from uqgear.analyses import run_study
+    from uqgear.report import write_report
+
+    study = load_study(ROOT / "studies" / "diagnose_eccentricity.yaml")
+    run_study(study, tmp_path, show_progress=False)
+    write_report(tmp_path)
+    result = xr.open_dataset(tmp_path / "diagnosis.nc")
+    content = json.loads(result.attrs["diagnosis"])
+    # data/rig/README.md: eccentricity.nc carries a 12 um pinion run-out
+    assert result.attrs["verdict"] == content["verdict"] == "eccentricity"
+    assert content["ranking"][0]["parameters"]["shaft"] == "pinion"
+    assert content["gap"]["shrink_fraction"] >= 0.7
+    assert result["gap_map_nominal"].dims == ("op", "channel", "family")
+    result.close()
+    text = (tmp_path / "report.html").read_text()
+    assert 'data-type="diagnose"' in text and "verdict eccentricity" in text
 
 
 def test_t2_envelope_study_uses_rail_condition_interval():
@@ -337,3 +360,19 @@ def test_calibrate_analysis_needs_an_existing_rig_file(tmp_path):
     (tmp_path / "x.nc").write_bytes(b"")
     study = parse_study(text.replace("nothere.nc", "x.nc"), base_dir=tmp_path)
     assert study.analyses[0].options["parameters"][0] == "mesh_stiffness_scale"
+
+
+def test_diagnose_analysis_options_are_checked(tmp_path):
+    from uqgear.study import parse_study
+
+    (tmp_path / "x.nc").write_bytes(b"")
+    text = "name: d\nseed: 1\ndesign: locomotive\nanalyses:\n  - type: diagnose\n    rig: x.nc\n"
+    study = parse_study(text, base_dir=tmp_path)
+    assert study.analyses[0].options["effects"] == ("eccentricity", "tooth_damage", "friction", "torque_ripple",
+                                                    "adhesion_oscillation", "bearing_clearance")
+    with pytest.raises(StudyError, match=r"analyses\[0\].effects\[1\]: expected one of eccentricity"):
+        parse_study(text + "    effects: [friction, wobble]\n", base_dir=tmp_path)
+    with pytest.raises(StudyError, match=r"analyses\[0\].rig: file .*gone.nc not found"):
+        parse_study(text.replace("x.nc", "gone.nc"), base_dir=tmp_path)
+    with pytest.raises(StudyError, match=r"analyses\[0\].rig: missing \(required\)"):
+        parse_study(text.replace("    rig: x.nc\n", "    effects: [friction]\n"), base_dir=tmp_path)

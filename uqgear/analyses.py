@@ -616,6 +616,27 @@ def calibrate_analysis(context: AnalysisContext) -> xr.Dataset:
     return result
 
 
+@register("diagnose")
+def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
+    """Sim-to-real gap diagnosis of the study's design against a rig file.
+
+    The result is the Dataset of ``uqgear diagnose``'s ``diagnosis.nc`` (gap
+    maps over ``op`` x ``channel`` x ``family``, candidate scores, held-out
+    spectra) with the content of its ``diagnosis.json`` (verdict, gap and
+    shrink, where, ranking) in attribute ``diagnosis``.
+    """
+    from .diagnosis import diagnosis_result
+    from .study import rig_path
+
+    effects = list(context.options["effects"])
+    content, result = diagnosis_result(rig_path(context.study, context.spec), design=context.design,
+                                       effects=effects, seed=context.stage_seed(0),
+                                       workers=context.threads)
+    result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
+                        effects=json.dumps(effects), rig=str(rig_path(context.study, context.spec)))
+    return result
+
+
 # ---------------------------------------------------------------------------- running a study
 
 

@@ -858,6 +858,15 @@ class RigCase:
 def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequence,
                  model_error: Mapping[str, float] | None = None, steps_per_mode: int = 24) -> RigCase:
     """Features, noise models, processors and simulator of a validated rig Dataset."""
+    errors = dict(DEFAULT_MODEL_ERROR)
+    if model_error is not None:
+        unknown = sorted(set(model_error) - set(errors))
+        if unknown:
+            raise DiagnosisError(f"model_error.{unknown[0]}: unknown feature kind; expected {', '.join(errors)}")
+        for key, value in model_error.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < 1.0:
+                raise DiagnosisError(f"model_error.{key}: expected a relative error in [0, 1); got {value!r}")
+            errors[key] = float(value)
     channels = tuple(name for name in SIGNAL_CHANNELS if name in rig.data_vars)
     fs = feature_module.sampling_rate(rig["time"].values, where="rig data: time")
     size = int(rig.sizes["time"])
@@ -878,12 +887,6 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
     rng = np.random.default_rng(seed)
     noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
     noise = [noise_by_speed[float(speed)] for speed in speeds]
-    errors = dict(DEFAULT_MODEL_ERROR)
-    if model_error is not None:
-        unknown = sorted(set(model_error) - set(errors))
-        if unknown:
-            raise DiagnosisError(f"model_error.{unknown[0]}: unknown feature kind; expected {', '.join(errors)}")
-        errors.update({key: float(value) for key, value in model_error.items()})
     simulator = CampaignSimulator(design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode)
     return RigCase(rig=rig, design=design, channels=channels, speeds=speeds,
                    drive_torques=np.asarray(rig["drive_torque"].values, dtype=float),
@@ -1402,6 +1405,9 @@ def bootstrap_shrink(z_before: np.ndarray, z_after: np.ndarray, rng: np.random.G
                      n_resamples: int = 400) -> tuple[float, float, float]:
     """Shrink fraction and its 5 % and 95 % bootstrap quantiles, resampling runs.
 
+    The quantiles are over the resamples that hold a gap to shrink (the
+    central resample does whenever the result is not 0).
+
     Parameters
     ----------
     z_before, z_after : ndarray (n_op, ...)
@@ -1419,13 +1425,19 @@ def bootstrap_shrink(z_before: np.ndarray, z_after: np.ndarray, rng: np.random.G
     def shrink_of(index: np.ndarray) -> float:
         count = counts[index].sum()
         if count == 0:
-            return 0.0
+            return math.nan
         gap_before = math.sqrt(max(squares_before[index].sum() / count - _GAP_NOISE_LEVEL, 0.0))
         gap_after = math.sqrt(max(squares_after[index].sum() / count - _GAP_NOISE_LEVEL, 0.0))
-        return shrink_fraction(gap_before, gap_after)
+        # a resample that left out every run carrying the gap has nothing to shrink: the
+        # fraction is undefined there, not 0 (a gap confined to one run would otherwise get a
+        # lower bound of 0 from the third of resamples that miss that run)
+        return shrink_fraction(gap_before, gap_after) if gap_before > 0 else math.nan
 
     central = shrink_of(np.arange(n_op))
+    if not math.isfinite(central):
+        return 0.0, 0.0, 0.0
     samples = np.array([shrink_of(rng.integers(0, n_op, n_op)) for _ in range(n_resamples)])
+    samples = samples[np.isfinite(samples)]
     return central, float(np.quantile(samples, 0.05)), float(np.quantile(samples, 0.95))
 
 
@@ -2231,6 +2243,62 @@ def _resolve_design(design: Design | str | os.PathLike[str] | None, rig: xr.Data
                          f"got {type(design).__name__}")
 
 
+def diagnosis_result(rig: str | os.PathLike[str] | xr.Dataset, *,
+                     design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
+                     seed: int | np.random.SeedSequence = 0, workers: int | None = None,
+                     calibration: str | os.PathLike[str] | xr.Dataset | None = None
+                     ) -> tuple[dict[str, Any], xr.Dataset]:
+    """Diagnose the sim-to-real gap of a rig campaign without writing anything.
+
+    Parameters are those of :func:`diagnose` (less the output options).
+
+    Returns
+    -------
+    (content, maps) : tuple of dict and xarray.Dataset
+        The content of ``diagnosis.json`` and the Dataset of ``diagnosis.nc``
+        (gap maps over op x channel x family, scores, held-out spectra).
+    """
+    content, maps, _ = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
+                                  calibration=calibration)
+    return content, maps
+
+
+def _diagnosis(rig, *, design, effects, seed, workers, calibration) -> tuple[dict[str, Any], xr.Dataset, Design]:
+    started = time.perf_counter()
+    cpu_started = _cpu_seconds()
+    effect_names = _check_effects(effects)
+    seed_sequence = _as_seed(seed)
+    workers = _check_workers(workers)
+    dataset, source = load_rig_input(rig)
+    nominal_design = _resolve_design(design, dataset)
+    posterior = load_calibration(calibration) if calibration is not None else None
+    noise_seed, run_seed = seed_sequence.spawn(2)
+    case = prepare_case(dataset, nominal_design, seed=noise_seed)
+    case.executor = RunExecutor(case, workers)
+    try:
+        result = run_diagnosis(case, effects=effect_names, seed=run_seed, calibration=posterior)
+        worst = np.argsort([-np.nansum(capped_squares(result.nominal_held.z[op])) for op in range(case.n_op)])
+        spectra = _held_spectra(result, sorted(int(op) for op in worst[:2]))
+    finally:
+        case.executor.close()
+        case.executor = None
+    timings = dict(result.timings, total_wall=time.perf_counter() - started,
+                   total_cpu=_cpu_seconds() - cpu_started, workers=float(workers))
+    content = _json_clean(summary(result, source=source, seed_text=str(seed_sequence.entropy), timings=timings))
+    content["nominal"]["start"] = "calibration posterior medians" if posterior is not None else "design values"
+    maps = result_dataset(result, spectra)
+    maps.attrs["verdict"] = content["verdict"]
+    return content, maps, nominal_design
+
+
+def _check_workers(workers: int | None) -> int:
+    if workers is None:
+        return max(1, min(2, os.cpu_count() or 1))
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise DiagnosisError(f"workers: expected an integer >= 1; got {workers!r}")
+    return int(workers)
+
+
 def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLike[str], *,
              design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
              seed: int | np.random.SeedSequence = 0, workers: int | None = None,
@@ -2273,40 +2341,20 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     DiagnosisError
         An unknown effect, a bad seed, design or worker count.
     """
-    started = time.perf_counter()
-    cpu_started = _cpu_seconds()
-    effect_names = _check_effects(effects)
-    seed_sequence = _as_seed(seed)
-    if workers is None:
-        workers = max(1, min(2, os.cpu_count() or 1))
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-        raise DiagnosisError(f"workers: expected an integer >= 1; got {workers!r}")
-    dataset, source = load_rig_input(rig)
-    nominal_design = _resolve_design(design, dataset)
-    posterior = load_calibration(calibration) if calibration is not None else None
+    # the cheap checks first: a bad option or folder fails before minutes of fitting
+    _check_effects(effects)
+    _as_seed(seed)
+    _check_workers(workers)
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DiagnosisError(f"out_dir: cannot create {out} ({exc})") from None
-    noise_seed, run_seed = seed_sequence.spawn(2)
-    case = prepare_case(dataset, nominal_design, seed=noise_seed)
-    case.executor = RunExecutor(case, int(workers))
-    try:
-        result = run_diagnosis(case, effects=effect_names, seed=run_seed, calibration=posterior)
-        worst = np.argsort([-np.nansum(capped_squares(result.nominal_held.z[op])) for op in range(case.n_op)])
-        spectra = _held_spectra(result, sorted(int(op) for op in worst[:2]))
-    finally:
-        case.executor.close()
-        case.executor = None
-    timings = dict(result.timings, total_wall=time.perf_counter() - started,
-                   total_cpu=_cpu_seconds() - cpu_started, workers=float(workers))
-    content = _json_clean(summary(result, source=source, seed_text=str(seed_sequence.entropy), timings=timings))
-    content["nominal"]["start"] = "calibration posterior medians" if posterior is not None else "design values"
+    content, maps, nominal_design = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
+                                               calibration=calibration)
     from .results import save_result
 
-    maps = result_dataset(result, spectra)
-    save_result(maps, out / "diagnosis.nc", seed=seed_sequence, design=nominal_design)
+    save_result(maps, out / "diagnosis.nc", seed=_as_seed(seed), design=nominal_design)
     _write_text_atomic(out / "diagnosis.json", json.dumps(content, indent=2, default=_json_default))
     if report:
         from .diagnosis_report import write_diagnosis_report

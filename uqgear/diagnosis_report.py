@@ -32,19 +32,9 @@ img { max-width: 100%; }
 """
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _figure_html(figure, alt: str) -> str:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=90, bbox_inches="tight")
-    _pyplot().close(figure)
     encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{encoded}"/>'
 
@@ -72,13 +62,24 @@ def _write_atomic(path: Path, text: str) -> Path:
     return path
 
 
-def _gap_map_figure(ds: xr.Dataset, variable: str, title: str) -> str:
-    plt = _pyplot()
+def _figure(width: float, height: float):
+    """A matplotlib Figure outside pyplot (nothing to close, safe in threads)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(width, height))
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def gap_map_plot(ds: xr.Dataset, variable: str, title: str):
+    """Figure of a gap map (op x channel x family) of a diagnosis Dataset."""
     values = ds[variable].values               # (op, channel, family)
     n_op, n_channel, n_family = values.shape
     matrix = values.transpose(1, 2, 0).reshape(n_channel * n_family, n_op)
     labels = [f"{c} / {f}" for c in ds["channel"].values for f in ds["family"].values]
-    figure, axis = plt.subplots(figsize=(1.0 + 0.7 * n_op, 0.28 * len(labels) + 1.2))
+    figure = _figure(1.0 + 0.7 * n_op, 0.28 * len(labels) + 1.2)
+    axis = figure.subplots()
     shown = np.log10(1.0 + np.nan_to_num(matrix, nan=0.0))
     # one scale for every map: the capped gap cannot exceed sqrt(99)
     image = axis.imshow(shown, aspect="auto", cmap="magma_r", vmin=0.0, vmax=math.log10(1.0 + math.sqrt(99.0)))
@@ -89,19 +90,22 @@ def _gap_map_figure(ds: xr.Dataset, variable: str, title: str) -> str:
     axis.set_title(title, fontsize=9)
     bar = figure.colorbar(image, ax=axis)
     bar.set_label("log10(1 + excess RMS z)")
-    return _figure_html(figure, title)
+    return figure
 
 
-def _spectra_figure(ds: xr.Dataset) -> str:
+def _gap_map_figure(ds: xr.Dataset, variable: str, title: str) -> str:
+    return _figure_html(gap_map_plot(ds, variable, title), title)
+
+
+def spectra_plot(ds: xr.Dataset):
     """Before/after: per held-out run, a row rig vs nominal model and a row rig vs model with the effect."""
-    plt = _pyplot()
     spectra = ds["amplitude_spectrum"]
     ops = spectra["spectrum_op"].values
     channels = spectra["channel"].values
     models = [str(source) for source in spectra["source"].values if source != "rig"]
     rows = [(op, model) for op in ops for model in models]
-    figure, axes = plt.subplots(len(rows), len(channels), figsize=(4.2 * len(channels), 2.4 * len(rows)),
-                                squeeze=False)
+    figure = _figure(4.2 * len(channels), 2.4 * len(rows))
+    axes = figure.subplots(len(rows), len(channels), squeeze=False)
     colours = {"nominal": "tab:blue", "with_effect": "tab:red"}
     frequency = spectra["frequency"].values
     for i, (op, model) in enumerate(rows):
@@ -128,7 +132,11 @@ def _spectra_figure(ds: xr.Dataset) -> str:
             if c == 0:
                 axis.legend(fontsize=7, loc="upper right")
     figure.tight_layout()
-    return _figure_html(figure, "held-out spectra")
+    return figure
+
+
+def _spectra_figure(ds: xr.Dataset) -> str:
+    return _figure_html(spectra_plot(ds), "held-out spectra")
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]], text_columns: Sequence[int] = (0,)) -> str:
@@ -213,10 +221,10 @@ def write_diagnosis_report(content: Mapping[str, Any], ds: xr.Dataset, path: str
 
 def blindtest_report_html(content: Mapping[str, Any]) -> str:
     """HTML text of a blind-test report from its JSON summary."""
-    plt = _pyplot()
     labels = content["labels"]
     matrix = np.array(content["confusion"]["counts"], dtype=float)
-    figure, axis = plt.subplots(figsize=(1.2 + 0.75 * matrix.shape[1], 1.0 + 0.55 * matrix.shape[0]))
+    figure = _figure(1.2 + 0.75 * matrix.shape[1], 1.0 + 0.55 * matrix.shape[0])
+    axis = figure.subplots()
     axis.imshow(matrix, cmap="Blues")
     axis.set_xticks(range(matrix.shape[1]), content["confusion"]["verdicts"], rotation=45, ha="right", fontsize=7)
     axis.set_yticks(range(matrix.shape[0]), labels, fontsize=7)

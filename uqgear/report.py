@@ -957,6 +957,60 @@ def _sobol_findings(ds: xr.Dataset, name: str, sweep: str | None, parameters: Se
     return sentences
 
 
+@renderer("diagnose")
+def _render_diagnose(ds: xr.Dataset, dpi: int) -> Section:
+    from .diagnosis_report import gap_map_plot, spectra_plot
+
+    section = _section(ds)
+    content = _json_attr(ds, "diagnosis", {})
+    verdict = str(content.get("verdict", ds.attrs.get("verdict", "?")))
+    gap = content.get("gap", {})
+    section.facts.append(("rig file", str(ds.attrs.get("rig", (content.get("rig") or {}).get("source", "")))))
+    section.facts.append(("verdict", verdict))
+    if gap:
+        section.facts.append(("held-out gap, nominal model", f"{float(gap['baseline']):.3g}"))
+        if gap.get("effect"):
+            interval = gap.get("shrink_interval") or [math.nan, math.nan]
+            section.facts.append((f"held-out gap with {gap['effect']}", f"{float(gap['with_effect']):.3g}"))
+            section.facts.append(("shrink fraction (90 % interval)",
+                                  f"{100 * float(gap['shrink_fraction']):.0f} % ({100 * float(interval[0]):.0f} "
+                                  f"to {100 * float(interval[1]):.0f} %)"))
+        section.facts.append(("evaluated on", str((gap.get("evaluated_on") or {}).get("scheme", ""))))
+    if content.get("reason"):
+        section.findings.append(f"verdict {verdict}: {content['reason']}")
+    where = content.get("where") or []
+    if where:
+        section.findings.append("the nominal model misses most at " + "; ".join(
+            f"{entry['channel']} {entry['feature']} (runs {', '.join(map(str, entry['ops']))}, "
+            f"RMS z {float(entry['score']):.1f})" for entry in where[:4]))
+    ranking = content.get("ranking") or []
+    if ranking:
+        def parameters(entry: dict) -> str:
+            values = (entry.get("parameters") or {}).items()
+            return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in values)
+
+        rows = "".join(f"<tr><td>{html.escape(str(entry['effect']))}</td><td>{float(entry['score']):.1f}</td>"
+                       f"<td>{100 * float(entry['shrink_fraction']):.0f} %</td>"
+                       f"<td>{html.escape(parameters(entry))}</td></tr>" for entry in ranking)
+        section.tables.append("<table><tr><th>candidate effect</th><th>score (nats)</th><th>shrink</th>"
+                              f"<th>fitted parameters</th></tr>{rows}</table>")
+    if "gap_map_nominal" in ds:
+        figure = gap_map_plot(ds, "gap_map_nominal", "nominal model, held-out runs")
+        section.figures.append(ReportFigure("Gap map of the nominal model on held-out runs (channel / feature "
+                                            "family x run).", figure_png(figure, dpi)))
+    if "gap_map_with_effect" in ds:
+        figure = gap_map_plot(ds, "gap_map_with_effect", f"with {ds['candidate'].values[0]}, held-out runs")
+        section.figures.append(ReportFigure("The same map with the best candidate effect added.",
+                                            figure_png(figure, dpi)))
+    if "amplitude_spectrum" in ds:
+        section.figures.append(ReportFigure("Held-out spectra of the two runs with the largest nominal gap: rig, "
+                                            "nominal model and model with the effect.",
+                                            figure_png(spectra_plot(ds), dpi)))
+    if verdict == "unexplained":
+        section.caveats.append("a significant gap remains that no candidate effect of the library removes")
+    return section
+
+
 @renderer("calibrate")
 def _render_calibrate(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)

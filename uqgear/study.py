@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from .design import _DESIGN_KEYS, STANDARD_GRAVITY, Design, load_design
+from .effects import EFFECTS
 from .errors import StudyError, UqgearError
 from .uncertainty import Distribution, Interval, ParameterSpace
 from .yamlio import YAMLError, load_yaml
@@ -585,6 +586,10 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "parameters": list_of(choice("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2",
                                      "k1_scale", "k2_scale", "zeta1", "zeta2", "m1", "m2"), unique=True),
     },
+    "diagnose": {
+        "rig": string(),
+        "effects": list_of(choice(*EFFECTS), unique=True),
+    },
 }
 
 #: Default option values per analysis type (applied after validation).
@@ -602,11 +607,12 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200,
               "qois": DEFAULT_QOIS},
     "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2")},
+    "diagnose": {"effects": tuple(EFFECTS)},
 }
 _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
-                                              "calibrate": ("rig",)}
+                                              "calibrate": ("rig",), "diagnose": ("rig",)}
 #: Analysis types that read a rig data file (key ``rig``, relative to the study file).
-RIG_TYPES: tuple[str, ...] = ("calibrate",)
+RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")
 #: Analysis types that propagate uncertain parameters (``parameters`` key).
 PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol")
 #: Cap on single simulate() runs in one ``simulate`` analysis (they keep full histories).
