@@ -120,6 +120,37 @@ def test_fast_matches_scipy_with_each_effect(design, effect):
     assert relative(healthy, ref, "te") > 0.1
 
 
+def test_schedule_tiles_the_mesh_period_and_splits_at_breakpoints(design):
+    from uqgear import _kernels as K
+    from uqgear.effects import make_effect
+    from uqgear.model import build_model
+
+    setup = build_model(design, 1500.0, 7000.0, 33000.0, effects=[make_effect("friction", {"coefficient": 0.1})])
+    steps = 96
+    first_sub, offsets, widths, refs, pairs, table = K.build_schedule(
+        setup.parameters, setup.pair_stiffness, setup.period_stiffness, setup.breakpoints, steps)
+    count = first_sub[-1]
+    period = 1.0 / setup.mesh_frequency
+    # contiguous sub-steps covering [0, period), each grid step starting on its grid point
+    assert np.allclose(offsets[1:count], offsets[:count - 1] + widths[:count - 1], rtol=0, atol=1e-15)
+    assert offsets[count - 1] + widths[count - 1] == pytest.approx(period, rel=1e-12)
+    assert np.allclose(offsets[first_sub[:-1]], np.arange(steps) * period / steps, rtol=0, atol=1e-15)
+    # one extra sub-step per breakpoint (pair leaving contact, friction reversing at the pitch point)
+    assert count == steps + len(setup.breakpoints)
+    ends = np.concatenate([offsets[:count], [period]]) / period
+    for phase in setup.breakpoints:
+        assert np.min(np.abs(ends - phase)) < 1e-12
+    # pairs in contact: eps - 1 of the period with two pairs, the rest with one
+    two = widths[:count][pairs[:count] == 2].sum() / period
+    assert two == pytest.approx(setup.derived["contact_ratio"] - 1.0, abs=1e-9)
+    # the tabulated stiffness at every stage equals the generic forcing there
+    for sub in range(0, count, 7):
+        for stage, t in enumerate((offsets[sub], offsets[sub] + widths[sub] / 2, offsets[sub] + widths[sub])):
+            k = K.forcing(t, refs[sub], setup.parameters, setup.pair_stiffness, setup.period_stiffness,
+                          setup.factor_pinion, setup.factor_gear)[0]
+            assert table[sub, stage, K.F_K] * setup.parameters[K.STIFFNESS_SCALE] == pytest.approx(k, rel=1e-12)
+
+
 def test_batch_equals_single_runs(design):
     samples = uqgear.samples_from_mapping({"pinion_speed": [900.0, 4400.0], "adhesion_torque": [25e3, 40e3],
                                            "k1": [1.0e9, 1.3e9]})
