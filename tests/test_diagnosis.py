@@ -353,13 +353,16 @@ def test_bad_options_are_rejected(tmp_path):
 @pytest.mark.parametrize("name", sorted(LABELLED))
 def test_labelled_campaign_verdict(name, tmp_path):
     """The diagnosis names each labelled campaign's effect (none for the healthy ones)."""
-    content = D.diagnose(DATA / name, tmp_path, seed=0)
+    # the report (figures, a few seconds) is checked on two files, one per verdict kind
+    report = name in ("healthy.nc", "eccentricity.nc")
+    content = D.diagnose(DATA / name, tmp_path, seed=0, report=report)
     assert content["verdict"] == LABELLED[name], content["reason"]
     on_disk = json.loads((tmp_path / "diagnosis.json").read_text())
     assert on_disk["verdict"] == content["verdict"]
     assert set(on_disk) >= {"verdict", "gap", "where", "ranking"}
     assert set(on_disk["gap"]) >= {"metric", "baseline", "with_effect", "shrink_fraction", "evaluated_on"}
-    assert (tmp_path / "report.html").read_text().startswith("<!DOCTYPE html>")
+    if report:
+        assert (tmp_path / "report.html").read_text().startswith("<!DOCTYPE html>")
     maps = xr.open_dataset(tmp_path / "diagnosis.nc")
     assert maps["gap_map_nominal"].dims == ("op", "channel", "family")
     maps.close()

@@ -442,7 +442,8 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument("--effects", nargs="+", metavar="NAME",
                           help="candidate effects (default: all six of the library)")
     diagnose.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    diagnose.add_argument("--workers", type=int, metavar="N", help="worker processes/threads (default: all cores)")
+    diagnose.add_argument("--workers", type=int, metavar="N",
+                          help="worker processes (default: one per two cores)")
     diagnose.set_defaults(handler=_command_diagnose)
 
     blind = commands.add_parser("blindtest", help="blind check of the diagnosis on virtual-rig campaigns",
@@ -452,7 +453,8 @@ def build_parser() -> argparse.ArgumentParser:
     blind.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
     blind.add_argument("--n-per-effect", type=int, default=3, metavar="N", help="campaigns per effect (default 3)")
     blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    blind.add_argument("--workers", type=int, metavar="N", help="worker processes (default: all cores)")
+    blind.add_argument("--workers", type=int, metavar="N",
+                       help="worker processes of each diagnosis (default: one per two cores)")
     blind.set_defaults(handler=_command_blindtest)
     return parser
 
