@@ -188,6 +188,12 @@ def test_verdict_names_effect_with_score_and_shrink():
 
 def test_verdict_unexplained_when_no_candidate_removes_the_gap():
     assert D.decide_verdict(3.0, [_entry("eccentricity", 200.0, 0.2)])[0] == "unexplained"
+    # a gap just above noise that the effect brings within noise is explained, though it shrank < 50 %
+    friction = {**_entry("friction", 160.0, 0.4, low=0.3), "gap_with_effect": 0.44}
+    verdict, reason = D.decide_verdict(0.74, [friction])
+    assert verdict == "friction" and "within noise" in reason
+    assert D.decide_verdict(0.74, [{**friction, "gap_with_effect": 0.6}])[0] == "unexplained"
+    assert D.decide_verdict(0.74, [{**friction, "shrink_interval": [-0.1, 1.0]}])[0] == "unexplained"
     assert D.decide_verdict(3.0, [_entry("eccentricity", 5.0, 0.9)])[0] == "unexplained"
     # a shrink whose interval reaches below zero is not evidence
     assert D.decide_verdict(3.0, [_entry("friction", 50.0, 0.6, low=-0.2)])[0] == "unexplained"
