@@ -29,7 +29,8 @@ LABELS = {"healthy.nc": "none", "healthy_b.nc": "none", "eccentricity.nc": "ecce
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("files", nargs="*", default=["tooth_damage.nc"], help="rig files in data/rig/ or 'all'")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=None,
+                        help="worker processes (default: the library default, one per two CPUs)")
     args = parser.parse_args()
     files = sorted(LABELS) if args.files == ["all"] else args.files
     print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
