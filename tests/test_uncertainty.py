@@ -238,7 +238,7 @@ def test_intervals_are_not_sampled_unless_asked():
     ({"n": 10, "method": "random", "seed": 1}, r"method: unknown sampling method 'random'; expected one of "
                                                r"monte_carlo, latin_hypercube"),
     ({"n": 10, "method": "halton"}, r"seed: the 'halton' sampling method is random; pass seed="),
-    ({"n": 10, "method": "halton", "seed": -3}, r"seed: expected a numpy.random.SeedSequence or a non-negative"),
+    ({"n": 10, "method": "halton", "seed": -3}, r"seed: expected a non-negative integer or a numpy SeedSequence"),
     ({"n": 10, "method": "halton", "seed": 1, "interval_treatment": "midpoint"}, r"interval_treatment: expected"),
 ])
 def test_sampling_rejects_bad_settings(kwargs, message):

@@ -114,7 +114,7 @@ from .features import extract_features
 from .fileio import write_text_atomic
 from .integration import BATCH_DESIGN_KEYS, build_batch, steps_per_period
 from .rig import read_rig, rig_design, validate_rig
-from .uncertainty import child_seed
+from .uncertainty import as_seed_sequence, child_seed
 
 
 class CalibrationError(UqgearError):
@@ -700,13 +700,7 @@ def effective_sample_size(chains: np.ndarray) -> float:
 # ---------------------------------------------------------------------------
 
 def _as_seed(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
-    if seed is None:
-        return np.random.SeedSequence()
-    if isinstance(seed, np.random.SeedSequence):
-        return seed
-    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
-        return np.random.SeedSequence(int(seed))
-    raise CalibrationError(f"seed: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
+    return np.random.SeedSequence() if seed is None else as_seed_sequence(seed, error=CalibrationError)
 
 
 def _check_int(name: str, value: object, lowest: int) -> int:

@@ -53,7 +53,6 @@ import math
 import multiprocessing
 import os
 import resource
-import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -73,8 +72,11 @@ from .design import Design
 from .effects import EFFECTS, Effect, make_effect
 from .errors import RigDataError, UqgearError
 from .features import FEATURE_FAMILIES, SIGNAL_CHANNELS, feature_definitions
+from .fileio import write_text_atomic
 from .integration import _HISTORY_COLUMNS, _integrate_fast, steps_per_period
 from .model import build_model
+from .uncertainty import as_seed_sequence
+from .virtual_rig import frequency_filter
 
 #: Effects of the library that the diagnosis can name.
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
@@ -222,17 +224,6 @@ class RunProcessor:
 PERIODICITIES = ("mesh", "pinion", "gear", "free")
 
 
-def _band_limit_response(size: int, rate: float, passband: float, stopband: float,
-                         derivative_order: int) -> np.ndarray:
-    """Real-FFT response of the rig's anti-alias filter (flat, raised cosine, zero), times (i w)^order."""
-    frequency = np.fft.rfftfreq(size, 1.0 / rate)
-    gain = np.ones_like(frequency)
-    transition = (frequency > passband) & (frequency < stopband)
-    gain[transition] = 0.5 * (1.0 + np.cos(np.pi * (frequency[transition] - passband) / (stopband - passband)))
-    gain[frequency >= stopband] = 0.0
-    return gain * (2j * np.pi * frequency) ** derivative_order
-
-
 @dataclass
 class SimulatedRun:
     """Model records of one run on the rig's time grid, and how they were obtained."""
@@ -366,7 +357,7 @@ class CampaignSimulator:
         for channel in self.channels:
             raw, order = self._raw(signals, channel)
             spectrum = np.fft.rfft(raw[:kept] - raw[:kept].mean())
-            spectrum *= _band_limit_response(kept, rate, self.passband, self.stopband, order)
+            spectrum *= frequency_filter(kept, rate, self.passband, self.stopband, order)
             fine = np.fft.irfft(spectrum, n=kept * factor) * factor
             records[channel] = np.interp(self.rig_time, grid, fine, period=period)
         return SimulatedRun(records, True, periodicity)
@@ -391,7 +382,7 @@ class CampaignSimulator:
         for channel in self.channels:
             raw, order = self._raw(signals, channel)
             centred = (raw - raw.mean()) * taper
-            spectrum = np.fft.rfft(centred) * _band_limit_response(size, rate, self.passband, self.stopband, order)
+            spectrum = np.fft.rfft(centred) * frequency_filter(size, rate, self.passband, self.stopband, order)
             fine = np.fft.irfft(spectrum, n=size * factor) * factor
             records[channel] = np.interp(self.rig_time + _GUARD, grid, fine)
         return SimulatedRun(records, False, "free")
@@ -2179,15 +2170,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text)
-        os.chmod(temporary, 0o644)   # mkstemp's 0600 is for the temporary, not the result
-        os.replace(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.remove(temporary)
+    write_text_atomic(path, text)
 
 
 def _json_default(value: Any) -> Any:
@@ -2217,11 +2200,7 @@ def _cpu_seconds() -> float:
 
 
 def _as_seed(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
-    if isinstance(seed, np.random.SeedSequence):
-        return seed
-    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
-        return np.random.SeedSequence(int(seed))
-    raise DiagnosisError(f"seed: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
+    return as_seed_sequence(seed, error=DiagnosisError)
 
 
 def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset) -> tuple[xr.Dataset, str]:

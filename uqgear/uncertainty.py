@@ -65,7 +65,8 @@ _UNIT_EPSILON = 1e-12
 # seeds
 # ---------------------------------------------------------------------------
 
-def as_seed_sequence(seed: SeedLike, *, setting: str = "seed") -> np.random.SeedSequence:
+def as_seed_sequence(seed: SeedLike, *, setting: str = "seed",
+                     error: type[ValueError] | None = None) -> np.random.SeedSequence:
     """Turn ``seed`` into a :class:`numpy.random.SeedSequence`.
 
     Parameters
@@ -74,6 +75,9 @@ def as_seed_sequence(seed: SeedLike, *, setting: str = "seed") -> np.random.Seed
         A seed sequence (used as is) or a non-negative integer entropy.
     setting : str
         Name of the setting, used in the error message.
+    error : type, optional
+        The error class to raise (the calling module's own; default
+        :class:`ParameterSpaceError`).
 
     Returns
     -------
@@ -81,15 +85,15 @@ def as_seed_sequence(seed: SeedLike, *, setting: str = "seed") -> np.random.Seed
 
     Raises
     ------
-    ParameterSpaceError
+    ParameterSpaceError (or ``error``)
         If ``seed`` is neither a SeedSequence nor a non-negative integer.
     """
     if isinstance(seed, np.random.SeedSequence):
         return seed
     if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
         return np.random.SeedSequence(int(seed))
-    raise ParameterSpaceError(
-        f"{setting}: expected a numpy.random.SeedSequence or a non-negative integer; got {seed!r}")
+    raise (error or ParameterSpaceError)(
+        f"{setting}: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
 
 
 def child_seed(seed_sequence: np.random.SeedSequence, index: int) -> np.random.SeedSequence:

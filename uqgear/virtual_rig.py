@@ -57,7 +57,7 @@ from .errors import OperatingPointError, RigDataError
 from .features import SIGNAL_CHANNELS
 from .integration import BATCH_DESIGN_KEYS, simulate
 from .rig import make_rig_dataset, write_rig
-from .uncertainty import child_seed
+from .uncertainty import as_seed_sequence, child_seed
 
 #: Pinion speeds (rpm) and drive torques (N m) of the public campaigns.
 DEFAULT_PINION_SPEEDS: tuple[float, ...] = (600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0)
@@ -200,8 +200,8 @@ def _true_model(design: Design, true_parameters: Mapping[str, object] | None) ->
     return true_design, float(scale), {key: float(values[key]) for key in values}
 
 
-def _frequency_filter(size: int, rate: float, passband: float, stopband: float,
-                      derivative_order: int) -> np.ndarray:
+def frequency_filter(size: int, rate: float, passband: float, stopband: float,
+                     derivative_order: int) -> np.ndarray:
     """Real-FFT response: gain 1 to ``passband``, raised cosine to 0 at ``stopband``, times (i w)^order."""
     frequency = np.fft.rfftfreq(size, 1.0 / rate)
     gain = np.ones_like(frequency)
@@ -216,7 +216,7 @@ def _acquire(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, tap
     """Band-limit a simulated signal (optionally differentiated) and return it on ``time[keep]``."""
     mean = signal.mean()
     tapered = (signal - mean) * taper
-    response = _frequency_filter(signal.size, rate, passband, stopband, derivative_order)
+    response = frequency_filter(signal.size, rate, passband, stopband, derivative_order)
     filtered = np.fft.irfft(np.fft.rfft(tapered) * response, n=signal.size)
     if derivative_order == 0:
         filtered += mean
@@ -231,13 +231,7 @@ def _check_positive(name: str, value: object, lowest: float = 0.0) -> float:
 
 
 def _as_seed(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
-    if seed is None:
-        return np.random.SeedSequence()
-    if isinstance(seed, np.random.SeedSequence):
-        return seed
-    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
-        return np.random.SeedSequence(int(seed))
-    raise OperatingPointError(f"seed: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
+    return np.random.SeedSequence() if seed is None else as_seed_sequence(seed, error=OperatingPointError)
 
 
 def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str, ArrayLike] | None = None, *,
