@@ -27,7 +27,8 @@ import argparse
 import shutil
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
 
@@ -237,8 +238,12 @@ def _parse_assignments(items: Sequence[str], option: str) -> dict[str, float]:
     return values
 
 
-def _new_output_folder(out: Path, option: str = "--out") -> Path:
-    """Check ``out`` can become a results folder; return the hidden work folder to fill first."""
+@contextmanager
+def _output_folder(out: Path, option: str = "--out") -> Iterator[Path]:
+    """A hidden work folder that becomes ``out`` when the block succeeds and is removed when it fails.
+
+    ``out`` is checked first: it must not exist or be an empty folder, and its parent must exist.
+    """
     if out.exists() and not _is_empty_dir(out):
         raise UqgearError(f"{option} {out}: exists and is not an empty folder; choose a new folder")
     if not out.parent.is_dir():
@@ -246,14 +251,17 @@ def _new_output_folder(out: Path, option: str = "--out") -> Path:
     work = _partial_dir(out)
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir()
-    return work
-
-
-def _finish_output_folder(work: Path, out: Path, failed: bool) -> None:
-    if failed:
+    try:
+        yield work
+    except BaseException:
         shutil.rmtree(work, ignore_errors=True)
-    else:
-        _publish(work, out)
+        raise
+    _publish(work, out)
+
+
+def _comma_list(items: list[str] | None) -> list[str] | None:
+    """Names given as separate arguments and/or comma-separated ones; None when none were given."""
+    return [name for item in items for name in item.split(",") if name] if items else None
 
 
 def _command_synth_rig(args: argparse.Namespace) -> int:
@@ -285,14 +293,9 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
     out = Path(args.out)
-    params = [name for item in args.params for name in item.split(",") if name] if args.params else None
-    work = _new_output_folder(out)
-    failed = True
-    try:
-        result = calibrate(rig, work, design=args.design, params=params, seed=args.seed, threads=args.workers)
-        failed = False
-    finally:
-        _finish_output_folder(work, out, failed)
+    with _output_folder(out) as work:
+        result = calibrate(rig, work, design=args.design, params=_comma_list(args.params), seed=args.seed,
+                           threads=args.workers)
     summary = result.to_dict()
     state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
     print(f"calibration of {rig} {state}; results in {out}")
@@ -308,15 +311,10 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     rig = Path(args.rig)
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
-    effects = [name for item in args.effects for name in item.split(",") if name] if args.effects else None
     out = Path(args.out)
-    work = _new_output_folder(out)
-    failed = True
-    try:
-        result = diagnose(rig, work, design=args.design, effects=effects, seed=args.seed, workers=args.workers)
-        failed = False
-    finally:
-        _finish_output_folder(work, out, failed)
+    with _output_folder(out) as work:
+        result = diagnose(rig, work, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
+                          workers=args.workers)
     gap = result.get("gap", {})
     print(f"diagnosis of {rig}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
           f"{gap.get('baseline')} -> {gap.get('with_effect')} (shrink {gap.get('shrink_fraction')}); results in {out}")
@@ -329,13 +327,8 @@ def _command_blindtest(args: argparse.Namespace) -> int:
     if args.n_per_effect < 1:
         return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
     out = Path(args.out)
-    work = _new_output_folder(out)
-    failed = True
-    try:
+    with _output_folder(out) as work:
         result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers)
-        failed = False
-    finally:
-        _finish_output_folder(work, out, failed)
     print(f"blind test: {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f}, "
           f"false alarms on healthy controls {result['false_alarms']}; results in {out}")
     return 0
