@@ -90,6 +90,30 @@ def _interp_uniform(table, position, span):
     return table[i] * (1.0 - w) + table[i + 1] * w
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def _mesh_position(t, t_ref, p):
+    """(n_ref, u_ref, u): mesh cycle and phase at ``t_ref``, and the phase of ``t`` in that cycle.
+
+    Pair i (0 = the newest) is in contact while u_ref + i < eps; its position on
+    the path of contact is u + i base pitches.
+    """
+    cycles_ref = p[OMEGA_MESH] * t_ref / TWO_PI
+    n_ref = math.floor(cycles_ref)
+    return n_ref, cycles_ref - n_ref, p[OMEGA_MESH] * t / TWO_PI - n_ref
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+def _friction_arms(kp, position, position_ref, p):
+    """k_i sign_i s_i (pinion) and k_i sign_i (L - s_i) (gear) of one pair at ``position`` base pitches.
+
+    Sliding reverses at the pitch point: beyond it (recess) the pinion flank
+    slides faster than the gear flank; ``position_ref`` decides the side.
+    """
+    sign = 1.0 if position_ref > p[PITCH_POSITION] else -1.0
+    s = p[PATH_START] + p[BASE_PITCH] * position
+    return kp * sign * s, kp * sign * (p[LOA_LENGTH] - s)
+
+
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
 def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     """Mesh stiffness and friction moment-arm sums at time ``t``.
@@ -104,10 +128,7 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
         Mesh stiffness (N/m) and sums of k_i * sign_i * arm_i over the pairs
         (pinion arms from T1, gear arms from T2), used for tooth friction.
     """
-    cycles_ref = p[OMEGA_MESH] * t_ref / TWO_PI
-    n_ref = math.floor(cycles_ref)
-    u_ref = cycles_ref - n_ref
-    u = p[OMEGA_MESH] * t / TWO_PI - n_ref
+    n_ref, u_ref, u = _mesh_position(t, t_ref, p)
     eps = p[CONTACT_RATIO]
     friction = p[FRICTION]
     damaged = p[TOOTH_FACTORS] != 0.0
@@ -122,12 +143,9 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
             kp *= factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
         k += kp
         if friction != 0.0:
-            # sliding reverses at the pitch point: beyond it (recess) the
-            # pinion flank slides faster than the gear flank
-            sign = 1.0 if u_ref + i > p[PITCH_POSITION] else -1.0
-            s = p[PATH_START] + p[BASE_PITCH] * (u + i)
-            arm_pinion += kp * sign * s
-            arm_gear += kp * sign * (p[LOA_LENGTH] - s)
+            pinion, gear = _friction_arms(kp, u + i, u_ref + i, p)
+            arm_pinion += pinion
+            arm_gear += gear
         i += 1
     if p[USE_PERIOD_TABLE] != 0.0:
         # smooth Fourier-series (or constant) curve; tooth factors act through
@@ -324,10 +342,7 @@ N_FIELDS = 4 + 3 * MAX_PAIRS
 @nb.njit(cache=True, error_model="numpy", fastmath=True)
 def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
     """The mesh-periodic forcing at local time ``t`` (first mesh period) into ``row``; returns the pair count."""
-    cycles_ref = p[OMEGA_MESH] * t_ref / TWO_PI
-    n_ref = math.floor(cycles_ref)
-    u_ref = cycles_ref - n_ref
-    u = p[OMEGA_MESH] * t / TWO_PI - n_ref
+    _, u_ref, u = _mesh_position(t, t_ref, p)
     eps = p[CONTACT_RATIO]
     k = 0.0
     arm_pinion = 0.0
@@ -337,14 +352,13 @@ def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
         if i >= MAX_PAIRS:
             raise ValueError("more tooth pairs in contact than a schedule holds")
         kp = _interp_uniform(pair_k, u + i, eps)
-        sign = 1.0 if u_ref + i > p[PITCH_POSITION] else -1.0
-        s = p[PATH_START] + p[BASE_PITCH] * (u + i)
+        pinion, gear = _friction_arms(kp, u + i, u_ref + i, p)
         row[4 + 3 * i] = kp
-        row[5 + 3 * i] = kp * sign * s
-        row[6 + 3 * i] = kp * sign * (p[LOA_LENGTH] - s)
+        row[5 + 3 * i] = pinion
+        row[6 + 3 * i] = gear
         k += kp
-        arm_pinion += kp * sign * s
-        arm_gear += kp * sign * (p[LOA_LENGTH] - s)
+        arm_pinion += pinion
+        arm_gear += gear
         i += 1
     if p[USE_PERIOD_TABLE] != 0.0:
         phase = p[OMEGA_MESH] * t / TWO_PI
