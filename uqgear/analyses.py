@@ -629,11 +629,11 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     from .study import rig_path
 
     effects = list(context.options["effects"])
-    content, result = diagnosis_result(rig_path(context.study, context.spec), design=context.design,
-                                       effects=effects, seed=context.stage_seed(0),
+    rig = rig_path(context.study, context.spec)
+    content, result = diagnosis_result(rig, design=context.design, effects=effects, seed=context.stage_seed(0),
                                        workers=context.threads)
     result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
-                        effects=json.dumps(effects), rig=str(rig_path(context.study, context.spec)))
+                        effects=json.dumps(effects), rig=str(rig))
     return result
 
 

@@ -75,6 +75,7 @@ from .features import FEATURE_FAMILIES, SIGNAL_CHANNELS, feature_definitions
 from .fileio import write_text_atomic
 from .integration import _HISTORY_COLUMNS, _integrate_fast, steps_per_period
 from .model import build_model
+from .results import json_default, load_result, save_result
 from .uncertainty import as_seed_sequence
 from .virtual_rig import frequency_filter
 
@@ -1903,7 +1904,6 @@ def load_calibration(calibration: str | os.PathLike[str] | xr.Dataset) -> xr.Dat
         path = path / "posterior.nc"
     if not path.is_file():
         raise DiagnosisError(f"calibration: {path}: no such file (expected posterior.nc of uqgear calibrate)")
-    from .results import load_result
 
     return load_result(path)
 
@@ -2169,18 +2169,6 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
     }
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    write_text_atomic(path, text)
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-
-
 def _json_clean(value: Any) -> Any:
     """Replace non-finite floats by None (JSON has no NaN)."""
     if isinstance(value, float) or isinstance(value, np.floating):
@@ -2347,10 +2335,8 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
         raise DiagnosisError(f"out_dir: cannot create {out} ({exc})") from None
     content, maps, nominal_design = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
                                                calibration=calibration)
-    from .results import save_result
-
     save_result(maps, out / "diagnosis.nc", seed=_as_seed(seed), design=nominal_design)
-    _write_text_atomic(out / "diagnosis.json", json.dumps(content, indent=2, default=_json_default))
+    write_text_atomic(out / "diagnosis.json", json.dumps(content, indent=2, default=json_default))
     if report:
         from .diagnosis_report import write_diagnosis_report
 

@@ -84,8 +84,8 @@ def package_versions() -> dict[str, str]:
 # --------------------------------------------------------------------------- attributes
 
 
-def _json_default(value: Any) -> Any:
-    # numpy scalars and arrays nested inside lists/dicts
+def json_default(value: Any) -> Any:
+    """``json.dumps`` default: numpy scalars and arrays nested inside lists and dicts."""
     if isinstance(value, np.bool_):
         return bool(value)
     if isinstance(value, np.integer):
@@ -126,7 +126,7 @@ def _encode_value(value: Any, where: str) -> tuple[Any, str | None]:
         # lists always go through JSON: a netCDF list of one element reads back
         # as a scalar and a list of strings may not be storable at all
         try:
-            return json.dumps(value, default=_json_default), "json"
+            return json.dumps(value, default=json_default), "json"
         except (TypeError, ValueError) as exc:
             raise UqgearError(f"{where}: cannot store this attribute in netCDF ({exc}); "
                               "expected lists/dicts of strings, numbers, booleans or None") from None
