@@ -369,6 +369,9 @@ def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
     (["diagnose", "{root}/data/rig/healthy.nc", "--out", "{tmp}/d", "--effects", "nonsense"],
      "'nonsense' is not a library effect"),
     (["blindtest", "--out", "{tmp}/d", "--n-per-effect", "0"], "--n-per-effect: expected a positive integer"),
+    (["diagnose", "{root}/data/rig/healthy.nc", "--out", "{tmp}/d", "--workers", "0"],
+     "workers: expected an integer >= 1; got 0"),
+    (["blindtest", "--out", "{tmp}/d", "--workers", "0"], "workers: expected an integer >= 1; got 0"),
 ])
 def test_diagnosis_commands_reject_bad_input(tmp_path, args, message):
     root = Path(__file__).resolve().parent.parent

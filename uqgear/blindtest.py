@@ -34,11 +34,11 @@ import xarray as xr
 
 from .design import Design, load_design
 from .diagnosis import (EFFECT_NAMES, NOISE_GAP_THRESHOLD, VERDICTS, DiagnosisError, RunExecutor, RunTask,
-                        default_workers,
-                        _json_clean, _json_default, _write_text_atomic, capped_squares, execute_run,
-                        expected_rig_features, prepare_case, run_diagnosis, standardised_discrepancy)
+                        _check_workers, _json_clean, capped_squares, execute_run, expected_rig_features,
+                        prepare_case, run_diagnosis, standardised_discrepancy)
 from .effects import Effect, make_effect
-from .results import save_result
+from .fileio import write_text_atomic
+from .results import json_default, save_result
 from .virtual_rig import DEFAULT_DRIVE_TORQUES, DEFAULT_PINION_SPEEDS, simulate_campaign
 
 #: Label of the healthy controls (the verdict they should get).
@@ -266,8 +266,7 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
     n_ops = _check_count("n_ops", n_ops, 3)
     if n_ops > len(DEFAULT_PINION_SPEEDS):
         raise DiagnosisError(f"n_ops: expected at most {len(DEFAULT_PINION_SPEEDS)}; got {n_ops}")
-    if workers is None:
-        workers = default_workers()
+    workers = _check_workers(workers)
     plan_seed, campaigns_seed = seed_sequence.spawn(2)
     specs = plan_campaigns(n_per_effect, np.random.default_rng(plan_seed), effects=effect_names, designs=designs,
                            n_healthy=n_healthy)
@@ -301,7 +300,7 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         case = prepare_case(blind, design, seed=noise_seed)
         recorded_truth = json.loads(rig.attrs["true_parameters"])
         visibility = oracle_gap(case, spec, {**truth, "adhesion_torque": recorded_truth["adhesion_torque"]})
-        case.executor = RunExecutor(case, int(workers))
+        case.executor = RunExecutor(case, workers)
         try:
             result = run_diagnosis(case, seed=diagnosis_seed)
         finally:
@@ -325,13 +324,13 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "seconds": time.perf_counter() - clock,
         }
         campaigns.append(entry)
-        _write_text_atomic(folder / "diagnosis.json",
+        write_text_atomic(folder / "diagnosis.json",
                            json.dumps(_json_clean({**entry, "ranking": result.ranking()}), indent=2,
-                                      default=_json_default))
+                                      default=json_default))
     content = summarise(campaigns, effect_names, seconds=time.perf_counter() - started,
                         seed_text=str(seed_sequence.entropy))
     save_result(blindtest_dataset(content), out / "blindtest.nc", seed=seed_sequence)
-    _write_text_atomic(out / "blindtest.json", json.dumps(_json_clean(content), indent=2, default=_json_default))
+    write_text_atomic(out / "blindtest.json", json.dumps(_json_clean(content), indent=2, default=json_default))
     if report:
         from .diagnosis_report import write_blindtest_report
 
