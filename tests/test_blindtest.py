@@ -27,7 +27,7 @@ def test_second_design_is_the_one_asked_for():
 
 def test_plan_covers_every_effect_strength_and_design():
     specs = B.plan_campaigns(3, np.random.default_rng(4))
-    assert len(specs) == 3 * (len(EFFECT_NAMES) + 1)
+    assert len(specs) == 3 * (len(EFFECT_NAMES) + 2)
     for effect in EFFECT_NAMES:
         mine = [s for s in specs if s.truth == effect]
         assert {s.strength for s in mine} == set(B.STRENGTHS)
@@ -35,7 +35,12 @@ def test_plan_covers_every_effect_strength_and_design():
         # the effect is buildable with its drawn values
         assert all(len(s.effects()) == 1 for s in mine)
     healthy = [s for s in specs if s.truth == B.HEALTHY]
-    assert len(healthy) == 3 and all(s.effects() == [] for s in healthy)
+    assert len(healthy) == 6 and all(s.effects() == [] for s in healthy)
+    # healthy controls cover both plans on both designs; a clearance can only show on the bearing check
+    assert {(s.plan, s.design_name) for s in healthy} == {(plan, name) for plan in B.PLANS
+                                                         for name in ("reference", "second")}
+    assert all(s.plan == ("bearing_check" if s.truth == "bearing_clearance" else "service")
+               for s in specs if s.truth != B.HEALTHY)
     again = B.plan_campaigns(3, np.random.default_rng(4))
     assert [s.effect_values for s in again] == [s.effect_values for s in specs]
 
@@ -50,6 +55,16 @@ def test_plan_rejects_bad_requests():
         B.plan_campaigns(1, rng, designs=["third"])
     with pytest.raises(DiagnosisError, match="n_ops: expected an integer >= 3"):
         B.blindtest("unused", n_ops=2)
+    with pytest.raises(DiagnosisError, match="plan: expected one of service, bearing_check"):
+        B.operating_points_of("overspeed", load_design("locomotive"))
+
+
+def test_plans_pick_their_runs():
+    design = load_design("locomotive")
+    service = B.operating_points_of("service", design, 4)
+    assert service["pinion_speed"].tolist() == [600.0, 1250.0, 2800.0, 3800.0]
+    check = B.operating_points_of("bearing_check", design)
+    assert check["pinion_speed"].size == 8 and np.all(check["drive_torque"] == 1500.0)
 
 
 def _campaign(truth, verdict, strength_value=1.0, detectable=True, shrink=None):

@@ -313,6 +313,25 @@ def test_adhesion_profile_finds_each_runs_torque(healthy_case):
     assert np.all(np.abs(found - truth) <= step), (found, truth)
 
 
+def test_improved_nominal_escapes_a_stuck_nominal_fit(healthy_case):
+    """A fit that moved the nominal parameters to a better optimum restarts the nominal fit; a worse one does not."""
+    case = healthy_case
+    problem = D.FitProblem(case, None)
+    lower, upper = case.adhesion_lower, case.adhesion_upper
+    positions = (np.array(HEALTHY_T2) - lower) / (upper - lower)
+    # a nominal fit stopped far off: damping and STE amplitude 60 % high, two solver steps
+    wrong = dict(HEALTHY_TRUTH, zeta_mesh=1.6 * HEALTHY_TRUTH["zeta_mesh"],
+                 ste_amplitude=1.6 * HEALTHY_TRUTH["ste_amplitude"])
+    stuck = D.fit(problem, [problem.vector(wrong, positions)], max_evaluations=2)
+    good = D.fit(problem, [problem.vector(HEALTHY_TRUTH, positions)], max_evaluations=2)
+    assert good.cost < stuck.cost - D._NOMINAL_MARGIN
+    better = D.improved_nominal(stuck, [good])
+    assert better is not None and better.cost <= good.cost + D._NOMINAL_MARGIN
+    assert better.values["zeta_mesh"] == pytest.approx(HEALTHY_TRUTH["zeta_mesh"], rel=0.15)
+    assert D.improved_nominal(good, [stuck]) is None
+    assert D.improved_nominal(good, []) is None
+
+
 # ---------------------------------------------------------------------------------------------- bad input
 
 def test_unknown_effect_is_rejected(tmp_path):

@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from uqgear import virtual_rig as V
 from uqgear.design import load_design
 from uqgear.effects import make_effect
 from uqgear.errors import OperatingPointError, RigDataError
 from uqgear.features import extract_features, line_amplitudes
+from uqgear.integration import simulate
+from uqgear.model import natural_frequencies
 from uqgear.rig import read_rig, rig_design, validate_rig
 from uqgear.virtual_rig import (adhesion_torque_bounds, default_operating_points, simulate_campaign, synth_rig,
                                 true_parameters_of)
@@ -54,6 +57,34 @@ def test_default_operating_points_and_bounds_match_the_public_campaign(design):
     lower, upper = adhesion_torque_bounds(design, [7000.0])
     assert lower[0] == pytest.approx(0.85 * 7000.0 * 101 / 21)
     assert upper[0] == pytest.approx(1.15 * 7000.0 * 101 / 21)
+
+
+def test_bearing_check_brackets_the_bearing_modes_and_unloads_a_bearing(design):
+    """The light-load plan brackets both bearing modes and unloads a bearing deeper than any service point."""
+    ops = V.bearing_check_operating_points(design)
+    speeds = ops["pinion_speed"].values
+    mode_speeds = natural_frequencies(design)[:2] * 60.0 / design.z1
+    for speed, factors in zip(mode_speeds, V.BEARING_CHECK_SPEED_FACTORS):
+        assert np.any(np.isclose(speeds, speed * min(factors), atol=5.0))
+        assert np.any(np.isclose(speeds, speed * max(factors), atol=5.0))
+    balancing = 1500.0 * design.z2 / design.z1
+    assert np.allclose(ops["adhesion_torque_lower"], 0.85 * balancing)
+    assert np.allclose(ops["adhesion_torque_upper"], 1.15 * balancing)
+
+    def least_bearing_load(speed, drive_torque):
+        # smallest bearing deflection over the steady response, relative to its mean (< 0: unloaded)
+        run = simulate(design, speed, drive_torque, drive_torque * design.z2 / design.z1, n_periods=400,
+                       keep_periods=100)
+        return min(float(np.min(run[name].values * np.sign(run[name].values.mean())) / abs(run[name].values.mean()))
+                   for name in ("y1", "y2"))
+
+    assert least_bearing_load(float(np.round(mode_speeds[0] / 10) * 10), 1500.0) < -0.5
+    # at service loads only the run nearest the first bearing mode (800 rpm) comes near unloading
+    service = [least_bearing_load(speed, torque) for speed, torque in zip(V.DEFAULT_PINION_SPEEDS,
+                                                                          V.DEFAULT_DRIVE_TORQUES)]
+    assert min(service) > -0.5 and sum(value < 0.0 for value in service) <= 1
+    with pytest.raises(OperatingPointError, match="drive_torque: expected a finite number > 0"):
+        V.bearing_check_operating_points(design, drive_torque=0.0)
 
 
 def test_campaign_is_valid_rig_data_with_truth_recorded(small_campaign, design):

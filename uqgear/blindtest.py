@@ -39,7 +39,8 @@ from .diagnosis import (EFFECT_NAMES, NOISE_GAP_THRESHOLD, VERDICTS, DiagnosisEr
 from .effects import Effect, make_effect
 from .fileio import write_text_atomic
 from .results import json_default, save_result
-from .virtual_rig import DEFAULT_DRIVE_TORQUES, DEFAULT_PINION_SPEEDS, simulate_campaign
+from .virtual_rig import (DEFAULT_DRIVE_TORQUES, DEFAULT_PINION_SPEEDS, bearing_check_operating_points,
+                          simulate_campaign)
 
 #: Label of the healthy controls (the verdict they should get).
 HEALTHY = "none"
@@ -47,19 +48,23 @@ HEALTHY = "none"
 #: Relative strengths of the effect ladder: weak (near detectability), medium, strong.
 STRENGTHS: tuple[str, ...] = ("weak", "medium", "strong")
 
+#: Test plans of the campaigns: the public campaigns' 8 service points, or the light-load
+#: run through the bearing modes (:func:`uqgear.virtual_rig.bearing_check_operating_points`).
+PLANS: tuple[str, ...] = ("service", "bearing_check")
+
 # Strength parameter of each effect and its value per strength level. "weak" sits near the
 # detection limit of the public campaigns' noise (oracle gap about 1, see oracle_gap), "strong"
 # at the public campaigns' own levels. Bearing clearance has no signature while the bearings
-# stay loaded (the dead zone is never entered, whatever its width); it shows only where a run
-# near the first natural frequency unloads a bearing, which depends on the campaign's true
-# stiffnesses and T2 more than on the clearance: the oracle gap says which campaigns can show it.
+# stay loaded (the dead zone is never entered, whatever its width), as they do at every service
+# point; its campaigns follow the bearing check plan, where a bearing unloads, and there the
+# signature saturates once the clearance exceeds the excursion past unloading (a few um).
 _LADDER: dict[str, tuple[str, tuple[float, float, float]]] = {
     "eccentricity": ("amplitude", (3e-8, 3e-7, 12e-6)),
     "tooth_damage": ("depth", (0.005, 0.03, 0.35)),
     "friction": ("coefficient", (0.05, 0.08, 0.12)),
     "torque_ripple": ("amplitude", (0.003, 0.01, 0.06)),
     "adhesion_oscillation": ("amplitude", (0.003, 0.01, 0.05)),
-    "bearing_clearance": ("clearance", (5e-5, 1.5e-4, 4e-4)),
+    "bearing_clearance": ("clearance", (5e-7, 3e-6, 5e-5)),
 }
 
 
@@ -79,6 +84,7 @@ class CampaignSpec:
     design_name: str
     effect_values: dict[str, object]
     true_parameters: dict[str, float]
+    plan: str = "service"
 
     def effects(self) -> list[Effect]:
         return [] if self.truth == HEALTHY else [make_effect(self.truth, self.effect_values)]
@@ -98,11 +104,14 @@ def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequ
     True nominal parameters scatter around the design (stiffness scale
     +-7 %, mesh damping and STE amplitude +-20 %, bearing stiffnesses and
     backlash +-10 %); phases, teeth, shafts and stick-slip frequencies are
-    drawn at random. Healthy controls (``n_healthy``, default
-    ``n_per_effect``) use the same scatter without an effect.
+    drawn at random. Campaigns follow the service plan, except bearing
+    clearance ones: the bearing check plan, the only one where a clearance
+    can show. Healthy controls (``n_healthy``, default ``2 n_per_effect``)
+    use the same scatter without an effect and alternate the two plans
+    (service first), so that false alarms are checked on both.
     """
     n_per_effect = _check_count("n_per_effect", n_per_effect, 1)
-    n_healthy = n_per_effect if n_healthy is None else _check_count("n_healthy", n_healthy, 0)
+    n_healthy = 2 * n_per_effect if n_healthy is None else _check_count("n_healthy", n_healthy, 0)
     for name in effects:
         if name not in EFFECT_NAMES:
             raise DiagnosisError(f"effects: {name!r} is not a library effect; expected {', '.join(EFFECT_NAMES)}")
@@ -115,7 +124,8 @@ def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequ
     for truth in list(effects) + [HEALTHY]:
         count = n_healthy if truth == HEALTHY else n_per_effect
         for k in range(count):
-            design_name = designs[k % len(designs)]
+            # healthy controls alternate the plans first and the designs second
+            design_name = designs[(k // len(PLANS) if truth == HEALTHY else k) % len(designs)]
             true_parameters = {
                 "mesh_stiffness_scale": float(rng.uniform(0.93, 1.07)),
                 "zeta_mesh_factor": float(rng.uniform(0.8, 1.25)),
@@ -125,7 +135,8 @@ def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequ
                 "backlash_factor": float(rng.uniform(0.9, 1.1)),
             }
             if truth == HEALTHY:
-                specs.append(CampaignSpec(f"{truth}-{k}", truth, "-", 0.0, design_name, {}, true_parameters))
+                specs.append(CampaignSpec(f"{truth}-{k}", truth, "-", 0.0, design_name, {}, true_parameters,
+                                          PLANS[k % len(PLANS)]))
                 continue
             level = order[k % 3]
             parameter, values = _LADDER[truth]
@@ -144,8 +155,9 @@ def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequ
                 effect_values.update(frequency=float(rng.uniform(6.0, 30.0)), phase=phase)
             elif truth == "bearing_clearance":
                 effect_values.update(bearing=("pinion", "gear", "both")[int(rng.integers(3))])
+            plan = "bearing_check" if truth == "bearing_clearance" else "service"
             specs.append(CampaignSpec(f"{truth}-{k}", truth, STRENGTHS[level], strength, design_name,
-                                      effect_values, true_parameters))
+                                      effect_values, true_parameters, plan))
     return specs
 
 
@@ -191,13 +203,18 @@ def oracle_gap(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> float:
     return float(math.sqrt(np.mean(squares))) if squares.size else 0.0
 
 
-def _ops_table(n_ops: int) -> dict[str, np.ndarray]:
-    if n_ops == len(DEFAULT_PINION_SPEEDS):
-        index = np.arange(n_ops)
+def operating_points_of(plan: str, design: Design, n_ops: int = 8) -> dict[str, np.ndarray]:
+    """The runs of a test plan (``n_ops`` of its 8, spread over them) for a design."""
+    if plan == "service":
+        table = {"pinion_speed": np.asarray(DEFAULT_PINION_SPEEDS), "drive_torque": np.asarray(DEFAULT_DRIVE_TORQUES)}
+    elif plan == "bearing_check":
+        ops = bearing_check_operating_points(design)
+        table = {str(name): ops[name].values for name in ops.data_vars}
     else:
-        index = np.unique(np.round(np.linspace(0, len(DEFAULT_PINION_SPEEDS) - 1, n_ops)).astype(int))
-    return {"pinion_speed": np.asarray(DEFAULT_PINION_SPEEDS)[index],
-            "drive_torque": np.asarray(DEFAULT_DRIVE_TORQUES)[index]}
+        raise DiagnosisError(f"plan: expected one of {', '.join(PLANS)}; got {plan!r}")
+    size = table["pinion_speed"].size
+    index = np.unique(np.round(np.linspace(0, size - 1, min(n_ops, size))).astype(int))
+    return {name: np.asarray(values)[index] for name, values in table.items()}
 
 
 def _thresholds(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -> list[dict[str, Any]]:
@@ -243,9 +260,10 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
     designs : sequence of {"reference", "second"}
         Designs to alternate.
     n_healthy : int, optional
-        Healthy controls (default ``n_per_effect``).
+        Healthy controls, alternating the service and bearing check plans
+        (default ``2 n_per_effect``).
     n_ops : int
-        Runs per campaign (a subset of the public campaigns' 8 operating points).
+        Runs per campaign (a subset of its plan's 8 operating points).
     duration : float
         Record length, s.
     workers : int, optional
@@ -278,7 +296,6 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         raise DiagnosisError(f"out_dir: cannot create {out} ({exc})") from None
     reference = load_design("locomotive")
     designs_by_name = {"reference": reference, "second": second_design(reference)}
-    operating_points = _ops_table(n_ops)
     campaigns: list[dict[str, Any]] = []
     from .rig import write_rig
 
@@ -287,8 +304,8 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         design = designs_by_name[spec.design_name]
         generation_seed, noise_seed, diagnosis_seed = campaign_seed.spawn(3)
         truth = _true_values(spec, design)
-        rig = simulate_campaign(design, operating_points, true_parameters=truth, effects=spec.effects(),
-                                seed=generation_seed, duration=duration, run_in=0.3,
+        rig = simulate_campaign(design, operating_points_of(spec.plan, design, n_ops), true_parameters=truth,
+                                effects=spec.effects(), seed=generation_seed, duration=duration, run_in=0.3,
                                 title=f"blind-test campaign {spec.identifier}")
         folder = out / "campaigns" / spec.identifier
         folder.mkdir(parents=True, exist_ok=True)
@@ -311,7 +328,7 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         detectable = spec.truth == HEALTHY or visibility > NOISE_GAP_THRESHOLD
         entry = {
             "id": spec.identifier, "truth": spec.truth, "strength": spec.strength,
-            "strength_value": spec.strength_value, "design": spec.design_name,
+            "strength_value": spec.strength_value, "design": spec.design_name, "plan": spec.plan,
             "effect_values": spec.effect_values, "true_parameters": truth,
             "verdict": result.verdict, "reason": result.reason,
             "correct": result.verdict == spec.truth,
@@ -398,6 +415,7 @@ def blindtest_dataset(content: Mapping[str, Any]) -> xr.Dataset:
                 "campaign_truth": ("campaign", [c["truth"] for c in campaigns]),
                 "campaign_verdict": ("campaign", [c["verdict"] for c in campaigns]),
                 "campaign_design": ("campaign", [c["design"] for c in campaigns]),
+                "campaign_plan": ("campaign", [c.get("plan", "service") for c in campaigns]),
                 "campaign_strength": ("campaign", [c["strength"] for c in campaigns])})
     ds.attrs.update(title="uqgear blind test of the gap diagnosis", accuracy=content["accuracy"],
                     accuracy_detectable=content["accuracy_detectable"], false_alarms=content["false_alarms"])
@@ -405,4 +423,4 @@ def blindtest_dataset(content: Mapping[str, Any]) -> xr.Dataset:
 
 
 __all__ = ["blindtest", "plan_campaigns", "summarise", "blindtest_dataset", "oracle_gap", "second_design",
-           "CampaignSpec", "HEALTHY", "STRENGTHS"]
+           "operating_points_of", "CampaignSpec", "HEALTHY", "STRENGTHS", "PLANS"]

@@ -329,7 +329,8 @@ def _command_blindtest(args: argparse.Namespace) -> int:
     out = Path(args.out)
     with _output_folder(out) as work:
         result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers)
-    print(f"blind test: {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f}, "
+    print(f"blind test: {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
+          f"({result['accuracy_detectable']:.2f} counting 'none' as right where the effect is invisible), "
           f"false alarms on healthy controls {result['false_alarms']}; results in {out}")
     return 0
 
@@ -442,7 +443,9 @@ def build_parser() -> argparse.ArgumentParser:
     blind = commands.add_parser("blindtest", help="blind check of the diagnosis on virtual-rig campaigns",
                                 description="Generate campaigns with withheld effects (and healthy controls), "
                                 "diagnose them, write the confusion matrix, shrink statistics and detection "
-                                "thresholds (DIR/blindtest.json, DIR/blindtest.nc, DIR/report.html).")
+                                "thresholds (DIR/blindtest.json, DIR/blindtest.nc, DIR/report.html). Campaigns "
+                                "follow the public campaigns' service points, bearing-clearance ones a light-load "
+                                "bearing check; healthy controls alternate both.")
     blind.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
     blind.add_argument("--n-per-effect", type=int, default=3, metavar="N", help="campaigns per effect (default 3)")
     blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")

@@ -233,15 +233,20 @@ def blindtest_report_html(content: Mapping[str, Any]) -> str:
              f"{100 * content['accuracy_detectable']:.1f} %); effects named on healthy controls: "
              f"{content['false_alarms']}; median shrink when identified: "
              f"{_number(content['shrink']['median'])}.</p>",
+             '<p class="note">Test plans: "service" is the public campaigns\' 8 service points; '
+             '"bearing_check" a light-load run (T1 1.5 kN m) through the two bearing-dominated modes, where a '
+             'bearing unloads. Bearing-clearance campaigns follow the bearing check (a clearance cannot show '
+             'at service loads), the other effects the service plan; healthy controls alternate both.</p>',
              _figure_html(figure, "confusion matrix"),
              "<h2>Detection threshold per effect</h2>",
              _table(["effect", "parameter", "detected at or above", "missed at or below", "note"],
                     [[t["effect"], t["parameter"], t["detected_from"], t["missed_up_to"], t["note"]]
                      for t in content["thresholds"]], (0, 1, 4)),
              "<h2>Campaigns</h2>",
-             _table(["id", "truth", "strength", "design", "verdict", "shrink", "seconds"],
-                    [[c["id"], c["truth"], c["strength"], c["design"], c["verdict"], c["shrink_fraction"],
-                      c["seconds"]] for c in content["campaigns"]], (0, 1, 3, 4))]
+             _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "shrink", "seconds"],
+                    [[c["id"], c["truth"], c["strength"], c["design"], c.get("plan", "service"), c["oracle_gap"],
+                      c["verdict"], c["shrink_fraction"], c["seconds"]] for c in content["campaigns"]],
+                    (0, 1, 3, 4, 6))]
     return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>uqgear blind test</title>"
             f"<style>{_STYLE}</style></head><body>" + "\n".join(parts) + "</body></html>")
 

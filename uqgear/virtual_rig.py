@@ -56,6 +56,7 @@ from .effects import Effect
 from .errors import OperatingPointError, RigDataError
 from .features import SIGNAL_CHANNELS
 from .integration import BATCH_DESIGN_KEYS, simulate
+from .model import natural_frequencies
 from .rig import make_rig_dataset, write_rig
 from .uncertainty import as_seed_sequence, child_seed
 
@@ -129,6 +130,61 @@ def default_operating_points(design: Design | None = None) -> xr.Dataset:
         ops["adhesion_torque_lower"] = ("op", lower, {"units": "N m", "long_name": "lower bound of T2"})
         ops["adhesion_torque_upper"] = ("op", upper, {"units": "N m", "long_name": "upper bound of T2"})
     return ops
+
+
+#: Drive torque of the light-load bearing check, N m (about a fifth of the rating).
+BEARING_CHECK_DRIVE_TORQUE = 1500.0
+
+#: Pinion speeds of the bearing check as multiples of the speeds that put the mesh fundamental
+#: on the two bearing-dominated modes: bracketing each, since the true stiffnesses move them.
+BEARING_CHECK_SPEED_FACTORS: tuple[tuple[float, ...], tuple[float, ...]] = ((0.9, 1.0, 1.1, 1.2),
+                                                                            (0.95, 1.05, 1.15, 1.25))
+
+
+def bearing_check_operating_points(design: Design, drive_torque: float = BEARING_CHECK_DRIVE_TORQUE,
+                                   spread: float = ADHESION_SPREAD) -> xr.Dataset:
+    """A light-load run through the bearing modes: the plan that can show a bearing clearance.
+
+    At service loads both bearings stay loaded and a clearance (a dead zone
+    in the bearing force) is never entered. At light load, with the mesh
+    fundamental near one of the two lowest (bearing-dominated) natural
+    frequencies of the nominal design, the dynamic bearing force exceeds
+    the static one and a bearing unloads. Eight runs: four around each of
+    those speeds (:data:`BEARING_CHECK_SPEED_FACTORS`), rounded to 10 rpm.
+    The load torque is the rig brake's, +-``spread`` around the balancing
+    (z2/z1) T1; the wheel/rail adhesion range does not bound it on a rig.
+
+    Parameters
+    ----------
+    design : Design
+        Nominal design (its natural frequencies place the speeds).
+    drive_torque : float
+        T1 of every run, N m (> 0).
+    spread : float
+        Relative half-width of the T2 interval around the balancing torque.
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimension ``op``: ``pinion_speed``, ``drive_torque``,
+        ``adhesion_torque_lower`` and ``adhesion_torque_upper``.
+    """
+    torque = _check_positive("drive_torque", drive_torque)
+    if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not 0.0 <= spread < 1.0:
+        raise OperatingPointError(f"spread: expected a relative half-width in [0, 1); got {spread!r}")
+    mode_speeds = natural_frequencies(design)[:2] * 60.0 / design.z1
+    speeds = np.concatenate([speed * np.asarray(factors)
+                             for speed, factors in zip(mode_speeds, BEARING_CHECK_SPEED_FACTORS)])
+    speeds = np.round(speeds / 10.0) * 10.0
+    balancing = np.full(speeds.size, torque * design.z2 / design.z1)
+    return xr.Dataset({
+        "pinion_speed": ("op", speeds, {"units": "rpm", "long_name": "mean pinion speed"}),
+        "drive_torque": ("op", np.full(speeds.size, torque), {"units": "N m", "long_name": "drive torque T1"}),
+        "adhesion_torque_lower": ("op", balancing * (1.0 - spread), {"units": "N m",
+                                                                     "long_name": "lower bound of T2"}),
+        "adhesion_torque_upper": ("op", balancing * (1.0 + spread), {"units": "N m",
+                                                                     "long_name": "upper bound of T2"}),
+    })
 
 
 def _operating_table(design: Design, operating_points: xr.Dataset | Mapping[str, ArrayLike] | None,
@@ -435,5 +491,6 @@ def synth_rig(design: Design, out_path: str | os.PathLike[str], *, effects: Sequ
 
 
 __all__ = ["simulate_campaign", "synth_rig", "default_operating_points", "adhesion_torque_bounds",
-           "true_parameters_of", "DEFAULT_PINION_SPEEDS", "DEFAULT_DRIVE_TORQUES", "ADHESION_SPREAD",
+           "true_parameters_of", "bearing_check_operating_points", "BEARING_CHECK_DRIVE_TORQUE",
+           "BEARING_CHECK_SPEED_FACTORS", "DEFAULT_PINION_SPEEDS", "DEFAULT_DRIVE_TORQUES", "ADHESION_SPREAD",
            "DEFAULT_RELATIVE_NOISE"]
