@@ -200,6 +200,14 @@ def test_verdict_unexplained_when_no_candidate_removes_the_gap():
     assert D.decide_verdict(3.0, [])[0] == "unexplained"
 
 
+def test_verdict_never_names_an_effect_that_adds_nothing_to_its_fit():
+    """A candidate as good with its effect off owes its score to the refitted nominal parameters."""
+    damage = _entry("tooth_damage", 130.0, 1.0)
+    assert D.decide_verdict(0.58, [{**damage, "effect_gain": 40.0}])[0] == "tooth_damage"
+    assert D.decide_verdict(0.58, [{**damage, "effect_gain": 0.3}])[0] == "unexplained"
+    assert D.decide_verdict(0.3, [{**damage, "effect_gain": 0.3}])[0] == "none"
+
+
 # ---------------------------------------------------------------------------------------------- processing
 
 @pytest.fixture(scope="module")

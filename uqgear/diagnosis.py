@@ -1635,6 +1635,8 @@ SCORE_THRESHOLD = 10.0
 SHRINK_THRESHOLD = 0.5
 #: The nominal model is within noise when its held-out gap is below this (and no candidate is named).
 NOISE_GAP_THRESHOLD = 0.5
+#: A named effect must itself improve its fit's robust cost by at least this much (about nats).
+EFFECT_GAIN_THRESHOLD = 5.0
 # A held-out feature this many sigmas off counts as a gap in the "where" list.
 _WHERE_Z = 3.0
 
@@ -1656,6 +1658,9 @@ class CandidateScore:
     shrink: float
     shrink_low: float
     shrink_high: float
+    # robust cost of the nominal model at this fit's nominal parameters and T2 minus the fit's own:
+    # what the effect itself adds (set by run_diagnosis; a screening fit shares the nominal's)
+    effect_gain: float = math.inf
 
     def parameters(self) -> dict[str, object]:
         """Fitted effect parameters (natural units) and the fixed choices."""
@@ -1684,7 +1689,8 @@ def score_candidate(fit_result: FitResult, held: HeldOut, nominal_held: HeldOut,
 
 def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
                    score_threshold: float = SCORE_THRESHOLD, shrink_threshold: float = SHRINK_THRESHOLD,
-                   noise_gap: float = NOISE_GAP_THRESHOLD) -> tuple[str, str]:
+                   noise_gap: float = NOISE_GAP_THRESHOLD,
+                   effect_gain_threshold: float = EFFECT_GAIN_THRESHOLD) -> tuple[str, str]:
     """The verdict from the held-out gap of the nominal model and the ranked candidates.
 
     Parameters
@@ -1695,7 +1701,8 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         Candidates best first, each with ``effect``, ``score`` (held-out log
         density gain over the nominal model minus the parameter penalty),
         ``shrink_fraction``, ``shrink_interval`` ([5 %, 95 %]) and optionally
-        ``gap_with_effect`` (its held-out gap).
+        ``gap_with_effect`` (its held-out gap) and ``effect_gain`` (how much
+        worse its fit is with the effect switched off, robust cost).
     score_threshold, shrink_threshold, noise_gap : float
         A candidate is named when its score reaches the threshold, the lower
         end of its shrink interval is positive, and it explains the gap:
@@ -1703,6 +1710,9 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         (held-out gap with the effect at most ``noise_gap``; a nominal gap
         just above noise cannot shrink by half and still be significant).
         The nominal model is within noise when its gap is at most ``noise_gap``.
+        A candidate whose fit is as good with its effect off (``effect_gain``
+        below ``effect_gain_threshold``) owes its score to the nominal
+        parameters it refitted, not to the effect, and is never named.
 
     Returns
     -------
@@ -1712,7 +1722,9 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         best = ranking[0]
         remaining = float(best.get("gap_with_effect", math.inf))
         explains = best["shrink_fraction"] >= shrink_threshold or remaining <= noise_gap
-        supported = best["score"] >= score_threshold and explains and best["shrink_interval"][0] > 0.0
+        carried = float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
+        supported = (best["score"] >= score_threshold and explains and best["shrink_interval"][0] > 0.0
+                     and carried)
         if supported:
             within = (f"; what remains ({remaining:.2f}) is within noise"
                       if best["shrink_fraction"] < shrink_threshold else "")
@@ -1847,7 +1859,7 @@ class DiagnosisResult:
         return [{"effect": s.effect, "variant": s.label, "score": s.score, "delta_log_density": s.delta_log_density,
                  "standard_error": s.standard_error, "penalty": s.penalty, "shrink_fraction": s.shrink,
                  "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap,
-                 "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
+                 "effect_gain": s.effect_gain, "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
 
 
 def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:
@@ -1915,10 +1927,22 @@ def load_calibration(calibration: str | os.PathLike[str] | xr.Dataset) -> xr.Dat
 # Full fits beyond the promoted ones while the gap stays unexplained (each costs about a screening).
 _EXTRA_FULL_FITS = 3
 # The nominal fit is restarted from a candidate's fit at most this many times.
-_NOMINAL_REFITS = 1
+_NOMINAL_REFITS = 2
 # A candidate's nominal parameters must beat the nominal fit's robust cost by this much (about
 # nats) to count as evidence that the nominal fit stopped in a local optimum.
 _NOMINAL_MARGIN = 5.0
+
+
+def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult]) -> tuple[list[np.ndarray], list[float]]:
+    """The nominal model at each fit's nominal parameters and T2 (its effect off): vectors and robust costs."""
+    problem = nominal.problem
+    starts = [problem.vector({key: value for key, value in candidate.values.items() if "." not in key},
+                             candidate.vector[candidate.problem.n_global:]) for candidate in fits]
+    if not starts:
+        return [], []
+    model, _ = problem.model_features(starts)
+    return starts, [robust_cost(problem.residual_vector(problem.discrepancy(model[index])[0], v))
+                    for index, v in enumerate(starts)]
 
 
 def improved_nominal(nominal: FitResult, fits: Sequence[FitResult], *,
@@ -1934,13 +1958,9 @@ def improved_nominal(nominal: FitResult, fits: Sequence[FitResult], *,
     optimum. The nominal model is then refitted from the best such point.
     """
     problem = nominal.problem
-    starts = [problem.vector({key: value for key, value in candidate.values.items() if "." not in key},
-                             candidate.vector[candidate.problem.n_global:]) for candidate in fits]
+    starts, costs = effect_off_costs(nominal, fits)
     if not starts:
         return None
-    model, _ = problem.model_features(starts)
-    costs = [robust_cost(problem.residual_vector(problem.discrepancy(model[index])[0], v))
-             for index, v in enumerate(starts)]
     best = int(np.argmin(costs))
     if costs[best] >= nominal.cost - margin:
         return None
@@ -1994,6 +2014,11 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
         if decide_verdict(nominal_gap, _ranking_of(best_per_effect))[0] != "unexplained":
             break
         fit_in_full([entry])
+    full_fits = [entry for entry in all_scores if entry.stage == "full"]
+    for entry, cost in zip(full_fits, effect_off_costs(nominal, [entry.fit for entry in full_fits])[1]):
+        entry.effect_gain = cost - entry.fit.cost
+    for entry in screened:
+        entry.effect_gain = nominal.cost - entry.fit.cost
     timings["full_fits"] += time.perf_counter() - clock
     return best_per_effect, all_scores
 
@@ -2002,7 +2027,8 @@ def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str,
     """What :func:`decide_verdict` needs of the best variant of each effect, best first."""
     scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
     return [{"effect": s.effect, "score": s.score, "shrink_fraction": s.shrink,
-             "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap} for s in scores]
+             "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap,
+             "effect_gain": s.effect_gain} for s in scores]
 
 
 def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
