@@ -8,7 +8,12 @@ Prints, in one run:
 2. a batch of 500 speeds x 20 adhesion torques (10,000 runs; 400 mesh
    periods, 200 kept) on all cores, its time, and the batch-vs-one-by-one
    ratio measured on a subset;
-3. peak memory (resident set) and the size of what the batch keeps.
+3. peak memory (resident set) and the size of what the batch keeps;
+4. what LLVM fast-math flags would buy: the same kernels compiled from the
+   same source with ``fastmath=True`` (all flags) and with only
+   ``{nnan, ninf}`` (no reassociation or contraction), timed on one run and on
+   a batch against the library's kernels (no fast-math: bit-identical results
+   cold, warm and uncached; see ``JIT_OPTIONS`` in ``uqgear/_kernels.py``).
 
 Usage: ``python benchmarks/integrator.py [--quick]`` (``--quick``: 1,000 runs).
 """
@@ -16,13 +21,18 @@ Usage: ``python benchmarks/integrator.py [--quick]`` (``--quick``: 1,000 runs).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import resource
 import time
+import types
+from pathlib import Path
 
 import numba
 import numpy as np
 
 import uqgear
+from uqgear import _kernels as K
+from uqgear import integration, model
 
 
 def _relative_rms(x, reference):
@@ -101,6 +111,60 @@ def batch(design, n_speeds: int, n_adhesion: int) -> None:
           f"= {one_by_one / together:.2f}x")
 
 
+def _kernel_variant(options: str) -> types.ModuleType:
+    """The library's kernel module compiled anew with other ``JIT_OPTIONS``."""
+    source = Path(K.__file__).read_text()
+    default = 'JIT_OPTIONS = {"cache": True, "error_model": "numpy"}'
+    if default not in source:
+        raise RuntimeError("uqgear/_kernels.py no longer defines JIT_OPTIONS as this benchmark expects")
+    module = types.ModuleType(f"_kernels_variant_{abs(hash(options))}")
+    exec(compile(source.replace(default, f"JIT_OPTIONS = {options}"), K.__file__, "exec"), module.__dict__)
+    return module
+
+
+@contextlib.contextmanager
+def _kernels_swapped(module: types.ModuleType):
+    # integration and model call the kernels through their module attribute K
+    saved = integration.K, model.K
+    integration.K = model.K = module
+    try:
+        yield
+    finally:
+        integration.K, model.K = saved
+
+
+def fastmath_cost(design, n_speeds: int) -> None:
+    samples = uqgear.samples_from_mapping({"pinion_speed": np.linspace(200.0, 6000.0, n_speeds),
+                                           "adhesion_torque": np.full(n_speeds, 33000.0)})
+    kw = dict(n_periods=400, keep_periods=200)
+
+    def timed():
+        uqgear.simulate_batch(design, samples.isel(sample=slice(0, 2)), n_periods=4, keep_periods=2)
+        uqgear.simulate(design, 1500.0, 7000.0, 33000.0, n_periods=4, keep_periods=2)
+        single = []
+        for _ in range(5):
+            start = time.perf_counter()
+            uqgear.simulate(design, 1500.0, 7000.0, 33000.0, **kw)
+            single.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        result = uqgear.simulate_batch(design, samples, **kw)
+        return float(np.median(single)), time.perf_counter() - start, result["dte_rms"].values
+
+    base_single, base_batch, base_dte = timed()
+    print(f"fast-math flags (one run at 1500 rpm; batch of {n_speeds} runs 200-6000 rpm), "
+          "time relative to the library's kernels (no fast-math):")
+    print(f"  none (library)  : single {base_single * 1e3:6.1f} ms  batch {base_batch:6.2f} s")
+    variants = (("{nnan, ninf}", '{"cache": False, "error_model": "numpy", "fastmath": {"nnan", "ninf"}}'),
+                ("fastmath=True", '{"cache": False, "error_model": "numpy", "fastmath": True}'))
+    for label, options in variants:
+        with _kernels_swapped(_kernel_variant(options)):
+            single, together, dte = timed()
+        change = float(np.max(np.abs(dte - base_dte) / np.abs(base_dte)))
+        print(f"  {label:16s}: single {single * 1e3:6.1f} ms  batch {together:6.2f} s   "
+              f"speed-up {base_single / single:.3f}x / {base_batch / together:.3f}x; "
+              f"max relative change of dte_rms {change:.1e}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="1,000-run batch instead of 10,000")
@@ -108,6 +172,7 @@ def main() -> None:
     design = uqgear.load_design("locomotive")
     single_run(design)
     batch(design, 50 if args.quick else 500, 20)
+    fastmath_cost(design, 40 if args.quick else 200)
 
 
 if __name__ == "__main__":

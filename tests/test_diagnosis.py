@@ -192,7 +192,11 @@ def test_verdict_unexplained_when_no_candidate_removes_the_gap():
     friction = {**_entry("friction", 160.0, 0.4, low=0.3), "gap_with_effect": 0.44}
     verdict, reason = D.decide_verdict(0.74, [friction])
     assert verdict == "friction" and "within noise" in reason
-    assert D.decide_verdict(0.74, [{**friction, "gap_with_effect": 0.6}])[0] == "unexplained"
+    # one that leaves a significant gap is named only as a partial explanation, with the rest unexplained
+    partial = D.decide(0.74, [{**friction, "gap_with_effect": 0.6}])
+    assert partial.verdict == "friction" and partial.partial and partial.remaining_gap == 0.6
+    assert D.decide_verdict(0.74, [{**friction, "gap_with_effect": 0.6,
+                                    "shrink_interval": [0.1, 0.6]}])[0] == "unexplained"
     assert D.decide_verdict(0.74, [{**friction, "shrink_interval": [-0.1, 1.0]}])[0] == "unexplained"
     assert D.decide_verdict(3.0, [_entry("eccentricity", 5.0, 0.9)])[0] == "unexplained"
     # a shrink whose interval reaches below zero is not evidence
@@ -406,3 +410,40 @@ def test_labelled_campaign_verdict(name, tmp_path):
     else:
         assert ranking[0]["effect"] == LABELLED[name]
         assert content["gap"]["shrink_fraction"] >= 0.7
+
+
+def test_a_strong_effect_that_explains_part_of_the_gap_is_named_with_an_unexplained_remainder():
+    partial = {**_entry("bearing_clearance", 182.0, 0.45, low=0.3), "gap_with_effect": 1.4}
+    decision = D.decide(2.6, [partial])
+    assert decision.verdict == "bearing_clearance" and decision.partial
+    assert decision.remaining_gap == 1.4 and "remains unexplained" in decision.reason
+    # a shrink interval reaching below the partial threshold is not enough
+    weak = {**partial, "shrink_interval": [0.1, 0.6]}
+    assert D.decide(2.6, [weak]).verdict == "unexplained"
+    # nor is an effect that adds nothing to its own fit
+    assert D.decide(2.6, [{**partial, "effect_gain": 1.0}]).verdict == "unexplained"
+    # a full explanation is not partial
+    full = D.decide(2.6, [{**partial, "shrink_fraction": 0.8, "shrink_interval": [0.6, 0.9]}])
+    assert full.verdict == "bearing_clearance" and not full.partial
+
+
+def test_a_figure_within_its_spread_of_its_threshold_is_flagged_borderline():
+    knife_edge = {**_entry("bearing_clearance", 182.0, 0.5, low=0.42), "gap_with_effect": 0.9,
+                  "standard_error": 40.0}
+    decision = D.decide(2.6, [knife_edge], nominal_gap_interval=(2.1, 3.0))
+    assert [entry["figure"] for entry in decision.borderline] == ["shrink_fraction"]
+    assert decision.borderline[0]["interval"] == [0.42, 0.6]
+    # a score whose own standard error reaches the threshold, and a nominal gap whose interval holds noise
+    close = {**_entry("friction", 12.0, 0.9), "standard_error": 5.0}
+    flagged = D.decide(0.6, [close], nominal_gap_interval=(0.3, 0.9)).borderline
+    assert {entry["figure"] for entry in flagged} == {"score", "nominal_gap"}
+    # clear decisions carry no flag
+    clear = {**_entry("friction", 120.0, 0.9), "standard_error": 5.0}
+    assert D.decide(3.0, [clear], nominal_gap_interval=(2.5, 3.5)).borderline == ()
+
+
+def test_bootstrap_gap_brackets_the_gap():
+    rng = np.random.default_rng(4)
+    z = rng.standard_normal((8, 3, 20)) * 2.0
+    low, high = D.bootstrap_gap(z, rng)
+    assert low <= D.gap_metric(z) <= high and high - low > 0

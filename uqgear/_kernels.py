@@ -55,8 +55,16 @@ N_ACCUMULATORS = 13
 
 TWO_PI = 2.0 * math.pi
 
+#: Compilation options of every kernel. No ``fastmath``: it licenses LLVM to
+#: reassociate sums and contract multiply-adds, and it did so differently for
+#: freshly compiled and cache-loaded parallel code, so the same input gave
+#: different last bits on a first and a later run (and may on another CPU).
+#: Without it the kernels are bit-identical cold, warm and uncached;
+#: ``benchmarks/integrator.py`` measures what fastmath would buy.
+JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+
+@nb.njit(**JIT_OPTIONS, inline="always")
 def dead_zone(x, half_width):
     """Backlash function f(x): x - b above b, x + b below -b, 0 between."""
     if x > half_width:
@@ -66,7 +74,7 @@ def dead_zone(x, half_width):
     return 0.0
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def contact_region(x, half_width):
     """1 drive-side contact, 0 separation, -1 back-side contact."""
     if x > half_width:
@@ -76,7 +84,7 @@ def contact_region(x, half_width):
     return 0
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _interp_uniform(table, position, span):
     """Linear interpolation on a uniform grid over [0, span], clamped at the ends."""
     n = table.shape[0]
@@ -90,7 +98,7 @@ def _interp_uniform(table, position, span):
     return table[i] * (1.0 - w) + table[i + 1] * w
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _mesh_position(t, t_ref, p):
     """(n_ref, u_ref, u): mesh cycle and phase at ``t_ref``, and the phase of ``t`` in that cycle.
 
@@ -102,7 +110,7 @@ def _mesh_position(t, t_ref, p):
     return n_ref, cycles_ref - n_ref, p[OMEGA_MESH] * t / TWO_PI - n_ref
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _friction_arms(kp, position, position_ref, p):
     """k_i sign_i s_i (pinion) and k_i sign_i (L - s_i) (gear) of one pair at ``position`` base pitches.
 
@@ -114,7 +122,7 @@ def _friction_arms(kp, position, position_ref, p):
     return kp * sign * s, kp * sign * (p[LOA_LENGTH] - s)
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     """Mesh stiffness and friction moment-arm sums at time ``t``.
 
@@ -164,7 +172,7 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     return k * scale, arm_pinion * scale, arm_gear * scale
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def static_transmission_error(t, p):
     """e(t): mesh-periodic STE plus any shaft run-out term, m."""
     ste = p[STE_AMPLITUDE] * math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
@@ -177,7 +185,7 @@ def static_transmission_error(t, p):
 # (registers) rather than scratch arrays: slicing rows out of a work array costs reference
 # counting on every stage, which made an RK4 step about ten times slower.
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _time_terms(t, sine, p):
     """(relative drive acceleration, e(t), e''(t)) given sin(omega t + STE phase)."""
     drive = p[T1]
@@ -195,7 +203,7 @@ def _time_terms(t, sine, p):
     return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     """Time-only terms of the right-hand side at any time.
 
@@ -209,7 +217,7 @@ def forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     return k, _friction_term(arm_pinion, arm_gear, p), drive, ste, ste_acc
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _friction_term(arm_pinion, arm_gear, p):
     """mu (R1 sum_i k_i s_i sign_i / I1 + R2 sum_i k_i (L - s_i) sign_i / I2).
 
@@ -222,7 +230,7 @@ def _friction_term(arm_pinion, arm_gear, p):
     return p[FRICTION] * (p[R1] * arm_pinion / p[I1] + p[R2] * arm_gear / p[I2])
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def derivative(s, terms, p):
     """State-dependent part of the right-hand side.
 
@@ -247,13 +255,13 @@ def derivative(s, terms, p):
     return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - terms[4]), force
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _shifted(s, h, d):
     return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4],
             s[5] + h * d[5])
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _rk4(s, h, d1, mid, end, p):
     """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
     d2, _ = derivative(_shifted(s, 0.5 * h, d1), mid, p)
@@ -268,7 +276,7 @@ def _rk4(s, h, d1, mid, end, p):
             s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     """Right-hand side of the 3-DOF model (model.md section 2) plus effect slots.
 
@@ -283,7 +291,7 @@ def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     return force, terms[0], terms[3]
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def _crossing_fraction(x0, v0, x1, v1, h, level):
     """Fraction of a step where the cubic Hermite interpolant of x reaches ``level``."""
     lo = 0.0
@@ -305,7 +313,7 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
     return 0.5 * (lo + hi)
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
     """``trial`` (the step from ``s`` over [t, t+h]), redone in two parts where it changes the
     contact region, split where the cubic Hermite interpolant of x crosses the boundary."""
@@ -339,7 +347,7 @@ MAX_PAIRS = 4
 N_FIELDS = 4 + 3 * MAX_PAIRS
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
     """The mesh-periodic forcing at local time ``t`` (first mesh period) into ``row``; returns the pair count."""
     _, u_ref, u = _mesh_position(t, t_ref, p)
@@ -371,7 +379,7 @@ def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
     return i
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def build_schedule(p, pair_k, period_k, breakpoints, steps_per_period):
     """Sub-steps of one mesh period and their forcing at RK4's three stage times.
 
@@ -419,7 +427,7 @@ def build_schedule(p, pair_k, period_k, breakpoints, steps_per_period):
     return first_sub, offsets, widths, refs, pairs, table
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def _add_substep(start, end, count, p, pair_k, period_k, offsets, widths, refs, pairs, table):
     t_ref = 0.5 * (start + end)
     offsets[count] = start
@@ -431,7 +439,7 @@ def _add_substep(start, end, count, p, pair_k, period_k, offsets, widths, refs, 
     return count + 1
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def _forcing_row(t, n, table, sub, stage, n_pairs, p, factor_pinion, factor_gear):
     """:func:`forcing` at absolute time ``t`` in mesh period ``n`` from a tabulated stage."""
     k = table[sub, stage, F_K]
@@ -453,7 +461,7 @@ def _forcing_row(t, n, table, sub, stage, n_pairs, p, factor_pinion, factor_gear
     return k * scale, _friction_term(arm_pinion * scale, arm_gear * scale, p), drive, ste, ste_acc
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, inline="always")
 def scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
     """Advance the state tuple ``s`` over grid step ``j`` of mesh period ``n``.
 
@@ -491,7 +499,7 @@ def scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
     return s, force, a1, a2
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def advance(state, first_period, n_periods, p, pair_k, period_k, fp, fg, schedule):
     """Advance the state array in place over whole mesh periods."""
     steps = schedule[0].size - 1
@@ -504,14 +512,14 @@ def advance(state, first_period, n_periods, p, pair_k, period_k, fp, fg, schedul
         state[c] = s[c]
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def record(t, state, p, pair_k, period_k, fp, fg, deriv):
     """Evaluate derivative and mesh quantities at a grid point (pairs taken just after ``t``)."""
     t_ref = t + 1e-9 * TWO_PI / p[OMEGA_MESH]
     return rhs(t, state, t_ref, p, pair_k, period_k, fp, fg, deriv)
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period,
                       n_periods, keep_periods, stride, history, poincare):
     """Integrate one run, storing histories of the kept periods.
@@ -535,27 +543,27 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
             if j == 0:
                 for c in range(6):
                     poincare[n - first_kept, c] = s[c]
+            start = s
+            # the step's first RK4 stage is the derivative at the grid point: reuse it
+            s, force, a1, a2 = scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
             if j % stride == 0:
-                # the forcing at a grid point is the first tabulated stage of its step
                 sub = first_sub[j]
                 terms = _forcing_row(n * period + offsets[sub], n, table, sub, 0, pairs[sub], p, fp, fg)
-                deriv, force = derivative(s, terms, p)
                 for c in range(6):
-                    history[row, c] = s[c]
-                history[row, 6] = deriv[3]
-                history[row, 7] = deriv[4]
+                    history[row, c] = start[c]
+                history[row, 6] = a1
+                history[row, 7] = a2
                 history[row, 8] = force
                 history[row, 9] = terms[0]
                 history[row, 10] = terms[3]
-                history[row, 11] = contact_region(s[2], p[HALF_BACKLASH])
+                history[row, 11] = contact_region(start[2], p[HALF_BACKLASH])
                 row += 1
-            s, _, _, _ = scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
         for c in range(6):
             state[c] = s[c]
     return state
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS)
 def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, n_periods,
                    keep_periods, history_stride, acc, poincare, history, lyapunov, scale):
     """Integrate one run keeping only accumulators, Poincare points and decimated histories.
@@ -642,7 +650,7 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
         acc[Q_LYAPUNOV] = np.nan
 
 
-@nb.njit(cache=True, parallel=True, error_model="numpy", fastmath=True)
+@nb.njit(**JIT_OPTIONS, parallel=True)
 def integrate_batch(states, params, pair_tables, period_tables, table_index, factor_pinion,
                     factor_gear, breakpoints, steps_per_period, n_periods, keep_periods,
                     history_stride, lyapunov, scales, accumulators, poincare, history):

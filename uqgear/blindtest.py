@@ -331,6 +331,8 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "strength_value": spec.strength_value, "design": spec.design_name, "plan": spec.plan,
             "effect_values": spec.effect_values, "true_parameters": truth,
             "verdict": result.verdict, "reason": result.reason,
+            "partial": bool(result.decision is not None and result.decision.partial),
+            "borderline": [entry["figure"] for entry in result.decision.borderline] if result.decision else [],
             "correct": result.verdict == spec.truth,
             "correct_detectable": result.verdict == spec.truth or (not detectable and result.verdict == HEALTHY),
             "detectable": bool(detectable), "oracle_gap": visibility, "nominal_gap": result.nominal_gap,

@@ -1433,6 +1433,23 @@ def bootstrap_shrink(z_before: np.ndarray, z_after: np.ndarray, rng: np.random.G
     return central, float(np.quantile(samples, 0.05)), float(np.quantile(samples, 0.95))
 
 
+def bootstrap_gap(z: np.ndarray, rng: np.random.Generator, n_resamples: int = 400) -> tuple[float, float]:
+    """5 % and 95 % bootstrap quantiles of :func:`gap_metric`, resampling runs (axis 0)."""
+    values = np.asarray(z, dtype=float)
+    n_op = values.shape[0]
+    squares = np.array([np.nansum(capped_squares(values[op])) for op in range(n_op)])
+    counts = np.array([np.sum(np.isfinite(values[op])) for op in range(n_op)])
+    gaps = []
+    for _ in range(n_resamples):
+        index = rng.integers(0, n_op, n_op)
+        count = counts[index].sum()
+        if count:
+            gaps.append(math.sqrt(max(squares[index].sum() / count - _GAP_NOISE_LEVEL, 0.0)))
+    if not gaps:
+        return math.nan, math.nan
+    return float(np.quantile(gaps, 0.05)), float(np.quantile(gaps, 0.95))
+
+
 # Positions in its interval at which each run's T2 is tried by :func:`profile_adhesion`.
 _T2_GRID = np.linspace(0.0, 1.0, 9)
 
@@ -1637,6 +1654,9 @@ SHRINK_THRESHOLD = 0.5
 NOISE_GAP_THRESHOLD = 0.5
 #: A named effect must itself improve its fit's robust cost by at least this much (about nats).
 EFFECT_GAIN_THRESHOLD = 5.0
+#: An effect that clears the score and gain rules but not the shrink rule is still named, with an
+#: unexplained remainder, when the lower end of its shrink interval reaches this fraction.
+PARTIAL_SHRINK_THRESHOLD = 0.2
 # A held-out feature this many sigmas off counts as a gap in the "where" list.
 _WHERE_Z = 3.0
 
@@ -1687,10 +1707,67 @@ def score_candidate(fit_result: FitResult, held: HeldOut, nominal_held: HeldOut,
                           score=delta - penalty, gap=gap, shrink=shrink, shrink_low=low, shrink_high=high)
 
 
-def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
-                   score_threshold: float = SCORE_THRESHOLD, shrink_threshold: float = SHRINK_THRESHOLD,
-                   noise_gap: float = NOISE_GAP_THRESHOLD,
-                   effect_gain_threshold: float = EFFECT_GAIN_THRESHOLD) -> tuple[str, str]:
+@dataclass(frozen=True)
+class Decision:
+    """A verdict with the figures that decided it.
+
+    Attributes
+    ----------
+    verdict, reason : str
+        As :func:`decide_verdict` returns them.
+    partial : bool
+        The named effect explains only part of the gap: what remains
+        (``remaining_gap``) is significant and unexplained.
+    remaining_gap : float or None
+        Held-out gap with the named effect (``None`` when none is named).
+    borderline : tuple of dict
+        Deciding figures that lie within their own spread of their threshold
+        (``figure``, ``value``, ``threshold``, ``interval``): a rerun on
+        another campaign of the same rig could go the other way.
+    """
+
+    verdict: str
+    reason: str
+    partial: bool = False
+    remaining_gap: float | None = None
+    borderline: tuple[dict[str, Any], ...] = ()
+
+
+def _straddles(interval: Sequence[float] | None, threshold: float) -> bool:
+    if interval is None or len(interval) != 2 or not all(math.isfinite(float(v)) for v in interval):
+        return False
+    return float(interval[0]) < threshold <= float(interval[1])
+
+
+def _borderline_figures(nominal_gap: float, nominal_gap_interval: Sequence[float] | None,
+                        best: Mapping[str, Any] | None, *, score_threshold: float, shrink_threshold: float,
+                        noise_gap: float) -> tuple[dict[str, Any], ...]:
+    figures = []
+    if _straddles(nominal_gap_interval, noise_gap):
+        figures.append({"figure": "nominal_gap", "value": nominal_gap, "threshold": noise_gap,
+                        "interval": [float(v) for v in nominal_gap_interval]})
+    if best is not None:
+        error = float(best.get("standard_error", math.nan))
+        if math.isfinite(error):
+            score_interval = [best["score"] - 1.645 * error, best["score"] + 1.645 * error]
+            if _straddles(score_interval, score_threshold):
+                figures.append({"figure": "score", "value": float(best["score"]), "threshold": score_threshold,
+                                "interval": score_interval})
+        if _straddles(best.get("shrink_interval"), shrink_threshold):
+            figures.append({"figure": "shrink_fraction", "value": float(best["shrink_fraction"]),
+                            "threshold": shrink_threshold,
+                            "interval": [float(v) for v in best["shrink_interval"]]})
+        if _straddles(best.get("gap_interval"), noise_gap):
+            figures.append({"figure": "gap_with_effect", "value": float(best["gap_with_effect"]),
+                            "threshold": noise_gap, "interval": [float(v) for v in best["gap_interval"]]})
+    return tuple(figures)
+
+
+def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
+           nominal_gap_interval: Sequence[float] | None = None,
+           score_threshold: float = SCORE_THRESHOLD, shrink_threshold: float = SHRINK_THRESHOLD,
+           noise_gap: float = NOISE_GAP_THRESHOLD, effect_gain_threshold: float = EFFECT_GAIN_THRESHOLD,
+           partial_shrink: float = PARTIAL_SHRINK_THRESHOLD) -> Decision:
     """The verdict from the held-out gap of the nominal model and the ranked candidates.
 
     Parameters
@@ -1701,8 +1778,11 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         Candidates best first, each with ``effect``, ``score`` (held-out log
         density gain over the nominal model minus the parameter penalty),
         ``shrink_fraction``, ``shrink_interval`` ([5 %, 95 %]) and optionally
-        ``gap_with_effect`` (its held-out gap) and ``effect_gain`` (how much
-        worse its fit is with the effect switched off, robust cost).
+        ``gap_with_effect`` (its held-out gap), ``gap_interval``,
+        ``standard_error`` (of the score) and ``effect_gain`` (how much worse
+        its fit is with the effect switched off, robust cost).
+    nominal_gap_interval : pair of float, optional
+        Bootstrap interval of the nominal gap (:func:`bootstrap_gap`).
     score_threshold, shrink_threshold, noise_gap : float
         A candidate is named when its score reaches the threshold, the lower
         end of its shrink interval is positive, and it explains the gap:
@@ -1710,39 +1790,61 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         (held-out gap with the effect at most ``noise_gap``; a nominal gap
         just above noise cannot shrink by half and still be significant).
         The nominal model is within noise when its gap is at most ``noise_gap``.
+    effect_gain_threshold : float
         A candidate whose fit is as good with its effect off (``effect_gain``
-        below ``effect_gain_threshold``) owes its score to the nominal
-        parameters it refitted, not to the effect, and is never named.
+        below this) owes its score to the nominal parameters it refitted, not
+        to the effect, and is never named.
+    partial_shrink : float
+        A candidate that passes the score and gain rules but explains only
+        part of the gap is named with an unexplained remainder (``partial``)
+        when the lower end of its shrink interval reaches this fraction;
+        below it the verdict is ``unexplained``.
 
     Returns
     -------
-    (verdict, reason) : tuple of str
+    Decision
     """
-    if ranking:
-        best = ranking[0]
+    best = ranking[0] if ranking else None
+    borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, score_threshold=score_threshold,
+                                     shrink_threshold=shrink_threshold, noise_gap=noise_gap)
+    if best is not None:
         remaining = float(best.get("gap_with_effect", math.inf))
         explains = best["shrink_fraction"] >= shrink_threshold or remaining <= noise_gap
         carried = float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
-        supported = (best["score"] >= score_threshold and explains and best["shrink_interval"][0] > 0.0
-                     and carried)
-        if supported:
+        evidence = best["score"] >= score_threshold and carried
+        if evidence and explains and best["shrink_interval"][0] > 0.0:
             within = (f"; what remains ({remaining:.2f}) is within noise"
                       if best["shrink_fraction"] < shrink_threshold else "")
-            return str(best["effect"]), (
+            return Decision(str(best["effect"]), (
                 f"{best['effect']} gains {best['score']:.1f} nats of held-out predictive density over the "
                 f"nominal model after its parameter penalty and shrinks the held-out gap by "
                 f"{100 * best['shrink_fraction']:.0f} % (90 % interval {100 * best['shrink_interval'][0]:.0f} "
-                f"to {100 * best['shrink_interval'][1]:.0f} %){within}")
+                f"to {100 * best['shrink_interval'][1]:.0f} %){within}"),
+                remaining_gap=remaining, borderline=borderline)
+        if evidence and not explains and best["shrink_interval"][0] >= partial_shrink:
+            return Decision(str(best["effect"]), (
+                f"{best['effect']} gains {best['score']:.1f} nats of held-out predictive density and shrinks "
+                f"the held-out gap by {100 * best['shrink_fraction']:.0f} % (90 % interval "
+                f"{100 * best['shrink_interval'][0]:.0f} to {100 * best['shrink_interval'][1]:.0f} %), but a "
+                f"gap of {remaining:.2f} (above {noise_gap:g}) remains unexplained"),
+                partial=True, remaining_gap=remaining, borderline=borderline)
     if not math.isfinite(nominal_gap) or nominal_gap <= noise_gap:
-        return "none", (f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-                        f"(threshold {noise_gap:g}) and no candidate is clearly better")
+        return Decision("none", f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
+                                f"(threshold {noise_gap:g}) and no candidate is clearly better",
+                        borderline=borderline)
     detail = ""
-    if ranking:
-        best = ranking[0]
+    if best is not None:
         detail = (f"; the best candidate, {best['effect']}, scores {best['score']:.1f} nats and shrinks it by "
                   f"{100 * best['shrink_fraction']:.0f} % (needed: {score_threshold:g} nats, and a shrink of "
                   f"{100 * shrink_threshold:.0f} % or a remaining gap within noise)")
-    return "unexplained", f"the nominal model's held-out gap is {nominal_gap:.2f} (above {noise_gap:g}){detail}"
+    return Decision("unexplained", f"the nominal model's held-out gap is {nominal_gap:.2f} "
+                                   f"(above {noise_gap:g}){detail}", borderline=borderline)
+
+
+def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], **thresholds: float) -> tuple[str, str]:
+    """``(verdict, reason)`` of :func:`decide` (same arguments)."""
+    decision = decide(nominal_gap, ranking, **thresholds)
+    return decision.verdict, decision.reason
 
 
 def where_gap(z: np.ndarray, case: RigCase, *, limit: int = 12) -> list[dict[str, Any]]:
@@ -1849,6 +1951,8 @@ class DiagnosisResult:
     hints: dict[str, float]
     effects: tuple[str, ...]
     timings: dict[str, float]
+    decision: Decision | None = None
+    nominal_gap_interval: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def best(self) -> CandidateScore | None:
@@ -2026,9 +2130,9 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
 def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str, Any]]:
     """What :func:`decide_verdict` needs of the best variant of each effect, best first."""
     scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
-    return [{"effect": s.effect, "score": s.score, "shrink_fraction": s.shrink,
-             "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap,
-             "effect_gain": s.effect_gain} for s in scores]
+    return [{"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
+             "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
+             "gap_with_effect": s.gap, "effect_gain": s.effect_gain} for s in scores]
 
 
 def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
@@ -2094,13 +2198,20 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         # the candidates were scored against a nominal fit stuck in a local optimum: score them again
         nominal = better
     scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
-    verdict, reason = decide_verdict(nominal_gap, _ranking_of(best_per_effect))
+    ranking = _ranking_of(best_per_effect)
+    # drawn after the shrink bootstraps, so their numbers do not depend on this
+    nominal_interval = bootstrap_gap(nominal_held.z, rng)
+    if scores:
+        ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
+    decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval)
+    verdict, reason = decision.verdict, decision.reason
     where = where_gap(nominal_held.z, case)
     families = family_character(nominal_held.z, case, locked)
     return DiagnosisResult(case=case, nominal=nominal, nominal_held=nominal_held, scores=scores,
                            all_scores=all_scores, verdict=verdict, reason=reason, nominal_gap=nominal_gap,
                            where=where, families=families, locked_lines=locked, hints=hints,
-                           effects=effect_names, timings=timings)
+                           effects=effect_names, timings=timings, decision=decision,
+                           nominal_gap_interval=nominal_interval)
 
 
 # ---------------------------------------------------------------------------------------------- outputs
@@ -2258,10 +2369,16 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
             "drive_torque": [float(v) for v in case.drive_torques],
         },
         "noise_threshold": NOISE_GAP_THRESHOLD,
+        "baseline_interval": [float(v) for v in result.nominal_gap_interval],
     }
+    decision = result.decision or Decision(result.verdict, result.reason)
     return {
         "verdict": result.verdict,
         "reason": result.reason,
+        "borderline": [dict(entry) for entry in decision.borderline],
+        "partial": decision.partial,
+        "remaining_gap": ({"value": decision.remaining_gap, "unexplained": True, "where": result.where}
+                          if decision.partial else None),
         "gap": gap,
         "where": result.where,
         "families": result.families,
@@ -2272,7 +2389,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
                     "periodic_runs": [bool(v) for v in result.nominal.periodic],
                     "converged": result.nominal.converged},
         "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
-                       "nominal_gap": NOISE_GAP_THRESHOLD},
+                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD},
         "model_error": case.model_error,
         "effects_considered": list(result.effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,

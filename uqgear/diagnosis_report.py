@@ -142,6 +142,23 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]], text_columns: 
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
 
 
+def _decision_notes(content: Mapping[str, Any]) -> list[str]:
+    """Paragraphs for a partial explanation and for figures that decided on a knife edge."""
+    notes = []
+    remaining = content.get("remaining_gap")
+    if content.get("partial") and remaining:
+        notes.append(f'<p class="note"><b>Partial explanation:</b> {html.escape(content["verdict"])} accounts '
+                     f'for part of the gap; a held-out gap of {remaining["value"]:.2f} remains unexplained '
+                     '(where: see the table of held-out discrepancies below).</p>')
+    for entry in content.get("borderline", []):
+        low, high = entry["interval"]
+        notes.append(f'<p class="note"><b>Borderline:</b> {html.escape(entry["figure"])} = {entry["value"]:.3g} '
+                     f'against a threshold of {entry["threshold"]:g}; its 90 % interval {low:.3g} to {high:.3g} '
+                     'contains the threshold, so another campaign of the same rig could be decided the other '
+                     'way.</p>')
+    return notes
+
+
 def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
     """HTML text of a diagnosis report from its JSON summary and Dataset."""
     gap = content["gap"]
@@ -151,6 +168,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
              f'{", ".join(content["rig"]["channels"])}</p>',
              f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
              f'<p>{html.escape(content["reason"])}.</p>',
+             *_decision_notes(content),
              "<h2>How far: the gap on held-out runs</h2>",
              _table(["metric", "nominal model", "with effect", "effect", "shrink fraction", "90 % interval"],
                     [[gap["metric"], gap["baseline"], gap["with_effect"], gap["effect"], gap["shrink_fraction"],

@@ -1210,6 +1210,8 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
         sections.append(RENDERERS.get(kind, _render_generic)(ds, dpi))
     study_name = str(first.attrs.get("study_name", "study"))
     versions = _json_attr(first, "provenance_versions", {})
+    if "numba_target_cpu" in first.attrs:
+        versions["kernels compiled for (CPU)"] = str(first.attrs["numba_target_cpu"])
     total_time = sum(float(ds.attrs.get("run_time_s", 0.0)) for ds in results)
     total_runs = sum(int(ds.attrs.get("model_runs", 0)) for ds in results)
     summary = [

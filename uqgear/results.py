@@ -42,13 +42,13 @@ ENCODED_ATTRS_MARKER = "uqgear_encoded_attrs"
 
 #: Attributes added by :func:`save_result`.
 PROVENANCE_ATTRS: tuple[str, ...] = (
-    "uqgear_version", "provenance_versions", "created", "seed", "seed_spawn_key",
-    "design", "study",
+    "uqgear_version", "provenance_versions", "numba_target_cpu", "created", "seed",
+    "seed_spawn_key", "design", "study",
 )
 
 #: Distributions whose versions are recorded in ``provenance_versions``.
 _PROVENANCE_PACKAGES: tuple[str, ...] = (
-    "numpy", "scipy", "xarray", "netCDF4", "chaospy", "SALib", "emcee", "numba",
+    "numpy", "scipy", "xarray", "netCDF4", "chaospy", "SALib", "emcee", "numba", "llvmlite",
 )
 
 _FALLBACK_VERSION = "0.1.0"
@@ -79,6 +79,20 @@ def package_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             versions[name] = "not installed"
     return versions
+
+
+def numba_target_cpu() -> str:
+    """The CPU name numba compiles the kernels for (``NUMBA_CPU_NAME`` or the host's).
+
+    The kernels use no fast-math, so their results should not depend on it;
+    it is recorded so that a difference between machines can be traced from
+    the output files alone.
+    """
+    from numba.core import config
+    if config.CPU_NAME:
+        return str(config.CPU_NAME)
+    import llvmlite.binding
+    return str(llvmlite.binding.get_host_cpu_name())
 
 
 # --------------------------------------------------------------------------- attributes
@@ -328,6 +342,7 @@ def provenance_attrs(*, seed: int | np.random.SeedSequence | None = None,
     attrs = {
         "uqgear_version": uqgear_version(),
         "provenance_versions": json.dumps(package_versions(), sort_keys=True),
+        "numba_target_cpu": numba_target_cpu(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
     if seed is not None:
@@ -407,4 +422,4 @@ def load_result(path: str | os.PathLike[str]) -> xr.Dataset:
 
 
 __all__ = ["save_result", "load_result", "write_dataset", "read_dataset", "provenance_attrs",
-           "package_versions", "uqgear_version", "PROVENANCE_ATTRS", "ENCODED_ATTRS_MARKER"]
+           "package_versions", "numba_target_cpu", "uqgear_version", "PROVENANCE_ATTRS", "ENCODED_ATTRS_MARKER"]
