@@ -31,8 +31,9 @@ import numba
 import numpy as np
 
 import uqgear
-from uqgear import _kernels as K
-from uqgear import integration, model
+from uqgear.physics import _kernels as K
+from uqgear.physics import integration
+from uqgear.physics import model
 
 
 def _relative_rms(x, reference):

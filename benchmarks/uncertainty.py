@@ -23,10 +23,11 @@ import numpy as np
 import xarray as xr
 
 import uqgear
-from uqgear.integration import BatchEvaluator
-from uqgear.interval import IntervalAnalysis
-from uqgear.runner import Runner
-from uqgear.uncertainty import Distribution, Interval, ParameterSpace
+from uqgear.physics.integration import BatchEvaluator
+from uqgear.uq.interval import IntervalAnalysis
+from uqgear.uq.runner import Runner
+from uqgear.uq.parameter_space import ParameterSpace
+from uqgear.uq.parameters import Distribution, Interval
 
 
 def interval_methods(design, speeds: np.ndarray, scan_points: int) -> None:

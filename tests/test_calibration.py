@@ -14,11 +14,11 @@ import xarray as xr
 from uqgear.calibration import (Calibration, CalibrationError, PolynomialEmulator, calibrate,
                                 effective_sample_size, write_calibration, integrated_autocorrelation_time, model_harmonics,
                                 observed_harmonics, prior_bounds, resolve_parameters, split_rhat)
-from uqgear.design import load_design
-from uqgear.errors import RigDataError
-from uqgear.integration import samples_from_mapping
-from uqgear.rig import make_rig_dataset, read_rig, write_rig
-from uqgear.virtual_rig import simulate_campaign
+from uqgear.physics.design import load_design
+from uqgear.common.errors import RigDataError
+from uqgear.physics.integration import samples_from_mapping
+from uqgear.rig.format import make_rig_dataset, read_rig, write_rig
+from uqgear.rig.virtual_rig import simulate_campaign
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 

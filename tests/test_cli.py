@@ -11,17 +11,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 import xarray as xr
 
-from uqgear import analyses
+import uqgear.common
+from uqgear.study import analyses
 from uqgear.cli import main
-from uqgear.errors import UqgearError
-from uqgear.results import load_result
-from uqgear.runner import Runner
-from uqgear.study import load_study, parse_study
+from uqgear.common.errors import UqgearError
+from uqgear.uq.results import load_result
+from uqgear.uq.runner import Runner
+from uqgear.study.schema import load_study, parse_study
 
 ROOT = Path(__file__).resolve().parent.parent
-SMOKE = ROOT / "studies" / "smoke.yaml"
+# the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)
+STUDIES = uqgear.common.bundled_file("study", "smoke").parent
+SMOKE = STUDIES / "smoke.yaml"
 ENVIRONMENT = {**os.environ, "UQGEAR_PROGRESS": "0", "MPLBACKEND": "Agg"}
 
 # A tiny study for in-process runs: two cheap analyses.
@@ -174,7 +178,9 @@ def test_bad_study_gives_status_2_one_line_and_no_output(tmp_path, capsys, text,
 def test_missing_study_file(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "absent.yaml"), "--out", str(out)]) == 2
-    assert capsys.readouterr().err == f"uqgear: error: {tmp_path / 'absent.yaml'}: study file not found\n"
+    error = capsys.readouterr().err
+    assert error.startswith(f"uqgear: error: {tmp_path / 'absent.yaml'}: study file not found (bundled studies")
+    assert error.count("\n") == 1 and "smoke" in error
     assert not out.exists()
     assert main(["validate", str(tmp_path / "absent.yaml")]) == 2
 
@@ -187,8 +193,10 @@ def test_non_empty_output_folder_is_refused_without_resume(tmp_path, capsys):
     assert main(["run", str(study), "--out", str(out)]) == 2
     assert "folder exists and is not empty" in capsys.readouterr().err
     assert [path.name for path in out.iterdir()] == ["keep.txt"]
-    assert main(["run", str(study), "--out", str(out / "missing" / "deeper")]) == 2
-    assert "does not exist" in capsys.readouterr().err
+    # missing folders above a new output folder are made (a fresh clone has no results/)
+    assert main(["run", str(study), "--out", str(out / "missing" / "deeper")]) == 0
+    assert (out / "missing" / "deeper" / "report.html").is_file()
+    assert sorted(path.name for path in out.iterdir()) == ["keep.txt", "missing"]
 
 
 def test_argument_errors_exit_2_with_one_line(capsys):
@@ -270,7 +278,7 @@ def test_simulate_command_data_and_mistakes(tmp_path, capsys):
     assert main(["simulate", "--speed", "3000", "--out", str(tmp_path / "run.txt")]) == 2
     assert "expected a file name ending in .png" in capsys.readouterr().err
     assert main(["simulate", "--speed", "-3000"]) == 2
-    assert "--speed: expected a pinion speed > 0 rpm" in capsys.readouterr().err
+    assert "--speed: expected a number in (0, 100000] rpm; got -3000" in capsys.readouterr().err
     assert main(["simulate", "--speed", "3000", "--design", "nowhere"]) == 2
     assert "not a bundled design" in capsys.readouterr().err
     assert not (tmp_path / "run.txt").exists()
@@ -380,3 +388,44 @@ def test_diagnosis_commands_reject_bad_input(tmp_path, args, message):
     assert message in completed.stderr
     assert len(completed.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "d").exists() and not any(p.name.startswith(".d") for p in tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------------------- bundled examples
+
+def test_examples_lists_and_copies_the_bundled_studies(tmp_path, capsys):
+    assert main(["examples"]) == 0
+    listing = capsys.readouterr().out
+    for name in ("smoke", "t2_envelope", "calibrate_healthy", "locomotive", "healthy", "eccentricity"):
+        assert name in listing
+    target = tmp_path / "mine.yaml"
+    assert main(["examples", "copy", "calibrate_healthy", str(target)]) == 0
+    assert target.read_text() == (STUDIES / "calibrate_healthy.yaml").read_text()
+    # the copy still finds its rig campaign by name, wherever it is
+    assert main(["validate", str(target)]) == 0
+    capsys.readouterr()
+    assert main(["examples", "copy", "calibrate_healthy", str(target)]) == 2
+    assert "pass --force" in capsys.readouterr().err
+    assert main(["examples", "copy", "calibrate_healthy", str(target), "--force"]) == 0
+    assert main(["examples", "copy", "no_such_study", str(tmp_path)]) == 2
+    assert "not a bundled study" in capsys.readouterr().err
+    assert main(["examples", "copy", "smoke", str(tmp_path)]) == 0
+    assert (tmp_path / "smoke.yaml").is_file()
+
+
+def test_a_bundled_study_runs_by_name_into_a_new_nested_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    out = Path("results") / "deeper" / "smoke"
+    assert main(["run", "smoke", "--out", str(out), "--quiet"]) == 0
+    assert (tmp_path / out / "report.html").is_file()
+
+
+def test_no_output_folders_are_left_behind_by_an_invalid_study(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((STUDIES / "smoke.yaml").read_text().replace("n_periods: 100", "n_periods: -3"))
+    assert main(["run", str(bad), "--out", str(tmp_path / "new" / "out")]) == 2
+    assert "n_periods" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+    # below a file there is no folder to make
+    (tmp_path / "file").write_text("x")
+    assert main(["run", "smoke", "--out", str(tmp_path / "file" / "out")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err

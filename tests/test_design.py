@@ -1,13 +1,13 @@
-"""Design loading, validation and involute geometry against model.md's derived values."""
+"""Design loading, validation and involute geometry against the derived values of docs/model.md section 5."""
 
 import math
 
 import pytest
 
 import uqgear
-from uqgear.design import DESIGN_KEYS, load_design
-from uqgear.errors import DesignError
-from uqgear.geometry import pair_geometry
+from uqgear.physics.design import DESIGN_KEYS, load_design
+from uqgear.common.errors import DesignError
+from uqgear.physics.geometry import pair_geometry
 
 
 @pytest.fixture(scope="module")
@@ -20,13 +20,13 @@ def test_reference_design_keys_and_provenance(design):
     assert design.module == pytest.approx(0.009)
     assert design.motor_pole_pairs == 3
     assert set(design.to_dict()) == set(DESIGN_KEYS) | {"motor_pole_pairs"}
-    text = (uqgear.design._BUNDLED_DIR / "locomotive.yaml").read_text()
+    text = (uqgear.physics.design._BUNDLED_DIR / "locomotive.yaml").read_text()
     assert "Provenance" in text and "NOT the lost parameter table" in text
 
 
 def test_derived_geometry_matches_model_md(design):
     g = pair_geometry(design)
-    # model.md section 4: base 88.8 / 427.1, tip 105.75 / 461.25, root 85.5 / 441.0 mm, eps ~ 1.65
+    # docs/model.md section 5: base 88.8 / 427.1, tip 105.75 / 461.25, root 85.5 / 441.0 mm, eps ~ 1.65
     assert g.pinion.base_radius * 1e3 == pytest.approx(88.8, abs=0.05)
     assert g.gear.base_radius * 1e3 == pytest.approx(427.1, abs=0.05)
     assert g.pinion.tip_radius * 1e3 == pytest.approx(105.75, abs=1e-9)
@@ -48,7 +48,7 @@ def test_profile_shift_sum_changes_working_pressure_angle(design):
 
 def test_adhesion_torque_interval(design):
     lower, upper = design.operation.adhesion_torque_bounds()
-    # T2 = mu Q R_w with Q = 23 t x g; model.md quotes "about [21.2, 46.5] kN m"
+    # T2 = mu Q R_w with Q = 23 t x g; the reference design's provenance quotes "about [21.2, 46.5] kN m"
     assert lower == pytest.approx(0.15 * 23000 * 9.80665 * 0.625, rel=1e-12)
     assert upper == pytest.approx(0.33 * 23000 * 9.80665 * 0.625, rel=1e-12)
     assert lower == pytest.approx(21.2e3, rel=5e-3)

@@ -21,9 +21,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
+import uqgear.common
 import uqgear
 
 ROOT = Path(__file__).resolve().parent.parent
+# the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)
+STUDIES = uqgear.common.bundled_file("study", "smoke").parent
 
 # Kernels exercised in a fresh interpreter; arrays saved for comparison.
 _KERNEL_SCRIPT = textwrap.dedent("""
@@ -88,7 +91,7 @@ def test_kernels_give_the_same_bits_on_a_cold_and_a_warm_cache(tmp_path):
 def test_smoke_study_gives_the_same_bits_on_a_cold_and_a_warm_cache(tmp_path):
     cache = tmp_path / "numba-cache"
     cache.mkdir()
-    study = ROOT / "studies" / "smoke.yaml"
+    study = STUDIES / "smoke.yaml"
     runs = []
     for name in ("cold", "warm"):
         _fresh_interpreter(["-m", "uqgear", "run", str(study), "--out", str(tmp_path / name)],
@@ -117,7 +120,7 @@ def test_batch_is_bit_identical_on_one_and_two_threads():
 
 
 def test_results_record_the_cpu_the_kernels_were_compiled_for(tmp_path):
-    from uqgear.results import load_result, numba_target_cpu, save_result
+    from uqgear.uq.results import load_result, numba_target_cpu, save_result
 
     saved = save_result(xr.Dataset({"x": ("sample", np.arange(3.0))}), tmp_path / "r.nc", seed=1)
     loaded = load_result(saved)

@@ -1,4 +1,4 @@
-"""Tests of the sim-to-real gap diagnosis (uqgear.diagnosis).
+"""Tests of the sim-to-real gap diagnosis (uqgear.diagnosis.pipeline).
 
 Fast tests check the pieces against independent truths: Rice-distributed
 line amplitudes drawn from complex Gaussian noise, closed-form Rice moments,
@@ -20,11 +20,13 @@ import pytest
 import scipy.stats
 import xarray as xr
 
-from uqgear import diagnosis as D
-from uqgear.design import load_design
-from uqgear.errors import RigDataError, UqgearError
-from uqgear.features import extract_features
-from uqgear.rig import make_rig_dataset, read_rig, rig_design
+from uqgear.diagnosis import DiagnosisError, decide, decide_verdict, diagnose, prepare_case
+from uqgear.diagnosis import candidates, fitting, pipeline, scoring, signatures, workflow
+from uqgear.diagnosis import case as rig_case, discrepancy as disc, simulation as sim, verdict as verdicts
+from uqgear.physics.design import load_design
+from uqgear.common.errors import RigDataError, UqgearError
+from uqgear.rig.features import extract_features
+from uqgear.rig.format import make_rig_dataset, read_rig, rig_design
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
@@ -47,11 +49,11 @@ def design():
 @pytest.fixture(scope="module")
 def healthy_case():
     rig = read_rig(DATA / "healthy.nc")
-    return D.prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
+    return prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
 
 
-def _layout_for_lines(n: int) -> D.FeatureLayout:
-    return D.FeatureLayout(tuple(f"line{i}" for i in range(n)), ("mesh_harmonic",) * n, ("line",) * n,
+def _layout_for_lines(n: int) -> disc.FeatureLayout:
+    return disc.FeatureLayout(tuple(f"line{i}" for i in range(n)), ("mesh_harmonic",) * n, ("line",) * n,
                            np.arange(n))
 
 
@@ -60,12 +62,12 @@ def _layout_for_lines(n: int) -> D.FeatureLayout:
 def test_rice_moments_match_scipy_and_the_normal_limit():
     sigma = np.full(5, 2.0)
     nu = np.array([0.0, 0.5, 2.0, 6.0, 30.0])
-    mean, spread = D._rice_moments(nu, sigma)
+    mean, spread = disc._rice_moments(nu, sigma)
     for k in range(nu.size):
         assert mean[k] == pytest.approx(scipy.stats.rice.mean(nu[k] / sigma[k], scale=sigma[k]), rel=1e-7)
         assert spread[k] == pytest.approx(scipy.stats.rice.std(nu[k] / sigma[k], scale=sigma[k]), rel=1e-5)
     # far above the noise (where scipy's series overflows): mean nu + s^2/(2 nu), spread s (1 - s^2/(8 nu^2))
-    mean, spread = D._rice_moments(np.array([3000.0]), np.array([2.0]))
+    mean, spread = disc._rice_moments(np.array([3000.0]), np.array([2.0]))
     assert mean[0] == pytest.approx(3000.0 + 4.0 / 6000.0, rel=1e-12)
     assert spread[0] == pytest.approx(2.0 * (1.0 - 4.0 / (8.0 * 3000.0 ** 2)), rel=1e-6)
 
@@ -77,9 +79,9 @@ def test_line_discrepancy_is_standard_normal_for_noisy_lines(nu_over_s):
     s = 0.7
     n = 40000
     observed = np.abs(nu_over_s * s + s * (rng.standard_normal(n) + 1j * rng.standard_normal(n)))
-    noise = D.NoiseModel(line_scale=np.array([s]), band_power=np.array([1.0, 0.1]),
+    noise = disc.NoiseModel(line_scale=np.array([s]), band_power=np.array([1.0, 0.1]),
                          total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
-    z, scale = D.standardised_discrepancy(observed.reshape(n, 1, 1, 1), np.full((n, 1, 1, 1), nu_over_s * s),
+    z, scale = disc.standardised_discrepancy(observed.reshape(n, 1, 1, 1), np.full((n, 1, 1, 1), nu_over_s * s),
                                           np.ones((1, 1)), [noise], _layout_for_lines(1),
                                           {"line": 0.0, "band": 0.0, "rms": 0.0, "kurtosis": 0.0})
     z = z.ravel()
@@ -91,12 +93,12 @@ def test_line_discrepancy_is_standard_normal_for_noisy_lines(nu_over_s):
 
 
 def test_model_error_widens_large_lines_only():
-    noise = D.NoiseModel(line_scale=np.array([1.0, 1.0]), band_power=np.array([1.0, 0.1]),
+    noise = disc.NoiseModel(line_scale=np.array([1.0, 1.0]), band_power=np.array([1.0, 0.1]),
                          total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
     model = np.array([0.0, 1000.0]).reshape(1, 1, 2)
     observed = np.array([1.2, 1100.0]).reshape(1, 1, 2)   # a 10 % high line
     errors = {"line": 0.05, "band": 0.0, "rms": 0.0, "kurtosis": 0.0}
-    z, scale = D.standardised_discrepancy(observed, model, np.ones((1, 1)), [noise], _layout_for_lines(2), errors)
+    z, scale = disc.standardised_discrepancy(observed, model, np.ones((1, 1)), [noise], _layout_for_lines(2), errors)
     # 100 above a model of 1000 with a 5 % relative error: about 2 sigma, not 100 (the Rice mean
     # sits sigma^2/(2 nu) above nu)
     sigma = math.hypot(1.0, 50.0)
@@ -106,25 +108,25 @@ def test_model_error_widens_large_lines_only():
 
 
 def test_band_power_discrepancy_adds_noise_power():
-    layout = D.FeatureLayout(("low_band_rms",), ("low_frequency",), ("band",), np.array([0]))
-    noise = D.NoiseModel(line_scale=np.array([np.nan]), band_power=np.array([0.01, 0.002]),
+    layout = disc.FeatureLayout(("low_band_rms",), ("low_frequency",), ("band",), np.array([0]))
+    noise = disc.NoiseModel(line_scale=np.array([np.nan]), band_power=np.array([0.01, 0.002]),
                          total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
     sigma = 3.0
     # a model band RMS of 0.4 plus the noise's 0.01 sigma^2 of mean square: rig value sqrt(0.16 + 0.09)
     observed = np.full((1, 1, 1), math.sqrt(0.16 + 0.01 * sigma ** 2))
-    z, _ = D.standardised_discrepancy(observed, np.full((1, 1, 1), 0.4), np.full((1, 1), sigma), [noise], layout,
+    z, _ = disc.standardised_discrepancy(observed, np.full((1, 1, 1), 0.4), np.full((1, 1), sigma), [noise], layout,
                                       {"line": 0.0, "band": 0.1, "rms": 0.0, "kurtosis": 0.0})
     assert abs(z.item()) < 1e-9
 
 
 def test_robust_log_density_has_normal_core_and_flat_floor():
-    core = D.robust_log_density(np.array([0.0]), np.array([1.0]))
+    core = disc.robust_log_density(np.array([0.0]), np.array([1.0]))
     assert core.item() == pytest.approx(math.log(0.99 / math.sqrt(2 * math.pi) + 0.01 / 200.0), rel=1e-12)
-    far = D.robust_log_density(np.array([50.0, 5000.0]), np.array([1.0, 1.0]))
+    far = disc.robust_log_density(np.array([50.0, 5000.0]), np.array([1.0, 1.0]))
     assert far[0] == pytest.approx(far[1])
     assert far[0] == pytest.approx(math.log(0.01 / 200.0), abs=1e-9)
     # a wider prediction pays near the data
-    assert D.robust_log_density(np.array([0.0]), np.array([4.0])).item() < core.item() - 1.0
+    assert disc.robust_log_density(np.array([0.0]), np.array([4.0])).item() < core.item() - 1.0
 
 
 # ---------------------------------------------------------------------------------------------- gap metric
@@ -132,38 +134,38 @@ def test_robust_log_density_has_normal_core_and_flat_floor():
 def test_gap_metric_is_zero_for_noise_and_known_for_offsets():
     rng = np.random.default_rng(0)
     # mean z^2 - 1 scatters by sqrt(2/n) about 0; the square root makes that 0.05 at n = 2e5
-    assert D.gap_metric(rng.standard_normal(200000)) < 0.1
-    assert D.gap_metric(np.full(100, 3.0)) == pytest.approx(math.sqrt(8.0))
+    assert scoring.gap_metric(rng.standard_normal(200000)) < 0.1
+    assert scoring.gap_metric(np.full(100, 3.0)) == pytest.approx(math.sqrt(8.0))
     # each feature counts at most 10 sigma
-    assert D.gap_metric(np.full(10, 1e6)) == pytest.approx(math.sqrt(99.0))
-    assert D.gap_metric(np.array([np.nan, 3.0])) == pytest.approx(math.sqrt(8.0))
-    assert math.isnan(D.gap_metric(np.array([np.nan])))
+    assert scoring.gap_metric(np.full(10, 1e6)) == pytest.approx(math.sqrt(99.0))
+    assert scoring.gap_metric(np.array([np.nan, 3.0])) == pytest.approx(math.sqrt(8.0))
+    assert math.isnan(scoring.gap_metric(np.array([np.nan])))
 
 
 def test_shrink_fraction_and_bootstrap():
-    assert D.shrink_fraction(2.0, 0.5) == pytest.approx(0.75)
-    assert D.shrink_fraction(0.0, 0.5) == 0.0
+    assert scoring.shrink_fraction(2.0, 0.5) == pytest.approx(0.75)
+    assert scoring.shrink_fraction(0.0, 0.5) == 0.0
     rng = np.random.default_rng(1)
     before = np.full((8, 3, 20), 4.0)
     after = rng.standard_normal((8, 3, 20))
-    central, low, high = D.bootstrap_shrink(before, after, rng)
+    central, low, high = scoring.bootstrap_shrink(before, after, rng)
     assert central > 0.9 and low > 0.85 and high <= 1.0
     # a gap left as it was does not shrink
-    central, low, high = D.bootstrap_shrink(before, before, rng)
+    central, low, high = scoring.bootstrap_shrink(before, before, rng)
     assert central == pytest.approx(0.0) and low == pytest.approx(0.0) and high == pytest.approx(0.0)
     # a gap confined to one run, removed by the effect: resamples without that run have no gap
     # to shrink and do not count, so the interval stays at 100 %
     before = rng.standard_normal((8, 3, 20))
     before[1] += 6.0
     after = rng.standard_normal((8, 3, 20))
-    central, low, high = D.bootstrap_shrink(before, after, rng)
+    central, low, high = scoring.bootstrap_shrink(before, after, rng)
     assert central > 0.9 and low > 0.5
     # ... and one the effect leaves in place is not called shrunk
-    central, low, high = D.bootstrap_shrink(before, before + 0.01 * rng.standard_normal(before.shape), rng)
+    central, low, high = scoring.bootstrap_shrink(before, before + 0.01 * rng.standard_normal(before.shape), rng)
     assert abs(central) < 0.05 and low < 0.05
     # nothing to shrink at all
     quiet = rng.standard_normal((8, 3, 20)) * 0.5
-    assert D.bootstrap_shrink(quiet, quiet, rng) == (0.0, 0.0, 0.0)
+    assert scoring.bootstrap_shrink(quiet, quiet, rng) == (0.0, 0.0, 0.0)
 
 
 # ---------------------------------------------------------------------------------------------- verdict rules
@@ -174,50 +176,50 @@ def _entry(effect, score, shrink, low=None):
 
 
 def test_verdict_none_when_nominal_within_noise():
-    verdict, reason = D.decide_verdict(0.2, [_entry("friction", 4.0, 0.3)])
+    verdict, reason = decide_verdict(0.2, [_entry("friction", 4.0, 0.3)])
     assert verdict == "none" and "within noise" in reason
-    assert D.decide_verdict(0.2, [])[0] == "none"
+    assert decide_verdict(0.2, [])[0] == "none"
 
 
 def test_verdict_names_effect_with_score_and_shrink():
-    verdict, reason = D.decide_verdict(3.0, [_entry("tooth_damage", 120.0, 0.95), _entry("friction", 20.0, 0.1)])
+    verdict, reason = decide_verdict(3.0, [_entry("tooth_damage", 120.0, 0.95), _entry("friction", 20.0, 0.1)])
     assert verdict == "tooth_damage" and "shrinks" in reason
     # strong evidence names the effect even when the omnibus gap is small
-    assert D.decide_verdict(0.4, [_entry("torque_ripple", 40.0, 0.8)])[0] == "torque_ripple"
+    assert decide_verdict(0.4, [_entry("torque_ripple", 40.0, 0.8)])[0] == "torque_ripple"
 
 
 def test_verdict_unexplained_when_no_candidate_removes_the_gap():
-    assert D.decide_verdict(3.0, [_entry("eccentricity", 200.0, 0.2)])[0] == "unexplained"
+    assert decide_verdict(3.0, [_entry("eccentricity", 200.0, 0.2)])[0] == "unexplained"
     # a gap just above noise that the effect brings within noise is explained, though it shrank < 50 %
     friction = {**_entry("friction", 160.0, 0.4, low=0.3), "gap_with_effect": 0.44}
-    verdict, reason = D.decide_verdict(0.74, [friction])
+    verdict, reason = decide_verdict(0.74, [friction])
     assert verdict == "friction" and "within noise" in reason
     # one that leaves a significant gap is named only as a partial explanation, with the rest unexplained
-    partial = D.decide(0.74, [{**friction, "gap_with_effect": 0.6}])
+    partial = decide(0.74, [{**friction, "gap_with_effect": 0.6}])
     assert partial.verdict == "friction" and partial.partial and partial.remaining_gap == 0.6
-    assert D.decide_verdict(0.74, [{**friction, "gap_with_effect": 0.6,
+    assert decide_verdict(0.74, [{**friction, "gap_with_effect": 0.6,
                                     "shrink_interval": [0.1, 0.6]}])[0] == "unexplained"
-    assert D.decide_verdict(0.74, [{**friction, "shrink_interval": [-0.1, 1.0]}])[0] == "unexplained"
-    assert D.decide_verdict(3.0, [_entry("eccentricity", 5.0, 0.9)])[0] == "unexplained"
+    assert decide_verdict(0.74, [{**friction, "shrink_interval": [-0.1, 1.0]}])[0] == "unexplained"
+    assert decide_verdict(3.0, [_entry("eccentricity", 5.0, 0.9)])[0] == "unexplained"
     # a shrink whose interval reaches below zero is not evidence
-    assert D.decide_verdict(3.0, [_entry("friction", 50.0, 0.6, low=-0.2)])[0] == "unexplained"
-    assert D.decide_verdict(3.0, [])[0] == "unexplained"
+    assert decide_verdict(3.0, [_entry("friction", 50.0, 0.6, low=-0.2)])[0] == "unexplained"
+    assert decide_verdict(3.0, [])[0] == "unexplained"
 
 
 def test_verdict_never_names_an_effect_that_adds_nothing_to_its_fit():
     """A candidate as good with its effect off owes its score to the refitted nominal parameters."""
     damage = _entry("tooth_damage", 130.0, 1.0)
-    assert D.decide_verdict(0.58, [{**damage, "effect_gain": 40.0}])[0] == "tooth_damage"
-    assert D.decide_verdict(0.58, [{**damage, "effect_gain": 0.3}])[0] == "unexplained"
-    assert D.decide_verdict(0.3, [{**damage, "effect_gain": 0.3}])[0] == "none"
+    assert decide_verdict(0.58, [{**damage, "effect_gain": 40.0}])[0] == "tooth_damage"
+    assert decide_verdict(0.58, [{**damage, "effect_gain": 0.3}])[0] == "unexplained"
+    assert decide_verdict(0.3, [{**damage, "effect_gain": 0.3}])[0] == "none"
 
 
 # ---------------------------------------------------------------------------------------------- processing
 
 @pytest.fixture(scope="module")
 def short_processor(design):
-    options = dict(D.FEATURE_OPTIONS, band_limit=20480.0 / 2.56)
-    return D.RunProcessor(design, 1250.0, 20480.0, 4096, options)
+    options = dict(rig_case.FEATURE_OPTIONS, band_limit=20480.0 / 2.56)
+    return sim.RunProcessor(design, 1250.0, 20480.0, 4096, options)
 
 
 def test_model_features_match_extract_features(design, short_processor):
@@ -247,11 +249,11 @@ def test_line_noise_scale_matches_monte_carlo(short_processor):
 
 
 def test_periodic_tiling_matches_full_simulation(design):
-    simulator = D.CampaignSimulator(design, [1250.0], [6000.0], 20480.0, 4096, ("te", "acc_pinion", "acc_gear"))
+    simulator = sim.CampaignSimulator(design, [1250.0], [6000.0], 20480.0, 4096, ("te", "acc_pinion", "acc_gear"))
     periodic = simulator.run(0, design, 1.0, 30000.0, (), "pinion")
     full = simulator.run(0, design, 1.0, 30000.0, (), "free")
     assert periodic.periodic and not full.periodic
-    processor = D.RunProcessor(design, 1250.0, 20480.0, 4096, dict(D.FEATURE_OPTIONS, band_limit=8000.0))
+    processor = sim.RunProcessor(design, 1250.0, 20480.0, 4096, dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0))
     names = processor.names
     for channel in ("te", "acc_pinion"):
         a = processor.model_features(periodic.records[channel][None])[0]
@@ -273,24 +275,24 @@ def test_frequency_locked_line_found_and_order_lines_ignored(design):
     rig = make_rig_dataset(time=time, pinion_speed=speeds, drive_torque=np.full(4, 6000.0),
                            adhesion_torque_lower=lower, adhesion_torque_upper=lower + 5000.0,
                            channels={"te": te}, design=design, title="synthetic", source="test", history="test")
-    case = D.prepare_case(rig, design, seed=np.random.SeedSequence(0))
-    lines = D.frequency_locked_lines(case)
+    case = prepare_case(rig, design, seed=np.random.SeedSequence(0))
+    lines = signatures.frequency_locked_lines(case)
     assert [round(line["frequency"]) for line in lines] == [15]
     assert lines[0]["ops"] == [0, 1, 2, 3]
-    assert D.signature_hints(case, lines)["adhesion_frequency"] == pytest.approx(15.0, abs=2.5)
+    assert signatures.signature_hints(case, lines)["adhesion_frequency"] == pytest.approx(15.0, abs=2.5)
 
 
 def test_true_parameters_reproduce_healthy_campaign(healthy_case):
     """With the README's true parameters the model is within noise of healthy.nc (no fit)."""
     case = healthy_case
-    problem = D.FitProblem(case, None)
+    problem = fitting.FitProblem(case, None)
     lower, upper = case.adhesion_lower, case.adhesion_upper
     vector = problem.vector(HEALTHY_TRUTH, (np.array(HEALTHY_T2) - lower) / (upper - lower))
     vector = vector.copy()
     model, _ = problem.model_features([vector])
     z, _ = problem.discrepancy(model[0])
     z = np.where(case.mask(), z, np.nan)
-    assert D.gap_metric(z) < 0.2
+    assert scoring.gap_metric(z) < 0.2
     assert np.nanmax(np.abs(z)) < 5.0
 
 
@@ -302,86 +304,86 @@ def test_calibration_posterior_gives_the_nominal_start(healthy_case):
     posterior = xr.Dataset({name: (("chain", "draw"), value * (1 + 0.01 * rng.standard_normal((4, 51))))
                             for name, value in draws.items()})
     posterior["adhesion_torque"] = (("chain", "draw", "op"), np.broadcast_to(t2, (4, 51, case.n_op)).copy())
-    start, positions = D.calibration_start(posterior, case)
+    start, positions = pipeline.calibration_start(posterior, case)
     assert set(start) == set(draws)
     for name, value in draws.items():
         assert start[name] == pytest.approx(value, rel=0.01)
     assert np.allclose(positions, np.linspace(0.1, 0.9, case.n_op))
-    with pytest.raises(D.DiagnosisError, match="calibration: the posterior has none of the parameters"):
-        D.calibration_start(xr.Dataset({"other": ("draw", [1.0])}), case)
-    with pytest.raises(D.DiagnosisError, match="calibration: .*no such file"):
-        D.load_calibration(DATA / "no_such_calibration")
+    with pytest.raises(DiagnosisError, match="calibration: the posterior has none of the parameters"):
+        pipeline.calibration_start(xr.Dataset({"other": ("draw", [1.0])}), case)
+    with pytest.raises(DiagnosisError, match="calibration: .*no such file"):
+        workflow.load_calibration(DATA / "no_such_calibration")
 
 
 def test_adhesion_profile_finds_each_runs_torque(healthy_case):
     """From the bottom of every interval, the grid profile puts T2 within a grid step of the truth."""
     case = healthy_case
-    problem = D.FitProblem(case, None)
+    problem = fitting.FitProblem(case, None)
     lower, upper = case.adhesion_lower, case.adhesion_upper
     truth = (np.array(HEALTHY_T2) - lower) / (upper - lower)
-    profiled = D.profile_adhesion(problem, problem.vector(HEALTHY_TRUTH, 0.0))
+    profiled = fitting.profile_adhesion(problem, problem.vector(HEALTHY_TRUTH, 0.0))
     found = profiled[problem.n_global:]
-    step = D._T2_GRID[1] - D._T2_GRID[0]
+    step = fitting._T2_GRID[1] - fitting._T2_GRID[0]
     assert np.all(np.abs(found - truth) <= step), (found, truth)
 
 
 def test_improved_nominal_escapes_a_stuck_nominal_fit(healthy_case):
     """A fit that moved the nominal parameters to a better optimum restarts the nominal fit; a worse one does not."""
     case = healthy_case
-    problem = D.FitProblem(case, None)
+    problem = fitting.FitProblem(case, None)
     lower, upper = case.adhesion_lower, case.adhesion_upper
     positions = (np.array(HEALTHY_T2) - lower) / (upper - lower)
     # a nominal fit stopped far off: damping and STE amplitude 60 % high, two solver steps
     wrong = dict(HEALTHY_TRUTH, zeta_mesh=1.6 * HEALTHY_TRUTH["zeta_mesh"],
                  ste_amplitude=1.6 * HEALTHY_TRUTH["ste_amplitude"])
-    stuck = D.fit(problem, [problem.vector(wrong, positions)], max_evaluations=2)
-    good = D.fit(problem, [problem.vector(HEALTHY_TRUTH, positions)], max_evaluations=2)
-    assert good.cost < stuck.cost - D._NOMINAL_MARGIN
-    better = D.improved_nominal(stuck, [good])
-    assert better is not None and better.cost <= good.cost + D._NOMINAL_MARGIN
+    stuck = fitting.fit(problem, [problem.vector(wrong, positions)], max_evaluations=2)
+    good = fitting.fit(problem, [problem.vector(HEALTHY_TRUTH, positions)], max_evaluations=2)
+    assert good.cost < stuck.cost - pipeline._NOMINAL_MARGIN
+    better = pipeline.improved_nominal(stuck, [good])
+    assert better is not None and better.cost <= good.cost + pipeline._NOMINAL_MARGIN
     assert better.values["zeta_mesh"] == pytest.approx(HEALTHY_TRUTH["zeta_mesh"], rel=0.15)
-    assert D.improved_nominal(good, [stuck]) is None
-    assert D.improved_nominal(good, []) is None
+    assert pipeline.improved_nominal(good, [stuck]) is None
+    assert pipeline.improved_nominal(good, []) is None
 
 
 # ---------------------------------------------------------------------------------------------- bad input
 
 def test_unknown_effect_is_rejected(tmp_path):
-    with pytest.raises(D.DiagnosisError, match="effects: 'gear_whine' is not a library effect"):
-        D.diagnose(DATA / "healthy.nc", tmp_path, effects=["gear_whine"])
+    with pytest.raises(DiagnosisError, match="effects: 'gear_whine' is not a library effect"):
+        diagnose(DATA / "healthy.nc", tmp_path, effects=["gear_whine"])
     with pytest.raises(UqgearError, match="effects"):
-        D.candidates_for("wear", load_design("locomotive"))
+        candidates.candidates_for("wear", load_design("locomotive"))
 
 
 def test_invalid_rig_inputs_are_rejected(tmp_path):
     with pytest.raises(RigDataError, match="rig data file not found"):
-        D.diagnose(tmp_path / "missing.nc", tmp_path / "out")
+        diagnose(tmp_path / "missing.nc", tmp_path / "out")
     broken = tmp_path / "broken.nc"
     broken.write_text("not a netCDF file")
     with pytest.raises(RigDataError, match="broken.nc"):
-        D.diagnose(broken, tmp_path / "out")
+        diagnose(broken, tmp_path / "out")
     rig = read_rig(DATA / "healthy.nc")
     rig.attrs["conventions"] = "other/1"
     with pytest.raises(RigDataError, match="conventions: expected 'uqgear-rig/1'"):
-        D.diagnose(rig, tmp_path / "out")
+        diagnose(rig, tmp_path / "out")
     with pytest.raises(RigDataError, match="expected a uqgear-rig/1 file path or an xarray Dataset"):
-        D.diagnose(42, tmp_path / "out")
+        diagnose(42, tmp_path / "out")
 
 
 def test_bad_options_are_rejected(tmp_path):
-    with pytest.raises(D.DiagnosisError, match="seed: expected a non-negative integer"):
-        D.diagnose(DATA / "healthy.nc", tmp_path, seed=-1)
-    with pytest.raises(D.DiagnosisError, match="workers: expected an integer >= 1"):
-        D.diagnose(DATA / "healthy.nc", tmp_path, workers=0)
-    with pytest.raises(D.DiagnosisError, match="design: expected a Design"):
-        D.diagnose(DATA / "healthy.nc", tmp_path, design=3.5)
-    with pytest.raises(D.DiagnosisError, match="effects: expected at least one"):
-        D.diagnose(DATA / "healthy.nc", tmp_path, effects=[])
+    with pytest.raises(DiagnosisError, match="seed: expected a non-negative integer"):
+        diagnose(DATA / "healthy.nc", tmp_path, seed=-1)
+    with pytest.raises(DiagnosisError, match="workers: expected an integer >= 1"):
+        diagnose(DATA / "healthy.nc", tmp_path, workers=0)
+    with pytest.raises(DiagnosisError, match="design: expected a Design"):
+        diagnose(DATA / "healthy.nc", tmp_path, design=3.5)
+    with pytest.raises(DiagnosisError, match="effects: expected at least one"):
+        diagnose(DATA / "healthy.nc", tmp_path, effects=[])
     rig = read_rig(DATA / "healthy.nc")
-    with pytest.raises(D.DiagnosisError, match="model_error.wobble: unknown feature kind"):
-        D.prepare_case(rig, load_design("locomotive"), seed=np.random.SeedSequence(0), model_error={"wobble": 0.1})
-    with pytest.raises(D.DiagnosisError, match=r"model_error.line: expected a relative error in \[0, 1\)"):
-        D.prepare_case(rig, load_design("locomotive"), seed=np.random.SeedSequence(0), model_error={"line": 2.0})
+    with pytest.raises(DiagnosisError, match="model_error.wobble: unknown feature kind"):
+        prepare_case(rig, load_design("locomotive"), seed=np.random.SeedSequence(0), model_error={"wobble": 0.1})
+    with pytest.raises(DiagnosisError, match=r"model_error.line: expected a relative error in \[0, 1\)"):
+        prepare_case(rig, load_design("locomotive"), seed=np.random.SeedSequence(0), model_error={"line": 2.0})
 
 
 # ---------------------------------------------------------------------------------------------- labelled campaigns
@@ -392,7 +394,7 @@ def test_labelled_campaign_verdict(name, tmp_path):
     """The diagnosis names each labelled campaign's effect (none for the healthy ones)."""
     # the report (figures, a few seconds) is checked on two files, one per verdict kind
     report = name in ("healthy.nc", "eccentricity.nc")
-    content = D.diagnose(DATA / name, tmp_path, seed=0, report=report)
+    content = diagnose(DATA / name, tmp_path, seed=0, report=report)
     assert content["verdict"] == LABELLED[name], content["reason"]
     on_disk = json.loads((tmp_path / "diagnosis.json").read_text())
     assert on_disk["verdict"] == content["verdict"]
@@ -406,7 +408,7 @@ def test_labelled_campaign_verdict(name, tmp_path):
     ranking = content["ranking"]
     assert [entry["score"] for entry in ranking] == sorted((entry["score"] for entry in ranking), reverse=True)
     if LABELLED[name] == "none":
-        assert content["gap"]["baseline"] <= D.NOISE_GAP_THRESHOLD
+        assert content["gap"]["baseline"] <= verdicts.NOISE_GAP_THRESHOLD
     else:
         assert ranking[0]["effect"] == LABELLED[name]
         assert content["gap"]["shrink_fraction"] >= 0.7
@@ -414,36 +416,36 @@ def test_labelled_campaign_verdict(name, tmp_path):
 
 def test_a_strong_effect_that_explains_part_of_the_gap_is_named_with_an_unexplained_remainder():
     partial = {**_entry("bearing_clearance", 182.0, 0.45, low=0.3), "gap_with_effect": 1.4}
-    decision = D.decide(2.6, [partial])
+    decision = decide(2.6, [partial])
     assert decision.verdict == "bearing_clearance" and decision.partial
     assert decision.remaining_gap == 1.4 and "remains unexplained" in decision.reason
     # a shrink interval reaching below the partial threshold is not enough
     weak = {**partial, "shrink_interval": [0.1, 0.6]}
-    assert D.decide(2.6, [weak]).verdict == "unexplained"
+    assert decide(2.6, [weak]).verdict == "unexplained"
     # nor is an effect that adds nothing to its own fit
-    assert D.decide(2.6, [{**partial, "effect_gain": 1.0}]).verdict == "unexplained"
+    assert decide(2.6, [{**partial, "effect_gain": 1.0}]).verdict == "unexplained"
     # a full explanation is not partial
-    full = D.decide(2.6, [{**partial, "shrink_fraction": 0.8, "shrink_interval": [0.6, 0.9]}])
+    full = decide(2.6, [{**partial, "shrink_fraction": 0.8, "shrink_interval": [0.6, 0.9]}])
     assert full.verdict == "bearing_clearance" and not full.partial
 
 
 def test_a_figure_within_its_spread_of_its_threshold_is_flagged_borderline():
     knife_edge = {**_entry("bearing_clearance", 182.0, 0.5, low=0.42), "gap_with_effect": 0.9,
                   "standard_error": 40.0}
-    decision = D.decide(2.6, [knife_edge], nominal_gap_interval=(2.1, 3.0))
+    decision = decide(2.6, [knife_edge], nominal_gap_interval=(2.1, 3.0))
     assert [entry["figure"] for entry in decision.borderline] == ["shrink_fraction"]
     assert decision.borderline[0]["interval"] == [0.42, 0.6]
     # a score whose own standard error reaches the threshold, and a nominal gap whose interval holds noise
     close = {**_entry("friction", 12.0, 0.9), "standard_error": 5.0}
-    flagged = D.decide(0.6, [close], nominal_gap_interval=(0.3, 0.9)).borderline
+    flagged = decide(0.6, [close], nominal_gap_interval=(0.3, 0.9)).borderline
     assert {entry["figure"] for entry in flagged} == {"score", "nominal_gap"}
     # clear decisions carry no flag
     clear = {**_entry("friction", 120.0, 0.9), "standard_error": 5.0}
-    assert D.decide(3.0, [clear], nominal_gap_interval=(2.5, 3.5)).borderline == ()
+    assert decide(3.0, [clear], nominal_gap_interval=(2.5, 3.5)).borderline == ()
 
 
 def test_bootstrap_gap_brackets_the_gap():
     rng = np.random.default_rng(4)
     z = rng.standard_normal((8, 3, 20)) * 2.0
-    low, high = D.bootstrap_gap(z, rng)
-    assert low <= D.gap_metric(z) <= high and high - low > 0
+    low, high = scoring.bootstrap_gap(z, rng)
+    assert low <= scoring.gap_metric(z) <= high and high - low > 0

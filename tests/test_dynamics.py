@@ -13,8 +13,9 @@ import pytest
 import xarray as xr
 from scipy.integrate import odeint
 
+import uqgear.physics  # noqa: F401  (loaded before fake_integration stands in for its integration module)
 from uqgear import dynamics
-from uqgear.errors import UqgearError
+from uqgear.common.errors import UqgearError
 
 
 # ----------------------------------------------------------------------------
@@ -149,16 +150,20 @@ def test_classify_quasi_periodic_ellipse():
     assert (result.label, result.period) == ("quasi-periodic", 0)
     assert result.evidence["zero_one_k"] < 0.1
     assert result.evidence["largest_lyapunov"] is None
-    # A given Lyapunov exponent decides over K, both ways.
+    # A Lyapunov exponent that agrees with K confirms; one that disagrees makes the label uncertain.
     forced = dynamics.classify_response(quasi_periodic_points(300), lyapunov=0.2)
-    assert forced.label == "chaotic" and "disagrees" in forced.reason
+    assert forced.label == "uncertain" and forced.period == 0
+    assert "the Lyapunov exponent says chaotic, the 0-1 test says regular" in forced.reason
     assert dynamics.classify_response(quasi_periodic_points(300), lyapunov=0.001).label == "quasi-periodic"
 
 
-def test_classify_lyapunov_decides_over_zero_one(ueda_chaotic):
-    assert dynamics.classify_response(ueda_chaotic, lyapunov=0.3).label == "chaotic"
+def test_classify_lyapunov_and_zero_one_side_by_side(ueda_chaotic):
+    agreed = dynamics.classify_response(ueda_chaotic, lyapunov=0.3)
+    assert agreed.label == "chaotic" and "agree" in agreed.reason
+    assert agreed.evidence["zero_one_k"] > 0.8 and agreed.evidence["largest_lyapunov"] == 0.3
     stable = dynamics.classify_response(ueda_chaotic, lyapunov=-0.05)
-    assert stable.label == "quasi-periodic" and "disagrees" in stable.reason
+    assert stable.label == "uncertain"
+    assert "the 0-1 test says chaotic, the Lyapunov exponent says regular" in stable.reason
 
 
 def test_classify_long_period():
@@ -247,8 +252,17 @@ def test_response_qois_closed_form():
     assert qois["acc_pinion_rms"].item() == pytest.approx(30.0 / math.sqrt(2.0), rel=1e-9)
     assert qois["acc_gear_rms"].item() == pytest.approx(12.0 / math.sqrt(2.0), rel=1e-9)
     assert set(qois.data_vars) == {"dte_mean", "dte_rms", "dte_peak_to_peak", "dynamic_load_factor",
+                                   "peak_mesh_force", "load_factor_rated",
                                    "acc_pinion_rms", "acc_gear_rms", "fraction_drive_contact",
                                    "fraction_separation", "fraction_back_contact"}
+    # peak of F_T (1 + 0.3 cos theta) with F_T = 80 kN; no rated mesh force in the attrs: NaN
+    assert qois["peak_mesh_force"].item() == pytest.approx(1.3 * 8.0e4, rel=1e-12)
+    assert qois["peak_mesh_force"].attrs["units"] == "N"
+    assert math.isnan(qois["load_factor_rated"].item())
+    rated = dynamics.response_qois(fake_simulation().assign_attrs(rated_mesh_force=6.5e4))
+    assert rated["load_factor_rated"].item() == pytest.approx(1.3 * 8.0e4 / 6.5e4, rel=1e-12)
+    assert rated["load_factor_rated"].attrs["units"] == "1"
+    assert rated["dynamic_load_factor"].item() == qois["dynamic_load_factor"].item()
     assert qois["dte_rms"].attrs["units"] == "m"
     assert qois["acc_gear_rms"].attrs["units"] == "m s-2"
 
@@ -394,22 +408,28 @@ def test_classify_batch_logistic_regimes():
 
 
 def test_classify_batch_lyapunov_units():
-    points = quasi_periodic_points(60)
+    # a chaotic sequence (K near 1): the exponent in 1/s is converted to nats per mesh period before
+    # the threshold 0.01; unconverted, both would exceed it
+    points = logistic_orbit(4.0, 200)
     batch = xr.Dataset(
-        {"poincare_x": (("sample", "period"), np.tile(points[:, 0], (2, 1))),
+        {"poincare_x": (("sample", "period"), np.tile(points, (2, 1))),
          "largest_lyapunov": ("sample", [50.0, 5.0], {"units": "s-1"})},
         coords={"pinion_speed": ("sample", [2000.0, 2000.0])},
         attrs={"z1": 30},  # mesh frequency 1000 Hz: exponents 0.05 and 0.005 per mesh period
     )
-    assert dynamics.classify_batch(batch)["regime"].values.tolist() == ["chaotic", "quasi-periodic"]
+    classes = dynamics.classify_batch(batch)
+    assert classes["regime"].values.tolist() == ["chaotic", "uncertain"]
+    np.testing.assert_allclose(classes["lyapunov_per_period"].values, [0.05, 0.005], rtol=1e-12)
+    assert classes["zero_one_k"].values[1] > 0.5
+    assert "0.005 per mesh period" in str(classes["regime_reason"].values[1])
 
 
 class FakeIntegration(types.ModuleType):
-    """Stands in for uqgear.integration: 'pinion_speed' s gives the logistic map
+    """Stands in for uqgear.physics.integration: 'pinion_speed' s gives the logistic map
     at r = s / 1000, shifted by 'adhesion_torque' (to check the grid layout)."""
 
     def __init__(self):
-        super().__init__("uqgear.integration")
+        super().__init__("uqgear.physics.integration")
         self.calls = []
 
     def simulate_batch(self, design, samples, *, n_periods=400, keep_periods=200, lyapunov=False):
@@ -427,7 +447,7 @@ class FakeIntegration(types.ModuleType):
 @pytest.fixture
 def fake_integration(monkeypatch):
     module = FakeIntegration()
-    monkeypatch.setitem(sys.modules, "uqgear.integration", module)
+    monkeypatch.setitem(sys.modules, "uqgear.physics.integration", module)
     return module
 
 
@@ -473,9 +493,9 @@ def test_sweep_errors(fake_integration):
 
 
 def test_bifurcation_real_integrator():
-    integration = pytest.importorskip("uqgear.integration")
+    integration = pytest.importorskip("uqgear.physics.integration")
     if not hasattr(integration, "simulate_batch"):
-        pytest.skip("uqgear.integration.simulate_batch not written yet")
+        pytest.skip("uqgear.physics.integration.simulate_batch not written yet")
     # Light speeds at rated load: a smooth period-1 mesh response.
     result = dynamics.bifurcation("locomotive", "pinion_speed", [500.0, 800.0], n_periods=120, keep_periods=40)
     assert result["poincare_x"].dims == ("pinion_speed", "period")
@@ -490,9 +510,9 @@ def test_bifurcation_real_integrator_light_load_regimes():
     # balancing), as found when this module was written: a stable period-10
     # orbit (beyond the old max_period of 8), a period-2, and chaos with a
     # clearly positive Lyapunov exponent. Update if the model changes.
-    integration = pytest.importorskip("uqgear.integration")
+    integration = pytest.importorskip("uqgear.physics.integration")
     if not hasattr(integration, "simulate_batch"):
-        pytest.skip("uqgear.integration.simulate_batch not written yet")
+        pytest.skip("uqgear.physics.integration.simulate_batch not written yet")
     fixed = {"drive_torque": 1000.0, "adhesion_torque": 1000.0 * 101 / 21}
     result = dynamics.bifurcation("locomotive", "pinion_speed", [3250.0, 4750.0, 5750.0], fixed=fixed,
                                   n_periods=600, keep_periods=200)

@@ -5,10 +5,10 @@ import pytest
 import xarray as xr
 
 import uqgear
-from uqgear.envelope import (bifurcation_envelope, qoi_envelope, regime_map, speed_adhesion_grid,
+from uqgear.uq.envelope import (bifurcation_envelope, qoi_envelope, regime_map, speed_adhesion_grid,
                              time_response_envelope)
-from uqgear.errors import OperatingPointError
-from uqgear.runner import Runner
+from uqgear.common.errors import OperatingPointError
+from uqgear.uq.runner import Runner
 
 LIGHT = {"drive_torque": 1000.0}
 

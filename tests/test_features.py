@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.design import load_design
-from uqgear.errors import DesignError, RigDataError, StudyError
-from uqgear.features import (FEATURE_FAMILIES, extract_features, feature_definitions, line_amplitudes,
+from uqgear.physics.design import load_design
+from uqgear.common.errors import DesignError, RigDataError, StudyError
+from uqgear.rig.features import (FEATURE_FAMILIES, extract_features, feature_definitions, line_amplitudes,
                              order_spectrum, sampling_rate)
-from uqgear.rig import read_rig, rig_design
+from uqgear.rig.format import read_rig, rig_design
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 FS = 20480.0

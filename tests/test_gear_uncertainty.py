@@ -4,10 +4,12 @@ import numpy as np
 import pytest
 
 import uqgear
-from uqgear.integration import BatchEvaluator
-from uqgear.interval import IntervalAnalysis
-from uqgear.sensitivity import SobolAnalysis
-from uqgear.uncertainty import Interval, ParameterSpace, PolynomialChaos
+from uqgear.physics.integration import BatchEvaluator
+from uqgear.uq.interval import IntervalAnalysis
+from uqgear.uq.sensitivity import SobolAnalysis
+from uqgear.uq.parameter_space import ParameterSpace
+from uqgear.uq.parameters import Interval
+from uqgear.uq.polynomial_chaos import PolynomialChaos
 
 
 @pytest.fixture(scope="module")

@@ -9,16 +9,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 import xarray as xr
 
-from uqgear.analyses import run_study
-from uqgear.errors import UqgearError
-from uqgear.report import (REPORT_NAME, axis_label, build_report, load_results, regime_findings,
-                           write_report)
-from uqgear.results import save_result
-from uqgear.study import VARIABLES, load_study
+import uqgear.common
+from uqgear.study.analyses import run_study
+from uqgear.common.errors import UqgearError
+from uqgear.report.findings import regime_findings
+from uqgear.report.presentation import axis_label
+from uqgear.report.study_report import REPORT_NAME, build_report, load_results, write_report
+from uqgear.uq.results import save_result
+from uqgear.study.schema import load_study
+from uqgear.study.variables import VARIABLES
 
 ROOT = Path(__file__).resolve().parent.parent
+# the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)
+STUDIES = uqgear.common.bundled_file("study", "smoke").parent
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -65,7 +71,7 @@ class ReportParser(HTMLParser):
 def smoke_report(tmp_path_factory) -> tuple[Path, str]:
     """The smoke study run in-process, and its report."""
     folder = tmp_path_factory.mktemp("report")
-    study = load_study(ROOT / "studies" / "smoke.yaml")
+    study = load_study(STUDIES / "smoke.yaml")
     run_study(study, folder, show_progress=False)
     path = write_report(folder, dpi=60)
     return folder, path.read_text()
@@ -79,9 +85,10 @@ def parsed(smoke_report) -> ReportParser:
 
 
 def test_report_has_every_section(parsed):
-    study = load_study(ROOT / "studies" / "smoke.yaml")
-    for identifier in ("summary", "design", "uncertain", "versions", "findings", "caveats", "study-text",
-                       "summary-table", "design-table", "uncertain-table", "versions-table"):
+    study = load_study(STUDIES / "smoke.yaml")
+    for identifier in ("what-this-shows", "summary", "design", "uncertain", "versions", "findings", "caveats",
+                       "study-text", "provenance", "summary-table", "design-table", "uncertain-table",
+                       "versions-table"):
         assert identifier in parsed.ids, identifier
     analysis_sections = {s["id"]: s["type"] for s in parsed.sections if s["id"].startswith("analysis-")}
     assert analysis_sections == {f"analysis-{spec.name}": spec.type for spec in study.analyses}
@@ -114,7 +121,7 @@ def test_report_is_self_contained(parsed, smoke_report):
 
 def test_summary_holds_design_parameters_seed_and_versions(parsed, smoke_report):
     cells = parsed.cells
-    study = load_study(ROOT / "studies" / "smoke.yaml")
+    study = load_study(STUDIES / "smoke.yaml")
     assert "20240601" in cells  # the seed
     assert "21 teeth" in cells and "101 teeth" in cells
     assert "0.06" in cells  # the zeta_mesh override, in the design table
@@ -195,6 +202,6 @@ def test_axis_labels_carry_units():
 
 def test_report_records_provenance_of_the_study_text(smoke_report):
     folder, text = smoke_report
-    study_text = (ROOT / "studies" / "smoke.yaml").read_text()
+    study_text = (STUDIES / "smoke.yaml").read_text()
     assert json.dumps(study_text)[1:40] in json.dumps(load_results(folder)[0].attrs["study"])
     assert "Study definition" in text and "adhesion_coefficient: [0.15, 0.33]" in text

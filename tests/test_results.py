@@ -11,9 +11,9 @@ import pytest
 import scipy
 import xarray as xr
 
-from uqgear.design import design_from_json, load_design
-from uqgear.errors import UqgearError
-from uqgear.results import (ENCODED_ATTRS_MARKER, PROVENANCE_ATTRS, load_result, read_dataset,
+from uqgear.physics.design import design_from_json, load_design
+from uqgear.common.errors import UqgearError
+from uqgear.uq.results import (ENCODED_ATTRS_MARKER, PROVENANCE_ATTRS, load_result, read_dataset,
                             save_result, write_dataset)
 
 ATTRS_OF_ALL_KINDS = {

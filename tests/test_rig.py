@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.design import load_design
-from uqgear.errors import RigDataError, UqgearError
-from uqgear.rig import (CONVENTIONS, make_rig_dataset, read_rig, rig_design, usable_runs, validate_rig,
+from uqgear.physics.design import load_design
+from uqgear.common.errors import RigDataError, UqgearError
+from uqgear.rig.format import (CONVENTIONS, make_rig_dataset, read_rig, rig_design, usable_runs, validate_rig,
                         write_rig)
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.errors import DesignError, ExecutionError
-from uqgear.progress import progress
-from uqgear.runner import Runner, chunk_hash
+from uqgear.common.errors import DesignError, ExecutionError
+from uqgear.common.progress import progress
+from uqgear.uq.runner import Runner, chunk_hash
 
 N_SAMPLES = 23
 TIME = np.linspace(0.0, 1.0, 5)
@@ -175,7 +175,7 @@ def test_kill_and_resume_reuses_finished_chunks(samples, reference, tmp_path, ca
     assert len(list(checkpoints.glob("chunk-*.nc"))) == 2
     assert not list(checkpoints.glob(".*"))  # no temporary files left behind
 
-    with caplog.at_level(logging.INFO, logger="uqgear.runner"):
+    with caplog.at_level(logging.INFO, logger="uqgear.uq.runner"):
         result = runner.run(CountingModel(tmp_path / "second"), samples, key=key, resume=True)
     # 5 chunks of which the first 2 finished before the kill: only chunks 2, 3, 4 run again
     assert [name[:4] for name in _calls(tmp_path / "second")] == ["0010", "0015", "0020"]
@@ -212,7 +212,7 @@ def test_unreadable_checkpoint_is_evaluated_again(samples, reference, tmp_path, 
     runner.run(CountingModel(tmp_path / "initial"), samples, key="k")
     broken = sorted(checkpoints.glob("chunk-*.nc"))[1]
     broken.write_text("not netCDF")
-    with caplog.at_level(logging.WARNING, logger="uqgear.runner"):
+    with caplog.at_level(logging.WARNING, logger="uqgear.uq.runner"):
         result = runner.run(CountingModel(tmp_path / "calls"), samples, key="k", resume=True)
     assert len(_calls(tmp_path / "calls")) == 1
     assert "unusable" in caplog.text and broken.name in caplog.text

@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.errors import ParameterSpaceError
-from uqgear.sensitivity import SobolAnalysis
-from uqgear.uncertainty import Distribution, Interval, ParameterSpace, evaluate_on_sweep
+from uqgear.common.errors import ParameterSpaceError
+from uqgear.uq.sensitivity import SobolAnalysis
+from uqgear.uq.parameter_space import ParameterSpace
+from uqgear.uq.parameters import Distribution, Interval
+from uqgear.uq.sweeps import evaluate_on_sweep
 
 ISHIGAMI_S1 = np.array([0.3139, 0.4424, 0.0])
 ISHIGAMI_ST = np.array([0.5576, 0.4424, 0.2437])

@@ -7,18 +7,21 @@ import re
 import textwrap
 from pathlib import Path
 
-import json
-
 import numpy as np
-import xarray as xr
 import pytest
+import xarray as xr
 
-from uqgear.design import STANDARD_GRAVITY
-from uqgear.errors import StudyError, UqgearError
-from uqgear.study import (ANALYSIS_DEFAULTS, ANALYSIS_SCHEMAS, VARIABLES, load_study, parse_study)
+import uqgear.common
+from uqgear.physics.design import STANDARD_GRAVITY
+from uqgear.common.errors import StudyError, UqgearError
+from uqgear.study.analysis_schemas import ANALYSIS_DEFAULTS, ANALYSIS_SCHEMAS
+from uqgear.study.schema import load_study, parse_study
+from uqgear.study.variables import VARIABLES
 
 ROOT = Path(__file__).resolve().parent.parent
-STUDIES = sorted((ROOT / "studies").glob("*.yaml"))
+# the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)
+STUDY_DIR = uqgear.common.bundled_file("study", "smoke").parent
+STUDIES = sorted(STUDY_DIR.glob("*.yaml"))
 
 MINIMAL = """
 seed: 3
@@ -52,21 +55,21 @@ def test_shipped_studies_validate():
 
 
 def test_smoke_study_covers_every_analysis_type():
-    from uqgear.study import RIG_TYPES
+    from uqgear.study.analysis_schemas import RIG_TYPES
 
     # analyses of rig data take a minute each: they have their own studies and slow end-to-end tests
-    study = load_study(ROOT / "studies" / "smoke.yaml")
+    study = load_study(STUDY_DIR / "smoke.yaml")
     assert {spec.type for spec in study.analyses} == set(ANALYSIS_SCHEMAS) - set(RIG_TYPES)
-    covered = {spec.type for path in (ROOT / "studies").glob("*.yaml") for spec in load_study(path).analyses}
+    covered = {spec.type for path in STUDY_DIR.glob("*.yaml") for spec in load_study(path).analyses}
     assert set(RIG_TYPES) <= covered
 
 
 @pytest.mark.slow
 def test_calibrate_study_end_to_end(tmp_path):
-    from uqgear.analyses import run_study
-    from uqgear.report import write_report
+    from uqgear.study.analyses import run_study
+    from uqgear.report.study_report import write_report
 
-    study = load_study(ROOT / "studies" / "calibrate_healthy.yaml")
+    study = load_study(STUDY_DIR / "calibrate_healthy.yaml")
     run_study(study, tmp_path, show_progress=False)
     write_report(tmp_path)
     result = xr.open_dataset(tmp_path / "calibration.nc")
@@ -81,12 +84,12 @@ def test_calibrate_study_end_to_end(tmp_path):
 
 @pytest.mark.slow
 def test_diagnose_study_end_to_end(tmp_path):
-    from uqgear.analyses import run_study
-    from uqgear.report import write_report
+    from uqgear.study.analyses import run_study
+    from uqgear.report.study_report import write_report
 
     # the bundled study with two of its six candidates: the labelled-file tests of
     # test_diagnosis.py run this campaign against all six already
-    text = (ROOT / "studies" / "diagnose_eccentricity.yaml").read_text()
+    text = (STUDY_DIR / "diagnose_eccentricity.yaml").read_text()
     full = "effects: [eccentricity, tooth_damage, friction, torque_ripple, adhesion_oscillation, bearing_clearance]"
     assert full in text
     text = text.replace(full, "effects: [eccentricity, torque_ripple]")
@@ -111,7 +114,7 @@ def test_diagnose_study_end_to_end(tmp_path):
 
 
 def test_t2_envelope_study_uses_rail_condition_interval():
-    study = load_study(ROOT / "studies" / "t2_envelope.yaml")
+    study = load_study(STUDY_DIR / "t2_envelope.yaml")
     t2 = study.uncertain["adhesion_torque"]
     lever = 23000 * STANDARD_GRAVITY * 0.625
     assert t2.lower == pytest.approx(0.15 * lever) and t2.upper == pytest.approx(0.33 * lever)
@@ -339,8 +342,8 @@ def test_missing_and_unreadable_study_files(tmp_path):
 
 
 def test_registries_agree():
-    from uqgear.analyses import ANALYSES
-    from uqgear.report import RENDERERS
+    from uqgear.study.analyses import ANALYSES
+    from uqgear.report.sections import RENDERERS
 
     assert set(ANALYSES) == set(ANALYSIS_SCHEMAS) == set(ANALYSIS_DEFAULTS)
     assert set(RENDERERS) == set(ANALYSIS_SCHEMAS)
@@ -361,7 +364,7 @@ def test_reference_documents_every_key_and_variable():
 
 
 def test_calibrate_analysis_needs_an_existing_rig_file(tmp_path):
-    from uqgear.study import parse_study
+    from uqgear.study.schema import parse_study
 
     text = "name: c\nseed: 1\ndesign: locomotive\nanalyses:\n  - type: calibrate\n    rig: nothere.nc\n"
     with pytest.raises(StudyError, match=r"analyses\[0\].rig: file .*nothere.nc not found"):
@@ -374,7 +377,7 @@ def test_calibrate_analysis_needs_an_existing_rig_file(tmp_path):
 
 
 def test_diagnose_analysis_options_are_checked(tmp_path):
-    from uqgear.study import parse_study
+    from uqgear.study.schema import parse_study
 
     (tmp_path / "x.nc").write_bytes(b"")
     text = "name: d\nseed: 1\ndesign: locomotive\nanalyses:\n  - type: diagnose\n    rig: x.nc\n"

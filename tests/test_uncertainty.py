@@ -10,11 +10,15 @@ import pytest
 import xarray as xr
 from scipy import stats
 
-from uqgear.design import load_design
-from uqgear.errors import ExecutionError, ParameterSpaceError, UqgearError
-from uqgear.uncertainty import (DISTRIBUTION_NAMES, Distribution, Fixed, Interval, ParameterSpace, PolynomialChaos,
-                                SAMPLING_METHODS, as_seed_sequence, call_model, evaluate_on_sweep,
-                                monte_carlo_statistics, number_of_terms, total_degree_indices)
+from uqgear.physics.design import load_design
+from uqgear.common.errors import ExecutionError, ParameterSpaceError, UqgearError
+from uqgear.uq.monte_carlo import monte_carlo_statistics
+from uqgear.uq.parameter_space import ParameterSpace
+from uqgear.uq.parameters import DISTRIBUTION_NAMES, Distribution, Fixed, Interval
+from uqgear.uq.polynomial_chaos import PolynomialChaos, number_of_terms, total_degree_indices
+from uqgear.uq.sampling import SAMPLING_METHODS
+from uqgear.uq.seeds import as_seed_sequence
+from uqgear.uq.sweeps import call_model, evaluate_on_sweep
 
 # Ishigami function with a = 7, b = 0.1 on [-pi, pi]^3 (Ishigami & Homma 1990).
 ISHIGAMI_MEAN = 3.5
@@ -294,7 +298,7 @@ def test_sweep_must_not_override_an_uncertain_parameter():
     samples = xr.Dataset({"a": ("sample", np.arange(3.0))})
     with pytest.raises(ParameterSpaceError, match=r"sweep pinion_speed: expected a non-empty 1-D sequence"):
         evaluate_on_sweep(lambda s: s, samples, {"pinion_speed": [[1.0, 2.0]]})
-    from uqgear.uncertainty import make_sweep
+    from uqgear.uq.sweeps import make_sweep
     with pytest.raises(ParameterSpaceError, match=r"sweep a: a is an uncertain parameter"):
         make_sweep({"a": [1.0]}, ParameterSpace({"a": [0, 1]}))
 

@@ -32,7 +32,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
 
-from .errors import UqgearError
+from .common.errors import UqgearError
 
 #: Exit status of a user mistake.
 EXIT_USER_ERROR = 2
@@ -64,7 +64,7 @@ def _fail(message: object) -> int:
 
 
 def _command_validate(args: argparse.Namespace) -> int:
-    from .study import load_study
+    from .study.schema import load_study
 
     study = load_study(args.study)
     kinds = ", ".join(f"{spec.name} ({spec.type})" for spec in study.analyses)
@@ -111,7 +111,7 @@ def _publish(work: Path, out: Path) -> None:
 
 
 def _command_run(args: argparse.Namespace) -> int:
-    from .study import load_study
+    from .study.schema import load_study
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -119,15 +119,15 @@ def _command_run(args: argparse.Namespace) -> int:
     if out.is_dir() and not _is_empty_dir(out) and not args.resume:
         return _fail(f"--out {out}: folder exists and is not empty; choose a new folder, remove it, "
                      "or pass --resume to continue or update that run")
-    if not out.parent.is_dir():
-        return _fail(f"--out {out}: the parent folder {out.parent} does not exist")
+    _check_parents(out, "--out")
     if args.workers is not None and args.workers < 1:
         return _fail(f"--workers: expected a positive integer; got {args.workers}")
     # the study is validated completely before anything is created
     study = load_study(args.study)
+    parents = _make_parents(out)
 
-    from .analyses import run_study
-    from .report import write_report
+    from .study.analyses import run_study
+    from .report.study_report import write_report
 
     work = _partial_dir(out)
     created = False
@@ -156,6 +156,7 @@ def _command_run(args: argparse.Namespace) -> int:
         # interrupted run stays for --resume
         if created or not args.resume:
             shutil.rmtree(work, ignore_errors=True)
+        _remove_if_empty(parents)
         raise
     if not args.quiet:
         print(f"results written to {out}" + (f" (report: {out / 'report.html'})"
@@ -163,13 +164,76 @@ def _command_run(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------- examples
+
+
+def _first_comment(path: Path) -> str:
+    """The study's description, or its first comment line."""
+    from .common.yamlio import YAMLError, load_yaml
+
+    try:
+        raw = load_yaml(path.read_text())
+    except YAMLError:
+        raw = None
+    if isinstance(raw, dict) and isinstance(raw.get("description"), str):
+        return " ".join(raw["description"].split())
+    for line in path.read_text().splitlines():
+        if line.startswith("#"):
+            return line.lstrip("# ").strip()
+    return ""
+
+
+def _command_examples(args: argparse.Namespace) -> int:
+    from .common.resources import bundled_file, bundled_names
+
+    if args.action == "copy":
+        return _copy_example(args)
+    if args.action is not None:
+        return _fail(f"examples: unknown action {args.action[:40]!r}; expected 'copy' or nothing")
+    print("Bundled studies (uqgear run NAME --out DIR; uqgear examples copy NAME DEST.yaml to edit one):")
+    for name in bundled_names("study"):
+        text = _first_comment(bundled_file("study", name))
+        print(f"  {name:24s} {text[:90] + ('...' if len(text) > 90 else '')}")
+    print("Bundled designs (design: {name: NAME} in a study, --design NAME on the command line):")
+    for name in bundled_names("design"):
+        print(f"  {name:24s} {bundled_file('design', name)}")
+    print("Example rig campaigns (uqgear calibrate FILE / uqgear diagnose FILE; "
+          "uqgear.example_rig_file(NAME) in Python):")
+    for name in bundled_names("rig"):
+        print(f"  {name:24s} {bundled_file('rig', name)}")
+    return 0
+
+
+def _copy_example(args: argparse.Namespace) -> int:
+    from .common.fileio import write_text_atomic
+    from .common.resources import bundled_file
+
+    if args.name is None or args.dest is None:
+        return _fail("examples copy: expected a study name and a destination: "
+                     "uqgear examples copy NAME DEST.yaml")
+    source = bundled_file("study", args.name)
+    dest = Path(args.dest)
+    if dest.is_dir():
+        dest = dest / source.name
+    if dest.suffix.lower() not in (".yaml", ".yml"):
+        return _fail(f"examples copy: {args.dest}: expected a folder or a file name ending in .yaml")
+    if dest.exists() and not args.force:
+        return _fail(f"examples copy: {dest} exists; choose another name or pass --force to overwrite it")
+    if not dest.parent.is_dir():
+        return _fail(f"examples copy: {dest}: the folder {dest.parent} does not exist")
+    write_text_atomic(dest, source.read_text())
+    print(f"study {source.stem} copied to {dest} (run it with: uqgear run {dest} --out DIR)")
+    return 0
+
+
 # ---------------------------------------------------------------------------- report
 
 
 def _command_report(args: argparse.Namespace) -> int:
-    from .report import write_report
+    from .report.study_report import write_report
+    from .study.limits import check_dpi
 
-    path = write_report(Path(args.directory), dpi=args.dpi)
+    path = write_report(Path(args.directory), dpi=check_dpi(args.dpi, "--dpi"))
     print(f"report written to {path}")
     return 0
 
@@ -178,31 +242,31 @@ def _command_report(args: argparse.Namespace) -> int:
 
 
 def _command_simulate(args: argparse.Namespace) -> int:
-    from .design import load_design
-    from .errors import OperatingPointError
+    from .physics.design import load_design
+    from .study.limits import check_dpi, check_operating_value, check_run_length
 
     design = load_design(args.design)
     out = Path(args.out) if args.out else None
     if out is not None:
         if out.suffix.lower() not in (".png", ".nc"):
             return _fail(f"--out {out}: expected a file name ending in .png (figure) or .nc (data)")
-        if not out.parent.is_dir():
-            return _fail(f"--out {out}: the folder {out.parent} does not exist")
-    if args.speed <= 0:
-        raise OperatingPointError(f"--speed: expected a pinion speed > 0 rpm; got {args.speed:g}")
-    if args.keep_periods > args.n_periods:
-        raise OperatingPointError(f"--keep-periods: expected at most --n-periods ({args.n_periods}); "
-                                  f"got {args.keep_periods}")
+        _check_new_file(out, args.force)
+    # the limits a study puts on the same values
+    speed = check_operating_value("pinion_speed", args.speed, "--speed")
+    drive = (check_operating_value("drive_torque", args.drive_torque, "--drive-torque")
+             if args.drive_torque is not None else design.operation.drive_torque)
+    adhesion = (check_operating_value("adhesion_torque", args.adhesion_torque, "--adhesion-torque")
+                if args.adhesion_torque is not None else drive * design.z2 / design.z1)
+    n_periods, keep_periods = check_run_length(args.n_periods, args.keep_periods,
+                                               where=("--n-periods", "--keep-periods"))
+    dpi = check_dpi(args.dpi, "--dpi")
 
-    from .analyses import quick_run
+    from .study.analyses import quick_run
     from .report import simulation_figure_png
-    from .results import save_result
+    from .uq.results import save_result
 
-    drive = args.drive_torque if args.drive_torque is not None else design.operation.drive_torque
-    adhesion = args.adhesion_torque if args.adhesion_torque is not None else drive * design.z2 / design.z1
-    run = quick_run(design, args.speed, drive, adhesion, n_periods=args.n_periods,
-                    keep_periods=args.keep_periods)
-    print(f"pinion speed {args.speed:g} rpm, T1 {drive / 1e3:.4g} kN m, T2 {adhesion / 1e3:.4g} kN m "
+    run = quick_run(design, speed, drive, adhesion, n_periods=n_periods, keep_periods=keep_periods)
+    print(f"pinion speed {speed:g} rpm, T1 {drive / 1e3:.4g} kN m, T2 {adhesion / 1e3:.4g} kN m "
           f"({design.name}): {run.attrs['regime']} ({run.attrs['regime_reason']})")
     print(f"  DTE RMS {run.attrs['dte_rms'] * 1e6:.4g} um, peak-to-peak "
           f"{run.attrs['dte_peak_to_peak'] * 1e6:.4g} um, dynamic load factor "
@@ -210,15 +274,25 @@ def _command_simulate(args: argparse.Namespace) -> int:
           f"of the time, back-side contact {100 * run.attrs['fraction_back_contact']:.3g} %")
     if out is not None:
         if out.suffix.lower() == ".png":
-            from .fileio import atomic_path
+            from .common.fileio import atomic_path
 
-            data = simulation_figure_png(run, dpi=args.dpi)
+            data = simulation_figure_png(run, dpi=dpi)
             with atomic_path(out) as temporary:
                 temporary.write_bytes(data)
         else:
             save_result(run, out, design=design)
         print(f"written to {out}")
     return 0
+
+
+def _check_new_file(out: Path, force: bool) -> None:
+    """An output file goes into an existing folder and replaces a file only with ``--force``."""
+    if out.is_dir():
+        raise UqgearError(f"--out {out}: is a folder; expected a file name")
+    if out.exists() and not force:
+        raise UqgearError(f"--out {out}: exists; choose another name or pass --force to overwrite it")
+    if not out.parent.is_dir():
+        raise UqgearError(f"--out {out}: the folder {out.parent} does not exist")
 
 
 # ---------------------------------------------------------------------------- rig data
@@ -246,8 +320,8 @@ def _output_folder(out: Path, option: str = "--out") -> Iterator[Path]:
     """
     if out.exists() and not _is_empty_dir(out):
         raise UqgearError(f"{option} {out}: exists and is not an empty folder; choose a new folder")
-    if not out.parent.is_dir():
-        raise UqgearError(f"{option} {out}: the parent folder {out.parent} does not exist")
+    _check_parents(out, option)
+    parents = _make_parents(out)
     work = _partial_dir(out)
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir()
@@ -255,8 +329,40 @@ def _output_folder(out: Path, option: str = "--out") -> Iterator[Path]:
         yield work
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
+        _remove_if_empty(parents)
         raise
     _publish(work, out)
+
+
+def _check_parents(out: Path, option: str) -> None:
+    """Refuse an output path below a file (its missing folders are made once the input is valid)."""
+    for ancestor in out.absolute().parents:
+        if ancestor.exists():
+            if not ancestor.is_dir():
+                raise UqgearError(f"{option} {out}: {ancestor} is a file, not a folder")
+            return
+
+
+def _make_parents(out: Path) -> list[Path]:
+    """Create the missing folders above ``out``; return them, outermost first."""
+    missing = []
+    folder = out.absolute().parent
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    missing.reverse()
+    for folder in missing:
+        folder.mkdir()
+    return missing
+
+
+def _remove_if_empty(folders: Sequence[Path]) -> None:
+    """Remove folders made by :func:`_make_parents` again, innermost first, while empty."""
+    for folder in reversed(folders):
+        try:
+            folder.rmdir()
+        except OSError:
+            return
 
 
 def _comma_list(items: list[str] | None) -> list[str] | None:
@@ -265,9 +371,9 @@ def _comma_list(items: list[str] | None) -> list[str] | None:
 
 
 def _command_synth_rig(args: argparse.Namespace) -> int:
-    from .design import load_design
-    from .effects import parse_effect
-    from .virtual_rig import synth_rig
+    from .physics.design import load_design
+    from .physics.effects import parse_effect
+    from .rig.virtual_rig import synth_rig
 
     design = load_design(args.design)
     effects = [parse_effect(text) for text in args.effect]
@@ -275,8 +381,7 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix != ".nc":
         return _fail(f"--out {out}: expected a file name ending in .nc")
-    if not out.parent.is_dir():
-        return _fail(f"--out {out}: the folder {out.parent} does not exist")
+    _check_new_file(out, args.force)
     if args.noise < 0:
         return _fail(f"--noise: expected a relative noise level >= 0; got {args.noise:g}")
     synth_rig(design, out, effects=effects, true_parameters=true_parameters, seed=args.seed,
@@ -306,7 +411,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
 
 
 def _command_diagnose(args: argparse.Namespace) -> int:
-    from .diagnosis import diagnose
+    from .diagnosis.workflow import diagnose
 
     rig = Path(args.rig)
     if not rig.is_file():
@@ -322,7 +427,7 @@ def _command_diagnose(args: argparse.Namespace) -> int:
 
 
 def _command_blindtest(args: argparse.Namespace) -> int:
-    from .blindtest import blindtest
+    from .diagnosis.blind_test import blindtest
 
     if args.n_per_effect < 1:
         return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
@@ -356,7 +461,8 @@ def build_parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run a study, write DIR/<analysis>.nc and DIR/report.html",
                               description="Run every analysis of a study. Results appear in DIR only "
                               "when the whole run has succeeded.")
-    run.add_argument("study", metavar="STUDY.yaml")
+    run.add_argument("study", metavar="STUDY.yaml", help="a study file, or the name of a bundled study "
+                     "(uqgear examples lists them)")
     run.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, "
                      "or an earlier run's folder with --resume)")
     run.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler address (tcp://host:8786); "
@@ -367,6 +473,17 @@ def build_parser() -> argparse.ArgumentParser:
                      "checkpoints of an interrupted or earlier run into DIR")
     run.add_argument("--quiet", action="store_true", help="no progress bars or summary line")
     run.set_defaults(handler=_command_run)
+
+    examples = commands.add_parser("examples", help="list the bundled studies, designs and rig campaigns; "
+                                   "copy a study to edit",
+                                   description="Without arguments: list what ships with uqgear. "
+                                   "'examples copy NAME DEST' writes the bundled study NAME to DEST "
+                                   "(a .yaml file or a folder).")
+    examples.add_argument("action", nargs="?", metavar="copy", help="copy a bundled study")
+    examples.add_argument("name", nargs="?", metavar="NAME", help="bundled study name (see the list)")
+    examples.add_argument("dest", nargs="?", metavar="DEST", help="destination file or folder")
+    examples.add_argument("--force", action="store_true", help="overwrite DEST if it exists")
+    examples.set_defaults(handler=_command_examples)
 
     report = commands.add_parser("report", help="rebuild DIR/report.html from the saved results",
                                  description="Rebuild the HTML report from the .nc files in DIR alone.")
@@ -390,6 +507,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--keep-periods", type=int, default=200,
                           help="mesh periods kept after the transient (default 200)")
     simulate.add_argument("--dpi", type=int, default=110, help="figure resolution (default 110)")
+    simulate.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     simulate.set_defaults(handler=_command_simulate)
 
     synth = commands.add_parser("synth-rig", help="simulate a virtual-rig campaign in the rig format",
@@ -399,6 +517,7 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--design", default="locomotive", metavar="NAME|FILE",
                        help="nominal design (bundled name or YAML file; default: locomotive)")
     synth.add_argument("--out", required=True, metavar="FILE.nc", help="rig file to write")
+    synth.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     synth.add_argument("--effect", action="append", default=[], metavar="NAME:param=value,...",
                        help="add an unmodelled effect, e.g. eccentricity:amplitude=12e-6,kappa=0.03 "
                        "(repeatable)")

@@ -1,0 +1,273 @@
+"""The Calibration estimator: settings checked in ``__init__``, the work in ``fit``, results in ``*_`` attributes."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..common.errors import RigDataError
+from ..physics.design import Design
+from ..physics.effects import Effect
+from ..rig.format import read_rig, rig_design, validate_rig
+from ..uq.seeds import child_seed
+from .convergence import ConvergenceCriteria
+from .errors import CalibrationError
+from .harmonics import HARMONIC_CHANNELS
+from .likelihood import StageLikelihood, observed_features, operating_points, prior_box
+from .predictive import predictive_check
+from .priors import DEFAULT_PARAMETERS, prior_bounds, resolve_parameters
+from .sampling import final_sampling, search_box, walker_count
+from .settings import (as_seed, check_channels, check_float, check_int, check_model_error_range, check_n_training,
+                       check_priors)
+from .summaries import posterior_dataset, posterior_summary, result_content
+from .training import model_log_features, train_emulators
+
+
+class Calibration:
+    """Bayesian calibration of the gear model on rig data (settings here; :meth:`fit` does the work).
+
+    Parameters
+    ----------
+    parameters : sequence of str
+        Global parameters (:mod:`uqgear.calibration`); default
+        ``mesh_stiffness_scale, zeta_mesh, backlash, ste_amplitude, k1, k2``.
+    design : Design, optional
+        Nominal design; default the rig file's ``design`` attribute.
+    priors : mapping, optional
+        Name -> (lower, upper) uniform prior bounds replacing the defaults.
+    channels : sequence of str
+        Rig channels whose mesh harmonics enter the likelihood.
+    n_harmonics : int
+        Mesh harmonics per channel.
+    min_snr : float
+        Features with observed amplitude / noise std below this are left out.
+    model_error_range : (float, float)
+        Bounds of the log-uniform prior of the relative model error per
+        (channel, harmonic) group.
+    effects : sequence of Effect
+        Model extensions with fixed parameters (none for a healthy rig).
+    n_training : int
+        Model runs per operating point and emulator stage (a power of 2).
+    emulator_degree : int
+        Total degree of the polynomial emulators.
+    max_stages : int
+        Most emulator boxes fitted.
+    n_walkers : int, optional
+        emcee walkers; default 4 x the number of sampled dimensions (even).
+    stage_steps : int
+        Steps per box-finding stage.
+    chunk_steps, max_steps : int
+        The final stage runs in chunks until converged or ``max_steps``.
+    autocorr_factor, rhat_threshold, min_ess : float
+        Convergence criteria (:mod:`~uqgear.calibration.convergence`).
+    predictive_draws : int
+        Posterior draws rerun with the real model.
+    transient, window : float
+        Settings of :func:`model_harmonics` (s).
+    seed : SeedSequence or int, optional
+        Source of all randomness (Sobol scrambling, emcee, predictive draws).
+    threads : int, optional
+        Threads of the model runs (default: all cores).
+
+    Attributes
+    ----------
+    posterior_ : xarray.Dataset
+        Draws over (chain, draw): one variable per parameter (design-key
+        names, SI units), ``adhesion_torque`` over (chain, draw, op),
+        ``log_likelihood``.
+    summary_ : dict
+        Per parameter mean, sd, q05, q50, q95, prior, units; per run T2; the
+        model error per group.
+    diagnostics_ : dict
+        Convergence diagnostics and their verdict.
+    converged_ : bool
+    predictive_ : xarray.Dataset
+        Posterior predictive check over (op, channel, harmonic).
+    predictive_check_ : dict
+        Its summary.
+    emulator_ : dict
+        Stages, boxes and leave-one-out errors of the emulators.
+    timing_ : dict
+        Wall and CPU time of the fit, s.
+    """
+
+    def __init__(self, parameters: Sequence[str] = DEFAULT_PARAMETERS, *, design: Design | None = None,
+                 priors: Mapping[str, Sequence[float]] | None = None,
+                 channels: Sequence[str] = HARMONIC_CHANNELS, n_harmonics: int = 3, min_snr: float = 5.0,
+                 model_error_range: tuple[float, float] = (0.01, 0.5), effects: Sequence[Effect] = (),
+                 n_training: int = 256, emulator_degree: int = 3, max_stages: int = 5,
+                 n_walkers: int | None = None, stage_steps: int = 1500, chunk_steps: int = 2000,
+                 max_steps: int = 30000, autocorr_factor: float = 50.0, rhat_threshold: float = 1.01,
+                 min_ess: float = 400.0, predictive_draws: int = 16, transient: float = 0.2, window: float = 0.1,
+                 seed: np.random.SeedSequence | int | None = None, threads: int | None = None) -> None:
+        self.parameters = resolve_parameters(parameters)
+        if design is not None and not isinstance(design, Design):
+            raise CalibrationError(f"design: expected a uqgear Design; got {type(design).__name__}")
+        self.design = design
+        self.priors = check_priors(priors, self.parameters)
+        self.channels = check_channels(channels)
+        self.n_harmonics = check_int("n_harmonics", n_harmonics, 1)
+        self.min_snr = check_float("min_snr", min_snr, 0.0, 1e6)
+        self.model_error_range = check_model_error_range(model_error_range)
+        self.effects = tuple(effects)
+        self.n_training = check_n_training(n_training)
+        self.emulator_degree = check_int("emulator_degree", emulator_degree, 1)
+        self.max_stages = check_int("max_stages", max_stages, 1)
+        self.n_walkers = None if n_walkers is None else check_int("n_walkers", n_walkers, 4)
+        self.stage_steps = check_int("stage_steps", stage_steps, 100)
+        self.chunk_steps = check_int("chunk_steps", chunk_steps, 100)
+        self.max_steps = check_int("max_steps", max_steps, self.chunk_steps)
+        self.autocorr_factor = check_float("autocorr_factor", autocorr_factor, 1.0, 1e4)
+        self.rhat_threshold = check_float("rhat_threshold", rhat_threshold, 1.0, 10.0)
+        self.min_ess = check_float("min_ess", min_ess, 1.0, 1e9)
+        self.predictive_draws = check_int("predictive_draws", predictive_draws, 0)
+        self.transient = check_float("transient", transient, 0.0, 100.0, " s")
+        self.window = check_float("window", window, 0.0, 100.0, " s")
+        self.seed = as_seed(seed)
+        self.threads = None if threads is None else check_int("threads", threads, 1)
+
+    # ------------------------------------------------------------------ settings record
+
+    def settings(self) -> dict[str, Any]:
+        """The settings as a JSON-ready mapping."""
+        return {"parameters": list(self.parameters), "priors": {k: list(v) for k, v in self.priors.items()},
+                "channels": list(self.channels), "n_harmonics": self.n_harmonics, "min_snr": self.min_snr,
+                "model_error_range": list(self.model_error_range),
+                "effects": [{"name": e.name, "values": dict(e.values)} for e in self.effects],
+                "n_training": self.n_training, "emulator_degree": self.emulator_degree,
+                "max_stages": self.max_stages, "n_walkers": self.n_walkers, "stage_steps": self.stage_steps,
+                "chunk_steps": self.chunk_steps, "max_steps": self.max_steps,
+                "autocorr_factor": self.autocorr_factor, "rhat_threshold": self.rhat_threshold,
+                "min_ess": self.min_ess, "predictive_draws": self.predictive_draws, "transient": self.transient,
+                "window": self.window, "seed_entropy": str(self.seed.entropy)}
+
+    # ------------------------------------------------------------------ fit
+
+    def fit(self, rig: xr.Dataset | str | os.PathLike[str]) -> "Calibration":
+        """Calibrate on a rig campaign.
+
+        Parameters
+        ----------
+        rig : xarray.Dataset or path
+            ``uqgear-rig/1`` data (a Dataset is validated, a path read).
+
+        Returns
+        -------
+        Calibration
+            ``self``, with the fitted attributes set.
+
+        Raises
+        ------
+        RigDataError
+            The rig data do not follow the format.
+        CalibrationError
+            No usable feature, or a setting that does not fit the data.
+        """
+        wall_start, cpu_start = time.perf_counter(), time.process_time()
+        if isinstance(rig, (str, os.PathLike)):
+            self.rig_source_ = str(rig)
+            rig = read_rig(rig)
+        elif isinstance(rig, xr.Dataset):
+            self.rig_source_ = str(rig.attrs.get("title", "rig data"))
+            validate_rig(rig, where="rig data")
+        else:
+            raise RigDataError(f"rig: expected a uqgear-rig/1 Dataset or file path; got {type(rig).__name__}")
+        design = self.design if self.design is not None else rig_design(rig)
+        self.design_ = design
+        # children derived from the spawn key, so that fitting again repeats the run exactly
+        seeds = [child_seed(self.seed, index) for index in range(8)]
+        self._prepare_data(rig, design)
+        self._prepare_space(design)
+        stage_rng = np.random.default_rng(seeds[0])
+        self.emulator_ = {"stages": []}
+        start_points, truncated = search_box(
+            self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_, walkers=self._walker_count(),
+            stage_steps=self.stage_steps, max_stages=self.max_stages, error_floor=self.model_error_range[0],
+            rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2], stages=self.emulator_["stages"])
+        self._final_sampling(start_points, stage_rng, seeds[3], truncated)
+        self._predictive_check(np.random.default_rng(seeds[4]))
+        self.timing_ = {"wall_s": time.perf_counter() - wall_start, "cpu_s": time.process_time() - cpu_start,
+                        "model_runs": int(self.model_runs_)}
+        return self
+
+    # ------------------------------------------------------------------ steps of fit
+
+    def _prepare_data(self, rig: xr.Dataset, design: Design) -> None:
+        self._features = observed_features(rig, design, channels=self.channels, n_harmonics=self.n_harmonics,
+                                           min_snr=self.min_snr, model_error_range=self.model_error_range)
+        self.observed_ = self._features.observed
+        self.n_op_ = rig.sizes["op"]
+        self.used_ = self._features.used
+        self.log_observed_ = self._features.log_observed
+        self.noise_variance_ = self._features.noise_variance
+        self.operating_ = operating_points(rig)
+        self.model_error_grid_ = self._features.model_error_grid
+
+    def _prepare_space(self, design: Design) -> None:
+        self.bounds_ = prior_bounds(design, self.parameters, self.priors)
+        self.prior_lower_, self.prior_upper_ = prior_box(self.bounds_, self.parameters, self.operating_)
+        self.n_global_ = len(self.parameters)
+        self.n_dim_ = self.n_global_ + self.n_op_
+        self.model_runs_ = 0
+
+    def _run_model(self, points: list[np.ndarray]) -> np.ndarray:
+        """Log features (op, M, channel, harmonic) of the real model at physical points (M, n_global + 1) per run."""
+        values = model_log_features(points, design=self.design_, parameters=self.parameters,
+                                    operating=self.operating_, effects=self.effects, n_harmonics=self.n_harmonics,
+                                    transient=self.transient, window=self.window, threads=self.threads)
+        self.model_runs_ += values.shape[0] * values.shape[1]
+        return values
+
+    def _fit_stage(self, box_lower: np.ndarray, box_upper: np.ndarray,
+                   seed: np.random.SeedSequence) -> StageLikelihood:
+        """Train the emulators in a box and make their likelihood the current one."""
+        emulators, loo = train_emulators(box_lower, box_upper, seed, run_model=self._run_model,
+                                         n_global=self.n_global_, n_op=self.n_op_, n_training=self.n_training,
+                                         degree=self.emulator_degree)
+        self._likelihood = StageLikelihood(box_lower, box_upper, emulators, loo, self._features, self.n_global_)
+        self.box_lower_, self.box_upper_ = self._likelihood.box_lower, self._likelihood.box_upper
+        self.loo_rms_ = self._likelihood.loo_rms
+        return self._likelihood
+
+    def _walker_count(self) -> int:
+        return walker_count(self.n_walkers, self.n_dim_)
+
+    def _parameter_names(self) -> list[str]:
+        return list(self.parameters) + [f"adhesion_torque[{op}]" for op in range(self.n_op_)]
+
+    def _final_sampling(self, start_points: np.ndarray, rng: np.random.Generator, seed: np.random.SeedSequence,
+                        truncated: bool) -> None:
+        criteria = ConvergenceCriteria(self.autocorr_factor, self.rhat_threshold, self.min_ess)
+        verdict, physical, log_likelihood = final_sampling(
+            self._likelihood, start_points, rng, seed, walkers=self._walker_count(), chunk_steps=self.chunk_steps,
+            max_steps=self.max_steps, criteria=criteria, names=self._parameter_names(), truncated=truncated)
+        self.diagnostics_ = verdict
+        self.converged_ = bool(verdict["converged"])
+        self.posterior_ = posterior_dataset(physical, log_likelihood, parameters=self.parameters,
+                                            bounds=self.bounds_, operating=self.operating_,
+                                            converged=self.converged_)
+        self.summary_ = posterior_summary(physical, parameters=self.parameters, bounds=self.bounds_,
+                                          operating=self.operating_, likelihood=self._likelihood,
+                                          features=self._features)
+
+    def _predictive_check(self, rng: np.random.Generator) -> None:
+        self.predictive_, self.predictive_check_ = predictive_check(
+            self.posterior_, rng, parameters=self.parameters, draws=self.predictive_draws, features=self._features,
+            likelihood=self._likelihood, model_error=self.summary_["model_error"],
+            pinion_speed=self.operating_["pinion_speed"], run_model=self._run_model)
+
+    # ------------------------------------------------------------------ results
+
+    def to_dict(self) -> dict[str, Any]:
+        """The calibration result as a JSON-ready mapping (the content of ``calibration.json``)."""
+        if not hasattr(self, "posterior_"):
+            raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
+        return result_content(rig=self.rig_source_, converged=self.converged_, design=self.design_.to_dict(),
+                               diagnostics=self.diagnostics_, summary=self.summary_,
+                               predictive_check=self.predictive_check_, emulator=self.emulator_,
+                               timing=self.timing_, settings=self.settings())

@@ -1,0 +1,87 @@
+"""Calibration outputs: ``posterior.nc``, ``calibration.json`` and ``report.html``, and ``uqgear calibrate``."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..common.fileio import write_text_atomic
+from ..physics.design import Design, load_design
+from ..rig.format import read_rig
+from .estimator import Calibration
+from .priors import DEFAULT_PARAMETERS
+
+
+def write_calibration(calibration: Calibration, out_dir: str | os.PathLike[str], *,
+                      truth: Mapping[str, Any] | None = None) -> dict[str, Path]:
+    """Write ``posterior.nc``, ``calibration.json`` and ``report.html`` of a fitted calibration.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        Fitted.
+    out_dir : path
+        Output folder (created if missing).
+    truth : mapping, optional
+        Known true values to mark in the report (e.g. of a virtual-rig file).
+
+    Returns
+    -------
+    dict
+        ``posterior``, ``json``, ``report`` -> paths written.
+    """
+    from ..report.calibration_report import write_calibration_report
+    from ..uq.results import save_result
+
+    folder = Path(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    content = calibration.to_dict()
+    posterior_path = save_result(calibration.posterior_, folder / "posterior.nc", seed=calibration.seed,
+                                 design=calibration.design_)
+    json_path = folder / "calibration.json"
+    write_text_atomic(json_path, json.dumps(content, indent=2, default=float))
+    report_path = write_calibration_report(calibration, folder / "report.html", truth=truth)
+    return {"posterior": posterior_path, "json": json_path, "report": report_path}
+
+
+def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+              design: Design | str | os.PathLike[str] | None = None, params: Sequence[str] | None = None,
+              seed: np.random.SeedSequence | int | None = 0, threads: int | None = None) -> Calibration:
+    """Calibrate the model on a rig file and write the results (``uqgear calibrate``).
+
+    Parameters
+    ----------
+    rig_path : path
+        ``uqgear-rig/1`` file.
+    out_dir : path
+        Folder for ``posterior.nc``, ``calibration.json`` and ``report.html``.
+    design : Design or design file/name, optional
+        Nominal design; default the file's ``design`` attribute.
+    params : sequence of str, optional
+        Parameters to calibrate (default :data:`DEFAULT_PARAMETERS`).
+    seed : SeedSequence or int
+        Source of all randomness.
+    threads : int, optional
+        Threads for the model runs.
+
+    Returns
+    -------
+    Calibration
+        The fitted calibration.
+    """
+    nominal = None if design is None else (design if isinstance(design, Design) else load_design(design))
+    calibration = Calibration(params if params is not None else DEFAULT_PARAMETERS, design=nominal, seed=seed,
+                              threads=threads)
+    calibration.fit(rig_path)
+    truth = None
+    rig = read_rig(rig_path)
+    if "true_parameters" in rig.attrs:
+        truth = json.loads(rig.attrs["true_parameters"])
+    write_calibration(calibration, out_dir, truth=truth)
+    return calibration
+

@@ -1,0 +1,185 @@
+"""emcee sampling on the emulated likelihood: walker starts, the staged box search and the final run.
+
+The box starts as the prior and is shrunk in stages around the current
+posterior (with a margin) until it stops shrinking or the emulator error is
+below a fifth of the model-error floor; a posterior that presses against a
+box side that is not a prior bound widens the box again. emcee's ensemble
+sampler (differential-evolution and snooker moves) runs on the emulators,
+vectorised over walkers, in chunks until the convergence criteria hold or
+``max_steps`` is reached; the first third of the chain is burn-in, the rest
+is thinned by half the autocorrelation time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import emcee
+import numpy as np
+from scipy.stats import qmc
+
+from .convergence import ConvergenceCriteria
+from .likelihood import StageLikelihood
+
+
+def walker_count(n_walkers: int | None, n_dim: int) -> int:
+    """Number of emcee walkers (even): ``n_walkers``, by default 4 x the dimensions, at least 32."""
+    count = n_walkers if n_walkers is not None else max(4 * n_dim, 32)
+    return count + count % 2
+
+
+def start_walkers(likelihood: StageLikelihood, start_points: np.ndarray | None, rng: np.random.Generator,
+                  count: int) -> np.ndarray:
+    """Unit-box start positions (count, n_dim) of the walkers, from earlier draws or a Sobol design."""
+    if start_points is None:
+        # the best of a Sobol design over the box: spread over every region the data favour
+        candidates = qmc.Sobol(likelihood.n_dim, scramble=True, seed=rng).random_base2(12)
+        values = np.concatenate([likelihood.log_likelihood(chunk) for chunk in np.array_split(candidates, 16)])
+        walkers = candidates[np.argsort(values)[::-1][:count]]
+    else:
+        unit = likelihood.to_unit(start_points)
+        unit = unit[np.all((unit >= 0) & (unit <= 1), axis=1)]
+        if unit.shape[0] < count:
+            unit = np.concatenate([unit, rng.uniform(0.25, 0.75, (count - unit.shape[0], likelihood.n_dim))])
+        walkers = unit[rng.choice(unit.shape[0], size=count, replace=False)]
+    walkers = np.clip(walkers, 1e-6, 1.0 - 1e-6)
+    values = likelihood.log_likelihood(walkers)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        walkers[bad] = walkers[np.flatnonzero(~bad)[0]] if (~bad).any() else 0.5
+    return walkers
+
+
+def make_sampler(likelihood: StageLikelihood, count: int, seed: np.random.SeedSequence) -> emcee.EnsembleSampler:
+    """An emcee ensemble sampler of the stage likelihood, vectorised over walkers, seeded from ``seed``."""
+    sampler = emcee.EnsembleSampler(count, likelihood.n_dim, likelihood.log_likelihood, vectorize=True,
+                                    moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
+    # emcee draws from its own RandomState: seed it from our SeedSequence
+    sampler.random_state = np.random.RandomState(np.random.MT19937(seed)).get_state()
+    return sampler
+
+
+def sample(likelihood: StageLikelihood, walkers: np.ndarray, steps: int,
+           seed: np.random.SeedSequence) -> tuple[np.ndarray, np.ndarray]:
+    """Chain (step, walker, dim) and acceptance fractions of ``steps`` steps from ``walkers``."""
+    sampler = make_sampler(likelihood, walkers.shape[0], seed)
+    sampler.run_mcmc(walkers, steps)
+    return sampler.get_chain(), sampler.acceptance_fraction
+
+
+def next_box(physical: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarray, prior_lower: np.ndarray,
+             prior_upper: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The next stage's box around posterior draws, and whether the draws press against a non-prior side."""
+    low, high = physical.min(axis=0), physical.max(axis=0)
+    width = box_upper - box_lower
+    spread = np.maximum(high - low, 0.02 * width)
+    at_prior_low = np.isclose(box_lower, prior_lower, rtol=1e-12, atol=0)
+    at_prior_high = np.isclose(box_upper, prior_upper, rtol=1e-12, atol=0)
+    presses_low = (low - box_lower < 0.02 * width) & ~at_prior_low
+    presses_high = (box_upper - high < 0.02 * width) & ~at_prior_high
+    truncated = bool(np.any(presses_low | presses_high))
+    margin = np.where(presses_low | presses_high, 1.0, 0.5) * spread
+    new_lower = np.maximum(low - margin, prior_lower)
+    new_upper = np.minimum(high + margin, prior_upper)
+    return new_lower, new_upper, truncated
+
+
+def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequence], StageLikelihood],
+               prior_lower: np.ndarray, prior_upper: np.ndarray, *, used: np.ndarray, walkers: int,
+               stage_steps: int, max_stages: int, error_floor: float, rng: np.random.Generator,
+               design_seed: np.random.SeedSequence, chain_seed: np.random.SeedSequence,
+               stages: list[dict[str, Any]]) -> tuple[np.ndarray, bool]:
+    """Shrink the emulator box in stages around the posterior (module docstring).
+
+    Parameters
+    ----------
+    fit_stage : callable
+        (box_lower, box_upper, seed) -> the likelihood on emulators trained in that box.
+    prior_lower, prior_upper : array (n_dim,)
+        The prior box, the first stage's box.
+    used : array (op, channel, harmonic) of bool
+        The features in the likelihood.
+    walkers : int
+        Number of walkers.
+    stage_steps, max_stages : int
+        Steps per stage and most stages.
+    error_floor : float
+        Lower bound of the model error: an emulator error below a fifth of it ends the search.
+    rng : numpy.random.Generator
+        Draws of walker starts.
+    design_seed, chain_seed : SeedSequence
+        Parents of each stage's Sobol design and chain seeds.
+    stages : list
+        A record of each stage is appended to it.
+
+    Returns
+    -------
+    start_points : array (M, n_dim)
+        Physical posterior draws of the last stage to start from.
+    truncated : bool
+        Whether the last stage's posterior is truncated by its box.
+    """
+    box_lower, box_upper = prior_lower.copy(), prior_upper.copy()
+    start_points: np.ndarray | None = None
+    design_seeds, chain_seeds = design_seed.spawn(max_stages), chain_seed.spawn(max_stages)
+    for stage in range(max_stages):
+        likelihood = fit_stage(box_lower, box_upper, design_seeds[stage])
+        start = start_walkers(likelihood, start_points, rng, walkers)
+        chain, accept = sample(likelihood, start, stage_steps, chain_seeds[stage])
+        kept = chain[chain.shape[0] // 2:].reshape(-1, likelihood.n_dim)
+        physical = likelihood.to_physical(kept)
+        new_lower, new_upper, truncated = next_box(physical, box_lower, box_upper, prior_lower, prior_upper)
+        old_width = box_upper - box_lower
+        new_width = new_upper - new_lower
+        stages.append({
+            "stage": stage, "box_lower": box_lower.tolist(), "box_upper": box_upper.tolist(),
+            "loo_rms_median": float(np.median(likelihood.loo_rms[used])),
+            "loo_rms_max": float(np.max(likelihood.loo_rms[used])),
+            "acceptance": float(np.mean(accept)), "truncated": truncated})
+        start_points = physical[rng.choice(physical.shape[0], size=min(physical.shape[0], 4096), replace=False)]
+        shrinking = np.any(new_width < 0.6 * old_width)
+        # refining further gains nothing once the emulator error is small against the model-error floor
+        accurate = float(np.max(likelihood.loo_rms[used])) <= 0.2 * error_floor
+        if not truncated and (accurate or not shrinking):
+            return start_points, False
+        if stage == max_stages - 1:
+            return start_points, truncated
+        box_lower, box_upper = new_lower, new_upper
+    raise AssertionError("unreachable: the last stage returns")
+
+
+def final_sampling(likelihood: StageLikelihood, start_points: np.ndarray, rng: np.random.Generator,
+                   seed: np.random.SeedSequence, *, walkers: int, chunk_steps: int, max_steps: int,
+                   criteria: ConvergenceCriteria, names: Sequence[str],
+                   truncated: bool) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+    """Sample in chunks until converged or ``max_steps``; burn in and thin.
+
+    Returns
+    -------
+    verdict : dict
+        :meth:`ConvergenceCriteria.verdict` with ``n_steps``, ``burn_in``, ``thin`` and ``n_walkers``.
+    physical : array (draw, walker, n_dim)
+        Kept draws, in physical units.
+    log_likelihood : array (draw, walker)
+    """
+    start = start_walkers(likelihood, start_points, rng, walkers)
+    sampler = make_sampler(likelihood, start.shape[0], seed)
+    state = start
+    total = 0
+    verdict: dict[str, Any] = {}
+    while total < max_steps:
+        state = sampler.run_mcmc(state, chunk_steps)
+        total += chunk_steps
+        chain = sampler.get_chain()
+        burn = total // 3
+        verdict = criteria.verdict(chain[burn:], sampler.acceptance_fraction, truncated, names)
+        if verdict["converged"]:
+            break
+    chain = sampler.get_chain()
+    burn = total // 3
+    thin = max(1, int(verdict["tau_max"] // 2))
+    kept = chain[burn::thin]                                              # (draw, chain, dim)
+    log_likelihood = sampler.get_log_prob()[burn::thin]
+    verdict.update(n_steps=int(total), burn_in=int(burn), thin=int(thin), n_walkers=int(chain.shape[1]))
+    return verdict, likelihood.to_physical(kept), log_likelihood

@@ -1,0 +1,74 @@
+"""Checks of the settings that :class:`~uqgear.calibration.estimator.Calibration` takes."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..uq.seeds import as_seed_sequence
+from .errors import CalibrationError
+from .harmonics import HARMONIC_CHANNELS
+from .priors import PARAMETER_ALIASES
+
+
+def as_seed(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
+    """The seed as a SeedSequence (fresh entropy for None)."""
+    return np.random.SeedSequence() if seed is None else as_seed_sequence(seed, error=CalibrationError)
+
+
+def check_int(name: str, value: object, lowest: int) -> int:
+    """``value`` as an int, if it is an integer >= ``lowest``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
+        raise CalibrationError(f"{name}: expected an integer >= {lowest}; got {value!r}")
+    return int(value)
+
+
+def check_float(name: str, value: object, lower: float, upper: float, unit: str = "") -> float:
+    """``value`` as a float, if it is a number in [lower, upper]."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not lower <= float(value) <= upper:
+        raise CalibrationError(f"{name}: expected a number in [{lower:g}, {upper:g}]{unit}; got {value!r}")
+    return float(value)
+
+
+def check_priors(priors: Mapping[str, Sequence[float]] | None, parameters: Sequence[str]) -> dict[str, Sequence[float]]:
+    """The prior bounds given, if each is of a calibrated parameter (aliases allowed)."""
+    priors = dict(priors or {})
+    for name in priors:
+        if PARAMETER_ALIASES.get(name, name) not in parameters:
+            raise CalibrationError(f"priors.{name}: not among the calibrated parameters "
+                                   f"({', '.join(parameters)})")
+    return priors
+
+
+def check_channels(channels: Sequence[str]) -> tuple[str, ...]:
+    """The channels, if at least one and each a rig channel of :data:`HARMONIC_CHANNELS`."""
+    channels = list(channels)
+    for name in channels:
+        if name not in HARMONIC_CHANNELS:
+            raise CalibrationError(f"channels: {name!r} is not a rig channel; expected "
+                                   f"{', '.join(HARMONIC_CHANNELS)}")
+    if not channels:
+        raise CalibrationError("channels: expected at least one channel")
+    return tuple(channels)
+
+
+def check_model_error_range(model_error_range: tuple[float, float]) -> tuple[float, float]:
+    """The bounds of the relative model error, if 0 < lower < upper."""
+    try:
+        low, high = (float(v) for v in model_error_range)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"model_error_range: expected (lower, upper) relative errors; "
+                               f"got {model_error_range!r}") from None
+    if not 0 < low < high:
+        raise CalibrationError(f"model_error_range: expected 0 < lower < upper (relative); got {model_error_range!r}")
+    return low, high
+
+
+def check_n_training(n_training: int) -> int:
+    """Model runs per operating point and stage, if a power of 2 (Sobol design) of at least 16."""
+    value = check_int("n_training", n_training, 16)
+    if value & (value - 1):
+        raise CalibrationError(f"n_training: expected a power of 2 (Sobol design); got {n_training!r}")
+    return value

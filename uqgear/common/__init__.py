@@ -1,0 +1,22 @@
+"""Shared ground floor: error types, atomic file writing, progress bars, YAML reading,
+and the files shipped in the package (bundled designs, studies, example rig campaigns).
+
+Imports nothing of uqgear; every other subpackage may import it.
+"""
+
+from __future__ import annotations
+
+from .errors import (
+    shown, UqgearError, DesignError, OperatingPointError, ParameterSpaceError, StudyError, RigDataError,
+    ExecutionError)
+from .fileio import (atomic_path, write_text_atomic)
+from .resources import ResourceError, bundled_file, bundled_names, example_rig_file
+from .progress import (progress, progress_enabled, PROGRESS_ENVIRONMENT_VARIABLE)
+from .yamlio import (load_yaml, YAMLError)
+
+__all__ = [
+    'ResourceError', 'bundled_file', 'bundled_names', 'example_rig_file',
+    'shown', 'UqgearError', 'DesignError', 'OperatingPointError', 'ParameterSpaceError', 'StudyError',
+    'RigDataError', 'ExecutionError', 'atomic_path', 'write_text_atomic', 'progress',
+    'progress_enabled', 'PROGRESS_ENVIRONMENT_VARIABLE', 'load_yaml', 'YAMLError',
+]

@@ -1,0 +1,184 @@
+"""A rig campaign prepared for diagnosis, and its model runs executed in this process or forked workers."""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..physics.design import Design
+from ..physics.effects import Effect
+from ..rig import features as feature_module
+from ..rig.features import SIGNAL_CHANNELS
+from .discrepancy import FeatureLayout, NoiseModel, noise_model
+from .errors import DiagnosisError
+from .simulation import CampaignSimulator, RunProcessor, SimulatedRun
+
+# Relative model error (standard deviation) by feature kind: line amplitudes,
+# band powers (as amplitudes), the broadband RMS and kurtosis. With their true
+# parameters and effect the model reproduces the reference campaigns' lines to
+# well under 1 % (a few per cent for lines near the noise floor); 3 % leaves
+# room for an independent rig without hiding a friction-sized change.
+DEFAULT_MODEL_ERROR: dict[str, float] = {"line": 0.03, "band": 0.05, "rms": 0.03, "kurtosis": 0.05}
+
+#: Options of the feature processing (as :func:`uqgear.rig.features.extract_features`).
+FEATURE_OPTIONS: dict[str, Any] = {"n_harmonics": 3, "n_sidebands": 3, "n_shaft_orders": 3, "n_motor_lines": 2,
+                                   "low_band": (2.0, 80.0), "window": "hann"}
+
+
+@dataclass
+class RigCase:
+    """A rig campaign prepared for diagnosis: features, noise, processing and simulator."""
+
+    rig: xr.Dataset
+    design: Design
+    channels: tuple[str, ...]
+    speeds: np.ndarray
+    drive_torques: np.ndarray
+    adhesion_lower: np.ndarray
+    adhesion_upper: np.ndarray
+    fs: float
+    size: int
+    processors: list[RunProcessor]
+    layout: FeatureLayout
+    observed: np.ndarray          # (n_op, n_channel, F) compared features
+    observed_all: np.ndarray      # (n_op, n_channel, all features)
+    noise_std: np.ndarray         # (n_op, n_channel)
+    noise: list[NoiseModel]
+    usable: np.ndarray            # (n_op, n_channel)
+    simulator: CampaignSimulator
+    model_error: dict[str, float]
+    executor: "RunExecutor | None" = None
+
+    @property
+    def n_op(self) -> int:
+        return int(self.speeds.size)
+
+    def mask(self) -> np.ndarray:
+        """Features that enter the comparison: usable runs and finite rig features."""
+        return np.isfinite(self.observed) & self.usable[..., None]
+
+    def execute(self, tasks: Sequence["RunTask"]) -> list[tuple[np.ndarray, bool]]:
+        """Simulate and reduce runs (through the executor when one is attached)."""
+        if self.executor is not None:
+            return self.executor.map(tasks)
+        return [execute_run(self, task) for task in tasks]
+
+
+def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequence,
+                 model_error: Mapping[str, float] | None = None, steps_per_mode: int = 24) -> RigCase:
+    """Features, noise models, processors and simulator of a validated rig Dataset."""
+    errors = dict(DEFAULT_MODEL_ERROR)
+    if model_error is not None:
+        unknown = sorted(set(model_error) - set(errors))
+        if unknown:
+            raise DiagnosisError(f"model_error.{unknown[0]}: unknown feature kind; expected {', '.join(errors)}")
+        for key, value in model_error.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < 1.0:
+                raise DiagnosisError(f"model_error.{key}: expected a relative error in [0, 1); got {value!r}")
+            errors[key] = float(value)
+    channels = tuple(name for name in SIGNAL_CHANNELS if name in rig.data_vars)
+    fs = feature_module.sampling_rate(rig["time"].values, where="rig data: time")
+    size = int(rig.sizes["time"])
+    options = dict(FEATURE_OPTIONS, band_limit=feature_module.DEFAULT_BAND_FRACTION * fs)
+    speeds = np.asarray(rig["pinion_speed"].values, dtype=float)
+    processors: list[RunProcessor] = []
+    cache: dict[float, RunProcessor] = {}
+    for speed in speeds:
+        if float(speed) not in cache:
+            cache[float(speed)] = RunProcessor(design, float(speed), fs, size, options)
+        processors.append(cache[float(speed)])
+    layout = FeatureLayout.from_processor(processors[0])
+    observed_all = np.stack([np.stack([processors[op].features(np.asarray(rig[channel].values[op], dtype=float)[None])[0]
+                                       for channel in channels]) for op in range(speeds.size)])
+    noise_column = processors[0].columns["noise_std"]
+    noise_std = observed_all[..., noise_column]
+    usable = np.isfinite(observed_all).any(axis=-1) & np.isfinite(noise_std) & (noise_std > 0)
+    rng = np.random.default_rng(seed)
+    noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
+    noise = [noise_by_speed[float(speed)] for speed in speeds]
+    simulator = CampaignSimulator(design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode)
+    return RigCase(rig=rig, design=design, channels=channels, speeds=speeds,
+                   drive_torques=np.asarray(rig["drive_torque"].values, dtype=float),
+                   adhesion_lower=np.asarray(rig["adhesion_torque_lower"].values, dtype=float),
+                   adhesion_upper=np.asarray(rig["adhesion_torque_upper"].values, dtype=float),
+                   fs=fs, size=size, processors=processors, layout=layout,
+                   observed=observed_all[..., layout.columns], observed_all=observed_all, noise_std=noise_std,
+                   noise=noise, usable=usable, simulator=simulator, model_error=errors)
+
+
+@dataclass(frozen=True)
+class RunTask:
+    """One run to simulate and reduce to features: all a worker process needs besides the case."""
+
+    op: int
+    design: Design
+    mesh_stiffness_scale: float
+    adhesion_torque: float
+    effects: tuple[Effect, ...]
+    periodicity: str
+
+
+def simulate_task(case: RigCase, task: RunTask) -> SimulatedRun:
+    """The model records of a run on the rig's time grid."""
+    return case.simulator.run(task.op, task.design, task.mesh_stiffness_scale, task.adhesion_torque, task.effects,
+                              task.periodicity)
+
+
+def execute_run(case: RigCase, task: RunTask) -> tuple[np.ndarray, bool]:
+    """Simulate a run and reduce its records with the rig's processing: (n_channel, all features), periodic."""
+    run = simulate_task(case, task)
+    stacked = np.stack([run.records[channel] for channel in case.channels])
+    return case.processors[task.op].model_features(stacked), run.periodic
+
+
+# The case a forked worker process inherits from its parent (set just before
+# the pool is created): the processors hold large least-squares bases that
+# are cheaper to share by fork than to pickle.
+_INHERITED_CASE: RigCase | None = None
+
+
+def _worker_execute(task: RunTask) -> tuple[np.ndarray, bool]:
+    assert _INHERITED_CASE is not None, "worker started without a case"  # internal invariant, not user input
+    return execute_run(_INHERITED_CASE, task)
+
+
+class RunExecutor:
+    """Runs :class:`RunTask` lists sequentially or over forked worker processes.
+
+    Parameters
+    ----------
+    case : RigCase
+    workers : int
+        Worker processes (1: in this process). Needs the ``fork`` start
+        method; elsewhere runs stay in this process.
+    """
+
+    def __init__(self, case: RigCase, workers: int = 1) -> None:
+        global _INHERITED_CASE
+        self.case = case
+        self.pool = None
+        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+            _INHERITED_CASE = case
+            try:
+                self.pool = multiprocessing.get_context("fork").Pool(workers)
+            finally:
+                _INHERITED_CASE = None
+        self.workers = workers if self.pool is not None else 1
+
+    def map(self, tasks: Sequence[RunTask]) -> list[tuple[np.ndarray, bool]]:
+        if self.pool is None or len(tasks) < 2:
+            return [execute_run(self.case, task) for task in tasks]
+        chunk = max(1, len(tasks) // (4 * self.workers))
+        return self.pool.map(_worker_execute, tasks, chunksize=chunk)
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.close()
+            self.pool.join()
+            self.pool = None
+

@@ -1,0 +1,390 @@
+"""Robust least-squares fits of the nominal model and of the nominal model plus one candidate effect."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+
+from .candidates import Candidate, ParameterSpec, nominal_parameters
+from .case import RigCase, RunTask
+from .discrepancy import standardised_discrepancy
+
+# Feature kinds the fits use (RMS and kurtosis enter the gap map only).
+_FITTED_KINDS = ("line", "band")
+# Robust (Cauchy) loss of the fits: quadratic to about this |z|, then logarithmic.
+_LOSS_SCALE = 3.0
+# Finite-difference step in optimiser units (prior standard deviations or effect units).
+_DIFFERENCE_STEP = 0.02
+
+
+class FitProblem:
+    """Nominal model plus at most one candidate effect, as a function of an optimiser vector.
+
+    The vector holds the global parameters (nominal ones, then the effect's)
+    in optimiser units (:class:`ParameterSpec`), then the position of each
+    run's T2 inside its interval (0 at the lower, 1 at the upper bound).
+    """
+
+    def __init__(self, case: RigCase, candidate: Candidate | None) -> None:
+        self.case = case
+        self.candidate = candidate
+        self.specs: list[ParameterSpec] = nominal_parameters(case.design) + list(candidate.fitted if candidate else [])
+        self.n_global = len(self.specs)
+        self.size = self.n_global + case.n_op
+        # RMS and kurtosis sum up everything, also what the model class cannot produce; fitted to
+        # them the nominal parameters would trade mesh-harmonic accuracy for the unmodelled part.
+        fitted_kind = np.array([kind in _FITTED_KINDS for kind in case.layout.kinds])
+        self.mask = case.mask() & fitted_kind
+        self.periodicity = candidate.periodicity if candidate else "mesh"
+        lower = [spec.bounds()[0] for spec in self.specs] + [0.0] * case.n_op
+        upper = [spec.bounds()[1] for spec in self.specs] + [1.0] * case.n_op
+        self.lower = np.array(lower)
+        self.upper = np.array(upper)
+        self.prior_index = np.array([i for i, spec in enumerate(self.specs) if spec.prior], dtype=int)
+        self._cache: dict[tuple, tuple[np.ndarray, bool]] = {}
+        self.evaluations = 0
+
+    # -- vectors
+    def vector(self, values: Mapping[str, float], t2_position: Sequence[float] | float = 0.5) -> np.ndarray:
+        """Optimiser vector from natural values (missing globals at their centres)."""
+        v = np.zeros(self.size)
+        for i, spec in enumerate(self.specs):
+            if spec.name in values:
+                v[i] = spec.to_optimiser(float(values[spec.name]))
+        v[self.n_global:] = np.broadcast_to(np.asarray(t2_position, dtype=float), (self.case.n_op,))
+        return np.clip(v, self.lower, self.upper)
+
+    def values(self, v: np.ndarray) -> dict[str, float]:
+        """Natural values of the global parameters."""
+        return {spec.name: spec.from_optimiser(float(v[i])) for i, spec in enumerate(self.specs)}
+
+    def adhesion_torques(self, v: np.ndarray) -> np.ndarray:
+        position = np.clip(v[self.n_global:], 0.0, 1.0)
+        return self.case.adhesion_lower + position * (self.case.adhesion_upper - self.case.adhesion_lower)
+
+    # -- model features
+    def run_task(self, v: np.ndarray, op: int) -> "RunTask":
+        """The simulation of run ``op`` at optimiser vector ``v``."""
+        values = self.values(v)
+        design = self.case.design.replace(zeta_mesh=values["zeta_mesh"], ste_amplitude=values["ste_amplitude"],
+                                          k1=values["k1"], k2=values["k2"])
+        effects = (self.candidate.make(values),) if self.candidate else ()
+        return RunTask(op, design, values["mesh_stiffness_scale"], float(self.adhesion_torques(v)[op]), effects,
+                       self.periodicity)
+
+    def model_features(self, vectors: Sequence[np.ndarray], ops: Sequence[Sequence[int]] | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free model features (V, n_op, n_channel, all features), NaN for runs not asked.
+
+        Returns the features and whether each run's response was periodic
+        (V, n_op). Runs already simulated for the same parameters come from a
+        cache; the others are simulated together (in worker processes when
+        the case has them).
+        """
+        case = self.case
+        n_all = case.observed_all.shape[-1]
+        out = np.full((len(vectors), case.n_op, len(case.channels), n_all), np.nan)
+        periodic = np.zeros((len(vectors), case.n_op), dtype=bool)
+        tasks: list[RunTask] = []
+        where: list[tuple[int, int, tuple]] = []
+        for index, v in enumerate(vectors):
+            for op in (range(case.n_op) if ops is None else ops[index]):
+                key = (op, float(v[self.n_global + op]), *np.round(v[:self.n_global], 12))
+                if key in self._cache:
+                    out[index, op], periodic[index, op] = self._cache[key]
+                    continue
+                tasks.append(self.run_task(v, op))
+                where.append((index, op, key))
+        for (index, op, key), (values, is_periodic) in zip(where, case.execute(tasks)):
+            self.evaluations += 1
+            out[index, op], periodic[index, op] = values, is_periodic
+            self._cache[key] = (values, is_periodic)
+        return out, periodic
+
+    def discrepancy(self, model_all: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Standardised discrepancies and scales (..., n_op, n_channel, F) of model features."""
+        case = self.case
+        return standardised_discrepancy(case.observed, model_all[..., case.layout.columns], case.noise_std,
+                                        case.noise, case.layout, case.model_error)
+
+    def residual_vector(self, z: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Feature residuals (masked) followed by the prior residuals."""
+        values = np.where(np.isfinite(z), z, 0.0)[self.mask]
+        return np.concatenate([values, v[self.prior_index]])
+
+    def residuals(self, v: np.ndarray) -> np.ndarray:
+        model, _ = self.model_features([v])
+        z, _ = self.discrepancy(model[0])
+        return self.residual_vector(z, v)
+
+    def jacobian(self, v: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """Forward-difference Jacobian of :meth:`residuals` in the ``free`` entries of ``v``.
+
+        All perturbations are simulated in one batch. Each run depends only
+        on its own T2, so one perturbation of all T2 positions at once gives
+        every run's T2 column (the positions are free all together or not at all).
+        """
+        free_index = np.flatnonzero(free)
+        global_index = free_index[free_index < self.n_global]
+        t2_free = bool(np.any(free_index >= self.n_global))
+        vectors = [v]
+        steps = []
+        for i in global_index:
+            step = _DIFFERENCE_STEP if v[i] + _DIFFERENCE_STEP <= self.upper[i] else -_DIFFERENCE_STEP
+            shifted = v.copy()
+            shifted[i] += step
+            vectors.append(shifted)
+            steps.append(step)
+        if t2_free:
+            t2_step = np.where(v[self.n_global:] + _DIFFERENCE_STEP <= 1.0, _DIFFERENCE_STEP, -_DIFFERENCE_STEP)
+            shifted = v.copy()
+            shifted[self.n_global:] += t2_step
+            vectors.append(shifted)
+        model, _ = self.model_features(vectors)
+        z, _ = self.discrepancy(model)
+        base = self.residual_vector(z[0], v)
+        columns = {}
+        for k, (i, step) in enumerate(zip(global_index, steps), start=1):
+            columns[int(i)] = (self.residual_vector(z[k], vectors[k]) - base) / step
+        if t2_free:
+            change = self.residual_vector(z[-1], vectors[-1]) - base
+            rows_of = self.op_of_row()
+            for op in range(self.case.n_op):
+                column = np.zeros(base.size)
+                rows = rows_of == op
+                column[rows] = change[rows] / t2_step[op]
+                columns[self.n_global + op] = column
+        return np.stack([columns[int(i)] for i in free_index], axis=1)
+
+    def op_of_row(self) -> np.ndarray:
+        """Run index of each residual row (-1 for priors)."""
+        shape = self.mask.shape
+        ops = np.broadcast_to(np.arange(shape[0])[:, None, None], shape)[self.mask]
+        return np.concatenate([ops, np.full(self.prior_index.size, -1)])
+
+
+def robust_cost(residuals: np.ndarray) -> float:
+    """The fits' objective: the Cauchy loss 0.5 c^2 sum log(1 + (r/c)^2), c = :data:`_LOSS_SCALE`.
+
+    A redescending loss: a feature far beyond what the model class can
+    produce (an unmodelled line thousands of sigmas high) loses its pull on
+    the parameters instead of bending them towards it through tiny slopes.
+    """
+    s = (np.asarray(residuals) / _LOSS_SCALE) ** 2
+    return float(0.5 * _LOSS_SCALE ** 2 * np.sum(np.log1p(s)))
+
+
+def robust_weights(residuals: np.ndarray) -> np.ndarray:
+    """IRLS weights of the Cauchy loss: 1 / (1 + (r/c)^2)."""
+    return 1.0 / (1.0 + (np.asarray(residuals) / _LOSS_SCALE) ** 2)
+
+
+@dataclass
+class FitResult:
+    """A fitted model: optimum, residuals and Jacobian there, cost and bookkeeping.
+
+    ``free`` marks the entries of the optimiser vector that were fitted (the
+    others stayed at their starting values); ``jacobian`` has one column per
+    free entry, in order.
+    """
+
+    problem: FitProblem
+    vector: np.ndarray
+    free: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    z: np.ndarray
+    scale: np.ndarray
+    model: np.ndarray
+    periodic: np.ndarray
+    cost: float
+    evaluations: int
+    seconds: float
+    converged: bool
+    message: str
+
+    @property
+    def values(self) -> dict[str, float]:
+        return self.problem.values(self.vector)
+
+    @property
+    def adhesion_torques(self) -> np.ndarray:
+        return self.problem.adhesion_torques(self.vector)
+
+    def after(self, earlier: "FitResult") -> "FitResult":
+        """This fit, counting the evaluations and time of the earlier fit it started from."""
+        self.evaluations += earlier.evaluations
+        self.seconds += earlier.seconds
+        return self
+
+
+def fit(problem: FitProblem, starts: Sequence[np.ndarray], *, free: np.ndarray | None = None,
+        max_evaluations: int = 30, loss: str = "cauchy", rows: np.ndarray | None = None,
+        tolerance: float = 1e-4) -> FitResult:
+    """Robust least-squares fit from the best of several starting vectors.
+
+    All starts are simulated in one batch; the one with the lowest robust
+    cost is refined with scipy's trust-region reflective least squares
+    (bounds, Cauchy loss), the Jacobian from batched finite differences.
+
+    Parameters
+    ----------
+    problem : FitProblem
+    starts : sequence of ndarray
+        Full optimiser vectors.
+    free : ndarray of bool, optional
+        Entries to fit (default all); the T2 positions are free all together or not at all.
+    max_evaluations : int
+        Cost evaluations allowed to the least-squares solver.
+    loss : {"cauchy", "soft_l1"}
+        Robust loss of the solver (the result's cost is always the Cauchy one).
+    rows : ndarray of bool, optional
+        Residual rows the solver sees (default all); the result holds all rows.
+    tolerance : float
+        Relative tolerance on the cost and the step (scipy's ftol and xtol).
+    """
+    started = time.perf_counter()
+    first = problem.evaluations
+    free = np.ones(problem.size, dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    model, _ = problem.model_features(list(starts))
+    selected = slice(None) if rows is None else np.asarray(rows, dtype=bool)
+    costs = []
+    for index, v in enumerate(starts):
+        z, _ = problem.discrepancy(model[index])
+        costs.append(robust_cost(problem.residual_vector(z, v)[selected]))
+    base = np.asarray(starts[int(np.argmin(costs))], dtype=float)
+
+    def expand(u: np.ndarray) -> np.ndarray:
+        v = base.copy()
+        v[free] = u
+        return v
+
+    result = scipy.optimize.least_squares(lambda u: problem.residuals(expand(u))[selected], base[free],
+                                          jac=lambda u: problem.jacobian(expand(u), free)[selected],
+                                          bounds=(problem.lower[free], problem.upper[free]), method="trf",
+                                          loss=loss, f_scale=_LOSS_SCALE, x_scale=1.0, max_nfev=max_evaluations,
+                                          xtol=tolerance, ftol=tolerance, gtol=1e-8)
+    v = np.clip(expand(result.x), problem.lower, problem.upper)
+    model, periodic = problem.model_features([v])
+    z, scale = problem.discrepancy(model[0])
+    residuals = problem.residual_vector(z, v)
+    jacobian = problem.jacobian(v, free)
+    return FitResult(problem=problem, vector=v, free=free, residuals=residuals, jacobian=jacobian, z=z, scale=scale,
+                     model=model[0], periodic=periodic[0], cost=robust_cost(residuals),
+                     evaluations=problem.evaluations - first, seconds=time.perf_counter() - started,
+                     converged=bool(result.status > 0), message=str(result.message))
+
+
+# Positions in its interval at which each run's T2 is tried by :func:`profile_adhesion`.
+_T2_GRID = np.linspace(0.0, 1.0, 9)
+
+
+def profile_adhesion(problem: FitProblem, vector: np.ndarray, ops: Sequence[int] | None = None) -> np.ndarray:
+    """Each run's T2 set to the best of a grid over its interval, other parameters fixed.
+
+    T2 moves a run across regimes (contact loss, quasi-periodic motion near
+    the mesh resonance), where a feature can change tenfold within a kN m
+    and be flat elsewhere: a local fit started on the wrong branch never
+    finds the right one. Each run depends on its own T2 only, so all runs'
+    grids are one batch; the run's Cauchy cost on its fitted features picks
+    the position. Returns the updated vector.
+    """
+    case = problem.case
+    ops = list(range(case.n_op)) if ops is None else list(ops)
+    vectors = []
+    for position in _T2_GRID:
+        shifted = np.array(vector, dtype=float)
+        shifted[problem.n_global + np.array(ops, dtype=int)] = position
+        vectors.append(shifted)
+    model, _ = problem.model_features(vectors, [ops] * len(vectors))
+    z, _ = problem.discrepancy(model)
+    result = np.array(vector, dtype=float)
+    for op in ops:
+        costs = [robust_cost(np.where(np.isfinite(z[k, op]), z[k, op], 0.0)[problem.mask[op]])
+                 for k in range(_T2_GRID.size)]
+        result[problem.n_global + op] = _T2_GRID[int(np.argmin(costs))]
+    return result
+
+
+def fit_nominal(case: RigCase, *, max_evaluations: int = 30, start: Mapping[str, float] | None = None,
+                positions: np.ndarray | None = None) -> FitResult:
+    """Fit the nominal model (no effect).
+
+    From the design's values and T2 mid-interval, two stages: a soft-L1
+    fit to the mesh harmonics alone (what the nominal model class produces,
+    a nearly convex problem from there), then the Cauchy fit to all fitted
+    features (the redescending loss alone can stall far from the optimum).
+    From a calibration (``start``: parameter values, ``positions``: each
+    run's T2 position in its interval) only the second stage runs. Before
+    the second stage every run's T2 is profiled on a grid (:func:`profile_adhesion`).
+    """
+    problem = FitProblem(case, None)
+    if start is not None:
+        begin = problem.vector(start, 0.5 if positions is None else positions)
+        return fit(problem, [profile_adhesion(problem, begin), begin], max_evaluations=max_evaluations,
+                   tolerance=1e-3)
+    families = np.broadcast_to(np.array(case.layout.families), problem.mask.shape)[problem.mask]
+    rows = np.concatenate([families == "mesh_harmonic", np.ones(problem.prior_index.size, dtype=bool)])
+    first = fit(problem, [problem.vector({}, 0.5)], max_evaluations=max_evaluations, loss="soft_l1", rows=rows,
+                tolerance=1e-3)
+    second = fit(problem, [profile_adhesion(problem, first.vector), first.vector], max_evaluations=max_evaluations,
+                 tolerance=1e-3)
+    return second.after(first)
+
+
+def fit_candidate(case: RigCase, candidate: Candidate, nominal: FitResult, *, full: bool,
+                  max_evaluations: int = 20, start: FitResult | None = None) -> FitResult:
+    """Fit nominal + one effect, warm-started from the nominal fit and the candidate's signature grid.
+
+    Parameters
+    ----------
+    case : RigCase
+    candidate : Candidate
+    nominal : FitResult
+        The nominal fit (its parameters and T2 positions are the start).
+    full : bool
+        Fit all parameters; otherwise only the effect's (the screening fit).
+    max_evaluations : int
+        Cost evaluations allowed to the least-squares solver.
+    start : FitResult, optional
+        A screening fit of the same candidate to start from instead of the grid.
+    """
+    problem = FitProblem(case, candidate)
+    positions = nominal.vector[nominal.problem.n_global:]
+    if start is not None:
+        starts = [problem.vector(start.values, start.vector[start.problem.n_global:])]
+    else:
+        starts = [problem.vector({**nominal.values, **point}, positions) for point in candidate.starts]
+    free = np.ones(problem.size, dtype=bool)
+    if full:
+        # As for the nominal fit: the redescending loss alone can leave a few features of one run
+        # (a sensitive quasi-periodic one) as "outliers" far from the optimum; a soft-L1 stage
+        # first, then the Cauchy fit from the better (in Cauchy cost) of its result and the start.
+        # An effect that changes every run (clearance in both bearings) drags the nominal fit far
+        # from the truth; the effect's values on the design's own parameters are a start too.
+        effect_only = {name: value for name, value in problem.values(starts[0]).items() if "." in name}
+        centred = [problem.vector(values, positions) for values in (effect_only, *candidate.starts)]
+        starts = [profile_adhesion(problem, starts[0]), profile_adhesion(problem, centred[0]), *starts, *centred[1:]]
+        first = fit(problem, starts, free=free, max_evaluations=max_evaluations, loss="soft_l1", tolerance=1e-3)
+        second = fit(problem, [first.vector, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
+        return second.after(first)
+    free[:] = False
+    free[len(nominal_parameters(case.design)):problem.n_global] = True
+    result = fit(problem, starts, free=free, max_evaluations=max_evaluations)
+    # Held-out predictions must leave each run out of the nominal parameters too, as the
+    # nominal model's do: leave_one_out needs the Jacobian in all parameters. The nominal
+    # fit's columns stand in for the nominal parameters and T2 (exact for a small effect;
+    # a strong one is refitted in full anyway).
+    n_nominal = len(nominal_parameters(case.design))
+    if nominal.jacobian.shape[1] == n_nominal + case.n_op and nominal.jacobian.shape[0] == result.jacobian.shape[0]:
+        result.jacobian = np.concatenate([nominal.jacobian[:, :n_nominal], result.jacobian,
+                                          nominal.jacobian[:, n_nominal:]], axis=1)
+    else:
+        result.jacobian = problem.jacobian(result.vector, np.ones(problem.size, dtype=bool))
+    result.free = np.ones(problem.size, dtype=bool)
+    return result
+

@@ -1,0 +1,227 @@
+"""What a diagnosis hands back: the JSON summary, the Dataset of gap maps and scores, held-out spectra."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import scipy.signal
+import xarray as xr
+
+from ..rig.features import FEATURE_FAMILIES
+from .case import RigCase, simulate_task
+from .pipeline import DiagnosisResult
+from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
+from .signatures import amplitude_spectrum
+from .verdict import NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, Decision
+
+
+def _held_spectra(result: DiagnosisResult, ops: Sequence[int]) -> xr.Dataset:
+    """Amplitude spectra of the rig and of the held-out predictions (nominal, best effect) for some runs."""
+    case = result.case
+    best = result.best
+    sources = ["rig", "nominal"] + (["with_effect"] if best is not None else [])
+    taper = scipy.signal.get_window("hann", case.size)
+    frequency = np.fft.rfftfreq(case.size, 1.0 / case.fs)
+    top = min(case.processors[0].limit, 3.6 * case.design.z1 * float(case.speeds[list(ops)].max()) / 60.0)
+    keep = frequency <= top
+    values = np.full((len(ops), len(sources), len(case.channels), int(keep.sum())), np.nan)
+
+    def spectrum(record: np.ndarray) -> np.ndarray:
+        return amplitude_spectrum(record, taper)[keep]
+
+    for i, op in enumerate(ops):
+        for c, channel in enumerate(case.channels):
+            if case.usable[op, c]:
+                values[i, 0, c] = spectrum(case.rig[channel].values[op])
+        fits = [(1, result.nominal.problem, result.nominal_held.vectors[op])]
+        if best is not None:
+            fits.append((2, best.fit.problem, best.held.vectors[op]))
+        for source, problem, vector in fits:
+            run = simulate_task(case, problem.run_task(vector, op))
+            for c, channel in enumerate(case.channels):
+                values[i, source, c] = spectrum(run.records[channel])
+    # mean amplitude of the rig's white noise in a bin: s sqrt(pi/2), s its per-quadrature spread
+    floor = (case.noise_std[list(ops)] * math.sqrt(2.0 * np.sum(taper ** 2)) / taper.sum()
+             * math.sqrt(math.pi / 2.0))
+    return xr.Dataset(
+        {"amplitude_spectrum": (("spectrum_op", "source", "channel", "frequency"), values,
+                                {"long_name": "amplitude spectrum (Hann window), held-out prediction for the models",
+                                 "units": "channel units"}),
+         "spectrum_noise_floor": (("spectrum_op", "channel"), floor,
+                                  {"long_name": "mean amplitude of the rig's white noise in one bin",
+                                   "units": "channel units"})},
+        coords={"spectrum_op": ("spectrum_op", np.asarray(ops, dtype=int), {"long_name": "run index"}),
+                "source": ("source", sources), "channel": ("channel", list(case.channels)),
+                "frequency": ("frequency", frequency[keep], {"units": "Hz"})})
+
+
+def _family_map(z: np.ndarray, case: RigCase) -> np.ndarray:
+    """Excess RMS (capped) standardised discrepancy per run, channel and feature family."""
+    families = np.array(case.layout.families)
+    out = np.full((case.n_op, len(case.channels), len(FEATURE_FAMILIES)), np.nan)
+    for k, family in enumerate(FEATURE_FAMILIES):
+        chosen = families == family
+        if not chosen.any():
+            continue
+        squares = capped_squares(z[:, :, chosen])
+        with np.errstate(invalid="ignore"):
+            mean = np.nanmean(np.where(np.isfinite(squares), squares, np.nan), axis=-1)
+        out[:, :, k] = np.sqrt(np.maximum(mean - _GAP_NOISE_LEVEL, 0.0))
+    return out
+
+
+def result_dataset(result: DiagnosisResult, spectra: xr.Dataset | None = None) -> xr.Dataset:
+    """The gap maps and scores as a Dataset (written to ``diagnosis.nc``)."""
+    case = result.case
+    data = {**_gap_variables(result), **_score_variables(result.scores)}
+    ds = xr.Dataset(data, coords=_coordinates(case, result.scores))
+    if spectra is not None:
+        ds = ds.merge(spectra)
+    ds.attrs.update(title="uqgear sim-to-real gap diagnosis", verdict=result.verdict, reason=result.reason,
+                    gap_metric=GAP_METRIC, nominal_gap=result.nominal_gap,
+                    model_error=json.dumps(case.model_error), effects_considered=json.dumps(list(result.effects)),
+                    nominal_parameters=json.dumps(result.nominal.values))
+    return ds
+
+
+def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
+    """Features, discrepancies and gap maps of the nominal model (and of the best effect) per run and channel."""
+    case = result.case
+    layout = case.layout
+    best = result.best
+    dims = ("op", "channel", "feature")
+    data: dict[str, Any] = {
+        "observed": (dims, case.observed, {"long_name": "rig features", "units": "channel units"}),
+        "nominal_model": (dims, result.nominal.model[..., layout.columns],
+                          {"long_name": "nominal model features (fitted to all runs)", "units": "channel units"}),
+        "nominal_heldout_model": (dims, result.nominal_held.model[..., layout.columns],
+                                  {"long_name": "nominal model features, run left out of the fit",
+                                   "units": "channel units"}),
+        "z_nominal": (dims, result.nominal.z, {"long_name": "standardised discrepancy, nominal fit", "units": "1"}),
+        "z_nominal_heldout": (dims, result.nominal_held.z,
+                              {"long_name": "standardised discrepancy on held-out runs, nominal model", "units": "1"}),
+        "gap_map_nominal": (("op", "channel", "family"), _family_map(result.nominal_held.z, case),
+                            {"long_name": "excess RMS standardised discrepancy (capped at 10) per feature family, "
+                                          "held-out runs, nominal model", "units": "1"}),
+        "noise_std": (("op", "channel"), case.noise_std, {"long_name": "white-noise level of the rig records",
+                                                          "units": "channel units"}),
+        "nominal_adhesion_torque": (("op",), result.nominal.adhesion_torques,
+                                    {"long_name": "adhesion torque T2 of the nominal fit", "units": "N m"}),
+        "nominal_periodic": (("op",), result.nominal.periodic.astype(np.int8),
+                             {"long_name": "nominal model's steady response repeats (1) or not (0)", "units": "1"}),
+    }
+    if best is not None:
+        data["with_effect_heldout_model"] = (dims, best.held.model[..., layout.columns],
+                                             {"long_name": f"model with {best.label}, run left out of the fit",
+                                              "units": "channel units"})
+        data["z_with_effect_heldout"] = (dims, best.held.z, {
+            "long_name": f"standardised discrepancy on held-out runs, model with {best.label}", "units": "1"})
+        data["gap_map_with_effect"] = (("op", "channel", "family"), _family_map(best.held.z, case), {
+            "long_name": f"excess RMS standardised discrepancy per feature family, held-out runs, with {best.label}",
+            "units": "1"})
+    return data
+
+
+def _score_variables(scores: Sequence[CandidateScore]) -> dict[str, Any]:
+    """Held-out scores of the candidates, best first."""
+    return {
+        "score": (("candidate",), [s.score for s in scores],
+                  {"long_name": "held-out log predictive density gain over nominal minus penalty", "units": "nat"}),
+        "delta_log_density": (("candidate",), [s.delta_log_density for s in scores],
+                              {"long_name": "held-out log predictive density gain over nominal", "units": "nat"}),
+        "delta_log_density_se": (("candidate",), [s.standard_error for s in scores],
+                                 {"long_name": "standard error of the gain (over runs)", "units": "nat"}),
+        "gap_with_effect": (("candidate",), [s.gap for s in scores],
+                            {"long_name": "held-out gap with the effect", "units": "1"}),
+        "shrink_fraction": (("candidate",), [s.shrink for s in scores],
+                            {"long_name": "1 - gap with effect / nominal gap, held-out runs", "units": "1"}),
+        "shrink_fraction_bounds": (("candidate", "bound"), [[s.shrink_low, s.shrink_high] for s in scores],
+                                   {"long_name": "5 % and 95 % bootstrap quantiles (runs resampled)",
+                                    "units": "1"}),
+    }
+
+
+def _coordinates(case: RigCase, scores: Sequence[CandidateScore]) -> dict[str, Any]:
+    """Coordinates of :func:`result_dataset`: runs, channels, features, families, candidates."""
+    layout = case.layout
+    return {
+        "op": ("op", np.arange(case.n_op)),
+        "pinion_speed": ("op", case.speeds, {"units": "rpm"}),
+        "drive_torque": ("op", case.drive_torques, {"units": "N m"}),
+        "channel": ("channel", list(case.channels)),
+        "feature": ("feature", list(layout.names)),
+        "feature_family": ("feature", list(layout.families)),
+        "feature_kind": ("feature", list(layout.kinds)),
+        "family": ("family", list(FEATURE_FAMILIES)),
+        "candidate": ("candidate", [s.label for s in scores]),
+        "candidate_effect": ("candidate", [s.effect for s in scores]),
+        "bound": ("bound", ["q05", "q95"]),
+    }
+
+
+def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Mapping[str, float]) -> dict[str, Any]:
+    """The JSON summary of a diagnosis (``diagnosis.json``)."""
+    case = result.case
+    best = result.best
+    named = best if best is not None and best.effect == result.verdict else None
+    chosen = named if named is not None else best
+    gap = {
+        "metric": GAP_METRIC,
+        "baseline": result.nominal_gap,
+        "with_effect": chosen.gap if chosen is not None else None,
+        "effect": chosen.effect if chosen is not None else None,
+        "effect_named": named is not None,
+        "shrink_fraction": chosen.shrink if chosen is not None else None,
+        "shrink_interval": [chosen.shrink_low, chosen.shrink_high] if chosen is not None else None,
+        "evaluated_on": {
+            "scheme": "leave-one-operating-point-out: each run predicted by the models fitted without it",
+            "ops": list(range(case.n_op)),
+            "pinion_speed": [float(v) for v in case.speeds],
+            "drive_torque": [float(v) for v in case.drive_torques],
+        },
+        "noise_threshold": NOISE_GAP_THRESHOLD,
+        "baseline_interval": [float(v) for v in result.nominal_gap_interval],
+    }
+    decision = result.decision or Decision(result.verdict, result.reason)
+    return {
+        "verdict": result.verdict,
+        "reason": result.reason,
+        "borderline": [dict(entry) for entry in decision.borderline],
+        "partial": decision.partial,
+        "remaining_gap": ({"value": decision.remaining_gap, "unexplained": True, "where": result.where}
+                          if decision.partial else None),
+        "gap": gap,
+        "where": result.where,
+        "families": result.families,
+        "frequency_locked_lines": result.locked_lines,
+        "ranking": result.ranking(),
+        "nominal": {"parameters": result.nominal.values,
+                    "adhesion_torque": [float(v) for v in result.nominal.adhesion_torques],
+                    "periodic_runs": [bool(v) for v in result.nominal.periodic],
+                    "converged": result.nominal.converged},
+        "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
+                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD},
+        "model_error": case.model_error,
+        "effects_considered": list(result.effects),
+        "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
+                "channels": list(case.channels)},
+        "seed": seed_text,
+        "timing_s": dict(timings),
+    }
+
+
+def _json_clean(value: Any) -> Any:
+    """Replace non-finite floats by None (JSON has no NaN)."""
+    if isinstance(value, float) or isinstance(value, np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _json_clean(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_clean(item) for item in value]
+    return value
+
+

@@ -1,0 +1,344 @@
+"""The diagnosis pipeline: fit the nominal model and every candidate effect, score them on held-out runs, decide.
+
+Sim-to-real gap diagnosis: where the model and the rig disagree, which
+unmodelled effect causes it, and how far the gap shrinks once it is added.
+
+Pipeline (docs/model.md section 6):
+
+1. **Features.** The rig's records are reduced to the features of
+   :mod:`uqgear.rig.features` (mesh harmonics, sideband families per shaft, shaft
+   and motor lines, a low-frequency band, RMS, kurtosis). The model's records
+   go through *the same* processing: each run is simulated (steady state after
+   a run-in), band-limited like the rig's anti-alias filter, resampled onto
+   the rig's time grid and fed to the same window-weighted line fit. A steady
+   response that repeats over a mesh period, a pinion or a gear revolution is
+   simulated over that period only and tiled (exact for a periodic
+   response); anything else over the full record.
+2. **Predictive distribution.** A feature of the rig is the model's value plus
+   sensor noise plus model error. A line amplitude is Rice distributed about
+   the model's amplitude with a per-quadrature spread from the record's white
+   noise floor (exact for the weighted least-squares fit) and a relative
+   model error; band powers add the noise power. The *standardised
+   discrepancy* of a feature is its probability integral transform mapped to
+   a standard normal, so it is N(0, 1) where the model is right, also for
+   lines at the noise floor (censoring is built in).
+3. **Fit.** The nominal model (mesh stiffness scale, mesh damping ratio, STE
+   amplitude, bearing stiffnesses; T2 of each run inside its interval) is fitted by
+   robust least squares on the standardised discrepancies with priors from
+   the nominal design (a Laplace approximation of its posterior): soft-L1 on
+   the mesh harmonics first, each run's T2 profiled on a grid (T2 can move a
+   run across a regime boundary), then a Cauchy loss on all line and band
+   features so that what the model class cannot produce loses its pull.
+   Every candidate effect is screened with its own parameters on top of the
+   nominal fit, from a start grid read off the data's signature (run-out
+   from the 1x TE line, stick-slip frequency from frequency-locked lines);
+   the best is refitted with all parameters. A calibration posterior
+   (``uqgear calibrate``) can give the nominal fit's start.
+4. **Held-out scoring.** Leave-one-operating-point-out predictions (one Newton
+   step from the full fit without that run, the held-out run's T2 profiled,
+   the prediction itself re-simulated) give the gap map on held-out runs, a
+   robust predictive density per candidate and the gap metric before and
+   after adding the effect.
+5. **Verdict.** ``none`` when the nominal model is within noise on held-out
+   runs; otherwise the best candidate when it clearly beats the nominal
+   model (predictive density gain beyond a penalty per extra parameter, a
+   gap that shrinks by at least half); otherwise ``unexplained``.
+
+This module holds the steps 3 to 5 together (:func:`run_diagnosis`); the
+pieces live in :mod:`.simulation` (step 1), :mod:`.discrepancy` (step 2),
+:mod:`.candidates`, :mod:`.case` and :mod:`.fitting` (step 3),
+:mod:`.scoring` (step 4) and :mod:`.verdict` (step 5). It does no
+plotting; :func:`uqgear.diagnosis.workflow.diagnose` writes ``diagnosis.json``,
+``diagnosis.nc`` (:mod:`.outputs`) and, through
+:mod:`uqgear.report.diagnosis_report`, ``report.html``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..physics.effects import EFFECTS
+from .candidates import candidates_for, nominal_parameters
+from .case import RigCase
+from .errors import DiagnosisError
+from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
+from .scoring import CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate
+from .signatures import frequency_locked_lines, signature_hints
+from .verdict import EFFECT_NAMES, Decision, decide, decide_verdict, family_character, where_gap
+
+#: Candidates promoted from the screening fit (effect parameters only) to a full fit.
+PROMOTED = 2
+
+
+@dataclass
+class DiagnosisResult:
+    """Everything a diagnosis found (see :func:`run_diagnosis`)."""
+
+    case: RigCase
+    nominal: FitResult
+    nominal_held: HeldOut
+    scores: list[CandidateScore]          # best variant per effect, ranked best first
+    all_scores: list[CandidateScore]      # every variant and stage
+    verdict: str
+    reason: str
+    nominal_gap: float
+    where: list[dict[str, Any]]
+    families: list[dict[str, Any]]
+    locked_lines: list[dict[str, Any]]
+    hints: dict[str, float]
+    effects: tuple[str, ...]
+    timings: dict[str, float]
+    decision: Decision | None = None
+    nominal_gap_interval: tuple[float, float] = (math.nan, math.nan)
+
+    @property
+    def best(self) -> CandidateScore | None:
+        return self.scores[0] if self.scores else None
+
+    def ranking(self) -> list[dict[str, Any]]:
+        """JSON-ready ranking, best first."""
+        return [{"effect": s.effect, "variant": s.label, "score": s.score, "delta_log_density": s.delta_log_density,
+                 "standard_error": s.standard_error, "penalty": s.penalty, "shrink_fraction": s.shrink,
+                 "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap,
+                 "effect_gain": s.effect_gain, "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
+
+
+def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:
+    if effects is None:
+        return EFFECT_NAMES
+    if isinstance(effects, str):
+        effects = [effects]
+    chosen = []
+    for name in effects:
+        if not isinstance(name, str) or name not in EFFECTS:
+            raise DiagnosisError(f"effects: {name!r} is not a library effect; expected one or more of "
+                                 f"{', '.join(EFFECT_NAMES)}")
+        if name not in chosen:
+            chosen.append(name)
+    if not chosen:
+        raise DiagnosisError(f"effects: expected at least one of {', '.join(EFFECT_NAMES)}; got none")
+    return tuple(chosen)
+
+
+def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, float], np.ndarray | None]:
+    """Starting values for the nominal fit from a calibration posterior (``posterior.nc`` of ``uqgear calibrate``).
+
+    Posterior medians of the parameters the diagnosis fits (and of the
+    backlash, which it keeps fixed: returned under ``backlash``), and each
+    run's T2 median as a position in its interval when the posterior has
+    one T2 per run of this campaign.
+
+    Raises
+    ------
+    DiagnosisError
+        Not a Dataset, or it holds none of the nominal parameters.
+    """
+    if not isinstance(posterior, xr.Dataset):
+        raise DiagnosisError(f"calibration: expected a posterior Dataset (posterior.nc of uqgear calibrate); "
+                             f"got {type(posterior).__name__}")
+    names = [spec.name for spec in nominal_parameters(case.design)] + ["backlash"]
+    start = {name: float(posterior[name].median()) for name in names if name in posterior.data_vars}
+    if not start:
+        raise DiagnosisError(f"calibration: the posterior has none of the parameters {', '.join(names)}")
+    positions = None
+    if "adhesion_torque" in posterior.data_vars and posterior["adhesion_torque"].sizes.get("op") == case.n_op:
+        other = [dim for dim in posterior["adhesion_torque"].dims if dim != "op"]
+        median = np.asarray(posterior["adhesion_torque"].median(dim=other).values, dtype=float)
+        width = np.maximum(case.adhesion_upper - case.adhesion_lower, 1e-12)
+        positions = np.clip((median - case.adhesion_lower) / width, 0.0, 1.0)
+    return start, positions
+
+
+
+# Full fits beyond the promoted ones while the gap stays unexplained (each costs about a screening).
+_EXTRA_FULL_FITS = 3
+# The nominal fit is restarted from a candidate's fit at most this many times.
+_NOMINAL_REFITS = 2
+# A candidate's nominal parameters must beat the nominal fit's robust cost by this much (about
+# nats) to count as evidence that the nominal fit stopped in a local optimum.
+_NOMINAL_MARGIN = 5.0
+
+
+def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult]) -> tuple[list[np.ndarray], list[float]]:
+    """The nominal model at each fit's nominal parameters and T2 (its effect off): vectors and robust costs."""
+    problem = nominal.problem
+    starts = [problem.vector({key: value for key, value in candidate.values.items() if "." not in key},
+                             candidate.vector[candidate.problem.n_global:]) for candidate in fits]
+    if not starts:
+        return [], []
+    model, _ = problem.model_features(starts)
+    return starts, [robust_cost(problem.residual_vector(problem.discrepancy(model[index])[0], v))
+                    for index, v in enumerate(starts)]
+
+
+def improved_nominal(nominal: FitResult, fits: Sequence[FitResult], *,
+                     margin: float = _NOMINAL_MARGIN) -> FitResult | None:
+    """A better nominal fit found through the candidates' full fits, or None.
+
+    Every candidate contains the nominal model (its effect at strength 0).
+    A full candidate fit refits the nominal parameters and T2 too; if the
+    nominal model alone, at those values, fits the data better than the
+    nominal fit did, the nominal fit had stopped in a local optimum (light
+    loads, with contact loss near the bearing modes, have several), and a
+    candidate would otherwise be credited with what is only the better
+    optimum. The nominal model is then refitted from the best such point.
+    """
+    problem = nominal.problem
+    starts, costs = effect_off_costs(nominal, fits)
+    if not starts:
+        return None
+    best = int(np.argmin(costs))
+    if costs[best] >= nominal.cost - margin:
+        return None
+    refit = fit(problem, [starts[best]], max_evaluations=30, tolerance=1e-3)
+    refit.after(nominal)
+    return refit if refit.cost < nominal.cost - margin else None
+
+
+def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, nominal_gap: float,
+                      effect_names: Sequence[str], hints: Mapping[str, float], rng: np.random.Generator,
+                      promoted: int, timings: dict[str, float]
+                      ) -> tuple[dict[str, CandidateScore], list[CandidateScore]]:
+    """Screen every candidate against the nominal fit, fit the best ones in full; best score per effect."""
+    clock = time.perf_counter()
+    screened: list[CandidateScore] = []
+    for name in effect_names:
+        for candidate in candidates_for(name, case.design, hints=hints):
+            result = fit_candidate(case, candidate, nominal, full=False, max_evaluations=6)
+            screened.append(score_candidate(result, leave_one_out(result), nominal_held, "screening", rng))
+    timings["screening"] += time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    best_per_effect: dict[str, CandidateScore] = {}
+    for entry in screened:
+        if entry.effect not in best_per_effect or entry.score > best_per_effect[entry.effect].score:
+            best_per_effect[entry.effect] = entry
+    order = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
+    all_scores = list(screened)
+    # the runner-up is refitted too unless the screening already puts it far behind
+    chosen = [entry for rank, entry in enumerate(order[:promoted])
+              if rank == 0 or (entry.score > 0 and entry.score >= 0.25 * order[0].score)]
+
+    def fit_in_full(entries: Sequence[CandidateScore]) -> None:
+        for entry in entries:
+            candidate = entry.fit.problem.candidate
+            result = fit_candidate(case, candidate, nominal, full=True, max_evaluations=12, start=entry.fit)
+            full = score_candidate(result, leave_one_out(result), nominal_held, "full", rng)
+            all_scores.append(full)
+            if full.score > best_per_effect[entry.effect].score:
+                best_per_effect[entry.effect] = full
+
+    fit_in_full(chosen)
+    # An effect that changes the response only in a few runs (a bearing clearance where a bearing
+    # unloads) cannot be screened with the nominal parameters held where the nominal model put
+    # them to absorb that change: before a gap is called unexplained the next candidate variants
+    # get a full fit, best screened first, until one explains it.
+    remaining = sorted((entry for entry in screened if not any(entry is done for done in chosen)),
+                       key=lambda entry: -entry.score)
+    for entry in remaining[:_EXTRA_FULL_FITS]:
+        if decide_verdict(nominal_gap, _ranking_of(best_per_effect))[0] != "unexplained":
+            break
+        fit_in_full([entry])
+    full_fits = [entry for entry in all_scores if entry.stage == "full"]
+    for entry, cost in zip(full_fits, effect_off_costs(nominal, [entry.fit for entry in full_fits])[1]):
+        entry.effect_gain = cost - entry.fit.cost
+    for entry in screened:
+        entry.effect_gain = nominal.cost - entry.fit.cost
+    timings["full_fits"] += time.perf_counter() - clock
+    return best_per_effect, all_scores
+
+
+def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str, Any]]:
+    """What :func:`decide_verdict` needs of the best variant of each effect, best first."""
+    scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
+    return [{"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
+             "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
+             "gap_with_effect": s.gap, "effect_gain": s.effect_gain} for s in scores]
+
+
+def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
+                  promoted: int = PROMOTED, calibration: xr.Dataset | None = None) -> DiagnosisResult:
+    """Fit the nominal model and every candidate, score them on held-out runs, decide.
+
+    Candidates are screened with their own parameters only (the nominal
+    parameters and T2 stay at the nominal fit); the best effect, and up to
+    ``promoted`` - 1 runners-up within a quarter of its score, are then
+    fitted in full (all parameters), warm-started from the screening fit,
+    and keep whichever fit scores better on held-out runs; while that leaves
+    a significant gap unexplained, up to three more variants are fitted in
+    full, best screened first, before the verdict says so. If a full fit
+    shows that the nominal fit stopped in a local optimum
+    (:func:`improved_nominal`), the nominal model is refitted from there and
+    the candidates are scored again against it.
+
+    Parameters
+    ----------
+    case : RigCase
+        The prepared campaign (:func:`prepare_case`), optionally with an executor attached.
+    effects : sequence of str, optional
+        Candidate effects (default all six).
+    seed : SeedSequence
+        Seeds the bootstrap of the shrink fractions.
+    promoted : int
+        At most this many effects get a full fit.
+    calibration : xarray.Dataset, optional
+        A calibration posterior; the nominal fit starts from its medians.
+
+    Returns
+    -------
+    DiagnosisResult
+    """
+    effect_names = _check_effects(effects)
+    rng = np.random.default_rng(seed)
+    timings: dict[str, float] = {"nominal_fit": 0.0, "screening": 0.0, "full_fits": 0.0}
+    clock = time.perf_counter()
+    if calibration is not None:
+        start, positions = calibration_start(calibration, case)
+        if "backlash" in start:
+            case.design = case.design.replace(backlash=start.pop("backlash"))
+        nominal = fit_nominal(case, start=start, positions=positions)
+    else:
+        nominal = fit_nominal(case)
+    timings["nominal_fit"] += time.perf_counter() - clock
+    locked = frequency_locked_lines(case)
+    hints = signature_hints(case, locked)
+    for attempt in range(_NOMINAL_REFITS + 1):
+        clock = time.perf_counter()
+        nominal_held = leave_one_out(nominal)
+        nominal_gap = gap_metric(nominal_held.z)
+        timings["nominal_fit"] += time.perf_counter() - clock
+        best_per_effect, all_scores = _score_candidates(case, nominal, nominal_held, nominal_gap, effect_names,
+                                                        hints, rng, promoted, timings)
+        if attempt == _NOMINAL_REFITS:
+            break
+        clock = time.perf_counter()
+        better = improved_nominal(nominal, [entry.fit for entry in all_scores if entry.stage == "full"])
+        timings["nominal_fit"] += time.perf_counter() - clock
+        if better is None:
+            break
+        # the candidates were scored against a nominal fit stuck in a local optimum: score them again
+        nominal = better
+    scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
+    ranking = _ranking_of(best_per_effect)
+    # drawn after the shrink bootstraps, so their numbers do not depend on this
+    nominal_interval = bootstrap_gap(nominal_held.z, rng)
+    if scores:
+        ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
+    decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval)
+    verdict, reason = decision.verdict, decision.reason
+    where = where_gap(nominal_held.z, case)
+    families = family_character(nominal_held.z, case, locked)
+    return DiagnosisResult(case=case, nominal=nominal, nominal_held=nominal_held, scores=scores,
+                           all_scores=all_scores, verdict=verdict, reason=reason, nominal_gap=nominal_gap,
+                           where=where, families=families, locked_lines=locked, hints=hints,
+                           effects=effect_names, timings=timings, decision=decision,
+                           nominal_gap_interval=nominal_interval)
+
+

@@ -1,0 +1,23 @@
+"""Nonlinear-dynamics analysis of simulated responses.
+
+Period and regime classification (Poincare points, 0-1 test, largest
+Lyapunov exponent), spectra, phase planes, contact fractions, response QoIs,
+and bifurcation and sweep grids over the physics' batch integrator.
+
+May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
+"""
+
+from __future__ import annotations
+
+from .regimes import (
+    detect_period, count_distinct_points, zero_one_test, ResponseClass, classify_response,
+    classify_dataset, classify_batch)
+from .spectra import amplitude_spectrum, spectrum_dataset
+from .response import phase_plane, poincare_section, contact_fractions, response_qois
+from .sweeps import bifurcation, sweep_grid
+
+__all__ = [
+    'detect_period', 'count_distinct_points', 'zero_one_test', 'ResponseClass', 'classify_response',
+    'classify_dataset', 'classify_batch', 'amplitude_spectrum', 'spectrum_dataset', 'phase_plane',
+    'poincare_section', 'contact_fractions', 'response_qois', 'bifurcation', 'sweep_grid',
+]

@@ -1,0 +1,217 @@
+"""Unmodelled physical effects as model extensions (docs/model.md section 6).
+
+Each effect is a small object with validated parameters (settings in
+``__init__``) and an ``apply(setup)`` that writes its terms into the slots
+of a :class:`~uqgear.physics.model.ModelSetup`; the right-hand side and integrators
+are shared, never forked. ``PARAMETERS`` gives each parameter's default,
+bounds, unit and whether calibration may vary it.
+
+Effects of the library: ``eccentricity``, ``tooth_damage``, ``friction``,
+``torque_ripple``, ``adhesion_oscillation``, ``bearing_clearance``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from ..common.errors import UqgearError
+
+
+class EffectError(UqgearError):
+    """An effect name or parameter is not valid."""
+
+
+@dataclass(frozen=True)
+class EffectParameter:
+    """Definition of one effect parameter."""
+
+    default: float
+    lower: float
+    upper: float
+    unit: str
+    description: str
+    calibrate: bool = True
+
+
+class Effect:
+    """Base class: validated parameters plus an ``apply`` writing kernel slots."""
+
+    name: ClassVar[str] = ""
+    PARAMETERS: ClassVar[dict[str, EffectParameter]] = {}
+    CHOICES: ClassVar[dict[str, tuple[str, ...]]] = {}
+
+    def __init__(self, values: Mapping[str, Any] | None = None) -> None:
+        values = dict(values or {})
+        unknown = sorted(set(values) - set(self.PARAMETERS) - set(self.CHOICES))
+        if unknown:
+            raise EffectError(f"{self.name}.{unknown[0]}: unknown parameter; expected one of "
+                              f"{', '.join(list(self.PARAMETERS) + list(self.CHOICES))}")
+        self.values: dict[str, Any] = {}
+        for key, options in self.CHOICES.items():
+            choice = values.get(key, options[0])
+            if choice not in options:
+                raise EffectError(f"{self.name}.{key}: expected one of {', '.join(options)}; got {choice!r}")
+            self.values[key] = choice
+        for key, spec in self.PARAMETERS.items():
+            raw = values.get(key, spec.default)
+            try:
+                value = float(raw)
+            except (TypeError, ValueError):
+                raise EffectError(f"{self.name}.{key}: expected a number in [{spec.lower:g}, {spec.upper:g}] "
+                                  f"{spec.unit}; got {raw!r}") from None
+            if not math.isfinite(value) or not spec.lower <= value <= spec.upper:
+                raise EffectError(f"{self.name}.{key}: expected a value in [{spec.lower:g}, {spec.upper:g}] "
+                                  f"{spec.unit}; got {raw!r}")
+            self.values[key] = value
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
+        return f"{type(self).__name__}({inner})"
+
+    def with_values(self, **changes: Any) -> "Effect":
+        """A copy with some parameters changed (validated)."""
+        return type(self)({**self.values, **changes})
+
+    def apply(self, setup) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class Eccentricity(Effect):
+    """Shaft run-out: e_s sin(W_s t + phase) added to the STE, and mesh
+    stiffness modulation k(t) (1 + kappa cos(W_s t + phase)), W_s the rotation
+    rate of the eccentric shaft."""
+
+    name = "eccentricity"
+    CHOICES = {"shaft": ("pinion", "gear")}
+    PARAMETERS = {
+        "amplitude": EffectParameter(10e-6, 0.0, 2e-4, "m", "run-out amplitude e_s"),
+        "phase": EffectParameter(0.0, -2 * math.pi, 2 * math.pi, "rad", "run-out phase"),
+        "kappa": EffectParameter(0.0, 0.0, 0.5, "1", "relative mesh stiffness modulation"),
+    }
+
+    def apply(self, setup) -> None:
+        rate = setup.pinion_rotation
+        if self.values["shaft"] == "gear":
+            rate *= setup.design.z1 / setup.design.z2
+        setup.set_slot("ecc_amplitude", self.values["amplitude"])
+        setup.set_slot("ecc_omega", rate)
+        setup.set_slot("ecc_phase", self.values["phase"])
+        setup.set_slot("ecc_kappa", self.values["kappa"])
+
+
+class ToothDamage(Effect):
+    """Local tooth damage: the single-pair stiffness of one tooth reduced by
+    ``depth`` whenever that tooth is in mesh (once per revolution of its gear).
+    Tooth numbers count from 0, tooth 0 being the one entering contact at t = 0."""
+
+    name = "tooth_damage"
+    CHOICES = {"gear": ("pinion", "gear")}
+    PARAMETERS = {
+        "tooth": EffectParameter(0.0, 0.0, 999.0, "1", "index of the damaged tooth", calibrate=False),
+        "depth": EffectParameter(0.3, 0.0, 0.95, "1", "relative stiffness loss of that tooth's pair"),
+    }
+
+    def apply(self, setup) -> None:
+        factors = setup.factor_pinion if self.values["gear"] == "pinion" else setup.factor_gear
+        tooth = int(round(self.values["tooth"]))
+        if tooth >= factors.size:
+            raise EffectError(f"tooth_damage.tooth: expected 0..{factors.size - 1} for the "
+                              f"{self.values['gear']}; got {tooth}")
+        factors[tooth] *= 1.0 - self.values["depth"]
+
+
+class Friction(Effect):
+    """Tooth surface friction mu_f F_pair sign(sliding velocity), reversing at
+    the pitch point, moment arms from the base-circle tangency points,
+    entering the torsional equations only."""
+
+    name = "friction"
+    PARAMETERS = {"coefficient": EffectParameter(0.05, 0.0, 0.3, "1", "sliding friction coefficient mu_f")}
+
+    def apply(self, setup) -> None:
+        setup.set_slot("friction", self.values["coefficient"])
+
+
+class TorqueRipple(Effect):
+    """Traction motor torque ripple T1(t) = T1 (1 + r cos(6 p W1 t + phase));
+    p from the design's ``motor_pole_pairs`` unless given."""
+
+    name = "torque_ripple"
+    PARAMETERS = {
+        "amplitude": EffectParameter(0.05, 0.0, 0.5, "1", "relative ripple amplitude r"),
+        "phase": EffectParameter(0.0, -2 * math.pi, 2 * math.pi, "rad", "ripple phase"),
+        "pole_pairs": EffectParameter(0.0, 0.0, 24.0, "1",
+                                      "motor pole pairs p (0: the design's motor_pole_pairs)", calibrate=False),
+    }
+
+    def apply(self, setup) -> None:
+        pole_pairs = int(round(self.values["pole_pairs"])) or setup.design.motor_pole_pairs
+        if not pole_pairs:
+            raise EffectError("torque_ripple.pole_pairs: the design has no motor_pole_pairs; "
+                              "expected pole_pairs >= 1")
+        setup.set_slot("ripple_amplitude", self.values["amplitude"])
+        setup.set_slot("ripple_omega", 6.0 * pole_pairs * setup.pinion_rotation)
+        setup.set_slot("ripple_phase", self.values["phase"])
+
+
+class AdhesionOscillation(Effect):
+    """Wheel/rail stick-slip: T2(t) = T2 (1 + a sin(2 pi f_s t + phase))."""
+
+    name = "adhesion_oscillation"
+    PARAMETERS = {
+        "amplitude": EffectParameter(0.05, 0.0, 0.5, "1", "relative amplitude dT2/T2"),
+        "frequency": EffectParameter(12.0, 0.5, 200.0, "Hz", "stick-slip frequency f_s"),
+        "phase": EffectParameter(0.0, -2 * math.pi, 2 * math.pi, "rad", "phase"),
+    }
+
+    def apply(self, setup) -> None:
+        setup.set_slot("adhesion_amplitude", self.values["amplitude"] * setup.slot("T2"))
+        setup.set_slot("adhesion_omega", 2.0 * math.pi * self.values["frequency"])
+        setup.set_slot("adhesion_phase", self.values["phase"])
+
+
+class BearingClearance(Effect):
+    """Radial bearing clearance: a dead zone of half-width c in the bearing force."""
+
+    name = "bearing_clearance"
+    CHOICES = {"bearing": ("pinion", "gear", "both")}
+    PARAMETERS = {"clearance": EffectParameter(10e-6, 0.0, 5e-4, "m", "half clearance c")}
+
+    def apply(self, setup) -> None:
+        if self.values["bearing"] in ("pinion", "both"):
+            setup.set_slot("clearance1", self.values["clearance"])
+        if self.values["bearing"] in ("gear", "both"):
+            setup.set_slot("clearance2", self.values["clearance"])
+
+
+#: The effect library by name.
+EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in
+                                    (Eccentricity, ToothDamage, Friction, TorqueRipple,
+                                     AdhesionOscillation, BearingClearance)}
+
+
+def make_effect(name: str, values: Mapping[str, Any] | None = None) -> Effect:
+    """Build an effect of the library by name."""
+    if name not in EFFECTS:
+        raise EffectError(f"effect {name!r}: unknown; expected one of {', '.join(EFFECTS)}")
+    return EFFECTS[name](values)
+
+
+def parse_effect(text: str) -> Effect:
+    """Parse ``NAME:param=value,param=value`` (the command-line form)."""
+    name, _, rest = text.partition(":")
+    values: dict[str, Any] = {}
+    for item in filter(None, rest.split(",")):
+        key, sep, raw = item.partition("=")
+        if not sep:
+            raise EffectError(f"effect {text!r}: expected NAME:param=value,...; got {item!r}")
+        values[key.strip()] = raw.strip()
+    return make_effect(name.strip(), values)
+
+
+__all__ = ["Effect", "EffectParameter", "EffectError", "EFFECTS", "make_effect", "parse_effect",
+           "Eccentricity", "ToothDamage", "Friction", "TorqueRipple", "AdhesionOscillation",
+           "BearingClearance"]

@@ -1,0 +1,577 @@
+"""Integrators: the scipy reference and the compiled fast path.
+
+* ``method="scipy"``: :func:`scipy.integrate.solve_ivp` (DOP853, tight
+  tolerances) on segments between the known stiffness breakpoints, with
+  terminal events at the contact boundaries |x| = b so every switch of the
+  backlash function is resolved. This is the accuracy reference.
+* ``method="fast"``: fixed-step RK4 compiled with numba (see
+  :mod:`uqgear.physics._kernels`), step length set by the highest natural frequency
+  (``steps_per_mode`` steps per period of the fastest mode) and an integer
+  number of steps per mesh period, with stiffness breakpoints and contact
+  crossings located inside steps. :func:`simulate_batch` runs many samples in
+  parallel over cores and keeps only QoIs, Poincare points and optionally a
+  decimated DTE history.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import xarray as xr
+from scipy.integrate import solve_ivp
+
+from . import _kernels as K
+from .design import DESIGN_KEYS, Design
+from .effects import Effect
+from ..common.errors import OperatingPointError
+from .model import ModelSetup, build_model, natural_frequencies
+
+METHODS = ("fast", "scipy")
+OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
+#: Design keys a batch may vary (the tooth counts fix the tables' layout).
+BATCH_DESIGN_KEYS = tuple(key for key in DESIGN_KEYS if key not in ("z1", "z2"))
+
+_HISTORY_COLUMNS = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity", "y1_acceleration",
+                    "y2_acceleration", "mesh_force", "mesh_stiffness", "ste", "contact")
+_UNITS = {"y1": "m", "y2": "m", "x": "m", "y1_velocity": "m s-1", "y2_velocity": "m s-1",
+          "x_velocity": "m s-1", "y1_acceleration": "m s-2", "y2_acceleration": "m s-2",
+          "mesh_force": "N", "mesh_stiffness": "N m-1", "ste": "m", "contact": "1", "te": "m"}
+_LONG_NAMES = {
+    "y1": "pinion centre displacement along the line of action",
+    "y2": "gear centre displacement along the line of action",
+    "x": "dynamic transmission error (DTE)", "y1_velocity": "pinion centre velocity",
+    "y2_velocity": "gear centre velocity", "x_velocity": "DTE velocity",
+    "y1_acceleration": "pinion centre acceleration", "y2_acceleration": "gear centre acceleration",
+    "mesh_force": "mesh force F = k f(x) + c_m x'", "mesh_stiffness": "mesh stiffness k(t)",
+    "ste": "static transmission error e(t)",
+    "contact": "contact state: 1 drive side, 0 separated, -1 back side",
+    "te": "transmission error R1 theta1 - R2 theta2 = x - y1 + y2 + e",
+}
+
+#: QoIs returned by :func:`simulate_batch`, with units and descriptions.
+QOI_INFO: dict[str, tuple[str, str]] = {
+    "dte_mean": ("m", "mean dynamic transmission error"),
+    "dte_rms": ("m", "RMS of the DTE about its mean"),
+    "dte_peak_to_peak": ("m", "peak-to-peak DTE"),
+    "dynamic_load_factor": ("1", "maximum mesh force / the run's own static mesh force F_T "
+                                 "(from its T1 and T2, so it moves with T2)"),
+    "peak_mesh_force": ("N", "maximum mesh force F = k f(x) + c_m x' in the kept section"),
+    "load_factor_rated": ("1", "maximum mesh force / rated mesh force T1_rated / r_b1 "
+                               "(the design's rated drive torque on the pinion base circle)"),
+    "acc_pinion_rms": ("m s-2", "RMS pinion centre acceleration"),
+    "acc_gear_rms": ("m s-2", "RMS gear centre acceleration"),
+    "fraction_drive_contact": ("1", "fraction of time in drive-side contact"),
+    "fraction_separation": ("1", "fraction of time with the teeth apart"),
+    "fraction_back_contact": ("1", "fraction of time in back-side contact (impact)"),
+    "largest_lyapunov": ("s-1", "largest Lyapunov exponent in 1/s: Benettin log growth over the kept time "
+                                "(renormalised once per mesh period; times the mesh period for nats per "
+                                "mesh period)"),
+}
+
+
+def _check_counts(n_periods: int, keep_periods: int) -> None:
+    if int(n_periods) != n_periods or n_periods < 1:
+        raise OperatingPointError(f"n_periods: expected a positive integer; got {n_periods!r}")
+    if int(keep_periods) != keep_periods or not 1 <= keep_periods <= n_periods:
+        raise OperatingPointError(f"keep_periods: expected an integer in [1, n_periods={n_periods}]; "
+                                  f"got {keep_periods!r}")
+
+
+_HIGHEST_MODES: dict[tuple, float] = {}
+
+
+def _highest_mode(design: Design, stiffness_scale: float) -> float:
+    """Highest natural frequency (Hz) at the peak mesh stiffness, cached on the values it depends on."""
+    from .model import _cached_tables, geometry_key
+
+    k_peak = float(np.max(_cached_tables(design, "ishikawa").period_stiffness)) * stiffness_scale
+    key = (geometry_key(design), design.m1, design.m2, design.I1, design.I2, design.k1, design.k2, k_peak)
+    if key not in _HIGHEST_MODES:
+        if len(_HIGHEST_MODES) >= 4096:
+            _HIGHEST_MODES.clear()
+        _HIGHEST_MODES[key] = float(natural_frequencies(design, k_peak)[-1])
+    return _HIGHEST_MODES[key]
+
+
+def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int = 32,
+                     multiple_of: int = 1) -> int:
+    """Grid steps per mesh period for the fast integrator.
+
+    Enough steps for ``steps_per_mode`` per period of the highest natural
+    frequency (with the peak mesh stiffness), at least ``minimum``, rounded
+    up to a multiple of ``multiple_of`` (the output sampling).
+    """
+    f_high = _highest_mode(setup.design, float(setup.parameters[K.STIFFNESS_SCALE]))
+    needed = max(minimum, math.ceil(steps_per_mode * f_high / setup.mesh_frequency))
+    return int(math.ceil(needed / multiple_of) * multiple_of)
+
+
+def _attrs(setup: ModelSetup, method: str, n_periods: int, keep_periods: int, steps: int) -> dict:
+    p = setup.parameters
+    attrs = {f"design_{key}": value for key, value in setup.design.to_dict().items()}
+    attrs.update({
+        "design_name": setup.design.name,
+        "pinion_speed": float(p[K.OMEGA_MESH] * 60.0 / (2.0 * math.pi * setup.design.z1)),
+        "drive_torque": float(p[K.T1]), "adhesion_torque": float(p[K.T2]),
+        "mesh_stiffness_scale": float(p[K.STIFFNESS_SCALE]),
+        "mesh_frequency": setup.mesh_frequency, "mesh_period": 1.0 / setup.mesh_frequency,
+        "half_backlash": float(p[K.HALF_BACKLASH]), "z1": setup.design.z1, "z2": setup.design.z2,
+        "method": method, "n_periods": n_periods, "keep_periods": keep_periods,
+        "steps_per_period": steps, "damping_in_separation": int(p[K.DAMP_IN_SEPARATION]),
+        "stiffness": setup.stiffness,
+        "mesh_damping": float(p[K.CM]), "effects": "; ".join(repr(e) for e in setup.effects) or "none",
+        "units_note": "SI units; pinion_speed in rpm",
+    })
+    attrs.update({key: float(value) for key, value in setup.derived.items()})
+    return attrs
+
+
+def _integrate_fast(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
+                    steps_per_mode: int, initial_state: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    steps = steps_per_period(setup, steps_per_mode, multiple_of=samples_per_period)
+    stride = steps // samples_per_period
+    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
+    poincare = np.empty((keep_periods, 6))
+    K.integrate_history(initial_state.astype(float), setup.parameters, setup.pair_stiffness,
+                        setup.period_stiffness, setup.factor_pinion, setup.factor_gear,
+                        setup.breakpoints, steps, n_periods, keep_periods, stride, history, poincare)
+    return history, poincare, steps
+
+
+def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
+                     initial_state: np.ndarray, rtol: float,
+                     atol: float | None) -> tuple[np.ndarray, np.ndarray, dict]:
+    p = setup.parameters
+    args = (p, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
+    period = 1.0 / setup.mesh_frequency
+    b = p[K.HALF_BACKLASH]
+    scale = setup.state_scale()
+    atol_vector = scale * (rtol if atol is None else atol)
+    phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
+    first_kept = n_periods - keep_periods
+    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
+    poincare = np.empty((keep_periods, 6))
+    deriv = np.empty(6)
+    state = initial_state.astype(float).copy()
+    stats = {"rhs_evaluations": 0, "contact_events": 0, "segments": 0}
+
+    def region_of(x: float) -> int:
+        return 1 if x > b else (-1 if x < -b else 0)
+
+    region = region_of(state[2])
+    for n in range(n_periods):
+        kept = n >= first_kept
+        if kept:
+            poincare[n - first_kept] = state
+            grid = (n + np.arange(samples_per_period) / samples_per_period) * period
+        for u_a, u_b in zip(phases[:-1], phases[1:]):
+            t_a, t_b = (n + u_a) * period, (n + u_b) * period
+            t_ref = 0.5 * (t_a + t_b)
+            out = np.empty(6)
+
+            def fun(t, y, t_ref=t_ref, out=out):
+                K.rhs(t, y, t_ref, *args, out)
+                return out.copy()
+
+            while t_a < t_b:
+                # directional events: only crossings away from the current region
+                def upper(t, y):
+                    return y[2] - b
+
+                def lower(t, y):
+                    return y[2] + b
+
+                upper.terminal = lower.terminal = True
+                upper.direction = -1 if region == 1 else 1
+                lower.direction = 1 if region == -1 else -1
+                events = [upper] if region == 1 else ([lower] if region == -1 else [upper, lower])
+                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector,
+                                events=events, dense_output=kept)
+                stats["rhs_evaluations"] += sol.nfev
+                stats["segments"] += 1
+                t_end = sol.t[-1]
+                if kept:
+                    # grid points in [t_a, t_end): each recorded once, by the piece that starts it
+                    for i in np.nonzero((grid >= t_a - 1e-12 * period) & (grid < t_end))[0]:
+                        t = grid[i]
+                        y = np.ascontiguousarray(sol.sol(t)) if t > t_a else state
+                        row = (n - first_kept) * samples_per_period + i
+                        force, k, ste = K.record(t, y, *args, deriv)
+                        history[row, :6] = y
+                        history[row, 6] = deriv[3]
+                        history[row, 7] = deriv[4]
+                        history[row, 8:11] = (force, k, ste)
+                        history[row, 11] = region_of(y[2])
+                state = sol.y[:, -1].copy()
+                if sol.status == 1:
+                    stats["contact_events"] += 1
+                    fired = next(i for i, te in enumerate(sol.t_events) if te.size)
+                    crossed = events[fired]
+                    if crossed is upper:
+                        region = 0 if region == 1 else 1
+                    else:
+                        region = 0 if region == -1 else -1
+                else:
+                    region = region_of(state[2])
+                t_a = t_end
+    return history, poincare, stats
+
+
+def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_torque: float, *,
+             method: str = "fast", n_periods: int = 400, keep_periods: int = 200,
+             samples_per_period: int = 64, mesh_stiffness_scale: float = 1.0,
+             effects: Sequence[Effect] = (), damping_in_separation: bool = True,
+             stiffness: str = "ishikawa", steps_per_mode: int = 24, rtol: float = 1e-10,
+             atol: float | None = None, initial_state: np.ndarray | None = None) -> xr.Dataset:
+    """Simulate one operating point of the gear pair.
+
+    Parameters
+    ----------
+    design : Design
+        Gear design (:func:`uqgear.load_design`).
+    pinion_speed : float
+        Pinion speed n1 in rpm (> 0).
+    drive_torque, adhesion_torque : float
+        T1 and T2 in N m.
+    method : {"fast", "scipy"}
+        Compiled RK4 fast path or the scipy reference.
+    n_periods, keep_periods : int
+        Mesh periods integrated in total and kept at the end (the rest is the
+        transient).
+    samples_per_period : int
+        Output samples per mesh period in the kept histories.
+    mesh_stiffness_scale : float
+        Factor on the Ishikawa mesh stiffness.
+    effects : sequence of Effect
+        Model extensions (:mod:`uqgear.physics.effects`).
+    damping_in_separation : bool
+        Mesh damping acts while the teeth are apart (classical form).
+    stiffness : {"ishikawa", "fourier"}
+        Raw stiffness curve or its truncated Fourier series.
+    steps_per_mode : int
+        Fast path: RK4 steps per period of the highest natural frequency.
+    rtol, atol : float
+        Scipy reference tolerances (atol relative to the state's scale).
+    initial_state : array of 6, optional
+        (y1, y2, x, y1', y2', x') at t = 0; static equilibrium by default.
+
+    Returns
+    -------
+    xarray.Dataset
+        Histories on ``time`` (kept periods), Poincare points on ``period``
+        (state at each kept mesh-period start), every parameter in attrs.
+    """
+    if method not in METHODS:
+        raise OperatingPointError(f"method: expected one of {', '.join(METHODS)}; got {method!r}")
+    _check_counts(n_periods, keep_periods)
+    if int(samples_per_period) != samples_per_period or samples_per_period < 1:
+        raise OperatingPointError(f"samples_per_period: expected a positive integer; got {samples_per_period!r}")
+    setup = build_model(design, pinion_speed, drive_torque, adhesion_torque,
+                        mesh_stiffness_scale=mesh_stiffness_scale, effects=effects,
+                        damping_in_separation=damping_in_separation, stiffness=stiffness)
+    state0 = setup.static_state() if initial_state is None else np.asarray(initial_state, dtype=float)
+    if state0.shape != (6,):
+        raise OperatingPointError(f"initial_state: expected 6 values (y1, y2, x, y1', y2', x'); "
+                                  f"got shape {state0.shape}")
+    if method == "fast":
+        history, poincare, steps = _integrate_fast(setup, n_periods, keep_periods, samples_per_period,
+                                                   steps_per_mode, state0)
+        extra = {"steps_per_mode": steps_per_mode}
+    else:
+        history, poincare, stats = _integrate_scipy(setup, n_periods, keep_periods, samples_per_period,
+                                                    state0, rtol, atol)
+        steps = samples_per_period
+        extra = {"rtol": rtol, "solver": "DOP853", **stats}
+    period = 1.0 / setup.mesh_frequency
+    first_kept = n_periods - keep_periods
+    time = (first_kept + np.arange(keep_periods * samples_per_period) / samples_per_period) * period
+    data = {}
+    for column, name in enumerate(_HISTORY_COLUMNS):
+        values = history[:, column].astype(np.int8) if name == "contact" else history[:, column]
+        data[name] = ("time", values, {"units": _UNITS[name], "long_name": _LONG_NAMES[name]})
+    te = history[:, 2] - history[:, 0] + history[:, 1] + history[:, 10]
+    data["te"] = ("time", te, {"units": "m", "long_name": _LONG_NAMES["te"]})
+    for column, name in enumerate(("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity")):
+        data[f"poincare_{name}"] = ("period", poincare[:, column],
+                                    {"units": _UNITS[name], "long_name": f"{name} once per mesh period"})
+    ds = xr.Dataset(data, coords={
+        "time": ("time", time, {"units": "s", "long_name": "time"}),
+        "period": ("period", np.arange(first_kept, n_periods), {"units": "1", "long_name": "mesh period index"}),
+    })
+    ds.attrs.update(_attrs(setup, method, n_periods, keep_periods, steps))
+    ds.attrs.update(samples_per_period=samples_per_period, **extra)
+    return ds
+
+
+# ---------------------------------------------------------------------------- batches
+
+def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]:
+    if "sample" not in samples.dims:
+        raise OperatingPointError("samples: expected a Dataset with dimension 'sample'")
+    n = samples.sizes["sample"]
+    known = set(OPERATING_VARIABLES) | set(BATCH_DESIGN_KEYS)
+    values: dict[str, np.ndarray] = {}
+    for name in samples.data_vars:
+        if name not in known and "." not in name:
+            raise OperatingPointError(
+                f"samples.{name}: unknown variable; expected one of {', '.join(sorted(known))} "
+                f"or EFFECT.PARAMETER")
+        array = np.asarray(samples[name].values, dtype=float)
+        if array.shape != (n,):
+            raise OperatingPointError(f"samples.{name}: expected dims ('sample',); got {samples[name].dims}")
+        values[name] = array
+    if "pinion_speed" not in values:
+        raise OperatingPointError("samples.pinion_speed: missing; expected pinion speeds in rpm")
+    values.setdefault("drive_torque", np.full(n, design.operation.drive_torque))
+    # without a given T2 the adhesion torque balances the drive torque (no rigid acceleration)
+    values.setdefault("adhesion_torque", values["drive_torque"] * design.z2 / design.z1)
+    values.setdefault("mesh_stiffness_scale", np.ones(n))
+    return values
+
+
+def build_batch(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect] = (),
+                damping_in_separation: bool = True, stiffness: str = "ishikawa") -> list[ModelSetup]:
+    """One :class:`ModelSetup` per sample (design keys and effect parameters may vary)."""
+    values = _sample_values(samples, design)
+    n = samples.sizes["sample"]
+    design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
+    effect_keys = [key for key in values if "." in key]
+    by_name = {effect.name: effect for effect in effects}
+    for key in effect_keys:
+        name, _, parameter = key.partition(".")
+        if name not in by_name:
+            raise OperatingPointError(f"samples.{key}: effect {name!r} is not among the model's effects "
+                                      f"({', '.join(by_name) or 'none'})")
+        if parameter not in by_name[name].PARAMETERS:
+            raise OperatingPointError(f"samples.{key}: unknown parameter of {name}; expected one of "
+                                      f"{', '.join(by_name[name].PARAMETERS)}")
+    designs: dict[tuple, Design] = {}
+    setups = []
+    for i in range(n):
+        design_key = tuple(float(values[key][i]) for key in design_keys)
+        if design_key not in designs:
+            designs[design_key] = design.replace(**dict(zip(design_keys, design_key))) if design_keys else design
+        sample_effects = list(effects)
+        if effect_keys:
+            changes: dict[str, dict[str, float]] = {}
+            for key in effect_keys:
+                name, _, parameter = key.partition(".")
+                changes.setdefault(name, {})[parameter] = float(values[key][i])
+            sample_effects = [e.with_values(**changes[e.name]) if e.name in changes else e for e in effects]
+        setups.append(build_model(designs[design_key], values["pinion_speed"][i], values["drive_torque"][i],
+                                  values["adhesion_torque"][i],
+                                  mesh_stiffness_scale=values["mesh_stiffness_scale"][i],
+                                  effects=sample_effects, damping_in_separation=damping_in_separation,
+                                  stiffness=stiffness))
+    return setups
+
+
+def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400, keep_periods: int = 200,
+                   history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
+                   effects: Sequence[Effect] = (),
+                   damping_in_separation: bool = True, stiffness: str = "ishikawa",
+                   steps_per_mode: int = 24, threads: int | None = None) -> xr.Dataset:
+    """Simulate many parameter samples in parallel, keeping only what is asked.
+
+    Parameters
+    ----------
+    design : Design
+        Base design; sample variables named like design keys override it.
+    samples : xarray.Dataset
+        Dimension ``sample``; variables among ``pinion_speed`` (rpm, required),
+        ``drive_torque`` (N m; default the design's rated torque),
+        ``adhesion_torque`` (N m; default T1 z2/z1, the balancing value),
+        ``mesh_stiffness_scale``, design keys (``k1``, ``backlash``, ...) and
+        ``EFFECT.PARAMETER`` for effects passed in ``effects``.
+    n_periods, keep_periods : int
+        Mesh periods integrated and kept.
+    history_per_period : int
+        If > 0, also keep the DTE ``x`` at this many points per kept mesh
+        period (variable ``x_history`` on dim ``mesh_cycle``).
+    rig_channels : bool
+        With ``history_per_period``: also keep ``te`` (x - y1 + y2 + e),
+        ``acc_pinion`` (y1'') and ``acc_gear`` (y2'') histories, the rig's channels.
+    lyapunov : bool
+        Also estimate the largest Lyapunov exponent (doubles the cost).
+    effects, damping_in_separation, stiffness, steps_per_mode
+        As in :func:`simulate`.
+    threads : int, optional
+        Number of threads (default: all cores).
+
+    Returns
+    -------
+    xarray.Dataset
+        Dims ``sample`` and ``period``: the QoIs of :data:`QOI_INFO`,
+        ``poincare_x`` and ``poincare_x_velocity``; input variables as
+        coordinates on ``sample``.
+    """
+    import numba
+
+    _check_counts(n_periods, keep_periods)
+    setups = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation,
+                         stiffness=stiffness)
+    n = len(setups)
+    multiple = max(int(history_per_period), 1)
+    steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=multiple) for s in setups], dtype=np.int64)
+    params = np.stack([s.parameters for s in setups]) if n else np.empty((0, K.N_PARAMS))
+    tables: dict[int, int] = {}
+    pair_tables, period_tables, table_index = [], [], np.empty(n, dtype=np.int64)
+    for i, s in enumerate(setups):
+        key = id(s.pair_stiffness), id(s.period_stiffness)
+        if key not in tables:
+            tables[key] = len(pair_tables)
+            pair_tables.append(s.pair_stiffness)
+            period_tables.append(s.period_stiffness)
+        table_index[i] = tables[key]
+    width = max((len(s.breakpoints) for s in setups), default=0)
+    breakpoints = np.full((n, max(width, 1)), np.nan)
+    for i, s in enumerate(setups):
+        breakpoints[i, :len(s.breakpoints)] = s.breakpoints
+    states = np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
+    scales = np.stack([s.state_scale() for s in setups]) if n else np.empty((0, 6))
+    factor_pinion = np.stack([s.factor_pinion for s in setups]) if n else np.empty((0, design.z1))
+    factor_gear = np.stack([s.factor_gear for s in setups]) if n else np.empty((0, design.z2))
+    history_stride = (steps // history_per_period) if history_per_period > 0 else np.zeros(n, dtype=np.int64)
+    accumulators = np.zeros((n, K.N_ACCUMULATORS))
+    poincare = np.empty((n, keep_periods, 2))
+    channels = 4 if rig_channels and history_per_period > 0 else 1
+    history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
+    previous_threads = numba.get_num_threads()
+    if threads is not None:
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        if n:
+            K.integrate_batch(states, params, np.stack(pair_tables), np.stack(period_tables), table_index,
+                              factor_pinion, factor_gear, breakpoints, steps, n_periods, keep_periods,
+                              history_stride.astype(np.int64), lyapunov, scales, accumulators, poincare, history)
+    finally:
+        numba.set_num_threads(previous_threads)
+    count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
+    mean_x = accumulators[:, K.Q_X_SUM] / count
+    mean_force = np.array([s.derived["static_mesh_force"] for s in setups])
+    rated_force = np.array([s.derived["rated_mesh_force"] for s in setups])
+    qois = {
+        "dte_mean": mean_x,
+        "dte_rms": np.sqrt(np.maximum(accumulators[:, K.Q_X_SQ] / count - mean_x ** 2, 0.0)),
+        "dte_peak_to_peak": accumulators[:, K.Q_X_MAX] - accumulators[:, K.Q_X_MIN],
+        "dynamic_load_factor": np.divide(accumulators[:, K.Q_F_MAX], mean_force,
+                                         out=np.full(n, np.nan), where=mean_force > 0),
+        "acc_pinion_rms": np.sqrt(accumulators[:, K.Q_A1_SQ] / count),
+        "acc_gear_rms": np.sqrt(accumulators[:, K.Q_A2_SQ] / count),
+        "fraction_drive_contact": accumulators[:, K.Q_N_DRIVE] / count,
+        "fraction_separation": accumulators[:, K.Q_N_SEP] / count,
+        "fraction_back_contact": accumulators[:, K.Q_N_BACK] / count,
+        "peak_mesh_force": accumulators[:, K.Q_F_MAX].copy(),
+        "load_factor_rated": np.divide(accumulators[:, K.Q_F_MAX], rated_force,
+                                       out=np.full(n, np.nan), where=rated_force > 0),
+    }
+    if lyapunov:
+        qois["largest_lyapunov"] = accumulators[:, K.Q_LYAPUNOV]
+    data = {name: ("sample", value, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
+            for name, value in qois.items()}
+    data["poincare_x"] = (("sample", "period"), poincare[:, :, 0], {"units": "m", "long_name": "DTE once per mesh period"})
+    data["poincare_x_velocity"] = (("sample", "period"), poincare[:, :, 1],
+                                   {"units": "m s-1", "long_name": "DTE velocity once per mesh period"})
+    data["static_mesh_force"] = ("sample", mean_force, {"units": "N", "long_name": "mean mesh force F_T"})
+    data["mesh_frequency"] = ("sample", np.array([s.mesh_frequency for s in setups]),
+                              {"units": "Hz", "long_name": "mesh frequency"})
+    data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "RK4 steps per mesh period"})
+    coords = {"period": ("period", np.arange(n_periods - keep_periods, n_periods), {"units": "1"})}
+    for name in samples.data_vars:
+        coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
+    for name in samples.coords:
+        if samples[name].dims == ("sample",) and name not in coords:
+            coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
+    if history_per_period > 0:
+        data["x_history"] = (("sample", "mesh_cycle"), history[:, 0], {"units": "m", "long_name": "decimated DTE history"})
+        if channels == 4:
+            data["te_history"] = (("sample", "mesh_cycle"), history[:, 1],
+                                  {"units": "m", "long_name": _LONG_NAMES["te"]})
+            data["acc_pinion_history"] = (("sample", "mesh_cycle"), history[:, 2],
+                                          {"units": "m s-2", "long_name": _LONG_NAMES["y1_acceleration"]})
+            data["acc_gear_history"] = (("sample", "mesh_cycle"), history[:, 3],
+                                        {"units": "m s-2", "long_name": _LONG_NAMES["y2_acceleration"]})
+        coords["mesh_cycle"] = ("mesh_cycle", n_periods - keep_periods
+                                + np.arange(keep_periods * history_per_period) / history_per_period,
+                                {"units": "1", "long_name": "time in mesh periods"})
+    ds = xr.Dataset(data, coords=coords)
+    half_backlash = np.array([s.parameters[K.HALF_BACKLASH] for s in setups])
+    ds.attrs.update(method="fast", n_periods=n_periods, keep_periods=keep_periods,
+                    steps_per_mode=steps_per_mode, design_name=design.name,
+                    damping_in_separation=int(damping_in_separation), stiffness=stiffness,
+                    effects="; ".join(repr(e) for e in effects) or "none",
+                    **{f"design_{key}": value for key, value in design.to_dict().items()})
+    if n and np.all(half_backlash == half_backlash[0]):
+        ds.attrs["half_backlash"] = float(half_backlash[0])
+    return ds
+
+
+def samples_from_mapping(values: Mapping[str, Sequence[float] | np.ndarray]) -> xr.Dataset:
+    """Build a ``sample`` Dataset from equal-length arrays (a convenience)."""
+    arrays = {name: np.atleast_1d(np.asarray(v, dtype=float)) for name, v in values.items()}
+    lengths = {a.shape[0] for a in arrays.values()}
+    if len(lengths) > 1:
+        raise OperatingPointError(f"samples: expected equal lengths; got {sorted(lengths)}")
+    return xr.Dataset({name: ("sample", a) for name, a in arrays.items()})
+
+
+
+
+class BatchEvaluator:
+    """The gear model as an ``evaluate(samples) -> Dataset`` function.
+
+    A picklable callable (settings in ``__init__``) so the runner can ship it
+    to dask workers; every uncertainty analysis takes a model of this form.
+
+    Parameters
+    ----------
+    design : Design
+    fixed : mapping, optional
+        Sample variables held constant (added to every sample unless the
+        samples carry them).
+    n_periods, keep_periods, history_per_period, rig_channels, lyapunov, effects,
+    damping_in_separation, stiffness, steps_per_mode, threads
+        As in :func:`simulate_batch` (``threads`` does not change the
+        results, so :meth:`key` leaves it out).
+    """
+
+    def __init__(self, design: Design, *, fixed: Mapping[str, float] | None = None, n_periods: int = 400,
+                 keep_periods: int = 200, history_per_period: int = 0, rig_channels: bool = False,
+                 lyapunov: bool = False, effects: Sequence[Effect] = (), damping_in_separation: bool = True,
+                 stiffness: str = "ishikawa", steps_per_mode: int = 24, threads: int | None = None) -> None:
+        _check_counts(n_periods, keep_periods)
+        self.design = design
+        self.fixed = dict(fixed or {})
+        self.n_periods = n_periods
+        self.keep_periods = keep_periods
+        self.history_per_period = history_per_period
+        self.rig_channels = rig_channels
+        self.lyapunov = lyapunov
+        self.effects = tuple(effects)
+        self.damping_in_separation = damping_in_separation
+        self.stiffness = stiffness
+        self.steps_per_mode = steps_per_mode
+        self.threads = threads
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        samples = samples.copy()
+        for name, value in self.fixed.items():
+            if name not in samples.data_vars:
+                samples[name] = ("sample", np.full(samples.sizes["sample"], float(value)))
+        return simulate_batch(self.design, samples, n_periods=self.n_periods, keep_periods=self.keep_periods,
+                              history_per_period=self.history_per_period, rig_channels=self.rig_channels,
+                              lyapunov=self.lyapunov,
+                              effects=self.effects, damping_in_separation=self.damping_in_separation,
+                              stiffness=self.stiffness, steps_per_mode=self.steps_per_mode, threads=self.threads)
+
+    def key(self) -> str:
+        """A text identifying the settings (for checkpoint hashing)."""
+        return repr((self.design.to_json(), sorted(self.fixed.items()), self.n_periods, self.keep_periods,
+                     self.history_per_period, self.rig_channels, self.lyapunov, [repr(e) for e in self.effects],
+                     self.damping_in_separation, self.stiffness, self.steps_per_mode))
+
+
+__all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period", "BatchEvaluator",
+           "QOI_INFO", "METHODS"]

@@ -1,0 +1,348 @@
+"""Self-contained HTML reports of a gap diagnosis and of a blind test.
+
+Figures are drawn with matplotlib's Agg backend and embedded as base64 PNG,
+so a report is one file that opens anywhere. Files are written atomically.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..common.fileio import write_text_atomic
+from .finding import HEADLINE_STYLE, Finding, headline_html
+from .page import figure_png, html_page, img_tag, new_figure
+
+_STYLE = """
+body { font-family: sans-serif; margin: 2em; max-width: 1200px; color: #222; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.2em; margin-top: 1.6em; }
+table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.9em; }
+th, td { border: 1px solid #bbb; padding: 3px 8px; text-align: right; }
+th { background: #eee; } td.text, th.text { text-align: left; }
+.verdict { font-size: 1.3em; font-weight: bold; padding: 0.4em 0.8em; background: #f3f3d8; display: inline-block; }
+.note { color: #555; font-size: 0.9em; }
+img { max-width: 100%; }
+"""
+
+
+def _figure_html(figure, alt: str) -> str:
+    return img_tag(figure_png(figure, 90, tight=True), alt)
+
+
+def _number(value: Any, digits: int = 3) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, (float, np.floating)):
+        if not math.isfinite(value):
+            return "-"
+        return f"{value:.{digits}g}"
+    return html.escape(str(value))
+
+
+def _write_atomic(path: Path, text: str) -> Path:
+    return write_text_atomic(path, text)
+
+
+def gap_map_plot(ds: xr.Dataset, variable: str, title: str):
+    """Figure of a gap map (op x channel x family) of a diagnosis Dataset."""
+    values = ds[variable].values               # (op, channel, family)
+    n_op, n_channel, n_family = values.shape
+    matrix = values.transpose(1, 2, 0).reshape(n_channel * n_family, n_op)
+    labels = [f"{c} / {f}" for c in ds["channel"].values for f in ds["family"].values]
+    figure = new_figure(1.0 + 0.7 * n_op, 0.28 * len(labels) + 1.2, layout=None)
+    axis = figure.subplots()
+    shown = np.log10(1.0 + np.nan_to_num(matrix, nan=0.0))
+    # one scale for every map: the capped gap cannot exceed sqrt(99)
+    image = axis.imshow(shown, aspect="auto", cmap="magma_r", vmin=0.0, vmax=math.log10(1.0 + math.sqrt(99.0)))
+    axis.set_yticks(range(len(labels)), labels, fontsize=7)
+    speeds = ds["pinion_speed"].values
+    axis.set_xticks(range(n_op), [f"{i}\n{s:.0f}" for i, s in enumerate(speeds)], fontsize=7)
+    axis.set_xlabel("held-out run (index / pinion speed, rpm)")
+    axis.set_title(title, fontsize=9)
+    bar = figure.colorbar(image, ax=axis)
+    bar.set_label("log10(1 + excess RMS z)")
+    return figure
+
+
+def _gap_map_figure(ds: xr.Dataset, variable: str, title: str) -> str:
+    return _figure_html(gap_map_plot(ds, variable, title), title)
+
+
+def spectra_plot(ds: xr.Dataset):
+    """Before/after: per held-out run, a row rig vs nominal model and a row rig vs model with the effect."""
+    spectra = ds["amplitude_spectrum"]
+    ops = spectra["spectrum_op"].values
+    channels = spectra["channel"].values
+    models = [str(source) for source in spectra["source"].values if source != "rig"]
+    rows = [(op, model) for op in ops for model in models]
+    figure = new_figure(4.2 * len(channels), 2.4 * len(rows), layout=None)
+    axes = figure.subplots(len(rows), len(channels), squeeze=False)
+    colours = {"nominal": "tab:blue", "with_effect": "tab:red"}
+    frequency = spectra["frequency"].values
+    for i, (op, model) in enumerate(rows):
+        for c, channel in enumerate(channels):
+            axis = axes[i, c]
+            floor = float(ds["spectrum_noise_floor"].sel(spectrum_op=op, channel=channel))
+            predicted = spectra.sel(spectrum_op=op, source=model, channel=channel).values
+            measured = spectra.sel(spectrum_op=op, source="rig", channel=channel).values
+            if np.any(np.isfinite(measured)):
+                axis.semilogy(frequency, measured, lw=0.7, color="0.6", label="rig")
+            if np.any(np.isfinite(predicted)):
+                # the models are noise-free: shown as the rig would record them
+                axis.semilogy(frequency, np.sqrt(predicted ** 2 + floor ** 2), lw=0.7, color=colours.get(model, "k"),
+                              alpha=0.85, label=model.replace("_", " ") + " (held out)")
+            both = np.concatenate([predicted, measured])
+            both = both[np.isfinite(both) & (both > 0)]
+            if both.size and floor > 0:
+                axis.set_ylim(floor / 5.0, both.max() * 3.0)
+            speed = float(ds["pinion_speed"].values[int(op)])
+            axis.set_title(f"run {int(op)} ({speed:.0f} rpm), {channel}: rig vs {model.replace('_', ' ')}",
+                           fontsize=8)
+            axis.set_xlabel("frequency (Hz)", fontsize=7)
+            axis.tick_params(labelsize=7)
+            if c == 0:
+                axis.legend(fontsize=7, loc="upper right")
+    figure.tight_layout()
+    return figure
+
+
+def _spectra_figure(ds: xr.Dataset) -> str:
+    return _figure_html(spectra_plot(ds), "held-out spectra")
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]], text_columns: Sequence[int] = (0,)) -> str:
+    head = "".join(f'<th class="{"text" if i in text_columns else ""}">{html.escape(h)}</th>'
+                   for i, h in enumerate(headers))
+    body = []
+    for row in rows:
+        cells = "".join(f'<td class="{"text" if i in text_columns else ""}">{_number(v)}</td>'
+                        for i, v in enumerate(row))
+        body.append(f"<tr>{cells}</tr>")
+    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+
+
+def _decision_notes(content: Mapping[str, Any]) -> list[str]:
+    """Paragraphs for a partial explanation and for figures that decided on a knife edge."""
+    notes = []
+    remaining = content.get("remaining_gap")
+    if content.get("partial") and remaining:
+        notes.append(f'<p class="note"><b>Partial explanation:</b> {html.escape(content["verdict"])} accounts '
+                     f'for part of the gap; a held-out gap of {remaining["value"]:.2f} remains unexplained '
+                     '(where: see the table of held-out discrepancies below).</p>')
+    for entry in content.get("borderline", []):
+        low, high = entry["interval"]
+        notes.append(f'<p class="note"><b>Borderline:</b> {html.escape(entry["figure"])} = {entry["value"]:.3g} '
+                     f'against a threshold of {entry["threshold"]:g}; its 90 % interval {low:.3g} to {high:.3g} '
+                     'contains the threshold, so another campaign of the same rig could be decided the other '
+                     'way.</p>')
+    return notes
+
+
+def _percent(value: Any) -> str:
+    return "-" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f} %"
+
+
+def _figure(value: Any, digits: int = 3, fixed: bool = False) -> str:
+    """A number as plain text (no HTML escaping: the headline escapes its sentences itself); ``fixed``:
+    ``digits`` decimals."""
+    if value is None or not math.isfinite(float(value)):
+        return "-"
+    if fixed:
+        return f"{float(value):.{digits}f}"
+    return f"{float(value):.0f}" if abs(float(value)) >= 10 ** digits else f"{float(value):.{digits}g}"
+
+
+def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """The headline statements of a diagnosis, from its JSON summary (``diagnosis.json``).
+
+    The verdict in one sentence; the held-out gap before and after the effect with the shrink and its
+    90 % interval; where the nominal model misses; the ``partial`` and ``borderline`` flags.
+    """
+    if not content:
+        return []
+    findings = []
+    verdict = str(content.get("verdict", "?"))
+    reason = str(content.get("reason", "")).rstrip(".")
+    if verdict == "none":
+        text = "Verdict none: the nominal model reproduces the rig within noise, no effect is needed"
+    elif verdict == "unexplained":
+        text = "Verdict unexplained: a significant gap remains that no candidate effect of the library removes"
+    else:
+        text = (f"Verdict {verdict}: adding {verdict} to the model explains "
+                + ("part of " if content.get("partial") else "") + "the gap between model and rig")
+    findings.append(Finding(text + (f"; {reason}." if reason else "."),
+                            {"verdict": verdict, "partial": bool(content.get("partial"))}, "verdict"))
+    gap = content.get("gap") or {}
+    if gap:
+        def gap_value(value: Any) -> str:
+            return _figure(value, 2, fixed=True)
+
+        facts = {key: gap.get(key) for key in ("baseline", "baseline_interval", "with_effect", "effect",
+                                               "effect_named", "shrink_fraction", "shrink_interval",
+                                               "noise_threshold")}
+        text = ("Held-out gap (RMS standardised discrepancy in excess of noise) of the nominal model "
+                + gap_value(gap.get("baseline")))
+        if gap.get("baseline_interval"):
+            low, high = gap["baseline_interval"]
+            text += f" (90 % interval {gap_value(low)} to {gap_value(high)})"
+        baseline, noise = gap.get("baseline"), gap.get("noise_threshold")
+        # a candidate's gap is worth quoting where it was named or where there is a gap to shrink
+        worth = gap.get("effect_named") or (baseline is not None and noise is not None and baseline >= noise)
+        if gap.get("effect") and gap.get("with_effect") is not None and worth:
+            low, high = gap.get("shrink_interval") or [None, None]
+            named = "" if gap.get("effect_named", True) else " (best candidate, not named)"
+            text += (f"; with {gap['effect']}{named} {gap_value(gap['with_effect'])}: a shrink of "
+                     f"{_percent(gap.get('shrink_fraction'))} (90 % interval {_percent(low)} to {_percent(high)})")
+        findings.append(Finding(text + f"; within noise below {_figure(noise)}.", facts, "gap"))
+    where = content.get("where") or []
+    n_op = int((content.get("rig") or {}).get("n_op", 0))
+    if where:
+        of = f" of {n_op}" if n_op else ""
+        shown = "; ".join(f"{w['channel']} {w['feature']} ({str(w['family']).replace('_', ' ')} family, beyond "
+                          f"3 sigma at {len(w['ops'])}{of} runs, RMS z {_figure(w['score'])})" for w in where[:3])
+        text = (f"The nominal model misses most at {shown}"
+                + (f"; {len(where)} features beyond 3 sigma in all" if len(where) > 3 else "") + ".")
+    else:
+        text = "No held-out feature of the nominal model is beyond 3 sigma."
+    findings.append(Finding(text, {"where": [dict(w) for w in where[:3]], "count": len(where)}, "where"))
+    if content.get("partial"):
+        remaining = (content.get("remaining_gap") or {}).get("value")
+        findings.append(Finding(f"Partial explanation: a held-out gap of {_figure(remaining, 2, fixed=True)} "
+                                f"remains unexplained after {verdict}.",
+                                {"partial": True, "remaining_gap": remaining}, "partial"))
+    for entry in content.get("borderline") or []:
+        low, high = entry["interval"]
+        findings.append(Finding(
+            f"Borderline: {entry['figure']} = {_figure(entry['value'])} against a threshold of "
+            f"{float(entry['threshold']):g}; its 90 % interval {_figure(low)} to {_figure(high)} contains the "
+            "threshold, so another campaign of the same rig could be decided the other way.",
+            {key: entry.get(key) for key in ("figure", "value", "threshold", "interval")}, "borderline"))
+    if not content.get("borderline"):
+        findings.append(Finding("No borderline figure: none of the figures that decided the verdict has its "
+                                "threshold inside its 90 % interval.", {"borderline": []}, "borderline"))
+    return findings
+
+
+def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
+    """HTML text of a diagnosis report from its JSON summary and Dataset."""
+    gap = content["gap"]
+    parts = ["<h1>Sim-to-real gap diagnosis</h1>",
+             headline_html(diagnosis_findings(content), "Details, maps and the candidate ranking below."),
+             f'<p class="note">rig: {html.escape(str(content["rig"]["source"]))} '
+             f'({html.escape(content["rig"]["title"])}), {content["rig"]["n_op"]} runs, channels '
+             f'{", ".join(content["rig"]["channels"])}</p>',
+             f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
+             f'<p>{html.escape(content["reason"])}.</p>',
+             *_decision_notes(content),
+             "<h2>How far: the gap on held-out runs</h2>",
+             _table(["metric", "nominal model", "with effect", "effect", "shrink fraction", "90 % interval"],
+                    [[gap["metric"], gap["baseline"], gap["with_effect"], gap["effect"], gap["shrink_fraction"],
+                      "-" if gap["shrink_interval"] is None else
+                      f"{gap['shrink_interval'][0]:.2f} to {gap['shrink_interval'][1]:.2f}"]], (0, 3, 5)),
+             f'<p class="note">{html.escape(gap["evaluated_on"]["scheme"])}. The gap is the RMS standardised '
+             f'discrepancy in excess of noise (each feature capped at 10 sigma); the nominal model is within '
+             f'noise below {gap["noise_threshold"]}.</p>',
+             "<h2>Where: gap map of the nominal model (held-out runs)</h2>",
+             _gap_map_figure(ds, "gap_map_nominal", "nominal model, held-out runs")]
+    if "gap_map_with_effect" in ds:
+        parts.append(_gap_map_figure(ds, "gap_map_with_effect",
+                                     f"with {ds['candidate'].values[0]}, held-out runs"))
+    if content["where"]:
+        parts.append(_table(["channel", "feature", "family", "runs beyond 3 sigma", "RMS z"],
+                            [[w["channel"], w["feature"], w["family"], ", ".join(map(str, w["ops"])), w["score"]]
+                             for w in content["where"]], (0, 1, 2, 3)))
+    families = [f for f in content["families"] if f["character"]]
+    if families:
+        parts.append(_table(["channel", "family", "excess RMS z", "character"],
+                            [[f["channel"], f["family"], f["score"], ", ".join(f["character"])] for f in families],
+                            (0, 1, 3)))
+    if content["frequency_locked_lines"]:
+        parts.append("<p>Lines at a fixed frequency across runs (not order-locked): " + ", ".join(
+            f"{line['frequency']:.1f} Hz (runs {', '.join(map(str, line['ops']))})"
+            for line in content["frequency_locked_lines"]) + ".</p>")
+    parts.append("<h2>Which: candidate effects ranked</h2>")
+    parts.append(_table(
+        ["effect", "variant", "score (nats)", "gain (nats)", "s.e.", "penalty", "gap with effect", "shrink",
+         "shrink 5 %", "shrink 95 %", "fit", "parameters"],
+        [[r["effect"], r["variant"], r["score"], r["delta_log_density"], r["standard_error"], r["penalty"],
+          r["gap_with_effect"], r["shrink_fraction"], r["shrink_interval"][0], r["shrink_interval"][1], r["fit"],
+          ", ".join(f"{k}={_number(v, 4)}" for k, v in r["parameters"].items())] for r in content["ranking"]],
+        (0, 1, 10, 11)))
+    parts.append('<p class="note">Score: held-out log predictive density gain over the nominal model minus '
+                 f'0.5 log(n) per effect parameter; an effect is named at a score of '
+                 f'{content["thresholds"]["score"]:g} or more with a shrink of at least '
+                 f'{content["thresholds"]["shrink_fraction"]:g}.</p>')
+    if "amplitude_spectrum" in ds:
+        parts.append("<h2>Spectra on held-out runs: rig, nominal model, model with the effect</h2>"
+                     "<p class=\"note\">The two runs with the largest nominal gap, each predicted by the models "
+                     "fitted without it; model spectra include the rig's noise floor.</p>")
+        parts.append(_spectra_figure(ds))
+    nominal = content["nominal"]
+    parts.append("<h2>Nominal fit</h2>")
+    parts.append(_table(["parameter", "value"], [[k, v] for k, v in nominal["parameters"].items()]))
+    parts.append(f'<p class="note">T2 per run (kN m): {", ".join(f"{v / 1e3:.2f}" for v in nominal["adhesion_torque"])}; '
+                 f'periodic steady response: {", ".join("yes" if p else "no" for p in nominal["periodic_runs"])}; '
+                 f'model error (relative): {html.escape(json.dumps(content["model_error"]))}; '
+                 f'time: {content["timing_s"].get("total_wall", float("nan")):.0f} s.</p>')
+    return html_page(f"uqgear diagnosis: {content['verdict']}", _STYLE + HEADLINE_STYLE, parts)
+
+
+def write_diagnosis_report(content: Mapping[str, Any], ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
+    """Write the diagnosis report (self-contained HTML) atomically."""
+    return _write_atomic(Path(path), diagnosis_report_html(content, ds))
+
+
+def blindtest_report_html(content: Mapping[str, Any]) -> str:
+    """HTML text of a blind-test report from its JSON summary."""
+    labels = content["labels"]
+    matrix = np.array(content["confusion"]["counts"], dtype=float)
+    figure = new_figure(1.2 + 0.75 * matrix.shape[1], 1.0 + 0.55 * matrix.shape[0], layout=None)
+    axis = figure.subplots()
+    axis.imshow(matrix, cmap="Blues")
+    axis.set_xticks(range(matrix.shape[1]), content["confusion"]["verdicts"], rotation=45, ha="right", fontsize=7)
+    axis.set_yticks(range(matrix.shape[0]), labels, fontsize=7)
+    for i in range(matrix.shape[0]):
+        for j in range(matrix.shape[1]):
+            if matrix[i, j]:
+                axis.text(j, i, f"{int(matrix[i, j])}", ha="center", va="center", fontsize=8)
+    axis.set_xlabel("verdict")
+    axis.set_ylabel("true effect")
+    axis.set_title("blind test: confusion matrix", fontsize=9)
+    parts = ["<h1>Blind test of the gap diagnosis</h1>",
+             f"<p>{content['n_campaigns']} campaigns; accuracy {100 * content['accuracy']:.1f} % "
+             f"(counting 'none' as right for effects below detectability: "
+             f"{100 * content['accuracy_detectable']:.1f} %); effects named on healthy controls: "
+             f"{content['false_alarms']}; median shrink when identified: "
+             f"{_number(content['shrink']['median'])}.</p>",
+             '<p class="note">Test plans: "service" is the public campaigns\' 8 service points; '
+             '"bearing_check" a light-load run (T1 1.5 kN m) through the two bearing-dominated modes, where a '
+             'bearing unloads. Bearing-clearance campaigns follow the bearing check (a clearance cannot show '
+             'at service loads), the other effects the service plan; healthy controls alternate both.</p>',
+             _figure_html(figure, "confusion matrix"),
+             "<h2>Detection threshold per effect</h2>",
+             _table(["effect", "parameter", "detected at or above", "missed at or below", "note"],
+                    [[t["effect"], t["parameter"], t["detected_from"], t["missed_up_to"], t["note"]]
+                     for t in content["thresholds"]], (0, 1, 4)),
+             "<h2>Campaigns</h2>",
+             _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "shrink", "seconds"],
+                    [[c["id"], c["truth"], c["strength"], c["design"], c.get("plan", "service"), c["oracle_gap"],
+                      c["verdict"], c["shrink_fraction"], c["seconds"]] for c in content["campaigns"]],
+                    (0, 1, 3, 4, 6))]
+    return html_page("uqgear blind test", _STYLE, parts)
+
+
+def write_blindtest_report(content: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
+    """Write the blind-test report (self-contained HTML) atomically."""
+    return _write_atomic(Path(path), blindtest_report_html(content))
+
+
+__all__ = ["diagnosis_report_html", "diagnosis_findings", "write_diagnosis_report", "blindtest_report_html",
+           "write_blindtest_report"]

@@ -1,0 +1,496 @@
+"""Our own virtual test rig: the gear model turned into rig data (``uqgear-rig/1``).
+
+:func:`simulate_campaign` runs the 3-DOF model at every operating point of a
+campaign with chosen *true* parameters (mesh stiffness scale, any design key,
+the adhesion torque of each run, unmodelled effects) and records what a rig
+would: steady records of the transmission error and the two bearing-housing
+accelerations, sampled at ``fs`` after a run-in, behind an anti-alias low-pass,
+with Gaussian sensor noise, stored as float32. The file's ``design`` attribute
+is the *nominal* design; the truth is kept in the attributes
+``true_parameters`` and ``effects`` (JSON) so that blind checks can score a
+calibration or a diagnosis against it.
+
+Acquisition chain, per run and channel:
+
+1. The model is integrated from static equilibrium over ``run_in`` plus a
+   random fraction of a pinion revolution (the record start is arbitrary, as
+   on a rig), then over the record and a guard interval on each side, with
+   an output rate of at least ``oversampling * fs``.
+2. Anti-alias filter: a zero-delay linear-phase low-pass, flat (gain 1) up to
+   ``passband`` (8 kHz at 20480 Hz), a raised-cosine transition, and exactly
+   zero from ``stopband`` (fs/2 = 10.24 kHz) on, applied in the frequency
+   domain. The accelerations are taken as the second time derivative of the
+   filtered displacements, which is the filtered acceleration (a filter
+   commutes with differentiation) without the aliasing that sampling the
+   jumps of y'' (mesh stiffness steps) would cause.
+3. The filtered signal is band-limited, so a cubic spline resamples it onto
+   the ``fs`` grid exactly enough (relative error below 1e-4 in the band).
+4. Sensor noise: white Gaussian noise of standard deviation
+   ``sqrt(noise_std**2 + (relative_noise * rms)**2)``, rms that of the run's
+   clean record (the public campaigns use 2 % of the run's RMS); each run and
+   channel has its own stream, spawned from the seed.
+5. ``te`` has its mean removed (encoders carry no absolute zero).
+
+Adhesion torque: the file carries a-priori bounds of +-15 % around the
+balancing value (z2/z1) T1, clipped to mu in the design's adhesion range times
+Q R_w (:func:`adhesion_torque_bounds`); the true T2 of each run is drawn
+uniformly inside unless given.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from numpy.typing import ArrayLike
+from scipy.interpolate import CubicSpline
+
+from ..physics.design import Design
+from ..physics.effects import Effect
+from ..common.errors import OperatingPointError, RigDataError
+from .features import SIGNAL_CHANNELS
+from ..physics.integration import BATCH_DESIGN_KEYS, simulate
+from ..physics.model import natural_frequencies
+from .format import make_rig_dataset, write_rig
+from ..uq.seeds import as_seed_sequence, child_seed
+
+#: Pinion speeds (rpm) and drive torques (N m) of the public campaigns.
+DEFAULT_PINION_SPEEDS: tuple[float, ...] = (600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0)
+DEFAULT_DRIVE_TORQUES: tuple[float, ...] = (7000.0, 5000.0, 6000.0, 8000.0, 7500.0, 6500.0, 5500.0, 5000.0)
+
+#: Half-width of the a-priori adhesion torque interval around (z2/z1) T1.
+ADHESION_SPREAD = 0.15
+
+#: Relative sensor noise of the public campaigns (of each run's RMS).
+DEFAULT_RELATIVE_NOISE = 0.02
+
+#: Keys ``true_parameters`` accepts besides the batch-variable design keys.
+TRUE_PARAMETER_EXTRAS: tuple[str, ...] = ("mesh_stiffness_scale", "adhesion_torque")
+
+# Guard interval simulated on each side of a record so that the filter's
+# edge effects (it is applied to a finite piece) stay outside the record;
+# the outer part of it is tapered.
+_GUARD = 0.025
+_TAPER = 0.015
+
+
+def adhesion_torque_bounds(design: Design, drive_torque: ArrayLike,
+                           spread: float = ADHESION_SPREAD) -> tuple[np.ndarray, np.ndarray]:
+    """A-priori bounds of T2 per run: +-``spread`` around (z2/z1) T1, clipped to mu Q R_w.
+
+    Parameters
+    ----------
+    design : Design
+        Gives the ratio and, through ``design.operation``, the adhesion range.
+    drive_torque : array_like
+        T1 of each run, N m.
+    spread : float
+        Relative half-width around the balancing torque.
+
+    Returns
+    -------
+    (lower, upper) : tuple of ndarray
+        N m.
+    """
+    torque = np.asarray(drive_torque, dtype=float)
+    balancing = torque * design.z2 / design.z1
+    low_limit, high_limit = design.operation.adhesion_torque_bounds()
+    lower = np.clip(balancing * (1.0 - spread), low_limit, high_limit)
+    upper = np.clip(balancing * (1.0 + spread), low_limit, high_limit)
+    return lower, upper
+
+
+def default_operating_points(design: Design | None = None) -> xr.Dataset:
+    """The 8 operating points of the public campaigns.
+
+    Parameters
+    ----------
+    design : Design, optional
+        When given, the adhesion torque bounds of :func:`adhesion_torque_bounds`
+        are included.
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimension ``op``: ``pinion_speed`` (rpm), ``drive_torque`` (N m) and,
+        with a design, ``adhesion_torque_lower`` and ``adhesion_torque_upper``.
+    """
+    ops = xr.Dataset({
+        "pinion_speed": ("op", np.array(DEFAULT_PINION_SPEEDS), {"units": "rpm", "long_name": "mean pinion speed"}),
+        "drive_torque": ("op", np.array(DEFAULT_DRIVE_TORQUES), {"units": "N m", "long_name": "drive torque T1"}),
+    })
+    if design is not None:
+        lower, upper = adhesion_torque_bounds(design, ops["drive_torque"].values)
+        ops["adhesion_torque_lower"] = ("op", lower, {"units": "N m", "long_name": "lower bound of T2"})
+        ops["adhesion_torque_upper"] = ("op", upper, {"units": "N m", "long_name": "upper bound of T2"})
+    return ops
+
+
+#: Drive torque of the light-load bearing check, N m (about a fifth of the rating).
+BEARING_CHECK_DRIVE_TORQUE = 1500.0
+
+#: Pinion speeds of the bearing check as multiples of the speeds that put the mesh fundamental
+#: on the two bearing-dominated modes: bracketing each, since the true stiffnesses move them.
+BEARING_CHECK_SPEED_FACTORS: tuple[tuple[float, ...], tuple[float, ...]] = ((0.9, 1.0, 1.1, 1.2),
+                                                                            (0.95, 1.05, 1.15, 1.25))
+
+
+def bearing_check_operating_points(design: Design, drive_torque: float = BEARING_CHECK_DRIVE_TORQUE,
+                                   spread: float = ADHESION_SPREAD) -> xr.Dataset:
+    """A light-load run through the bearing modes: the plan that can show a bearing clearance.
+
+    At service loads both bearings stay loaded and a clearance (a dead zone
+    in the bearing force) is never entered. At light load, with the mesh
+    fundamental near one of the two lowest (bearing-dominated) natural
+    frequencies of the nominal design, the dynamic bearing force exceeds
+    the static one and a bearing unloads. Eight runs: four around each of
+    those speeds (:data:`BEARING_CHECK_SPEED_FACTORS`), rounded to 10 rpm.
+    The load torque is the rig brake's, +-``spread`` around the balancing
+    (z2/z1) T1; the wheel/rail adhesion range does not bound it on a rig.
+
+    Parameters
+    ----------
+    design : Design
+        Nominal design (its natural frequencies place the speeds).
+    drive_torque : float
+        T1 of every run, N m (> 0).
+    spread : float
+        Relative half-width of the T2 interval around the balancing torque.
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimension ``op``: ``pinion_speed``, ``drive_torque``,
+        ``adhesion_torque_lower`` and ``adhesion_torque_upper``.
+    """
+    torque = _check_positive("drive_torque", drive_torque)
+    if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not 0.0 <= spread < 1.0:
+        raise OperatingPointError(f"spread: expected a relative half-width in [0, 1); got {spread!r}")
+    mode_speeds = natural_frequencies(design)[:2] * 60.0 / design.z1
+    speeds = np.concatenate([speed * np.asarray(factors)
+                             for speed, factors in zip(mode_speeds, BEARING_CHECK_SPEED_FACTORS)])
+    speeds = np.round(speeds / 10.0) * 10.0
+    balancing = np.full(speeds.size, torque * design.z2 / design.z1)
+    return xr.Dataset({
+        "pinion_speed": ("op", speeds, {"units": "rpm", "long_name": "mean pinion speed"}),
+        "drive_torque": ("op", np.full(speeds.size, torque), {"units": "N m", "long_name": "drive torque T1"}),
+        "adhesion_torque_lower": ("op", balancing * (1.0 - spread), {"units": "N m",
+                                                                     "long_name": "lower bound of T2"}),
+        "adhesion_torque_upper": ("op", balancing * (1.0 + spread), {"units": "N m",
+                                                                     "long_name": "upper bound of T2"}),
+    })
+
+
+def _operating_table(design: Design, operating_points: xr.Dataset | Mapping[str, ArrayLike] | None,
+                     adhesion_override: ArrayLike | None, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    where = "operating_points"
+    if operating_points is None:
+        operating_points = default_operating_points()
+    if isinstance(operating_points, xr.Dataset):
+        raw = {str(name): operating_points[name].values for name in operating_points.variables
+               if operating_points[name].dims == ("op",)}
+    elif isinstance(operating_points, Mapping):
+        raw = {str(name): np.asarray(values, dtype=float) for name, values in operating_points.items()}
+    else:
+        raise OperatingPointError(f"{where}: expected an xarray Dataset over 'op' or a mapping of arrays; "
+                                  f"got {type(operating_points).__name__}")
+    known = ("pinion_speed", "drive_torque", "adhesion_torque", "adhesion_torque_lower", "adhesion_torque_upper")
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise OperatingPointError(f"{where}.{unknown[0]}: unknown variable; expected {', '.join(known)}")
+    for name in ("pinion_speed", "drive_torque"):
+        if name not in raw:
+            raise OperatingPointError(f"{where}.{name}: missing; expected one value per run")
+    table = {name: np.atleast_1d(np.asarray(values, dtype=float)) for name, values in raw.items()}
+    n_op = table["pinion_speed"].size
+    for name, values in table.items():
+        if values.shape != (n_op,):
+            raise OperatingPointError(f"{where}.{name}: expected {n_op} values (one per run, as pinion_speed); "
+                                      f"got shape {values.shape}")
+        if not np.all(np.isfinite(values)):
+            raise OperatingPointError(f"{where}.{name}: expected finite values; got {values}")
+    if np.any(table["pinion_speed"] <= 0):
+        raise OperatingPointError(f"{where}.pinion_speed: expected speeds > 0 rpm; got {table['pinion_speed']}")
+    if np.any(table["drive_torque"] < 0):
+        raise OperatingPointError(f"{where}.drive_torque: expected torques >= 0 N m; got {table['drive_torque']}")
+    lower, upper = adhesion_torque_bounds(design, table["drive_torque"])
+    table.setdefault("adhesion_torque_lower", lower)
+    table.setdefault("adhesion_torque_upper", upper)
+    if np.any(table["adhesion_torque_lower"] > table["adhesion_torque_upper"]):
+        raise OperatingPointError(f"{where}.adhesion_torque_lower: expected <= adhesion_torque_upper; got "
+                                  f"{table['adhesion_torque_lower']} and {table['adhesion_torque_upper']}")
+    if adhesion_override is not None:
+        table["adhesion_torque"] = np.atleast_1d(np.asarray(adhesion_override, dtype=float))
+        if table["adhesion_torque"].shape != (n_op,):
+            raise OperatingPointError(f"true_parameters.adhesion_torque: expected {n_op} values (one per run); "
+                                      f"got shape {table['adhesion_torque'].shape}")
+    if "adhesion_torque" not in table:
+        table["adhesion_torque"] = rng.uniform(table["adhesion_torque_lower"], table["adhesion_torque_upper"])
+    return table
+
+
+def _true_model(design: Design, true_parameters: Mapping[str, object] | None) -> tuple[Design, float, dict]:
+    """The true design, stiffness scale and the JSON-ready record of the truth."""
+    values = dict(true_parameters or {})
+    allowed = set(BATCH_DESIGN_KEYS) | set(TRUE_PARAMETER_EXTRAS)
+    unknown = sorted(set(values) - allowed)
+    if unknown:
+        raise OperatingPointError(f"true_parameters.{unknown[0]}: unknown parameter; expected "
+                                  f"mesh_stiffness_scale, adhesion_torque or a design key "
+                                  f"({', '.join(BATCH_DESIGN_KEYS)})")
+    scale = values.pop("mesh_stiffness_scale", 1.0)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.floating)) or not 0.1 <= scale <= 10.0:
+        raise OperatingPointError(f"true_parameters.mesh_stiffness_scale: expected a factor in [0.1, 10]; "
+                                  f"got {scale!r}")
+    values.pop("adhesion_torque", None)
+    try:
+        true_design = design.replace(**values) if values else design
+    except ValueError as exc:
+        raise OperatingPointError(f"true_parameters: {exc}") from None
+    return true_design, float(scale), {key: float(values[key]) for key in values}
+
+
+def frequency_filter(size: int, rate: float, passband: float, stopband: float,
+                     derivative_order: int) -> np.ndarray:
+    """Real-FFT response: gain 1 to ``passband``, raised cosine to 0 at ``stopband``, times (i w)^order."""
+    frequency = np.fft.rfftfreq(size, 1.0 / rate)
+    gain = np.ones_like(frequency)
+    transition = (frequency > passband) & (frequency < stopband)
+    gain[transition] = 0.5 * (1.0 + np.cos(np.pi * (frequency[transition] - passband) / (stopband - passband)))
+    gain[frequency >= stopband] = 0.0
+    return gain * (2j * np.pi * frequency) ** derivative_order
+
+
+def _acquire(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, taper: np.ndarray,
+             passband: float, stopband: float, derivative_order: int) -> np.ndarray:
+    """Band-limit a simulated signal (optionally differentiated) and return it on ``time[keep]``."""
+    mean = signal.mean()
+    tapered = (signal - mean) * taper
+    response = frequency_filter(signal.size, rate, passband, stopband, derivative_order)
+    filtered = np.fft.irfft(np.fft.rfft(tapered) * response, n=signal.size)
+    if derivative_order == 0:
+        filtered += mean
+    return filtered[keep]
+
+
+def _check_positive(name: str, value: object, lowest: float = 0.0) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(float(value)) or float(value) <= lowest:
+        raise OperatingPointError(f"{name}: expected a finite number > {lowest:g}; got {value!r}")
+    return float(value)
+
+
+def _as_seed(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
+    return np.random.SeedSequence() if seed is None else as_seed_sequence(seed, error=OperatingPointError)
+
+
+def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str, ArrayLike] | None = None, *,
+                      true_parameters: Mapping[str, object] | None = None, effects: Sequence[Effect] = (),
+                      noise_std: Mapping[str, float] | None = None,
+                      relative_noise: float = DEFAULT_RELATIVE_NOISE, fs: float = 20480.0, duration: float = 1.0,
+                      run_in: float = 1.0, seed: np.random.SeedSequence | int | None = None,
+                      channels: Sequence[str] = tuple(SIGNAL_CHANNELS), title: str | None = None,
+                      oversampling: int = 4, steps_per_mode: int = 32) -> xr.Dataset:
+    """Simulate a rig campaign and return it in the ``uqgear-rig/1`` format.
+
+    Parameters
+    ----------
+    design : Design
+        The *nominal* design, stored in the ``design`` attribute.
+    operating_points : xarray.Dataset or mapping, optional
+        Over dimension ``op``: ``pinion_speed`` (rpm) and ``drive_torque``
+        (N m), optionally ``adhesion_torque_lower``/``_upper`` (default
+        :func:`adhesion_torque_bounds`) and the true ``adhesion_torque``
+        (default: uniform inside the bounds, from the seed). Default: the 8
+        runs of the public campaigns (:func:`default_operating_points`).
+    true_parameters : mapping, optional
+        The rig's true values: ``mesh_stiffness_scale`` (factor on the
+        nominal Ishikawa stiffness, default 1), any design key (``zeta_mesh``,
+        ``backlash``, ``ste_amplitude``, ``k1``, ``k2``, ...; default nominal)
+        and ``adhesion_torque`` (one value per run, N m).
+    effects : sequence of Effect
+        Unmodelled effects acting on the rig (:mod:`uqgear.physics.effects`).
+    noise_std : mapping, optional
+        Channel -> absolute sensor noise standard deviation (channel units).
+    relative_noise : float
+        Sensor noise as a fraction of each run's clean RMS (0 for none).
+    fs : float
+        Sampling rate in Hz.
+    duration, run_in : float
+        Record length and discarded run-in in s (a run-in below the filter's
+        25 ms guard interval is raised to it).
+    seed : SeedSequence or int, optional
+        Source of all randomness (true T2 if not given, record starts, noise).
+        Without one a fresh SeedSequence is drawn and recorded in ``attrs``.
+    channels : sequence of str
+        Channels to record, among ``te``, ``acc_pinion``, ``acc_gear``.
+    title : str, optional
+        Free text for the ``title`` attribute.
+    oversampling : int
+        The model output rate is at least ``oversampling * fs`` before
+        filtering and resampling.
+    steps_per_mode : int
+        RK4 steps per period of the highest natural frequency.
+
+    Returns
+    -------
+    xarray.Dataset
+        Valid ``uqgear-rig/1`` data; extra global attributes
+        ``true_parameters`` (JSON: mesh_stiffness_scale, the design keys given,
+        adhesion_torque per run), ``effects`` (JSON list of name and values),
+        ``noise`` (JSON), ``seed_entropy``.
+
+    Raises
+    ------
+    OperatingPointError
+        A wrong operating point, true parameter, noise level or setting.
+    """
+    seed_sequence = _as_seed(seed)
+    fs = _check_positive("fs", fs)
+    duration = _check_positive("duration", duration)
+    if isinstance(run_in, bool) or not isinstance(run_in, (int, float)) or not math.isfinite(run_in) or run_in < 0:
+        raise OperatingPointError(f"run_in: expected a duration >= 0 s; got {run_in!r}")
+    relative_noise = float(relative_noise)
+    if not math.isfinite(relative_noise) or relative_noise < 0:
+        raise OperatingPointError(f"relative_noise: expected a fraction >= 0 of the run's RMS; got {relative_noise!r}")
+    if isinstance(oversampling, bool) or not isinstance(oversampling, (int, np.integer)) or oversampling < 2:
+        raise OperatingPointError(f"oversampling: expected an integer >= 2; got {oversampling!r}")
+    channels = list(channels)
+    for name in channels:
+        if name not in SIGNAL_CHANNELS:
+            raise OperatingPointError(f"channels: {name!r} is not a rig channel; expected {', '.join(SIGNAL_CHANNELS)}")
+    if not channels:
+        raise OperatingPointError("channels: expected at least one channel")
+    noise_std = dict(noise_std or {})
+    for name, value in noise_std.items():
+        if name not in channels:
+            raise OperatingPointError(f"noise_std.{name}: not among the channels recorded ({', '.join(channels)})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            raise OperatingPointError(f"noise_std.{name}: expected a standard deviation >= 0 in "
+                                      f"{SIGNAL_CHANNELS[name][0]}; got {value!r}")
+
+    true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
+    top_rng = np.random.default_rng(child_seed(seed_sequence, 0))
+    adhesion_override = (true_parameters or {}).get("adhesion_torque")
+    table = _operating_table(design, operating_points, adhesion_override, top_rng)
+    n_op = table["pinion_speed"].size
+    fastest = float(table["pinion_speed"].max())
+    if not fs > 6.0 * design.z1 * fastest / 60.0:
+        raise OperatingPointError(f"fs: {fs:g} Hz does not resolve the third mesh harmonic at {fastest:g} rpm; "
+                                  f"expected more than {6.0 * design.z1 * fastest / 60.0:g} Hz")
+    passband, stopband = fs / 2.56, fs / 2.0
+    n_samples = int(round(duration * fs))
+    record_time = np.arange(n_samples) / fs
+    # children derived from the spawn key: the same seed object always gives the same campaign
+    run_seeds = [child_seed(seed_sequence, 1 + op) for op in range(n_op)]
+    data = {name: np.empty((n_op, n_samples)) for name in channels}
+    for op in range(n_op):
+        speed = float(table["pinion_speed"][op])
+        mesh_frequency = design.z1 * speed / 60.0
+        op_seed, *channel_seeds = (child_seed(run_seeds[op], index) for index in range(1 + len(channels)))
+        # arbitrary record start: anywhere within a pinion revolution after the run-in
+        # (never inside the filter's guard interval at the start of the simulation)
+        start = max(run_in, _GUARD) + np.random.default_rng(op_seed).uniform(0.0, 60.0 / speed)
+        per_period = int(math.ceil(oversampling * fs / mesh_frequency))
+        first_period = max(int(math.floor((start - _GUARD) * mesh_frequency)), 0)
+        last_period = int(math.ceil((start + duration + _GUARD) * mesh_frequency)) + 1
+        sim = simulate(true_design, speed, float(table["drive_torque"][op]), float(table["adhesion_torque"][op]),
+                       n_periods=last_period, keep_periods=last_period - first_period,
+                       samples_per_period=per_period, mesh_stiffness_scale=stiffness_scale, effects=effects,
+                       steps_per_mode=steps_per_mode)
+        time = sim["time"].values
+        rate = per_period * mesh_frequency
+        keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD)),
+                     int(np.searchsorted(time, start + duration + 0.5 * _GUARD)))
+        # taper only the outer part of the guard intervals, far from the record
+        taper = np.ones(time.size)
+        ramp_left = time < time[0] + _TAPER
+        taper[ramp_left] = 0.5 * (1.0 - np.cos(np.pi * (time[ramp_left] - time[0]) / _TAPER))
+        ramp_right = time > time[-1] - _TAPER
+        taper[ramp_right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[ramp_right]) / _TAPER))
+        sample_time = start + record_time
+        for name, channel_seed in zip(channels, channel_seeds):
+            if name == "te":
+                raw, order = sim["te"].values, 0
+            else:
+                raw, order = sim["y1" if name == "acc_pinion" else "y2"].values, 2
+            filtered = _acquire(time, raw, rate, keep, taper, passband, stopband, order)
+            clean = CubicSpline(time[keep], filtered)(sample_time)
+            rms = float(np.sqrt(np.mean((clean - clean.mean()) ** 2)))
+            sigma = math.hypot(noise_std.get(name, 0.0), relative_noise * rms)
+            noisy = clean + sigma * np.random.default_rng(channel_seed).standard_normal(n_samples)
+            data[name][op] = noisy - noisy.mean() if name == "te" else noisy
+
+    stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    truth = {"mesh_stiffness_scale": stiffness_scale, **true_record,
+             "adhesion_torque": [float(v) for v in table["adhesion_torque"]]}
+    effect_record = [{"name": effect.name, "values": dict(effect.values)} for effect in effects]
+    noise_record = {"relative_noise": relative_noise, "noise_std": noise_std}
+    ds = make_rig_dataset(
+        time=record_time, pinion_speed=table["pinion_speed"], drive_torque=table["drive_torque"],
+        adhesion_torque_lower=table["adhesion_torque_lower"], adhesion_torque_upper=table["adhesion_torque_upper"],
+        channels=data, design=design,
+        title=title or "uqgear virtual rig campaign",
+        source="uqgear virtual rig: 3-DOF gear model (fast RK4 integrator), zero-delay anti-alias low-pass "
+               f"flat to {passband:g} Hz and zero from {stopband:g} Hz, Gaussian sensor noise",
+        history=f"{stamp}: simulated by uqgear.rig.virtual_rig.simulate_campaign; {duration:g} s records at "
+                f"{fs:g} Hz after a run-in of {run_in:g} s plus a random start within a pinion revolution",
+        noise_std=noise_std if relative_noise == 0 and noise_std else None)
+    ds.attrs.update(true_parameters=json.dumps(truth), effects=json.dumps(effect_record),
+                    noise=json.dumps(noise_record), seed_entropy=str(seed_sequence.entropy),
+                    seed_spawn_key=json.dumps([int(k) for k in seed_sequence.spawn_key]))
+    return ds
+
+
+def true_parameters_of(ds: xr.Dataset) -> dict[str, object]:
+    """The truth recorded by :func:`simulate_campaign` (``true_parameters`` attribute)."""
+    text = ds.attrs.get("true_parameters")
+    if not isinstance(text, str):
+        raise RigDataError("true_parameters: attribute missing; only campaigns of uqgear's virtual rig carry "
+                           "their true parameters")
+    return json.loads(text)
+
+
+def synth_rig(design: Design, out_path: str | os.PathLike[str], *, effects: Sequence[Effect] = (),
+              true_parameters: Mapping[str, object] | None = None,
+              seed: np.random.SeedSequence | int | None = None, noise_std: Mapping[str, float] | None = None,
+              relative_noise: float = DEFAULT_RELATIVE_NOISE,
+              operating_points: xr.Dataset | Mapping[str, ArrayLike] | None = None,
+              duration: float = 1.0, run_in: float = 1.0, title: str | None = None) -> Path:
+    """Simulate a campaign (:func:`simulate_campaign`) and write it atomically as a rig file.
+
+    This is what ``uqgear synth-rig --design FILE --out FILE.nc [--effect ...] [--seed N]`` runs.
+
+    Parameters
+    ----------
+    design : Design
+        Nominal design (stored in the file).
+    out_path : str or path-like
+        Target ``.nc`` file; its folder must exist.
+    effects, true_parameters, seed, noise_std, relative_noise, operating_points, duration, run_in, title
+        As in :func:`simulate_campaign`.
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+    """
+    path = Path(out_path)
+    if not path.parent.is_dir():
+        raise RigDataError(f"{path}: folder {path.parent} does not exist")
+    ds = simulate_campaign(design, operating_points, true_parameters=true_parameters, effects=effects,
+                           noise_std=noise_std, relative_noise=relative_noise, duration=duration, run_in=run_in,
+                           seed=seed, title=title)
+    return write_rig(path, ds)
+
+
+__all__ = ["simulate_campaign", "synth_rig", "default_operating_points", "adhesion_torque_bounds",
+           "true_parameters_of", "bearing_check_operating_points", "BEARING_CHECK_DRIVE_TORQUE",
+           "BEARING_CHECK_SPEED_FACTORS", "DEFAULT_PINION_SPEEDS", "DEFAULT_DRIVE_TORQUES", "ADHESION_SPREAD",
+           "DEFAULT_RELATIVE_NOISE"]

@@ -1,0 +1,134 @@
+"""Analysis types of a study: the keys each takes with their checks, and their defaults.
+
+Adding an analysis type takes one entry in :data:`ANALYSIS_SCHEMAS` (its keys
+and their checks) and one function registered in :mod:`uqgear.study.analyses`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..physics.effects import EFFECTS
+from .checkers import Checker, boolean, choice, identifier, list_of, number, string
+from .variables import VARIABLES
+
+
+#: Scalar quantities of interest of a simulation run (see uqgear.physics.integration.QOI_INFO).
+QOIS: tuple[str, ...] = (
+    "dte_mean", "dte_rms", "dte_peak_to_peak", "dynamic_load_factor", "peak_mesh_force",
+    "load_factor_rated", "acc_pinion_rms", "acc_gear_rms", "fraction_drive_contact", "fraction_separation",
+    "fraction_back_contact", "largest_lyapunov",
+)
+DEFAULT_QOIS: tuple[str, ...] = ("dte_rms", "dynamic_load_factor", "fraction_separation")
+
+INTERVAL_METHODS: tuple[str, ...] = ("scan", "vertex", "chebyshev", "optimize")
+INTERVAL_FALLBACKS: tuple[str, ...] = ("scan", "optimize", "none")
+SAMPLING_METHODS: tuple[str, ...] = ("monte_carlo", "latin_hypercube", "sobol", "halton")
+
+
+def _qoi_list() -> Checker:
+    return list_of(choice(*QOIS), unique=True, what="a list of QoI names")
+
+
+def _variable_list() -> Checker:
+    return list_of(choice(*VARIABLES), unique=True, what="a list of parameter names")
+
+
+_COMMON_KEYS: dict[str, Checker] = {
+    "type": string(),
+    "name": identifier(),
+    "description": string(),
+    # merged over the study's operating_points and simulation
+    "operating_points": lambda value, path: value,
+    "simulation": lambda value, path: value,
+}
+
+#: Keys (with checks) of each analysis type, besides ``type``, ``name``,
+#: ``description``, ``operating_points`` and ``simulation``.
+ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
+    "simulate": {
+        "samples_per_period": number("samples per mesh period", 8, 1024, integer=True),
+        "method": choice("fast", "scipy"),
+        "spectrum": choice("order", "frequency"),
+        "labels": list_of(string(), what="a list of labels"),
+    },
+    "bifurcation": {
+        "parameter": choice(*VARIABLES),
+        "envelope": _variable_list(),
+        "points": number("values across each interval", 2, 200, integer=True),
+    },
+    "regime_map": {
+        "axes": list_of(choice(*VARIABLES), min_length=2, unique=True, what="a list of two variable names"),
+        "points": number("values across each interval", 2, 200, integer=True),
+    },
+    "interval": {
+        "parameters": _variable_list(),
+        "method": choice(*INTERVAL_METHODS),
+        "order": number("(Chebyshev series order)", 1, 20, integer=True),
+        "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
+        "fallback": choice(*INTERVAL_FALLBACKS),
+        "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
+        "qois": _qoi_list(),
+    },
+    "monte_carlo": {
+        "parameters": _variable_list(),
+        "intervals": choice("uniform", "pbox"),
+        "points": number("(scan points per interval parameter, p-box)", 2, 101, integer=True),
+        "samples": number("samples", 2, 10_000_000, integer=True),
+        "sampling": choice(*SAMPLING_METHODS),
+        "quantiles": list_of(number("", 0.0, 1.0), unique=True, what="a list of probabilities"),
+        "qois": _qoi_list(),
+    },
+    "pce": {
+        "parameters": _variable_list(),
+        "order": number("(highest total polynomial degree tried)", 1, 12, integer=True),
+        "min_order": number("(lowest total polynomial degree tried)", 1, 12, integer=True),
+        "samples": number("training samples", 2, 1_000_000, integer=True),
+        "validation_samples": number("check samples", 2, 1_000_000, integer=True),
+        "sampling": choice(*SAMPLING_METHODS),
+        "qois": _qoi_list(),
+    },
+    "sobol": {
+        "parameters": _variable_list(),
+        "samples": number("base samples N (a power of 2)", 8, 1_048_576, integer=True),
+        "second_order": boolean(),
+        "confidence_level": number("", 0.5, 0.999),
+        "bootstrap": number("resamples", 10, 100_000, integer=True),
+        "qois": _qoi_list(),
+    },
+    "calibrate": {
+        "rig": string(),
+        "parameters": list_of(choice("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2",
+                                     "k1_scale", "k2_scale", "zeta1", "zeta2", "m1", "m2"), unique=True),
+    },
+    "diagnose": {
+        "rig": string(),
+        "effects": list_of(choice(*EFFECTS), unique=True),
+    },
+}
+
+#: Default option values per analysis type (applied after validation).
+ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
+    "simulate": {"samples_per_period": 64, "method": "fast", "spectrum": "order", "labels": ()},
+    "bifurcation": {"envelope": (), "points": 5},
+    "regime_map": {"points": 9},
+    "interval": {"method": "chebyshev", "order": 6, "points": None, "fallback": "scan",
+                 "tolerance": 0.02, "qois": DEFAULT_QOIS},
+    "monte_carlo": {"intervals": "uniform", "points": 5, "samples": 256, "sampling": "latin_hypercube",
+                    "quantiles": (0.05, 0.5, 0.95),
+                    "qois": DEFAULT_QOIS},
+    "pce": {"order": 3, "min_order": 1, "samples": 0, "validation_samples": 32, "sampling": "halton",
+            "qois": DEFAULT_QOIS},
+    "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200,
+              "qois": DEFAULT_QOIS},
+    "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2")},
+    "diagnose": {"effects": tuple(EFFECTS)},
+}
+_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
+                                              "calibrate": ("rig",), "diagnose": ("rig",)}
+#: Analysis types that read a rig data file (key ``rig``, relative to the study file).
+RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")
+#: Analysis types that propagate uncertain parameters (``parameters`` key).
+PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol")
+#: Cap on single simulate() runs in one ``simulate`` analysis (they keep full histories).
+MAX_SIMULATE_RUNS = 64

@@ -1,0 +1,301 @@
+"""Study definitions: the YAML schema, its validation and loading.
+
+A study says what to run: the design (with overrides), the operating points
+and sweeps, the uncertain parameters, the analyses, the seed, the simulation
+settings and the outputs. :func:`load_study` reads a YAML file and validates
+it completely before anything runs; every problem raises
+:class:`~uqgear.common.errors.StudyError` whose message starts with the key path and
+says what was expected, e.g.::
+
+    analyses[2].method: expected one of scan, vertex, chebyshev, optimize; got 'chebychev'
+
+The reference of every key with its units is ``docs/study-reference.md``.
+
+The parts live in their own modules: :mod:`~uqgear.study.checkers`,
+:mod:`~uqgear.study.variables`, :mod:`~uqgear.study.parameters`,
+:mod:`~uqgear.study.settings`, :mod:`~uqgear.study.analysis_schemas` (adding an
+analysis type starts there) and :mod:`~uqgear.study.analysis_specs`; this
+module holds the :class:`Study` and reads it.
+
+This module imports no physics beyond the design loader, so validating a
+study is fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from ..physics.design import _DESIGN_KEYS, Design, load_design
+from ..common.errors import StudyError, UqgearError
+from ..common.resources import bundled_file, bundled_names
+from ..common.yamlio import YAMLError, load_yaml
+from .analysis_schemas import RIG_TYPES
+from .limits import DPI
+from .analysis_specs import AnalysisSpec, _analysis
+from .checkers import _fail, _type_name, boolean, check_mapping, identifier, number, string
+from .parameters import (UncertainParameter, ValueSpec, _check_parameter_range, _operating_points,
+                         _uncertain_parameter)
+from .settings import SimulationSettings, _simulation
+from .variables import OPERATING_VARIABLES, VARIABLES
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What a run writes besides one netCDF file per analysis.
+
+    Attributes
+    ----------
+    report : bool
+        Write ``report.html``.
+    dpi : int
+        Resolution of the report's figures, dots per inch.
+    """
+
+    report: bool = True
+    dpi: int = 110
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study (see :func:`load_study`)."""
+
+    name: str
+    description: str
+    seed: int
+    design: Design
+    design_source: str
+    design_overrides: Mapping[str, Any]
+    operating_points: Mapping[str, ValueSpec]
+    uncertain: Mapping[str, UncertainParameter]
+    simulation: SimulationSettings
+    analyses: tuple[AnalysisSpec, ...]
+    outputs: Outputs
+    chunk_size: int
+    text: str
+    path: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("design_overrides", "operating_points", "uncertain"):
+            object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
+
+    def seed_sequences(self) -> list[np.random.SeedSequence]:
+        """One independent SeedSequence per analysis, spawned from the study seed in list order."""
+        return np.random.SeedSequence(self.seed).spawn(len(self.analyses))
+
+    def analysis(self, name: str) -> AnalysisSpec:
+        for spec in self.analyses:
+            if spec.name == name:
+                return spec
+        raise StudyError(f"analysis {name!r}: not in the study; expected one of "
+                         f"{', '.join(spec.name for spec in self.analyses)}")
+
+
+def _resolve(path: str, base_dir: Path | None) -> Path:
+    candidate = Path(path)
+    return candidate if candidate.is_absolute() or base_dir is None else base_dir / candidate
+
+
+def _resolve_rig(value: str, base_dir: Path | None) -> Path:
+    """A rig file relative to the study's folder, or a bundled campaign named without a suffix."""
+    candidate = _resolve(value, base_dir)
+    if not candidate.exists() and not Path(value).suffix and Path(value).name == value \
+            and value in bundled_names("rig"):
+        return bundled_file("rig", value)
+    return candidate
+
+
+def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
+    """The rig file of a ``calibrate``/``diagnose`` analysis.
+
+    A path is relative to the study file's folder; a bare name such as
+    ``healthy`` with no such file there is the bundled campaign of that name
+    (``uqgear examples`` lists them).
+    """
+    return _resolve_rig(spec.options["rig"], Path(study.path).parent if study.path else None)
+
+
+_TOP_LEVEL_KEYS = ("name", "description", "seed", "design", "operating_points", "uncertain",
+                   "simulation", "analyses", "outputs", "execution")
+
+
+def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any]]:
+    if raw is None:
+        raw = "locomotive"
+    if isinstance(raw, str):
+        spec = {"name": raw}
+    elif isinstance(raw, Mapping):
+        spec = check_mapping(raw, "design", {"name": string(), "path": string(),
+                                             "overrides": lambda v, p: v})
+    else:
+        raise _fail("design", "a bundled design name, or a mapping with name or path and overrides", raw)
+    if ("name" in spec) == ("path" in spec):
+        raise StudyError("design: expected exactly one of name (a bundled design or a file) and path")
+    overrides = spec.get("overrides") or {}
+    if not isinstance(overrides, Mapping):
+        raise _fail("design.overrides", "a mapping of design keys to values", overrides)
+    for key, value in overrides.items():
+        if key not in _DESIGN_KEYS and key != "motor_pole_pairs":
+            raise StudyError(f"design.overrides.{key}: unknown design key; expected one of "
+                             f"{', '.join(_DESIGN_KEYS)}")
+    source = spec.get("path", spec.get("name"))
+    location: str | Path = source
+    candidate = Path(source)
+    if "path" in spec or candidate.suffix:
+        if not candidate.is_absolute() and base_dir is not None:
+            candidate = base_dir / candidate
+        location = candidate
+    try:
+        design = load_design(location)
+    except UqgearError as exc:
+        raise StudyError(f"design: {exc}") from None
+    try:
+        design = design.replace(**dict(overrides)) if overrides else design
+    except UqgearError as exc:
+        raise StudyError(f"design.overrides.{exc}") from None
+    return design, str(source), dict(overrides)
+
+
+
+def study_from_mapping(raw: Any, *, text: str = "", path: str = "",
+                       base_dir: str | Path | None = None) -> Study:
+    """Validate a parsed study mapping and build a :class:`Study`.
+
+    Parameters
+    ----------
+    raw : mapping
+        The parsed YAML.
+    text : str
+        The YAML text (kept for provenance).
+    path : str
+        The study file, for messages and reports.
+    base_dir : str or Path, optional
+        Folder against which a relative design path is resolved.
+
+    Raises
+    ------
+    StudyError
+        The first problem found, with its key path.
+    """
+    if not isinstance(raw, Mapping):
+        raise StudyError(f"study: expected a mapping with keys {', '.join(_TOP_LEVEL_KEYS)}; got "
+                         f"{_type_name(raw)}")
+    for key in raw:
+        if key not in _TOP_LEVEL_KEYS:
+            raise StudyError(f"{key}: unknown key; expected one of {', '.join(_TOP_LEVEL_KEYS)}")
+    if "analyses" not in raw:
+        raise StudyError("analyses: missing (required); expected a list of analyses")
+    name = identifier()(raw.get("name", Path(path).stem if path else "study"), "name")
+    description = string()(raw.get("description", ""), "description")
+    seed = number("", 0, 2**63 - 1, integer=True)(raw.get("seed", 0), "seed")
+    design, design_source, overrides = _design(raw.get("design"), Path(base_dir) if base_dir else None)
+    points = _operating_points(raw.get("operating_points"), "operating_points")
+    uncertain_raw = raw.get("uncertain") or {}
+    if not isinstance(uncertain_raw, Mapping):
+        raise _fail("uncertain", "a mapping of parameter name to its interval or distribution", uncertain_raw)
+    uncertain = {}
+    for key, entry in uncertain_raw.items():
+        if key not in VARIABLES:
+            raise StudyError(f"uncertain.{key}: unknown parameter; expected one of "
+                             f"{', '.join(OPERATING_VARIABLES)} or a design key")
+        if key in points:
+            raise StudyError(f"uncertain.{key}: also given in operating_points; give a study-wide "
+                             "value in one place (an analysis may fix it in its own operating_points)")
+        parameter = _uncertain_parameter(key, entry, f"uncertain.{key}", design)
+        _check_parameter_range(parameter, f"uncertain.{key}")
+        uncertain[key] = parameter
+    simulation = _simulation(raw.get("simulation"), "simulation", SimulationSettings())
+    outputs_raw = check_mapping(raw.get("outputs") or {}, "outputs",
+                                {"report": boolean(), "dpi": DPI})
+    outputs = Outputs(**outputs_raw)
+    execution = check_mapping(raw.get("execution") or {}, "execution",
+                              {"chunk_size": number("samples per chunk", 1, 1_000_000, integer=True)})
+    analyses_raw = raw["analyses"]
+    if not isinstance(analyses_raw, list) or not analyses_raw:
+        raise _fail("analyses", "a non-empty list of analyses", analyses_raw)
+    analyses = tuple(_analysis(entry, index, points, simulation, uncertain)
+                     for index, entry in enumerate(analyses_raw))
+    names = [spec.name for spec in analyses]
+    for index, spec in enumerate(analyses):
+        if names.count(spec.name) > 1:
+            raise StudyError(f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
+                             "expected unique names (give each a 'name')")
+    for spec in analyses:
+        if spec.type in RIG_TYPES:
+            rig = _resolve_rig(spec.options["rig"], Path(base_dir) if base_dir else None)
+            if not rig.is_file():
+                raise StudyError(f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
+                                 "netCDF file (relative paths start at the study file's folder) or a bundled "
+                                 f"campaign ({', '.join(bundled_names('rig'))})")
+    return Study(name=name, description=description, seed=seed, design=design,
+                 design_source=design_source, design_overrides=overrides, operating_points=points,
+                 uncertain=uncertain, simulation=simulation, analyses=analyses, outputs=outputs,
+                 chunk_size=execution.get("chunk_size", 64), text=text, path=path)
+
+
+def parse_study(text: str, *, path: str = "", base_dir: str | Path | None = None) -> Study:
+    """Parse and validate study YAML text.
+
+    Raises
+    ------
+    StudyError
+        Not valid YAML, or the first schema violation (with its key path).
+    """
+    try:
+        raw = load_yaml(text)
+    except YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise StudyError(f"not valid YAML{where}: {problem}") from None
+    if raw is None:
+        raise StudyError("study: the file is empty; expected a mapping with 'analyses' and other keys")
+    return study_from_mapping(raw, text=text, path=path, base_dir=base_dir)
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and validate a study YAML file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The study file, or the name of a bundled study (``"smoke"``) when no
+        such file exists. A relative design or rig path in it is resolved
+        against the file's folder.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    StudyError
+        The file is missing or unreadable, not valid YAML, or breaks the
+        schema; the message starts with the file name and the key path.
+    """
+    source = Path(path)
+    if not source.exists() and isinstance(path, str) and not source.suffix and source.name == path \
+            and path in bundled_names("study"):
+        source = bundled_file("study", path)
+    if source.is_dir():
+        raise StudyError(f"{source}: is a folder; expected a study YAML file")
+    if not source.is_file():
+        bundled = ", ".join(bundled_names("study"))
+        raise StudyError(f"{source}: study file not found (bundled studies, runnable by name: {bundled})")
+    try:
+        content = source.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StudyError(f"{source}: cannot read the study file ({exc})") from None
+    try:
+        return parse_study(content, path=str(source), base_dir=source.parent)
+    except StudyError as exc:
+        raise StudyError(f"{source}: {exc}") from None
+
+
+
+__all__ = ["Study", "Outputs", "load_study", "parse_study", "study_from_mapping", "rig_path"]
