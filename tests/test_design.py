@@ -5,6 +5,7 @@ import math
 import pytest
 
 import uqgear
+import uqgear.common
 from uqgear.physics.design import DESIGN_KEYS, load_design
 from uqgear.common.errors import DesignError
 from uqgear.physics.geometry import pair_geometry
@@ -20,7 +21,7 @@ def test_reference_design_keys_and_provenance(design):
     assert design.module == pytest.approx(0.009)
     assert design.motor_pole_pairs == 3
     assert set(design.to_dict()) == set(DESIGN_KEYS) | {"motor_pole_pairs"}
-    text = (uqgear.physics.design._BUNDLED_DIR / "locomotive.yaml").read_text()
+    text = uqgear.common.bundled_file("design", "locomotive").read_text()
     assert "Provenance" in text and "NOT the lost parameter table" in text
 
 
