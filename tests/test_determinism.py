@@ -3,9 +3,9 @@
 numba compiles the kernels on a first run and loads them from its on-disk
 cache afterwards. With fast-math flags the two sets of machine code rounded
 differently (last bits of every batch output), so a first run after install
-disagreed with every later one. These tests run the batch kernel, the
-calibration's harmonic kernel and the smoke study in fresh interpreters, once
-with an empty cache and once with the cache it filled, and compare every float
+disagreed with every later one. The slow test runs the batch kernel, the
+calibration's harmonic kernel and the smoke study in a fresh interpreter, once
+with an empty cache and once with the cache it filled, and compares every float
 bit for bit.
 """
 
@@ -21,22 +21,20 @@ import numpy as np
 import pytest
 import xarray as xr
 
-import uqgear.common
 import uqgear
 
-ROOT = Path(__file__).resolve().parent.parent
-# the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)
-STUDIES = uqgear.common.bundled_file("study", "smoke").parent
 
-# Kernels exercised in a fresh interpreter; arrays saved for comparison.
-_KERNEL_SCRIPT = textwrap.dedent("""
+# Run in a fresh interpreter: the batch kernel through separation and period-n regimes, the
+# calibration's harmonic kernel, and the smoke study through the real command line. One
+# interpreter does all three, so each cache state costs one compilation.
+_SCRIPT = textwrap.dedent("""
     import sys
     import numpy as np
     import uqgear
     from uqgear.calibration import model_harmonics
+    from uqgear.cli import main
 
     design = uqgear.load_design("locomotive")
-    # speeds through the mesh resonance: separation, period-n and smooth runs
     samples = uqgear.samples_from_mapping({
         "pinion_speed": np.linspace(1000.0, 5500.0, 8),
         "adhesion_torque": np.linspace(21e3, 46e3, 8),
@@ -48,6 +46,7 @@ _KERNEL_SCRIPT = textwrap.dedent("""
     arrays.update({f"harmonics_{name}": harmonics[name].values for name in harmonics.data_vars
                    if np.issubdtype(harmonics[name].dtype, np.floating)})
     np.savez(sys.argv[1], **arrays)
+    sys.exit(main(["run", "smoke", "--out", sys.argv[2], "--quiet"]))
 """)
 
 
@@ -74,35 +73,24 @@ def _differences(first: dict[str, np.ndarray], second: dict[str, np.ndarray]) ->
 
 
 @pytest.mark.slow
-def test_kernels_give_the_same_bits_on_a_cold_and_a_warm_cache(tmp_path):
+def test_kernels_and_the_smoke_study_give_the_same_bits_on_a_cold_and_a_warm_cache(tmp_path):
     cache = tmp_path / "numba-cache"
     cache.mkdir()
-    script = tmp_path / "kernels.py"
-    script.write_text(_KERNEL_SCRIPT)
-    _fresh_interpreter([str(script), str(tmp_path / "cold.npz")], cache, tmp_path)
-    assert any(cache.rglob("*.nbi")), "the first run did not fill the numba cache"
-    _fresh_interpreter([str(script), str(tmp_path / "warm.npz")], cache, tmp_path)
+    script = tmp_path / "run.py"
+    script.write_text(_SCRIPT)
+    for state in ("cold", "warm"):
+        _fresh_interpreter([str(script), str(tmp_path / f"{state}.npz"), str(tmp_path / state)], cache, tmp_path)
+        if state == "cold":
+            assert any(cache.rglob("*.nbi")), "the first run did not fill the numba cache"
     cold, warm = np.load(tmp_path / "cold.npz"), np.load(tmp_path / "warm.npz")
     assert len(cold.files) > 10
     assert _differences({k: cold[k] for k in cold.files}, {k: warm[k] for k in warm.files}) == []
-
-
-@pytest.mark.slow
-def test_smoke_study_gives_the_same_bits_on_a_cold_and_a_warm_cache(tmp_path):
-    cache = tmp_path / "numba-cache"
-    cache.mkdir()
-    study = STUDIES / "smoke.yaml"
-    runs = []
-    for name in ("cold", "warm"):
-        _fresh_interpreter(["-m", "uqgear", "run", str(study), "--out", str(tmp_path / name)],
-                           cache, tmp_path)
-        runs.append(tmp_path / name)
-    files = sorted(path.name for path in runs[0].glob("*.nc"))
+    files = sorted(path.name for path in (tmp_path / "cold").glob("*.nc"))
     assert len(files) >= 8
-    assert files == sorted(path.name for path in runs[1].glob("*.nc"))
+    assert files == sorted(path.name for path in (tmp_path / "warm").glob("*.nc"))
     compared = 0
     for file in files:
-        first, second = _float_variables(runs[0] / file), _float_variables(runs[1] / file)
+        first, second = _float_variables(tmp_path / "cold" / file), _float_variables(tmp_path / "warm" / file)
         compared += len(first)
         assert _differences(first, second) == [], file
     assert compared > 50
