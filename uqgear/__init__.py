@@ -55,7 +55,8 @@ _PUBLIC: dict[str, str] = {
     # errors
     "UqgearError": "common", "DesignError": "common", "OperatingPointError": "common",
     "ParameterSpaceError": "common", "StudyError": "common", "RigDataError": "common",
-    "ExecutionError": "common",
+    "ExecutionError": "common", "InternalError": "common",
+    "UqgearWarning": "common", "DesignWarning": "common", "UndercutWarning": "common",
 }
 
 __all__ = [*_PUBLIC, "__version__"]

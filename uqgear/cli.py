@@ -13,12 +13,22 @@
     uqgear blindtest --out DIR [--n-per-effect N] [--seed S]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
-unreachable scheduler) ends with exit status 2 and a one-line message on
-standard error, without a traceback, and leaves no partial output: ``run``
-writes into a hidden sibling folder ``.DIR.partial`` and renames it to
-``DIR`` only when everything is written. An interrupted run (Ctrl-C, a killed
-job) keeps that folder, with its chunk checkpoints, so that ``--resume``
-continues where it stopped.
+unreachable scheduler, a rig file without usable signal) ends with exit status
+2 and a one-line message on standard error, without a traceback, and leaves no
+partial output: ``run`` writes into a hidden sibling folder ``.DIR.partial``
+and renames it to ``DIR`` only when everything is written. Such mistakes are
+found before the work starts. An interrupted run (Ctrl-C, a killed job) keeps
+that folder, with its chunk checkpoints, so that ``--resume`` continues where
+it stopped.
+
+A failure of uqgear's own computation after the input was accepted
+(:class:`~uqgear.common.errors.InternalError`) is no mistake of the user's:
+it ends with exit status 1 and one line ``uqgear: internal error during
+diagnosis step 'STEP': ...`` naming the step that failed, and keeps what was
+finished: ``diagnose``, ``calibrate`` and ``blindtest`` publish their folder
+with the outputs written so far and ``failure.json`` (the step, the error, its
+traceback, the finished steps and what they found); ``run`` keeps its work
+folder for ``--resume``.
 """
 
 from __future__ import annotations
@@ -27,13 +37,16 @@ import argparse
 import shutil
 import sys
 import tempfile
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
 
-from .common.errors import UqgearError
+from .common.errors import InternalError, UqgearError, UqgearWarning
 
+#: Exit status of an internal failure after the input was accepted.
+EXIT_INTERNAL_ERROR = 1
 #: Exit status of a user mistake.
 EXIT_USER_ERROR = 2
 #: Exit status after Ctrl-C.
@@ -58,6 +71,41 @@ def _one_line(message: object) -> str:
 def _fail(message: object) -> int:
     print(f"uqgear: error: {_one_line(message)}", file=sys.stderr)
     return EXIT_USER_ERROR
+
+
+def _run_command(args: argparse.Namespace) -> int:
+    """Run a command's handler; uqgear's own warnings (an undercut design, ...) print as one line each."""
+    with warnings.catch_warnings():
+        python_style = warnings.showwarning
+        shown: set[str] = set()  # a design read from several places (file, copies) is reported once
+
+        def show(message, category, filename, lineno, file=None, line=None) -> None:
+            if not issubclass(category, UqgearWarning):
+                python_style(message, category, filename, lineno, file, line)
+            elif _one_line(message) not in shown:
+                shown.add(_one_line(message))
+                print(f"uqgear: warning: {_one_line(message)}", file=sys.stderr)
+
+        warnings.showwarning = show
+        return args.handler(args)
+
+
+#: What each command computes, for the message of an internal failure.
+_WORK = {"run": "study run", "calibrate": "calibration", "diagnose": "diagnosis", "blindtest": "blind test",
+         "simulate": "simulation", "synth-rig": "virtual rig simulation", "report": "report"}
+
+
+def _internal_failure(command: str, exc: InternalError) -> int:
+    """One line naming the failed step and where the finished outputs are; exit status 1."""
+    kept = ""
+    if exc.kept:
+        from .common.steps import FAILURE_RECORD
+
+        record = Path(exc.kept) / FAILURE_RECORD
+        kept = f"; finished outputs kept in {exc.kept}" + (f" (see {FAILURE_RECORD})" if record.is_file() else "")
+    print(_one_line(f"uqgear: internal error during {_WORK.get(command, command)} step '{exc.step}': "
+                    f"{exc.detail}{kept}; this is not a mistake in the input, please report it"), file=sys.stderr)
+    return EXIT_INTERNAL_ERROR
 
 
 # ---------------------------------------------------------------------------- validate
@@ -151,6 +199,10 @@ def _command_run(args: argparse.Namespace) -> int:
         print(f"uqgear: interrupted; finished work is kept in {work}; run again with --resume "
               "to continue", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except InternalError as exc:
+        # the study was valid: finished analyses and checkpoints stay for --resume
+        exc.kept = f"{work} (run again with --resume to continue)"
+        raise
     except BaseException:
         # no partial output: drop what this invocation created; a folder left by an earlier
         # interrupted run stays for --resume
@@ -327,6 +379,15 @@ def _output_folder(out: Path, option: str = "--out") -> Iterator[Path]:
     work.mkdir()
     try:
         yield work
+    except InternalError as exc:
+        # the input was valid and work was done: what was finished is published, not thrown away
+        if any(work.iterdir()):
+            _publish(work, out)
+            exc.kept = str(out)
+        else:
+            work.rmdir()
+            _remove_if_empty(parents)
+        raise
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         _remove_if_empty(parents)
@@ -404,6 +465,10 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     summary = result.to_dict()
     state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
     print(f"calibration of {rig} {state}; results in {out}")
+    if not summary.get("converged"):
+        print(f"  {summary.get('message', '')}")
+    for warning in summary.get("warnings") or []:
+        print(f"  warning: {warning}")
     for name, values in (summary.get("parameters") or {}).items():
         if isinstance(values, dict) and "q05" in values:
             print(f"  {name:22s} median {values['q50']:.6g}   90 % interval [{values['q05']:.6g}, {values['q95']:.6g}]")
@@ -421,6 +486,11 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         result = diagnose(rig, work, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
                           workers=args.workers)
     gap = result.get("gap", {})
+    if gap.get("baseline") is None:
+        # nothing was compared (verdict inconclusive): the reason, not a row of Nones
+        print(f"diagnosis of {rig}: verdict {result['verdict']} ({_one_line(result.get('reason', ''))}); "
+              f"results in {out}")
+        return 0
     print(f"diagnosis of {rig}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
           f"{gap.get('baseline')} -> {gap.get('with_effect')} (shrink {gap.get('shrink_fraction')}); results in {out}")
     return 0
@@ -535,7 +605,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "emcee; write DIR/posterior.nc, DIR/calibration.json, DIR/report.html.")
     calibrate.add_argument("rig", metavar="RIG.nc")
     calibrate.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
-    calibrate.add_argument("--design", metavar="FILE", help="nominal design (default: the rig file's design)")
+    calibrate.add_argument("--design", metavar="NAME|FILE", help="nominal design, replacing the rig file's "
+                           "(whose copy is then not checked; default: the rig file's design)")
     calibrate.add_argument("--params", nargs="+", metavar="NAME",
                            help="parameters to calibrate (default: mesh_stiffness_scale zeta_mesh backlash "
                            "ste_amplitude k1 k2)")
@@ -551,7 +622,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "DIR/report.html.")
     diagnose.add_argument("rig", metavar="RIG.nc")
     diagnose.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
-    diagnose.add_argument("--design", metavar="FILE", help="nominal design (default: the rig file's design)")
+    diagnose.add_argument("--design", metavar="NAME|FILE", help="nominal design, replacing the rig file's "
+                          "(whose copy is then not checked; default: the rig file's design)")
     diagnose.add_argument("--effects", nargs="+", metavar="NAME",
                           help="candidate effects (default: all six of the library)")
     diagnose.add_argument("--seed", type=int, default=0, help="seed (default 0)")
@@ -579,7 +651,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.handler(args)
+        return _run_command(args)
+    except InternalError as exc:
+        return _internal_failure(args.command, exc)
     except UqgearError as exc:
         return _fail(exc)
     except FileNotFoundError as exc:

@@ -11,12 +11,17 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import RigDataError
+from ..common.steps import StepLog
 from ..physics.design import Design
 from ..physics.effects import Effect
+from ..physics.geometry import geometry_notes
 from ..rig.format import read_rig, rig_design, validate_rig
+from ..rig.order_tracking import speed_summary, track_orders
+from ..rig.usability import check_usable_signal
 from ..uq.seeds import child_seed
 from .convergence import ConvergenceCriteria
 from .errors import CalibrationError
+from .failure import failure_causes
 from .harmonics import HARMONIC_CHANNELS
 from .likelihood import StageLikelihood, observed_features, operating_points, prior_box
 from .predictive import predictive_check
@@ -37,7 +42,8 @@ class Calibration:
         Global parameters (:mod:`uqgear.calibration`); default
         ``mesh_stiffness_scale, zeta_mesh, backlash, ste_amplitude, k1, k2``.
     design : Design, optional
-        Nominal design; default the rig file's ``design`` attribute.
+        Nominal design; default the rig file's ``design`` attribute. When
+        given it replaces the file's, which is then not validated as a design.
     priors : mapping, optional
         Name -> (lower, upper) uniform prior bounds replacing the defaults.
     channels : sequence of str
@@ -94,6 +100,8 @@ class Calibration:
         Stages, boxes and leave-one-out errors of the emulators.
     timing_ : dict
         Wall and CPU time of the fit, s.
+    steps_ : StepLog
+        The steps of the fit as they finished (kept by a failure).
     """
 
     def __init__(self, parameters: Sequence[str] = DEFAULT_PARAMETERS, *, design: Design | None = None,
@@ -164,35 +172,57 @@ class Calibration:
         Raises
         ------
         RigDataError
-            The rig data do not follow the format.
+            The rig data do not follow the format, or carry no usable signal
+            (:func:`~uqgear.rig.usability.check_usable_signal`).
         CalibrationError
             No usable feature, or a setting that does not fit the data.
+        InternalError
+            A step failed after the input was accepted (``steps_`` holds the
+            finished ones).
         """
         wall_start, cpu_start = time.perf_counter(), time.process_time()
         if isinstance(rig, (str, os.PathLike)):
-            self.rig_source_ = str(rig)
-            rig = read_rig(rig)
+            self.rig_source_ = where = str(rig)
+            # a given design replaces the file's, whose copy is then not validated as a design
+            rig = read_rig(rig, design=self.design)
         elif isinstance(rig, xr.Dataset):
             self.rig_source_ = str(rig.attrs.get("title", "rig data"))
-            validate_rig(rig, where="rig data")
+            where = "rig data"
+            validate_rig(rig, where=where, design=self.design)
         else:
             raise RigDataError(f"rig: expected a uqgear-rig/1 Dataset or file path; got {type(rig).__name__}")
+        # one run is enough: the priors regularise what a single run cannot separate
+        check_usable_signal(rig, where=where, min_operating_points=1, purpose="the calibration")
         design = self.design if self.design is not None else rig_design(rig)
         self.design_ = design
+        # order tracking once, before any feature is read: every later step sees constant-speed records
+        tracking_start = time.perf_counter()
+        rig = track_orders(rig, design)
+        self.speed_ = speed_summary(rig)
+        tracking_s = time.perf_counter() - tracking_start
         # children derived from the spawn key, so that fitting again repeats the run exactly
         seeds = [child_seed(self.seed, index) for index in range(8)]
+        # the data's features and the prior box are input: a problem with them is the user's (exit 2)
         self._prepare_data(rig, design)
         self._prepare_space(design)
+        # from here on the input is accepted: a failure is ours, reported with its step
+        self.steps_ = steps = StepLog()
         stage_rng = np.random.default_rng(seeds[0])
         self.emulator_ = {"stages": []}
-        start_points, truncated = search_box(
-            self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_, walkers=self._walker_count(),
-            stage_steps=self.stage_steps, max_stages=self.max_stages, error_floor=self.model_error_range[0],
-            rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2], stages=self.emulator_["stages"])
-        self._final_sampling(start_points, stage_rng, seeds[3], truncated)
-        self._predictive_check(np.random.default_rng(seeds[4]))
+        with steps.step("search the posterior box (staged emulators and sampling)") as found:
+            start_points, truncated = search_box(
+                self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_,
+                walkers=self._walker_count(), stage_steps=self.stage_steps, max_stages=self.max_stages,
+                error_floor=self.model_error_range[0], rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2],
+                stages=self.emulator_["stages"])
+            found.update(stages=self.emulator_["stages"], truncated=truncated)
+        with steps.step("final sampling") as found:
+            self._final_sampling(start_points, stage_rng, seeds[3], truncated)
+            found.update(converged=self.converged_)
+        with steps.step("posterior predictive check"):
+            self._predictive_check(np.random.default_rng(seeds[4]))
         self.timing_ = {"wall_s": time.perf_counter() - wall_start, "cpu_s": time.process_time() - cpu_start,
-                        "model_runs": int(self.model_runs_)}
+                        "model_runs": int(self.model_runs_), "order_tracking_s": tracking_s}
         return self
 
     # ------------------------------------------------------------------ steps of fit
@@ -263,11 +293,23 @@ class Calibration:
 
     # ------------------------------------------------------------------ results
 
+    def failure(self) -> dict[str, Any]:
+        """What keeps the fit from being a result (:func:`~uqgear.calibration.failure.failure_causes`)."""
+        if not hasattr(self, "posterior_"):
+            raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
+        return failure_causes(diagnostics=self.diagnostics_, summary=self.summary_,
+                              predictive_check=self.predictive_check_, predictive=self.predictive_,
+                              model_error_cap=self.model_error_range[1])
+
     def to_dict(self) -> dict[str, Any]:
         """The calibration result as a JSON-ready mapping (the content of ``calibration.json``)."""
         if not hasattr(self, "posterior_"):
             raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
-        return result_content(rig=self.rig_source_, converged=self.converged_, design=self.design_.to_dict(),
-                               diagnostics=self.diagnostics_, summary=self.summary_,
-                               predictive_check=self.predictive_check_, emulator=self.emulator_,
-                               timing=self.timing_, settings=self.settings())
+        content = result_content(rig=self.rig_source_, converged=self.converged_, design=self.design_.to_dict(),
+                                 diagnostics=self.diagnostics_, summary=self.summary_,
+                                 predictive_check=self.predictive_check_, emulator=self.emulator_,
+                                 timing=self.timing_, settings=self.settings(), speed=self.speed_,
+                                 failure=self.failure())
+        # what the model did with the design's geometry (an undercut tooth), for the report and the record
+        content["design_notes"] = geometry_notes(self.design_)
+        return content

@@ -121,8 +121,13 @@ class StageLikelihood:
         self.log_normaliser = np.where(used, -0.5 * np.log(2.0 * np.pi * total), 0.0).sum(axis=1)  # (K, C, H)
 
     def to_physical(self, unit: np.ndarray) -> np.ndarray:
-        """Physical values of unit-box points."""
-        return self.box_lower + unit * (self.box_upper - self.box_lower)
+        """Physical values of unit-box points, inside the box.
+
+        ``lower + 1 * (upper - lower)`` can round one ulp past ``upper``; the
+        values go to the model as design keys, validated like a user's input,
+        so they are clipped to the box (which lies inside the design's ranges).
+        """
+        return np.clip(self.box_lower + unit * (self.box_upper - self.box_lower), self.box_lower, self.box_upper)
 
     def to_unit(self, physical: np.ndarray) -> np.ndarray:
         """Unit-box coordinates of physical points."""

@@ -10,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from ..common.errors import InternalError
 from ..common.fileio import write_text_atomic
+from ..common.steps import StepLog, write_failure_record
 from ..physics.design import Design, load_design
 from ..rig.format import read_rig
 from .estimator import Calibration
@@ -61,7 +63,8 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     out_dir : path
         Folder for ``posterior.nc``, ``calibration.json`` and ``report.html``.
     design : Design or design file/name, optional
-        Nominal design; default the file's ``design`` attribute.
+        Nominal design; default the file's ``design`` attribute. When given it
+        replaces the file's, which is then not validated as a design.
     params : sequence of str, optional
         Parameters to calibrate (default :data:`DEFAULT_PARAMETERS`).
     seed : SeedSequence or int
@@ -73,15 +76,35 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     -------
     Calibration
         The fitted calibration.
+
+    Raises
+    ------
+    RigDataError, CalibrationError, DesignError
+        A mistake in the input, found before the work starts.
+    InternalError
+        A step failed after the input was accepted: ``out_dir`` keeps
+        ``failure.json`` (the failed step, the error, the finished steps) and
+        the error's ``kept`` names it.
     """
     nominal = None if design is None else (design if isinstance(design, Design) else load_design(design))
     calibration = Calibration(params if params is not None else DEFAULT_PARAMETERS, design=nominal, seed=seed,
                               threads=threads)
-    calibration.fit(rig_path)
-    truth = None
-    rig = read_rig(rig_path)
-    if "true_parameters" in rig.attrs:
-        truth = json.loads(rig.attrs["true_parameters"])
-    write_calibration(calibration, out_dir, truth=truth)
+    try:
+        calibration.fit(rig_path)
+        steps = getattr(calibration, "steps_", StepLog())
+        with steps.step("write the results"):
+            truth = None
+            rig = read_rig(rig_path, design=nominal)
+            if "true_parameters" in rig.attrs:
+                truth = json.loads(rig.attrs["true_parameters"])
+            write_calibration(calibration, out_dir, truth=truth)
+    except InternalError as exc:
+        folder = Path(out_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_failure_record(folder, exc, command="calibration",
+                             inputs={"rig": str(rig_path), "params": list(calibration.parameters), "seed": str(seed),
+                                     "design": design if isinstance(design, (str, os.PathLike)) else None})
+        exc.kept = str(folder)
+        raise
     return calibration
 

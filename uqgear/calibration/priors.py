@@ -16,6 +16,14 @@ any other design key     nominal x [0.7, 1.3] (or ``priors``)        its units
 =======================  ==========================================  ==============
 
 ``k1_scale``/``k2_scale`` are accepted as aliases of ``k1``/``k2``.
+
+Every prior lies inside what the design validation accepts for its key: a
+default prior is cut to the key's plausible range (``k1`` of a design at
+1e13 N/m gets [6e12, 1e13]), a prior given outside it is refused before any
+work starts, and so is a prior box at whose corners the design stops being a
+working gear pair (a profile shift that makes the teeth pointed or the tips
+interfere). The sampler's proposals never leave the box, so no model run of a
+calibration can be refused for its parameters.
 """
 
 from __future__ import annotations
@@ -23,8 +31,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from itertools import product
 
-from ..physics.design import Design
+from ..common.errors import DesignError
+from ..physics.design import Design, design_key_bounds
 from ..physics.integration import BATCH_DESIGN_KEYS
 from .errors import CalibrationError
 
@@ -128,12 +138,67 @@ def prior_bounds(design: Design, parameters: Sequence[str],
                 lower, upper = nominal * rule.lower, nominal * rule.upper
             else:
                 lower, upper = rule.lower, rule.upper
+            # a negative nominal (a negative profile shift) turns a relative range around
+            lower, upper = min(lower, upper), max(lower, upper)
+            if name != "mesh_stiffness_scale":
+                # a default prior is cut to what the design accepts; one given is checked below
+                valid_lower, valid_upper = design_key_bounds(name)
+                lower, upper = max(lower, valid_lower), min(upper, valid_upper)
         if not (math.isfinite(lower) and math.isfinite(upper) and lower < upper):
             raise CalibrationError(f"priors.{name}: expected finite bounds with lower < upper; got [{lower!r}, {upper!r}]")
         if name == "mesh_stiffness_scale" and lower <= 0:
             raise CalibrationError(f"priors.{name}: expected a positive lower bound; got {lower!r}")
+        if name != "mesh_stiffness_scale":
+            valid_lower, valid_upper = design_key_bounds(name)
+            if lower < valid_lower or upper > valid_upper:
+                raise CalibrationError(f"priors.{name}: expected bounds within [{valid_lower:g}, {valid_upper:g}] "
+                                       f"{parameter_units(name)} (the design's plausible range); "
+                                       f"got [{lower!r}, {upper!r}]")
         bounds[name] = (lower, upper)
+    _check_prior_designs(design, bounds)
     return bounds
+
+
+# Up to this many design keys in a prior box, every corner is checked; beyond, the end of each
+# key's range with the others at their nominal values (2^12 corners would take a second).
+_MAX_CORNER_KEYS = 10
+
+
+def _check_prior_designs(design: Design, bounds: Mapping[str, tuple[float, float]]) -> None:
+    """Refuse a prior box in which the design stops being a working gear pair.
+
+    The keys' ranges are checked above; what is left are the geometry checks
+    (interference, pointed teeth, contact ratio, tip clearance), which depend on
+    several keys at once. They are checked at the end of each key's range
+    (naming that key) and at the corners of the box, where a geometric limit
+    is reached first.
+    """
+    keys = [name for name in bounds if name != "mesh_stiffness_scale"]
+    if not keys:
+        return
+
+    def refused(changes: Mapping[str, float]) -> str | None:
+        try:
+            design.replace(**changes)
+        except DesignError as exc:
+            return str(exc)
+        return None
+
+    for name in keys:
+        for value in bounds[name]:
+            problem = refused({name: value})
+            if problem is not None:
+                raise CalibrationError(f"priors.{name}: the design at {name} = {value:g} is not a working gear "
+                                       f"pair ({problem}); expected a prior inside the range the design accepts")
+    if len(keys) > _MAX_CORNER_KEYS:
+        return
+    for corner in product(*(bounds[name] for name in keys)):
+        changes = dict(zip(keys, corner))
+        problem = refused(changes)
+        if problem is not None:
+            shown = ", ".join(f"{name} = {value:g}" for name, value in changes.items())
+            raise CalibrationError(f"priors: the design at the corner {shown} of the prior box is not a working "
+                                   f"gear pair ({problem}); expected priors inside the range the design accepts")
 
 
 def parameter_units(name: str) -> str:

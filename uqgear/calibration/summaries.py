@@ -91,19 +91,34 @@ def model_error_summary(unit: np.ndarray, likelihood: StageLikelihood, features:
 
 def result_content(*, rig: str, converged: bool, design: Mapping[str, Any], diagnostics: dict[str, Any],
                    summary: dict[str, Any], predictive_check: dict[str, Any], emulator: dict[str, Any],
-                   timing: dict[str, Any], settings: dict[str, Any]) -> dict[str, Any]:
-    """The content of ``calibration.json``: estimates only if converged."""
+                   timing: dict[str, Any], settings: dict[str, Any],
+                   speed: list[dict[str, Any]], failure: Mapping[str, Any]) -> dict[str, Any]:
+    """The content of ``calibration.json``: estimates only if converged.
+
+    ``failure`` is :func:`uqgear.calibration.failure.failure_causes` of the
+    fit: an unconverged fit carries its ``message`` and ``causes`` (the
+    sampler named only when the chain statistics are all that failed); a
+    converged one lists what it still shows (a predictive misfit, a
+    parameter at a prior bound, capped model-error terms) under ``warnings``.
+
+    ``speed`` is the per-operating-point speed estimate of the order tracking
+    (:func:`uqgear.rig.order_tracking.speed_summary`).
+    """
     estimates = {"parameters": summary["parameters"], "adhesion_torque": summary["adhesion_torque"]}
     result: dict[str, Any] = {
         "rig": rig, "converged": converged,
         "design": design,
         "diagnostics": diagnostics, "model_error": summary["model_error"],
         "predictive_check": predictive_check, "emulator": emulator, "timing": timing,
-        "settings": settings,
+        "settings": settings, "speed": speed,
     }
+    causes = failure["causes"]
     if converged:
         result.update(estimates)
+        # a converged fit may still misfit, lean on a bound or on its model-error terms: say so, keep the result
+        result["warnings"] = [cause["text"] for cause in causes]
     else:
         result.update(parameters=None, adhesion_torque=None, unconverged_estimates=estimates,
-                      message="the sampler did not converge: estimates are not a result")
+                      message=failure["message"],
+                      causes=causes)
     return result

@@ -76,7 +76,9 @@ def train_emulators(box_lower: np.ndarray, box_upper: np.ndarray, seed: np.rando
     points = []
     for op in range(n_op):
         columns = list(range(n_global)) + [n_global + op]
-        points.append(box_lower[columns] + unit * (box_upper[columns] - box_lower[columns]))
+        # clipped: the arithmetic can round past the box, whose sides may be the design's own limits
+        points.append(np.clip(box_lower[columns] + unit * (box_upper[columns] - box_lower[columns]),
+                              box_lower[columns], box_upper[columns]))
     outputs = run_model(points).reshape(n_op, n_training, -1)
     emulators, loo = [], np.full((n_op, outputs.shape[2]), np.nan)
     z = 2.0 * unit - 1.0

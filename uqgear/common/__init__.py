@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from .errors import (
     shown, UqgearError, DesignError, OperatingPointError, ParameterSpaceError, StudyError, RigDataError,
-    ExecutionError)
+    ExecutionError, InternalError, internal_step, UqgearWarning, DesignWarning, UndercutWarning)
 from .fileio import (atomic_path, write_text_atomic)
+from .steps import FAILURE_RECORD, StepLog, write_failure_record
 from .resources import ResourceError, bundled_file, bundled_names, example_rig_file
 from .progress import (progress, progress_enabled, PROGRESS_ENVIRONMENT_VARIABLE)
 from .yamlio import (load_yaml, YAMLError)
@@ -17,6 +18,8 @@ from .yamlio import (load_yaml, YAMLError)
 __all__ = [
     'ResourceError', 'bundled_file', 'bundled_names', 'example_rig_file',
     'shown', 'UqgearError', 'DesignError', 'OperatingPointError', 'ParameterSpaceError', 'StudyError',
-    'RigDataError', 'ExecutionError', 'atomic_path', 'write_text_atomic', 'progress',
-    'progress_enabled', 'PROGRESS_ENVIRONMENT_VARIABLE', 'load_yaml', 'YAMLError',
+    'RigDataError', 'ExecutionError', 'InternalError', 'internal_step', 'UqgearWarning', 'DesignWarning',
+    'UndercutWarning', 'atomic_path', 'write_text_atomic', 'progress',
+    'progress_enabled', 'PROGRESS_ENVIRONMENT_VARIABLE', 'load_yaml', 'YAMLError', 'FAILURE_RECORD', 'StepLog',
+    'write_failure_record',
 ]

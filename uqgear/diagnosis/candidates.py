@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics.design import Design
+from ..physics.design import Design, design_key_bounds
 from ..physics.effects import EFFECTS, Effect, make_effect
 from .errors import DiagnosisError
 from .simulation import _MAX_STIFFNESS_SCALE
@@ -21,6 +21,12 @@ class ParameterSpec:
     The optimiser works with ``v = (g(x) - g(centre)) / unit`` where ``g`` is
     the identity or the logarithm; with a prior (normal in g) the unit is its
     standard deviation, so the prior's residual is ``v`` itself.
+
+    Natural values always lie in ``[lower, upper]``: :meth:`from_optimiser`
+    clips, because the round trip through the transform is not exact
+    (``0.03 exp(log(10))`` is ``0.30000000000000004``) and the values go to
+    constructors that validate them as strictly as a user's input (an
+    effect's parameters, the design keys).
     """
 
     name: str
@@ -38,10 +44,32 @@ class ParameterSpec:
 
     def from_optimiser(self, v: float) -> float:
         g = v * self.unit
-        return self.centre * math.exp(g) if self.log else self.centre + g
+        value = self.centre * math.exp(g) if self.log else self.centre + g
+        # an optimiser, a finite-difference step or a Newton step may sit on (or a rounding past)
+        # a bound: the natural value is held inside, never handed on one ulp outside
+        return min(max(value, self.lower), self.upper)
 
     def bounds(self) -> tuple[float, float]:
         return self.to_optimiser(self.lower), self.to_optimiser(self.upper)
+
+
+# Floors of the log-scale centres: a design may give an undamped mesh or no STE, but a log
+# transform needs a positive centre (the fit then starts at the floor).
+_ZETA_MESH_FLOOR = 1e-3
+_STE_FLOOR = 1e-7
+
+
+def _design_spec(name: str, centre: float, unit: float, lower: float, upper: float) -> ParameterSpec:
+    """A nominal parameter that is a design key, its bounds inside what the design validation accepts.
+
+    Without the intersection a design near the edge of a key's plausible
+    range (k1 = 1e13 N/m, an STE of 0.4 mm) would let the fit propose a value
+    the design refuses, minutes into the work.
+    """
+    valid_lower, valid_upper = design_key_bounds(name)
+    lower, upper = max(lower, valid_lower), min(upper, valid_upper)
+    centre = min(max(centre, lower), upper)
+    return ParameterSpec(name, True, centre, unit, lower, upper, True)
 
 
 def nominal_parameters(design: Design) -> list[ParameterSpec]:
@@ -49,16 +77,16 @@ def nominal_parameters(design: Design) -> list[ParameterSpec]:
 
     Mesh stiffness scale (log-normal, 15 %), mesh damping ratio (50 %), STE
     amplitude (40 %), bearing stiffnesses (25 %), bounded at about three
-    standard deviations.
+    standard deviations and inside the design keys' plausible ranges.
     """
+    zeta = max(design.zeta_mesh, _ZETA_MESH_FLOOR)
+    ste = max(design.ste_amplitude, _STE_FLOOR)
     return [
         ParameterSpec("mesh_stiffness_scale", True, 1.0, 0.15, 0.6, _MAX_STIFFNESS_SCALE, True),
-        ParameterSpec("zeta_mesh", True, design.zeta_mesh, 0.5, design.zeta_mesh / 5.0,
-                      min(design.zeta_mesh * 5.0, 0.9), True),
-        ParameterSpec("ste_amplitude", True, max(design.ste_amplitude, 1e-7), 0.4,
-                      max(design.ste_amplitude, 1e-7) / 3.0, max(design.ste_amplitude, 1e-7) * 3.0, True),
-        ParameterSpec("k1", True, design.k1, 0.25, design.k1 / 2.0, design.k1 * 2.0, True),
-        ParameterSpec("k2", True, design.k2, 0.25, design.k2 / 2.0, design.k2 * 2.0, True),
+        _design_spec("zeta_mesh", zeta, 0.5, zeta / 5.0, min(zeta * 5.0, 0.9)),
+        _design_spec("ste_amplitude", ste, 0.4, ste / 3.0, ste * 3.0),
+        _design_spec("k1", design.k1, 0.25, design.k1 / 2.0, design.k1 * 2.0),
+        _design_spec("k2", design.k2, 0.25, design.k2 / 2.0, design.k2 * 2.0),
     ]
 
 
@@ -100,8 +128,9 @@ class Candidate:
 def _effect_spec(effect: str, parameter: str, unit: float, lower: float | None = None,
                  upper: float | None = None) -> ParameterSpec:
     definition = EFFECTS[effect].PARAMETERS[parameter]
-    low = definition.lower if lower is None else lower
-    high = definition.upper if upper is None else upper
+    # the search range never reaches past what the effect itself accepts
+    low = definition.lower if lower is None else max(lower, definition.lower)
+    high = definition.upper if upper is None else min(upper, definition.upper)
     return ParameterSpec(f"{effect}.{parameter}", False, 0.0, unit, low, high, False)
 
 
@@ -114,8 +143,9 @@ def _strength_spec(effect: str, parameter: str, centre: float, upper: float | No
     "absent".
     """
     definition = EFFECTS[effect].PARAMETERS[parameter]
-    high = definition.upper if upper is None else upper
-    return ParameterSpec(f"{effect}.{parameter}", True, centre, 1.0, centre * 1e-6, high, False)
+    high = definition.upper if upper is None else min(upper, definition.upper)
+    return ParameterSpec(f"{effect}.{parameter}", True, centre, 1.0, max(centre * 1e-6, definition.lower), high,
+                         False)
 
 
 def _grid(**axes: Sequence[float]) -> tuple[dict[str, float], ...]:

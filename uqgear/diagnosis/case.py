@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -14,6 +15,7 @@ from ..physics.design import Design
 from ..physics.effects import Effect
 from ..rig import features as feature_module
 from ..rig.features import SIGNAL_CHANNELS
+from ..rig.order_tracking import speed_summary, track_orders
 from .discrepancy import FeatureLayout, NoiseModel, noise_model
 from .errors import DiagnosisError
 from .simulation import CampaignSimulator, RunProcessor, SimulatedRun
@@ -52,6 +54,8 @@ class RigCase:
     usable: np.ndarray            # (n_op, n_channel)
     simulator: CampaignSimulator
     model_error: dict[str, float]
+    speed: list[dict[str, Any]]    # per run: the order tracking's speed estimate
+    tracking_s: float              # time spent estimating speeds and resampling
     executor: "RunExecutor | None" = None
 
     @property
@@ -71,7 +75,12 @@ class RigCase:
 
 def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequence,
                  model_error: Mapping[str, float] | None = None, steps_per_mode: int = 24) -> RigCase:
-    """Features, noise models, processors and simulator of a validated rig Dataset."""
+    """Features, noise models, processors and simulator of a validated rig Dataset.
+
+    The records are first order-tracked (:func:`uqgear.rig.order_tracking.track_orders`):
+    every later step, and the model runs at each run's ``pinion_speed``, see
+    constant-speed records at the estimated mean speed.
+    """
     errors = dict(DEFAULT_MODEL_ERROR)
     if model_error is not None:
         unknown = sorted(set(model_error) - set(errors))
@@ -82,6 +91,9 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
                 raise DiagnosisError(f"model_error.{key}: expected a relative error in [0, 1); got {value!r}")
             errors[key] = float(value)
     channels = tuple(name for name in SIGNAL_CHANNELS if name in rig.data_vars)
+    clock = time.perf_counter()
+    rig = track_orders(rig, design)
+    tracking_s = time.perf_counter() - clock
     fs = feature_module.sampling_rate(rig["time"].values, where="rig data: time")
     size = int(rig.sizes["time"])
     options = dict(FEATURE_OPTIONS, band_limit=feature_module.DEFAULT_BAND_FRACTION * fs)
@@ -108,7 +120,8 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
                    adhesion_upper=np.asarray(rig["adhesion_torque_upper"].values, dtype=float),
                    fs=fs, size=size, processors=processors, layout=layout,
                    observed=observed_all[..., layout.columns], observed_all=observed_all, noise_std=noise_std,
-                   noise=noise, usable=usable, simulator=simulator, model_error=errors)
+                   noise=noise, usable=usable, simulator=simulator, model_error=errors,
+                   speed=speed_summary(rig), tracking_s=tracking_s)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,8 @@ from .case import RigCase, simulate_task
 from .pipeline import DiagnosisResult
 from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
 from .signatures import amplitude_spectrum
-from .verdict import NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, Decision
+from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, SIGNAL_SNR,
+                      Decision, line_signal_to_noise)
 
 
 def _held_spectra(result: DiagnosisResult, ops: Sequence[int]) -> xr.Dataset:
@@ -68,8 +69,10 @@ def _family_map(z: np.ndarray, case: RigCase) -> np.ndarray:
         if not chosen.any():
             continue
         squares = capped_squares(z[:, :, chosen])
-        with np.errstate(invalid="ignore"):
-            mean = np.nanmean(np.where(np.isfinite(squares), squares, np.nan), axis=-1)
+        # a family without a compared feature in a run (short records merge its lines) is NaN, silently
+        finite = np.isfinite(squares)
+        count = finite.sum(axis=-1)
+        mean = np.where(count > 0, np.where(finite, squares, 0.0).sum(axis=-1) / np.maximum(count, 1), np.nan)
         out[:, :, k] = np.sqrt(np.maximum(mean - _GAP_NOISE_LEVEL, 0.0))
     return out
 
@@ -177,12 +180,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "effect_named": named is not None,
         "shrink_fraction": chosen.shrink if chosen is not None else None,
         "shrink_interval": [chosen.shrink_low, chosen.shrink_high] if chosen is not None else None,
-        "evaluated_on": {
-            "scheme": "leave-one-operating-point-out: each run predicted by the models fitted without it",
-            "ops": list(range(case.n_op)),
-            "pinion_speed": [float(v) for v in case.speeds],
-            "drive_torque": [float(v) for v in case.drive_torques],
-        },
+        "evaluated_on": _evaluated_on(case),
         "noise_threshold": NOISE_GAP_THRESHOLD,
         "baseline_interval": [float(v) for v in result.nominal_gap_interval],
     }
@@ -208,10 +206,80 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "model_error": case.model_error,
         "effects_considered": list(result.effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
-                "channels": list(case.channels)},
+                "channels": list(case.channels), "speed": case.speed},
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+
+
+def _evaluated_on(case: RigCase) -> dict[str, Any]:
+    return {"scheme": "leave-one-operating-point-out: each run predicted by the models fitted without it",
+            "ops": list(range(case.n_op)), "pinion_speed": [float(v) for v in case.speeds],
+            "drive_torque": [float(v) for v in case.drive_torques]}
+
+
+def _strongest_lines(case: RigCase) -> list[float | None]:
+    """Per run: the strongest line's amplitude in noise spreads (None where nothing could be measured)."""
+    ratio = line_signal_to_noise(case)
+    return [float(np.nanmax(ratio[op])) if np.isfinite(ratio[op]).any() else None for op in range(case.n_op)]
+
+
+def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Sequence[str], seed_text: str,
+                         timings: Mapping[str, float]) -> dict[str, Any]:
+    """The JSON summary of a diagnosis whose data cannot decide (verdict ``inconclusive``, nothing fitted).
+
+    The same keys as :func:`summary`; what was not computed is None or empty
+    (``nominal`` is None: no model was fitted to noise), and ``signal`` gives
+    the strongest line of each run in noise spreads against the threshold.
+    """
+    gap = {"metric": GAP_METRIC, "baseline": None, "with_effect": None, "effect": None, "effect_named": False,
+           "shrink_fraction": None, "shrink_interval": None, "evaluated_on": _evaluated_on(case),
+           "noise_threshold": NOISE_GAP_THRESHOLD, "baseline_interval": None}
+    return {
+        "verdict": "inconclusive",
+        "reason": reason,
+        "borderline": [],
+        "partial": False,
+        "remaining_gap": None,
+        "gap": gap,
+        "where": [],
+        "families": [],
+        "frequency_locked_lines": [],
+        "ranking": [],
+        "nominal": None,
+        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": SIGNAL_SNR},
+        "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
+                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD,
+                       "signal_snr": SIGNAL_SNR},
+        "model_error": case.model_error,
+        "effects_considered": list(effects),
+        "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
+                "channels": list(case.channels), "speed": case.speed},
+        "seed": seed_text,
+        "timing_s": dict(timings),
+    }
+
+
+def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> xr.Dataset:
+    """The Dataset of ``diagnosis.nc`` for data that cannot decide: the rig's features and their signal-to-noise."""
+    layout = case.layout
+    dims = ("op", "channel", "feature")
+    data = {
+        "observed": (dims, case.observed, {"long_name": "rig features", "units": "channel units"}),
+        "line_snr": (dims, line_signal_to_noise(case),
+                     {"long_name": "line amplitude over its per-quadrature noise spread", "units": "1"}),
+        "noise_std": (("op", "channel"), case.noise_std, {"long_name": "white-noise level of the rig records",
+                                                          "units": "channel units"}),
+    }
+    coords = {"op": ("op", np.arange(case.n_op)), "pinion_speed": ("op", case.speeds, {"units": "rpm"}),
+              "drive_torque": ("op", case.drive_torques, {"units": "N m"}), "channel": ("channel", list(case.channels)),
+              "feature": ("feature", list(layout.names)), "feature_family": ("feature", list(layout.families)),
+              "feature_kind": ("feature", list(layout.kinds))}
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(title="uqgear sim-to-real gap diagnosis", verdict="inconclusive", reason=reason,
+                    gap_metric=GAP_METRIC, model_error=json.dumps(case.model_error),
+                    effects_considered=json.dumps(list(effects)))
+    return ds
 
 
 def _json_clean(value: Any) -> Any:

@@ -42,7 +42,14 @@ Pipeline (docs/model.md section 6):
 5. **Verdict.** ``none`` when the nominal model is within noise on held-out
    runs; otherwise the best candidate when it clearly beats the nominal
    model (predictive density gain beyond a penalty per extra parameter, a
-   gap that shrinks by at least half); otherwise ``unexplained``.
+   gap that shrinks by at least half); otherwise ``unexplained``;
+   ``inconclusive`` when no feature could be compared on held-out runs (and,
+   decided before any fit by :func:`uqgear.diagnosis.workflow.diagnose`, when
+   no line stands above the noise floor in two runs).
+
+Each step runs inside a :class:`~uqgear.common.steps.StepLog` step: a failure
+after the input was accepted is an :class:`~uqgear.common.errors.InternalError`
+naming the step, not a user error.
 
 This module holds the steps 3 to 5 together (:func:`run_diagnosis`); the
 pieces live in :mod:`.simulation` (step 1), :mod:`.discrepancy` (step 2),
@@ -64,6 +71,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from ..common.steps import StepLog
 from ..physics.effects import EFFECTS
 from .candidates import candidates_for, nominal_parameters
 from .case import RigCase
@@ -202,17 +210,25 @@ def improved_nominal(nominal: FitResult, fits: Sequence[FitResult], *,
     return refit if refit.cost < nominal.cost - margin else None
 
 
+def _found(entry: CandidateScore) -> dict[str, Any]:
+    """What a candidate's fit found, for the step log."""
+    return {"score": entry.score, "shrink_fraction": entry.shrink, "gap_with_effect": entry.gap,
+            "parameters": entry.parameters()}
+
+
 def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, nominal_gap: float,
                       effect_names: Sequence[str], hints: Mapping[str, float], rng: np.random.Generator,
-                      promoted: int, timings: dict[str, float]
+                      promoted: int, timings: dict[str, float], steps: StepLog
                       ) -> tuple[dict[str, CandidateScore], list[CandidateScore]]:
     """Screen every candidate against the nominal fit, fit the best ones in full; best score per effect."""
     clock = time.perf_counter()
     screened: list[CandidateScore] = []
     for name in effect_names:
         for candidate in candidates_for(name, case.design, hints=hints):
-            result = fit_candidate(case, candidate, nominal, full=False, max_evaluations=6)
-            screened.append(score_candidate(result, leave_one_out(result), nominal_held, "screening", rng))
+            with steps.step(f"screen {candidate.label}") as found:
+                result = fit_candidate(case, candidate, nominal, full=False, max_evaluations=6)
+                screened.append(score_candidate(result, leave_one_out(result), nominal_held, "screening", rng))
+                found.update(_found(screened[-1]))
     timings["screening"] += time.perf_counter() - clock
 
     clock = time.perf_counter()
@@ -229,8 +245,10 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
     def fit_in_full(entries: Sequence[CandidateScore]) -> None:
         for entry in entries:
             candidate = entry.fit.problem.candidate
-            result = fit_candidate(case, candidate, nominal, full=True, max_evaluations=12, start=entry.fit)
-            full = score_candidate(result, leave_one_out(result), nominal_held, "full", rng)
+            with steps.step(f"fit {candidate.label} in full") as found:
+                result = fit_candidate(case, candidate, nominal, full=True, max_evaluations=12, start=entry.fit)
+                full = score_candidate(result, leave_one_out(result), nominal_held, "full", rng)
+                found.update(_found(full))
             all_scores.append(full)
             if full.score > best_per_effect[entry.effect].score:
                 best_per_effect[entry.effect] = full
@@ -247,7 +265,9 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
             break
         fit_in_full([entry])
     full_fits = [entry for entry in all_scores if entry.stage == "full"]
-    for entry, cost in zip(full_fits, effect_off_costs(nominal, [entry.fit for entry in full_fits])[1]):
+    with steps.step("switch the effects of the full fits off"):
+        costs = effect_off_costs(nominal, [entry.fit for entry in full_fits])[1]
+    for entry, cost in zip(full_fits, costs):
         entry.effect_gain = cost - entry.fit.cost
     for entry in screened:
         entry.effect_gain = nominal.cost - entry.fit.cost
@@ -264,7 +284,8 @@ def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str,
 
 
 def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
-                  promoted: int = PROMOTED, calibration: xr.Dataset | None = None) -> DiagnosisResult:
+                  promoted: int = PROMOTED, calibration: xr.Dataset | None = None,
+                  steps: StepLog | None = None) -> DiagnosisResult:
     """Fit the nominal model and every candidate, score them on held-out runs, decide.
 
     Candidates are screened with their own parameters only (the nominal
@@ -290,51 +311,74 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         At most this many effects get a full fit.
     calibration : xarray.Dataset, optional
         A calibration posterior; the nominal fit starts from its medians.
+    steps : StepLog, optional
+        Records each finished step with what it found; a failure inside a
+        step is raised as :class:`~uqgear.common.errors.InternalError`
+        naming it, with the finished steps attached.
 
     Returns
     -------
     DiagnosisResult
+
+    Raises
+    ------
+    DiagnosisError
+        An unknown effect, or a calibration posterior without the nominal parameters.
+    InternalError
+        A step failed after the input was accepted.
     """
     effect_names = _check_effects(effects)
+    steps = StepLog() if steps is None else steps
     rng = np.random.default_rng(seed)
-    timings: dict[str, float] = {"nominal_fit": 0.0, "screening": 0.0, "full_fits": 0.0}
-    clock = time.perf_counter()
+    timings: dict[str, float] = {"order_tracking": case.tracking_s, "nominal_fit": 0.0, "screening": 0.0,
+                                 "full_fits": 0.0}
+    start, positions = None, None
     if calibration is not None:
+        # the posterior is input: checked here, before the work, so a bad one is the user's error
         start, positions = calibration_start(calibration, case)
         if "backlash" in start:
             case.design = case.design.replace(backlash=start.pop("backlash"))
-        nominal = fit_nominal(case, start=start, positions=positions)
-    else:
-        nominal = fit_nominal(case)
+    clock = time.perf_counter()
+    with steps.step("fit the nominal model") as found:
+        nominal = fit_nominal(case) if start is None else fit_nominal(case, start=start, positions=positions)
+        found.update(parameters=nominal.values, adhesion_torque=list(nominal.adhesion_torques), cost=nominal.cost)
     timings["nominal_fit"] += time.perf_counter() - clock
-    locked = frequency_locked_lines(case)
-    hints = signature_hints(case, locked)
+    with steps.step("find frequency-locked lines and signature hints") as found:
+        locked = frequency_locked_lines(case)
+        hints = signature_hints(case, locked)
+        found.update(hints=dict(hints))
     for attempt in range(_NOMINAL_REFITS + 1):
         clock = time.perf_counter()
-        nominal_held = leave_one_out(nominal)
-        nominal_gap = gap_metric(nominal_held.z)
+        with steps.step("predict held-out runs with the nominal model") as found:
+            nominal_held = leave_one_out(nominal)
+            nominal_gap = gap_metric(nominal_held.z)
+            found.update(nominal_gap=nominal_gap)
         timings["nominal_fit"] += time.perf_counter() - clock
         best_per_effect, all_scores = _score_candidates(case, nominal, nominal_held, nominal_gap, effect_names,
-                                                        hints, rng, promoted, timings)
+                                                        hints, rng, promoted, timings, steps)
         if attempt == _NOMINAL_REFITS:
             break
         clock = time.perf_counter()
-        better = improved_nominal(nominal, [entry.fit for entry in all_scores if entry.stage == "full"])
+        with steps.step("check the nominal fit against the candidate fits") as found:
+            better = improved_nominal(nominal, [entry.fit for entry in all_scores if entry.stage == "full"])
+            found.update(refitted=better is not None)
         timings["nominal_fit"] += time.perf_counter() - clock
         if better is None:
             break
         # the candidates were scored against a nominal fit stuck in a local optimum: score them again
         nominal = better
-    scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
-    ranking = _ranking_of(best_per_effect)
-    # drawn after the shrink bootstraps, so their numbers do not depend on this
-    nominal_interval = bootstrap_gap(nominal_held.z, rng)
-    if scores:
-        ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
-    decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval)
-    verdict, reason = decision.verdict, decision.reason
-    where = where_gap(nominal_held.z, case)
-    families = family_character(nominal_held.z, case, locked)
+    with steps.step("decide the verdict") as found:
+        scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
+        ranking = _ranking_of(best_per_effect)
+        # drawn after the shrink bootstraps, so their numbers do not depend on this
+        nominal_interval = bootstrap_gap(nominal_held.z, rng)
+        if scores:
+            ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
+        decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval)
+        verdict, reason = decision.verdict, decision.reason
+        where = where_gap(nominal_held.z, case)
+        families = family_character(nominal_held.z, case, locked)
+        found.update(verdict=verdict, reason=reason)
     return DiagnosisResult(case=case, nominal=nominal, nominal_held=nominal_held, scores=scores,
                            all_scores=all_scores, verdict=verdict, reason=reason, nominal_gap=nominal_gap,
                            where=where, families=families, locked_lines=locked, hints=hints,

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from ..physics.design import Design
+from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
 from ..physics.integration import _HISTORY_COLUMNS, _integrate_fast, steps_per_period
 from ..physics.model import build_model
@@ -202,7 +202,9 @@ class CampaignSimulator:
         self.passband = self.fs / 2.56
         self.stopband = self.fs / 2.0
         self.rig_time = np.arange(self.size) / self.fs
-        stiff = design.replace(k1=min(design.k1 * 2.0, 1e13), k2=min(design.k2 * 2.0, 1e13))
+        # the stiffest bearings a fit may propose (candidates.nominal_parameters), inside the design's range
+        stiff = design.replace(k1=min(design.k1 * 2.0, design_key_bounds("k1")[1]),
+                               k2=min(design.k2 * 2.0, design_key_bounds("k2")[1]))
         self.samples_per_period = []
         for speed, torque in zip(self.speeds, self.drive_torques):
             # every neighbour of a fit integrates on the same grid: the steps of the stiffest model,

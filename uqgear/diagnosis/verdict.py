@@ -17,8 +17,16 @@ from .scoring import capped_squares, excess_over_noise
 
 #: Effects of the library that the diagnosis can name.
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
-#: Possible verdicts.
-VERDICTS: tuple[str, ...] = EFFECT_NAMES + ("none", "unexplained")
+#: Possible verdicts: an effect of the library; ``none`` (the nominal model is within noise on
+#: held-out runs); ``unexplained`` (a significant gap that no candidate removes); ``inconclusive``
+#: (valid data that cannot decide: no line above the noise floor in enough runs, or no feature
+#: that could be compared on held-out runs).
+VERDICTS: tuple[str, ...] = EFFECT_NAMES + ("none", "unexplained", "inconclusive")
+#: A rig line counts as signal when its amplitude is at least this many per-quadrature noise
+#: spreads: white noise alone reaches 5 (Rayleigh tail exp(-12.5)) in about one of 270,000 lines.
+SIGNAL_SNR = 5.0
+#: Runs with a line above the noise floor that a diagnosis needs: one to fit, one held out.
+MIN_INFORMATIVE_RUNS = 2
 
 #: A candidate must gain this much held-out log predictive density (nats, after the penalty) to be named.
 SCORE_THRESHOLD = 10.0
@@ -118,7 +126,9 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         shrinks it by ``shrink_threshold`` or leaves no significant gap
         (held-out gap with the effect at most ``noise_gap``; a nominal gap
         just above noise cannot shrink by half and still be significant).
-        The nominal model is within noise when its gap is at most ``noise_gap``.
+        The nominal model is within noise when its gap is at most ``noise_gap``;
+        a gap that could not be measured (NaN: no feature compared on a
+        held-out run) gives ``inconclusive``, never ``none``.
     effect_gain_threshold : float
         A candidate whose fit is as good with its effect off (``effect_gain``
         below this) owes its score to the nominal parameters it refitted, not
@@ -157,7 +167,12 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
                 f"{100 * best['shrink_interval'][0]:.0f} to {100 * best['shrink_interval'][1]:.0f} %), but a "
                 f"gap of {remaining:.2f} (above {noise_gap:g}) remains unexplained"),
                 partial=True, remaining_gap=remaining, borderline=borderline)
-    if not math.isfinite(nominal_gap) or nominal_gap <= noise_gap:
+    if not math.isfinite(nominal_gap):
+        # no feature could be compared on a held-out run: the data cannot tell "within noise"
+        # from "not measured", and no data must never read as a healthy gear
+        return Decision("inconclusive", "the held-out gap could not be measured: no feature of any run could be "
+                                        "compared with the model on held-out runs", borderline=borderline)
+    if nominal_gap <= noise_gap:
         return Decision("none", f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
                                 f"(threshold {noise_gap:g}) and no candidate is clearly better",
                         borderline=borderline)
@@ -174,6 +189,50 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], **t
     """``(verdict, reason)`` of :func:`decide` (same arguments)."""
     decision = decide(nominal_gap, ranking, **thresholds)
     return decision.verdict, decision.reason
+
+
+def line_signal_to_noise(case: RigCase) -> np.ndarray:
+    """Amplitude over per-quadrature noise spread of every compared rig line (n_op, n_channel, F).
+
+    NaN for features that are not lines, for lines outside the band and for
+    records the comparison cannot use (missing samples, no noise floor).
+    """
+    line = np.array(case.layout.kinds) == "line"
+    scale = np.stack([noise.line_scale[case.layout.columns] for noise in case.noise])      # (n_op, F)
+    sigma = case.noise_std[..., None] * scale[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = case.observed / sigma
+    usable = case.usable[..., None] & line[None, None, :] & np.isfinite(ratio) & (sigma > 0)
+    return np.where(usable, ratio, np.nan)
+
+
+def uninformative_reason(case: RigCase, *, snr: float = SIGNAL_SNR,
+                         min_runs: int = MIN_INFORMATIVE_RUNS) -> str | None:
+    """Why a valid campaign cannot be diagnosed, or None when it can.
+
+    A diagnosis compares the rig's lines with the model's on held-out runs:
+    it needs at least ``min_runs`` runs in which some usable channel shows a
+    line (mesh harmonic, sideband, shaft or motor line) at least ``snr``
+    noise spreads high. Below that every record is noise as far as the
+    features can tell, and any verdict but ``inconclusive`` would be a guess.
+    """
+    ratio = line_signal_to_noise(case)
+    with np.errstate(invalid="ignore"):
+        informative = np.nan_to_num(ratio, nan=0.0) >= snr
+    runs = informative.any(axis=(1, 2))
+    if int(runs.sum()) >= min_runs:
+        return None
+    usable_runs = int(case.usable.any(axis=1).sum())
+    strongest = float(np.nanmax(ratio)) if np.isfinite(ratio).any() else math.nan
+    if usable_runs < min_runs:
+        return (f"only {usable_runs} of {case.n_op} runs have a channel whose noise floor can be measured; "
+                f"the diagnosis needs at least {min_runs} (each run is predicted by a fit to the others)")
+    where = ("no run" if not runs.any() else
+             "only run " + ", ".join(str(int(op)) for op in np.flatnonzero(runs)))
+    detail = f"; the strongest line is {strongest:.1f} noise spreads high" if math.isfinite(strongest) else ""
+    return (f"{where} of {case.n_op} shows a line above the noise floor ({snr:g} noise spreads) in any channel"
+            f"{detail}: the records carry noise only as far as the features can tell, so the data cannot decide "
+            f"between a healthy gear and an effect; the diagnosis needs such lines in at least {min_runs} runs")
 
 
 def where_gap(z: np.ndarray, case: RigCase, *, limit: int = 12) -> list[dict[str, Any]]:

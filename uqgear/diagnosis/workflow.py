@@ -13,16 +13,18 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from ..common.errors import RigDataError
+from ..common.errors import InternalError, RigDataError
 from ..common.fileio import write_text_atomic
+from ..common.steps import StepLog, write_failure_record
 from ..physics.design import Design
 from ..uq.results import json_default, load_result, save_result
 from ..uq.seeds import as_seed_sequence
 from .case import RunExecutor, prepare_case
 from .errors import DiagnosisError
-from .outputs import _held_spectra, _json_clean, result_dataset, summary
+from .outputs import _held_spectra, _json_clean, inconclusive_dataset, inconclusive_summary, result_dataset, summary
 from .pipeline import _check_effects, run_diagnosis
 from .scoring import capped_squares
+from .verdict import MIN_INFORMATIVE_RUNS, uninformative_reason
 
 def _cpu_seconds() -> float:
     """CPU time of this process and of its finished worker processes, s."""
@@ -35,19 +37,41 @@ def _as_seed(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
     return as_seed_sequence(seed, error=DiagnosisError)
 
 
-def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset) -> tuple[xr.Dataset, str]:
-    """A validated rig Dataset from a path or a Dataset, and a text naming its source."""
+def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *,
+                   design: Design | None = None) -> tuple[xr.Dataset, str]:
+    """A validated rig Dataset from a path or a Dataset, and a text naming its source.
+
+    A ``design`` given replaces the file's: the file's ``design`` attribute is
+    then not validated as a design (:func:`uqgear.rig.format.validate_rig`).
+
+    Besides the format, the campaign must carry signal the diagnosis can use
+    (:func:`uqgear.rig.usability.check_usable_signal`): records that are
+    neither missing nor constant, at least one pinion revolution long, in at
+    least two operating points (each is predicted by a fit to the others).
+
+    Raises
+    ------
+    RigDataError
+        Not a rig file or Dataset, not in the format, or no usable signal.
+    """
     from ..rig.format import read_rig, validate_rig
+    from ..rig.usability import check_usable_signal
 
     if isinstance(rig, xr.Dataset):
-        validate_rig(rig, where="rig data")
-        return rig, str(rig.attrs.get("title", "rig Dataset"))
-    if isinstance(rig, (str, os.PathLike)):
-        return read_rig(rig), str(rig)
-    raise RigDataError(f"rig: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(rig).__name__}")
+        validate_rig(rig, where="rig data", design=design)
+        dataset, source = rig, str(rig.attrs.get("title", "rig Dataset"))
+        where = "rig data"
+    elif isinstance(rig, (str, os.PathLike)):
+        dataset, source = read_rig(rig, design=design), str(rig)
+        where = source
+    else:
+        raise RigDataError(f"rig: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(rig).__name__}")
+    check_usable_signal(dataset, where=where, min_operating_points=MIN_INFORMATIVE_RUNS, purpose="the diagnosis",
+                        why="each operating point is predicted by the model fitted to the others")
+    return dataset, source
 
 
-def _resolve_design(design: Design | str | os.PathLike[str] | None, rig: xr.Dataset) -> Design:
+def _resolve_design(design: Design | str | os.PathLike[str] | None, rig: xr.Dataset | None) -> Design:
     from ..physics.design import load_design
     from ..rig.format import rig_design
 
@@ -95,36 +119,65 @@ def diagnosis_result(rig: str | os.PathLike[str] | xr.Dataset, *,
         (gap maps over op x channel x family, scores, held-out spectra).
     """
     content, maps, _ = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
-                                  calibration=calibration)
+                                  calibration=calibration, steps=StepLog())
     return content, maps
 
 
-def _diagnosis(rig, *, design, effects, seed, workers, calibration) -> tuple[dict[str, Any], xr.Dataset, Design]:
+def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepLog
+               ) -> tuple[dict[str, Any], xr.Dataset, Design]:
     started = time.perf_counter()
     cpu_started = _cpu_seconds()
+    # the input first, all of it: a mistake in it is the user's (exit 2) and costs no work
     effect_names = _check_effects(effects)
     seed_sequence = _as_seed(seed)
     workers = _check_workers(workers)
-    dataset, source = load_rig_input(rig)
-    nominal_design = _resolve_design(design, dataset)
+    # a design given replaces the file's before the file is read: its copy is then not validated
+    given = None if design is None else _resolve_design(design, None)
+    dataset, source = load_rig_input(rig, design=given)
+    nominal_design = given if given is not None else _resolve_design(None, dataset)
     posterior = load_calibration(calibration) if calibration is not None else None
     noise_seed, run_seed = seed_sequence.spawn(2)
-    case = prepare_case(dataset, nominal_design, seed=noise_seed)
-    case.executor = RunExecutor(case, workers)
+    # from here on the input is accepted: a failure is ours, reported with its step
+    with steps.step("extract the rig features"):
+        case = prepare_case(dataset, nominal_design, seed=noise_seed)
+    with steps.step("check that the data can decide") as found:
+        reason = uninformative_reason(case)
+        found.update(informative=reason is None)
+    if reason is not None:
+        # valid data that cannot decide: said so at once, without minutes of fitting noise
+        with steps.step("summarise the results"):
+            timings = {"total_wall": time.perf_counter() - started, "total_cpu": _cpu_seconds() - cpu_started,
+                       "workers": float(workers)}
+            content = _json_clean(inconclusive_summary(case, reason, source=source, effects=effect_names,
+                                                       seed_text=str(seed_sequence.entropy), timings=timings))
+            maps = inconclusive_dataset(case, reason, effect_names)
+        return _noted(content, nominal_design), maps, nominal_design
+    with steps.step("start the worker processes"):
+        case.executor = RunExecutor(case, workers)
     try:
-        result = run_diagnosis(case, effects=effect_names, seed=run_seed, calibration=posterior)
-        worst = np.argsort([-np.nansum(capped_squares(result.nominal_held.z[op])) for op in range(case.n_op)])
-        spectra = _held_spectra(result, sorted(int(op) for op in worst[:2]))
+        result = run_diagnosis(case, effects=effect_names, seed=run_seed, calibration=posterior, steps=steps)
+        with steps.step("simulate the held-out spectra"):
+            worst = np.argsort([-np.nansum(capped_squares(result.nominal_held.z[op])) for op in range(case.n_op)])
+            spectra = _held_spectra(result, sorted(int(op) for op in worst[:2]))
     finally:
         case.executor.close()
         case.executor = None
-    timings = dict(result.timings, total_wall=time.perf_counter() - started,
-                   total_cpu=_cpu_seconds() - cpu_started, workers=float(workers))
-    content = _json_clean(summary(result, source=source, seed_text=str(seed_sequence.entropy), timings=timings))
-    content["nominal"]["start"] = "calibration posterior medians" if posterior is not None else "design values"
-    maps = result_dataset(result, spectra)
-    maps.attrs["verdict"] = content["verdict"]
-    return content, maps, nominal_design
+    with steps.step("summarise the results"):
+        timings = dict(result.timings, total_wall=time.perf_counter() - started,
+                       total_cpu=_cpu_seconds() - cpu_started, workers=float(workers))
+        content = _json_clean(summary(result, source=source, seed_text=str(seed_sequence.entropy), timings=timings))
+        content["nominal"]["start"] = "calibration posterior medians" if posterior is not None else "design values"
+        maps = result_dataset(result, spectra)
+        maps.attrs["verdict"] = content["verdict"]
+    return _noted(content, nominal_design), maps, nominal_design
+
+
+def _noted(content: dict[str, Any], design: Design) -> dict[str, Any]:
+    """``content`` with ``design_notes``: what the model did with the design's geometry (an undercut tooth)."""
+    from ..physics.geometry import geometry_notes
+
+    content["design_notes"] = geometry_notes(design)
+    return content
 
 
 def default_workers() -> int:
@@ -170,6 +223,8 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
         each written atomically.
     design : Design, design file or name, optional
         The nominal design; by default the rig file's ``design`` attribute.
+        When given it replaces the file's, which is then not validated as a
+        design (it may even hold one that uqgear refuses).
     effects : sequence of str, optional
         Candidate effects (default: all six of the library).
     seed : int or SeedSequence
@@ -192,21 +247,40 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     Raises
     ------
     RigDataError
-        The rig file or Dataset does not follow the format.
+        The rig file or Dataset does not follow the format, or carries no
+        usable signal (all missing or constant, records shorter than a pinion
+        revolution, fewer than two operating points).
     DiagnosisError
         An unknown effect, a bad seed, design or worker count.
+    InternalError
+        A step failed after the input was accepted. The outputs finished
+        before stay in ``out_dir``, with ``failure.json`` (the failed step,
+        the error and its traceback, the finished steps and what they found);
+        the error's ``kept`` names the folder.
     """
     # the cheap checks first: a bad option or folder fails before minutes of fitting
     _check_effects(effects)
     _as_seed(seed)
     _check_workers(workers)
     out = make_out_dir(out_dir)
-    content, maps, nominal_design = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
-                                               calibration=calibration)
-    save_result(maps, out / "diagnosis.nc", seed=_as_seed(seed), design=nominal_design)
-    write_text_atomic(out / "diagnosis.json", json.dumps(content, indent=2, default=json_default))
-    if report:
-        from ..report.diagnosis_report import write_diagnosis_report
+    steps = StepLog()
+    try:
+        content, maps, nominal_design = _diagnosis(rig, design=design, effects=effects, seed=seed,
+                                                   workers=workers, calibration=calibration, steps=steps)
+        with steps.step("write diagnosis.nc"):
+            save_result(maps, out / "diagnosis.nc", seed=_as_seed(seed), design=nominal_design)
+        with steps.step("write diagnosis.json"):
+            write_text_atomic(out / "diagnosis.json", json.dumps(content, indent=2, default=json_default))
+        if report:
+            from ..report.diagnosis_report import write_diagnosis_report
 
-        write_diagnosis_report(content, maps, out / "report.html")
+            with steps.step("write report.html"):
+                write_diagnosis_report(content, maps, out / "report.html")
+    except InternalError as exc:
+        inputs = {"rig": rig if isinstance(rig, (str, os.PathLike)) else "rig Dataset", "seed": str(seed),
+                  "effects": list(effects) if effects is not None else None,
+                  "design": design if isinstance(design, (str, os.PathLike)) else None}
+        write_failure_record(out, exc, command="diagnosis", inputs=_json_clean(inputs))
+        exc.kept = str(out)
+        raise
     return content

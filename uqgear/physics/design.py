@@ -67,6 +67,24 @@ DESIGN_KEYS: tuple[str, ...] = tuple(_DESIGN_KEYS)
 OPTIONAL_DESIGN_KEYS: tuple[str, ...] = tuple(_OPTIONAL_DESIGN_KEYS)
 
 
+def design_key_bounds(key: str) -> tuple[float, float]:
+    """The plausible range ``(lower, upper)`` that :meth:`Design.from_mapping` accepts for a design key.
+
+    Lets a fit or a sampler keep its internal proposals inside what the
+    validation accepts (geometry checks such as undercut come on top).
+
+    Raises
+    ------
+    DesignError
+        ``key`` is not a design key.
+    """
+    table = {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}
+    if key not in table:
+        raise DesignError(f"{key}: unknown design key; expected one of {', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}")
+    lower, upper, _, _ = table[key]
+    return float(lower), float(upper)
+
+
 
 def _check_number(key: str, value: Any, lower: float, upper: float, unit: str,
                   integer: bool, where: str) -> float | int:

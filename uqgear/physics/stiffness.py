@@ -3,6 +3,10 @@
 Each tooth is a cantilever from the root circle: a rectangle of thickness S_F
 up to the effective root radius r_ff, then a trapezoid tapering to the tip
 thickness S_k at the tip circle (docs/model.md section 4). Thicknesses are chordal.
+On an undercut tooth r_ff is the form radius (the involute's start), the
+rectangle takes the undercut flank's narrowest section S_u < S_F, and load
+points lie on the generated involute only (the path of contact starts at the
+form circle where it limits, :func:`~uqgear.physics.geometry.pair_geometry`).
 The shear term uses a shear factor ``shear_factor`` (1.0 by default: the
 plain ``integral of F/(G A)`` of docs/model.md; Timoshenko's 1.2 for rectangles is
 available). One pair's compliance is the sum of both teeth's bending, shear
@@ -52,6 +56,9 @@ def tooth_compliance(tooth: ToothGeometry, contact_radius: np.ndarray, face_widt
     r_x = np.asarray(contact_radius, dtype=float)
     s_f = float(tooth.chordal_thickness(tooth.effective_root_radius))
     s_k = float(tooth.chordal_thickness(tooth.tip_radius))
+    # An undercut root is thinner than the involute at r_ff: the rectangle (and the foundation
+    # under it) takes the undercut flank's narrowest section; the trapezoid keeps S_F.
+    s_r = s_f if tooth.neck_thickness is None else min(float(tooth.neck_thickness), s_f)
     h_r = max(tooth.effective_root_radius - tooth.root_radius, 0.0)
     h_k = tooth.tip_radius - tooth.root_radius
     h_i = (s_f * h_k - s_k * h_r) / (s_f - s_k)
@@ -60,10 +67,15 @@ def tooth_compliance(tooth: ToothGeometry, contact_radius: np.ndarray, face_widt
     rho = (h_i - h_x) / length
     cos2 = np.cos(tooth.load_angle(r_x)) ** 2
     e_b = youngs_modulus * face_width
-    bending_rectangle = 12.0 * cos2 / (e_b * s_f ** 3) * (h_x * h_r * (h_x - h_r) + h_r ** 3 / 3.0)
+    bending_rectangle = 12.0 * cos2 / (e_b * s_r ** 3) * (h_x * h_r * (h_x - h_r) + h_r ** 3 / 3.0)
     bending_trapezoid = 6.0 * cos2 * length ** 3 / (e_b * s_f ** 3) * (rho * (4.0 - rho) - 2.0 * np.log(rho) - 3.0)
-    shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / (e_b * s_f) * (h_r + length * np.log(1.0 / rho))
-    foundation = 24.0 * h_x ** 2 * cos2 / (math.pi * e_b * s_f ** 2)
+    if s_r == s_f:
+        # one thickness: the form of docs/model.md section 4.1, evaluated as it always was
+        shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / (e_b * s_f) * (h_r + length * np.log(1.0 / rho))
+    else:
+        shear = (shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / e_b
+                 * (h_r / s_r + length * np.log(1.0 / rho) / s_f))
+    foundation = 24.0 * h_x ** 2 * cos2 / (math.pi * e_b * s_r ** 2)
     total = bending_rectangle + bending_trapezoid + shear + foundation
     return {"bending_rectangle": bending_rectangle, "bending_trapezoid": bending_trapezoid,
             "shear": shear, "foundation": foundation, "total": total}

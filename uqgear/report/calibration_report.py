@@ -98,10 +98,26 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
                                            if {"tau_max", "rhat_max", "ess_min"} <= set(numbers) else "") + ".")
     else:
         reasons = [str(r) for r in diagnostics.get("reasons", [])]
-        text = ("NOT converged, so the estimates are not a result"
-                + (": " + "; ".join(reasons) if reasons else "") + ".")
+        message = str(content.get("message") or "")
+        text = (("NOT converged: " + message) if message else
+                ("NOT converged, so the estimates are not a result"
+                 + (": " + "; ".join(reasons) if reasons else ""))) + "."
     findings.append(Finding(text, {"converged": converged, "reasons": list(diagnostics.get("reasons", [])),
                                    **numbers}, "convergence"))
+    warnings = [str(w) for w in content.get("warnings") or []]
+    if warnings:
+        findings.append(Finding("Caution, the result leans on: " + "; ".join(warnings) + ".",
+                                {"warnings": warnings}, "warnings"))
+    speed_rows = [row for row in content.get("speed") or [] if row.get("wander") is not None]
+    if speed_rows:
+        widest = max(speed_rows, key=lambda row: row["wander"])
+        tracked = [row["op"] for row in speed_rows if row.get("order_tracked")]
+        findings.append(Finding(
+            f"Pinion speed within a record wandered by up to +-{100 * widest['wander']:.2f} % (run {widest['op']}, "
+            f"{widest['mean_rpm']:.0f} rpm); "
+            + (f"runs {', '.join(map(str, tracked))} were resampled to uniform pinion angle (order tracking) "
+               "before their features were read." if tracked else "no run needed order tracking."),
+            {"max_wander": widest["wander"], "order_tracked_runs": tracked}, "speed"))
     estimates = content.get("parameters") if converged else None
     if estimates:
         parts, facts = [], {}
@@ -275,8 +291,12 @@ def calibration_report_html(calibration: "Calibration", *, truth: Mapping[str, A
                '<p class="bad">NOT converged: the estimates below are not a result.</p>'
                + "<ul>" + "".join(f"<li>{html.escape(r)}</li>" for r in calibration.diagnostics_["reasons"])
                + "</ul>")
+    # what the model did with the design's geometry (an undercut tooth is modelled, not refused)
+    design_notes = "".join(f'<p class="note"><b>Design:</b> {html.escape(str(note))}.</p>'
+                           for note in content.get("design_notes") or [])
     parts = ["<h1>uqgear calibration report</h1>",
              headline_html(calibration_findings(content), "Details, figures and diagnostics below."), verdict,
+             design_notes,
              _table([("rig data", content["rig"]), ("model runs", str(calibration.timing_["model_runs"])),
                      ("wall time", f"{calibration.timing_['wall_s']:.1f} s"),
                      ("CPU time", f"{calibration.timing_['cpu_s']:.1f} s"),

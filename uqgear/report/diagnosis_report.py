@@ -146,6 +146,12 @@ def _decision_notes(content: Mapping[str, Any]) -> list[str]:
     return notes
 
 
+def _design_notes(content: Mapping[str, Any]) -> list[str]:
+    """Paragraphs saying what the model did with the design's geometry (an undercut tooth is modelled, not refused)."""
+    return [f'<p class="note"><b>Design:</b> {html.escape(str(note))}.</p>'
+            for note in content.get("design_notes") or []]
+
+
 def _percent(value: Any) -> str:
     return "-" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f} %"
 
@@ -175,13 +181,20 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         text = "Verdict none: the nominal model reproduces the rig within noise, no effect is needed"
     elif verdict == "unexplained":
         text = "Verdict unexplained: a significant gap remains that no candidate effect of the library removes"
+    elif verdict == "inconclusive":
+        # never read as "healthy": the data did not allow a comparison at all
+        text = ("Verdict inconclusive: the data cannot decide whether the gear is healthy or carries an effect, "
+                "so neither is claimed")
     else:
         text = (f"Verdict {verdict}: adding {verdict} to the model explains "
                 + ("part of " if content.get("partial") else "") + "the gap between model and rig")
     findings.append(Finding(text + (f"; {reason}." if reason else "."),
                             {"verdict": verdict, "partial": bool(content.get("partial"))}, "verdict"))
     gap = content.get("gap") or {}
-    if gap:
+    if gap and gap.get("baseline") is None:
+        findings.append(Finding("Held-out gap not measured: no feature could be compared with the model on "
+                                "held-out runs.", {"baseline": None}, "gap"))
+    elif gap:
         def gap_value(value: Any) -> str:
             return _figure(value, 2, fixed=True)
 
@@ -204,7 +217,9 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         findings.append(Finding(text + f"; within noise below {_figure(noise)}.", facts, "gap"))
     where = content.get("where") or []
     n_op = int((content.get("rig") or {}).get("n_op", 0))
-    if where:
+    if verdict == "inconclusive" and gap.get("baseline") is None:
+        text = "No held-out comparison was made: the nominal model was not fitted to data that cannot decide."
+    elif where:
         of = f" of {n_op}" if n_op else ""
         shown = "; ".join(f"{w['channel']} {w['feature']} ({str(w['family']).replace('_', ' ')} family, beyond "
                           f"3 sigma at {len(w['ops'])}{of} runs, RMS z {_figure(w['score'])})" for w in where[:3])
@@ -242,6 +257,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
              f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
              f'<p>{html.escape(content["reason"])}.</p>',
              *_decision_notes(content),
+             *_design_notes(content),
              "<h2>How far: the gap on held-out runs</h2>",
              _table(["metric", "nominal model", "with effect", "effect", "shrink fraction", "90 % interval"],
                     [[gap["metric"], gap["baseline"], gap["with_effect"], gap["effect"], gap["shrink_fraction"],
@@ -249,9 +265,15 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
                       f"{gap['shrink_interval'][0]:.2f} to {gap['shrink_interval'][1]:.2f}"]], (0, 3, 5)),
              f'<p class="note">{html.escape(gap["evaluated_on"]["scheme"])}. The gap is the RMS standardised '
              f'discrepancy in excess of noise (each feature capped at 10 sigma); the nominal model is within '
-             f'noise below {gap["noise_threshold"]}.</p>',
-             "<h2>Where: gap map of the nominal model (held-out runs)</h2>",
-             _gap_map_figure(ds, "gap_map_nominal", "nominal model, held-out runs")]
+             f'noise below {gap["noise_threshold"]}.</p>']
+    if "gap_map_nominal" in ds:
+        parts += ["<h2>Where: gap map of the nominal model (held-out runs)</h2>",
+                  _gap_map_figure(ds, "gap_map_nominal", "nominal model, held-out runs")]
+    signal = content.get("signal")
+    if signal:
+        parts += ["<h2>Signal: the strongest line of each run</h2>",
+                  _table(["run", "strongest line (noise spreads)", "needed"],
+                         [[op, value, signal["threshold"]] for op, value in enumerate(signal["strongest_line_snr"])])]
     if "gap_map_with_effect" in ds:
         parts.append(_gap_map_figure(ds, "gap_map_with_effect",
                                      f"with {ds['candidate'].values[0]}, held-out runs"))
@@ -287,11 +309,15 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
         parts.append(_spectra_figure(ds))
     nominal = content["nominal"]
     parts.append("<h2>Nominal fit</h2>")
-    parts.append(_table(["parameter", "value"], [[k, v] for k, v in nominal["parameters"].items()]))
-    parts.append(f'<p class="note">T2 per run (kN m): {", ".join(f"{v / 1e3:.2f}" for v in nominal["adhesion_torque"])}; '
-                 f'periodic steady response: {", ".join("yes" if p else "no" for p in nominal["periodic_runs"])}; '
-                 f'model error (relative): {html.escape(json.dumps(content["model_error"]))}; '
-                 f'time: {content["timing_s"].get("total_wall", float("nan")):.0f} s.</p>')
+    if nominal is None:
+        parts.append("<p>Not fitted: the data cannot decide (see the verdict).</p>")
+    else:
+        parts.append(_table(["parameter", "value"], [[k, v] for k, v in nominal["parameters"].items()]))
+        parts.append(f'<p class="note">T2 per run (kN m): '
+                     f'{", ".join(f"{v / 1e3:.2f}" for v in nominal["adhesion_torque"])}; '
+                     f'periodic steady response: {", ".join("yes" if p else "no" for p in nominal["periodic_runs"])}; '
+                     f'model error (relative): {html.escape(json.dumps(content["model_error"]))}; '
+                     f'time: {content["timing_s"].get("total_wall", float("nan")):.0f} s.</p>')
     return html_page(f"uqgear diagnosis: {content['verdict']}", _STYLE + HEADLINE_STYLE, parts)
 
 

@@ -22,7 +22,7 @@ def _render_diagnose(ds: xr.Dataset, dpi: int) -> Section:
     gap = content.get("gap", {})
     section.facts.append(("rig file", str(ds.attrs.get("rig", (content.get("rig") or {}).get("source", "")))))
     section.facts.append(("verdict", verdict))
-    if gap:
+    if gap and gap.get("baseline") is not None:
         section.facts.append(("held-out gap, nominal model", f"{float(gap['baseline']):.3g}"))
         if gap.get("effect"):
             interval = gap.get("shrink_interval") or [math.nan, math.nan]
@@ -63,6 +63,8 @@ def _render_diagnose(ds: xr.Dataset, dpi: int) -> Section:
                                             figure_png(spectra_plot(ds), dpi)))
     if verdict == "unexplained":
         section.caveats.append("a significant gap remains that no candidate effect of the library removes")
+    elif verdict == "inconclusive":
+        section.caveats.append("the data cannot decide between a healthy gear and an effect: no verdict on either")
     return section
 
 

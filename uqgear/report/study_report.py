@@ -88,6 +88,19 @@ def _design_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
             for key, value in design.items()]
 
 
+def _design_notes(ds: xr.Dataset) -> list[str]:
+    """What the model did with the design's geometry (an undercut tooth is modelled, with a warning)."""
+    from types import SimpleNamespace
+
+    from ..physics.geometry import geometry_notes
+
+    values = _json_attr(ds, "design", {})
+    try:
+        return geometry_notes(SimpleNamespace(**values))
+    except (TypeError, ValueError, AttributeError, ArithmeticError):
+        return []  # a result without a complete design: nothing to say about its geometry
+
+
 def _uncertain_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
     rows = []
     for name, entry in _json_attr(ds, "uncertain_parameters", {}).items():
@@ -182,7 +195,8 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
             parts.append(f"<h3>{html.escape(section.title)}</h3>" + _list(section.findings))
     parts.append("</section>")
     parts.append('<section id="caveats"><h2>Caveats</h2>')
-    caveats = [f"{section.name}: {caveat}" for section in sections for caveat in section.caveats]
+    caveats = [f"design: {note}" for note in _design_notes(first)]
+    caveats += [f"{section.name}: {caveat}" for section in sections for caveat in section.caveats]
     parts.append(_list(caveats, "caveats"))
     parts.append("</section>")
     for section in sections:

@@ -11,6 +11,7 @@ from .format import (
 from .features import (
     SIGNAL_CHANNELS, FEATURE_FAMILIES, FeatureDefinition, feature_definitions, sampling_rate,
     order_spectrum, line_amplitudes, extract_features)
+from .usability import check_usable_signal, record_states
 from .virtual_rig import (
     simulate_campaign, synth_rig, default_operating_points, adhesion_torque_bounds,
     true_parameters_of, bearing_check_operating_points)
@@ -21,4 +22,5 @@ __all__ = [
     'feature_definitions', 'sampling_rate', 'order_spectrum', 'line_amplitudes', 'extract_features',
     'simulate_campaign', 'synth_rig', 'default_operating_points', 'adhesion_torque_bounds',
     'true_parameters_of', 'bearing_check_operating_points',
+    'check_usable_signal', 'record_states',
 ]

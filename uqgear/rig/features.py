@@ -67,23 +67,14 @@ from numpy.typing import ArrayLike
 
 from ..physics.design import Design
 from ..common.errors import DesignError, RigDataError, StudyError
-
-#: Measured channels of the rig format: name -> (units, long name).
-SIGNAL_CHANNELS: dict[str, tuple[str, str]] = {
-    "te": ("m", "transmission error along the line of action (encoders, mean removed)"),
-    "acc_pinion": ("m s-2", "pinion bearing-housing acceleration along the line of action"),
-    "acc_gear": ("m s-2", "gear bearing-housing acceleration along the line of action"),
-}
+from .order_tracking import SPEED_ESTIMATE_VARIABLES, check_tracking_mode, track_orders
+from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, band_limit_of as _band_limit, sampling_rate
 
 #: Feature families, for mapping sim-to-real gaps over op x channel x family.
 FEATURE_FAMILIES: tuple[str, ...] = (
     "mesh_harmonic", "sideband_pinion", "sideband_gear", "shaft_pinion", "shaft_gear",
     "motor_line", "low_frequency", "broadband",
 )
-
-#: Usable bandwidth as a fraction of the sampling rate when none is given: the
-#: customary fs/2.56 of anti-aliased acquisition (8 kHz at 20480 Hz).
-DEFAULT_BAND_FRACTION = 1.0 / 2.56
 
 # Bins on each side of a line that the noise-floor estimate leaves out: the
 # Hann main lobe spans +-2 bins, one more keeps its skirt out of the median.
@@ -191,39 +182,6 @@ def feature_definitions(design: Design, *, n_harmonics: int = 3, n_sidebands: in
     definitions.append(FeatureDefinition("crest_factor", "broadband", dimensionless=True))
     definitions.append(FeatureDefinition("noise_std", "broadband"))
     return tuple(definitions)
-
-
-def sampling_rate(time: ArrayLike, *, where: str = "time") -> float:
-    """Sampling rate of a uniformly spaced time axis, Hz.
-
-    Parameters
-    ----------
-    time : array_like
-        Sample instants in s (at least two, increasing, uniform spacing).
-    where : str
-        Prefix naming the file or variable in error messages.
-
-    Raises
-    ------
-    RigDataError
-        Fewer than two samples, non-finite, non-increasing or non-uniform.
-    """
-    values = np.asarray(time, dtype=float)
-    if values.ndim != 1 or values.size < 2:
-        raise RigDataError(f"{where}: expected a 1-D time axis of at least 2 samples; got shape {values.shape}")
-    if not np.all(np.isfinite(values)):
-        raise RigDataError(f"{where}: expected finite sample instants; found NaN or inf")
-    steps = np.diff(values)
-    step = float(np.median(steps))
-    if step <= 0:
-        raise RigDataError(f"{where}: expected increasing sample instants; got a median step of {step:g} s")
-    worst = int(np.argmax(np.abs(steps - step)))
-    # Instants stored as float64 k/fs deviate from uniform by rounding only.
-    if abs(steps[worst] - step) > 1e-6 * step:
-        raise RigDataError(f"{where}: expected uniform spacing 1/fs; step {worst} is {steps[worst]:.9g} s "
-                           f"against a median of {step:.9g} s")
-    # The end-to-end span is less affected by rounding than any single step.
-    return (values.size - 1) / (values[-1] - values[0])
 
 
 def _window(name: str, size: int) -> np.ndarray:
@@ -412,14 +370,6 @@ def line_amplitudes(signal: xr.DataArray, pinion_speed: float | xr.DataArray, or
     return result
 
 
-def _band_limit(band_limit: float | None, fs: float) -> float:
-    if band_limit is None:
-        return DEFAULT_BAND_FRACTION * fs
-    if isinstance(band_limit, bool) or not isinstance(band_limit, (int, float)) or not 0 < band_limit <= 0.5 * fs:
-        raise StudyError(f"band_limit: expected a frequency in (0, fs/2 = {0.5 * fs:g}] Hz; got {band_limit!r}")
-    return float(band_limit)
-
-
 def _lines_by_speed(records: np.ndarray, speeds: np.ndarray, orders: np.ndarray, fs: float, limit: float,
                     taper: np.ndarray) -> np.ndarray:
     """Line amplitudes (R, L); records sharing a speed share one fit; NaN rows where a sample is NaN."""
@@ -536,7 +486,8 @@ def _record_features(channel_records: Sequence[np.ndarray], channel_speeds: Sequ
 def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[str] | None = None,
                      n_harmonics: int = 3, n_sidebands: int = 3, n_shaft_orders: int = 3,
                      n_motor_lines: int = 2, low_band: tuple[float, float] = (2.0, 80.0),
-                     band_limit: float | None = None, window: str = "hann") -> xr.Dataset:
+                     band_limit: float | None = None, window: str = "hann",
+                     order_tracking: str = "auto") -> xr.Dataset:
     """Features of every record and channel (see the module docstring for the list).
 
     Parameters
@@ -561,6 +512,12 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
         floor is taken below it. Default fs/2.56.
     window : str
         Analysis window (:func:`scipy.signal.get_window` name).
+    order_tracking : {"auto", "always", "never"}
+        Resampling of the records to uniform pinion angle before the features
+        are read (:func:`uqgear.rig.order_tracking.track_orders`; ``auto``
+        where the speed wanders enough to matter). Signals that already went
+        through :func:`~uqgear.rig.order_tracking.track_orders` are used as
+        they are.
 
     Returns
     -------
@@ -570,7 +527,9 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
         every feature carries except those with ``dimensionless`` True.
         Coordinates along ``feature``: ``family``, ``order`` (NaN for non-line
         features), ``dimensionless``; ``frequency`` (Hz) over the speed's
-        dimensions and ``feature``.
+        dimensions and ``feature``. Over the speed's dimensions the speed
+        estimate of the order tracking: ``speed_mean``, ``speed_min``,
+        ``speed_max`` (rpm), ``order_tracked`` and ``pinion_speed_stated``.
 
     Raises
     ------
@@ -581,6 +540,7 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
         An option is out of range.
     """
     where = "signals: "
+    order_tracking = check_tracking_mode(order_tracking)
     if not isinstance(signals, xr.Dataset):
         raise RigDataError(f"{where}expected an xarray Dataset of channel variables; got {type(signals).__name__}")
     if channels is None:
@@ -614,6 +574,13 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
             raise RigDataError(f"{where}{name}: sampling rate {rate:g} Hz differs from {fs:g} Hz of {channels[0]}")
     limit = _band_limit(band_limit, fs)
     band = _check_low_band(low_band, fs)
+    if order_tracking != "never" and "order_tracked" not in signals.variables:
+        # after the checks above, so that a wrong input is named as the features name it
+        signals = track_orders(signals, design, mode=order_tracking, channels=channels, band_limit=limit,
+                               n_harmonics=n_harmonics)
+        speed = signals["pinion_speed"]
+        if bool(np.any(signals["order_tracked"].values)):
+            prepared = [_prepare(signals[name], speed, f"{where}{name}: ") for name in channels]
     values = _record_features([records for _, records, _, _ in prepared], [speeds for _, _, speeds, _ in prepared],
                               fs, design, definitions, n_sidebands=n_sidebands, low_band=band, limit=limit,
                               window=window)
@@ -638,8 +605,11 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
     )
     features = features.assign_coords(frequency=(speed / 60.0 * orders).assign_attrs(
         units="Hz", long_name="line frequency"))
+    if "order_tracked" in signals.variables:
+        features = features.assign_coords({name: signals[name] for name in SPEED_ESTIMATE_VARIABLES})
     features.attrs.update(
         window=window, low_band=list(band), band_limit=limit,
+        order_tracking=signals.attrs.get("order_tracking", "never"),
         sampling_rate=fs, n_harmonics=n_harmonics, n_sidebands=n_sidebands, n_shaft_orders=n_shaft_orders,
         n_motor_lines=n_motor_lines if design.motor_pole_pairs is not None else 0, z1=design.z1, z2=design.z2,
     )

@@ -16,6 +16,7 @@ unusable for that channel only (:func:`usable_runs`).
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Mapping
@@ -29,6 +30,7 @@ from ..physics.design import Design, design_from_json
 from ..common.fileio import atomic_path
 from ..common.errors import DesignError, RigDataError
 from .features import SIGNAL_CHANNELS, sampling_rate
+from .order_tracking import TACHOMETER_VARIABLE
 
 #: Value of the ``conventions`` global attribute.
 CONVENTIONS = "uqgear-rig/1"
@@ -67,7 +69,7 @@ def _check_units(where: str, name: str, attrs: Mapping, expected: str) -> None:
         raise RigDataError(f"{where}: {name}: expected units {expected!r}; got {attrs['units']!r}")
 
 
-def validate_rig(ds: xr.Dataset, *, where: str = "rig data") -> Design:
+def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | None = None) -> Design:
     """Check that a Dataset follows ``uqgear-rig/1``.
 
     Parameters
@@ -76,11 +78,16 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data") -> Design:
         The rig data, as read from a file or built by :func:`make_rig_dataset`.
     where : str
         Names the file in error messages.
+    design : Design, optional
+        A nominal design that replaces the file's (``--design``): the file's
+        ``design`` attribute must still be a JSON object but is not validated
+        as a design (it may hold one that uqgear would refuse), and the
+        sampling-rate check uses this design's z1.
 
     Returns
     -------
     Design
-        The nominal design of the ``design`` attribute.
+        The nominal design: ``design`` if given, else the ``design`` attribute's.
 
     Raises
     ------
@@ -135,10 +142,20 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data") -> Design:
     channels = [str(name) for name in ds.data_vars]
     if not channels:
         raise RigDataError(f"{where}: no data variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}")
+    if TACHOMETER_VARIABLE in channels:
+        # optional instantaneous speed (a tachometer), used by the order tracking; not a measured channel
+        channels.remove(TACHOMETER_VARIABLE)
+        tachometer = ds[TACHOMETER_VARIABLE]
+        if tachometer.dims != ("op", "time"):
+            raise RigDataError(f"{where}: {TACHOMETER_VARIABLE}: expected dims ('op', 'time'); got {tachometer.dims}")
+        _check_units(where, TACHOMETER_VARIABLE, tachometer.attrs, "rpm")
+        if not channels:
+            raise RigDataError(f"{where}: no channel variable besides {TACHOMETER_VARIABLE}; expected at least "
+                               f"one of {', '.join(SIGNAL_CHANNELS)}")
     for name in channels:
         if name not in SIGNAL_CHANNELS:
             raise RigDataError(f"{where}: {name}: unknown data variable; expected channels "
-                               f"{', '.join(SIGNAL_CHANNELS)}")
+                               f"{', '.join(SIGNAL_CHANNELS)} (and optionally {TACHOMETER_VARIABLE})")
         variable = ds[name]
         units = SIGNAL_CHANNELS[name][0]
         if variable.dims != ("op", "time"):
@@ -167,10 +184,7 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data") -> Design:
         raise RigDataError(f"{where}: design: missing global attribute (JSON object of the design keys)")
     if not isinstance(text, str):
         raise RigDataError(f"{where}: design: expected JSON text; got {type(text).__name__}")
-    try:
-        design = design_from_json(text, where=f"{where}: design")
-    except DesignError as exc:
-        raise RigDataError(str(exc)) from None
+    design = _nominal_design(text, where, design)
 
     fastest = float(speed.max())
     needed = 6.0 * design.z1 * fastest / 60.0
@@ -178,6 +192,26 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data") -> Design:
         raise RigDataError(f"{where}: time: sampling rate {fs:g} Hz does not resolve the third mesh harmonic at "
                            f"{fastest:g} rpm; expected fs > 6 z1 n1_max/60 = {needed:g} Hz")
     return design
+
+
+def _nominal_design(text: str, where: str, replacement: Design | None) -> Design:
+    """The file's design, validated, or the replacement, with the file's copy only parsed."""
+    if replacement is None:
+        try:
+            return design_from_json(text, where=f"{where}: design")
+        except DesignError as exc:
+            raise RigDataError(str(exc)) from None
+    if not isinstance(replacement, Design):
+        raise RigDataError(f"{where}: design: expected a uqgear Design to replace the file's; "
+                           f"got {type(replacement).__name__}")
+    # replaced: the file's copy is not used, so it is held to the format (a JSON object) only
+    try:
+        values = json.loads(text)
+    except (ValueError, RecursionError):
+        values = None
+    if not isinstance(values, dict):
+        raise RigDataError(f"{where}: design: expected JSON text of an object of design keys")
+    return replacement
 
 
 def _canonical_units(ds: xr.Dataset) -> None:
@@ -188,13 +222,16 @@ def _canonical_units(ds: xr.Dataset) -> None:
         ds[name].attrs["units"] = SIGNAL_CHANNELS[str(name)][0]
 
 
-def read_rig(path: str | os.PathLike[str]) -> xr.Dataset:
+def read_rig(path: str | os.PathLike[str], *, design: Design | None = None) -> xr.Dataset:
     """Read and validate a ``uqgear-rig/1`` file.
 
     Parameters
     ----------
     path : str or path-like
         The netCDF-4 file.
+    design : Design, optional
+        A nominal design that replaces the file's: the file's ``design``
+        attribute is then not validated as a design (:func:`validate_rig`).
 
     Returns
     -------
@@ -215,7 +252,7 @@ def read_rig(path: str | os.PathLike[str]) -> xr.Dataset:
         ds = xr.load_dataset(path, engine="netcdf4", decode_times=False, decode_timedelta=False)
     except (OSError, ValueError, RuntimeError) as exc:
         raise RigDataError(f"{path}: not a readable netCDF-4 file ({exc})") from None
-    validate_rig(ds, where=str(path))
+    validate_rig(ds, where=str(path), design=design)
     _canonical_units(ds)
     return ds
 

@@ -279,6 +279,43 @@ def _acquire(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, tap
     return filtered[keep]
 
 
+# Spawn-key indices of the per-run random streams of the nuisances, above
+# those of the record start and the channels' noise so that adding a
+# nuisance leaves every other draw as it was.
+_WANDER_STREAM = 1000
+_INTERFERENCE_STREAM = 1001
+
+
+def _check_wander(speed_wander: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+    components = []
+    for index, component in enumerate(speed_wander):
+        try:
+            amplitude, frequency = (float(value) for value in component)
+        except (TypeError, ValueError):
+            raise OperatingPointError(f"speed_wander[{index}]: expected (relative amplitude, frequency in Hz); "
+                                      f"got {component!r}") from None
+        if not (math.isfinite(amplitude) and 0.0 <= amplitude < 0.2):
+            raise OperatingPointError(f"speed_wander[{index}]: expected a relative amplitude in [0, 0.2); "
+                                      f"got {amplitude!r}")
+        if not (math.isfinite(frequency) and frequency > 0.0):
+            raise OperatingPointError(f"speed_wander[{index}]: expected a frequency > 0 Hz; got {frequency!r}")
+        components.append((amplitude, frequency))
+    return components
+
+
+def _check_interference(line_interference: Mapping[float, float] | None, fs: float) -> dict[float, float]:
+    lines = {}
+    for frequency, amplitude in (line_interference or {}).items():
+        if isinstance(frequency, bool) or not isinstance(frequency, (int, float)) or not 0 < frequency < fs / 2:
+            raise OperatingPointError(f"line_interference: expected frequencies in (0, fs/2) Hz; got {frequency!r}")
+        if isinstance(amplitude, bool) or not isinstance(amplitude, (int, float)) or not math.isfinite(amplitude) \
+                or amplitude < 0:
+            raise OperatingPointError(f"line_interference.{frequency:g}: expected an amplitude >= 0 m s-2; "
+                                      f"got {amplitude!r}")
+        lines[float(frequency)] = float(amplitude)
+    return lines
+
+
 def _check_positive(name: str, value: object, lowest: float = 0.0) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
             or not math.isfinite(float(value)) or float(value) <= lowest:
@@ -296,7 +333,9 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                       relative_noise: float = DEFAULT_RELATIVE_NOISE, fs: float = 20480.0, duration: float = 1.0,
                       run_in: float = 1.0, seed: np.random.SeedSequence | int | None = None,
                       channels: Sequence[str] = tuple(SIGNAL_CHANNELS), title: str | None = None,
-                      oversampling: int = 4, steps_per_mode: int = 32) -> xr.Dataset:
+                      oversampling: int = 4, steps_per_mode: int = 32,
+                      speed_wander: Sequence[tuple[float, float]] = (),
+                      line_interference: Mapping[float, float] | None = None) -> xr.Dataset:
     """Simulate a rig campaign and return it in the ``uqgear-rig/1`` format.
 
     Parameters
@@ -337,6 +376,18 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         filtering and resampling.
     steps_per_mode : int
         RK4 steps per period of the highest natural frequency.
+    speed_wander : sequence of (float, float)
+        Components (relative amplitude, frequency in Hz) of the pinion speed's
+        wander within each record: n(t) = n1 (1 + sum a sin(2 pi f t + phi)),
+        phases random per run. The model runs at the mean speed and its
+        output is read at the pinion angle the wandering shaft reaches
+        (quasi-steady: the response follows the angle, accelerations scale
+        with the squared instantaneous speed), which is what order tracking
+        must undo.
+    line_interference : mapping, optional
+        Frequency (Hz) -> amplitude (m s-2) of fixed-frequency lines (mains
+        pickup, e.g. ``{50: 0.5, 150: 0.2}``) on the accelerometer channels,
+        phases random per run and channel.
 
     Returns
     -------
@@ -375,6 +426,10 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
             raise OperatingPointError(f"noise_std.{name}: expected a standard deviation >= 0 in "
                                       f"{SIGNAL_CHANNELS[name][0]}; got {value!r}")
 
+    wander = _check_wander(speed_wander)
+    interference = _check_interference(line_interference, fs)
+    # largest time shift of the wandering shaft against the mean rotation
+    wander_shift = sum(amplitude / (2.0 * math.pi * frequency) for amplitude, frequency in wander) * 2.0
     true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
     top_rng = np.random.default_rng(child_seed(seed_sequence, 0))
     adhesion_override = (true_parameters or {}).get("adhesion_torque")
@@ -398,16 +453,16 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         # (never inside the filter's guard interval at the start of the simulation)
         start = max(run_in, _GUARD) + np.random.default_rng(op_seed).uniform(0.0, 60.0 / speed)
         per_period = int(math.ceil(oversampling * fs / mesh_frequency))
-        first_period = max(int(math.floor((start - _GUARD) * mesh_frequency)), 0)
-        last_period = int(math.ceil((start + duration + _GUARD) * mesh_frequency)) + 1
+        first_period = max(int(math.floor((start - _GUARD - wander_shift) * mesh_frequency)), 0)
+        last_period = int(math.ceil((start + duration + _GUARD + wander_shift) * mesh_frequency)) + 1
         sim = simulate(true_design, speed, float(table["drive_torque"][op]), float(table["adhesion_torque"][op]),
                        n_periods=last_period, keep_periods=last_period - first_period,
                        samples_per_period=per_period, mesh_stiffness_scale=stiffness_scale, effects=effects,
                        steps_per_mode=steps_per_mode)
         time = sim["time"].values
         rate = per_period * mesh_frequency
-        keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD)),
-                     int(np.searchsorted(time, start + duration + 0.5 * _GUARD)))
+        keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD - wander_shift)),
+                     int(np.searchsorted(time, start + duration + 0.5 * _GUARD + wander_shift)))
         # taper only the outer part of the guard intervals, far from the record
         taper = np.ones(time.size)
         ramp_left = time < time[0] + _TAPER
@@ -415,6 +470,15 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         ramp_right = time > time[-1] - _TAPER
         taper[ramp_right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[ramp_right]) / _TAPER))
         sample_time = start + record_time
+        speed_ratio = np.ones(n_samples)
+        if wander:
+            phases = np.random.default_rng(child_seed(run_seeds[op], _WANDER_STREAM)).uniform(
+                0.0, 2.0 * math.pi, len(wander))
+            for (amplitude, frequency), phase in zip(wander, phases):
+                omega = 2.0 * math.pi * frequency
+                sample_time = sample_time + amplitude / omega * (math.cos(phase) - np.cos(omega * record_time + phase))
+                speed_ratio = speed_ratio + amplitude * np.sin(omega * record_time + phase)
+        interference_rng = np.random.default_rng(child_seed(run_seeds[op], _INTERFERENCE_STREAM))
         for name, channel_seed in zip(channels, channel_seeds):
             if name == "te":
                 raw, order = sim["te"].values, 0
@@ -422,16 +486,24 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                 raw, order = sim["y1" if name == "acc_pinion" else "y2"].values, 2
             filtered = _acquire(time, raw, rate, keep, taper, passband, stopband, order)
             clean = CubicSpline(time[keep], filtered)(sample_time)
+            if order == 2:
+                clean = clean * speed_ratio**2
             rms = float(np.sqrt(np.mean((clean - clean.mean()) ** 2)))
             sigma = math.hypot(noise_std.get(name, 0.0), relative_noise * rms)
             noisy = clean + sigma * np.random.default_rng(channel_seed).standard_normal(n_samples)
+            if order == 2:
+                for frequency, amplitude in interference.items():
+                    noisy = noisy + amplitude * np.cos(2.0 * math.pi * frequency * record_time
+                                                       + interference_rng.uniform(0.0, 2.0 * math.pi))
             data[name][op] = noisy - noisy.mean() if name == "te" else noisy
 
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
     truth = {"mesh_stiffness_scale": stiffness_scale, **true_record,
              "adhesion_torque": [float(v) for v in table["adhesion_torque"]]}
     effect_record = [{"name": effect.name, "values": dict(effect.values)} for effect in effects]
-    noise_record = {"relative_noise": relative_noise, "noise_std": noise_std}
+    noise_record = {"relative_noise": relative_noise, "noise_std": noise_std,
+                    "speed_wander": [list(component) for component in wander],
+                    "line_interference": {f"{frequency:g}": amplitude for frequency, amplitude in interference.items()}}
     ds = make_rig_dataset(
         time=record_time, pinion_speed=table["pinion_speed"], drive_torque=table["drive_torque"],
         adhesion_torque_lower=table["adhesion_torque_lower"], adhesion_torque_upper=table["adhesion_torque_upper"],
