@@ -15,7 +15,9 @@ from __future__ import annotations
 from .design import (
     Design, Operation, load_design, bundled_designs, design_from_json, DESIGN_KEYS,
     OPTIONAL_DESIGN_KEYS, STANDARD_GRAVITY)
-from .geometry import (involute, ToothGeometry, PairGeometry, pair_geometry, check_geometry)
+from .geometry import (involute, ToothGeometry, PairGeometry, pair_geometry, check_geometry, geometry_notes,
+                       least_shift)
+from .generation import RackCorner, Undercut, undercut, tip_penetration
 from .stiffness import (
     tooth_compliance, contact_compliance, single_pair_stiffness, iso6336_stiffness, mesh_stiffness,
     stiffness_tables, StiffnessTables)
@@ -32,7 +34,8 @@ from .integration import (
 __all__ = [
     'Design', 'Operation', 'load_design', 'bundled_designs', 'design_from_json', 'DESIGN_KEYS',
     'OPTIONAL_DESIGN_KEYS', 'STANDARD_GRAVITY', 'involute', 'ToothGeometry', 'PairGeometry',
-    'pair_geometry', 'check_geometry', 'tooth_compliance', 'contact_compliance',
+    'pair_geometry', 'check_geometry', 'geometry_notes', 'least_shift', 'RackCorner', 'Undercut', 'undercut',
+    'tip_penetration', 'tooth_compliance', 'contact_compliance',
     'single_pair_stiffness', 'iso6336_stiffness', 'mesh_stiffness', 'stiffness_tables',
     'StiffnessTables', 'build_model', 'ModelSetup', 'equivalent_mass', 'mean_mesh_force', 'rated_mesh_force',
     'natural_frequencies', 'dimensionless', 'STIFFNESS_MODES', 'Effect', 'EffectParameter',

@@ -188,7 +188,13 @@ class Design:
         ------
         DesignError
             A key is missing, unknown, or outside its plausible range, or the
-            geometry is not a working gear pair (undercut, contact ratio < 1).
+            pair cannot mesh (pointed teeth, interference, contact ratio < 1;
+            :func:`~uqgear.physics.geometry.check_geometry`).
+
+        Warns
+        -----
+        UndercutWarning
+            A tooth is undercut: modelled from its form circle, not refused.
         """
         if not isinstance(values, Mapping):
             raise DesignError(f"{where}design: expected a mapping of design keys; got {type(values).__name__}")
@@ -209,7 +215,7 @@ class Design:
                               f"({checked['addendum_coefficient']:g}) to leave tip clearance; "
                               f"got {checked['dedendum_coefficient']:g}")
         design = cls(**checked, name=name, operation=operation or Operation())
-        # Geometry-level checks (undercut, interference, contact ratio) need the
+        # Geometry-level checks (interference, contact ratio; an undercut warns) need the
         # involute geometry; importing here avoids a module cycle.
         from .geometry import check_geometry
         check_geometry(design, where=where)
