@@ -24,7 +24,6 @@ import math
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +47,8 @@ from uqgear.physics.effects import EFFECTS, EffectError
 from uqgear.rig.format import read_rig, rig_design
 from uqgear.rig.usability import check_usable_signal
 from uqgear.study import analyses
+
+from test_cli import TINY  # the tiny in-process study of the CLI tests
 
 ROOT = Path(__file__).resolve().parent.parent
 HEALTHY = ROOT / "data" / "rig" / "healthy.nc"
@@ -284,16 +285,7 @@ def test_internal_failure_in_the_calibration_exits_1_with_the_step(tmp_path, cap
     assert record["command"] == "calibration" and record["inputs"]["rig"] == str(HEALTHY)
 
 
-TINY = textwrap.dedent("""
-    name: tiny
-    seed: 5
-    operating_points: {pinion_speed: [3000, 4000], drive_torque: 1000}
-    uncertain: {adhesion_torque: {interval: [20000, 40000]}}
-    simulation: {n_periods: 60, keep_periods: 24}
-    analyses:
-      - {type: bifurcation, parameter: pinion_speed}
-      - {type: monte_carlo, samples: 4}
-    """)
+
 
 
 def test_internal_failure_in_a_study_run_keeps_the_work_for_resume(tmp_path, capsys, monkeypatch):

@@ -223,13 +223,14 @@ def _first_comment(path: Path) -> str:
     """The study's description, or its first comment line."""
     from .common.yamlio import YAMLError, load_yaml
 
+    text = path.read_text()
     try:
-        raw = load_yaml(path.read_text())
+        raw = load_yaml(text)
     except YAMLError:
         raw = None
     if isinstance(raw, dict) and isinstance(raw.get("description"), str):
         return " ".join(raw["description"].split())
-    for line in path.read_text().splitlines():
+    for line in text.splitlines():
         if line.startswith("#"):
             return line.lstrip("# ").strip()
     return ""
@@ -269,10 +270,7 @@ def _copy_example(args: argparse.Namespace) -> int:
         dest = dest / source.name
     if dest.suffix.lower() not in (".yaml", ".yml"):
         return _fail(f"examples copy: {args.dest}: expected a folder or a file name ending in .yaml")
-    if dest.exists() and not args.force:
-        return _fail(f"examples copy: {dest} exists; choose another name or pass --force to overwrite it")
-    if not dest.parent.is_dir():
-        return _fail(f"examples copy: {dest}: the folder {dest.parent} does not exist")
+    _check_new_file(dest, args.force, f"examples copy: {dest}")
     write_text_atomic(dest, source.read_text())
     print(f"study {source.stem} copied to {dest} (run it with: uqgear run {dest} --out DIR)")
     return 0
@@ -337,14 +335,18 @@ def _command_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_new_file(out: Path, force: bool) -> None:
-    """An output file goes into an existing folder and replaces a file only with ``--force``."""
+def _check_new_file(out: Path, force: bool, where: str | None = None) -> None:
+    """An output file goes into an existing folder and replaces a file only with ``--force``.
+
+    ``where`` names the file in messages (default ``--out OUT``).
+    """
+    where = f"--out {out}" if where is None else where
     if out.is_dir():
-        raise UqgearError(f"--out {out}: is a folder; expected a file name")
+        raise UqgearError(f"{where}: is a folder; expected a file name")
     if out.exists() and not force:
-        raise UqgearError(f"--out {out}: exists; choose another name or pass --force to overwrite it")
+        raise UqgearError(f"{where}: exists; choose another name or pass --force to overwrite it")
     if not out.parent.is_dir():
-        raise UqgearError(f"--out {out}: the folder {out.parent} does not exist")
+        raise UqgearError(f"{where}: the folder {out.parent} does not exist")
 
 
 # ---------------------------------------------------------------------------- rig data

@@ -10,7 +10,7 @@ when they are what failed and nothing else is.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -61,7 +61,7 @@ def worst_misfits(predictive: xr.Dataset) -> list[dict[str, Any]]:
 
 
 def failure_causes(*, diagnostics: Mapping[str, Any], summary: Mapping[str, Any],
-                   predictive_check: Mapping[str, Any], predictive: xr.Dataset | None,
+                   predictive_check: Mapping[str, Any], predictive: xr.Dataset,
                    model_error_cap: float) -> dict[str, Any]:
     """What is wrong with a fit, each cause with its numbers.
 
@@ -74,7 +74,7 @@ def failure_causes(*, diagnostics: Mapping[str, Any], summary: Mapping[str, Any]
     """
     causes: list[dict[str, Any]] = []
     if predictive_check.get("passed") is False:
-        misfits = worst_misfits(predictive) if predictive is not None else []
+        misfits = worst_misfits(predictive)
         worst = "; ".join(f"{m['feature']} at {m['pinion_speed']:g} rpm off by {100 * m['relative_difference']:+.0f} % "
                           f"({m['z']:+.1f} sigma)" for m in misfits)
         causes.append({"kind": "predictive_misfit", "misfits": misfits,
@@ -113,9 +113,4 @@ def failure_causes(*, diagnostics: Mapping[str, Any], summary: Mapping[str, Any]
     return {"causes": causes, "message": message}
 
 
-def causes_text(causes: Sequence[Mapping[str, Any]]) -> str:
-    """The causes' texts joined, for a report line."""
-    return "; ".join(str(cause["text"]) for cause in causes)
-
-
-__all__ = ["parameters_at_bounds", "model_errors_at_cap", "worst_misfits", "failure_causes", "causes_text"]
+__all__ = ["parameters_at_bounds", "model_errors_at_cap", "worst_misfits", "failure_causes"]

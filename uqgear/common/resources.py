@@ -75,6 +75,20 @@ def bundled_file(kind: str, name: str) -> Path:
     return _folder(kind) / f"{stem}{suffix}"
 
 
+def bundled_by_name(kind: str, text: str, candidate: Path) -> Path | None:
+    """The bundled file that ``text`` names, when it can only mean that one.
+
+    ``text`` as typed by the user and ``candidate`` the path it resolves to;
+    the bundled file is meant when ``candidate`` does not exist and ``text``
+    is a bare name (no suffix, no folder) of a bundled file of ``kind``.
+    Otherwise None: the caller goes on with ``candidate``.
+    """
+    bare = isinstance(text, str) and not Path(text).suffix and Path(text).name == text
+    if bare and not candidate.exists() and text in bundled_names(kind):
+        return bundled_file(kind, text)
+    return None
+
+
 def example_rig_file(name: str = "healthy") -> Path:
     """Path of a labelled rig campaign shipped with the package.
 
@@ -93,4 +107,4 @@ def example_rig_file(name: str = "healthy") -> Path:
     return bundled_file("rig", name)
 
 
-__all__ = ["ResourceError", "bundled_names", "bundled_file", "example_rig_file"]
+__all__ = ["ResourceError", "bundled_names", "bundled_file", "bundled_by_name", "example_rig_file"]

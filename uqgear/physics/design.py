@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..common.errors import DesignError, shown
-from ..common.resources import ResourceError, bundled_file, bundled_names
+from ..common.resources import bundled_by_name, bundled_names
 from ..common.yamlio import YAMLError, load_yaml
 
 #: Standard gravity used to turn an axle load in kg into a normal force.
@@ -320,12 +320,10 @@ def load_design(name_or_path: str | Path | Design | Mapping[str, Any] = "locomot
             design = Design.from_mapping(raw)
     else:
         path = Path(name_or_path)
+        path = bundled_by_name("design", str(name_or_path), path) or path
         if not path.suffix and not path.exists():
-            try:
-                path = bundled_file("design", str(name_or_path))
-            except ResourceError:
-                raise DesignError(f"design {str(name_or_path)[:80]!r}: not a bundled design "
-                                  f"({', '.join(bundled_designs())}) nor an existing file") from None
+            raise DesignError(f"design {str(name_or_path)[:80]!r}: not a bundled design "
+                              f"({', '.join(bundled_designs())}) nor an existing file")
         if not path.is_file():
             raise DesignError(f"{path}: design file not found")
         try:

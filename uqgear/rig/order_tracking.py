@@ -128,7 +128,7 @@ class AngleEstimate:
 
 
 def _lowpass(values: np.ndarray, cutoff: float, fs: float) -> np.ndarray:
-    """Zero-phase low-pass of complex rows, with odd-reflection padding over the filter's memory."""
+    """Zero-phase low-pass of complex rows, with even-reflection padding over the filter's memory."""
     # third order run forward and back: 1/(1 + 2^12) of power left at the
     # pinion sidebands (twice the cutoff), little ringing from the record ends;
     # even reflection keeps the phasor continuous where odd reflection of a
@@ -274,13 +274,14 @@ def _track_record(records: np.ndarray, names: Sequence[str], fs: float, stated: 
     mean_rate = (angle[-1] - angle[0]) / duration
     mean = mean_rate * 60.0 / (2.0 * math.pi)
     rate = np.gradient(angle) * fs * 60.0 / (2.0 * math.pi)
+    # the estimate is least certain near the record ends: speeds and smear are read without 5 % at each end
     edge = size // 20
-    interior = rate[edge: size - edge] if size > 10 * max(edge, 1) else rate
-    low, high = float(np.min(interior)), float(np.max(interior))
+    interior = slice(edge, size - edge)
+    low, high = float(np.min(rate[interior])), float(np.max(rate[interior]))
     top_order = n_harmonics * design.z1
     time = np.arange(size) / fs
     trend = np.polyval(np.polyfit(time, angle, 1), time)
-    smear = top_order * float(np.max(np.abs(angle - trend)[edge: size - edge] if edge else np.abs(angle - trend)))
+    smear = top_order * float(np.max(np.abs(angle - trend)[interior]))
     bins = abs(mean - stated) / 60.0 * top_order * duration
     significant = smear > _NOISE_MARGIN * top_order * estimate.angle_std or estimate.angle_std == 0.0
     tracked = mode == "always" or (mode == "auto" and significant and (smear > _SMEAR_LIMIT or bins > _BIN_LIMIT))
@@ -370,16 +371,17 @@ def track_orders(signals: xr.Dataset, design: Design, *, mode: str = "auto", cha
                                f"got {signals[TACHOMETER_VARIABLE].dims}")
         tachometer = np.asarray(signals[TACHOMETER_VARIABLE].values, dtype=float).reshape(-1, size)
     n_records = stacked.shape[0]
-    statistics = np.full((4, n_records), np.nan)
+    statistics = np.full((3, n_records), np.nan)    # mean, min, max speed (rpm)
     tracked = np.zeros(n_records, dtype=bool)
     references: list[str] = []
     outputs = {name: None for name in channels}
+    acceleration_rows = [index for index, name in enumerate(channels)
+                         if signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("",))[0]) == "m s-2"]
     for record in range(n_records):
         result = _track_record(stacked[record].astype(float), channels, fs, float(stated[record]), design, mode,
                                limit, n_harmonics, None if tachometer is None else tachometer[record],
-                               [index for index, name in enumerate(channels)
-                                if signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("",))[0]) == "m s-2"])
-        statistics[:, record] = (result.mean, result.low, result.high, stated[record])
+                               acceleration_rows)
+        statistics[:, record] = (result.mean, result.low, result.high)
         tracked[record] = result.tracked
         references.append(result.lines)
         if result.records is not None:

@@ -21,7 +21,7 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import RigDataError
-from .features import SIGNAL_CHANNELS, sampling_rate
+from .sampling import SIGNAL_CHANNELS, sampling_rate
 
 
 def record_states(ds: xr.Dataset) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..common.errors import StudyError
 from .checkers import number
-from .settings import _SIMULATION_SCHEMA
+from .settings import _SIMULATION_SCHEMA, check_kept_within
 from .variables import OPERATING_VARIABLES
 
 #: Figure resolution of reports, dots per inch (the study key ``outputs.dpi``).
@@ -43,8 +42,7 @@ def check_run_length(n_periods: Any, keep_periods: Any, *, where: tuple[str, str
     """
     total = _SIMULATION_SCHEMA["n_periods"](n_periods, where[0])
     kept = _SIMULATION_SCHEMA["keep_periods"](keep_periods, where[1])
-    if kept > total:
-        raise StudyError(f"{where[1]}: expected at most {where[0]} ({total}); got {kept}")
+    check_kept_within(total, kept, where[0], where[1])
     return total, kept
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..physics.design import _DESIGN_KEYS, Design, load_design
 from ..common.errors import StudyError, UqgearError
-from ..common.resources import bundled_file, bundled_names
+from ..common.resources import bundled_by_name, bundled_names
 from ..common.yamlio import YAMLError, load_yaml
 from .analysis_schemas import RIG_TYPES
 from .limits import DPI
@@ -104,10 +104,7 @@ def _resolve(path: str, base_dir: Path | None) -> Path:
 def _resolve_rig(value: str, base_dir: Path | None) -> Path:
     """A rig file relative to the study's folder, or a bundled campaign named without a suffix."""
     candidate = _resolve(value, base_dir)
-    if not candidate.exists() and not Path(value).suffix and Path(value).name == value \
-            and value in bundled_names("rig"):
-        return bundled_file("rig", value)
-    return candidate
+    return bundled_by_name("rig", value, candidate) or candidate
 
 
 def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
@@ -279,9 +276,7 @@ def load_study(path: str | Path) -> Study:
         schema; the message starts with the file name and the key path.
     """
     source = Path(path)
-    if not source.exists() and isinstance(path, str) and not source.suffix and source.name == path \
-            and path in bundled_names("study"):
-        source = bundled_file("study", path)
+    source = bundled_by_name("study", path, source) or source
     if source.is_dir():
         raise StudyError(f"{source}: is a folder; expected a study YAML file")
     if not source.is_file():

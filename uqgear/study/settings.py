@@ -56,7 +56,11 @@ def _simulation(raw: Any, path: str, base: SimulationSettings) -> SimulationSett
     values = base.to_dict()
     values.update(check_mapping(raw, path, _SIMULATION_SCHEMA))
     settings = SimulationSettings(**values)
-    if settings.keep_periods > settings.n_periods:
-        raise StudyError(f"{path}.keep_periods: expected at most n_periods ({settings.n_periods}); "
-                         f"got {settings.keep_periods}")
+    check_kept_within(settings.n_periods, settings.keep_periods, "n_periods", f"{path}.keep_periods")
     return settings
+
+
+def check_kept_within(total: int, kept: int, total_name: str, kept_name: str) -> None:
+    """Refuse keeping more mesh periods than are integrated; the message names both values."""
+    if kept > total:
+        raise StudyError(f"{kept_name}: expected at most {total_name} ({total}); got {kept}")
