@@ -156,3 +156,29 @@ def test_virtual_rig_wander_is_undone_by_tracking(design):
         got = tracked[channel].sel(feature=names).values
         assert np.all(np.abs(got - expected) <= np.maximum(0.01 * expected, noise)), channel
         assert np.any(np.abs(smeared[channel].sel(feature=names).values / expected - 1.0) > 0.2)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"speed_wander": [(0.01,)]}, r"speed_wander\[0\]: expected \(relative amplitude, frequency in Hz\)"),
+    ({"speed_wander": [(0.5, 1.0)]}, r"speed_wander\[0\]: expected a relative amplitude in \[0, 0.2\); got 0.5"),
+    ({"speed_wander": [(0.01, 0.0)]}, r"speed_wander\[0\]: expected a frequency > 0 Hz; got 0.0"),
+    ({"line_interference": {20000.0: 0.5}}, r"line_interference: expected frequencies in \(0, fs/2\) Hz"),
+    ({"line_interference": {50.0: -1.0}}, r"line_interference.50: expected an amplitude >= 0 m s-2; got -1.0"),
+])
+def test_virtual_rig_nuisance_options_are_checked(design, options, message):
+    with pytest.raises(uqgear.OperatingPointError, match=message):
+        simulate_campaign(design, {"pinion_speed": [1500.0], "drive_torque": [6000.0]}, seed=1, **options)
+
+
+def test_a_tachometer_variable_in_a_rig_file_is_checked(design, tmp_path):
+    rig = uqgear.read_rig(uqgear.example_rig_file("healthy"))
+    good = rig.assign(pinion_speed_signal=(("op", "time"),
+                                           np.broadcast_to(rig["pinion_speed"].values[:, None], rig["te"].shape),
+                                           {"units": "rpm", "long_name": "instantaneous pinion speed"}))
+    path = uqgear.write_rig(tmp_path / "tacho.nc", good)
+    assert "pinion_speed_signal" in uqgear.read_rig(path).data_vars
+    with pytest.raises(uqgear.RigDataError, match=r"pinion_speed_signal: expected dims \('op', 'time'\)"):
+        uqgear.write_rig(tmp_path / "bad.nc", good.assign(pinion_speed_signal=good["pinion_speed_signal"].isel(time=0)))
+    with pytest.raises(uqgear.RigDataError, match="pinion_speed_signal"):
+        uqgear.write_rig(tmp_path / "bad_units.nc", good.assign(
+            pinion_speed_signal=good["pinion_speed_signal"].assign_attrs(units="Hz")))

@@ -219,7 +219,7 @@ def _canonical_units(ds: xr.Dataset) -> None:
     for name, (_, units, _) in RIG_COORDINATES.items():
         ds[name].attrs["units"] = units
     for name in ds.data_vars:
-        ds[name].attrs["units"] = SIGNAL_CHANNELS[str(name)][0]
+        ds[name].attrs["units"] = "rpm" if name == TACHOMETER_VARIABLE else SIGNAL_CHANNELS[str(name)][0]
 
 
 def read_rig(path: str | os.PathLike[str], *, design: Design | None = None) -> xr.Dataset:
