@@ -10,7 +10,6 @@ import pytest
 import xarray as xr
 
 from uqgear.rig import virtual_rig as V
-from uqgear.physics.design import load_design
 from uqgear.physics.effects import make_effect
 from uqgear.common.errors import OperatingPointError, RigDataError
 from uqgear.rig.features import extract_features, line_amplitudes
@@ -29,10 +28,6 @@ HEALTHY_TRUTH = {"mesh_stiffness_scale": 0.970, "zeta_mesh": 0.052, "backlash": 
 
 SHORT = {"duration": 0.25, "run_in": 0.3}
 
-
-@pytest.fixture(scope="module")
-def design():
-    return load_design("locomotive")
 
 
 @pytest.fixture(scope="module")

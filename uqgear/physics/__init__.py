@@ -4,7 +4,8 @@
 derived once per operating point) -> ``integration`` (the compiled RK4 fast
 path in ``_kernels`` and the scipy reference). ``effects`` holds the
 unmodelled effects of docs/model.md section 6 as slots of the same
-right-hand side.
+right-hand side; ``pitch_errors`` the per-tooth pitch offsets every real gear
+has (section 2.6), an input of the model set-up, not an effect.
 
 May import :mod:`uqgear.common` only; never plotting or file output (a test
 checks it).
@@ -27,6 +28,7 @@ from .model import (
 from .effects import (
     Effect, EffectParameter, EffectError, EFFECTS, make_effect, parse_effect, Eccentricity,
     ToothDamage, Friction, TorqueRipple, AdhesionOscillation, BearingClearance)
+from .pitch_errors import PitchErrors, iso1328_single_pitch_tolerance, draw_pitch_errors
 from .integration import (
     simulate, simulate_batch, build_batch, samples_from_mapping, steps_per_period, BatchEvaluator,
     QOI_INFO, METHODS)
@@ -42,5 +44,5 @@ __all__ = [
     'EffectError', 'EFFECTS', 'make_effect', 'parse_effect', 'Eccentricity', 'ToothDamage',
     'Friction', 'TorqueRipple', 'AdhesionOscillation', 'BearingClearance', 'simulate',
     'simulate_batch', 'build_batch', 'samples_from_mapping', 'steps_per_period', 'BatchEvaluator',
-    'QOI_INFO', 'METHODS',
+    'QOI_INFO', 'METHODS', 'PitchErrors', 'iso1328_single_pitch_tolerance', 'draw_pitch_errors',
 ]

@@ -34,8 +34,11 @@ import numpy as np
  ECC_AMPLITUDE, ECC_OMEGA, ECC_PHASE, ECC_KAPPA,
  FRICTION, CLEARANCE1, CLEARANCE2,
  PATH_START, BASE_PITCH, LOA_LENGTH, PITCH_POSITION, CONTACT_RATIO,
- USE_PERIOD_TABLE, Z1, Z2, TOOTH_FACTORS) = range(42)
-N_PARAMS = 42
+ USE_PERIOD_TABLE, Z1, Z2, TOOTH_FACTORS, PITCH_ERRORS) = range(43)
+#: Number of named slots. The parameter vector goes on with the per-tooth pitch offsets
+#: (m): z1 of the pinion from index ``N_PARAMS``, then z2 of the gear (docs/model.md
+#: section 2.6); ``PITCH_ERRORS`` is 1 when any of them is not zero.
+N_PARAMS = 43
 
 #: Names of the parameter slots, in order (for error messages and tests).
 PARAMETER_SLOTS = (
@@ -45,7 +48,7 @@ PARAMETER_SLOTS = (
     "adhesion_amplitude", "adhesion_omega", "adhesion_phase", "ecc_amplitude", "ecc_omega",
     "ecc_phase", "ecc_kappa", "friction", "clearance1", "clearance2", "path_start",
     "base_pitch", "loa_length", "pitch_position", "contact_ratio", "use_period_table", "z1", "z2",
-    "tooth_factors",
+    "tooth_factors", "pitch_errors",
 )
 
 # QoI accumulator layout of the batch kernel
@@ -262,11 +265,8 @@ def _shifted(s, h, d):
 
 
 @nb.njit(**JIT_OPTIONS, inline="always")
-def _rk4(s, h, d1, mid, end, p):
-    """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
-    d2, _ = derivative(_shifted(s, 0.5 * h, d1), mid, p)
-    d3, _ = derivative(_shifted(s, 0.5 * h, d2), mid, p)
-    d4, _ = derivative(_shifted(s, h, d3), end, p)
+def rk4_combine(s, h, d1, d2, d3, d4):
+    """The classical RK4 update of ``s`` over ``h`` from its four stage derivatives."""
     w = h / 6.0
     return (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
             s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
@@ -274,6 +274,15 @@ def _rk4(s, h, d1, mid, end, p):
             s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
             s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
             s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
+
+
+@nb.njit(**JIT_OPTIONS, inline="always")
+def _rk4(s, h, d1, mid, end, p):
+    """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
+    d2, _ = derivative(_shifted(s, 0.5 * h, d1), mid, p)
+    d3, _ = derivative(_shifted(s, 0.5 * h, d2), mid, p)
+    d4, _ = derivative(_shifted(s, h, d3), end, p)
+    return rk4_combine(s, h, d1, d2, d3, d4)
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -284,6 +293,14 @@ def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     into ``out`` and returns (mesh force F, mesh stiffness k, static
     transmission error e).
     """
+    if p[PITCH_ERRORS] != 0.0:
+        # per-pair deflections (docs/model.md section 2.6); the branch leaves the classical path as it was
+        terms = _pairs.forcing_pairs(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
+        d, force = _pairs.derivative_pairs((state[0], state[1], state[2], state[3], state[4], state[5]),
+                                           terms, p)
+        for j in range(6):
+            out[j] = d[j]
+        return force, terms[0], terms[3]
     terms = forcing(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
     d, force = derivative((state[0], state[1], state[2], state[3], state[4], state[5]), terms, p)
     for j in range(6):
@@ -476,6 +493,8 @@ def scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
         The new state tuple, and the mesh force and accelerations of y1, y2
         at the step's start (first RK4 stage).
     """
+    if p[PITCH_ERRORS] != 0.0:
+        return _pairs.scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
     first_sub, offsets, widths, refs, pairs, table = schedule
     start = n * period
     force = 0.0
@@ -497,6 +516,18 @@ def scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
         else:
             s = _split_at_contact(t, h, s, d1, trial, start + refs[sub], p, pair_k, period_k, fp, fg)
     return s, force, a1, a2
+
+
+@nb.njit(**JIT_OPTIONS, inline="always")
+def contact_at(x, n, n_pairs, p):
+    """Contact state (1 drive, 0 apart, -1 back side) at DTE ``x`` in mesh period ``n`` with ``n_pairs`` in mesh.
+
+    Without pitch errors it follows from x alone; with them from each pair's
+    deflection (:func:`uqgear.physics._pairs.pair_contact`).
+    """
+    if p[PITCH_ERRORS] != 0.0:
+        return _pairs.pair_contact(x, n, n_pairs, p)
+    return contact_region(x, p[HALF_BACKLASH])
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -556,7 +587,7 @@ def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_pe
                 history[row, 8] = force
                 history[row, 9] = terms[0]
                 history[row, 10] = terms[3]
-                history[row, 11] = contact_region(start[2], p[HALF_BACKLASH])
+                history[row, 11] = contact_at(start[2], n, pairs[sub], p)
                 row += 1
         for c in range(6):
             state[c] = s[c]
@@ -575,7 +606,8 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
     h = period / steps_per_period
     schedule = build_schedule(p, pair_k, period_k, breakpoints, steps_per_period)
     first_kept = n_periods - keep_periods
-    b = p[HALF_BACKLASH]
+    first_sub = schedule[0]
+    pairs = schedule[4]
     acc[Q_X_MIN] = np.inf
     acc[Q_X_MAX] = -np.inf
     acc[Q_F_MAX] = -np.inf
@@ -608,7 +640,7 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
                     acc[Q_F_MIN] = force
                 acc[Q_A1_SQ] += a1 * a1
                 acc[Q_A2_SQ] += a2 * a2
-                region = contact_region(x, b)
+                region = contact_at(x, n, pairs[first_sub[j]], p)
                 if region == 1:
                     acc[Q_N_DRIVE] += 1.0
                 elif region == 0:
@@ -663,3 +695,10 @@ def integrate_batch(states, params, pair_tables, period_tables, table_index, fac
                        factor_pinion[i], factor_gear[i], breakpoints[i], steps_per_period[i],
                        n_periods, keep_periods, history_stride[i], accumulators[i], poincare[i],
                        history[i], lyapunov, scales[i])
+
+
+# The per-pair path of pitch errors lives in its own module and uses the helpers above, so it is
+# imported last (absolute, so that benchmarks/integrator.py can recompile this file on its own).
+# numba's cache checks the timestamp of a function's own file only: after editing _pairs.py,
+# clear the cache (``__pycache__/*.nbi``, ``*.nbc``) of this module as well.
+from uqgear.physics import _pairs  # noqa: E402

@@ -16,7 +16,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -27,6 +28,7 @@ from .design import DESIGN_KEYS, Design
 from .effects import Effect
 from ..common.errors import OperatingPointError
 from .model import ModelSetup, build_model, natural_frequencies
+from .pitch_errors import PitchErrors
 
 METHODS = ("fast", "scipy")
 OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
@@ -125,6 +127,9 @@ def _attrs(setup: ModelSetup, method: str, n_periods: int, keep_periods: int, st
         "units_note": "SI units; pinion_speed in rpm",
     })
     attrs.update({key: float(value) for key, value in setup.derived.items()})
+    if setup.pitch_errors is not None:
+        attrs.update(pitch_errors_pinion=setup.pitch_errors.pinion.copy(),
+                     pitch_errors_gear=setup.pitch_errors.gear.copy())
     return attrs
 
 
@@ -138,6 +143,25 @@ def _integrate_fast(setup: ModelSetup, n_periods: int, keep_periods: int, sample
                         setup.period_stiffness, setup.factor_pinion, setup.factor_gear,
                         setup.breakpoints, steps, n_periods, keep_periods, stride, history, poincare)
     return history, poincare, steps
+
+
+def _record_grid(history: np.ndarray, grid: np.ndarray, sol: Any, state: np.ndarray, t_a: float, t_end: float,
+                 period: float, first_row: int, args: tuple, deriv: np.ndarray, contact: Callable[[float], int]) -> None:
+    """Write the history rows of the grid points in [t_a, t_end) from one solve_ivp piece.
+
+    Each grid point is recorded once, by the piece that starts it (the state
+    itself at t_a, the dense output inside).
+    """
+    for i in np.nonzero((grid >= t_a - 1e-12 * period) & (grid < t_end))[0]:
+        t = grid[i]
+        y = np.ascontiguousarray(sol.sol(t)) if t > t_a else state
+        row = first_row + i
+        force, k, ste = K.record(t, y, *args, deriv)
+        history[row, :6] = y
+        history[row, 6] = deriv[3]
+        history[row, 7] = deriv[4]
+        history[row, 8:11] = (force, k, ste)
+        history[row, 11] = contact(y[2])
 
 
 def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
@@ -160,6 +184,9 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
     def region_of(x: float) -> int:
         return 1 if x > b else (-1 if x < -b else 0)
 
+    if p[K.PITCH_ERRORS] != 0.0:
+        return _integrate_scipy_pairs(setup, n_periods, keep_periods, samples_per_period, state, rtol,
+                                      atol_vector)
     region = region_of(state[2])
     for n in range(n_periods):
         kept = n >= first_kept
@@ -193,17 +220,8 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
                 stats["segments"] += 1
                 t_end = sol.t[-1]
                 if kept:
-                    # grid points in [t_a, t_end): each recorded once, by the piece that starts it
-                    for i in np.nonzero((grid >= t_a - 1e-12 * period) & (grid < t_end))[0]:
-                        t = grid[i]
-                        y = np.ascontiguousarray(sol.sol(t)) if t > t_a else state
-                        row = (n - first_kept) * samples_per_period + i
-                        force, k, ste = K.record(t, y, *args, deriv)
-                        history[row, :6] = y
-                        history[row, 6] = deriv[3]
-                        history[row, 7] = deriv[4]
-                        history[row, 8:11] = (force, k, ste)
-                        history[row, 11] = region_of(y[2])
+                    _record_grid(history, grid, sol, state, t_a, t_end, period, (n - first_kept) * samples_per_period,
+                                 args, deriv, region_of)
                 state = sol.y[:, -1].copy()
                 if sol.status == 1:
                     stats["contact_events"] += 1
@@ -219,12 +237,79 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
     return history, poincare, stats
 
 
+def _integrate_scipy_pairs(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
+                           state: np.ndarray, rtol: float, atol_vector: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The scipy reference with pitch errors: a terminal event at every pair's contact boundary.
+
+    Within a segment between stiffness breakpoints the pairs in mesh, and so
+    their offsets e_i, are fixed; each pair changes its contact state where
+    x crosses e_i + b or e_i - b. Each such level is an event, directed away
+    from the side x is on (tracked across events, as the classical path
+    tracks its region), so every kink of the per-pair dead zones is resolved.
+    """
+    p = setup.parameters
+    args = (p, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
+    period = 1.0 / setup.mesh_frequency
+    b = p[K.HALF_BACKLASH]
+    phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
+    first_kept = n_periods - keep_periods
+    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
+    poincare = np.empty((keep_periods, 6))
+    deriv = np.empty(6)
+    stats = {"rhs_evaluations": 0, "contact_events": 0, "segments": 0}
+    for n in range(n_periods):
+        kept = n >= first_kept
+        if kept:
+            poincare[n - first_kept] = state
+            grid = (n + np.arange(samples_per_period) / samples_per_period) * period
+        for u_a, u_b in zip(phases[:-1], phases[1:]):
+            t_a, t_b = (n + u_a) * period, (n + u_b) * period
+            t_ref = 0.5 * (t_a + t_b)
+            newest, count = K._pairs.pair_state(t_ref, p)
+            offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
+            levels = np.unique([e + side for e in offsets for side in (b, -b)])
+            above = state[2] > levels
+            out = np.empty(6)
+
+            def fun(t, y, t_ref=t_ref, out=out):
+                K.rhs(t, y, t_ref, *args, out)
+                return out.copy()
+
+            def make_event(level: float, is_above: bool):
+                def event(t, y):
+                    return y[2] - level
+                event.terminal = True
+                event.direction = -1 if is_above else 1
+                return event
+
+            while t_a < t_b:
+                events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
+                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector,
+                                events=events, dense_output=kept)
+                stats["rhs_evaluations"] += sol.nfev
+                stats["segments"] += 1
+                t_end = sol.t[-1]
+                if kept:
+                    _record_grid(history, grid, sol, state, t_a, t_end, period, (n - first_kept) * samples_per_period,
+                                 args, deriv, lambda x: K._pairs.pair_contact(x, newest, count, p))
+                state = sol.y[:, -1].copy()
+                if sol.status == 1:
+                    stats["contact_events"] += 1
+                    fired = next(i for i, te in enumerate(sol.t_events) if te.size)
+                    above[fired] = not above[fired]
+                else:
+                    above = state[2] > levels
+                t_a = t_end
+    return history, poincare, stats
+
+
 def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_torque: float, *,
              method: str = "fast", n_periods: int = 400, keep_periods: int = 200,
              samples_per_period: int = 64, mesh_stiffness_scale: float = 1.0,
              effects: Sequence[Effect] = (), damping_in_separation: bool = True,
              stiffness: str = "ishikawa", steps_per_mode: int = 24, rtol: float = 1e-10,
-             atol: float | None = None, initial_state: np.ndarray | None = None) -> xr.Dataset:
+             atol: float | None = None, initial_state: np.ndarray | None = None,
+             pitch_errors: PitchErrors | None = None) -> xr.Dataset:
     """Simulate one operating point of the gear pair.
 
     Parameters
@@ -256,12 +341,16 @@ def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_
         Scipy reference tolerances (atol relative to the state's scale).
     initial_state : array of 6, optional
         (y1, y2, x, y1', y2', x') at t = 0; static equilibrium by default.
+    pitch_errors : PitchErrors, optional
+        Per-tooth pitch offsets (:mod:`uqgear.physics.pitch_errors`); with
+        them ``contact`` is 1 while some pair is in drive-side contact.
 
     Returns
     -------
     xarray.Dataset
         Histories on ``time`` (kept periods), Poincare points on ``period``
-        (state at each kept mesh-period start), every parameter in attrs.
+        (state at each kept mesh-period start), every parameter in attrs
+        (the pitch errors as ``pitch_errors_pinion`` and ``_gear``, m).
     """
     if method not in METHODS:
         raise OperatingPointError(f"method: expected one of {', '.join(METHODS)}; got {method!r}")
@@ -270,7 +359,8 @@ def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_
         raise OperatingPointError(f"samples_per_period: expected a positive integer; got {samples_per_period!r}")
     setup = build_model(design, pinion_speed, drive_torque, adhesion_torque,
                         mesh_stiffness_scale=mesh_stiffness_scale, effects=effects,
-                        damping_in_separation=damping_in_separation, stiffness=stiffness)
+                        damping_in_separation=damping_in_separation, stiffness=stiffness,
+                        pitch_errors=pitch_errors)
     state0 = setup.static_state() if initial_state is None else np.asarray(initial_state, dtype=float)
     if state0.shape != (6,):
         raise OperatingPointError(f"initial_state: expected 6 values (y1, y2, x, y1', y2', x'); "
@@ -332,8 +422,10 @@ def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]
 
 
 def build_batch(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect] = (),
-                damping_in_separation: bool = True, stiffness: str = "ishikawa") -> list[ModelSetup]:
-    """One :class:`ModelSetup` per sample (design keys and effect parameters may vary)."""
+                damping_in_separation: bool = True, stiffness: str = "ishikawa",
+                pitch_errors: PitchErrors | None = None) -> list[ModelSetup]:
+    """One :class:`ModelSetup` per sample (design keys and effect parameters may vary; the pitch errors,
+    if any, are those of every sample)."""
     values = _sample_values(samples, design)
     n = samples.sizes["sample"]
     design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
@@ -364,7 +456,7 @@ def build_batch(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect
                                   values["adhesion_torque"][i],
                                   mesh_stiffness_scale=values["mesh_stiffness_scale"][i],
                                   effects=sample_effects, damping_in_separation=damping_in_separation,
-                                  stiffness=stiffness))
+                                  stiffness=stiffness, pitch_errors=pitch_errors))
     return setups
 
 
@@ -372,7 +464,8 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
                    history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
                    effects: Sequence[Effect] = (),
                    damping_in_separation: bool = True, stiffness: str = "ishikawa",
-                   steps_per_mode: int = 24, threads: int | None = None) -> xr.Dataset:
+                   steps_per_mode: int = 24, threads: int | None = None,
+                   pitch_errors: PitchErrors | None = None) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
 
     Parameters
@@ -399,6 +492,8 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         As in :func:`simulate`.
     threads : int, optional
         Number of threads (default: all cores).
+    pitch_errors : PitchErrors, optional
+        Per-tooth pitch offsets of every sample (as in :func:`simulate`).
 
     Returns
     -------
@@ -411,7 +506,7 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
 
     _check_counts(n_periods, keep_periods)
     setups = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation,
-                         stiffness=stiffness)
+                         stiffness=stiffness, pitch_errors=pitch_errors)
     n = len(setups)
     multiple = max(int(history_per_period), 1)
     steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=multiple) for s in setups], dtype=np.int64)
@@ -505,6 +600,8 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
                     **{f"design_{key}": value for key, value in design.to_dict().items()})
     if n and np.all(half_backlash == half_backlash[0]):
         ds.attrs["half_backlash"] = float(half_backlash[0])
+    if pitch_errors is not None:
+        ds.attrs.update(pitch_errors_pinion=pitch_errors.pinion.copy(), pitch_errors_gear=pitch_errors.gear.copy())
     return ds
 
 
@@ -532,7 +629,7 @@ class BatchEvaluator:
         Sample variables held constant (added to every sample unless the
         samples carry them).
     n_periods, keep_periods, history_per_period, rig_channels, lyapunov, effects,
-    damping_in_separation, stiffness, steps_per_mode, threads
+    damping_in_separation, stiffness, steps_per_mode, threads, pitch_errors
         As in :func:`simulate_batch` (``threads`` does not change the
         results, so :meth:`key` leaves it out).
     """
@@ -540,7 +637,8 @@ class BatchEvaluator:
     def __init__(self, design: Design, *, fixed: Mapping[str, float] | None = None, n_periods: int = 400,
                  keep_periods: int = 200, history_per_period: int = 0, rig_channels: bool = False,
                  lyapunov: bool = False, effects: Sequence[Effect] = (), damping_in_separation: bool = True,
-                 stiffness: str = "ishikawa", steps_per_mode: int = 24, threads: int | None = None) -> None:
+                 stiffness: str = "ishikawa", steps_per_mode: int = 24, threads: int | None = None,
+                 pitch_errors: PitchErrors | None = None) -> None:
         _check_counts(n_periods, keep_periods)
         self.design = design
         self.fixed = dict(fixed or {})
@@ -554,6 +652,7 @@ class BatchEvaluator:
         self.stiffness = stiffness
         self.steps_per_mode = steps_per_mode
         self.threads = threads
+        self.pitch_errors = pitch_errors
 
     def __call__(self, samples: xr.Dataset) -> xr.Dataset:
         samples = samples.copy()
@@ -564,13 +663,18 @@ class BatchEvaluator:
                               history_per_period=self.history_per_period, rig_channels=self.rig_channels,
                               lyapunov=self.lyapunov,
                               effects=self.effects, damping_in_separation=self.damping_in_separation,
-                              stiffness=self.stiffness, steps_per_mode=self.steps_per_mode, threads=self.threads)
+                              stiffness=self.stiffness, steps_per_mode=self.steps_per_mode, threads=self.threads,
+                              pitch_errors=self.pitch_errors)
 
     def key(self) -> str:
         """A text identifying the settings (for checkpoint hashing)."""
-        return repr((self.design.to_json(), sorted(self.fixed.items()), self.n_periods, self.keep_periods,
-                     self.history_per_period, self.rig_channels, self.lyapunov, [repr(e) for e in self.effects],
-                     self.damping_in_separation, self.stiffness, self.steps_per_mode))
+        settings = (self.design.to_json(), sorted(self.fixed.items()), self.n_periods, self.keep_periods,
+                    self.history_per_period, self.rig_channels, self.lyapunov, [repr(e) for e in self.effects],
+                    self.damping_in_separation, self.stiffness, self.steps_per_mode)
+        if self.pitch_errors is not None:
+            # only then: the keys of existing checkpoints stay as they were
+            settings += (self.pitch_errors.to_dict(),)
+        return repr(settings)
 
 
 __all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period", "BatchEvaluator",

@@ -24,6 +24,7 @@ from . import _kernels as K
 from .design import Design
 from ..common.errors import OperatingPointError
 from .geometry import pair_geometry
+from .pitch_errors import PitchErrors
 from .stiffness import StiffnessTables, stiffness_tables
 
 STIFFNESS_MODES = ("ishikawa", "fourier", "constant")
@@ -113,6 +114,9 @@ class ModelSetup:
         Mesh phases in (0, 1) where the stiffness or friction direction jumps.
     derived : dict
         Derived scalars for output attributes.
+    pitch_errors : PitchErrors or None
+        Per-tooth pitch offsets, also written to the tail of ``parameters``
+        (docs/model.md section 2.6).
     """
 
     design: Design
@@ -125,6 +129,7 @@ class ModelSetup:
     derived: dict[str, float] = field(default_factory=dict)
     effects: tuple = ()
     stiffness: str = "ishikawa"
+    pitch_errors: PitchErrors | None = None
 
     def slot(self, name: str) -> float:
         """Value of a parameter slot by name."""
@@ -150,17 +155,32 @@ class ModelSetup:
         Each bearing sits F_T / k_i beyond its clearance (bearing clearance
         effect), so a run starting here has no start-up transient to ring
         down; the pinion bearing is pushed to negative y1, the gear's to
-        positive y2.
+        positive y2. With pitch errors x also moves by the stiffness-weighted
+        mean offset of the pairs in mesh at t = 0.
         """
         p = self.parameters
         force = self.derived["static_mesh_force"]
         k = self.derived["k_mean"] * p[K.STIFFNESS_SCALE]
         b = p[K.HALF_BACKLASH]
         x = force / k + b if force >= 0 else force / k - b
+        if p[K.PITCH_ERRORS] != 0.0:
+            x += self._mean_pair_offset()
         direction = math.copysign(1.0, force) if force != 0.0 else 0.0
         y1 = -force / p[K.K1] - direction * p[K.CLEARANCE1]
         y2 = force / p[K.K2] + direction * p[K.CLEARANCE2]
         return np.array([y1, y2, x, 0.0, 0.0, 0.0])
+
+    def _mean_pair_offset(self) -> float:
+        """Stiffness-weighted mean pitch offset (m) of the pairs in mesh at t = 0."""
+        p = self.parameters
+        z1, z2 = self.design.z1, self.design.z2
+        eps = p[K.CONTACT_RATIO]
+        pairs = np.arange(math.ceil(eps))  # pair i is meshing number -i, at i base pitches along the path
+        grid = np.linspace(0.0, eps, self.pair_stiffness.size)
+        weights = np.interp(pairs.astype(float), grid, self.pair_stiffness)
+        weights = weights * self.factor_pinion[-pairs % z1] * self.factor_gear[-pairs % z2]
+        offsets = p[K.N_PARAMS + (-pairs % z1)] + p[K.N_PARAMS + z1 + (-pairs % z2)]
+        return float(np.sum(weights * offsets) / np.sum(weights))
 
     def state_scale(self) -> np.ndarray:
         """Typical magnitudes of the state components (for Lyapunov distances)."""
@@ -183,7 +203,8 @@ def _check_operating(name: str, value: float, lower: float, unit: str, strict: b
 
 def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesion_torque: float, *,
                 mesh_stiffness_scale: float = 1.0, effects: Sequence = (),
-                damping_in_separation: bool = True, stiffness: str = "ishikawa") -> ModelSetup:
+                damping_in_separation: bool = True, stiffness: str = "ishikawa",
+                pitch_errors: PitchErrors | None = None) -> ModelSetup:
     """Assemble the model for one operating point.
 
     Parameters
@@ -204,6 +225,11 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     stiffness : {"ishikawa", "fourier", "constant"}
         Raw Ishikawa curve, its truncated Fourier series, or the constant
         mean k_mean (linear-limit checks).
+    pitch_errors : PitchErrors, optional
+        Per-tooth pitch offsets along the line of action (z1 pinion and z2
+        gear values, m). All zero or none: the classical mesh force k f(x),
+        bit for bit; otherwise each pair in mesh deflects by x - e_i
+        (docs/model.md section 2.6).
 
     Returns
     -------
@@ -228,7 +254,13 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     r1, r2 = geometry.pinion.base_radius, geometry.gear.base_radius
     k_mean = tables.k_mean
     omega_mesh = 2.0 * math.pi * design.z1 * pinion_speed / 60.0
-    p = np.zeros(K.N_PARAMS)
+    if pitch_errors is not None and not isinstance(pitch_errors, PitchErrors):
+        raise OperatingPointError(f"pitch_errors: expected a PitchErrors (per-tooth offsets in m) or None; "
+                                  f"got {type(pitch_errors).__name__}")
+    if pitch_errors is not None:
+        pitch_errors.check(design)
+    # the named slots, then the per-tooth pitch offsets of pinion and gear (zero without pitch errors)
+    p = np.zeros(K.N_PARAMS + design.z1 + design.z2)
     p[K.M1], p[K.M2], p[K.ME] = design.m1, design.m2, me
     p[K.K1], p[K.K2] = design.k1, design.k2
     p[K.C1] = 2.0 * design.zeta1 * math.sqrt(design.k1 * design.m1)
@@ -259,7 +291,14 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     setup = ModelSetup(design=design, parameters=p, pair_stiffness=tables.pair_stiffness,
                        period_stiffness=period_table, factor_pinion=np.ones(design.z1),
                        factor_gear=np.ones(design.z2), breakpoints=np.empty(0), derived=derived,
-                       effects=tuple(effects), stiffness=stiffness)
+                       effects=tuple(effects), stiffness=stiffness, pitch_errors=pitch_errors)
+    if pitch_errors is not None and pitch_errors.any:
+        if geometry.contact_ratio >= K.MAX_PAIRS:
+            raise OperatingPointError(f"pitch_errors: the per-pair path holds at most {K.MAX_PAIRS} pairs in mesh; "
+                                      f"the contact ratio is {geometry.contact_ratio:.3f}")
+        p[K.N_PARAMS:K.N_PARAMS + design.z1] = pitch_errors.pinion
+        p[K.N_PARAMS + design.z1:] = pitch_errors.gear
+        p[K.PITCH_ERRORS] = 1.0
     for effect in effects:
         effect.apply(setup)
     # the kernel skips per-tooth lookups unless some tooth differs

@@ -31,6 +31,13 @@ Acquisition chain, per run and channel:
    channel has its own stream, spawned from the seed.
 5. ``te`` has its mean removed (encoders carry no absolute zero).
 
+Pitch errors (``pitch_errors``): a manufactured gear pair has a pitch error on
+every tooth. Given an ISO 1328-1:2013 flank tolerance class, one random set
+is drawn per campaign (the same gears in every run,
+:func:`uqgear.physics.pitch_errors.draw_pitch_errors`) and acts in the model's
+pair loop (docs/model.md section 2.6); the set is kept in the ``noise``
+attribute with the other nuisances, which a blind diagnosis never sees.
+
 Adhesion torque: the file carries a-priori bounds of +-15 % around the
 balancing value (z2/z1) T1, clipped to mu in the design's adhesion range times
 Q R_w (:func:`adhesion_torque_bounds`); the true T2 of each run is drawn
@@ -57,6 +64,7 @@ from ..common.errors import OperatingPointError, RigDataError
 from .features import SIGNAL_CHANNELS
 from ..physics.integration import BATCH_DESIGN_KEYS, simulate
 from ..physics.model import natural_frequencies
+from ..physics.pitch_errors import PitchErrors, draw_pitch_errors, iso1328_single_pitch_tolerance
 from .format import make_rig_dataset, write_rig
 from ..uq.seeds import as_seed_sequence, child_seed
 
@@ -284,6 +292,38 @@ def _acquire(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, tap
 # nuisance leaves every other draw as it was.
 _WANDER_STREAM = 1000
 _INTERFERENCE_STREAM = 1001
+# The pitch errors are the gears', one draw per campaign: a child of the campaign's seed (whose
+# children 1, 2, ... are the runs', so this one is free for campaigns of up to 1001 runs).
+_PITCH_STREAM = 1002
+
+
+def _pitch_errors(design: Design, pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None,
+                  seed_sequence: np.random.SeedSequence) -> tuple[PitchErrors | None, dict | None]:
+    """The campaign's pitch errors and their JSON record (grade, tolerances, values in m)."""
+    if pitch_errors is None:
+        return None, None
+    if isinstance(pitch_errors, (int, np.integer)) and not isinstance(pitch_errors, bool):
+        grade = int(pitch_errors)
+        errors = draw_pitch_errors(design, grade, np.random.default_rng(child_seed(seed_sequence, _PITCH_STREAM)))
+        record = {"iso1328_class": grade,
+                  "single_pitch_tolerance_pinion": iso1328_single_pitch_tolerance(
+                      design.module * design.z1, design.module, grade),
+                  "single_pitch_tolerance_gear": iso1328_single_pitch_tolerance(
+                      design.module * design.z2, design.module, grade)}
+    elif isinstance(pitch_errors, PitchErrors):
+        errors, record = pitch_errors, {"iso1328_class": None}
+    elif isinstance(pitch_errors, Mapping):
+        unknown = sorted(set(pitch_errors) - {"pinion", "gear"})
+        if unknown or len(pitch_errors) != 2:
+            raise OperatingPointError(f"pitch_errors: expected the keys pinion and gear (per-tooth offsets in m); "
+                                      f"got {sorted(pitch_errors)}")
+        errors, record = PitchErrors(pitch_errors["pinion"], pitch_errors["gear"]), {"iso1328_class": None}
+    else:
+        raise OperatingPointError(f"pitch_errors: expected an ISO 1328-1 flank tolerance class (integer 1..11), "
+                                  f"a PitchErrors or a mapping with pinion and gear offsets in m; "
+                                  f"got {pitch_errors!r:.80}")
+    errors.check(design)
+    return errors, {**record, **errors.to_dict()}
 
 
 def _check_wander(speed_wander: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -335,7 +375,8 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                       channels: Sequence[str] = tuple(SIGNAL_CHANNELS), title: str | None = None,
                       oversampling: int = 4, steps_per_mode: int = 32,
                       speed_wander: Sequence[tuple[float, float]] = (),
-                      line_interference: Mapping[float, float] | None = None) -> xr.Dataset:
+                      line_interference: Mapping[float, float] | None = None,
+                      pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None = None) -> xr.Dataset:
     """Simulate a rig campaign and return it in the ``uqgear-rig/1`` format.
 
     Parameters
@@ -388,6 +429,22 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         Frequency (Hz) -> amplitude (m s-2) of fixed-frequency lines (mains
         pickup, e.g. ``{50: 0.5, 150: 0.2}``) on the accelerometer channels,
         phases random per run and channel.
+    pitch_errors : int, PitchErrors or mapping, optional
+        Pitch errors of the rig's gears, the same in every run. An integer is
+        an ISO 1328-1:2013 flank tolerance class A (1..11; traction gears are
+        typically 6 to 8): per gear (reference diameter d = m z, module m)
+        the single pitch tolerance is
+        ``f_pT = (0.001 d + 0.4 m + 5) sqrt(2)^(A - 5)`` um (d, m in mm;
+        ISO 1328-1:2013 formula (5), unrounded), the single pitch deviations
+        are drawn normal with sigma = f_pT / 2, closed (their sum over the
+        gear is zero), summed to tooth positions (mean removed) and taken
+        along the line of action (times cos alpha); see
+        :func:`uqgear.physics.pitch_errors.draw_pitch_errors`. The draw has
+        its own stream (child 1002 of the seed), so every other draw of the
+        campaign is as without pitch errors. Explicit offsets: a
+        :class:`~uqgear.physics.pitch_errors.PitchErrors` or a mapping
+        ``{"pinion": z1 values, "gear": z2 values}`` in m. Recorded in the
+        ``noise`` attribute (class, tolerances, offsets).
 
     Returns
     -------
@@ -395,7 +452,9 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         Valid ``uqgear-rig/1`` data; extra global attributes
         ``true_parameters`` (JSON: mesh_stiffness_scale, the design keys given,
         adhesion_torque per run), ``effects`` (JSON list of name and values),
-        ``noise`` (JSON), ``seed_entropy``.
+        ``noise`` (JSON; with pitch errors also ``pitch_errors``: the
+        ``iso1328_class`` or null, the tolerances f_pT of pinion and gear in
+        m and the per-tooth ``pinion`` and ``gear`` offsets in m), ``seed_entropy``.
 
     Raises
     ------
@@ -431,6 +490,7 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     # largest time shift of the wandering shaft against the mean rotation
     wander_shift = sum(amplitude / (2.0 * math.pi * frequency) for amplitude, frequency in wander) * 2.0
     true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
+    pitch, pitch_record = _pitch_errors(design, pitch_errors, seed_sequence)
     top_rng = np.random.default_rng(child_seed(seed_sequence, 0))
     adhesion_override = (true_parameters or {}).get("adhesion_torque")
     table = _operating_table(design, operating_points, adhesion_override, top_rng)
@@ -458,7 +518,7 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         sim = simulate(true_design, speed, float(table["drive_torque"][op]), float(table["adhesion_torque"][op]),
                        n_periods=last_period, keep_periods=last_period - first_period,
                        samples_per_period=per_period, mesh_stiffness_scale=stiffness_scale, effects=effects,
-                       steps_per_mode=steps_per_mode)
+                       steps_per_mode=steps_per_mode, pitch_errors=pitch)
         time = sim["time"].values
         rate = per_period * mesh_frequency
         keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD - wander_shift)),
@@ -504,6 +564,8 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     noise_record = {"relative_noise": relative_noise, "noise_std": noise_std,
                     "speed_wander": [list(component) for component in wander],
                     "line_interference": {f"{frequency:g}": amplitude for frequency, amplitude in interference.items()}}
+    if pitch_record is not None:
+        noise_record["pitch_errors"] = pitch_record
     ds = make_rig_dataset(
         time=record_time, pinion_speed=table["pinion_speed"], drive_torque=table["drive_torque"],
         adhesion_torque_lower=table["adhesion_torque_lower"], adhesion_torque_upper=table["adhesion_torque_upper"],
@@ -534,7 +596,8 @@ def synth_rig(design: Design, out_path: str | os.PathLike[str], *, effects: Sequ
               seed: np.random.SeedSequence | int | None = None, noise_std: Mapping[str, float] | None = None,
               relative_noise: float = DEFAULT_RELATIVE_NOISE,
               operating_points: xr.Dataset | Mapping[str, ArrayLike] | None = None,
-              duration: float = 1.0, run_in: float = 1.0, title: str | None = None) -> Path:
+              duration: float = 1.0, run_in: float = 1.0, title: str | None = None,
+              pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None = None) -> Path:
     """Simulate a campaign (:func:`simulate_campaign`) and write it atomically as a rig file.
 
     This is what ``uqgear synth-rig --design FILE --out FILE.nc [--effect ...] [--seed N]`` runs.
@@ -545,7 +608,7 @@ def synth_rig(design: Design, out_path: str | os.PathLike[str], *, effects: Sequ
         Nominal design (stored in the file).
     out_path : str or path-like
         Target ``.nc`` file; its folder must exist.
-    effects, true_parameters, seed, noise_std, relative_noise, operating_points, duration, run_in, title
+    effects, true_parameters, seed, noise_std, relative_noise, operating_points, duration, run_in, title, pitch_errors
         As in :func:`simulate_campaign`.
 
     Returns
@@ -558,7 +621,7 @@ def synth_rig(design: Design, out_path: str | os.PathLike[str], *, effects: Sequ
         raise RigDataError(f"{path}: folder {path.parent} does not exist")
     ds = simulate_campaign(design, operating_points, true_parameters=true_parameters, effects=effects,
                            noise_std=noise_std, relative_noise=relative_noise, duration=duration, run_in=run_in,
-                           seed=seed, title=title)
+                           seed=seed, title=title, pitch_errors=pitch_errors)
     return write_rig(path, ds)
 
 
