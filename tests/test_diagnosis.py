@@ -26,7 +26,7 @@ from uqgear.diagnosis import case as rig_case, discrepancy as disc, simulation a
 from uqgear.physics.design import load_design
 from uqgear.common.errors import RigDataError, UqgearError
 from uqgear.rig.features import extract_features
-from uqgear.rig.format import make_rig_dataset, read_rig, rig_design
+from uqgear.rig.format import make_rig_dataset, read_rig
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
@@ -41,15 +41,6 @@ HEALTHY_TRUTH = {"mesh_stiffness_scale": 0.970, "zeta_mesh": 0.052, "backlash": 
 HEALTHY_T2 = [29.78e3, 26.12e3, 30.70e3, 38.23e3, 39.38e3, 27.09e3, 25.82e3, 21.30e3]
 
 
-@pytest.fixture(scope="module")
-def design():
-    return load_design("locomotive")
-
-
-@pytest.fixture(scope="module")
-def healthy_case():
-    rig = read_rig(DATA / "healthy.nc")
-    return prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
 
 
 def _layout_for_lines(n: int) -> disc.FeatureLayout:
@@ -396,6 +387,9 @@ def test_labelled_campaign_verdict(name, tmp_path):
     report = name in ("healthy.nc", "eccentricity.nc")
     content = diagnose(DATA / name, tmp_path, seed=0, report=report)
     assert content["verdict"] == LABELLED[name], content["reason"]
+    # one effect acts on each labelled campaign: forward selection adds none beside it
+    assert [entry["effect"] for entry in content["effects"]] == \
+        ([] if LABELLED[name] == "none" else [LABELLED[name]]), content["reason"]
     on_disk = json.loads((tmp_path / "diagnosis.json").read_text())
     assert on_disk["verdict"] == content["verdict"]
     assert set(on_disk) >= {"verdict", "gap", "where", "ranking"}

@@ -93,6 +93,10 @@ class CampaignSpec:
     def effects(self) -> list[Effect]:
         return [] if self.truth == HEALTHY else [make_effect(self.truth, self.effect_values)]
 
+    def truth_set(self) -> list[str]:
+        """The library effects acting on the campaign, in order (empty for a healthy control)."""
+        return [effect.name for effect in self.effects()]
+
 
 def _check_count(name: str, value: object, lowest: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
@@ -325,7 +329,10 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         named = best if best is not None and best.effect == result.verdict else None
         detectable = spec.truth == HEALTHY or visibility > NOISE_GAP_THRESHOLD
         entry = {
-            "id": spec.identifier, "truth": spec.truth, "strength": spec.strength,
+            "id": spec.identifier, "truth": spec.truth, "truth_effects": spec.truth_set(),
+            "effects_named": [chosen.entry.effect for chosen in result.selected],
+            "shrink_shares": [chosen.shrink_share for chosen in result.selected],
+            "strength": spec.strength,
             "strength_value": spec.strength_value, "design": spec.design_name, "plan": spec.plan,
             "effect_values": spec.effect_values, "true_parameters": truth,
             "verdict": result.verdict, "reason": result.reason,
@@ -355,9 +362,55 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
     return _json_clean(content)
 
 
+def _truth_set(campaign: Mapping[str, Any]) -> set[str]:
+    """The effects acting on a scored campaign (``truth_effects``, else its one ``truth``)."""
+    if campaign.get("truth_effects") is not None:
+        return set(campaign["truth_effects"])
+    return set() if campaign["truth"] == HEALTHY else {campaign["truth"]}
+
+
+def _named_set(campaign: Mapping[str, Any]) -> set[str]:
+    """The effects a diagnosis named (``effects_named``, else its verdict when that is an effect)."""
+    if campaign.get("effects_named") is not None:
+        return set(campaign["effects_named"])
+    return {campaign["verdict"]} if campaign["verdict"] in EFFECT_NAMES else set()
+
+
+def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -> dict[str, Any]:
+    """How well the named effect sets match the true ones.
+
+    Per effect: precision (of the campaigns where it was named, the share
+    where it acts) and recall (of the campaigns where it acts, the share
+    where it was named), None where undefined (never named, never acting).
+    ``set_exact``: the share of campaigns whose named set is exactly the
+    true set; an empty true set counts only with the verdict ``none`` (an
+    ``unexplained`` or ``inconclusive`` healthy control names nothing, but
+    is not right).
+    """
+    names = list(dict.fromkeys([*effects, *(name for c in campaigns for name in _truth_set(c) | _named_set(c))]))
+    rows = []
+    for name in names:
+        named = [c for c in campaigns if name in _named_set(c)]
+        acting = [c for c in campaigns if name in _truth_set(c)]
+        hits = sum(1 for c in named if name in _truth_set(c))
+        rows.append({"effect": name, "named": len(named), "acting": len(acting), "correct": hits,
+                     "precision": hits / len(named) if named else None,
+                     "recall": hits / len(acting) if acting else None})
+    exact = [(_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == HEALTHY)
+             for c in campaigns]
+    multi = [ok for c, ok in zip(campaigns, exact) if len(_truth_set(c)) > 1]
+    return {"per_effect": rows, "set_exact": sum(exact) / len(exact) if exact else math.nan,
+            "n_multi_effect": len(multi), "set_exact_multi_effect": sum(multi) / len(multi) if multi else None}
+
+
 def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *, seconds: float = math.nan,
               seed_text: str = "") -> dict[str, Any]:
-    """Confusion matrix, accuracies, false alarms, shrink statistics and thresholds of scored campaigns."""
+    """Confusion matrix, accuracies, false alarms, shrink statistics, thresholds and effect-set scores.
+
+    The confusion matrix and the accuracies score the verdict (the leading
+    effect) against the campaign's ``truth``; ``effect_sets``
+    (:func:`set_scores`) scores the named effect sets against the true ones.
+    """
     labels = list(effects) + [HEALTHY]
     verdicts = list(VERDICTS)
     counts = np.zeros((len(labels), len(verdicts)), dtype=int)
@@ -381,6 +434,7 @@ def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *,
                    "q75": float(np.quantile(shrinks, 0.75)) if shrinks.size else None,
                    "minimum": float(shrinks.min()) if shrinks.size else None},
         "thresholds": _thresholds(campaigns, effects),
+        "effect_sets": set_scores(campaigns, effects),
         "campaigns": list(campaigns),
         "seconds": seconds,
         "seed": seed_text,
@@ -422,5 +476,5 @@ def blindtest_dataset(content: Mapping[str, Any]) -> xr.Dataset:
     return ds
 
 
-__all__ = ["blindtest", "plan_campaigns", "summarise", "blindtest_dataset", "oracle_gap", "second_design",
+__all__ = ["blindtest", "plan_campaigns", "summarise", "set_scores", "blindtest_dataset", "oracle_gap", "second_design",
            "operating_points_of", "CampaignSpec", "HEALTHY", "STRENGTHS", "PLANS"]

@@ -11,7 +11,7 @@ import numpy as np
 from ..physics.design import Design, design_key_bounds
 from ..physics.effects import EFFECTS, Effect, make_effect
 from .errors import DiagnosisError
-from .simulation import _MAX_STIFFNESS_SCALE
+from .simulation import _MAX_STIFFNESS_SCALE, PERIODICITIES
 
 
 @dataclass(frozen=True)
@@ -217,3 +217,64 @@ def candidates_for(effect: str, design: Design, *, hints: Mapping[str, float] | 
     return [Candidate(effect, f"bearing_clearance[{bearing}]", (("bearing", bearing),), fitted, starts, "mesh")
             for bearing in ("pinion", "gear", "both")]
 
+
+
+def combined_periodicity(periodicities: Sequence[str], design: Design | None = None) -> str:
+    """The period over which the steady response of several effects together repeats.
+
+    The coarser common period of the effects': a mesh-periodic effect
+    (friction, a clearance) repeats within any shaft revolution, so it adds
+    nothing to a pinion's or a gear's period; a pinion and a gear effect
+    together repeat only over the hunting-tooth period (lcm(z1, z2) mesh
+    periods), which is not one of :data:`~.simulation.PERIODICITIES`: the
+    response is then simulated over the whole record (``free``), unless z1
+    divides z2, when one gear revolution is a whole number of pinion
+    revolutions. Anything with a frequency of its own (``free``) stays free.
+
+    Parameters
+    ----------
+    periodicities : sequence of str
+        One of :data:`~.simulation.PERIODICITIES` per effect (none: the nominal model, ``mesh``).
+    design : Design, optional
+        For the tooth numbers (without it a pinion and a gear effect give ``free``).
+
+    Raises
+    ------
+    DiagnosisError
+        An unknown periodicity.
+    """
+    kinds = set()
+    for periodicity in periodicities:
+        if periodicity not in PERIODICITIES:
+            raise DiagnosisError(f"periodicity: expected one of {', '.join(PERIODICITIES)}; got {periodicity!r}")
+        if periodicity != "mesh":
+            kinds.add(periodicity)
+    if not kinds:
+        return "mesh"
+    if len(kinds) == 1:
+        return kinds.pop()
+    if kinds == {"pinion", "gear"} and design is not None and design.z2 % design.z1 == 0:
+        return "gear"
+    return "free"
+
+
+def check_combination(candidates: Sequence[Candidate]) -> tuple[Candidate, ...]:
+    """The candidates of one model, checked: each effect at most once.
+
+    Two variants of one effect (eccentricity of the pinion and of the gear)
+    would share their fitted parameters' names, and an effect named twice
+    would only soak up noise: forward selection never proposes it.
+
+    Raises
+    ------
+    DiagnosisError
+        An effect that appears twice, named with its labels.
+    """
+    chosen = tuple(candidates)
+    seen: dict[str, str] = {}
+    for candidate in chosen:
+        if candidate.effect in seen:
+            raise DiagnosisError(f"effects: {candidate.effect!r} appears twice in one model ({seen[candidate.effect]} "
+                                 f"and {candidate.label}); each effect enters a model at most once")
+        seen[candidate.effect] = candidate.label
+    return chosen

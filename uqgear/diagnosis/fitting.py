@@ -1,7 +1,8 @@
-"""Robust least-squares fits of the nominal model and of the nominal model plus one candidate effect."""
+"""Robust least-squares fits of the nominal model and of the nominal model plus candidate effects."""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -9,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
-from .candidates import Candidate, ParameterSpec, nominal_parameters
+from .candidates import Candidate, ParameterSpec, check_combination, combined_periodicity, nominal_parameters
 from .case import RigCase, RunTask
 from .discrepancy import standardised_discrepancy
 
@@ -22,24 +23,43 @@ _DIFFERENCE_STEP = 0.02
 
 
 class FitProblem:
-    """Nominal model plus at most one candidate effect, as a function of an optimiser vector.
+    """Nominal model plus any number of candidate effects, as a function of an optimiser vector.
 
-    The vector holds the global parameters (nominal ones, then the effect's)
-    in optimiser units (:class:`ParameterSpec`), then the position of each
-    run's T2 inside its interval (0 at the lower, 1 at the upper bound).
+    The vector holds the global parameters (nominal ones, then each
+    candidate's, in order) in optimiser units (:class:`ParameterSpec`), then
+    the position of each run's T2 inside its interval (0 at the lower, 1 at
+    the upper bound). All candidates act together in every simulation; the
+    last one is the *new* candidate a fit adds to the others (its ``base``,
+    fixed in structure, their parameters fitted or held), the one a score
+    is about.
+
+    Parameters
+    ----------
+    case : RigCase
+    candidates : Candidate or sequence of Candidate or None
+        The effects of the model (None or empty: the nominal model); each
+        library effect at most once (:func:`~.candidates.check_combination`).
     """
 
-    def __init__(self, case: RigCase, candidate: Candidate | None) -> None:
+    def __init__(self, case: RigCase, candidates: Candidate | Sequence[Candidate] | None) -> None:
         self.case = case
-        self.candidate = candidate
-        self.specs: list[ParameterSpec] = nominal_parameters(case.design) + list(candidate.fitted if candidate else [])
+        if candidates is None:
+            candidates = ()
+        elif isinstance(candidates, Candidate):
+            candidates = (candidates,)
+        self.candidates: tuple[Candidate, ...] = check_combination(candidates)
+        self.specs: list[ParameterSpec] = nominal_parameters(case.design)
+        for candidate in self.candidates:
+            self.specs += list(candidate.fitted)
         self.n_global = len(self.specs)
+        # where the new candidate's parameters start: the base's (nominal and earlier effects) end there
+        self.n_base_global = self.n_global - (len(self.candidate.fitted) if self.candidate else 0)
         self.size = self.n_global + case.n_op
         # RMS and kurtosis sum up everything, also what the model class cannot produce; fitted to
         # them the nominal parameters would trade mesh-harmonic accuracy for the unmodelled part.
         fitted_kind = np.array([kind in _FITTED_KINDS for kind in case.layout.kinds])
         self.mask = case.mask() & fitted_kind
-        self.periodicity = candidate.periodicity if candidate else "mesh"
+        self.periodicity = combined_periodicity([c.periodicity for c in self.candidates], case.design)
         lower = [spec.bounds()[0] for spec in self.specs] + [0.0] * case.n_op
         upper = [spec.bounds()[1] for spec in self.specs] + [1.0] * case.n_op
         self.lower = np.array(lower)
@@ -47,6 +67,16 @@ class FitProblem:
         self.prior_index = np.array([i for i, spec in enumerate(self.specs) if spec.prior], dtype=int)
         self._cache: dict[tuple, tuple[np.ndarray, bool]] = {}
         self.evaluations = 0
+
+    @property
+    def candidate(self) -> Candidate | None:
+        """The new candidate (the last one), or None for the nominal model."""
+        return self.candidates[-1] if self.candidates else None
+
+    @property
+    def base(self) -> tuple[Candidate, ...]:
+        """The candidates the new one is added to."""
+        return self.candidates[:-1]
 
     # -- vectors
     def vector(self, values: Mapping[str, float], t2_position: Sequence[float] | float = 0.5) -> np.ndarray:
@@ -72,7 +102,7 @@ class FitProblem:
         values = self.values(v)
         design = self.case.design.replace(zeta_mesh=values["zeta_mesh"], ste_amplitude=values["ste_amplitude"],
                                           k1=values["k1"], k2=values["k2"])
-        effects = (self.candidate.make(values),) if self.candidate else ()
+        effects = tuple(candidate.make(values) for candidate in self.candidates)
         return RunTask(op, design, values["mesh_stiffness_scale"], float(self.adhesion_torques(v)[op]), effects,
                        self.periodicity)
 
@@ -279,6 +309,49 @@ def fit(problem: FitProblem, starts: Sequence[np.ndarray], *, free: np.ndarray |
                      converged=bool(result.status > 0), message=str(result.message))
 
 
+# Standard normal quantile of the two-sided 90 % parameter intervals.
+_Z90 = 1.6448536269514722
+
+
+def parameter_intervals(result: FitResult, names: Sequence[str] | None = None) -> dict[str, tuple[float, float]]:
+    """90 % intervals of fitted global parameters from the Laplace approximation at the optimum.
+
+    The covariance in optimiser units is the inverse of the Gauss-Newton
+    Hessian of the robust cost, J^T W J (W the Cauchy loss' IRLS weights, J
+    the fit's Jacobian in all its free entries, T2 positions included, so
+    that their uncertainty widens the global parameters'); each interval is
+    the optimiser value +- 1.645 standard deviations, kept inside the bounds
+    and mapped to natural units (a log-scale parameter gets a multiplicative
+    interval). A parameter the fit held fixed has no interval.
+
+    Parameters
+    ----------
+    result : FitResult
+    names : sequence of str, optional
+        Parameter names (default: every free global parameter).
+    """
+    problem = result.problem
+    free_index = np.flatnonzero(result.free)
+    if result.jacobian.shape[1] != free_index.size:
+        return {}
+    weights = robust_weights(result.residuals)
+    hessian = result.jacobian.T @ (weights[:, None] * result.jacobian)
+    covariance = np.linalg.pinv(hessian)
+    wanted = None if names is None else set(names)
+    intervals = {}
+    for column, index in enumerate(free_index):
+        if index >= problem.n_global:
+            continue
+        spec = problem.specs[index]
+        if wanted is not None and spec.name not in wanted:
+            continue
+        spread = _Z90 * math.sqrt(max(float(covariance[column, column]), 0.0))
+        low = max(float(result.vector[index]) - spread, float(problem.lower[index]))
+        high = min(float(result.vector[index]) + spread, float(problem.upper[index]))
+        intervals[spec.name] = (spec.from_optimiser(low), spec.from_optimiser(high))
+    return intervals
+
+
 # Positions in its interval at which each run's T2 is tried by :func:`profile_adhesion`.
 _T2_GRID = np.linspace(0.0, 1.0, 9)
 
@@ -336,55 +409,61 @@ def fit_nominal(case: RigCase, *, max_evaluations: int = 30, start: Mapping[str,
     return second.after(first)
 
 
-def fit_candidate(case: RigCase, candidate: Candidate, nominal: FitResult, *, full: bool,
+def fit_candidate(case: RigCase, candidate: Candidate, base: FitResult, *, full: bool,
                   max_evaluations: int = 20, start: FitResult | None = None) -> FitResult:
-    """Fit nominal + one effect, warm-started from the nominal fit and the candidate's signature grid.
+    """Fit a base model plus one more effect, warm-started from the base fit and the candidate's signature grid.
+
+    The base is the nominal fit, or (forward selection) a fit of the nominal
+    model with effects already named: their structure stays, the new
+    candidate acts together with them in every simulation.
 
     Parameters
     ----------
     case : RigCase
     candidate : Candidate
-    nominal : FitResult
-        The nominal fit (its parameters and T2 positions are the start).
+        The effect added; not an effect of the base (:func:`~.candidates.check_combination`).
+    base : FitResult
+        The base fit (its parameters and T2 positions are the start).
     full : bool
-        Fit all parameters; otherwise only the effect's (the screening fit).
+        Fit all parameters (nominal, the base's effects, the new one's, T2);
+        otherwise only the new effect's (the screening fit).
     max_evaluations : int
         Cost evaluations allowed to the least-squares solver.
     start : FitResult, optional
         A screening fit of the same candidate to start from instead of the grid.
     """
-    problem = FitProblem(case, candidate)
-    positions = nominal.vector[nominal.problem.n_global:]
+    problem = FitProblem(case, (*base.problem.candidates, candidate))
+    positions = base.vector[base.problem.n_global:]
     if start is not None:
         starts = [problem.vector(start.values, start.vector[start.problem.n_global:])]
     else:
-        starts = [problem.vector({**nominal.values, **point}, positions) for point in candidate.starts]
+        starts = [problem.vector({**base.values, **point}, positions) for point in candidate.starts]
     free = np.ones(problem.size, dtype=bool)
     if full:
         # As for the nominal fit: the redescending loss alone can leave a few features of one run
         # (a sensitive quasi-periodic one) as "outliers" far from the optimum; a soft-L1 stage
         # first, then the Cauchy fit from the better (in Cauchy cost) of its result and the start.
         # An effect that changes every run (clearance in both bearings) drags the nominal fit far
-        # from the truth; the effect's values on the design's own parameters are a start too.
+        # from the truth; the effects' values on the design's own parameters are a start too.
         effect_only = {name: value for name, value in problem.values(starts[0]).items() if "." in name}
-        centred = [problem.vector(values, positions) for values in (effect_only, *candidate.starts)]
+        centred = [problem.vector(values, positions) for values in
+                   (effect_only, *({**effect_only, **point} for point in candidate.starts))]
         starts = [profile_adhesion(problem, starts[0]), profile_adhesion(problem, centred[0]), *starts, *centred[1:]]
         first = fit(problem, starts, free=free, max_evaluations=max_evaluations, loss="soft_l1", tolerance=1e-3)
         second = fit(problem, [first.vector, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         return second.after(first)
+    n_base = base.problem.n_global
     free[:] = False
-    free[len(nominal_parameters(case.design)):problem.n_global] = True
+    free[n_base:problem.n_global] = True
     result = fit(problem, starts, free=free, max_evaluations=max_evaluations)
-    # Held-out predictions must leave each run out of the nominal parameters too, as the
-    # nominal model's do: leave_one_out needs the Jacobian in all parameters. The nominal
-    # fit's columns stand in for the nominal parameters and T2 (exact for a small effect;
-    # a strong one is refitted in full anyway).
-    n_nominal = len(nominal_parameters(case.design))
-    if nominal.jacobian.shape[1] == n_nominal + case.n_op and nominal.jacobian.shape[0] == result.jacobian.shape[0]:
-        result.jacobian = np.concatenate([nominal.jacobian[:, :n_nominal], result.jacobian,
-                                          nominal.jacobian[:, n_nominal:]], axis=1)
+    # Held-out predictions must leave each run out of the base's parameters too, as the base
+    # model's do: leave_one_out needs the Jacobian in all parameters. The base fit's columns
+    # stand in for its parameters and T2 (exact for a small effect; a strong one is refitted in
+    # full anyway).
+    if base.jacobian.shape[1] == n_base + case.n_op and base.jacobian.shape[0] == result.jacobian.shape[0]:
+        result.jacobian = np.concatenate([base.jacobian[:, :n_base], result.jacobian, base.jacobian[:, n_base:]],
+                                         axis=1)
     else:
         result.jacobian = problem.jacobian(result.vector, np.ones(problem.size, dtype=bool))
     result.free = np.ones(problem.size, dtype=bool)
     return result
-

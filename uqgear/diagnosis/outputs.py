@@ -21,9 +21,13 @@ from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRES
 
 
 def _held_spectra(result: DiagnosisResult, ops: Sequence[int]) -> xr.Dataset:
-    """Amplitude spectra of the rig and of the held-out predictions (nominal, best effect) for some runs."""
+    """Amplitude spectra of the rig and of the held-out predictions (nominal, model with the effects) for some runs.
+
+    The model with the effects is the one with every named effect, or the
+    best candidate when none is named.
+    """
     case = result.case
-    best = result.best
+    best = result.final if result.final is not None else result.best
     sources = ["rig", "nominal"] + (["with_effect"] if best is not None else [])
     taper = scipy.signal.get_window("hann", case.size)
     frequency = np.fft.rfftfreq(case.size, 1.0 / case.fs)
@@ -80,15 +84,51 @@ def _family_map(z: np.ndarray, case: RigCase) -> np.ndarray:
 def result_dataset(result: DiagnosisResult, spectra: xr.Dataset | None = None) -> xr.Dataset:
     """The gap maps and scores as a Dataset (written to ``diagnosis.nc``)."""
     case = result.case
-    data = {**_gap_variables(result), **_score_variables(result.scores)}
-    ds = xr.Dataset(data, coords=_coordinates(case, result.scores))
+    data = {**_gap_variables(result), **_score_variables(result.scores), **_selection_variables(result)}
+    coords = _coordinates(case, result.scores)
+    coords["selected_effect"] = ("selected_effect", [chosen.entry.label for chosen in result.selected],
+                                 {"long_name": "effects named, in the order forward selection added them"})
+    ds = xr.Dataset(data, coords=coords)
     if spectra is not None:
         ds = ds.merge(spectra)
     ds.attrs.update(title="uqgear sim-to-real gap diagnosis", verdict=result.verdict, reason=result.reason,
                     gap_metric=GAP_METRIC, nominal_gap=result.nominal_gap,
                     model_error=json.dumps(case.model_error), effects_considered=json.dumps(list(result.effects)),
-                    nominal_parameters=json.dumps(result.nominal.values))
+                    nominal_parameters=json.dumps(result.nominal.values),
+                    effects=json.dumps([chosen.entry.effect for chosen in result.selected]),
+                    remaining_gap=result.remaining_gap)
     return ds
+
+
+def _selection_variables(result: DiagnosisResult) -> dict[str, Any]:
+    """The named effect set: each effect's shrink share and the gap after it; the final model's gap map.
+
+    The final model's held-out discrepancies and gap map are written when
+    it holds more than one effect (with one they are ``z_with_effect_heldout``
+    and ``gap_map_with_effect``).
+    """
+    case = result.case
+    selected = result.selected
+    data: dict[str, Any] = {
+        "shrink_share": (("selected_effect",), [chosen.shrink_share for chosen in selected],
+                         {"long_name": "held-out gap shrink brought by the effect, fraction of the nominal gap",
+                          "units": "1"}),
+        "gap_after_effect": (("selected_effect",), [chosen.entry.gap for chosen in selected],
+                             {"long_name": "held-out gap with this and the earlier named effects", "units": "1"}),
+    }
+    if len(selected) > 1:
+        names = " + ".join(chosen.entry.label for chosen in selected)
+        dims = ("op", "channel", "feature")
+        held = selected[-1].entry.held
+        data["final_heldout_model"] = (dims, held.model[..., case.layout.columns],
+                                       {"long_name": f"model with {names}, run left out of the fit",
+                                        "units": "channel units"})
+        data["z_final_heldout"] = (dims, held.z, {
+            "long_name": f"standardised discrepancy on held-out runs, model with {names}", "units": "1"})
+        data["gap_map_final"] = (("op", "channel", "family"), _family_map(held.z, case), {
+            "long_name": f"excess RMS standardised discrepancy per feature family, held-out runs, with {names}",
+            "units": "1"})
+    return data
 
 
 def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
@@ -190,8 +230,9 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "reason": result.reason,
         "borderline": [dict(entry) for entry in decision.borderline],
         "partial": decision.partial,
-        "remaining_gap": ({"value": decision.remaining_gap, "unexplained": True, "where": result.where}
-                          if decision.partial else None),
+        "effects": [chosen.summary() for chosen in result.selected],
+        "remaining_gap": _remaining_gap(result),
+        "forward_selection": [selection.summary() for selection in result.rounds],
         "gap": gap,
         "where": result.where,
         "families": result.families,
@@ -210,6 +251,23 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+
+
+def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:
+    """The held-out gap the final model leaves (the nominal model when no effect is named), and where it lies.
+
+    ``unexplained`` when it is above the noise threshold; ``where`` lists
+    the features (channel, feature, family, runs beyond 3 sigma) and
+    ``families`` the channel x feature family cells above noise with their
+    per-run (operating point) values, both from the final model's held-out
+    discrepancies.
+    """
+    value = result.remaining_gap
+    return {"value": value, "interval": [float(v) for v in result.remaining_interval],
+            "unexplained": bool(math.isfinite(value) and value > NOISE_GAP_THRESHOLD),
+            "model": ["nominal"] + [chosen.entry.label for chosen in result.selected],
+            "where": result.remaining_where,
+            "families": [row for row in result.remaining_families if row["score"] > NOISE_GAP_THRESHOLD]}
 
 
 def _evaluated_on(case: RigCase) -> dict[str, Any]:
@@ -240,7 +298,9 @@ def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Se
         "reason": reason,
         "borderline": [],
         "partial": False,
+        "effects": [],
         "remaining_gap": None,
+        "forward_selection": [],
         "gap": gap,
         "where": [],
         "families": [],

@@ -46,12 +46,22 @@ Pipeline (docs/model.md section 6):
    ``inconclusive`` when no feature could be compared on held-out runs (and,
    decided before any fit by :func:`uqgear.diagnosis.workflow.diagnose`, when
    no line stands above the noise floor in two runs).
+6. **Several effects (forward selection).** When an effect is named and
+   its model still leaves a significant held-out gap, the model with it
+   becomes the base: the other library effects (never the named one again,
+   nor another variant of it) are screened on top of it with only their own
+   parameters free, the best is fitted in full with all effects present in
+   the simulation and scored on held-out runs against the base's held-out
+   predictions; :func:`~.verdict.decide`, applied to the gap that remains,
+   adds it or not. Repeated while a significant gap remains, at most three
+   effects. The verdict stays the first effect; each effect's share of the
+   shrink and the final model's remaining gap are reported with it.
 
 Each step runs inside a :class:`~uqgear.common.steps.StepLog` step: a failure
 after the input was accepted is an :class:`~uqgear.common.errors.InternalError`
 naming the step, not a user error.
 
-This module holds the steps 3 to 5 together (:func:`run_diagnosis`); the
+This module holds the steps 3 to 6 together (:func:`run_diagnosis`); the
 pieces live in :mod:`.simulation` (step 1), :mod:`.discrepancy` (step 2),
 :mod:`.candidates`, :mod:`.case` and :mod:`.fitting` (step 3),
 :mod:`.scoring` (step 4) and :mod:`.verdict` (step 5). It does no
@@ -65,7 +75,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -77,12 +87,75 @@ from .candidates import candidates_for, nominal_parameters
 from .case import RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
-from .scoring import CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate
+from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
+                      shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
-from .verdict import EFFECT_NAMES, Decision, decide, decide_verdict, family_character, where_gap
+from .verdict import (EFFECT_NAMES, NOISE_GAP_THRESHOLD, SHRINK_THRESHOLD, Decision, decide, decide_verdict,
+                      family_character, where_gap)
 
 #: Candidates promoted from the screening fit (effect parameters only) to a full fit.
 PROMOTED = 2
+#: Most effects a diagnosis names together (forward selection).
+MAX_EFFECTS = 3
+
+
+@dataclass
+class SelectedEffect:
+    """One effect of the named set, in the order forward selection added it.
+
+    Attributes
+    ----------
+    entry : CandidateScore
+        Its best fit with the effects named before it (its base) and its
+        held-out scores against the base's held-out predictions.
+    gap_before : float
+        Held-out gap of the base (the nominal model's for the first effect).
+    shrink_share : float
+        How far it shrank the held-out gap, as a fraction of the nominal
+        model's gap: (gap_before - gap with it) / nominal gap. The shares of
+        the set add up to 1 - final gap / nominal gap.
+    decision : Decision
+        The rule that added it (:func:`decide` on top of its base).
+    gap_interval : pair of float
+        Bootstrap 5 % and 95 % quantiles of the held-out gap with it.
+    """
+
+    entry: CandidateScore
+    gap_before: float
+    shrink_share: float
+    decision: Decision
+    gap_interval: tuple[float, float] = (math.nan, math.nan)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: effect, variant, fitted parameters with their 90 % intervals, shrink share, scores."""
+        entry = self.entry
+        return {"effect": entry.effect, "variant": entry.label, "parameters": entry.parameters(),
+                "parameter_intervals": entry.parameter_intervals(), "shrink_share": self.shrink_share,
+                "score": entry.score, "shrink_fraction": entry.shrink,
+                "shrink_interval": [entry.shrink_low, entry.shrink_high], "gap_before": self.gap_before,
+                "gap_after": entry.gap, "gap_after_interval": [float(v) for v in self.gap_interval],
+                "effect_gain": entry.effect_gain, "fit": entry.stage,
+                "partial": self.decision.partial}
+
+
+@dataclass
+class SelectionRound:
+    """A forward-selection round after the first effect: what was tried on top of which base, and the outcome."""
+
+    base: tuple[str, ...]
+    gap_before: float
+    scores: list[CandidateScore]          # best variant per effect against the base, best first
+    added: str | None
+    reason: str
+    decision: Decision | None = None
+    gap_interval: tuple[float, float] = (math.nan, math.nan)   # of the best candidate's held-out gap
+
+    def summary(self) -> dict[str, Any]:
+        return {"base": list(self.base), "gap_before": self.gap_before, "added": self.added, "reason": self.reason,
+                "candidates": [{"effect": s.effect, "variant": s.label, "score": s.score,
+                                "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
+                                "gap_with_effect": s.gap, "effect_gain": s.effect_gain, "fit": s.stage,
+                                "parameters": s.parameters()} for s in self.scores]}
 
 
 @dataclass
@@ -105,10 +178,28 @@ class DiagnosisResult:
     timings: dict[str, float]
     decision: Decision | None = None
     nominal_gap_interval: tuple[float, float] = (math.nan, math.nan)
+    # forward selection: the named effects in order, the rounds after the first, and the final
+    # model's held-out predictions (the nominal model's when nothing is named)
+    selected: list[SelectedEffect] = field(default_factory=list)
+    rounds: list[SelectionRound] = field(default_factory=list)
+    final_held: HeldOut | None = None
+    remaining_where: list[dict[str, Any]] = field(default_factory=list)
+    remaining_families: list[dict[str, Any]] = field(default_factory=list)
+    remaining_interval: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def best(self) -> CandidateScore | None:
         return self.scores[0] if self.scores else None
+
+    @property
+    def final(self) -> CandidateScore | None:
+        """The model with every named effect (None when none is named)."""
+        return self.selected[-1].entry if self.selected else None
+
+    @property
+    def remaining_gap(self) -> float:
+        """Held-out gap of the final model (the nominal model's when no effect is named)."""
+        return self.selected[-1].entry.gap if self.selected else self.nominal_gap
 
     def ranking(self) -> list[dict[str, Any]]:
         """JSON-ready ranking, best first."""
@@ -175,9 +266,15 @@ _NOMINAL_MARGIN = 5.0
 
 
 def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult]) -> tuple[list[np.ndarray], list[float]]:
-    """The nominal model at each fit's nominal parameters and T2 (its effect off): vectors and robust costs."""
+    """The base model at each fit's values of the base's parameters and T2 (its new effect off): vectors and costs.
+
+    ``nominal`` is the base fit: the nominal model's, or in forward selection
+    the model with the effects named before (the new effect is switched off,
+    the others stay at the fit's values).
+    """
     problem = nominal.problem
-    starts = [problem.vector({key: value for key, value in candidate.values.items() if "." not in key},
+    names = {spec.name for spec in problem.specs}
+    starts = [problem.vector({key: value for key, value in candidate.values.items() if key in names},
                              candidate.vector[candidate.problem.n_global:]) for candidate in fits]
     if not starts:
         return [], []
@@ -275,17 +372,166 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
     return best_per_effect, all_scores
 
 
+def _ranking_entry(s: CandidateScore) -> dict[str, Any]:
+    """What :func:`decide` needs of one candidate's scores."""
+    return {"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
+            "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
+            "gap_with_effect": s.gap, "effect_gain": s.effect_gain}
+
+
 def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str, Any]]:
     """What :func:`decide_verdict` needs of the best variant of each effect, best first."""
     scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
-    return [{"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
-             "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
-             "gap_with_effect": s.gap, "effect_gain": s.effect_gain} for s in scores]
+    return [_ranking_entry(s) for s in scores]
+
+
+def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
+    """Each named effect's share of the held-out gap shrink, as a fraction of the nominal model's gap.
+
+    The first effect's share is its shrink fraction (``first_shrink``, its
+    gap ``gaps[0]`` against the nominal model's); each later one's is
+    (gap before it - gap after it) / nominal gap, ``gaps`` being the
+    held-out gaps after each effect of the set, in order. The shares add up
+    to the shrink of the whole set, 1 - last gap / nominal gap.
+    """
+    shares = [float(first_shrink)] if gaps else []
+    for before, after in zip(gaps[:-1], gaps[1:]):
+        shares.append((before - after) / nominal_gap if nominal_gap > 0 else 0.0)
+    return shares
+
+
+def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effect_names: Sequence[str],
+                 hints: Mapping[str, float], rng: np.random.Generator, steps: StepLog) -> SelectionRound:
+    """One forward-selection round: the other effects screened on top of the base, the best fitted in full.
+
+    Only the new effect's parameters are screened (the base's fit, its
+    Jacobian and held-out predictions are reused); the best screened
+    variant is fitted in full with every effect present, and scored against
+    the base's held-out predictions; :func:`decide` on top of the base adds
+    it or not.
+    """
+    base_fit, base_held = base.fit, base.held
+    base_labels = tuple(candidate.label for candidate in base_fit.problem.candidates)
+    screened: list[CandidateScore] = []
+    for name in effect_names:
+        if name in named:
+            # an effect is never named twice, nor as another variant: it would only soak up noise
+            continue
+        for candidate in candidates_for(name, case.design, hints=hints):
+            with steps.step(f"forward selection: screen {candidate.label} on top of {' + '.join(base_labels)}") \
+                    as found:
+                result = fit_candidate(case, candidate, base_fit, full=False, max_evaluations=6)
+                screened.append(score_candidate(result, leave_one_out(result), base_held, "screening", rng))
+                screened[-1].effect_gain = base_fit.cost - result.cost
+                found.update(_found(screened[-1]))
+    if not screened:
+        return SelectionRound(base_labels, base.gap, [], None, "no other candidate effect is left to try")
+    best_per_effect: dict[str, CandidateScore] = {}
+    for entry in screened:
+        if entry.effect not in best_per_effect or entry.score > best_per_effect[entry.effect].score:
+            best_per_effect[entry.effect] = entry
+    leader = max(screened, key=lambda entry: entry.score)
+    candidate = leader.fit.problem.candidate
+    with steps.step(f"forward selection: fit {candidate.label} in full on top of {' + '.join(base_labels)}") \
+            as found:
+        result = fit_candidate(case, candidate, base_fit, full=True, max_evaluations=12, start=leader.fit)
+        full = score_candidate(result, leave_one_out(result), base_held, "full", rng)
+        full.effect_gain = effect_off_costs(base_fit, [result])[1][0] - result.cost
+        found.update(_found(full))
+    if full.score > best_per_effect[full.effect].score:
+        best_per_effect[full.effect] = full
+    ranking = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
+    best = best_per_effect[full.effect]
+    figures = _ranking_entry(best)
+    figures["gap_interval"] = list(bootstrap_gap(best.held.z, rng))
+    decision = decide(base.gap, [figures])
+    added = best.effect if decision.verdict == best.effect else None
+    return SelectionRound(base_labels, base.gap, ranking, added, decision.reason, decision,
+                          tuple(figures["gap_interval"]))
+
+
+def forward_selection(case: RigCase, nominal_gap: float, first: CandidateScore, first_decision: Decision,
+                      effect_names: Sequence[str], hints: Mapping[str, float], rng: np.random.Generator,
+                      steps: StepLog, *, first_gap_interval: Sequence[float] = (math.nan, math.nan),
+                      max_effects: int = MAX_EFFECTS, noise_gap: float = NOISE_GAP_THRESHOLD
+                      ) -> tuple[list[SelectedEffect], list[SelectionRound]]:
+    """Add effects one at a time after the first while a significant held-out gap remains.
+
+    The first effect's fit (``first``, named by :func:`decide`) is the base;
+    each round screens the effects not yet named on top of it, fits the
+    best in full with all effects present and adds it when :func:`decide`,
+    applied to the gap that remains, names it (held-out score beyond the
+    penalty, its own effect gain, a shrink of the remaining gap); the
+    model with it is the next base. Rounds stop when the remaining gap is
+    within ``noise_gap``, when a round adds nothing, or at ``max_effects``.
+
+    Returns
+    -------
+    selected : list of SelectedEffect
+        The named effects in order (the first one included), with their shrink shares.
+    rounds : list of SelectionRound
+        The rounds after the first, the last one possibly adding nothing.
+    """
+    entries, decisions, intervals = [first], [first_decision], [tuple(first_gap_interval)]
+    rounds: list[SelectionRound] = []
+    while len(entries) < max_effects and entries[-1].gap > noise_gap:
+        selection = _next_effect(case, entries[-1], [entry.effect for entry in entries], effect_names, hints, rng,
+                                 steps)
+        rounds.append(selection)
+        if selection.added is None:
+            break
+        # the added effect's best fit leads its round's ranking (its full fit was started from the best screening)
+        entries.append(selection.scores[0])
+        decisions.append(selection.decision)
+        intervals.append(selection.gap_interval)
+    shares = shrink_shares(nominal_gap, first.shrink, [entry.gap for entry in entries])
+    befores = [nominal_gap] + [entry.gap for entry in entries[:-1]]
+    selected = [SelectedEffect(entry, before, share, decision, interval)
+                for entry, before, share, decision, interval in zip(entries, befores, shares, decisions, intervals)]
+    return selected, rounds
+
+
+def set_decision(first_decision: Decision, selected: Sequence[SelectedEffect], rounds: Sequence[SelectionRound],
+                 nominal_gap: float, *, shrink_threshold: float = SHRINK_THRESHOLD,
+                 noise_gap: float = NOISE_GAP_THRESHOLD) -> Decision:
+    """The decision for the named set: the first effect's verdict, ``partial`` and remaining gap of the whole set.
+
+    With one effect named and no round run this is ``first_decision``
+    itself. ``partial`` follows the rule of :func:`decide` applied to the
+    set against the nominal model: an effect set is named with an
+    unexplained remainder when it neither shrinks the nominal gap by
+    ``shrink_threshold`` nor leaves a gap within noise.
+    """
+    if not selected or not rounds:
+        return first_decision
+    final_gap = selected[-1].entry.gap
+    reason = first_decision.reason
+    borderline = list(first_decision.borderline)
+    for chosen in selected[1:]:
+        names = " + ".join(entry.entry.effect for entry in selected[:selected.index(chosen)])
+        entry = chosen.entry
+        reason += (f"; on top of {names}, forward selection adds {entry.effect}: it gains {entry.score:.1f} nats "
+                   f"of held-out predictive density after its penalty and shrinks the remaining held-out gap "
+                   f"from {chosen.gap_before:.2f} to {entry.gap:.2f} (90 % interval of the shrink "
+                   f"{100 * entry.shrink_low:.0f} to {100 * entry.shrink_high:.0f} %), "
+                   f"{100 * chosen.shrink_share:.0f} % of the nominal gap")
+        borderline += [{**figure, "effect": entry.effect} for figure in chosen.decision.borderline]
+    last = rounds[-1]
+    if last.added is None and last.scores:
+        best = last.scores[0]
+        reason += (f"; no further effect clearly explains the remaining gap of {last.gap_before:.2f} (the best, "
+                   f"{best.effect}, scores {best.score:.1f} nats on top and shrinks it by "
+                   f"{100 * best.shrink:.0f} %)")
+    explains = shrink_fraction(nominal_gap, final_gap) >= shrink_threshold or final_gap <= noise_gap
+    if not explains:
+        reason += f"; a gap of {final_gap:.2f} (above {noise_gap:g}) remains unexplained"
+    return Decision(first_decision.verdict, reason, partial=not explains, remaining_gap=final_gap,
+                    borderline=tuple(borderline))
 
 
 def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
                   promoted: int = PROMOTED, calibration: xr.Dataset | None = None,
-                  steps: StepLog | None = None) -> DiagnosisResult:
+                  steps: StepLog | None = None, max_effects: int = MAX_EFFECTS) -> DiagnosisResult:
     """Fit the nominal model and every candidate, score them on held-out runs, decide.
 
     Candidates are screened with their own parameters only (the nominal
@@ -297,7 +543,10 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
     full, best screened first, before the verdict says so. If a full fit
     shows that the nominal fit stopped in a local optimum
     (:func:`improved_nominal`), the nominal model is refitted from there and
-    the candidates are scored again against it.
+    the candidates are scored again against it. When an effect is named and
+    a significant held-out gap remains, further effects are added by
+    forward selection (:func:`forward_selection`, at most ``max_effects``
+    in all).
 
     Parameters
     ----------
@@ -311,6 +560,8 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         At most this many effects get a full fit.
     calibration : xarray.Dataset, optional
         A calibration posterior; the nominal fit starts from its medians.
+    max_effects : int
+        Most effects named together by forward selection (1: the first one only).
     steps : StepLog, optional
         Records each finished step with what it found; a failure inside a
         step is raised as :class:`~uqgear.common.errors.InternalError`
@@ -323,11 +574,13 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
     Raises
     ------
     DiagnosisError
-        An unknown effect, or a calibration posterior without the nominal parameters.
+        An unknown effect, a bad ``max_effects``, or a calibration posterior without the nominal parameters.
     InternalError
         A step failed after the input was accepted.
     """
     effect_names = _check_effects(effects)
+    if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 1:
+        raise DiagnosisError(f"max_effects: expected an integer >= 1; got {max_effects!r}")
     steps = StepLog() if steps is None else steps
     rng = np.random.default_rng(seed)
     timings: dict[str, float] = {"order_tracking": case.tracking_s, "nominal_fit": 0.0, "screening": 0.0,
@@ -375,14 +628,31 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         if scores:
             ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
         decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval)
-        verdict, reason = decision.verdict, decision.reason
         where = where_gap(nominal_held.z, case)
         families = family_character(nominal_held.z, case, locked)
-        found.update(verdict=verdict, reason=reason)
+        found.update(verdict=decision.verdict, reason=decision.reason)
+    selected: list[SelectedEffect] = []
+    rounds: list[SelectionRound] = []
+    if decision.verdict in EFFECT_NAMES:
+        # forward selection: a second round only while the named effect leaves a significant gap
+        clock = time.perf_counter()
+        selected, rounds = forward_selection(case, nominal_gap, scores[0], decision, effect_names, hints, rng, steps,
+                                             first_gap_interval=ranking[0]["gap_interval"],
+                                             max_effects=max_effects)
+        if rounds:
+            timings["forward_selection"] = time.perf_counter() - clock
+        with steps.step("decide the effect set") as found:
+            decision = set_decision(decision, selected, rounds, nominal_gap)
+            found.update(effects=[chosen.entry.effect for chosen in selected], partial=decision.partial)
+    final_held = selected[-1].entry.held if selected else nominal_held
+    remaining_interval = selected[-1].gap_interval if selected else nominal_interval
     return DiagnosisResult(case=case, nominal=nominal, nominal_held=nominal_held, scores=scores,
-                           all_scores=all_scores, verdict=verdict, reason=reason, nominal_gap=nominal_gap,
-                           where=where, families=families, locked_lines=locked, hints=hints,
+                           all_scores=all_scores, verdict=decision.verdict, reason=decision.reason,
+                           nominal_gap=nominal_gap, where=where, families=families, locked_lines=locked, hints=hints,
                            effects=effect_names, timings=timings, decision=decision,
-                           nominal_gap_interval=nominal_interval)
+                           nominal_gap_interval=nominal_interval, selected=selected, rounds=rounds,
+                           final_held=final_held, remaining_where=where_gap(final_held.z, case),
+                           remaining_families=family_character(final_held.z, case, locked),
+                           remaining_interval=tuple(remaining_interval))
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import scipy.stats
 
 from .discrepancy import robust_log_density
-from .fitting import FitProblem, FitResult, profile_adhesion, robust_weights
+from .fitting import FitProblem, FitResult, parameter_intervals, profile_adhesion, robust_weights
 
 # ---------------------------------------------------------------------------------------------- held-out runs
 
@@ -317,15 +317,32 @@ class CandidateScore:
     effect_gain: float = math.inf
 
     def parameters(self) -> dict[str, object]:
-        """Fitted effect parameters (natural units) and the fixed choices."""
-        values: dict[str, object] = {key: value for key, value in self.fit.problem.candidate.choices}
-        values.update({name.split(".", 1)[1]: float(value) for name, value in self.fit.values.items() if "." in name})
+        """Fitted parameters of this candidate's effect (natural units) and its fixed choices.
+
+        Only the new candidate's: in a fit on top of named effects theirs are reported with them.
+        """
+        candidate = self.fit.problem.candidate
+        values: dict[str, object] = {key: value for key, value in candidate.choices}
+        fitted = self.fit.values
+        values.update({spec.name.split(".", 1)[1]: float(fitted[spec.name]) for spec in candidate.fitted})
         return values
+
+    def parameter_intervals(self) -> dict[str, list[float]]:
+        """90 % Laplace intervals of this candidate's fitted parameters (:func:`~.fitting.parameter_intervals`)."""
+        candidate = self.fit.problem.candidate
+        intervals = parameter_intervals(self.fit, [spec.name for spec in candidate.fitted])
+        return {name.split(".", 1)[1]: [low, high] for name, (low, high) in intervals.items()}
 
 
 def score_candidate(fit_result: FitResult, held: HeldOut, nominal_held: HeldOut, stage: str,
                     rng: np.random.Generator) -> CandidateScore:
-    """Held-out log-density gain over the nominal model, its standard error, penalty and gap shrink."""
+    """Held-out log-density gain over the base model, its standard error, penalty and gap shrink.
+
+    The base is the nominal model, or in forward selection the model with
+    the effects already named (``nominal_held`` is then its held-out
+    predictions): the gain, the penalty (the new effect's parameters only)
+    and the shrink are the new effect's on top of it.
+    """
     candidate = fit_result.problem.candidate
     difference = held.log_density - nominal_held.log_density
     per_run = np.array([np.nansum(difference[op]) for op in range(difference.shape[0])])

@@ -20,6 +20,7 @@ import xarray as xr
 from ..common.fileio import write_text_atomic
 from .finding import HEADLINE_STYLE, Finding, headline_html
 from .page import figure_png, html_page, img_tag, new_figure
+from .reference_section import reference_section_html
 
 _STYLE = """
 body { font-family: sans-serif; margin: 2em; max-width: 1200px; color: #222; }
@@ -139,11 +140,16 @@ def _decision_notes(content: Mapping[str, Any]) -> list[str]:
                      '(where: see the table of held-out discrepancies below).</p>')
     for entry in content.get("borderline", []):
         low, high = entry["interval"]
-        notes.append(f'<p class="note"><b>Borderline:</b> {html.escape(entry["figure"])} = {entry["value"]:.3g} '
+        notes.append(f'<p class="note"><b>Borderline:</b> {html.escape(_figure_name(entry))} = {entry["value"]:.3g} '
                      f'against a threshold of {entry["threshold"]:g}; its 90 % interval {low:.3g} to {high:.3g} '
                      'contains the threshold, so another campaign of the same rig could be decided the other '
                      'way.</p>')
     return notes
+
+
+def _figure_name(entry: Mapping[str, Any]) -> str:
+    """A borderline figure's name, with the effect it belongs to when forward selection added that effect."""
+    return f"{entry['figure']} of {entry['effect']} (added on top)" if entry.get("effect") else str(entry["figure"])
 
 
 def _design_notes(content: Mapping[str, Any]) -> list[str]:
@@ -186,8 +192,14 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         text = ("Verdict inconclusive: the data cannot decide whether the gear is healthy or carries an effect, "
                 "so neither is claimed")
     else:
-        text = (f"Verdict {verdict}: adding {verdict} to the model explains "
-                + ("part of " if content.get("partial") else "") + "the gap between model and rig")
+        effects = [entry["effect"] for entry in content.get("effects") or []]
+        if len(effects) > 1:
+            text = (f"Verdict {verdict} with {' and '.join(effects[1:])}: adding these {len(effects)} effects "
+                    "together to the model explains " + ("part of " if content.get("partial") else "")
+                    + f"the gap between model and rig, {verdict} the largest share")
+        else:
+            text = (f"Verdict {verdict}: adding {verdict} to the model explains "
+                    + ("part of " if content.get("partial") else "") + "the gap between model and rig")
     findings.append(Finding(text + (f"; {reason}." if reason else "."),
                             {"verdict": verdict, "partial": bool(content.get("partial"))}, "verdict"))
     gap = content.get("gap") or {}
@@ -228,15 +240,24 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
     else:
         text = "No held-out feature of the nominal model is beyond 3 sigma."
     findings.append(Finding(text, {"where": [dict(w) for w in where[:3]], "count": len(where)}, "where"))
+    effects = content.get("effects") or []
+    if len(effects) > 1:
+        shares = "; ".join(f"{entry['effect']} ({entry['variant']}) {_percent(entry['shrink_share'])}"
+                           for entry in effects)
+        findings.append(Finding(f"Effects named by forward selection, each with its share of the held-out gap "
+                                f"shrink: {shares}.",
+                                {"effects": [{key: entry.get(key) for key in ("effect", "variant", "shrink_share")}
+                                             for entry in effects]}, "effects"))
     if content.get("partial"):
         remaining = (content.get("remaining_gap") or {}).get("value")
+        after = " + ".join(entry["effect"] for entry in effects) if effects else verdict
         findings.append(Finding(f"Partial explanation: a held-out gap of {_figure(remaining, 2, fixed=True)} "
-                                f"remains unexplained after {verdict}.",
+                                f"remains unexplained after {after}.",
                                 {"partial": True, "remaining_gap": remaining}, "partial"))
     for entry in content.get("borderline") or []:
         low, high = entry["interval"]
         findings.append(Finding(
-            f"Borderline: {entry['figure']} = {_figure(entry['value'])} against a threshold of "
+            f"Borderline: {_figure_name(entry)} = {_figure(entry['value'])} against a threshold of "
             f"{float(entry['threshold']):g}; its 90 % interval {_figure(low)} to {_figure(high)} contains the "
             "threshold, so another campaign of the same rig could be decided the other way.",
             {key: entry.get(key) for key in ("figure", "value", "threshold", "interval")}, "borderline"))
@@ -244,6 +265,57 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         findings.append(Finding("No borderline figure: none of the figures that decided the verdict has its "
                                 "threshold inside its 90 % interval.", {"borderline": []}, "borderline"))
     return findings
+
+
+def _parameter_text(entry: Mapping[str, Any]) -> str:
+    """Fitted parameters of a named effect with their 90 % intervals where the fit gave them."""
+    intervals = entry.get("parameter_intervals") or {}
+    texts = []
+    for key, value in (entry.get("parameters") or {}).items():
+        text = f"{key}={_number(value, 4)}"
+        if key in intervals and intervals[key] is not None and None not in intervals[key]:
+            low, high = intervals[key]
+            text += f" [{_number(low, 3)}, {_number(high, 3)}]"
+        texts.append(text)
+    return ", ".join(texts)
+
+
+def _effect_set_html(content: Mapping[str, Any], ds: xr.Dataset) -> list[str]:
+    """The named effects in the order forward selection added them, and the gap that remains, with where."""
+    effects = content.get("effects") or []
+    remaining = content.get("remaining_gap")
+    parts = []
+    if effects:
+        parts += ["<h2>The named effects (forward selection)</h2>",
+                  _table(["order", "effect", "variant", "score on top (nats)", "gap before", "gap after",
+                          "share of the shrink", "fit", "parameters [90 % interval]"],
+                         [[k + 1, e["effect"], e["variant"], e["score"], e["gap_before"], e["gap_after"],
+                           _percent(e["shrink_share"]), e["fit"], _parameter_text(e)]
+                          for k, e in enumerate(effects)], (1, 2, 6, 7, 8)),
+                  '<p class="note">Each effect after the first was screened and fitted with the earlier ones '
+                  'present in the simulation, scored on held-out runs against the model with the earlier ones, '
+                  'and added by the same rule as the first (score beyond its penalty, its own gain, a shrink of '
+                  'the remaining gap). Share: the gap shrink it brought as a fraction of the nominal model\'s '
+                  'gap. Parameter intervals: Laplace approximation at the fit.</p>']
+    for selection in content.get("forward_selection") or []:
+        if selection.get("added") is None and selection.get("candidates"):
+            best = selection["candidates"][0]
+            parts.append(f'<p class="note">On top of {html.escape(" + ".join(selection["base"]))} no further effect '
+                         f'was added: the best, {html.escape(best["variant"])}, scores {_number(best["score"])} nats '
+                         f'and shrinks the remaining gap of {_number(selection["gap_before"])} by '
+                         f'{_percent(best["shrink_fraction"])}.</p>')
+    if remaining and effects:
+        parts.append(f'<h2>What remains: held-out gap {_number(remaining["value"])} with '
+                     f'{html.escape(" + ".join(e["effect"] for e in effects))}</h2>')
+        if "gap_map_final" in ds:
+            parts.append(_gap_map_figure(ds, "gap_map_final", "model with all named effects, held-out runs"))
+        if remaining.get("where"):
+            parts.append(_table(["channel", "feature", "family", "runs beyond 3 sigma", "RMS z"],
+                                [[w["channel"], w["feature"], w["family"], ", ".join(map(str, w["ops"])), w["score"]]
+                                 for w in remaining["where"]], (0, 1, 2, 3)))
+        else:
+            parts.append("<p>No held-out feature of the final model is beyond 3 sigma.</p>")
+    return parts
 
 
 def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
@@ -265,7 +337,8 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
                       f"{gap['shrink_interval'][0]:.2f} to {gap['shrink_interval'][1]:.2f}"]], (0, 3, 5)),
              f'<p class="note">{html.escape(gap["evaluated_on"]["scheme"])}. The gap is the RMS standardised '
              f'discrepancy in excess of noise (each feature capped at 10 sigma); the nominal model is within '
-             f'noise below {gap["noise_threshold"]}.</p>']
+             f'noise below {gap["noise_threshold"]}.</p>',
+             *_effect_set_html(content, ds)]
     if "gap_map_nominal" in ds:
         parts += ["<h2>Where: gap map of the nominal model (held-out runs)</h2>",
                   _gap_map_figure(ds, "gap_map_nominal", "nominal model, held-out runs")]
@@ -318,6 +391,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
                      f'periodic steady response: {", ".join("yes" if p else "no" for p in nominal["periodic_runs"])}; '
                      f'model error (relative): {html.escape(json.dumps(content["model_error"]))}; '
                      f'time: {content["timing_s"].get("total_wall", float("nan")):.0f} s.</p>')
+    parts += reference_section_html(content)
     return html_page(f"uqgear diagnosis: {content['verdict']}", _STYLE + HEADLINE_STYLE, parts)
 
 
@@ -357,12 +431,30 @@ def blindtest_report_html(content: Mapping[str, Any]) -> str:
              _table(["effect", "parameter", "detected at or above", "missed at or below", "note"],
                     [[t["effect"], t["parameter"], t["detected_from"], t["missed_up_to"], t["note"]]
                      for t in content["thresholds"]], (0, 1, 4)),
+             *_effect_set_scores_html(content),
              "<h2>Campaigns</h2>",
-             _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "shrink", "seconds"],
-                    [[c["id"], c["truth"], c["strength"], c["design"], c.get("plan", "service"), c["oracle_gap"],
-                      c["verdict"], c["shrink_fraction"], c["seconds"]] for c in content["campaigns"]],
-                    (0, 1, 3, 4, 6))]
+             _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "effects named", "shrink",
+                     "seconds"],
+                    [[c["id"], " + ".join(c.get("truth_effects") or [c["truth"]]), c["strength"], c["design"],
+                      c.get("plan", "service"), c["oracle_gap"], c["verdict"],
+                      " + ".join(c.get("effects_named") or []) or "-", c["shrink_fraction"], c["seconds"]]
+                     for c in content["campaigns"]],
+                    (0, 1, 3, 4, 6, 7))]
     return html_page("uqgear blind test", _STYLE, parts)
+
+
+def _effect_set_scores_html(content: Mapping[str, Any]) -> list[str]:
+    """Per-effect precision and recall of the named effect sets, and how often a set was exactly right."""
+    sets = content.get("effect_sets")
+    if not sets:
+        return []
+    return ["<h2>Effect sets: precision and recall per effect</h2>",
+            f"<p>Named set exactly the true set: {_percent(sets['set_exact'])} of the campaigns"
+            + (f" ({_percent(sets['set_exact_multi_effect'])} of the {sets['n_multi_effect']} with several effects)"
+               if sets.get("n_multi_effect") else "") + ".</p>",
+            _table(["effect", "acting", "named", "named and acting", "precision", "recall"],
+                   [[r["effect"], r["acting"], r["named"], r["correct"], r["precision"], r["recall"]]
+                    for r in sets["per_effect"]])]
 
 
 def write_blindtest_report(content: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:

@@ -1,0 +1,350 @@
+"""Tests of the diagnosis with several effects at once (forward selection, uqgear.diagnosis.pipeline).
+
+Fast tests check the combination logic on its own: the period over which
+several effects repeat together, the parameter layout of a fit with a base
+of named effects plus a new one, that an effect is never proposed twice
+(nor as another variant), the shrink shares, the set-level ``partial``
+rule, the Laplace parameter intervals and the blind test's effect-set
+scores. The selection rounds run on stand-in fits there (what they return
+is set by hand), so that the rules are checked without simulations.
+
+The slow tests run the whole diagnosis on virtual-rig campaigns: a pinion
+run-out together with a damaged gear tooth must be named as both effects,
+each with a positive share of the gap shrink; a run-out alone as one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from uqgear.common.steps import StepLog
+from uqgear.diagnosis import DiagnosisError, diagnose, prepare_case
+from uqgear.diagnosis import blind_test, candidates, fitting, pipeline, scoring
+from uqgear.diagnosis.verdict import NOISE_GAP_THRESHOLD, Decision
+from uqgear.physics.effects import make_effect
+from uqgear.rig.virtual_rig import simulate_campaign
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
+
+
+
+
+def _variant(design, label):
+    effect = label.split("[")[0]
+    return next(c for c in candidates.candidates_for(effect, design) if c.label == label)
+
+
+# ---------------------------------------------------------------------------------------------- combinations
+
+def test_combined_periodicity_is_the_coarser_common_period(design):
+    combined = candidates.combined_periodicity
+    assert combined([]) == "mesh"
+    assert combined(["mesh", "mesh"]) == "mesh"
+    assert combined(["mesh", "pinion"]) == "pinion"
+    assert combined(["gear", "mesh"]) == "gear"
+    assert combined(["pinion", "pinion"]) == "pinion"
+    # a pinion and a gear effect repeat over the hunting-tooth period, not one of the tiled periods
+    assert combined(["pinion", "gear"], design) == "free"
+    assert combined(["pinion", "gear"]) == "free"
+    assert combined(["free", "mesh"]) == "free"
+    assert combined(["pinion", "free"], design) == "free"
+    # unless a gear revolution is a whole number of pinion revolutions
+    assert combined(["pinion", "gear"], design.replace(z1=20, z2=100)) == "gear"
+    with pytest.raises(DiagnosisError, match="periodicity: expected one of"):
+        combined(["mesh", "hourly"])
+
+
+def test_a_fit_with_a_base_lays_out_nominal_base_and_new_parameters(healthy_case):
+    case = healthy_case
+    run_out = _variant(case.design, "eccentricity[pinion]")
+    damage = _variant(case.design, "tooth_damage[gear]")
+    nominal = candidates.nominal_parameters(case.design)
+    problem = fitting.FitProblem(case, [run_out, damage])
+    names = [spec.name for spec in problem.specs]
+    assert names == ([spec.name for spec in nominal] + [spec.name for spec in run_out.fitted]
+                     + [spec.name for spec in damage.fitted])
+    assert problem.n_global == len(names) and problem.size == len(names) + case.n_op
+    # the new candidate is the last; its parameters follow the base's
+    assert problem.candidate is damage and problem.base == (run_out,)
+    assert problem.n_base_global == len(nominal) + len(run_out.fitted)
+    assert problem.periodicity == "free"
+    values = {"eccentricity.amplitude": 12e-6, "eccentricity.phase": 0.7, "eccentricity.kappa": 0.03,
+              "tooth_damage.depth": 0.35}
+    vector = problem.vector(values, 0.5)
+    back = problem.values(vector)
+    for key, value in values.items():
+        assert back[key] == pytest.approx(value, rel=1e-9)
+    task = problem.run_task(vector, 0)
+    assert [effect.name for effect in task.effects] == ["eccentricity", "tooth_damage"]
+    assert task.effects[0].values["shaft"] == "pinion" and task.effects[0].values["amplitude"] == pytest.approx(12e-6)
+    assert task.effects[1].values["gear"] == "gear" and task.effects[1].values["depth"] == pytest.approx(0.35)
+    assert task.periodicity == "free"
+    # one effect and the nominal model keep their old layout and periods
+    single = fitting.FitProblem(case, run_out)
+    assert single.candidates == (run_out,) and single.periodicity == "pinion"
+    assert single.n_base_global == len(nominal)
+    plain = fitting.FitProblem(case, None)
+    assert plain.candidate is None and plain.periodicity == "mesh" and plain.run_task(plain.vector({}), 0).effects == ()
+    # a mesh-periodic effect on top of a gear one keeps the gear's period
+    assert fitting.FitProblem(case, [damage, _variant(case.design, "friction")]).periodicity == "gear"
+
+
+def test_an_effect_never_enters_a_model_twice(healthy_case):
+    case = healthy_case
+    with pytest.raises(DiagnosisError, match="effects: 'eccentricity' appears twice"):
+        fitting.FitProblem(case, [_variant(case.design, "eccentricity[pinion]"),
+                                  _variant(case.design, "eccentricity[gear]")])
+    with pytest.raises(DiagnosisError, match="tooth_damage"):
+        candidates.check_combination([_variant(case.design, "tooth_damage[gear]")] * 2)
+
+
+def test_laplace_intervals_of_the_fitted_parameters(healthy_case):
+    """On a fit with a known Jacobian the 90 % interval is +-1.645 sd in optimiser units, mapped to values."""
+    case = healthy_case
+    damage = _variant(case.design, "tooth_damage[gear]")
+    problem = fitting.FitProblem(case, damage)
+    vector = problem.vector({"tooth_damage.depth": 0.2}, 0.5)
+    n_rows = int(problem.mask.sum()) + problem.prior_index.size
+    jacobian = np.zeros((n_rows, problem.size))
+    # each free entry seen by its own rows, with a curvature of 4 (a standard deviation of 0.5)
+    for column in range(problem.size):
+        jacobian[column, column] = 2.0
+    result = fitting.FitResult(problem=problem, vector=vector, free=np.ones(problem.size, dtype=bool),
+                               residuals=np.zeros(n_rows), jacobian=jacobian, z=None, scale=None, model=None,
+                               periodic=None, cost=0.0, evaluations=0, seconds=0.0, converged=True, message="")
+    intervals = fitting.parameter_intervals(result)
+    assert set(intervals) == {spec.name for spec in problem.specs}
+    low, high = intervals["tooth_damage.depth"]
+    # depth is on a log scale with unit 1: a multiplicative interval exp(+-1.645 * 0.5)
+    assert low == pytest.approx(0.2 * math.exp(-1.645 * 0.5), rel=1e-3)
+    assert high == pytest.approx(0.2 * math.exp(1.645 * 0.5), rel=1e-3)
+    entry = scoring.CandidateScore("tooth_damage", damage.label, result, None, "full", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                   0.0, 0.0)
+    # only the candidate's own parameters, with its fixed choices
+    assert entry.parameters() == {"gear": "gear", "tooth": 0.0, "depth": pytest.approx(0.2)}
+    assert list(entry.parameter_intervals()) == ["depth"]
+
+
+# ---------------------------------------------------------------------------------------------- selection rules
+
+def test_shrink_shares_add_up_to_the_set_shrink():
+    shares = pipeline.shrink_shares(4.0, 0.5, [2.0, 0.4, 0.3])
+    assert shares == pytest.approx([0.5, 0.4, 0.025])
+    assert sum(shares) == pytest.approx(1.0 - 0.3 / 4.0)
+    assert pipeline.shrink_shares(4.0, 0.9, [0.4]) == [0.9]
+    assert pipeline.shrink_shares(4.0, 0.9, []) == []
+
+
+def _score(effect, label, score, gap, shrink, *, low=None, gain=50.0, candidate=None, fit=None):
+    if fit is None:
+        fit = SimpleNamespace(problem=SimpleNamespace(candidate=candidate, candidates=(candidate,)), cost=0.0,
+                              values={spec.name: 1.0 for spec in candidate.fitted} if candidate else {})
+    held = SimpleNamespace(z=np.zeros((2, 1, 1)), gap=gap)
+    return scoring.CandidateScore(effect, label, fit, held, "full", score + 5.0, 1.0, 5.0, score, gap, shrink,
+                                  shrink - 0.1 if low is None else low, min(shrink + 0.1, 1.0), effect_gain=gain)
+
+
+class _StandIns:
+    """Stand-ins for the fits of a selection round: each variant's scores set by hand, every call recorded."""
+
+    def __init__(self, monkeypatch, table):
+        self.table = table
+        self.screened: list[str] = []
+        self.full: list[str] = []
+        self.bases: list[tuple[str, ...]] = []
+        monkeypatch.setattr(pipeline, "fit_candidate", self.fit_candidate)
+        monkeypatch.setattr(pipeline, "leave_one_out", lambda result: result.held)
+        monkeypatch.setattr(pipeline, "score_candidate", self.score_candidate)
+        monkeypatch.setattr(pipeline, "effect_off_costs", lambda base, fits: ([], [50.0 for _ in fits]))
+        monkeypatch.setattr(pipeline, "bootstrap_gap", lambda z, rng: (0.0, 1.0))
+
+    def fit_candidate(self, case, candidate, base, *, full, max_evaluations, start=None):
+        (self.full if full else self.screened).append(candidate.label)
+        self.bases.append(tuple(c.label for c in base.problem.candidates))
+        values = {spec.name: 1.0 for spec in candidate.fitted}
+        problem = SimpleNamespace(candidate=candidate, candidates=(*base.problem.candidates, candidate))
+        return SimpleNamespace(problem=problem, cost=0.0, values=values, held=SimpleNamespace(z=None), full=full)
+
+    def score_candidate(self, result, held, base_held, stage, rng):
+        """The table's (score, gap, shrink) of a variant; a full fit scores a nat more unless the table says;
+        a gap of None is 0.6 of the base's."""
+        label = result.problem.candidate.label
+        score, gap, shrink = self.table.get(label, (-5.0, 1.0, 0.0))
+        if stage == "full":
+            score, gap, shrink = self.table.get((label, stage), (score + 1.0, gap, shrink))
+        gap = 0.6 * base_held.gap if gap is None else gap
+        return _score(label.split("[")[0], label, score, gap, shrink, fit=result)
+
+
+def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatch, design):
+    case = SimpleNamespace(design=design)
+    run_out = _variant(design, "eccentricity[pinion]")
+    base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
+    stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 0.3, 0.75),
+                                        ("tooth_damage[gear]", "full"): (95.0, 0.2, 0.83),
+                                        "friction": (12.0, 1.0, 0.15)})
+    selection = pipeline._next_effect(case, base, ["eccentricity"], pipeline.EFFECT_NAMES, {},
+                                      np.random.default_rng(0), StepLog())
+    # never eccentricity again, in either variant; every other library effect's variants screened
+    assert not any(label.startswith("eccentricity") for label in stand_ins.screened)
+    expected = [c.label for name in pipeline.EFFECT_NAMES if name != "eccentricity"
+                for c in candidates.candidates_for(name, design)]
+    assert stand_ins.screened == expected
+    # all on top of the base, and only the best screened variant fitted in full
+    assert set(stand_ins.bases) == {("eccentricity[pinion]",)}
+    assert stand_ins.full == ["tooth_damage[gear]"]
+    assert selection.added == "tooth_damage" and selection.scores[0].stage == "full"
+    assert selection.base == ("eccentricity[pinion]",) and selection.gap_before == 1.2
+    assert [s.effect for s in selection.scores][0] == "tooth_damage"
+    assert len({s.effect for s in selection.scores}) == len(selection.scores)
+
+
+def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design):
+    case = SimpleNamespace(design=design)
+    run_out = _variant(design, "eccentricity[pinion]")
+    base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
+    # a fair score but no real shrink of what remains (soaking up noise): not added
+    _StandIns(monkeypatch, {"friction": (14.0, 1.15, 0.04)})
+    selection = pipeline._next_effect(case, base, ["eccentricity"], pipeline.EFFECT_NAMES, {},
+                                      np.random.default_rng(0), StepLog())
+    assert selection.added is None and selection.scores[0].effect == "friction"
+
+
+def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design):
+    case = SimpleNamespace(design=design)
+    run_out = _variant(design, "eccentricity[pinion]")
+    first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
+    # within noise after the first effect: no round at all
+    stand_ins = _StandIns(monkeypatch, {})
+    done = _score("eccentricity", run_out.label, 300.0, 0.3, 0.9, candidate=run_out)
+    selected, rounds = pipeline.forward_selection(case, 3.0, done, first_decision, pipeline.EFFECT_NAMES, {},
+                                                  np.random.default_rng(0), StepLog())
+    assert [s.entry.effect for s in selected] == ["eccentricity"] and rounds == [] and stand_ins.screened == []
+    assert selected[0].shrink_share == 0.9
+    # every round adds an effect that halves the remaining gap: capped at three effects
+    first = _score("eccentricity", run_out.label, 300.0, 2.0, 1.0 / 3.0, low=0.25, candidate=run_out)
+    table = {c.label: (60.0 + k, None, 0.5 + 0.01 * k)
+             for k, c in enumerate(c for name in pipeline.EFFECT_NAMES for c in candidates.candidates_for(name, design))}
+    stand_ins = _StandIns(monkeypatch, table)
+    selected, rounds = pipeline.forward_selection(case, 3.0, first, first_decision, pipeline.EFFECT_NAMES, {},
+                                                  np.random.default_rng(0), StepLog(), max_effects=3)
+    names = [s.entry.effect for s in selected]
+    assert len(names) == 3 and len(set(names)) == 3 and len(rounds) == 2
+    # the third round's base holds both earlier effects
+    assert max(len(base) for base in stand_ins.bases) == 2
+    shares = [s.shrink_share for s in selected]
+    assert all(share > 0 for share in shares)
+    assert sum(shares) == pytest.approx(1.0 - selected[-1].entry.gap / 3.0)
+    decision = pipeline.set_decision(first_decision, selected, rounds, 3.0)
+    assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap
+    assert "forward selection adds" in decision.reason
+    assert decision.partial == (selected[-1].entry.gap > NOISE_GAP_THRESHOLD and sum(shares) < 0.5)
+
+
+def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():
+    first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
+    first = pipeline.SelectedEffect(_score("eccentricity", "eccentricity[pinion]", 300.0, 2.0, 0.33), 3.0, 0.33,
+                                    first_decision)
+    added = Decision("tooth_damage", "second")
+    explained = pipeline.SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 90.0, 0.3, 0.85), 2.0,
+                                        (2.0 - 0.3) / 3.0, added)
+    rounds = [pipeline.SelectionRound(("eccentricity[pinion]",), 2.0, [explained.entry], "tooth_damage", "", added)]
+    decision = pipeline.set_decision(first_decision, [first, explained], rounds, 3.0)
+    assert not decision.partial and decision.remaining_gap == 0.3
+    still = pipeline.SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 30.0, 1.6, 0.2, low=0.05), 2.0,
+                                    0.4 / 3.0, added)
+    decision = pipeline.set_decision(first_decision, [first, still], rounds, 3.0)
+    assert decision.partial and "remains unexplained" in decision.reason
+    # one effect and no round: the first decision itself
+    assert pipeline.set_decision(first_decision, [first], [], 3.0) is first_decision
+
+
+def test_blind_test_scores_effect_sets():
+    campaigns = [
+        {"truth": "eccentricity", "truth_effects": ["eccentricity", "tooth_damage"], "verdict": "eccentricity",
+         "effects_named": ["eccentricity", "tooth_damage"]},
+        {"truth": "eccentricity", "truth_effects": ["eccentricity", "friction"], "verdict": "eccentricity",
+         "effects_named": ["eccentricity"]},
+        {"truth": "friction", "verdict": "friction"},                          # today's entries: one effect
+        {"truth": "tooth_damage", "verdict": "friction", "effects_named": ["friction", "tooth_damage"]},
+        {"truth": "none", "verdict": "none", "effects_named": []},
+        {"truth": "none", "verdict": "unexplained", "effects_named": []},
+    ]
+    sets = blind_test.set_scores(campaigns, ["eccentricity", "tooth_damage", "friction"])
+    rows = {row["effect"]: row for row in sets["per_effect"]}
+    assert rows["eccentricity"] == {"effect": "eccentricity", "named": 2, "acting": 2, "correct": 2,
+                                    "precision": 1.0, "recall": 1.0}
+    assert rows["tooth_damage"]["precision"] == 1.0 and rows["tooth_damage"]["recall"] == 1.0
+    assert rows["friction"]["named"] == 2 and rows["friction"]["precision"] == 0.5
+    assert rows["friction"]["recall"] == 0.5
+    # exactly right: the first, the single friction and the healthy control called none
+    assert sets["set_exact"] == pytest.approx(3 / 6)
+    assert sets["n_multi_effect"] == 2 and sets["set_exact_multi_effect"] == pytest.approx(0.5)
+    spec = blind_test.CampaignSpec("eccentricity-0", "eccentricity", "strong", 12e-6, "reference",
+                                   {"amplitude": 12e-6, "shaft": "gear"}, {})
+    assert spec.truth_set() == ["eccentricity"]
+    assert blind_test.CampaignSpec("none-0", "none", "-", 0.0, "reference", {}, {}).truth_set() == []
+
+
+# ---------------------------------------------------------------------------------------------- whole diagnoses
+
+def _campaign(design, effects, seed):
+    ops = blind_test.operating_points_of("service", design, 4)
+    return simulate_campaign(design, ops, effects=effects, seed=seed, duration=0.5, run_in=0.3)
+
+
+@pytest.mark.slow
+def test_run_out_and_tooth_damage_together_are_both_named(design, tmp_path):
+    """A pinion run-out of 12 um with a 35 % crack of a gear tooth: both named, each with a share of the shrink.
+
+    Through ``diagnose``: the JSON summary, the Dataset and the report carry the set and the remaining gap.
+    """
+    truth = {"eccentricity": {"shaft": "pinion", "amplitude": 12e-6, "phase": 0.7, "kappa": 0.03},
+             "tooth_damage": {"gear": "gear", "tooth": 5.0, "depth": 0.35}}
+    rig = _campaign(design, [make_effect(name, values) for name, values in truth.items()], seed=7)
+    content = diagnose(rig, tmp_path, effects=["eccentricity", "tooth_damage", "friction"], seed=2)
+    effects = content["effects"]
+    named = {entry["effect"]: entry for entry in effects}
+    assert set(named) == {"eccentricity", "tooth_damage"}, content["reason"]
+    assert content["verdict"] == effects[0]["effect"]
+    shares = [entry["shrink_share"] for entry in effects]
+    assert all(share > 0 for share in shares) and sum(shares) <= 1.0
+    assert shares[0] == pytest.approx(content["gap"]["shrink_fraction"])
+    assert sum(shares) == pytest.approx(1.0 - content["remaining_gap"]["value"] / content["gap"]["baseline"])
+    assert "forward_selection" in content["timing_s"] and content["forward_selection"][0]["added"] is not None
+    run_out, damage = named["eccentricity"], named["tooth_damage"]
+    assert run_out["variant"] == "eccentricity[pinion]" and damage["variant"] == "tooth_damage[gear]"
+    assert run_out["parameters"]["amplitude"] == pytest.approx(12e-6, rel=0.3)
+    assert damage["parameters"]["depth"] == pytest.approx(0.35, rel=0.3)
+    low, high = damage["parameter_intervals"]["depth"]
+    assert low <= damage["parameters"]["depth"] <= high
+    remaining = content["remaining_gap"]
+    assert remaining["model"] == ["nominal", run_out["variant"], damage["variant"]] or \
+        remaining["model"] == ["nominal", damage["variant"], run_out["variant"]]
+    assert remaining["value"] < content["gap"]["baseline"]
+    maps = xr.open_dataset(tmp_path / "diagnosis.nc")
+    assert list(maps["selected_effect"].values) == [entry["variant"] for entry in effects]
+    assert maps["gap_map_final"].dims == ("op", "channel", "family")
+    assert json.loads(maps.attrs["effects"]) == [entry["effect"] for entry in effects]
+    maps.close()
+    page = (tmp_path / "report.html").read_text()
+    assert "The named effects (forward selection)" in page and "What remains" in page
+
+
+@pytest.mark.slow
+def test_a_run_out_alone_is_named_alone(design):
+    rig = _campaign(design, [make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 0.7,
+                                                          "kappa": 0.03})], seed=8)
+    case = prepare_case(rig, design, seed=np.random.SeedSequence(1))
+    result = pipeline.run_diagnosis(case, effects=["eccentricity", "tooth_damage", "friction"],
+                                    seed=np.random.SeedSequence(2))
+    assert result.verdict == "eccentricity", result.reason
+    assert [chosen.entry.effect for chosen in result.selected] == ["eccentricity"]
+    assert result.selected[0].shrink_share == result.selected[0].entry.shrink
