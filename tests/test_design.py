@@ -11,10 +11,6 @@ from uqgear.common.errors import DesignError
 from uqgear.physics.geometry import pair_geometry
 
 
-@pytest.fixture(scope="module")
-def design():
-    return load_design("locomotive")
-
 
 def test_reference_design_keys_and_provenance(design):
     assert design.z1 == 21 and design.z2 == 101

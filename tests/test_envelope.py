@@ -13,10 +13,6 @@ from uqgear.uq.runner import Runner
 LIGHT = {"drive_torque": 1000.0}
 
 
-@pytest.fixture(scope="module")
-def design():
-    return uqgear.load_design("locomotive")
-
 
 @pytest.fixture(scope="module")
 def grid(design):

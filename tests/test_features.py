@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.physics.design import load_design
 from uqgear.common.errors import DesignError, RigDataError, StudyError
 from uqgear.rig.features import (FEATURE_FAMILIES, extract_features, feature_definitions, line_amplitudes,
                              order_spectrum, sampling_rate)
@@ -29,10 +28,6 @@ TRUTH = {"mesh1": 1.0, "mesh2": 0.4, "mesh3": 0.1, "mesh1_sb_pinion+1": 0.05, "m
 # A line locked to no order (adhesion oscillation) in the low band
 FREE_FREQUENCY, FREE_AMPLITUDE = 50.0, 0.3
 
-
-@pytest.fixture(scope="module")
-def design():
-    return load_design("locomotive")
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-import uqgear
 from uqgear.physics.integration import BatchEvaluator
 from uqgear.uq.interval import IntervalAnalysis
 from uqgear.uq.sensitivity import SobolAnalysis
@@ -11,10 +10,6 @@ from uqgear.uq.parameter_space import ParameterSpace
 from uqgear.uq.parameters import Interval
 from uqgear.uq.polynomial_chaos import PolynomialChaos
 
-
-@pytest.fixture(scope="module")
-def design():
-    return uqgear.load_design("locomotive")
 
 
 @pytest.mark.slow

@@ -63,7 +63,7 @@ def test_error_messages_show_a_bounded_prefix_of_a_value():
     for _ in range(100_000):
         nested = [nested]
     start = time.perf_counter()
-    assert len(shown(nested)) <= 80 and time.perf_counter() - start < 0.5
+    assert len(shown(nested)) <= 80 and time.perf_counter() - start < 5.0   # unbounded it would recurse 100 000 levels
     with pytest.raises(Exception) as caught:
         parse_study(SMOKE.replace("seed: 20240601", f"seed: {'9' * 5000}x"))
     assert len(str(caught.value)) < 300

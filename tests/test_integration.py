@@ -11,10 +11,6 @@ from uqgear.common.errors import OperatingPointError
 from uqgear.physics.model import build_model
 
 
-@pytest.fixture(scope="module")
-def design():
-    return uqgear.load_design("locomotive")
-
 
 def _linear_amplitude(setup, omega):
     """Steady DTE amplitude of the linearised model under STE excitation (complex response)."""

@@ -131,10 +131,6 @@ def test_noise_alone_gives_no_estimate_and_no_resampling(design):
         extract_features(signals, design, order_tracking="sometimes")
 
 
-@pytest.fixture(scope="module")
-def design():
-    return uqgear.load_design("locomotive")
-
 
 def test_virtual_rig_wander_is_undone_by_tracking(design):
     """Same campaign with and without +-1 % wander at 1.3 Hz: tracked mesh lines agree to 1 % (or the noise)."""

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.physics.design import load_design
 from uqgear.common.errors import RigDataError, UqgearError
 from uqgear.rig.format import (CONVENTIONS, make_rig_dataset, read_rig, rig_design, usable_runs, validate_rig,
                         write_rig)
@@ -19,10 +18,6 @@ DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 FS = 20480.0
 N_TIME = 512
 
-
-@pytest.fixture(scope="module")
-def design():
-    return load_design("locomotive")
 
 
 @pytest.fixture()

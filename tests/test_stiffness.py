@@ -6,14 +6,9 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from uqgear.physics.design import load_design
 from uqgear.physics.geometry import pair_geometry
 from uqgear.physics.stiffness import iso6336_stiffness, mesh_stiffness, tooth_compliance
 
-
-@pytest.fixture(scope="module")
-def design():
-    return load_design("locomotive")
 
 
 @pytest.fixture(scope="module")
