@@ -9,7 +9,7 @@
                     [--out FILE.png|FILE.nc]
     uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
-    uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...]
+    uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...] [--reference HEALTHY.nc]
     uqgear blindtest --out DIR [--n-per-effect N] [--seed S]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
@@ -483,17 +483,21 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     rig = Path(args.rig)
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
+    reference = Path(args.reference) if args.reference else None
+    if reference is not None and not reference.is_file():
+        return _fail(f"--reference {reference}: rig data file not found")
     out = Path(args.out)
     with _output_folder(out) as work:
         result = diagnose(rig, work, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
-                          workers=args.workers)
+                          workers=args.workers, reference=reference)
     gap = result.get("gap", {})
     if gap.get("baseline") is None:
         # nothing was compared (verdict inconclusive): the reason, not a row of Nones
         print(f"diagnosis of {rig}: verdict {result['verdict']} ({_one_line(result.get('reason', ''))}); "
               f"results in {out}")
         return 0
-    print(f"diagnosis of {rig}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
+    against = f" against reference {reference}" if reference is not None else ""
+    print(f"diagnosis of {rig}{against}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
           f"{gap.get('baseline')} -> {gap.get('with_effect')} (shrink {gap.get('shrink_fraction')}); results in {out}")
     return 0
 
@@ -631,6 +635,10 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     diagnose.add_argument("--workers", type=int, metavar="N",
                           help="worker processes (default: one per two cores)")
+    diagnose.add_argument("--reference", metavar="HEALTHY.nc",
+                          help="a campaign of the same rig and test plan with a known good gearbox: what it "
+                          "shows against the fitted model (transfer paths, the rig's own structure) is learned "
+                          "and carried over, so the diagnosis names what changed")
     diagnose.set_defaults(handler=_command_diagnose)
 
     blind = commands.add_parser("blindtest", help="blind check of the diagnosis on virtual-rig campaigns",

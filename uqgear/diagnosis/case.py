@@ -32,6 +32,29 @@ FEATURE_OPTIONS: dict[str, Any] = {"n_harmonics": 3, "n_sidebands": 3, "n_shaft_
                                    "low_band": (2.0, 80.0), "window": "hann"}
 
 
+class FeatureModelError(dict):
+    """Relative model error per feature kind, widened feature by feature.
+
+    The dict's own items are the per-kind errors (what summaries and JSON
+    show); looking a kind up returns them combined in quadrature with a
+    per-feature widening (n_op, n_channel, features of that kind in layout
+    order), e.g. the uncertainty of a reference campaign's transfer
+    correction (:mod:`uqgear.diagnosis.reference`). Arrays broadcast where
+    :func:`~uqgear.diagnosis.discrepancy.standardised_discrepancy` uses scalars.
+    """
+
+    def __init__(self, base: Mapping[str, float], widening: Mapping[str, np.ndarray]) -> None:
+        super().__init__({key: float(value) for key, value in dict(base).items()})
+        self.widening = {key: np.asarray(value, dtype=float) for key, value in widening.items()}
+
+    def __getitem__(self, kind: str) -> Any:
+        base = super().__getitem__(kind)
+        extra = self.widening.get(kind)
+        if extra is None or extra.size == 0:
+            return base
+        return np.sqrt(base ** 2 + extra ** 2)
+
+
 @dataclass
 class RigCase:
     """A rig campaign prepared for diagnosis: features, noise, processing and simulator."""
@@ -57,6 +80,9 @@ class RigCase:
     speed: list[dict[str, Any]]    # per run: the order tracking's speed estimate
     tracking_s: float              # time spent estimating speeds and resampling
     executor: "RunExecutor | None" = None
+    # (n_op, n_channel, all features): the model's features are multiplied by it (a reference
+    # campaign's transfer correction, uqgear.diagnosis.reference); None: unity
+    transfer: np.ndarray | None = None
 
     @property
     def n_op(self) -> int:
@@ -146,7 +172,11 @@ def execute_run(case: RigCase, task: RunTask) -> tuple[np.ndarray, bool]:
     """Simulate a run and reduce its records with the rig's processing: (n_channel, all features), periodic."""
     run = simulate_task(case, task)
     stacked = np.stack([run.records[channel] for channel in case.channels])
-    return case.processors[task.op].model_features(stacked), run.periodic
+    features = case.processors[task.op].model_features(stacked)
+    if case.transfer is not None:
+        # the rig sees the gear through its transfer paths: the model's features as the rig would record them
+        features = features * case.transfer[task.op]
+    return features, run.periodic
 
 
 # The case a forked worker process inherits from its parent (set just before

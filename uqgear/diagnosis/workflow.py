@@ -8,7 +8,7 @@ import resource
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import xarray as xr
@@ -25,6 +25,9 @@ from .outputs import _held_spectra, _json_clean, inconclusive_dataset, inconclus
 from .pipeline import _check_effects, run_diagnosis
 from .scoring import capped_squares
 from .verdict import MIN_INFORMATIVE_RUNS, uninformative_reason
+
+if TYPE_CHECKING:
+    from .reference import ReferenceCorrection
 
 def _cpu_seconds() -> float:
     """CPU time of this process and of its finished worker processes, s."""
@@ -103,10 +106,48 @@ def load_calibration(calibration: str | os.PathLike[str] | xr.Dataset) -> xr.Dat
 
 
 
+def load_reference(reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection", test: xr.Dataset, *,
+                   design: Design | None = None) -> "tuple[xr.Dataset, str, ReferenceCorrection | None]":
+    """A healthy reference campaign, checked against the test campaign before any work.
+
+    Returns the reference Dataset, the text naming it and, when ``reference``
+    is an already learned :class:`~uqgear.diagnosis.reference.ReferenceCorrection`
+    (to reuse one reference for several test campaigns), that correction.
+
+    Raises
+    ------
+    RigDataError
+        The reference is not a rig file or Dataset in the format, or carries no usable signal.
+    DiagnosisError
+        Its design or channels differ from the test campaign's, or a test
+        operating point has no reference point at the same speed and torque
+        (:mod:`uqgear.diagnosis.reference`).
+    """
+    from .reference import ReferenceCorrection, check_design_match, match_operating_points
+
+    learned = None
+    if isinstance(reference, ReferenceCorrection):
+        learned, dataset, source = reference, reference.rig, reference.source
+    elif isinstance(reference, (str, os.PathLike)):
+        if not Path(reference).is_file():
+            raise DiagnosisError(f"reference: {reference}: no such file (expected a uqgear-rig/1 campaign of the "
+                                 "same rig with a healthy gearbox)")
+        dataset, source = load_rig_input(reference, design=design)
+    elif isinstance(reference, xr.Dataset):
+        dataset, source = load_rig_input(reference, design=design)
+    else:
+        raise DiagnosisError(f"reference: expected a uqgear-rig/1 file path or an xarray Dataset; "
+                             f"got {type(reference).__name__}")
+    check_design_match(test, dataset, where=source)
+    match_operating_points(test, dataset, where=source)
+    return dataset, source, learned
+
+
 def diagnosis_result(rig: str | os.PathLike[str] | xr.Dataset, *,
                      design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
                      seed: int | np.random.SeedSequence = 0, workers: int | None = None,
-                     calibration: str | os.PathLike[str] | xr.Dataset | None = None
+                     calibration: str | os.PathLike[str] | xr.Dataset | None = None,
+                     reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection | None" = None
                      ) -> tuple[dict[str, Any], xr.Dataset]:
     """Diagnose the sim-to-real gap of a rig campaign without writing anything.
 
@@ -119,11 +160,11 @@ def diagnosis_result(rig: str | os.PathLike[str] | xr.Dataset, *,
         (gap maps over op x channel x family, scores, held-out spectra).
     """
     content, maps, _ = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
-                                  calibration=calibration, steps=StepLog())
+                                  calibration=calibration, reference=reference, steps=StepLog())
     return content, maps
 
 
-def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepLog
+def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepLog, reference=None
                ) -> tuple[dict[str, Any], xr.Dataset, Design]:
     started = time.perf_counter()
     cpu_started = _cpu_seconds()
@@ -136,10 +177,25 @@ def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepL
     dataset, source = load_rig_input(rig, design=given)
     nominal_design = given if given is not None else _resolve_design(None, dataset)
     posterior = load_calibration(calibration) if calibration is not None else None
+    if reference is not None:
+        reference_data, reference_source, learned = load_reference(reference, dataset, design=given)
     noise_seed, run_seed = seed_sequence.spawn(2)
     # from here on the input is accepted: a failure is ours, reported with its step
     with steps.step("extract the rig features"):
         case = prepare_case(dataset, nominal_design, seed=noise_seed)
+    reference_summary = None
+    if reference is not None:
+        from .reference import attach_reference, learn_reference
+
+        if learned is None:
+            with steps.step("fit the nominal model to the reference campaign and learn its transfer correction") \
+                    as found:
+                # spawned after the others: a diagnosis without a reference draws the same numbers
+                learned = learn_reference(reference_data, nominal_design, source=reference_source,
+                                          seed=seed_sequence.spawn(1)[0], workers=workers)
+                found.update(seconds=learned.summary["seconds"])
+        with steps.step("correct the model features by the reference's transfer correction"):
+            reference_summary = attach_reference(case, learned, dataset)
     with steps.step("check that the data can decide") as found:
         reason = uninformative_reason(case)
         found.update(informative=reason is None)
@@ -151,6 +207,7 @@ def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepL
             content = _json_clean(inconclusive_summary(case, reason, source=source, effects=effect_names,
                                                        seed_text=str(seed_sequence.entropy), timings=timings))
             maps = inconclusive_dataset(case, reason, effect_names)
+            _add_reference(content, maps, reference_summary)
         return _noted(content, nominal_design), maps, nominal_design
     with steps.step("start the worker processes"):
         case.executor = RunExecutor(case, workers)
@@ -169,7 +226,18 @@ def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepL
         content["nominal"]["start"] = "calibration posterior medians" if posterior is not None else "design values"
         maps = result_dataset(result, spectra)
         maps.attrs["verdict"] = content["verdict"]
+        _add_reference(content, maps, reference_summary)
     return _noted(content, nominal_design), maps, nominal_design
+
+
+def _add_reference(content: dict[str, Any], maps: xr.Dataset, summary: dict[str, Any] | None) -> None:
+    """The reference campaign's fit and learned correction in ``diagnosis.json`` (``reference``) and maps' attrs."""
+    if summary is None:
+        return
+    content["reference"] = _json_clean(summary)
+    maps.attrs["reference"] = str(summary["file"])
+    if isinstance(content.get("timing_s"), dict):
+        content["timing_s"]["reference_fit"] = summary["seconds"]
 
 
 def _noted(content: dict[str, Any], design: Design) -> dict[str, Any]:
@@ -210,7 +278,8 @@ def make_out_dir(out_dir: str | os.PathLike[str]) -> Path:
 def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLike[str], *,
              design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
              seed: int | np.random.SeedSequence = 0, workers: int | None = None,
-             calibration: str | os.PathLike[str] | xr.Dataset | None = None, report: bool = True) -> dict[str, Any]:
+             calibration: str | os.PathLike[str] | xr.Dataset | None = None, report: bool = True,
+             reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection | None" = None) -> dict[str, Any]:
     """Diagnose the sim-to-real gap of a rig campaign and write the results.
 
     Parameters
@@ -237,6 +306,17 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
         medians (backlash included) instead of the design's values.
     report : bool
         Write ``report.html``.
+    reference : path or xarray.Dataset, optional
+        A campaign of the same rig recorded with a known good gearbox
+        (:mod:`uqgear.diagnosis.reference`): what it shows against the fitted
+        nominal model (the rig's transfer paths, its own structure) is
+        learned per channel as a gain over frequency, with its uncertainty,
+        and carried to this campaign, so that the diagnosis names what
+        changed between the two. Same design and channels, and a reference
+        run at the same speed (1 %) and drive torque (5 %) for every run, or
+        it is refused. What was learned is ``reference`` in ``diagnosis.json``.
+        An already learned
+        :class:`~uqgear.diagnosis.reference.ReferenceCorrection` is reused as it is.
 
     Returns
     -------
@@ -251,7 +331,8 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
         usable signal (all missing or constant, records shorter than a pinion
         revolution, fewer than two operating points).
     DiagnosisError
-        An unknown effect, a bad seed, design or worker count.
+        An unknown effect, a bad seed, design or worker count; a reference
+        campaign of another design or test plan.
     InternalError
         A step failed after the input was accepted. The outputs finished
         before stay in ``out_dir``, with ``failure.json`` (the failed step,
@@ -266,7 +347,8 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     steps = StepLog()
     try:
         content, maps, nominal_design = _diagnosis(rig, design=design, effects=effects, seed=seed,
-                                                   workers=workers, calibration=calibration, steps=steps)
+                                                   workers=workers, calibration=calibration, steps=steps,
+                                                   reference=reference)
         with steps.step("write diagnosis.nc"):
             save_result(maps, out / "diagnosis.nc", seed=_as_seed(seed), design=nominal_design)
         with steps.step("write diagnosis.json"):
@@ -279,7 +361,9 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     except InternalError as exc:
         inputs = {"rig": rig if isinstance(rig, (str, os.PathLike)) else "rig Dataset", "seed": str(seed),
                   "effects": list(effects) if effects is not None else None,
-                  "design": design if isinstance(design, (str, os.PathLike)) else None}
+                  "design": design if isinstance(design, (str, os.PathLike)) else None,
+                  "reference": str(reference) if isinstance(reference, (str, os.PathLike)) else
+                  (None if reference is None else "reference campaign")}
         write_failure_record(out, exc, command="diagnosis", inputs=_json_clean(inputs))
         exc.kept = str(out)
         raise

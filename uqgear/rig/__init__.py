@@ -12,6 +12,7 @@ from .features import (
     SIGNAL_CHANNELS, FEATURE_FAMILIES, FeatureDefinition, feature_definitions, sampling_rate,
     order_spectrum, line_amplitudes, extract_features)
 from .usability import check_usable_signal, record_states
+from .transfer_path import apply_transfer_path, transfer_path_gain
 from .virtual_rig import (
     simulate_campaign, synth_rig, default_operating_points, adhesion_torque_bounds,
     true_parameters_of, bearing_check_operating_points)
@@ -22,5 +23,5 @@ __all__ = [
     'feature_definitions', 'sampling_rate', 'order_spectrum', 'line_amplitudes', 'extract_features',
     'simulate_campaign', 'synth_rig', 'default_operating_points', 'adhesion_torque_bounds',
     'true_parameters_of', 'bearing_check_operating_points',
-    'check_usable_signal', 'record_states',
+    'check_usable_signal', 'record_states', 'apply_transfer_path', 'transfer_path_gain',
 ]

@@ -633,17 +633,22 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     The result is the Dataset of ``uqgear diagnose``'s ``diagnosis.nc`` (gap
     maps over ``op`` x ``channel`` x ``family``, candidate scores, held-out
     spectra) with the content of its ``diagnosis.json`` (verdict, gap and
-    shrink, where, ranking) in attribute ``diagnosis``.
+    shrink, where, ranking) in attribute ``diagnosis``. With ``reference``
+    (a healthy campaign of the same rig, ``uqgear diagnose --reference``) its
+    learned transfer correction is carried over and recorded there.
     """
     from ..diagnosis.workflow import diagnosis_result
-    from .schema import rig_path
+    from .schema import reference_path, rig_path
 
     effects = list(context.options["effects"])
     rig = rig_path(context.study, context.spec)
+    reference = reference_path(context.study, context.spec)
     content, result = diagnosis_result(rig, design=context.design, effects=effects, seed=context.stage_seed(0),
-                                       workers=context.threads)
+                                       workers=context.threads, reference=reference)
     result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
                         effects=json.dumps(effects), rig=str(rig))
+    if reference is not None:
+        result.attrs["reference"] = str(reference)
     return result
 
 

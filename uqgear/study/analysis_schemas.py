@@ -104,6 +104,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
     "diagnose": {
         "rig": string(),
         "effects": list_of(choice(*EFFECTS), unique=True),
+        # a healthy campaign of the same rig and test plan (uqgear diagnose --reference)
+        "reference": string(),
     },
 }
 
@@ -122,7 +124,7 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200,
               "qois": DEFAULT_QOIS},
     "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2")},
-    "diagnose": {"effects": tuple(EFFECTS)},
+    "diagnose": {"effects": tuple(EFFECTS), "reference": None},
 }
 _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
                                               "calibrate": ("rig",), "diagnose": ("rig",)}

@@ -117,6 +117,14 @@ def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
     return _resolve_rig(spec.options["rig"], Path(study.path).parent if study.path else None)
 
 
+def reference_path(study: "Study", spec: "AnalysisSpec") -> Path | None:
+    """The healthy reference campaign of a ``diagnose`` analysis (key ``reference``), resolved like ``rig``; or None."""
+    value = spec.options.get("reference")
+    if value is None:
+        return None
+    return _resolve_rig(value, Path(study.path).parent if study.path else None)
+
+
 _TOP_LEVEL_KEYS = ("name", "description", "seed", "design", "operating_points", "uncertain",
                    "simulation", "analyses", "outputs", "execution")
 
@@ -229,6 +237,14 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "",
                 raise StudyError(f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
                                  "netCDF file (relative paths start at the study file's folder) or a bundled "
                                  f"campaign ({', '.join(bundled_names('rig'))})")
+            reference = spec.options.get("reference")
+            if reference is not None:
+                found = _resolve_rig(reference, Path(base_dir) if base_dir else None)
+                if not found.is_file():
+                    raise StudyError(f"analyses[{spec.index}].reference: file {found} not found; expected a "
+                                     "uqgear-rig/1 netCDF file of the same rig with a healthy gearbox (relative "
+                                     "paths start at the study file's folder) or a bundled campaign "
+                                     f"({', '.join(bundled_names('rig'))})")
     return Study(name=name, description=description, seed=seed, design=design,
                  design_source=design_source, design_overrides=overrides, operating_points=points,
                  uncertain=uncertain, simulation=simulation, analyses=analyses, outputs=outputs,
@@ -293,4 +309,4 @@ def load_study(path: str | Path) -> Study:
 
 
 
-__all__ = ["Study", "Outputs", "load_study", "parse_study", "study_from_mapping", "rig_path"]
+__all__ = ["Study", "Outputs", "load_study", "parse_study", "study_from_mapping", "rig_path", "reference_path"]

@@ -1,0 +1,574 @@
+"""A healthy reference campaign from the same rig: learn what the model lacks there, carry it to a test campaign.
+
+A real rig carries structure the gear model lacks: transfer paths between
+the gear body and a sensor (a housing resonance on the accelerometer path,
+the accelerometer's own response), extra modes, its own TE definition. A
+campaign recorded on the same rig while the gearbox was known to be good
+shows that structure against the fitted nominal model; a diagnosis of a
+later campaign with it (``uqgear diagnose TEST.nc --reference HEALTHY.nc``)
+then names what changed between the two instead of the rig's own structure.
+
+Method (docs/model.md section 6.1):
+
+1. **Compatibility.** Both campaigns must state the same design (every key
+   of the ``design`` attribute) and the reference must hold every channel of
+   the test campaign; every test operating point needs a reference point at
+   the same pinion speed (within 1 %) and drive torque (within 5 %).
+   Otherwise :class:`DiagnosisError` names the file and what differs.
+2. **Reference fit.** The reference is prepared like any campaign
+   (:func:`~uqgear.diagnosis.case.prepare_case`) and the nominal model fitted
+   to it (:func:`~uqgear.diagnosis.fitting.fit_nominal`).
+3. **What the model lacks.** For every line that stands clear of the noise
+   in the reference (amplitude at least :data:`MIN_LINE_SNR` per-quadrature
+   noise spreads, in rig and model) the log ratio rig/model is a sample of
+   the channel's transfer correction at the line's frequency. A transfer
+   path acts on frequency, not order (a housing resonance is a peak in Hz),
+   so each channel's log gain is modelled as a smooth function of log
+   frequency: a Gaussian process with a constant mean, a squared-exponential
+   kernel and a white scatter term, hyperparameters by maximum marginal
+   likelihood, made robust (Student-t scatter, iteratively reweighted) so
+   that lines the model cannot produce at all lose their pull.
+   Its predictive spread (curve uncertainty plus the scatter) is the
+   correction's uncertainty. Band power, RMS and kurtosis are not line
+   spectra: their correction is read directly at the matched reference run.
+4. **Carried to the test campaign.** The test campaign's model features are
+   multiplied by the gain at their frequencies (the observed features and
+   the noise floor stay as recorded, so the Rice statistics of the lines
+   stay exact) and the correction's relative uncertainty widens their
+   model error (:class:`~uqgear.diagnosis.case.FeatureModelError`). Fits,
+   held-out scoring and the verdict then run unchanged on the test campaign.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+import xarray as xr
+
+from ..physics.design import Design
+from .case import FeatureModelError, RigCase
+from .errors import DiagnosisError
+
+#: Relative tolerance on pinion speed for matching a test run to a reference run.
+SPEED_TOLERANCE = 0.01
+#: Relative tolerance on drive torque for matching a test run to a reference run.
+TORQUE_TOLERANCE = 0.05
+#: A line enters the learned correction when rig and model both stand this many per-quadrature noise spreads up.
+MIN_LINE_SNR = 5.0
+# Bounds of the Gaussian process hyperparameters: length scale in ln(f) (the log gain of a
+# resonance of damping 0.02 falls by half within about 0.04 of its peak; one decade is 2.3),
+# amplitude and scatter in ln(gain). A shorter length would let the curve follow a single
+# line that the model lacks (two lines a few hertz apart disagreeing is no transfer path).
+_LENGTH_BOUNDS = (0.04, 3.0)
+_AMPLITUDE_BOUNDS = (1e-3, 5.0)
+_SCATTER_BOUNDS = (0.01, 2.0)
+# A correction read directly at one reference run has at least this relative uncertainty.
+_DIRECT_FLOOR = 0.03
+# Frequencies of the gain curve stored in diagnosis.json (per channel).
+_CURVE_POINTS = 120
+# The local noise floor at a line is the median of the free periodogram bins within this
+# relative distance of it (at least _LOCAL_MIN_HZ): narrower than a resonance of damping 0.05
+# (half-power half-width 5 %), wide enough for a median of about a hundred bins at 1 Hz.
+_LOCAL_WIDTH = 0.03
+_LOCAL_MIN_HZ = 50.0
+_LOCAL_MIN_BINS = 20
+
+
+# ---------------------------------------------------------------------------------------------- compatibility
+
+def _design_dict(rig: xr.Dataset, where: str) -> dict[str, Any]:
+    try:
+        design = json.loads(str(rig.attrs.get("design", "")))
+    except ValueError:
+        raise DiagnosisError(f"{where}: design: expected a JSON object") from None
+    if not isinstance(design, dict):
+        raise DiagnosisError(f"{where}: design: expected a JSON object")
+    return design
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-15)
+    return a == b
+
+
+def check_design_match(test: xr.Dataset, reference: xr.Dataset, *, where: str) -> None:
+    """Refuse a reference campaign whose stated design or channels differ from the test campaign's.
+
+    Raises
+    ------
+    DiagnosisError
+        Naming ``where`` (the reference file) and the first keys that differ.
+    """
+    ours, theirs = _design_dict(test, "rig data"), _design_dict(reference, where)
+    differ = [key for key in sorted(set(ours) | set(theirs))
+              if key not in ours or key not in theirs or not _same(ours[key], theirs[key])]
+    if differ:
+        shown = ", ".join(f"{key} {theirs.get(key, 'missing')} (test {ours.get(key, 'missing')})" for key in differ[:4])
+        more = f" and {len(differ) - 4} more" if len(differ) > 4 else ""
+        raise DiagnosisError(f"reference {where}: design differs from the test campaign's: {shown}{more}; "
+                             "expected a campaign of the same gear pair on the same rig")
+    from ..rig.sampling import SIGNAL_CHANNELS
+
+    missing = [name for name in SIGNAL_CHANNELS if name in test.data_vars and name not in reference.data_vars]
+    if missing:
+        raise DiagnosisError(f"reference {where}: no channel {', '.join(missing)}; expected every channel of the "
+                             "test campaign")
+
+
+def match_operating_points(test: xr.Dataset, reference: xr.Dataset, *, where: str,
+                           speed_tolerance: float = SPEED_TOLERANCE,
+                           torque_tolerance: float = TORQUE_TOLERANCE) -> np.ndarray:
+    """For each test operating point the reference one at the same speed and drive torque.
+
+    Returns
+    -------
+    ndarray of int (n_op,)
+        Index of the matched reference run (the closest in relative speed and torque).
+
+    Raises
+    ------
+    DiagnosisError
+        A test run without a reference run within the tolerances (the first one is named).
+    """
+    speeds = np.asarray(test["pinion_speed"].values, dtype=float)
+    torques = np.asarray(test["drive_torque"].values, dtype=float)
+    ref_speeds = np.asarray(reference["pinion_speed"].values, dtype=float)
+    ref_torques = np.asarray(reference["drive_torque"].values, dtype=float)
+    matched = np.zeros(speeds.size, dtype=int)
+    for op, (speed, torque) in enumerate(zip(speeds, torques)):
+        speed_off = np.abs(ref_speeds - speed) / speed
+        # a torque near zero is matched against a small absolute scale (1 N m)
+        torque_off = np.abs(ref_torques - torque) / max(abs(torque), 1.0)
+        fits = (speed_off <= speed_tolerance) & (torque_off <= torque_tolerance)
+        if not fits.any():
+            raise DiagnosisError(
+                f"reference {where}: test operating point {op} ({speed:g} rpm, {torque:g} N m) has no reference "
+                f"operating point within {speed_tolerance:.0%} in pinion speed and {torque_tolerance:.0%} in "
+                "drive torque; expected a reference campaign covering the test plan")
+        distance = np.where(fits, speed_off / speed_tolerance + torque_off / torque_tolerance, np.inf)
+        matched[op] = int(np.argmin(distance))
+    return matched
+
+
+# ---------------------------------------------------------------------------------------------- gain curves
+
+@dataclass
+class GainCurve:
+    """One channel's log gain (rig over model) as a Gaussian process in ln(frequency).
+
+    Attributes
+    ----------
+    x, y : ndarray
+        Training points: ln(frequency / Hz) and ln(rig / model) of the lines.
+    weights : ndarray
+        Robustness weight of each point (1: a full member; small: a line the
+        curve cannot follow, e.g. one the model does not produce at all).
+    mean, amplitude, length, scatter : float
+        Constant mean, kernel amplitude and length scale (in ln f), white scatter (in ln gain).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    weights: np.ndarray
+    mean: float
+    amplitude: float
+    length: float
+    scatter: float
+    _alpha: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    _factor: tuple | None = field(default=None, repr=False)
+
+    @property
+    def dropped(self) -> int:
+        """Lines the curve effectively ignores (weight below :data:`_DROPPED_WEIGHT`)."""
+        return int(np.sum(self.weights < _DROPPED_WEIGHT))
+
+    @classmethod
+    def flat(cls, mean: float = 0.0, scatter: float = _DIRECT_FLOOR) -> "GainCurve":
+        """Too few lines to learn from: a constant gain, a small uncertainty."""
+        return cls(np.zeros(0), np.zeros(0), np.zeros(0), mean, _AMPLITUDE_BOUNDS[0], 1.0, scatter)
+
+    def _kernel(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return _kernel(a, b, self.amplitude, self.length)
+
+    def prepare(self) -> "GainCurve":
+        if self.x.size:
+            matrix = self._kernel(self.x, self.x) + np.diag(self.scatter ** 2 / self.weights)
+            self._factor = scipy.linalg.cho_factor(matrix, lower=True)
+            self._alpha = scipy.linalg.cho_solve(self._factor, self.y - self.mean)
+        return self
+
+    def predict(self, frequencies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Log gain and its predictive standard deviation (curve plus scatter) at ``frequencies`` (Hz)."""
+        f = np.asarray(frequencies, dtype=float)
+        x = np.log(np.maximum(f, 1e-3))
+        if not self.x.size or self._factor is None:
+            return np.full(f.shape, self.mean), np.full(f.shape, self.scatter)
+        cross = self._kernel(x.ravel(), self.x)
+        mean = self.mean + cross @ self._alpha
+        variance = self.amplitude ** 2 - np.sum(cross * scipy.linalg.cho_solve(self._factor, cross.T).T, axis=1)
+        spread = np.sqrt(np.maximum(variance, 0.0) + self.scatter ** 2)
+        return mean.reshape(f.shape), spread.reshape(f.shape)
+
+
+# Student-t degrees of freedom of the robust curve fit, and the weight below which a line counts as dropped.
+_STUDENT_DOF = 4.0
+_DROPPED_WEIGHT = 0.2
+_ROBUST_ITERATIONS = 6
+
+
+def _kernel(a: np.ndarray, b: np.ndarray, amplitude: float, length: float) -> np.ndarray:
+    return amplitude ** 2 * np.exp(-0.5 * ((a[:, None] - b[None, :]) / length) ** 2)
+
+
+def _negative_log_evidence(log_parameters: np.ndarray, x: np.ndarray, y: np.ndarray, weights: np.ndarray) -> float:
+    amplitude, length, scatter = np.exp(log_parameters)
+    matrix = _kernel(x, x, amplitude, length) + np.diag(scatter ** 2 / weights)
+    try:
+        factor = scipy.linalg.cho_factor(matrix, lower=True)
+    except np.linalg.LinAlgError:
+        return 1e12
+    # the constant mean is profiled out (generalised least squares)
+    ones = np.ones(x.size)
+    solved_ones = scipy.linalg.cho_solve(factor, ones)
+    mean = float(solved_ones @ y / (ones @ solved_ones))
+    residual = y - mean
+    return float(0.5 * residual @ scipy.linalg.cho_solve(factor, residual) + np.sum(np.log(np.diag(factor[0]))))
+
+
+def fit_gain_curve(frequencies: np.ndarray, log_ratios: np.ndarray) -> GainCurve:
+    """A channel's gain curve from lines' frequencies (Hz) and log ratios rig/model (module docstring, step 3).
+
+    Robust: a Student-t scatter (4 degrees of freedom) by iteratively
+    reweighted maximum marginal likelihood, each line weighted by its
+    leave-one-out residual against the curve through the others, so that a
+    line the model does not produce at all neither bends the curve nor
+    inflates its scatter, while a resonance sampled by several lines keeps them.
+    """
+    x = np.log(np.asarray(frequencies, dtype=float))
+    y = np.asarray(log_ratios, dtype=float)
+    keep = np.isfinite(x) & np.isfinite(y)
+    x, y = x[keep], y[keep]
+    if x.size < 3:
+        return GainCurve.flat(float(np.median(y)) if y.size else 0.0).prepare()
+    bounds = [tuple(np.log(b)) for b in (_AMPLITUDE_BOUNDS, _LENGTH_BOUNDS, _SCATTER_BOUNDS)]
+    weights = np.ones(x.size)
+    spread = max(float(np.std(y)), 0.05)
+    starts = [np.log([spread, length, 0.3 * spread]) for length in (0.06, 0.2, 0.8)]
+    curve = None
+    for _ in range(_ROBUST_ITERATIONS):
+        best = min((scipy.optimize.minimize(_negative_log_evidence, start, args=(x, y, weights), method="L-BFGS-B",
+                                            bounds=bounds) for start in starts), key=lambda found: found.fun)
+        amplitude, length, scatter = (float(v) for v in np.exp(best.x))
+        matrix = _kernel(x, x, amplitude, length) + np.diag(scatter ** 2 / weights)
+        factor = scipy.linalg.cho_factor(matrix, lower=True)
+        ones = np.ones(x.size)
+        solved = scipy.linalg.cho_solve(factor, ones)
+        mean = float(solved @ y / (ones @ solved))
+        curve = GainCurve(x, y, weights.copy(), mean, amplitude, length, scatter).prepare()
+        # leave-one-out residuals in closed form (alpha_i / [K^-1]_ii); their spread without the
+        # point's own down-weighted noise, so that a far line cannot talk its weight back up
+        inverse_diagonal = np.diag(scipy.linalg.cho_solve(factor, np.eye(x.size)))
+        loo = curve._alpha / inverse_diagonal
+        latent = np.maximum(1.0 / inverse_diagonal - scatter ** 2 / weights, 0.0)
+        standardised = loo / np.sqrt(latent + scatter ** 2)
+        updated = (_STUDENT_DOF + 1.0) / (_STUDENT_DOF + standardised ** 2)
+        updated = np.clip(updated, 1e-3, 1.0)
+        starts = [best.x] + starts[1:]
+        if np.allclose(updated, weights, atol=0.02):
+            break
+        weights = updated
+    return curve
+
+
+# ---------------------------------------------------------------------------------------------- the correction
+
+@dataclass
+class ReferenceCorrection:
+    """What a healthy reference campaign shows against the fitted nominal model (see the module docstring).
+
+    Attributes
+    ----------
+    source : str
+        The reference file (or a Dataset's title).
+    rig : xarray.Dataset
+        The reference campaign (validated).
+    channels : tuple of str
+    curves : dict
+        Per channel, its :class:`GainCurve`.
+    direct : dict
+        Per feature kind (``band``, ``rms``, ``kurtosis``), (n_ref_op, n_channel) log
+        corrections read at each reference run (NaN: none).
+    summary : dict
+        The reference fit and what was learned, JSON-ready (``reference`` of ``diagnosis.json``).
+    """
+
+    source: str
+    rig: xr.Dataset
+    channels: tuple[str, ...]
+    curves: dict[str, GainCurve]
+    direct: dict[str, np.ndarray]
+    summary: dict[str, Any]
+
+    def apply(self, case: RigCase, matched: np.ndarray) -> dict[str, Any]:
+        """Put the correction on a prepared test campaign; returns the JSON-ready record of what was applied.
+
+        Sets ``case.transfer`` (model features are multiplied by it) and
+        replaces ``case.model_error`` by a :class:`FeatureModelError`
+        widened by the correction's relative uncertainty.
+        """
+        n_all = case.observed_all.shape[-1]
+        gain = np.ones((case.n_op, len(case.channels), n_all))
+        spread = np.zeros_like(gain)
+        processor_kinds = _kinds_of_all(case)
+        for op in range(case.n_op):
+            processor = case.processors[op]
+            orders = np.array([d.order for d in processor.definitions])
+            frequencies = orders * case.speeds[op] / 60.0
+            for c, channel in enumerate(case.channels):
+                curve = self.curves.get(channel)
+                lines = np.isfinite(frequencies)
+                if curve is not None and lines.any():
+                    mean, sd = curve.predict(frequencies[lines])
+                    gain[op, c, lines] = np.exp(mean)
+                    spread[op, c, lines] = sd
+                reference_channel = self.channels.index(channel)
+                for kind, values in self.direct.items():
+                    value = values[matched[op], reference_channel]
+                    if not math.isfinite(value):
+                        continue
+                    columns = np.flatnonzero(processor_kinds == kind)
+                    gain[op, c, columns] = math.exp(value)
+                    scatter = curve.scatter if curve is not None else _DIRECT_FLOOR
+                    spread[op, c, columns] = max(scatter, _DIRECT_FLOOR)
+        # the test records' own noise colour: lines and their model are both divided by it, so that the
+        # white-noise level of the record is the right noise for them (Rice statistics stay exact)
+        colour = noise_colour(case)
+        case.observed_all = case.observed_all / colour
+        case.observed = case.observed_all[..., case.layout.columns]
+        case.transfer = gain / colour
+        compared = gain[..., case.layout.columns]
+        widened = spread[..., case.layout.columns]
+        kinds = np.array(case.layout.kinds)
+        # a log-gain spread s is a relative error of about s on an amplitude
+        case.model_error = FeatureModelError(case.model_error,
+                                             {kind: widened[..., kinds == kind] for kind in set(case.layout.kinds)})
+        line = kinds == "line"
+        usable = np.isfinite(case.observed[..., line])
+        return {"noise_colour_range": [float(np.min(colour)), float(np.max(colour))],
+                "gain_range": [float(np.nanmin(compared[..., line][usable])) if usable.any() else None,
+                               float(np.nanmax(compared[..., line][usable])) if usable.any() else None],
+                "largest_added_relative_error": float(np.max(widened)) if widened.size else 0.0}
+
+
+def _kinds_of_all(case: RigCase) -> np.ndarray:
+    """Feature kind of every processor column (``""`` for features not compared)."""
+    kinds = np.full(case.observed_all.shape[-1], "", dtype=object)
+    kinds[case.layout.columns] = case.layout.kinds
+    return kinds
+
+
+def noise_colour(case: RigCase) -> np.ndarray:
+    """Local noise floor at each line over the record's white-noise level, as amplitudes (n_op, n_channel, all).
+
+    The diagnosis takes a record's noise as white at the level of its median
+    spectral floor. A transfer path colours the noise that enters before it
+    (a resonance raises the floor around it, a roll-off lowers it), so a line
+    at the noise floor near a resonance would look several noise spreads
+    high. The ratio is the square root of the median of the free
+    periodogram bins near the line over the median of all free bins (the
+    bins the noise estimate uses); 1 for features that are not lines and
+    where too few free bins lie near the line.
+    """
+    colour = np.ones(case.observed_all.shape)
+    for op in range(case.n_op):
+        processor = case.processors[op]
+        fit = processor.fit
+        frequencies = np.fft.rfftfreq(processor.size, 1.0 / processor.fs)
+        kept = ~processor.excluded
+        centres = np.array([d.order * processor.speed / 60.0 for d in processor.definitions])
+        lines = np.flatnonzero(np.isfinite(centres))
+        windows = []
+        for i in lines:
+            width = max(_LOCAL_WIDTH * centres[i], _LOCAL_MIN_HZ)
+            windows.append(kept & (np.abs(frequencies - centres[i]) <= width))
+        for c, channel in enumerate(case.channels):
+            record = np.asarray(case.rig[channel].values[op], dtype=float)
+            if not case.usable[op, c] or np.isnan(record).any() or not fit.n_centres:
+                continue
+            # the fitted lines taken out first: a strong line's window leakage is no noise for the fit
+            coefficients = scipy.linalg.cho_solve(fit.factor, fit.weighted.T @ record)
+            residual = record * processor.taper - fit.weighted @ coefficients
+            density = np.abs(np.fft.rfft(residual)) ** 2
+            overall = float(np.median(density[kept])) if kept.any() else 0.0
+            if overall <= 0:
+                continue
+            for i, window in zip(lines, windows):
+                if window.sum() >= _LOCAL_MIN_BINS:
+                    colour[op, c, i] = math.sqrt(float(np.median(density[window])) / overall)
+    return colour
+
+
+def _line_points(case: RigCase, model_all: np.ndarray, colour: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per channel the (frequency, log ratio) of lines clear of the noise in rig and model."""
+    points: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    kinds = np.array(case.layout.kinds)
+    line = kinds == "line"
+    columns = case.layout.columns[line]
+    for c, channel in enumerate(case.channels):
+        frequencies, ratios = [], []
+        for op in range(case.n_op):
+            if not case.usable[op, c]:
+                continue
+            processor = case.processors[op]
+            scale = case.noise_std[op, c] * case.noise[op].line_scale[columns] * colour[op, c, columns]
+            observed = case.observed_all[op, c, columns]
+            model = np.abs(model_all[op, c, columns])
+            orders = np.array([processor.definitions[i].order for i in columns])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                clear = (observed >= MIN_LINE_SNR * scale) & (model >= MIN_LINE_SNR * scale) & (scale > 0)
+                # the Rice mean's bias is removed to first order: E|A + n|^2 = A^2 + 2 sigma^2
+                rig = np.sqrt(np.maximum(observed ** 2 - 2.0 * scale ** 2, 0.25 * observed ** 2))
+                ratio = np.log(rig / model)
+            # lines merged with an earlier one (within a bin) report that line: count each frequency once
+            chosen = np.flatnonzero(clear & np.isfinite(ratio))
+            seen: set[float] = set()
+            for i in chosen:
+                f = round(float(orders[i] * case.speeds[op] / 60.0), 6)
+                if f in seen:
+                    continue
+                seen.add(f)
+                frequencies.append(f)
+                ratios.append(float(ratio[i]))
+        points[channel] = (np.array(frequencies), np.array(ratios))
+    return points
+
+
+def _direct_corrections(case: RigCase, model_all: np.ndarray) -> dict[str, np.ndarray]:
+    """Log corrections of band power, RMS and kurtosis read at each reference run (n_op, n_channel)."""
+    names = case.processors[0].names
+    out = {kind: np.full((case.n_op, len(case.channels)), np.nan) for kind in ("band", "rms", "kurtosis")}
+    for op in range(case.n_op):
+        noise = case.noise[op]
+        for c in range(len(case.channels)):
+            if not case.usable[op, c]:
+                continue
+            sigma2 = case.noise_std[op, c] ** 2
+            for kind, name, power in (("band", "low_band_rms", noise.band_power), ("rms", "rms", noise.total_power)):
+                observed = case.observed_all[op, c, names.index(name)]
+                model = model_all[op, c, names.index(name)]
+                signal = observed ** 2 - sigma2 * power[0]
+                # only where the signal stands clear of the noise power's own scatter
+                if np.isfinite(signal) and model > 0 and signal > MIN_LINE_SNR * sigma2 * power[1]:
+                    out[kind][op, c] = 0.5 * math.log(signal / model ** 2)
+            rms_model = model_all[op, c, names.index("rms")]
+            kurtosis_model = model_all[op, c, names.index("kurtosis")]
+            observed = case.observed_all[op, c, names.index("kurtosis")]
+            if math.isfinite(out["rms"][op, c]) and kurtosis_model > 0 and np.isfinite(observed):
+                signal_power = (rms_model * math.exp(out["rms"][op, c])) ** 2
+                noise_power = sigma2 * noise.total_power[0]
+                # the noise-free kurtosis that, with this noise, gives what the rig recorded (the inverse
+                # of discrepancy._noisy_kurtosis)
+                kurtosis = (observed * (signal_power + noise_power) ** 2 - 6.0 * signal_power * noise_power
+                            - 3.0 * noise_power ** 2) / signal_power ** 2
+                if kurtosis > 0:
+                    out["kurtosis"][op, c] = math.log(kurtosis / kurtosis_model)
+    return out
+
+
+def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.random.SeedSequence,
+                    workers: int = 1) -> ReferenceCorrection:
+    """Fit the nominal model to a healthy reference campaign and learn each channel's transfer correction.
+
+    Parameters
+    ----------
+    rig : xarray.Dataset
+        The reference campaign, validated (:func:`uqgear.diagnosis.workflow.load_rig_input`).
+    design : Design
+        The nominal design (the same as the test campaign's).
+    source : str
+        Names the reference in messages and in the summary.
+    seed : SeedSequence
+        Seeds the reference's noise calibration.
+    workers : int
+        Worker processes for the reference fit's simulations.
+
+    Returns
+    -------
+    ReferenceCorrection
+    """
+    from .case import RunExecutor, prepare_case
+    from .fitting import fit_nominal
+
+    started = time.perf_counter()
+    case = prepare_case(rig, design, seed=seed)
+    case.executor = RunExecutor(case, workers)
+    try:
+        nominal = fit_nominal(case)
+    finally:
+        case.executor.close()
+        case.executor = None
+    model_all = nominal.model
+    points = _line_points(case, model_all, noise_colour(case))
+    curves = {channel: fit_gain_curve(*points[channel]) for channel in case.channels}
+    direct = _direct_corrections(case, model_all)
+    channels_summary = {}
+    for channel in case.channels:
+        curve = curves[channel]
+        frequencies, ratios = points[channel]
+        if frequencies.size:
+            grid = np.geomspace(max(1.0, 0.8 * frequencies.min()), 1.25 * frequencies.max(), _CURVE_POINTS)
+        else:
+            grid = np.geomspace(10.0, 0.5 * case.fs, _CURVE_POINTS)
+        mean, sd = curve.predict(grid)
+        peak = int(np.argmax(np.abs(mean)))
+        channels_summary[channel] = {
+            "lines": int(frequencies.size), "lines_dropped": curve.dropped,
+            "mean_log_gain": curve.mean, "amplitude": curve.amplitude, "length_scale_ln_f": curve.length,
+            "scatter": curve.scatter,
+            "largest_gain": {"frequency": float(grid[peak]), "gain": float(np.exp(mean[peak])),
+                             "interval_2sd": [float(np.exp(mean[peak] - 2 * sd[peak])),
+                                              float(np.exp(mean[peak] + 2 * sd[peak]))]},
+            "points": {"frequency": frequencies.tolist(), "log_ratio": ratios.tolist()},
+            "curve": {"frequency": grid.tolist(), "gain": np.exp(mean).tolist(),
+                      "low": np.exp(mean - 2 * sd).tolist(), "high": np.exp(mean + 2 * sd).tolist()},
+        }
+    summary = {
+        "file": source,
+        "method": "per-channel log gain rig/model as a Gaussian process in ln(frequency) over lines clear of "
+                  "the noise; band power, RMS and kurtosis read at the matched reference run",
+        "nominal_fit": {"parameters": nominal.values, "adhesion_torque": list(map(float, nominal.adhesion_torques)),
+                        "cost": nominal.cost, "converged": bool(nominal.converged)},
+        "operating_points": {"pinion_speed": case.speeds.tolist(), "drive_torque": case.drive_torques.tolist()},
+        "channels": channels_summary,
+        "direct": {kind: values.tolist() for kind, values in direct.items()},
+        "seconds": time.perf_counter() - started,
+    }
+    return ReferenceCorrection(source=source, rig=rig, channels=case.channels, curves=curves, direct=direct,
+                               summary=summary)
+
+
+def attach_reference(case: RigCase, correction: ReferenceCorrection, test: xr.Dataset) -> dict[str, Any]:
+    """Match the test campaign's runs to the reference's and correct the case; the ``reference`` summary."""
+    matched = match_operating_points(test, correction.rig, where=correction.source)
+    applied = correction.apply(case, matched)
+    summary = dict(correction.summary)
+    summary["matched_operating_points"] = [
+        {"op": op, "reference_op": int(ref), "pinion_speed": float(test["pinion_speed"].values[op]),
+         "reference_pinion_speed": float(correction.rig["pinion_speed"].values[ref]),
+         "drive_torque": float(test["drive_torque"].values[op]),
+         "reference_drive_torque": float(correction.rig["drive_torque"].values[ref])}
+        for op, ref in enumerate(matched)]
+    summary["applied"] = applied
+    return summary
+
+
+__all__ = ["SPEED_TOLERANCE", "TORQUE_TOLERANCE", "MIN_LINE_SNR", "GainCurve", "ReferenceCorrection",
+           "check_design_match", "match_operating_points", "fit_gain_curve", "learn_reference", "attach_reference"]
