@@ -3,22 +3,20 @@
 numba compiles the kernels on a first run and loads them from its on-disk
 cache afterwards. With fast-math flags the two sets of machine code rounded
 differently (last bits of every batch output), so a first run after install
-disagreed with every later one. The slow test runs the batch kernel, the
-calibration's harmonic kernel and the smoke study in a fresh interpreter, once
-with an empty cache and once with the cache it filled, and compares every float
-bit for bit.
+disagreed with every later one. ``COLD_WARM_SCRIPT`` runs the batch kernel, the
+calibration's harmonic kernel and the smoke study in a fresh interpreter; the
+packaging test (tests/test_packaging.py) runs it with the installed wheel,
+once with an empty cache and once with the cache it filled, and compares
+every float bit for bit with :func:`differences` (one cold compilation
+serves both checks: a cold compile of every kernel costs minutes).
 """
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import numpy as np
-import pytest
 import xarray as xr
 
 import uqgear
@@ -27,7 +25,7 @@ import uqgear
 # Run in a fresh interpreter: the batch kernel through separation and period-n regimes, the
 # calibration's harmonic kernel, and the smoke study through the real command line. One
 # interpreter does all three, so each cache state costs one compilation.
-_SCRIPT = textwrap.dedent("""
+COLD_WARM_SCRIPT = textwrap.dedent("""
     import sys
     import numpy as np
     import uqgear
@@ -50,50 +48,18 @@ _SCRIPT = textwrap.dedent("""
 """)
 
 
-def _fresh_interpreter(arguments: list[str], cache: Path, cwd: Path) -> None:
-    environment = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "UQGEAR_PROGRESS": "0",
-                   "MPLBACKEND": "Agg"}
-    completed = subprocess.run([sys.executable, *arguments], cwd=cwd, env=environment,
-                               capture_output=True, text=True, timeout=900)
-    assert completed.returncode == 0, completed.stderr[-3000:]
-
-
-def _float_variables(path: Path) -> dict[str, np.ndarray]:
+def float_variables(path: Path) -> dict[str, np.ndarray]:
     with xr.open_dataset(path) as ds:
         return {name: ds[name].values.copy() for name in ds.variables
                 if np.issubdtype(ds[name].dtype, np.floating)}
 
 
-def _differences(first: dict[str, np.ndarray], second: dict[str, np.ndarray]) -> list[str]:
+def differences(first: dict[str, np.ndarray], second: dict[str, np.ndarray]) -> list[str]:
     assert first.keys() == second.keys()
     # bit for bit: compare the raw bytes, so NaN payloads and signed zeros count too
     return [name for name in first
             if first[name].shape != second[name].shape
             or first[name].tobytes() != second[name].tobytes()]
-
-
-@pytest.mark.slow
-def test_kernels_and_the_smoke_study_give_the_same_bits_on_a_cold_and_a_warm_cache(tmp_path):
-    cache = tmp_path / "numba-cache"
-    cache.mkdir()
-    script = tmp_path / "run.py"
-    script.write_text(_SCRIPT)
-    for state in ("cold", "warm"):
-        _fresh_interpreter([str(script), str(tmp_path / f"{state}.npz"), str(tmp_path / state)], cache, tmp_path)
-        if state == "cold":
-            assert any(cache.rglob("*.nbi")), "the first run did not fill the numba cache"
-    cold, warm = np.load(tmp_path / "cold.npz"), np.load(tmp_path / "warm.npz")
-    assert len(cold.files) > 10
-    assert _differences({k: cold[k] for k in cold.files}, {k: warm[k] for k in warm.files}) == []
-    files = sorted(path.name for path in (tmp_path / "cold").glob("*.nc"))
-    assert len(files) >= 8
-    assert files == sorted(path.name for path in (tmp_path / "warm").glob("*.nc"))
-    compared = 0
-    for file in files:
-        first, second = _float_variables(tmp_path / "cold" / file), _float_variables(tmp_path / "warm" / file)
-        compared += len(first)
-        assert _differences(first, second) == [], file
-    assert compared > 50
 
 
 def test_batch_is_bit_identical_on_one_and_two_threads():
@@ -104,7 +70,7 @@ def test_batch_is_bit_identical_on_one_and_two_threads():
     two = uqgear.simulate_batch(design, samples, n_periods=120, keep_periods=40, threads=2)
     floats = [name for name in one.data_vars if np.issubdtype(one[name].dtype, np.floating)]
     assert len(floats) > 5
-    assert _differences({n: one[n].values for n in floats}, {n: two[n].values for n in floats}) == []
+    assert differences({n: one[n].values for n in floats}, {n: two[n].values for n in floats}) == []
 
 
 def test_results_record_the_cpu_the_kernels_were_compiled_for(tmp_path):

@@ -280,13 +280,18 @@ def test_blind_test_scores_effect_sets():
     sets = blind_test.set_scores(campaigns, ["eccentricity", "tooth_damage", "friction"])
     rows = {row["effect"]: row for row in sets["per_effect"]}
     assert rows["eccentricity"] == {"effect": "eccentricity", "named": 2, "acting": 2, "correct": 2,
-                                    "precision": 1.0, "recall": 1.0}
+                                    "precision": 1.0, "recall": 1.0, "shrink_share_median": None}
     assert rows["tooth_damage"]["precision"] == 1.0 and rows["tooth_damage"]["recall"] == 1.0
     assert rows["friction"]["named"] == 2 and rows["friction"]["precision"] == 0.5
     assert rows["friction"]["recall"] == 0.5
     # exactly right: the first, the single friction and the healthy control called none
     assert sets["set_exact"] == pytest.approx(3 / 6)
     assert sets["n_multi_effect"] == 2 and sets["set_exact_multi_effect"] == pytest.approx(0.5)
+    assert sets["n_controls"] == 2 and sets["controls_with_an_effect_named"] == 0
+    # the shrink share of an effect where it was rightly named
+    shared = dict(campaigns[0], shrink_shares=[0.6, 0.3])
+    rows = {row["effect"]: row for row in blind_test.set_scores([shared], ["eccentricity"])["per_effect"]}
+    assert rows["tooth_damage"]["shrink_share_median"] == pytest.approx(0.3)
     spec = blind_test.CampaignSpec("eccentricity-0", "eccentricity", "strong", 12e-6, "reference",
                                    {"amplitude": 12e-6, "shaft": "gear"}, {})
     assert spec.truth_set() == ["eccentricity"]
@@ -294,6 +299,31 @@ def test_blind_test_scores_effect_sets():
 
 
 # ---------------------------------------------------------------------------------------------- whole diagnoses
+
+def test_real_world_plan_covers_every_kind():
+    specs = blind_test.plan_real_world(2, np.random.default_rng(0))
+    assert len(specs) == 2 * 11
+    kinds = {spec.identifier.rsplit("-", 1)[0] for spec in specs}
+    assert len(kinds) == 11
+    two = [spec for spec in specs if len(spec.truth_set()) == 2]
+    assert len(two) == 6 and all(len(set(spec.truth_set())) == 2 for spec in two)
+    assert all(spec.effect_values[blind_test._LADDER[spec.truth][0]] == blind_test._LADDER[spec.truth][1][2]
+               for spec in specs if spec.truth != "none")      # the leading effect at the strong level
+    controls = [spec for spec in specs if spec.truth == "none"]
+    assert len(controls) == 10 and all(spec.nuisances for spec in controls)
+    assert sum(1 for spec in specs if spec.nuisances.get("reference")) == 4
+    assert {spec.design_name for spec in specs} == {"reference", "second"}
+    # the same draw, the same plan
+    again = blind_test.plan_real_world(2, np.random.default_rng(0))
+    assert [spec.effect_values for spec in again] == [spec.effect_values for spec in specs]
+    with pytest.raises(DiagnosisError, match="n_per_kind: expected an integer >= 1"):
+        blind_test.plan_real_world(0, np.random.default_rng(0))
+
+
+def test_an_unknown_blind_test_suite_is_refused(tmp_path):
+    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world; got 'lab'"):
+        blind_test.blindtest(tmp_path / "b", suite="lab")
+
 
 def _campaign(design, effects, seed):
     ops = blind_test.operating_points_of("service", design, 4)

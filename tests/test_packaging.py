@@ -3,7 +3,8 @@
 Builds the wheel from this checkout (offline: ``--no-build-isolation``), installs
 it (not editable) into a new virtual environment outside the checkout, and from
 an empty folder loads the bundled design, runs the bundled smoke study to its
-report and calibrates the shipped rig campaign to its report. The new venv sees
+report twice (kernels compiled, then loaded: the same bits, see
+tests/test_determinism.py) and calibrates the shipped rig campaign to its report. The new venv sees
 this environment's dependencies through a ``.pth`` line but not its ``uqgear``:
 the test checks that what runs is the installed copy.
 """
@@ -18,7 +19,9 @@ import tarfile
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
+from test_determinism import COLD_WARM_SCRIPT, differences, float_variables
 
 from uqgear.common.resources import bundled_names
 
@@ -89,14 +92,35 @@ def test_the_installed_package_works_from_an_empty_folder(installed, tmp_path):
     listing = _run([str(uqgear), "examples"], cwd=work).stdout
     assert "smoke" in listing and "healthy" in listing
 
-    _run([str(uqgear), "run", "smoke", "--out", "smoke"], cwd=work)
-    assert (work / "smoke" / "report.html").stat().st_size > 10_000
+    # the first run after install compiles the kernels, the second loads them from the cache the first
+    # filled: the batch kernel, the harmonic kernel and the smoke study give the same bits (one cold
+    # compilation serves this check and tests/test_determinism.py's)
+    script = work / "cold_warm.py"
+    script.write_text(COLD_WARM_SCRIPT)
+    for state in ("cold", "warm"):
+        _run([str(installed), str(script), str(work / f"{state}.npz"), str(work / state)], cwd=work)
+        if state == "cold":
+            assert any((work / ".numba-cache").rglob("*.nbi")), "the first run did not fill the numba cache"
+    cold, warm = np.load(work / "cold.npz"), np.load(work / "warm.npz")
+    assert len(cold.files) > 10
+    assert differences({k: cold[k] for k in cold.files}, {k: warm[k] for k in warm.files}) == []
+    files = sorted(path.name for path in (work / "cold").glob("*.nc"))
+    assert len(files) >= 8 and files == sorted(path.name for path in (work / "warm").glob("*.nc"))
+    compared = 0
+    for file in files:
+        first, second = float_variables(work / "cold" / file), float_variables(work / "warm" / file)
+        compared += len(first)
+        assert differences(first, second) == [], file
+    assert compared > 50
+    assert (work / "cold" / "report.html").stat().st_size > 10_000
 
     _run([str(uqgear), "examples", "copy", "smoke", "my_study.yaml"], cwd=work)
     _run([str(uqgear), "validate", "my_study.yaml"], cwd=work)
 
     rig_file = probe[2]
-    _run([str(uqgear), "calibrate", rig_file, "--out", "cal"], cwd=work)
+    # two parameters: what is checked is the installed calibration path, not the posterior (tests/test_calibration.py)
+    _run([str(uqgear), "calibrate", rig_file, "--out", "cal", "--params", "mesh_stiffness_scale", "zeta_mesh"],
+         cwd=work)
     assert (work / "cal" / "report.html").is_file()
     assert (work / "cal" / "posterior.nc").is_file()
 

@@ -22,9 +22,17 @@ pytestmark = pytest.mark.slow
 
 
 def _environment(source: Path, cwd: Path) -> dict[str, str]:
+    """The environment of a README command run on the package at ``source``.
+
+    A clone elsewhere compiles its kernels afresh, into a cache of its own;
+    the checkout itself keeps the suite's cache (its kernels were compiled
+    by the tests before: another cold compile would check nothing new and
+    cost minutes).
+    """
     environment = {key: value for key, value in os.environ.items() if key != "PYTHONHOME"}
-    environment.update({"PYTHONPATH": str(source), "UQGEAR_PROGRESS": "0", "MPLBACKEND": "Agg",
-                        "NUMBA_CACHE_DIR": str(cwd / ".numba-cache")})
+    environment.update({"PYTHONPATH": str(source), "UQGEAR_PROGRESS": "0", "MPLBACKEND": "Agg"})
+    if source.resolve() != ROOT.resolve():
+        environment["NUMBA_CACHE_DIR"] = str(cwd / ".numba-cache")
     return environment
 
 
@@ -58,6 +66,35 @@ def _fresh_clone(target: Path) -> Path:
     return target
 
 
+def _carry_kernel_cache(clone: Path) -> int:
+    """Give the clone the checkout's compiled kernels where its sources are the same; the number carried.
+
+    numba keeps a module's compiled kernels beside it (``__pycache__/*.nbi``,
+    ``*.nbc``, when no ``NUMBA_CACHE_DIR`` is set, as in CI) and uses them
+    while the source file has the same size and modification time. A cold
+    compilation of every kernel costs minutes and is checked by
+    tests/test_packaging.py; here it would check nothing about the clone. A
+    source that differs (or a checkout without such a cache) compiles afresh.
+    """
+    carried = 0
+    for index in (ROOT / "uqgear").rglob("__pycache__/*.nbi"):
+        module = index.name.split(".")[0]
+        source = index.parent.parent / f"{module}.py"
+        target_source = clone / source.relative_to(ROOT)
+        if not source.is_file() or not target_source.is_file() or \
+                source.read_bytes() != target_source.read_bytes():
+            continue
+        target_cache = target_source.parent / "__pycache__"
+        target_cache.mkdir(exist_ok=True)
+        stem = index.name[:-len(".nbi")]
+        for cached in [index, *index.parent.glob(f"{stem}.*.nbc")]:
+            shutil.copy2(cached, target_cache / cached.name)
+        stat = source.stat()
+        os.utime(target_source, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+        carried += 1
+    return carried
+
+
 def test_the_first_setup_command_works_on_a_fresh_clone(tmp_path):
     command = _setup_command(1)
     install, _, main_job = command.partition(" && ")
@@ -66,8 +103,11 @@ def test_the_first_setup_command_works_on_a_fresh_clone(tmp_path):
     clone = _fresh_clone(tmp_path / "clone")
     assert not (clone / "results").exists()
     arguments = main_job.split()[1:]
+    environment = _environment(clone, tmp_path)
+    if _carry_kernel_cache(clone):
+        environment.pop("NUMBA_CACHE_DIR")
     completed = subprocess.run([sys.executable, "-m", "uqgear", *arguments], cwd=clone,
-                               env=_environment(clone, tmp_path), capture_output=True, text=True, timeout=1200)
+                               env=environment, capture_output=True, text=True, timeout=1200)
     assert completed.returncode == 0, completed.stderr[-3000:]
     out = clone / arguments[arguments.index("--out") + 1]
     report = (out / "report.html").read_text()

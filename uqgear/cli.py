@@ -10,7 +10,7 @@
     uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
     uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...] [--reference HEALTHY.nc]
-    uqgear blindtest --out DIR [--n-per-effect N] [--seed S]
+    uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler, a rig file without usable signal) ends with exit status
@@ -509,10 +509,13 @@ def _command_blindtest(args: argparse.Namespace) -> int:
         return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
     out = Path(args.out)
     with _output_folder(out) as work:
-        result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers)
-    print(f"blind test: {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
+        result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers,
+                           suite=args.suite)
+    sets = result["effect_sets"]
+    print(f"blind test ({args.suite}): {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
           f"({result['accuracy_detectable']:.2f} counting 'none' as right where the effect is invisible), "
-          f"false alarms on healthy controls {result['false_alarms']}; results in {out}")
+          f"effect sets exactly right {sets['set_exact']:.2f}, false alarms on healthy controls "
+          f"{result['false_alarms']} of {result['healthy_controls']}; results in {out}")
     return 0
 
 
@@ -650,6 +653,10 @@ def build_parser() -> argparse.ArgumentParser:
     blind.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
     blind.add_argument("--n-per-effect", type=int, default=3, metavar="N", help="campaigns per effect (default 3)")
     blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    blind.add_argument("--suite", choices=("library", "real_world"), default="library",
+                       help="library: each effect alone on a clean rig (default); real_world: two effects at "
+                       "once, a transfer-path resonance with a healthy reference, speed wander, pitch errors and "
+                       "healthy controls with those nuisances (--n-per-effect campaigns of each kind)")
     blind.add_argument("--workers", type=int, metavar="N",
                        help="worker processes of each diagnosis (default: one per two cores)")
     blind.set_defaults(handler=_command_blindtest)

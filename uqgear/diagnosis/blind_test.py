@@ -25,7 +25,7 @@ import math
 import os
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -89,9 +89,16 @@ class CampaignSpec:
     effect_values: dict[str, object]
     true_parameters: dict[str, float]
     plan: str = "service"
+    # further effects acting at once, as (name, values) pairs (the real-world suite)
+    extra_effects: tuple[tuple[str, dict[str, object]], ...] = ()
+    # rig nuisances: options of simulate_campaign (speed_wander, line_interference, relative_noise,
+    # pitch_errors) and "transfer_path" (frequency, damping) on acc_pinion; "reference": the
+    # diagnosis gets a healthy campaign of the same rig (same nuisances, own seed)
+    nuisances: dict[str, object] = field(default_factory=dict)
 
     def effects(self) -> list[Effect]:
-        return [] if self.truth == HEALTHY else [make_effect(self.truth, self.effect_values)]
+        leading = [] if self.truth == HEALTHY else [make_effect(self.truth, self.effect_values)]
+        return leading + [make_effect(name, values) for name, values in self.extra_effects]
 
     def truth_set(self) -> list[str]:
         """The library effects acting on the campaign, in order (empty for a healthy control)."""
@@ -134,38 +141,116 @@ def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequ
         for k in range(count):
             # healthy controls alternate the plans first and the designs second
             design_name = designs[(k // len(PLANS) if truth == HEALTHY else k) % len(designs)]
-            true_parameters = {
-                "mesh_stiffness_scale": float(rng.uniform(0.93, 1.07)),
-                "zeta_mesh_factor": float(rng.uniform(0.8, 1.25)),
-                "ste_amplitude_factor": float(rng.uniform(0.8, 1.2)),
-                "k1_factor": float(rng.uniform(0.9, 1.1)),
-                "k2_factor": float(rng.uniform(0.9, 1.1)),
-                "backlash_factor": float(rng.uniform(0.9, 1.1)),
-            }
+            true_parameters = _scattered_truth(rng)
             if truth == HEALTHY:
                 specs.append(CampaignSpec(f"{truth}-{k}", truth, "-", 0.0, design_name, {}, true_parameters,
                                           PLANS[k % len(PLANS)]))
                 continue
             level = order[k % 3]
-            parameter, values = _LADDER[truth]
+            _, values = _LADDER[truth]
             strength = values[level]
-            effect_values: dict[str, object] = {parameter: strength}
-            phase = float(rng.uniform(0.0, 2.0 * math.pi))
-            if truth == "eccentricity":
-                # stiffness modulation in proportion (the public campaign: 12 um with kappa 0.03)
-                effect_values.update(shaft=("pinion", "gear")[int(rng.integers(2))], phase=phase,
-                                     kappa=float(strength / 4e-4))
-            elif truth == "tooth_damage":
-                effect_values.update(gear=("pinion", "gear")[int(rng.integers(2))], tooth=float(rng.integers(0, 17)))
-            elif truth == "torque_ripple":
-                effect_values.update(phase=phase)
-            elif truth == "adhesion_oscillation":
-                effect_values.update(frequency=float(rng.uniform(6.0, 30.0)), phase=phase)
-            elif truth == "bearing_clearance":
-                effect_values.update(bearing=("pinion", "gear", "both")[int(rng.integers(3))])
+            effect_values = _effect_draw(truth, strength, rng)
             plan = "bearing_check" if truth == "bearing_clearance" else "service"
             specs.append(CampaignSpec(f"{truth}-{k}", truth, STRENGTHS[level], strength, design_name,
                                       effect_values, true_parameters, plan))
+    return specs
+
+
+#: Blind-test suites: the library's effects one at a time on a clean rig, or real-world campaigns.
+SUITES: tuple[str, ...] = ("library", "real_world")
+
+# The real-world suite's kinds, each a function of the draw. Strengths are the ladder's strong level
+# (the public campaigns' own) or medium, so that a miss is the rig's doing, not the effect's weakness.
+_RESONANCE = {"transfer_path": (2500.0, 0.05)}
+_WANDER = {"speed_wander": [(0.005, 1.3)]}
+_PITCH = {"pitch_errors": 7}
+_MAINS_NOISE = {"line_interference": {50.0: 0.5, 150.0: 0.2}, "relative_noise": 0.03}
+_ALL_NUISANCES = {**_WANDER, **_PITCH, **_MAINS_NOISE}
+_REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = (
+    # (kind, effects (leading first), nuisances)
+    ("two_effects", ("eccentricity", "tooth_damage"), {}),
+    ("two_effects", ("torque_ripple", "tooth_damage"), {}),
+    ("two_effects_nuisances", ("eccentricity", "friction"), _ALL_NUISANCES),
+    ("resonance_reference", ("eccentricity",), {**_RESONANCE, "reference": True}),
+    ("wander", ("tooth_damage",), _WANDER),
+    ("pitch_errors", ("eccentricity",), _PITCH),
+    ("control_wander", (), _WANDER),
+    ("control_pitch_errors", (), _PITCH),
+    ("control_mains_noise", (), _MAINS_NOISE),
+    ("control_all_nuisances", (), _ALL_NUISANCES),
+    ("control_resonance_reference", (), {**_RESONANCE, "reference": True}),
+)
+
+
+def _effect_draw(name: str, strength: float, rng: np.random.Generator) -> dict[str, object]:
+    """Random values of an effect at a strength: phases, teeth, shafts and frequencies drawn."""
+    parameter = _LADDER[name][0]
+    values: dict[str, object] = {parameter: strength}
+    phase = float(rng.uniform(0.0, 2.0 * math.pi))
+    if name == "eccentricity":
+        # stiffness modulation in proportion (the public campaign: 12 um with kappa 0.03)
+        values.update(shaft=("pinion", "gear")[int(rng.integers(2))], phase=phase, kappa=float(strength / 4e-4))
+    elif name == "tooth_damage":
+        values.update(gear=("pinion", "gear")[int(rng.integers(2))], tooth=float(rng.integers(0, 17)))
+    elif name == "torque_ripple":
+        values.update(phase=phase)
+    elif name == "adhesion_oscillation":
+        values.update(frequency=float(rng.uniform(6.0, 30.0)), phase=phase)
+    elif name == "bearing_clearance":
+        values.update(bearing=("pinion", "gear", "both")[int(rng.integers(3))])
+    return values
+
+
+def _scattered_truth(rng: np.random.Generator) -> dict[str, float]:
+    """True nominal parameters scattered around the design's."""
+    return {
+        "mesh_stiffness_scale": float(rng.uniform(0.93, 1.07)),
+        "zeta_mesh_factor": float(rng.uniform(0.8, 1.25)),
+        "ste_amplitude_factor": float(rng.uniform(0.8, 1.2)),
+        "k1_factor": float(rng.uniform(0.9, 1.1)),
+        "k2_factor": float(rng.uniform(0.9, 1.1)),
+        "backlash_factor": float(rng.uniform(0.9, 1.1)),
+    }
+
+
+def plan_real_world(n_per_kind: int, rng: np.random.Generator, *, designs: Sequence[str] = ("reference", "second")
+                    ) -> list[CampaignSpec]:
+    """The real-world suite: campaigns that are not the model plus one effect on a clean rig.
+
+    Per kind (``n_per_kind`` each, alternating the designs): two effects of
+    different families at once (strong run-out or torque ripple with a
+    medium or strong cracked tooth; run-out with friction under every
+    nuisance), one effect with a 2.5 kHz resonance (damping 0.05) on the
+    pinion accelerometer's path diagnosed against a healthy reference
+    campaign of the same rig, one with +-0.5 % speed wander at 1.3 Hz, one
+    with ISO 1328-1 class 7 pitch errors, and healthy controls carrying each
+    nuisance (wander, pitch errors, 50/150 Hz mains with 3 % noise, all of
+    them, the resonance with its reference). True nominal parameters
+    scatter as in :func:`plan_campaigns`.
+    """
+    n_per_kind = _check_count("n_per_kind", n_per_kind, 1)
+    for name in designs:
+        if name not in ("reference", "second"):
+            raise DiagnosisError(f"designs: {name!r} unknown; expected 'reference' and/or 'second'")
+    specs: list[CampaignSpec] = []
+    for kind, effect_names, nuisances in _REAL_WORLD_KINDS:
+        for k in range(n_per_kind):
+            design_name = designs[k % len(designs)]
+            truth = _scattered_truth(rng)
+            drawn = []
+            for position, name in enumerate(effect_names):
+                # the leading effect strong; a second one strong or medium
+                level = 2 if position == 0 else (2, 1)[int(rng.integers(2))]
+                drawn.append((name, _LADDER[name][1][level], STRENGTHS[level], _effect_draw(name, _LADDER[name][1][level], rng)))
+            if drawn:
+                leading = drawn[0]
+                specs.append(CampaignSpec(f"{kind}-{'+'.join(effect_names)}-{k}", leading[0], leading[2], leading[1],
+                                          design_name, leading[3], truth, "service",
+                                          tuple((name, values) for name, _, _, values in drawn[1:]),
+                                          dict(nuisances)))
+            else:
+                specs.append(CampaignSpec(f"{kind}-{k}", HEALTHY, "-", 0.0, design_name, {}, truth, "service", (),
+                                          dict(nuisances)))
     return specs
 
 
@@ -250,7 +335,7 @@ def _thresholds(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) 
 def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: int | np.random.SeedSequence = 0,
               effects: Sequence[str] | None = None, designs: Sequence[str] = ("reference", "second"),
               n_healthy: int | None = None, n_ops: int = 8, duration: float = 1.0, workers: int | None = None,
-              report: bool = True) -> dict[str, Any]:
+              report: bool = True, suite: str = "library") -> dict[str, Any]:
     """Run a blind test of the diagnosis and write ``blindtest.json``, ``blindtest.nc`` and ``report.html``.
 
     Parameters
@@ -278,11 +363,20 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         Worker processes of each diagnosis.
     report : bool
         Write ``report.html``.
+    suite : {"library", "real_world"}
+        ``library``: each library effect alone on a clean rig (above).
+        ``real_world`` (:func:`plan_real_world`): ``n_per_effect`` campaigns
+        of each real-world kind: two effects at once, a transfer-path
+        resonance with a healthy reference, speed wander, pitch errors, and
+        healthy controls carrying those nuisances; ``effects`` and
+        ``n_healthy`` do not apply.
 
     Returns
     -------
     dict
-        The content of ``blindtest.json``.
+        The content of ``blindtest.json``; ``effect_sets`` scores the named
+        sets against the true ones (per-effect precision and recall,
+        exactly right sets, two-effect campaigns).
     """
     started = time.perf_counter()
     seed_sequence = _as_seed(seed)
@@ -292,8 +386,14 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         raise DiagnosisError(f"n_ops: expected at most {len(DEFAULT_PINION_SPEEDS)}; got {n_ops}")
     workers = _check_workers(workers)
     plan_seed, campaigns_seed = seed_sequence.spawn(2)
-    specs = plan_campaigns(n_per_effect, np.random.default_rng(plan_seed), effects=effect_names, designs=designs,
-                           n_healthy=n_healthy)
+    if suite not in SUITES:
+        raise DiagnosisError(f"suite: expected one of {', '.join(SUITES)}; got {suite!r}")
+    if suite == "library":
+        specs = plan_campaigns(n_per_effect, np.random.default_rng(plan_seed), effects=effect_names,
+                               designs=designs, n_healthy=n_healthy)
+    else:
+        specs = plan_real_world(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
+        effect_names = tuple(dict.fromkeys(name for spec in specs for name in spec.truth_set()))
     campaign_seeds = campaigns_seed.spawn(len(specs))
     out = make_out_dir(out_dir)
     reference = load_design("locomotive")
@@ -304,11 +404,11 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
     for spec, campaign_seed in zip(specs, campaign_seeds):
         clock = time.perf_counter()
         design = designs_by_name[spec.design_name]
-        generation_seed, noise_seed, diagnosis_seed = campaign_seed.spawn(3)
+        # a fourth child leaves the first three (and so every library-suite campaign) as they were
+        generation_seed, noise_seed, diagnosis_seed, reference_seed = campaign_seed.spawn(4)
         truth = _true_values(spec, design)
-        rig = simulate_campaign(design, operating_points_of(spec.plan, design, n_ops), true_parameters=truth,
-                                effects=spec.effects(), seed=generation_seed, duration=duration, run_in=0.3,
-                                title=f"blind-test campaign {spec.identifier}")
+        rig = _rig_campaign(spec, design, operating_points_of(spec.plan, design, n_ops), truth, spec.effects(),
+                            generation_seed, duration, f"blind-test campaign {spec.identifier}")
         folder = out / "campaigns" / spec.identifier
         folder.mkdir(parents=True, exist_ok=True)
         write_rig(folder / "rig.nc", rig)
@@ -317,6 +417,17 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         for name in ("true_parameters", "effects", "noise"):
             blind.attrs.pop(name, None)
         case = prepare_case(blind, design, seed=noise_seed)
+        if spec.nuisances.get("reference"):
+            # a healthy campaign of the same rig (its nuisances, its own noise and T2), learned blind too
+            from .reference import attach_reference, learn_reference
+
+            healthy_seed, learn_seed = reference_seed.spawn(2)
+            healthy = _rig_campaign(spec, design, operating_points_of(spec.plan, design, n_ops), truth, [],
+                                    healthy_seed, duration, f"healthy reference of {spec.identifier}")
+            for name in ("true_parameters", "effects", "noise"):
+                healthy.attrs.pop(name, None)
+            attach_reference(case, learn_reference(healthy, design, source=f"reference of {spec.identifier}",
+                                                   seed=learn_seed, workers=workers), blind)
         recorded_truth = json.loads(rig.attrs["true_parameters"])
         visibility = oracle_gap(case, spec, {**truth, "adhesion_torque": recorded_truth["adhesion_torque"]})
         case.executor = RunExecutor(case, workers)
@@ -334,6 +445,7 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "shrink_shares": [chosen.shrink_share for chosen in result.selected],
             "strength": spec.strength,
             "strength_value": spec.strength_value, "design": spec.design_name, "plan": spec.plan,
+            "nuisances": {key: value for key, value in spec.nuisances.items()},
             "effect_values": spec.effect_values, "true_parameters": truth,
             "verdict": result.verdict, "reason": result.reason,
             "partial": bool(result.decision is not None and result.decision.partial),
@@ -360,6 +472,21 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
 
         write_blindtest_report(_json_clean(content), out / "report.html")
     return _json_clean(content)
+
+
+def _rig_campaign(spec: CampaignSpec, design: Design, operating_points: Mapping[str, np.ndarray],
+                  truth: Mapping[str, float], effects: Sequence[Effect], seed: np.random.SeedSequence,
+                  duration: float, title: str) -> xr.Dataset:
+    """A blind-test campaign from the virtual rig, with the spec's nuisances (transfer path last)."""
+    from ..rig.transfer_path import apply_transfer_path
+
+    options = {key: value for key, value in spec.nuisances.items() if key not in ("transfer_path", "reference")}
+    rig = simulate_campaign(design, operating_points, true_parameters=dict(truth), effects=effects, seed=seed,
+                            duration=duration, run_in=0.3, title=title, **options)
+    if "transfer_path" in spec.nuisances:
+        frequency, damping = spec.nuisances["transfer_path"]
+        rig = apply_transfer_path(rig, "acc_pinion", frequency, damping)
+    return rig
 
 
 def _truth_set(campaign: Mapping[str, Any]) -> set[str]:
@@ -393,14 +520,21 @@ def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -
         named = [c for c in campaigns if name in _named_set(c)]
         acting = [c for c in campaigns if name in _truth_set(c)]
         hits = sum(1 for c in named if name in _truth_set(c))
+        # its share of the shrink where it was rightly named (campaigns that record the shares)
+        shares = [c["shrink_shares"][list(c["effects_named"]).index(name)] for c in named
+                  if name in _truth_set(c) and c.get("shrink_shares") is not None]
         rows.append({"effect": name, "named": len(named), "acting": len(acting), "correct": hits,
                      "precision": hits / len(named) if named else None,
-                     "recall": hits / len(acting) if acting else None})
+                     "recall": hits / len(acting) if acting else None,
+                     "shrink_share_median": float(np.median(shares)) if shares else None})
     exact = [(_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == HEALTHY)
              for c in campaigns]
     multi = [ok for c, ok in zip(campaigns, exact) if len(_truth_set(c)) > 1]
+    controls = [c for c in campaigns if not _truth_set(c)]
     return {"per_effect": rows, "set_exact": sum(exact) / len(exact) if exact else math.nan,
-            "n_multi_effect": len(multi), "set_exact_multi_effect": sum(multi) / len(multi) if multi else None}
+            "n_multi_effect": len(multi), "set_exact_multi_effect": sum(multi) / len(multi) if multi else None,
+            "n_controls": len(controls),
+            "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c))}
 
 
 def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *, seconds: float = math.nan,
@@ -476,5 +610,5 @@ def blindtest_dataset(content: Mapping[str, Any]) -> xr.Dataset:
     return ds
 
 
-__all__ = ["blindtest", "plan_campaigns", "summarise", "set_scores", "blindtest_dataset", "oracle_gap", "second_design",
+__all__ = ["blindtest", "plan_campaigns", "plan_real_world", "SUITES", "summarise", "set_scores", "blindtest_dataset", "oracle_gap", "second_design",
            "operating_points_of", "CampaignSpec", "HEALTHY", "STRENGTHS", "PLANS"]

@@ -451,10 +451,13 @@ def _effect_set_scores_html(content: Mapping[str, Any]) -> list[str]:
     return ["<h2>Effect sets: precision and recall per effect</h2>",
             f"<p>Named set exactly the true set: {_percent(sets['set_exact'])} of the campaigns"
             + (f" ({_percent(sets['set_exact_multi_effect'])} of the {sets['n_multi_effect']} with several effects)"
-               if sets.get("n_multi_effect") else "") + ".</p>",
-            _table(["effect", "acting", "named", "named and acting", "precision", "recall"],
-                   [[r["effect"], r["acting"], r["named"], r["correct"], r["precision"], r["recall"]]
-                    for r in sets["per_effect"]])]
+               if sets.get("n_multi_effect") else "")
+            + (f"; healthy controls with an effect named: {sets['controls_with_an_effect_named']} of "
+               f"{sets['n_controls']}" if sets.get("n_controls") is not None else "") + ".</p>",
+            _table(["effect", "acting", "named", "named and acting", "precision", "recall",
+                    "median shrink share"],
+                   [[r["effect"], r["acting"], r["named"], r["correct"], r["precision"], r["recall"],
+                     r.get("shrink_share_median")] for r in sets["per_effect"]])]
 
 
 def write_blindtest_report(content: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
