@@ -651,8 +651,10 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
                            nominal_gap=nominal_gap, where=where, families=families, locked_lines=locked, hints=hints,
                            effects=effect_names, timings=timings, decision=decision,
                            nominal_gap_interval=nominal_interval, selected=selected, rounds=rounds,
-                           final_held=final_held, remaining_where=where_gap(final_held.z, case),
-                           remaining_families=family_character(final_held.z, case, locked),
+                           final_held=final_held,
+                           # with no effect named the final model is the nominal one: its maps are already made
+                           remaining_where=where_gap(final_held.z, case) if selected else where,
+                           remaining_families=family_character(final_held.z, case, locked) if selected else families,
                            remaining_interval=tuple(remaining_interval))
 
 
