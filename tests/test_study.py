@@ -390,3 +390,10 @@ def test_diagnose_analysis_options_are_checked(tmp_path):
         parse_study(text.replace("x.nc", "gone.nc"), base_dir=tmp_path)
     with pytest.raises(StudyError, match=r"analyses\[0\].rig: missing \(required\)"):
         parse_study(text.replace("    rig: x.nc\n", "    effects: [friction]\n"), base_dir=tmp_path)
+    # the healthy reference campaign (uqgear diagnose --reference): resolved like rig, its absence named
+    assert parse_study(text + "    reference: x.nc\n", base_dir=tmp_path).analyses[0].options["reference"] == "x.nc"
+    with pytest.raises(StudyError, match=r"analyses\[0\].reference: file .*healthy_gone.nc not found; expected "
+                                         r"a uqgear-rig/1 netCDF file of the same rig with a healthy gearbox"):
+        parse_study(text + "    reference: healthy_gone.nc\n", base_dir=tmp_path)
+    with pytest.raises(StudyError, match=r"analyses\[0\].reference"):
+        parse_study(text + "    reference: [x.nc]\n", base_dir=tmp_path)
