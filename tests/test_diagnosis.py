@@ -254,6 +254,46 @@ def test_periodic_tiling_matches_full_simulation(design):
             assert a[k] == pytest.approx(b[k], rel=2e-3), (channel, feature)
 
 
+def test_runs_are_bit_identical_however_many_workers(healthy_case):
+    """Runs are reduced in groups fixed by the task list alone, one BLAS thread everywhere: the worker
+    count (and the dispatch order the executor picks from measured costs) never changes a bit."""
+    case = healthy_case
+    design = case.design
+    tasks = [rig_case.RunTask(op, design, scale, float(case.adhesion_lower[op]), (), "mesh")
+             for scale in (0.95, 1.0) for op in (0, 3, 7)]
+    tasks += [rig_case.RunTask(7, design, 1.0, float(case.adhesion_upper[7]), (), "free")]
+    alone = [rig_case.execute_run(case, task) for task in tasks]
+    sequential = rig_case.execute_runs(case, tasks)
+    executor = rig_case.RunExecutor(case, workers=2)
+    try:
+        assert executor.pool is not None
+        first = executor.map(tasks)
+        again = executor.map(tasks)          # dispatched in another order, dearest operating point first
+    finally:
+        executor.close()
+    for (a, pa), (b, pb), (c, pc) in zip(sequential, first, again):
+        assert np.array_equal(a, b, equal_nan=True) and np.array_equal(a, c, equal_nan=True)
+        assert pa == pb == pc
+    # reduced alone or in company, a run's features agree to rounding (of each channel's largest line)
+    for (a, _), (b, _) in zip(alone, sequential):
+        assert np.array_equal(np.isfinite(a), np.isfinite(b))
+        for row_a, row_b in zip(a, b):
+            finite = np.isfinite(row_a)
+            assert np.allclose(row_a[finite], row_b[finite], rtol=1e-9, atol=1e-9 * np.max(np.abs(row_a[finite])))
+
+
+def test_run_groups_hold_one_operating_point_each_and_keep_every_task():
+    task = rig_case.RunTask
+    tasks = [task(op, None, 1.0, 0.0, (), "mesh") for op in [3, 1, 3, 3, 1] + [2] * 19]
+    groups = rig_case.run_groups(tasks)
+    assert sorted(index for group in groups for index in group) == list(range(len(tasks)))
+    assert all(len({tasks[i].op for i in group}) == 1 for group in groups)
+    assert max(len(group) for group in groups) == rig_case._GROUP_SIZE
+    assert [len(group) for group in groups if tasks[group[0]].op == 2] == [8, 8, 3]
+    with pytest.raises(RuntimeError, match="one operating point"):
+        rig_case.execute_group(None, tasks[:2])
+
+
 def test_frequency_locked_line_found_and_order_lines_ignored(design):
     fs, n = 20480.0, 8192
     time = np.arange(n) / fs

@@ -637,7 +637,7 @@ def build_parser() -> argparse.ArgumentParser:
                           help="candidate effects (default: all six of the library)")
     diagnose.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     diagnose.add_argument("--workers", type=int, metavar="N",
-                          help="worker processes (default: one per two cores)")
+                          help="worker processes (default: one per CPU, at most 8)")
     diagnose.add_argument("--reference", metavar="HEALTHY.nc",
                           help="a campaign of the same rig and test plan with a known good gearbox: what it "
                           "shows against the fitted model (transfer paths, the rig's own structure) is learned "
@@ -658,7 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "once, a transfer-path resonance with a healthy reference, speed wander, pitch errors and "
                        "healthy controls with those nuisances (--n-per-effect campaigns of each kind)")
     blind.add_argument("--workers", type=int, metavar="N",
-                       help="worker processes of each diagnosis (default: one per two cores)")
+                       help="worker processes of each diagnosis (default: one per CPU, at most 8)")
     blind.set_defaults(handler=_command_blindtest)
     return parser
 

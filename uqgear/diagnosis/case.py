@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import xarray as xr
+from threadpoolctl import threadpool_limits
 
 from ..physics.design import Design
 from ..physics.effects import Effect
@@ -96,7 +98,7 @@ class RigCase:
         """Simulate and reduce runs (through the executor when one is attached)."""
         if self.executor is not None:
             return self.executor.map(tasks)
-        return [execute_run(self, task) for task in tasks]
+        return execute_runs(self, tasks)
 
 
 def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequence,
@@ -170,13 +172,73 @@ def simulate_task(case: RigCase, task: RunTask) -> SimulatedRun:
 
 def execute_run(case: RigCase, task: RunTask) -> tuple[np.ndarray, bool]:
     """Simulate a run and reduce its records with the rig's processing: (n_channel, all features), periodic."""
-    run = simulate_task(case, task)
-    stacked = np.stack([run.records[channel] for channel in case.channels])
-    features = case.processors[task.op].model_features(stacked)
+    return execute_group(case, [task])[0]
+
+
+def execute_group(case: RigCase, tasks: Sequence[RunTask]) -> list[tuple[np.ndarray, bool]]:
+    """Simulate runs of one operating point and reduce their records together.
+
+    The line fit reads its least-squares basis (tens of MB) once per call:
+    records of the same run in one call share that read, which is most of a
+    periodic run's cost.
+    """
+    ops = {task.op for task in tasks}
+    if len(ops) != 1:
+        # an internal invariant (run_groups makes the groups): the step log reports it as internal
+        raise RuntimeError(f"execute_group: expected runs of one operating point; got runs {sorted(ops)}")
+    op = ops.pop()
+    runs = [simulate_task(case, task) for task in tasks]
+    stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
+    features = case.processors[op].model_features(stacked).reshape(len(runs), len(case.channels), -1)
     if case.transfer is not None:
         # the rig sees the gear through its transfer paths: the model's features as the rig would record them
-        features = features * case.transfer[task.op]
-    return features, run.periodic
+        features = features * case.transfer[op]
+    return [(features[index], run.periodic) for index, run in enumerate(runs)]
+
+
+# Most runs of one operating point reduced in one call (:func:`execute_group`):
+# enough to share the line fit's basis, few enough to spread a batch over workers.
+_GROUP_SIZE = 8
+
+
+def run_groups(tasks: Sequence[RunTask]) -> list[list[int]]:
+    """Indices of ``tasks`` in groups of one operating point, at most :data:`_GROUP_SIZE` each.
+
+    The grouping depends on the task list alone, never on the number of
+    workers: every run is reduced in the same company, so the numbers are
+    the same bit for bit however the groups are spread.
+    """
+    by_op: dict[int, list[int]] = {}
+    for index, task in enumerate(tasks):
+        by_op.setdefault(task.op, []).append(index)
+    groups = []
+    for op in sorted(by_op):
+        indices = by_op[op]
+        groups += [indices[start:start + _GROUP_SIZE] for start in range(0, len(indices), _GROUP_SIZE)]
+    return groups
+
+
+def execute_runs(case: RigCase, tasks: Sequence[RunTask],
+                 group_map: Callable[[list[list[RunTask]]], list[list[tuple[np.ndarray, bool]]]] | None = None
+                 ) -> list[tuple[np.ndarray, bool]]:
+    """Features and periodicity of each task, in order, computed group by group (:func:`run_groups`).
+
+    ``group_map`` maps the task groups to their results (a worker pool's
+    map); by default they are computed here, with one BLAS thread as in a
+    worker.
+    """
+    groups = run_groups(tasks)
+    grouped = [[tasks[index] for index in group] for group in groups]
+    if group_map is None:
+        with threadpool_limits(1):
+            results = [execute_group(case, group) for group in grouped]
+    else:
+        results = group_map(grouped)
+    out: list[tuple[np.ndarray, bool] | None] = [None] * len(tasks)
+    for group, values in zip(groups, results):
+        for index, value in zip(group, values):
+            out[index] = value
+    return out  # type: ignore[return-value]
 
 
 # The case a forked worker process inherits from its parent (set just before
@@ -185,13 +247,26 @@ def execute_run(case: RigCase, task: RunTask) -> tuple[np.ndarray, bool]:
 _INHERITED_CASE: RigCase | None = None
 
 
-def _worker_execute(task: RunTask) -> tuple[np.ndarray, bool]:
+def _worker_execute(tasks: list[RunTask]) -> tuple[list[tuple[np.ndarray, bool]], float]:
     assert _INHERITED_CASE is not None, "worker started without a case"  # internal invariant, not user input
-    return execute_run(_INHERITED_CASE, task)
+    started = time.perf_counter()
+    results = execute_group(_INHERITED_CASE, tasks)
+    return results, time.perf_counter() - started
+
+
+def _single_threaded_worker() -> None:
+    # the workers are the parallelism: a multi-threaded BLAS in each would only spin on the same cores
+    threadpool_limits(1)
 
 
 class RunExecutor:
     """Runs :class:`RunTask` lists sequentially or over forked worker processes.
+
+    Every run's linear algebra is single-threaded, in this process as in a
+    worker: the runs of a batch are the parallelism (a threaded BLAS on top
+    of them only busy-waits, measured: the same wall time at twice the CPU
+    time), and one thread count everywhere keeps the numbers bit for bit the
+    same however many workers there are.
 
     Parameters
     ----------
@@ -208,16 +283,35 @@ class RunExecutor:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
             _INHERITED_CASE = case
             try:
-                self.pool = multiprocessing.get_context("fork").Pool(workers)
+                self.pool = multiprocessing.get_context("fork").Pool(workers, initializer=_single_threaded_worker)
             finally:
                 _INHERITED_CASE = None
         self.workers = workers if self.pool is not None else 1
+        # seconds per run of each operating point, as last measured: the dearest groups go out first
+        self._run_seconds: dict[int, float] = {}
 
     def map(self, tasks: Sequence[RunTask]) -> list[tuple[np.ndarray, bool]]:
         if self.pool is None or len(tasks) < 2:
-            return [execute_run(self.case, task) for task in tasks]
-        chunk = max(1, len(tasks) // (4 * self.workers))
-        return self.pool.map(_worker_execute, tasks, chunksize=chunk)
+            return execute_runs(self.case, tasks)
+        return execute_runs(self.case, tasks, self._spread)
+
+    def _spread(self, groups: list[list[RunTask]]) -> list[list[tuple[np.ndarray, bool]]]:
+        """Results of the groups, computed by the workers, the longest expected first.
+
+        A run that does not repeat (simulated over the whole record) costs
+        several times a periodic one, and such runs gather at a few
+        operating points: sent last, their groups would leave the other
+        workers idle. Only the order of dispatch changes, never a group.
+        """
+        assert self.pool is not None  # internal invariant: called only with a pool
+        expected = [len(group) * self._run_seconds.get(group[0].op, math.inf) for group in groups]
+        order = sorted(range(len(groups)), key=lambda index: -expected[index])
+        answers = self.pool.map(_worker_execute, [groups[index] for index in order], chunksize=1)
+        results: list[list[tuple[np.ndarray, bool]]] = [[] for _ in groups]
+        for index, (values, seconds) in zip(order, answers):
+            results[index] = values
+            self._run_seconds[groups[index][0].op] = seconds / len(groups[index])
+        return results
 
     def close(self) -> None:
         if self.pool is not None:

@@ -9,6 +9,7 @@ records of either source with exactly the rig's feature processing.
 from __future__ import annotations
 
 import math
+from functools import partial
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -25,9 +26,16 @@ from ..rig.features import feature_definitions
 from ..rig.virtual_rig import frequency_filter
 from .errors import DiagnosisError
 
-# Run-in simulated before the kept window: about 9 time constants of the
-# slowest decay (about 17 ms on the reference design: a transient falls by 2e-5).
+# Run-in simulated before the kept window: about 8 time constants of the
+# slowest linear decay (18 ms on the reference design: a transient falls by 3e-4).
 _RUN_IN = 0.15
+# A window is taken as one period of the steady response when the state
+# returns to within this share of its peak-to-peak range. What is left of
+# the start-up transient after the run-in (a few 1e-3 of the range on the
+# slow gear mode at some speeds, measured) is below it, and tiling the
+# window leaves that out as the steady response should; a quasi-periodic or
+# chaotic response misses by 5e-2 to 1 and is simulated in full.
+_PERIODIC_TOLERANCE = 1e-2
 # Guard on each side of a non-periodic window, so that the band-limiting
 # filter's wrap-around stays outside the record.
 _GUARD = 0.025
@@ -167,8 +175,8 @@ class CampaignSimulator:
     one period of its steady response (a mesh period, a pinion or a gear
     revolution, by the effects present), which is tiled over the record; a
     run whose state does not return after that period (a quasi-periodic or
-    chaotic response, or an effect at a frequency of its own) is simulated
-    over the whole record instead. Displacements are band-limited like the
+    chaotic response, a slowly settling one, or an effect at a frequency of
+    its own) is simulated over the whole record instead. Displacements are band-limited like the
     rig's anti-alias filter and accelerations taken as their second
     derivative in the frequency domain (sampling y'' directly would alias
     the jumps of the mesh stiffness), then resampled onto the rig's grid.
@@ -202,6 +210,8 @@ class CampaignSimulator:
         self.passband = self.fs / 2.56
         self.stopband = self.fs / 2.0
         self.rig_time = np.arange(self.size) / self.fs
+        # filters, tapers and interpolation weights per grid: the same for every run of an operating point
+        self._grid_cache: dict[tuple, Any] = {}
         # the stiffest bearings a fit may propose (candidates.nominal_parameters), inside the design's range
         stiff = design.replace(k1=min(design.k1 * 2.0, design_key_bounds("k1")[1]),
                                k2=min(design.k2 * 2.0, design_key_bounds("k2")[1]))
@@ -238,11 +248,16 @@ class CampaignSimulator:
         """
         if periodicity not in PERIODICITIES:
             raise DiagnosisError(f"periodicity: expected one of {', '.join(PERIODICITIES)}; got {periodicity!r}")
+        simulate = partial(self._simulate, op, design, mesh_stiffness_scale, adhesion_torque, effects)
+        f_mesh = self.mesh_frequency(op)
+        run_in = int(math.ceil(_RUN_IN * f_mesh))
         if periodicity != "free":
-            result = self._periodic(op, design, mesh_stiffness_scale, adhesion_torque, effects, periodicity)
+            window = self.window_periods(periodicity, op)
+            result = self._tiled(op, *simulate(run_in + window + 1, window + 1), window, periodicity)
             if result is not None:
                 return result
-        return self._free(op, design, mesh_stiffness_scale, adhesion_torque, effects)
+        whole = self.window_periods("free", op)
+        return self._whole(op, simulate(run_in + whole, whole)[0])
 
     def _simulate(self, op: int, design: Design, scale: float, adhesion_torque: float, effects: Sequence[Effect],
                   n_periods: int, keep_periods: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -262,63 +277,94 @@ class CampaignSimulator:
                    + history[:, columns["ste"]]}
         return signals, poincare
 
-    def _periodic(self, op: int, design: Design, scale: float, adhesion_torque: float, effects: Sequence[Effect],
-                  periodicity: str) -> SimulatedRun | None:
+    def _tiled(self, op: int, signals: Mapping[str, np.ndarray], poincare: np.ndarray, window: int,
+               periodicity: str) -> SimulatedRun | None:
+        """Records tiled from the first ``window`` mesh periods of a simulation, or None if they do not repeat."""
         f_mesh = self.mesh_frequency(op)
-        window = self.window_periods(periodicity, op)
-        # a run-in of whole windows puts the kept window's start at the response's phase 0
-        run_in = int(math.ceil(_RUN_IN * f_mesh))
-        signals, poincare = self._simulate(op, design, scale, adhesion_torque, effects, run_in + window + 1,
-                                           window + 1)
         per_period = self.samples_per_period[op]
         kept = window * per_period
         # the state one window later must be where it started, else the response is not periodic
         spread = np.array([np.ptp(signals[name][:kept]) for name in ("y1", "y2", "x")])
         change = np.abs(poincare[window, :3] - poincare[0, :3])
-        if np.any(change > 1e-3 * np.maximum(spread, 1e-12)):
+        if np.any(change > _PERIODIC_TOLERANCE * np.maximum(spread, 1e-12)):
             return None
         period = window / f_mesh
         rate = per_period * f_mesh
         # upsampled grid fine enough for linear interpolation of the band-limited signal
         factor = max(1, int(math.ceil(4.0 * self.fs / rate)))
-        grid = np.arange(kept * factor) * (period / (kept * factor))
-        records = {}
-        for channel in self.channels:
-            raw, order = self._raw(signals, channel)
-            spectrum = np.fft.rfft(raw[:kept] - raw[:kept].mean())
-            spectrum *= frequency_filter(kept, rate, self.passband, self.stopband, order)
-            fine = np.fft.irfft(spectrum, n=kept * factor) * factor
-            records[channel] = np.interp(self.rig_time, grid, fine, period=period)
-        return SimulatedRun(records, True, periodicity)
+        raw = np.stack([self._raw(signals, channel)[:kept] for channel in self.channels])
+        spectrum = np.fft.rfft(raw - raw.mean(axis=1, keepdims=True), axis=1) * self._filters(kept, rate)
+        fine = np.fft.irfft(spectrum, n=kept * factor, axis=1) * factor
+        index, weight = self._interpolation(("periodic", op, kept * factor), self.rig_time * (kept * factor / period),
+                                            kept * factor, periodic=True)
+        values = fine[:, index] + weight * (fine[:, index + 1] - fine[:, index])
+        return SimulatedRun(dict(zip(self.channels, values)), True, periodicity)
 
-    def _free(self, op: int, design: Design, scale: float, adhesion_torque: float,
-              effects: Sequence[Effect]) -> SimulatedRun:
-        f_mesh = self.mesh_frequency(op)
-        window = self.window_periods("free", op)
-        run_in = int(math.ceil(_RUN_IN * f_mesh))
-        signals, _ = self._simulate(op, design, scale, adhesion_torque, effects, run_in + window, window)
-        rate = self.samples_per_period[op] * f_mesh
+    def _whole(self, op: int, signals: Mapping[str, np.ndarray]) -> SimulatedRun:
+        """Records from a simulation of the whole record (with its guards), band-limited and resampled."""
+        rate = self.samples_per_period[op] * self.mesh_frequency(op)
         size = signals["te"].size
-        time = np.arange(size) / rate
-        taper = np.ones(size)
-        edge = 0.6 * _GUARD
-        left, right = time < edge, time > time[-1] - edge
-        taper[left] = 0.5 * (1.0 - np.cos(np.pi * time[left] / edge))
-        taper[right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[right]) / edge))
         factor = max(1, int(math.ceil(4.0 * self.fs / rate)))
-        grid = np.arange(size * factor) / (rate * factor)
-        records = {}
-        for channel in self.channels:
-            raw, order = self._raw(signals, channel)
-            centred = (raw - raw.mean()) * taper
-            spectrum = np.fft.rfft(centred) * frequency_filter(size, rate, self.passband, self.stopband, order)
-            fine = np.fft.irfft(spectrum, n=size * factor) * factor
-            records[channel] = np.interp(self.rig_time + _GUARD, grid, fine)
-        return SimulatedRun(records, False, "free")
+        raw = np.stack([self._raw(signals, channel) for channel in self.channels])
+        centred = (raw - raw.mean(axis=1, keepdims=True)) * self._edge_taper(size, rate)
+        spectrum = np.fft.rfft(centred, axis=1) * self._filters(size, rate)
+        fine = np.fft.irfft(spectrum, n=size * factor, axis=1) * factor
+        index, weight = self._interpolation(("free", op, size * factor), (self.rig_time + _GUARD) * (rate * factor),
+                                            size * factor, periodic=False)
+        values = fine[:, index] + weight * (fine[:, index + 1] - fine[:, index])
+        return SimulatedRun(dict(zip(self.channels, values)), False, "free")
+
+    def _filters(self, size: int, rate: float) -> np.ndarray:
+        """The anti-alias filter (and derivative) of each channel, (n_channel, size // 2 + 1), built once per grid."""
+        key = ("filters", size, rate)
+        if key not in self._grid_cache:
+            self._grid_cache[key] = np.stack([
+                frequency_filter(size, rate, self.passband, self.stopband, self._raw_order(channel))
+                for channel in self.channels])
+        return self._grid_cache[key]
+
+    def _edge_taper(self, size: int, rate: float) -> np.ndarray:
+        """Raised-cosine edges of a non-periodic window (inside its guards), built once per grid."""
+        key = ("taper", size, rate)
+        if key not in self._grid_cache:
+            time = np.arange(size) / rate
+            taper = np.ones(size)
+            edge = 0.6 * _GUARD
+            left, right = time < edge, time > time[-1] - edge
+            taper[left] = 0.5 * (1.0 - np.cos(np.pi * time[left] / edge))
+            taper[right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[right]) / edge))
+            self._grid_cache[key] = taper
+        return self._grid_cache[key]
+
+    def _interpolation(self, key: tuple, position: np.ndarray, size: int, *, periodic: bool
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Left neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
+
+        ``position`` is in grid steps; a periodic grid wraps (its last point's
+        right neighbour is the first), which the index arrays get by a
+        repeated first column. Built once per grid: the rig's time points
+        are the same for every run.
+        """
+        if key not in self._grid_cache:
+            if periodic:
+                position = np.mod(position, size)
+            index = np.clip(np.floor(position).astype(np.intp), 0, size - 2 if not periodic else size - 1)
+            weight = position - index
+            if periodic:
+                # the right neighbour of the last point is the first: a wrapped index
+                index = np.where(index >= size - 1, index - size, index)
+            self._grid_cache[key] = (index, weight)
+        return self._grid_cache[key]
 
     @staticmethod
-    def _raw(signals: Mapping[str, np.ndarray], channel: str) -> tuple[np.ndarray, int]:
+    def _raw(signals: Mapping[str, np.ndarray], channel: str) -> np.ndarray:
+        """The simulated displacement a channel is made of (accelerations: its second derivative)."""
         if channel == "te":
-            return signals["te"], 0
-        return signals["y1" if channel == "acc_pinion" else "y2"], 2
+            return signals["te"]
+        return signals["y1" if channel == "acc_pinion" else "y2"]
+
+    @staticmethod
+    def _raw_order(channel: str) -> int:
+        """Time derivatives between the simulated displacement and the channel (0: TE, 2: accelerations)."""
+        return 0 if channel == "te" else 2
 

@@ -249,12 +249,18 @@ def _noted(content: dict[str, Any], design: Design) -> dict[str, Any]:
 
 
 def default_workers() -> int:
-    """Worker processes by default: one per two CPUs.
+    """Worker processes by default: one per CPU this process may use, at most 8.
 
-    A worker's own numpy (BLAS) calls already keep about two cores busy: on
-    2 CPUs one process diagnoses a campaign about 13 % faster than two.
+    Runs are single-threaded (:class:`~.case.RunExecutor`), so each CPU gets
+    a worker: on 2 CPUs two workers diagnose an 8-run campaign about 1.5x
+    faster than one (benchmarks/diagnosis.py). Beyond 8 a fit's batches
+    (one run per operating point and parameter) no longer keep them busy.
     """
-    return max(1, (os.cpu_count() or 1) // 2)
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        available = os.cpu_count() or 1
+    return max(1, min(available, 8))
 
 
 def _check_workers(workers: int | None) -> int:
@@ -299,7 +305,7 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     seed : int or SeedSequence
         Seeds the noise calibration and the bootstrap.
     workers : int, optional
-        Worker processes for the simulations (default: one per two CPUs, :func:`default_workers`).
+        Worker processes for the simulations (default: one per CPU, at most 8, :func:`default_workers`).
     calibration : path or xarray.Dataset, optional
         A calibration of this campaign (``posterior.nc`` of ``uqgear
         calibrate``, or its folder): the nominal fit starts from its posterior
