@@ -11,6 +11,18 @@ from uqgear.diagnosis import prepare_case
 from uqgear.physics.design import load_design
 from uqgear.rig.format import read_rig, rig_design
 
+#: Test files that take longest (minutes on 2 cores, measured), started first: with one file per
+#: process (pytest-xdist's --dist loadfile) a long file collected last would finish alone.
+LONGEST_FIRST = ("test_packaging.py", "test_diagnosis.py", "test_blindtest.py", "test_calibration.py",
+                 "test_cli.py", "test_diagnosis_multi.py", "test_reference.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Put the longest test files first (a stable sort: the order inside each file is kept)."""
+    rank = {name: index for index, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 #: The labelled rig campaigns copied into the repository (data/rig/README.md says what each holds).
 RIG_DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
