@@ -13,8 +13,9 @@ from uqgear.rig.format import read_rig, rig_design
 
 #: Test files that take longest (minutes on 2 cores, measured), started first: with one file per
 #: process (pytest-xdist's --dist loadfile) a long file collected last would finish alone.
-LONGEST_FIRST = ("test_packaging.py", "test_diagnosis.py", "test_blindtest.py", "test_calibration.py",
-                 "test_cli.py", "test_diagnosis_multi.py", "test_reference.py")
+LONGEST_FIRST = ("test_packaging.py", "test_study.py", "test_diagnosis.py", "test_dynamics.py",
+                 "test_calibration.py", "test_cli.py", "test_blindtest.py", "test_diagnosis_multi.py",
+                 "test_reference.py")
 
 
 def pytest_collection_modifyitems(config, items):
