@@ -341,8 +341,8 @@ class CampaignSimulator:
         """Left neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
 
         ``position`` is in grid steps; a periodic grid wraps (its last point's
-        right neighbour is the first), which the index arrays get by a
-        repeated first column. Built once per grid: the rig's time points
+        right neighbour is the first): that point's index is stored as -1, so
+        that ``index + 1`` is 0. Built once per grid: the rig's time points
         are the same for every run.
         """
         if key not in self._grid_cache:
