@@ -28,7 +28,7 @@ import argparse
 import time
 from pathlib import Path
 
-import numba
+from uqgear.physics.threads import default_threads
 
 from uqgear.calibration import Calibration
 
@@ -50,7 +50,7 @@ def run(name: str, threads: int | None, seed: int) -> bool:
     calibration = Calibration(seed=seed, threads=threads).fit(DATA / name)
     wall, cpu = time.perf_counter() - start_wall, time.process_time() - start_cpu
     diagnostics = calibration.diagnostics_
-    print(f"\n=== {name}: wall {wall:.1f} s, CPU {cpu:.1f} s ({numba.get_num_threads()} threads), "
+    print(f"\n=== {name}: wall {wall:.1f} s, CPU {cpu:.1f} s ({default_threads()} threads), "
           f"{calibration.timing_['model_runs']} model runs, {len(calibration.emulator_['stages'])} emulator stages, "
           f"{diagnostics['n_steps']} final emcee steps x {diagnostics['n_walkers']} walkers")
     print(f"converged: {calibration.converged_}  tau_max {diagnostics['tau_max']:.1f}  "

@@ -27,7 +27,7 @@ import time
 import types
 from pathlib import Path
 
-import numba
+from uqgear.physics.threads import default_threads
 import numpy as np
 
 import uqgear
@@ -94,7 +94,7 @@ def batch(design, n_speeds: int, n_adhesion: int) -> None:
     rss_after = _peak_rss_mib()
     steps = float((result["steps_per_period"] * 400).sum())
     print(f"batch: {n} runs ({n_speeds} speeds 200-6000 rpm x {n_adhesion} T2 values), 400 mesh periods, "
-          f"200 kept, {numba.get_num_threads()} threads")
+          f"200 kept, {default_threads()} threads")
     print(f"  time {elapsed:.1f} s  ({elapsed / n * 1e3:.2f} ms/run, {steps / elapsed / 1e6:.1f} M RK4 steps/s)")
     print(f"  kept output {result.nbytes / 2**20:.1f} MiB; peak RSS {rss_after:.0f} MiB "
           f"(growth during the batch {rss_after - rss_before:.0f} MiB)")

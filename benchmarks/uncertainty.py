@@ -72,14 +72,12 @@ def monte_carlo(design, n_samples: int) -> None:
     print(f"Monte Carlo: {n_samples} samples at 3000 rpm (T2 uniform on its interval, stiffness scale N(1, 0.05))")
     timings = {}
     results = {}
-    import numba
-
     for threads in (1, 2):
-        numba.set_num_threads(threads)
+        model.threads = threads
         start = time.perf_counter()
         results[f"threads={threads}"] = Runner(chunk_size=1000, progress=False).run(model, samples)
         timings[f"threads={threads}"] = time.perf_counter() - start
-    numba.set_num_threads(2)
+    model.threads = 2
     from distributed import Client, LocalCluster
 
     for workers in (1, 2):

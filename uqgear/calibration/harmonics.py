@@ -30,6 +30,7 @@ from ..physics import _kernels as K
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..physics.integration import build_batch, steps_per_period
+from ..physics.threads import spread
 from ..rig.features import extract_features
 from .errors import CalibrationError
 
@@ -94,7 +95,8 @@ def _shoot(state, p, pair_k, period_k, fp, fg, schedule, scale, tolerance, max_n
     return 0
 
 
-@nb.njit(cache=True)
+# numba-inlined into its only caller (not compiled and emitted twice; see uqgear.physics._kernels.INLINED)
+@nb.njit(cache=True, inline="always")
 def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, transient_periods, min_periods,
                       max_periods, tolerance, scale, n_harmonics, shoot, out, info):
     schedule = K.build_schedule(p, pair_k, period_k, bps, steps)
@@ -172,11 +174,12 @@ def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, tr
     info[1] = 1.0 if periodic >= min_periods else 0.0
 
 
-@nb.njit(cache=True, parallel=True)
-def _harmonics_batch(states, params, pair_tables, period_tables, table_index, factor_pinion, factor_gear,
-                     breakpoints, steps, stride, transient_periods, min_periods, max_periods, tolerance, scales,
-                     n_harmonics, shoot, out, info):
-    for i in nb.prange(params.shape[0]):
+@nb.njit(cache=True, nogil=True)
+def _harmonics_batch(start, stop, states, params, pair_tables, period_tables, table_index, factor_pinion,
+                     factor_gear, breakpoints, steps, stride, transient_periods, min_periods, max_periods, tolerance,
+                     scales, n_harmonics, shoot, out, info):
+    """Samples ``start`` to ``stop - 1`` (GIL released; threads share a batch by ranges)."""
+    for i in range(start, stop):
         state = states[i].copy()
         table = table_index[i]
         _steady_harmonics(state, params[i], pair_tables[table], period_tables[table], factor_pinion[i],
@@ -249,17 +252,12 @@ def model_harmonics(design: Design, samples: xr.Dataset, *, effects: Sequence[Ef
     out = np.zeros((n, 3, int(n_harmonics)))
     info = np.zeros((n, 2))
     if n:
-        previous_threads = nb.get_num_threads()
-        if threads is not None:
-            nb.set_num_threads(max(1, min(int(threads), nb.config.NUMBA_NUM_THREADS)))
-        try:
-            _harmonics_batch(np.stack([s.static_state() for s in setups]), np.stack([s.parameters for s in setups]),
-                             np.stack(pair_tables), np.stack(period_tables), table_index,
-                             np.stack([s.factor_pinion for s in setups]), np.stack([s.factor_gear for s in setups]),
-                             breakpoints, steps, stride, transient_periods, 2, window_periods, float(tolerance),
-                             scales, int(n_harmonics), periodic_model, out, info)
-        finally:
-            nb.set_num_threads(previous_threads)
+        arrays = (np.stack([s.static_state() for s in setups]), np.stack([s.parameters for s in setups]),
+                  np.stack(pair_tables), np.stack(period_tables), table_index,
+                  np.stack([s.factor_pinion for s in setups]), np.stack([s.factor_gear for s in setups]),
+                  breakpoints, steps, stride, transient_periods, 2, window_periods, float(tolerance),
+                  scales, int(n_harmonics), periodic_model, out, info)
+        spread(lambda start, stop: _harmonics_batch(start, stop, *arrays), n, threads)
     coords: dict[str, Any] = {"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1)}
     for name in samples.data_vars:
         coords[name] = ("sample", samples[name].values)

@@ -28,7 +28,7 @@ import numba as nb
 
 from uqgear.physics._kernels import (
     CONTACT_RATIO, CM, C1, C2, CLEARANCE1, CLEARANCE2, DAMP_IN_SEPARATION, ECC_KAPPA, ECC_OMEGA, ECC_PHASE,
-    F_K, F_SINE, FRICTION, HALF_BACKLASH, JIT_OPTIONS, K1, K2, M1, M2, MAX_PAIRS, ME, N_PARAMS,
+    F_K, F_SINE, FRICTION, HALF_BACKLASH, INLINED, JIT_OPTIONS, K1, K2, M1, M2, MAX_PAIRS, ME, N_PARAMS,
     OMEGA_MESH, STE_PHASE, STIFFNESS_SCALE, TOOTH_FACTORS, TWO_PI, USE_PERIOD_TABLE, Z1, Z2, _crossing_fraction,
     _friction_arms, _friction_term, _interp_uniform, _mesh_position, _shifted, _time_terms, contact_region,
     dead_zone, rk4_combine)
@@ -41,7 +41,7 @@ PAIR_OFFSET = PAIR_FRICTION + MAX_PAIRS
 N_PAIR_TERMS = PAIR_OFFSET + MAX_PAIRS
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def pair_offset(tooth, p):
     """e_pinion + e_gear (m) of the pair brought into mesh by meshing number ``tooth``.
 
@@ -52,7 +52,7 @@ def pair_offset(tooth, p):
     return p[N_PARAMS + tooth % z1] + p[N_PARAMS + z1 + tooth % int(p[Z2])]
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def _pair(i, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg):
     """(k_i, pinion arm, gear arm, e_i) of pair ``i``, unscaled; zeros when it is not in mesh."""
     if not u_ref + i < eps:
@@ -68,7 +68,7 @@ def _pair(i, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg):
     return kp, pinion, gear, pair_offset(tooth, p)
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def _pack(count, a, b, c, d, scale, drive, ste, ste_acc, p):
     """The 18-tuple forcing from four (k, arms, e) pair tuples, with the stiffness scale applied."""
     k0, k1, k2, k3 = a[0] * scale, b[0] * scale, c[0] * scale, d[0] * scale
@@ -112,7 +112,7 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
                  _pair(3, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg), scale, drive, ste, ste_acc, p)
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def _row_pair(i, n, table, sub, stage, n_pairs, ratio, p, fp, fg):
     """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._kernels.build_schedule`."""
     if i >= n_pairs:
@@ -129,7 +129,7 @@ def _row_pair(i, n, table, sub, stage, n_pairs, ratio, p, fp, fg):
     return kp, pinion, gear, pair_offset(tooth, p)
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def _forcing_row_pairs(t, n, table, sub, stage, n_pairs, p, fp, fg):
     """:func:`forcing_pairs` at absolute time ``t`` in mesh period ``n`` from a tabulated stage."""
     ratio = 1.0
@@ -149,7 +149,7 @@ def _forcing_row_pairs(t, n, table, sub, stage, n_pairs, p, fp, fg):
                  _row_pair(3, n, table, sub, stage, n_pairs, ratio, p, fp, fg), scale, drive, ste, ste_acc, p)
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def derivative_pairs(s, terms, p):
     """:func:`~uqgear.physics._kernels.derivative` with one dead zone per pair: F = sum k_i f(x - e_i) + c_m* x'.
 
@@ -180,7 +180,7 @@ def derivative_pairs(s, terms, p):
     return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - terms[4]), force
 
 
-@nb.njit(**JIT_OPTIONS, inline="always")
+@nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
     """:func:`~uqgear.physics._kernels._rk4` with the pair-resolved derivative."""
     d2, _ = derivative_pairs(_shifted(s, 0.5 * h, d1), mid, p)

@@ -29,6 +29,7 @@ from .effects import Effect
 from ..common.errors import OperatingPointError
 from .model import ModelSetup, build_model, natural_frequencies
 from .pitch_errors import PitchErrors
+from .threads import spread
 
 METHODS = ("fast", "scipy")
 OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
@@ -502,8 +503,6 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         ``poincare_x`` and ``poincare_x_velocity``; input variables as
         coordinates on ``sample``.
     """
-    import numba
-
     _check_counts(n_periods, keep_periods)
     setups = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation,
                          stiffness=stiffness, pitch_errors=pitch_errors)
@@ -533,16 +532,15 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     poincare = np.empty((n, keep_periods, 2))
     channels = 4 if rig_channels and history_per_period > 0 else 1
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
-    previous_threads = numba.get_num_threads()
-    if threads is not None:
-        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    try:
-        if n:
-            K.integrate_batch(states, params, np.stack(pair_tables), np.stack(period_tables), table_index,
-                              factor_pinion, factor_gear, breakpoints, steps, n_periods, keep_periods,
-                              history_stride.astype(np.int64), lyapunov, scales, accumulators, poincare, history)
-    finally:
-        numba.set_num_threads(previous_threads)
+    if n:
+        pair_stack, period_stack, strides = np.stack(pair_tables), np.stack(period_tables), history_stride.astype(np.int64)
+
+        def run_range(start: int, stop: int) -> None:
+            K.integrate_batch(start, stop, states, params, pair_stack, period_stack, table_index, factor_pinion,
+                              factor_gear, breakpoints, steps, n_periods, keep_periods, strides, lyapunov, scales,
+                              accumulators, poincare, history)
+
+        spread(run_range, n, threads)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
     mean_x = accumulators[:, K.Q_X_SUM] / count
     mean_force = np.array([s.derived["static_mesh_force"] for s in setups])
