@@ -24,7 +24,7 @@ import warnings
 from pathlib import Path
 
 from uqgear.diagnosis.workflow import diagnose
-from uqgear.physics.design import Design, Operation
+from uqgear.physics.design import load_design
 from uqgear.physics.effects import Eccentricity
 from uqgear.common.errors import UndercutWarning
 from uqgear.rig.format import write_rig
@@ -34,23 +34,11 @@ DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 LABELS = {"healthy.nc": "none", "healthy_b.nc": "none", "eccentricity.nc": "eccentricity",
           "tooth_damage.nc": "tooth_damage", "torque_ripple.nc": "torque_ripple",
           "adhesion_oscillation.nc": "adhesion_oscillation", "friction.nc": "friction"}
-#: A 17:38 test-rig gearbox, module 3 mm, no profile shift (as in tests/test_real_gears.py).
-PAIR_17_38 = {
-    "z1": 17, "z2": 38, "module": 0.003, "pressure_angle": 20.0, "x1": 0.0, "x2": 0.0,
-    "addendum_coefficient": 1.0, "dedendum_coefficient": 1.25, "face_width": 0.02,
-    "youngs_modulus": 206.0e9, "poisson_ratio": 0.3, "m1": 1.0, "m2": 3.0, "I1": 2.0e-3, "I2": 8.0e-3,
-    "k1": 1.0e8, "k2": 1.0e8, "zeta1": 0.05, "zeta2": 0.05, "zeta_mesh": 0.05, "backlash": 0.1e-3,
-    "ste_amplitude": 5.0e-6,
-}
-#: Its operation: T2 = mu Q R_w brackets the balancing torque 100 x 38/17 = 224 N m.
-OPERATION_17_38 = Operation(drive_torque=100.0, axle_load=300.0, wheel_radius=0.32, adhesion_coefficient=(0.15, 0.33))
-
-
 def fifty_khz_campaign(folder: Path) -> Path:
-    """A 6-run, 50 kHz, 1 s campaign of the 17:38 gearbox with a 12 um pinion run-out (virtual rig, seed 5)."""
+    """A 6-run, 50 kHz, 1 s campaign of the bundled 17:38 gearbox (``pair_17_38``) with a 12 um pinion run-out (virtual rig, seed 5)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UndercutWarning)       # the unshifted 17-tooth pinion, modelled
-        design = Design.from_mapping(PAIR_17_38, name="pair_17_38", operation=OPERATION_17_38)
+        design = load_design("pair_17_38")
         campaign = simulate_campaign(
             design, {"pinion_speed": [900.0, 1400.0, 2000.0, 2600.0, 3300.0, 4000.0],
                      "drive_torque": [110.0, 90.0, 100.0, 120.0, 95.0, 105.0]},

@@ -35,17 +35,16 @@ from uqgear.physics.stiffness import mesh_stiffness, tooth_compliance
 ROOT = Path(__file__).resolve().parent.parent
 ENVIRONMENT = {**os.environ, "UQGEAR_PROGRESS": "0", "MPLBACKEND": "Agg"}
 
-#: A 17:38 test-rig gearbox, module 3 mm, no profile shift: the pinion is (marginally) undercut.
-PAIR_17_38 = {
-    "z1": 17, "z2": 38, "module": 0.003, "pressure_angle": 20.0, "x1": 0.0, "x2": 0.0,
-    "addendum_coefficient": 1.0, "dedendum_coefficient": 1.25, "face_width": 0.02,
-    "youngs_modulus": 206.0e9, "poisson_ratio": 0.3, "m1": 1.0, "m2": 3.0, "I1": 2.0e-3, "I2": 8.0e-3,
-    "k1": 1.0e8, "k2": 1.0e8, "zeta1": 0.05, "zeta2": 0.05, "zeta_mesh": 0.05, "backlash": 0.1e-3,
-    "ste_amplitude": 5.0e-6,
-}
-#: Its operation: T2 = mu Q R_w brackets the balancing torque 100 x 38/17 = 224 N m.
-OPERATION_17_38 = {"drive_torque": 100.0, "axle_load": 300.0, "wheel_radius": 0.32,
-                   "adhesion_coefficient": [0.15, 0.33]}
+#: The bundled 17:38 test-rig gearbox (module 3 mm, no profile shift: the pinion is marginally undercut),
+#: as design keys. T2 = mu Q R_w of its operation brackets the balancing torque 100 x 38/17 = 224 N m.
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore", UndercutWarning)
+    _BUNDLED_17_38 = load_design("pair_17_38")
+PAIR_17_38 = _BUNDLED_17_38.to_dict()
+OPERATION_17_38 = {"drive_torque": _BUNDLED_17_38.operation.drive_torque,
+                   "axle_load": _BUNDLED_17_38.operation.axle_load,
+                   "wheel_radius": _BUNDLED_17_38.operation.wheel_radius,
+                   "adhesion_coefficient": list(_BUNDLED_17_38.operation.adhesion_coefficient)}
 #: Small module, high ratio (5.9), no shift: undercut, and the form circle limits the contact.
 PAIR_14_83 = {**PAIR_17_38, "z1": 14, "z2": 83, "module": 0.001, "face_width": 0.01}
 #: Stub teeth at 25 deg: contact ratio near 1.2, no undercut.
@@ -183,6 +182,14 @@ def test_17_tooth_pinion_without_shift_warns_and_is_modelled():
     assert g.contact_ratio == pytest.approx(1.609, abs=5e-4)
     assert g.centre_distance == pytest.approx(0.003 * 55 / 2, rel=1e-14)
     assert geometry_notes(design) == [message]
+
+
+def test_the_bundled_17_38_design_loads_with_its_undercut_warning():
+    # bundled so that a user (and benchmarks/diagnosis.py) has a real unshifted gearbox by name
+    with pytest.warns(UndercutWarning, match="x1: the pinion .z1=17, x1=0. is undercut"):
+        design = load_design("pair_17_38")
+    assert design.name == "pair_17_38" and "pair_17_38" in uqgear.bundled_designs()
+    assert (design.z1, design.z2, design.module, design.x1, design.x2) == (17, 38, 0.003, 0.0, 0.0)
 
 
 def test_undercut_17_tooth_design_simulates():
