@@ -28,9 +28,8 @@ import argparse
 import time
 from pathlib import Path
 
-from uqgear.physics.threads import default_threads
-
 from uqgear.calibration import Calibration
+from uqgear.physics.threads import default_threads
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 

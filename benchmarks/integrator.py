@@ -27,13 +27,13 @@ import time
 import types
 from pathlib import Path
 
-from uqgear.physics.threads import default_threads
 import numpy as np
 
 import uqgear
 from uqgear.physics import _kernels as K
 from uqgear.physics import integration
 from uqgear.physics import model
+from uqgear.physics.threads import default_threads
 
 
 def _relative_rms(x, reference):

@@ -290,29 +290,39 @@ class CampaignSimulator:
             return None
         period = window / f_mesh
         rate = per_period * f_mesh
-        # upsampled grid fine enough for linear interpolation of the band-limited signal
-        factor = max(1, int(math.ceil(4.0 * self.fs / rate)))
+        factor = self._upsampling(rate)
         raw = np.stack([self._raw(signals, channel)[:kept] for channel in self.channels])
-        spectrum = np.fft.rfft(raw - raw.mean(axis=1, keepdims=True), axis=1) * self._filters(kept, rate)
-        fine = np.fft.irfft(spectrum, n=kept * factor, axis=1) * factor
-        index, weight = self._interpolation(("periodic", op, kept * factor), self.rig_time * (kept * factor / period),
-                                            kept * factor, periodic=True)
-        values = fine[:, index] + weight * (fine[:, index + 1] - fine[:, index])
+        values = self._on_rig_grid(("periodic", op), raw - raw.mean(axis=1, keepdims=True), rate, factor,
+                                   kept * factor / period, 0.0, periodic=True)
         return SimulatedRun(dict(zip(self.channels, values)), True, periodicity)
 
     def _whole(self, op: int, signals: Mapping[str, np.ndarray]) -> SimulatedRun:
         """Records from a simulation of the whole record (with its guards), band-limited and resampled."""
         rate = self.samples_per_period[op] * self.mesh_frequency(op)
         size = signals["te"].size
-        factor = max(1, int(math.ceil(4.0 * self.fs / rate)))
+        factor = self._upsampling(rate)
         raw = np.stack([self._raw(signals, channel) for channel in self.channels])
         centred = (raw - raw.mean(axis=1, keepdims=True)) * self._edge_taper(size, rate)
+        values = self._on_rig_grid(("free", op), centred, rate, factor, rate * factor, _GUARD, periodic=False)
+        return SimulatedRun(dict(zip(self.channels, values)), False, "free")
+
+    def _upsampling(self, rate: float) -> int:
+        """Upsampling factor from the simulation's ``rate`` to a grid fine enough for linear interpolation."""
+        return max(1, int(math.ceil(4.0 * self.fs / rate)))
+
+    def _on_rig_grid(self, key: tuple, centred: np.ndarray, rate: float, factor: int, steps_per_second: float,
+                     offset: float, *, periodic: bool) -> np.ndarray:
+        """Channels sampled at ``rate`` band-limited, upsampled ``factor`` times and read at the rig's times.
+
+        The rig's time ``t`` sits at ``(t + offset) * steps_per_second`` steps
+        of the upsampled grid (periodic: wrapped).
+        """
+        size = centred.shape[1]
         spectrum = np.fft.rfft(centred, axis=1) * self._filters(size, rate)
         fine = np.fft.irfft(spectrum, n=size * factor, axis=1) * factor
-        index, weight = self._interpolation(("free", op, size * factor), (self.rig_time + _GUARD) * (rate * factor),
-                                            size * factor, periodic=False)
-        values = fine[:, index] + weight * (fine[:, index + 1] - fine[:, index])
-        return SimulatedRun(dict(zip(self.channels, values)), False, "free")
+        index, weight = self._interpolation((*key, size * factor), offset, steps_per_second, size * factor,
+                                            periodic=periodic)
+        return fine[:, index] + weight * (fine[:, index + 1] - fine[:, index])
 
     def _filters(self, size: int, rate: float) -> np.ndarray:
         """The anti-alias filter (and derivative) of each channel, (n_channel, size // 2 + 1), built once per grid."""
@@ -336,16 +346,18 @@ class CampaignSimulator:
             self._grid_cache[key] = taper
         return self._grid_cache[key]
 
-    def _interpolation(self, key: tuple, position: np.ndarray, size: int, *, periodic: bool
+    def _interpolation(self, key: tuple, offset: float, steps_per_second: float, size: int, *, periodic: bool
                        ) -> tuple[np.ndarray, np.ndarray]:
         """Left neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
 
-        ``position`` is in grid steps; a periodic grid wraps (its last point's
+        The rig's times sit at ``(t + offset) * steps_per_second`` grid steps
+        (computed on a cache miss only); a periodic grid wraps (its last point's
         right neighbour is the first): that point's index is stored as -1, so
         that ``index + 1`` is 0. Built once per grid: the rig's time points
         are the same for every run.
         """
         if key not in self._grid_cache:
+            position = (self.rig_time + offset) * steps_per_second
             if periodic:
                 position = np.mod(position, size)
             index = np.clip(np.floor(position).astype(np.intp), 0, size - 2 if not periodic else size - 1)
