@@ -172,7 +172,9 @@ def simulate_task(case: RigCase, task: RunTask) -> SimulatedRun:
 
 def execute_run(case: RigCase, task: RunTask) -> tuple[np.ndarray, bool]:
     """Simulate a run and reduce its records with the rig's processing: (n_channel, all features), periodic."""
-    return execute_group(case, [task])[0]
+    # one BLAS thread, as every grouped path (execute_runs, the workers) reduces its runs
+    with threadpool_limits(1):
+        return execute_group(case, [task])[0]
 
 
 def execute_group(case: RigCase, tasks: Sequence[RunTask]) -> list[tuple[np.ndarray, bool]]:
