@@ -6,8 +6,9 @@ below a fifth of the model-error floor; a posterior that presses against a
 box side that is not a prior bound widens the box again. emcee's ensemble
 sampler (differential-evolution moves and the snooker move of its paper,
 :class:`SnookerMove`) runs on the emulators, vectorised over walkers, in
-chunks until the convergence criteria hold or ``max_steps`` is reached; the first third of the chain is burn-in, the rest
-is thinned by half the autocorrelation time.
+chunks until the convergence criteria hold or ``max_steps`` is reached;
+the first third of the chain is burn-in, the rest is thinned by half the
+autocorrelation time.
 """
 
 from __future__ import annotations
