@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import threading
 
 import numpy as np
 import pytest
 
-from uqgear.physics.threads import default_threads, spread
+from uqgear.physics.threads import spread
 
 
 @pytest.mark.parametrize("n, threads", [(1, 4), (7, 2), (100, 2), (101, 3), (5, 1), (0, 2)])
@@ -39,8 +42,16 @@ def test_a_kernel_error_reaches_the_caller():
         spread(run_range, 100, 2)
 
 
-def test_threads_default_to_the_environment(monkeypatch):
-    monkeypatch.setenv("NUMBA_NUM_THREADS", "3")
-    assert default_threads() == 3
-    monkeypatch.delenv("NUMBA_NUM_THREADS")
-    assert default_threads() >= 1
+# the CPUs this process may run on (numba's default thread count)
+USABLE_CPUS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+@pytest.mark.parametrize("setting, expected", [("3", 3), ("1", 1), (None, USABLE_CPUS)])
+def test_threads_default_to_numbas_setting(setting, expected):
+    # numba reads NUMBA_NUM_THREADS once, at import: a fresh interpreter sees the setting
+    environment = {key: value for key, value in os.environ.items() if key != "NUMBA_NUM_THREADS"}
+    if setting is not None:
+        environment["NUMBA_NUM_THREADS"] = setting
+    code = "from uqgear.physics.threads import default_threads; print(default_threads())"
+    answer = subprocess.run([sys.executable, "-c", code], env=environment, capture_output=True, text=True, check=True)
+    assert int(answer.stdout) == expected

@@ -9,9 +9,10 @@ for bit, for any number of threads and any order the chunks finish in.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+
+import numba
 
 #: Chunks per thread: small enough that a thread finishing early takes more work
 #: (runs at high speed or with separation cost several times the others).
@@ -19,11 +20,13 @@ CHUNKS_PER_THREAD = 8
 
 
 def default_threads() -> int:
-    """Threads a batch uses when not told: ``NUMBA_NUM_THREADS`` if set, else one per CPU."""
-    from_environment = os.environ.get("NUMBA_NUM_THREADS", "").strip()
-    if from_environment.isdigit() and int(from_environment) > 0:
-        return int(from_environment)
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+    """Threads a batch uses when not told: numba's thread count.
+
+    That is ``NUMBA_NUM_THREADS`` as numba read it at import, else one per
+    CPU this process may run on (its affinity): one setting for the threaded
+    kernels and numba's own parallel code.
+    """
+    return max(1, int(numba.config.NUMBA_NUM_THREADS))
 
 
 def spread(run_range: Callable[[int, int], None], n: int, threads: int | None = None) -> None:
