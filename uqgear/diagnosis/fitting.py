@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +20,8 @@ _FITTED_KINDS = ("line", "band")
 _LOSS_SCALE = 3.0
 # Finite-difference step in optimiser units (prior standard deviations or effect units).
 _DIFFERENCE_STEP = 0.02
+# Every this many Jacobians of a fit is a finite-difference one, the others secant updates.
+_SECANT_REFRESH = 2
 
 
 class FitProblem:
@@ -213,6 +215,43 @@ def robust_weights(residuals: np.ndarray) -> np.ndarray:
     return 1.0 / (1.0 + (np.asarray(residuals) / _LOSS_SCALE) ** 2)
 
 
+class SecantJacobian:
+    """The solver's Jacobian: finite differences where a fit starts, Broyden's rank-one updates after.
+
+    A finite-difference Jacobian costs a simulation per free global
+    parameter and run, several times a residual evaluation; the solver asks
+    for one at every accepted point. Between accepted points the residuals
+    already simulated give the secant (Broyden 1965) update for free. Its
+    entries that are structurally zero (a run's rows in another run's T2
+    column, the prior rows) stay zero; every :data:`_SECANT_REFRESH`-th
+    call is a fresh finite-difference Jacobian. The fit's final Jacobian
+    (intervals, held-out predictions) is always a finite-difference one.
+    """
+
+    def __init__(self, problem: FitProblem, free: np.ndarray, expand: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.problem, self.free, self.expand = problem, free, expand
+        self.calls = 0
+        self.point: np.ndarray | None = None
+        self.values: np.ndarray | None = None
+        self.matrix: np.ndarray | None = None
+        self.zero: np.ndarray | None = None
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        v = self.expand(u)
+        values = self.problem.residuals(v)          # simulated already: the solver evaluated it there
+        step = None if self.point is None else u - self.point
+        if self.matrix is None or self.calls % _SECANT_REFRESH == 0 or not step @ step > 0.0:
+            matrix = self.problem.jacobian(v, self.free)
+            if self.zero is None:
+                self.zero = matrix == 0.0
+        else:
+            matrix = self.matrix + np.outer(values - self.values - self.matrix @ step, step / (step @ step))
+            matrix[self.zero] = 0.0
+        self.calls += 1
+        self.point, self.values, self.matrix = np.array(u, dtype=float), values, matrix
+        return matrix
+
+
 @dataclass
 class FitResult:
     """A fitted model: optimum, residuals and Jacobian there, cost and bookkeeping.
@@ -293,8 +332,9 @@ def fit(problem: FitProblem, starts: Sequence[np.ndarray], *, free: np.ndarray |
         v[free] = u
         return v
 
+    jacobian = SecantJacobian(problem, free, expand)
     result = scipy.optimize.least_squares(lambda u: problem.residuals(expand(u))[selected], base[free],
-                                          jac=lambda u: problem.jacobian(expand(u), free)[selected],
+                                          jac=lambda u: jacobian(u)[selected],
                                           bounds=(problem.lower[free], problem.upper[free]), method="trf",
                                           loss=loss, f_scale=_LOSS_SCALE, x_scale=1.0, max_nfev=max_evaluations,
                                           xtol=tolerance, ftol=tolerance, gtol=1e-8)
