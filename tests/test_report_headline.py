@@ -377,6 +377,21 @@ def test_calibration_headline():
     assert [finding.topic for finding in unconverged] == ["convergence", "predictive_check"]
 
 
+def test_calibration_headline_says_what_the_pitch_error_correction_did():
+    content = _calibration_content()
+    content["pitch_errors"] = {"applied": True, "reason": "ISO 1328-1 classes 6 to 8 as stated", "draws": 4,
+                               "max_abs_log_shift": 0.191, "median_abs_log_shift": 0.0042, "max_draw_spread": 0.12,
+                               "scale_to_class_7": 1.03, "classes": [6.0, 8.0]}
+    finding = next(f for f in calibration_findings(content) if f.topic == "pitch_errors")
+    assert finding.text == ("Pitch errors: the observed mesh harmonics were corrected for random pitch errors (ISO "
+                            "1328-1 classes 6 to 8 as stated; 4 model draws, largest change 19.1 %, median 0.42 %, "
+                            "spread between draws up to 12.0 %, added to the variance).")
+    assert finding.facts["scale_to_class_7"] == 1.03
+    content["pitch_errors"] = {"applied": False, "reason": "22 of 864 sidebands stand 3 noise std above"}
+    finding = next(f for f in calibration_findings(content) if f.topic == "pitch_errors")
+    assert finding.text == "Pitch errors: no correction (22 of 864 sidebands stand 3 noise std above)."
+
+
 def test_diagnosis_headline_with_partial_and_borderline_flags():
     content = {
         "verdict": "bearing_clearance", "reason": "bearing_clearance gains 182 nats", "partial": True,

@@ -374,6 +374,14 @@ def test_calibrate_analysis_needs_an_existing_rig_file(tmp_path):
     (tmp_path / "x.nc").write_bytes(b"")
     study = parse_study(text.replace("nothere.nc", "x.nc"), base_dir=tmp_path)
     assert study.analyses[0].options["parameters"][0] == "mesh_stiffness_scale"
+    assert study.analyses[0].options["pitch_classes"] == (6.0, 8.0)
+    known = text.replace("nothere.nc", "x.nc") + "    pitch_classes: [7, 7]\n"
+    assert parse_study(known, base_dir=tmp_path).analyses[0].options["pitch_classes"] == (7.0, 7.0)
+    unknown = text.replace("nothere.nc", "x.nc") + "    pitch_classes: none\n"
+    assert parse_study(unknown, base_dir=tmp_path).analyses[0].options["pitch_classes"] is None
+    for wrong in ("[8, 6]", "[7]", "seven", "[0, 12]"):
+        with pytest.raises(StudyError, match=r"analyses\[0\].pitch_classes: expected \[lowest, highest\]"):
+            parse_study(text.replace("nothere.nc", "x.nc") + f"    pitch_classes: {wrong}\n", base_dir=tmp_path)
 
 
 def test_diagnose_analysis_options_are_checked(tmp_path):

@@ -454,16 +454,33 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     return 0
 
 
+def _pitch_classes(words: list[str]) -> tuple[float, float] | None | str:
+    """``--pitch-classes``: two ISO 1328-1 classes, or ``none``; an error message otherwise (the
+    calibration checks the values)."""
+    if [word.lower() for word in words] == ["none"]:
+        return None
+    try:
+        values = tuple(float(word) for word in words)
+    except ValueError:
+        values = ()
+    if len(values) != 2:
+        return f"--pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; got {' '.join(words)}"
+    return values[0], values[1]
+
+
 def _command_calibrate(args: argparse.Namespace) -> int:
     from .calibration import calibrate
 
     rig = Path(args.rig)
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
+    classes = _pitch_classes(args.pitch_classes)
+    if isinstance(classes, str):
+        return _fail(classes)
     out = Path(args.out)
     with _output_folder(out) as work:
         result = calibrate(rig, work, design=args.design, params=_comma_list(args.params), seed=args.seed,
-                           threads=args.workers)
+                           threads=args.workers, pitch_classes=classes)
     summary = result.to_dict()
     state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
     print(f"calibration of {rig} {state}; results in {out}")
@@ -621,6 +638,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "ste_amplitude k1 k2)")
     calibrate.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     calibrate.add_argument("--workers", type=int, metavar="N", help="integrator threads (default: all cores)")
+    calibrate.add_argument("--pitch-classes", nargs="+", default=["6", "8"], metavar="CLASS",
+                           help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest, for "
+                           "the pitch-error correction (default 6 8); 'none': read the level from the sidebands")
     calibrate.set_defaults(handler=_command_calibrate)
 
     diagnose = commands.add_parser("diagnose", help="where model and rig disagree, which unmodelled effect "

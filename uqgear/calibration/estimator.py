@@ -24,11 +24,12 @@ from .errors import CalibrationError
 from .failure import failure_causes
 from .harmonics import HARMONIC_CHANNELS
 from .likelihood import StageLikelihood, observed_features, operating_points, prior_box
+from .pitch_correction import DEFAULT_CLASSES, pitch_error_correction
 from .predictive import predictive_check
 from .priors import DEFAULT_PARAMETERS, prior_bounds, resolve_parameters
 from .sampling import final_sampling, search_box, walker_count
 from .settings import (as_seed, check_channels, check_float, check_int, check_model_error_range, check_n_training,
-                       check_priors)
+                       check_pitch_classes, check_priors)
 from .summaries import posterior_dataset, posterior_summary, result_content
 from .training import model_log_features, train_emulators
 
@@ -79,6 +80,16 @@ class Calibration:
         Source of all randomness (Sobol scrambling, emcee, predictive draws).
     threads : int, optional
         Threads of the model runs (default: all cores).
+    pitch_correction : bool
+        Correct the observed mesh harmonics for the rig's pitch errors where
+        its sidebands show them (:mod:`~uqgear.calibration.pitch_correction`;
+        nothing changes where they show none).
+    pitch_draws : int
+        Random pitch-error draws the correction averages (at least 2).
+    pitch_classes : (float, float) or None
+        ISO 1328-1 flank tolerance classes of the rig's gears (from their
+        drawings; default 6 to 8, the usual traction-gear grades); None:
+        the level read from the rig's sidebands instead.
 
     Attributes
     ----------
@@ -102,6 +113,8 @@ class Calibration:
         Wall and CPU time of the fit, s.
     steps_ : StepLog
         The steps of the fit as they finished (kept by a failure).
+    pitch_errors_ : PitchCorrection or None
+        The pitch-error correction (None when switched off).
     """
 
     def __init__(self, parameters: Sequence[str] = DEFAULT_PARAMETERS, *, design: Design | None = None,
@@ -112,7 +125,9 @@ class Calibration:
                  n_walkers: int | None = None, stage_steps: int = 1500, chunk_steps: int = 2000,
                  max_steps: int = 30000, autocorr_factor: float = 50.0, rhat_threshold: float = 1.01,
                  min_ess: float = 400.0, predictive_draws: int = 16, transient: float = 0.2, window: float = 0.1,
-                 seed: np.random.SeedSequence | int | None = None, threads: int | None = None) -> None:
+                 seed: np.random.SeedSequence | int | None = None, threads: int | None = None,
+                 pitch_correction: bool = True, pitch_draws: int = 4,
+                 pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> None:
         self.parameters = resolve_parameters(parameters)
         if design is not None and not isinstance(design, Design):
             raise CalibrationError(f"design: expected a uqgear Design; got {type(design).__name__}")
@@ -138,6 +153,11 @@ class Calibration:
         self.window = check_float("window", window, 0.0, 100.0, " s")
         self.seed = as_seed(seed)
         self.threads = None if threads is None else check_int("threads", threads, 1)
+        if not isinstance(pitch_correction, (bool, np.bool_)):
+            raise CalibrationError(f"pitch_correction: expected true or false; got {pitch_correction!r}")
+        self.pitch_correction = bool(pitch_correction)
+        self.pitch_draws = check_int("pitch_draws", pitch_draws, 2)
+        self.pitch_classes = check_pitch_classes(pitch_classes)
 
     # ------------------------------------------------------------------ settings record
 
@@ -152,7 +172,9 @@ class Calibration:
                 "chunk_steps": self.chunk_steps, "max_steps": self.max_steps,
                 "autocorr_factor": self.autocorr_factor, "rhat_threshold": self.rhat_threshold,
                 "min_ess": self.min_ess, "predictive_draws": self.predictive_draws, "transient": self.transient,
-                "window": self.window, "seed_entropy": str(self.seed.entropy)}
+                "window": self.window, "pitch_correction": self.pitch_correction, "pitch_draws": self.pitch_draws,
+                "pitch_classes": None if self.pitch_classes is None else list(self.pitch_classes),
+                "seed_entropy": str(self.seed.entropy)}
 
     # ------------------------------------------------------------------ fit
 
@@ -207,6 +229,7 @@ class Calibration:
         self._prepare_space(design)
         # from here on the input is accepted: a failure is ours, reported with its step
         self.steps_ = steps = StepLog()
+        self._likelihood: StageLikelihood | None = None     # no emulators of an earlier fit are reused
         stage_rng = np.random.default_rng(seeds[0])
         self.emulator_ = {"stages": []}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
@@ -216,13 +239,18 @@ class Calibration:
                 error_floor=self.model_error_range[0], rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2],
                 stages=self.emulator_["stages"])
             found.update(stages=self.emulator_["stages"], truncated=truncated)
+        self.pitch_errors_ = None
+        if self.pitch_correction:
+            start_points, truncated = self._correct_pitch_errors(rig, design, start_points, truncated, stage_rng,
+                                                                 seeds[5:8], steps)
         with steps.step("final sampling") as found:
             self._final_sampling(start_points, stage_rng, seeds[3], truncated)
             found.update(converged=self.converged_)
         with steps.step("posterior predictive check"):
             self._predictive_check(np.random.default_rng(seeds[4]))
         self.timing_ = {"wall_s": time.perf_counter() - wall_start, "cpu_s": time.process_time() - cpu_start,
-                        "model_runs": int(self.model_runs_), "order_tracking_s": tracking_s}
+                        "model_runs": int(self.model_runs_), "order_tracking_s": tracking_s,
+                        "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds}
         return self
 
     # ------------------------------------------------------------------ steps of fit
@@ -253,9 +281,44 @@ class Calibration:
         self.model_runs_ += values.shape[0] * values.shape[1]
         return values
 
+    def _correct_pitch_errors(self, rig: xr.Dataset, design: Design, points: np.ndarray, truncated: bool,
+                              stage_rng: np.random.Generator, seeds: Sequence[np.random.SeedSequence],
+                              steps: StepLog) -> tuple[np.ndarray, bool]:
+        """The pitch-error correction at the medians of posterior draws (physical, (M, n_dim)) and, where
+        applied, the box search resumed on the corrected features; the new start points and truncation."""
+        with steps.step("pitch-error correction (rig sidebands, model draws at the posterior medians)") as found:
+            medians = np.median(points, axis=0)
+            self.pitch_errors_ = correction = pitch_error_correction(
+                rig, design, self._features, dict(zip(self.parameters, medians[:self.n_global_])),
+                medians[self.n_global_:], seed=seeds[0], effects=self.effects, channels=self.channels,
+                n_harmonics=self.n_harmonics, draws=self.pitch_draws, classes=self.pitch_classes)
+            found.update(applied=correction.applied, reason=correction.reason)
+        if not correction.applied:
+            return points, truncated
+        with steps.step("search the posterior box again (corrected features)") as found:
+            self._features = correction.apply(self._features)
+            self.log_observed_ = self._features.log_observed
+            self.noise_variance_ = self._features.noise_variance
+            points, truncated = search_box(
+                self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_,
+                walkers=self._walker_count(), stage_steps=self.stage_steps, max_stages=self.max_stages,
+                error_floor=self.model_error_range[0], rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2],
+                stages=self.emulator_["stages"], start_box=(self.box_lower_, self.box_upper_), start_points=points)
+            found.update(stages=self.emulator_["stages"], truncated=truncated)
+        return points, truncated
+
     def _fit_stage(self, box_lower: np.ndarray, box_upper: np.ndarray,
                    seed: np.random.SeedSequence) -> StageLikelihood:
-        """Train the emulators in a box and make their likelihood the current one."""
+        """Train the emulators in a box and make their likelihood the current one.
+
+        In the box of the current likelihood (a search resumed after the
+        features were corrected) its emulators are reused with the current features.
+        """
+        current = getattr(self, "_likelihood", None)
+        if current is not None and np.array_equal(box_lower, current.box_lower) and \
+                np.array_equal(box_upper, current.box_upper):
+            self._likelihood = current.with_features(self._features)
+            return self._likelihood
         emulators, loo = train_emulators(box_lower, box_upper, seed, run_model=self._run_model,
                                          n_global=self.n_global_, n_op=self.n_op_, n_training=self.n_training,
                                          degree=self.emulator_degree)
@@ -312,4 +375,5 @@ class Calibration:
                                  failure=self.failure())
         # what the model did with the design's geometry (an undercut tooth), for the report and the record
         content["design_notes"] = geometry_notes(self.design_)
+        content["pitch_errors"] = None if self.pitch_errors_ is None else self.pitch_errors_.summary(self.used_)
         return content

@@ -29,7 +29,7 @@ import xarray as xr
 from ..physics import _kernels as K
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..physics.integration import build_batch, steps_per_period
+from ..physics.integration import breakpoint_table, build_batch, shared_stiffness_tables, steps_per_period
 from ..physics.threads import spread
 from ..rig.features import extract_features
 from .errors import CalibrationError
@@ -239,8 +239,8 @@ def model_harmonics(design: Design, samples: xr.Dataset, *, effects: Sequence[Ef
     setups, steps = _batch_setups(design, samples, effects, steps_per_mode, samples_per_period)
     n = len(setups)
     stride = steps // samples_per_period
-    pair_tables, period_tables, table_index = _stiffness_tables(setups)
-    breakpoints = _breakpoint_table(setups)
+    pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
+    breakpoints = breakpoint_table(setups)
     mesh_frequency = np.array([s.mesh_frequency for s in setups])
     periodic_model = all(effect.name in MESH_PERIODIC_EFFECTS for effect in effects)
     transient_periods = np.ceil(transient * mesh_frequency).astype(np.int64)
@@ -283,32 +283,6 @@ def _batch_setups(design: Design, samples: xr.Dataset, effects: Sequence[Effect]
     return setups, np.array(step_counts, dtype=np.int64)
 
 
-def _stiffness_tables(setups: Sequence[Any]) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
-    """The distinct stiffness tables of the set-ups and, per set-up, the index of its own."""
-    n = len(setups)
-    tables: dict[tuple[int, int], int] = {}
-    pair_tables, period_tables = [], []
-    table_index = np.empty(n, dtype=np.int64)
-    for i, setup in enumerate(setups):
-        key = id(setup.pair_stiffness), id(setup.period_stiffness)
-        if key not in tables:
-            tables[key] = len(pair_tables)
-            pair_tables.append(setup.pair_stiffness)
-            period_tables.append(setup.period_stiffness)
-        table_index[i] = tables[key]
-    return pair_tables, period_tables, table_index
-
-
-def _breakpoint_table(setups: Sequence[Any]) -> np.ndarray:
-    """Breakpoints of the set-ups, one row each, padded with NaN."""
-    n = len(setups)
-    width = max((len(s.breakpoints) for s in setups), default=0)
-    breakpoints = np.full((n, max(width, 1)), np.nan)
-    for i, setup in enumerate(setups):
-        breakpoints[i, :len(setup.breakpoints)] = setup.breakpoints
-    return breakpoints
-
-
 def _state_scales(setups: Sequence[Any]) -> np.ndarray:
     """Scale of each state variable (static mesh deflection and its velocity) per set-up."""
     n = len(setups)
@@ -326,7 +300,7 @@ def _state_scales(setups: Sequence[Any]) -> np.ndarray:
 # observed features
 # ---------------------------------------------------------------------------
 
-def _line_noise_factor(size: int, window: str = "hann") -> float:
+def line_noise_factor(size: int, window: str = "hann") -> float:
     """Std of a line amplitude from a weighted least-squares fit in white noise of unit std.
 
     Each quadrature coefficient has variance 2 sum(w^2) / (sum w)^2 for
@@ -339,14 +313,17 @@ def _line_noise_factor(size: int, window: str = "hann") -> float:
 
 def observed_harmonics(rig: xr.Dataset, design: Design, *, channels: Sequence[str] = HARMONIC_CHANNELS,
                        n_harmonics: int = 3) -> xr.Dataset:
-    """Mesh-harmonic amplitudes of rig data with their noise standard deviations.
+    """Mesh-harmonic amplitudes of rig data with their noise standard deviations, and their first sidebands.
 
     Returns
     -------
     xarray.Dataset
         Over (op, channel, harmonic): ``amplitude`` and ``amplitude_std``
-        (sensor-noise std of the amplitude, from the record's own noise floor);
-        NaN for channels absent, runs unusable or lines above the band.
+        (sensor-noise std of the amplitude, from the record's own noise floor;
+        a sideband's is the same); over (op, channel, harmonic, sideband):
+        ``sideband_amplitude``, the shaft-order sidebands k z1 +- j (pinion)
+        and k z1 +- j z1/z2 (gear), j = 1..3, read in the same line fit. NaN
+        for channels absent, runs unusable or lines above the band.
     """
     present = [name for name in channels if name in rig.data_vars]
     if not present:
@@ -355,20 +332,34 @@ def observed_harmonics(rig: xr.Dataset, design: Design, *, channels: Sequence[st
     # sidebands stay in the joint line fit and out of the noise floor, should the rig have any
     features = extract_features(rig, design, channels=present, n_harmonics=n_harmonics,
                                 n_sidebands=min(3, design.z1 - 1), n_shaft_orders=0, n_motor_lines=0)
-    n_op = rig.sizes["op"]
+    return harmonic_lines(features, rig.sizes["time"], n_harmonics)
+
+
+def harmonic_lines(features: xr.Dataset, size: int, n_harmonics: int) -> xr.Dataset:
+    """:func:`observed_harmonics` from the features of :func:`~uqgear.rig.features.extract_features` (records of
+    ``size`` samples), with every sideband order they hold."""
+    n_op = features.sizes["op"]
+    names = [str(name) for name in features["feature"].values]
+    labels = [name[len("mesh1_sb_"):] for name in names if name.startswith("mesh1_sb_")]
     amplitude = np.full((n_op, len(HARMONIC_CHANNELS), n_harmonics), np.nan)
     noise = np.full_like(amplitude, np.nan)
-    factor = _line_noise_factor(rig.sizes["time"])
-    names = [f"mesh{k}" for k in range(1, n_harmonics + 1)]
+    sideband = np.full((n_op, len(HARMONIC_CHANNELS), n_harmonics, len(labels)), np.nan)
+    factor = line_noise_factor(size)
     for index, name in enumerate(HARMONIC_CHANNELS):
-        if name not in present:
+        if name not in features.data_vars:
             continue
         values = features[name]
-        amplitude[:, index, :] = values.sel(feature=names).transpose("op", "feature").values
+        amplitude[:, index, :] = values.sel(feature=[f"mesh{k}" for k in range(1, n_harmonics + 1)]
+                                            ).transpose("op", "feature").values
         noise[:, index, :] = (values.sel(feature="noise_std").values * factor)[:, None]
+        for k in range(n_harmonics):
+            row = [f"mesh{k + 1}_sb_{label}" for label in labels]
+            sideband[:, index, k, :] = values.sel(feature=row).transpose("op", "feature").values
     return xr.Dataset(
         {"amplitude": (("op", "channel", "harmonic"), amplitude, {"long_name": "observed mesh-harmonic amplitude"}),
          "amplitude_std": (("op", "channel", "harmonic"), noise,
-                           {"long_name": "sensor-noise standard deviation of the amplitude"})},
+                           {"long_name": "sensor-noise standard deviation of the amplitude"}),
+         "sideband_amplitude": (("op", "channel", "harmonic", "sideband"), sideband,
+                                {"long_name": "amplitude of the shaft-order sidebands of each mesh harmonic"})},
         coords={"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1),
-                "pinion_speed": ("op", rig["pinion_speed"].values)})
+                "sideband": labels, "pinion_speed": ("op", features["pinion_speed"].values)})

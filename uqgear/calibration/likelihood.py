@@ -107,6 +107,7 @@ class StageLikelihood:
                  loo: np.ndarray, features: Features, n_global: int) -> None:
         self.box_lower, self.box_upper = box_lower.copy(), box_upper.copy()
         self.n_dim = self.box_lower.size
+        self._emulators, self._loo, self._n_global = tuple(emulators), loo, n_global
         self.emulator = JointEmulator(emulators, n_global)
         self.log_observed = features.log_observed
         n_op = len(emulators)
@@ -119,6 +120,10 @@ class StageLikelihood:
         used = features.used[None]
         self.inverse_total = np.where(used, 1.0 / total, 0.0)
         self.log_normaliser = np.where(used, -0.5 * np.log(2.0 * np.pi * total), 0.0).sum(axis=1)  # (K, C, H)
+
+    def with_features(self, features: Features) -> "StageLikelihood":
+        """The likelihood of other observed features (a corrected copy) on the same box and emulators."""
+        return StageLikelihood(self.box_lower, self.box_upper, self._emulators, self._loo, features, self._n_global)
 
     def to_physical(self, unit: np.ndarray) -> np.ndarray:
         """Physical values of unit-box points, inside the box.

@@ -16,6 +16,7 @@ from ..common.steps import StepLog, write_failure_record
 from ..physics.design import Design, load_design
 from ..rig.format import read_rig
 from .estimator import Calibration
+from .pitch_correction import DEFAULT_CLASSES
 from .priors import DEFAULT_PARAMETERS
 
 
@@ -53,7 +54,8 @@ def write_calibration(calibration: Calibration, out_dir: str | os.PathLike[str],
 
 def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
               design: Design | str | os.PathLike[str] | None = None, params: Sequence[str] | None = None,
-              seed: np.random.SeedSequence | int | None = 0, threads: int | None = None) -> Calibration:
+              seed: np.random.SeedSequence | int | None = 0, threads: int | None = None,
+              pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> Calibration:
     """Calibrate the model on a rig file and write the results (``uqgear calibrate``).
 
     Parameters
@@ -71,6 +73,9 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
         Source of all randomness.
     threads : int, optional
         Threads for the model runs.
+    pitch_classes : (float, float) or None
+        ISO 1328-1 classes of the rig's gears for the pitch-error correction
+        (:class:`Calibration`); None: read from the rig's sidebands.
 
     Returns
     -------
@@ -88,7 +93,7 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     """
     nominal = None if design is None else (design if isinstance(design, Design) else load_design(design))
     calibration = Calibration(params if params is not None else DEFAULT_PARAMETERS, design=nominal, seed=seed,
-                              threads=threads)
+                              threads=threads, pitch_classes=pitch_classes)
     try:
         calibration.fit(rig_path)
         steps = getattr(calibration, "steps_", StepLog())

@@ -461,6 +461,35 @@ def build_batch(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect
     return setups
 
 
+def shared_stiffness_tables(setups: Sequence[ModelSetup]) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """The distinct stiffness tables of a batch's set-ups and, per set-up, the index of its own.
+
+    Set-ups of one design share their tables (the model's stiffness cache),
+    so a batch passes each table to the kernels once, not once per sample.
+    """
+    tables: dict[tuple[int, int], int] = {}
+    pair_tables: list[np.ndarray] = []
+    period_tables: list[np.ndarray] = []
+    table_index = np.empty(len(setups), dtype=np.int64)
+    for i, setup in enumerate(setups):
+        key = id(setup.pair_stiffness), id(setup.period_stiffness)
+        if key not in tables:
+            tables[key] = len(pair_tables)
+            pair_tables.append(setup.pair_stiffness)
+            period_tables.append(setup.period_stiffness)
+        table_index[i] = tables[key]
+    return pair_tables, period_tables, table_index
+
+
+def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
+    """Breakpoints of a batch's set-ups, one row each, padded with NaN (one column at least)."""
+    width = max((len(setup.breakpoints) for setup in setups), default=0)
+    breakpoints = np.full((len(setups), max(width, 1)), np.nan)
+    for i, setup in enumerate(setups):
+        breakpoints[i, :len(setup.breakpoints)] = setup.breakpoints
+    return breakpoints
+
+
 def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400, keep_periods: int = 200,
                    history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
                    effects: Sequence[Effect] = (),
@@ -510,19 +539,8 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     multiple = max(int(history_per_period), 1)
     steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=multiple) for s in setups], dtype=np.int64)
     params = np.stack([s.parameters for s in setups]) if n else np.empty((0, K.N_PARAMS))
-    tables: dict[int, int] = {}
-    pair_tables, period_tables, table_index = [], [], np.empty(n, dtype=np.int64)
-    for i, s in enumerate(setups):
-        key = id(s.pair_stiffness), id(s.period_stiffness)
-        if key not in tables:
-            tables[key] = len(pair_tables)
-            pair_tables.append(s.pair_stiffness)
-            period_tables.append(s.period_stiffness)
-        table_index[i] = tables[key]
-    width = max((len(s.breakpoints) for s in setups), default=0)
-    breakpoints = np.full((n, max(width, 1)), np.nan)
-    for i, s in enumerate(setups):
-        breakpoints[i, :len(s.breakpoints)] = s.breakpoints
+    pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
+    breakpoints = breakpoint_table(setups)
     states = np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
     scales = np.stack([s.state_scale() for s in setups]) if n else np.empty((0, 6))
     factor_pinion = np.stack([s.factor_pinion for s in setups]) if n else np.empty((0, design.z1))

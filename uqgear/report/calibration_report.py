@@ -118,6 +118,17 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
             + (f"runs {', '.join(map(str, tracked))} were resampled to uniform pinion angle (order tracking) "
                "before their features were read." if tracked else "no run needed order tracking."),
             {"max_wander": widest["wander"], "order_tracked_runs": tracked}, "speed"))
+    pitch = content.get("pitch_errors")
+    if pitch:
+        if pitch.get("applied"):
+            text = (f"Pitch errors: the observed mesh harmonics were corrected for random pitch errors "
+                    f"({pitch['reason']}; {pitch['draws']} model draws, largest change "
+                    f"{100 * pitch['max_abs_log_shift']:.1f} %, median {100 * pitch['median_abs_log_shift']:.2f} %, "
+                    f"spread between draws up to {100 * pitch['max_draw_spread']:.1f} %, added to the variance).")
+        else:
+            text = f"Pitch errors: no correction ({pitch['reason']})."
+        findings.append(Finding(text, {key: pitch.get(key) for key in ("applied", "scale_to_class_7", "classes",
+                                                                        "max_abs_log_shift")}, "pitch_errors"))
     estimates = content.get("parameters") if converged else None
     if estimates:
         parts, facts = [], {}

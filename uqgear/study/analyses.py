@@ -618,7 +618,8 @@ def calibrate_analysis(context: AnalysisContext) -> xr.Dataset:
 
     names = list(context.options["parameters"])
     calibration = Calibration(parameters=names, design=context.design, seed=context.stage_seed(0),
-                              threads=context.threads).fit(rig_path(context.study, context.spec))
+                              threads=context.threads, pitch_classes=context.options["pitch_classes"]
+                              ).fit(rig_path(context.study, context.spec))
     result = calibration.posterior_.copy()
     summary = calibration.to_dict()
     result.attrs.update(calibration=json.dumps(summary, default=float), converged=int(bool(summary["converged"])),

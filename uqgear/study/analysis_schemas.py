@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..physics.effects import EFFECTS
-from .checkers import Checker, boolean, choice, identifier, list_of, number, string
+from .checkers import Checker, boolean, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
 
 
@@ -100,6 +100,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "rig": string(),
         "parameters": list_of(choice("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2",
                                      "k1_scale", "k2_scale", "zeta1", "zeta2", "m1", "m2"), unique=True),
+        # ISO 1328-1 classes of the rig's gears, for the pitch-error correction (none: read from the sidebands)
+        "pitch_classes": class_range(1, 11),
     },
     "diagnose": {
         "rig": string(),
@@ -123,7 +125,8 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
             "qois": DEFAULT_QOIS},
     "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200,
               "qois": DEFAULT_QOIS},
-    "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2")},
+    "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"),
+                  "pitch_classes": (6.0, 8.0)},
     "diagnose": {"effects": tuple(EFFECTS), "reference": None},
 }
 _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),

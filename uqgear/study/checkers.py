@@ -129,3 +129,21 @@ def check_mapping(value: Any, path: str, schema: Mapping[str, Checker], *,
         if key not in value:
             raise StudyError(f"{prefix}{key}: missing (required)")
     return {key: schema[key](entry, f"{prefix}{key}") for key, entry in value.items()}
+
+
+def class_range(lowest: float, highest: float) -> Checker:
+    """Checker of ``[low, high]`` with ``lowest <= low <= high <= highest`` (a range of grades), or none."""
+    expected = f"[lowest, highest] with {lowest:g} <= lowest <= highest <= {highest:g}, or none"
+
+    def check(value: Any, path: str) -> tuple[float, float] | None:
+        if value is None or value == "none":
+            return None
+        if not isinstance(value, list) or len(value) != 2 or not all(
+                isinstance(entry, (int, float)) and not isinstance(entry, bool) for entry in value):
+            raise _fail(path, expected, value)
+        low, high = float(value[0]), float(value[1])
+        if not lowest <= low <= high <= highest:
+            raise _fail(path, expected, value)
+        return low, high
+
+    return check
