@@ -229,7 +229,6 @@ class Calibration:
         self._prepare_space(design)
         # from here on the input is accepted: a failure is ours, reported with its step
         self.steps_ = steps = StepLog()
-        self._likelihood: StageLikelihood | None = None     # no emulators of an earlier fit are reused
         stage_rng = np.random.default_rng(seeds[0])
         self.emulator_ = {"stages": []}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
@@ -299,26 +298,19 @@ class Calibration:
             self._features = correction.apply(self._features)
             self.log_observed_ = self._features.log_observed
             self.noise_variance_ = self._features.noise_variance
+            # resumed in the last box, on its emulators: only the features changed
+            self._likelihood = self._likelihood.with_features(self._features)
             points, truncated = search_box(
                 self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_,
                 walkers=self._walker_count(), stage_steps=self.stage_steps, max_stages=self.max_stages,
                 error_floor=self.model_error_range[0], rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2],
-                stages=self.emulator_["stages"], start_box=(self.box_lower_, self.box_upper_), start_points=points)
+                stages=self.emulator_["stages"], start_likelihood=self._likelihood, start_points=points)
             found.update(stages=self.emulator_["stages"], truncated=truncated)
         return points, truncated
 
     def _fit_stage(self, box_lower: np.ndarray, box_upper: np.ndarray,
                    seed: np.random.SeedSequence) -> StageLikelihood:
-        """Train the emulators in a box and make their likelihood the current one.
-
-        In the box of the current likelihood (a search resumed after the
-        features were corrected) its emulators are reused with the current features.
-        """
-        current = getattr(self, "_likelihood", None)
-        if current is not None and np.array_equal(box_lower, current.box_lower) and \
-                np.array_equal(box_upper, current.box_upper):
-            self._likelihood = current.with_features(self._features)
-            return self._likelihood
+        """Train the emulators in a box and make their likelihood the current one."""
         emulators, loo = train_emulators(box_lower, box_upper, seed, run_model=self._run_model,
                                          n_global=self.n_global_, n_op=self.n_op_, n_training=self.n_training,
                                          degree=self.emulator_degree)

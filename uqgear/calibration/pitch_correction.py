@@ -148,10 +148,15 @@ def sideband_amplitudes(rig: xr.Dataset, design: Design, *, channels: Sequence[s
     return harmonic_lines(features, rig.sizes["time"], n_harmonics)
 
 
+def _channels_and_noise(observed: xr.Dataset, channels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Which channels count, and each line's noise std, both broadcast over (op, channel, harmonic, sideband)."""
+    channel_used = np.array([name in channels for name in HARMONIC_CHANNELS])[None, :, None, None]
+    return channel_used, observed["amplitude_std"].values[..., None]
+
+
 def _visible_sidebands(observed: xr.Dataset, channels: Sequence[str]) -> tuple[int, int]:
     """How many of the rig's sidebands stand :data:`MIN_SIDEBAND_SNR` noise std above its noise, of how many."""
-    channel_used = np.array([name in channels for name in HARMONIC_CHANNELS])[None, :, None, None]
-    noise = observed["amplitude_std"].values[..., None]
+    channel_used, noise = _channels_and_noise(observed, channels)
     amplitude = observed["sideband_amplitude"].values
     with np.errstate(invalid="ignore"):
         visible = int(np.sum(channel_used & (amplitude >= MIN_SIDEBAND_SNR * noise)))
@@ -169,8 +174,7 @@ def _sideband_level(observed: xr.Dataset, clean: xr.Dataset, reference: xr.Datas
     gear, each order and side) of each order's median log power ratio, and its
     uncertainty the spread of those medians over the square root of their count.
     """
-    channel_used = np.array([name in channels for name in HARMONIC_CHANNELS])[None, :, None, None]
-    noise = observed["amplitude_std"].values[..., None]
+    channel_used, noise = _channels_and_noise(observed, channels)
     rig_power = observed["sideband_amplitude"].values ** 2 - noise ** 2
     model_power = clean["sideband_amplitude"].values ** 2
     raised = reference["sideband_amplitude"].values ** 2 - model_power

@@ -126,7 +126,7 @@ def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequen
                prior_lower: np.ndarray, prior_upper: np.ndarray, *, used: np.ndarray, walkers: int,
                stage_steps: int, max_stages: int, error_floor: float, rng: np.random.Generator,
                design_seed: np.random.SeedSequence, chain_seed: np.random.SeedSequence,
-               stages: list[dict[str, Any]], start_box: tuple[np.ndarray, np.ndarray] | None = None,
+               stages: list[dict[str, Any]], start_likelihood: StageLikelihood | None = None,
                start_points: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
     """Shrink the emulator box in stages around the posterior (module docstring).
 
@@ -150,9 +150,9 @@ def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequen
         Parents of each stage's Sobol design and chain seeds.
     stages : list
         A record of each stage is appended to it.
-    start_box : (array, array), optional
-        The first stage's box instead of the prior box (a search resumed
-        after the features changed).
+    start_likelihood : StageLikelihood, optional
+        The first stage's likelihood instead of one fitted in the prior box
+        (a search resumed on changed features: its box and emulators are kept).
     start_points : array (M, n_dim), optional
         Physical points the first stage's walkers start from.
 
@@ -163,11 +163,12 @@ def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequen
     truncated : bool
         Whether the last stage's posterior is truncated by its box.
     """
-    box_lower, box_upper = (prior_lower.copy(), prior_upper.copy()) if start_box is None else \
-        (start_box[0].copy(), start_box[1].copy())
+    box_lower, box_upper = (prior_lower.copy(), prior_upper.copy()) if start_likelihood is None else \
+        (start_likelihood.box_lower.copy(), start_likelihood.box_upper.copy())
     design_seeds, chain_seeds = design_seed.spawn(max_stages), chain_seed.spawn(max_stages)
     for stage in range(max_stages):
-        likelihood = fit_stage(box_lower, box_upper, design_seeds[stage])
+        likelihood = start_likelihood if stage == 0 and start_likelihood is not None else \
+            fit_stage(box_lower, box_upper, design_seeds[stage])
         start = start_walkers(likelihood, start_points, rng, walkers)
         chain, accept = sample(likelihood, start, stage_steps, chain_seeds[stage])
         kept = chain[chain.shape[0] // 2:].reshape(-1, likelihood.n_dim)
