@@ -352,6 +352,20 @@ def test_calibrate_rejects_a_file_that_is_not_rig_data(tmp_path):
     assert not any(p.name.startswith(".cal") for p in tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("words, message", [
+    (["6", "x"], "uqgear: error: --pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; got 6 x"),
+    (["7"], "uqgear: error: --pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; got 7"),
+    (["9", "6"], "uqgear: error: pitch_classes: expected 1 <= lowest <= highest <= 11; got (9, 6)"),
+])
+def test_calibrate_rejects_wrong_pitch_classes_before_any_work(tmp_path, words, message):
+    rig = Path(__file__).resolve().parent.parent / "data" / "rig" / "healthy.nc"
+    completed = _uqgear("calibrate", str(rig), "--out", str(tmp_path / "cal"), "--pitch-classes", *words)
+    assert completed.returncode == 2
+    assert completed.stderr.strip() == message
+    assert not (tmp_path / "cal").exists()
+    assert not any(p.name.startswith(".cal") for p in tmp_path.iterdir())
+
+
 @pytest.mark.slow
 def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
     import json

@@ -454,9 +454,8 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     return 0
 
 
-def _pitch_classes(words: list[str]) -> tuple[float, float] | None | str:
-    """``--pitch-classes``: two ISO 1328-1 classes, or ``none``; an error message otherwise (the
-    calibration checks the values)."""
+def _pitch_classes(words: list[str]) -> tuple[float, float] | None:
+    """``--pitch-classes``: two ISO 1328-1 classes, or ``none`` (the calibration checks their range)."""
     if [word.lower() for word in words] == ["none"]:
         return None
     try:
@@ -464,7 +463,8 @@ def _pitch_classes(words: list[str]) -> tuple[float, float] | None | str:
     except ValueError:
         values = ()
     if len(values) != 2:
-        return f"--pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; got {' '.join(words)}"
+        raise UqgearError(f"--pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; "
+                          f"got {' '.join(words)}")
     return values[0], values[1]
 
 
@@ -475,8 +475,6 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
     classes = _pitch_classes(args.pitch_classes)
-    if isinstance(classes, str):
-        return _fail(classes)
     out = Path(args.out)
     with _output_folder(out) as work:
         result = calibrate(rig, work, design=args.design, params=_comma_list(args.params), seed=args.seed,
