@@ -455,7 +455,7 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
 
 
 def _pitch_classes(words: list[str]) -> tuple[float, float] | None:
-    """``--pitch-classes``: two ISO 1328-1 classes, or ``none`` (the calibration checks their range)."""
+    """``--pitch-classes``: two ISO 1328-1 classes, or ``none`` (the calibration or diagnosis checks their range)."""
     if [word.lower() for word in words] == ["none"]:
         return None
     try:
@@ -501,10 +501,11 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     reference = Path(args.reference) if args.reference else None
     if reference is not None and not reference.is_file():
         return _fail(f"--reference {reference}: rig data file not found")
+    classes = _pitch_classes(args.pitch_classes)
     out = Path(args.out)
     with _output_folder(out) as work:
         result = diagnose(rig, work, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
-                          workers=args.workers, reference=reference)
+                          workers=args.workers, reference=reference, pitch_classes=classes)
     gap = result.get("gap", {})
     if gap.get("baseline") is None:
         # nothing was compared (verdict inconclusive): the reason, not a row of Nones
@@ -660,6 +661,10 @@ def build_parser() -> argparse.ArgumentParser:
                           help="a campaign of the same rig and test plan with a known good gearbox: what it "
                           "shows against the fitted model (transfer paths, the rig's own structure) is learned "
                           "and carried over, so the diagnosis names what changed")
+    diagnose.add_argument("--pitch-classes", nargs="+", default=["6", "8"], metavar="CLASS",
+                          help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest "
+                          "(default 6 8): where the sidebands show pitch errors on both shafts, what such "
+                          "errors do is model error, not an effect; 'none': perfect gears")
     diagnose.set_defaults(handler=_command_diagnose)
 
     blind = commands.add_parser("blindtest", help="blind check of the diagnosis on virtual-rig campaigns",

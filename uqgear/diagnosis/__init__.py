@@ -6,7 +6,8 @@ Modules along the data path: :mod:`.simulation` (model records, the rig's
 feature processing), :mod:`.discrepancy` (predictive distribution of the
 features), :mod:`.candidates` (fitted parameters and candidate effects),
 :mod:`.case` (a prepared campaign and its run execution), :mod:`.signatures`
-(frequency-locked lines, start hints), :mod:`.fitting`, :mod:`.scoring`
+(frequency-locked lines, start hints), :mod:`.fitting`, :mod:`.manufacturing`
+(the gears' pitch errors as model error), :mod:`.scoring`
 (held-out predictions and the gap), :mod:`.verdict`, :mod:`.pipeline`
 (:func:`run_diagnosis`), :mod:`.outputs` (summary and Dataset),
 :mod:`.workflow` (:func:`diagnose`) and :mod:`.blind_test`.

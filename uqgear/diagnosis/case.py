@@ -6,7 +6,7 @@ import math
 import multiprocessing
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -15,11 +15,13 @@ from threadpoolctl import threadpool_limits
 
 from ..physics.design import Design
 from ..physics.effects import Effect
+from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
 from ..rig.features import SIGNAL_CHANNELS
 from ..rig.order_tracking import speed_summary, track_orders
 from .discrepancy import FeatureLayout, NoiseModel, noise_model
 from .errors import DiagnosisError
+from .interference import NOTCH_HALF_WIDTH, interference_lines
 from .simulation import CampaignSimulator, RunProcessor, SimulatedRun
 
 # Relative model error (standard deviation) by feature kind: line amplitudes,
@@ -35,7 +37,7 @@ FEATURE_OPTIONS: dict[str, Any] = {"n_harmonics": 3, "n_sidebands": 3, "n_shaft_
 
 
 class FeatureModelError(dict):
-    """Relative model error per feature kind, widened feature by feature.
+    """Relative model error per feature kind, widened feature by feature, and absolute model error.
 
     The dict's own items are the per-kind errors (what summaries and JSON
     show); looking a kind up returns them combined in quadrature with a
@@ -43,11 +45,19 @@ class FeatureModelError(dict):
     order), e.g. the uncertainty of a reference campaign's transfer
     correction (:mod:`uqgear.diagnosis.reference`). Arrays broadcast where
     :func:`~uqgear.diagnosis.discrepancy.standardised_discrepancy` uses scalars.
+
+    ``absolute`` holds, per kind, model error that does not scale with the
+    model's value (same shapes): for lines a per-quadrature standard
+    deviation in the channel's units, for band and RMS features a standard
+    deviation of the power, for kurtosis one of the kurtosis; e.g. what the
+    pitch errors of manufactured gears add (:mod:`uqgear.diagnosis.manufacturing`).
     """
 
-    def __init__(self, base: Mapping[str, float], widening: Mapping[str, np.ndarray]) -> None:
+    def __init__(self, base: Mapping[str, float], widening: Mapping[str, np.ndarray],
+                 absolute: Mapping[str, np.ndarray] | None = None) -> None:
         super().__init__({key: float(value) for key, value in dict(base).items()})
         self.widening = {key: np.asarray(value, dtype=float) for key, value in widening.items()}
+        self.absolute = {key: np.asarray(value, dtype=float) for key, value in (absolute or {}).items()}
 
     def __getitem__(self, kind: str) -> Any:
         base = super().__getitem__(kind)
@@ -55,6 +65,17 @@ class FeatureModelError(dict):
         if extra is None or extra.size == 0:
             return base
         return np.sqrt(base ** 2 + extra ** 2)
+
+    @classmethod
+    def combined(cls, current: Mapping[str, float], absolute: Mapping[str, np.ndarray]) -> "FeatureModelError":
+        """``current`` (a plain mapping or one of these) with ``absolute`` added to its absolute errors."""
+        widening = getattr(current, "widening", {})
+        before = dict(getattr(current, "absolute", {}))
+        for kind, values in absolute.items():
+            values = np.asarray(values, dtype=float)
+            before[kind] = np.sqrt(before[kind] ** 2 + values ** 2) if kind in before else values
+        # dict() of one of these reads the per-kind errors, not the widened arrays
+        return cls(dict(current), widening, before)
 
 
 @dataclass
@@ -85,6 +106,8 @@ class RigCase:
     # (n_op, n_channel, all features): the model's features are multiplied by it (a reference
     # campaign's transfer correction, uqgear.diagnosis.reference); None: unity
     transfer: np.ndarray | None = None
+    # line interference left out of the low band (uqgear.diagnosis.interference)
+    interference: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def n_op(self) -> int:
@@ -107,7 +130,9 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
 
     The records are first order-tracked (:func:`uqgear.rig.order_tracking.track_orders`):
     every later step, and the model runs at each run's ``pinion_speed``, see
-    constant-speed records at the estimated mean speed.
+    constant-speed records at the estimated mean speed. Line interference on
+    the accelerometers (:mod:`uqgear.diagnosis.interference`) is left out of
+    the low band of every record.
     """
     errors = dict(DEFAULT_MODEL_ERROR)
     if model_error is not None:
@@ -138,6 +163,21 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
     noise_column = processors[0].columns["noise_std"]
     noise_std = observed_all[..., noise_column]
     usable = np.isfinite(observed_all).any(axis=-1) & np.isfinite(noise_std) & (noise_std > 0)
+    records = {channel: np.asarray(rig[channel].values, dtype=float) for channel in channels}
+    interference = interference_lines(records, {c: noise_std[:, i] for i, c in enumerate(channels)},
+                                      {c: usable[:, i] for i, c in enumerate(channels)}, speeds, fs,
+                                      tuple(options["low_band"]), channels)
+    if interference:
+        # out of the low band of every record, rig and model alike (before the noise models read it)
+        frequencies = sorted({line["frequency"] for line in interference})
+        for processor in cache.values():
+            processor.set_notch(frequencies, NOTCH_HALF_WIDTH)
+        column = processors[0].columns["low_band_rms"]
+        for op in range(speeds.size):
+            for index, channel in enumerate(channels):
+                record = records[channel][op]
+                if not np.isnan(record).any():
+                    observed_all[op, index, column] = processors[op].low_band_rms(record[None])[0]
     rng = np.random.default_rng(seed)
     noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
     noise = [noise_by_speed[float(speed)] for speed in speeds]
@@ -149,7 +189,7 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
                    fs=fs, size=size, processors=processors, layout=layout,
                    observed=observed_all[..., layout.columns], observed_all=observed_all, noise_std=noise_std,
                    noise=noise, usable=usable, simulator=simulator, model_error=errors,
-                   speed=speed_summary(rig), tracking_s=tracking_s)
+                   speed=speed_summary(rig), tracking_s=tracking_s, interference=interference)
 
 
 @dataclass(frozen=True)
@@ -162,12 +202,16 @@ class RunTask:
     adhesion_torque: float
     effects: tuple[Effect, ...]
     periodicity: str
+    # per-tooth pitch errors of the gears (uqgear.diagnosis.manufacturing); None: perfect gears
+    pitch_errors: PitchErrors | None = None
+    # reduce to complex line phasors (lines) and the other features (real part) instead of features
+    phasors: bool = False
 
 
 def simulate_task(case: RigCase, task: RunTask) -> SimulatedRun:
     """The model records of a run on the rig's time grid."""
     return case.simulator.run(task.op, task.design, task.mesh_stiffness_scale, task.adhesion_torque, task.effects,
-                              task.periodicity)
+                              task.periodicity, pitch_errors=task.pitch_errors)
 
 
 def execute_run(case: RigCase, task: RunTask) -> tuple[np.ndarray, bool]:
@@ -189,9 +233,13 @@ def execute_group(case: RigCase, tasks: Sequence[RunTask]) -> list[tuple[np.ndar
         # an internal invariant (run_groups makes the groups): the step log reports it as internal
         raise RuntimeError(f"execute_group: expected runs of one operating point; got runs {sorted(ops)}")
     op = ops.pop()
+    phasors = {task.phasors for task in tasks}
+    if len(phasors) != 1:
+        raise RuntimeError("execute_group: expected runs reduced alike (features or phasors); got both")
     runs = [simulate_task(case, task) for task in tasks]
     stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
-    features = case.processors[op].model_features(stacked).reshape(len(runs), len(case.channels), -1)
+    reduce = case.processors[op].model_phasors if phasors.pop() else case.processors[op].model_features
+    features = reduce(stacked).reshape(len(runs), len(case.channels), -1)
     if case.transfer is not None:
         # the rig sees the gear through its transfer paths: the model's features as the rig would record them
         features = features * case.transfer[op]

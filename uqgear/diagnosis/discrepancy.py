@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.special
@@ -131,6 +132,11 @@ class FeatureLayout:
         return cls(names, families, kinds, np.array(chosen, dtype=int))
 
 
+def absolute_model_error(model_error: Mapping[str, Any], kind: str) -> Any:
+    """Absolute model error of a feature kind (:class:`~.case.FeatureModelError`; 0 where none is held)."""
+    return getattr(model_error, "absolute", {}).get(kind, 0.0)
+
+
 def _noisy_kurtosis(kurtosis: np.ndarray, signal_power: np.ndarray, noise_power: np.ndarray) -> np.ndarray:
     """Kurtosis of a signal of this kurtosis and mean square plus independent Gaussian noise of this power."""
     return (kurtosis * signal_power ** 2 + 6.0 * signal_power * noise_power + 3.0 * noise_power ** 2) / \
@@ -154,7 +160,9 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
         Per run (unit noise).
     layout : FeatureLayout
     model_error : mapping
-        Relative model error per feature kind.
+        Relative model error per feature kind (a
+        :class:`~uqgear.diagnosis.case.FeatureModelError` may add absolute
+        model error, :func:`absolute_model_error`).
 
     Returns
     -------
@@ -177,7 +185,8 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
     line = kinds == "line"
     if line.any():
         nu = np.abs(model[..., line])
-        sigma = np.sqrt((sigma_noise * line_scale[..., line]) ** 2 + (model_error["line"] * nu) ** 2)
+        sigma = np.sqrt((sigma_noise * line_scale[..., line]) ** 2 + (model_error["line"] * nu) ** 2
+                        + absolute_model_error(model_error, "line") ** 2)
         sigma = np.maximum(sigma, 1e-300)
         z[..., line] = _line_discrepancy(observed[..., line], nu, sigma)
         scale[..., line] = sigma / np.maximum(sigma_noise * line_scale[..., line], 1e-300)
@@ -190,7 +199,8 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
         # noise power scatter, model error, and the signal-noise cross term
         relative_scatter = moments[..., 1:2] / moments[..., 0:1]
         spread = np.sqrt((sigma_noise ** 2 * moments[..., 1:2]) ** 2 + (2.0 * model_error[kind] * model_power) ** 2
-                         + 2.0 * model_power * noise_power * relative_scatter ** 2)
+                         + 2.0 * model_power * noise_power * relative_scatter ** 2
+                         + absolute_model_error(model_error, kind) ** 2)
         spread = np.maximum(spread, 1e-300)
         z[..., chosen] = (observed[..., chosen] ** 2 - model_power - noise_power) / spread
         scale[..., chosen] = spread / np.maximum(sigma_noise ** 2 * moments[..., 1:2], 1e-300)
@@ -201,7 +211,8 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
         noise_power = sigma_noise ** 2 * total[..., 0:1]
         kurt = model[..., chosen]
         predicted = _noisy_kurtosis(kurt, power, noise_power)
-        spread = np.sqrt((model_error["kurtosis"] * predicted) ** 2 + kurt_spread[..., None] ** 2)
+        spread = np.sqrt((model_error["kurtosis"] * predicted) ** 2 + kurt_spread[..., None] ** 2
+                         + absolute_model_error(model_error, "kurtosis") ** 2)
         z[..., chosen] = (observed[..., chosen] - predicted) / spread
         scale[..., chosen] = spread / np.maximum(kurt_spread[..., None], 1e-300)
     return z, scale

@@ -15,7 +15,7 @@ from ..rig.features import FEATURE_FAMILIES
 from .case import RigCase, simulate_task
 from .pipeline import DiagnosisResult
 from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
-from .signatures import amplitude_spectrum
+from .interference import amplitude_spectrum
 from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, SIGNAL_SNR,
                       Decision, line_signal_to_noise)
 
@@ -245,6 +245,8 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
                        "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD},
         "model_error": case.model_error,
+        "pitch_errors": result.pitch_errors.summary() if result.pitch_errors is not None else None,
+        "line_interference": case.interference,
         "effects_considered": list(result.effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
                 "channels": list(case.channels), "speed": case.speed},
@@ -312,6 +314,8 @@ def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Se
                        "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD,
                        "signal_snr": SIGNAL_SNR},
         "model_error": case.model_error,
+        "pitch_errors": None,
+        "line_interference": case.interference,
         "effects_considered": list(effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
                 "channels": list(case.channels), "speed": case.speed},

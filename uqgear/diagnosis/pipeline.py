@@ -84,9 +84,11 @@ import xarray as xr
 from ..common.steps import StepLog
 from ..physics.effects import EFFECTS
 from .candidates import candidates_for, nominal_parameters
-from .case import RigCase
+from ..uq.seeds import child_seed
+from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
+from .manufacturing import DEFAULT_CLASSES, PitchErrorAllowance, check_classes, pitch_error_allowance
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
@@ -97,6 +99,8 @@ from .verdict import (EFFECT_NAMES, NOISE_GAP_THRESHOLD, SHRINK_THRESHOLD, Decis
 PROMOTED = 2
 #: Most effects a diagnosis names together (forward selection).
 MAX_EFFECTS = 3
+# Child of the diagnosis seed that draws the pitch errors (the bootstrap uses the seed itself).
+_PITCH_ERROR_STREAM = 7
 
 
 @dataclass
@@ -186,6 +190,7 @@ class DiagnosisResult:
     remaining_where: list[dict[str, Any]] = field(default_factory=list)
     remaining_families: list[dict[str, Any]] = field(default_factory=list)
     remaining_interval: tuple[float, float] = (math.nan, math.nan)
+    pitch_errors: PitchErrorAllowance | None = None
 
     @property
     def best(self) -> CandidateScore | None:
@@ -531,7 +536,8 @@ def set_decision(first_decision: Decision, selected: Sequence[SelectedEffect], r
 
 def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
                   promoted: int = PROMOTED, calibration: xr.Dataset | None = None,
-                  steps: StepLog | None = None, max_effects: int = MAX_EFFECTS) -> DiagnosisResult:
+                  steps: StepLog | None = None, max_effects: int = MAX_EFFECTS,
+                  pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> DiagnosisResult:
     """Fit the nominal model and every candidate, score them on held-out runs, decide.
 
     Candidates are screened with their own parameters only (the nominal
@@ -546,7 +552,10 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
     the candidates are scored again against it. When an effect is named and
     a significant held-out gap remains, further effects are added by
     forward selection (:func:`forward_selection`, at most ``max_effects``
-    in all).
+    in all). Where the rig's sidebands show pitch errors on both shafts,
+    what pitch errors of ``pitch_classes`` do to each feature becomes model
+    error of the nominal model, which is then refitted
+    (:mod:`uqgear.diagnosis.manufacturing`).
 
     Parameters
     ----------
@@ -562,6 +571,9 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         A calibration posterior; the nominal fit starts from its medians.
     max_effects : int
         Most effects named together by forward selection (1: the first one only).
+    pitch_classes : (float, float) or None
+        ISO 1328-1 flank tolerance classes (finest, coarsest) the gears are
+        made to; None: perfect gears, no allowance for pitch errors.
     steps : StepLog, optional
         Records each finished step with what it found; a failure inside a
         step is raised as :class:`~uqgear.common.errors.InternalError`
@@ -579,6 +591,7 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         A step failed after the input was accepted.
     """
     effect_names = _check_effects(effects)
+    pitch_classes = check_classes(pitch_classes)
     if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 1:
         raise DiagnosisError(f"max_effects: expected an integer >= 1; got {max_effects!r}")
     steps = StepLog() if steps is None else steps
@@ -596,6 +609,17 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         nominal = fit_nominal(case) if start is None else fit_nominal(case, start=start, positions=positions)
         found.update(parameters=nominal.values, adhesion_torque=list(nominal.adhesion_torques), cost=nominal.cost)
     timings["nominal_fit"] += time.perf_counter() - clock
+    clock = time.perf_counter()
+    with steps.step("allow for the gears' pitch errors") as found:
+        allowance = pitch_error_allowance(case, nominal, classes=pitch_classes,
+                                          seed=child_seed(seed, _PITCH_ERROR_STREAM))
+        found.update(applied=allowance.applied, reason=allowance.reason)
+        if allowance.applied:
+            case.model_error = FeatureModelError.combined(case.model_error, allowance.absolute)
+            # the nominal parameters were pulled by what pitch errors did to the features: refit
+            nominal = fit(nominal.problem, [nominal.vector], max_evaluations=30, tolerance=1e-3).after(nominal)
+            found.update(parameters=nominal.values, cost=nominal.cost)
+    timings["pitch_errors"] = time.perf_counter() - clock
     with steps.step("find frequency-locked lines and signature hints") as found:
         locked = frequency_locked_lines(case)
         hints = signature_hints(case, locked)
@@ -655,6 +679,6 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
                            # with no effect named the final model is the nominal one: its maps are already made
                            remaining_where=where_gap(final_held.z, case) if selected else where,
                            remaining_families=family_character(final_held.z, case, locked) if selected else families,
-                           remaining_interval=tuple(remaining_interval))
+                           remaining_interval=tuple(remaining_interval), pitch_errors=allowance)
 
 

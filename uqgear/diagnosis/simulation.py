@@ -21,6 +21,7 @@ from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
 from ..physics.integration import _HISTORY_COLUMNS, _integrate_fast, steps_per_period
 from ..physics.model import build_model
+from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
 from ..rig.features import feature_definitions
 from ..rig.virtual_rig import frequency_filter
@@ -95,6 +96,29 @@ class RunProcessor:
         edge = (self._band_bins == 0) | ((self.size % 2 == 0) & (self._band_bins == self.size // 2))
         self._band_weights = np.where(edge, 1.0, 2.0)
         self._window_power = float(np.sum(self.taper ** 2))
+        self.notch: tuple[float, ...] = ()
+
+    def set_notch(self, frequencies: Sequence[float], half_width: int) -> None:
+        """Leave the bins within ``half_width`` of each frequency (Hz) out of the low band, rig and model alike.
+
+        For line interference (:mod:`uqgear.diagnosis.interference`). The rig's
+        low band is then computed by :meth:`model_features`'s formula too.
+        """
+        resolution = self.fs / self.size
+        keep = np.ones(self._band_bins.size, dtype=bool)
+        for frequency in frequencies:
+            keep &= np.abs(self._band_bins * resolution - frequency) > half_width * resolution + 1e-9
+        self._band_bins = self._band_bins[keep]
+        self._band_weights = self._band_weights[keep]
+        self.notch = self.notch + tuple(float(f) for f in frequencies)
+
+    def low_band_rms(self, records: np.ndarray) -> np.ndarray:
+        """RMS of the low band (without notched bins) of records (R, N): the one-sided periodogram density summed."""
+        centred = records - records.mean(axis=1, keepdims=True)
+        spectrum = np.fft.rfft(centred * self.taper, axis=1)
+        # one-sided periodogram density (scipy's 'density' scaling), summed over the band
+        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
+        return np.sqrt(density.sum(axis=1) * self.fs / self.size)
 
     def features(self, records: np.ndarray) -> np.ndarray:
         """Feature values (R, F) of records (R, N); rows with a NaN sample are NaN."""
@@ -105,6 +129,8 @@ class RunProcessor:
             out[usable] = feature_module._block_features(
                 records[usable], self.fit, self.excluded, self.fs, self.taper, self.low_band, self.columns,
                 self.line_columns, len(self.definitions))
+            if self.notch:
+                out[usable, self.columns["low_band_rms"]] = self.low_band_rms(records[usable])
         return out
 
     def model_features(self, records: np.ndarray) -> np.ndarray:
@@ -118,15 +144,23 @@ class RunProcessor:
         out = np.full((records.shape[0], len(self.definitions)), np.nan)
         out[:, self.line_columns] = self.fit.amplitudes(records)
         centred = records - records.mean(axis=1, keepdims=True)
-        spectrum = np.fft.rfft(centred * self.taper, axis=1)
-        # one-sided periodogram density (scipy's 'density' scaling), summed over the band
-        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
-        out[:, self.columns["low_band_rms"]] = np.sqrt(density.sum(axis=1) * self.fs / self.size)
+        out[:, self.columns["low_band_rms"]] = self.low_band_rms(records)
         mean_square = np.mean(centred ** 2, axis=1)
         out[:, self.columns["rms"]] = np.sqrt(mean_square)
         with np.errstate(divide="ignore", invalid="ignore"):
             out[:, self.columns["kurtosis"]] = np.where(mean_square > 0,
                                                         np.mean(centred ** 4, axis=1) / mean_square ** 2, np.nan)
+        return out
+
+    def model_phasors(self, records: np.ndarray) -> np.ndarray:
+        """:meth:`features` (noise floor included) with each line's complex phasor in place of its amplitude (R, F).
+
+        For model records with lines at every shaft order (pitch errors), whose
+        forest of lines raises the noise floor a rig's records are read with.
+        """
+        records = np.atleast_2d(np.asarray(records, dtype=float))
+        out = self.features(records).astype(complex)
+        out[:, self.line_columns] = self.fit.phasors(records)
         return out
 
     def _line_noise_scale(self) -> np.ndarray:
@@ -240,15 +274,18 @@ class CampaignSimulator:
         return int(math.ceil((self.duration + 2 * _GUARD) * self.mesh_frequency(op))) + 1
 
     def run(self, op: int, design: Design, mesh_stiffness_scale: float, adhesion_torque: float,
-            effects: Sequence[Effect], periodicity: str) -> SimulatedRun:
+            effects: Sequence[Effect], periodicity: str, *, pitch_errors: PitchErrors | None = None) -> SimulatedRun:
         """Model records of run ``op`` (dict channel -> (N,) array on the rig grid).
 
         ``periodicity`` is the expected period of the steady response; a run
-        found not to repeat over it is simulated in full.
+        found not to repeat over it is simulated in full (always, with
+        ``pitch_errors``: their pattern repeats only after z1 z2 / gcd mesh periods).
         """
         if periodicity not in PERIODICITIES:
             raise DiagnosisError(f"periodicity: expected one of {', '.join(PERIODICITIES)}; got {periodicity!r}")
-        simulate = partial(self._simulate, op, design, mesh_stiffness_scale, adhesion_torque, effects)
+        simulate = partial(self._simulate, op, design, mesh_stiffness_scale, adhesion_torque, effects, pitch_errors)
+        if pitch_errors is not None:
+            periodicity = "free"
         f_mesh = self.mesh_frequency(op)
         run_in = int(math.ceil(_RUN_IN * f_mesh))
         if periodicity != "free":
@@ -260,6 +297,7 @@ class CampaignSimulator:
         return self._whole(op, simulate(run_in + whole, whole)[0])
 
     def _simulate(self, op: int, design: Design, scale: float, adhesion_torque: float, effects: Sequence[Effect],
+                  pitch_errors: PitchErrors | None,
                   n_periods: int, keep_periods: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """Displacements and TE over the kept periods, and the state at each kept period start.
 
@@ -268,7 +306,7 @@ class CampaignSimulator:
         integration of a short periodic window.
         """
         setup = build_model(design, float(self.speeds[op]), float(self.drive_torques[op]), float(adhesion_torque),
-                            mesh_stiffness_scale=float(scale), effects=effects)
+                            mesh_stiffness_scale=float(scale), effects=effects, pitch_errors=pitch_errors)
         history, poincare, _ = _integrate_fast(setup, n_periods, keep_periods, self.samples_per_period[op],
                                                self.steps_per_mode, setup.static_state())
         columns = {name: index for index, name in enumerate(_HISTORY_COLUMNS)}

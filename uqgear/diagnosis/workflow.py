@@ -22,6 +22,7 @@ from ..uq.seeds import as_seed_sequence
 from .case import RunExecutor, prepare_case
 from .errors import DiagnosisError
 from .outputs import _held_spectra, _json_clean, inconclusive_dataset, inconclusive_summary, result_dataset, summary
+from .manufacturing import DEFAULT_CLASSES, check_classes
 from .pipeline import _check_effects, run_diagnosis
 from .scoring import capped_squares
 from .verdict import MIN_INFORMATIVE_RUNS, uninformative_reason
@@ -147,7 +148,8 @@ def diagnosis_result(rig: str | os.PathLike[str] | xr.Dataset, *,
                      design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
                      seed: int | np.random.SeedSequence = 0, workers: int | None = None,
                      calibration: str | os.PathLike[str] | xr.Dataset | None = None,
-                     reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection | None" = None
+                     reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection | None" = None,
+                     pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES
                      ) -> tuple[dict[str, Any], xr.Dataset]:
     """Diagnose the sim-to-real gap of a rig campaign without writing anything.
 
@@ -160,16 +162,19 @@ def diagnosis_result(rig: str | os.PathLike[str] | xr.Dataset, *,
         (gap maps over op x channel x family, scores, held-out spectra).
     """
     content, maps, _ = _diagnosis(rig, design=design, effects=effects, seed=seed, workers=workers,
-                                  calibration=calibration, reference=reference, steps=StepLog())
+                                  calibration=calibration, reference=reference, steps=StepLog(),
+                                  pitch_classes=pitch_classes)
     return content, maps
 
 
-def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepLog, reference=None
+def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepLog, reference=None,
+               pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES
                ) -> tuple[dict[str, Any], xr.Dataset, Design]:
     started = time.perf_counter()
     cpu_started = _cpu_seconds()
     # the input first, all of it: a mistake in it is the user's (exit 2) and costs no work
     effect_names = _check_effects(effects)
+    pitch_classes = check_classes(pitch_classes)
     seed_sequence = _as_seed(seed)
     workers = _check_workers(workers)
     # a design given replaces the file's before the file is read: its copy is then not validated
@@ -212,7 +217,8 @@ def _diagnosis(rig, *, design, effects, seed, workers, calibration, steps: StepL
     with steps.step("start the worker processes"):
         case.executor = RunExecutor(case, workers)
     try:
-        result = run_diagnosis(case, effects=effect_names, seed=run_seed, calibration=posterior, steps=steps)
+        result = run_diagnosis(case, effects=effect_names, seed=run_seed, calibration=posterior, steps=steps,
+                               pitch_classes=pitch_classes)
         with steps.step("simulate the held-out spectra"):
             worst = np.argsort([-np.nansum(capped_squares(result.nominal_held.z[op])) for op in range(case.n_op)])
             spectra = _held_spectra(result, sorted(int(op) for op in worst[:2]))
@@ -285,7 +291,8 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
              design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
              seed: int | np.random.SeedSequence = 0, workers: int | None = None,
              calibration: str | os.PathLike[str] | xr.Dataset | None = None, report: bool = True,
-             reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection | None" = None) -> dict[str, Any]:
+             reference: "str | os.PathLike[str] | xr.Dataset | ReferenceCorrection | None" = None,
+             pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> dict[str, Any]:
     """Diagnose the sim-to-real gap of a rig campaign and write the results.
 
     Parameters
@@ -323,6 +330,14 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
         it is refused. What was learned is ``reference`` in ``diagnosis.json``.
         An already learned
         :class:`~uqgear.diagnosis.reference.ReferenceCorrection` is reused as it is.
+    pitch_classes : (float, float) or None
+        ISO 1328-1 flank tolerance classes (finest, coarsest) the gears are
+        made to, default 6 to 8. Where the rig's sidebands show pitch errors
+        on both shafts, what random pitch errors of these classes do to each
+        feature is model error of the nominal model, so that no effect is
+        named for what a manufactured gear's pitch errors can do
+        (:mod:`uqgear.diagnosis.manufacturing`; ``pitch_errors`` in
+        ``diagnosis.json``). None: perfect gears.
 
     Returns
     -------
@@ -347,6 +362,7 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     """
     # the cheap checks first: a bad option or folder fails before minutes of fitting
     _check_effects(effects)
+    check_classes(pitch_classes)
     _as_seed(seed)
     _check_workers(workers)
     out = make_out_dir(out_dir)
@@ -354,7 +370,7 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     try:
         content, maps, nominal_design = _diagnosis(rig, design=design, effects=effects, seed=seed,
                                                    workers=workers, calibration=calibration, steps=steps,
-                                                   reference=reference)
+                                                   reference=reference, pitch_classes=pitch_classes)
         with steps.step("write diagnosis.nc"):
             save_result(maps, out / "diagnosis.nc", seed=_as_seed(seed), design=nominal_design)
         with steps.step("write diagnosis.json"):

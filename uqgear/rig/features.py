@@ -328,6 +328,15 @@ class _LineFit:
             result[:, self.inside] = amplitude[:, self.groups]
         return result
 
+    def phasors(self, records: np.ndarray) -> np.ndarray:
+        """Complex amplitudes (R, L), cos - i sin coefficients, whose moduli are :meth:`amplitudes`."""
+        result = np.full((records.shape[0], self.size_out), np.nan, dtype=complex)
+        if self.n_centres:
+            coefficients = scipy.linalg.cho_solve(self.factor, self.weighted.T @ records.T)
+            phasor = (coefficients[1:1 + self.n_centres] - 1j * coefficients[1 + self.n_centres:]).T
+            result[:, self.inside] = phasor[:, self.groups]
+        return result
+
 
 def _blocks(rows: np.ndarray, size: int) -> list[np.ndarray]:
     """Row indices in blocks that bound the float64 working copies."""

@@ -645,7 +645,8 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     rig = rig_path(context.study, context.spec)
     reference = reference_path(context.study, context.spec)
     content, result = diagnosis_result(rig, design=context.design, effects=effects, seed=context.stage_seed(0),
-                                       workers=context.threads, reference=reference)
+                                       workers=context.threads, reference=reference,
+                                       pitch_classes=context.options["pitch_classes"])
     result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
                         effects=json.dumps(effects), rig=str(rig))
     if reference is not None:

@@ -108,6 +108,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "effects": list_of(choice(*EFFECTS), unique=True),
         # a healthy campaign of the same rig and test plan (uqgear diagnose --reference)
         "reference": string(),
+        # ISO 1328-1 classes of the rig's gears: what their pitch errors do is model error (none: perfect gears)
+        "pitch_classes": class_range(1, 11),
     },
 }
 
@@ -127,7 +129,7 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
               "qois": DEFAULT_QOIS},
     "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"),
                   "pitch_classes": (6.0, 8.0)},
-    "diagnose": {"effects": tuple(EFFECTS), "reference": None},
+    "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
 }
 _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
                                               "calibrate": ("rig",), "diagnose": ("rig",)}

@@ -1,0 +1,226 @@
+"""Tests of the diagnosis's allowance for the pitch errors of manufactured gears (uqgear.diagnosis.manufacturing).
+
+Fast tests check the pieces against closed forms: an absolute line error is
+a random phasor, so a line the model does not have follows a Rayleigh law
+of the widened spread; the absolute errors combine in quadrature and keep
+a reference correction's widening; the line fit's phasors have the
+amplitudes' moduli and the phase of a known cosine; a healthy campaign
+without pitch errors does not pass the gate, and nothing is simulated.
+
+The slow tests diagnose virtual-rig campaigns whose gears carry ISO 1328-1
+class-7 pitch errors: a healthy one must not be `unexplained` or given an
+effect with the allowance (and is, without it: the test can fail), and a
+12 um pinion run-out on such gears must still lead the ranking, no other
+effect named.
+
+Line interference (uqgear.diagnosis.interference): a fixed-frequency line on
+an accelerometer alone is found, one that the TE carries too is not, and
+mains on a virtual rig's accelerometers is left out of the low band.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.stats
+
+from uqgear.diagnosis import DiagnosisError, prepare_case
+from uqgear.diagnosis import blind_test, pipeline
+from uqgear.diagnosis.case import DEFAULT_MODEL_ERROR, FeatureModelError
+from uqgear.diagnosis.discrepancy import FeatureLayout, NoiseModel, absolute_model_error, standardised_discrepancy
+from uqgear.diagnosis.fitting import fit_nominal
+from uqgear.diagnosis.manufacturing import check_classes, pitch_error_allowance, visible_sidebands
+from uqgear.diagnosis.simulation import RunProcessor
+from uqgear.physics.effects import make_effect
+from uqgear.rig.virtual_rig import simulate_campaign
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
+
+
+def _one_line_layout() -> tuple[FeatureLayout, list[NoiseModel]]:
+    layout = FeatureLayout(("sideband",), ("sideband_pinion",), ("line",), np.array([0]))
+    noise = [NoiseModel(line_scale=np.array([0.5]), band_power=np.array([1.0, 0.1]),
+                        total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)]
+    return layout, noise
+
+
+def test_an_absolute_line_error_is_a_random_phasor_rayleigh_for_a_line_the_model_lacks():
+    layout, noise = _one_line_layout()
+    noise_std = np.array([[2.0]])                        # per quadrature: 2.0 * 0.5 = 1.0
+    added = np.array([[[3.0]]])                          # per quadrature, channel units
+    error = FeatureModelError(DEFAULT_MODEL_ERROR, {}, {"line": added})
+    observed = np.array([[[2.5]]])
+    z, scale = standardised_discrepancy(observed, np.zeros((1, 1, 1)), noise_std, noise, layout, error)
+    sigma = math.sqrt(1.0 + 9.0)
+    expected = scipy.stats.norm.ppf(scipy.stats.rayleigh.cdf(2.5 / sigma))
+    assert z[0, 0, 0] == pytest.approx(expected, abs=1e-9)
+    assert scale[0, 0, 0] == pytest.approx(sigma / 1.0)
+    # without it the same line is far off
+    plain, _ = standardised_discrepancy(observed, np.zeros((1, 1, 1)), noise_std, noise, layout,
+                                        dict(DEFAULT_MODEL_ERROR))
+    assert plain[0, 0, 0] > z[0, 0, 0] + 1.0
+
+
+def test_absolute_errors_combine_in_quadrature_and_keep_a_reference_widening():
+    widening = {"line": np.full((2, 1, 3), 0.1)}
+    first = FeatureModelError.combined(FeatureModelError(DEFAULT_MODEL_ERROR, widening),
+                                       {"line": np.full((2, 1, 3), 3.0)})
+    second = FeatureModelError.combined(first, {"line": np.full((2, 1, 3), 4.0), "band": np.ones((2, 1, 1))})
+    assert np.allclose(absolute_model_error(second, "line"), 5.0)
+    assert np.allclose(absolute_model_error(second, "band"), 1.0)
+    assert absolute_model_error(dict(DEFAULT_MODEL_ERROR), "line") == 0.0
+    assert np.allclose(second["line"], math.hypot(DEFAULT_MODEL_ERROR["line"], 0.1))
+    # what the JSON shows stays the per-kind errors
+    assert dict(second) == DEFAULT_MODEL_ERROR
+
+
+def test_line_phasors_have_the_amplitudes_moduli_and_a_known_phase(design):
+    processor = RunProcessor(design, 1200.0, 20480.0, 10240, {"n_harmonics": 2, "n_sidebands": 1,
+                                                             "n_shaft_orders": 1, "n_motor_lines": 1,
+                                                             "low_band": (2.0, 80.0), "band_limit": 8000.0,
+                                                             "window": "hann"})
+    time = np.arange(10240) / 20480.0
+    mesh = design.z1 * 1200.0 / 60.0
+    record = 0.7 * np.cos(2 * np.pi * mesh * time + 0.4)
+    phasors = processor.model_phasors(record[None])[0]
+    features = processor.model_features(record[None])[0]
+    lines = processor.line_columns
+    assert np.allclose(np.abs(phasors[lines]), features[lines], equal_nan=True)
+    first = processor.columns[processor.names[lines[0]]]
+    assert abs(phasors[first]) == pytest.approx(0.7, rel=1e-6)
+    assert np.angle(phasors[first]) == pytest.approx(0.4, abs=1e-6)
+    # the noise floor is read too (the pitch errors' forest of lines raises it)
+    assert np.isfinite(phasors[processor.columns["noise_std"]].real)
+
+
+def test_the_classes_are_checked():
+    assert check_classes(None) is None
+    assert check_classes([6, 8]) == (6.0, 8.0)
+    with pytest.raises(DiagnosisError, match=r"pitch_classes: expected 1 <= lowest <= highest <= 11; got \(9, 6\)"):
+        check_classes((9, 6))
+    with pytest.raises(DiagnosisError, match="pitch_classes: expected two ISO 1328-1 classes"):
+        check_classes("seven")
+    with pytest.raises(DiagnosisError, match="pitch_classes"):
+        pipeline.run_diagnosis(None, seed=np.random.SeedSequence(0), pitch_classes=(0, 3))
+
+
+def test_a_healthy_gear_without_pitch_errors_gets_no_allowance_and_no_simulation(healthy_case):
+    nominal = fit_nominal(healthy_case)
+    counts = visible_sidebands(healthy_case, nominal)
+    assert set(counts) == {"sideband_pinion", "sideband_gear"}
+    for orders in counts.values():
+        assert set(orders) == {1, 2, 3}
+        for visible, total in orders.values():
+            assert total > 100 and visible < 0.05 * total
+    evaluations = nominal.problem.evaluations
+    allowance = pitch_error_allowance(healthy_case, nominal, classes=(6, 8), seed=np.random.SeedSequence(0))
+    assert not allowance.applied and allowance.absolute == {}
+    assert "do not show pitch errors at every order on both shafts" in allowance.reason
+    assert nominal.problem.evaluations == evaluations
+    assert allowance.summary()["visible_sidebands"]["sideband_gear"]["2"]["of"] == counts["sideband_gear"][2][1]
+    none = pitch_error_allowance(healthy_case, nominal, classes=None, seed=np.random.SeedSequence(0))
+    assert not none.applied and "perfect" in none.reason
+
+
+def _pitch_campaign(design, effects, seed):
+    ops = blind_test.operating_points_of("service", design, 4)
+    return simulate_campaign(design, ops, effects=effects, seed=seed, duration=0.5, run_in=0.3, pitch_errors=7)
+
+
+_EFFECTS = ["eccentricity", "tooth_damage", "friction"]
+
+
+@pytest.mark.slow
+def test_a_healthy_class_7_gear_is_not_given_an_effect_nor_left_unexplained(design):
+    rig = _pitch_campaign(design, [], seed=11)
+    case = prepare_case(rig, design, seed=np.random.SeedSequence(1))
+    result = pipeline.run_diagnosis(case, effects=_EFFECTS, seed=np.random.SeedSequence(2))
+    assert result.pitch_errors is not None and result.pitch_errors.applied, result.pitch_errors
+    assert result.verdict == "none", result.reason
+    assert result.selected == []
+    assert "pitch_errors" in result.timings
+    # the same campaign with perfect gears assumed: the gap the allowance took away is there
+    plain = pipeline.run_diagnosis(prepare_case(rig, design, seed=np.random.SeedSequence(1)), effects=_EFFECTS,
+                                   seed=np.random.SeedSequence(2), pitch_classes=None)
+    assert not plain.pitch_errors.applied
+    assert plain.nominal_gap > 2.0 * max(result.nominal_gap, 0.5)
+
+
+@pytest.mark.slow
+def test_a_run_out_on_class_7_gears_stays_the_leading_candidate(design):
+    """A 12 um pinion run-out on class-7 gears is not hidden by the allowance: it leads the ranking by far.
+
+    On 4 runs of 0.5 s it explains about a third of the gap (the rest: accelerometer shaft lines the
+    run-out and the pitch errors make together, which the allowance, simulated without the run-out,
+    lacks), so the verdict may stay `unexplained`; no other effect is named and the gap is not called noise.
+    """
+    run_out = make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 0.7, "kappa": 0.03})
+    rig = _pitch_campaign(design, [run_out], seed=12)
+    case = prepare_case(rig, design, seed=np.random.SeedSequence(1))
+    result = pipeline.run_diagnosis(case, effects=_EFFECTS, seed=np.random.SeedSequence(2))
+    assert result.pitch_errors.applied
+    assert result.verdict in ("eccentricity", "unexplained"), result.reason
+    assert result.best.effect == "eccentricity" and result.best.score > 20.0, result.reason
+    assert all(entry.score < 0 for entry in result.scores[1:])
+    assert [chosen.entry.effect for chosen in result.selected] in ([], ["eccentricity"])
+    levels = result.pitch_errors.levels
+    assert set(levels) == {"pinion", "gear"}
+    for read in levels.values():
+        low, high = read["draw_range"]
+        assert low <= read["level"] <= high
+
+
+# ---------------------------------------------------------------------------------------------- line interference
+
+def _records(fs, size, speeds, lines, rng, noise=0.01):
+    """Records (n_op, N) with white noise and lines: (frequency in Hz, or order if negative, amplitude)."""
+    time = np.arange(size) / fs
+    out = noise * rng.standard_normal((len(speeds), size))
+    for op, speed in enumerate(speeds):
+        for where, amplitude in lines:
+            frequency = -where * speed / 60.0 if where < 0 else where
+            out[op] += amplitude * np.cos(2 * np.pi * frequency * time + op)
+    return out
+
+
+def test_a_fixed_line_on_an_accelerometer_alone_is_interference_a_line_on_the_te_too_is_not():
+    from uqgear.diagnosis.interference import interference_lines
+
+    rng = np.random.default_rng(3)
+    fs, size, speeds = 4096.0, 4096, np.array([600.0, 900.0, 1300.0, 1800.0])
+    noise = {name: np.full(speeds.size, 0.01) for name in ("te", "acc_pinion", "acc_gear")}
+    usable = {name: np.ones(speeds.size, dtype=bool) for name in noise}
+    records = {"te": _records(fs, size, speeds, [(-21.0, 1.0), (17.0, 0.5)], rng),
+               # mains at 50 Hz, the gear's 17 Hz line and an order-locked line
+               "acc_pinion": _records(fs, size, speeds, [(50.0, 0.5), (17.0, 0.5), (-3.0, 0.5)], rng),
+               "acc_gear": _records(fs, size, speeds, [(-21.0, 1.0)], rng)}
+    found = interference_lines(records, noise, usable, speeds, fs, (2.0, 80.0), ("te", "acc_pinion", "acc_gear"))
+    assert [(line["channel"], line["frequency"]) for line in found] == [("acc_pinion", 50.0)]
+    assert found[0]["ops"] == [0, 1, 2, 3] and found[0]["amplitude"] == pytest.approx(0.5, rel=0.05)
+    # without a TE channel nothing can be told apart: nothing is left out
+    assert interference_lines({k: v for k, v in records.items() if k != "te"}, noise, usable, speeds, fs,
+                              (2.0, 80.0), ("acc_pinion", "acc_gear")) == []
+
+
+def test_mains_on_the_accelerometers_is_left_out_of_the_low_band(design):
+    ops = blind_test.operating_points_of("service", design, 4)
+    clean = simulate_campaign(design, ops, seed=5, duration=0.5, run_in=0.3)
+    mains = simulate_campaign(design, ops, seed=5, duration=0.5, run_in=0.3, line_interference={50.0: 0.5})
+    plain_case = prepare_case(clean, design, seed=np.random.SeedSequence(1))
+    mains_case = prepare_case(mains, design, seed=np.random.SeedSequence(1))
+    assert plain_case.interference == []
+    assert {line["frequency"] for line in mains_case.interference} == {50.0}
+    column = mains_case.layout.names.index("low_band_rms")
+    acc = mains_case.channels.index("acc_gear")
+    with_notch = mains_case.observed[:, acc, column]
+    without_mains = plain_case.observed[:, acc, column]
+    unnotched = np.array([plain_case.processors[op].features(np.asarray(mains["acc_gear"].values[op])[None])[0][
+        plain_case.processors[op].columns["low_band_rms"]] for op in range(mains_case.n_op)])
+    # the 0.5 m/s2 line dominates the band unless it is left out; left out, the band is the gear's again
+    assert np.all(unnotched > 1.5 * without_mains)
+    assert np.allclose(with_notch, without_mains, rtol=0.5)
+    # the model's records are read the same way
+    assert mains_case.processors[0].notch == (50.0,)
