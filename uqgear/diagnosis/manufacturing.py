@@ -56,8 +56,6 @@ DEFAULT_CLASSES: tuple[float, float] = (6.0, 8.0)
 REFERENCE_CLASS = 7
 #: Pitch-error draws whose changes give the model error.
 DRAWS = 12
-# Fewest lines a gear's level is read from.
-_MIN_LEVEL_LINES = 12
 #: A sideband counts as visible this many noise standard deviations above the nominal fit.
 MIN_SIDEBAND_SNR = 3.0
 #: Fraction of each shaft's sidebands of each order 1..3 that must be visible (measured: class-7 gears 49-88 %;
@@ -84,9 +82,7 @@ def check_classes(classes: Any) -> tuple[float, float] | None:
 class PitchErrorAllowance:
     """What pitch errors of the stated classes add to each feature of the nominal model.
 
-    ``levels`` holds per gear the power level of its pitch-error lines read
-    off the rig (relative to the draws' mean) and the range of the draws'
-    own levels it is held to (:func:`_gear_level`). ``absolute`` maps feature kinds to (n_op, n_channel, features of that
+    ``absolute`` maps feature kinds to (n_op, n_channel, features of that
     kind) absolute model errors (:class:`~uqgear.diagnosis.case.FeatureModelError`);
     empty where not applied. ``floor_share`` is the median share of the
     rig's noise floor estimate that the draws' lines alone would read as
@@ -100,7 +96,6 @@ class PitchErrorAllowance:
     visible: dict[str, dict[int, tuple[int, int]]]
     draws: int
     absolute: dict[str, np.ndarray]
-    levels: dict[str, dict[str, Any]]
     largest_line_ratio: float
     floor_share: float
     seconds: float
@@ -112,8 +107,7 @@ class PitchErrorAllowance:
                 "visible_sidebands": {family: {str(order): {"visible": count, "of": total}
                                                for order, (count, total) in orders.items()}
                                       for family, orders in self.visible.items()},
-                "draws": self.draws, "levels": self.levels,
-                "largest_line_error_to_noise": self.largest_line_ratio,
+                "draws": self.draws, "largest_line_error_to_noise": self.largest_line_ratio,
                 "noise_floor_share_of_lines": self.floor_share,
                 "seconds": self.seconds,
                 "method": "the nominal fit simulated with random ISO 1328-1 pitch-error draws over the stated "
@@ -123,60 +117,6 @@ class PitchErrorAllowance:
 def _sideband_order(name: str) -> int:
     """Shaft order j of a sideband feature (``mesh{k}_sb_{shaft}{+j}``, :func:`uqgear.rig.features.feature_definitions`)."""
     return int(re.search(r"[+-](\d+)$", name).group(1))
-
-
-# The lines each gear's pitch errors make: its sidebands and shaft lines (the motor sits on the pinion shaft,
-# its ripple lines are pinion orders); the mesh harmonics are both gears'.
-_GEAR_FAMILIES = {"pinion": ("sideband_pinion", "shaft_pinion", "motor_line"),
-                  "gear": ("sideband_gear", "shaft_gear")}
-# Median of |X|^2 / sigma^2 for a complex normal X of per-quadrature spread sigma (2 ln 2).
-_RAYLEIGH_MEDIAN_SQUARE = 2.0 * math.log(2.0)
-
-
-def _gear_level(observed: np.ndarray, model: np.ndarray, noise_sigma: np.ndarray, allowance: np.ndarray,
-                changes: np.ndarray, usable: np.ndarray) -> tuple[float, float, float]:
-    """One gear's pitch-error power level on the rig relative to the draws' mean, held to the draws' own range.
-
-    The allowance treats each line as an independent random phasor, but the
-    lines of one gear share its draw: a pinion whose errors came out large
-    raises all of its lines at once (measured: a class-7 pinion's lines at a
-    median 1.2-1.9 times the allowance's spread, its gear's at 0.6), which
-    the gap adds up as if it were an effect. So the level is read off the
-    rig: the factor s for which the median of observed^2 / (noise^2 + s
-    allowance^2), over the gear's lines that the model does not make and
-    the allowance dominates, is a Rayleigh amplitude's (2 ln 2); medians,
-    so a few lines of another cause (a run-out's first order) do not move
-    it. It is held to the range of the draws' own levels (the same median
-    for each draw against the mean), so that no more than the stated
-    classes' pitch errors could make is taken for them: an effect beyond
-    that stays visible. Returns (level, lowest draw level, highest); NaN
-    level where too few lines qualify.
-    """
-    chosen = usable & np.isfinite(observed) & (allowance >= noise_sigma) & (model < noise_sigma)
-    if chosen.sum() < _MIN_LEVEL_LINES:
-        return math.nan, math.nan, math.nan
-    # each draw's median of |change|^2 over the mean, as a Rayleigh level (median of Exp(1): ln 2)
-    draw_levels = np.median(changes[:, chosen] / np.mean(changes, axis=0)[chosen], axis=1) / math.log(2.0)
-    low, high = float(np.min(draw_levels)), float(np.max(draw_levels))
-    square = observed[chosen] ** 2
-    noise, allowed = noise_sigma[chosen] ** 2, allowance[chosen] ** 2
-
-    def excess(level: float) -> float:
-        return float(np.median(square / (noise + level * allowed))) - _RAYLEIGH_MEDIAN_SQUARE
-
-    # the median falls as the level grows: bisect on a log scale inside the draws' range
-    if excess(low) <= 0:
-        return low, low, high
-    if excess(high) >= 0:
-        return high, low, high
-    lower, upper = math.log(low), math.log(high)
-    for _ in range(40):
-        middle = 0.5 * (lower + upper)
-        if excess(math.exp(middle)) > 0:
-            lower = middle
-        else:
-            upper = middle
-    return math.exp(0.5 * (lower + upper)), low, high
 
 
 def visible_sidebands(case: RigCase, nominal: FitResult) -> dict[str, dict[int, tuple[int, int]]]:
@@ -221,7 +161,7 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     visible = visible_sidebands(case, nominal)
 
     def not_applied(reason: str) -> PitchErrorAllowance:
-        return PitchErrorAllowance(False, reason, classes, visible, 0, {}, {}, 0.0, 0.0, time.perf_counter() - started)
+        return PitchErrorAllowance(False, reason, classes, visible, 0, {}, 0.0, 0.0, time.perf_counter() - started)
 
     if classes is None:
         return not_applied("no pitch-error classes stated: the gears are taken as perfect")
@@ -269,24 +209,13 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     absolute = {kind: np.nan_to_num(values, nan=0.0, posinf=0.0) for kind, values in absolute.items()}
     line_scale = np.stack([noise.line_scale[case.layout.columns][line] for noise in case.noise])[:, None, :]
     noise_sigma = case.noise_std[..., None] * line_scale
-    levels_read = {}
-    for gear, families in _GEAR_FAMILIES.items():
-        chosen = np.isin(np.array(case.layout.families)[line], families)
-        level, low, high = _gear_level(case.observed[..., line][..., chosen],
-                                       np.abs(nominal.model[..., case.layout.columns][..., line][..., chosen]),
-                                       noise_sigma[..., chosen], absolute["line"][..., chosen],
-                                       np.abs(drawn[..., line][..., chosen] - base[..., line][..., chosen]) ** 2,
-                                       case.mask()[..., line][..., chosen])
-        levels_read[gear] = {"level": level, "draw_range": [low, high]}
-        if math.isfinite(level):
-            absolute["line"][..., chosen] *= math.sqrt(level)
     ratio = absolute["line"] / np.maximum(noise_sigma, 1e-300)
     finite = ratio[np.isfinite(ratio)]
     shown = ", ".join(f"{family.split('_')[1]} {sum(c for c, _ in orders.values())} of "
                       f"{sum(t for _, t in orders.values())}" for family, orders in visible.items())
     reason = (f"ISO 1328-1 classes {classes[0]:g} to {classes[1]:g}: the rig's first sidebands show pitch errors "
               f"at every order on both shafts ({shown} clear of the nominal fit)")
-    return PitchErrorAllowance(True, reason, classes, visible, draws, absolute, levels_read,
+    return PitchErrorAllowance(True, reason, classes, visible, draws, absolute,
                                float(finite.max()) if finite.size else 0.0,
                                float(np.median(forest_share[case.usable])) if case.usable.any() else 0.0,
                                time.perf_counter() - started)

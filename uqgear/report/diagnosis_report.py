@@ -368,6 +368,18 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
         parts.append("<p>Lines at a fixed frequency across runs (not order-locked): " + ", ".join(
             f"{line['frequency']:.1f} Hz (runs {', '.join(map(str, line['ops']))})"
             for line in content["frequency_locked_lines"]) + ".</p>")
+    if content.get("line_interference"):
+        parts.append("<p>Line interference (a fixed line on an accelerometer that the TE lacks), left out of the "
+                     "low band: " + ", ".join(f"{line['frequency']:.1f} Hz on {html.escape(line['channel'])}"
+                                              for line in content["line_interference"]) + ".</p>")
+    pitch = content.get("pitch_errors")
+    if pitch:
+        if pitch["applied"]:
+            parts.append(f"<p>Pitch errors: {html.escape(pitch['reason'])}. What {pitch['draws']} random draws "
+                         "do to each feature is model error of the nominal model; no effect is named for what "
+                         "such errors can do.</p>")
+        else:
+            parts.append(f"<p class=\"note\">Pitch errors: no allowance ({html.escape(pitch['reason'])}).</p>")
     parts.append("<h2>Which: candidate effects ranked</h2>")
     parts.append(_table(
         ["effect", "variant", "score (nats)", "gain (nats)", "s.e.", "penalty", "gap with effect", "shrink",
