@@ -248,6 +248,14 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     assert decision.partial == (selected[-1].entry.gap > NOISE_GAP_THRESHOLD and sum(shares) < 0.5)
 
 
+def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carries():
+    strong = {"effect": "tooth_damage", "score": 1428.0, "effect_gain": 2053.0, "shrink_interval": [0.17, 0.28]}
+    assert pipeline._leads_a_set(strong)
+    assert not pipeline._leads_a_set({**strong, "score": 9.0})
+    assert not pipeline._leads_a_set({**strong, "effect_gain": 1.0})       # the refitted nominal part scores
+    assert not pipeline._leads_a_set({**strong, "shrink_interval": [-0.01, 0.3]})
+
+
 def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():
     first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
     first = pipeline.SelectedEffect(_score("eccentricity", "eccentricity[pinion]", 300.0, 2.0, 0.33), 3.0, 0.33,

@@ -92,8 +92,8 @@ from .manufacturing import DEFAULT_CLASSES, PitchErrorAllowance, check_classes, 
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
-from .verdict import (EFFECT_NAMES, NOISE_GAP_THRESHOLD, SHRINK_THRESHOLD, Decision, decide, decide_verdict,
-                      family_character, where_gap)
+from .verdict import (EFFECT_GAIN_THRESHOLD, EFFECT_NAMES, NOISE_GAP_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD,
+                      Decision, decide, decide_verdict, family_character, where_gap)
 
 #: Candidates promoted from the screening fit (effect parameters only) to a full fit.
 PROMOTED = 2
@@ -390,6 +390,18 @@ def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str,
     return [_ranking_entry(s) for s in scores]
 
 
+def _leads_a_set(best: Mapping[str, Any]) -> bool:
+    """Whether an unexplained gap's best candidate is strong enough to start a forward selection.
+
+    The evidence rules of :func:`~.verdict.decide` without the one on how
+    much of the gap it explains alone: a score beyond the threshold, a fit
+    that is clearly worse with its effect off, and a shrink whose 90 %
+    interval is above zero.
+    """
+    return (best["score"] >= SCORE_THRESHOLD and float(best.get("effect_gain", math.inf)) >= EFFECT_GAIN_THRESHOLD
+            and best["shrink_interval"][0] > 0.0)
+
+
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
     """Each named effect's share of the held-out gap shrink, as a fraction of the nominal model's gap.
 
@@ -552,7 +564,11 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
     the candidates are scored again against it. When an effect is named and
     a significant held-out gap remains, further effects are added by
     forward selection (:func:`forward_selection`, at most ``max_effects``
-    in all). Where the rig's sidebands show pitch errors on both shafts,
+    in all). When the gap stays unexplained only because no effect explains
+    enough of it alone, the strongest candidate (its evidence rules met,
+    :func:`_leads_a_set`) starts a forward selection, and the set is named
+    if together it shrinks the gap by half or leaves it within noise (two
+    effects of about equal size). Where the rig's sidebands show pitch errors on both shafts,
     what pitch errors of ``pitch_classes`` do to each feature becomes model
     error of the nominal model, which is then refitted
     (:mod:`uqgear.diagnosis.manufacturing`).
@@ -657,7 +673,34 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         found.update(verdict=decision.verdict, reason=decision.reason)
     selected: list[SelectedEffect] = []
     rounds: list[SelectionRound] = []
-    if decision.verdict in EFFECT_NAMES:
+    if decision.verdict == "unexplained" and scores and _leads_a_set(ranking[0]):
+        # two effects of about equal size each explain less than half of the gap alone: the strongest,
+        # clearly carried by its effect, is the base of a forward selection, and the set is named only
+        # if it explains the gap together (set_decision's rule)
+        clock = time.perf_counter()
+        first = scores[0]
+        provisional = Decision(first.effect, (
+            f"{first.effect} gains {first.score:.1f} nats of held-out predictive density over the nominal model "
+            f"after its parameter penalty but alone shrinks the held-out gap by only {100 * first.shrink:.0f} % "
+            f"(90 % interval {100 * first.shrink_low:.0f} to {100 * first.shrink_high:.0f} %)"),
+            partial=True, remaining_gap=first.gap)
+        trial, trial_rounds = forward_selection(case, nominal_gap, first, provisional, effect_names, hints, rng,
+                                                steps, first_gap_interval=ranking[0]["gap_interval"],
+                                                max_effects=max_effects)
+        timings["forward_selection"] = time.perf_counter() - clock
+        with steps.step("decide whether a set of effects explains the gap") as found:
+            final_gap = trial[-1].entry.gap
+            if len(trial) > 1 and (shrink_fraction(nominal_gap, final_gap) >= SHRINK_THRESHOLD
+                                   or final_gap <= NOISE_GAP_THRESHOLD):
+                selected, rounds = trial, trial_rounds
+                decision = set_decision(provisional, selected, rounds, nominal_gap)
+            else:
+                decision = Decision(decision.verdict, decision.reason + (
+                    f"; forward selection from {first.effect} found no set that explains it together (held-out "
+                    f"gap {final_gap:.2f} with {' + '.join(entry.entry.effect for entry in trial)})"),
+                    borderline=decision.borderline)
+            found.update(effects=[chosen.entry.effect for chosen in selected], verdict=decision.verdict)
+    elif decision.verdict in EFFECT_NAMES:
         # forward selection: a second round only while the named effect leaves a significant gap
         clock = time.perf_counter()
         selected, rounds = forward_selection(case, nominal_gap, scores[0], decision, effect_names, hints, rng, steps,
