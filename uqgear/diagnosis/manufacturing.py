@@ -25,8 +25,10 @@ model, from the model itself:
    with the rig's own line fit: each line's mean square complex change over
    the draws, per quadrature, becomes an absolute model error of that line
    (a random phasor added to the model's: Rice statistics stay exact); for
-   band and RMS features the root mean square change of their power, for the
-   kurtosis that of the kurtosis.
+   band and RMS features the root mean square change of their power, plus
+   the share of the noise power the draws' lines alone read as (their forest
+   raises the floor the rig's noise is read from), for the kurtosis the root
+   mean square change of the kurtosis.
 
 The nominal model is then refitted with the widened error, and every
 candidate is fitted and scored against it: an effect is named only where it
