@@ -108,6 +108,9 @@ class RigCase:
     transfer: np.ndarray | None = None
     # line interference left out of the low band (uqgear.diagnosis.interference)
     interference: list[dict[str, Any]] = field(default_factory=list)
+    # per gear, the first-order run-out the stated classes' pitch errors stay under, m
+    # (uqgear.diagnosis.manufacturing.run_out_bounds); empty: perfect gears
+    run_out_allowance: dict[str, float] = field(default_factory=dict)
 
     @property
     def n_op(self) -> int:

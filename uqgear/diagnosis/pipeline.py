@@ -378,10 +378,22 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
 
 
 def _ranking_entry(s: CandidateScore) -> dict[str, Any]:
-    """What :func:`decide` needs of one candidate's scores."""
-    return {"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
-            "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
-            "gap_with_effect": s.gap, "effect_gain": s.effect_gain}
+    """What :func:`decide` needs of one candidate's scores.
+
+    A run-out within what the gears' stated pitch-error classes make as a
+    first-order run-out (``case.run_out_allowance``) is flagged
+    ``within_pitch_errors``: it is not evidence of an eccentric shaft.
+    """
+    entry = {"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
+             "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
+             "gap_with_effect": s.gap, "effect_gain": s.effect_gain}
+    if s.effect == "eccentricity" and s.fit.problem.case.run_out_allowance:
+        bounds = s.fit.problem.case.run_out_allowance
+        values = s.parameters()
+        bound = bounds.get(str(values.get("shaft")))
+        if bound is not None and float(values.get("amplitude", math.inf)) <= bound:
+            entry["within_pitch_errors"] = {"run_out": float(values["amplitude"]), "bound": bound}
+    return entry
 
 
 def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str, Any]]:
@@ -399,7 +411,7 @@ def _leads_a_set(best: Mapping[str, Any]) -> bool:
     interval is above zero.
     """
     return (best["score"] >= SCORE_THRESHOLD and float(best.get("effect_gain", math.inf)) >= EFFECT_GAIN_THRESHOLD
-            and best["shrink_interval"][0] > 0.0)
+            and best["shrink_interval"][0] > 0.0 and not best.get("within_pitch_errors"))
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
@@ -632,6 +644,7 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         found.update(applied=allowance.applied, reason=allowance.reason)
         if allowance.applied:
             case.model_error = FeatureModelError.combined(case.model_error, allowance.absolute)
+            case.run_out_allowance = dict(allowance.run_out_bound)
             # the nominal parameters were pulled by what pitch errors did to the features: refit
             nominal = fit(nominal.problem, [nominal.vector], max_evaluations=30, tolerance=1e-3).after(nominal)
             found.update(parameters=nominal.values, cost=nominal.cost)

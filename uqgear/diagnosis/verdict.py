@@ -149,7 +149,9 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
     if best is not None:
         remaining = float(best.get("gap_with_effect", math.inf))
         explains = best["shrink_fraction"] >= shrink_threshold or remaining <= noise_gap
-        carried = float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
+        # a run-out the gears' own pitch errors make (the candidate ranking's flag) is no eccentric shaft
+        carried = (float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
+                   and not best.get("within_pitch_errors"))
         evidence = best["score"] >= score_threshold and carried
         if evidence and explains and best["shrink_interval"][0] > 0.0:
             within = (f"; what remains ({remaining:.2f}) is within noise"
@@ -172,15 +174,20 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         # from "not measured", and no data must never read as a healthy gear
         return Decision("inconclusive", "the held-out gap could not be measured: no feature of any run could be "
                                         "compared with the model on held-out runs", borderline=borderline)
+    within = best.get("within_pitch_errors") if best is not None else None
+    beyond = (f"; {best['effect']} fits a run-out of {1e6 * within['run_out']:.1f} um, within what the gears' "
+              f"stated pitch-error classes make as a first-order run-out (95 %: {1e6 * within['bound']:.1f} um)"
+              if within else "")
     if nominal_gap <= noise_gap:
         return Decision("none", f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-                                f"(threshold {noise_gap:g}) and no candidate is clearly better",
+                                f"(threshold {noise_gap:g}) and no candidate is clearly better{beyond}",
                         borderline=borderline)
     detail = ""
     if best is not None:
         detail = (f"; the best candidate, {best['effect']}, scores {best['score']:.1f} nats and shrinks it by "
                   f"{100 * best['shrink_fraction']:.0f} % (needed: {score_threshold:g} nats, and a shrink of "
                   f"{100 * shrink_threshold:.0f} % or a remaining gap within noise)")
+        detail += beyond
     return Decision("unexplained", f"the nominal model's held-out gap is {nominal_gap:.2f} "
                                    f"(above {noise_gap:g}){detail}", borderline=borderline)
 
