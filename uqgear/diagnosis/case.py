@@ -116,6 +116,11 @@ class RigCase:
     def n_op(self) -> int:
         return int(self.speeds.size)
 
+    def line_noise_sigma(self) -> np.ndarray:
+        """Per-quadrature noise spread of each compared line (n_op, n_channel, F; NaN for features not lines)."""
+        scale = np.stack([noise.line_scale[self.layout.columns] for noise in self.noise])      # (n_op, F)
+        return self.noise_std[..., None] * scale[:, None, :]
+
     def mask(self) -> np.ndarray:
         """Features that enter the comparison: usable runs and finite rig features."""
         return np.isfinite(self.observed) & self.usable[..., None]
@@ -161,12 +166,12 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
             cache[float(speed)] = RunProcessor(design, float(speed), fs, size, options)
         processors.append(cache[float(speed)])
     layout = FeatureLayout.from_processor(processors[0])
-    observed_all = np.stack([np.stack([processors[op].features(np.asarray(rig[channel].values[op], dtype=float)[None])[0]
+    records = {channel: np.asarray(rig[channel].values, dtype=float) for channel in channels}
+    observed_all = np.stack([np.stack([processors[op].features(records[channel][op][None])[0]
                                        for channel in channels]) for op in range(speeds.size)])
     noise_column = processors[0].columns["noise_std"]
     noise_std = observed_all[..., noise_column]
     usable = np.isfinite(observed_all).any(axis=-1) & np.isfinite(noise_std) & (noise_std > 0)
-    records = {channel: np.asarray(rig[channel].values, dtype=float) for channel in channels}
     interference = interference_lines(records, {c: noise_std[:, i] for i, c in enumerate(channels)},
                                       {c: usable[:, i] for i, c in enumerate(channels)}, speeds, fs,
                                       tuple(options["low_band"]), channels)

@@ -158,10 +158,8 @@ def _sideband_order(name: str) -> int:
 def visible_sidebands(case: RigCase, nominal: FitResult) -> dict[str, dict[int, tuple[int, int]]]:
     """Per shaft's sideband family and shaft order: how many of the rig's sidebands stand clear of the nominal fit,
     of how many (usable runs and channels, both sides of every harmonic)."""
-    columns = case.layout.columns
-    model = nominal.model[..., columns]
-    line_scale = np.stack([noise.line_scale[columns] for noise in case.noise])[:, None, :]
-    sigma = case.noise_std[..., None] * line_scale
+    model = nominal.model[..., case.layout.columns]
+    sigma = case.line_noise_sigma()
     usable = case.mask()
     with np.errstate(invalid="ignore"):
         clear = usable & (case.observed - np.abs(model) >= MIN_SIDEBAND_SNR * sigma)
@@ -244,9 +242,7 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
         chosen = kinds == "kurtosis"
         absolute["kurtosis"] = np.sqrt(np.mean((drawn[..., chosen].real - base[..., chosen].real) ** 2, axis=0))
     absolute = {kind: np.nan_to_num(values, nan=0.0, posinf=0.0) for kind, values in absolute.items()}
-    line_scale = np.stack([noise.line_scale[case.layout.columns][line] for noise in case.noise])[:, None, :]
-    noise_sigma = case.noise_std[..., None] * line_scale
-    ratio = absolute["line"] / np.maximum(noise_sigma, 1e-300)
+    ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
     finite = ratio[np.isfinite(ratio)]
     shown = ", ".join(f"{family.split('_')[1]} {sum(c for c, _ in orders.values())} of "
                       f"{sum(t for _, t in orders.values())}" for family, orders in visible.items())

@@ -83,8 +83,8 @@ import xarray as xr
 
 from ..common.steps import StepLog
 from ..physics.effects import EFFECTS
-from .candidates import candidates_for, nominal_parameters
 from ..uq.seeds import child_seed
+from .candidates import candidates_for, nominal_parameters
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
@@ -702,15 +702,14 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
                                                 max_effects=max_effects)
         timings["forward_selection"] = time.perf_counter() - clock
         with steps.step("decide whether a set of effects explains the gap") as found:
-            final_gap = trial[-1].entry.gap
-            if len(trial) > 1 and (shrink_fraction(nominal_gap, final_gap) >= SHRINK_THRESHOLD
-                                   or final_gap <= NOISE_GAP_THRESHOLD):
-                selected, rounds = trial, trial_rounds
-                decision = set_decision(provisional, selected, rounds, nominal_gap)
+            # set_decision's own rule: the set is partial unless it halves the gap or leaves it within noise
+            joint = set_decision(provisional, trial, trial_rounds, nominal_gap) if len(trial) > 1 else None
+            if joint is not None and not joint.partial:
+                selected, rounds, decision = trial, trial_rounds, joint
             else:
                 decision = Decision(decision.verdict, decision.reason + (
                     f"; forward selection from {first.effect} found no set that explains it together (held-out "
-                    f"gap {final_gap:.2f} with {' + '.join(entry.entry.effect for entry in trial)})"),
+                    f"gap {trial[-1].entry.gap:.2f} with {' + '.join(entry.entry.effect for entry in trial)})"),
                     borderline=decision.borderline)
             found.update(effects=[chosen.entry.effect for chosen in selected], verdict=decision.verdict)
     elif decision.verdict in EFFECT_NAMES:

@@ -174,10 +174,10 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         # from "not measured", and no data must never read as a healthy gear
         return Decision("inconclusive", "the held-out gap could not be measured: no feature of any run could be "
                                         "compared with the model on held-out runs", borderline=borderline)
-    within = best.get("within_pitch_errors") if best is not None else None
-    beyond = (f"; {best['effect']} fits a run-out of {1e6 * within['run_out']:.1f} um, within what the gears' "
-              f"stated pitch-error classes make as a first-order run-out (95 %: {1e6 * within['bound']:.1f} um)"
-              if within else "")
+    run_out = best.get("within_pitch_errors") if best is not None else None
+    beyond = (f"; {best['effect']} fits a run-out of {1e6 * run_out['run_out']:.1f} um, within what the gears' "
+              f"stated pitch-error classes make as a first-order run-out (95 %: {1e6 * run_out['bound']:.1f} um)"
+              if run_out else "")
     if nominal_gap <= noise_gap:
         return Decision("none", f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
                                 f"(threshold {noise_gap:g}) and no candidate is clearly better{beyond}",
@@ -205,8 +205,7 @@ def line_signal_to_noise(case: RigCase) -> np.ndarray:
     records the comparison cannot use (missing samples, no noise floor).
     """
     line = np.array(case.layout.kinds) == "line"
-    scale = np.stack([noise.line_scale[case.layout.columns] for noise in case.noise])      # (n_op, F)
-    sigma = case.noise_std[..., None] * scale[:, None, :]
+    sigma = case.line_noise_sigma()
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = case.observed / sigma
     usable = case.usable[..., None] & line[None, None, :] & np.isfinite(ratio) & (sigma > 0)

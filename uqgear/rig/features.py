@@ -319,11 +319,15 @@ class _LineFit:
         # Normal equations: one small Gram matrix per speed, shared by all records.
         self.factor = scipy.linalg.cho_factor(self.weighted.T @ basis)
 
+    def _coefficients(self, records: np.ndarray) -> np.ndarray:
+        """Least-squares coefficients (1 + 2 n_centres, R): the mean, then the cos and sin of each line."""
+        return scipy.linalg.cho_solve(self.factor, self.weighted.T @ records.T)
+
     def amplitudes(self, records: np.ndarray) -> np.ndarray:
         """Amplitudes (R, L) of the lines in float64 records (R, N) without NaN."""
         result = np.full((records.shape[0], self.size_out), np.nan)
         if self.n_centres:
-            coefficients = scipy.linalg.cho_solve(self.factor, self.weighted.T @ records.T)
+            coefficients = self._coefficients(records)
             amplitude = np.hypot(coefficients[1:1 + self.n_centres], coefficients[1 + self.n_centres:]).T
             result[:, self.inside] = amplitude[:, self.groups]
         return result
@@ -332,7 +336,7 @@ class _LineFit:
         """Complex amplitudes (R, L), cos - i sin coefficients, whose moduli are :meth:`amplitudes`."""
         result = np.full((records.shape[0], self.size_out), np.nan, dtype=complex)
         if self.n_centres:
-            coefficients = scipy.linalg.cho_solve(self.factor, self.weighted.T @ records.T)
+            coefficients = self._coefficients(records)
             phasor = (coefficients[1:1 + self.n_centres] - 1j * coefficients[1 + self.n_centres:]).T
             result[:, self.inside] = phasor[:, self.groups]
         return result
