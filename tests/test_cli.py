@@ -357,13 +357,14 @@ def test_calibrate_rejects_a_file_that_is_not_rig_data(tmp_path):
     (["7"], "uqgear: error: --pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; got 7"),
     (["9", "6"], "uqgear: error: pitch_classes: expected 1 <= lowest <= highest <= 11; got (9, 6)"),
 ])
-def test_calibrate_rejects_wrong_pitch_classes_before_any_work(tmp_path, words, message):
+@pytest.mark.parametrize("command", ["calibrate", "diagnose"])
+def test_wrong_pitch_classes_are_rejected_before_any_work(tmp_path, words, message, command):
     rig = Path(__file__).resolve().parent.parent / "data" / "rig" / "healthy.nc"
-    completed = _uqgear("calibrate", str(rig), "--out", str(tmp_path / "cal"), "--pitch-classes", *words)
+    completed = _uqgear(command, str(rig), "--out", str(tmp_path / "out"), "--pitch-classes", *words)
     assert completed.returncode == 2
     assert completed.stderr.strip() == message
-    assert not (tmp_path / "cal").exists()
-    assert not any(p.name.startswith(".cal") for p in tmp_path.iterdir())
+    assert not (tmp_path / "out").exists()
+    assert not any(p.name.startswith(".out") for p in tmp_path.iterdir())
 
 
 @pytest.mark.slow
