@@ -69,7 +69,9 @@ class Calibration:
     stage_steps : int
         Steps per box-finding stage.
     chunk_steps, max_steps : int
-        The final stage runs in chunks until converged or ``max_steps``.
+        The final stage (the ensemble moves plus independence proposals
+        fitted to the last box stage's draws) runs in chunks until converged
+        or ``max_steps``; its first tenth is burn-in.
     autocorr_factor, rhat_threshold, min_ess : float
         Convergence criteria (:mod:`~uqgear.calibration.convergence`).
     predictive_draws : int
