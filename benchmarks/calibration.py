@@ -55,6 +55,7 @@ def run(name: str, threads: int | None, seed: int) -> bool:
     print(f"converged: {calibration.converged_}  tau_max {diagnostics['tau_max']:.1f}  "
           f"R-hat max {diagnostics['rhat_max']:.4f}  ESS min {diagnostics['ess_min']:.0f}  "
           f"acceptance {diagnostics['acceptance_mean']:.3f}  {'; '.join(diagnostics['reasons'])}")
+    print("steps: " + ", ".join(f"{step} {seconds:.1f} s" for step, seconds in calibration.timing_["steps_s"].items()))
     truth = TRUTH[name]
     all_inside = True
     print(f"{'parameter':22s} {'true':>11s} {'q05':>11s} {'q50':>11s} {'q95':>11s}  inside")

@@ -253,6 +253,13 @@ def test_calibrate_on_the_public_healthy_file_holds_the_truth(tmp_path):
     outside_images = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", report)
     assert "http" not in outside_images.replace("http-equiv", "")
     assert calibration.timing_["wall_s"] > 0   # the time is measured and reported (targets: benchmarks/)
+    steps = content["timing"]["steps_s"]       # and so is each step's, in order
+    assert list(steps)[0] == "search the posterior box (staged emulators and sampling)"
+    assert list(steps)[-2:] == ["final sampling", "posterior predictive check"]
+    assert all(value > 0 for value in steps.values()) and sum(steps.values()) < calibration.timing_["wall_s"]
+    # the final run converged with its independence proposals well before the step limit
+    assert content["diagnostics"]["n_steps"] <= 4000 and content["diagnostics"]["burn_in"] == \
+        content["diagnostics"]["n_steps"] // 10
 
 
 @pytest.mark.slow

@@ -112,7 +112,8 @@ class Calibration:
     emulator_ : dict
         Stages, boxes and leave-one-out errors of the emulators.
     timing_ : dict
-        Wall and CPU time of the fit, s.
+        Wall and CPU time of the fit, s; model runs; the time of order
+        tracking, of the pitch-error correction and of each step (``steps_s``).
     steps_ : StepLog
         The steps of the fit as they finished (kept by a failure).
     pitch_errors_ : PitchCorrection or None
@@ -251,7 +252,9 @@ class Calibration:
             self._predictive_check(np.random.default_rng(seeds[4]))
         self.timing_ = {"wall_s": time.perf_counter() - wall_start, "cpu_s": time.process_time() - cpu_start,
                         "model_runs": int(self.model_runs_), "order_tracking_s": tracking_s,
-                        "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds}
+                        "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds,
+                        # each step's wall time, in order (the box search, any correction, sampling, the check)
+                        "steps_s": {entry["step"]: entry["seconds"] for entry in steps.finished}}
         return self
 
     # ------------------------------------------------------------------ steps of fit

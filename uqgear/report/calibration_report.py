@@ -42,7 +42,7 @@ class Calibration(Protocol):
     summary_: Mapping[str, Any]
     converged_: bool
     diagnostics_: Mapping[str, Any]
-    timing_: Mapping[str, float]
+    timing_: Mapping[str, Any]
     emulator_: Any
 
     def to_dict(self) -> dict[str, Any]: ...
