@@ -238,3 +238,57 @@ def test_a_reference_with_the_rigs_resonance_keeps_the_diagnosis_right(design, t
     healthy = diagnose(campaign([], 13), tmp_path / "healthy", effects=candidates, seed=2, reference=reference,
                        report=False)
     assert healthy["effects"] == [] and healthy["verdict"] in ("none", "unexplained"), healthy["reason"]
+
+
+# ---------------------------------------------------------------------------------------------- RMS through the path
+
+def test_the_rms_through_the_path_is_that_of_the_record_with_its_lines_scaled(healthy_case):
+    """Closed form: a record of known lines plus a broadband rest; the path scales some lines only."""
+    from uqgear.diagnosis.case import transferred_rms
+
+    processor = healthy_case.processors[3]
+    time_axis = np.arange(processor.size) / processor.fs
+    rest = np.random.default_rng(1).normal(0.0, 0.3, processor.size)
+    columns = processor.distinct_line_columns[:4]
+    frequencies = [processor.definitions[i].order * processor.speed / 60.0 for i in columns]
+    gains = [1.0, 6.0, 0.5, 2.0]                      # a resonance near the second line
+
+    def rms_of(amplitudes, scale):
+        record = rest + sum(a * g * np.cos(2 * np.pi * f * time_axis + 0.3 * k)
+                            for k, (a, g, f) in enumerate(zip(amplitudes, scale, frequencies)))
+        return processor.model_features(record[None])[0]
+
+    rms = processor.columns["rms"]
+    line_gain = np.ones(len(processor.definitions))
+    line_gain[columns] = gains
+    reference_mix, test_mix = [1.0, 0.5, 0.2, 0.8], [1.0, 1.0, 0.2, 0.8]
+    for amplitudes in (reference_mix, test_mix):
+        assert transferred_rms(rms_of(amplitudes, [1.0] * 4), line_gain, processor) == \
+            pytest.approx(rms_of(amplitudes, gains)[rms], rel=5e-3)
+    # one ratio read at the reference's mix misses the test mix by far more
+    ratio = rms_of(reference_mix, gains)[rms] / rms_of(reference_mix, [1.0] * 4)[rms]
+    assert ratio * rms_of(test_mix, [1.0] * 4)[rms] != pytest.approx(rms_of(test_mix, gains)[rms], rel=0.2)
+
+
+def test_the_noise_colour_of_a_shaft_line_in_the_low_band_is_read_off_the_nearest_free_bins(healthy_case):
+    """Noise 5 times stronger in amplitude below 1 kHz than above: a 10 Hz line's colour follows it, not 1."""
+    import copy
+
+    from uqgear.diagnosis.reference import noise_colour
+
+    case = copy.copy(healthy_case)
+    rig = healthy_case.rig.copy(deep=True)
+    rng = np.random.default_rng(2)
+    size = rig.sizes["time"]
+    spectrum = np.fft.rfft(rng.normal(0.0, 1.0, (rig.sizes["op"], size)), axis=1)
+    frequencies = np.fft.rfftfreq(size, 1.0 / healthy_case.fs)
+    spectrum[:, frequencies < 1000.0] *= 5.0
+    rig["acc_pinion"].values[...] = np.fft.irfft(spectrum, n=size, axis=1)
+    case.rig = rig
+    colour = noise_colour(case)
+    channel = case.channels.index("acc_pinion")
+    for op, processor in enumerate(case.processors):
+        shaft = processor.columns["shaft_pinion1"]
+        assert processor.definitions[shaft].order * processor.speed / 60.0 < 80.0
+        # the white level is the median of all free bins, most of them above 1 kHz
+        assert 3.5 < colour[op, channel, shaft] < 6.5

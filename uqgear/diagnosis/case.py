@@ -106,6 +106,9 @@ class RigCase:
     # (n_op, n_channel, all features): the model's features are multiplied by it (a reference
     # campaign's transfer correction, uqgear.diagnosis.reference); None: unity
     transfer: np.ndarray | None = None
+    # (n_op, n_channel, all features): the transfer path's gain at each line (1 elsewhere); the model's
+    # RMS is then taken through it line by line (transferred_rms) before ``transfer`` scales it
+    line_gain: np.ndarray | None = None
     # line interference left out of the low band (uqgear.diagnosis.interference)
     interference: list[dict[str, Any]] = field(default_factory=list)
     # per gear, the first-order run-out the stated classes' pitch errors stay under, m
@@ -250,8 +253,47 @@ def execute_group(case: RigCase, tasks: Sequence[RunTask]) -> list[tuple[np.ndar
     features = reduce(stacked).reshape(len(runs), len(case.channels), -1)
     if case.transfer is not None:
         # the rig sees the gear through its transfer paths: the model's features as the rig would record them
-        features = features * case.transfer[op]
+        transferred = features * case.transfer[op]
+        if case.line_gain is not None:
+            rms = case.processors[op].columns["rms"]
+            transferred[..., rms] = (transferred_rms(features, case.line_gain[op], case.processors[op])
+                                     * case.transfer[op][:, rms])
+        features = transferred
     return [(features[index], run.periodic) for index, run in enumerate(runs)]
+
+
+def transferred_rms(features: np.ndarray, line_gain: np.ndarray, processor: RunProcessor) -> np.ndarray:
+    """The RMS of model records seen through a transfer path with gain ``line_gain`` at each line.
+
+    A transfer path acts on frequency: a resonance near one mesh harmonic
+    raises that line, not the record's RMS as a whole. The mean square is
+    the lines' power (half the squared amplitude of each distinct line)
+    plus the rest; each line's power is scaled by its squared gain, the
+    rest kept (a reference's direct RMS correction then scales the
+    result). One ratio read at a reference run would not follow a test
+    campaign whose line mix differs: measured on a 2.5 kHz accelerometer
+    resonance, the second mesh harmonic at 2.66 kHz moved the held-out
+    RMS of a healthy control 20 noise spreads off.
+
+    Parameters
+    ----------
+    features : array (..., all features)
+        Model features (amplitudes or phasors of the lines), not yet transferred.
+    line_gain : array (..., all features)
+        The path's gain at each line column, broadcast against ``features``.
+    processor : RunProcessor
+        The run's processing (its columns).
+
+    Returns
+    -------
+    array (...)
+    """
+    columns = processor.distinct_line_columns
+    amplitude = np.nan_to_num(np.abs(features[..., columns]))
+    gain = np.broadcast_to(line_gain, features.shape)[..., columns]
+    line_power = 0.5 * np.sum(amplitude ** 2, axis=-1)
+    rest = np.maximum(np.real(features[..., processor.columns["rms"]]) ** 2 - line_power, 0.0)
+    return np.sqrt(rest + 0.5 * np.sum((gain * amplitude) ** 2, axis=-1))
 
 
 # Most runs of one operating point reduced in one call (:func:`execute_group`):

@@ -53,7 +53,7 @@ import scipy.optimize
 import xarray as xr
 
 from ..physics.design import Design
-from .case import FeatureModelError, RigCase
+from .case import FeatureModelError, RigCase, transferred_rms
 from .errors import DiagnosisError
 
 #: Relative tolerance on pinion speed for matching a test run to a reference run.
@@ -76,6 +76,8 @@ _CURVE_POINTS = 120
 # The local noise floor at a line is the median of the free periodogram bins within this
 # relative distance of it (at least _LOCAL_MIN_HZ): narrower than a resonance of damping 0.05
 # (half-power half-width 5 %), wide enough for a median of about a hundred bins at 1 Hz.
+# Where fewer than _LOCAL_MIN_BINS free bins lie that near (shaft lines inside the excluded low
+# band), the nearest _LOCAL_MIN_BINS free bins are taken instead.
 _LOCAL_WIDTH = 0.03
 _LOCAL_MIN_HZ = 50.0
 _LOCAL_MIN_BINS = 20
@@ -324,21 +326,12 @@ class ReferenceCorrection:
         replaces ``case.model_error`` by a :class:`FeatureModelError`
         widened by the correction's relative uncertainty.
         """
-        n_all = case.observed_all.shape[-1]
-        gain = np.ones((case.n_op, len(case.channels), n_all))
-        spread = np.zeros_like(gain)
+        line_gain, spread = line_gains(case, self.curves)
+        gain = line_gain.copy()
         processor_kinds = _kinds_of_all(case)
         for op in range(case.n_op):
-            processor = case.processors[op]
-            orders = np.array([d.order for d in processor.definitions])
-            frequencies = orders * case.speeds[op] / 60.0
             for c, channel in enumerate(case.channels):
                 curve = self.curves.get(channel)
-                lines = np.isfinite(frequencies)
-                if curve is not None and lines.any():
-                    mean, sd = curve.predict(frequencies[lines])
-                    gain[op, c, lines] = np.exp(mean)
-                    spread[op, c, lines] = sd
                 reference_channel = self.channels.index(channel)
                 for kind, values in self.direct.items():
                     value = values[matched[op], reference_channel]
@@ -354,6 +347,8 @@ class ReferenceCorrection:
         case.observed_all = case.observed_all / colour
         case.observed = case.observed_all[..., case.layout.columns]
         case.transfer = gain / colour
+        # the RMS through the path line by line (case.transferred_rms), then scaled by its direct correction
+        case.line_gain = line_gain
         compared = gain[..., case.layout.columns]
         widened = spread[..., case.layout.columns]
         kinds = np.array(case.layout.kinds)
@@ -384,8 +379,12 @@ def noise_colour(case: RigCase) -> np.ndarray:
     at the noise floor near a resonance would look several noise spreads
     high. The ratio is the square root of the median of the free
     periodogram bins near the line over the median of all free bins (the
-    bins the noise estimate uses); 1 for features that are not lines and
-    where too few free bins lie near the line.
+    bins the noise estimate uses), or of the nearest free bins where too
+    few lie near the line (a shaft line inside the low band, which the noise
+    estimate leaves out: measured behind a 2.5 kHz accelerometer resonance,
+    the floor there was 30 times the median in power, and taken as white
+    it made noise-level shaft lines read 2-3 noise spreads high on every
+    run); 1 for features that are not lines.
     """
     colour = np.ones(case.observed_all.shape)
     for op in range(case.n_op):
@@ -395,10 +394,16 @@ def noise_colour(case: RigCase) -> np.ndarray:
         kept = ~processor.excluded
         centres = np.array([d.order * processor.speed / 60.0 for d in processor.definitions])
         lines = np.flatnonzero(np.isfinite(centres))
+        free = np.flatnonzero(kept)
         windows = []
         for i in lines:
             width = max(_LOCAL_WIDTH * centres[i], _LOCAL_MIN_HZ)
-            windows.append(kept & (np.abs(frequencies - centres[i]) <= width))
+            window = kept & (np.abs(frequencies - centres[i]) <= width)
+            if window.sum() < _LOCAL_MIN_BINS and free.size >= _LOCAL_MIN_BINS:
+                nearest = free[np.argsort(np.abs(frequencies[free] - centres[i]), kind="stable")[:_LOCAL_MIN_BINS]]
+                window = np.zeros_like(kept)
+                window[nearest] = True
+            windows.append(window)
         for c, channel in enumerate(case.channels):
             record = np.asarray(case.rig[channel].values[op], dtype=float)
             if not case.usable[op, c] or np.isnan(record).any() or not fit.n_centres:
@@ -451,8 +456,33 @@ def _line_points(case: RigCase, model_all: np.ndarray, colour: np.ndarray) -> di
     return points
 
 
-def _direct_corrections(case: RigCase, model_all: np.ndarray) -> dict[str, np.ndarray]:
-    """Log corrections of band power, RMS and kurtosis read at each reference run (n_op, n_channel)."""
+def line_gains(case: RigCase, curves: dict[str, GainCurve]) -> tuple[np.ndarray, np.ndarray]:
+    """Each channel's learned gain and its log-gain spread at every line of every run (n_op, n_channel, all).
+
+    1 and 0 for features that are not lines and for channels without a curve.
+    """
+    gain = np.ones((case.n_op, len(case.channels), case.observed_all.shape[-1]))
+    spread = np.zeros_like(gain)
+    for op in range(case.n_op):
+        orders = np.array([d.order for d in case.processors[op].definitions])
+        frequencies = orders * case.speeds[op] / 60.0
+        lines = np.isfinite(frequencies)
+        for c, channel in enumerate(case.channels):
+            curve = curves.get(channel)
+            if curve is not None and lines.any():
+                mean, sd = curve.predict(frequencies[lines])
+                gain[op, c, lines] = np.exp(mean)
+                spread[op, c, lines] = sd
+    return gain, spread
+
+
+def _direct_corrections(case: RigCase, model_all: np.ndarray, line_gain: np.ndarray) -> dict[str, np.ndarray]:
+    """Log corrections of band power, RMS and kurtosis read at each reference run (n_op, n_channel).
+
+    The RMS correction is read against the model's RMS taken through the
+    learned line gains (:func:`~uqgear.diagnosis.case.transferred_rms`), as
+    it is applied to the test campaign's model.
+    """
     names = case.processors[0].names
     out = {kind: np.full((case.n_op, len(case.channels)), np.nan) for kind in ("band", "rms", "kurtosis")}
     for op in range(case.n_op):
@@ -461,14 +491,16 @@ def _direct_corrections(case: RigCase, model_all: np.ndarray) -> dict[str, np.nd
             if not case.usable[op, c]:
                 continue
             sigma2 = case.noise_std[op, c] ** 2
+            through_path = {"low_band_rms": model_all[op, c, names.index("low_band_rms")],
+                            "rms": float(transferred_rms(model_all[op, c], line_gain[op, c], case.processors[op]))}
             for kind, name, power in (("band", "low_band_rms", noise.band_power), ("rms", "rms", noise.total_power)):
                 observed = case.observed_all[op, c, names.index(name)]
-                model = model_all[op, c, names.index(name)]
+                model = through_path[name]
                 signal = observed ** 2 - sigma2 * power[0]
                 # only where the signal stands clear of the noise power's own scatter
                 if np.isfinite(signal) and model > 0 and signal > MIN_LINE_SNR * sigma2 * power[1]:
                     out[kind][op, c] = 0.5 * math.log(signal / model ** 2)
-            rms_model = model_all[op, c, names.index("rms")]
+            rms_model = through_path["rms"]
             kurtosis_model = model_all[op, c, names.index("kurtosis")]
             observed = case.observed_all[op, c, names.index("kurtosis")]
             if math.isfinite(out["rms"][op, c]) and kurtosis_model > 0 and np.isfinite(observed):
@@ -518,7 +550,7 @@ def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.ra
     model_all = nominal.model
     points = _line_points(case, model_all, noise_colour(case))
     curves = {channel: fit_gain_curve(*points[channel]) for channel in case.channels}
-    direct = _direct_corrections(case, model_all)
+    direct = _direct_corrections(case, model_all, line_gains(case, curves)[0])
     channels_summary = {}
     for channel in case.channels:
         curve = curves[channel]

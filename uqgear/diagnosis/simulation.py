@@ -86,6 +86,10 @@ class RunProcessor:
         self.low_band = tuple(options["low_band"])
         self.taper = feature_module._window(options["window"], self.size)
         self.fit = feature_module._LineFit(line_orders * self.speed / 60.0, self.fs, self.size, self.limit, self.taper)
+        # one column per fitted line (lines within a bin of each other share one fitted amplitude): sums of
+        # line power count each line once
+        _, first = np.unique(self.fit.groups, return_index=True)
+        self.distinct_line_columns = self.line_columns[self.fit.inside[first]]
         frequencies = np.fft.rfftfreq(self.size, 1.0 / self.fs)
         self.excluded = feature_module._excluded_bins(frequencies, self.speed, design, line_orders,
                                                       options["n_sidebands"], self.low_band, self.limit,
