@@ -30,7 +30,9 @@ Method (docs/model.md section 6.1):
    that lines the model cannot produce at all lose their pull.
    Its predictive spread (curve uncertainty plus the scatter) is the
    correction's uncertainty. Band power, RMS and kurtosis are not line
-   spectra: their correction is read directly at the matched reference run.
+   spectra: their correction is read directly at the matched reference run
+   (the RMS after the model's lines are taken through the curve one by one,
+   :func:`~uqgear.diagnosis.case.transferred_rms`).
 4. **Carried to the test campaign.** The test campaign's model features are
    multiplied by the gain at their frequencies (the observed features and
    the noise floor stay as recorded, so the Rice statistics of the lines
