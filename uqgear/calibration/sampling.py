@@ -279,8 +279,7 @@ def final_sampling(likelihood: StageLikelihood, start_points: np.ndarray, rng: n
         verdict = criteria.verdict(chain[burn:], sampler.acceptance_fraction, truncated, names)
         if verdict["converged"]:
             break
-    chain = sampler.get_chain()
-    burn = total // BURN_IN_DIVISOR
+    # the last chunk's chain and burn-in (max_steps >= chunk_steps: the loop ran)
     thin = max(1, int(verdict["tau_max"] // 2))
     kept = chain[burn::thin]                                              # (draw, chain, dim)
     log_likelihood = sampler.get_log_prob()[burn::thin]

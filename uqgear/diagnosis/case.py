@@ -19,7 +19,7 @@ from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
 from ..rig.features import SIGNAL_CHANNELS
 from ..rig.order_tracking import speed_summary, track_orders
-from .discrepancy import FeatureLayout, NoiseModel, noise_model
+from .discrepancy import FeatureLayout, NoiseModel, line_noise_sigma, noise_model
 from .errors import DiagnosisError
 from .interference import NOTCH_HALF_WIDTH, interference_lines
 from .simulation import CampaignSimulator, RunProcessor, SimulatedRun
@@ -121,8 +121,7 @@ class RigCase:
 
     def line_noise_sigma(self) -> np.ndarray:
         """Per-quadrature noise spread of each compared line (n_op, n_channel, F; NaN for features not lines)."""
-        scale = np.stack([noise.line_scale[self.layout.columns] for noise in self.noise])      # (n_op, F)
-        return self.noise_std[..., None] * scale[:, None, :]
+        return line_noise_sigma(self.noise_std, self.noise, self.layout)
 
     def mask(self) -> np.ndarray:
         """Features that enter the comparison: usable runs and finite rig features."""

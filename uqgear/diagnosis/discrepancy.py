@@ -177,7 +177,7 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
     scale = np.full(observed.shape, np.nan)
     kinds = np.array(layout.kinds)
     sigma_noise = np.asarray(noise_std, dtype=float)[..., None]            # (n_op, n_channel, 1)
-    line_scale = np.stack([n.line_scale[layout.columns] for n in noise])[:, None, :]   # (n_op, 1, F)
+    line_sigma = line_noise_sigma(noise_std, noise, layout)
     band = np.stack([n.band_power for n in noise])[:, None, :]             # (n_op, 1, 2)
     total = np.stack([n.total_power for n in noise])[:, None, :]
     kurt_spread = np.array([n.kurtosis_spread for n in noise])[:, None]
@@ -185,11 +185,11 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
     line = kinds == "line"
     if line.any():
         nu = np.abs(model[..., line])
-        sigma = np.sqrt((sigma_noise * line_scale[..., line]) ** 2 + (model_error["line"] * nu) ** 2
+        sigma = np.sqrt(line_sigma[..., line] ** 2 + (model_error["line"] * nu) ** 2
                         + absolute_model_error(model_error, "line") ** 2)
         sigma = np.maximum(sigma, 1e-300)
         z[..., line] = _line_discrepancy(observed[..., line], nu, sigma)
-        scale[..., line] = sigma / np.maximum(sigma_noise * line_scale[..., line], 1e-300)
+        scale[..., line] = sigma / np.maximum(line_sigma[..., line], 1e-300)
     for kind, moments in (("band", band), ("rms", total)):
         chosen = kinds == kind
         if not chosen.any():
@@ -218,6 +218,13 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
     return z, scale
 
 
+def line_noise_sigma(noise_std: np.ndarray, noise: Sequence[NoiseModel], layout: FeatureLayout) -> np.ndarray:
+    """Per-quadrature noise spread of each compared line (n_op, n_channel, F; NaN for features not lines):
+    each record's noise std times the line's scale in its run's noise model."""
+    line_scale = np.stack([n.line_scale[layout.columns] for n in noise])[:, None, :]   # (n_op, 1, F)
+    return np.asarray(noise_std, dtype=float)[..., None] * line_scale
+
+
 def expected_rig_features(model: np.ndarray, noise_std: np.ndarray, noise: Sequence[NoiseModel],
                           layout: FeatureLayout) -> np.ndarray:
     """What a rig records on average for noise-free model features (..., n_op, n_channel, F).
@@ -230,11 +237,11 @@ def expected_rig_features(model: np.ndarray, noise_std: np.ndarray, noise: Seque
     out = np.full(model.shape, np.nan)
     kinds = np.array(layout.kinds)
     sigma_noise = np.asarray(noise_std, dtype=float)[..., None]
-    line_scale = np.stack([n.line_scale[layout.columns] for n in noise])[:, None, :]
     band = np.stack([n.band_power[0] for n in noise])[:, None, None]
     total = np.stack([n.total_power[0] for n in noise])[:, None, None]
     line = kinds == "line"
-    sigma = np.broadcast_to(np.maximum(sigma_noise * line_scale[..., line], 1e-300), model[..., line].shape)
+    sigma = np.broadcast_to(np.maximum(line_noise_sigma(noise_std, noise, layout)[..., line], 1e-300),
+                            model[..., line].shape)
     out[..., line] = _rice_moments(np.abs(model[..., line]), sigma)[0]
     for kind, power in (("band", band), ("rms", total)):
         chosen = kinds == kind

@@ -411,7 +411,7 @@ def noise_colour(case: RigCase) -> np.ndarray:
             if not case.usable[op, c] or np.isnan(record).any() or not fit.n_centres:
                 continue
             # the fitted lines taken out first: a strong line's window leakage is no noise for the fit
-            coefficients = scipy.linalg.cho_solve(fit.factor, fit.weighted.T @ record)
+            coefficients = fit._coefficients(record[None])[:, 0]
             residual = record * processor.taper - fit.weighted @ coefficients
             density = np.abs(np.fft.rfft(residual)) ** 2
             overall = float(np.median(density[kept])) if kept.any() else 0.0
