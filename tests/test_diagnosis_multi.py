@@ -144,7 +144,8 @@ def test_shrink_shares_add_up_to_the_set_shrink():
 
 def _score(effect, label, score, gap, shrink, *, low=None, gain=50.0, candidate=None, fit=None):
     if fit is None:
-        fit = SimpleNamespace(problem=SimpleNamespace(candidate=candidate, candidates=(candidate,)), cost=0.0,
+        fit = SimpleNamespace(problem=SimpleNamespace(candidate=candidate, candidates=(candidate,),
+                                                      own_model_error=None), cost=0.0,
                               values={spec.name: 1.0 for spec in candidate.fitted} if candidate else {})
     held = SimpleNamespace(z=np.zeros((2, 1, 1)), gap=gap)
     return scoring.CandidateScore(effect, label, fit, held, "full", score + 5.0, 1.0, 5.0, score, gap, shrink,
@@ -162,14 +163,17 @@ class _StandIns:
         monkeypatch.setattr(pipeline, "fit_candidate", self.fit_candidate)
         monkeypatch.setattr(pipeline, "leave_one_out", lambda result: result.held)
         monkeypatch.setattr(pipeline, "score_candidate", self.score_candidate)
-        monkeypatch.setattr(pipeline, "effect_off_costs", lambda base, fits: ([], [50.0 for _ in fits]))
+        monkeypatch.setattr(pipeline, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
+        # no pitch-error allowance on these stand-ins: a full fit is scored as fitted
+        monkeypatch.setattr(pipeline, "with_own_allowance", lambda result: result)
         monkeypatch.setattr(pipeline, "bootstrap_gap", lambda z, rng: (0.0, 1.0))
 
     def fit_candidate(self, case, candidate, base, *, full, max_evaluations, start=None):
         (self.full if full else self.screened).append(candidate.label)
         self.bases.append(tuple(c.label for c in base.problem.candidates))
         values = {spec.name: 1.0 for spec in candidate.fitted}
-        problem = SimpleNamespace(candidate=candidate, candidates=(*base.problem.candidates, candidate))
+        problem = SimpleNamespace(candidate=candidate, candidates=(*base.problem.candidates, candidate),
+                                  own_model_error=None)
         return SimpleNamespace(problem=problem, cost=0.0, values=values, held=SimpleNamespace(z=None), full=full)
 
     def score_candidate(self, result, held, base_held, stage, rng):

@@ -205,3 +205,25 @@ def test_report_records_provenance_of_the_study_text(smoke_report):
     study_text = (STUDIES / "smoke.yaml").read_text()
     assert json.dumps(study_text)[1:40] in json.dumps(load_results(folder)[0].attrs["study"])
     assert "Study definition" in text and "adhesion_coefficient: [0.15, 0.33]" in text
+
+
+def test_figures_drawn_in_forked_processes_are_the_bytes_drawn_here():
+    """figure_pngs draws each figure whole in one process: the PNGs are those of drawing them in order here."""
+    from uqgear.report.page import figure_pngs, new_figure
+
+    def maker(frequency):
+        def make():
+            figure = new_figure(3.0, 2.0, layout=None)
+            axis = figure.subplots()
+            t = np.linspace(0.0, 1.0, 500)
+            axis.semilogy(t, 1.5 + np.sin(2 * np.pi * frequency * t))
+            axis.set_title(f"{frequency} Hz")
+            return figure
+        return make
+
+    makers = [maker(f) for f in (1.0, 3.0, 7.0)]
+    here = figure_pngs(makers, 60, tight=True, processes=1)
+    forked = figure_pngs(makers, 60, tight=True, processes=2)
+    assert all(png.startswith(PNG_SIGNATURE) for png in here)
+    assert forked == here
+    assert len(set(here)) == 3

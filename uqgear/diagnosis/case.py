@@ -114,6 +114,11 @@ class RigCase:
     # per gear, the first-order run-out the stated classes' pitch errors stay under, m
     # (uqgear.diagnosis.manufacturing.run_out_bounds); empty: perfect gears
     run_out_allowance: dict[str, float] = field(default_factory=dict)
+    # the pitch-error allowance applied to the nominal model (a manufacturing.PitchErrorAllowance) and the
+    # model error before it: a fit with effects is scored with its own model's allowance
+    # (manufacturing.with_own_allowance); None: none applied
+    pitch_allowance: Any = None
+    model_error_before_allowance: Mapping[str, float] | None = None
 
     @property
     def n_op(self) -> int:

@@ -41,10 +41,16 @@ class FitProblem:
     candidates : Candidate or sequence of Candidate or None
         The effects of the model (None or empty: the nominal model); each
         library effect at most once (:func:`~.candidates.check_combination`).
+    model_error : mapping, optional
+        This model's own model error (e.g. with the pitch-error allowance
+        of its own effects, :func:`~.manufacturing.allowance_for_fit`);
+        default the case's.
     """
 
-    def __init__(self, case: RigCase, candidates: Candidate | Sequence[Candidate] | None) -> None:
+    def __init__(self, case: RigCase, candidates: Candidate | Sequence[Candidate] | None, *,
+                 model_error: Mapping[str, float] | None = None) -> None:
         self.case = case
+        self.own_model_error = model_error
         if candidates is None:
             candidates = ()
         elif isinstance(candidates, Candidate):
@@ -137,11 +143,21 @@ class FitProblem:
             self._cache[key] = (values, is_periodic)
         return out, periodic
 
-    def discrepancy(self, model_all: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Standardised discrepancies and scales (..., n_op, n_channel, F) of model features."""
+    @property
+    def model_error(self) -> Mapping[str, float]:
+        """The model error the discrepancies are standardised with: this model's own, else the case's."""
+        return self.case.model_error if self.own_model_error is None else self.own_model_error
+
+    def discrepancy(self, model_all: np.ndarray, model_error: Mapping[str, float] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Standardised discrepancies and scales (..., n_op, n_channel, F) of model features.
+
+        ``model_error`` replaces :attr:`model_error` (e.g. to judge a base model by a richer one's error).
+        """
         case = self.case
         return standardised_discrepancy(case.observed, model_all[..., case.layout.columns], case.noise_std,
-                                        case.noise, case.layout, case.model_error)
+                                        case.noise, case.layout,
+                                        self.model_error if model_error is None else model_error)
 
     def residual_vector(self, z: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Feature residuals (masked) followed by the prior residuals."""
@@ -472,7 +488,8 @@ def fit_candidate(case: RigCase, candidate: Candidate, base: FitResult, *, full:
     start : FitResult, optional
         A screening fit of the same candidate to start from instead of the grid.
     """
-    problem = FitProblem(case, (*base.problem.candidates, candidate))
+    # the base's own model error (its effects' pitch-error allowance) until the new fit gets its own
+    problem = FitProblem(case, (*base.problem.candidates, candidate), model_error=base.problem.own_model_error)
     positions = base.vector[base.problem.n_global:]
     if start is not None:
         starts = [problem.vector(start.values, start.vector[start.problem.n_global:])]

@@ -88,7 +88,8 @@ from .candidates import candidates_for, nominal_parameters
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
-from .manufacturing import DEFAULT_CLASSES, PitchErrorAllowance, check_classes, pitch_error_allowance
+from .manufacturing import (DEFAULT_CLASSES, PitchErrorAllowance, check_classes, pitch_error_allowance,
+                            with_own_allowance)
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
@@ -270,12 +271,16 @@ _NOMINAL_REFITS = 2
 _NOMINAL_MARGIN = 5.0
 
 
-def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult]) -> tuple[list[np.ndarray], list[float]]:
+def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult], *, own_error: bool = False
+                     ) -> tuple[list[np.ndarray], list[float]]:
     """The base model at each fit's values of the base's parameters and T2 (its new effect off): vectors and costs.
 
     ``nominal`` is the base fit: the nominal model's, or in forward selection
     the model with the effects named before (the new effect is switched off,
-    the others stay at the fit's values).
+    the others stay at the fit's values). ``own_error``: each cost is taken
+    with that fit's model error (its own pitch-error allowance), so that an
+    effect's gain is what switching it off costs under one error model,
+    not what a wider allowance forgives; else with the base's.
     """
     problem = nominal.problem
     names = {spec.name for spec in problem.specs}
@@ -284,7 +289,8 @@ def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult]) -> tuple[lis
     if not starts:
         return [], []
     model, _ = problem.model_features(starts)
-    return starts, [robust_cost(problem.residual_vector(problem.discrepancy(model[index])[0], v))
+    errors = [fit_result.problem.model_error if own_error else None for fit_result in fits]
+    return starts, [robust_cost(problem.residual_vector(problem.discrepancy(model[index], errors[index])[0], v))
                     for index, v in enumerate(starts)]
 
 
@@ -318,6 +324,18 @@ def _found(entry: CandidateScore) -> dict[str, Any]:
             "parameters": entry.parameters()}
 
 
+def _supersedes(full: CandidateScore, best: CandidateScore) -> bool:
+    """Whether a full fit takes the place of its effect's best entry so far.
+
+    When it scores higher; and always over the screening of its own
+    variant when it was scored with its own pitch-error allowance (the
+    screening was scored with the nominal model's: the two are not on one
+    footing).
+    """
+    own = full.fit.problem.own_model_error is not None
+    return full.score > best.score or (own and best.stage == "screening" and best.label == full.label)
+
+
 def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, nominal_gap: float,
                       effect_names: Sequence[str], hints: Mapping[str, float], rng: np.random.Generator,
                       promoted: int, timings: dict[str, float], steps: StepLog
@@ -340,19 +358,25 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
             best_per_effect[entry.effect] = entry
     order = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
     all_scores = list(screened)
-    # the runner-up is refitted too unless the screening already puts it far behind
+    # the runner-up is refitted too unless the screening already puts it far behind; with a pitch-error
+    # allowance the screening judged every candidate by the nominal model's allowance, which an effect
+    # that acts together with the pitch errors (friction) outgrows, so any runner-up with evidence of
+    # its own is refitted (with its own allowance, with_own_allowance)
+    share = 0.0 if case.pitch_allowance is not None else 0.25
     chosen = [entry for rank, entry in enumerate(order[:promoted])
-              if rank == 0 or (entry.score > 0 and entry.score >= 0.25 * order[0].score)]
+              if rank == 0 or (entry.score >= (SCORE_THRESHOLD if share == 0.0 else 0.0)
+                               and entry.score > 0 and entry.score >= share * order[0].score)]
 
     def fit_in_full(entries: Sequence[CandidateScore]) -> None:
         for entry in entries:
             candidate = entry.fit.problem.candidate
             with steps.step(f"fit {candidate.label} in full") as found:
-                result = fit_candidate(case, candidate, nominal, full=True, max_evaluations=12, start=entry.fit)
+                result = with_own_allowance(fit_candidate(case, candidate, nominal, full=True, max_evaluations=12,
+                                                          start=entry.fit))
                 full = score_candidate(result, leave_one_out(result), nominal_held, "full", rng)
                 found.update(_found(full))
             all_scores.append(full)
-            if full.score > best_per_effect[entry.effect].score:
+            if _supersedes(full, best_per_effect[entry.effect]):
                 best_per_effect[entry.effect] = full
 
     fit_in_full(chosen)
@@ -368,7 +392,7 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
         fit_in_full([entry])
     full_fits = [entry for entry in all_scores if entry.stage == "full"]
     with steps.step("switch the effects of the full fits off"):
-        costs = effect_off_costs(nominal, [entry.fit for entry in full_fits])[1]
+        costs = effect_off_costs(nominal, [entry.fit for entry in full_fits], own_error=True)[1]
     for entry, cost in zip(full_fits, costs):
         entry.effect_gain = cost - entry.fit.cost
     for entry in screened:
@@ -463,11 +487,12 @@ def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effe
     candidate = leader.fit.problem.candidate
     with steps.step(f"forward selection: fit {candidate.label} in full on top of {' + '.join(base_labels)}") \
             as found:
-        result = fit_candidate(case, candidate, base_fit, full=True, max_evaluations=12, start=leader.fit)
+        result = with_own_allowance(fit_candidate(case, candidate, base_fit, full=True, max_evaluations=12,
+                                                  start=leader.fit))
         full = score_candidate(result, leave_one_out(result), base_held, "full", rng)
-        full.effect_gain = effect_off_costs(base_fit, [result])[1][0] - result.cost
+        full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
         found.update(_found(full))
-    if full.score > best_per_effect[full.effect].score:
+    if _supersedes(full, best_per_effect[full.effect]):
         best_per_effect[full.effect] = full
     ranking = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
     best = best_per_effect[full.effect]
@@ -643,6 +668,8 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
                                           seed=child_seed(seed, _PITCH_ERROR_STREAM))
         found.update(applied=allowance.applied, reason=allowance.reason)
         if allowance.applied:
+            case.model_error_before_allowance = case.model_error
+            case.pitch_allowance = allowance
             case.model_error = FeatureModelError.combined(case.model_error, allowance.absolute)
             case.run_out_allowance = dict(allowance.run_out_bound)
             # the nominal parameters were pulled by what pitch errors did to the features: refit

@@ -394,7 +394,7 @@ def noise_colour(case: RigCase) -> np.ndarray:
         fit = processor.fit
         frequencies = np.fft.rfftfreq(processor.size, 1.0 / processor.fs)
         kept = ~processor.excluded
-        centres = np.array([d.order * processor.speed / 60.0 for d in processor.definitions])
+        centres = processor.frequencies
         lines = np.flatnonzero(np.isfinite(centres))
         free = np.flatnonzero(kept)
         windows = []
@@ -438,7 +438,7 @@ def _line_points(case: RigCase, model_all: np.ndarray, colour: np.ndarray) -> di
             scale = case.noise_std[op, c] * case.noise[op].line_scale[columns] * colour[op, c, columns]
             observed = case.observed_all[op, c, columns]
             model = np.abs(model_all[op, c, columns])
-            orders = np.array([processor.definitions[i].order for i in columns])
+            line_frequencies = processor.frequencies[columns]
             with np.errstate(divide="ignore", invalid="ignore"):
                 clear = (observed >= MIN_LINE_SNR * scale) & (model >= MIN_LINE_SNR * scale) & (scale > 0)
                 # the Rice mean's bias is removed to first order: E|A + n|^2 = A^2 + 2 sigma^2
@@ -448,7 +448,7 @@ def _line_points(case: RigCase, model_all: np.ndarray, colour: np.ndarray) -> di
             chosen = np.flatnonzero(clear & np.isfinite(ratio))
             seen: set[float] = set()
             for i in chosen:
-                f = round(float(orders[i] * case.speeds[op] / 60.0), 6)
+                f = round(float(line_frequencies[i]), 6)
                 if f in seen:
                     continue
                 seen.add(f)
@@ -466,8 +466,7 @@ def line_gains(case: RigCase, curves: dict[str, GainCurve]) -> tuple[np.ndarray,
     gain = np.ones((case.n_op, len(case.channels), case.observed_all.shape[-1]))
     spread = np.zeros_like(gain)
     for op in range(case.n_op):
-        orders = np.array([d.order for d in case.processors[op].definitions])
-        frequencies = orders * case.speeds[op] / 60.0
+        frequencies = case.processors[op].frequencies
         lines = np.isfinite(frequencies)
         for c, channel in enumerate(case.channels):
             curve = curves.get(channel)

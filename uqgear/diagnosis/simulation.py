@@ -81,6 +81,8 @@ class RunProcessor:
         self.names = [definition.name for definition in self.definitions]
         self.columns = {name: index for index, name in enumerate(self.names)}
         self.line_columns = np.array([i for i, d in enumerate(self.definitions) if d.is_line], dtype=int)
+        # each feature's frequency at this speed, Hz (NaN for features that are not lines)
+        self.frequencies = np.array([d.order for d in self.definitions], dtype=float) * self.speed / 60.0
         line_orders = np.array([self.definitions[i].order for i in self.line_columns])
         self.limit = options["band_limit"]
         self.low_band = tuple(options["low_band"])

@@ -20,7 +20,7 @@ from matplotlib.ticker import LogLocator, NullLocator
 
 from ..common.fileio import write_text_atomic
 from .finding import HEADLINE_STYLE, Finding, headline_html
-from .page import figure_png, html_page, img_tag, new_figure
+from .page import figure_png, figure_pngs, html_page, img_tag, new_figure
 from .reference_section import reference_section_html
 
 _STYLE = """
@@ -74,10 +74,6 @@ def gap_map_plot(ds: xr.Dataset, variable: str, title: str):
     return figure
 
 
-def _gap_map_figure(ds: xr.Dataset, variable: str, title: str) -> str:
-    return _figure_html(gap_map_plot(ds, variable, title), title)
-
-
 def spectra_plot(ds: xr.Dataset):
     """Before/after: per held-out run, a row rig vs nominal model and a row rig vs model with the effect."""
     spectra = ds["amplitude_spectrum"]
@@ -118,10 +114,6 @@ def spectra_plot(ds: xr.Dataset):
                 axis.legend(fontsize=7, loc="upper right")
     figure.tight_layout()
     return figure
-
-
-def _spectra_figure(ds: xr.Dataset) -> str:
-    return _figure_html(spectra_plot(ds), "held-out spectra")
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]], text_columns: Sequence[int] = (0,)) -> str:
@@ -285,7 +277,7 @@ def _parameter_text(entry: Mapping[str, Any]) -> str:
     return ", ".join(texts)
 
 
-def _effect_set_html(content: Mapping[str, Any], ds: xr.Dataset) -> list[str]:
+def _effect_set_html(content: Mapping[str, Any], figures: Mapping[str, str]) -> list[str]:
     """The named effects in the order forward selection added them, and the gap that remains, with where."""
     effects = content.get("effects") or []
     remaining = content.get("remaining_gap")
@@ -312,8 +304,8 @@ def _effect_set_html(content: Mapping[str, Any], ds: xr.Dataset) -> list[str]:
     if remaining and effects:
         parts.append(f'<h2>What remains: held-out gap {_number(remaining["value"])} with '
                      f'{html.escape(" + ".join(e["effect"] for e in effects))}</h2>')
-        if "gap_map_final" in ds:
-            parts.append(_gap_map_figure(ds, "gap_map_final", "model with all named effects, held-out runs"))
+        if "gap_map_final" in figures:
+            parts.append(figures["gap_map_final"])
         if remaining.get("where"):
             parts.append(_table(["channel", "feature", "family", "runs beyond 3 sigma", "RMS z"],
                                 [[w["channel"], w["feature"], w["family"], ", ".join(map(str, w["ops"])), w["score"]]
@@ -323,9 +315,30 @@ def _effect_set_html(content: Mapping[str, Any], ds: xr.Dataset) -> list[str]:
     return parts
 
 
+def _diagnosis_figures(content: Mapping[str, Any], ds: xr.Dataset) -> dict[str, str]:
+    """The report's figures as ``<img>`` elements, drawn side by side (:func:`~.page.figure_pngs`)."""
+    makers: dict[str, tuple[Any, str]] = {}
+    # the spectra, the dearest, first: the gap maps share the other process
+    if "amplitude_spectrum" in ds:
+        makers["spectra"] = (lambda: spectra_plot(ds), "held-out spectra")
+    if "gap_map_nominal" in ds:
+        title = "nominal model, held-out runs"
+        makers["gap_map_nominal"] = (lambda: gap_map_plot(ds, "gap_map_nominal", title), title)
+    if "gap_map_with_effect" in ds:
+        effect_title = f"with {ds['candidate'].values[0]}, held-out runs"
+        makers["gap_map_with_effect"] = (lambda: gap_map_plot(ds, "gap_map_with_effect", effect_title),
+                                         effect_title)
+    if "gap_map_final" in ds and content.get("remaining_gap") and content.get("effects"):
+        final_title = "model with all named effects, held-out runs"
+        makers["gap_map_final"] = (lambda: gap_map_plot(ds, "gap_map_final", final_title), final_title)
+    pngs = figure_pngs([make for make, _ in makers.values()], 90, tight=True)
+    return {key: img_tag(png, alt) for (key, (_, alt)), png in zip(makers.items(), pngs)}
+
+
 def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
     """HTML text of a diagnosis report from its JSON summary and Dataset."""
     gap = content["gap"]
+    figures = _diagnosis_figures(content, ds)
     parts = ["<h1>Sim-to-real gap diagnosis</h1>",
              headline_html(diagnosis_findings(content), "Details, maps and the candidate ranking below."),
              f'<p class="note">rig: {html.escape(str(content["rig"]["source"]))} '
@@ -343,18 +356,17 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
              f'<p class="note">{html.escape(gap["evaluated_on"]["scheme"])}. The gap is the RMS standardised '
              f'discrepancy in excess of noise (each feature capped at 10 sigma); the nominal model is within '
              f'noise below {gap["noise_threshold"]}.</p>',
-             *_effect_set_html(content, ds)]
+             *_effect_set_html(content, figures)]
     if "gap_map_nominal" in ds:
         parts += ["<h2>Where: gap map of the nominal model (held-out runs)</h2>",
-                  _gap_map_figure(ds, "gap_map_nominal", "nominal model, held-out runs")]
+                  figures["gap_map_nominal"]]
     signal = content.get("signal")
     if signal:
         parts += ["<h2>Signal: the strongest line of each run</h2>",
                   _table(["run", "strongest line (noise spreads)", "needed"],
                          [[op, value, signal["threshold"]] for op, value in enumerate(signal["strongest_line_snr"])])]
     if "gap_map_with_effect" in ds:
-        parts.append(_gap_map_figure(ds, "gap_map_with_effect",
-                                     f"with {ds['candidate'].values[0]}, held-out runs"))
+        parts.append(figures["gap_map_with_effect"])
     if content["where"]:
         parts.append(_table(["channel", "feature", "family", "runs beyond 3 sigma", "RMS z"],
                             [[w["channel"], w["feature"], w["family"], ", ".join(map(str, w["ops"])), w["score"]]
@@ -396,7 +408,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
         parts.append("<h2>Spectra on held-out runs: rig, nominal model, model with the effect</h2>"
                      "<p class=\"note\">The two runs with the largest nominal gap, each predicted by the models "
                      "fitted without it; model spectra include the rig's noise floor.</p>")
-        parts.append(_spectra_figure(ds))
+        parts.append(figures["spectra"])
     nominal = content["nominal"]
     parts.append("<h2>Nominal fit</h2>")
     if nominal is None:

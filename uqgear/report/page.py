@@ -10,7 +10,8 @@ from __future__ import annotations
 import base64
 import html
 import io
-from collections.abc import Iterable
+import multiprocessing
+from collections.abc import Callable, Iterable, Sequence
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -28,6 +29,40 @@ def figure_png(figure: Figure, dpi: int, *, tight: bool = False) -> bytes:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=dpi, **({"bbox_inches": "tight"} if tight else {}))
     return buffer.getvalue()
+
+
+# The figure makers a forked child draws (set just before the pool forks): closures over Datasets
+# are inherited by fork rather than pickled.
+_PENDING: Sequence[Callable[[], Figure]] = ()
+
+
+def _draw_pending(index: int, dpi: int, tight: bool) -> bytes:
+    return figure_png(_PENDING[index](), dpi, tight=tight)
+
+
+def figure_pngs(makers: Sequence[Callable[[], Figure]], dpi: int, *, tight: bool = False,
+                processes: int = 2) -> list[bytes]:
+    """PNG bytes of the figures the ``makers`` draw, in order, drawn in up to ``processes`` forked processes.
+
+    Laying out and rasterising a figure is single-threaded Python in
+    matplotlib: a diagnosis report's three figures took 3.7 s of its 5 s
+    one after the other. Each figure is drawn whole in one process, so the
+    bytes are those of drawing it here. Without the ``fork`` start method,
+    inside a daemonic process (which may not have children) or for a single
+    figure they are drawn here.
+    """
+    global _PENDING
+    makers = list(makers)
+    if (len(makers) < 2 or processes < 2 or "fork" not in multiprocessing.get_all_start_methods()
+            or multiprocessing.current_process().daemon):
+        return [figure_png(make(), dpi, tight=tight) for make in makers]
+    _PENDING = makers
+    try:
+        with multiprocessing.get_context("fork").Pool(min(processes, len(makers))) as pool:
+            # the dearest first is the caller's order to choose; one figure per task
+            return pool.starmap(_draw_pending, [(index, dpi, tight) for index in range(len(makers))], chunksize=1)
+    finally:
+        _PENDING = ()
 
 
 def img_tag(png: bytes, alt: str) -> str:
