@@ -99,6 +99,35 @@ def test_summary_counts_confusion_accuracy_and_false_alarms():
     assert ds["confusion"].dims == ("truth", "verdict") and int(ds["confusion"].sum()) == 6
 
 
+def test_effect_sets_are_scored_against_the_truth_and_against_what_the_data_can_tell():
+    """set_exact against the true set; set_exact_identifiable against the effects visible beyond the model error."""
+    def entry(truth, named, verdict, identifiable):
+        return {"truth": truth[0] if truth else B.HEALTHY, "truth_effects": truth, "effects_named": named,
+                "verdict": verdict, "shrink_shares": [0.5] * len(named), "identifiable_effects": identifiable}
+
+    campaigns = [
+        # a run-out the pitch errors could make, friction named: wrong set, right on what can be told
+        entry(["eccentricity", "friction"], ["friction"], "friction", ["friction"]),
+        # a run-out hidden in the allowance, nothing named: the same
+        entry(["eccentricity"], [], "none", []),
+        # both named and both visible: right either way
+        entry(["eccentricity", "tooth_damage"], ["eccentricity", "tooth_damage"], "eccentricity",
+              ["eccentricity", "tooth_damage"]),
+        # an effect named that cannot be told is wrong either way
+        entry(["tooth_damage"], ["tooth_damage", "friction"], "tooth_damage", ["tooth_damage"]),
+        # a control is right only with `none`
+        entry([], [], "unexplained", []),
+        entry([], [], "none", []),
+    ]
+    sets = B.set_scores(campaigns, ["eccentricity", "friction", "tooth_damage"])
+    assert sets["set_exact"] == pytest.approx(2 / 6)
+    assert sets["set_exact_identifiable"] == pytest.approx(4 / 6)
+    assert sets["effects_not_identifiable"] == 2
+    # campaigns that do not record what can be told are scored against their truth
+    old = [{key: value for key, value in c.items() if key != "identifiable_effects"} for c in campaigns]
+    assert B.set_scores(old, ["eccentricity"])["set_exact_identifiable"] == pytest.approx(2 / 6)
+
+
 @pytest.mark.slow
 def test_small_blind_test(tmp_path):
     """Two withheld campaigns (a torque ripple and a healthy control, 4 runs) get the right verdicts."""

@@ -530,7 +530,8 @@ def _command_blindtest(args: argparse.Namespace) -> int:
     sets = result["effect_sets"]
     print(f"blind test ({args.suite}): {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
           f"({result['accuracy_detectable']:.2f} counting 'none' as right where the effect is invisible), "
-          f"effect sets exactly right {sets['set_exact']:.2f}, false alarms on healthy controls "
+          f"effect sets exactly right {sets['set_exact']:.2f} ({sets['set_exact_identifiable']:.2f} against the "
+          f"effects the data can tell), false alarms on healthy controls "
           f"{result['false_alarms']} of {result['healthy_controls']}; results in {out}")
     return 0
 

@@ -32,7 +32,7 @@ import numpy as np
 import xarray as xr
 
 from ..physics.design import Design, load_design
-from .case import RunExecutor, RunTask, execute_run, prepare_case
+from .case import RunExecutor, RunTask, execute_run, execute_runs, prepare_case
 from .discrepancy import expected_rig_features, standardised_discrepancy
 from .errors import DiagnosisError
 from .outputs import _json_clean
@@ -296,6 +296,42 @@ def oracle_gap(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> float:
     return float(math.sqrt(np.mean(squares))) if squares.size else 0.0
 
 
+def effect_visibility(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> dict[str, float]:
+    """How visible each of a campaign's effects is next to the others, by the diagnosis's own model error.
+
+    Per effect: the gap (as :func:`oracle_gap`) between the true model with
+    all the campaign's effects and with all but that one, both over the
+    whole record, standardised with ``case.model_error`` as the diagnosis
+    left it: after a run, that holds the pitch-error allowance (and a
+    reference's widening), so an effect that the stated manufacturing
+    classes could make as well (a 12 um run-out on class-7 gears, whose
+    own first-order run-out reaches 22 um) reads as what it is to the
+    data. Empty for a healthy control.
+    """
+    effects = list(spec.effects())
+    if not effects:
+        return {}
+    design = case.design.replace(**{key: float(truth[key]) for key in ("zeta_mesh", "ste_amplitude", "k1", "k2",
+                                                                      "backlash")})
+    scale = float(truth["mesh_stiffness_scale"])
+    adhesion = np.asarray(truth["adhesion_torque"], dtype=float)
+    names = list(spec.truth_set())
+
+    def features(chosen: Sequence[Effect]) -> np.ndarray:
+        tasks = [RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free") for op in range(case.n_op)]
+        return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
+
+    recorded = expected_rig_features(features(effects), case.noise_std, case.noise, case.layout)
+    visibility = {}
+    for index, name in enumerate(names):
+        shift, _ = standardised_discrepancy(recorded, features(effects[:index] + effects[index + 1:]),
+                                            case.noise_std, case.noise, case.layout, case.model_error)
+        squares = capped_squares(shift[case.mask()])
+        squares = squares[np.isfinite(squares)]
+        visibility[name] = float(math.sqrt(np.mean(squares))) if squares.size else 0.0
+    return visibility
+
+
 def operating_points_of(plan: str, design: Design, n_ops: int = 8) -> dict[str, np.ndarray]:
     """The runs of a test plan (``n_ops`` of its 8, spread over them) for a design."""
     if plan == "service":
@@ -439,6 +475,8 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
         best = result.best
         named = best if best is not None and best.effect == result.verdict else None
         detectable = spec.truth == HEALTHY or visibility > NOISE_GAP_THRESHOLD
+        # after the diagnosis: its model error then holds the pitch-error allowance where one applies
+        per_effect = effect_visibility(case, spec, {**truth, "adhesion_torque": recorded_truth["adhesion_torque"]})
         entry = {
             "id": spec.identifier, "truth": spec.truth, "truth_effects": spec.truth_set(),
             "effects_named": [chosen.entry.effect for chosen in result.selected],
@@ -453,6 +491,8 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "correct": result.verdict == spec.truth,
             "correct_detectable": result.verdict == spec.truth or (not detectable and result.verdict == HEALTHY),
             "detectable": bool(detectable), "oracle_gap": visibility, "nominal_gap": result.nominal_gap,
+            "effect_visibility": per_effect,
+            "identifiable_effects": [name for name, gap in per_effect.items() if gap > NOISE_GAP_THRESHOLD],
             "shrink_fraction": named.shrink if named is not None else None,
             "shrink_interval": [named.shrink_low, named.shrink_high] if named is not None else None,
             "best_candidate": best.effect if best is not None else None,
@@ -529,9 +569,17 @@ def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -
                      "shrink_share_median": float(np.median(shares)) if shares else None})
     exact = [(_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == HEALTHY)
              for c in campaigns]
+    # against the effects the data can tell (effect_visibility) where the campaign records them
+    identifiable = [set(c["identifiable_effects"]) if c.get("identifiable_effects") is not None else _truth_set(c)
+                    for c in campaigns]
+    exact_identifiable = [_named_set(c) == wanted if _truth_set(c) else c["verdict"] == HEALTHY
+                          for c, wanted in zip(campaigns, identifiable)]
     multi = [ok for c, ok in zip(campaigns, exact) if len(_truth_set(c)) > 1]
     controls = [c for c in campaigns if not _truth_set(c)]
     return {"per_effect": rows, "set_exact": sum(exact) / len(exact) if exact else math.nan,
+            "set_exact_identifiable": sum(exact_identifiable) / len(exact_identifiable) if exact_identifiable
+            else math.nan,
+            "effects_not_identifiable": sum(len(_truth_set(c) - wanted) for c, wanted in zip(campaigns, identifiable)),
             "n_multi_effect": len(multi), "set_exact_multi_effect": sum(multi) / len(multi) if multi else None,
             "n_controls": len(controls),
             "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c))}

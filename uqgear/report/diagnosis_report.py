@@ -483,6 +483,11 @@ def _effect_set_scores_html(content: Mapping[str, Any]) -> list[str]:
                if sets.get("n_multi_effect") else "")
             + (f"; healthy controls with an effect named: {sets['controls_with_an_effect_named']} of "
                f"{sets['n_controls']}" if sets.get("n_controls") is not None else "") + ".</p>",
+            *([f"<p>Against the effects the data can tell (each effect's visibility next to the others "
+               f"beyond the noise-gap threshold, by the diagnosis's own model error, pitch-error allowance "
+               f"included): "
+               f"{_percent(sets['set_exact_identifiable'])} exactly right; effects too faint to tell: "
+               f"{sets['effects_not_identifiable']}.</p>"] if "set_exact_identifiable" in sets else []),
             _table(["effect", "acting", "named", "named and acting", "precision", "recall",
                     "median shrink share"],
                    [[r["effect"], r["acting"], r["named"], r["correct"], r["precision"], r["recall"],
