@@ -362,10 +362,13 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
     # allowance the screening judged every candidate by the nominal model's allowance, which an effect
     # that acts together with the pitch errors (friction) outgrows, so any runner-up with evidence of
     # its own is refitted (with its own allowance, with_own_allowance)
-    share = 0.0 if case.pitch_allowance is not None else 0.25
-    chosen = [entry for rank, entry in enumerate(order[:promoted])
-              if rank == 0 or (entry.score >= (SCORE_THRESHOLD if share == 0.0 else 0.0)
-                               and entry.score > 0 and entry.score >= share * order[0].score)]
+    if case.pitch_allowance is not None:
+        def also_promoted(entry: CandidateScore) -> bool:
+            return entry.score >= SCORE_THRESHOLD
+    else:
+        def also_promoted(entry: CandidateScore) -> bool:
+            return entry.score > 0 and entry.score >= 0.25 * order[0].score
+    chosen = [entry for rank, entry in enumerate(order[:promoted]) if rank == 0 or also_promoted(entry)]
 
     def fit_in_full(entries: Sequence[CandidateScore]) -> None:
         for entry in entries:
