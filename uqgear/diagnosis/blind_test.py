@@ -275,10 +275,7 @@ def oracle_gap(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> float:
     """
     if spec.truth == HEALTHY:
         return 0.0
-    design = case.design.replace(**{key: float(truth[key]) for key in ("zeta_mesh", "ste_amplitude", "k1", "k2",
-                                                                      "backlash")})
-    scale = float(truth["mesh_stiffness_scale"])
-    adhesion = np.asarray(truth["adhesion_torque"], dtype=float)
+    design, scale, adhesion = _true_model(case, truth)
     effect = spec.effects()
     periodicity = "free"
     with_effect, without = [], []
@@ -289,7 +286,18 @@ def oracle_gap(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> float:
     columns = case.layout.columns
     # the noise the rig's records carry, as the diagnosis estimates it
     recorded = expected_rig_features(np.stack(with_effect)[..., columns], case.noise_std, case.noise, case.layout)
-    plain = np.stack(without)[..., columns]
+    return _capped_gap(case, recorded, np.stack(without)[..., columns])
+
+
+def _true_model(case, truth: Mapping[str, Any]) -> tuple[Design, float, np.ndarray]:
+    """The true design, mesh-stiffness scale and per-run T2 of a campaign's truth."""
+    design = case.design.replace(**{key: float(truth[key]) for key in ("zeta_mesh", "ste_amplitude", "k1", "k2",
+                                                                      "backlash")})
+    return design, float(truth["mesh_stiffness_scale"]), np.asarray(truth["adhesion_torque"], dtype=float)
+
+
+def _capped_gap(case, recorded: np.ndarray, plain: np.ndarray) -> float:
+    """sqrt(mean(min(z^2, 10^2))) of the standardised shifts between what a rig records and a model."""
     shift, _ = standardised_discrepancy(recorded, plain, case.noise_std, case.noise, case.layout, case.model_error)
     squares = capped_squares(shift[case.mask()])
     squares = squares[np.isfinite(squares)]
@@ -311,10 +319,7 @@ def effect_visibility(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> dic
     effects = list(spec.effects())
     if not effects:
         return {}
-    design = case.design.replace(**{key: float(truth[key]) for key in ("zeta_mesh", "ste_amplitude", "k1", "k2",
-                                                                      "backlash")})
-    scale = float(truth["mesh_stiffness_scale"])
-    adhesion = np.asarray(truth["adhesion_torque"], dtype=float)
+    design, scale, adhesion = _true_model(case, truth)
     names = list(spec.truth_set())
 
     def features(chosen: Sequence[Effect]) -> np.ndarray:
@@ -322,14 +327,8 @@ def effect_visibility(case, spec: CampaignSpec, truth: Mapping[str, Any]) -> dic
         return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
 
     recorded = expected_rig_features(features(effects), case.noise_std, case.noise, case.layout)
-    visibility = {}
-    for index, name in enumerate(names):
-        shift, _ = standardised_discrepancy(recorded, features(effects[:index] + effects[index + 1:]),
-                                            case.noise_std, case.noise, case.layout, case.model_error)
-        squares = capped_squares(shift[case.mask()])
-        squares = squares[np.isfinite(squares)]
-        visibility[name] = float(math.sqrt(np.mean(squares))) if squares.size else 0.0
-    return visibility
+    return {name: _capped_gap(case, recorded, features(effects[:index] + effects[index + 1:]))
+            for index, name in enumerate(names)}
 
 
 def operating_points_of(plan: str, design: Design, n_ops: int = 8) -> dict[str, np.ndarray]:

@@ -111,9 +111,6 @@ class RigCase:
     line_gain: np.ndarray | None = None
     # line interference left out of the low band (uqgear.diagnosis.interference)
     interference: list[dict[str, Any]] = field(default_factory=list)
-    # per gear, the first-order run-out the stated classes' pitch errors stay under, m
-    # (uqgear.diagnosis.manufacturing.run_out_bounds); empty: perfect gears
-    run_out_allowance: dict[str, float] = field(default_factory=dict)
     # the pitch-error allowance applied to the nominal model (a manufacturing.PitchErrorAllowance) and the
     # model error before it: a fit with effects is scored with its own model's allowance
     # (manufacturing.with_own_allowance); None: none applied
@@ -123,6 +120,12 @@ class RigCase:
     @property
     def n_op(self) -> int:
         return int(self.speeds.size)
+
+    @property
+    def run_out_allowance(self) -> dict[str, float]:
+        """Per gear, the first-order run-out the stated classes' pitch errors stay under, m
+        (:func:`uqgear.diagnosis.manufacturing.run_out_bounds`); empty without an allowance (perfect gears)."""
+        return {} if self.pitch_allowance is None else dict(self.pitch_allowance.run_out_bound)
 
     def line_noise_sigma(self) -> np.ndarray:
         """Per-quadrature noise spread of each compared line (n_op, n_channel, F; NaN for features not lines)."""

@@ -674,7 +674,6 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
             case.model_error_before_allowance = case.model_error
             case.pitch_allowance = allowance
             case.model_error = FeatureModelError.combined(case.model_error, allowance.absolute)
-            case.run_out_allowance = dict(allowance.run_out_bound)
             # the nominal parameters were pulled by what pitch errors did to the features: refit
             nominal = fit(nominal.problem, [nominal.vector], max_evaluations=30, tolerance=1e-3).after(nominal)
             found.update(parameters=nominal.values, cost=nominal.cost)
