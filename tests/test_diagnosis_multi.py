@@ -188,7 +188,7 @@ class _StandIns:
 
 
 def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatch, design):
-    case = SimpleNamespace(design=design)
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={})
     run_out = _variant(design, "eccentricity[pinion]")
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 0.3, 0.75),
@@ -211,7 +211,7 @@ def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatc
 
 
 def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design):
-    case = SimpleNamespace(design=design)
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={})
     run_out = _variant(design, "eccentricity[pinion]")
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     # a fair score but no real shrink of what remains (soaking up noise): not added
@@ -222,7 +222,7 @@ def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design)
 
 
 def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design):
-    case = SimpleNamespace(design=design)
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={})
     run_out = _variant(design, "eccentricity[pinion]")
     first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
     # within noise after the first effect: no round at all
@@ -232,6 +232,13 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
                                                   np.random.default_rng(0), StepLog())
     assert [s.entry.effect for s in selected] == ["eccentricity"] and rounds == [] and stand_ins.screened == []
     assert selected[0].shrink_share == 0.9
+    # with the pitch-error allowance a gap within noise may still hide an effect: one round is run
+    allowed = SimpleNamespace(design=design, pitch_allowance=object(), run_out_allowance={})
+    stand_ins = _StandIns(monkeypatch, {})
+    selected, rounds = pipeline.forward_selection(allowed, 3.0, done, first_decision, pipeline.EFFECT_NAMES, {},
+                                                  np.random.default_rng(0), StepLog())
+    assert [s.entry.effect for s in selected] == ["eccentricity"] and len(rounds) == 1
+    assert rounds[0].added is None and stand_ins.screened
     # every round adds an effect that halves the remaining gap: capped at three effects
     first = _score("eccentricity", run_out.label, 300.0, 2.0, 1.0 / 3.0, low=0.25, candidate=run_out)
     table = {c.label: (60.0 + k, None, 0.5 + 0.01 * k)

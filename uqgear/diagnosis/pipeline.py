@@ -88,8 +88,8 @@ from .candidates import candidates_for, nominal_parameters
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
-from .manufacturing import (DEFAULT_CLASSES, PitchErrorAllowance, check_classes, pitch_error_allowance,
-                            with_own_allowance)
+from .manufacturing import (DEFAULT_CLASSES, PitchErrorAllowance, check_classes, modulation_gain,
+                            pitch_error_allowance, with_own_allowance)
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
@@ -377,6 +377,7 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
                 result = with_own_allowance(fit_candidate(case, candidate, nominal, full=True, max_evaluations=12,
                                                           start=entry.fit))
                 full = score_candidate(result, leave_one_out(result), nominal_held, "full", rng)
+                _measure_modulation(case, full)
                 found.update(_found(full))
             all_scores.append(full)
             if _supersedes(full, best_per_effect[entry.effect]):
@@ -404,21 +405,37 @@ def _score_candidates(case: RigCase, nominal: FitResult, nominal_held: HeldOut, 
     return best_per_effect, all_scores
 
 
+def _measure_modulation(case: RigCase, full: CandidateScore) -> None:
+    """Set an eccentricity full fit's :attr:`~.scoring.CandidateScore.modulation_gain` where pitch errors apply.
+
+    Only there does the run-out guard of :func:`_ranking_entry` need it;
+    elsewhere it stays None at no cost.
+    """
+    if full.effect == "eccentricity" and case.run_out_allowance:
+        full.modulation_gain = modulation_gain(full.fit)
+
+
 def _ranking_entry(s: CandidateScore) -> dict[str, Any]:
     """What :func:`decide` needs of one candidate's scores.
 
     A run-out within what the gears' stated pitch-error classes make as a
     first-order run-out (``case.run_out_allowance``) is flagged
-    ``within_pitch_errors``: it is not evidence of an eccentric shaft.
+    ``within_pitch_errors``: it is not evidence of an eccentric shaft,
+    unless the fit is also clearly worse without its mesh-stiffness
+    modulation (``modulation_gain`` at least the effect-gain threshold),
+    which pitch errors do not make.
     """
     entry = {"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
              "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
              "gap_with_effect": s.gap, "effect_gain": s.effect_gain}
+    if s.modulation_gain is not None:
+        entry["modulation_gain"] = s.modulation_gain
     if s.effect == "eccentricity" and s.fit.problem.case.run_out_allowance:
         bounds = s.fit.problem.case.run_out_allowance
         values = s.parameters()
         bound = bounds.get(str(values.get("shaft")))
-        if bound is not None and float(values.get("amplitude", math.inf)) <= bound:
+        modulated = s.modulation_gain is not None and s.modulation_gain >= EFFECT_GAIN_THRESHOLD
+        if bound is not None and float(values.get("amplitude", math.inf)) <= bound and not modulated:
             entry["within_pitch_errors"] = {"run_out": float(values["amplitude"]), "bound": bound}
     return entry
 
@@ -494,6 +511,7 @@ def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effe
                                                   start=leader.fit))
         full = score_candidate(result, leave_one_out(result), base_held, "full", rng)
         full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
+        _measure_modulation(case, full)
         found.update(_found(full))
     if _supersedes(full, best_per_effect[full.effect]):
         best_per_effect[full.effect] = full
@@ -501,6 +519,9 @@ def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effe
     best = best_per_effect[full.effect]
     figures = _ranking_entry(best)
     figures["gap_interval"] = list(bootstrap_gap(best.held.z, rng))
+    # no density_evidence here: a further effect must shrink a gap that is there, or it only soaks up what
+    # the allowance already forgives (measured: torque ripple's motor line on the sideband that friction
+    # and pitch errors share, 21 nats on top of a gap of 0.00)
     decision = decide(base.gap, [figures])
     added = best.effect if decision.verdict == best.effect else None
     return SelectionRound(base_labels, base.gap, ranking, added, decision.reason, decision,
@@ -520,7 +541,10 @@ def forward_selection(case: RigCase, nominal_gap: float, first: CandidateScore, 
     applied to the gap that remains, names it (held-out score beyond the
     penalty, its own effect gain, a shrink of the remaining gap); the
     model with it is the next base. Rounds stop when the remaining gap is
-    within ``noise_gap``, when a round adds nothing, or at ``max_effects``.
+    within ``noise_gap`` (where the pitch-error allowance applies, only at a
+    gap of 0: its widened error can hold a further effect's evidence below
+    the noise gap, and the effect is added when it shrinks what is left),
+    when a round adds nothing, or at ``max_effects``.
 
     Returns
     -------
@@ -531,7 +555,10 @@ def forward_selection(case: RigCase, nominal_gap: float, first: CandidateScore, 
     """
     entries, decisions, intervals = [first], [first_decision], [tuple(first_gap_interval)]
     rounds: list[SelectionRound] = []
-    while len(entries) < max_effects and entries[-1].gap > noise_gap:
+    # with the pitch-error allowance a gap within noise does not mean nothing is left: rounds go on while
+    # there is any gap to shrink, until one adds nothing
+    below_noise = case.pitch_allowance is not None
+    while len(entries) < max_effects and (entries[-1].gap > noise_gap or (below_noise and entries[-1].gap > 0.0)):
         selection = _next_effect(case, entries[-1], [entry.effect for entry in entries], effect_names, hints, rng,
                                  steps)
         rounds.append(selection)
@@ -709,7 +736,8 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         nominal_interval = bootstrap_gap(nominal_held.z, rng)
         if scores:
             ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
-        decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval)
+        decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval,
+                          density_evidence=case.pitch_allowance is not None)
         where = where_gap(nominal_held.z, case)
         families = family_character(nominal_held.z, case, locked)
         found.update(verdict=decision.verdict, reason=decision.reason)

@@ -315,6 +315,9 @@ class CandidateScore:
     # robust cost of the nominal model at this fit's nominal parameters and T2 minus the fit's own:
     # what the effect itself adds (set by run_diagnosis; a screening fit shares the nominal's)
     effect_gain: float = math.inf
+    # an eccentricity fit's robust cost with its mesh-stiffness modulation (kappa) off minus its own:
+    # evidence that pitch errors, which make a run-out but no modulation, cannot give (None: not measured)
+    modulation_gain: float | None = None
 
     def parameters(self) -> dict[str, object]:
         """Fitted parameters of this candidate's effect (natural units) and its fixed choices.

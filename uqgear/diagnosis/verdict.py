@@ -104,7 +104,7 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
            nominal_gap_interval: Sequence[float] | None = None,
            score_threshold: float = SCORE_THRESHOLD, shrink_threshold: float = SHRINK_THRESHOLD,
            noise_gap: float = NOISE_GAP_THRESHOLD, effect_gain_threshold: float = EFFECT_GAIN_THRESHOLD,
-           partial_shrink: float = PARTIAL_SHRINK_THRESHOLD) -> Decision:
+           partial_shrink: float = PARTIAL_SHRINK_THRESHOLD, density_evidence: bool = False) -> Decision:
     """The verdict from the held-out gap of the nominal model and the ranked candidates.
 
     Parameters
@@ -138,6 +138,17 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         part of the gap is named with an unexplained remainder (``partial``)
         when the lower end of its shrink interval reaches this fraction;
         below it the verdict is ``unexplained``.
+    density_evidence : bool
+        The model error holds the pitch-error allowance: it widens the error
+        of every sideband, so an effect's signature spread over many features
+        can leave each of them within noise (a held-out gap within
+        ``noise_gap``, nothing to shrink) while the held-out density still
+        sees it. Then, and only while the nominal gap is within noise, a
+        score whose 90 % lower bound (1.645 standard errors below it) reaches
+        ``score_threshold`` stands in for a shrink interval above zero; the
+        score and effect-gain rules (and the run-out guard) still apply. For
+        the first effect only: a further effect (forward selection) must
+        shrink the gap that is left.
 
     Returns
     -------
@@ -153,6 +164,16 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         carried = (float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
                    and not best.get("within_pitch_errors"))
         evidence = best["score"] >= score_threshold and carried
+        score_low = best["score"] - 1.645 * float(best.get("standard_error", math.inf))
+        by_density = (density_evidence and nominal_gap <= noise_gap and remaining <= noise_gap
+                      and best["shrink_interval"][0] <= 0.0 and score_low >= score_threshold)
+        if evidence and by_density:
+            return Decision(str(best["effect"]), (
+                f"{best['effect']} gains {best['score']:.1f} nats of held-out predictive density (90 % lower "
+                f"bound {score_low:.1f}) over the model without it after its parameter penalty; the held-out "
+                f"gap ({nominal_gap:.2f}) is within noise because the pitch-error allowance widens the error "
+                f"of every sideband, so the evidence is spread over many features: the density shows it, "
+                f"the gap cannot"), remaining_gap=remaining, borderline=borderline)
         if evidence and explains and best["shrink_interval"][0] > 0.0:
             within = (f"; what remains ({remaining:.2f}) is within noise"
                       if best["shrink_fraction"] < shrink_threshold else "")
