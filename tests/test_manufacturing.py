@@ -241,7 +241,7 @@ def test_a_run_out_whose_evidence_the_allowance_spreads_below_the_gap_is_named_o
     assert result.verdict == "eccentricity", result.reason
     assert [chosen.entry.effect for chosen in result.selected] == ["eccentricity"]
     assert "lower bound" in result.reason
-    assert result.best.modulation_gain >= 5.0
+    assert result.best.modulation_gain >= 5.0 and result.ranking()[0]["modulation_gain"] == result.best.modulation_gain
 
 
 def test_first_order_run_out_of_pitch_errors_scales_with_the_class_and_guards_the_verdict(design):

@@ -227,3 +227,19 @@ def test_figures_drawn_in_forked_processes_are_the_bytes_drawn_here():
     assert all(png.startswith(PNG_SIGNATURE) for png in here)
     assert forked == here
     assert len(set(here)) == 3
+
+
+def test_the_report_says_which_eccentricities_a_stiffness_modulation_let_be_named_on_gears_with_pitch_errors():
+    from uqgear.report.diagnosis_report import _pitch_error_notes
+
+    applied = {"applied": True, "reason": "sidebands at every order on both shafts", "draws": 12}
+    ranking = [{"variant": "eccentricity[pinion]", "modulation_gain": 34.04},
+               {"variant": "friction"}]
+    notes = _pitch_error_notes({"pitch_errors": applied, "ranking": ranking})
+    assert len(notes) == 2 and "12 random draws" in notes[0]
+    assert "eccentricity[pinion] 34.0 nats" in notes[1] and "friction" not in notes[1]
+    # nothing measured: the allowance alone; no allowance: one note; none at all: nothing
+    assert len(_pitch_error_notes({"pitch_errors": applied, "ranking": ranking[1:]})) == 1
+    skipped = _pitch_error_notes({"pitch_errors": {"applied": False, "reason": "perfect gears"}, "ranking": []})
+    assert skipped == ['<p class="note">Pitch errors: no allowance (perfect gears).</p>']
+    assert _pitch_error_notes({"pitch_errors": None}) == []

@@ -208,11 +208,13 @@ class DiagnosisResult:
         return self.selected[-1].entry.gap if self.selected else self.nominal_gap
 
     def ranking(self) -> list[dict[str, Any]]:
-        """JSON-ready ranking, best first."""
+        """JSON-ready ranking, best first (``modulation_gain`` where it was measured)."""
         return [{"effect": s.effect, "variant": s.label, "score": s.score, "delta_log_density": s.delta_log_density,
                  "standard_error": s.standard_error, "penalty": s.penalty, "shrink_fraction": s.shrink,
                  "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap,
-                 "effect_gain": s.effect_gain, "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
+                 "effect_gain": s.effect_gain, "parameters": s.parameters(), "fit": s.stage,
+                 **({} if s.modulation_gain is None else {"modulation_gain": s.modulation_gain})}
+                for s in self.scores]
 
 
 def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:

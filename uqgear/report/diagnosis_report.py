@@ -335,6 +335,25 @@ def _diagnosis_figures(content: Mapping[str, Any], ds: xr.Dataset) -> dict[str, 
     return {key: img_tag(png, alt) for (key, (_, alt)), png in zip(makers.items(), pngs)}
 
 
+def _pitch_error_notes(content: Mapping[str, Any]) -> list[str]:
+    """What the pitch-error allowance did, and the eccentricities a mesh-stiffness modulation let be named."""
+    pitch = content.get("pitch_errors")
+    if not pitch:
+        return []
+    if not pitch["applied"]:
+        return [f"<p class=\"note\">Pitch errors: no allowance ({html.escape(pitch['reason'])}).</p>"]
+    parts = [f"<p>Pitch errors: {html.escape(pitch['reason'])}. What {pitch['draws']} random draws do to each "
+             "feature is model error of the nominal model; no effect is named for what such errors can do.</p>"]
+    modulated = [r for r in content.get("ranking", []) if r.get("modulation_gain") is not None]
+    if modulated:
+        parts.append('<p class="note">Pitch errors make a run-out but no mesh-stiffness modulation: an '
+                     "eccentricity within their run-out is named only where its fit is clearly worse with its "
+                     "modulation off (by at least the effect-gain threshold); here "
+                     + ", ".join(f"{html.escape(r['variant'])} {r['modulation_gain']:.1f} nats" for r in modulated)
+                     + ".</p>")
+    return parts
+
+
 def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
     """HTML text of a diagnosis report from its JSON summary and Dataset."""
     gap = content["gap"]
@@ -384,14 +403,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
         parts.append("<p>Line interference (a fixed line on an accelerometer that the TE lacks), left out of the "
                      "low band: " + ", ".join(f"{line['frequency']:.1f} Hz on {html.escape(line['channel'])}"
                                               for line in content["line_interference"]) + ".</p>")
-    pitch = content.get("pitch_errors")
-    if pitch:
-        if pitch["applied"]:
-            parts.append(f"<p>Pitch errors: {html.escape(pitch['reason'])}. What {pitch['draws']} random draws "
-                         "do to each feature is model error of the nominal model; no effect is named for what "
-                         "such errors can do.</p>")
-        else:
-            parts.append(f"<p class=\"note\">Pitch errors: no allowance ({html.escape(pitch['reason'])}).</p>")
+    parts += _pitch_error_notes(content)
     parts.append("<h2>Which: candidate effects ranked</h2>")
     parts.append(_table(
         ["effect", "variant", "score (nats)", "gain (nats)", "s.e.", "penalty", "gap with effect", "shrink",
