@@ -305,6 +305,13 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
                                                      5.0, 65.2, 0.0, 0.0, 0.0, 0.0, effect_gain=29.0))
     assert decide(0.0, [guarded], density_evidence=True).verdict == "none"
     assert decide(0.0, [{**entry, "effect_gain": 1.0}], density_evidence=True).verdict == "none"
+    # below the gap the effect must carry the score threshold by its own gain (a nuisance-only control's
+    # torque ripple: 30 nats, gain 5.9), whether the shrink or the density speaks for it
+    assert decide(0.0, [{**entry, "effect_gain": 6.0}], density_evidence=True).verdict == "none"
+    shrinking = {**entry, "shrink_fraction": 0.3, "shrink_interval": [0.05, 0.6], "gap_with_effect": 0.2}
+    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}], density_evidence=True).verdict == "none"
+    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}]).verdict == "eccentricity"
+    assert decide(0.4, [shrinking], density_evidence=True).verdict == "eccentricity"
     # above noise the gap rules as before
     assert decide(2.0, [entry], density_evidence=True).verdict == "unexplained"
 

@@ -7,7 +7,7 @@ import multiprocessing
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import xarray as xr
@@ -78,6 +78,17 @@ class FeatureModelError(dict):
         return cls(dict(current), widening, before)
 
 
+class AppliedPitchAllowance(Protocol):
+    """What a case reads of the pitch-error allowance applied to it.
+
+    :class:`uqgear.diagnosis.manufacturing.PitchErrorAllowance` is one; that
+    module builds on this one, so the case names only what it reads.
+    """
+
+    applied: bool
+    run_out_bound: Mapping[str, float]
+
+
 @dataclass
 class RigCase:
     """A rig campaign prepared for diagnosis: features, noise, processing and simulator."""
@@ -114,7 +125,7 @@ class RigCase:
     # the pitch-error allowance applied to the nominal model (a manufacturing.PitchErrorAllowance) and the
     # model error before it: a fit with effects is scored with its own model's allowance
     # (manufacturing.with_own_allowance); None: none applied
-    pitch_allowance: Any = None
+    pitch_allowance: AppliedPitchAllowance | None = None
     model_error_before_allowance: Mapping[str, float] | None = None
 
     @property

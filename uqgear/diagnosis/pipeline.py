@@ -523,8 +523,12 @@ def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effe
     figures["gap_interval"] = list(bootstrap_gap(best.held.z, rng))
     # no density_evidence here: a further effect must shrink a gap that is there, or it only soaks up what
     # the allowance already forgives (measured: torque ripple's motor line on the sideband that friction
-    # and pitch errors share, 21 nats on top of a gap of 0.00)
-    decision = decide(base.gap, [figures])
+    # and pitch errors share, 21 nats on top of a gap of 0.00); below the noise gap it must also carry the
+    # score threshold by its own effect gain, as a first effect named there must
+    below_noise = case.pitch_allowance is not None and base.gap <= NOISE_GAP_THRESHOLD
+    decision = decide(base.gap, [figures],
+                      effect_gain_threshold=max(SCORE_THRESHOLD, EFFECT_GAIN_THRESHOLD) if below_noise
+                      else EFFECT_GAIN_THRESHOLD)
     added = best.effect if decision.verdict == best.effect else None
     return SelectionRound(base_labels, base.gap, ranking, added, decision.reason, decision,
                           tuple(figures["gap_interval"]))
