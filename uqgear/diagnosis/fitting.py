@@ -9,10 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
+import xarray as xr
 
 from .candidates import Candidate, ParameterSpec, check_combination, combined_periodicity, nominal_parameters
 from .case import RigCase, RunTask
 from .discrepancy import standardised_discrepancy
+from .errors import DiagnosisError
 
 # Feature kinds the fits use (RMS and kurtosis enter the gap map only).
 _FITTED_KINDS = ("line", "band")
@@ -524,3 +526,32 @@ def fit_candidate(case: RigCase, candidate: Candidate, base: FitResult, *, full:
         result.jacobian = problem.jacobian(result.vector, np.ones(problem.size, dtype=bool))
     result.free = np.ones(problem.size, dtype=bool)
     return result
+
+
+def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, float], np.ndarray | None]:
+    """Starting values for the nominal fit from a calibration posterior (``posterior.nc`` of ``uqgear calibrate``).
+
+    Posterior medians of the parameters the diagnosis fits (and of the
+    backlash, which it keeps fixed: returned under ``backlash``), and each
+    run's T2 median as a position in its interval when the posterior has
+    one T2 per run of this campaign.
+
+    Raises
+    ------
+    DiagnosisError
+        Not a Dataset, or it holds none of the nominal parameters.
+    """
+    if not isinstance(posterior, xr.Dataset):
+        raise DiagnosisError(f"calibration: expected a posterior Dataset (posterior.nc of uqgear calibrate); "
+                             f"got {type(posterior).__name__}")
+    names = [spec.name for spec in nominal_parameters(case.design)] + ["backlash"]
+    start = {name: float(posterior[name].median()) for name in names if name in posterior.data_vars}
+    if not start:
+        raise DiagnosisError(f"calibration: the posterior has none of the parameters {', '.join(names)}")
+    positions = None
+    if "adhesion_torque" in posterior.data_vars and posterior["adhesion_torque"].sizes.get("op") == case.n_op:
+        other = [dim for dim in posterior["adhesion_torque"].dims if dim != "op"]
+        median = np.asarray(posterior["adhesion_torque"].median(dim=other).values, dtype=float)
+        width = np.maximum(case.adhesion_upper - case.adhesion_lower, 1e-12)
+        positions = np.clip((median - case.adhesion_lower) / width, 0.0, 1.0)
+    return start, positions

@@ -84,10 +84,10 @@ import xarray as xr
 from ..common.steps import StepLog
 from ..physics.effects import EFFECTS
 from ..uq.seeds import child_seed
-from .candidates import candidates_for, nominal_parameters
+from .candidates import candidates_for
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
-from .fitting import FitResult, fit, fit_candidate, fit_nominal, robust_cost
+from .fitting import FitResult, calibration_start, fit, fit_candidate, fit_nominal, robust_cost
 from .manufacturing import (DEFAULT_CLASSES, PitchErrorAllowance, check_classes, modulation_gain,
                             pitch_error_allowance, with_own_allowance)
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
@@ -232,36 +232,6 @@ def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:
     if not chosen:
         raise DiagnosisError(f"effects: expected at least one of {', '.join(EFFECT_NAMES)}; got none")
     return tuple(chosen)
-
-
-def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, float], np.ndarray | None]:
-    """Starting values for the nominal fit from a calibration posterior (``posterior.nc`` of ``uqgear calibrate``).
-
-    Posterior medians of the parameters the diagnosis fits (and of the
-    backlash, which it keeps fixed: returned under ``backlash``), and each
-    run's T2 median as a position in its interval when the posterior has
-    one T2 per run of this campaign.
-
-    Raises
-    ------
-    DiagnosisError
-        Not a Dataset, or it holds none of the nominal parameters.
-    """
-    if not isinstance(posterior, xr.Dataset):
-        raise DiagnosisError(f"calibration: expected a posterior Dataset (posterior.nc of uqgear calibrate); "
-                             f"got {type(posterior).__name__}")
-    names = [spec.name for spec in nominal_parameters(case.design)] + ["backlash"]
-    start = {name: float(posterior[name].median()) for name in names if name in posterior.data_vars}
-    if not start:
-        raise DiagnosisError(f"calibration: the posterior has none of the parameters {', '.join(names)}")
-    positions = None
-    if "adhesion_torque" in posterior.data_vars and posterior["adhesion_torque"].sizes.get("op") == case.n_op:
-        other = [dim for dim in posterior["adhesion_torque"].dims if dim != "op"]
-        median = np.asarray(posterior["adhesion_torque"].median(dim=other).values, dtype=float)
-        width = np.maximum(case.adhesion_upper - case.adhesion_lower, 1e-12)
-        positions = np.clip((median - case.adhesion_lower) / width, 0.0, 1.0)
-    return start, positions
-
 
 
 # Full fits beyond the promoted ones while the gap stays unexplained (each costs about a screening).
