@@ -201,7 +201,7 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
 
     An eccentricity fit whose run-out is within the classes' own is guarded
     unless switching its kappa off costs at least the effect-gain threshold;
-    with the pitch-error allowance (decide's density_evidence) a gap within
+    with the pitch-error allowance (decide's pitch_allowance and density_evidence) a gap within
     noise does not stop a candidate whose score's 90 % lower bound passes
     the score threshold, and without the allowance, or with a weaker score,
     the verdict stays `none`.
@@ -228,23 +228,28 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
     assert "within_pitch_errors" not in entry and entry["modulation_gain"] == 34.0
     # a nominal gap of 0 (nothing to shrink): named on the density only with the allowance
     assert decide(0.0, [entry]).verdict == "none"
-    decision = decide(0.0, [entry], density_evidence=True)
+    decision = decide(0.0, [entry], pitch_allowance=True, density_evidence=True)
     assert decision.verdict == "eccentricity" and "lower bound 32.3" in decision.reason
     weak = {**entry, "standard_error": 40.0}
-    assert decide(0.0, [weak], density_evidence=True).verdict == "none"
+    assert decide(0.0, [weak], pitch_allowance=True, density_evidence=True).verdict == "none"
     guarded = pipeline._ranking_entry(CandidateScore("eccentricity", variant.label, fit, held, "full", 70.2, 20.0,
                                                      5.0, 65.2, 0.0, 0.0, 0.0, 0.0, effect_gain=29.0))
-    assert decide(0.0, [guarded], density_evidence=True).verdict == "none"
-    assert decide(0.0, [{**entry, "effect_gain": 1.0}], density_evidence=True).verdict == "none"
+    assert decide(0.0, [guarded], pitch_allowance=True, density_evidence=True).verdict == "none"
+    assert decide(0.0, [{**entry, "effect_gain": 1.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
     # below the gap the effect must carry the score threshold by its own gain (a nuisance-only control's
     # torque ripple: 30 nats, gain 5.9), whether the shrink or the density speaks for it
-    assert decide(0.0, [{**entry, "effect_gain": 6.0}], density_evidence=True).verdict == "none"
+    assert decide(0.0, [{**entry, "effect_gain": 6.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
     shrinking = {**entry, "shrink_fraction": 0.3, "shrink_interval": [0.05, 0.6], "gap_with_effect": 0.2}
-    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}], density_evidence=True).verdict == "none"
+    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
     assert decide(0.4, [{**shrinking, "effect_gain": 6.0}]).verdict == "eccentricity"
-    assert decide(0.4, [shrinking], density_evidence=True).verdict == "eccentricity"
+    assert decide(0.4, [shrinking], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
+    # a further effect (forward selection) gets the raised gain without the density route
+    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}], pitch_allowance=True).verdict == "none"
+    assert decide(0.0, [entry], pitch_allowance=True).verdict == "none"
+    with pytest.raises(ValueError, match="pitch_allowance"):
+        decide(0.0, [entry], density_evidence=True)
     # above noise the gap rules as before
-    assert decide(2.0, [entry], density_evidence=True).verdict == "unexplained"
+    assert decide(2.0, [entry], pitch_allowance=True, density_evidence=True).verdict == "unexplained"
 
 
 def test_friction_acting_with_pitch_errors_widens_the_sidebands_the_nominal_allowance_leaves_narrow(design):

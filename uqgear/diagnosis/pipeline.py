@@ -209,12 +209,8 @@ class DiagnosisResult:
 
     def ranking(self) -> list[dict[str, Any]]:
         """JSON-ready ranking, best first (``modulation_gain`` where it was measured)."""
-        return [{"effect": s.effect, "variant": s.label, "score": s.score, "delta_log_density": s.delta_log_density,
-                 "standard_error": s.standard_error, "penalty": s.penalty, "shrink_fraction": s.shrink,
-                 "shrink_interval": [s.shrink_low, s.shrink_high], "gap_with_effect": s.gap,
-                 "effect_gain": s.effect_gain, "parameters": s.parameters(), "fit": s.stage,
-                 **({} if s.modulation_gain is None else {"modulation_gain": s.modulation_gain})}
-                for s in self.scores]
+        return [{**s.figures(), "variant": s.label, "delta_log_density": s.delta_log_density, "penalty": s.penalty,
+                 "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
 
 
 def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:
@@ -397,11 +393,7 @@ def _ranking_entry(s: CandidateScore) -> dict[str, Any]:
     modulation (``modulation_gain`` at least the effect-gain threshold),
     which pitch errors do not make.
     """
-    entry = {"effect": s.effect, "score": s.score, "standard_error": s.standard_error,
-             "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
-             "gap_with_effect": s.gap, "effect_gain": s.effect_gain}
-    if s.modulation_gain is not None:
-        entry["modulation_gain"] = s.modulation_gain
+    entry = s.figures()
     if s.effect == "eccentricity" and s.fit.problem.case.run_out_allowance:
         bounds = s.fit.problem.case.run_out_allowance
         values = s.parameters()
@@ -446,7 +438,8 @@ def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]
 
 
 def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effect_names: Sequence[str],
-                 hints: Mapping[str, float], rng: np.random.Generator, steps: StepLog) -> SelectionRound:
+                 hints: Mapping[str, float], rng: np.random.Generator, steps: StepLog, *,
+                 noise_gap: float = NOISE_GAP_THRESHOLD) -> SelectionRound:
     """One forward-selection round: the other effects screened on top of the base, the best fitted in full.
 
     Only the new effect's parameters are screened (the base's fit, its
@@ -493,12 +486,8 @@ def _next_effect(case: RigCase, base: CandidateScore, named: Sequence[str], effe
     figures["gap_interval"] = list(bootstrap_gap(best.held.z, rng))
     # no density_evidence here: a further effect must shrink a gap that is there, or it only soaks up what
     # the allowance already forgives (measured: torque ripple's motor line on the sideband that friction
-    # and pitch errors share, 21 nats on top of a gap of 0.00); below the noise gap it must also carry the
-    # score threshold by its own effect gain, as a first effect named there must
-    below_noise = case.pitch_allowance is not None and base.gap <= NOISE_GAP_THRESHOLD
-    decision = decide(base.gap, [figures],
-                      effect_gain_threshold=max(SCORE_THRESHOLD, EFFECT_GAIN_THRESHOLD) if below_noise
-                      else EFFECT_GAIN_THRESHOLD)
+    # and pitch errors share, 21 nats on top of a gap of 0.00)
+    decision = decide(base.gap, [figures], noise_gap=noise_gap, pitch_allowance=case.pitch_allowance is not None)
     added = best.effect if decision.verdict == best.effect else None
     return SelectionRound(base_labels, base.gap, ranking, added, decision.reason, decision,
                           tuple(figures["gap_interval"]))
@@ -533,10 +522,11 @@ def forward_selection(case: RigCase, nominal_gap: float, first: CandidateScore, 
     rounds: list[SelectionRound] = []
     # with the pitch-error allowance a gap within noise does not mean nothing is left: rounds go on while
     # there is any gap to shrink, until one adds nothing
-    below_noise = case.pitch_allowance is not None
-    while len(entries) < max_effects and (entries[-1].gap > noise_gap or (below_noise and entries[-1].gap > 0.0)):
+    allowance_applies = case.pitch_allowance is not None
+    while len(entries) < max_effects and (entries[-1].gap > noise_gap
+                                          or (allowance_applies and entries[-1].gap > 0.0)):
         selection = _next_effect(case, entries[-1], [entry.effect for entry in entries], effect_names, hints, rng,
-                                 steps)
+                                 steps, noise_gap=noise_gap)
         rounds.append(selection)
         if selection.added is None:
             break
@@ -713,6 +703,7 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         if scores:
             ranking[0]["gap_interval"] = list(bootstrap_gap(scores[0].held.z, rng))
         decision = decide(nominal_gap, ranking, nominal_gap_interval=nominal_interval,
+                          pitch_allowance=case.pitch_allowance is not None,
                           density_evidence=case.pitch_allowance is not None)
         where = where_gap(nominal_held.z, case)
         families = family_character(nominal_held.z, case, locked)

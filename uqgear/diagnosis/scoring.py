@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.stats
@@ -318,6 +319,16 @@ class CandidateScore:
     # an eccentricity fit's robust cost with its mesh-stiffness modulation (kappa) off minus its own:
     # evidence that pitch errors, which make a run-out but no modulation, cannot give (None: not measured)
     modulation_gain: float | None = None
+
+    def figures(self) -> dict[str, Any]:
+        """The figures the verdict reads and the ranking reports (``modulation_gain`` where it was measured)."""
+        figures: dict[str, Any] = {
+            "effect": self.effect, "score": self.score, "standard_error": self.standard_error,
+            "shrink_fraction": self.shrink, "shrink_interval": [self.shrink_low, self.shrink_high],
+            "gap_with_effect": self.gap, "effect_gain": self.effect_gain}
+        if self.modulation_gain is not None:
+            figures["modulation_gain"] = self.modulation_gain
+        return figures
 
     def parameters(self) -> dict[str, object]:
         """Fitted parameters of this candidate's effect (natural units) and its fixed choices.

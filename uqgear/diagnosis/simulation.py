@@ -120,7 +120,9 @@ class RunProcessor:
 
     def low_band_rms(self, records: np.ndarray) -> np.ndarray:
         """RMS of the low band (without notched bins) of records (R, N): the one-sided periodogram density summed."""
-        centred = records - records.mean(axis=1, keepdims=True)
+        return self._centred_low_band_rms(records - records.mean(axis=1, keepdims=True))
+
+    def _centred_low_band_rms(self, centred: np.ndarray) -> np.ndarray:
         spectrum = np.fft.rfft(centred * self.taper, axis=1)
         # one-sided periodogram density (scipy's 'density' scaling), summed over the band
         density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
@@ -150,12 +152,13 @@ class RunProcessor:
         out = np.full((records.shape[0], len(self.definitions)), np.nan)
         out[:, self.line_columns] = self.fit.amplitudes(records)
         centred = records - records.mean(axis=1, keepdims=True)
-        out[:, self.columns["low_band_rms"]] = self.low_band_rms(records)
-        mean_square = np.mean(centred ** 2, axis=1)
+        out[:, self.columns["low_band_rms"]] = self._centred_low_band_rms(centred)
+        square = centred * centred
+        mean_square = np.mean(square, axis=1)
         out[:, self.columns["rms"]] = np.sqrt(mean_square)
         with np.errstate(divide="ignore", invalid="ignore"):
-            out[:, self.columns["kurtosis"]] = np.where(mean_square > 0,
-                                                        np.mean(centred ** 4, axis=1) / mean_square ** 2, np.nan)
+            out[:, self.columns["kurtosis"]] = np.where(mean_square > 0, np.mean(square * square, axis=1)
+                                                        / mean_square ** 2, np.nan)
         return out
 
     def model_phasors(self, records: np.ndarray) -> np.ndarray:
@@ -364,9 +367,10 @@ class CampaignSimulator:
         size = centred.shape[1]
         spectrum = np.fft.rfft(centred, axis=1) * self._filters(size, rate)
         fine = np.fft.irfft(spectrum, n=size * factor, axis=1) * factor
-        index, weight = self._interpolation((*key, size * factor), offset, steps_per_second, size * factor,
-                                            periodic=periodic)
-        return fine[:, index] + weight * (fine[:, index + 1] - fine[:, index])
+        index, following, weight = self._interpolation((*key, size * factor), offset, steps_per_second,
+                                                       size * factor, periodic=periodic)
+        left = fine[:, index]
+        return left + weight * (fine[:, following] - left)
 
     def _filters(self, size: int, rate: float) -> np.ndarray:
         """The anti-alias filter (and derivative) of each channel, (n_channel, size // 2 + 1), built once per grid."""
@@ -391,8 +395,8 @@ class CampaignSimulator:
         return self._grid_cache[key]
 
     def _interpolation(self, key: tuple, offset: float, steps_per_second: float, size: int, *, periodic: bool
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """Left neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Left and right neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
 
         The rig's times sit at ``(t + offset) * steps_per_second`` grid steps
         (computed on a cache miss only); a periodic grid wraps (its last point's
@@ -409,7 +413,7 @@ class CampaignSimulator:
             if periodic:
                 # the right neighbour of the last point is the first: a wrapped index
                 index = np.where(index >= size - 1, index - size, index)
-            self._grid_cache[key] = (index, weight)
+            self._grid_cache[key] = (index, index + 1, weight)
         return self._grid_cache[key]
 
     @staticmethod

@@ -104,7 +104,8 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
            nominal_gap_interval: Sequence[float] | None = None,
            score_threshold: float = SCORE_THRESHOLD, shrink_threshold: float = SHRINK_THRESHOLD,
            noise_gap: float = NOISE_GAP_THRESHOLD, effect_gain_threshold: float = EFFECT_GAIN_THRESHOLD,
-           partial_shrink: float = PARTIAL_SHRINK_THRESHOLD, density_evidence: bool = False) -> Decision:
+           partial_shrink: float = PARTIAL_SHRINK_THRESHOLD, pitch_allowance: bool = False,
+           density_evidence: bool = False) -> Decision:
     """The verdict from the held-out gap of the nominal model and the ranked candidates.
 
     Parameters
@@ -138,23 +139,28 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         part of the gap is named with an unexplained remainder (``partial``)
         when the lower end of its shrink interval reaches this fraction;
         below it the verdict is ``unexplained``.
-    density_evidence : bool
+    pitch_allowance : bool
         The model error holds the pitch-error allowance: it widens the error
-        of every sideband, so an effect's signature spread over many features
-        can leave each of them within noise (a held-out gap within
-        ``noise_gap``, nothing to shrink) while the held-out density still
-        sees it. Then, and only while the nominal gap is within noise, a
-        score whose 90 % lower bound (1.645 standard errors below it) reaches
-        ``score_threshold`` stands in for a shrink interval above zero, and
-        the effect gain must reach ``score_threshold`` too (the effect
-        carries the evidence by itself); the run-out guard still applies.
-        For the first effect only: a further effect (forward selection)
-        must shrink the gap that is left.
+        of every sideband, so while the nominal gap is within ``noise_gap``
+        the gap speaks for no effect, and the effect gain must reach
+        ``score_threshold`` too (the effect carries the evidence by itself).
+        For the first effect and every further one (forward selection).
+    density_evidence : bool
+        With ``pitch_allowance`` only, for the first effect only: an effect's
+        signature spread over many features can leave each of them within
+        noise (a held-out gap within ``noise_gap``, nothing to shrink) while
+        the held-out density still sees it. Then a score whose 90 % lower
+        bound (1.645 standard errors below it) reaches ``score_threshold``
+        stands in for a shrink interval above zero; the run-out guard still
+        applies. A further effect must shrink the gap that is left.
 
     Returns
     -------
     Decision
     """
+    if density_evidence and not pitch_allowance:
+        raise ValueError("decide: density_evidence stands in for a gap only under the pitch-error allowance; "
+                         "expected pitch_allowance=True with it")
     best = ranking[0] if ranking else None
     borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, score_threshold=score_threshold,
                                      shrink_threshold=shrink_threshold, noise_gap=noise_gap)
@@ -165,13 +171,13 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         carried = (float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
                    and not best.get("within_pitch_errors"))
         score_low = best["score"] - 1.645 * float(best.get("standard_error", math.inf))
-        below_gap = density_evidence and nominal_gap <= noise_gap
+        below_gap = pitch_allowance and nominal_gap <= noise_gap
         if below_gap:
             # no gap to speak for it: the effect must carry the score threshold by itself (a control with
             # every nuisance had torque ripple at 30 nats with a gain of 5.9, a run-out 65 nats with 29)
             carried = carried and float(best.get("effect_gain", math.inf)) >= score_threshold
         evidence = best["score"] >= score_threshold and carried
-        by_density = (below_gap and remaining <= noise_gap and best["shrink_interval"][0] <= 0.0
+        by_density = (density_evidence and below_gap and remaining <= noise_gap and best["shrink_interval"][0] <= 0.0
                       and score_low >= score_threshold)
         if evidence and by_density:
             return Decision(str(best["effect"]), (
