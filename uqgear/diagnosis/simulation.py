@@ -128,15 +128,15 @@ class RunProcessor:
         density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
         return np.sqrt(density.sum(axis=1) * self.fs / self.size)
 
-    def features(self, records: np.ndarray) -> np.ndarray:
-        """Feature values (R, F) of records (R, N); rows with a NaN sample are NaN."""
+    def features(self, records: np.ndarray, *, lines: bool = True) -> np.ndarray:
+        """Feature values (R, F) of records (R, N); NaN rows where a sample is NaN, NaN lines without ``lines``."""
         records = np.atleast_2d(np.asarray(records, dtype=float))
         out = np.full((records.shape[0], len(self.definitions)), np.nan)
         usable = ~np.isnan(records).any(axis=1)
         if usable.any():
             out[usable] = feature_module._block_features(
                 records[usable], self.fit, self.excluded, self.fs, self.taper, self.low_band, self.columns,
-                self.line_columns, len(self.definitions))
+                self.line_columns, len(self.definitions), lines=lines)
             if self.notch:
                 out[usable, self.columns["low_band_rms"]] = self.low_band_rms(records[usable])
         return out
@@ -168,7 +168,7 @@ class RunProcessor:
         forest of lines raises the noise floor a rig's records are read with.
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
-        out = self.features(records).astype(complex)
+        out = self.features(records, lines=False).astype(complex)
         out[:, self.line_columns] = self.fit.phasors(records)
         return out
 

@@ -165,15 +165,28 @@ def _record_grid(history: np.ndarray, grid: np.ndarray, sol: Any, state: np.ndar
         history[row, 11] = contact(y[2])
 
 
+def _pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], int]:
+    """The contact state of x with the pairs in mesh (``newest``, ``count``): the history's contact column."""
+    return lambda x: K._pairs.pair_contact(x, newest, count, p)
+
+
 def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
                      initial_state: np.ndarray, rtol: float,
                      atol: float | None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The scipy reference: DOP853 between stiffness breakpoints, a terminal event at every contact boundary.
+
+    Within a segment between breakpoints the contact boundaries are fixed:
+    x = -b and x = +b for the mesh as a whole, and with pitch errors
+    x = e_i - b and x = e_i + b for each pair in mesh (its offset e_i, the
+    pairs fixed within the segment). Each boundary is an event directed away
+    from the side x is on (tracked across events), so every kink of the dead
+    zones is resolved.
+    """
     p = setup.parameters
     args = (p, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
     period = 1.0 / setup.mesh_frequency
     b = p[K.HALF_BACKLASH]
-    scale = setup.state_scale()
-    atol_vector = scale * (rtol if atol is None else atol)
+    atol_vector = setup.state_scale() * (rtol if atol is None else atol)
     phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
     first_kept = n_periods - keep_periods
     history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
@@ -181,14 +194,22 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
     deriv = np.empty(6)
     state = initial_state.astype(float).copy()
     stats = {"rhs_evaluations": 0, "contact_events": 0, "segments": 0}
+    with_pairs = p[K.PITCH_ERRORS] != 0.0
+    levels = np.array([-b, b])
+    above = state[2] > levels
 
-    def region_of(x: float) -> int:
+    def mesh_contact(x: float) -> int:
         return 1 if x > b else (-1 if x < -b else 0)
 
-    if p[K.PITCH_ERRORS] != 0.0:
-        return _integrate_scipy_pairs(setup, n_periods, keep_periods, samples_per_period, state, rtol,
-                                      atol_vector)
-    region = region_of(state[2])
+    contact: Callable[[float], int] = mesh_contact
+
+    def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
+        def event(t: float, y: np.ndarray) -> float:
+            return y[2] - level
+        event.terminal = True  # type: ignore[attr-defined]
+        event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
+        return event
+
     for n in range(n_periods):
         kept = n >= first_kept
         if kept:
@@ -197,91 +218,17 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
         for u_a, u_b in zip(phases[:-1], phases[1:]):
             t_a, t_b = (n + u_a) * period, (n + u_b) * period
             t_ref = 0.5 * (t_a + t_b)
+            if with_pairs:
+                newest, count = K._pairs.pair_state(t_ref, p)
+                offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
+                levels = np.unique([e + side for e in offsets for side in (b, -b)])
+                above = state[2] > levels
+                contact = _pair_contact(newest, count, p)
             out = np.empty(6)
 
             def fun(t, y, t_ref=t_ref, out=out):
                 K.rhs(t, y, t_ref, *args, out)
                 return out.copy()
-
-            while t_a < t_b:
-                # directional events: only crossings away from the current region
-                def upper(t, y):
-                    return y[2] - b
-
-                def lower(t, y):
-                    return y[2] + b
-
-                upper.terminal = lower.terminal = True
-                upper.direction = -1 if region == 1 else 1
-                lower.direction = 1 if region == -1 else -1
-                events = [upper] if region == 1 else ([lower] if region == -1 else [upper, lower])
-                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector,
-                                events=events, dense_output=kept)
-                stats["rhs_evaluations"] += sol.nfev
-                stats["segments"] += 1
-                t_end = sol.t[-1]
-                if kept:
-                    _record_grid(history, grid, sol, state, t_a, t_end, period, (n - first_kept) * samples_per_period,
-                                 args, deriv, region_of)
-                state = sol.y[:, -1].copy()
-                if sol.status == 1:
-                    stats["contact_events"] += 1
-                    fired = next(i for i, te in enumerate(sol.t_events) if te.size)
-                    crossed = events[fired]
-                    if crossed is upper:
-                        region = 0 if region == 1 else 1
-                    else:
-                        region = 0 if region == -1 else -1
-                else:
-                    region = region_of(state[2])
-                t_a = t_end
-    return history, poincare, stats
-
-
-def _integrate_scipy_pairs(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
-                           state: np.ndarray, rtol: float, atol_vector: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The scipy reference with pitch errors: a terminal event at every pair's contact boundary.
-
-    Within a segment between stiffness breakpoints the pairs in mesh, and so
-    their offsets e_i, are fixed; each pair changes its contact state where
-    x crosses e_i + b or e_i - b. Each such level is an event, directed away
-    from the side x is on (tracked across events, as the classical path
-    tracks its region), so every kink of the per-pair dead zones is resolved.
-    """
-    p = setup.parameters
-    args = (p, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
-    period = 1.0 / setup.mesh_frequency
-    b = p[K.HALF_BACKLASH]
-    phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
-    first_kept = n_periods - keep_periods
-    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
-    poincare = np.empty((keep_periods, 6))
-    deriv = np.empty(6)
-    stats = {"rhs_evaluations": 0, "contact_events": 0, "segments": 0}
-    for n in range(n_periods):
-        kept = n >= first_kept
-        if kept:
-            poincare[n - first_kept] = state
-            grid = (n + np.arange(samples_per_period) / samples_per_period) * period
-        for u_a, u_b in zip(phases[:-1], phases[1:]):
-            t_a, t_b = (n + u_a) * period, (n + u_b) * period
-            t_ref = 0.5 * (t_a + t_b)
-            newest, count = K._pairs.pair_state(t_ref, p)
-            offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
-            levels = np.unique([e + side for e in offsets for side in (b, -b)])
-            above = state[2] > levels
-            out = np.empty(6)
-
-            def fun(t, y, t_ref=t_ref, out=out):
-                K.rhs(t, y, t_ref, *args, out)
-                return out.copy()
-
-            def make_event(level: float, is_above: bool):
-                def event(t, y):
-                    return y[2] - level
-                event.terminal = True
-                event.direction = -1 if is_above else 1
-                return event
 
             while t_a < t_b:
                 events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
@@ -292,7 +239,7 @@ def _integrate_scipy_pairs(setup: ModelSetup, n_periods: int, keep_periods: int,
                 t_end = sol.t[-1]
                 if kept:
                     _record_grid(history, grid, sol, state, t_a, t_end, period, (n - first_kept) * samples_per_period,
-                                 args, deriv, lambda x: K._pairs.pair_contact(x, newest, count, p))
+                                 args, deriv, contact)
                 state = sol.y[:, -1].copy()
                 if sol.status == 1:
                     stats["contact_events"] += 1

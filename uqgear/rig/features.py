@@ -444,10 +444,15 @@ def _check_low_band(low_band: tuple[float, float], fs: float) -> tuple[float, fl
 
 def _block_features(records: np.ndarray, fit: _LineFit, excluded: np.ndarray, fs: float, taper: np.ndarray,
                     low_band: tuple[float, float], columns: dict[str, int], line_columns: np.ndarray,
-                    n_features: int) -> np.ndarray:
-    """Feature values (R, F) of float64 records (R, N) without NaN, all at one speed."""
+                    n_features: int, *, lines: bool = True) -> np.ndarray:
+    """Feature values (R, F) of float64 records (R, N) without NaN, all at one speed.
+
+    With ``lines`` False the line columns are left NaN (a caller that fits
+    the lines' phasors itself saves the second least-squares solve).
+    """
     values = np.full((records.shape[0], n_features), np.nan)
-    values[:, line_columns] = fit.amplitudes(records)
+    if lines:
+        values[:, line_columns] = fit.amplitudes(records)
     centred = records - records.mean(axis=1, keepdims=True)
     frequencies, density = scipy.signal.periodogram(centred, fs, window=taper, detrend=False,
                                                     scaling="density", axis=1)
