@@ -39,7 +39,6 @@ import hashlib
 import json
 import logging
 import os
-import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,10 +49,11 @@ import xarray as xr
 
 from ..common.errors import ExecutionError, UqgearError
 from ..common.progress import progress
+from .cluster import is_dask_client, run_on_cluster, scheduler_text
 from .results import read_dataset, write_dataset
 
 if TYPE_CHECKING:
-    from distributed import Client, Future
+    from distributed import Client
 
 #: A model: samples (dim ``sample``) in, results (dim ``sample``, same length) out.
 Evaluate = Callable[[xr.Dataset], xr.Dataset]
@@ -182,7 +182,7 @@ class Runner:
             if not scheduler.strip():
                 raise ExecutionError("scheduler: expected an address like 'tcp://host:8786'; "
                                      "got an empty string")
-        elif not _is_dask_client(scheduler):
+        elif not is_dask_client(scheduler):
             raise ExecutionError(f"scheduler: expected None, an address like 'tcp://host:8786' "
                                  f"or a distributed.Client; got {type(scheduler).__name__}")
         if not isinstance(connect_timeout, (int, float)) or not connect_timeout > 0:
@@ -263,7 +263,7 @@ class Runner:
                         self.checkpoint_dir)
 
         pending = [index for index, result in enumerate(results) if result is None]
-        executor = "in-process" if self.scheduler is None else self._scheduler_text()
+        executor = "in-process" if self.scheduler is None else scheduler_text(self.scheduler)
         with progress(n_samples, desc="evaluating", unit="sample", enabled=self.progress) as bar:
             bar.update(sum(stop - start for (start, stop), result in zip(spans, results)
                            if result is not None))
@@ -281,7 +281,12 @@ class Runner:
             elif self.scheduler is None:
                 retried = self._run_in_process(evaluate, chunks, spans, pending, finish)
             else:
-                retried = self._run_on_cluster(evaluate, chunks, spans, pending, finish)
+                attempts = self.retries + 1
+                retried = run_on_cluster(
+                    self.scheduler, evaluate, chunks, spans, pending, finish, workers=self.workers,
+                    attempts=attempts, timeout=self.connect_timeout,
+                    failed=lambda index, made, exc: self._chunk_failed(index, spans[index], made, exc),
+                    retrying=lambda index, attempt, exc: self._log_retry(index, attempt, attempts, exc))
 
         self.last_report = RunReport(n_samples=n_samples, n_chunks=len(spans),
                                      reused_chunks=reused, evaluated_chunks=len(pending),
@@ -343,96 +348,7 @@ class Runner:
                 break
         return retried
 
-    def _run_on_cluster(self, evaluate: Evaluate, chunks: list[xr.Dataset],
-                        spans: list[tuple[int, int]], pending: list[int],
-                        finish: Callable[[int, Any], None]) -> int:
-        from distributed import as_completed
-
-        client, owned = self._connect()
-        in_flight: dict[str, tuple[int, int, Future]] = {}
-        try:
-            restrict = self._select_workers(client)
-            placement: dict[str, Any] = ({} if restrict is None
-                                         else {"workers": restrict, "allow_other_workers": False})
-
-            def submit(index: int, attempt: int) -> Future:
-                future = client.submit(evaluate, chunks[index],
-                                       key=f"uqgear-chunk-{index}-{attempt}-{uuid.uuid4().hex[:12]}",
-                                       pure=False, **placement)
-                in_flight[future.key] = (index, attempt, future)
-                return future
-
-            completed = as_completed([submit(index, 1) for index in pending], loop=client.loop)
-            retried = 0
-            attempts = self.retries + 1
-            for future in completed:
-                index, attempt, _ = in_flight.pop(future.key)
-                if future.status == "finished":
-                    result = future.result()
-                    future.release()
-                    finish(index, result)
-                    continue
-                if future.status == "cancelled":
-                    raise ExecutionError(f"chunk {index} (samples {spans[index][0]} to "
-                                         f"{spans[index][1] - 1}) was cancelled by the scheduler "
-                                         f"{self._scheduler_text()} (lost connection?)")
-                exc = future.exception()
-                if isinstance(exc, UqgearError):
-                    raise exc
-                if attempt == attempts or not isinstance(exc, Exception):
-                    raise self._chunk_failed(index, spans[index], attempt, exc) from exc
-                retried += 1
-                self._log_retry(index, attempt, attempts, exc)
-                completed.add(submit(index, attempt + 1))
-            return retried
-        finally:
-            if in_flight:
-                client.cancel([future for _, _, future in in_flight.values()])
-            if owned:
-                client.close()
-
-    def _connect(self) -> tuple[Client, bool]:
-        """The client to use and whether this runner opened it (and must close it)."""
-        if not isinstance(self.scheduler, str):
-            return self.scheduler, False
-        from distributed import Client
-
-        try:
-            client = Client(self.scheduler, timeout=self.connect_timeout, set_as_default=False)
-        except Exception as exc:
-            raise ExecutionError(
-                f"scheduler {self.scheduler}: cannot connect within {self.connect_timeout:g} s "
-                f"({type(exc).__name__}: {exc}); expected a running dask scheduler at this "
-                "address (start one with `dask scheduler` and workers with "
-                "`dask worker <address>`)") from None
-        return client, True
-
-    def _select_workers(self, client: Client) -> list[str] | None:
-        """Worker addresses to restrict the tasks to, None for all."""
-        wanted = 1 if self.workers is None else self.workers
-        try:
-            client.wait_for_workers(wanted, timeout=self.connect_timeout)
-        except TimeoutError:
-            connected = len(client.scheduler_info(n_workers=-1)["workers"])
-            if self.workers is not None:
-                raise ExecutionError(
-                    f"workers: expected at least {self.workers} workers at scheduler "
-                    f"{self._scheduler_text()}; {connected} connected after "
-                    f"{self.connect_timeout:g} s") from None
-            logger.warning("scheduler %s has no workers yet; chunks wait until workers join",
-                           self._scheduler_text())
-        if self.workers is None:
-            return None
-        addresses = sorted(client.scheduler_info(n_workers=-1)["workers"])
-        return addresses[:self.workers]
-
     # ------------------------------------------------------------------ helpers
-
-    def _scheduler_text(self) -> str:
-        if isinstance(self.scheduler, str):
-            return self.scheduler
-        address = getattr(self.scheduler, "scheduler", None)
-        return str(getattr(address, "address", "dask client"))
 
     @staticmethod
     def _check_result(result: Any, index: int, start: int, stop: int) -> None:
@@ -471,14 +387,6 @@ class Runner:
             raise ExecutionError(f"the chunk results do not fit together along 'sample' "
                                  f"({exc}); expected every chunk to return the same variables "
                                  "and the same non-sample coordinates") from None
-
-
-def _is_dask_client(candidate: Any) -> bool:
-    try:
-        from distributed import Client
-    except ImportError:
-        return False
-    return isinstance(candidate, Client)
 
 
 __all__ = ["Runner", "RunReport", "Evaluate", "chunk_hash"]
