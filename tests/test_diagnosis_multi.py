@@ -265,6 +265,10 @@ def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carrie
     assert not pipeline._leads_a_set({**strong, "score": 9.0})
     assert not pipeline._leads_a_set({**strong, "effect_gain": 1.0})       # the refitted nominal part scores
     assert not pipeline._leads_a_set({**strong, "shrink_interval": [-0.01, 0.3]})
+    # with the pitch-error allowance the score must hold at its 90 % lower bound (26.3 - 1.645 * 15.5 = 0.8)
+    weak = {**strong, "score": 26.3, "standard_error": 15.5}
+    assert pipeline._leads_a_set(weak) and not pipeline._leads_a_set(weak, pitch_allowance=True)
+    assert pipeline._leads_a_set({**weak, "standard_error": 5.0}, pitch_allowance=True)
 
 
 def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():

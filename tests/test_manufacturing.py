@@ -252,6 +252,32 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
     assert decide(2.0, [entry], pitch_allowance=True, density_evidence=True).verdict == "unexplained"
 
 
+def test_with_the_allowance_a_gap_just_above_noise_needs_the_density_to_hold_at_its_lower_bound():
+    """An effect that leaves a gap within noise without halving it must hold its score at the 90 % lower bound.
+
+    The figures of a healthy class-7 control (out-of-sample blind seed 5):
+    nominal gap 0.51, a pinion run-out of 17 um with kappa 0.026 scoring
+    26.3 +- 15.5 nats and shrinking the gap by 14 % to 0.44. Without the
+    allowance the rules name it (the gap is within noise after it); with the
+    allowance, as on the density route just below the gap, they do not.
+    """
+    from uqgear.diagnosis.verdict import decide
+
+    control = {"effect": "eccentricity", "score": 26.3, "standard_error": 15.5, "shrink_fraction": 0.14,
+               "shrink_interval": [0.03, 1.0], "gap_with_effect": 0.44, "effect_gain": 49.0,
+               "modulation_gain": 38.5}
+    assert decide(0.51, [control]).verdict == "eccentricity"
+    decision = decide(0.51, [control], pitch_allowance=True, density_evidence=True)
+    assert decision.verdict == "unexplained" and "lower bound, and eccentricity's is 0.8" in decision.reason
+    # as strong at its lower bound (26.3 - 1.645 * 5 = 18.1), or halving the gap, it is named
+    assert decide(0.51, [{**control, "standard_error": 5.0}], pitch_allowance=True,
+                  density_evidence=True).verdict == "eccentricity"
+    halving = {**control, "shrink_fraction": 0.6, "shrink_interval": [0.3, 1.0], "gap_with_effect": 0.2}
+    assert decide(0.51, [halving], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
+    # a further effect (no density_evidence) keeps the shrink rule of forward selection
+    assert decide(0.51, [control], pitch_allowance=True).verdict == "eccentricity"
+
+
 def test_friction_acting_with_pitch_errors_widens_the_sidebands_the_nominal_allowance_leaves_narrow(design):
     """What pitch errors do to a feature depends on the model they act in (manufacturing.allowance_for_fit).
 

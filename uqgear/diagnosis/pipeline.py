@@ -410,16 +410,21 @@ def _ranking_of(best_per_effect: Mapping[str, CandidateScore]) -> list[dict[str,
     return [_ranking_entry(s) for s in scores]
 
 
-def _leads_a_set(best: Mapping[str, Any]) -> bool:
+def _leads_a_set(best: Mapping[str, Any], *, pitch_allowance: bool = False) -> bool:
     """Whether an unexplained gap's best candidate is strong enough to start a forward selection.
 
     The evidence rules of :func:`~.verdict.decide` without the one on how
     much of the gap it explains alone: a score beyond the threshold, a fit
     that is clearly worse with its effect off, and a shrink whose 90 %
-    interval is above zero.
+    interval is above zero. With the pitch-error allowance the score must
+    reach the threshold at its 90 % lower bound, as decide asks of an
+    effect that does not halve the gap there: a set led by a weak first
+    effect would name it anyway.
     """
+    score_low = best["score"] - 1.645 * float(best.get("standard_error", math.inf))
     return (best["score"] >= SCORE_THRESHOLD and float(best.get("effect_gain", math.inf)) >= EFFECT_GAIN_THRESHOLD
-            and best["shrink_interval"][0] > 0.0 and not best.get("within_pitch_errors"))
+            and best["shrink_interval"][0] > 0.0 and not best.get("within_pitch_errors")
+            and (not pitch_allowance or score_low >= SCORE_THRESHOLD))
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
@@ -710,7 +715,8 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         found.update(verdict=decision.verdict, reason=decision.reason)
     selected: list[SelectedEffect] = []
     rounds: list[SelectionRound] = []
-    if decision.verdict == "unexplained" and scores and _leads_a_set(ranking[0]):
+    if decision.verdict == "unexplained" and scores and _leads_a_set(ranking[0],
+                                                                     pitch_allowance=case.pitch_allowance is not None):
         # two effects of about equal size each explain less than half of the gap alone: the strongest,
         # clearly carried by its effect, is the base of a forward selection, and the set is named only
         # if it explains the gap together (set_decision's rule)
