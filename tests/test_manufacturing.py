@@ -276,6 +276,9 @@ def test_with_the_allowance_a_gap_just_above_noise_needs_the_density_to_hold_at_
     assert decide(0.51, [halving], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
     # a further effect (no density_evidence) keeps the shrink rule of forward selection
     assert decide(0.51, [control], pitch_allowance=True).verdict == "eccentricity"
+    # just below the gap the same: no jump at the noise gap
+    below = decide(0.49, [{**control, "gap_with_effect": 0.42}], pitch_allowance=True, density_evidence=True)
+    assert below.verdict == "none" and "eccentricity's is 0.8" in below.reason
 
 
 def test_friction_acting_with_pitch_errors_widens_the_sidebands_the_nominal_allowance_leaves_narrow(design):

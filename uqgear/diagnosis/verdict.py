@@ -194,9 +194,10 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         # noise (not for a shrink of half) must hold its density at the 90 % lower bound, as on the density
         # route just below the gap (out of sample, a healthy class-7 control at a gap of 0.51 had a 17 um
         # run-out with kappa 0.026 at 26 +- 15 nats; pitch errors shift the pairs' load sharing too)
-        weak_near_noise = (density_evidence and best["shrink_fraction"] < shrink_threshold
+        by_shrink = evidence and explains and best["shrink_interval"][0] > 0.0
+        weak_near_noise = (by_shrink and density_evidence and best["shrink_fraction"] < shrink_threshold
                            and score_low < score_threshold)
-        if evidence and explains and best["shrink_interval"][0] > 0.0 and not weak_near_noise:
+        if by_shrink and not weak_near_noise:
             within = (f"; what remains ({remaining:.2f}) is within noise"
                       if best["shrink_fraction"] < shrink_threshold else "")
             return Decision(str(best["effect"]), (
@@ -221,20 +222,21 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
     beyond = (f"; {best['effect']} fits a run-out of {1e6 * run_out['run_out']:.1f} um, within what the gears' "
               f"stated pitch-error classes make as a first-order run-out (95 %: {1e6 * run_out['bound']:.1f} um)"
               if run_out else "")
+    held = ""
+    if weak_near_noise:
+        held = (f"; with the pitch-error allowance an effect that leaves a gap within noise without halving it "
+                f"must hold {score_threshold:g} nats at its score's 90 % lower bound, and {best['effect']}'s "
+                f"is {score_low:.1f}: pitch errors of the stated classes can give as much")
     if nominal_gap <= noise_gap:
         return Decision("none", f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-                                f"(threshold {noise_gap:g}) and no candidate is clearly better{beyond}",
+                                f"(threshold {noise_gap:g}) and no candidate is clearly better{held}{beyond}",
                         borderline=borderline)
     detail = ""
     if best is not None:
         detail = (f"; the best candidate, {best['effect']}, scores {best['score']:.1f} nats and shrinks it by "
                   f"{100 * best['shrink_fraction']:.0f} % (needed: {score_threshold:g} nats, and a shrink of "
                   f"{100 * shrink_threshold:.0f} % or a remaining gap within noise)")
-        if weak_near_noise:
-            detail += (f"; with the pitch-error allowance an effect that leaves a gap within noise without "
-                       f"halving it must hold {score_threshold:g} nats at its score's 90 % lower bound, and "
-                       f"{best['effect']}'s is {score_low:.1f}: pitch errors of the stated classes can give as much")
-        detail += beyond
+        detail += held + beyond
     return Decision("unexplained", f"the nominal model's held-out gap is {nominal_gap:.2f} "
                                    f"(above {noise_gap:g}){detail}", borderline=borderline)
 
