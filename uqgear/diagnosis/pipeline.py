@@ -94,7 +94,7 @@ from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
 from .verdict import (EFFECT_GAIN_THRESHOLD, EFFECT_NAMES, NOISE_GAP_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD,
-                      Decision, decide, decide_verdict, family_character, where_gap)
+                      Decision, decide, decide_verdict, family_character, score_lower_bound, where_gap)
 
 #: Candidates promoted from the screening fit (effect parameters only) to a full fit.
 PROMOTED = 2
@@ -421,10 +421,9 @@ def _leads_a_set(best: Mapping[str, Any], *, pitch_allowance: bool = False) -> b
     effect that does not halve the gap there: a set led by a weak first
     effect would name it anyway.
     """
-    score_low = best["score"] - 1.645 * float(best.get("standard_error", math.inf))
     return (best["score"] >= SCORE_THRESHOLD and float(best.get("effect_gain", math.inf)) >= EFFECT_GAIN_THRESHOLD
             and best["shrink_interval"][0] > 0.0 and not best.get("within_pitch_errors")
-            and (not pitch_allowance or score_low >= SCORE_THRESHOLD))
+            and (not pitch_allowance or score_lower_bound(best) >= SCORE_THRESHOLD))
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:

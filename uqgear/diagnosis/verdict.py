@@ -76,6 +76,15 @@ def _straddles(interval: Sequence[float] | None, threshold: float) -> bool:
     return float(interval[0]) < threshold <= float(interval[1])
 
 
+#: Standard errors on each side of a score for its 90 % interval (the normal 95 % quantile).
+SCORE_QUANTILE = 1.645
+
+
+def score_lower_bound(entry: Mapping[str, Any]) -> float:
+    """The lower end of a candidate's 90 % score interval (``score`` - 1.645 ``standard_error``; -inf without one)."""
+    return entry["score"] - SCORE_QUANTILE * float(entry.get("standard_error", math.inf))
+
+
 def _borderline_figures(nominal_gap: float, nominal_gap_interval: Sequence[float] | None,
                         best: Mapping[str, Any] | None, *, score_threshold: float, shrink_threshold: float,
                         noise_gap: float) -> tuple[dict[str, Any], ...]:
@@ -86,7 +95,7 @@ def _borderline_figures(nominal_gap: float, nominal_gap_interval: Sequence[float
     if best is not None:
         error = float(best.get("standard_error", math.nan))
         if math.isfinite(error):
-            score_interval = [best["score"] - 1.645 * error, best["score"] + 1.645 * error]
+            score_interval = [score_lower_bound(best), best["score"] + SCORE_QUANTILE * error]
             if _straddles(score_interval, score_threshold):
                 figures.append({"figure": "score", "value": float(best["score"]), "threshold": score_threshold,
                                 "interval": score_interval})
@@ -174,7 +183,7 @@ def decide(nominal_gap: float, ranking: Sequence[Mapping[str, Any]], *,
         # a run-out the gears' own pitch errors make (the candidate ranking's flag) is no eccentric shaft
         carried = (float(best.get("effect_gain", math.inf)) >= effect_gain_threshold
                    and not best.get("within_pitch_errors"))
-        score_low = best["score"] - 1.645 * float(best.get("standard_error", math.inf))
+        score_low = score_lower_bound(best)
         below_gap = pitch_allowance and nominal_gap <= noise_gap
         if below_gap:
             # no gap to speak for it: the effect must carry the score threshold by itself (a control with
