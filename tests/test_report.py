@@ -243,3 +243,18 @@ def test_the_report_says_which_eccentricities_a_stiffness_modulation_let_be_name
     skipped = _pitch_error_notes({"pitch_errors": {"applied": False, "reason": "perfect gears"}, "ranking": []})
     assert skipped == ['<p class="note">Pitch errors: no allowance (perfect gears).</p>']
     assert _pitch_error_notes({"pitch_errors": None}) == []
+
+
+def test_the_report_shows_each_gear_orders_factor_on_the_pitch_error_allowance_with_its_range():
+    from uqgear.report.diagnosis_report import _pitch_error_notes
+
+    applied = {"applied": True, "reason": "sidebands at every order on both shafts", "draws": 12,
+               "order_factors": {"gear": {"2": {"factor": 0.0805, "low": 0.0108, "high": 6.49, "amplitude_m": 2.1e-6,
+                                                "amplitude_range_m": [0.8e-6, 19.0e-6]}},
+                                 "pinion": {"1": {"factor": 3.32, "low": 0.00545, "high": 4.43,
+                                                  "amplitude_m": 27.9e-6, "amplitude_range_m": [1.1e-6, 31.2e-6]}}}}
+    notes = _pitch_error_notes({"pitch_errors": applied, "ranking": []})
+    assert len(notes) == 3 and "one draw, the same in every run" in notes[1]
+    table = notes[2]
+    assert table.count("<tr>") == 3 and "0.0108 to 6.49" in table and "0.00545 to 4.43" in table
+    assert ">pinion<" in table and ">gear<" in table and "1.1 to 31.2" in table and "run-out" in notes[1]

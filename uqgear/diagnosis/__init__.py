@@ -7,7 +7,8 @@ feature processing), :mod:`.discrepancy` (predictive distribution of the
 features), :mod:`.candidates` (fitted parameters and candidate effects),
 :mod:`.case` (a prepared campaign and its run execution), :mod:`.signatures`
 (frequency-locked lines, start hints), :mod:`.fitting`, :mod:`.manufacturing`
-(the gears' pitch errors as model error), :mod:`.scoring`
+(the gears' pitch errors as model error), :mod:`.gear_orders` (that model error scaled
+to the rig's own gears, order by order), :mod:`.scoring`
 (held-out predictions and the gap), :mod:`.verdict`, :mod:`.pipeline`
 (:func:`run_diagnosis`), :mod:`.outputs` (summary and Dataset),
 :mod:`.workflow` (:func:`diagnose`) and :mod:`.blind_test`.

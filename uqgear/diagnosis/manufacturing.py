@@ -54,6 +54,7 @@ from ..uq.seeds import child_seed
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitProblem, FitResult, fit, robust_cost
+from .gear_orders import drawn_amplitudes, factor_bounds, factors_summary, fitted_factors, scaled_line_errors
 
 #: ISO 1328-1 classes assumed when none are stated: the usual range of traction gears.
 DEFAULT_CLASSES: tuple[float, float] = (6.0, 8.0)
@@ -107,6 +108,10 @@ class PitchErrorAllowance:
     run_out_bound: dict[str, float] = field(default_factory=dict)
     # the scaled draws simulated (a fit with effects is simulated with the same ones: :func:`allowance_for_fit`)
     drawn_errors: tuple[PitchErrors, ...] = field(default=(), repr=False, compare=False)
+    # per (gear, shaft order): the range of the rig's own share of the allowance, and the nominal fit's
+    # factor in it (:mod:`uqgear.diagnosis.gear_orders`); ``absolute`` holds the lines scaled by it
+    factor_bounds: dict[tuple[str, int], tuple[float, float]] = field(default_factory=dict)
+    factors: dict[tuple[str, int], float] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready record (``pitch_errors`` of ``diagnosis.json``)."""
@@ -118,6 +123,8 @@ class PitchErrorAllowance:
                 "draws": self.draws, "largest_line_error_to_noise": self.largest_line_ratio,
                 "noise_floor_share_of_lines": self.floor_share,
                 "run_out_within_pitch_errors_m": dict(self.run_out_bound),
+                "order_factors": factors_summary(self.factors, self.factor_bounds,
+                                                 drawn_amplitudes(self.drawn_errors)) if self.factors else {},
                 "seconds": self.seconds,
                 "method": "the nominal fit simulated with random ISO 1328-1 pitch-error draws over the stated "
                           "classes; each feature's mean square change becomes absolute model error"}
@@ -218,6 +225,10 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
         errors = draw_pitch_errors(case.design, REFERENCE_CLASS, rng)
         drawn_errors.append(PitchErrors(errors.pinion * level, errors.gear * level))
     absolute, forest_share = allowance_errors(case, nominal.problem, nominal.vector, drawn_errors)
+    # the rig's gears are one draw: each (gear, order) group's share scaled to what the rig shows
+    ranges = factor_bounds(case.design, classes, drawn_errors, np.random.default_rng(child_seed(seed, 1)))
+    factors = fitted_factors(case, nominal.model, absolute["line"], case.model_error, ranges)
+    absolute["line"] = scaled_line_errors(case, absolute["line"], factors)
     line = np.array(case.layout.kinds) == "line"
     ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
     finite = ratio[np.isfinite(ratio)]
@@ -228,7 +239,7 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     return PitchErrorAllowance(True, reason, classes, visible, draws, absolute,
                                float(finite.max()) if finite.size else 0.0,
                                float(np.median(forest_share[case.usable])) if case.usable.any() else 0.0,
-                               time.perf_counter() - started, bounds, tuple(drawn_errors))
+                               time.perf_counter() - started, bounds, tuple(drawn_errors), ranges, factors)
 
 
 def allowance_errors(case: RigCase, problem: FitProblem, vector: np.ndarray, drawn_errors: Sequence[PitchErrors]
@@ -304,6 +315,10 @@ def allowance_for_fit(case: RigCase, result: FitResult, allowance: PitchErrorAll
     equal terms.
     """
     absolute, _ = allowance_errors(case, result.problem, result.vector, allowance.drawn_errors)
+    if allowance.factor_bounds:
+        # its own share of the rig's gears' errors, from its own residuals
+        factors = fitted_factors(case, result.model, absolute["line"], base_error, allowance.factor_bounds)
+        absolute["line"] = scaled_line_errors(case, absolute["line"], factors)
     return FeatureModelError.combined(base_error, absolute)
 
 

@@ -94,7 +94,7 @@ from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
 from .verdict import (EFFECT_GAIN_THRESHOLD, EFFECT_NAMES, NOISE_GAP_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD,
-                      Decision, decide, decide_verdict, family_character, score_lower_bound, where_gap)
+                      Decision, decide, decide_verdict, family_character, holds_against_pitch_errors, where_gap)
 
 #: Candidates promoted from the screening fit (effect parameters only) to a full fit.
 PROMOTED = 2
@@ -401,6 +401,8 @@ def _ranking_entry(s: CandidateScore) -> dict[str, Any]:
         modulated = s.modulation_gain is not None and s.modulation_gain >= EFFECT_GAIN_THRESHOLD
         if bound is not None and float(values.get("amplitude", math.inf)) <= bound and not modulated:
             entry["within_pitch_errors"] = {"run_out": float(values["amplitude"]), "bound": bound}
+        elif bound is not None and float(values.get("amplitude", 0.0)) > bound:
+            entry["beyond_pitch_errors"] = {"run_out": float(values["amplitude"]), "bound": bound}
     return entry
 
 
@@ -423,7 +425,7 @@ def _leads_a_set(best: Mapping[str, Any], *, pitch_allowance: bool = False) -> b
     """
     return (best["score"] >= SCORE_THRESHOLD and float(best.get("effect_gain", math.inf)) >= EFFECT_GAIN_THRESHOLD
             and best["shrink_interval"][0] > 0.0 and not best.get("within_pitch_errors")
-            and (not pitch_allowance or score_lower_bound(best) >= SCORE_THRESHOLD))
+            and (not pitch_allowance or holds_against_pitch_errors(best)))
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:

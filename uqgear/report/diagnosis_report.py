@@ -344,6 +344,20 @@ def _pitch_error_notes(content: Mapping[str, Any]) -> list[str]:
         return [f"<p class=\"note\">Pitch errors: no allowance ({html.escape(pitch['reason'])}).</p>"]
     parts = [f"<p>Pitch errors: {html.escape(pitch['reason'])}. What {pitch['draws']} random draws do to each "
              "feature is model error of the nominal model; no effect is named for what such errors can do.</p>"]
+    factors = pitch.get("order_factors") or {}
+    if factors:
+        rows = [[gear, order, entry["factor"], f"{entry['low']:.3g} to {entry['high']:.3g}",
+                 1e6 * entry["amplitude_m"],
+                 f"{1e6 * entry['amplitude_range_m'][0]:.2g} to {1e6 * entry['amplitude_range_m'][1]:.3g}"]
+                for gear, orders in factors.items() for order, entry in orders.items()]
+        parts += ['<p class="note">The rig\'s gears are one draw, the same in every run: each gear\'s share of '
+                  "the allowance at each shaft order (its shaft line and the sidebands of that order) is scaled "
+                  "to what the rig shows, within the range gears of the stated classes give (1 % to 99 %). As "
+                  "read by the nominal fit; |E_j| is the gear's tooth positions' j-th Fourier coefficient along "
+                  "the line of action (at order 1 its run-out, which an eccentricity within that range cannot "
+                  "be told from):</p>",
+                  _table(["gear", "shaft order", "factor on the allowance's power", "range", "|E_j| um",
+                          "range um"], rows, (0, 1, 3, 5))]
     modulated = [r for r in content.get("ranking", []) if r.get("modulation_gain") is not None]
     if modulated:
         parts.append('<p class="note">Pitch errors make a run-out but no mesh-stiffness modulation: an '
