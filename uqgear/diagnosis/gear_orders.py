@@ -64,6 +64,7 @@ _BOUND_DRAWS = 4000
 # Candidate factors per decade between the bounds (a log grid; the likelihood is smooth in the factor).
 _GRID_PER_DECADE = 24
 _GEARS = ("pinion", "gear")
+# the class draws are made at and scaled from, as manufacturing.REFERENCE_CLASS (which builds on this module)
 _REFERENCE_CLASS = 7
 
 
@@ -202,5 +203,5 @@ def factors_summary(factors: Mapping[tuple[str, int], float],
     return summary
 
 
-__all__ = ["ORDERS", "FACTOR_QUANTILES", "order_powers", "drawn_amplitudes", "factor_bounds", "line_groups", "fitted_factors",
-           "scaled_line_errors", "factors_summary"]
+__all__ = ["ORDERS", "FACTOR_QUANTILES", "order_powers", "drawn_amplitudes", "factor_bounds", "line_groups",
+           "fitted_factors", "scaled_line_errors", "factors_summary"]
