@@ -256,3 +256,14 @@ def test_pitch_errors_are_read_only_and_described(design, grade7):
         grade7.pinion[0] = 1.0
     assert "21 teeth" in repr(grade7) and "101 teeth" in repr(grade7)
     assert not PitchErrors.zeros(design).any and grade7.any
+
+
+def test_a_draw_in_classes_is_the_reference_class_draw_scaled_by_sqrt_2_a_class(design):
+    from uqgear.physics.pitch_errors import REFERENCE_CLASS, class_level, draw_in_classes
+
+    assert class_level((REFERENCE_CLASS, REFERENCE_CLASS), 0.3) == 1.0
+    assert class_level((5.0, 9.0), np.array([0.0, 0.5, 1.0])) == pytest.approx([0.5, 1.0, 2.0])
+    scaled = draw_in_classes(design, (6.0, 8.0), 1.0, np.random.default_rng(4))
+    reference = draw_pitch_errors(design, REFERENCE_CLASS, np.random.default_rng(4))
+    assert scaled.pinion == pytest.approx(math.sqrt(2.0) * reference.pinion, rel=1e-15)
+    assert scaled.gear == pytest.approx(math.sqrt(2.0) * reference.gear, rel=1e-15)

@@ -56,14 +56,12 @@ import xarray as xr
 
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..physics.pitch_errors import PitchErrors, draw_pitch_errors
+from ..physics.pitch_errors import REFERENCE_CLASS, PitchErrors, class_level, draw_pitch_errors
 from ..rig.features import extract_features, sampling_rate
 from ..rig.virtual_rig import simulate_campaign
 from .harmonics import HARMONIC_CHANNELS, harmonic_lines, observed_harmonics
 from .likelihood import OPERATING_VARIABLES, Features
 
-#: ISO 1328-1 flank tolerance class of the reference draws (a common traction-gear grade).
-REFERENCE_CLASS = 7
 #: Levels below this fraction of class 7 (about ISO class 3) are not applied.
 MIN_SCALE = 0.25
 #: A sideband counts where the reference draw raises its power this many noise std above the rig's noise.
@@ -293,7 +291,7 @@ def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, 
             levels = scale * np.exp(min(log_sd, 1.0) * scipy.stats.norm.ppf(positions))
         else:
             # evenly over the stated classes; tolerances grow by sqrt(2) a class
-            levels = math.sqrt(2.0) ** (classes[0] + (classes[1] - classes[0]) * positions - REFERENCE_CLASS)
+            levels = class_level(classes, positions)
         for level in levels:
             errors = draw_pitch_errors(design, REFERENCE_CLASS, draw_rng)
             scaled = harmonics(simulate(PitchErrors(errors.pinion * level, errors.gear * level)))

@@ -51,7 +51,7 @@ import numpy as np
 import scipy.special
 
 from ..physics.design import Design
-from ..physics.pitch_errors import PitchErrors, draw_pitch_errors
+from ..physics.pitch_errors import PitchErrors, draw_in_classes
 from .case import RigCase
 from .discrepancy import absolute_model_error
 
@@ -64,8 +64,6 @@ _BOUND_DRAWS = 4000
 # Candidate factors per decade between the bounds (a log grid; the likelihood is smooth in the factor).
 _GRID_PER_DECADE = 24
 _GEARS = ("pinion", "gear")
-# the class draws are made at and scaled from, as manufacturing.REFERENCE_CLASS (which builds on this module)
-_REFERENCE_CLASS = 7
 
 
 def order_powers(errors: np.ndarray, orders: Sequence[int] = ORDERS) -> np.ndarray:
@@ -76,12 +74,16 @@ def order_powers(errors: np.ndarray, orders: Sequence[int] = ORDERS) -> np.ndarr
     return np.abs(2.0 / teeth * (errors @ phases)) ** 2
 
 
+def _mean_powers(drawn_errors: Sequence[PitchErrors]) -> dict[str, np.ndarray]:
+    """Per gear, the mean |E_j|^2 (one per order of :data:`ORDERS`) over pitch-error draws."""
+    return {gear: np.mean([order_powers(getattr(errors, gear)) for errors in drawn_errors], axis=0)
+            for gear in _GEARS}
+
+
 def drawn_amplitudes(drawn_errors: Sequence[PitchErrors]) -> dict[tuple[str, int], float]:
     """Per (gear, order): the RMS |E_j| over the draws the allowance simulated (m, along the line of action)."""
     return {(gear, order): float(math.sqrt(power))
-            for gear in _GEARS
-            for order, power in zip(ORDERS, np.mean([order_powers(getattr(errors, gear)) for errors in drawn_errors],
-                                                    axis=0))}
+            for gear, powers in _mean_powers(drawn_errors).items() for order, power in zip(ORDERS, powers)}
 
 
 def factor_bounds(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
@@ -94,13 +96,11 @@ def factor_bounds(design: Design, classes: tuple[float, float], drawn_errors: Se
     """
     powers = {gear: np.empty((draws, len(ORDERS))) for gear in _GEARS}
     for index in range(draws):
-        level = math.sqrt(2.0) ** (classes[0] + (classes[1] - classes[0]) * rng.random() - _REFERENCE_CLASS)
-        drawn = draw_pitch_errors(design, _REFERENCE_CLASS, rng)
+        drawn = draw_in_classes(design, classes, rng.random(), rng)
         for gear in _GEARS:
-            powers[gear][index] = order_powers(getattr(drawn, gear) * level)
+            powers[gear][index] = order_powers(getattr(drawn, gear))
     bounds = {}
-    for gear in _GEARS:
-        allowed = np.mean([order_powers(getattr(errors, gear)) for errors in drawn_errors], axis=0)
+    for gear, allowed in _mean_powers(drawn_errors).items():
         low, high = np.quantile(powers[gear], quantiles, axis=0)
         for position, order in enumerate(ORDERS):
             mean = max(float(allowed[position]), 1e-300)
@@ -184,6 +184,14 @@ def scaled_line_errors(case: RigCase, allowance_line: np.ndarray,
     return scaled
 
 
+def scaled_to_rig(case: RigCase, model: np.ndarray, allowance_line: np.ndarray, base_error: Mapping[str, float],
+                  bounds: Mapping[tuple[str, int], tuple[float, float]]
+                  ) -> tuple[np.ndarray, dict[tuple[str, int], float]]:
+    """A model's allowance line errors scaled by its own fitted factors (:func:`fitted_factors`), and the factors."""
+    factors = fitted_factors(case, model, allowance_line, base_error, bounds)
+    return scaled_line_errors(case, allowance_line, factors), factors
+
+
 def factors_summary(factors: Mapping[tuple[str, int], float],
                     bounds: Mapping[tuple[str, int], tuple[float, float]],
                     amplitudes: Mapping[tuple[str, int], float]) -> dict[str, dict[str, dict[str, Any]]]:
@@ -204,4 +212,4 @@ def factors_summary(factors: Mapping[tuple[str, int], float],
 
 
 __all__ = ["ORDERS", "FACTOR_QUANTILES", "order_powers", "drawn_amplitudes", "factor_bounds", "line_groups",
-           "fitted_factors", "scaled_line_errors", "factors_summary"]
+           "fitted_factors", "scaled_line_errors", "scaled_to_rig", "factors_summary"]

@@ -49,17 +49,15 @@ import numpy as np
 from ..calibration.errors import CalibrationError
 from ..calibration.settings import check_pitch_classes
 from ..physics.design import Design
-from ..physics.pitch_errors import PitchErrors, draw_pitch_errors
+from ..physics.pitch_errors import PitchErrors, draw_in_classes
 from ..uq.seeds import child_seed
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitProblem, FitResult, fit, robust_cost
-from .gear_orders import drawn_amplitudes, factor_bounds, factors_summary, fitted_factors, scaled_line_errors
+from .gear_orders import drawn_amplitudes, factor_bounds, factors_summary, scaled_to_rig
 
 #: ISO 1328-1 classes assumed when none are stated: the usual range of traction gears.
 DEFAULT_CLASSES: tuple[float, float] = (6.0, 8.0)
-#: Class of the draws, scaled to the stated classes' levels (tolerances grow by sqrt(2) a class).
-REFERENCE_CLASS = 7
 #: Pitch-error draws whose changes give the model error.
 DRAWS = 12
 #: A sideband counts as visible this many noise standard deviations above the nominal fit.
@@ -153,8 +151,7 @@ def run_out_bounds(design: Design, classes: tuple[float, float], rng: np.random.
         phases = np.exp(-2j * np.pi * np.arange(teeth) / teeth)
         amplitudes = np.empty(draws)
         for index in range(draws):
-            level = math.sqrt(2.0) ** (classes[0] + (classes[1] - classes[0]) * rng.random() - REFERENCE_CLASS)
-            errors = getattr(draw_pitch_errors(design, REFERENCE_CLASS, rng), gear) * level
+            errors = getattr(draw_in_classes(design, classes, rng.random(), rng), gear)
             amplitudes[index] = 2.0 / teeth * abs(np.sum(errors * phases))
         bounds[gear] = float(np.quantile(amplitudes, quantile))
     return bounds
@@ -219,16 +216,11 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     rng = np.random.default_rng(seed)
     bounds = run_out_bounds(case.design, classes, np.random.default_rng(child_seed(seed, 0)))
     positions = (np.arange(draws) + 0.5) / draws
-    levels = math.sqrt(2.0) ** (classes[0] + (classes[1] - classes[0]) * positions - REFERENCE_CLASS)
-    drawn_errors = []
-    for level in levels:
-        errors = draw_pitch_errors(case.design, REFERENCE_CLASS, rng)
-        drawn_errors.append(PitchErrors(errors.pinion * level, errors.gear * level))
+    drawn_errors = [draw_in_classes(case.design, classes, position, rng) for position in positions]
     absolute, forest_share = allowance_errors(case, nominal.problem, nominal.vector, drawn_errors)
     # the rig's gears are one draw: each (gear, order) group's share scaled to what the rig shows
     ranges = factor_bounds(case.design, classes, drawn_errors, np.random.default_rng(child_seed(seed, 1)))
-    factors = fitted_factors(case, nominal.model, absolute["line"], case.model_error, ranges)
-    absolute["line"] = scaled_line_errors(case, absolute["line"], factors)
+    absolute["line"], factors = scaled_to_rig(case, nominal.model, absolute["line"], case.model_error, ranges)
     line = np.array(case.layout.kinds) == "line"
     ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
     finite = ratio[np.isfinite(ratio)]
@@ -317,8 +309,7 @@ def allowance_for_fit(case: RigCase, result: FitResult, allowance: PitchErrorAll
     absolute, _ = allowance_errors(case, result.problem, result.vector, allowance.drawn_errors)
     if allowance.factor_bounds:
         # its own share of the rig's gears' errors, from its own residuals
-        factors = fitted_factors(case, result.model, absolute["line"], base_error, allowance.factor_bounds)
-        absolute["line"] = scaled_line_errors(case, absolute["line"], factors)
+        absolute["line"], _ = scaled_to_rig(case, result.model, absolute["line"], base_error, allowance.factor_bounds)
     return FeatureModelError.combined(base_error, absolute)
 
 

@@ -399,10 +399,11 @@ def _ranking_entry(s: CandidateScore) -> dict[str, Any]:
         values = s.parameters()
         bound = bounds.get(str(values.get("shaft")))
         modulated = s.modulation_gain is not None and s.modulation_gain >= EFFECT_GAIN_THRESHOLD
-        if bound is not None and float(values.get("amplitude", math.inf)) <= bound and not modulated:
-            entry["within_pitch_errors"] = {"run_out": float(values["amplitude"]), "bound": bound}
-        elif bound is not None and float(values.get("amplitude", 0.0)) > bound:
-            entry["beyond_pitch_errors"] = {"run_out": float(values["amplitude"]), "bound": bound}
+        run_out = float(values.get("amplitude", math.nan))
+        if bound is not None and run_out <= bound and not modulated:
+            entry["within_pitch_errors"] = {"run_out": run_out, "bound": bound}
+        elif bound is not None and run_out > bound:
+            entry["beyond_pitch_errors"] = {"run_out": run_out, "bound": bound}
     return entry
 
 

@@ -28,6 +28,9 @@ ISO1328_CLASSES = tuple(range(1, 12))
 #: Largest pitch offset accepted, m: 1 mm is far beyond ISO class 11 for any module this model takes.
 MAX_PITCH_OFFSET = 1e-3
 
+#: Class at which pitch errors are drawn before being scaled to another (tolerances grow by sqrt(2) a class).
+REFERENCE_CLASS = 7
+
 
 def _per_tooth(name: str, values: ArrayLike, teeth: int | None) -> np.ndarray:
     try:
@@ -178,4 +181,22 @@ def draw_pitch_errors(design: Design, tolerance_class: int, rng: np.random.Gener
                        _draw_gear(rng, design.z2, gear_tolerance, cos_alpha))
 
 
-__all__ = ["PitchErrors", "iso1328_single_pitch_tolerance", "draw_pitch_errors", "ISO1328_CLASSES"]
+def class_level(classes: tuple[float, float], position: float | np.ndarray) -> float | np.ndarray:
+    """Scale of a :data:`REFERENCE_CLASS` draw at ``position`` (0..1) across the classes (lowest, highest).
+
+    ``sqrt(2) ** (class - REFERENCE_CLASS)`` with the class spread evenly
+    (``position`` uniform or stratified) from the lowest to the highest.
+    """
+    return math.sqrt(2.0) ** (classes[0] + (classes[1] - classes[0]) * position - REFERENCE_CLASS)
+
+
+def draw_in_classes(design: Design, classes: tuple[float, float], position: float,
+                    rng: np.random.Generator) -> PitchErrors:
+    """Pitch errors drawn at :data:`REFERENCE_CLASS` and scaled to the class at ``position`` across ``classes``."""
+    errors = draw_pitch_errors(design, REFERENCE_CLASS, rng)
+    level = class_level(classes, position)
+    return PitchErrors(errors.pinion * level, errors.gear * level)
+
+
+__all__ = ["PitchErrors", "iso1328_single_pitch_tolerance", "draw_pitch_errors", "ISO1328_CLASSES",
+           "REFERENCE_CLASS", "class_level", "draw_in_classes"]
