@@ -32,7 +32,7 @@ import xarray as xr
 
 import uqgear
 from uqgear.calibration import CalibrationError, prior_bounds
-from uqgear.calibration import estimator
+from uqgear.calibration import estimator, posterior_fit
 from uqgear.calibration.likelihood import StageLikelihood
 from uqgear.calibration.training import train_emulators
 from uqgear.cli import main
@@ -274,7 +274,7 @@ def test_internal_failure_in_the_calibration_exits_1_with_the_step(tmp_path, cap
     def failing(*args, **kwargs):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setattr(estimator, "search_box", failing)
+    monkeypatch.setattr(posterior_fit, "search_box", failing)
     out = tmp_path / "out"
     assert main(["calibrate", str(HEALTHY), "--out", str(out), "--workers", "1"]) == 1
     err = capsys.readouterr().err

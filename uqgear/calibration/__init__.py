@@ -54,14 +54,16 @@ with the real model).
 
 Modules, along the work of :meth:`Calibration.fit`
 --------------------------------------------------
-``errors`` (CalibrationError), ``priors`` (parameter names, units, priors),
+``errors`` (CalibrationError), ``rig_input`` (the rig data read or
+validated and order-tracked), ``priors`` (parameter names, units, priors),
 ``harmonics`` (model and observed mesh-harmonic features), ``emulator``
 (polynomial emulators), ``training`` (model runs and emulator training),
 ``likelihood`` (features, noise, emulated log likelihood), ``convergence``
 (R-hat, autocorrelation, ESS, verdict), ``sampling`` (emcee: box search and
 final run), ``summaries`` (posterior Dataset, summary, JSON content),
-``predictive`` (posterior predictive check), ``settings`` (checks of the
-settings), ``estimator`` (the Calibration class), ``outputs`` (files and
+``predictive`` (posterior predictive check), ``posterior_fit`` (one fit's
+work from the box search to the predictive check), ``settings`` (checks of
+the settings), ``estimator`` (the Calibration class), ``outputs`` (files and
 :func:`calibrate`).
 """
 

@@ -1,4 +1,9 @@
-"""The Calibration estimator: settings checked in ``__init__``, the work in ``fit``, results in ``*_`` attributes."""
+"""The Calibration estimator: settings checked in ``__init__``, the work in ``fit``, results in ``*_`` attributes.
+
+``fit`` accepts the rig data (:mod:`~uqgear.calibration.rig_input`) and prepares the features and the prior
+box; the staged search, the pitch-error correction, the final sampling and the predictive check run on a
+:class:`~uqgear.calibration.posterior_fit.PosteriorFit`.
+"""
 
 from __future__ import annotations
 
@@ -10,28 +15,25 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from ..common.errors import RigDataError
 from ..common.steps import StepLog
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..physics.geometry import geometry_notes
-from ..rig.format import read_rig, rig_design, validate_rig
-from ..rig.order_tracking import speed_summary, track_orders
-from ..rig.usability import check_usable_signal
 from ..uq.seeds import child_seed
 from .convergence import ConvergenceCriteria
 from .errors import CalibrationError
 from .failure import failure_causes
 from .harmonics import HARMONIC_CHANNELS
-from .likelihood import StageLikelihood, observed_features, operating_points, prior_box
-from .pitch_correction import DEFAULT_CLASSES, pitch_error_correction
-from .predictive import predictive_check
+from .likelihood import observed_features, operating_points, prior_box
+from .pitch_correction import DEFAULT_CLASSES
+from .posterior_fit import PosteriorFit
 from .priors import DEFAULT_PARAMETERS, prior_bounds, resolve_parameters
-from .sampling import final_sampling, search_box, walker_count
-from .settings import (as_seed, check_channels, check_float, check_int, check_model_error_range, check_n_training,
-                       check_pitch_classes, check_priors)
-from .summaries import posterior_dataset, posterior_summary, result_content
-from .training import model_log_features, train_emulators
+from .rig_input import accept_rig
+from .sampling import walker_count
+from .settings import (as_seed, check_bool, check_channels, check_design, check_float, check_int,
+                       check_model_error_range, check_n_training, check_pitch_classes, check_priors)
+from .summaries import result_content
+from .training import ModelRuns
 
 
 class Calibration:
@@ -132,9 +134,7 @@ class Calibration:
                  pitch_correction: bool = True, pitch_draws: int = 4,
                  pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> None:
         self.parameters = resolve_parameters(parameters)
-        if design is not None and not isinstance(design, Design):
-            raise CalibrationError(f"design: expected a uqgear Design; got {type(design).__name__}")
-        self.design = design
+        self.design = check_design(design)
         self.priors = check_priors(priors, self.parameters)
         self.channels = check_channels(channels)
         self.n_harmonics = check_int("n_harmonics", n_harmonics, 1)
@@ -156,9 +156,7 @@ class Calibration:
         self.window = check_float("window", window, 0.0, 100.0, " s")
         self.seed = as_seed(seed)
         self.threads = None if threads is None else check_int("threads", threads, 1)
-        if not isinstance(pitch_correction, (bool, np.bool_)):
-            raise CalibrationError(f"pitch_correction: expected true or false; got {pitch_correction!r}")
-        self.pitch_correction = bool(pitch_correction)
+        self.pitch_correction = check_bool("pitch_correction", pitch_correction)
         self.pitch_draws = check_int("pitch_draws", pitch_draws, 2)
         self.pitch_classes = check_pitch_classes(pitch_classes)
 
@@ -206,150 +204,61 @@ class Calibration:
             finished ones).
         """
         wall_start, cpu_start = time.perf_counter(), time.process_time()
-        if isinstance(rig, (str, os.PathLike)):
-            self.rig_source_ = where = str(rig)
-            # a given design replaces the file's, whose copy is then not validated as a design
-            rig = read_rig(rig, design=self.design)
-        elif isinstance(rig, xr.Dataset):
-            self.rig_source_ = str(rig.attrs.get("title", "rig data"))
-            where = "rig data"
-            validate_rig(rig, where=where, design=self.design)
-        else:
-            raise RigDataError(f"rig: expected a uqgear-rig/1 Dataset or file path; got {type(rig).__name__}")
-        # one run is enough: the priors regularise what a single run cannot separate
-        check_usable_signal(rig, where=where, min_operating_points=1, purpose="the calibration")
-        design = self.design if self.design is not None else rig_design(rig)
-        self.design_ = design
-        # order tracking once, before any feature is read: every later step sees constant-speed records
-        tracking_start = time.perf_counter()
-        rig = track_orders(rig, design)
-        self.speed_ = speed_summary(rig)
-        tracking_s = time.perf_counter() - tracking_start
+        accepted = accept_rig(rig, self.design)
+        rig, design, tracking_s = accepted.rig, accepted.design, accepted.tracking_s
+        self.rig_source_, self.design_, self.speed_ = accepted.source, design, accepted.speed
         # children derived from the spawn key, so that fitting again repeats the run exactly
         seeds = [child_seed(self.seed, index) for index in range(8)]
         # the data's features and the prior box are input: a problem with them is the user's (exit 2)
-        self._prepare_data(rig, design)
-        self._prepare_space(design)
+        features = observed_features(
+            rig, design, channels=self.channels, n_harmonics=self.n_harmonics, min_snr=self.min_snr,
+            model_error_range=self.model_error_range)
+        self.observed_, self.used_, self.model_error_grid_ = features.observed, features.used, features.model_error_grid
+        self.n_op_, self.operating_ = rig.sizes["op"], operating_points(rig)
+        self.bounds_ = prior_bounds(design, self.parameters, self.priors)
+        self.prior_lower_, self.prior_upper_ = prior_box(self.bounds_, self.parameters, self.operating_)
+        self.n_global_ = len(self.parameters)
+        self.n_dim_ = self.n_global_ + self.n_op_
         # from here on the input is accepted: a failure is ours, reported with its step
         self.steps_ = steps = StepLog()
         stage_rng = np.random.default_rng(seeds[0])
-        self.emulator_ = {"stages": []}
+        model = ModelRuns(design=design, parameters=self.parameters, operating=self.operating_, effects=self.effects,
+                          n_harmonics=self.n_harmonics, transient=self.transient, window=self.window,
+                          threads=self.threads)
+        work = PosteriorFit(features, model, bounds=self.bounds_, prior_lower=self.prior_lower_,
+                            prior_upper=self.prior_upper_, n_training=self.n_training, degree=self.emulator_degree,
+                            walkers=walker_count(self.n_walkers, self.n_dim_), stage_steps=self.stage_steps,
+                            max_stages=self.max_stages, error_floor=self.model_error_range[0])
+        self.emulator_ = {"stages": work.stages}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
-            start_points, truncated = search_box(
-                self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_,
-                walkers=self._walker_count(), stage_steps=self.stage_steps, max_stages=self.max_stages,
-                error_floor=self.model_error_range[0], rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2],
-                stages=self.emulator_["stages"])
-            found.update(stages=self.emulator_["stages"], truncated=truncated)
+            start_points, truncated = work.search(stage_rng, seeds[1], seeds[2])
+            found.update(stages=work.stages, truncated=truncated)
         self.pitch_errors_ = None
         if self.pitch_correction:
-            start_points, truncated = self._correct_pitch_errors(rig, design, start_points, truncated, stage_rng,
-                                                                 seeds[5:8], steps)
+            self.pitch_errors_, start_points, truncated = work.correct_pitch_errors(
+                rig, start_points, truncated, stage_rng, seeds[5:8], steps, channels=self.channels,
+                draws=self.pitch_draws, classes=self.pitch_classes)
         with steps.step("final sampling") as found:
-            self._final_sampling(start_points, stage_rng, seeds[3], truncated)
+            self.diagnostics_, self.posterior_, self.summary_ = work.final_sampling(
+                start_points, stage_rng, seeds[3], truncated, chunk_steps=self.chunk_steps, max_steps=self.max_steps,
+                criteria=ConvergenceCriteria(self.autocorr_factor, self.rhat_threshold, self.min_ess))
+            self.converged_ = bool(self.diagnostics_["converged"])
             found.update(converged=self.converged_)
         with steps.step("posterior predictive check"):
-            self._predictive_check(np.random.default_rng(seeds[4]))
+            self.predictive_, self.predictive_check_ = work.predictive_check(
+                self.posterior_, self.summary_, np.random.default_rng(seeds[4]), draws=self.predictive_draws)
+        # read at the end: the pitch-error correction may replace the features, and its resumed search the box
+        features, likelihood = work.features, work.likelihood
+        self._features, self._likelihood = features, likelihood
+        self.log_observed_, self.noise_variance_ = features.log_observed, features.noise_variance
+        self.box_lower_, self.box_upper_, self.loo_rms_ = likelihood.box_lower, likelihood.box_upper, likelihood.loo_rms
+        self.model_runs_ = model.count
         self.timing_ = {"wall_s": time.perf_counter() - wall_start, "cpu_s": time.process_time() - cpu_start,
                         "model_runs": int(self.model_runs_), "order_tracking_s": tracking_s,
                         "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds,
                         # each step's wall time, in order (the box search, any correction, sampling, the check)
                         "steps_s": {entry["step"]: entry["seconds"] for entry in steps.finished}}
         return self
-
-    # ------------------------------------------------------------------ steps of fit
-
-    def _prepare_data(self, rig: xr.Dataset, design: Design) -> None:
-        self._features = observed_features(rig, design, channels=self.channels, n_harmonics=self.n_harmonics,
-                                           min_snr=self.min_snr, model_error_range=self.model_error_range)
-        self.observed_ = self._features.observed
-        self.n_op_ = rig.sizes["op"]
-        self.used_ = self._features.used
-        self.log_observed_ = self._features.log_observed
-        self.noise_variance_ = self._features.noise_variance
-        self.operating_ = operating_points(rig)
-        self.model_error_grid_ = self._features.model_error_grid
-
-    def _prepare_space(self, design: Design) -> None:
-        self.bounds_ = prior_bounds(design, self.parameters, self.priors)
-        self.prior_lower_, self.prior_upper_ = prior_box(self.bounds_, self.parameters, self.operating_)
-        self.n_global_ = len(self.parameters)
-        self.n_dim_ = self.n_global_ + self.n_op_
-        self.model_runs_ = 0
-
-    def _run_model(self, points: list[np.ndarray]) -> np.ndarray:
-        """Log features (op, M, channel, harmonic) of the real model at physical points (M, n_global + 1) per run."""
-        values = model_log_features(points, design=self.design_, parameters=self.parameters,
-                                    operating=self.operating_, effects=self.effects, n_harmonics=self.n_harmonics,
-                                    transient=self.transient, window=self.window, threads=self.threads)
-        self.model_runs_ += values.shape[0] * values.shape[1]
-        return values
-
-    def _correct_pitch_errors(self, rig: xr.Dataset, design: Design, points: np.ndarray, truncated: bool,
-                              stage_rng: np.random.Generator, seeds: Sequence[np.random.SeedSequence],
-                              steps: StepLog) -> tuple[np.ndarray, bool]:
-        """The pitch-error correction at the medians of posterior draws (physical, (M, n_dim)) and, where
-        applied, the box search resumed on the corrected features; the new start points and truncation."""
-        with steps.step("pitch-error correction (rig sidebands, model draws at the posterior medians)") as found:
-            medians = np.median(points, axis=0)
-            self.pitch_errors_ = correction = pitch_error_correction(
-                rig, design, self._features, dict(zip(self.parameters, medians[:self.n_global_])),
-                medians[self.n_global_:], seed=seeds[0], effects=self.effects, channels=self.channels,
-                n_harmonics=self.n_harmonics, draws=self.pitch_draws, classes=self.pitch_classes)
-            found.update(applied=correction.applied, reason=correction.reason)
-        if not correction.applied:
-            return points, truncated
-        with steps.step("search the posterior box again (corrected features)") as found:
-            self._features = correction.apply(self._features)
-            self.log_observed_ = self._features.log_observed
-            self.noise_variance_ = self._features.noise_variance
-            # resumed in the last box, on its emulators: only the features changed
-            self._likelihood = self._likelihood.with_features(self._features)
-            points, truncated = search_box(
-                self._fit_stage, self.prior_lower_, self.prior_upper_, used=self.used_,
-                walkers=self._walker_count(), stage_steps=self.stage_steps, max_stages=self.max_stages,
-                error_floor=self.model_error_range[0], rng=stage_rng, design_seed=seeds[1], chain_seed=seeds[2],
-                stages=self.emulator_["stages"], start_likelihood=self._likelihood, start_points=points)
-            found.update(stages=self.emulator_["stages"], truncated=truncated)
-        return points, truncated
-
-    def _fit_stage(self, box_lower: np.ndarray, box_upper: np.ndarray,
-                   seed: np.random.SeedSequence) -> StageLikelihood:
-        """Train the emulators in a box and make their likelihood the current one."""
-        emulators, loo = train_emulators(box_lower, box_upper, seed, run_model=self._run_model,
-                                         n_global=self.n_global_, n_op=self.n_op_, n_training=self.n_training,
-                                         degree=self.emulator_degree)
-        self._likelihood = StageLikelihood(box_lower, box_upper, emulators, loo, self._features, self.n_global_)
-        self.box_lower_, self.box_upper_ = self._likelihood.box_lower, self._likelihood.box_upper
-        self.loo_rms_ = self._likelihood.loo_rms
-        return self._likelihood
-
-    def _walker_count(self) -> int:
-        return walker_count(self.n_walkers, self.n_dim_)
-
-    def _parameter_names(self) -> list[str]:
-        return list(self.parameters) + [f"adhesion_torque[{op}]" for op in range(self.n_op_)]
-
-    def _final_sampling(self, start_points: np.ndarray, rng: np.random.Generator, seed: np.random.SeedSequence,
-                        truncated: bool) -> None:
-        criteria = ConvergenceCriteria(self.autocorr_factor, self.rhat_threshold, self.min_ess)
-        verdict, physical, log_likelihood = final_sampling(
-            self._likelihood, start_points, rng, seed, walkers=self._walker_count(), chunk_steps=self.chunk_steps,
-            max_steps=self.max_steps, criteria=criteria, names=self._parameter_names(), truncated=truncated)
-        self.diagnostics_ = verdict
-        self.converged_ = bool(verdict["converged"])
-        self.posterior_ = posterior_dataset(physical, log_likelihood, parameters=self.parameters,
-                                            bounds=self.bounds_, operating=self.operating_,
-                                            converged=self.converged_)
-        self.summary_ = posterior_summary(physical, parameters=self.parameters, bounds=self.bounds_,
-                                          operating=self.operating_, likelihood=self._likelihood,
-                                          features=self._features)
-
-    def _predictive_check(self, rng: np.random.Generator) -> None:
-        self.predictive_, self.predictive_check_ = predictive_check(
-            self.posterior_, rng, parameters=self.parameters, draws=self.predictive_draws, features=self._features,
-            likelihood=self._likelihood, model_error=self.summary_["model_error"],
-            pinion_speed=self.operating_["pinion_speed"], run_model=self._run_model)
 
     # ------------------------------------------------------------------ results
 

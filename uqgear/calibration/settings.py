@@ -6,6 +6,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from ..physics.design import Design
 from ..uq.seeds import as_seed_sequence
 from .errors import CalibrationError
 from .harmonics import HARMONIC_CHANNELS
@@ -15,6 +16,20 @@ from .priors import PARAMETER_ALIASES
 def as_seed(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
     """The seed as a SeedSequence (fresh entropy for None)."""
     return np.random.SeedSequence() if seed is None else as_seed_sequence(seed, error=CalibrationError)
+
+
+def check_design(design: object) -> Design | None:
+    """None, or ``design`` if it is a uqgear Design."""
+    if design is not None and not isinstance(design, Design):
+        raise CalibrationError(f"design: expected a uqgear Design; got {type(design).__name__}")
+    return design
+
+
+def check_bool(name: str, value: object) -> bool:
+    """``value`` as a bool, if it is true or false."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise CalibrationError(f"{name}: expected true or false; got {value!r}")
+    return bool(value)
 
 
 def check_int(name: str, value: object, lowest: int) -> int:

@@ -58,6 +58,50 @@ def model_log_features(points: Sequence[np.ndarray], *, design: Design, paramete
     return restored.reshape(n_op, count, len(HARMONIC_CHANNELS), n_harmonics)
 
 
+class ModelRuns:
+    """The real model of one calibration (:func:`model_log_features` with its settings), counting its runs.
+
+    Parameters
+    ----------
+    design : Design
+        The nominal design.
+    parameters : sequence of str
+        The global parameters, in the order of the points' columns.
+    operating : mapping
+        Speed, drive torque and T2 interval of each run
+        (:func:`~uqgear.calibration.likelihood.operating_points`).
+    effects : sequence of Effect
+        Model extensions with fixed parameters.
+    n_harmonics : int
+        Mesh harmonics per channel.
+    transient, window : float
+        Settings of :func:`~uqgear.calibration.harmonics.model_harmonics` (s).
+    threads : int or None
+        Threads of the model runs (None: all cores).
+
+    Attributes
+    ----------
+    count : int
+        Model runs so far (one per operating point and physical point).
+    """
+
+    def __init__(self, *, design: Design, parameters: Sequence[str], operating: Mapping[str, np.ndarray],
+                 effects: Sequence[Effect], n_harmonics: int, transient: float, window: float,
+                 threads: int | None) -> None:
+        self.design, self.parameters, self.operating = design, parameters, operating
+        self.effects, self.n_harmonics = effects, n_harmonics
+        self.transient, self.window, self.threads = transient, window, threads
+        self.count = 0
+
+    def __call__(self, points: Sequence[np.ndarray]) -> np.ndarray:
+        """Log features (op, M, channel, harmonic) at physical points (M, n_global + 1) per run."""
+        values = model_log_features(points, design=self.design, parameters=self.parameters,
+                                    operating=self.operating, effects=self.effects, n_harmonics=self.n_harmonics,
+                                    transient=self.transient, window=self.window, threads=self.threads)
+        self.count += values.shape[0] * values.shape[1]
+        return values
+
+
 def train_emulators(box_lower: np.ndarray, box_upper: np.ndarray, seed: np.random.SeedSequence, *,
                     run_model: Callable[[list[np.ndarray]], np.ndarray], n_global: int, n_op: int,
                     n_training: int, degree: int) -> tuple[list[PolynomialEmulator], np.ndarray]:

@@ -120,7 +120,7 @@ class SobolAnalysis:
         names = self._parameter_names(space)
         held = {name: space.nominal(name) for name in space.uncertain_names if name not in names}
         analysed_space = space.fix(held)
-        problem = self._problem(names)
+        problem = _unit_problem(names)
         rng = np.random.default_rng(child_seed(self.seed_sequence, 0))
         with warnings.catch_warnings():
             # SALib warns about sample sizes; ours are checked to be powers of 2
@@ -140,7 +140,7 @@ class SobolAnalysis:
             "n_base": self.n_base,
             "second_order": int(self.second_order),
             "sobol_parameters": json.dumps(names),
-            "distribution_assumed": self._distribution_text(space, names),
+            "distribution_assumed": _assumed_distributions(space, names),
             "held_at_nominal": json.dumps(held),
             "parameter_space": space.to_json(),
             **seed_attributes(self.seed_sequence),
@@ -191,53 +191,17 @@ class SobolAnalysis:
             qoi_names = list(self.qoi)
         if not qoi_names:
             raise ParameterSpaceError("outputs: no numeric variable with dimension 'sample'")
-        problem = self._problem(names)
+        problem = _unit_problem(names)
         bootstrap_seed = int(child_seed(self.seed_sequence, 1).generate_state(1, np.uint32)[0]) % (2 ** 31 - 1) + 1
         data_vars: dict[str, Any] = {}
         nonfinite: dict[str, int] = {}
         for name in qoi_names:
-            variable = outputs[name].transpose(..., "sample")
-            other_dims = variable.dims[:-1]
-            shape = variable.shape[:-1]
-            columns = np.asarray(variable.values, dtype=float).reshape(-1, size)
-            first_total = np.full((columns.shape[0], len(names), 2), np.nan)
-            confidence = np.full_like(first_total, np.nan)
-            second = np.full((columns.shape[0], len(names), len(names)), np.nan)
-            second_confidence = np.full_like(second, np.nan)
-            bad = 0
-            for row, y in enumerate(columns):
-                if not np.all(np.isfinite(y)):
-                    bad += 1
-                    continue
-                if np.ptp(y) == 0.0:
-                    continue  # variance zero: the indices are undefined
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    indices = salib_analyze.analyze(problem, y, calc_second_order=second_order,
-                                                    num_resamples=self.num_resamples, conf_level=self.conf_level,
-                                                    print_to_console=False, seed=bootstrap_seed)
-                first_total[row] = np.stack([indices["S1"], indices["ST"]], axis=-1)
-                confidence[row] = np.stack([indices["S1_conf"], indices["ST_conf"]], axis=-1)
-                if second_order:
-                    second[row] = indices["S2"]
-                    second_confidence[row] = indices["S2_conf"]
+            variables, bad = _qoi_indices(name, outputs[name], problem, names, second_order=second_order,
+                                          num_resamples=self.num_resamples, conf_level=self.conf_level,
+                                          seed=bootstrap_seed)
+            data_vars.update(variables)
             if bad:
                 nonfinite[name] = bad
-            units_note = {"units": "1"}
-            data_vars[name] = ((*other_dims, "param", "index"), first_total.reshape(*shape, len(names), 2),
-                               {**units_note, "long_name": f"Sobol indices of {name}"})
-            data_vars[f"{name}_conf"] = ((*other_dims, "param", "index"), confidence.reshape(*shape, len(names), 2),
-                                         {**units_note, "long_name": f"half-width of the {self.conf_level:g} "
-                                                                     f"bootstrap confidence interval"})
-            if second_order:
-                data_vars[f"{name}_S2"] = ((*other_dims, "param", "param_2"),
-                                           second.reshape(*shape, len(names), len(names)),
-                                           {**units_note, "long_name": f"second-order Sobol indices of {name} "
-                                                                       f"(upper triangle)"})
-                data_vars[f"{name}_S2_conf"] = ((*other_dims, "param", "param_2"),
-                                                second_confidence.reshape(*shape, len(names), len(names)),
-                                                {**units_note, "long_name": "half-width of the bootstrap "
-                                                                            "confidence interval"})
         coords: dict[str, Any] = {dim: outputs.coords[dim] for dim in outputs.coords
                                   if "sample" not in outputs.coords[dim].dims}
         coords.update(param=("param", list(names)), index=("index", list(SOBOL_INDICES)))
@@ -296,18 +260,69 @@ class SobolAnalysis:
             raise ParameterSpaceError("second_order: needs at least two analysed parameters")
         return names
 
-    @staticmethod
-    def _problem(names: Sequence[str]) -> dict[str, Any]:
-        # SALib works in the unit hypercube; the inverse CDFs map to the parameters
-        return {"num_vars": len(names), "names": list(names), "bounds": [[0.0, 1.0]] * len(names)}
 
-    @staticmethod
-    def _distribution_text(space: ParameterSpace, names: Sequence[str]) -> str:
-        assumed = {}
-        for name in names:
-            if name in space.interval_names:
-                assumed[name] = (f"uniform on {space[name].describe()} (assumed for variance-based sensitivity "
-                                 f"only: an interval implies no distribution)")
-            else:
-                assumed[name] = space[name].describe()
-        return json.dumps(assumed)
+def _unit_problem(names: Sequence[str]) -> dict[str, Any]:
+    """SALib's problem over the analysed parameters."""
+    # SALib works in the unit hypercube; the inverse CDFs map to the parameters
+    return {"num_vars": len(names), "names": list(names), "bounds": [[0.0, 1.0]] * len(names)}
+
+
+def _assumed_distributions(space: ParameterSpace, names: Sequence[str]) -> str:
+    """JSON of the distribution each analysed parameter is taken to have (``distribution_assumed``)."""
+    assumed = {}
+    for name in names:
+        if name in space.interval_names:
+            assumed[name] = (f"uniform on {space[name].describe()} (assumed for variance-based sensitivity "
+                             f"only: an interval implies no distribution)")
+        else:
+            assumed[name] = space[name].describe()
+    return json.dumps(assumed)
+
+
+def _qoi_indices(name: str, output: xr.DataArray, problem: Mapping[str, Any], names: Sequence[str], *,
+                 second_order: bool, num_resamples: int, conf_level: float,
+                 seed: int) -> tuple[dict[str, Any], int]:
+    """The index variables of one QoI (:meth:`SobolAnalysis.analyze`), and how many of its sample columns
+    had non-finite values (their indices are NaN)."""
+    variable = output.transpose(..., "sample")
+    other_dims = variable.dims[:-1]
+    shape = variable.shape[:-1]
+    columns = np.asarray(variable.values, dtype=float).reshape(-1, variable.shape[-1])
+    first_total = np.full((columns.shape[0], len(names), 2), np.nan)
+    confidence = np.full_like(first_total, np.nan)
+    second = np.full((columns.shape[0], len(names), len(names)), np.nan)
+    second_confidence = np.full_like(second, np.nan)
+    bad = 0
+    for row, y in enumerate(columns):
+        if not np.all(np.isfinite(y)):
+            bad += 1
+            continue
+        if np.ptp(y) == 0.0:
+            continue  # variance zero: the indices are undefined
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            indices = salib_analyze.analyze(problem, y, calc_second_order=second_order,
+                                            num_resamples=num_resamples, conf_level=conf_level,
+                                            print_to_console=False, seed=seed)
+        first_total[row] = np.stack([indices["S1"], indices["ST"]], axis=-1)
+        confidence[row] = np.stack([indices["S1_conf"], indices["ST_conf"]], axis=-1)
+        if second_order:
+            second[row] = indices["S2"]
+            second_confidence[row] = indices["S2_conf"]
+    units_note = {"units": "1"}
+    data_vars: dict[str, Any] = {}
+    data_vars[name] = ((*other_dims, "param", "index"), first_total.reshape(*shape, len(names), 2),
+                       {**units_note, "long_name": f"Sobol indices of {name}"})
+    data_vars[f"{name}_conf"] = ((*other_dims, "param", "index"), confidence.reshape(*shape, len(names), 2),
+                                 {**units_note, "long_name": f"half-width of the {conf_level:g} "
+                                                             f"bootstrap confidence interval"})
+    if second_order:
+        data_vars[f"{name}_S2"] = ((*other_dims, "param", "param_2"),
+                                   second.reshape(*shape, len(names), len(names)),
+                                   {**units_note, "long_name": f"second-order Sobol indices of {name} "
+                                                               f"(upper triangle)"})
+        data_vars[f"{name}_S2_conf"] = ((*other_dims, "param", "param_2"),
+                                        second_confidence.reshape(*shape, len(names), len(names)),
+                                        {**units_note, "long_name": "half-width of the bootstrap "
+                                                                    "confidence interval"})
+    return data_vars, bad
