@@ -318,6 +318,29 @@ def test_blind_test_scores_effect_sets():
     spec = blind_test.CampaignSpec("eccentricity-0", "eccentricity", "strong", 12e-6, "reference",
                                    {"amplitude": 12e-6, "shaft": "gear"}, {})
     assert spec.truth_set() == ["eccentricity"]
+    # old entries record no run-outs left untold: nothing counted
+    assert sets["effects_missed"] == 0 and sets["controls_with_cannot_tell"] == 0
+
+
+def test_blind_test_counts_missed_effects_reported_as_not_told_apart():
+    campaigns = [
+        # the run-out missed and reported on its shaft; friction named
+        {"truth": "eccentricity", "truth_effects": ["eccentricity", "friction"], "verdict": "friction",
+         "effects_named": ["friction"], "cannot_tell": ["eccentricity[pinion]"]},
+        # missed, not reported
+        {"truth": "eccentricity", "truth_effects": ["eccentricity"], "verdict": "none", "effects_named": [],
+         "cannot_tell": []},
+        # named: nothing missed (a report on the other gear is not counted for it)
+        {"truth": "eccentricity", "truth_effects": ["eccentricity"], "verdict": "eccentricity",
+         "effects_named": ["eccentricity"], "cannot_tell": ["eccentricity[gear]"]},
+        {"truth": "none", "verdict": "none", "effects_named": [], "cannot_tell": ["eccentricity[gear]"]},
+        {"truth": "none", "verdict": "none", "effects_named": [], "cannot_tell": []},
+    ]
+    sets = blind_test.set_scores(campaigns, ["eccentricity", "friction"])
+    assert sets["effects_missed"] == 2 and sets["effects_missed_reported_cannot_tell"] == 1
+    # a report is not a named effect: the controls stay right
+    assert sets["controls_with_cannot_tell"] == 1 and sets["controls_with_an_effect_named"] == 0
+    assert sets["set_exact"] == pytest.approx(3 / 5)
     assert blind_test.CampaignSpec("none-0", "none", "-", 0.0, "reference", {}, {}).truth_set() == []
 
 

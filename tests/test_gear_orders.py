@@ -17,8 +17,10 @@ import numpy as np
 import pytest
 
 from uqgear.diagnosis.discrepancy import FeatureLayout
-from uqgear.diagnosis.gear_orders import (ORDERS, drawn_amplitudes, factor_bounds, factors_summary,
-                                          fitted_factors, line_groups, order_powers, scaled_line_errors)
+from uqgear.diagnosis.gear_orders import (ORDERS, bounds_of, class_powers, drawn_amplitudes, factor_bounds,
+                                          factors_summary, fitted_factors, line_groups, order_powers,
+                                          scaled_line_errors, share_below)
+from uqgear.diagnosis.manufacturing import LARGE_RUN_OUT_SHARE, PitchErrorAllowance, run_outs_not_told_apart
 from uqgear.physics.pitch_errors import draw_pitch_errors
 
 
@@ -46,6 +48,52 @@ def test_the_factor_range_brackets_one_and_two_classes_up_double_every_tolerance
     # the draws' RMS first-order |E_1| is a run-out of micrometres on class-7 gears (docs/model.md 6.4)
     amplitudes = drawn_amplitudes(drawn)
     assert 3e-6 < amplitudes[("pinion", 1)] < 30e-6 and amplitudes[("gear", 1)] > amplitudes[("pinion", 1)]
+
+
+def test_the_share_of_class_gears_below_a_read_factor_is_the_exponential_distribution(design):
+    """|E_1|^2 of one class is exponential (E_1 sums many independent deviations): P(below f x mean) = 1 - exp(-f)."""
+    drawn = [draw_pitch_errors(design, 7, np.random.default_rng(3)) for _ in range(12)]
+    spread = class_powers(design, (7, 7), drawn, np.random.default_rng(0), draws=4000)
+    assert bounds_of(spread) == factor_bounds(design, (7, 7), drawn, np.random.default_rng(0), draws=4000)
+    for key, (powers, mean) in spread.items():
+        # a factor on the allowance's mean power that is f times the classes' own mean power
+        for f in (0.5, 1.0, 2.3):
+            share = share_below(spread, {key: f * powers.mean() / mean})[key]
+            assert share == pytest.approx(1.0 - math.exp(-f), abs=0.03), (key, f, share)
+    # the larger the run-out read, the larger the share below it
+    key = ("pinion", 1)
+    assert share_below(spread, {key: 0.1})[key] < share_below(spread, {key: 1.0})[key] < share_below(
+        spread, {key: 5.0})[key]
+
+
+def _allowance(design, shares: dict, factors: dict) -> PitchErrorAllowance:
+    drawn = tuple(draw_pitch_errors(design, 7, np.random.default_rng(seed)) for seed in range(12))
+    return PitchErrorAllowance(True, "test", (6.0, 8.0), {}, len(drawn), {}, 0.0, 0.0, 0.0,
+                               {"pinion": 22e-6, "gear": 52e-6}, drawn, {key: (0.01, 5.0) for key in factors},
+                               factors, shares)
+
+
+def test_a_first_order_error_large_for_the_classes_is_reported_as_a_run_out_that_cannot_be_told(design):
+    factors = {("pinion", 1): 3.0, ("gear", 1): 0.5, ("gear", 2): 4.0}
+    allowance = _allowance(design, {("pinion", 1): 0.93, ("gear", 1): 0.4, ("gear", 2): 0.97}, factors)
+    reports = run_outs_not_told_apart(allowance, [])
+    # the first order only: a large second-order error is no run-out
+    assert [(entry["effect"], entry["shaft"]) for entry in reports] == [("eccentricity", "pinion")]
+    entry = reports[0]
+    # the run-out read is the draws' RMS |E_1| times the square root of the factor (independently from the draws)
+    rms = math.sqrt(np.mean([order_powers(errors.pinion)[0] for errors in allowance.drawn_errors]))
+    assert entry["run_out_m"] == pytest.approx(rms * math.sqrt(3.0), rel=1e-12)
+    assert entry["share_of_class_gears_below"] == 0.93 and entry["classes"] == [6.0, 8.0]
+    assert "pinion" in entry["reason"] and "93 %" in entry["reason"] and "cannot tell" in entry["reason"]
+    # an eccentricity named on that shaft settles it; at the threshold it is reported, below it not
+    assert run_outs_not_told_apart(allowance, ["pinion"]) == []
+    at = _allowance(design, {("pinion", 1): LARGE_RUN_OUT_SHARE, ("gear", 1): LARGE_RUN_OUT_SHARE - 1e-9},
+                    factors)
+    assert [entry["shaft"] for entry in run_outs_not_told_apart(at, [])] == ["pinion"]
+    # no allowance, nothing to report
+    assert run_outs_not_told_apart(None, []) == []
+    not_applied = PitchErrorAllowance(False, "no classes", None, {}, 0, {}, 0.0, 0.0, 0.0)
+    assert run_outs_not_told_apart(not_applied, []) == []
 
 
 def _case(observed: np.ndarray, noise: float):

@@ -252,9 +252,27 @@ def test_the_report_shows_each_gear_orders_factor_on_the_pitch_error_allowance_w
                "order_factors": {"gear": {"2": {"factor": 0.0805, "low": 0.0108, "high": 6.49, "amplitude_m": 2.1e-6,
                                                 "amplitude_range_m": [0.8e-6, 19.0e-6]}},
                                  "pinion": {"1": {"factor": 3.32, "low": 0.00545, "high": 4.43,
-                                                  "amplitude_m": 27.9e-6, "amplitude_range_m": [1.1e-6, 31.2e-6]}}}}
+                                                  "amplitude_m": 27.9e-6, "amplitude_range_m": [1.1e-6, 31.2e-6],
+                                                  "share_of_class_gears_below": 0.957}}}}
     notes = _pitch_error_notes({"pitch_errors": applied, "ranking": []})
     assert len(notes) == 3 and "one draw, the same in every run" in notes[1]
     table = notes[2]
     assert table.count("<tr>") == 3 and "0.0108 to 6.49" in table and "0.00545 to 4.43" in table
     assert ">pinion<" in table and ">gear<" in table and "1.1 to 31.2" in table and "run-out" in notes[1]
+    # the share of class gears below what was read (absent in older summaries: a dash)
+    assert "class gears below" in table and ">96 %<" in table and ">-<" in table
+
+
+def test_a_run_out_that_cannot_be_told_from_pitch_errors_is_a_headline_finding():
+    from uqgear.report.diagnosis_report import diagnosis_findings
+
+    reason = ("the pinion's first-order lines read as a run-out of 20 um along the line of action, more than 92 % "
+              "of ISO 1328-1 class 6 to 8 pinions have from their pitch errors: ...")
+    content = {"verdict": "friction", "reason": "friction named", "effects": [], "gap": {}, "where": [],
+               "rig": {"n_op": 8}, "borderline": [],
+               "cannot_tell": [{"effect": "eccentricity", "shaft": "pinion", "run_out_m": 20e-6,
+                                "share_of_class_gears_below": 0.92, "classes": [6, 8], "reason": reason}]}
+    findings = [f for f in diagnosis_findings(content) if f.topic == "cannot_tell"]
+    assert len(findings) == 1 and findings[0].text == f"Cannot tell: {reason}."
+    assert findings[0].facts["shaft"] == "pinion" and findings[0].facts["run_out_m"] == 20e-6
+    assert not [f for f in diagnosis_findings({**content, "cannot_tell": []}) if f.topic == "cannot_tell"]

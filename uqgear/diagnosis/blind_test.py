@@ -35,7 +35,8 @@ from ..physics.design import Design, load_design
 from .case import RunExecutor, RunTask, execute_run, execute_runs, prepare_case
 from .discrepancy import expected_rig_features, standardised_discrepancy
 from .errors import DiagnosisError
-from .outputs import _json_clean
+from .manufacturing import run_outs_not_told_apart
+from .outputs import _json_clean, named_shafts
 from .pipeline import run_diagnosis
 from .scoring import capped_squares
 from .verdict import EFFECT_NAMES, NOISE_GAP_THRESHOLD, VERDICTS
@@ -496,6 +497,9 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "shrink_interval": [named.shrink_low, named.shrink_high] if named is not None else None,
             "best_candidate": best.effect if best is not None else None,
             "best_score": best.score if best is not None else None,
+            # run-outs the lines cannot tell from the gears' own pitch errors (reported, not named)
+            "cannot_tell": [f"{entry['effect']}[{entry['shaft']}]"
+                            for entry in run_outs_not_told_apart(result.pitch_errors, named_shafts(result))],
             "seconds": time.perf_counter() - clock,
         }
         campaigns.append(entry)
@@ -575,13 +579,20 @@ def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -
                           for c, wanted in zip(campaigns, identifiable)]
     multi = [ok for c, ok in zip(campaigns, exact) if len(_truth_set(c)) > 1]
     controls = [c for c in campaigns if not _truth_set(c)]
+    # effects missed but reported as not told apart from the gears' own errors (campaigns that record it)
+    recorded = [c for c in campaigns if c.get("cannot_tell") is not None]
+    missed = [(c, name) for c in recorded for name in sorted(_truth_set(c) - _named_set(c))]
     return {"per_effect": rows, "set_exact": sum(exact) / len(exact) if exact else math.nan,
             "set_exact_identifiable": sum(exact_identifiable) / len(exact_identifiable) if exact_identifiable
             else math.nan,
             "effects_not_identifiable": sum(len(_truth_set(c) - wanted) for c, wanted in zip(campaigns, identifiable)),
             "n_multi_effect": len(multi), "set_exact_multi_effect": sum(multi) / len(multi) if multi else None,
             "n_controls": len(controls),
-            "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c))}
+            "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c)),
+            "effects_missed": len(missed),
+            "effects_missed_reported_cannot_tell": sum(1 for c, name in missed
+                                                       if any(label.startswith(f"{name}[") for label in c["cannot_tell"])),
+            "controls_with_cannot_tell": sum(1 for c in controls if c.get("cannot_tell"))}
 
 
 def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *, seconds: float = math.nan,

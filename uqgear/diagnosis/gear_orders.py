@@ -86,26 +86,47 @@ def drawn_amplitudes(drawn_errors: Sequence[PitchErrors]) -> dict[tuple[str, int
             for gear, powers in _mean_powers(drawn_errors).items() for order, power in zip(ORDERS, powers)}
 
 
-def factor_bounds(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
-                  rng: np.random.Generator, *, quantiles: tuple[float, float] = FACTOR_QUANTILES,
-                  draws: int = _BOUND_DRAWS) -> dict[tuple[str, int], tuple[float, float]]:
-    """Per (gear, order): the range of |E_j|^2 that gears of ``classes`` give, over the allowance draws' mean.
+def class_powers(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
+                 rng: np.random.Generator, *, draws: int = _BOUND_DRAWS
+                 ) -> dict[tuple[str, int], tuple[np.ndarray, float]]:
+    """Per (gear, order): |E_j|^2 of ``draws`` gears of ``classes`` (tooth positions only), and the allowance draws' mean.
 
     Levels are drawn uniformly over the classes (tolerances grow by sqrt(2)
-    a class), as the allowance spreads its draws.
+    a class), as the allowance spreads its draws. The spread of the gears
+    the stated classes make, against the allowance's own power
+    (:func:`bounds_of`, :func:`share_below`).
     """
     powers = {gear: np.empty((draws, len(ORDERS))) for gear in _GEARS}
     for index in range(draws):
         drawn = draw_in_classes(design, classes, rng.random(), rng)
         for gear in _GEARS:
             powers[gear][index] = order_powers(getattr(drawn, gear))
+    return {(gear, order): (powers[gear][:, position], max(float(allowed[position]), 1e-300))
+            for gear, allowed in _mean_powers(drawn_errors).items() for position, order in enumerate(ORDERS)}
+
+
+def bounds_of(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
+              quantiles: tuple[float, float] = FACTOR_QUANTILES) -> dict[tuple[str, int], tuple[float, float]]:
+    """Per group, the ``quantiles`` of :func:`class_powers` over the allowance's mean: the range its factor is held to."""
     bounds = {}
-    for gear, allowed in _mean_powers(drawn_errors).items():
-        low, high = np.quantile(powers[gear], quantiles, axis=0)
-        for position, order in enumerate(ORDERS):
-            mean = max(float(allowed[position]), 1e-300)
-            bounds[(gear, order)] = (float(low[position]) / mean, float(high[position]) / mean)
+    for key, (powers, mean) in spread.items():
+        low, high = np.quantile(powers, quantiles)
+        bounds[key] = (float(low) / mean, float(high) / mean)
     return bounds
+
+
+def factor_bounds(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
+                  rng: np.random.Generator, *, quantiles: tuple[float, float] = FACTOR_QUANTILES,
+                  draws: int = _BOUND_DRAWS) -> dict[tuple[str, int], tuple[float, float]]:
+    """Per (gear, order): the range of |E_j|^2 that gears of ``classes`` give, over the allowance draws' mean."""
+    return bounds_of(class_powers(design, classes, drawn_errors, rng, draws=draws), quantiles)
+
+
+def share_below(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
+                factors: Mapping[tuple[str, int], float]) -> dict[tuple[str, int], float]:
+    """Per group, the share of gears of the stated classes whose |E_j| is below the one a fit read (its factor)."""
+    return {key: float(np.mean(spread[key][0] < factor * spread[key][1]))
+            for key, factor in factors.items() if key in spread}
 
 
 def line_groups(case: RigCase) -> dict[tuple[str, int], np.ndarray]:
@@ -194,12 +215,15 @@ def scaled_to_rig(case: RigCase, model: np.ndarray, allowance_line: np.ndarray, 
 
 def factors_summary(factors: Mapping[tuple[str, int], float],
                     bounds: Mapping[tuple[str, int], tuple[float, float]],
-                    amplitudes: Mapping[tuple[str, int], float]) -> dict[str, dict[str, dict[str, Any]]]:
+                    amplitudes: Mapping[tuple[str, int], float],
+                    shares: Mapping[tuple[str, int], float] | None = None) -> dict[str, dict[str, dict[str, Any]]]:
     """JSON-ready: per gear and order, the fitted factor and its range, and what they are as |E_j| in m.
 
     ``amplitudes`` are the draws' RMS |E_j| (:func:`drawn_amplitudes`): the
     gear's |E_j| as the fit reads it is that times the square root of its
     factor (for the first order, the gear's run-out from its pitch errors).
+    ``shares`` (:func:`share_below`), where given, become
+    ``share_of_class_gears_below``.
     """
     summary: dict[str, dict[str, dict[str, Any]]] = {}
     for (gear, order), factor in sorted(factors.items()):
@@ -208,8 +232,11 @@ def factors_summary(factors: Mapping[tuple[str, int], float],
         summary.setdefault(gear, {})[str(order)] = {
             "factor": factor, "low": low, "high": high, "amplitude_m": rms * math.sqrt(factor),
             "amplitude_range_m": [rms * math.sqrt(low), rms * math.sqrt(high)]}
+        if shares is not None and (gear, order) in shares:
+            summary[gear][str(order)]["share_of_class_gears_below"] = shares[(gear, order)]
     return summary
 
 
-__all__ = ["ORDERS", "FACTOR_QUANTILES", "order_powers", "drawn_amplitudes", "factor_bounds", "line_groups",
+__all__ = ["ORDERS", "FACTOR_QUANTILES", "order_powers", "drawn_amplitudes", "class_powers", "factor_bounds",
+           "bounds_of", "share_below", "line_groups",
            "fitted_factors", "scaled_line_errors", "scaled_to_rig", "factors_summary"]

@@ -54,7 +54,7 @@ from ..uq.seeds import child_seed
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitProblem, FitResult, fit, robust_cost
-from .gear_orders import drawn_amplitudes, factor_bounds, factors_summary, scaled_to_rig
+from .gear_orders import bounds_of, class_powers, drawn_amplitudes, factors_summary, scaled_to_rig, share_below
 
 #: ISO 1328-1 classes assumed when none are stated: the usual range of traction gears.
 DEFAULT_CLASSES: tuple[float, float] = (6.0, 8.0)
@@ -110,6 +110,8 @@ class PitchErrorAllowance:
     # factor in it (:mod:`uqgear.diagnosis.gear_orders`); ``absolute`` holds the lines scaled by it
     factor_bounds: dict[tuple[str, int], tuple[float, float]] = field(default_factory=dict)
     factors: dict[tuple[str, int], float] = field(default_factory=dict)
+    # per group, the share of gears of the stated classes with a smaller |E_j| than the nominal fit read
+    class_shares: dict[tuple[str, int], float] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready record (``pitch_errors`` of ``diagnosis.json``)."""
@@ -121,8 +123,8 @@ class PitchErrorAllowance:
                 "draws": self.draws, "largest_line_error_to_noise": self.largest_line_ratio,
                 "noise_floor_share_of_lines": self.floor_share,
                 "run_out_within_pitch_errors_m": dict(self.run_out_bound),
-                "order_factors": factors_summary(self.factors, self.factor_bounds,
-                                                 drawn_amplitudes(self.drawn_errors)) if self.factors else {},
+                "order_factors": factors_summary(self.factors, self.factor_bounds, drawn_amplitudes(self.drawn_errors),
+                                                 self.class_shares) if self.factors else {},
                 "seconds": self.seconds,
                 "method": "the nominal fit simulated with random ISO 1328-1 pitch-error draws over the stated "
                           "classes; each feature's mean square change becomes absolute model error"}
@@ -219,7 +221,8 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     drawn_errors = [draw_in_classes(case.design, classes, position, rng) for position in positions]
     absolute, forest_share = allowance_errors(case, nominal.problem, nominal.vector, drawn_errors)
     # the rig's gears are one draw: each (gear, order) group's share scaled to what the rig shows
-    ranges = factor_bounds(case.design, classes, drawn_errors, np.random.default_rng(child_seed(seed, 1)))
+    spread = class_powers(case.design, classes, drawn_errors, np.random.default_rng(child_seed(seed, 1)))
+    ranges = bounds_of(spread)
     absolute["line"], factors = scaled_to_rig(case, nominal.model, absolute["line"], case.model_error, ranges)
     line = np.array(case.layout.kinds) == "line"
     ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
@@ -231,7 +234,8 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     return PitchErrorAllowance(True, reason, classes, visible, draws, absolute,
                                float(finite.max()) if finite.size else 0.0,
                                float(np.median(forest_share[case.usable])) if case.usable.any() else 0.0,
-                               time.perf_counter() - started, bounds, tuple(drawn_errors), ranges, factors)
+                               time.perf_counter() - started, bounds, tuple(drawn_errors), ranges, factors,
+                               share_below(spread, factors))
 
 
 def allowance_errors(case: RigCase, problem: FitProblem, vector: np.ndarray, drawn_errors: Sequence[PitchErrors]
@@ -353,3 +357,57 @@ def modulation_gain(result: FitResult) -> float:
     model, _ = problem.model_features([vector])
     off = robust_cost(problem.residual_vector(problem.discrepancy(model[0])[0], vector))
     return float(off - result.cost)
+
+
+#: A gear whose first-order errors read larger than this share of the stated classes' gears is reported
+#: (:func:`run_outs_not_told_apart`): by construction one gear in ten of those classes is, with no run-out.
+LARGE_RUN_OUT_SHARE = 0.9
+
+
+def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts: Sequence[str]
+                            ) -> list[dict[str, Any]]:
+    """Gears whose first-order errors read as a run-out large for their classes, with no eccentricity named there.
+
+    A gear's first-order pitch error is a run-out exactly as an eccentric
+    shaft's (both move its shaft line 1 in the same way, and its first
+    sidebands mostly through the rest of its errors), so a run-out of a
+    size the stated classes make is the gear's own to the diagnosis
+    (:mod:`.gear_orders`). Where the nominal fit read the gear's first order
+    as larger than :data:`LARGE_RUN_OUT_SHARE` of such gears have, a shaft
+    run-out may be part of it: the diagnosis cannot tell, and says so
+    rather than naming an eccentricity or nothing.
+
+    Parameters
+    ----------
+    allowance : PitchErrorAllowance or None
+        The case's allowance (nothing is reported where none was applied).
+    named_shafts : sequence of str
+        Shafts ("pinion", "gear") whose eccentricity was named.
+
+    Returns
+    -------
+    list of dict
+        Per such gear: ``effect`` (eccentricity), ``shaft``, ``run_out_m``
+        (the |E_1| the nominal fit read, along the line of action),
+        ``share_of_class_gears_below``, ``classes``, ``run_out_95_m`` (the
+        classes' 95 % first-order run-out) and ``reason``.
+    """
+    if allowance is None or not allowance.applied or not allowance.class_shares or allowance.classes is None:
+        return []
+    amplitudes = drawn_amplitudes(allowance.drawn_errors)
+    low, high = allowance.classes
+    found = []
+    for shaft in ("pinion", "gear"):
+        share = allowance.class_shares.get((shaft, 1))
+        if share is None or share < LARGE_RUN_OUT_SHARE or shaft in named_shafts:
+            continue
+        run_out = amplitudes[(shaft, 1)] * math.sqrt(allowance.factors[(shaft, 1)])
+        found.append({
+            "effect": "eccentricity", "shaft": shaft, "run_out_m": run_out, "share_of_class_gears_below": share,
+            "classes": [low, high], "run_out_95_m": allowance.run_out_bound.get(shaft),
+            "reason": f"the {shaft}'s first-order lines read as a run-out of {1e6 * run_out:.3g} um along the line "
+                      f"of action, more than {100 * share:.0f} % of ISO 1328-1 class {low:g} to {high:g} "
+                      f"{shaft}s have from their pitch errors: an eccentric {shaft} shaft may be part of it, and "
+                      f"the lines cannot tell a shaft's run-out from the {shaft}'s own first-order errors here "
+                      f"(a run-out measurement of the {shaft} can)"})
+    return found

@@ -261,6 +261,11 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
     if not content.get("borderline"):
         findings.append(Finding("No borderline figure: none of the figures that decided the verdict has its "
                                 "threshold inside its 90 % interval.", {"borderline": []}, "borderline"))
+    for entry in content.get("cannot_tell") or []:
+        findings.append(Finding(f"Cannot tell: {entry['reason']}.",
+                                {key: entry.get(key) for key in ("effect", "shaft", "run_out_m",
+                                                                 "share_of_class_gears_below", "classes")},
+                                "cannot_tell"))
     return findings
 
 
@@ -348,7 +353,8 @@ def _pitch_error_notes(content: Mapping[str, Any]) -> list[str]:
     if factors:
         rows = [[gear, order, entry["factor"], f"{entry['low']:.3g} to {entry['high']:.3g}",
                  1e6 * entry["amplitude_m"],
-                 f"{1e6 * entry['amplitude_range_m'][0]:.2g} to {1e6 * entry['amplitude_range_m'][1]:.3g}"]
+                 f"{1e6 * entry['amplitude_range_m'][0]:.2g} to {1e6 * entry['amplitude_range_m'][1]:.3g}",
+                 _percent(entry.get("share_of_class_gears_below"))]
                 for gear, orders in factors.items() for order, entry in orders.items()]
         parts += ['<p class="note">The rig\'s gears are one draw, the same in every run: each gear\'s share of '
                   "the allowance at each shaft order (its shaft line and the sidebands of that order) is scaled "
@@ -357,7 +363,7 @@ def _pitch_error_notes(content: Mapping[str, Any]) -> list[str]:
                   "the line of action (at order 1 its run-out, which an eccentricity within that range cannot "
                   "be told from):</p>",
                   _table(["gear", "shaft order", "factor on the allowance's power", "range", "|E_j| um",
-                          "range um"], rows, (0, 1, 3, 5))]
+                          "range um", "class gears below"], rows, (0, 1, 3, 5, 6))]
     modulated = [r for r in content.get("ranking", []) if r.get("modulation_gain") is not None]
     if modulated:
         parts.append('<p class="note">Pitch errors make a run-out but no mesh-stiffness modulation: an '
@@ -488,13 +494,14 @@ def blindtest_report_html(content: Mapping[str, Any]) -> str:
                      for t in content["thresholds"]], (0, 1, 4)),
              *_effect_set_scores_html(content),
              "<h2>Campaigns</h2>",
-             _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "effects named", "shrink",
-                     "seconds"],
+             _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "effects named",
+                     "cannot tell", "shrink", "seconds"],
                     [[c["id"], " + ".join(c.get("truth_effects") or [c["truth"]]), c["strength"], c["design"],
                       c.get("plan", "service"), c["oracle_gap"], c["verdict"],
-                      " + ".join(c.get("effects_named") or []) or "-", c["shrink_fraction"], c["seconds"]]
+                      " + ".join(c.get("effects_named") or []) or "-", " + ".join(c.get("cannot_tell") or []) or "-",
+                      c["shrink_fraction"], c["seconds"]]
                      for c in content["campaigns"]],
-                    (0, 1, 3, 4, 6, 7))]
+                    (0, 1, 3, 4, 6, 7, 8))]
     return html_page("uqgear blind test", _STYLE, parts)
 
 
@@ -514,6 +521,11 @@ def _effect_set_scores_html(content: Mapping[str, Any]) -> list[str]:
                f"included): "
                f"{_percent(sets['set_exact_identifiable'])} exactly right; effects too faint to tell: "
                f"{sets['effects_not_identifiable']}.</p>"] if "set_exact_identifiable" in sets else []),
+            *([f"<p>Effects missed: {sets['effects_missed']}, of which reported as a run-out the lines cannot "
+               f"tell from the gears' own pitch errors: {sets['effects_missed_reported_cannot_tell']}; healthy "
+               f"controls with such a report: {sets['controls_with_cannot_tell']} of {sets['n_controls']} (one "
+               f"gear in ten of the stated classes has a first-order error that large).</p>"]
+              if "effects_missed_reported_cannot_tell" in sets else []),
             _table(["effect", "acting", "named", "named and acting", "precision", "recall",
                     "median shrink share"],
                    [[r["effect"], r["acting"], r["named"], r["correct"], r["precision"], r["recall"],
