@@ -16,8 +16,7 @@ import numpy as np
 import pytest
 
 from uqgear.diagnosis import blind_test, pipeline, prepare_case
-from uqgear.diagnosis.manufacturing import LARGE_RUN_OUT_SHARE, run_outs_not_told_apart
-from uqgear.diagnosis.outputs import named_shafts
+from uqgear.diagnosis.manufacturing import LARGE_RUN_OUT_SHARE
 
 
 def _real_world_case(seed: int, prefix: str):
@@ -107,7 +106,7 @@ def test_friction_on_class_7_gears_is_named_first_and_no_wrong_effect_with_it():
     if "eccentricity" not in named:
         # not named, but not passed over either: the pinion's first order reads larger than most class-6-8
         # pinions have (about 95 % of them), so the report says a run-out may hide there
-        reports = run_outs_not_told_apart(result.pitch_errors, named_shafts(result))
+        reports = result.cannot_tell()
         assert [entry["shaft"] for entry in reports] == ["pinion"], reports
         assert reports[0]["share_of_class_gears_below"] >= LARGE_RUN_OUT_SHARE
         assert result.pitch_errors.summary()["order_factors"]["pinion"]["1"]["share_of_class_gears_below"] == \

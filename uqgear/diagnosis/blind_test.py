@@ -35,8 +35,7 @@ from ..physics.design import Design, load_design
 from .case import RunExecutor, RunTask, execute_run, execute_runs, prepare_case
 from .discrepancy import expected_rig_features, standardised_discrepancy
 from .errors import DiagnosisError
-from .manufacturing import run_outs_not_told_apart
-from .outputs import _json_clean, named_shafts
+from .outputs import _json_clean
 from .pipeline import run_diagnosis
 from .scoring import capped_squares
 from .verdict import EFFECT_NAMES, NOISE_GAP_THRESHOLD, VERDICTS
@@ -498,8 +497,7 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "best_candidate": best.effect if best is not None else None,
             "best_score": best.score if best is not None else None,
             # run-outs the lines cannot tell from the gears' own pitch errors (reported, not named)
-            "cannot_tell": [f"{entry['effect']}[{entry['shaft']}]"
-                            for entry in run_outs_not_told_apart(result.pitch_errors, named_shafts(result))],
+            "cannot_tell": [f"{entry['effect']}[{entry['shaft']}]" for entry in result.cannot_tell()],
             "seconds": time.perf_counter() - clock,
         }
         campaigns.append(entry)
@@ -590,8 +588,8 @@ def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -
             "n_controls": len(controls),
             "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c)),
             "effects_missed": len(missed),
-            "effects_missed_reported_cannot_tell": sum(1 for c, name in missed
-                                                       if any(label.startswith(f"{name}[") for label in c["cannot_tell"])),
+            "effects_missed_reported_cannot_tell": sum(
+                1 for c, name in missed if any(label.startswith(f"{name}[") for label in c["cannot_tell"])),
             "controls_with_cannot_tell": sum(1 for c in controls if c.get("cannot_tell"))}
 
 

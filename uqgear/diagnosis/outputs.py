@@ -16,7 +16,6 @@ from .case import RigCase, simulate_task
 from .pipeline import DiagnosisResult
 from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
 from .interference import amplitude_spectrum
-from .manufacturing import run_outs_not_told_apart
 from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, SIGNAL_SNR,
                       Decision, line_signal_to_noise)
 
@@ -247,7 +246,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
                        "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD},
         "model_error": case.model_error,
         "pitch_errors": result.pitch_errors.summary() if result.pitch_errors is not None else None,
-        "cannot_tell": run_outs_not_told_apart(result.pitch_errors, named_shafts(result)),
+        "cannot_tell": result.cannot_tell(),
         "line_interference": case.interference,
         "effects_considered": list(result.effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
@@ -255,12 +254,6 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "seed": seed_text,
         "timing_s": dict(timings),
     }
-
-
-def named_shafts(result: DiagnosisResult) -> list[str]:
-    """The shafts whose eccentricity the diagnosis named."""
-    return sorted({dict(candidate.choices)["shaft"] for chosen in result.selected
-                   for candidate in chosen.entry.fit.problem.candidates if candidate.effect == "eccentricity"})
 
 
 def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:

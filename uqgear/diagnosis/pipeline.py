@@ -89,7 +89,7 @@ from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, calibration_start, fit, fit_candidate, fit_nominal, robust_cost
 from .manufacturing import (DEFAULT_CLASSES, PitchErrorAllowance, check_classes, modulation_gain,
-                            pitch_error_allowance, with_own_allowance)
+                            pitch_error_allowance, run_outs_not_told_apart, with_own_allowance)
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
                       shrink_fraction)
 from .signatures import frequency_locked_lines, signature_hints
@@ -211,6 +211,20 @@ class DiagnosisResult:
         """JSON-ready ranking, best first (``modulation_gain`` where it was measured)."""
         return [{**s.figures(), "variant": s.label, "delta_log_density": s.delta_log_density, "penalty": s.penalty,
                  "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
+
+    @property
+    def named_shafts(self) -> list[str]:
+        """The shafts whose eccentricity the diagnosis named."""
+        return sorted({dict(candidate.choices)["shaft"] for chosen in self.selected
+                       for candidate in chosen.entry.fit.problem.candidates if candidate.effect == "eccentricity"})
+
+    def cannot_tell(self) -> list[dict[str, Any]]:
+        """Run-outs the lines cannot tell from the gears' own pitch errors.
+
+        The ``cannot_tell`` entries of ``diagnosis.json``
+        (:func:`~uqgear.diagnosis.manufacturing.run_outs_not_told_apart`).
+        """
+        return run_outs_not_told_apart(self.pitch_errors, self.named_shafts)
 
 
 def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:
