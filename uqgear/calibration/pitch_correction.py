@@ -56,7 +56,7 @@ import xarray as xr
 
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..physics.pitch_errors import REFERENCE_CLASS, PitchErrors, class_level, draw_pitch_errors
+from ..physics.pitch_errors import REFERENCE_CLASS, PitchErrors, class_level, draw_at_level, draw_pitch_errors
 from ..rig.features import extract_features, sampling_rate
 from ..rig.virtual_rig import simulate_campaign
 from .harmonics import HARMONIC_CHANNELS, harmonic_lines, observed_harmonics
@@ -293,8 +293,7 @@ def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, 
             # evenly over the stated classes; tolerances grow by sqrt(2) a class
             levels = class_level(classes, positions)
         for level in levels:
-            errors = draw_pitch_errors(design, REFERENCE_CLASS, draw_rng)
-            scaled = harmonics(simulate(PitchErrors(errors.pinion * level, errors.gear * level)))
+            scaled = harmonics(simulate(draw_at_level(design, level, draw_rng)))
             changes.append(np.log(scaled["amplitude"].values) - base)
     changes = np.array(changes)
     finite = np.all(np.isfinite(changes), axis=0)

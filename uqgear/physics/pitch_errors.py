@@ -190,13 +190,17 @@ def class_level(classes: tuple[float, float], position: float | np.ndarray) -> f
     return math.sqrt(2.0) ** (classes[0] + (classes[1] - classes[0]) * position - REFERENCE_CLASS)
 
 
-def draw_in_classes(design: Design, classes: tuple[float, float], position: float,
-                    rng: np.random.Generator) -> PitchErrors:
-    """Pitch errors drawn at :data:`REFERENCE_CLASS` and scaled to the class at ``position`` across ``classes``."""
+def draw_at_level(design: Design, level: float, rng: np.random.Generator) -> PitchErrors:
+    """Pitch errors drawn at :data:`REFERENCE_CLASS` and scaled by ``level`` (1: that class)."""
     errors = draw_pitch_errors(design, REFERENCE_CLASS, rng)
-    level = class_level(classes, position)
     return PitchErrors(errors.pinion * level, errors.gear * level)
 
 
+def draw_in_classes(design: Design, classes: tuple[float, float], position: float,
+                    rng: np.random.Generator) -> PitchErrors:
+    """Pitch errors drawn at :data:`REFERENCE_CLASS` and scaled to the class at ``position`` across ``classes``."""
+    return draw_at_level(design, class_level(classes, position), rng)
+
+
 __all__ = ["PitchErrors", "iso1328_single_pitch_tolerance", "draw_pitch_errors", "ISO1328_CLASSES",
-           "REFERENCE_CLASS", "class_level", "draw_in_classes"]
+           "REFERENCE_CLASS", "class_level", "draw_at_level", "draw_in_classes"]
