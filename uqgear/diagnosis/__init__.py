@@ -22,7 +22,8 @@ from __future__ import annotations
 from .errors import DiagnosisError
 from .case import prepare_case
 from .verdict import decide, decide_verdict, Decision, EFFECT_NAMES, VERDICTS
-from .pipeline import run_diagnosis, DiagnosisResult
+from .pipeline import run_diagnosis
+from .result import DiagnosisResult
 from .workflow import diagnose, diagnosis_result
 from .blind_test import (
     blindtest, plan_campaigns, summarise, blindtest_dataset, oracle_gap, CampaignSpec, HEALTHY,

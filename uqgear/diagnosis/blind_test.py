@@ -498,6 +498,7 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
             "best_score": best.score if best is not None else None,
             # run-outs the lines cannot tell from the gears' own pitch errors (reported, not named)
             "cannot_tell": [f"{entry['effect']}[{entry['shaft']}]" for entry in result.cannot_tell()],
+            "sideband_phase_log_ratios": {evidence.shaft: evidence.log_ratio for evidence in result.modulation},
             "seconds": time.perf_counter() - clock,
         }
         campaigns.append(entry)

@@ -359,6 +359,22 @@ def modulation_gain(result: FitResult) -> float:
     return float(off - result.cost)
 
 
+def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[float, float]]:
+    """Per gear: the run-out its first-order lines read as (m, along the line of action) and the share of class gears below.
+
+    The run-out is the allowance draws' RMS |E_1| scaled by the factor the
+    nominal fit read off the rig (:func:`.gear_orders.scaled_to_rig`); the
+    share places it among gears of the stated classes
+    (:func:`.gear_orders.share_below`). Empty where no allowance was applied.
+    """
+    if allowance is None or not allowance.applied or not allowance.class_shares:
+        return {}
+    amplitudes = drawn_amplitudes(allowance.drawn_errors)
+    return {shaft: (amplitudes[(shaft, 1)] * math.sqrt(allowance.factors[(shaft, 1)]),
+                    allowance.class_shares[(shaft, 1)])
+            for shaft in ("pinion", "gear") if (shaft, 1) in allowance.class_shares}
+
+
 #: A gear whose first-order errors read larger than this share of the stated classes' gears is reported
 #: (:func:`run_outs_not_told_apart`): by construction one gear in ten of those classes is, with no run-out.
 LARGE_RUN_OUT_SHARE = 0.9
@@ -392,16 +408,13 @@ def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts:
         ``share_of_class_gears_below``, ``classes``, ``run_out_95_m`` (the
         classes' 95 % first-order run-out) and ``reason``.
     """
-    if allowance is None or not allowance.applied or not allowance.class_shares or allowance.classes is None:
+    if allowance is None or allowance.classes is None:
         return []
-    amplitudes = drawn_amplitudes(allowance.drawn_errors)
     low, high = allowance.classes
     found = []
-    for shaft in ("pinion", "gear"):
-        share = allowance.class_shares.get((shaft, 1))
-        if share is None or share < LARGE_RUN_OUT_SHARE or shaft in named_shafts:
+    for shaft, (run_out, share) in first_order_reads(allowance).items():
+        if share < LARGE_RUN_OUT_SHARE or shaft in named_shafts:
             continue
-        run_out = amplitudes[(shaft, 1)] * math.sqrt(allowance.factors[(shaft, 1)])
         found.append({
             "effect": "eccentricity", "shaft": shaft, "run_out_m": run_out, "share_of_class_gears_below": share,
             "classes": [low, high], "run_out_95_m": allowance.run_out_bound.get(shaft),

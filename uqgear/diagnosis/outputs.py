@@ -13,7 +13,7 @@ import xarray as xr
 
 from ..rig.features import FEATURE_FAMILIES
 from .case import RigCase, simulate_task
-from .pipeline import DiagnosisResult
+from .result import DiagnosisResult
 from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
 from .interference import amplitude_spectrum
 from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, SIGNAL_SNR,
@@ -247,6 +247,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "model_error": case.model_error,
         "pitch_errors": result.pitch_errors.summary() if result.pitch_errors is not None else None,
         "cannot_tell": result.cannot_tell(),
+        "sideband_phases": [evidence.summary() for evidence in result.modulation],
         "line_interference": case.interference,
         "effects_considered": list(result.effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
@@ -317,6 +318,7 @@ def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Se
         "model_error": case.model_error,
         "pitch_errors": None,
         "cannot_tell": [],
+        "sideband_phases": [],
         "line_interference": case.interference,
         "effects_considered": list(effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,

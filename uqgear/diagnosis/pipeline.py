@@ -75,7 +75,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -88,10 +87,12 @@ from .candidates import candidates_for
 from .case import FeatureModelError, RigCase
 from .errors import DiagnosisError
 from .fitting import FitResult, calibration_start, fit, fit_candidate, fit_nominal, robust_cost
-from .manufacturing import (DEFAULT_CLASSES, PitchErrorAllowance, check_classes, modulation_gain,
-                            pitch_error_allowance, run_outs_not_told_apart, with_own_allowance)
+from .manufacturing import (DEFAULT_CLASSES, check_classes, first_order_reads, modulation_gain, pitch_error_allowance,
+                            with_own_allowance)
 from .scoring import (CandidateScore, HeldOut, bootstrap_gap, gap_metric, leave_one_out, score_candidate,
                       shrink_fraction)
+from .sideband_phase import ModulationEvidence, fit_modulated_run_out, modulation_evidence, shafts_tested
+from .result import DiagnosisResult, SelectedEffect, SelectionRound
 from .signatures import frequency_locked_lines, signature_hints
 from .verdict import (EFFECT_GAIN_THRESHOLD, EFFECT_NAMES, NOISE_GAP_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD,
                       Decision, decide, decide_verdict, family_character, holds_against_pitch_errors, where_gap)
@@ -102,129 +103,6 @@ PROMOTED = 2
 MAX_EFFECTS = 3
 # Child of the diagnosis seed that draws the pitch errors (the bootstrap uses the seed itself).
 _PITCH_ERROR_STREAM = 7
-
-
-@dataclass
-class SelectedEffect:
-    """One effect of the named set, in the order forward selection added it.
-
-    Attributes
-    ----------
-    entry : CandidateScore
-        Its best fit with the effects named before it (its base) and its
-        held-out scores against the base's held-out predictions.
-    gap_before : float
-        Held-out gap of the base (the nominal model's for the first effect).
-    shrink_share : float
-        How far it shrank the held-out gap, as a fraction of the nominal
-        model's gap: (gap_before - gap with it) / nominal gap. The shares of
-        the set add up to 1 - final gap / nominal gap.
-    decision : Decision
-        The rule that added it (:func:`decide` on top of its base).
-    gap_interval : pair of float
-        Bootstrap 5 % and 95 % quantiles of the held-out gap with it.
-    """
-
-    entry: CandidateScore
-    gap_before: float
-    shrink_share: float
-    decision: Decision
-    gap_interval: tuple[float, float] = (math.nan, math.nan)
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready: effect, variant, fitted parameters with their 90 % intervals, shrink share, scores."""
-        entry = self.entry
-        return {"effect": entry.effect, "variant": entry.label, "parameters": entry.parameters(),
-                "parameter_intervals": entry.parameter_intervals(), "shrink_share": self.shrink_share,
-                "score": entry.score, "shrink_fraction": entry.shrink,
-                "shrink_interval": [entry.shrink_low, entry.shrink_high], "gap_before": self.gap_before,
-                "gap_after": entry.gap, "gap_after_interval": [float(v) for v in self.gap_interval],
-                "effect_gain": entry.effect_gain, "fit": entry.stage,
-                "partial": self.decision.partial}
-
-
-@dataclass
-class SelectionRound:
-    """A forward-selection round after the first effect: what was tried on top of which base, and the outcome."""
-
-    base: tuple[str, ...]
-    gap_before: float
-    scores: list[CandidateScore]          # best variant per effect against the base, best first
-    added: str | None
-    reason: str
-    decision: Decision | None = None
-    gap_interval: tuple[float, float] = (math.nan, math.nan)   # of the best candidate's held-out gap
-
-    def summary(self) -> dict[str, Any]:
-        return {"base": list(self.base), "gap_before": self.gap_before, "added": self.added, "reason": self.reason,
-                "candidates": [{"effect": s.effect, "variant": s.label, "score": s.score,
-                                "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
-                                "gap_with_effect": s.gap, "effect_gain": s.effect_gain, "fit": s.stage,
-                                "parameters": s.parameters()} for s in self.scores]}
-
-
-@dataclass
-class DiagnosisResult:
-    """Everything a diagnosis found (see :func:`run_diagnosis`)."""
-
-    case: RigCase
-    nominal: FitResult
-    nominal_held: HeldOut
-    scores: list[CandidateScore]          # best variant per effect, ranked best first
-    all_scores: list[CandidateScore]      # every variant and stage
-    verdict: str
-    reason: str
-    nominal_gap: float
-    where: list[dict[str, Any]]
-    families: list[dict[str, Any]]
-    locked_lines: list[dict[str, Any]]
-    hints: dict[str, float]
-    effects: tuple[str, ...]
-    timings: dict[str, float]
-    decision: Decision | None = None
-    nominal_gap_interval: tuple[float, float] = (math.nan, math.nan)
-    # forward selection: the named effects in order, the rounds after the first, and the final
-    # model's held-out predictions (the nominal model's when nothing is named)
-    selected: list[SelectedEffect] = field(default_factory=list)
-    rounds: list[SelectionRound] = field(default_factory=list)
-    final_held: HeldOut | None = None
-    remaining_where: list[dict[str, Any]] = field(default_factory=list)
-    remaining_families: list[dict[str, Any]] = field(default_factory=list)
-    remaining_interval: tuple[float, float] = (math.nan, math.nan)
-    pitch_errors: PitchErrorAllowance | None = None
-
-    @property
-    def best(self) -> CandidateScore | None:
-        return self.scores[0] if self.scores else None
-
-    @property
-    def final(self) -> CandidateScore | None:
-        """The model with every named effect (None when none is named)."""
-        return self.selected[-1].entry if self.selected else None
-
-    @property
-    def remaining_gap(self) -> float:
-        """Held-out gap of the final model (the nominal model's when no effect is named)."""
-        return self.selected[-1].entry.gap if self.selected else self.nominal_gap
-
-    def ranking(self) -> list[dict[str, Any]]:
-        """JSON-ready ranking, best first (``modulation_gain`` where it was measured)."""
-        return [{**s.figures(), "variant": s.label, "delta_log_density": s.delta_log_density, "penalty": s.penalty,
-                 "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
-
-    @property
-    def named_shafts(self) -> list[str]:
-        """The shafts whose eccentricity the diagnosis named."""
-        return sorted({dict(candidate.choices)["shaft"] for chosen in self.selected
-                       for candidate in chosen.entry.fit.problem.candidates if candidate.effect == "eccentricity"})
-
-    def cannot_tell(self) -> list[dict[str, Any]]:
-        """Run-outs the lines cannot tell from the gears' own pitch errors.
-
-        The ``cannot_tell`` entries of ``diagnosis.json``
-        (:func:`~uqgear.diagnosis.manufacturing.run_outs_not_told_apart`).
-        """
-        return run_outs_not_told_apart(self.pitch_errors, self.named_shafts)
 
 
 def _check_effects(effects: Sequence[str] | None) -> tuple[str, ...]:
@@ -600,6 +478,51 @@ def set_decision(first_decision: Decision, selected: Sequence[SelectedEffect], r
                     borderline=tuple(borderline))
 
 
+def _phase_named_run_out(case: RigCase, nominal: FitResult, nominal_held: HeldOut, nominal_gap: float,
+                         selected: list[SelectedEffect], decision: Decision, rng: np.random.Generator,
+                         steps: StepLog) -> tuple[list[ModulationEvidence],
+                                                  tuple[list[SelectedEffect], Decision] | None]:
+    """Test the shafts' sideband phase sums for an eccentricity the amplitudes cannot tell from pitch errors.
+
+    Each shaft :func:`~.sideband_phase.shafts_tested` admits is tested
+    against the final model (:func:`~.sideband_phase.modulation_evidence`);
+    the shaft with the strongest decisive evidence gets its eccentricity
+    fitted on top (:func:`~.sideband_phase.fit_modulated_run_out`) and added
+    to the set, with its own share of the shrink (negative where it widens
+    the held-out gap).
+    """
+    base_fit = selected[-1].entry.fit if selected else nominal
+    base_held = selected[-1].entry.held if selected else nominal_held
+    base_gap = selected[-1].entry.gap if selected else nominal_gap
+    reads = first_order_reads(case.pitch_allowance)
+    found_evidence = []
+    for shaft in shafts_tested(case):
+        if shaft not in reads:
+            continue
+        with steps.step(f"test the {shaft}'s sideband phases for an eccentric shaft") as found:
+            evidence = modulation_evidence(case, base_fit, shaft, reads[shaft][0])
+            found.update(evidence.summary())
+        found_evidence.append(evidence)
+    decisive = [evidence for evidence in found_evidence if evidence.decisive]
+    if not decisive:
+        return found_evidence, None
+    evidence = max(decisive, key=lambda item: item.log_ratio)
+    with steps.step(f"fit the eccentric {evidence.shaft} shaft the sideband phases name") as found:
+        entry = fit_modulated_run_out(case, base_fit, base_held, evidence, rng)
+        found.update(_found(entry))
+    share = (base_gap - entry.gap) / nominal_gap if nominal_gap > 0 else 0.0
+    reason = (f"{evidence.reason()}; fitted on top, it changes the held-out gap from {base_gap:.2f} to "
+              f"{entry.gap:.2f}")
+    added = Decision("eccentricity", reason, remaining_gap=entry.gap)
+    chosen = SelectedEffect(entry, base_gap, share, added, tuple(bootstrap_gap(entry.held.z, rng)))
+    if selected:
+        decision = Decision(decision.verdict, f"{decision.reason}; {reason}", partial=decision.partial,
+                            remaining_gap=entry.gap, borderline=decision.borderline)
+    else:
+        decision = added
+    return found_evidence, ([*selected, chosen], decision)
+
+
 def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: np.random.SeedSequence,
                   promoted: int = PROMOTED, calibration: xr.Dataset | None = None,
                   steps: StepLog | None = None, max_effects: int = MAX_EFFECTS,
@@ -769,6 +692,15 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
         with steps.step("decide the effect set") as found:
             decision = set_decision(decision, selected, rounds, nominal_gap)
             found.update(effects=[chosen.entry.effect for chosen in selected], partial=decision.partial)
+    modulation: list[ModulationEvidence] = []
+    if allowance.applied and "eccentricity" in effect_names and decision.verdict != "unexplained" \
+            and len(selected) < max_effects and "eccentricity" not in [chosen.entry.effect for chosen in selected]:
+        clock = time.perf_counter()
+        modulation, added = _phase_named_run_out(case, nominal, nominal_held, nominal_gap, selected, decision, rng,
+                                                 steps)
+        if added is not None:
+            selected, decision = added
+        timings["sideband_phases"] = time.perf_counter() - clock
     final_held = selected[-1].entry.held if selected else nominal_held
     remaining_interval = selected[-1].gap_interval if selected else nominal_interval
     return DiagnosisResult(case=case, nominal=nominal, nominal_held=nominal_held, scores=scores,
@@ -780,6 +712,7 @@ def run_diagnosis(case: RigCase, *, effects: Sequence[str] | None = None, seed: 
                            # with no effect named the final model is the nominal one: its maps are already made
                            remaining_where=where_gap(final_held.z, case) if selected else where,
                            remaining_families=family_character(final_held.z, case, locked) if selected else families,
-                           remaining_interval=tuple(remaining_interval), pitch_errors=allowance)
+                           remaining_interval=tuple(remaining_interval), pitch_errors=allowance,
+                           modulation=modulation)
 
 

@@ -371,6 +371,17 @@ def _pitch_error_notes(content: Mapping[str, Any]) -> list[str]:
                      "modulation off (by at least the effect-gain threshold); here "
                      + ", ".join(f"{html.escape(r['variant'])} {r['modulation_gain']:.1f} nats" for r in modulated)
                      + ".</p>")
+    phases = content.get("sideband_phases") or []
+    if phases:
+        parts.append('<p class="note">An eccentric shaft also modulates the mesh stiffness, which pitch errors do '
+                     "not: the phase sums of each tested shaft's first sidebands around the mesh harmonics, scored "
+                     "with an eccentricity of the run-out read (at the best of the modulations tried) against the "
+                     "gears' pitch errors alone; an eccentricity is named from them at a log ratio of "
+                     f"{phases[0]['threshold']:g} nats: "
+                     + "; ".join(f"{html.escape(entry['shaft'])} {entry['log_ratio']:.0f} nats over "
+                                 f"{entry['n_sums']} sums (kappa {entry['kappa']:g}, "
+                                 f"{'named' if entry['named'] else 'not named'})" for entry in phases)
+                     + ".</p>")
     return parts
 
 
