@@ -245,6 +245,21 @@ def test_the_report_says_which_eccentricities_a_stiffness_modulation_let_be_name
     assert _pitch_error_notes({"pitch_errors": None}) == []
 
 
+def test_the_report_gives_each_shafts_sideband_phase_evidence_and_whether_it_named_an_eccentricity():
+    from uqgear.report.diagnosis_report import _pitch_error_notes
+
+    applied = {"applied": True, "reason": "sidebands at every order on both shafts", "draws": 12}
+    phases = [{"shaft": "pinion", "run_out_m": 19.3e-6, "kappa": 0.01, "log_ratio": 684.6,
+               "log_ratio_all_runs": 1403.5, "n_sums": 72, "threshold": 200.0, "named": True}]
+    notes = _pitch_error_notes({"pitch_errors": applied, "ranking": [], "sideband_phases": phases})
+    assert len(notes) == 2 and "200 nats" in notes[1]
+    assert "pinion 685 nats over 72 sums (kappa 0.01, named)" in notes[1]
+    quiet = [{**phases[0], "log_ratio": -12.0, "named": False}]
+    notes = _pitch_error_notes({"pitch_errors": applied, "ranking": [], "sideband_phases": quiet})
+    assert "pinion -12 nats over 72 sums (kappa 0.01, not named)" in notes[1]
+    assert len(_pitch_error_notes({"pitch_errors": applied, "ranking": [], "sideband_phases": []})) == 1
+
+
 def test_the_report_shows_each_gear_orders_factor_on_the_pitch_error_allowance_with_its_range():
     from uqgear.report.diagnosis_report import _pitch_error_notes
 

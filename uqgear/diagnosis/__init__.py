@@ -9,8 +9,10 @@ features), :mod:`.candidates` (fitted parameters and candidate effects),
 (frequency-locked lines, start hints), :mod:`.fitting`, :mod:`.manufacturing`
 (the gears' pitch errors as model error), :mod:`.gear_orders` (that model error scaled
 to the rig's own gears, order by order), :mod:`.scoring`
-(held-out predictions and the gap), :mod:`.verdict`, :mod:`.pipeline`
-(:func:`run_diagnosis`), :mod:`.outputs` (summary and Dataset),
+(held-out predictions and the gap), :mod:`.verdict`, :mod:`.sideband_phase`
+(an eccentric shaft told from pitch errors by its sidebands' phases),
+:mod:`.pipeline` (:func:`run_diagnosis`), :mod:`.result` (what it returns),
+:mod:`.outputs` (summary and Dataset),
 :mod:`.workflow` (:func:`diagnose`) and :mod:`.blind_test`.
 
 May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,

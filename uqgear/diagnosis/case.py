@@ -87,6 +87,7 @@ class AppliedPitchAllowance(Protocol):
 
     applied: bool
     run_out_bound: Mapping[str, float]
+    drawn_errors: Sequence[PitchErrors]
 
 
 @dataclass

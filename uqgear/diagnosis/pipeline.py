@@ -511,7 +511,11 @@ def _phase_named_run_out(case: RigCase, nominal: FitResult, nominal_held: HeldOu
         entry = fit_modulated_run_out(case, base_fit, base_held, evidence, rng)
         found.update(_found(entry))
     share = (base_gap - entry.gap) / nominal_gap if nominal_gap > 0 else 0.0
-    reason = (f"{evidence.reason()}; fitted on top, it changes the held-out gap from {base_gap:.2f} to "
+    run_out = entry.parameters()["amplitude"]
+    low, high = entry.parameter_intervals().get("amplitude", (math.nan, math.nan))
+    # the amplitudes cannot tell the run-out from the gear's own first-order errors: its interval says how much
+    reason = (f"{evidence.reason()}; fitted on top (run-out {1e6 * run_out:.3g} um, 90 % interval "
+              f"{1e6 * low:.3g} to {1e6 * high:.3g} um), it changes the held-out gap from {base_gap:.2f} to "
               f"{entry.gap:.2f}")
     added = Decision("eccentricity", reason, remaining_gap=entry.gap)
     chosen = SelectedEffect(entry, base_gap, share, added, tuple(bootstrap_gap(entry.held.z, rng)))

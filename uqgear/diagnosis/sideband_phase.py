@@ -156,7 +156,8 @@ def sideband_triples(names: Sequence[str], shaft: str) -> list[tuple[int, int, i
 
 def phase_sums(phasors: np.ndarray, triples: Sequence[tuple[int, int, int]]) -> np.ndarray:
     """Q = arg P(upper) + arg P(lower) - 2 arg P(carrier), wrapped to (-pi, pi], per triple on the last axis."""
-    sums = np.stack([np.angle(phasors[..., upper]) + np.angle(phasors[..., lower]) - 2.0 * np.angle(phasors[..., carrier])
+    angles = np.angle(phasors)
+    sums = np.stack([angles[..., upper] + angles[..., lower] - 2.0 * angles[..., carrier]
                      for carrier, upper, lower in triples], axis=-1)
     return np.angle(np.exp(1j * sums))
 
@@ -222,7 +223,7 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
     """
     clock = time.perf_counter()
     allowance = case.pitch_allowance
-    drawn_errors = list(getattr(allowance, "drawn_errors", ()))[:DRAWS_PER_POINT]
+    drawn_errors = [] if allowance is None else list(allowance.drawn_errors)[:DRAWS_PER_POINT]
     line = np.array(case.layout.kinds) == "line"
     line_columns = np.array(case.layout.columns)[line]
     names = [name for name, kind in zip(case.layout.names, case.layout.kinds) if kind == "line"]

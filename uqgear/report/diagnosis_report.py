@@ -506,13 +506,15 @@ def blindtest_report_html(content: Mapping[str, Any]) -> str:
              *_effect_set_scores_html(content),
              "<h2>Campaigns</h2>",
              _table(["id", "truth", "strength", "design", "plan", "oracle gap", "verdict", "effects named",
-                     "cannot tell", "shrink", "seconds"],
+                     "cannot tell", "sideband phases, nats", "shrink", "seconds"],
                     [[c["id"], " + ".join(c.get("truth_effects") or [c["truth"]]), c["strength"], c["design"],
                       c.get("plan", "service"), c["oracle_gap"], c["verdict"],
                       " + ".join(c.get("effects_named") or []) or "-", " + ".join(c.get("cannot_tell") or []) or "-",
+                      ", ".join(f"{shaft} {value:.0f}" for shaft, value in
+                                (c.get("sideband_phase_log_ratios") or {}).items()) or "-",
                       c["shrink_fraction"], c["seconds"]]
                      for c in content["campaigns"]],
-                    (0, 1, 3, 4, 6, 7, 8))]
+                    (0, 1, 3, 4, 6, 7, 8, 9))]
     return html_page("uqgear blind test", _STYLE, parts)
 
 
