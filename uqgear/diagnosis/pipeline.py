@@ -514,9 +514,10 @@ def _phase_named_run_out(case: RigCase, nominal: FitResult, nominal_held: HeldOu
     run_out = entry.parameters()["amplitude"]
     low, high = entry.parameter_intervals().get("amplitude", (math.nan, math.nan))
     # the amplitudes cannot tell the run-out from the gear's own first-order errors: its interval says how much
-    reason = (f"{evidence.reason()}; fitted on top (run-out {1e6 * run_out:.3g} um, 90 % interval "
-              f"{1e6 * low:.3g} to {1e6 * high:.3g} um), it changes the held-out gap from {base_gap:.2f} to "
-              f"{entry.gap:.2f}")
+    reason = (f"{evidence.reason()}; fitted on top, its run-out is left open by the line amplitudes, which "
+              f"cannot tell it from the {evidence.shaft}'s own first-order errors ({1e6 * run_out:.3g} um, 90 % "
+              f"interval {1e6 * low:.3g} to {1e6 * high:.3g} um), and it changes the held-out gap from "
+              f"{base_gap:.2f} to {entry.gap:.2f}")
     added = Decision("eccentricity", reason, remaining_gap=entry.gap)
     chosen = SelectedEffect(entry, base_gap, share, added, tuple(bootstrap_gap(entry.held.z, rng)))
     if selected:
