@@ -75,6 +75,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -520,11 +521,8 @@ def _phase_named_run_out(case: RigCase, nominal: FitResult, nominal_held: HeldOu
               f"{base_gap:.2f} to {entry.gap:.2f}")
     added = Decision("eccentricity", reason, remaining_gap=entry.gap)
     chosen = SelectedEffect(entry, base_gap, share, added, tuple(bootstrap_gap(entry.held.z, rng)))
-    if selected:
-        decision = Decision(decision.verdict, f"{decision.reason}; {reason}", partial=decision.partial,
-                            remaining_gap=entry.gap, borderline=decision.borderline)
-    else:
-        decision = added
+    decision = replace(decision, reason=f"{decision.reason}; {reason}", remaining_gap=entry.gap) if selected \
+        else added
     return found_evidence, ([*selected, chosen], decision)
 
 
