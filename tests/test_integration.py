@@ -241,3 +241,26 @@ def test_fast_and_scipy_classify_alike(design, speed, drive, adhesion, expected)
     assert classify_dataset(ref).label == classify_dataset(fast).label == expected
     x_ref, x_fast = ref["x"].values, fast["x"].values
     assert np.sqrt(np.mean((x_fast - x_ref) ** 2)) / np.std(x_ref) <= 1e-3
+
+
+def test_batch_final_state_restarts_the_run_bit_for_bit():
+    """Two halves of a run, the second started from the first's final state, are the whole run."""
+    design = uqgear.load_design("locomotive")
+    samples = uqgear.samples_from_mapping({"pinion_speed": [1500.0, 3600.0], "adhesion_torque": [21.15e3, 30e3]})
+    whole = uqgear.simulate_batch(design, samples, n_periods=40, keep_periods=20, final_state=True, threads=1)
+    first = uqgear.simulate_batch(design, samples, n_periods=20, keep_periods=20, final_state=True, threads=1)
+    second = uqgear.simulate_batch(design, samples, n_periods=20, keep_periods=20, final_state=True, threads=1,
+                                   initial_states=first["final_state"].values)
+    assert whole["final_state"].dims == ("sample", "state")
+    np.testing.assert_array_equal(second["final_state"].values, whole["final_state"].values)
+    np.testing.assert_array_equal(second["poincare_x"].values, whole["poincare_x"].values)
+    rest = uqgear.simulate_batch(design, samples, n_periods=40, keep_periods=20, threads=1)
+    assert "final_state" not in rest
+    np.testing.assert_array_equal(rest["peak_mesh_force"].values, whole["peak_mesh_force"].values)
+
+
+def test_batch_initial_states_of_the_wrong_shape_are_refused():
+    design = uqgear.load_design("locomotive")
+    samples = uqgear.samples_from_mapping({"pinion_speed": [1500.0, 3600.0]})
+    with pytest.raises(uqgear.UqgearError, match="initial_states"):
+        uqgear.simulate_batch(design, samples, n_periods=4, keep_periods=2, initial_states=np.zeros((1, 6)))

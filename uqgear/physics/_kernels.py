@@ -695,8 +695,11 @@ def _integrate_qoi(state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_pe
 @nb.njit(**JIT_OPTIONS, nogil=True)
 def integrate_batch(start, stop, states, params, pair_tables, period_tables, table_index, factor_pinion,
                     factor_gear, breakpoints, steps_per_period, n_periods, keep_periods,
-                    history_stride, lyapunov, scales, accumulators, poincare, history):
+                    history_stride, lyapunov, scales, accumulators, poincare, history, final_states):
     """Integrate runs ``start`` to ``stop - 1`` of a batch, each from its own state (GIL released).
+
+    ``states`` holds each run's state at t = 0 and is not changed; each run's state
+    at the end of its last period goes to ``final_states``.
 
     Threads share a batch by calling this on disjoint ranges
     (:func:`uqgear.physics.threads.spread`); a run's numbers do not depend on
@@ -710,6 +713,7 @@ def integrate_batch(start, stop, states, params, pair_tables, period_tables, tab
                        factor_pinion[i], factor_gear[i], breakpoints[i], steps_per_period[i],
                        n_periods, keep_periods, history_stride[i], accumulators[i], poincare[i],
                        history[i], lyapunov, scales[i])
+        final_states[i, :] = state
 
 
 # The per-pair path of pitch errors lives in its own module and uses the helpers above, so it is

@@ -35,6 +35,8 @@ METHODS = ("fast", "scipy")
 OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
 #: Design keys a batch may vary (the tooth counts fix the tables' layout).
 BATCH_DESIGN_KEYS = tuple(key for key in DESIGN_KEYS if key not in ("z1", "z2"))
+#: The state vector's components, in order.
+STATE_NAMES = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity")
 
 _HISTORY_COLUMNS = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity", "y1_acceleration",
                     "y2_acceleration", "mesh_force", "mesh_stiffness", "ste", "contact")
@@ -442,7 +444,8 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
                    effects: Sequence[Effect] = (),
                    damping_in_separation: bool = True, stiffness: str = "ishikawa",
                    steps_per_mode: int = 24, threads: int | None = None,
-                   pitch_errors: PitchErrors | None = None) -> xr.Dataset:
+                   pitch_errors: PitchErrors | None = None, initial_states: np.ndarray | None = None,
+                   final_state: bool = False) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
 
     Parameters
@@ -471,6 +474,15 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         Number of threads (default: all cores).
     pitch_errors : PitchErrors, optional
         Per-tooth pitch offsets of every sample (as in :func:`simulate`).
+    initial_states : array of shape (n_samples, 6), optional
+        Each sample's (y1, y2, x, y1', y2', x') at t = 0 (mesh phase 0); each
+        sample's static equilibrium by default.
+    final_state : bool
+        Also return each sample's state at the end of its last period (mesh
+        phase 0 again) as ``final_state`` on dims ``sample`` and ``state``, to
+        start a later batch from it (sweeps that follow a branch). The restart
+        continues a mesh-periodic run exactly; effects and pitch errors with a
+        longer period start their own phase again at t = 0.
 
     Returns
     -------
@@ -488,7 +500,14 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     params = np.stack([s.parameters for s in setups]) if n else np.empty((0, K.N_PARAMS))
     pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
     breakpoints = breakpoint_table(setups)
-    states = np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
+    if initial_states is None:
+        states = np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
+    else:
+        states = np.array(initial_states, dtype=float)
+        if states.shape != (n, 6) or not np.all(np.isfinite(states)):
+            raise OperatingPointError(f"initial_states: expected finite values of shape ({n}, 6) "
+                                      f"(y1, y2, x, y1', y2', x' per sample); got shape {states.shape}")
+    final_states = np.empty((n, 6))
     scales = np.stack([s.state_scale() for s in setups]) if n else np.empty((0, 6))
     factor_pinion = np.stack([s.factor_pinion for s in setups]) if n else np.empty((0, design.z1))
     factor_gear = np.stack([s.factor_gear for s in setups]) if n else np.empty((0, design.z2))
@@ -503,7 +522,7 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         def run_range(start: int, stop: int) -> None:
             K.integrate_batch(start, stop, states, params, pair_stack, period_stack, table_index, factor_pinion,
                               factor_gear, breakpoints, steps, n_periods, keep_periods, strides, lyapunov, scales,
-                              accumulators, poincare, history)
+                              accumulators, poincare, history, final_states)
 
         spread(run_range, n, threads)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
@@ -554,6 +573,11 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         coords["mesh_cycle"] = ("mesh_cycle", n_periods - keep_periods
                                 + np.arange(keep_periods * history_per_period) / history_per_period,
                                 {"units": "1", "long_name": "time in mesh periods"})
+    if final_state:
+        data["final_state"] = (("sample", "state"), final_states,
+                               {"units": "m, m, m, m s-1, m s-1, m s-1",
+                                "long_name": "state at the end of the last period"})
+        coords["state"] = ("state", list(STATE_NAMES), {"long_name": "state component"})
     ds = xr.Dataset(data, coords=coords)
     half_backlash = np.array([s.parameters[K.HALF_BACKLASH] for s in setups])
     ds.attrs.update(method="fast", n_periods=n_periods, keep_periods=keep_periods,
