@@ -44,6 +44,8 @@ from .shooting import PoincareMap, ShootingError, ShootingSettings, newton_orbit
 
 #: Parameter step of the forward difference for dP/dlambda, in scaled units (range = 1).
 PARAMETER_DIFFERENCE = 1e-6
+#: Mesh periods integrated before shooting again when the first orbit is not found from the start state.
+RELAXATION_PERIODS = (200, 1000)
 #: A doubled branch ends where the distance between its orbit's halves falls below this fraction of
 #: its largest value at a fold or branch point: it merges back into its parent there.
 MERGE_FRACTION = 0.05
@@ -184,6 +186,12 @@ class _Tracer:
         """The orbit at a fixed parameter value by plain shooting, as a branch point heading ``direction``."""
         mapping = self.mapping(value)
         orbit = newton_orbit(mapping, guess, period, self.settings.shooting, self.scale)
+        for transient in RELAXATION_PERIODS:
+            if orbit is not None:
+                break
+            # a start far from the orbit: let the transient decay first, then shoot again
+            guess = mapping(guess, transient, with_matrix=False).state
+            orbit = newton_orbit(mapping, guess, period, self.settings.shooting, self.scale)
         self.passes += mapping.passes
         if orbit is None:
             raise ShootingError(f"{self.parameter} = {value:g}: no period-{period} orbit found from the start state; "
