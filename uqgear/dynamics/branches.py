@@ -22,8 +22,10 @@ Layout (dims ``branch``, ``point``, ``state``, ``multiplier``, ``bifurcation``):
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -31,11 +33,33 @@ import xarray as xr
 
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO, STATE_NAMES
+from .bifurcations import Bifurcation, BranchPoint
 from .floquet import FOLD
 
-if TYPE_CHECKING:
-    from .bifurcations import Bifurcation
-    from .continuation import Branch
+
+@dataclass
+class Branch:
+    """A followed branch: its points in order, its period and where it came from.
+
+    Attributes
+    ----------
+    period : int
+        n of its period-n orbits.
+    points : list of BranchPoint
+    parent, origin : int
+        The branch and the bifurcation (indices) it was switched from; -1 for the first branch.
+    end : str
+        Why it ends.
+    merged_at : float
+        Where a doubled branch merges back into its parent (NaN otherwise).
+    """
+
+    period: int
+    points: list[BranchPoint]
+    parent: int = -1
+    origin: int = -1
+    end: str = ""
+    merged_at: float = math.nan
 
 #: Orbit QoIs stored per branch point (see :func:`uqgear.dynamics.shooting.orbit_qois`).
 BRANCH_QOIS: dict[str, tuple[str, str]] = {
@@ -170,4 +194,4 @@ def bifurcation_table(ds: xr.Dataset) -> pd.DataFrame:
     return pd.DataFrame(columns)
 
 
-__all__ = ["branches_dataset", "bifurcation_table", "BRANCH_QOIS", "PARAMETER_UNITS"]
+__all__ = ["Branch", "branches_dataset", "bifurcation_table", "BRANCH_QOIS", "PARAMETER_UNITS"]

@@ -33,12 +33,11 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-import xarray as xr
 
 from ..common.errors import UqgearError
 from ..physics.design import Design
 from .bifurcations import Bifurcation, BranchPoint, detect, locate
-from .branches import branches_dataset
+from .branches import Branch, branches_dataset
 from .floquet import BRANCH_POINT, FOLD, PERIOD_DOUBLING, floquet_multipliers
 from .shooting import PoincareMap, ShootingError, ShootingSettings, newton_orbit, orbit_qois, setup_at
 
@@ -91,18 +90,6 @@ class ContinuationSettings:
     min_fold_width: float | None = None
     corrector_iterations: int = 8
     shooting: ShootingSettings = field(default_factory=ShootingSettings)
-
-
-@dataclass
-class Branch:
-    """A followed branch: its points in order, its period and where it came from."""
-
-    period: int
-    points: list[BranchPoint]
-    parent: int = -1
-    origin: int = -1
-    end: str = ""
-    merged_at: float = math.nan
 
 
 class _Tracer:
