@@ -179,6 +179,44 @@ def _table(branches: Sequence[Branch], bifurcations: Sequence[Bifurcation], unit
     return table
 
 
+def _fill(dtype: np.dtype) -> Any:
+    if np.issubdtype(dtype, np.floating):
+        return np.nan
+    if np.issubdtype(dtype, np.integer):
+        return -1
+    return ""
+
+
+def stack_cases(datasets: Sequence[xr.Dataset], values: Mapping[str, Sequence[float]]) -> xr.Dataset:
+    """Branch Datasets of several cases (e.g. both ends of the T2 interval) along a new dim ``case``.
+
+    ``branch``, ``point`` and ``bifurcation`` are padded to the largest case (NaN, -1 or '');
+    ``values`` gives each case's inputs, stored as ``case_<name>``.
+    """
+    sizes = {dim: max(ds.sizes.get(dim, 0) for ds in datasets) for dim in ("branch", "point", "bifurcation")}
+    padded = []
+    for ds in datasets:
+        variables = {}
+        for name, variable in ds.data_vars.items():
+            widths = [(0, sizes[dim] - ds.sizes[dim]) if dim in sizes else (0, 0) for dim in variable.dims]
+            array = np.asarray(variable.values)
+            if array.dtype.kind in "US":
+                array = array.astype(object)
+            array = np.pad(array, widths, constant_values=_fill(variable.dtype)) if array.ndim else array
+            if variable.dtype.kind in "US":
+                array = array.astype(str)
+            variables[name] = (variable.dims, array, dict(variable.attrs))
+        coords = {dim: (dim, np.arange(size)) for dim, size in sizes.items()}
+        coords.update({name: ds[name] for name in ("state", "multiplier") if name in ds.coords})
+        padded.append(xr.Dataset(variables, coords=coords))
+    stacked = xr.concat(padded, dim="case", combine_attrs="drop_conflicts")
+    stacked = stacked.assign_coords(case=np.arange(len(datasets)))
+    for name, column in values.items():
+        stacked[f"case_{name}"] = ("case", np.asarray(column, dtype=float),
+                                   {"units": PARAMETER_UNITS.get(name, "1"), "long_name": f"{name} of the case"})
+    return stacked
+
+
 def bifurcation_table(ds: xr.Dataset) -> pd.DataFrame:
     """The bifurcation table of a branches Dataset as a DataFrame (one row per bifurcation).
 
@@ -194,4 +232,4 @@ def bifurcation_table(ds: xr.Dataset) -> pd.DataFrame:
     return pd.DataFrame(columns)
 
 
-__all__ = ["Branch", "branches_dataset", "bifurcation_table", "BRANCH_QOIS", "PARAMETER_UNITS"]
+__all__ = ["Branch", "branches_dataset", "stack_cases", "bifurcation_table", "BRANCH_QOIS", "PARAMETER_UNITS"]

@@ -81,7 +81,7 @@ def _check_bifurcation(spec: AnalysisSpec, intervals: list[str], path: str) -> N
     _check_axis(spec, intervals, options["parameter"], "parameter", path)
     others = [name for name in spec.sweeps if name != options["parameter"]]
     if others:
-        raise StudyError(f"{path}.operating_points.{others[0]}: a bifurcation sweeps only its "
+        raise StudyError(f"{path}.operating_points.{others[0]}: a {spec.type} sweeps only its "
                          f"parameter ({options['parameter']}); expected a single value")
     for name in options["envelope"]:
         if name not in intervals:
@@ -160,7 +160,7 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
                               path: str) -> None:
     """The analysis's options against the study's sweeps and uncertain parameters."""
     intervals = [name for name, parameter in uncertain.items() if parameter.is_interval]
-    if spec.type == "bifurcation":
+    if spec.type in ("bifurcation", "continuation"):
         _check_bifurcation(spec, intervals, path)
     elif spec.type == "regime_map":
         _check_regime_map(spec, intervals, path)

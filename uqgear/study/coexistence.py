@@ -137,16 +137,21 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
     return out
 
 
-def multi_start_model(context: Any, simulation: SimulationSettings, poincare: bool) -> MultiStartModel:
-    """The multi-start model of an analysis (an :class:`~uqgear.study.analyses.AnalysisContext`), its
-    batches through the analysis's runner, checkpointed under a key of their own."""
+def started_model(context: Any, simulation: SimulationSettings) -> RunnerModel:
+    """The batch model with start states of an analysis (an :class:`~uqgear.study.analyses.AnalysisContext`),
+    through the analysis's runner, checkpointed under a key of its own."""
     function = functools.partial(evaluate_started, design=context.design, simulation=simulation,
                                  threads=context.threads, classify_seed=context.stage_seed(99))
     key = json.dumps({"analysis": context.spec.name, "design": context.design.to_dict(), "started": True,
                       "simulation": simulation.to_dict(),
                       "seed": [str(context.seed.entropy), list(context.seed.spawn_key)]}, sort_keys=True)
-    return MultiStartModel(RunnerModel(context.runner, function, key, context.resume), context.design,
-                           simulation.starts, context.stage_seed(98), poincare)
+    return RunnerModel(context.runner, function, key, context.resume)
+
+
+def multi_start_model(context: Any, simulation: SimulationSettings, poincare: bool) -> MultiStartModel:
+    """The multi-start model of an analysis (``simulation.starts`` set)."""
+    return MultiStartModel(started_model(context, simulation), context.design, simulation.starts,
+                           context.stage_seed(98), poincare)
 
 
 def interval_over_attractors(context: Any, names: Sequence[str], qois: Sequence[str],
@@ -165,5 +170,5 @@ def interval_over_attractors(context: Any, names: Sequence[str], qois: Sequence[
     return result
 
 
-__all__ = ["MultiStartModel", "multi_start_model", "evaluate_started", "summarise", "interval_over_attractors",
+__all__ = ["MultiStartModel", "multi_start_model", "started_model", "evaluate_started", "summarise", "interval_over_attractors",
            "PER_ATTRACTOR"]
