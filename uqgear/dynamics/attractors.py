@@ -185,9 +185,8 @@ def _final_states(result: xr.Dataset) -> np.ndarray:
 def _sweep_runs(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, rest: xr.Dataset,
                 groups: Sequence[np.ndarray]) -> dict[str, xr.Dataset]:
     """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions."""
-    n = samples.sizes["sample"]
     finals = _final_states(rest)
-    carried = {"up": {}, "down": {}}   # sample index -> the final state it passes on
+    carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}   # sample index -> the final state it passes on
     for direction in ("up", "down"):
         for members in groups:
             first = members[0] if direction == "up" else members[-1]

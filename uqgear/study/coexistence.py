@@ -170,5 +170,5 @@ def interval_over_attractors(context: Any, names: Sequence[str], qois: Sequence[
     return result
 
 
-__all__ = ["MultiStartModel", "multi_start_model", "started_model", "evaluate_started", "summarise", "interval_over_attractors",
-           "PER_ATTRACTOR"]
+__all__ = ["MultiStartModel", "multi_start_model", "started_model", "evaluate_started", "summarise",
+           "interval_over_attractors", "PER_ATTRACTOR"]
