@@ -57,6 +57,9 @@ class BranchPoint:
         Orbit QoIs (:func:`uqgear.dynamics.shooting.orbit_qois`).
     arclength : float
         Scaled arclength from the branch's first point.
+    poincare_x : ndarray
+        The DTE at the start of each of the orbit's n mesh periods (filled in when the branch is
+        stored).
     """
 
     parameter: float
@@ -66,6 +69,7 @@ class BranchPoint:
     monodromy: np.ndarray
     qois: dict[str, float]
     arclength: float = 0.0
+    poincare_x: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def counts(self) -> UnstableCounts:
@@ -107,6 +111,7 @@ class Bifurcation:
     side: int
     stable_before: bool
     stable_after: bool
+    arclength: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -172,7 +177,8 @@ def locate(kind: str, test: Callable[[BranchPoint], Any], before: BranchPoint, a
         travel = np.sign(high_point.parameter - low_point.parameter) or np.sign(before.tangent[-1]) or 1.0
         side = int(travel)
     return Bifurcation(kind=kind, branch=branch, point=near, parameter=float(location), tolerance=float(width),
-                       side=side, stable_before=before.stable, stable_after=after.stable)
+                       side=side, stable_before=before.stable, stable_after=after.stable,
+                       arclength=before.arclength + 0.5 * (low + high))
 
 
 def _narrow_enough(kind: str, low: BranchPoint, high: BranchPoint, width: float, tolerance: float,

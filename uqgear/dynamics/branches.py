@@ -119,6 +119,12 @@ def branches_dataset(branches: Sequence[Branch], bifurcations: Sequence[Bifurcat
     for name, (unit, long_name) in BRANCH_QOIS.items():
         data[name] = (("branch", "point"), _padded(branches, width, lambda p, name=name: p.qois[name]),
                       {"units": unit, "long_name": long_name})
+    phases = max((branch.period for branch in branches), default=1)
+    data["orbit_poincare_x"] = (("branch", "point", "phase"),
+                                _padded(branches, width, lambda p: np.pad(p.poincare_x, (0, phases - p.poincare_x.size),
+                                                                          constant_values=np.nan), (phases,)),
+                                {"units": "m", "long_name": "DTE of the orbit at each mesh-period start (its Poincare "
+                                                            "points)"})
     data.update({
         "branch_period": ("branch", np.array([b.period for b in branches], dtype=np.int64),
                           {"units": "1", "long_name": "n of the branch's period-n orbits"}),
@@ -133,7 +139,7 @@ def branches_dataset(branches: Sequence[Branch], bifurcations: Sequence[Bifurcat
     data.update(_table(branches, bifurcations, units))
     coords = {"branch": ("branch", np.arange(len(branches))), "point": ("point", np.arange(width)),
               "state": ("state", list(STATE_NAMES)), "multiplier": ("multiplier", np.arange(6)),
-              "bifurcation": ("bifurcation", np.arange(len(bifurcations)))}
+              "bifurcation": ("bifurcation", np.arange(len(bifurcations))), "phase": ("phase", np.arange(phases))}
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update({"parameter": parameter, "parameter_units": units, "location_tolerance": float(tolerance),
                      "fixed_inputs": json.dumps({k: float(v) for k, v in fixed.items()}), "design_name": design.name,
@@ -163,6 +169,8 @@ def _table(branches: Sequence[Branch], bifurcations: Sequence[Bifurcation], unit
                                       {"long_name": "branch stable before it (direction of travel)"}),
         "bifurcation_stable_after": ("bifurcation", np.array([b.stable_after for b in bifurcations], dtype=np.int8),
                                      {"long_name": "branch stable after it (direction of travel)"}),
+        "bifurcation_arclength": ("bifurcation", np.array([b.arclength for b in bifurcations], dtype=float),
+                                  {"units": "1", "long_name": "scaled arclength along its branch"}),
         "bifurcation_sweep": ("bifurcation", np.array([_sweep(b) for b in bifurcations], dtype=str),
                               {"long_name": "fold of a stable stretch: the sweep direction that jumps there"}),
         "bifurcation_state": (("bifurcation", "state"), np.array([b.point.state for b in bifurcations]).reshape(n, 6),
@@ -193,7 +201,7 @@ def stack_cases(datasets: Sequence[xr.Dataset], values: Mapping[str, Sequence[fl
     ``branch``, ``point`` and ``bifurcation`` are padded to the largest case (NaN, -1 or '');
     ``values`` gives each case's inputs, stored as ``case_<name>``.
     """
-    sizes = {dim: max(ds.sizes.get(dim, 0) for ds in datasets) for dim in ("branch", "point", "bifurcation")}
+    sizes = {dim: max(ds.sizes.get(dim, 0) for ds in datasets) for dim in ("branch", "point", "bifurcation", "phase")}
     padded = []
     for ds in datasets:
         variables = {}

@@ -193,6 +193,17 @@ class _Tracer:
         margin = 1e-9 * self.span
         return self.low - margin <= point.parameter <= self.high + margin
 
+    def iterates(self, point: BranchPoint, period: int) -> np.ndarray:
+        """The DTE at the start of each mesh period of a period-n orbit (its n Poincare points)."""
+        values = [point.state[2]]
+        state = point.state
+        mapping = self.mapping(point.parameter) if period > 1 else None
+        for _ in range(period - 1):
+            state = mapping(state, 1, with_matrix=False).state
+            values.append(state[2])
+        self.passes += period - 1
+        return np.array(values)
+
     def half_distance(self, point: BranchPoint, period: int) -> float:
         """Scaled distance between a period-2n orbit's state and its image after n periods (0: period n)."""
         if period % 2:
@@ -305,6 +316,9 @@ class Continuation:
                     if switched is not None:
                         doubled = Branch(2 * branch.period, [], parent=index, origin=len(bifurcations) - 1)
                         queue.append((doubled, *switched))
+        for branch in branches:
+            for point in branch.points:
+                point.poincare_x = tracer.iterates(point, branch.period)
         self.branches_ = branches
         self.bifurcations_ = bifurcations
         self.tolerance_ = tolerance
