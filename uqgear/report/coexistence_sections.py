@@ -133,4 +133,5 @@ def coexistence_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
             for sentence in sentences]
 
 
-__all__ = ["attractor_bound_sentences", "draw_sweep_starts", "mark_coexistence", "coexistence_sentences", "coexistence_headline", "START_STYLE"]
+__all__ = ["attractor_bound_sentences", "draw_sweep_starts", "mark_coexistence", "coexistence_sentences",
+           "coexistence_headline", "START_STYLE"]

@@ -48,8 +48,8 @@ def _table(ds: xr.Dataset, case: int) -> list[dict[str, Any]]:
     for k, kind in enumerate(kinds):
         if not kind:
             continue
-        rows.append({name[len("bifurcation_"):]: ds[name].values[case, k].item()
-                     for name in ds.data_vars if name.startswith("bifurcation_") and ds[name].dims == ("case", "bifurcation")})
+        rows.append({name[len("bifurcation_"):]: ds[name].values[case, k].item() for name in ds.data_vars
+                     if name.startswith("bifurcation_") and ds[name].dims == ("case", "bifurcation")})
     return rows
 
 
