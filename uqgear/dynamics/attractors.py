@@ -183,14 +183,20 @@ def _final_states(result: xr.Dataset) -> np.ndarray:
 
 
 def _sweep_runs(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, rest: xr.Dataset,
-                groups: Sequence[np.ndarray]) -> dict[str, xr.Dataset]:
-    """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions."""
+                groups: Sequence[np.ndarray], rest_index: np.ndarray | None = None) -> dict[str, xr.Dataset]:
+    """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions.
+
+    ``rest`` holds the rest runs of the samples ``rest_index`` (default: all), which must include
+    each group's first and last member: the sweeps start there.
+    """
+    rows_of = {int(sample): row for row, sample in enumerate(
+        np.arange(samples.sizes["sample"]) if rest_index is None else rest_index)}
     finals = _final_states(rest)
     carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}   # sample index -> the final state it passes on
     for direction in ("up", "down"):
         for members in groups:
             first = members[0] if direction == "up" else members[-1]
-            carried[direction][int(first)] = finals[first]
+            carried[direction][int(first)] = finals[rows_of[int(first)]]
     longest = max((len(members) for members in groups), default=0)
     pieces: dict[str, list[tuple[np.ndarray, xr.Dataset]]] = {"up": [], "down": []}
     for step in range(1, longest):
@@ -215,12 +221,37 @@ def _sweep_runs(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Datase
     for direction in ("up", "down"):
         # the first point of each sweep is its rest run
         firsts = np.array([int(m[0] if direction == "up" else m[-1]) for m in groups], dtype=int)
-        parts = [(firsts, rest.isel(sample=firsts))] + pieces[direction]
+        parts = [(firsts, rest.isel(sample=[rows_of[int(i)] for i in firsts]))] + pieces[direction]
         order = np.concatenate([indices for indices, _ in parts])
         stacked = xr.concat([part for _, part in parts], dim="sample", coords="minimal", compat="override",
                             join="override", combine_attrs="drop_conflicts")
         out[direction] = stacked.isel(sample=np.argsort(order, kind="stable"))
     return out
+
+
+def up_down_sweeps(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset,
+                   variable: str = "pinion_speed") -> dict[str, xr.Dataset]:
+    """Brute-force up- and down-sweeps along ``variable``: each run starts from its neighbour's final state.
+
+    Only the first point of each sweep starts from rest. Returns ``{"up": runs, "down": runs}``, each
+    in the order of ``samples`` (one batch call per sweep step, both directions and every group of
+    the other inputs together).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> from uqgear.physics.integration import samples_from_mapping
+    >>> design = uqgear.load_design("locomotive")
+    >>> speeds = [3550.0, 3600.0, 3650.0, 3700.0]
+    >>> samples = samples_from_mapping({"pinion_speed": speeds, "adhesion_torque": [21150.0] * 4})
+    >>> runs = up_down_sweeps(StartedEvaluator(design, {"n_periods": 1500, "keep_periods": 300}), samples)
+    >>> [round(float(f) / 1e3) for f in runs["down"]["peak_mesh_force"].values]
+    [102, 177, 178, 180]
+    """
+    groups = sweep_order(samples, variable)
+    ends = np.unique(np.concatenate([[members[0], members[-1]] for members in groups])).astype(int)
+    rest = evaluate(_with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
+    return _sweep_runs(evaluate, samples, rest, groups, ends)
 
 
 class MultiStartSearch:
@@ -414,4 +445,4 @@ def extremes_over_attractors(attractors: xr.Dataset, qois: Sequence[str]) -> xr.
 
 
 __all__ = ["MultiStart", "MultiStartSearch", "StartedEvaluator", "group_attractors", "extremes_over_attractors",
-           "sweep_order", "INITIAL_VARIABLES", "FINAL_VARIABLES", "ATTRACTOR_QOIS"]
+           "sweep_order", "up_down_sweeps", "INITIAL_VARIABLES", "FINAL_VARIABLES", "ATTRACTOR_QOIS"]

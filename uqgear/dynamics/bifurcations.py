@@ -175,7 +175,9 @@ def locate(kind: str, test: Callable[[BranchPoint], Any], before: BranchPoint, a
         location, near = 0.5 * (low_point.parameter + high_point.parameter), high_point
         width = 0.5 * abs(high_point.parameter - low_point.parameter)
         travel = np.sign(high_point.parameter - low_point.parameter) or np.sign(before.tangent[-1]) or 1.0
-        side = int(travel)
+        # the new condition (separation, contact on the back side, one more unstable multiplier) holds
+        # on the far side in the direction of travel when the test grew across the point
+        side = int(travel if test(after) > reference else -travel)
     return Bifurcation(kind=kind, branch=branch, point=near, parameter=float(location), tolerance=float(width),
                        side=side, stable_before=before.stable, stable_after=after.stable,
                        arclength=before.arclength + 0.5 * (low + high))
