@@ -1,7 +1,7 @@
 """The ``continuation`` analysis: periodic-orbit branches and their bifurcations, over interval parameters.
 
-For every combination of ``points`` values across each ``envelope`` interval parameter (by default both
-ends: wet and dry rail for T2) the period-1 branch is followed over the range of ``parameter`` (the
+For every combination of ``points`` values across each ``envelope`` parameter (an interval: from end
+to end, by default both ends, wet and dry rail for T2; a distribution: its 5 % to 95 % quantiles) the period-1 branch is followed over the range of ``parameter`` (the
 span of its sweep, or its interval) with :class:`~uqgear.dynamics.continuation.Continuation`, switching
 onto doubled branches at period doublings up to ``max_period``. The result stacks the cases along dim
 ``case`` (:func:`~uqgear.dynamics.branches.stack_cases`): each bifurcation point of each case, so
@@ -32,13 +32,24 @@ from .analyses import register
 from .coexistence import started_model
 from .variables import variable_units_short
 
+#: Quantile range at which a distribution in ``envelope`` is continued (``points`` values across it).
+QUANTILES = (0.05, 0.95)
 #: Brute-force sweep QoIs kept for the comparison.
 SWEEP_QOIS = ("peak_mesh_force", "fraction_separation", "fraction_back_contact", "dte_peak_to_peak")
 
 
+def _envelope_values(context: Any, name: str) -> np.ndarray:
+    """``points`` values across an interval, or at the quantiles 5 % to 95 % of a distribution."""
+    parameter = context.study.uncertain[name]
+    if parameter.is_interval:
+        return context.axis_values(name)
+    levels = np.linspace(QUANTILES[0], QUANTILES[1], int(context.options["points"]))
+    return np.asarray(parameter.to_parameter().to_chaospy().inv(levels), dtype=float)
+
+
 def _cases(context: Any) -> tuple[list[dict[str, float]], dict[str, list[float]]]:
     names = list(context.options["envelope"])
-    grids = [context.axis_values(name) for name in names]
+    grids = [_envelope_values(context, name) for name in names]
     cases = [dict(zip(names, map(float, combination))) for combination in itertools.product(*grids)] or [{}]
     return cases, {name: [case[name] for case in cases] for name in names}
 
