@@ -303,7 +303,7 @@ class Shooting:
     >>> setup = setup_at(design, {"pinion_speed": 3000.0, "adhesion_torque": 21150.0})
     >>> orbit = Shooting().fit(setup, setup.static_state()).orbit_
     >>> orbit.stable, round(orbit.qois["peak_mesh_force"] / 1e3)
-    (True, 90)
+    (True, 75)
     """
 
     def __init__(self, period: int = 1, settings: ShootingSettings | None = None) -> None:
