@@ -134,3 +134,23 @@ def test_starts_are_checked_and_leave_rest_only_results_as_they_were():
         parse_study(STUDY.replace("ANALYSES", "  starts: {bogus: 1}\nanalyses:\n  - type: simulate\n"))
     study = parse_study(STUDY.replace("ANALYSES", "  starts: true\nanalyses:\n  - type: simulate\n"))
     assert study.analyses[0].simulation.starts.seeded == 2
+
+
+def test_qoi_envelope_spans_the_attractors_of_a_multi_start_grid():
+    import xarray as xr
+
+    from uqgear.uq.envelope import qoi_envelope
+
+    dims = ("pinion_speed", "adhesion_torque")
+    grid = xr.Dataset({
+        "peak_mesh_force": (dims, [[1.0, 2.0], [3.0, 4.0]]),
+        "peak_mesh_force_max": (dims, [[1.0, 2.0], [5.0, 4.0]]),
+        "peak_mesh_force_min": (dims, [[1.0, 2.0], [3.0, 4.0]]),
+        "peak_mesh_force_max_start": (dims, [["rest", "rest"], ["down", "rest"]]),
+        "peak_mesh_force_min_start": (dims, [["rest", "rest"], ["rest", "rest"]]),
+        "regime": (dims, [["period-1"] * 2] * 2), "fraction_separation": (dims, [[0.0, 0.0], [0.5, 0.0]]),
+    }, coords={"pinion_speed": [3500.0, 3600.0], "adhesion_torque": [21150.0, 46520.0]})
+    envelope = qoi_envelope(grid, ["peak_mesh_force"])
+    np.testing.assert_array_equal(envelope["peak_mesh_force"].values, [[1.0, 2.0], [3.0, 5.0]])
+    assert envelope["peak_mesh_force_start_at_bound"].values[1, 1] == "down"
+    assert envelope["peak_mesh_force_adhesion_at_bound"].values[1, 1] == 21150.0
