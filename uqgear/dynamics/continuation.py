@@ -46,8 +46,12 @@ PARAMETER_DIFFERENCE = 1e-6
 #: Mesh periods integrated before shooting again when the first orbit is not found from the start state.
 RELAXATION_PERIODS = (200, 1000)
 #: A doubled branch ends where the distance between its orbit's halves falls below this fraction of
-#: its largest value at a fold or branch point: it merges back into its parent there.
-MERGE_FRACTION = 0.05
+#: its largest value at a fold or branch point: it merges back into its parent there (the distance
+#: grows like the square root of the parameter's distance from the merge, so a fold located within
+#: 1 % of the bubble's width from it is at about a tenth of the largest distance).
+MERGE_FRACTION = 0.3
+#: ... or at any point below this fraction (the corrector slid onto the parent orbit at the merge).
+COLLAPSE_FRACTION = 0.01
 #: Largest Newton update of a correction in scaled units; a larger one fails the step.
 MAX_CORRECTION = 0.25
 
@@ -298,24 +302,26 @@ class Continuation:
         first = tracer.first_point(start, guess, 1, math.copysign(1.0, stop - start))
         branches: list[Branch] = []
         bifurcations: list[Bifurcation] = []
-        queue: list[tuple[Branch, BranchPoint, np.ndarray | None]] = [(Branch(1, [first]), first, None)]
+        queue: list[tuple[Branch, BranchPoint, np.ndarray | None, list[float]]] = [
+            (Branch(1, [first]), first, None, [])]
         while queue:
-            branch, point, heading = queue.pop(0)
+            branch, point, heading, parent_doublings = queue.pop(0)
             if any(other.period == branch.period and abs(other.merged_at - point.parameter) < 10 * tolerance
                    for other in branches):
                 continue   # reached already from its other end
             index = len(branches)
             branches.append(branch)
-            found = self._trace(tracer, branch, index, point, heading, tolerance)
+            found = self._trace(tracer, branch, index, point, heading, tolerance, parent_doublings)
             found, dropped = _drop_fold_pairs(found, width, point.parameter if heading is not None else None)
             self.folds_dropped_ += dropped
+            doublings = [b.parameter for b in found if b.kind == PERIOD_DOUBLING]
             for bifurcation in found:
                 bifurcations.append(bifurcation)
                 if bifurcation.kind == PERIOD_DOUBLING and 2 * branch.period <= self.settings.max_period:
                     switched = self._switch(tracer, bifurcation)
                     if switched is not None:
                         doubled = Branch(2 * branch.period, [], parent=index, origin=len(bifurcations) - 1)
-                        queue.append((doubled, *switched))
+                        queue.append((doubled, *switched, doublings))
         for branch in branches:
             for point in branch.points:
                 point.poincare_x = tracer.iterates(point, branch.period)
@@ -338,8 +344,11 @@ class Continuation:
                 "folds_dropped": int(self.folds_dropped_)}
 
     def _trace(self, tracer: _Tracer, branch: Branch, index: int, point: BranchPoint, heading: np.ndarray | None,
-               tolerance: float) -> list[Bifurcation]:
-        """Follow ``branch`` from ``point`` (or, for a switched branch, from the bifurcation along ``heading``)."""
+               tolerance: float, parent_doublings: Sequence[float] = ()) -> list[Bifurcation]:
+        """Follow ``branch`` from ``point`` (or, for a switched branch, from the bifurcation along ``heading``).
+
+        ``parent_doublings``: the period doublings of a switched branch's parent, where it can merge back.
+        """
         settings = self.settings
         period = branch.period
         step = settings.step
@@ -385,7 +394,15 @@ class Continuation:
             if merged:
                 break
             if period % 2 == 0:
-                widest = max(widest, tracer.half_distance(new, period))
+                distance = tracer.half_distance(new, period)
+                if distance < COLLAPSE_FRACTION * widest:
+                    # the corrector slid onto the parent orbit (a period-2n solution too) across the merge,
+                    # which is the parent's period doubling nearest to here
+                    branch.merged_at = min(parent_doublings, key=lambda v: abs(v - new.parameter),
+                                           default=new.parameter)
+                    branch.end = f"merges into the period-{period // 2} branch at {branch.merged_at:.6g}"
+                    break
+                widest = max(widest, distance)
             branch.points.append(new)
             if not tracer.inside(new):
                 branch.end = "leaves the range"

@@ -89,12 +89,14 @@ def stable_stretches(ds: xr.Dataset, case: int) -> list[dict[str, Any]]:
 def coexistence(ds: xr.Dataset, case: int) -> list[dict[str, Any]]:
     """Parameter ranges where two (or more) stable orbits coexist, with their peak mesh forces at the middle."""
     stretches = stable_stretches(ds, case)
+    # stretches that only touch (a parent and its doubled orbit at a period doubling) do not coexist
+    least = 10.0 * float(ds.attrs.get("location_tolerance", 0.0))
     found = []
     for a in range(len(stretches)):
         for b in range(a + 1, len(stretches)):
             low = max(stretches[a]["low"], stretches[b]["low"])
             high = min(stretches[a]["high"], stretches[b]["high"])
-            if high <= low:
+            if high - low <= least:
                 continue
             middle = 0.5 * (low + high)
             forces = []

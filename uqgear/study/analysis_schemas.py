@@ -57,13 +57,6 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "envelope": _variable_list(),
         "points": number("values across each interval", 2, 200, integer=True),
     },
-    "continuation": {
-        "parameter": choice(*VARIABLES),
-        "envelope": _variable_list(),
-        "points": number("values across each interval", 2, 50, integer=True),
-        "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
-        "compare_sweeps": boolean(),
-    },
     "regime_map": {
         "axes": list_of(choice(*VARIABLES), min_length=2, unique=True, what="a list of two variable names"),
         "points": number("values across each interval", 2, 200, integer=True),
@@ -117,6 +110,13 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "reference": string(),
         # ISO 1328-1 classes of the rig's gears: what their pitch errors do is model error (none: perfect gears)
         "pitch_classes": class_range(1, 11),
+    },
+    "continuation": {
+        "parameter": choice(*VARIABLES),
+        "envelope": _variable_list(),
+        "points": number("values across each interval", 2, 50, integer=True),
+        "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
+        "compare_sweeps": boolean(),
     },
 }
 
