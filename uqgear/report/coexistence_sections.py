@@ -24,19 +24,22 @@ START_STYLE = {"up": ("#0072B2", "^", "up-sweep start"), "down": ("#D55E00", "v"
 
 
 def draw_sweep_starts(ax: Any, ds: xr.Dataset, parameter: str, condition: str | None, scale: float) -> bool:
-    """Overlay the up- and down-sweep starts' Poincare points; False when the result has none."""
-    if "poincare_x_up" not in ds:
+    """Overlay the up- and down-sweep starts' Poincare points where a point holds more than one response;
+    False when the result has none."""
+    if "poincare_x_up" not in ds or "attractor_count" not in ds:
+        return False
+    order = (parameter, condition) if condition is not None else (parameter,)
+    several = np.asarray(ds["attractor_count"].transpose(*order).values).reshape(ds.sizes[parameter], -1) > 1
+    if not several.any():
         return False
     values = np.asarray(ds[parameter].values, dtype=float) * scale
     for start, (colour, marker, label) in START_STYLE.items():
-        points = ds[f"poincare_x_{start}"]
-        if condition is not None:
-            points = points.transpose(parameter, condition, "period")
-            column = points.values.reshape(points.shape[0], -1) * 1e6
-        else:
-            column = points.transpose(parameter, "period").values * 1e6
-        ax.plot(np.repeat(values, column.shape[1]), column.ravel(), linestyle="none", marker=marker, markersize=2.4,
-                color=colour, alpha=0.7, label=label)
+        points = ds[f"poincare_x_{start}"].transpose(*order, "period").values * 1e6
+        points = points.reshape(ds.sizes[parameter], -1, points.shape[-1])
+        rows, members = np.nonzero(several)
+        shown = points[rows, members]
+        ax.plot(np.repeat(values[rows], shown.shape[1]), shown.ravel(), linestyle="none", marker=marker,
+                markersize=3.0, color=colour, alpha=0.8, label=label)
     return True
 
 

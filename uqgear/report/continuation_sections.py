@@ -37,7 +37,10 @@ JUMP_FRACTION = 0.1
 def _case_label(ds: xr.Dataset, case: int) -> str:
     names = [name[len("case_"):] for name in ds.data_vars if name.startswith("case_")]
     if not names:
-        return "the study's inputs"
+        fixed = _json_attr(ds, "fixed_inputs", {})
+        shown = [f"{short_name(name)} = {format_value(name, float(fixed[name]))}"
+                 for name in ("drive_torque", "adhesion_torque") if isinstance(fixed.get(name), (int, float))]
+        return ", ".join(shown) or "the study's inputs"
     return ", ".join(f"{short_name(name)} = {format_value(name, float(ds[f'case_{name}'].values[case]))}"
                      for name in names)
 
@@ -72,15 +75,18 @@ def stable_stretches(ds: xr.Dataset, case: int) -> list[dict[str, Any]]:
             while stop + 1 < stable.size and stable[stop + 1] == 1:
                 stop += 1
             ends = [parameter[index], parameter[stop]]
+            kinds = ["", ""]
             for position, neighbour in ((0, index - 1), (1, stop + 1)):
                 if 0 <= neighbour < stable.size and stable[neighbour] == 0:
                     low, high = sorted((arclength[neighbour], arclength[index if position == 0 else stop]))
                     found = [row for row in table if row["branch"] == branch and row["type"] in STABILITY_TYPES
                              and low <= row["arclength"] <= high]
                     if found:
-                        ends[position] = float(found[0]["parameter"])
+                        ends[position], kinds[position] = float(found[0]["parameter"]), str(found[0]["type"])
+            order = np.argsort(ends)
             stretches.append({"branch": branch, "period": int(ds["branch_period"].values[case, branch]),
-                              "low": float(min(ends)), "high": float(max(ends)),
+                              "low": float(ends[order[0]]), "high": float(ends[order[1]]),
+                              "low_kind": kinds[order[0]], "high_kind": kinds[order[1]],
                               "parameter": parameter[index:stop + 1], "force": force[index:stop + 1]})
             index = stop + 1
     return stretches
@@ -103,8 +109,11 @@ def coexistence(ds: xr.Dataset, case: int) -> list[dict[str, Any]]:
             for stretch in (stretches[a], stretches[b]):
                 order = np.argsort(stretch["parameter"])
                 forces.append(float(np.interp(middle, stretch["parameter"][order], stretch["force"][order])))
+            low_kind = max((stretches[a], stretches[b]), key=lambda item: item["low"])["low_kind"]
+            high_kind = min((stretches[a], stretches[b]), key=lambda item: item["high"])["high_kind"]
             found.append({"low": low, "high": high, "middle": middle, "forces": sorted(forces),
-                          "periods": sorted([stretches[a]["period"], stretches[b]["period"]])})
+                          "periods": sorted([stretches[a]["period"], stretches[b]["period"]]),
+                          "between_folds": low_kind == high_kind == "fold"})
     return sorted(found, key=lambda item: item["low"])
 
 
@@ -175,12 +184,16 @@ def continuation_sentences(facts: dict[str, Any]) -> list[str]:
                          + (f"; never in the range at {', '.join(never)}" if never else ""))
     for entry in facts["cases"]:
         for item in entry["coexistence"]:
+            periods = "" if item["periods"] == [1, 1] else (
+                " (period-" + " and period-".join(str(p) for p in item["periods"]) + ")")
+            history = ("an up-sweep stays on the lower one up to the fold at the top of the range, a down-sweep "
+                       "on the upper one down to the fold at its bottom" if item["between_folds"]
+                       else "the start decides")
             sentences.append(
                 f"{entry['label']}: between {_value(facts, item['low'])} and {_value(facts, item['high'])} two "
-                f"stable responses coexist, peak mesh force {item['forces'][0] / 1e3:.4g} or "
+                f"stable responses{periods} coexist, peak mesh force {item['forces'][0] / 1e3:.4g} or "
                 f"{item['forces'][1] / 1e3:.4g} kN (at {_value(facts, item['middle'])}); which one the gear holds "
-                f"depends on its history: an up-sweep stays on the lower one up to the fold at the top of the range, "
-                f"a down-sweep on the upper one down to the fold at its bottom")
+                f"depends on its history: {history}")
         for key, words in (("period_doubling", "period doubling"), ("neimark_sacker", "Neimark-Sacker (torus)")):
             if entry[key]:
                 sentences.append(f"{entry['label']}: {words} of the period-1 orbit at "
@@ -222,12 +235,13 @@ def _draw_branches(ax: Any, ds: xr.Dataset, variable: str, factor: float, phases
                     # each stretch with its neighbouring points, so stable and unstable lines meet
                     edge = np.convolve((stable == flag).astype(float), [1, 1, 1], mode="same") > 0
                     shown = np.where(edge, values[:, column], np.nan)
-                    ax.plot(parameter, shown * factor, linestyle=style, color=colour, linewidth=1.3 if flag else 0.9)
+                    ax.plot(parameter, shown * factor, linestyle=style, color=colour, linewidth=1.4 if flag else 1.0,
+                            zorder=3)
         for kind, (marker, _) in BIFURCATION_MARKERS.items():
             rows = [row for row in _table(ds, case) if row["type"] == kind]
             if rows and variable in ("peak_mesh_force",):
                 ax.plot([row["parameter"] for row in rows], [row["peak_mesh_force"] * factor for row in rows],
-                        linestyle="none", marker=marker, color="black", markersize=6, markerfacecolor="none")
+                        linestyle="none", marker=marker, color="black", markersize=6, markerfacecolor="none", zorder=4)
 
 
 def _draw_sweeps(ax: Any, ds: xr.Dataset, variable: str, factor: float) -> None:
@@ -240,9 +254,10 @@ def _draw_sweeps(ax: Any, ds: xr.Dataset, variable: str, factor: float) -> None:
             column = data[case]
             if column.ndim == 2:
                 ax.plot(np.repeat(values, column.shape[1]), column.ravel(), linestyle="none", marker=marker,
-                        markersize=2.0, color=colour, alpha=0.6)
+                        markersize=1.8, color=colour, alpha=0.5, zorder=2)
             else:
-                ax.plot(values, column, linestyle="none", marker=marker, markersize=4, color=colour, alpha=0.8)
+                ax.plot(values, column, linestyle="none", marker=marker, markersize=3, color=colour, alpha=0.6,
+                        zorder=2)
 
 
 def _legend(ax: Any, ds: xr.Dataset) -> None:

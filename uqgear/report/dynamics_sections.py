@@ -392,7 +392,8 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
         top.set_title("bifurcation diagram: Poincaré points of the DTE", fontsize=9)
         regime = ds["regime"]
     if draw_sweep_starts(top, ds, parameter, condition, scale):
-        top.set_title(top.get_title() + "\nblue ▲ / orange ▼: the up- / down-sweep starts", fontsize=9)
+        top.set_title(top.get_title() + "\nwhere two or more responses coexist: blue ▲ up-sweep start, "
+                      "orange ▼ down-sweep start", fontsize=9)
     top.set_ylabel("Poincaré points of DTE $x_n$ [µm]")
     half_backlash = _half_backlash(ds, parameter)
     if half_backlash is not None:
