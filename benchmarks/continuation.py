@@ -127,7 +127,8 @@ def main() -> None:
               f"{len(fit.branches_)} branches), sweeps {sweeps:.1f} s ({2 * speeds.size} runs x 1500 periods); "
               f"ratio {sweeps / continuation:.1f}")
         for _, row in table.iterrows():
-            print(f"  {row['type']:<20s} branch {row['branch']} (period {row['period']}) at {row['parameter']:9.3f} rpm "
+            print(f"  {row['type']:<20s} branch {row['branch']} (period {row['period']}) at "
+                  f"{row['parameter']:9.3f} rpm "
                   f"+- {row['tolerance']:.3f}  peak force {row['peak_mesh_force'] / 1e3:7.2f} kN  {row['sweep']}")
         for line in check(table, found, args.step):
             print("  check: " + line)
