@@ -71,8 +71,15 @@ def check(table, found: dict, step: float) -> list[str]:
     lines = []
     for _, row in table.iterrows():
         location, kind, period = row["parameter"], row["type"], int(row["period"])
+        if not (row["stable_before"] or row["stable_after"]) and kind != "grazing_separation":
+            lines.append(f"{kind} at {location:.2f} rpm (branch {row['branch']}): unstable on both sides, "
+                         "no sweep can see it")
+            continue
         if kind == "fold" and row["sweep"]:
-            brackets = [(a, b) for a, b in found[f"jumps_{row['sweep']}"]]
+            # a jump of the peak force, or (off a doubled branch) of the period
+            changes = found[f"periods_{row['sweep']}"]
+            brackets = [(a, b) for a, b in found[f"jumps_{row['sweep']}"]] + [
+                (a, b) for a, b, p, q in changes if period > 1 and f"period-{period}" in (p, q)]
             what = f"fold ({row['sweep']}-sweep jumps)"
         elif kind == "grazing_separation":
             brackets = [(a, b) for start in ("up", "down") for a, b, _, _ in found[f"separation_{start}"]]
