@@ -141,3 +141,21 @@ def test_period_doublings_match_the_brute_force_bifurcation_diagram(design):
         changes = [i for i in range(len(regime) - 1) if regime[i] == before and regime[i + 1] == after]
         assert changes, f"the sweep shows no {before} -> {after} change"
         assert any(speeds[i] - step <= location <= speeds[i + 1] + step for i in changes)
+
+
+@pytest.mark.slow
+def test_back_side_grazing_matches_the_first_back_contact_of_a_sweep(design):
+    """A tight backlash (2b = 40 um) and a larger STE: the period-2 orbit off a period doubling near 4508 rpm
+    begins to hit the back flanks; a down-sweep (coming from the orbit's side) first shows it there."""
+    tight = design.replace(backlash=0.04e-3, ste_amplitude=20e-6)
+    light = {"drive_torque": 1000.0, "adhesion_torque": 4810.0}
+    fit = Continuation("pinion_speed", 4400.0, 4800.0).fit(tight, light)
+    table = bifurcation_table(fit.result_)
+    onset = table[(table["type"] == "grazing_back_side") & (table["side"] > 0)]
+    assert len(onset) == 1 and int(onset["period"].iloc[0]) == 2
+    step = 10.0
+    speeds = np.arange(4400.0, 4601.0, step)
+    runs = _sweep(tight, speeds, light)
+    back = runs["down"]["fraction_back_contact"].values
+    first = speeds[np.argmax(back > 0)]
+    assert first - step <= float(onset["parameter"].iloc[0]) <= first

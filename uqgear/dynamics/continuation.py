@@ -43,6 +43,8 @@ from .shooting import PoincareMap, ShootingError, ShootingSettings, newton_orbit
 
 #: Parameter step of the forward difference for dP/dlambda, in scaled units (range = 1).
 PARAMETER_DIFFERENCE = 1e-6
+#: Leaps over a kink of the discrete map a branch may take before it is ended there.
+MAX_LEAPS = 5
 #: Mesh periods integrated before shooting again when the first orbit is not found from the start state.
 RELAXATION_PERIODS = (200, 1000)
 #: A doubled branch ends where the distance between its orbit's halves falls below this fraction of
@@ -359,15 +361,23 @@ class Continuation:
         if heading is not None:
             current = None   # type: ignore[assignment]
         widest = 0.0   # largest distance between the halves of a doubled orbit so far
+        leaps = 0
         while len(branch.points) < settings.max_points:
             predicted = x + step * tangent
             new = tracer.correct(predicted, tangent, period, tangent)
             if new is None or (current is not None and new.tangent @ current.tangent < math.cos(settings.max_turn)):
                 step *= 0.5
-                if step < settings.min_step:
+                if step >= settings.min_step:
+                    continue
+                # stuck at a kink of the discrete map (a contact crossing appearing at a grid point, say):
+                # leap over it once with the first step size, the turn not checked
+                leap = tracer.correct(x + settings.step * tangent, tangent, period, tangent) if leaps < MAX_LEAPS \
+                    else None
+                if leap is None or current is None:
                     branch.end = "corrector failed" if new is None else "branch turns too sharply"
                     break
-                continue
+                leaps += 1
+                new, step = leap, settings.step
             if current is None:
                 # the first point of a switched branch: no bifurcation test against the doubling point
                 widest = tracer.half_distance(new, period)
