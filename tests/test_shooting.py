@@ -185,6 +185,7 @@ def _scipy_map(design, state, damping_in_separation):
     return np.array([run[f"poincare_{name}"].values[1] for name in STATE_NAMES])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damping_in_separation, tolerance", [(True, 3e-4), (False, 2e-3)])
 def test_flow_monodromy_with_saltation_matches_the_scipy_reference(design, damping_in_separation, tolerance):
     setup = setup_at(design, {"pinion_speed": 3600.0, "adhesion_torque": 21150.0},
