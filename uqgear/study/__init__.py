@@ -12,6 +12,8 @@ from .settings import SimulationSettings
 from .analysis_schemas import ANALYSIS_SCHEMAS
 from .variables import VARIABLES
 from .analyses import (ANALYSES, register, run_analysis, run_study)
+# registers the continuation analysis in ANALYSES
+from . import continuation_analysis  # noqa: F401
 
 __all__ = [
     'Study', 'AnalysisSpec', 'SimulationSettings', 'load_study', 'parse_study',

@@ -111,12 +111,20 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         # ISO 1328-1 classes of the rig's gears: what their pitch errors do is model error (none: perfect gears)
         "pitch_classes": class_range(1, 11),
     },
+    "continuation": {
+        "parameter": choice(*VARIABLES),
+        "envelope": _variable_list(),
+        "points": number("values across each interval", 2, 50, integer=True),
+        "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
+        "compare_sweeps": boolean(),
+    },
 }
 
 #: Default option values per analysis type (applied after validation).
 ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "simulate": {"samples_per_period": 64, "method": "fast", "spectrum": "order", "labels": ()},
     "bifurcation": {"envelope": (), "points": 5},
+    "continuation": {"envelope": (), "points": 2, "max_period": 8, "compare_sweeps": True},
     "regime_map": {"points": 9},
     "interval": {"method": "chebyshev", "order": 6, "points": None, "fallback": "scan",
                  "tolerance": 0.02, "qois": DEFAULT_QOIS},
@@ -131,7 +139,8 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
                   "pitch_classes": (6.0, 8.0)},
     "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
 }
-_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
+_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "continuation": ("parameter",),
+                                              "regime_map": ("axes",),
                                               "calibrate": ("rig",), "diagnose": ("rig",)}
 #: Analysis types that read a rig data file (key ``rig``, relative to the study file).
 RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")
