@@ -77,6 +77,11 @@ def lane_ready(params: np.ndarray) -> np.ndarray:
             & (p[:, ECC_KAPPA] == 0.0) & (p[:, RIPPLE_AMPLITUDE] == 0.0) & (p[:, ADHESION_AMPLITUDE] == 0.0))
 
 
+#: Small integers (lane, stage and row numbers) as plain int64: a literal 0..7 in a call makes numba
+#: compile the callee once per value (it specialises on literal arguments), eight times the work
+LANE = np.arange(LANES, dtype=np.int64)
+
+
 @nb.njit(**INLINED)
 def _coefficients(co, lane):
     return (co[0, lane], co[1, lane], co[2, lane], co[3, lane], co[4, lane], co[5, lane], co[6, lane], co[7, lane],
@@ -148,14 +153,14 @@ def _put_row(out, row, v0, v1, v2, v3, v4, v5, v6, v7):
 
 @nb.njit(**INLINED)
 def _later_stages(S, D, out, factor, table, widths, drive, co, sub, stage):
-    _put(out, _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 0),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 1),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 2),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 3),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 4),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 5),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 6),
-         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, 7))
+    _put(out, _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[0]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[1]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[2]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[3]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[4]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[5]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[6]),
+         _later_stage(S, D, factor, table, widths, drive, co, sub, stage, LANE[7]))
 
 
 @nb.njit(**INLINED)
@@ -168,31 +173,31 @@ def _step_lanes(S, trial, D1, D2, D3, D4, aux, table, widths, drive, co, sub):
     trees shallow enough for its depth limit. Returns the number of lanes
     whose step crossed a contact boundary.
     """
-    r0 = _first_stage(S, table, drive, co, sub, 0)
-    r1 = _first_stage(S, table, drive, co, sub, 1)
-    r2 = _first_stage(S, table, drive, co, sub, 2)
-    r3 = _first_stage(S, table, drive, co, sub, 3)
-    r4 = _first_stage(S, table, drive, co, sub, 4)
-    r5 = _first_stage(S, table, drive, co, sub, 5)
-    r6 = _first_stage(S, table, drive, co, sub, 6)
-    r7 = _first_stage(S, table, drive, co, sub, 7)
+    r0 = _first_stage(S, table, drive, co, sub, LANE[0])
+    r1 = _first_stage(S, table, drive, co, sub, LANE[1])
+    r2 = _first_stage(S, table, drive, co, sub, LANE[2])
+    r3 = _first_stage(S, table, drive, co, sub, LANE[3])
+    r4 = _first_stage(S, table, drive, co, sub, LANE[4])
+    r5 = _first_stage(S, table, drive, co, sub, LANE[5])
+    r6 = _first_stage(S, table, drive, co, sub, LANE[6])
+    r7 = _first_stage(S, table, drive, co, sub, LANE[7])
     _put(D1, r0[0], r1[0], r2[0], r3[0], r4[0], r5[0], r6[0], r7[0])
-    _put_row(aux, 0, r0[1], r1[1], r2[1], r3[1], r4[1], r5[1], r6[1], r7[1])
-    _put_row(aux, 1, r0[0][3], r1[0][3], r2[0][3], r3[0][3], r4[0][3], r5[0][3], r6[0][3], r7[0][3])
-    _put_row(aux, 2, r0[0][4], r1[0][4], r2[0][4], r3[0][4], r4[0][4], r5[0][4], r6[0][4], r7[0][4])
-    _later_stages(S, D1, D2, 0.5, table, widths, drive, co, sub, 1)
-    _later_stages(S, D2, D3, 0.5, table, widths, drive, co, sub, 1)
-    _later_stages(S, D3, D4, 1.0, table, widths, drive, co, sub, 2)
-    c0 = _combined(S, D1, D2, D3, D4, widths, co, sub, 0)
-    c1 = _combined(S, D1, D2, D3, D4, widths, co, sub, 1)
-    c2 = _combined(S, D1, D2, D3, D4, widths, co, sub, 2)
-    c3 = _combined(S, D1, D2, D3, D4, widths, co, sub, 3)
-    c4 = _combined(S, D1, D2, D3, D4, widths, co, sub, 4)
-    c5 = _combined(S, D1, D2, D3, D4, widths, co, sub, 5)
-    c6 = _combined(S, D1, D2, D3, D4, widths, co, sub, 6)
-    c7 = _combined(S, D1, D2, D3, D4, widths, co, sub, 7)
+    _put_row(aux, LANE[0], r0[1], r1[1], r2[1], r3[1], r4[1], r5[1], r6[1], r7[1])
+    _put_row(aux, LANE[1], r0[0][3], r1[0][3], r2[0][3], r3[0][3], r4[0][3], r5[0][3], r6[0][3], r7[0][3])
+    _put_row(aux, LANE[2], r0[0][4], r1[0][4], r2[0][4], r3[0][4], r4[0][4], r5[0][4], r6[0][4], r7[0][4])
+    _later_stages(S, D1, D2, 0.5, table, widths, drive, co, sub, LANE[1])
+    _later_stages(S, D2, D3, 0.5, table, widths, drive, co, sub, LANE[1])
+    _later_stages(S, D3, D4, 1.0, table, widths, drive, co, sub, LANE[2])
+    c0 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[0])
+    c1 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[1])
+    c2 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[2])
+    c3 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[3])
+    c4 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[4])
+    c5 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[5])
+    c6 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[6])
+    c7 = _combined(S, D1, D2, D3, D4, widths, co, sub, LANE[7])
     _put(trial, c0[0], c1[0], c2[0], c3[0], c4[0], c5[0], c6[0], c7[0])
-    _put_row(aux, 3, c0[1], c1[1], c2[1], c3[1], c4[1], c5[1], c6[1], c7[1])
+    _put_row(aux, LANE[3], c0[1], c1[1], c2[1], c3[1], c4[1], c5[1], c6[1], c7[1])
     return (c0[1] + c1[1]) + (c2[1] + c3[1]) + ((c4[1] + c5[1]) + (c6[1] + c7[1]))
 
 
