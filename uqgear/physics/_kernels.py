@@ -26,17 +26,17 @@ import numpy as np
 
 from uqgear.physics import _pairs
 from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family's one namespace)
-    M1, M2, ME, K1, K2, C1, C2, CM, HALF_BACKLASH, R1, R2, I1, I2, T1, T2, OMEGA_MESH, STE_AMPLITUDE, STE_PHASE,
-    STIFFNESS_SCALE, DAMP_IN_SEPARATION, RIPPLE_AMPLITUDE, RIPPLE_OMEGA, RIPPLE_PHASE, ADHESION_AMPLITUDE,
-    ADHESION_OMEGA, ADHESION_PHASE, ECC_AMPLITUDE, ECC_OMEGA, ECC_PHASE, ECC_KAPPA, FRICTION, CLEARANCE1,
-    CLEARANCE2, PATH_START, BASE_PITCH, LOA_LENGTH, PITCH_POSITION, CONTACT_RATIO, USE_PERIOD_TABLE, Z1, Z2,
-    TOOTH_FACTORS, PITCH_ERRORS, N_PARAMS, PARAMETER_SLOTS, Q_X_SUM, Q_X_SQ, Q_X_MIN, Q_X_MAX, Q_F_MAX, Q_A1_SQ,
-    Q_A2_SQ, Q_N_DRIVE, Q_N_SEP, Q_N_BACK, Q_COUNT, Q_LYAPUNOV, Q_F_MIN, N_ACCUMULATORS, TWO_PI, JIT_OPTIONS,
-    INLINED, MAX_PAIRS, F_K, F_ARM_PINION, F_ARM_GEAR, F_SINE, N_FIELDS, _add_substep, _crossing_fraction,
-    _forcing_row, _friction_arms, _friction_term, _interp_uniform, _mesh_position, _rk4, _shifted,
-    _split_at_contact, _tabulate_stage, _time_terms, build_schedule, classical_step, coefficients, contact_region,
-    dead_zone, derivative, forcing, mesh_contact, mesh_terms, rk4_combine, rk4_step, state_derivative,
-    static_transmission_error,)
+    ADHESION_AMPLITUDE, ADHESION_OMEGA, ADHESION_PHASE, BASE_PITCH, C1, C2, CLEARANCE1, CLEARANCE2, CM,
+    CONTACT_RATIO, DAMP_IN_SEPARATION, ECC_AMPLITUDE, ECC_KAPPA, ECC_OMEGA, ECC_PHASE, F_ARM_GEAR, F_ARM_PINION,
+    F_K, F_SINE, FRICTION, HALF_BACKLASH, I1, I2, INLINED, JIT_OPTIONS, K1, K2, LOA_LENGTH, M1, M2, MAX_PAIRS, ME,
+    N_ACCUMULATORS, N_FIELDS, N_PARAMS, OMEGA_MESH, PARAMETER_SLOTS, PATH_START, PITCH_ERRORS, PITCH_POSITION,
+    Q_A1_SQ, Q_A2_SQ, Q_COUNT, Q_F_MAX, Q_F_MIN, Q_LYAPUNOV, Q_N_BACK, Q_N_DRIVE, Q_N_SEP, Q_X_MAX, Q_X_MIN, Q_X_SQ,
+    Q_X_SUM, R1, R2, RIPPLE_AMPLITUDE, RIPPLE_OMEGA, RIPPLE_PHASE, STE_AMPLITUDE, STE_PHASE, STIFFNESS_SCALE, T1,
+    T2, TOOTH_FACTORS, TWO_PI, USE_PERIOD_TABLE, Z1, Z2, _add_substep, _crossing_fraction, _forcing_row,
+    _friction_arms, _friction_term, _interp_uniform, _mesh_position, _rk4, _shifted, _split_at_contact,
+    _tabulate_stage, _time_terms, build_schedule, classical_step, coefficients, contact_region, dead_zone,
+    derivative, forcing, mesh_contact, mesh_terms, rk4_combine, rk4_step, state_derivative,
+    static_transmission_error)
 
 
 @nb.njit(**JIT_OPTIONS)

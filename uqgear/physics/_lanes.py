@@ -37,10 +37,37 @@ import numba as nb
 import numpy as np
 
 from uqgear.physics._rhs import (
-    ADHESION_AMPLITUDE, ECC_AMPLITUDE, ECC_KAPPA, INLINED, JIT_OPTIONS, N_ACCUMULATORS, OMEGA_MESH, PITCH_ERRORS,
-    Q_A1_SQ, Q_A2_SQ, Q_COUNT, Q_F_MAX, Q_F_MIN, Q_LYAPUNOV, Q_N_BACK, Q_N_DRIVE, Q_N_SEP, Q_X_MAX, Q_X_MIN, Q_X_SQ,
-    Q_X_SUM, RIPPLE_AMPLITUDE, TOOTH_FACTORS, TWO_PI, _forcing_row, _split_at_contact, build_schedule,
-    coefficients, contact_region, rk4_step, state_derivative, static_transmission_error)
+    ADHESION_AMPLITUDE,
+    ECC_AMPLITUDE,
+    ECC_KAPPA,
+    INLINED,
+    JIT_OPTIONS,
+    N_ACCUMULATORS,
+    OMEGA_MESH,
+    PITCH_ERRORS,
+    Q_A1_SQ,
+    Q_A2_SQ,
+    Q_COUNT,
+    Q_F_MAX,
+    Q_F_MIN,
+    Q_LYAPUNOV,
+    Q_N_BACK,
+    Q_N_DRIVE,
+    Q_N_SEP,
+    Q_X_MAX,
+    Q_X_MIN,
+    Q_X_SQ,
+    Q_X_SUM,
+    RIPPLE_AMPLITUDE,
+    TOOTH_FACTORS,
+    TWO_PI,
+    _forcing_row,
+    _split_at_contact,
+    build_schedule,
+    coefficients,
+    state_derivative,
+    static_transmission_error,
+)
 
 #: Runs advanced together: two vectors of four doubles (AVX2), enough independent chains to hide
 #: the latency of one.
@@ -388,13 +415,13 @@ def _accumulate(acc, S, aux, co):
         acc[Q_X_SUM, lane] += x
         acc[Q_X_SQ, lane] += x * x
         low = acc[Q_X_MIN, lane]
-        acc[Q_X_MIN, lane] = x if x < low else low
+        acc[Q_X_MIN, lane] = x if x < low else low  # noqa: FURB136
         high = acc[Q_X_MAX, lane]
-        acc[Q_X_MAX, lane] = x if x > high else high
+        acc[Q_X_MAX, lane] = x if x > high else high  # noqa: FURB136
         high = acc[Q_F_MAX, lane]
-        acc[Q_F_MAX, lane] = force if force > high else high
+        acc[Q_F_MAX, lane] = force if force > high else high  # noqa: FURB136
         low = acc[Q_F_MIN, lane]
-        acc[Q_F_MIN, lane] = force if force < low else low
+        acc[Q_F_MIN, lane] = force if force < low else low  # noqa: FURB136
         acc[Q_A1_SQ, lane] += aux[1, lane] * aux[1, lane]
         acc[Q_A2_SQ, lane] += aux[2, lane] * aux[2, lane]
         drive_side = 1.0 if x > b else 0.0

@@ -175,9 +175,12 @@ def _pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], i
 
 
 def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
-                     initial_state: np.ndarray, rtol: float,
-                     atol: float | None) -> tuple[np.ndarray, np.ndarray, dict]:
+                     initial_state: np.ndarray, rtol: float, atol: float | None,
+                     solver: str = "DOP853") -> tuple[np.ndarray, np.ndarray, dict]:
     """The scipy reference: DOP853 between stiffness breakpoints, a terminal event at every contact boundary.
+
+    ``solver`` names another :func:`scipy.integrate.solve_ivp` method on the
+    same segments and events (``benchmarks/integrator.py`` times LSODA so).
 
     Within a segment between breakpoints the contact boundaries are fixed:
     x = -b and x = +b for the mesh as a whole, and with pitch errors
@@ -236,7 +239,7 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
 
             while t_a < t_b:
                 events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
-                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector,
+                sol = solve_ivp(fun, (t_a, t_b), state, method=solver, rtol=rtol, atol=atol_vector,
                                 events=events, dense_output=kept)
                 stats["rhs_evaluations"] += sol.nfev
                 stats["segments"] += 1
