@@ -23,7 +23,10 @@ Prints, in one run:
    installs, CyRK's numba DOP853 on the same right-hand side between the
    stiffness breakpoints (no contact events), each at the fast path's error.
 
-Usage: ``python benchmarks/integrator.py [--quick] [--reference CHECKOUT] [--no-cold] [--no-precision]``.
+With ``--bands``, also the CPU time a step on one thread by speed band
+(200-4000 rpm) for each kernel: where the batch spends its time.
+
+Usage: ``python benchmarks/integrator.py [--quick] [--reference CHECKOUT] [--bands] [--no-cold] [--no-precision]``.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import time
 import types
 from pathlib import Path
 
+import numba
 import numpy as np
 
 import uqgear
@@ -134,6 +138,37 @@ def _reference_kernels(checkout: Path) -> types.SimpleNamespace:
 
     namespace.integrate_batch = integrate_batch
     return namespace
+
+
+def speed_bands(design, reference: Path | None) -> None:
+    """CPU time a step, one thread, by speed band: where the batch spends its time, kernel by kernel."""
+    lower, upper = design.operation.adhesion_torque_bounds()
+    kernels = [("lanes", integration.K, {}), ("one-sample", integration.K, {"lanes": False})]
+    if reference is not None:
+        kernels.append(("reference", _reference_kernels(reference), {"lanes": False}))
+    print(f"speed bands: CPU time a step, one thread (8 T2 values a band: one lane group; {_load()})")
+    print(f"  {'rpm':>6s} {'steps/period':>12s} {'separation':>10s}  " + "  ".join(f"{k[0] + ' ns':>14s}" for k in kernels))
+    saved, saved_threads = integration.K, numba.get_num_threads()
+    numba.set_num_threads(1)  # the reference kernel's prange too
+    try:
+        for speed in (200.0, 500.0, 1000.0, 2000.0, 3000.0, 4000.0):
+            samples = uqgear.samples_from_mapping({"pinion_speed": np.full(8, speed),
+                                                   "adhesion_torque": np.linspace(lower, upper, 8)})
+            cells, result = [], None
+            for _, module, kw in kernels:
+                integration.K = module
+                uqgear.simulate_batch(design, samples, n_periods=4, keep_periods=2, threads=1, **kw)
+                best = np.inf
+                for _ in range(3):
+                    start = time.process_time()
+                    result = uqgear.simulate_batch(design, samples, threads=1, **kw)
+                    best = min(best, time.process_time() - start)
+                cells.append(best / float((result["steps_per_period"] * 400).sum()) * 1e9)
+            print(f"  {speed:6.0f} {int(result['steps_per_period'][0]):12d} "
+                  f"{float(result['fraction_separation'].mean()):10.3f}  " + "  ".join(f"{c:14.1f}" for c in cells))
+    finally:
+        integration.K = saved
+        numba.set_num_threads(saved_threads)
 
 
 COLD_SCRIPT = """
@@ -289,9 +324,12 @@ def main() -> None:
                         help="checkout of an older version (26ef8ac) whose batch kernel runs side by side")
     parser.add_argument("--no-cold", action="store_true", help="skip the cold-compilation timings")
     parser.add_argument("--no-precision", action="store_true", help="skip the work-precision curve")
+    parser.add_argument("--bands", action="store_true", help="also CPU time a step by speed band, one thread")
     args = parser.parse_args()
     design = uqgear.load_design("locomotive")
     batch(design, 50 if args.quick else 500, args.reference)
+    if args.bands:
+        speed_bands(design, args.reference)
     if not args.no_cold:
         cold_compile(args.quick)
     if not args.no_precision:

@@ -343,6 +343,9 @@ def _run_lanes(samples, written, table, widths, offsets, refs, drive, co, period
                lyapunov, scales, accumulators, poincare, history, final_states):
     """The time loop of a lane group: the one-sample kernel's loop, lane by lane (see the module doc)."""
     half = LANES // 2
+    live = written.copy()
+    if lyapunov:
+        live[half:] = written[:half]
     S = np.empty((6, LANES))
     trial = np.empty((6, LANES))
     aux = np.empty((4, LANES))
@@ -381,7 +384,8 @@ def _run_lanes(samples, written, table, widths, offsets, refs, drive, co, period
                         row += 1
                 if crossed != 0.0:
                     for lane in range(LANES):
-                        if aux[3, lane] != 0.0:
+                        # an empty lane's numbers are never read: it is not redone
+                        if aux[3, lane] != 0.0 and live[lane]:
                             _split_lane(lane, n, sub, S, trial, D1, widths, offsets, refs, period,
                                         samples[lane], params, pair_tables, period_tables, table_index,
                                         factor_pinion, factor_gear)
