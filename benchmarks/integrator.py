@@ -24,7 +24,9 @@ Prints, in one run:
    stiffness breakpoints (no contact events), each at the fast path's error.
 
 With ``--bands``, also the CPU time a step on one thread by speed band
-(200-4000 rpm) for each kernel: where the batch spends its time.
+(200-4000 rpm) for each kernel: where the batch spends its time (with
+``--reference``, also that checkout's kernel compiled serially, its
+``prange`` a ``range``: what the switch to serial batch kernels cost).
 
 Usage: ``python benchmarks/integrator.py [--quick] [--reference CHECKOUT] [--bands] [--no-cold] [--no-precision]``.
 """
@@ -67,9 +69,10 @@ def _grid(design, n_speeds: int):
 
 
 def _timed_batch(design, samples, **kw):
-    start = time.perf_counter()
+    """(wall time, CPU time of all threads, result): on a shared machine the CPU time moves less with the load."""
+    start, cpu = time.perf_counter(), time.process_time()
     result = uqgear.simulate_batch(design, samples, **kw)
-    return time.perf_counter() - start, result
+    return time.perf_counter() - start, time.process_time() - cpu, result
 
 
 def _floats(ds) -> dict[str, np.ndarray]:
@@ -85,16 +88,19 @@ def batch(design, n_speeds: int, reference: Path | None) -> None:
     uqgear.simulate_batch(design, warm, n_periods=4, keep_periods=2, lanes=False)
     print(f"batch: {n} runs ({n_speeds} speeds 200-4000 rpm x 20 T2 values, rated drive torque), "
           f"400 mesh periods, 200 kept, {threads} threads; {_load()}")
-    lanes_time, lanes = _timed_batch(design, samples)
+    lanes_time, lanes_cpu, lanes = _timed_batch(design, samples)
     steps = float((lanes["steps_per_period"] * 400).sum())
     per_core = lanes_time * threads / steps * 1e9
-    print(f"  lanes      : {lanes_time:6.2f} s  ({lanes_time / n * 1e3:.3f} ms/run, {steps / lanes_time / 1e6:.1f} M RK4 "
-          f"steps/s, {per_core:.1f} ns a step per core: {SCALAR_LIMIT_NS / per_core:.2f}x the ~{SCALAR_LIMIT_NS:.0f} ns "
-          f"scalar limit, {SIMD_LIMIT_NS / per_core:.2f}x the ~{SIMD_LIMIT_NS:.0f} ns SIMD one)")
-    one_time, one = _timed_batch(design, samples, lanes=False)
+    cpu_step = lanes_cpu / steps * 1e9
+    print(f"  lanes      : {lanes_time:6.2f} s, CPU {lanes_cpu:6.2f} s  ({lanes_time / n * 1e3:.3f} ms/run, "
+          f"{steps / lanes_time / 1e6:.1f} M RK4 steps/s, {per_core:.1f} ns a step per core by wall time, {cpu_step:.1f} "
+          f"by CPU time: {SCALAR_LIMIT_NS / cpu_step:.2f}x the ~{SCALAR_LIMIT_NS:.0f} ns scalar limit, "
+          f"{SIMD_LIMIT_NS / cpu_step:.2f}x the ~{SIMD_LIMIT_NS:.0f} ns SIMD one)")
+    one_time, one_cpu, one = _timed_batch(design, samples, lanes=False)
     same = all(a.tobytes() == b.tobytes() for a, b in zip(_floats(lanes).values(), _floats(one).values()))
-    print(f"  one-sample : {one_time:6.2f} s  ({steps / one_time / 1e6:.1f} M RK4 steps/s)   "
-          f"RATIO lanes vs one-sample = {one_time / lanes_time:.2f}x; outputs bit-identical: {'yes' if same else 'NO'}")
+    print(f"  one-sample : {one_time:6.2f} s, CPU {one_cpu:6.2f} s  ({steps / one_time / 1e6:.1f} M RK4 steps/s)   "
+          f"RATIO lanes vs one-sample = {one_time / lanes_time:.2f}x (CPU {one_cpu / lanes_cpu:.2f}x); "
+          f"outputs bit-identical: {'yes' if same else 'NO'}")
     if reference is None:
         print("  reference  : skipped (--reference CHECKOUT runs another checkout's kernels side by side)")
         return
@@ -104,23 +110,30 @@ def batch(design, n_speeds: int, reference: Path | None) -> None:
     try:
         # the old batch kernel is a prange over all runs: one call, numba's threads
         uqgear.simulate_batch(design, warm, n_periods=4, keep_periods=2, lanes=False, threads=1)
-        ref_time, ref = _timed_batch(design, samples, lanes=False, threads=1)
+        ref_time, ref_cpu, ref = _timed_batch(design, samples, lanes=False, threads=1)
     finally:
         integration.K = saved
     change = max(float(np.nanmax(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
                  for a, b in zip(_floats(lanes).values(), _floats(ref).values()) if a.size)
-    print(f"  reference  : {ref_time:6.2f} s  ({steps / ref_time / 1e6:.1f} M RK4 steps/s; kernels of {reference})   "
-          f"RATIO lanes vs reference = {ref_time / lanes_time:.2f}x; largest relative output change {change:.1e}")
+    print(f"  reference  : {ref_time:6.2f} s, CPU {ref_cpu:6.2f} s  ({steps / ref_time / 1e6:.1f} M RK4 steps/s; kernels of "
+          f"{reference})   RATIO lanes vs reference = {ref_time / lanes_time:.2f}x (CPU {ref_cpu / lanes_cpu:.2f}x); "
+          f"largest relative output change {change:.1e}")
 
 
-def _reference_kernels(checkout: Path) -> types.SimpleNamespace:
-    """The batch kernel of an older checkout (``uqgear/_kernels.py``, prange over all runs) behind today's call."""
+def _reference_kernels(checkout: Path, serial: bool = False) -> types.SimpleNamespace:
+    """The batch kernel of an older checkout (``uqgear/_kernels.py``, prange over all runs) behind today's call.
+
+    ``serial``: the same source with the ``prange`` a plain ``range`` and no
+    ``parallel=True``, as the batch kernels have been compiled since.
+    """
     path = checkout / "uqgear" / "_kernels.py"
     if not path.exists():
         raise SystemExit(f"--reference: {path} not found; expected a checkout of 26ef8ac (git worktree add DIR 26ef8ac)")
     # compiled here without its cache: that checkout's cache entries name its own module
     module = types.ModuleType("_kernels_reference")
     source = path.read_text().replace("cache=True", "cache=False")
+    if serial:
+        source = source.replace("parallel=True, ", "").replace("nb.prange(", "range(")
     exec(compile(source, str(path), "exec"), module.__dict__)  # noqa: S102  (our own older source)
     namespace = types.SimpleNamespace(**{name: getattr(K, name) for name in dir(K) if not name.startswith("__")})
 
@@ -146,6 +159,7 @@ def speed_bands(design, reference: Path | None) -> None:
     kernels = [("lanes", integration.K, {}), ("one-sample", integration.K, {"lanes": False})]
     if reference is not None:
         kernels.append(("reference", _reference_kernels(reference), {"lanes": False}))
+        kernels.append(("ref. serial", _reference_kernels(reference, serial=True), {"lanes": False}))
     print(f"speed bands: CPU time a step, one thread (8 T2 values a band: one lane group; {_load()})")
     print(f"  {'rpm':>6s} {'steps/period':>12s} {'separation':>10s}  " + "  ".join(f"{k[0] + ' ns':>14s}" for k in kernels))
     saved, saved_threads = integration.K, numba.get_num_threads()
