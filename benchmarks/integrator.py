@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -210,15 +211,18 @@ def cold_compile(quick: bool) -> None:
     for family in families:
         with tempfile.TemporaryDirectory() as cache:
             env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-            start = time.perf_counter()
+            start, children = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
             out = subprocess.run([sys.executable, "-c", COLD_SCRIPT, family], env=env, capture_output=True, text=True,
                                  check=False)
             wall = time.perf_counter() - start
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = after.ru_utime + after.ru_stime - children.ru_utime - children.ru_stime
         if out.returncode != 0:
             print(f"  {family:12s}: failed: {out.stderr.strip().splitlines()[-1:]}")
             continue
         imported, first = (float(v) for v in out.stdout.split())
-        print(f"  {family:12s}: first result {first:5.1f} s after import ({imported:.1f} s), {wall:.1f} s in all")
+        print(f"  {family:12s}: first result {first:5.1f} s after import ({imported:.1f} s), {wall:.1f} s in all, "
+              f"{cpu:.1f} s of CPU")
 
 
 def _relative_rms(x, reference):
