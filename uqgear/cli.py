@@ -36,14 +36,13 @@ from __future__ import annotations
 import argparse
 import shutil
 import sys
-import tempfile
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
 from .common.errors import InternalError, UqgearError, UqgearWarning
+from .common.transaction import OutputFolder, is_empty_folder
 
 #: Exit status of an internal failure after the input was accepted.
 EXIT_INTERNAL_ERROR = 1
@@ -52,7 +51,6 @@ EXIT_USER_ERROR = 2
 #: Exit status after Ctrl-C.
 EXIT_INTERRUPTED = 130
 
-PARTIAL_SUFFIX = ".partial"
 #: Folder of chunk checkpoints inside the work folder.
 CHECKPOINTS = ".checkpoints"
 
@@ -123,14 +121,6 @@ def _command_validate(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------- run
 
 
-def _partial_dir(out: Path) -> Path:
-    return out.parent / f".{out.name}{PARTIAL_SUFFIX}"
-
-
-def _is_empty_dir(path: Path) -> bool:
-    return path.is_dir() and not any(path.iterdir())
-
-
 def _copy_previous(out: Path, work: Path) -> None:
     """Copy a finished run's results and checkpoints into the work folder (for --resume)."""
     for item in out.iterdir():
@@ -143,73 +133,40 @@ def _copy_previous(out: Path, work: Path) -> None:
             shutil.copy2(item, target)
 
 
-def _publish(work: Path, out: Path) -> None:
-    """Move the finished work folder to ``out`` (replacing a previous run's folder)."""
-    if out.exists():
-        if _is_empty_dir(out):
-            out.rmdir()
-        else:
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-            old.rmdir()
-            out.rename(old)
-            work.rename(out)
-            shutil.rmtree(old, ignore_errors=True)
-            return
-    work.rename(out)
-
-
 def _command_run(args: argparse.Namespace) -> int:
     from .study.schema import load_study
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         return _fail(f"--out {out}: exists and is not a folder; expected a new or empty folder")
-    if out.is_dir() and not _is_empty_dir(out) and not args.resume:
+    if out.is_dir() and not is_empty_folder(out) and not args.resume:
         return _fail(f"--out {out}: folder exists and is not empty; choose a new folder, remove it, "
                      "or pass --resume to continue or update that run")
-    _check_parents(out, "--out")
+    folder = OutputFolder(out, where="--out", existing="replace", resumable=True, resume=args.resume)
+    folder.check()
     if args.workers is not None and args.workers < 1:
         return _fail(f"--workers: expected a positive integer; got {args.workers}")
     # the study is validated completely before anything is created
     study = load_study(args.study)
-    parents = _make_parents(out)
 
     from .study.analyses import run_study
     from .report.study_report import write_report
 
-    work = _partial_dir(out)
-    created = False
-    if work.exists() and not args.resume:
-        shutil.rmtree(work)  # left by an interrupted run; a fresh run was asked for
-    if not work.exists():
-        work.mkdir()
-        created = True
     try:
-        if args.resume and out.is_dir():
-            _copy_previous(out, work)
-        run_study(study, work, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
-                  show_progress=not args.quiet, checkpoint_dir=work / CHECKPOINTS)
-        if study.outputs.report:
-            write_report(work, dpi=study.outputs.dpi)
-        # chunk checkpoints only serve an interrupted run; a finished analysis is reused
-        # from its result file on --resume
-        shutil.rmtree(work / CHECKPOINTS, ignore_errors=True)
-        _publish(work, out)
+        with folder as work:
+            if args.resume and out.is_dir():
+                _copy_previous(out, work)
+            run_study(study, work, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                      show_progress=not args.quiet, checkpoint_dir=work / CHECKPOINTS)
+            if study.outputs.report:
+                write_report(work, dpi=study.outputs.dpi)
+            # chunk checkpoints only serve an interrupted run; a finished analysis is reused
+            # from its result file on --resume
+            shutil.rmtree(work / CHECKPOINTS, ignore_errors=True)
     except KeyboardInterrupt:
-        print(f"uqgear: interrupted; finished work is kept in {work}; run again with --resume "
+        print(f"uqgear: interrupted; finished work is kept in {folder.work}; run again with --resume "
               "to continue", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except InternalError as exc:
-        # the study was valid: finished analyses and checkpoints stay for --resume
-        exc.kept = f"{work} (run again with --resume to continue)"
-        raise
-    except BaseException:
-        # no partial output: drop what this invocation created; a folder left by an earlier
-        # interrupted run stays for --resume
-        if created or not args.resume:
-            shutil.rmtree(work, ignore_errors=True)
-        _remove_if_empty(parents)
-        raise
     if not args.quiet:
         print(f"results written to {out}" + (f" (report: {out / 'report.html'})"
                                               if study.outputs.report else ""))
@@ -366,66 +323,10 @@ def _parse_assignments(items: Sequence[str], option: str) -> dict[str, float]:
     return values
 
 
-@contextmanager
-def _output_folder(out: Path, option: str = "--out") -> Iterator[Path]:
-    """A hidden work folder that becomes ``out`` when the block succeeds and is removed when it fails.
-
-    ``out`` is checked first: it must not exist or be an empty folder, and its parent must exist.
-    """
-    if out.exists() and not _is_empty_dir(out):
-        raise UqgearError(f"{option} {out}: exists and is not an empty folder; choose a new folder")
-    _check_parents(out, option)
-    parents = _make_parents(out)
-    work = _partial_dir(out)
-    shutil.rmtree(work, ignore_errors=True)
-    work.mkdir()
-    try:
-        yield work
-    except InternalError as exc:
-        # the input was valid and work was done: what was finished is published, not thrown away
-        if any(work.iterdir()):
-            _publish(work, out)
-            exc.kept = str(out)
-        else:
-            work.rmdir()
-            _remove_if_empty(parents)
-        raise
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        _remove_if_empty(parents)
-        raise
-    _publish(work, out)
-
-
-def _check_parents(out: Path, option: str) -> None:
-    """Refuse an output path below a file (its missing folders are made once the input is valid)."""
-    for ancestor in out.absolute().parents:
-        if ancestor.exists():
-            if not ancestor.is_dir():
-                raise UqgearError(f"{option} {out}: {ancestor} is a file, not a folder")
-            return
-
-
-def _make_parents(out: Path) -> list[Path]:
-    """Create the missing folders above ``out``; return them, outermost first."""
-    missing = []
-    folder = out.absolute().parent
-    while not folder.exists():
-        missing.append(folder)
-        folder = folder.parent
-    missing.reverse()
-    for folder in missing:
-        folder.mkdir()
-    return missing
-
-
-def _remove_if_empty(folders: Sequence[Path]) -> None:
-    """Remove folders made by :func:`_make_parents` again, innermost first, while empty."""
-    for folder in reversed(folders):
-        try:
-            folder.rmdir()
-        except OSError:
-            return
+def _new_output_folder(out: Path) -> Path:
+    """``--out``: a new or empty folder, checked before any work (the library writes it as a whole)."""
+    OutputFolder(out, where="--out", existing="refuse").check()
+    return out
 
 
 def _comma_list(items: list[str] | None) -> list[str] | None:
@@ -475,10 +376,9 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
     classes = _pitch_classes(args.pitch_classes)
-    out = Path(args.out)
-    with _output_folder(out) as work:
-        result = calibrate(rig, work, design=args.design, params=_comma_list(args.params), seed=args.seed,
-                           threads=args.workers, pitch_classes=classes)
+    out = _new_output_folder(Path(args.out))
+    result = calibrate(rig, out, design=args.design, params=_comma_list(args.params), seed=args.seed,
+                       threads=args.workers, pitch_classes=classes)
     summary = result.to_dict()
     state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
     print(f"calibration of {rig} {state}; results in {out}")
@@ -493,7 +393,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
 
 
 def _command_diagnose(args: argparse.Namespace) -> int:
-    from .diagnosis.workflow import diagnose
+    from .diagnosis import diagnose
 
     rig = Path(args.rig)
     if not rig.is_file():
@@ -502,10 +402,9 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     if reference is not None and not reference.is_file():
         return _fail(f"--reference {reference}: rig data file not found")
     classes = _pitch_classes(args.pitch_classes)
-    out = Path(args.out)
-    with _output_folder(out) as work:
-        result = diagnose(rig, work, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
-                          workers=args.workers, reference=reference, pitch_classes=classes)
+    out = _new_output_folder(Path(args.out))
+    result = diagnose(rig, out, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
+                      workers=args.workers, reference=reference, pitch_classes=classes)
     gap = result.get("gap", {})
     if gap.get("baseline") is None:
         # nothing was compared (verdict inconclusive): the reason, not a row of Nones
@@ -519,14 +418,12 @@ def _command_diagnose(args: argparse.Namespace) -> int:
 
 
 def _command_blindtest(args: argparse.Namespace) -> int:
-    from .diagnosis.blind_test import blindtest
+    from .validation import blindtest
 
     if args.n_per_effect < 1:
         return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
-    out = Path(args.out)
-    with _output_folder(out) as work:
-        result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers,
-                           suite=args.suite)
+    out = _new_output_folder(Path(args.out))
+    result = blindtest(out, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers, suite=args.suite)
     sets = result["effect_sets"]
     print(f"blind test ({args.suite}): {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
           f"({result['accuracy_detectable']:.2f} counting 'none' as right where the effect is invisible), "

@@ -12,15 +12,16 @@ import scipy.signal
 import xarray as xr
 
 from ..rig.features import FEATURE_FAMILIES
-from .case import RigCase, simulate_task
+from .allowances.interference import amplitude_spectrum
+from .case import RigCase
+from .execution import simulate_task
+from .gap_maps import line_signal_to_noise
 from .result import DiagnosisResult
-from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
-from .interference import amplitude_spectrum
-from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, SIGNAL_SNR,
-                      Decision, line_signal_to_noise)
+from .scoring import GAP_METRIC, GAP_NOISE_LEVEL, CandidateScore, capped_squares
+from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 
-def _held_spectra(result: DiagnosisResult, ops: Sequence[int]) -> xr.Dataset:
+def held_spectra(result: DiagnosisResult, ops: Sequence[int]) -> xr.Dataset:
     """Amplitude spectra of the rig and of the held-out predictions (nominal, model with the effects) for some runs.
 
     The model with the effects is the one with every named effect, or the
@@ -77,7 +78,7 @@ def _family_map(z: np.ndarray, case: RigCase) -> np.ndarray:
         finite = np.isfinite(squares)
         count = finite.sum(axis=-1)
         mean = np.where(count > 0, np.where(finite, squares, 0.0).sum(axis=-1) / np.maximum(count, 1), np.nan)
-        out[:, :, k] = np.sqrt(np.maximum(mean - _GAP_NOISE_LEVEL, 0.0))
+        out[:, :, k] = np.sqrt(np.maximum(mean - GAP_NOISE_LEVEL, 0.0))
     return out
 
 
@@ -113,7 +114,7 @@ def _selection_variables(result: DiagnosisResult) -> dict[str, Any]:
         "shrink_share": (("selected_effect",), [chosen.shrink_share for chosen in selected],
                          {"long_name": "held-out gap shrink brought by the effect, fraction of the nominal gap",
                           "units": "1"}),
-        "gap_after_effect": (("selected_effect",), [chosen.entry.gap for chosen in selected],
+        "gap_after_effect": (("selected_effect",), [chosen.entry.gap_with_effect for chosen in selected],
                              {"long_name": "held-out gap with this and the earlier named effects", "units": "1"}),
     }
     if len(selected) > 1:
@@ -178,11 +179,11 @@ def _score_variables(scores: Sequence[CandidateScore]) -> dict[str, Any]:
                               {"long_name": "held-out log predictive density gain over nominal", "units": "nat"}),
         "delta_log_density_se": (("candidate",), [s.standard_error for s in scores],
                                  {"long_name": "standard error of the gain (over runs)", "units": "nat"}),
-        "gap_with_effect": (("candidate",), [s.gap for s in scores],
+        "gap_with_effect": (("candidate",), [s.gap_with_effect for s in scores],
                             {"long_name": "held-out gap with the effect", "units": "1"}),
-        "shrink_fraction": (("candidate",), [s.shrink for s in scores],
+        "shrink_fraction": (("candidate",), [s.shrink_fraction for s in scores],
                             {"long_name": "1 - gap with effect / nominal gap, held-out runs", "units": "1"}),
-        "shrink_fraction_bounds": (("candidate", "bound"), [[s.shrink_low, s.shrink_high] for s in scores],
+        "shrink_fraction_bounds": (("candidate", "bound"), [list(s.shrink_interval) for s in scores],
                                    {"long_name": "5 % and 95 % bootstrap quantiles (runs resampled)",
                                     "units": "1"}),
     }
@@ -208,24 +209,24 @@ def _coordinates(case: RigCase, scores: Sequence[CandidateScore]) -> dict[str, A
 
 def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Mapping[str, float]) -> dict[str, Any]:
     """The JSON summary of a diagnosis (``diagnosis.json``)."""
-    case = result.case
+    case, settings = result.case, result.settings
     best = result.best
     named = best if best is not None and best.effect == result.verdict else None
     chosen = named if named is not None else best
     gap = {
         "metric": GAP_METRIC,
         "baseline": result.nominal_gap,
-        "with_effect": chosen.gap if chosen is not None else None,
+        "with_effect": chosen.gap_with_effect if chosen is not None else None,
         "effect": chosen.effect if chosen is not None else None,
         "effect_named": named is not None,
-        "shrink_fraction": chosen.shrink if chosen is not None else None,
-        "shrink_interval": [chosen.shrink_low, chosen.shrink_high] if chosen is not None else None,
+        "shrink_fraction": chosen.shrink_fraction if chosen is not None else None,
+        "shrink_interval": list(chosen.shrink_interval) if chosen is not None else None,
         "evaluated_on": _evaluated_on(case),
-        "noise_threshold": NOISE_GAP_THRESHOLD,
+        "noise_threshold": settings.noise_gap,
         "baseline_interval": [float(v) for v in result.nominal_gap_interval],
     }
-    decision = result.decision or Decision(result.verdict, result.reason)
-    return {
+    decision = result.decision
+    content = {
         "verdict": result.verdict,
         "reason": result.reason,
         "borderline": [dict(entry) for entry in decision.borderline],
@@ -242,19 +243,30 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
                     "adhesion_torque": [float(v) for v in result.nominal.adhesion_torques],
                     "periodic_runs": [bool(v) for v in result.nominal.periodic],
                     "converged": result.nominal.converged},
-        "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
-                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD},
+        "thresholds": _thresholds(settings),
         "model_error": case.model_error,
         "pitch_errors": result.pitch_errors.summary() if result.pitch_errors is not None else None,
         "cannot_tell": result.cannot_tell(),
         "sideband_phases": [evidence.summary() for evidence in result.modulation],
-        "line_interference": case.interference,
+        "line_interference": case.interference.summary(),
         "effects_considered": list(result.effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
                 "channels": list(case.channels), "speed": case.speed},
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+    if settings.changed():
+        content["settings"] = settings.changed()
+    return content
+
+
+def _thresholds(settings: DiagnosisSettings, *, signal: bool = False) -> dict[str, float]:
+    """The verdict's thresholds as ``diagnosis.json`` reports them."""
+    thresholds = {"score": settings.score_threshold, "shrink_fraction": settings.shrink_threshold,
+                  "nominal_gap": settings.noise_gap, "partial_shrink": settings.partial_shrink}
+    if signal:
+        thresholds["signal_snr"] = settings.signal_snr
+    return thresholds
 
 
 def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:
@@ -266,12 +278,12 @@ def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:
     per-run (operating point) values, both from the final model's held-out
     discrepancies.
     """
-    value = result.remaining_gap
+    value, noise_gap = result.remaining_gap, result.settings.noise_gap
     return {"value": value, "interval": [float(v) for v in result.remaining_interval],
-            "unexplained": bool(math.isfinite(value) and value > NOISE_GAP_THRESHOLD),
+            "unexplained": bool(math.isfinite(value) and value > noise_gap),
             "model": ["nominal"] + [chosen.entry.label for chosen in result.selected],
             "where": result.remaining_where,
-            "families": [row for row in result.remaining_families if row["score"] > NOISE_GAP_THRESHOLD]}
+            "families": [row for row in result.remaining_families if row["score"] > noise_gap]}
 
 
 def _evaluated_on(case: RigCase) -> dict[str, Any]:
@@ -287,7 +299,8 @@ def _strongest_lines(case: RigCase) -> list[float | None]:
 
 
 def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Sequence[str], seed_text: str,
-                         timings: Mapping[str, float]) -> dict[str, Any]:
+                         timings: Mapping[str, float], settings: DiagnosisSettings = DEFAULT_SETTINGS
+                         ) -> dict[str, Any]:
     """The JSON summary of a diagnosis whose data cannot decide (verdict ``inconclusive``, nothing fitted).
 
     The same keys as :func:`summary`; what was not computed is None or empty
@@ -296,8 +309,8 @@ def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Se
     """
     gap = {"metric": GAP_METRIC, "baseline": None, "with_effect": None, "effect": None, "effect_named": False,
            "shrink_fraction": None, "shrink_interval": None, "evaluated_on": _evaluated_on(case),
-           "noise_threshold": NOISE_GAP_THRESHOLD, "baseline_interval": None}
-    return {
+           "noise_threshold": settings.noise_gap, "baseline_interval": None}
+    content = {
         "verdict": "inconclusive",
         "reason": reason,
         "borderline": [],
@@ -311,21 +324,22 @@ def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Se
         "frequency_locked_lines": [],
         "ranking": [],
         "nominal": None,
-        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": SIGNAL_SNR},
-        "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
-                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD,
-                       "signal_snr": SIGNAL_SNR},
+        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": settings.signal_snr},
+        "thresholds": _thresholds(settings, signal=True),
         "model_error": case.model_error,
         "pitch_errors": None,
         "cannot_tell": [],
         "sideband_phases": [],
-        "line_interference": case.interference,
+        "line_interference": case.interference.summary(),
         "effects_considered": list(effects),
         "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
                 "channels": list(case.channels), "speed": case.speed},
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+    if settings.changed():
+        content["settings"] = settings.changed()
+    return content
 
 
 def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> xr.Dataset:
@@ -350,14 +364,17 @@ def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> 
     return ds
 
 
-def _json_clean(value: Any) -> Any:
+def json_clean(value: Any) -> Any:
     """Replace non-finite floats by None (JSON has no NaN)."""
     if isinstance(value, float) or isinstance(value, np.floating):
         return float(value) if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {key: _json_clean(item) for key, item in value.items()}
+        return {key: json_clean(item) for key, item in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_json_clean(item) for item in value]
+        return [json_clean(item) for item in value]
     return value
+
+
+__all__ = ["held_spectra", "result_dataset", "summary", "inconclusive_summary", "inconclusive_dataset", "json_clean"]
 
 

@@ -19,7 +19,7 @@ import scipy.linalg
 
 from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
-from ..physics.integration import _HISTORY_COLUMNS, _integrate_fast, steps_per_period
+from ..physics.integration import HISTORY_COLUMNS, integrate_fast, steps_per_period
 from ..physics.model import build_model
 from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
@@ -42,7 +42,7 @@ _PERIODIC_TOLERANCE = 1e-2
 _GUARD = 0.025
 # Highest mesh-stiffness scale for which the step count is fixed in advance,
 # so that finite-difference neighbours integrate on the same grid.
-_MAX_STIFFNESS_SCALE = 1.5
+MAX_STIFFNESS_SCALE = 1.5
 
 
 # ---------------------------------------------------------------------------------------------- feature processing
@@ -86,14 +86,14 @@ class RunProcessor:
         line_orders = np.array([self.definitions[i].order for i in self.line_columns])
         self.limit = options["band_limit"]
         self.low_band = tuple(options["low_band"])
-        self.taper = feature_module._window(options["window"], self.size)
-        self.fit = feature_module._LineFit(line_orders * self.speed / 60.0, self.fs, self.size, self.limit, self.taper)
+        self.taper = feature_module.analysis_window(options["window"], self.size)
+        self.fit = feature_module.LineFit(line_orders * self.speed / 60.0, self.fs, self.size, self.limit, self.taper)
         # one column per fitted line (lines within a bin of each other share one fitted amplitude): sums of
         # line power count each line once
         _, first = np.unique(self.fit.groups, return_index=True)
         self.distinct_line_columns = self.line_columns[self.fit.inside[first]]
         frequencies = np.fft.rfftfreq(self.size, 1.0 / self.fs)
-        self.excluded = feature_module._excluded_bins(frequencies, self.speed, design, line_orders,
+        self.excluded = feature_module.excluded_bins(frequencies, self.speed, design, line_orders,
                                                       options["n_sidebands"], self.low_band, self.limit,
                                                       self.fs / self.size)
         self.line_noise = self._line_noise_scale()
@@ -134,7 +134,7 @@ class RunProcessor:
         out = np.full((records.shape[0], len(self.definitions)), np.nan)
         usable = ~np.isnan(records).any(axis=1)
         if usable.any():
-            out[usable] = feature_module._block_features(
+            out[usable] = feature_module.block_features(
                 records[usable], self.fit, self.excluded, self.fs, self.taper, self.low_band, self.columns,
                 self.line_columns, len(self.definitions), lines=lines)
             if self.notch:
@@ -263,7 +263,7 @@ class CampaignSimulator:
             # every neighbour of a fit integrates on the same grid: the steps of the stiffest model,
             # kept every step or (at twice the stop band and more) every other step
             steps = steps_per_period(build_model(stiff, speed, torque, torque * design.z2 / design.z1,
-                                                 mesh_stiffness_scale=_MAX_STIFFNESS_SCALE), self.steps_per_mode)
+                                                 mesh_stiffness_scale=MAX_STIFFNESS_SCALE), self.steps_per_mode)
             steps += steps % 2
             mesh_frequency = design.z1 * speed / 60.0
             half = steps // 2
@@ -316,9 +316,9 @@ class CampaignSimulator:
         """
         setup = build_model(design, float(self.speeds[op]), float(self.drive_torques[op]), float(adhesion_torque),
                             mesh_stiffness_scale=float(scale), effects=effects, pitch_errors=pitch_errors)
-        history, poincare, _ = _integrate_fast(setup, n_periods, keep_periods, self.samples_per_period[op],
+        history, poincare, _ = integrate_fast(setup, n_periods, keep_periods, self.samples_per_period[op],
                                                self.steps_per_mode, setup.static_state())
-        columns = {name: index for index, name in enumerate(_HISTORY_COLUMNS)}
+        columns = {name: index for index, name in enumerate(HISTORY_COLUMNS)}
         signals = {"y1": history[:, columns["y1"]], "y2": history[:, columns["y2"]], "x": history[:, columns["x"]],
                    "te": history[:, columns["x"]] - history[:, columns["y1"]] + history[:, columns["y2"]]
                    + history[:, columns["ste"]]}

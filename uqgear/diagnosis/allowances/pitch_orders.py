@@ -1,43 +1,35 @@
 """The rig's own gears, order by order: the pitch-error allowance scaled to what the rig shows.
 
-The pitch-error allowance (:mod:`uqgear.diagnosis.manufacturing`) is the
-mean square change a random gear of the stated classes makes to each line.
-A rig's gears are one draw, the same in every run. Their tooth positions'
-j-th Fourier coefficient over a revolution, E_j, drives the shaft line of
-order j and the sidebands +-j around every mesh harmonic of that gear, in
-every run and channel, so the lines of one (gear, order) group are off
-together by one shared factor, |E_j|^2 over its ensemble mean. That
-factor is exponentially distributed (E_j sums many independent pitch
-deviations) and spreads further with the class. On seed 3's healthy
-class-7 control of the real-world blind test the gear's own E_2 came out
-at 0.08 of the mean power: its second-order lines sat far below what the
-allowance expected (median z -1.4, mean z^2 2.9 over 168 lines), which,
-with the third order, made the control `unexplained` (held-out gap 0.66).
+The pitch-error allowance (:mod:`.pitch_errors`) is the mean square change
+a random gear of the stated classes makes to each line. A rig's gears are
+one draw, the same in every run. Their tooth positions' j-th Fourier
+coefficient over a revolution, E_j, drives the shaft line of order j and the
+sidebands +-j around every mesh harmonic of that gear, in every run and
+channel, so the lines of one (gear, order) group are off together by one
+shared factor, |E_j|^2 over its ensemble mean. That factor is exponentially
+distributed (E_j sums many independent pitch deviations) and spreads further
+with the class: an allowance held at the mean is far too wide for a gear that
+came out fine at an order, and too narrow for one that came out coarse.
 
 So each group's share of the allowance is scaled by the factor that makes
 the rig's lines most likely (Rice likelihood of the line amplitudes with
 noise, the model's own relative and absolute errors, and the scaled
 allowance), within the range pitch errors of the stated classes give that
-group: the 1 % and 99 % quantiles of |E_j|^2 over many draws of the tooth
-positions alone (no simulation), relative to the mean over the draws the
-allowance simulated. A rig whose gear shows more at an order than such
-gears can is still charged with the excess; below the range the allowance
-is not shrunk further. Each model (the nominal one and every fit with
-effects) gets its own factors from its own residuals, so an effect that
+group: quantiles (``order_factor_quantiles`` of
+:class:`~uqgear.diagnosis.DiagnosisSettings`) of |E_j|^2 over many draws of
+the tooth positions alone (no simulation), relative to the mean over the
+draws the allowance simulated. A rig whose gear shows more at an order than
+such gears can is still charged with the excess; below the range the
+allowance is not shrunk further. Each model (the nominal one and every fit
+with effects) gets its own factors from its own residuals, so an effect that
 explains a group's lines is not charged for the nominal model's widening.
 
-The first order is scaled like the others. A gear's first-order pitch
-error is a run-out exactly as an eccentric shaft's, so a run-out within
-what the classes' gears make is not evidence of an eccentricity; only its
-mesh-stiffness modulation can be. Held at the ensemble mean there (tried),
-a healthy class-7 control's gear, whose own first-order power was about
-twice the mean, was given an eccentricity at 72 nats (blind seed 2): the
-nominal model could not take the gear's run-out, the eccentricity fit took
-it and then narrowed its own first-order allowance. The price is paid by
-small run-outs on such gears: a 12 um pinion run-out (kappa 0.03) that
-brought the pinion's first order to 3.3 times the mean power is the
-pinion's own errors to the nominal model (blind seed 1), and the
-eccentricity fit scored 7 nats even from the true values.
+The first order is scaled like the others: a gear's first-order pitch error
+is a run-out exactly as an eccentric shaft's, so a run-out within what the
+classes' gears make is not evidence of an eccentricity; only its
+mesh-stiffness modulation can be (docs/model.md section 6.4, "The rig's own
+gears, order by order"; the campaigns behind this choice are in
+docs/validation/diagnosis.md).
 """
 
 from __future__ import annotations
@@ -50,28 +42,21 @@ from typing import Any
 import numpy as np
 import scipy.special
 
-from ..physics.design import Design
-from ..physics.pitch_errors import PitchErrors, draw_in_classes
-from .case import RigCase
-from .discrepancy import absolute_model_error
+from ...physics.design import Design
+from ...physics.pitch_errors import PitchErrors, draw_in_classes, order_powers
+from ..case import RigCase
+from ..discrepancy import absolute_model_error
+from ..settings import DEFAULT_SETTINGS
 
 #: Shaft orders whose groups are scaled (the orders the features hold: shaft lines and sidebands 1..3).
 ORDERS: tuple[int, ...] = (1, 2, 3)
 #: Quantiles of a group's power over the stated classes' draws that bound its factor.
-FACTOR_QUANTILES: tuple[float, float] = (0.01, 0.99)
+FACTOR_QUANTILES: tuple[float, ...] = DEFAULT_SETTINGS.order_factor_quantiles
 # Draws of the tooth positions alone (no simulation) that give those quantiles.
 _BOUND_DRAWS = 4000
 # Candidate factors per decade between the bounds (a log grid; the likelihood is smooth in the factor).
 _GRID_PER_DECADE = 24
 _GEARS = ("pinion", "gear")
-
-
-def order_powers(errors: np.ndarray, orders: Sequence[int] = ORDERS) -> np.ndarray:
-    """|E_j|^2 of tooth positions ``errors`` (..., z): the power of their j-th Fourier coefficient per revolution."""
-    errors = np.asarray(errors, dtype=float)
-    teeth = errors.shape[-1]
-    phases = np.exp(-2j * np.pi * np.outer(np.arange(teeth), np.asarray(orders)) / teeth)   # (z, orders)
-    return np.abs(2.0 / teeth * (errors @ phases)) ** 2
 
 
 def _mean_powers(drawn_errors: Sequence[PitchErrors]) -> dict[str, np.ndarray]:
@@ -106,7 +91,7 @@ def class_powers(design: Design, classes: tuple[float, float], drawn_errors: Seq
 
 
 def bounds_of(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
-              quantiles: tuple[float, float] = FACTOR_QUANTILES) -> dict[tuple[str, int], tuple[float, float]]:
+              quantiles: tuple[float, ...] = FACTOR_QUANTILES) -> dict[tuple[str, int], tuple[float, float]]:
     """Per group, the ``quantiles`` of :func:`class_powers` over the allowance's mean: the range its factor is held to."""
     bounds = {}
     for key, (powers, mean) in spread.items():
@@ -116,7 +101,7 @@ def bounds_of(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
 
 
 def factor_bounds(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
-                  rng: np.random.Generator, *, quantiles: tuple[float, float] = FACTOR_QUANTILES,
+                  rng: np.random.Generator, *, quantiles: tuple[float, ...] = FACTOR_QUANTILES,
                   draws: int = _BOUND_DRAWS) -> dict[tuple[str, int], tuple[float, float]]:
     """Per (gear, order): the range of |E_j|^2 that gears of ``classes`` give, over the allowance draws' mean."""
     return bounds_of(class_powers(design, classes, drawn_errors, rng, draws=draws), quantiles)
@@ -137,11 +122,14 @@ def line_groups(case: RigCase) -> dict[tuple[str, int], np.ndarray]:
     for position, (name, family) in enumerate(lines):
         for gear in _GEARS:
             if family == f"shaft_{gear}":
-                order = int(re.search(r"(\d+)$", name).group(1))
+                found = re.search(r"(\d+)$", name)
             elif family == f"sideband_{gear}":
-                order = int(re.search(r"[+-](\d+)$", name).group(1))
+                found = re.search(r"[+-](\d+)$", name)
             else:
                 continue
+            if found is None:  # an internal invariant: the layout names every shaft line and sideband so
+                raise ValueError(f"{name!r} is not a shaft line or sideband feature name")
+            order = int(found.group(1))
             if order in ORDERS:
                 groups.setdefault((gear, order), []).append(position)
     return {key: np.array(positions) for key, positions in groups.items()}
@@ -237,6 +225,6 @@ def factors_summary(factors: Mapping[tuple[str, int], float],
     return summary
 
 
-__all__ = ["ORDERS", "FACTOR_QUANTILES", "order_powers", "drawn_amplitudes", "class_powers", "factor_bounds",
+__all__ = ["ORDERS", "FACTOR_QUANTILES", "drawn_amplitudes", "class_powers", "factor_bounds",
            "bounds_of", "share_below", "line_groups",
            "fitted_factors", "scaled_line_errors", "scaled_to_rig", "factors_summary"]

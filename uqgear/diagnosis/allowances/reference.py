@@ -13,7 +13,8 @@ Method (docs/model.md section 6.1):
 1. **Compatibility.** Both campaigns must state the same design (every key
    of the ``design`` attribute) and the reference must hold every channel of
    the test campaign; every test operating point needs a reference point at
-   the same pinion speed (within 1 %) and drive torque (within 5 %).
+   the same pinion speed and drive torque (``speed_tolerance`` and
+   ``torque_tolerance`` of :class:`~uqgear.diagnosis.DiagnosisSettings`).
    Otherwise :class:`DiagnosisError` names the file and what differs.
 2. **Reference fit.** The reference is prepared like any campaign
    (:func:`~uqgear.diagnosis.case.prepare_case`) and the nominal model fitted
@@ -21,24 +22,20 @@ Method (docs/model.md section 6.1):
 3. **What the model lacks.** For every line that stands clear of the noise
    in the reference (amplitude at least :data:`MIN_LINE_SNR` per-quadrature
    noise spreads, in rig and model) the log ratio rig/model is a sample of
-   the channel's transfer correction at the line's frequency. A transfer
-   path acts on frequency, not order (a housing resonance is a peak in Hz),
-   so each channel's log gain is modelled as a smooth function of log
-   frequency: a Gaussian process with a constant mean, a squared-exponential
-   kernel and a white scatter term, hyperparameters by maximum marginal
-   likelihood, made robust (Student-t scatter, iteratively reweighted) so
-   that lines the model cannot produce at all lose their pull.
-   Its predictive spread (curve uncertainty plus the scatter) is the
+   the channel's transfer correction at the line's frequency; a gain curve
+   over frequency (:mod:`.gain_curve`) is fitted to them per channel. Its
+   predictive spread (curve uncertainty plus the scatter) is the
    correction's uncertainty. Band power, RMS and kurtosis are not line
    spectra: their correction is read directly at the matched reference run
    (the RMS after the model's lines are taken through the curve one by one,
-   :func:`~uqgear.diagnosis.case.transferred_rms`).
+   :func:`~uqgear.diagnosis.execution.transferred_rms`).
 4. **Carried to the test campaign.** The test campaign's model features are
    multiplied by the gain at their frequencies (the observed features and
    the noise floor stay as recorded, so the Rice statistics of the lines
    stay exact) and the correction's relative uncertainty widens their
-   model error (:class:`~uqgear.diagnosis.case.FeatureModelError`). Fits,
-   held-out scoring and the verdict then run unchanged on the test campaign.
+   model error (:class:`~uqgear.diagnosis.case.FeatureModelError`):
+   :meth:`ReferenceCorrection.apply` returns the corrected case. Fits,
+   held-out scoring and the verdict then run unchanged on it.
 """
 
 from __future__ import annotations
@@ -46,33 +43,26 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
 
 import numpy as np
-import scipy.linalg
-import scipy.optimize
 import xarray as xr
 
-from ..physics.design import Design
-from .case import FeatureModelError, RigCase, transferred_rms
-from .errors import DiagnosisError
+from ...physics.design import Design
+from ..case import FeatureModelError, RigCase, prepare_case
+from ..errors import DiagnosisError
+from ..execution import RunExecutor, transferred_rms
+from ..fitting import fit_nominal
+from ..settings import DEFAULT_SETTINGS
+from .gain_curve import DIRECT_FLOOR, GainCurve, fit_gain_curve
 
 #: Relative tolerance on pinion speed for matching a test run to a reference run.
-SPEED_TOLERANCE = 0.01
+SPEED_TOLERANCE = DEFAULT_SETTINGS.speed_tolerance
 #: Relative tolerance on drive torque for matching a test run to a reference run.
-TORQUE_TOLERANCE = 0.05
+TORQUE_TOLERANCE = DEFAULT_SETTINGS.torque_tolerance
 #: A line enters the learned correction when rig and model both stand this many per-quadrature noise spreads up.
 MIN_LINE_SNR = 5.0
-# Bounds of the Gaussian process hyperparameters: length scale in ln(f) (the log gain of a
-# resonance of damping 0.02 falls by half within about 0.04 of its peak; one decade is 2.3),
-# amplitude and scatter in ln(gain). A shorter length would let the curve follow a single
-# line that the model lacks (two lines a few hertz apart disagreeing is no transfer path).
-_LENGTH_BOUNDS = (0.04, 3.0)
-_AMPLITUDE_BOUNDS = (1e-3, 5.0)
-_SCATTER_BOUNDS = (0.01, 2.0)
-# A correction read directly at one reference run has at least this relative uncertainty.
-_DIRECT_FLOOR = 0.03
 # Frequencies of the gain curve stored in diagnosis.json (per channel).
 _CURVE_POINTS = 120
 # The local noise floor at a line is the median of the free periodogram bins within this
@@ -119,7 +109,7 @@ def check_design_match(test: xr.Dataset, reference: xr.Dataset, *, where: str) -
         more = f" and {len(differ) - 4} more" if len(differ) > 4 else ""
         raise DiagnosisError(f"reference {where}: design differs from the test campaign's: {shown}{more}; "
                              "expected a campaign of the same gear pair on the same rig")
-    from ..rig.sampling import SIGNAL_CHANNELS
+    from ...rig.sampling import SIGNAL_CHANNELS
 
     missing = [name for name in SIGNAL_CHANNELS if name in test.data_vars and name not in reference.data_vars]
     if missing:
@@ -162,136 +152,6 @@ def match_operating_points(test: xr.Dataset, reference: xr.Dataset, *, where: st
     return matched
 
 
-# ---------------------------------------------------------------------------------------------- gain curves
-
-@dataclass
-class GainCurve:
-    """One channel's log gain (rig over model) as a Gaussian process in ln(frequency).
-
-    Attributes
-    ----------
-    x, y : ndarray
-        Training points: ln(frequency / Hz) and ln(rig / model) of the lines.
-    weights : ndarray
-        Robustness weight of each point (1: a full member; small: a line the
-        curve cannot follow, e.g. one the model does not produce at all).
-    mean, amplitude, length, scatter : float
-        Constant mean, kernel amplitude and length scale (in ln f), white scatter (in ln gain).
-    """
-
-    x: np.ndarray
-    y: np.ndarray
-    weights: np.ndarray
-    mean: float
-    amplitude: float
-    length: float
-    scatter: float
-    _alpha: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
-    _factor: tuple | None = field(default=None, repr=False)
-
-    @property
-    def dropped(self) -> int:
-        """Lines the curve effectively ignores (weight below :data:`_DROPPED_WEIGHT`)."""
-        return int(np.sum(self.weights < _DROPPED_WEIGHT))
-
-    @classmethod
-    def flat(cls, mean: float = 0.0, scatter: float = _DIRECT_FLOOR) -> "GainCurve":
-        """Too few lines to learn from: a constant gain, a small uncertainty."""
-        return cls(np.zeros(0), np.zeros(0), np.zeros(0), mean, _AMPLITUDE_BOUNDS[0], 1.0, scatter)
-
-    def _kernel(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return _kernel(a, b, self.amplitude, self.length)
-
-    def prepare(self) -> "GainCurve":
-        if self.x.size:
-            matrix = self._kernel(self.x, self.x) + np.diag(self.scatter ** 2 / self.weights)
-            self._factor = scipy.linalg.cho_factor(matrix, lower=True)
-            self._alpha = scipy.linalg.cho_solve(self._factor, self.y - self.mean)
-        return self
-
-    def predict(self, frequencies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Log gain and its predictive standard deviation (curve plus scatter) at ``frequencies`` (Hz)."""
-        f = np.asarray(frequencies, dtype=float)
-        x = np.log(np.maximum(f, 1e-3))
-        if not self.x.size or self._factor is None:
-            return np.full(f.shape, self.mean), np.full(f.shape, self.scatter)
-        cross = self._kernel(x.ravel(), self.x)
-        mean = self.mean + cross @ self._alpha
-        variance = self.amplitude ** 2 - np.sum(cross * scipy.linalg.cho_solve(self._factor, cross.T).T, axis=1)
-        spread = np.sqrt(np.maximum(variance, 0.0) + self.scatter ** 2)
-        return mean.reshape(f.shape), spread.reshape(f.shape)
-
-
-# Student-t degrees of freedom of the robust curve fit, and the weight below which a line counts as dropped.
-_STUDENT_DOF = 4.0
-_DROPPED_WEIGHT = 0.2
-_ROBUST_ITERATIONS = 6
-
-
-def _kernel(a: np.ndarray, b: np.ndarray, amplitude: float, length: float) -> np.ndarray:
-    return amplitude ** 2 * np.exp(-0.5 * ((a[:, None] - b[None, :]) / length) ** 2)
-
-
-def _negative_log_evidence(log_parameters: np.ndarray, x: np.ndarray, y: np.ndarray, weights: np.ndarray) -> float:
-    amplitude, length, scatter = np.exp(log_parameters)
-    matrix = _kernel(x, x, amplitude, length) + np.diag(scatter ** 2 / weights)
-    try:
-        factor = scipy.linalg.cho_factor(matrix, lower=True)
-    except np.linalg.LinAlgError:
-        return 1e12
-    # the constant mean is profiled out (generalised least squares)
-    ones = np.ones(x.size)
-    solved_ones = scipy.linalg.cho_solve(factor, ones)
-    mean = float(solved_ones @ y / (ones @ solved_ones))
-    residual = y - mean
-    return float(0.5 * residual @ scipy.linalg.cho_solve(factor, residual) + np.sum(np.log(np.diag(factor[0]))))
-
-
-def fit_gain_curve(frequencies: np.ndarray, log_ratios: np.ndarray) -> GainCurve:
-    """A channel's gain curve from lines' frequencies (Hz) and log ratios rig/model (module docstring, step 3).
-
-    Robust: a Student-t scatter (4 degrees of freedom) by iteratively
-    reweighted maximum marginal likelihood, each line weighted by its
-    leave-one-out residual against the curve through the others, so that a
-    line the model does not produce at all neither bends the curve nor
-    inflates its scatter, while a resonance sampled by several lines keeps them.
-    """
-    x = np.log(np.asarray(frequencies, dtype=float))
-    y = np.asarray(log_ratios, dtype=float)
-    keep = np.isfinite(x) & np.isfinite(y)
-    x, y = x[keep], y[keep]
-    if x.size < 3:
-        return GainCurve.flat(float(np.median(y)) if y.size else 0.0).prepare()
-    bounds = [tuple(np.log(b)) for b in (_AMPLITUDE_BOUNDS, _LENGTH_BOUNDS, _SCATTER_BOUNDS)]
-    weights = np.ones(x.size)
-    spread = max(float(np.std(y)), 0.05)
-    starts = [np.log([spread, length, 0.3 * spread]) for length in (0.06, 0.2, 0.8)]
-    curve = None
-    for _ in range(_ROBUST_ITERATIONS):
-        best = min((scipy.optimize.minimize(_negative_log_evidence, start, args=(x, y, weights), method="L-BFGS-B",
-                                            bounds=bounds) for start in starts), key=lambda found: found.fun)
-        amplitude, length, scatter = (float(v) for v in np.exp(best.x))
-        matrix = _kernel(x, x, amplitude, length) + np.diag(scatter ** 2 / weights)
-        factor = scipy.linalg.cho_factor(matrix, lower=True)
-        ones = np.ones(x.size)
-        solved = scipy.linalg.cho_solve(factor, ones)
-        mean = float(solved @ y / (ones @ solved))
-        curve = GainCurve(x, y, weights.copy(), mean, amplitude, length, scatter).prepare()
-        # leave-one-out residuals in closed form (alpha_i / [K^-1]_ii); their spread without the
-        # point's own down-weighted noise, so that a far line cannot talk its weight back up
-        inverse_diagonal = np.diag(scipy.linalg.cho_solve(factor, np.eye(x.size)))
-        loo = curve._alpha / inverse_diagonal
-        latent = np.maximum(1.0 / inverse_diagonal - scatter ** 2 / weights, 0.0)
-        standardised = loo / np.sqrt(latent + scatter ** 2)
-        updated = (_STUDENT_DOF + 1.0) / (_STUDENT_DOF + standardised ** 2)
-        updated = np.clip(updated, 1e-3, 1.0)
-        starts = [best.x] + starts[1:]
-        if np.allclose(updated, weights, atol=0.02):
-            break
-        weights = updated
-    return curve
-
-
 # ---------------------------------------------------------------------------------------------- the correction
 
 @dataclass
@@ -321,12 +181,21 @@ class ReferenceCorrection:
     direct: dict[str, np.ndarray]
     summary: dict[str, Any]
 
-    def apply(self, case: RigCase, matched: np.ndarray) -> dict[str, Any]:
-        """Put the correction on a prepared test campaign; returns the JSON-ready record of what was applied.
+    #: Its entry in ``diagnosis.json``.
+    key: ClassVar[str] = "reference"
 
-        Sets ``case.transfer`` (model features are multiplied by it) and
-        replaces ``case.model_error`` by a :class:`FeatureModelError`
-        widened by the correction's relative uncertainty.
+    @property
+    def applied(self) -> bool:
+        """A learned correction is always carried over."""
+        return True
+
+    def apply(self, case: RigCase, matched: np.ndarray) -> tuple[RigCase, dict[str, Any]]:
+        """The test campaign with the correction on it, and the JSON-ready record of what was applied.
+
+        The new case's model features are multiplied by ``transfer``, its
+        observed lines divided by their noise colour, and its model error is
+        a :class:`FeatureModelError` widened by the correction's relative
+        uncertainty; ``case`` itself is not changed.
         """
         line_gain, spread = line_gains(case, self.curves)
         gain = line_gain.copy()
@@ -341,28 +210,28 @@ class ReferenceCorrection:
                         continue
                     columns = np.flatnonzero(processor_kinds == kind)
                     gain[op, c, columns] = math.exp(value)
-                    scatter = curve.scatter if curve is not None else _DIRECT_FLOOR
-                    spread[op, c, columns] = max(scatter, _DIRECT_FLOOR)
+                    scatter = curve.scatter if curve is not None else DIRECT_FLOOR
+                    spread[op, c, columns] = max(scatter, DIRECT_FLOOR)
         # the test records' own noise colour: lines and their model are both divided by it, so that the
         # white-noise level of the record is the right noise for them (Rice statistics stay exact)
         colour = noise_colour(case)
-        case.observed_all = case.observed_all / colour
-        case.observed = case.observed_all[..., case.layout.columns]
-        case.transfer = gain / colour
-        # the RMS through the path line by line (case.transferred_rms), then scaled by its direct correction
-        case.line_gain = line_gain
+        observed_all = case.observed_all / colour
         compared = gain[..., case.layout.columns]
         widened = spread[..., case.layout.columns]
         kinds = np.array(case.layout.kinds)
         # a log-gain spread s is a relative error of about s on an amplitude
-        case.model_error = FeatureModelError(case.model_error,
-                                             {kind: widened[..., kinds == kind] for kind in set(case.layout.kinds)})
+        model_error = FeatureModelError(case.model_error,
+                                        {kind: widened[..., kinds == kind] for kind in set(case.layout.kinds)})
+        # the RMS through the path line by line (transferred_rms), then scaled by its direct correction
+        corrected = replace(case, observed_all=observed_all, observed=observed_all[..., case.layout.columns],
+                            transfer=gain / colour, line_gain=line_gain, model_error=model_error)
         line = kinds == "line"
-        usable = np.isfinite(case.observed[..., line])
-        return {"noise_colour_range": [float(np.min(colour)), float(np.max(colour))],
-                "gain_range": [float(np.nanmin(compared[..., line][usable])) if usable.any() else None,
-                               float(np.nanmax(compared[..., line][usable])) if usable.any() else None],
-                "largest_added_relative_error": float(np.max(widened)) if widened.size else 0.0}
+        usable = np.isfinite(corrected.observed[..., line])
+        return corrected, {
+            "noise_colour_range": [float(np.min(colour)), float(np.max(colour))],
+            "gain_range": [float(np.nanmin(compared[..., line][usable])) if usable.any() else None,
+                           float(np.nanmax(compared[..., line][usable])) if usable.any() else None],
+            "largest_added_relative_error": float(np.max(widened)) if widened.size else 0.0}
 
 
 def _kinds_of_all(case: RigCase) -> np.ndarray:
@@ -383,10 +252,9 @@ def noise_colour(case: RigCase) -> np.ndarray:
     periodogram bins near the line over the median of all free bins (the
     bins the noise estimate uses), or of the nearest free bins where too
     few lie near the line (a shaft line inside the low band, which the noise
-    estimate leaves out: measured behind a 2.5 kHz accelerometer resonance,
-    the floor there was 30 times the median in power, and taken as white
-    it made noise-level shaft lines read 2-3 noise spreads high on every
-    run); 1 for features that are not lines.
+    estimate leaves out and where a resonance's floor can be far above the
+    median; docs/model.md section 6.1, step 4); 1 for features that are not
+    lines.
     """
     colour = np.ones(case.observed_all.shape)
     for op in range(case.n_op):
@@ -411,7 +279,7 @@ def noise_colour(case: RigCase) -> np.ndarray:
             if not case.usable[op, c] or np.isnan(record).any() or not fit.n_centres:
                 continue
             # the fitted lines taken out first: a strong line's window leakage is no noise for the fit
-            coefficients = fit._coefficients(record[None])[:, 0]
+            coefficients = fit.coefficients(record[None])[:, 0]
             residual = record * processor.taper - fit.weighted @ coefficients
             density = np.abs(np.fft.rfft(residual)) ** 2
             overall = float(np.median(density[kept])) if kept.any() else 0.0
@@ -481,7 +349,7 @@ def _direct_corrections(case: RigCase, model_all: np.ndarray, line_gain: np.ndar
     """Log corrections of band power, RMS and kurtosis read at each reference run (n_op, n_channel).
 
     The RMS correction is read against the model's RMS taken through the
-    learned line gains (:func:`~uqgear.diagnosis.case.transferred_rms`), as
+    learned line gains (:func:`~uqgear.diagnosis.execution.transferred_rms`), as
     it is applied to the test campaign's model.
     """
     names = case.processors[0].names
@@ -523,7 +391,7 @@ def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.ra
     Parameters
     ----------
     rig : xarray.Dataset
-        The reference campaign, validated (:func:`uqgear.diagnosis.workflow.load_rig_input`).
+        The reference campaign, validated (:func:`uqgear.diagnosis.inputs.load_rig_input`).
     design : Design
         The nominal design (the same as the test campaign's).
     source : str
@@ -537,17 +405,14 @@ def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.ra
     -------
     ReferenceCorrection
     """
-    from .case import RunExecutor, prepare_case
-    from .fitting import fit_nominal
-
     started = time.perf_counter()
-    case = prepare_case(rig, design, seed=seed)
-    case.executor = RunExecutor(case, workers)
+    prepared = prepare_case(rig, design, seed=seed)
+    executor = RunExecutor(prepared, workers)
     try:
-        nominal = fit_nominal(case)
+        nominal = fit_nominal(prepared.with_executor(executor))
     finally:
-        case.executor.close()
-        case.executor = None
+        executor.close()
+    case = prepared
     model_all = nominal.model
     points = _line_points(case, model_all, noise_colour(case))
     curves = {channel: fit_gain_curve(*points[channel]) for channel in case.channels}
@@ -588,10 +453,14 @@ def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.ra
                                summary=summary)
 
 
-def attach_reference(case: RigCase, correction: ReferenceCorrection, test: xr.Dataset) -> dict[str, Any]:
-    """Match the test campaign's runs to the reference's and correct the case; the ``reference`` summary."""
-    matched = match_operating_points(test, correction.rig, where=correction.source)
-    applied = correction.apply(case, matched)
+def attach_reference(case: RigCase, correction: ReferenceCorrection, test: xr.Dataset, *,
+                     speed_tolerance: float = SPEED_TOLERANCE, torque_tolerance: float = TORQUE_TOLERANCE
+                     ) -> tuple[RigCase, dict[str, Any]]:
+    """The test campaign corrected by a learned reference (its runs matched to the reference's), and the
+    ``reference`` summary of ``diagnosis.json``."""
+    matched = match_operating_points(test, correction.rig, where=correction.source, speed_tolerance=speed_tolerance,
+                                     torque_tolerance=torque_tolerance)
+    corrected, applied = correction.apply(case, matched)
     summary = dict(correction.summary)
     summary["matched_operating_points"] = [
         {"op": op, "reference_op": int(ref), "pinion_speed": float(test["pinion_speed"].values[op]),
@@ -600,8 +469,8 @@ def attach_reference(case: RigCase, correction: ReferenceCorrection, test: xr.Da
          "reference_drive_torque": float(correction.rig["drive_torque"].values[ref])}
         for op, ref in enumerate(matched)]
     summary["applied"] = applied
-    return summary
+    return corrected, summary
 
 
-__all__ = ["SPEED_TOLERANCE", "TORQUE_TOLERANCE", "MIN_LINE_SNR", "GainCurve", "ReferenceCorrection",
-           "check_design_match", "match_operating_points", "fit_gain_curve", "learn_reference", "attach_reference"]
+__all__ = ["SPEED_TOLERANCE", "TORQUE_TOLERANCE", "MIN_LINE_SNR", "ReferenceCorrection", "check_design_match",
+           "match_operating_points", "noise_colour", "line_gains", "learn_reference", "attach_reference"]

@@ -3,7 +3,7 @@
 A gear's first-order pitch error and an eccentric shaft's run-out move the
 shaft's first-order line alike, and the compared features are amplitudes,
 so a run-out of a size the gears' stated classes make is the gear's own to
-the fit (:mod:`.gear_orders`, :func:`.manufacturing.run_outs_not_told_apart`).
+the fit (:mod:`.pitch_orders`, :func:`.pitch_errors.run_outs_not_told_apart`).
 An eccentric shaft also modulates the mesh stiffness, k(t) (1 + kappa
 cos(W_s t + phase)), which pitch errors do not: it adds sidebands in a
 fixed phase relation to their mesh harmonic. The phase sum
@@ -13,43 +13,47 @@ fixed phase relation to their mesh harmonic. The phase sum
 of the n-th mesh harmonic's first sidebands of that shaft (orders in the
 shaft's rotations) does not depend on where the record starts nor on the
 eccentricity's phase, and for pitch errors it hardly depends on the draw
-(measured: 12 draws within a few degrees). Its distribution is simulated
+(docs/model.md section 6.4). Its distribution is simulated
 under the final model with pitch errors of the allowance (H0) and with an
 eccentricity of the run-out the fit read (H1), each over the fitted
 model's parameter spread, and the rig's phase sums are scored under both
 (von Mises densities widened by each sum's own noise). The log ratio is
 evidence for an eccentricity that the amplitudes cannot give.
 
-Only a shaft whose sidebands lie at least :data:`MIN_SIDEBAND_ORDERS`
-pinion orders from their carrier is tested: on the gear's (0.21 pinion
-orders for the reference design's 21:101) the test favoured a gear
-eccentricity that was not there on five of six blind campaigns, by 105 to
-435 nats.
+Only a shaft whose sidebands lie at least ``min_sideband_orders`` pinion
+orders from their carrier is tested (:class:`~uqgear.diagnosis.DiagnosisSettings`):
+nearer, as a gear's sidebands are on the reference design (0.21 pinion
+orders), they sit among the gear's other orders, which the line fit does not
+hold apart, and the sums mislead (docs/model.md section 6.4, "An eccentric
+shaft named by its sidebands' phases"; docs/validation/diagnosis.md).
 """
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.special
 
-from ..physics.effects import Eccentricity
-from .candidates import Candidate, candidates_for
-from .case import RigCase
-from .fitting import FitResult, fit_candidate
-from .scoring import CandidateScore, HeldOut, leave_one_out, score_candidate
+from ...physics.effects import Eccentricity
+from ..case import RigCase
+from ..effects import effect_family
+from ..fitting import FitResult, fit_candidate
+from ..heldout import HeldOut, leave_one_out
+from ..scoring import CandidateScore, score_candidate
+from ..settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 #: Mesh stiffness modulations the eccentric-shaft hypothesis is tried at (a profile over kappa).
-MODULATION_KAPPAS = (0.01, 0.03)
+MODULATION_KAPPAS = DEFAULT_SETTINGS.modulation_kappas
 #: Log ratio (nats) of the rig's phase sums under an eccentricity over pitch errors alone that names it.
-PHASE_EVIDENCE_THRESHOLD = 200.0
+PHASE_EVIDENCE_THRESHOLD = DEFAULT_SETTINGS.phase_evidence_threshold
 #: A shaft is tested only where its first sidebands lie this many pinion orders from their carrier.
-MIN_SIDEBAND_ORDERS = 0.5
+MIN_SIDEBAND_ORDERS = DEFAULT_SETTINGS.min_sideband_orders
 #: Pitch-error draws of the allowance simulated at each point of the parameter spread.
-DRAWS_PER_POINT = 4
+DRAWS_PER_POINT = DEFAULT_SETTINGS.phase_draws_per_point
 #: The fitted model's parameter spread the phase sums are pooled over: each factor up and down.
 PARAMETER_SPREAD = {"mesh_stiffness_scale": 1.03, "zeta_mesh": 1.25}
 _HARMONICS = (1, 2, 3)
@@ -62,8 +66,7 @@ class ModulationEvidence:
     The evidence for each modulation tried is the log ratio summed over the
     phase sums of every operating point but the one that favours the
     eccentricity most: a single run's sums (a resonance crossed, a burst of
-    wander) must not name an effect alone (measured: a healthy control's
-    91 of its 136 nats sat in one run of eight).
+    wander) must not name an effect alone.
 
     Attributes
     ----------
@@ -85,6 +88,13 @@ class ModulationEvidence:
     n_sums: int
     threshold: float = PHASE_EVIDENCE_THRESHOLD
     seconds: float = 0.0
+    #: Its entry in ``diagnosis.json`` (one per shaft tested).
+    key: ClassVar[str] = "sideband_phases"
+
+    @property
+    def applied(self) -> bool:
+        """Whether any phase sum was scored."""
+        return self.n_sums > 0
 
     @classmethod
     def from_sums(cls, shaft: str, run_out: float, per_sum: dict[float, np.ndarray], n_sums: int, *,
@@ -193,15 +203,15 @@ def _spread_vectors(base: FitResult) -> list[np.ndarray]:
     return vectors
 
 
-def shafts_tested(case: RigCase) -> list[str]:
-    """The shafts whose first sidebands lie far enough from their carrier (:data:`MIN_SIDEBAND_ORDERS`)."""
+def shafts_tested(case: RigCase, *, min_orders: float = MIN_SIDEBAND_ORDERS) -> list[str]:
+    """The shafts whose first sidebands lie at least ``min_orders`` pinion orders from their carrier."""
     pinion_orders = {"pinion": 1.0, "gear": case.design.z1 / case.design.z2}
-    return [shaft for shaft, orders in pinion_orders.items() if orders >= MIN_SIDEBAND_ORDERS]
+    return [shaft for shaft, orders in pinion_orders.items() if orders >= min_orders]
 
 
 def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: float, *,
-                        kappas: Sequence[float] = MODULATION_KAPPAS,
-                        threshold: float = PHASE_EVIDENCE_THRESHOLD) -> ModulationEvidence:
+                        kappas: Sequence[float] = MODULATION_KAPPAS, threshold: float = PHASE_EVIDENCE_THRESHOLD,
+                        draws_per_point: int = DRAWS_PER_POINT) -> ModulationEvidence:
     """Score the rig's sideband phase sums of ``shaft`` with and without an eccentric shaft.
 
     Parameters
@@ -216,6 +226,10 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
         Eccentricity amplitude of the hypothesis, m.
     kappas : sequence of float
         Mesh stiffness modulations tried.
+    threshold : float
+        Log ratio that names the eccentricity, nats.
+    draws_per_point : int
+        Pitch-error draws at each point of the parameter spread.
 
     Returns
     -------
@@ -223,7 +237,7 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
     """
     clock = time.perf_counter()
     allowance = case.pitch_allowance
-    drawn_errors = [] if allowance is None else list(allowance.drawn_errors)[:DRAWS_PER_POINT]
+    drawn_errors = [] if allowance is None else list(allowance.drawn_errors)[:draws_per_point]
     line = np.array(case.layout.kinds) == "line"
     line_columns = np.array(case.layout.columns)[line]
     names = [name for name, kind in zip(case.layout.names, case.layout.kinds) if kind == "line"]
@@ -263,7 +277,8 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
 
 
 def fit_modulated_run_out(case: RigCase, base: FitResult, base_held: HeldOut, evidence: ModulationEvidence,
-                          rng: np.random.Generator) -> CandidateScore:
+                          rng: np.random.Generator, *, settings: DiagnosisSettings = DEFAULT_SETTINGS
+                          ) -> CandidateScore:
     """The eccentricity the phase sums name, fitted on top of the base and scored on held-out runs.
 
     Its modulation is held at the one the phase sums favour (the compared
@@ -272,14 +287,19 @@ def fit_modulated_run_out(case: RigCase, base: FitResult, base_held: HeldOut, ev
     new effect's parameters free (a screening fit), and its held-out gap
     against the base's gives its share of the shrink.
     """
-    library = next(candidate for candidate in candidates_for("eccentricity", case.design)
+    library = next(candidate for candidate in effect_family("eccentricity").variants(case.design, {})
                    if dict(candidate.choices)["shaft"] == evidence.shaft)
     fitted = tuple(spec for spec in library.fitted if spec.name != "eccentricity.kappa")
     starts = tuple({"eccentricity.amplitude": evidence.run_out, "eccentricity.phase": phase}
                    for phase in (0.5 * math.pi, 1.5 * math.pi))
-    candidate = Candidate(library.effect, library.label, (*library.choices, ("kappa", evidence.kappa)), fitted,
-                          starts, library.periodicity)
-    result = fit_candidate(case, candidate, base, full=False, max_evaluations=6)
-    entry = score_candidate(result, leave_one_out(result), base_held, "screening", rng)
+    candidate = replace(library, choices=(*library.choices, ("kappa", evidence.kappa)), fitted=fitted, starts=starts)
+    result = fit_candidate(case, candidate, base, full=False, max_evaluations=settings.screening_evaluations)
+    entry = score_candidate(result, leave_one_out(result), base_held, "screening", rng,
+                            n_resamples=settings.bootstrap_resamples)
     entry.effect_gain = base.cost - result.cost
     return entry
+
+
+__all__ = ["MODULATION_KAPPAS", "PHASE_EVIDENCE_THRESHOLD", "MIN_SIDEBAND_ORDERS", "DRAWS_PER_POINT",
+           "PARAMETER_SPREAD", "ModulationEvidence", "sideband_triples", "phase_sums", "log_density", "shafts_tested",
+           "modulation_evidence", "fit_modulated_run_out"]

@@ -1,38 +1,37 @@
-"""Pitch errors of the manufactured gears, as model error of the nominal model.
+"""Pitch errors of the manufactured gears, as model error of the nominal model (the ``pitch_errors`` allowance).
 
 Every manufactured gear has random single-pitch errors (ISO 1328-1 classes 6
 to 8 on traction gears). They put sidebands at all shaft orders around every
-mesh harmonic, on both shafts, and change the harmonics themselves: on a
-healthy class-7 virtual-rig gear the nominal model (mesh-periodic, perfect
-teeth) left a held-out gap of 6-7 noise units, which hid a 12 um run-out and
-made every healthy control `unexplained`. A gear's own draw is unknown, so
-the diagnosis does not fit per-tooth offsets (hundreds of parameters); it
-takes what such errors do to each feature as model error of the nominal
-model, from the model itself:
+mesh harmonic, on both shafts, change the harmonics themselves and raise the
+noise floor with their forest of lines: a perfect-gear nominal model reads
+them as a gap an effect could be named for. A gear's own draw is unknown and
+one offset per tooth is out of reach of the fits, so the diagnosis takes what
+such errors do to each feature as model error of the nominal model, from the
+model itself (docs/model.md section 6.4):
 
-1. whether: at least :data:`MIN_VISIBLE_FRACTION` of the rig's sidebands
-   of *each* shaft order 1, 2 and 3 (around every harmonic, both sides) on
-   *both* shafts stand :data:`MIN_SIDEBAND_SNR` noise standard deviations
-   above the nominal fit. Pitch errors light every order of both shafts; an
-   effect of the library lights one shaft's (a damaged tooth), mainly the
-   first order (a run-out) or none (friction, torque ripple, ...), and even
-   a run-out on one shaft with a damaged tooth on the other leaves an order
-   dark: a gear without pitch errors is diagnosed as before, at no cost;
+1. whether: at least ``min_visible_fraction`` of the rig's sidebands of
+   *each* shaft order 1, 2 and 3 (around every harmonic, both sides) on
+   *both* shafts stand ``min_sideband_snr`` noise spreads above the nominal
+   fit (:class:`~uqgear.diagnosis.DiagnosisSettings`). Pitch errors light
+   every order of both shafts; an effect of the library lights one shaft's
+   (a damaged tooth), mainly the first order (a run-out) or none, so a gear
+   without pitch errors is diagnosed as before, at no cost;
 2. how much: the nominal fit is simulated over the whole record without and
-   with :data:`DRAWS` random pitch-error draws (ISO 1328-1 single-pitch
-   deviations, :func:`uqgear.physics.pitch_errors.draw_pitch_errors`) at
-   levels spread evenly over the stated classes (default 6 to 8), and read
-   with the rig's own line fit: each line's mean square complex change over
-   the draws, per quadrature, becomes an absolute model error of that line
-   (a random phasor added to the model's: Rice statistics stay exact); for
-   band and RMS features the root mean square change of their power, plus
-   the share of the noise power the draws' lines alone read as (their forest
-   raises the floor the rig's noise is read from), for the kurtosis the root
-   mean square change of the kurtosis.
+   with ``pitch_draws`` random pitch-error draws
+   (:func:`uqgear.physics.pitch_errors.draw_in_classes`) at levels spread
+   evenly over the stated classes, and read with the rig's own line fit:
+   each line's mean square complex change over the draws, per quadrature,
+   becomes an absolute model error of that line (a random phasor added to the
+   model's: Rice statistics stay exact); for band and RMS features the root
+   mean square change of their power, plus the share of the noise power the
+   draws' lines alone read as; for the kurtosis the root mean square change
+   of the kurtosis. Each (gear, order) group of lines is then scaled to the
+   rig's own gears (:mod:`.pitch_orders`).
 
 The nominal model is then refitted with the widened error, and every
-candidate is fitted and scored against it: an effect is named only where it
-explains more than pitch errors of the stated classes could.
+candidate is fitted and scored against its own model's allowance
+(:func:`with_own_allowance`): an effect is named only where it explains more
+than pitch errors of the stated classes could.
 """
 
 from __future__ import annotations
@@ -42,44 +41,31 @@ import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from ..calibration.errors import CalibrationError
-from ..calibration.settings import check_pitch_classes
-from ..physics.design import Design
-from ..physics.pitch_errors import PitchErrors, draw_in_classes
-from ..uq.seeds import child_seed
-from .case import FeatureModelError, RigCase
-from .errors import DiagnosisError
-from .fitting import FitProblem, FitResult, fit, robust_cost
-from .gear_orders import bounds_of, class_powers, drawn_amplitudes, factors_summary, scaled_to_rig, share_below
+from ...physics.pitch_errors import DEFAULT_CLASSES, PitchErrors, draw_in_classes, run_out_bounds
+from ...physics.pitch_errors import check_classes as check_tolerance_classes
+from ...uq.seeds import child_seed
+from ..case import FeatureModelError, RigCase
+from ..errors import DiagnosisError
+from ..fit_problem import FitProblem, robust_cost
+from ..fitting import FitResult, fit
+from ..settings import DEFAULT_SETTINGS, DiagnosisSettings
+from .pitch_orders import bounds_of, class_powers, drawn_amplitudes, factors_summary, scaled_to_rig, share_below
 
-#: ISO 1328-1 classes assumed when none are stated: the usual range of traction gears.
-DEFAULT_CLASSES: tuple[float, float] = (6.0, 8.0)
-#: Pitch-error draws whose changes give the model error.
-DRAWS = 12
-#: A sideband counts as visible this many noise standard deviations above the nominal fit.
-MIN_SIDEBAND_SNR = 3.0
-#: Fraction of each shaft's sidebands of each order 1..3 that must be visible (measured: class-7 gears 49-88 %;
-#: an error-free healthy gear 0-3 %; a run-out or a damaged tooth lights one shaft, a run-out mainly order 1;
-#: two effects at once up to 12 % at the order least lit; a transfer-path resonance's coloured noise 16-24 %
-#: without its reference).
-MIN_VISIBLE_FRACTION = 0.2
 _SIDEBAND_FAMILIES = ("sideband_pinion", "sideband_gear")
+# Draws of the tooth positions alone (no simulation) that give the run-out bounds.
+_RUN_OUT_DRAWS = 4000
 
 
 def check_classes(classes: Any) -> tuple[float, float] | None:
     """Validated ISO 1328-1 class range ``(lowest, highest)``, or None (perfect gears: no allowance).
 
-    The calibration's check (:func:`uqgear.calibration.settings.check_pitch_classes`), raising
-    :class:`DiagnosisError`.
+    :func:`uqgear.physics.pitch_errors.check_classes`, raising :class:`DiagnosisError`.
     """
-    try:
-        return check_pitch_classes(classes)
-    except CalibrationError as exc:
-        raise DiagnosisError(str(exc)) from None
+    return check_tolerance_classes(classes, error=DiagnosisError)
 
 
 @dataclass(frozen=True)
@@ -107,11 +93,20 @@ class PitchErrorAllowance:
     # the scaled draws simulated (a fit with effects is simulated with the same ones: :func:`allowance_for_fit`)
     drawn_errors: tuple[PitchErrors, ...] = field(default=(), repr=False, compare=False)
     # per (gear, shaft order): the range of the rig's own share of the allowance, and the nominal fit's
-    # factor in it (:mod:`uqgear.diagnosis.gear_orders`); ``absolute`` holds the lines scaled by it
+    # factor in it (:mod:`.pitch_orders`); ``absolute`` holds the lines scaled by it
     factor_bounds: dict[tuple[str, int], tuple[float, float]] = field(default_factory=dict)
     factors: dict[tuple[str, int], float] = field(default_factory=dict)
     # per group, the share of gears of the stated classes with a smaller |E_j| than the nominal fit read
     class_shares: dict[tuple[str, int], float] = field(default_factory=dict)
+    #: Its entry in ``diagnosis.json``.
+    key: ClassVar[str] = "pitch_errors"
+
+    def apply(self, case: RigCase) -> RigCase:
+        """The case with this allowance added to its model error (the case itself where it is not applied)."""
+        if not self.applied:
+            return case
+        return replace(case, model_error_before_allowance=case.model_error, pitch_allowance=self,
+                       model_error=FeatureModelError.combined(case.model_error, self.absolute))
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready record (``pitch_errors`` of ``diagnosis.json``)."""
@@ -130,48 +125,23 @@ class PitchErrorAllowance:
                           "classes; each feature's mean square change becomes absolute model error"}
 
 
-#: Share of the stated classes' draws whose first-order run-out a named run-out must exceed.
-RUN_OUT_QUANTILE = 0.95
-# Draws of the tooth positions alone (no simulation) that give that quantile.
-_RUN_OUT_DRAWS = 4000
-
-
-def run_out_bounds(design: Design, classes: tuple[float, float], rng: np.random.Generator, *,
-                   quantile: float = RUN_OUT_QUANTILE, draws: int = _RUN_OUT_DRAWS) -> dict[str, float]:
-    """Per gear, the first-order run-out (m, along the line of action) that pitch errors of ``classes`` stay under.
-
-    The running sum of a gear's pitch errors is a kinematic run-out: its
-    first Fourier coefficient over the teeth, 2/z |sum e_i exp(-2 pi i i/z)|,
-    acts exactly as an eccentricity's e_s (both enter the TE along the line
-    of action). On the reference design, classes 6 to 8 give a median of
-    9.7 um on the pinion (95 %: 22 um) and 23 um on the gear (95 %: 52 um),
-    so a run-out below such a bound is not evidence of an eccentric shaft on
-    gears of those classes. Levels are drawn uniformly over the classes.
-    """
-    bounds = {}
-    for gear, teeth in (("pinion", design.z1), ("gear", design.z2)):
-        phases = np.exp(-2j * np.pi * np.arange(teeth) / teeth)
-        amplitudes = np.empty(draws)
-        for index in range(draws):
-            errors = getattr(draw_in_classes(design, classes, rng.random(), rng), gear)
-            amplitudes[index] = 2.0 / teeth * abs(np.sum(errors * phases))
-        bounds[gear] = float(np.quantile(amplitudes, quantile))
-    return bounds
-
-
 def _sideband_order(name: str) -> int:
     """Shaft order j of a sideband feature (``mesh{k}_sb_{shaft}{+j}``, :func:`uqgear.rig.features.feature_definitions`)."""
-    return int(re.search(r"[+-](\d+)$", name).group(1))
+    found = re.search(r"[+-](\d+)$", name)
+    if found is None:  # an internal invariant: the layout names every sideband so
+        raise ValueError(f"{name!r} is not a sideband feature name")
+    return int(found.group(1))
 
 
-def visible_sidebands(case: RigCase, nominal: FitResult) -> dict[str, dict[int, tuple[int, int]]]:
-    """Per shaft's sideband family and shaft order: how many of the rig's sidebands stand clear of the nominal fit,
-    of how many (usable runs and channels, both sides of every harmonic)."""
+def visible_sidebands(case: RigCase, nominal: FitResult, *, min_snr: float = DEFAULT_SETTINGS.min_sideband_snr
+                      ) -> dict[str, dict[int, tuple[int, int]]]:
+    """Per shaft's sideband family and shaft order: how many of the rig's sidebands stand ``min_snr`` noise
+    spreads clear of the nominal fit, of how many (usable runs and channels, both sides of every harmonic)."""
     model = nominal.model[..., case.layout.columns]
     sigma = case.line_noise_sigma()
     usable = case.mask()
     with np.errstate(invalid="ignore"):
-        clear = usable & (case.observed - np.abs(model) >= MIN_SIDEBAND_SNR * sigma)
+        clear = usable & (case.observed - np.abs(model) >= min_snr * sigma)
     counts: dict[str, dict[int, tuple[int, int]]] = {}
     for family in _SIDEBAND_FAMILIES:
         orders: dict[int, list[int]] = {}
@@ -184,7 +154,8 @@ def visible_sidebands(case: RigCase, nominal: FitResult) -> dict[str, dict[int, 
 
 
 def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[float, float] | None,
-                          seed: np.random.SeedSequence, draws: int = DRAWS) -> PitchErrorAllowance:
+                          seed: np.random.SeedSequence, settings: DiagnosisSettings = DEFAULT_SETTINGS
+                          ) -> PitchErrorAllowance:
     """The model error that pitch errors of ``classes`` add to the nominal fit's features (module docstring).
 
     Parameters
@@ -197,11 +168,13 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
         ISO 1328-1 flank tolerance classes the gears are made to (None: no allowance).
     seed : SeedSequence
         Source of the draws.
-    draws : int
-        Pitch-error draws.
+    settings : DiagnosisSettings
+        The gate (``min_sideband_snr``, ``min_visible_fraction``), the draws
+        (``pitch_draws``) and the run-out bound's quantile (``run_out_quantile``).
     """
     started = time.perf_counter()
-    visible = visible_sidebands(case, nominal)
+    draws, fraction = settings.pitch_draws, settings.min_visible_fraction
+    visible = visible_sidebands(case, nominal, min_snr=settings.min_sideband_snr)
 
     def not_applied(reason: str) -> PitchErrorAllowance:
         return PitchErrorAllowance(False, reason, classes, visible, 0, {}, 0.0, 0.0, time.perf_counter() - started)
@@ -210,19 +183,20 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
         return not_applied("no pitch-error classes stated: the gears are taken as perfect")
     short = [f"{family.split('_')[1]} order {order}: {count} of {total}"
              for family, orders in visible.items() for order, (count, total) in orders.items()
-             if total == 0 or count < MIN_VISIBLE_FRACTION * total]
+             if total == 0 or count < fraction * total]
     if short or not all(visible.values()):
         return not_applied(f"the rig's first sidebands do not show pitch errors at every order on both shafts "
-                           f"(clear of the nominal fit by {MIN_SIDEBAND_SNR:g} noise std: {', '.join(short)}; at "
-                           f"least {100 * MIN_VISIBLE_FRACTION:.0f} % needed at each)")
+                           f"(clear of the nominal fit by {settings.min_sideband_snr:g} noise std: {', '.join(short)}; "
+                           f"at least {100 * fraction:.0f} % needed at each)")
     rng = np.random.default_rng(seed)
-    bounds = run_out_bounds(case.design, classes, np.random.default_rng(child_seed(seed, 0)))
+    bounds = run_out_bounds(case.design, classes, np.random.default_rng(child_seed(seed, 0)),
+                            quantile=settings.run_out_quantile, draws=_RUN_OUT_DRAWS)
     positions = (np.arange(draws) + 0.5) / draws
     drawn_errors = [draw_in_classes(case.design, classes, position, rng) for position in positions]
     absolute, forest_share = allowance_errors(case, nominal.problem, nominal.vector, drawn_errors)
     # the rig's gears are one draw: each (gear, order) group's share scaled to what the rig shows
     spread = class_powers(case.design, classes, drawn_errors, np.random.default_rng(child_seed(seed, 1)))
-    ranges = bounds_of(spread)
+    ranges = bounds_of(spread, settings.order_factor_quantiles)
     absolute["line"], factors = scaled_to_rig(case, nominal.model, absolute["line"], case.model_error, ranges)
     line = np.array(case.layout.kinds) == "line"
     ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
@@ -298,17 +272,14 @@ def allowance_for_fit(case: RigCase, result: FitResult, allowance: PitchErrorAll
 
     What pitch errors do to the features depends on the model they act in:
     sliding friction, which reverses at the pitch point, switches at
-    instants the pitch errors shift tooth by tooth, and on the virtual rig
-    with class-7 gears friction of 0.12 raised the first mesh harmonic's
-    third lower pinion sideband on the TE six-fold (0.035 to 0.20 um at 600
-    rpm), where the nominal model's draws allow 0.017 um. Scored with the
-    nominal model's allowance, a fit with friction (and perfect gears) is
-    charged with sidebands that only its own combination with pitch errors
-    makes, and an effect with a line there (torque ripple's motor line at
-    order 18 on a 21-tooth pinion) is credited with them. The fit is
-    simulated with the same draws (the same gears' errors the nominal
-    allowance used), so the two models' held-out densities are compared on
-    equal terms.
+    instants the pitch errors shift tooth by tooth and raises sidebands the
+    nominal model's draws do not. Scored with the nominal model's allowance,
+    a fit with such an effect would be charged with sidebands that only its
+    own combination with pitch errors makes, and an effect with a line there
+    credited with them. The fit is simulated with the same draws (the same
+    gears' errors the nominal allowance used), so the two models' held-out
+    densities are compared on equal terms (docs/model.md section 6.4, "Each
+    model its own allowance").
     """
     absolute, _ = allowance_errors(case, result.problem, result.vector, allowance.drawn_errors)
     if allowance.factor_bounds:
@@ -317,22 +288,23 @@ def allowance_for_fit(case: RigCase, result: FitResult, allowance: PitchErrorAll
     return FeatureModelError.combined(base_error, absolute)
 
 
-def with_own_allowance(result: FitResult, *, max_evaluations: int = 12) -> FitResult:
+def with_own_allowance(result: FitResult, *, max_evaluations: int = DEFAULT_SETTINGS.full_fit_evaluations
+                       ) -> FitResult:
     """A fit with effects refitted with its own model's pitch-error allowance (:func:`allowance_for_fit`).
 
     Unchanged when the case has no allowance applied or the fit has no
     effect. The refit starts at the fit's optimum (the allowance mostly
-    re-weights a few sidebands) and its problem keeps the new model error,
+    re-weights a few sidebands); its problem holds the new model error,
     which later fits on top of it (forward selection) start from.
     """
     case = result.problem.case
     allowance = case.pitch_allowance
-    if allowance is None or not allowance.applied or not result.problem.candidates:
+    if not isinstance(allowance, PitchErrorAllowance) or not allowance.applied or not result.problem.candidates:
         return result
     base_error = case.model_error_before_allowance
-    result.problem.own_model_error = allowance_for_fit(case, result, allowance,
-                                                       case.model_error if base_error is None else base_error)
-    refit = fit(result.problem, [result.vector], free=result.free, max_evaluations=max_evaluations, tolerance=1e-3)
+    own = allowance_for_fit(case, result, allowance, case.model_error if base_error is None else base_error)
+    refit = fit(result.problem.with_model_error(own), [result.vector], free=result.free,
+                max_evaluations=max_evaluations, tolerance=1e-3)
     return refit.after(result)
 
 
@@ -363,9 +335,9 @@ def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[
     """Per gear: the run-out its first-order lines read as (m, along the line of action) and the share of class gears below.
 
     The run-out is the allowance draws' RMS |E_1| scaled by the factor the
-    nominal fit read off the rig (:func:`.gear_orders.scaled_to_rig`); the
+    nominal fit read off the rig (:func:`.pitch_orders.scaled_to_rig`); the
     share places it among gears of the stated classes
-    (:func:`.gear_orders.share_below`). Empty where no allowance was applied.
+    (:func:`.pitch_orders.share_below`). Empty where no allowance was applied.
     """
     if allowance is None or not allowance.applied or not allowance.class_shares:
         return {}
@@ -377,19 +349,19 @@ def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[
 
 #: A gear whose first-order errors read larger than this share of the stated classes' gears is reported
 #: (:func:`run_outs_not_told_apart`): by construction one gear in ten of those classes is, with no run-out.
-LARGE_RUN_OUT_SHARE = 0.9
+LARGE_RUN_OUT_SHARE = DEFAULT_SETTINGS.large_run_out_share
 
 
-def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts: Sequence[str]
-                            ) -> list[dict[str, Any]]:
+def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts: Sequence[str], *,
+                            share_threshold: float = LARGE_RUN_OUT_SHARE) -> list[dict[str, Any]]:
     """Gears whose first-order errors read as a run-out large for their classes, with no eccentricity named there.
 
     A gear's first-order pitch error is a run-out exactly as an eccentric
     shaft's (both move its shaft line 1 in the same way, and its first
     sidebands mostly through the rest of its errors), so a run-out of a
     size the stated classes make is the gear's own to the diagnosis
-    (:mod:`.gear_orders`). Where the nominal fit read the gear's first order
-    as larger than :data:`LARGE_RUN_OUT_SHARE` of such gears have, a shaft
+    (:mod:`.pitch_orders`). Where the nominal fit read the gear's first order
+    as larger than ``share_threshold`` of such gears have, a shaft
     run-out may be part of it: the diagnosis cannot tell, and says so
     rather than naming an eccentricity or nothing.
 
@@ -413,7 +385,7 @@ def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts:
     low, high = allowance.classes
     found = []
     for shaft, (run_out, share) in first_order_reads(allowance).items():
-        if share < LARGE_RUN_OUT_SHARE or shaft in named_shafts:
+        if share < share_threshold or shaft in named_shafts:
             continue
         found.append({
             "effect": "eccentricity", "shaft": shaft, "run_out_m": run_out, "share_of_class_gears_below": share,
@@ -424,3 +396,8 @@ def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts:
                       f"the lines cannot tell a shaft's run-out from the {shaft}'s own first-order errors here "
                       f"(a run-out measurement of the {shaft} can)"})
     return found
+
+
+__all__ = ["DEFAULT_CLASSES", "LARGE_RUN_OUT_SHARE", "PitchErrorAllowance", "check_classes", "run_out_bounds",
+           "visible_sidebands", "pitch_error_allowance", "allowance_errors", "allowance_for_fit", "with_own_allowance",
+           "modulation_gain", "first_order_reads", "run_outs_not_told_apart"]
