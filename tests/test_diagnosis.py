@@ -23,7 +23,7 @@ import xarray as xr
 
 from uqgear.diagnosis import DiagnosisError, decide, decide_verdict, diagnose
 from uqgear.diagnosis import effects, fit_problem, fitting, inputs, scoring, screening, signatures
-from uqgear.diagnosis import case as rig_case, discrepancy as disc, execution as runs, simulation as sim
+from uqgear.diagnosis import case as rig_case, discrepancy as disc, execution as runs, processing, simulation as sim
 from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.physics.design import load_design
@@ -213,7 +213,7 @@ def test_verdict_never_names_an_effect_that_adds_nothing_to_its_fit():
 @pytest.fixture(scope="module")
 def short_processor(design):
     options = dict(rig_case.FEATURE_OPTIONS, band_limit=20480.0 / 2.56)
-    return sim.RunProcessor(design, 1250.0, 20480.0, 4096, options)
+    return processing.RunProcessor(design, 1250.0, 20480.0, 4096, options)
 
 
 def test_model_features_match_extract_features(design, short_processor):
@@ -247,7 +247,7 @@ def test_periodic_tiling_matches_full_simulation(design):
     periodic = simulator.run(0, design, 1.0, 30000.0, (), "pinion")
     full = simulator.run(0, design, 1.0, 30000.0, (), "free")
     assert periodic.periodic and not full.periodic
-    processor = sim.RunProcessor(design, 1250.0, 20480.0, 4096, dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0))
+    processor = processing.RunProcessor(design, 1250.0, 20480.0, 4096, dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0))
     names = processor.names
     for channel in ("te", "acc_pinion"):
         a = processor.model_features(periodic.records[channel][None])[0]

@@ -35,7 +35,8 @@ def test_every_setting_states_its_unit_rule_and_docs_section():
     assert set(table) == {field.name for field in dataclasses.fields(DiagnosisSettings)}
     for name, entry in table.items():
         assert entry["unit"] and entry["rule"].strip() and entry["docs"].startswith("docs/model.md section 6"), name
-        assert entry["default"] == getattr(DEFAULT_SETTINGS, name) or name == "model_error"
+        value = getattr(DEFAULT_SETTINGS, name)
+        assert entry["default"] == (list(value) if isinstance(value, tuple) else value), name
     # the documented decision thresholds a study may set
     assert {"score_threshold", "shrink_threshold", "noise_gap", "max_effects"} <= set(DiagnosisSettings.study_keys())
     assert DEFAULT_SETTINGS.changed() == {}
@@ -127,3 +128,16 @@ def test_a_campaign_that_cannot_decide_is_concluded_with_the_settings_it_was_jud
     assert diagnosis.result_.attrs["verdict"] == "inconclusive"
     # the rig Dataset handed in is not changed by the fit
     xr.testing.assert_identical(noise, before)
+
+
+def test_the_study_reference_lists_the_thresholds_a_study_may_set():
+    import re
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "study-reference.md").read_text()
+    table = text[text.index("| setting | units | default | rule (docs/model.md) |"):]
+    table = table[:table.index("\n\n")]
+    documented = re.findall(r"^\| `(\w+)` \|", table, flags=re.M)
+    assert documented == list(DiagnosisSettings.study_keys())
+    for name in documented:
+        row = next(line for line in table.splitlines() if line.startswith(f"| `{name}` |"))
+        assert f"| {DiagnosisSettings.describe(name)['default']:g} |" in row, row

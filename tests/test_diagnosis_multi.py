@@ -27,7 +27,7 @@ import xarray as xr
 
 from uqgear.common.steps import StepLog
 from uqgear.diagnosis import Diagnosis, DiagnosisError, DiagnosisSettings, diagnose
-from uqgear.diagnosis import candidates, effects, fit_problem, fitting, scoring, selection, verdict
+from uqgear.diagnosis import candidates, effects, fit_problem, fitting, scoring, selection, set_verdict, verdict
 from uqgear.diagnosis.effect_set import SelectedEffect, SelectionRound
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.diagnosis.state import DiagnosisState
@@ -262,7 +262,7 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     shares = [s.shrink_share for s in selected]
     assert all(share > 0 for share in shares)
     assert sum(shares) == pytest.approx(1.0 - selected[-1].entry.gap_with_effect / 3.0)
-    decision = verdict.set_decision(first_decision, selected, rounds, 3.0)
+    decision = set_verdict.set_decision(first_decision, selected, rounds, 3.0)
     assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap_with_effect
     assert [entry.entry.effect for entry in selected[1:]] == [entry.added for entry in rounds]
     assert decision.partial == (selected[-1].entry.gap_with_effect > DEFAULT_SETTINGS.noise_gap and sum(shares) < 0.5)
@@ -288,14 +288,14 @@ def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():
     explained = SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 90.0, 0.3, 0.85), 2.0,
                                         (2.0 - 0.3) / 3.0, added)
     rounds = [SelectionRound(("eccentricity[pinion]",), 2.0, [explained.entry], "tooth_damage", "", added)]
-    decision = verdict.set_decision(first_decision, [first, explained], rounds, 3.0)
+    decision = set_verdict.set_decision(first_decision, [first, explained], rounds, 3.0)
     assert not decision.partial and decision.remaining_gap == 0.3
     still = SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 30.0, 1.6, 0.2, low=0.05), 2.0,
                                     0.4 / 3.0, added)
-    decision = verdict.set_decision(first_decision, [first, still], rounds, 3.0)
+    decision = set_verdict.set_decision(first_decision, [first, still], rounds, 3.0)
     assert decision.partial and "remains unexplained" in decision.reason
     # one effect and no round: the first decision itself
-    assert verdict.set_decision(first_decision, [first], [], 3.0) is first_decision
+    assert set_verdict.set_decision(first_decision, [first], [], 3.0) is first_decision
 
 
 def test_blind_test_scores_effect_sets():

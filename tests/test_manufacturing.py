@@ -39,7 +39,7 @@ from uqgear.diagnosis.fitting import fit_nominal
 from uqgear.diagnosis.heldout import leave_one_out
 from uqgear.diagnosis.scoring import RunOutCheck, gap_metric
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
-from uqgear.diagnosis.simulation import RunProcessor
+from uqgear.diagnosis.processing import RunProcessor
 from uqgear import validation as blind_test
 from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign

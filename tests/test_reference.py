@@ -27,7 +27,7 @@ from uqgear.diagnosis import DiagnosisError, diagnose
 from uqgear.diagnosis.case import FeatureModelError
 from uqgear import validation as blind_test
 from uqgear.diagnosis.allowances.gain_curve import fit_gain_curve
-from uqgear.diagnosis.allowances.reference import match_operating_points
+from uqgear.diagnosis.allowances.compatibility import match_operating_points
 from uqgear.physics.effects import make_effect
 from uqgear.rig import apply_transfer_path, read_rig, transfer_path_gain, write_rig
 from uqgear.rig.virtual_rig import simulate_campaign

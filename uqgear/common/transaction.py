@@ -148,8 +148,15 @@ class OutputFolder:
         ``refuse``, or lies below a file.
     """
 
-    def __init__(self, out: str | os.PathLike[str], *, where: str = "out_dir", existing: Existing = "merge",
-                 resumable: bool = False, resume: bool = False) -> None:
+    def __init__(
+        self,
+        out: str | os.PathLike[str],
+        *,
+        where: str = "out_dir",
+        existing: Existing = "merge",
+        resumable: bool = False,
+        resume: bool = False,
+    ) -> None:
         self.out = Path(out)
         self.where = where
         self.existing = existing
@@ -179,8 +186,9 @@ class OutputFolder:
             self._created = True
         return self.work
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
+    ) -> None:
         if error is None:
             publish(self.work, self.out, merge=self.existing == "merge")
             return
@@ -206,5 +214,13 @@ class OutputFolder:
             remove_if_empty(self._parents)
 
 
-__all__ = ["PARTIAL_SUFFIX", "OutputFolder", "partial_folder", "publish", "is_empty_folder", "check_parents",
-           "make_parents", "remove_if_empty"]
+__all__ = [
+    "PARTIAL_SUFFIX",
+    "OutputFolder",
+    "partial_folder",
+    "publish",
+    "is_empty_folder",
+    "check_parents",
+    "make_parents",
+    "remove_if_empty",
+]

@@ -27,19 +27,34 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
 
 from __future__ import annotations
 
-from .errors import DiagnosisError
-from .settings import DiagnosisSettings
 from .decision import Decision
 from .effects import EffectFamily, effect_family, effect_names, register_effect, unregister_effect
-from .inputs import DiagnosisSeeds
-from .scoring import CandidateScore
-from .verdict import decide, decide_verdict, EFFECT_NAMES, VERDICTS
-from .result import DiagnosisResult
+from .errors import DiagnosisError
 from .estimator import Diagnosis
+from .inputs import DiagnosisSeeds
+from .result import DiagnosisResult
+from .scoring import CandidateScore
+from .settings import DiagnosisSettings
+from .verdict import EFFECT_NAMES, VERDICTS, decide, decide_verdict
 from .writer import diagnose, write_diagnosis
 
 __all__ = [
-    'Diagnosis', 'DiagnosisSettings', 'DiagnosisSeeds', 'diagnose', 'write_diagnosis', 'decide', 'decide_verdict',
-    'Decision', 'DiagnosisError', 'DiagnosisResult', 'CandidateScore', 'EFFECT_NAMES', 'VERDICTS', 'EffectFamily',
-    'effect_family', 'effect_names', 'register_effect', 'unregister_effect',
+    "Diagnosis",
+    "DiagnosisSettings",
+    "DiagnosisSeeds",
+    "diagnose",
+    "write_diagnosis",
+    "decide",
+    "decide_verdict",
+    "Decision",
+    "DiagnosisError",
+    "DiagnosisResult",
+    "CandidateScore",
+    "EFFECT_NAMES",
+    "VERDICTS",
+    "EffectFamily",
+    "effect_family",
+    "effect_names",
+    "register_effect",
+    "unregister_effect",
 ]

@@ -186,7 +186,9 @@ def check_combination(candidates: Sequence[Candidate]) -> tuple[Candidate, ...]:
     seen: dict[str, str] = {}
     for candidate in chosen:
         if candidate.effect in seen:
-            raise DiagnosisError(f"effects: {candidate.effect!r} appears twice in one model ({seen[candidate.effect]} "
-                                 f"and {candidate.label}); each effect enters a model at most once")
+            raise DiagnosisError(
+                f"effects: {candidate.effect!r} appears twice in one model ({seen[candidate.effect]} "
+                f"and {candidate.label}); each effect enters a model at most once"
+            )
         seen[candidate.effect] = candidate.label
     return chosen

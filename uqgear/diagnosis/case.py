@@ -25,12 +25,19 @@ from .allowances.interference import NOTCH_HALF_WIDTH, LineInterference, interfe
 from .discrepancy import FeatureLayout, NoiseModel, line_noise_sigma, noise_model
 from .errors import DiagnosisError
 from .execution import RunExecutor, RunTask, execute_runs
+from .processing import RunProcessor
 from .settings import DiagnosisSettings
-from .simulation import CampaignSimulator, RunProcessor
+from .simulation import CampaignSimulator
 
 #: Options of the feature processing (as :func:`uqgear.rig.features.extract_features`).
-FEATURE_OPTIONS: dict[str, Any] = {"n_harmonics": 3, "n_sidebands": 3, "n_shaft_orders": 3, "n_motor_lines": 2,
-                                   "low_band": (2.0, 80.0), "window": "hann"}
+FEATURE_OPTIONS: dict[str, Any] = {
+    "n_harmonics": 3,
+    "n_sidebands": 3,
+    "n_shaft_orders": 3,
+    "n_motor_lines": 2,
+    "low_band": (2.0, 80.0),
+    "window": "hann",
+}
 
 
 class FeatureModelError(dict):
@@ -50,8 +57,12 @@ class FeatureModelError(dict):
     pitch errors of manufactured gears add (:mod:`uqgear.diagnosis.allowances.pitch_errors`).
     """
 
-    def __init__(self, base: Mapping[str, float], widening: Mapping[str, np.ndarray],
-                 absolute: Mapping[str, np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        base: Mapping[str, float],
+        widening: Mapping[str, np.ndarray],
+        absolute: Mapping[str, np.ndarray] | None = None,
+    ) -> None:
         super().__init__({key: float(value) for key, value in dict(base).items()})
         self.widening = {key: np.asarray(value, dtype=float) for key, value in widening.items()}
         self.absolute = {key: np.asarray(value, dtype=float) for key, value in (absolute or {}).items()}
@@ -61,16 +72,16 @@ class FeatureModelError(dict):
         extra = self.widening.get(kind)
         if extra is None or extra.size == 0:
             return base
-        return np.sqrt(base ** 2 + extra ** 2)
+        return np.sqrt(base**2 + extra**2)
 
     @classmethod
-    def combined(cls, current: Mapping[str, float], absolute: Mapping[str, np.ndarray]) -> "FeatureModelError":
+    def combined(cls, current: Mapping[str, float], absolute: Mapping[str, np.ndarray]) -> FeatureModelError:
         """``current`` (a plain mapping or one of these) with ``absolute`` added to its absolute errors."""
         widening = getattr(current, "widening", {})
         before = dict(getattr(current, "absolute", {}))
         for kind, values in absolute.items():
             values = np.asarray(values, dtype=float)
-            before[kind] = np.sqrt(before[kind] ** 2 + values ** 2) if kind in before else values
+            before[kind] = np.sqrt(before[kind] ** 2 + values**2) if kind in before else values
         # dict() of one of these reads the per-kind errors, not the widened arrays
         return cls(dict(current), widening, before)
 
@@ -107,15 +118,15 @@ class RigCase:
     size: int
     processors: list[RunProcessor]
     layout: FeatureLayout
-    observed: np.ndarray          # (n_op, n_channel, F) compared features
-    observed_all: np.ndarray      # (n_op, n_channel, all features)
-    noise_std: np.ndarray         # (n_op, n_channel)
+    observed: np.ndarray  # (n_op, n_channel, F) compared features
+    observed_all: np.ndarray  # (n_op, n_channel, all features)
+    noise_std: np.ndarray  # (n_op, n_channel)
     noise: list[NoiseModel]
-    usable: np.ndarray            # (n_op, n_channel)
+    usable: np.ndarray  # (n_op, n_channel)
     simulator: CampaignSimulator
     model_error: Mapping[str, float]
-    speed: list[dict[str, Any]]    # per run: the order tracking's speed estimate
-    tracking_s: float              # time spent estimating speeds and resampling
+    speed: list[dict[str, Any]]  # per run: the order tracking's speed estimate
+    tracking_s: float  # time spent estimating speeds and resampling
     # the worker processes that run its simulations (None: in this process)
     executor: RunExecutor | None = None
     # (n_op, n_channel, all features): the model's features are multiplied by it (a reference
@@ -137,8 +148,10 @@ class RigCase:
 
     @property
     def run_out_allowance(self) -> dict[str, float]:
-        """Per gear, the first-order run-out the stated classes' pitch errors stay under, m
-        (:func:`uqgear.diagnosis.allowances.pitch_errors.run_out_bounds`); empty without an allowance (perfect gears)."""
+        """Per gear, the first-order run-out the stated classes' pitch errors stay under, m.
+
+        :func:`uqgear.physics.pitch_errors.run_out_bounds`; empty without an allowance (perfect gears).
+        """
         return {} if self.pitch_allowance is None else dict(self.pitch_allowance.run_out_bound)
 
     def line_noise_sigma(self) -> np.ndarray:
@@ -151,8 +164,11 @@ class RigCase:
 
     def observed_features(self) -> dict[str, np.ndarray]:
         """The compared rig features over runs by ``CHANNEL:FEATURE`` name (what effect families read hints off)."""
-        return {f"{channel}:{name}": self.observed[:, c, f] for c, channel in enumerate(self.channels)
-                for f, name in enumerate(self.layout.names)}
+        return {
+            f"{channel}:{name}": self.observed[:, c, f]
+            for c, channel in enumerate(self.channels)
+            for f, name in enumerate(self.layout.names)
+        }
 
     def execute(self, tasks: Sequence[RunTask]) -> list[tuple[np.ndarray, bool]]:
         """Simulate and reduce runs (through the executor when the case has one)."""
@@ -160,11 +176,11 @@ class RigCase:
             return self.executor.map(tasks)
         return execute_runs(self, tasks)
 
-    def with_design(self, design: Design) -> "RigCase":
+    def with_design(self, design: Design) -> RigCase:
         """This case with another nominal design (a calibrated backlash)."""
         return replace(self, design=design)
 
-    def with_executor(self, executor: RunExecutor | None) -> "RigCase":
+    def with_executor(self, executor: RunExecutor | None) -> RigCase:
         """This case with its simulations run by ``executor``."""
         return replace(self, executor=executor)
 
@@ -182,9 +198,56 @@ def _check_model_error(model_error: Mapping[str, float] | None, defaults: Mappin
     return errors
 
 
-def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequence,
-                 model_error: Mapping[str, float] | None = None, steps_per_mode: int = 24,
-                 settings: DiagnosisSettings | None = None) -> RigCase:
+def _left_out_interference(
+    records: Mapping[str, np.ndarray],
+    noise_std: np.ndarray,
+    usable: np.ndarray,
+    speeds: np.ndarray,
+    fs: float,
+    options: Mapping[str, Any],
+    channels: tuple[str, ...],
+    processors: list[RunProcessor],
+    observed_all: np.ndarray,
+    settings: DiagnosisSettings,
+) -> LineInterference:
+    """Line interference on the accelerometers, left out of the low band of every record, rig and model alike.
+
+    Done while the campaign is prepared, before the noise models read the
+    processing: the processors (built for this campaign) are notched and the
+    rig's low-band features in ``observed_all`` read again.
+    """
+    interference = interference_lines(
+        records,
+        {c: noise_std[:, i] for i, c in enumerate(channels)},
+        {c: usable[:, i] for i, c in enumerate(channels)},
+        speeds,
+        fs,
+        tuple(options["low_band"]),
+        channels,
+        threshold=settings.interference_threshold,
+        minimum_runs=settings.interference_runs,
+    )
+    if interference.applied:
+        for processor in {id(processor): processor for processor in processors}.values():
+            processor.set_notch(interference.frequencies, NOTCH_HALF_WIDTH)
+        column = processors[0].columns["low_band_rms"]
+        for op in range(speeds.size):
+            for index, channel in enumerate(channels):
+                record = records[channel][op]
+                if not np.isnan(record).any():
+                    observed_all[op, index, column] = processors[op].low_band_rms(record[None])[0]
+    return interference
+
+
+def prepare_case(
+    rig: xr.Dataset,
+    design: Design,
+    *,
+    seed: np.random.SeedSequence,
+    model_error: Mapping[str, float] | None = None,
+    steps_per_mode: int = 24,
+    settings: DiagnosisSettings | None = None,
+) -> RigCase:
     """Features, noise models, processors and simulator of a validated rig Dataset.
 
     The records are first order-tracked (:func:`uqgear.rig.order_tracking.track_orders`):
@@ -212,38 +275,45 @@ def prepare_case(rig: xr.Dataset, design: Design, *, seed: np.random.SeedSequenc
         processors.append(cache[float(speed)])
     layout = FeatureLayout.from_processor(processors[0])
     records = {channel: np.asarray(rig[channel].values, dtype=float) for channel in channels}
-    observed_all = np.stack([np.stack([processors[op].features(records[channel][op][None])[0]
-                                       for channel in channels]) for op in range(speeds.size)])
+    observed_all = np.stack(
+        [
+            np.stack([processors[op].features(records[channel][op][None])[0] for channel in channels])
+            for op in range(speeds.size)
+        ]
+    )
     noise_column = processors[0].columns["noise_std"]
     noise_std = observed_all[..., noise_column]
     usable = np.isfinite(observed_all).any(axis=-1) & np.isfinite(noise_std) & (noise_std > 0)
-    interference = interference_lines(records, {c: noise_std[:, i] for i, c in enumerate(channels)},
-                                      {c: usable[:, i] for i, c in enumerate(channels)}, speeds, fs,
-                                      tuple(options["low_band"]), channels,
-                                      threshold=settings.interference_threshold,
-                                      minimum_runs=settings.interference_runs)
-    if interference.applied:
-        # out of the low band of every record, rig and model alike (before the noise models read it)
-        for processor in cache.values():
-            processor.set_notch(interference.frequencies, NOTCH_HALF_WIDTH)
-        column = processors[0].columns["low_band_rms"]
-        for op in range(speeds.size):
-            for index, channel in enumerate(channels):
-                record = records[channel][op]
-                if not np.isnan(record).any():
-                    observed_all[op, index, column] = processors[op].low_band_rms(record[None])[0]
+    interference = _left_out_interference(
+        records, noise_std, usable, speeds, fs, options, channels, processors, observed_all, settings
+    )
     rng = np.random.default_rng(seed)
     noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
     noise = [noise_by_speed[float(speed)] for speed in speeds]
     simulator = CampaignSimulator(design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode)
-    return RigCase(rig=rig, design=design, channels=channels, speeds=speeds,
-                   drive_torques=np.asarray(rig["drive_torque"].values, dtype=float),
-                   adhesion_lower=np.asarray(rig["adhesion_torque_lower"].values, dtype=float),
-                   adhesion_upper=np.asarray(rig["adhesion_torque_upper"].values, dtype=float),
-                   fs=fs, size=size, processors=processors, layout=layout,
-                   observed=observed_all[..., layout.columns], observed_all=observed_all, noise_std=noise_std,
-                   noise=noise, usable=usable, simulator=simulator, model_error=errors,
-                   speed=speed_summary(rig), tracking_s=tracking_s, interference=interference)
+    return RigCase(
+        rig=rig,
+        design=design,
+        channels=channels,
+        speeds=speeds,
+        drive_torques=np.asarray(rig["drive_torque"].values, dtype=float),
+        adhesion_lower=np.asarray(rig["adhesion_torque_lower"].values, dtype=float),
+        adhesion_upper=np.asarray(rig["adhesion_torque_upper"].values, dtype=float),
+        fs=fs,
+        size=size,
+        processors=processors,
+        layout=layout,
+        observed=observed_all[..., layout.columns],
+        observed_all=observed_all,
+        noise_std=noise_std,
+        noise=noise,
+        usable=usable,
+        simulator=simulator,
+        model_error=errors,
+        speed=speed_summary(rig),
+        tracking_s=tracking_s,
+        interference=interference,
+    )
 
 
 __all__ = ["FEATURE_OPTIONS", "FeatureModelError", "RigCase", "prepare_case"]

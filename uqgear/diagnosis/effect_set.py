@@ -40,13 +40,22 @@ class SelectedEffect:
     def summary(self) -> dict[str, Any]:
         """JSON-ready: effect, variant, fitted parameters with their 90 % intervals, shrink share, scores."""
         entry = self.entry
-        return {"effect": entry.effect, "variant": entry.label, "parameters": entry.parameters(),
-                "parameter_intervals": entry.parameter_intervals(), "shrink_share": self.shrink_share,
-                "score": entry.score, "shrink_fraction": entry.shrink_fraction,
-                "shrink_interval": list(entry.shrink_interval), "gap_before": self.gap_before,
-                "gap_after": entry.gap_with_effect, "gap_after_interval": [float(v) for v in self.gap_interval],
-                "effect_gain": entry.effect_gain, "fit": entry.stage,
-                "partial": self.decision.partial}
+        return {
+            "effect": entry.effect,
+            "variant": entry.label,
+            "parameters": entry.parameters(),
+            "parameter_intervals": entry.parameter_intervals(),
+            "shrink_share": self.shrink_share,
+            "score": entry.score,
+            "shrink_fraction": entry.shrink_fraction,
+            "shrink_interval": list(entry.shrink_interval),
+            "gap_before": self.gap_before,
+            "gap_after": entry.gap_with_effect,
+            "gap_after_interval": [float(v) for v in self.gap_interval],
+            "effect_gain": entry.effect_gain,
+            "fit": entry.stage,
+            "partial": self.decision.partial,
+        }
 
 
 @dataclass
@@ -55,19 +64,34 @@ class SelectionRound:
 
     base: tuple[str, ...]
     gap_before: float
-    scores: list[CandidateScore]          # best variant per effect against the base, best first
+    scores: list[CandidateScore]  # best variant per effect against the base, best first
     added: str | None
     reason: str
     decision: Decision | None = None
-    gap_interval: tuple[float, float] = (math.nan, math.nan)   # of the best candidate's held-out gap
+    gap_interval: tuple[float, float] = (math.nan, math.nan)  # of the best candidate's held-out gap
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready: the base, what was tried on top of it and whether it was added."""
-        return {"base": list(self.base), "gap_before": self.gap_before, "added": self.added, "reason": self.reason,
-                "candidates": [{"effect": s.effect, "variant": s.label, "score": s.score,
-                                "shrink_fraction": s.shrink_fraction, "shrink_interval": list(s.shrink_interval),
-                                "gap_with_effect": s.gap_with_effect, "effect_gain": s.effect_gain, "fit": s.stage,
-                                "parameters": s.parameters()} for s in self.scores]}
+        return {
+            "base": list(self.base),
+            "gap_before": self.gap_before,
+            "added": self.added,
+            "reason": self.reason,
+            "candidates": [
+                {
+                    "effect": s.effect,
+                    "variant": s.label,
+                    "score": s.score,
+                    "shrink_fraction": s.shrink_fraction,
+                    "shrink_interval": list(s.shrink_interval),
+                    "gap_with_effect": s.gap_with_effect,
+                    "effect_gain": s.effect_gain,
+                    "fit": s.stage,
+                    "parameters": s.parameters(),
+                }
+                for s in self.scores
+            ],
+        }
 
 
 __all__ = ["SelectedEffect", "SelectionRound"]

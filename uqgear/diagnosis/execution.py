@@ -15,7 +15,9 @@ from threadpoolctl import threadpool_limits
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..physics.pitch_errors import PitchErrors
-from .simulation import CampaignSimulator, RunProcessor, SimulatedRun
+from .processing import RunProcessor
+from .simulation import CampaignSimulator, SimulatedRun
+
 
 class RunContext(Protocol):
     """What running a task reads of a prepared campaign (:class:`~uqgear.diagnosis.case.RigCase` is one)."""
@@ -54,8 +56,15 @@ class RunTask:
 
 def simulate_task(case: RunContext, task: RunTask) -> SimulatedRun:
     """The model records of a run on the rig's time grid."""
-    return case.simulator.run(task.op, task.design, task.mesh_stiffness_scale, task.adhesion_torque, task.effects,
-                              task.periodicity, pitch_errors=task.pitch_errors)
+    return case.simulator.run(
+        task.op,
+        task.design,
+        task.mesh_stiffness_scale,
+        task.adhesion_torque,
+        task.effects,
+        task.periodicity,
+        pitch_errors=task.pitch_errors,
+    )
 
 
 def execute_run(case: RunContext, task: RunTask) -> tuple[np.ndarray, bool]:
@@ -89,8 +98,9 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
         transferred = features * case.transfer[op]
         if case.line_gain is not None:
             rms = case.processors[op].columns["rms"]
-            transferred[..., rms] = (transferred_rms(features, case.line_gain[op], case.processors[op])
-                                     * case.transfer[op][:, rms])
+            transferred[..., rms] = (
+                transferred_rms(features, case.line_gain[op], case.processors[op]) * case.transfer[op][:, rms]
+            )
         features = transferred
     return [(features[index], run.periodic) for index, run in enumerate(runs)]
 
@@ -122,7 +132,7 @@ def transferred_rms(features: np.ndarray, line_gain: np.ndarray, processor: RunP
     columns = processor.distinct_line_columns
     amplitude = np.nan_to_num(np.abs(features[..., columns]))
     gain = np.broadcast_to(line_gain, features.shape)[..., columns]
-    line_power = 0.5 * np.sum(amplitude ** 2, axis=-1)
+    line_power = 0.5 * np.sum(amplitude**2, axis=-1)
     rest = np.maximum(np.real(features[..., processor.columns["rms"]]) ** 2 - line_power, 0.0)
     return np.sqrt(rest + 0.5 * np.sum((gain * amplitude) ** 2, axis=-1))
 
@@ -145,13 +155,15 @@ def run_groups(tasks: Sequence[RunTask]) -> list[list[int]]:
     groups = []
     for op in sorted(by_op):
         indices = by_op[op]
-        groups += [indices[start:start + GROUP_SIZE] for start in range(0, len(indices), GROUP_SIZE)]
+        groups += [indices[start : start + GROUP_SIZE] for start in range(0, len(indices), GROUP_SIZE)]
     return groups
 
 
-def execute_runs(case: RunContext, tasks: Sequence[RunTask],
-                 group_map: Callable[[list[list[RunTask]]], list[list[tuple[np.ndarray, bool]]]] | None = None
-                 ) -> list[tuple[np.ndarray, bool]]:
+def execute_runs(
+    case: RunContext,
+    tasks: Sequence[RunTask],
+    group_map: Callable[[list[list[RunTask]]], list[list[tuple[np.ndarray, bool]]]] | None = None,
+) -> list[tuple[np.ndarray, bool]]:
     """Features and periodicity of each task, in order, computed group by group (:func:`run_groups`).
 
     ``group_map`` maps the task groups to their results (a worker pool's
@@ -252,5 +264,15 @@ class RunExecutor:
             self.pool = None
 
 
-__all__ = ["RunContext", "RunTask", "RunExecutor", "simulate_task", "execute_run", "execute_group", "execute_runs",
-           "run_groups", "transferred_rms", "GROUP_SIZE"]
+__all__ = [
+    "RunContext",
+    "RunTask",
+    "RunExecutor",
+    "simulate_task",
+    "execute_run",
+    "execute_group",
+    "execute_runs",
+    "run_groups",
+    "transferred_rms",
+    "GROUP_SIZE",
+]

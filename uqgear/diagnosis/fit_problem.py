@@ -49,8 +49,13 @@ class FitProblem:
         default the case's.
     """
 
-    def __init__(self, case: RigCase, candidates: Candidate | Sequence[Candidate] | None, *,
-                 model_error: Mapping[str, float] | None = None) -> None:
+    def __init__(
+        self,
+        case: RigCase,
+        candidates: Candidate | Sequence[Candidate] | None,
+        *,
+        model_error: Mapping[str, float] | None = None,
+    ) -> None:
         self.case = case
         self.own_model_error = model_error
         if candidates is None:
@@ -78,7 +83,7 @@ class FitProblem:
         self._cache: dict[tuple[Any, ...], tuple[np.ndarray, bool]] = {}
         self.evaluations = 0
 
-    def with_model_error(self, model_error: Mapping[str, float] | None) -> "FitProblem":
+    def with_model_error(self, model_error: Mapping[str, float] | None) -> FitProblem:
         """The same model judged with another model error (its own pitch-error allowance).
 
         The two share their simulations: the model error changes no run, only how its features are scored.
@@ -87,7 +92,7 @@ class FitProblem:
         sibling.own_model_error = model_error
         return sibling
 
-    def on_case(self, case: RigCase) -> "FitProblem":
+    def on_case(self, case: RigCase) -> FitProblem:
         """The same model on a case that differs only in its model error (an allowance taken in).
 
         The two share their simulations, as :meth:`with_model_error`.
@@ -107,13 +112,15 @@ class FitProblem:
         return self.candidates[:-1]
 
     # -- vectors
-    def vector(self, values: Mapping[str, float], t2_position: Sequence[float] | float = 0.5) -> np.ndarray:
+    def vector(
+        self, values: Mapping[str, float], t2_position: Sequence[float] | np.ndarray | float = 0.5
+    ) -> np.ndarray:
         """Optimiser vector from natural values (missing globals at their centres)."""
         v = np.zeros(self.size)
         for i, spec in enumerate(self.specs):
             if spec.name in values:
                 v[i] = spec.to_optimiser(float(values[spec.name]))
-        v[self.n_global:] = np.broadcast_to(np.asarray(t2_position, dtype=float), (self.case.n_op,))
+        v[self.n_global :] = np.broadcast_to(np.asarray(t2_position, dtype=float), (self.case.n_op,))
         return np.clip(v, self.lower, self.upper)
 
     def values(self, v: np.ndarray) -> dict[str, float]:
@@ -121,21 +128,24 @@ class FitProblem:
         return {spec.name: spec.from_optimiser(float(v[i])) for i, spec in enumerate(self.specs)}
 
     def adhesion_torques(self, v: np.ndarray) -> np.ndarray:
-        position = np.clip(v[self.n_global:], 0.0, 1.0)
+        position = np.clip(v[self.n_global :], 0.0, 1.0)
         return self.case.adhesion_lower + position * (self.case.adhesion_upper - self.case.adhesion_lower)
 
     # -- model features
     def run_task(self, v: np.ndarray, op: int) -> RunTask:
         """The simulation of run ``op`` at optimiser vector ``v``."""
         values = self.values(v)
-        design = self.case.design.replace(zeta_mesh=values["zeta_mesh"], ste_amplitude=values["ste_amplitude"],
-                                          k1=values["k1"], k2=values["k2"])
+        design = self.case.design.replace(
+            zeta_mesh=values["zeta_mesh"], ste_amplitude=values["ste_amplitude"], k1=values["k1"], k2=values["k2"]
+        )
         effects = tuple(candidate.make(values) for candidate in self.candidates)
-        return RunTask(op, design, values["mesh_stiffness_scale"], float(self.adhesion_torques(v)[op]), effects,
-                       self.periodicity)
+        return RunTask(
+            op, design, values["mesh_stiffness_scale"], float(self.adhesion_torques(v)[op]), effects, self.periodicity
+        )
 
-    def model_features(self, vectors: Sequence[np.ndarray], ops: Sequence[Sequence[int]] | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+    def model_features(
+        self, vectors: Sequence[np.ndarray], ops: Sequence[Sequence[int]] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free model features (V, n_op, n_channel, all features), NaN for runs not asked.
 
         Returns the features and whether each run's response was periodic
@@ -150,8 +160,8 @@ class FitProblem:
         tasks: list[RunTask] = []
         where: list[tuple[int, int, tuple[Any, ...]]] = []
         for index, v in enumerate(vectors):
-            for op in (range(case.n_op) if ops is None else ops[index]):
-                key = (op, float(v[self.n_global + op]), *np.round(v[:self.n_global], 12))
+            for op in range(case.n_op) if ops is None else ops[index]:
+                key = (op, float(v[self.n_global + op]), *np.round(v[: self.n_global], 12))
                 if key in self._cache:
                     out[index, op], periodic[index, op] = self._cache[key]
                     continue
@@ -168,16 +178,22 @@ class FitProblem:
         """The model error the discrepancies are standardised with: this model's own, else the case's."""
         return self.case.model_error if self.own_model_error is None else self.own_model_error
 
-    def discrepancy(self, model_all: np.ndarray, model_error: Mapping[str, float] | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+    def discrepancy(
+        self, model_all: np.ndarray, model_error: Mapping[str, float] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Standardised discrepancies and scales (..., n_op, n_channel, F) of model features.
 
         ``model_error`` replaces :attr:`model_error` (e.g. to judge a base model by a richer one's error).
         """
         case = self.case
-        return standardised_discrepancy(case.observed, model_all[..., case.layout.columns], case.noise_std,
-                                        case.noise, case.layout,
-                                        self.model_error if model_error is None else model_error)
+        return standardised_discrepancy(
+            case.observed,
+            model_all[..., case.layout.columns],
+            case.noise_std,
+            case.noise,
+            case.layout,
+            self.model_error if model_error is None else model_error,
+        )
 
     def residual_vector(self, z: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Feature residuals (masked) followed by the prior residuals."""
@@ -208,9 +224,9 @@ class FitProblem:
             vectors.append(shifted)
             steps.append(step)
         if t2_free:
-            t2_step = np.where(v[self.n_global:] + _DIFFERENCE_STEP <= 1.0, _DIFFERENCE_STEP, -_DIFFERENCE_STEP)
+            t2_step = np.where(v[self.n_global :] + _DIFFERENCE_STEP <= 1.0, _DIFFERENCE_STEP, -_DIFFERENCE_STEP)
             shifted = v.copy()
-            shifted[self.n_global:] += t2_step
+            shifted[self.n_global :] += t2_step
             vectors.append(shifted)
         model, _ = self.model_features(vectors)
         z, _ = self.discrepancy(model)
@@ -243,7 +259,7 @@ def robust_cost(residuals: np.ndarray) -> float:
     the parameters instead of bending them towards it through tiny slopes.
     """
     s = (np.asarray(residuals) / LOSS_SCALE) ** 2
-    return float(0.5 * LOSS_SCALE ** 2 * np.sum(np.log1p(s)))
+    return float(0.5 * LOSS_SCALE**2 * np.sum(np.log1p(s)))
 
 
 def robust_weights(residuals: np.ndarray) -> np.ndarray:

@@ -45,13 +45,14 @@ class SecantJacobian:
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         v = self.expand(u)
-        values = self.problem.residuals(v)          # simulated already: the solver evaluated it there
+        values = self.problem.residuals(v)  # simulated already: the solver evaluated it there
         step = None if self.point is None else u - self.point
-        if self.matrix is None or self.calls % _SECANT_REFRESH == 0 or not step @ step > 0.0:
+        if self.matrix is None or step is None or self.calls % _SECANT_REFRESH == 0 or not step @ step > 0.0:
             matrix = self.problem.jacobian(v, self.free)
             if self.zero is None:
                 self.zero = matrix == 0.0
         else:
+            assert self.values is not None and step is not None  # set with the matrix by the call before
             matrix = self.matrix + np.outer(values - self.values - self.matrix @ step, step / (step @ step))
             matrix[self.zero] = 0.0
         self.calls += 1
@@ -91,16 +92,23 @@ class FitResult:
     def adhesion_torques(self) -> np.ndarray:
         return self.problem.adhesion_torques(self.vector)
 
-    def after(self, earlier: "FitResult") -> "FitResult":
+    def after(self, earlier: FitResult) -> FitResult:
         """This fit, counting the evaluations and time of the earlier fit it started from."""
         self.evaluations += earlier.evaluations
         self.seconds += earlier.seconds
         return self
 
 
-def fit(problem: FitProblem, starts: Sequence[np.ndarray], *, free: np.ndarray | None = None,
-        max_evaluations: int = 30, loss: str = "cauchy", rows: np.ndarray | None = None,
-        tolerance: float = 1e-4) -> FitResult:
+def fit(
+    problem: FitProblem,
+    starts: Sequence[np.ndarray],
+    *,
+    free: np.ndarray | None = None,
+    max_evaluations: int = 30,
+    loss: str = "cauchy",
+    rows: np.ndarray | None = None,
+    tolerance: float = 1e-4,
+) -> FitResult:
     """Robust least-squares fit from the best of several starting vectors.
 
     All starts are simulated in one batch; the one with the lowest robust
@@ -139,21 +147,42 @@ def fit(problem: FitProblem, starts: Sequence[np.ndarray], *, free: np.ndarray |
         v[free] = u
         return v
 
-    jacobian = SecantJacobian(problem, free, expand)
-    result = scipy.optimize.least_squares(lambda u: problem.residuals(expand(u))[selected], base[free],
-                                          jac=lambda u: jacobian(u)[selected],
-                                          bounds=(problem.lower[free], problem.upper[free]), method="trf",
-                                          loss=loss, f_scale=LOSS_SCALE, x_scale=1.0, max_nfev=max_evaluations,
-                                          xtol=tolerance, ftol=tolerance, gtol=1e-8)
+    secant = SecantJacobian(problem, free, expand)
+    result = scipy.optimize.least_squares(
+        lambda u: problem.residuals(expand(u))[selected],
+        base[free],
+        jac=lambda u: secant(u)[selected],
+        bounds=(problem.lower[free], problem.upper[free]),
+        method="trf",
+        loss=loss,
+        f_scale=LOSS_SCALE,
+        x_scale=1.0,
+        max_nfev=max_evaluations,
+        xtol=tolerance,
+        ftol=tolerance,
+        gtol=1e-8,
+    )
     v = np.clip(expand(result.x), problem.lower, problem.upper)
     model, periodic = problem.model_features([v])
     z, scale = problem.discrepancy(model[0])
     residuals = problem.residual_vector(z, v)
     jacobian = problem.jacobian(v, free)
-    return FitResult(problem=problem, vector=v, free=free, residuals=residuals, jacobian=jacobian, z=z, scale=scale,
-                     model=model[0], periodic=periodic[0], cost=robust_cost(residuals),
-                     evaluations=problem.evaluations - first, seconds=time.perf_counter() - started,
-                     converged=bool(result.status > 0), message=str(result.message))
+    return FitResult(
+        problem=problem,
+        vector=v,
+        free=free,
+        residuals=residuals,
+        jacobian=jacobian,
+        z=z,
+        scale=scale,
+        model=model[0],
+        periodic=periodic[0],
+        cost=robust_cost(residuals),
+        evaluations=problem.evaluations - first,
+        seconds=time.perf_counter() - started,
+        converged=bool(result.status > 0),
+        message=str(result.message),
+    )
 
 
 #: Standard normal quantile of the two-sided 90 % parameter intervals.
@@ -224,14 +253,20 @@ def profile_adhesion(problem: FitProblem, vector: np.ndarray, ops: Sequence[int]
     z, _ = problem.discrepancy(model)
     result = np.array(vector, dtype=float)
     for op in ops:
-        costs = [robust_cost(np.where(np.isfinite(z[k, op]), z[k, op], 0.0)[problem.mask[op]])
-                 for k in range(_T2_GRID.size)]
+        costs = [
+            robust_cost(np.where(np.isfinite(z[k, op]), z[k, op], 0.0)[problem.mask[op]]) for k in range(_T2_GRID.size)
+        ]
         result[problem.n_global + op] = _T2_GRID[int(np.argmin(costs))]
     return result
 
 
-def fit_nominal(case: RigCase, *, max_evaluations: int = DEFAULT_SETTINGS.nominal_evaluations, start: Mapping[str, float] | None = None,
-                positions: np.ndarray | None = None) -> FitResult:
+def fit_nominal(
+    case: RigCase,
+    *,
+    max_evaluations: int = DEFAULT_SETTINGS.nominal_evaluations,
+    start: Mapping[str, float] | None = None,
+    positions: np.ndarray | None = None,
+) -> FitResult:
     """Fit the nominal model (no effect).
 
     From the design's values and T2 mid-interval, two stages: a soft-L1
@@ -245,19 +280,30 @@ def fit_nominal(case: RigCase, *, max_evaluations: int = DEFAULT_SETTINGS.nomina
     problem = FitProblem(case, None)
     if start is not None:
         begin = problem.vector(start, 0.5 if positions is None else positions)
-        return fit(problem, [profile_adhesion(problem, begin), begin], max_evaluations=max_evaluations,
-                   tolerance=1e-3)
+        return fit(problem, [profile_adhesion(problem, begin), begin], max_evaluations=max_evaluations, tolerance=1e-3)
     families = np.broadcast_to(np.array(case.layout.families), problem.mask.shape)[problem.mask]
     rows = np.concatenate([families == "mesh_harmonic", np.ones(problem.prior_index.size, dtype=bool)])
-    first = fit(problem, [problem.vector({}, 0.5)], max_evaluations=max_evaluations, loss="soft_l1", rows=rows,
-                tolerance=1e-3)
-    second = fit(problem, [profile_adhesion(problem, first.vector), first.vector], max_evaluations=max_evaluations,
-                 tolerance=1e-3)
+    first = fit(
+        problem, [problem.vector({}, 0.5)], max_evaluations=max_evaluations, loss="soft_l1", rows=rows, tolerance=1e-3
+    )
+    second = fit(
+        problem,
+        [profile_adhesion(problem, first.vector), first.vector],
+        max_evaluations=max_evaluations,
+        tolerance=1e-3,
+    )
     return second.after(first)
 
 
-def fit_candidate(case: RigCase, candidate: Candidate, base: FitResult, *, full: bool,
-                  max_evaluations: int = 20, start: FitResult | None = None) -> FitResult:
+def fit_candidate(
+    case: RigCase,
+    candidate: Candidate,
+    base: FitResult,
+    *,
+    full: bool,
+    max_evaluations: int = 20,
+    start: FitResult | None = None,
+) -> FitResult:
     """Fit a base model plus one more effect, warm-started from the base fit and the candidate's signature grid.
 
     The base is the nominal fit, or (forward selection) a fit of the nominal
@@ -281,9 +327,9 @@ def fit_candidate(case: RigCase, candidate: Candidate, base: FitResult, *, full:
     """
     # the base's own model error (its effects' pitch-error allowance) until the new fit gets its own
     problem = FitProblem(case, (*base.problem.candidates, candidate), model_error=base.problem.own_model_error)
-    positions = base.vector[base.problem.n_global:]
+    positions = base.vector[base.problem.n_global :]
     if start is not None:
-        starts = [problem.vector(start.values, start.vector[start.problem.n_global:])]
+        starts = [problem.vector(start.values, start.vector[start.problem.n_global :])]
     else:
         starts = [problem.vector({**base.values, **point}, positions) for point in candidate.starts]
     free = np.ones(problem.size, dtype=bool)
@@ -294,23 +340,26 @@ def fit_candidate(case: RigCase, candidate: Candidate, base: FitResult, *, full:
         # An effect that changes every run (clearance in both bearings) drags the nominal fit far
         # from the truth; the effects' values on the design's own parameters are a start too.
         effect_only = {name: value for name, value in problem.values(starts[0]).items() if "." in name}
-        centred = [problem.vector(values, positions) for values in
-                   (effect_only, *({**effect_only, **point} for point in candidate.starts))]
+        centred = [
+            problem.vector(values, positions)
+            for values in (effect_only, *({**effect_only, **point} for point in candidate.starts))
+        ]
         starts = [profile_adhesion(problem, starts[0]), profile_adhesion(problem, centred[0]), *starts, *centred[1:]]
         first = fit(problem, starts, free=free, max_evaluations=max_evaluations, loss="soft_l1", tolerance=1e-3)
         second = fit(problem, [first.vector, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         return second.after(first)
     n_base = base.problem.n_global
     free[:] = False
-    free[n_base:problem.n_global] = True
+    free[n_base : problem.n_global] = True
     result = fit(problem, starts, free=free, max_evaluations=max_evaluations)
     # Held-out predictions must leave each run out of the base's parameters too, as the base
     # model's do: leave_one_out needs the Jacobian in all parameters. The base fit's columns
     # stand in for its parameters and T2 (exact for a small effect; a strong one is refitted in
     # full anyway).
     if base.jacobian.shape[1] == n_base + case.n_op and base.jacobian.shape[0] == result.jacobian.shape[0]:
-        result.jacobian = np.concatenate([base.jacobian[:, :n_base], result.jacobian, base.jacobian[:, n_base:]],
-                                         axis=1)
+        result.jacobian = np.concatenate(
+            [base.jacobian[:, :n_base], result.jacobian, base.jacobian[:, n_base:]], axis=1
+        )
     else:
         result.jacobian = problem.jacobian(result.vector, np.ones(problem.size, dtype=bool))
     result.free = np.ones(problem.size, dtype=bool)
@@ -331,8 +380,10 @@ def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, f
         Not a Dataset, or it holds none of the nominal parameters.
     """
     if not isinstance(posterior, xr.Dataset):
-        raise DiagnosisError(f"calibration: expected a posterior Dataset (posterior.nc of uqgear calibrate); "
-                             f"got {type(posterior).__name__}")
+        raise DiagnosisError(
+            f"calibration: expected a posterior Dataset (posterior.nc of uqgear calibrate); "
+            f"got {type(posterior).__name__}"
+        )
     names = [spec.name for spec in nominal_parameters(case.design)] + ["backlash"]
     start = {name: float(posterior[name].median()) for name in names if name in posterior.data_vars}
     if not start:
@@ -346,5 +397,14 @@ def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, f
     return start, positions
 
 
-__all__ = ["SecantJacobian", "FitResult", "fit", "Z90", "parameter_intervals", "profile_adhesion", "fit_nominal",
-           "fit_candidate", "calibration_start"]
+__all__ = [
+    "SecantJacobian",
+    "FitResult",
+    "fit",
+    "Z90",
+    "parameter_intervals",
+    "profile_adhesion",
+    "fit_nominal",
+    "fit_candidate",
+    "calibration_start",
+]

@@ -14,6 +14,7 @@ from .case import RigCase
 from .scoring import capped_squares, excess_over_noise
 from .settings import DEFAULT_SETTINGS
 
+
 def line_signal_to_noise(case: RigCase) -> np.ndarray:
     """Amplitude over per-quadrature noise spread of every compared rig line (n_op, n_channel, F).
 
@@ -28,8 +29,9 @@ def line_signal_to_noise(case: RigCase) -> np.ndarray:
     return np.where(usable, ratio, np.nan)
 
 
-def uninformative_reason(case: RigCase, *, snr: float = DEFAULT_SETTINGS.signal_snr,
-                         min_runs: int = DEFAULT_SETTINGS.min_informative_runs) -> str | None:
+def uninformative_reason(
+    case: RigCase, *, snr: float = DEFAULT_SETTINGS.signal_snr, min_runs: int = DEFAULT_SETTINGS.min_informative_runs
+) -> str | None:
     """Why a valid campaign cannot be diagnosed, or None when it can.
 
     A diagnosis compares the rig's lines with the model's on held-out runs:
@@ -47,20 +49,24 @@ def uninformative_reason(case: RigCase, *, snr: float = DEFAULT_SETTINGS.signal_
     usable_runs = int(case.usable.any(axis=1).sum())
     strongest = float(np.nanmax(ratio)) if np.isfinite(ratio).any() else math.nan
     if usable_runs < min_runs:
-        return (f"only {usable_runs} of {case.n_op} runs have a channel whose noise floor can be measured; "
-                f"the diagnosis needs at least {min_runs} (each run is predicted by a fit to the others)")
-    where = ("no run" if not runs.any() else
-             "only run " + ", ".join(str(int(op)) for op in np.flatnonzero(runs)))
+        return (
+            f"only {usable_runs} of {case.n_op} runs have a channel whose noise floor can be measured; "
+            f"the diagnosis needs at least {min_runs} (each run is predicted by a fit to the others)"
+        )
+    where = "no run" if not runs.any() else "only run " + ", ".join(str(int(op)) for op in np.flatnonzero(runs))
     detail = f"; the strongest line is {strongest:.1f} noise spreads high" if math.isfinite(strongest) else ""
-    return (f"{where} of {case.n_op} shows a line above the noise floor ({snr:g} noise spreads) in any channel"
-            f"{detail}: the records carry noise only as far as the features can tell, so the data cannot decide "
-            f"between a healthy gear and an effect; the diagnosis needs such lines in at least {min_runs} runs")
+    return (
+        f"{where} of {case.n_op} shows a line above the noise floor ({snr:g} noise spreads) in any channel"
+        f"{detail}: the records carry noise only as far as the features can tell, so the data cannot decide "
+        f"between a healthy gear and an effect; the diagnosis needs such lines in at least {min_runs} runs"
+    )
 
 
-def where_gap(z: np.ndarray, case: RigCase, *, limit: int = 12, where_z: float = DEFAULT_SETTINGS.where_z
-              ) -> list[dict[str, Any]]:
+def where_gap(
+    z: np.ndarray, case: RigCase, *, limit: int = 12, where_z: float = DEFAULT_SETTINGS.where_z
+) -> list[dict[str, Any]]:
     """The features carrying a held-out gap: RMS z over runs, runs beyond ``where_z`` sigma, strongest first."""
-    entries = []
+    entries: list[dict[str, Any]] = []
     for c, channel in enumerate(case.channels):
         for f, name in enumerate(case.layout.names):
             values = z[:, c, f]
@@ -70,8 +76,9 @@ def where_gap(z: np.ndarray, case: RigCase, *, limit: int = 12, where_z: float =
             score = float(np.sqrt(np.mean(values[finite] ** 2)))
             ops = [int(op) for op in np.flatnonzero(finite & (np.abs(np.nan_to_num(values)) > where_z))]
             if score > where_z / 1.5 and ops:
-                entries.append({"channel": channel, "feature": name, "family": case.layout.families[f],
-                                "ops": ops, "score": score})
+                entries.append(
+                    {"channel": channel, "feature": name, "family": case.layout.families[f], "ops": ops, "score": score}
+                )
     entries.sort(key=lambda entry: -entry["score"])
     return entries[:limit]
 
@@ -90,9 +97,14 @@ def _shaft_lines_in_band(z: np.ndarray, case: RigCase, channel: int, where_z: fl
     return False
 
 
-def family_character(z: np.ndarray, case: RigCase, locked_lines: Sequence[Mapping[str, Any]], *,
-                     noise_gap: float = DEFAULT_SETTINGS.noise_gap, where_z: float = DEFAULT_SETTINGS.where_z
-                     ) -> list[dict[str, Any]]:
+def family_character(
+    z: np.ndarray,
+    case: RigCase,
+    locked_lines: Sequence[Mapping[str, Any]],
+    *,
+    noise_gap: float = DEFAULT_SETTINGS.noise_gap,
+    where_z: float = DEFAULT_SETTINGS.where_z,
+) -> list[dict[str, Any]]:
     """Per channel and feature family: held-out gap and its character.
 
     ``order-locked`` for a gap on lines at orders of the shafts or the mesh;
@@ -112,8 +124,12 @@ def family_character(z: np.ndarray, case: RigCase, locked_lines: Sequence[Mappin
             if not finite.any():
                 continue
             score = excess_over_noise(float(np.mean(capped_squares(values[finite]))))
-            per_run = np.array([np.sqrt(np.nanmean(capped_squares(values[op]))) if finite[op].any() else np.nan
-                                for op in range(case.n_op)])
+            per_run = np.array(
+                [
+                    np.sqrt(np.nanmean(capped_squares(values[op]))) if finite[op].any() else np.nan
+                    for op in range(case.n_op)
+                ]
+            )
             character = []
             if score > noise_gap:
                 if family not in ("low_frequency", "broadband"):
@@ -133,9 +149,15 @@ def family_character(z: np.ndarray, case: RigCase, locked_lines: Sequence[Mappin
                             rho = scipy.stats.spearmanr(per_run[ok], driver[ok]).statistic
                             if np.isfinite(rho) and abs(rho) >= 0.7:
                                 character.append(label)
-            rows.append({"channel": channel, "family": family, "score": score,
-                         "per_run": [None if not np.isfinite(v) else float(v) for v in per_run],
-                         "character": character})
+            rows.append(
+                {
+                    "channel": channel,
+                    "family": family,
+                    "score": score,
+                    "per_run": [None if not np.isfinite(v) else float(v) for v in per_run],
+                    "character": character,
+                }
+            )
     return rows
 
 

@@ -11,6 +11,7 @@ from .discrepancy import robust_log_density
 from .fit_problem import FitProblem, robust_weights
 from .fitting import FitResult, profile_adhesion
 
+
 @dataclass
 class HeldOut:
     """Leave-one-run-out predictions of a fitted model.
@@ -66,19 +67,27 @@ def leave_one_out(result: FitResult) -> HeldOut:
     global_columns = np.flatnonzero(free_index < problem.n_global)
     rows_of = problem.op_of_row()
     # column of each run's T2 position in the Jacobian (runs whose T2 was fitted)
-    t2_column: dict[int, int] = {int(index) - problem.n_global: column
-                                 for column, index in enumerate(free_index) if index >= problem.n_global}
+    t2_column: dict[int, int] = {
+        int(index) - problem.n_global: column for column, index in enumerate(free_index) if index >= problem.n_global
+    }
     vectors, covariances = _newton_steps(result, free_index, global_columns, rows_of, t2_column)
     held_model = _held_out_model(problem, vectors, profile=bool(t2_column))
-    z, inflated_scale = _held_out_discrepancy(result, held_model, vectors, covariances, global_columns, rows_of,
-                                              t2_column)
-    log_density = np.where(np.isfinite(z), robust_log_density(np.nan_to_num(z), np.nan_to_num(inflated_scale, nan=1.0)),
-                           np.nan)
+    z, inflated_scale = _held_out_discrepancy(
+        result, held_model, vectors, covariances, global_columns, rows_of, t2_column
+    )
+    log_density = np.where(
+        np.isfinite(z), robust_log_density(np.nan_to_num(z), np.nan_to_num(inflated_scale, nan=1.0)), np.nan
+    )
     return HeldOut(z=z, scale=inflated_scale, log_density=log_density, vectors=vectors, model=held_model)
 
 
-def _newton_steps(result: FitResult, free_index: np.ndarray, global_columns: np.ndarray, rows_of: np.ndarray,
-                  t2_column: Mapping[int, int]) -> tuple[np.ndarray, list[np.ndarray]]:
+def _newton_steps(
+    result: FitResult,
+    free_index: np.ndarray,
+    global_columns: np.ndarray,
+    rows_of: np.ndarray,
+    t2_column: Mapping[int, int],
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """Parameter vectors fitted without each run (one Newton step), and their global parameters' covariances."""
     problem = result.problem
     case = problem.case
@@ -98,8 +107,12 @@ def _newton_steps(result: FitResult, free_index: np.ndarray, global_columns: np.
         reduced += np.eye(keep.size) * 1e-9 * max(np.trace(reduced) / max(keep.size, 1), 1e-12)
         # parameters held at a bound by the data stay there (active set); the rest take one
         # Newton step, limited to one optimiser unit: dropping one run is a small perturbation
-        at_bound = _pressed_to_bound(result.vector[free_index[keep]], reduced_gradient,
-                                     problem.lower[free_index[keep]], problem.upper[free_index[keep]])
+        at_bound = _pressed_to_bound(
+            result.vector[free_index[keep]],
+            reduced_gradient,
+            problem.lower[free_index[keep]],
+            problem.upper[free_index[keep]],
+        )
         inverse = np.zeros_like(reduced)
         moving = np.flatnonzero(~at_bound)
         if moving.size:
@@ -129,8 +142,9 @@ def _held_out_model(problem: FitProblem, vectors: np.ndarray, *, profile: bool) 
         # change in T2: its T2 is then profiled on the grid before the linear refinement
         z_first, _ = problem.discrepancy(held_model)
         harmonic = np.array(case.layout.families) == "mesh_harmonic"
-        worst = np.nanmax(np.abs(np.where(np.isfinite(z_first[..., harmonic]), z_first[..., harmonic], 0.0)),
-                          axis=(1, 2))
+        worst = np.nanmax(
+            np.abs(np.where(np.isfinite(z_first[..., harmonic]), z_first[..., harmonic], 0.0)), axis=(1, 2)
+        )
         for op in np.flatnonzero(worst > _PROFILE_Z):
             vectors[op] = profile_adhesion(problem, vectors[op], [int(op)])
             model, _ = problem.model_features([vectors[op]], [[int(op)]])
@@ -138,9 +152,15 @@ def _held_out_model(problem: FitProblem, vectors: np.ndarray, *, profile: bool) 
     return held_model
 
 
-def _held_out_discrepancy(result: FitResult, held_model: np.ndarray, vectors: np.ndarray,
-                          covariances: Sequence[np.ndarray], global_columns: np.ndarray, rows_of: np.ndarray,
-                          t2_column: Mapping[int, int]) -> tuple[np.ndarray, np.ndarray]:
+def _held_out_discrepancy(
+    result: FitResult,
+    held_model: np.ndarray,
+    vectors: np.ndarray,
+    covariances: Sequence[np.ndarray],
+    global_columns: np.ndarray,
+    rows_of: np.ndarray,
+    t2_column: Mapping[int, int],
+) -> tuple[np.ndarray, np.ndarray]:
     """Held-out standardised discrepancies and predictive scales, each run's T2 refined linearly.
 
     Each run's T2 is profiled on its own fitted features (a linearised
@@ -164,7 +184,7 @@ def _held_out_discrepancy(result: FitResult, held_model: np.ndarray, vectors: np
             slope = np.zeros(residual.size)
             slope[fitted_rows] = slope_fitted
             w = robust_weights(residual) * fitted_rows
-            curvature = float(np.sum(w * slope ** 2))
+            curvature = float(np.sum(w * slope**2))
             if curvature > 0:
                 position = vectors[op, problem.n_global + op]
                 shift = -float(np.sum(w * slope * residual)) / curvature

@@ -18,7 +18,8 @@ from ..common.errors import RigDataError
 from ..physics.design import Design
 from ..uq.results import load_result
 from ..uq.seeds import as_seed_sequence, child_seed
-from .allowances.reference import ReferenceCorrection, check_design_match, match_operating_points
+from .allowances.compatibility import check_design_match, match_operating_points
+from .allowances.reference import ReferenceCorrection
 from .errors import DiagnosisError
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
@@ -39,7 +40,7 @@ class DiagnosisSeeds:
     reference: np.random.SeedSequence
 
     @classmethod
-    def from_seed(cls, seed: np.random.SeedSequence) -> "DiagnosisSeeds":
+    def from_seed(cls, seed: np.random.SeedSequence) -> DiagnosisSeeds:
         return cls(child_seed(seed, 0), child_seed(seed, 1), child_seed(seed, 2))
 
 
@@ -61,9 +62,14 @@ class DiagnosisInputs:
     learned: ReferenceCorrection | None = None
 
 
-def read_inputs(rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None, *,
-                design: Design | None, calibration: str | os.PathLike[str] | xr.Dataset | None,
-                settings: DiagnosisSettings = DEFAULT_SETTINGS) -> DiagnosisInputs:
+def read_inputs(
+    rig: str | os.PathLike[str] | xr.Dataset,
+    reference: ReferenceInput | None,
+    *,
+    design: Design | None,
+    calibration: str | os.PathLike[str] | xr.Dataset | None,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+) -> DiagnosisInputs:
     """Read and check every input of a diagnosis before any work (``design``: one given, replacing the file's)."""
     dataset, source = load_rig_input(rig, design=design)
     nominal_design = design if design is not None else resolve_design(None, dataset)
@@ -74,8 +80,7 @@ def read_inputs(rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceIn
     return DiagnosisInputs(dataset, source, nominal_design, posterior, reference_data, reference_source, learned)
 
 
-def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *,
-                   design: Design | None = None) -> tuple[xr.Dataset, str]:
+def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *, design: Design | None = None) -> tuple[xr.Dataset, str]:
     """A validated rig Dataset from a path or a Dataset, and a text naming its source.
 
     A ``design`` given replaces the file's: the file's ``design`` attribute is
@@ -103,9 +108,13 @@ def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *,
         where = source
     else:
         raise RigDataError(f"rig: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(rig).__name__}")
-    check_usable_signal(dataset, where=where, min_operating_points=DEFAULT_SETTINGS.min_informative_runs,
-                        purpose="the diagnosis",
-                        why="each operating point is predicted by the model fitted to the others")
+    check_usable_signal(
+        dataset,
+        where=where,
+        min_operating_points=DEFAULT_SETTINGS.min_informative_runs,
+        purpose="the diagnosis",
+        why="each operating point is predicted by the model fitted to the others",
+    )
     return dataset, source
 
 
@@ -122,9 +131,10 @@ def resolve_design(design: Design | str | os.PathLike[str] | None, rig: xr.Datas
         return design
     if isinstance(design, (str, os.PathLike)):
         return load_design(str(design))
-    raise DiagnosisError(f"design: expected a Design, a design file or name, or None (the rig file's design); "
-                         f"got {type(design).__name__}")
-
+    raise DiagnosisError(
+        f"design: expected a Design, a design file or name, or None (the rig file's design); "
+        f"got {type(design).__name__}"
+    )
 
 
 def load_calibration(calibration: str | os.PathLike[str] | xr.Dataset) -> xr.Dataset:
@@ -132,8 +142,9 @@ def load_calibration(calibration: str | os.PathLike[str] | xr.Dataset) -> xr.Dat
     if isinstance(calibration, xr.Dataset):
         return calibration
     if not isinstance(calibration, (str, os.PathLike)):
-        raise DiagnosisError(f"calibration: expected a posterior.nc path, its folder or a Dataset; "
-                             f"got {type(calibration).__name__}")
+        raise DiagnosisError(
+            f"calibration: expected a posterior.nc path, its folder or a Dataset; got {type(calibration).__name__}"
+        )
     path = Path(calibration)
     if path.is_dir():
         path = path / "posterior.nc"
@@ -143,9 +154,13 @@ def load_calibration(calibration: str | os.PathLike[str] | xr.Dataset) -> xr.Dat
     return load_result(path)
 
 
-
-def load_reference(reference: ReferenceInput, test: xr.Dataset, *, design: Design | None = None,
-                   settings: DiagnosisSettings = DEFAULT_SETTINGS) -> tuple[xr.Dataset, str, ReferenceCorrection | None]:
+def load_reference(
+    reference: ReferenceInput,
+    test: xr.Dataset,
+    *,
+    design: Design | None = None,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+) -> tuple[xr.Dataset, str, ReferenceCorrection | None]:
     """A healthy reference campaign, checked against the test campaign before any work.
 
     Returns the reference Dataset, the text naming it and, when ``reference``
@@ -166,17 +181,25 @@ def load_reference(reference: ReferenceInput, test: xr.Dataset, *, design: Desig
         learned, dataset, source = reference, reference.rig, reference.source
     elif isinstance(reference, (str, os.PathLike)):
         if not Path(reference).is_file():
-            raise DiagnosisError(f"reference: {reference}: no such file (expected a uqgear-rig/1 campaign of the "
-                                 "same rig with a healthy gearbox)")
+            raise DiagnosisError(
+                f"reference: {reference}: no such file (expected a uqgear-rig/1 campaign of the "
+                "same rig with a healthy gearbox)"
+            )
         dataset, source = load_rig_input(reference, design=design)
     elif isinstance(reference, xr.Dataset):
         dataset, source = load_rig_input(reference, design=design)
     else:
-        raise DiagnosisError(f"reference: expected a uqgear-rig/1 file path or an xarray Dataset; "
-                             f"got {type(reference).__name__}")
+        raise DiagnosisError(
+            f"reference: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(reference).__name__}"
+        )
     check_design_match(test, dataset, where=source)
-    match_operating_points(test, dataset, where=source, speed_tolerance=settings.speed_tolerance,
-                           torque_tolerance=settings.torque_tolerance)
+    match_operating_points(
+        test,
+        dataset,
+        where=source,
+        speed_tolerance=settings.speed_tolerance,
+        torque_tolerance=settings.torque_tolerance,
+    )
     return dataset, source, learned
 
 
@@ -204,5 +227,16 @@ def check_workers(workers: int | None) -> int:
     return int(workers)
 
 
-__all__ = ["DiagnosisSeeds", "DiagnosisInputs", "ReferenceInput", "as_seed", "read_inputs", "load_rig_input",
-           "resolve_design", "load_calibration", "load_reference", "default_workers", "check_workers"]
+__all__ = [
+    "DiagnosisSeeds",
+    "DiagnosisInputs",
+    "ReferenceInput",
+    "as_seed",
+    "read_inputs",
+    "load_rig_input",
+    "resolve_design",
+    "load_calibration",
+    "load_reference",
+    "default_workers",
+    "check_workers",
+]

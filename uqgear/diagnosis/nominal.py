@@ -31,8 +31,14 @@ from .state import DiagnosisState
 PITCH_ERROR_STREAM = 7
 
 
-def fit_nominal_model(case: RigCase, posterior: xr.Dataset | None, *, settings: DiagnosisSettings, steps: StepLog,
-                      timings: dict[str, float]) -> tuple[RigCase, FitResult]:
+def fit_nominal_model(
+    case: RigCase,
+    posterior: xr.Dataset | None,
+    *,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> tuple[RigCase, FitResult]:
     """The nominal fit, from a calibration posterior's medians where one is given (its backlash taken over).
 
     Returns the case (with the calibrated backlash in its design) and the fit.
@@ -50,39 +56,61 @@ def fit_nominal_model(case: RigCase, posterior: xr.Dataset | None, *, settings: 
     clock = time.perf_counter()
     with steps.step("fit the nominal model") as found:
         budget = settings.nominal_evaluations
-        nominal = (fit_nominal(case, max_evaluations=budget) if start is None else
-                   fit_nominal(case, max_evaluations=budget, start=start, positions=positions))
+        nominal = (
+            fit_nominal(case, max_evaluations=budget)
+            if start is None
+            else fit_nominal(case, max_evaluations=budget, start=start, positions=positions)
+        )
         found.update(parameters=nominal.values, adhesion_torque=list(nominal.adhesion_torques), cost=nominal.cost)
     timings["nominal_fit"] += time.perf_counter() - clock
     return case, nominal
 
 
-def allow_pitch_errors(case: RigCase, nominal: FitResult, *, classes: tuple[float, float] | None,
-                       seed: np.random.SeedSequence, settings: DiagnosisSettings, steps: StepLog,
-                       timings: dict[str, float]) -> tuple[RigCase, FitResult, PitchErrorAllowance]:
+def allow_pitch_errors(
+    case: RigCase,
+    nominal: FitResult,
+    *,
+    classes: tuple[float, float] | None,
+    seed: np.random.SeedSequence,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> tuple[RigCase, FitResult, PitchErrorAllowance]:
     """The pitch-error allowance of ``classes`` taken into the case's model error, and the nominal model refitted.
 
     Where the allowance does not apply, the case and the fit come back as they were.
     """
     clock = time.perf_counter()
     with steps.step("allow for the gears' pitch errors") as found:
-        allowance = pitch_error_allowance(case, nominal, classes=classes, seed=child_seed(seed, PITCH_ERROR_STREAM),
-                                          settings=settings)
+        allowance = pitch_error_allowance(
+            case, nominal, classes=classes, seed=child_seed(seed, PITCH_ERROR_STREAM), settings=settings
+        )
         found.update(applied=allowance.applied, reason=allowance.reason)
         if allowance.applied:
             case = allowance.apply(case)
             # the nominal parameters were pulled by what pitch errors did to the features: refit
-            nominal = fit(nominal.problem.on_case(case), [nominal.vector], max_evaluations=settings.nominal_evaluations,
-                          tolerance=1e-3).after(nominal)
+            nominal = fit(
+                nominal.problem.on_case(case),
+                [nominal.vector],
+                max_evaluations=settings.nominal_evaluations,
+                tolerance=1e-3,
+            ).after(nominal)
             found.update(parameters=nominal.values, cost=nominal.cost)
     timings["pitch_errors"] = time.perf_counter() - clock
     return case, nominal, allowance
 
 
-def score_against_nominal(case: RigCase, nominal: FitResult, *, effects: tuple[str, ...], hints: Mapping[str, float],
-                          rng: np.random.Generator, settings: DiagnosisSettings, steps: StepLog,
-                          timings: dict[str, float]
-                          ) -> tuple[DiagnosisState, dict[str, CandidateScore], list[CandidateScore]]:
+def score_against_nominal(
+    case: RigCase,
+    nominal: FitResult,
+    *,
+    effects: tuple[str, ...],
+    hints: Mapping[str, float],
+    rng: np.random.Generator,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> tuple[DiagnosisState, dict[str, CandidateScore], list[CandidateScore]]:
     """Every candidate scored against the nominal fit's held-out predictions (:func:`~.screening.score_candidates`).
 
     Where a candidate's full fit shows that the nominal fit stopped in a
@@ -105,8 +133,9 @@ def score_against_nominal(case: RigCase, nominal: FitResult, *, effects: tuple[s
             break
         clock = time.perf_counter()
         with steps.step("check the nominal fit against the candidate fits") as found:
-            better = improved_nominal(nominal, [entry.fit for entry in all_scores if entry.stage == "full"],
-                                      settings=settings)
+            better = improved_nominal(
+                nominal, [entry.fit for entry in all_scores if entry.stage == "full"], settings=settings
+            )
             found.update(refitted=better is not None)
         timings["nominal_fit"] += time.perf_counter() - clock
         if better is None:

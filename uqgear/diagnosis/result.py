@@ -28,8 +28,8 @@ class DiagnosisResult:
     case: RigCase
     nominal: FitResult
     nominal_held: HeldOut
-    scores: list[CandidateScore]          # best variant per effect, ranked best first
-    all_scores: list[CandidateScore]      # every variant and stage
+    scores: list[CandidateScore]  # best variant per effect, ranked best first
+    all_scores: list[CandidateScore]  # every variant and stage
     decision: Decision
     nominal_gap: float
     where: list[dict[str, Any]]
@@ -76,14 +76,29 @@ class DiagnosisResult:
 
     def ranking(self) -> list[dict[str, Any]]:
         """JSON-ready ranking, best first (``modulation_gain`` where it was measured)."""
-        return [{**s.figures(), "variant": s.label, "delta_log_density": s.delta_log_density, "penalty": s.penalty,
-                 "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
+        return [
+            {
+                **s.figures(),
+                "variant": s.label,
+                "delta_log_density": s.delta_log_density,
+                "penalty": s.penalty,
+                "parameters": s.parameters(),
+                "fit": s.stage,
+            }
+            for s in self.scores
+        ]
 
     @property
     def named_shafts(self) -> list[str]:
         """The shafts whose eccentricity the diagnosis named."""
-        return sorted({str(dict(candidate.choices)["shaft"]) for chosen in self.selected
-                       for candidate in chosen.entry.fit.problem.candidates if candidate.effect == "eccentricity"})
+        return sorted(
+            {
+                str(dict(candidate.choices)["shaft"])
+                for chosen in self.selected
+                for candidate in chosen.entry.fit.problem.candidates
+                if candidate.effect == "eccentricity"
+            }
+        )
 
     def cannot_tell(self) -> list[dict[str, Any]]:
         """Run-outs the lines cannot tell from the gears' own pitch errors.
@@ -91,8 +106,9 @@ class DiagnosisResult:
         The ``cannot_tell`` entries of ``diagnosis.json``
         (:func:`~uqgear.diagnosis.allowances.pitch_errors.run_outs_not_told_apart`).
         """
-        return run_outs_not_told_apart(self.pitch_errors, self.named_shafts,
-                                       share_threshold=self.settings.large_run_out_share)
+        return run_outs_not_told_apart(
+            self.pitch_errors, self.named_shafts, share_threshold=self.settings.large_run_out_share
+        )
 
 
 __all__ = ["DiagnosisResult", "SelectedEffect", "SelectionRound"]

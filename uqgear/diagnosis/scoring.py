@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.stats
 
+from .candidates import Candidate
 from .fitting import FitResult, parameter_intervals
 from .heldout import HeldOut
 from .settings import DEFAULT_SETTINGS
@@ -21,13 +21,16 @@ GAP_METRIC = "excess_rms_standardised_discrepancy_capped_at_10"
 # features thousands of sigmas off do not decide alone how far a gap shrank.
 _GAP_CAP = 10.0
 # E[min(z^2, cap^2)] for z ~ N(0, 1): the noise level the gap is measured from.
-GAP_NOISE_LEVEL = float(1.0 - 2.0 * (_GAP_CAP * scipy.stats.norm.pdf(_GAP_CAP) + scipy.stats.norm.sf(_GAP_CAP))
-                         + 2.0 * _GAP_CAP ** 2 * scipy.stats.norm.sf(_GAP_CAP))
+GAP_NOISE_LEVEL = float(
+    1.0
+    - 2.0 * (_GAP_CAP * scipy.stats.norm.pdf(_GAP_CAP) + scipy.stats.norm.sf(_GAP_CAP))
+    + 2.0 * _GAP_CAP**2 * scipy.stats.norm.sf(_GAP_CAP)
+)
 
 
 def capped_squares(z: np.ndarray) -> np.ndarray:
     """min(z^2, cap^2) (NaN stays NaN)."""
-    return np.minimum(np.asarray(z, dtype=float) ** 2, _GAP_CAP ** 2)
+    return np.minimum(np.asarray(z, dtype=float) ** 2, _GAP_CAP**2)
 
 
 def gap_metric(z: np.ndarray) -> float:
@@ -64,8 +67,12 @@ def shrink_fraction(before: float, after: float) -> float:
     return 1.0 - after / before
 
 
-def bootstrap_shrink(z_before: np.ndarray, z_after: np.ndarray, rng: np.random.Generator,
-                     n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples) -> tuple[float, float, float]:
+def bootstrap_shrink(
+    z_before: np.ndarray,
+    z_after: np.ndarray,
+    rng: np.random.Generator,
+    n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples,
+) -> tuple[float, float, float]:
     """Shrink fraction and its 5 % and 95 % bootstrap quantiles, resampling runs.
 
     The quantiles are over the resamples that hold a gap to shrink (the
@@ -84,7 +91,7 @@ def bootstrap_shrink(z_before: np.ndarray, z_after: np.ndarray, rng: np.random.G
     squares_before, counts = _per_run_squares(before)
     squares_after, _ = _per_run_squares(after)
 
-    def shrink_of(index: np.ndarray) -> float:
+    def shrink_of(index: Any) -> float:
         count = counts[index].sum()
         if count == 0:
             return math.nan
@@ -103,8 +110,9 @@ def bootstrap_shrink(z_before: np.ndarray, z_after: np.ndarray, rng: np.random.G
     return central, float(np.quantile(samples, 0.05)), float(np.quantile(samples, 0.95))
 
 
-def bootstrap_gap(z: np.ndarray, rng: np.random.Generator,
-                  n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples) -> tuple[float, float]:
+def bootstrap_gap(
+    z: np.ndarray, rng: np.random.Generator, n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples
+) -> tuple[float, float]:
     """5 % and 95 % bootstrap quantiles of :func:`gap_metric`, resampling runs (axis 0)."""
     values = np.asarray(z, dtype=float)
     n_op = values.shape[0]
@@ -121,6 +129,7 @@ def bootstrap_gap(z: np.ndarray, rng: np.random.Generator,
 
 
 # ---------------------------------------------------------------------------------------------- candidate scores
+
 
 @dataclass(frozen=True)
 class RunOutCheck:
@@ -178,34 +187,50 @@ class CandidateScore:
     def figures(self) -> dict[str, Any]:
         """The figures the ranking reports (``modulation_gain`` where it was measured)."""
         figures: dict[str, Any] = {
-            "effect": self.effect, "score": self.score, "standard_error": self.standard_error,
-            "shrink_fraction": self.shrink_fraction, "shrink_interval": list(self.shrink_interval),
-            "gap_with_effect": self.gap_with_effect, "effect_gain": self.effect_gain}
+            "effect": self.effect,
+            "score": self.score,
+            "standard_error": self.standard_error,
+            "shrink_fraction": self.shrink_fraction,
+            "shrink_interval": list(self.shrink_interval),
+            "gap_with_effect": self.gap_with_effect,
+            "effect_gain": self.effect_gain,
+        }
         if self.modulation_gain is not None:
             figures["modulation_gain"] = self.modulation_gain
         return figures
+
+    def _candidate(self) -> Candidate:
+        candidate = self.fit.problem.candidate
+        assert candidate is not None  # internal invariant: a score is of a fit with its candidate
+        return candidate
 
     def parameters(self) -> dict[str, object]:
         """Fitted parameters of this candidate's effect (natural units) and its fixed choices.
 
         Only the new candidate's: in a fit on top of named effects theirs are reported with them.
         """
-        candidate = self.fit.problem.candidate
-        values: dict[str, object] = {key: value for key, value in candidate.choices}
+        candidate = self._candidate()
+        values: dict[str, object] = dict(candidate.choices)
         fitted = self.fit.values
         values.update({spec.name.split(".", 1)[1]: float(fitted[spec.name]) for spec in candidate.fitted})
         return values
 
     def parameter_intervals(self) -> dict[str, list[float]]:
         """90 % Laplace intervals of this candidate's fitted parameters (:func:`~.fitting.parameter_intervals`)."""
-        candidate = self.fit.problem.candidate
+        candidate = self._candidate()
         intervals = parameter_intervals(self.fit, [spec.name for spec in candidate.fitted])
         return {name.split(".", 1)[1]: [low, high] for name, (low, high) in intervals.items()}
 
 
-def score_candidate(fit_result: FitResult, held: HeldOut, nominal_held: HeldOut, stage: str,
-                    rng: np.random.Generator, *, n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples
-                    ) -> CandidateScore:
+def score_candidate(
+    fit_result: FitResult,
+    held: HeldOut,
+    nominal_held: HeldOut,
+    stage: str,
+    rng: np.random.Generator,
+    *,
+    n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples,
+) -> CandidateScore:
     """Held-out log-density gain over the base model, its standard error, penalty and gap shrink.
 
     The base is the nominal model, or in forward selection the model with
@@ -225,11 +250,32 @@ def score_candidate(fit_result: FitResult, held: HeldOut, nominal_held: HeldOut,
     penalty = 0.5 * len(candidate.fitted) * math.log(max(n_features, 2))
     gap = gap_metric(held.z)
     shrink, low, high = bootstrap_shrink(nominal_held.z, held.z, rng, n_resamples)
-    return CandidateScore(effect=candidate.effect, label=candidate.label, fit=fit_result, held=held, stage=stage,
-                          delta_log_density=delta, standard_error=standard_error, penalty=penalty,
-                          score=delta - penalty, gap_with_effect=gap, shrink_fraction=shrink,
-                          shrink_interval=(low, high))
+    return CandidateScore(
+        effect=candidate.effect,
+        label=candidate.label,
+        fit=fit_result,
+        held=held,
+        stage=stage,
+        delta_log_density=delta,
+        standard_error=standard_error,
+        penalty=penalty,
+        score=delta - penalty,
+        gap_with_effect=gap,
+        shrink_fraction=shrink,
+        shrink_interval=(low, high),
+    )
 
 
-__all__ = ["GAP_METRIC", "GAP_NOISE_LEVEL", "capped_squares", "gap_metric", "excess_over_noise", "shrink_fraction",
-           "bootstrap_shrink", "bootstrap_gap", "RunOutCheck", "CandidateScore", "score_candidate"]
+__all__ = [
+    "GAP_METRIC",
+    "GAP_NOISE_LEVEL",
+    "capped_squares",
+    "gap_metric",
+    "excess_over_noise",
+    "shrink_fraction",
+    "bootstrap_shrink",
+    "bootstrap_gap",
+    "RunOutCheck",
+    "CandidateScore",
+    "score_candidate",
+]

@@ -12,7 +12,7 @@ model's held-out predictions.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -29,8 +29,9 @@ from .state import DiagnosisState
 from .verdict import decide_verdict, ranked
 
 
-def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult], *, own_error: bool = False
-                     ) -> tuple[list[np.ndarray], list[float]]:
+def effect_off_costs(
+    nominal: FitResult, fits: Sequence[FitResult], *, own_error: bool = False
+) -> tuple[list[np.ndarray], list[float]]:
     """The base model at each fit's values of the base's parameters and T2 (its new effect off): vectors and costs.
 
     ``nominal`` is the base fit: the nominal model's, or in forward selection
@@ -42,18 +43,26 @@ def effect_off_costs(nominal: FitResult, fits: Sequence[FitResult], *, own_error
     """
     problem = nominal.problem
     names = {spec.name for spec in problem.specs}
-    starts = [problem.vector({key: value for key, value in candidate.values.items() if key in names},
-                             candidate.vector[candidate.problem.n_global:]) for candidate in fits]
+    starts = [
+        problem.vector(
+            {key: value for key, value in candidate.values.items() if key in names},
+            candidate.vector[candidate.problem.n_global :],
+        )
+        for candidate in fits
+    ]
     if not starts:
         return [], []
     model, _ = problem.model_features(starts)
     errors = [fit_result.problem.model_error if own_error else None for fit_result in fits]
-    return starts, [robust_cost(problem.residual_vector(problem.discrepancy(model[index], errors[index])[0], v))
-                    for index, v in enumerate(starts)]
+    return starts, [
+        robust_cost(problem.residual_vector(problem.discrepancy(model[index], errors[index])[0], v))
+        for index, v in enumerate(starts)
+    ]
 
 
-def improved_nominal(nominal: FitResult, fits: Sequence[FitResult], *, settings: DiagnosisSettings = DEFAULT_SETTINGS
-                     ) -> FitResult | None:
+def improved_nominal(
+    nominal: FitResult, fits: Sequence[FitResult], *, settings: DiagnosisSettings = DEFAULT_SETTINGS
+) -> FitResult | None:
     """A better nominal fit found through the candidates' full fits, or None.
 
     Every candidate contains the nominal model (its effect at strength 0).
@@ -79,8 +88,12 @@ def improved_nominal(nominal: FitResult, fits: Sequence[FitResult], *, settings:
 
 def found(entry: CandidateScore) -> dict[str, Any]:
     """What a candidate's fit found, for the step log."""
-    return {"score": entry.score, "shrink_fraction": entry.shrink_fraction, "gap_with_effect": entry.gap_with_effect,
-            "parameters": entry.parameters()}
+    return {
+        "score": entry.score,
+        "shrink_fraction": entry.shrink_fraction,
+        "gap_with_effect": entry.gap_with_effect,
+        "parameters": entry.parameters(),
+    }
 
 
 def supersedes(full: CandidateScore, best: CandidateScore) -> bool:
@@ -121,10 +134,19 @@ def screen(state: DiagnosisState) -> list[CandidateScore]:
     for name in state.effects:
         for candidate in candidates_for(name, case.design, hints=state.hints):
             with state.steps.step(f"screen {candidate.label}") as finding:
-                result = fit_candidate(case, candidate, state.nominal, full=False,
-                                       max_evaluations=settings.screening_evaluations)
-                screened.append(score_candidate(result, leave_one_out(result), state.nominal_held, "screening",
-                                                state.rng, n_resamples=settings.bootstrap_resamples))
+                result = fit_candidate(
+                    case, candidate, state.nominal, full=False, max_evaluations=settings.screening_evaluations
+                )
+                screened.append(
+                    score_candidate(
+                        result,
+                        leave_one_out(result),
+                        state.nominal_held,
+                        "screening",
+                        state.rng,
+                        n_resamples=settings.bootstrap_resamples,
+                    )
+                )
                 finding.update(found(screened[-1]))
     return screened
 
@@ -135,11 +157,25 @@ def fit_in_full(state: DiagnosisState, entry: CandidateScore) -> CandidateScore:
     candidate = entry.fit.problem.candidate
     assert candidate is not None  # internal invariant: a screened entry has its candidate
     with state.steps.step(f"fit {candidate.label} in full") as finding:
-        result = with_own_allowance(fit_candidate(case, candidate, state.nominal, full=True,
-                                                  max_evaluations=settings.full_fit_evaluations, start=entry.fit),
-                                    max_evaluations=settings.full_fit_evaluations)
-        full = score_candidate(result, leave_one_out(result), state.nominal_held, "full", state.rng,
-                               n_resamples=settings.bootstrap_resamples)
+        result = with_own_allowance(
+            fit_candidate(
+                case,
+                candidate,
+                state.nominal,
+                full=True,
+                max_evaluations=settings.full_fit_evaluations,
+                start=entry.fit,
+            ),
+            max_evaluations=settings.full_fit_evaluations,
+        )
+        full = score_candidate(
+            result,
+            leave_one_out(result),
+            state.nominal_held,
+            "full",
+            state.rng,
+            n_resamples=settings.bootstrap_resamples,
+        )
         measure_modulation(case, full)
         finding.update(found(full))
     return full
@@ -171,7 +207,7 @@ def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], 
     order = sorted(best.values(), key=lambda entry: -entry.score)
     all_scores = list(screened)
     promoted = _also_promoted(state, order[0]) if order else (lambda entry: False)
-    chosen = [entry for rank, entry in enumerate(order[:settings.promoted]) if rank == 0 or promoted(entry)]
+    chosen = [entry for rank, entry in enumerate(order[: settings.promoted]) if rank == 0 or promoted(entry)]
 
     def fitted(entry: CandidateScore) -> None:
         full = fit_in_full(state, entry)
@@ -185,11 +221,14 @@ def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], 
     # unloads) cannot be screened with the nominal parameters held where the nominal model put
     # them to absorb that change: before a gap is called unexplained the next candidate variants
     # get a full fit, best screened first, until one explains it.
-    remaining = sorted((entry for entry in screened if not any(entry is done for done in chosen)),
-                       key=lambda entry: -entry.score)
-    for entry in remaining[:settings.extra_full_fits]:
-        if decide_verdict(state.nominal_gap, ranked(best, state.case, settings=settings),
-                          settings=settings)[0] != "unexplained":
+    remaining = sorted(
+        (entry for entry in screened if not any(entry is done for done in chosen)), key=lambda entry: -entry.score
+    )
+    for entry in remaining[: settings.extra_full_fits]:
+        if (
+            decide_verdict(state.nominal_gap, ranked(best, state.case, settings=settings), settings=settings)[0]
+            != "unexplained"
+        ):
             break
         fitted(entry)
     full_fits = [entry for entry in all_scores if entry.stage == "full"]
@@ -203,5 +242,13 @@ def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], 
     return best, all_scores
 
 
-__all__ = ["effect_off_costs", "improved_nominal", "supersedes", "measure_modulation", "best_per_effect",
-           "screen", "fit_in_full", "score_candidates"]
+__all__ = [
+    "effect_off_costs",
+    "improved_nominal",
+    "supersedes",
+    "measure_modulation",
+    "best_per_effect",
+    "screen",
+    "fit_in_full",
+    "score_candidates",
+]

@@ -26,9 +26,9 @@ from .fitting import fit_candidate
 from .heldout import leave_one_out
 from .scoring import CandidateScore, bootstrap_gap, score_candidate
 from .screening import best_per_effect, effect_off_costs, found, measure_modulation, supersedes
+from .set_verdict import lead_decision, phase_named_decision, set_decision, unled_decision
 from .state import DiagnosisState
-from .verdict import (FirstDecision, decide, lead_decision, leads_a_set, phase_named_decision, ranked, set_decision,
-                      unled_decision)
+from .verdict import FirstDecision, decide, leads_a_set, ranked
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
@@ -57,10 +57,19 @@ def _screen_on_top(state: DiagnosisState, base: CandidateScore, named: Sequence[
             continue
         for candidate in candidates_for(name, state.case.design, hints=state.hints):
             with state.steps.step(f"forward selection: screen {candidate.label} on top of {labels}") as finding:
-                result = fit_candidate(state.case, candidate, base_fit, full=False,
-                                       max_evaluations=settings.screening_evaluations)
-                screened.append(score_candidate(result, leave_one_out(result), base.held, "screening", state.rng,
-                                                n_resamples=settings.bootstrap_resamples))
+                result = fit_candidate(
+                    state.case, candidate, base_fit, full=False, max_evaluations=settings.screening_evaluations
+                )
+                screened.append(
+                    score_candidate(
+                        result,
+                        leave_one_out(result),
+                        base.held,
+                        "screening",
+                        state.rng,
+                        n_resamples=settings.bootstrap_resamples,
+                    )
+                )
                 screened[-1].effect_gain = base_fit.cost - result.cost
                 finding.update(found(screened[-1]))
     return screened
@@ -84,13 +93,23 @@ def next_effect(state: DiagnosisState, base: CandidateScore, named: Sequence[str
     leader = max(screened, key=lambda entry: entry.score)
     candidate = leader.fit.problem.candidate
     assert candidate is not None  # internal invariant: a screened entry has its candidate
-    with state.steps.step(f"forward selection: fit {candidate.label} in full on top of {' + '.join(base_labels)}") \
-            as finding:
-        result = with_own_allowance(fit_candidate(state.case, candidate, base_fit, full=True,
-                                                  max_evaluations=settings.full_fit_evaluations, start=leader.fit),
-                                    max_evaluations=settings.full_fit_evaluations)
-        full = score_candidate(result, leave_one_out(result), base.held, "full", state.rng,
-                               n_resamples=settings.bootstrap_resamples)
+    with state.steps.step(
+        f"forward selection: fit {candidate.label} in full on top of {' + '.join(base_labels)}"
+    ) as finding:
+        result = with_own_allowance(
+            fit_candidate(
+                state.case,
+                candidate,
+                base_fit,
+                full=True,
+                max_evaluations=settings.full_fit_evaluations,
+                start=leader.fit,
+            ),
+            max_evaluations=settings.full_fit_evaluations,
+        )
+        full = score_candidate(
+            result, leave_one_out(result), base.held, "full", state.rng, n_resamples=settings.bootstrap_resamples
+        )
         full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
         measure_modulation(state.case, full)
         finding.update(found(full))
@@ -104,13 +123,18 @@ def next_effect(state: DiagnosisState, base: CandidateScore, named: Sequence[str
     decision = decide(base.gap_with_effect, [chosen], settings=settings, pitch_allowance=state.pitch_allowance)
     added = chosen.effect if decision.verdict == chosen.effect else None
     assert chosen.gap_interval is not None
-    return SelectionRound(base_labels, base.gap_with_effect, ranking, added, decision.reason, decision,
-                          chosen.gap_interval)
+    return SelectionRound(
+        base_labels, base.gap_with_effect, ranking, added, decision.reason, decision, chosen.gap_interval
+    )
 
 
-def forward_selection(state: DiagnosisState, first: CandidateScore, first_decision: Decision, *,
-                      first_gap_interval: Sequence[float] = (math.nan, math.nan)
-                      ) -> tuple[list[SelectedEffect], list[SelectionRound]]:
+def forward_selection(
+    state: DiagnosisState,
+    first: CandidateScore,
+    first_decision: Decision,
+    *,
+    first_gap_interval: Sequence[float] = (math.nan, math.nan),
+) -> tuple[list[SelectedEffect], list[SelectionRound]]:
     """Add effects one at a time after the first while a significant held-out gap remains.
 
     The first effect's fit (``first``, named by :func:`~.verdict.decide`) is
@@ -134,8 +158,10 @@ def forward_selection(state: DiagnosisState, first: CandidateScore, first_decisi
     entries, decisions = [first], [first_decision]
     intervals: list[tuple[float, float]] = [(float(first_gap_interval[0]), float(first_gap_interval[1]))]
     rounds: list[SelectionRound] = []
-    while len(entries) < settings.max_effects and (entries[-1].gap_with_effect > settings.noise_gap
-                                                   or (state.pitch_allowance and entries[-1].gap_with_effect > 0.0)):
+    while len(entries) < settings.max_effects and (
+        entries[-1].gap_with_effect > settings.noise_gap
+        or (state.pitch_allowance and entries[-1].gap_with_effect > 0.0)
+    ):
         selection = next_effect(state, entries[-1], [entry.effect for entry in entries])
         rounds.append(selection)
         if selection.added is None or selection.decision is None:
@@ -146,13 +172,16 @@ def forward_selection(state: DiagnosisState, first: CandidateScore, first_decisi
         intervals.append(selection.gap_interval)
     shares = shrink_shares(state.nominal_gap, first.shrink_fraction, [entry.gap_with_effect for entry in entries])
     befores = [state.nominal_gap] + [entry.gap_with_effect for entry in entries[:-1]]
-    selected = [SelectedEffect(entry, before, share, decision, interval)
-                for entry, before, share, decision, interval in zip(entries, befores, shares, decisions, intervals)]
+    selected = [
+        SelectedEffect(entry, before, share, decision, interval)
+        for entry, before, share, decision, interval in zip(entries, befores, shares, decisions, intervals)
+    ]
     return selected, rounds
 
 
-def phase_named_run_out(state: DiagnosisState, selected: list[SelectedEffect], decision: Decision
-                        ) -> tuple[list[ModulationEvidence], tuple[list[SelectedEffect], Decision] | None]:
+def phase_named_run_out(
+    state: DiagnosisState, selected: list[SelectedEffect], decision: Decision
+) -> tuple[list[ModulationEvidence], tuple[list[SelectedEffect], Decision] | None]:
     """Test the shafts' sideband phase sums for an eccentricity the amplitudes cannot tell from pitch errors.
 
     Each shaft :func:`~.allowances.sideband_phase.shafts_tested` admits is
@@ -173,9 +202,15 @@ def phase_named_run_out(state: DiagnosisState, selected: list[SelectedEffect], d
         if shaft not in reads:
             continue
         with state.steps.step(f"test the {shaft}'s sideband phases for an eccentric shaft") as finding:
-            evidence = modulation_evidence(case, base_fit, shaft, reads[shaft][0], kappas=settings.modulation_kappas,
-                                           threshold=settings.phase_evidence_threshold,
-                                           draws_per_point=settings.phase_draws_per_point)
+            evidence = modulation_evidence(
+                case,
+                base_fit,
+                shaft,
+                reads[shaft][0],
+                kappas=settings.modulation_kappas,
+                threshold=settings.phase_evidence_threshold,
+                draws_per_point=settings.phase_draws_per_point,
+            )
             finding.update(evidence.summary())
         found_evidence.append(evidence)
     decisive = [evidence for evidence in found_evidence if evidence.decisive]
@@ -186,16 +221,19 @@ def phase_named_run_out(state: DiagnosisState, selected: list[SelectedEffect], d
         entry = fit_modulated_run_out(case, base_fit, base_held, evidence, state.rng, settings=settings)
         finding.update(found(entry))
     share = (base_gap - entry.gap_with_effect) / state.nominal_gap if state.nominal_gap > 0 else 0.0
-    run_out = entry.parameters()["amplitude"]
+    run_out = float(entry.parameters()["amplitude"])  # type: ignore[arg-type]
     low, high = entry.parameter_intervals().get("amplitude", (math.nan, math.nan))
     # the amplitudes cannot tell the run-out from the gear's own first-order errors: its interval says how much
-    reason = (f"{evidence.reason()}; fitted on top, its run-out is left open by the line amplitudes, which "
-              f"cannot tell it from the {evidence.shaft}'s own first-order errors ({1e6 * run_out:.3g} um, 90 % "
-              f"interval {1e6 * low:.3g} to {1e6 * high:.3g} um), and it changes the held-out gap from "
-              f"{base_gap:.2f} to {entry.gap_with_effect:.2f}")
+    reason = (
+        f"{evidence.reason()}; fitted on top, its run-out is left open by the line amplitudes, which "
+        f"cannot tell it from the {evidence.shaft}'s own first-order errors ({1e6 * run_out:.3g} um, 90 % "
+        f"interval {1e6 * low:.3g} to {1e6 * high:.3g} um), and it changes the held-out gap from "
+        f"{base_gap:.2f} to {entry.gap_with_effect:.2f}"
+    )
     added, whole = phase_named_decision(decision, reason, entry.gap_with_effect, set_named=bool(selected))
-    chosen = SelectedEffect(entry, base_gap, share, added,
-                            bootstrap_gap(entry.held.z, state.rng, settings.bootstrap_resamples))
+    chosen = SelectedEffect(
+        entry, base_gap, share, added, bootstrap_gap(entry.held.z, state.rng, settings.bootstrap_resamples)
+    )
     return found_evidence, ([*selected, chosen], whole)
 
 
@@ -223,21 +261,26 @@ def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
     trial, trial_rounds = forward_selection(state, lead, provisional, first_gap_interval=first.leader_gap_interval)
     state.timings["forward_selection"] = time.perf_counter() - clock
     with state.steps.step("decide whether a set of effects explains the gap") as finding:
-        joint = set_decision(provisional, trial, trial_rounds, state.nominal_gap, settings=state.settings) \
-            if len(trial) > 1 else None
+        joint = (
+            set_decision(provisional, trial, trial_rounds, state.nominal_gap, settings=state.settings)
+            if len(trial) > 1
+            else None
+        )
         if joint is not None and not joint.partial:
             named = NamedSet(trial, trial_rounds, joint)
         else:
             named = NamedSet(decision=unled_decision(first.decision, lead, trial))
-        finding.update(effects=[chosen.entry.effect for chosen in named.selected], verdict=named.decision.verdict)
+        verdict = named.decision.verdict if named.decision is not None else first.decision.verdict
+        finding.update(effects=[chosen.entry.effect for chosen in named.selected], verdict=verdict)
     return named
 
 
 def _grown_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
     """The first effect named: further effects while a significant gap remains (forward selection)."""
     clock = time.perf_counter()
-    selected, rounds = forward_selection(state, first.scores[0], first.decision,
-                                         first_gap_interval=first.leader_gap_interval)
+    selected, rounds = forward_selection(
+        state, first.scores[0], first.decision, first_gap_interval=first.leader_gap_interval
+    )
     if rounds:
         state.timings["forward_selection"] = time.perf_counter() - clock
     with state.steps.step("decide the effect set") as finding:
@@ -257,8 +300,11 @@ def name_effect_set(state: DiagnosisState, first: FirstDecision, *, allowance_ap
     (:func:`phase_named_run_out`).
     """
     settings, decision = state.settings, first.decision
-    if decision.verdict == "unexplained" and first.scores and leads_a_set(
-            first.ranking[0], pitch_allowance=state.pitch_allowance, settings=settings):
+    if (
+        decision.verdict == "unexplained"
+        and first.scores
+        and leads_a_set(first.ranking[0], pitch_allowance=state.pitch_allowance, settings=settings)
+    ):
         named = _led_set(state, first)
     elif decision.verdict in state.effects:
         named = _grown_set(state, first)
@@ -266,8 +312,13 @@ def name_effect_set(state: DiagnosisState, first: FirstDecision, *, allowance_ap
         named = NamedSet(decision=decision)
     assert named.decision is not None
     in_set = [chosen.entry.effect for chosen in named.selected]
-    if allowance_applied and "eccentricity" in state.effects and named.decision.verdict != "unexplained" \
-            and len(named.selected) < settings.max_effects and "eccentricity" not in in_set:
+    if (
+        allowance_applied
+        and "eccentricity" in state.effects
+        and named.decision.verdict != "unexplained"
+        and len(named.selected) < settings.max_effects
+        and "eccentricity" not in in_set
+    ):
         clock = time.perf_counter()
         named.modulation, added = phase_named_run_out(state, named.selected, named.decision)
         if added is not None:

@@ -13,8 +13,9 @@ from .effects import signature_hints as family_hints
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 
-def frequency_locked_lines(case: RigCase, *, channel: str = "te", settings: DiagnosisSettings = DEFAULT_SETTINGS
-                           ) -> list[dict[str, Any]]:
+def frequency_locked_lines(
+    case: RigCase, *, channel: str = "te", settings: DiagnosisSettings = DEFAULT_SETTINGS
+) -> list[dict[str, Any]]:
     """Spectral lines of a channel that keep their frequency, not their order, across runs.
 
     :func:`~.allowances.interference.fixed_frequency_lines` on the case's
@@ -25,9 +26,16 @@ def frequency_locked_lines(case: RigCase, *, channel: str = "te", settings: Diag
     if channel not in case.channels:
         return []
     index = case.channels.index(channel)
-    return fixed_frequency_lines(np.asarray(case.rig[channel].values, dtype=float), case.noise_std[:, index],
-                                 case.speeds, case.fs, case.processors[0].limit, usable=case.usable[:, index],
-                                 threshold=settings.interference_threshold, minimum_runs=settings.interference_runs)
+    return fixed_frequency_lines(
+        np.asarray(case.rig[channel].values, dtype=float),
+        case.noise_std[:, index],
+        case.speeds,
+        case.fs,
+        case.processors[0].limit,
+        usable=case.usable[:, index],
+        threshold=settings.interference_threshold,
+        minimum_runs=settings.interference_runs,
+    )
 
 
 def signature_hints(case: RigCase, locked_lines: Sequence[Mapping[str, Any]]) -> dict[str, float]:

@@ -62,7 +62,7 @@ class DiagnosisState:
         """Whether the pitch-error allowance is in the model error."""
         return self.case.pitch_allowance is not None
 
-    def with_nominal(self, nominal: FitResult, held: HeldOut, gap: float) -> "DiagnosisState":
+    def with_nominal(self, nominal: FitResult, held: HeldOut, gap: float) -> DiagnosisState:
         """This state with another nominal fit and its held-out predictions."""
         return replace(self, nominal=nominal, nominal_held=held, nominal_gap=gap)
 

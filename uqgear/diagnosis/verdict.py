@@ -1,10 +1,9 @@
-"""The verdict: every decision of a diagnosis, as rules on the candidates' held-out scores.
+"""The verdict: the decision rules on the candidates' held-out scores, and the first effect's decision (step 5).
 
-All :class:`Decision` objects are made here: the first effect's
-(:func:`decide`), the named set's (:func:`set_decision`), a set that an
-unexplained gap's strongest candidate leads (:func:`lead_decision`,
-:func:`unled_decision`) and an eccentric shaft the sideband phases name
-(:func:`phase_named_decision`). The thresholds come from
+Every :class:`Decision` is made here or, for a set of effects, in
+:mod:`.set_verdict`: the first effect's (:func:`decide`, :func:`decide_first`),
+the named set's, a set that an unexplained gap's strongest candidate leads
+and an eccentric shaft the sideband phases name. The thresholds come from
 :class:`~uqgear.diagnosis.DiagnosisSettings` (docs/model.md section 6, step
 5, and sections 6.2 and 6.4).
 """
@@ -16,12 +15,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from .decision import Decision
-from .effect_set import SelectedEffect, SelectionRound
 from .case import RigCase
+from .decision import Decision
 from .effects import effect_names
 from .gap_maps import family_character, where_gap
-from .scoring import CandidateScore, RunOutCheck, bootstrap_gap, shrink_fraction
+from .scoring import CandidateScore, RunOutCheck, bootstrap_gap
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 from .state import DiagnosisState
 
@@ -34,8 +32,9 @@ EFFECT_NAMES: tuple[str, ...] = effect_names()
 VERDICTS: tuple[str, ...] = EFFECT_NAMES + ("none", "unexplained", "inconclusive")
 
 
-def run_out_check(score: CandidateScore, bounds: dict[str, float], *,
-                  settings: DiagnosisSettings = DEFAULT_SETTINGS) -> RunOutCheck | None:
+def run_out_check(
+    score: CandidateScore, bounds: dict[str, float], *, settings: DiagnosisSettings = DEFAULT_SETTINGS
+) -> RunOutCheck | None:
     """An eccentricity's run-out against the pitch-error classes' first-order run-out on its shaft, or None.
 
     ``bounds`` are the case's :attr:`~uqgear.diagnosis.case.RigCase.run_out_allowance`
@@ -53,8 +52,9 @@ def run_out_check(score: CandidateScore, bounds: dict[str, float], *,
     return RunOutCheck(float(values.get("amplitude", math.nan)), bound, modulated)  # type: ignore[arg-type]
 
 
-def ranked(best_per_effect: Mapping[str, CandidateScore], case: RigCase, *,
-           settings: DiagnosisSettings = DEFAULT_SETTINGS) -> list[CandidateScore]:
+def ranked(
+    best_per_effect: Mapping[str, CandidateScore], case: RigCase, *, settings: DiagnosisSettings = DEFAULT_SETTINGS
+) -> list[CandidateScore]:
     """The best variant of each effect, best first, each with its run-out check (new objects)."""
     scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
     return [replace(s, run_out=run_out_check(s, case.run_out_allowance, settings=settings)) for s in scores]
@@ -79,11 +79,13 @@ def holds_against_pitch_errors(score: CandidateScore, *, settings: DiagnosisSett
     """
     beyond = score.run_out is not None and score.run_out.beyond
     return score_lower_bound(score, settings=settings) >= settings.score_threshold or bool(
-        beyond and score.score >= settings.score_threshold)
+        beyond and score.score >= settings.score_threshold
+    )
 
 
-def leads_a_set(best: CandidateScore, *, pitch_allowance: bool = False,
-                settings: DiagnosisSettings = DEFAULT_SETTINGS) -> bool:
+def leads_a_set(
+    best: CandidateScore, *, pitch_allowance: bool = False, settings: DiagnosisSettings = DEFAULT_SETTINGS
+) -> bool:
     """Whether an unexplained gap's best candidate is strong enough to start a forward selection.
 
     The evidence rules of :func:`decide` without the one on how much of
@@ -94,9 +96,13 @@ def leads_a_set(best: CandidateScore, *, pitch_allowance: bool = False,
     that does not halve the gap there: a set led by a weak first effect
     would name it anyway.
     """
-    return (best.score >= settings.score_threshold and float(best.effect_gain) >= settings.effect_gain_threshold
-            and best.shrink_interval[0] > 0.0 and not _within(best)
-            and (not pitch_allowance or holds_against_pitch_errors(best, settings=settings)))
+    return (
+        best.score >= settings.score_threshold
+        and float(best.effect_gain) >= settings.effect_gain_threshold
+        and best.shrink_interval[0] > 0.0
+        and not _within(best)
+        and (not pitch_allowance or holds_against_pitch_errors(best, settings=settings))
+    )
 
 
 def _straddles(interval: Sequence[float] | None, threshold: float) -> bool:
@@ -105,28 +111,54 @@ def _straddles(interval: Sequence[float] | None, threshold: float) -> bool:
     return float(interval[0]) < threshold <= float(interval[1])
 
 
-def _borderline_figures(nominal_gap: float, nominal_gap_interval: Sequence[float] | None,
-                        best: CandidateScore | None, settings: DiagnosisSettings) -> tuple[dict[str, Any], ...]:
+def _borderline_figures(
+    nominal_gap: float,
+    nominal_gap_interval: Sequence[float] | None,
+    best: CandidateScore | None,
+    settings: DiagnosisSettings,
+) -> tuple[dict[str, Any], ...]:
     noise_gap = settings.noise_gap
     figures = []
     if nominal_gap_interval is not None and _straddles(nominal_gap_interval, noise_gap):
-        figures.append({"figure": "nominal_gap", "value": nominal_gap, "threshold": noise_gap,
-                        "interval": [float(v) for v in nominal_gap_interval]})
+        figures.append(
+            {
+                "figure": "nominal_gap",
+                "value": nominal_gap,
+                "threshold": noise_gap,
+                "interval": [float(v) for v in nominal_gap_interval],
+            }
+        )
     if best is not None:
         error = float(best.standard_error)
         if math.isfinite(error):
-            score_interval = [score_lower_bound(best, settings=settings),
-                              best.score + settings.score_quantile * error]
+            score_interval = [score_lower_bound(best, settings=settings), best.score + settings.score_quantile * error]
             if _straddles(score_interval, settings.score_threshold):
-                figures.append({"figure": "score", "value": float(best.score),
-                                "threshold": settings.score_threshold, "interval": score_interval})
+                figures.append(
+                    {
+                        "figure": "score",
+                        "value": float(best.score),
+                        "threshold": settings.score_threshold,
+                        "interval": score_interval,
+                    }
+                )
         if _straddles(best.shrink_interval, settings.shrink_threshold):
-            figures.append({"figure": "shrink_fraction", "value": float(best.shrink_fraction),
-                            "threshold": settings.shrink_threshold,
-                            "interval": [float(v) for v in best.shrink_interval]})
+            figures.append(
+                {
+                    "figure": "shrink_fraction",
+                    "value": float(best.shrink_fraction),
+                    "threshold": settings.shrink_threshold,
+                    "interval": [float(v) for v in best.shrink_interval],
+                }
+            )
         if best.gap_interval is not None and _straddles(best.gap_interval, noise_gap):
-            figures.append({"figure": "gap_with_effect", "value": float(best.gap_with_effect),
-                            "threshold": noise_gap, "interval": [float(v) for v in best.gap_interval]})
+            figures.append(
+                {
+                    "figure": "gap_with_effect",
+                    "value": float(best.gap_with_effect),
+                    "threshold": noise_gap,
+                    "interval": [float(v) for v in best.gap_interval],
+                }
+            )
     return tuple(figures)
 
 
@@ -134,9 +166,15 @@ def _percent(interval: Sequence[float]) -> str:
     return f"{100 * interval[0]:.0f} to {100 * interval[1]:.0f} %"
 
 
-def decide(nominal_gap: float, ranking: Sequence[CandidateScore], *,
-           nominal_gap_interval: Sequence[float] | None = None, settings: DiagnosisSettings = DEFAULT_SETTINGS,
-           pitch_allowance: bool = False, density_evidence: bool = False) -> Decision:
+def decide(
+    nominal_gap: float,
+    ranking: Sequence[CandidateScore],
+    *,
+    nominal_gap_interval: Sequence[float] | None = None,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+    pitch_allowance: bool = False,
+    density_evidence: bool = False,
+) -> Decision:
     """The verdict from the held-out gap of the base model and the ranked candidates on top of it.
 
     A candidate is named when its score reaches ``score_threshold``, its fit
@@ -181,8 +219,10 @@ def decide(nominal_gap: float, ranking: Sequence[CandidateScore], *,
     Decision
     """
     if density_evidence and not pitch_allowance:
-        raise ValueError("decide: density_evidence stands in for a gap only under the pitch-error allowance; "
-                         "expected pitch_allowance=True with it")
+        raise ValueError(
+            "decide: density_evidence stands in for a gap only under the pitch-error allowance; "
+            "expected pitch_allowance=True with it"
+        )
     best = ranking[0] if ranking else None
     borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, settings)
     weak_near_noise = False
@@ -193,14 +233,23 @@ def decide(nominal_gap: float, ranking: Sequence[CandidateScore], *,
     if not math.isfinite(nominal_gap):
         # no feature could be compared on a held-out run: the data cannot tell "within noise"
         # from "not measured", and no data must never read as a healthy gear
-        return Decision("inconclusive", "the held-out gap could not be measured: no feature of any run could be "
-                                        "compared with the model on held-out runs", borderline=borderline)
+        return Decision(
+            "inconclusive",
+            "the held-out gap could not be measured: no feature of any run could be "
+            "compared with the model on held-out runs",
+            borderline=borderline,
+        )
     return _unnamed(best, nominal_gap, borderline, settings, weak_near_noise)
 
 
-def _named(best: CandidateScore, nominal_gap: float, borderline: tuple[dict[str, Any], ...],
-           settings: DiagnosisSettings, pitch_allowance: bool, density_evidence: bool
-           ) -> tuple[Decision | None, bool]:
+def _named(
+    best: CandidateScore,
+    nominal_gap: float,
+    borderline: tuple[dict[str, Any], ...],
+    settings: DiagnosisSettings,
+    pitch_allowance: bool,
+    density_evidence: bool,
+) -> tuple[Decision | None, bool]:
     """The decision naming ``best`` where the rules of :func:`decide` name it, and whether it was weak near noise."""
     remaining = float(best.gap_with_effect)
     explains = best.shrink_fraction >= settings.shrink_threshold or remaining <= settings.noise_gap
@@ -213,63 +262,102 @@ def _named(best: CandidateScore, nominal_gap: float, borderline: tuple[dict[str,
         carried = carried and float(best.effect_gain) >= settings.score_threshold
     evidence = best.score >= settings.score_threshold and carried
     holds = holds_against_pitch_errors(best, settings=settings)
-    by_density = (density_evidence and below_gap and remaining <= settings.noise_gap
-                  and best.shrink_interval[0] <= 0.0 and holds)
+    by_density = (
+        density_evidence and below_gap and remaining <= settings.noise_gap and best.shrink_interval[0] <= 0.0 and holds
+    )
     if evidence and by_density:
-        return Decision(best.effect, (
-            f"{best.effect} gains {best.score:.1f} nats of held-out predictive density (90 % lower "
-            f"bound {score_low:.1f}) over the model without it after its parameter penalty; the held-out "
-            f"gap ({nominal_gap:.2f}) is within noise because the pitch-error allowance widens the error "
-            f"of every sideband, so the evidence is spread over many features: the density shows it, "
-            f"the gap cannot"), remaining_gap=remaining, borderline=borderline), False
+        return Decision(
+            best.effect,
+            (
+                f"{best.effect} gains {best.score:.1f} nats of held-out predictive density (90 % lower "
+                f"bound {score_low:.1f}) over the model without it after its parameter penalty; the held-out "
+                f"gap ({nominal_gap:.2f}) is within noise because the pitch-error allowance widens the error "
+                f"of every sideband, so the evidence is spread over many features: the density shows it, "
+                f"the gap cannot"
+            ),
+            remaining_gap=remaining,
+            borderline=borderline,
+        ), False
     # with the allowance a gap near noise speaks weakly: an effect named because what remains is within
     # noise (not for a shrink of half) must hold its density at the 90 % lower bound, as on the density
     # route just below the gap
     by_shrink = evidence and explains and best.shrink_interval[0] > 0.0
-    weak_near_noise = (by_shrink and density_evidence and best.shrink_fraction < settings.shrink_threshold
-                       and not holds)
+    weak_near_noise = by_shrink and density_evidence and best.shrink_fraction < settings.shrink_threshold and not holds
     if by_shrink and not weak_near_noise:
-        within = (f"; what remains ({remaining:.2f}) is within noise"
-                  if best.shrink_fraction < settings.shrink_threshold else "")
-        return Decision(best.effect, (
-            f"{best.effect} gains {best.score:.1f} nats of held-out predictive density over the "
-            f"nominal model after its parameter penalty and shrinks the held-out gap by "
-            f"{100 * best.shrink_fraction:.0f} % (90 % interval {_percent(best.shrink_interval)}){within}"),
-            remaining_gap=remaining, borderline=borderline), False
+        within = (
+            f"; what remains ({remaining:.2f}) is within noise"
+            if best.shrink_fraction < settings.shrink_threshold
+            else ""
+        )
+        return Decision(
+            best.effect,
+            (
+                f"{best.effect} gains {best.score:.1f} nats of held-out predictive density over the "
+                f"nominal model after its parameter penalty and shrinks the held-out gap by "
+                f"{100 * best.shrink_fraction:.0f} % (90 % interval {_percent(best.shrink_interval)}){within}"
+            ),
+            remaining_gap=remaining,
+            borderline=borderline,
+        ), False
     if evidence and not explains and best.shrink_interval[0] >= settings.partial_shrink:
-        return Decision(best.effect, (
-            f"{best.effect} gains {best.score:.1f} nats of held-out predictive density and shrinks "
-            f"the held-out gap by {100 * best.shrink_fraction:.0f} % (90 % interval "
-            f"{_percent(best.shrink_interval)}), but a gap of {remaining:.2f} (above {settings.noise_gap:g}) "
-            f"remains unexplained"), partial=True, remaining_gap=remaining, borderline=borderline), False
+        return Decision(
+            best.effect,
+            (
+                f"{best.effect} gains {best.score:.1f} nats of held-out predictive density and shrinks "
+                f"the held-out gap by {100 * best.shrink_fraction:.0f} % (90 % interval "
+                f"{_percent(best.shrink_interval)}), but a gap of {remaining:.2f} (above {settings.noise_gap:g}) "
+                f"remains unexplained"
+            ),
+            partial=True,
+            remaining_gap=remaining,
+            borderline=borderline,
+        ), False
     return None, weak_near_noise
 
 
-def _unnamed(best: CandidateScore | None, nominal_gap: float, borderline: tuple[dict[str, Any], ...],
-             settings: DiagnosisSettings, weak_near_noise: bool) -> Decision:
+def _unnamed(
+    best: CandidateScore | None,
+    nominal_gap: float,
+    borderline: tuple[dict[str, Any], ...],
+    settings: DiagnosisSettings,
+    weak_near_noise: bool,
+) -> Decision:
     """``none`` or ``unexplained`` with the reason no candidate was named."""
     run_out = best.run_out if best is not None and _within(best) else None
-    beyond = (f"; {best.effect} fits a run-out of {1e6 * run_out.run_out:.1f} um, within what the gears' "
-              f"stated pitch-error classes make as a first-order run-out (95 %: {1e6 * run_out.bound:.1f} um)"
-              if best is not None and run_out is not None else "")
+    beyond = (
+        f"; {best.effect} fits a run-out of {1e6 * run_out.run_out:.1f} um, within what the gears' "
+        f"stated pitch-error classes make as a first-order run-out (95 %: {1e6 * run_out.bound:.1f} um)"
+        if best is not None and run_out is not None
+        else ""
+    )
     held = ""
     if weak_near_noise and best is not None:
-        held = (f"; with the pitch-error allowance an effect that leaves a gap within noise without halving it "
-                f"must hold {settings.score_threshold:g} nats at its score's 90 % lower bound, and {best.effect}'s "
-                f"is {score_lower_bound(best, settings=settings):.1f}: pitch errors of the stated classes can give "
-                f"as much")
+        held = (
+            f"; with the pitch-error allowance an effect that leaves a gap within noise without halving it "
+            f"must hold {settings.score_threshold:g} nats at its score's 90 % lower bound, and {best.effect}'s "
+            f"is {score_lower_bound(best, settings=settings):.1f}: pitch errors of the stated classes can give "
+            f"as much"
+        )
     if nominal_gap <= settings.noise_gap:
-        return Decision("none", f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-                                f"(threshold {settings.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
-                        borderline=borderline)
+        return Decision(
+            "none",
+            f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
+            f"(threshold {settings.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
+            borderline=borderline,
+        )
     detail = ""
     if best is not None:
-        detail = (f"; the best candidate, {best.effect}, scores {best.score:.1f} nats and shrinks it by "
-                  f"{100 * best.shrink_fraction:.0f} % (needed: {settings.score_threshold:g} nats, and a shrink of "
-                  f"{100 * settings.shrink_threshold:.0f} % or a remaining gap within noise)")
+        detail = (
+            f"; the best candidate, {best.effect}, scores {best.score:.1f} nats and shrinks it by "
+            f"{100 * best.shrink_fraction:.0f} % (needed: {settings.score_threshold:g} nats, and a shrink of "
+            f"{100 * settings.shrink_threshold:.0f} % or a remaining gap within noise)"
+        )
         detail += held + beyond
-    return Decision("unexplained", f"the nominal model's held-out gap is {nominal_gap:.2f} "
-                                   f"(above {settings.noise_gap:g}){detail}", borderline=borderline)
+    return Decision(
+        "unexplained",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.noise_gap:g}){detail}",
+        borderline=borderline,
+    )
 
 
 def decide_verdict(nominal_gap: float, ranking: Sequence[CandidateScore], **options: Any) -> tuple[str, str]:
@@ -310,8 +398,9 @@ class FirstDecision:
         return interval if interval is not None else (math.nan, math.nan)
 
 
-def decide_first(state: DiagnosisState, best: Mapping[str, CandidateScore],
-                 locked_lines: Sequence[Mapping[str, Any]]) -> FirstDecision:
+def decide_first(
+    state: DiagnosisState, best: Mapping[str, CandidateScore], locked_lines: Sequence[Mapping[str, Any]]
+) -> FirstDecision:
     """The verdict on the candidates' held-out scores against the nominal model (step 5), and where the gap lies."""
     settings = state.settings
     with state.steps.step("decide the verdict") as found:
@@ -320,88 +409,36 @@ def decide_first(state: DiagnosisState, best: Mapping[str, CandidateScore],
         # drawn after the shrink bootstraps, so their numbers do not depend on this
         nominal_interval = bootstrap_gap(state.nominal_held.z, state.rng, settings.bootstrap_resamples)
         if scores:
-            ranking[0] = replace(ranking[0], gap_interval=bootstrap_gap(scores[0].held.z, state.rng,
-                                                                        settings.bootstrap_resamples))
-        decision = decide(state.nominal_gap, ranking, nominal_gap_interval=nominal_interval, settings=settings,
-                          pitch_allowance=state.pitch_allowance, density_evidence=state.pitch_allowance)
+            ranking[0] = replace(
+                ranking[0], gap_interval=bootstrap_gap(scores[0].held.z, state.rng, settings.bootstrap_resamples)
+            )
+        decision = decide(
+            state.nominal_gap,
+            ranking,
+            nominal_gap_interval=nominal_interval,
+            settings=settings,
+            pitch_allowance=state.pitch_allowance,
+            density_evidence=state.pitch_allowance,
+        )
         where = where_gap(state.nominal_held.z, state.case, where_z=settings.where_z)
-        families = family_character(state.nominal_held.z, state.case, locked_lines, noise_gap=settings.noise_gap,
-                                    where_z=settings.where_z)
+        families = family_character(
+            state.nominal_held.z, state.case, locked_lines, noise_gap=settings.noise_gap, where_z=settings.where_z
+        )
         found.update(verdict=decision.verdict, reason=decision.reason)
     return FirstDecision(decision, scores, ranking, nominal_interval, where, families)
 
 
-def set_decision(first_decision: Decision, selected: Sequence[SelectedEffect], rounds: Sequence[SelectionRound],
-                 nominal_gap: float, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> Decision:
-    """The decision for the named set: the first effect's verdict, ``partial`` and remaining gap of the whole set.
-
-    With one effect named and no round run this is ``first_decision``
-    itself. ``partial`` follows the rule of :func:`decide` applied to the
-    set against the nominal model: an effect set is named with an
-    unexplained remainder when it neither shrinks the nominal gap by
-    ``shrink_threshold`` nor leaves a gap within ``noise_gap``.
-    """
-    if not selected or not rounds:
-        return first_decision
-    final_gap = selected[-1].entry.gap_with_effect
-    reason = first_decision.reason
-    borderline = list(first_decision.borderline)
-    for chosen in selected[1:]:
-        names = " + ".join(entry.entry.effect for entry in selected[:selected.index(chosen)])
-        entry = chosen.entry
-        reason += (f"; on top of {names}, forward selection adds {entry.effect}: it gains {entry.score:.1f} nats "
-                   f"of held-out predictive density after its penalty and shrinks the remaining held-out gap "
-                   f"from {chosen.gap_before:.2f} to {entry.gap_with_effect:.2f} (90 % interval of the shrink "
-                   f"{_percent(entry.shrink_interval)}), {100 * chosen.shrink_share:.0f} % of the nominal gap")
-        borderline += [{**figure, "effect": entry.effect} for figure in chosen.decision.borderline]
-    last = rounds[-1]
-    if last.added is None and last.scores:
-        best = last.scores[0]
-        reason += (f"; no further effect clearly explains the remaining gap of {last.gap_before:.2f} (the best, "
-                   f"{best.effect}, scores {best.score:.1f} nats on top and shrinks it by "
-                   f"{100 * best.shrink_fraction:.0f} %)")
-    explains = (shrink_fraction(nominal_gap, final_gap) >= settings.shrink_threshold
-                or final_gap <= settings.noise_gap)
-    if not explains:
-        reason += f"; a gap of {final_gap:.2f} (above {settings.noise_gap:g}) remains unexplained"
-    return Decision(first_decision.verdict, reason, partial=not explains, remaining_gap=final_gap,
-                    borderline=tuple(borderline))
-
-
-def lead_decision(first: CandidateScore) -> Decision:
-    """The provisional decision of an unexplained gap's strongest candidate that leads a forward selection.
-
-    It names its effect ``partial``: alone it does not explain enough of the
-    gap; :func:`set_decision` then judges the set it leads.
-    """
-    return Decision(first.effect, (
-        f"{first.effect} gains {first.score:.1f} nats of held-out predictive density over the nominal model "
-        f"after its parameter penalty but alone shrinks the held-out gap by only {100 * first.shrink_fraction:.0f} % "
-        f"(90 % interval {_percent(first.shrink_interval)})"), partial=True, remaining_gap=first.gap_with_effect)
-
-
-def unled_decision(decision: Decision, first: CandidateScore, trial: Sequence[SelectedEffect]) -> Decision:
-    """The unexplained decision kept when the set its strongest candidate led does not explain the gap."""
-    return Decision(decision.verdict, decision.reason + (
-        f"; forward selection from {first.effect} found no set that explains it together (held-out "
-        f"gap {trial[-1].entry.gap_with_effect:.2f} with {' + '.join(entry.entry.effect for entry in trial)})"),
-        borderline=decision.borderline)
-
-
-def phase_named_decision(decision: Decision, reason: str, remaining_gap: float, *, set_named: bool
-                         ) -> tuple[Decision, Decision]:
-    """The decision that adds an eccentric shaft the sideband phases name, and the set's decision with it.
-
-    Returns the eccentricity's own decision and the whole set's: the set's
-    decision with the reason appended when a set was named before, else the
-    eccentricity's own.
-    """
-    added = Decision("eccentricity", reason, remaining_gap=remaining_gap)
-    whole = replace(decision, reason=f"{decision.reason}; {reason}", remaining_gap=remaining_gap) if set_named \
-        else added
-    return added, whole
-
-
-__all__ = ["EFFECT_NAMES", "VERDICTS", "Decision", "FirstDecision", "decide_first", "ranked", "run_out_check", "score_lower_bound", "holds_against_pitch_errors",
-           "leads_a_set", "decide", "decide_verdict", "set_decision", "lead_decision", "unled_decision",
-           "phase_named_decision"]
+__all__ = [
+    "EFFECT_NAMES",
+    "VERDICTS",
+    "Decision",
+    "FirstDecision",
+    "decide_first",
+    "ranked",
+    "run_out_check",
+    "score_lower_bound",
+    "holds_against_pitch_errors",
+    "leads_a_set",
+    "decide",
+    "decide_verdict",
+]

@@ -44,12 +44,20 @@ def write_diagnosis(diagnosis: Diagnosis, out_dir: str | os.PathLike[str], *, re
             write_diagnosis_report(diagnosis.to_dict(), diagnosis.result_, out / "report.html")
 
 
-def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLike[str], *,
-             design: Design | str | os.PathLike[str] | None = None, effects: Sequence[str] | None = None,
-             seed: int | np.random.SeedSequence = 0, workers: int | None = None,
-             calibration: str | os.PathLike[str] | xr.Dataset | None = None, report: bool = True,
-             reference: ReferenceInput | None = None, pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
-             settings: DiagnosisSettings | None = None) -> dict[str, Any]:
+def diagnose(
+    rig: str | os.PathLike[str] | xr.Dataset,
+    out_dir: str | os.PathLike[str],
+    *,
+    design: Design | str | os.PathLike[str] | None = None,
+    effects: Sequence[str] | None = None,
+    seed: int | np.random.SeedSequence = 0,
+    workers: int | None = None,
+    calibration: str | os.PathLike[str] | xr.Dataset | None = None,
+    report: bool = True,
+    reference: ReferenceInput | None = None,
+    pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+    settings: DiagnosisSettings | None = None,
+) -> dict[str, Any]:
     """Diagnose the sim-to-real gap of a rig campaign and write the results.
 
     The options are those of :class:`~uqgear.diagnosis.Diagnosis` (its
@@ -100,18 +108,29 @@ def diagnose(rig: str | os.PathLike[str] | xr.Dataset, out_dir: str | os.PathLik
     'none'
     """
     # the cheap checks first: a bad option fails before minutes of fitting and before any folder is made
-    diagnosis = Diagnosis(effects=effects, settings=settings, seed=seed, workers=workers, design=design,
-                          calibration=calibration, pitch_classes=pitch_classes)
+    diagnosis = Diagnosis(
+        effects=effects,
+        settings=settings,
+        seed=seed,
+        workers=workers,
+        design=design,
+        calibration=calibration,
+        pitch_classes=pitch_classes,
+    )
     with OutputFolder(out_dir) as work:
         try:
             diagnosis.fit(rig, reference=reference)
             write_diagnosis(diagnosis, work, report=report)
         except InternalError as exc:
-            inputs = {"rig": rig if isinstance(rig, (str, os.PathLike)) else "rig Dataset", "seed": str(seed),
-                      "effects": list(effects) if effects is not None else None,
-                      "design": design if isinstance(design, (str, os.PathLike)) else None,
-                      "reference": str(reference) if isinstance(reference, (str, os.PathLike)) else
-                      (None if reference is None else "reference campaign")}
+            inputs = {
+                "rig": rig if isinstance(rig, (str, os.PathLike)) else "rig Dataset",
+                "seed": str(seed),
+                "effects": list(effects) if effects is not None else None,
+                "design": design if isinstance(design, (str, os.PathLike)) else None,
+                "reference": str(reference)
+                if isinstance(reference, (str, os.PathLike))
+                else (None if reference is None else "reference campaign"),
+            }
             write_failure_record(work, exc, command="diagnosis", inputs=json_clean(inputs))
             raise
     return diagnosis.to_dict()

@@ -13,14 +13,38 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
 
 from __future__ import annotations
 
-from .campaigns import (HEALTHY, PLANS, STRENGTHS, SUITES, CampaignSpec, operating_points_of, plan_campaigns,
-                        plan_real_world, rig_campaign, second_design)
+from .blind_test import blindtest, diagnose_campaign
+from .campaigns import (
+    HEALTHY,
+    PLANS,
+    STRENGTHS,
+    SUITES,
+    CampaignSpec,
+    operating_points_of,
+    plan_campaigns,
+    plan_real_world,
+    rig_campaign,
+    second_design,
+)
 from .oracle import effect_visibility, oracle_gap
 from .scores import blindtest_dataset, set_scores, summarise
-from .blind_test import blindtest, diagnose_campaign
 
 __all__ = [
-    'blindtest', 'diagnose_campaign', 'plan_campaigns', 'plan_real_world', 'rig_campaign', 'summarise', 'set_scores',
-    'blindtest_dataset', 'oracle_gap', 'effect_visibility', 'second_design', 'operating_points_of', 'CampaignSpec',
-    'HEALTHY', 'STRENGTHS', 'PLANS', 'SUITES',
+    "blindtest",
+    "diagnose_campaign",
+    "plan_campaigns",
+    "plan_real_world",
+    "rig_campaign",
+    "summarise",
+    "set_scores",
+    "blindtest_dataset",
+    "oracle_gap",
+    "effect_visibility",
+    "second_design",
+    "operating_points_of",
+    "CampaignSpec",
+    "HEALTHY",
+    "STRENGTHS",
+    "PLANS",
+    "SUITES",
 ]

@@ -31,8 +31,19 @@ from ..physics.design import Design, load_design
 from ..rig.format import write_rig
 from ..rig.virtual_rig import DEFAULT_PINION_SPEEDS
 from ..uq.results import json_default, save_result
-from .campaigns import (HEALTHY, LIBRARY_EFFECTS, SUITES, CampaignSpec, check_count, operating_points_of,
-                        plan_campaigns, plan_real_world, rig_campaign, second_design, true_values)
+from .campaigns import (
+    HEALTHY,
+    LIBRARY_EFFECTS,
+    SUITES,
+    CampaignSpec,
+    check_count,
+    operating_points_of,
+    plan_campaigns,
+    plan_real_world,
+    rig_campaign,
+    second_design,
+    true_values,
+)
 from .oracle import effect_visibility, oracle_gap
 from .scores import blindtest_dataset, summarise
 
@@ -48,8 +59,16 @@ def _blind(rig: xr.Dataset) -> xr.Dataset:
     return blind
 
 
-def diagnose_campaign(spec: CampaignSpec, design: Design, seed: np.random.SeedSequence, folder: Path, *,
-                      n_ops: int, duration: float, workers: int) -> dict[str, Any]:
+def diagnose_campaign(
+    spec: CampaignSpec,
+    design: Design,
+    seed: np.random.SeedSequence,
+    folder: Path,
+    *,
+    n_ops: int,
+    duration: float,
+    workers: int,
+) -> dict[str, Any]:
     """Make one campaign, diagnose it blind, and judge the verdict; returns its entry of ``blindtest.json``.
 
     Writes the campaign's ``rig.nc`` and ``diagnosis.json`` into ``folder``.
@@ -59,31 +78,61 @@ def diagnose_campaign(spec: CampaignSpec, design: Design, seed: np.random.SeedSe
     generation_seed, noise_seed, diagnosis_seed, reference_seed = seed.spawn(4)
     truth = true_values(spec, design)
     operating_points = operating_points_of(spec.plan, design, n_ops)
-    rig = rig_campaign(spec, design, operating_points, truth, spec.effects(), generation_seed, duration,
-                       f"blind-test campaign {spec.identifier}")
+    rig = rig_campaign(
+        spec,
+        design,
+        operating_points,
+        truth,
+        spec.effects(),
+        generation_seed,
+        duration,
+        f"blind-test campaign {spec.identifier}",
+    )
     folder.mkdir(parents=True, exist_ok=True)
     write_rig(folder / "rig.nc", rig)
     healthy_seed, learn_seed = reference_seed.spawn(2)
     reference = None
     if spec.nuisances.get("reference"):
         # a healthy campaign of the same rig (its nuisances, its own noise and T2), learned blind too
-        reference = _blind(rig_campaign(spec, design, operating_points, truth, [], healthy_seed, duration,
-                                        f"healthy reference of {spec.identifier}"))
-    diagnosis = Diagnosis(design=design, seed=DiagnosisSeeds(noise_seed, diagnosis_seed, learn_seed),
-                          workers=workers).fit(_blind(rig), reference=reference)
+        reference = _blind(
+            rig_campaign(
+                spec,
+                design,
+                operating_points,
+                truth,
+                [],
+                healthy_seed,
+                duration,
+                f"healthy reference of {spec.identifier}",
+            )
+        )
+    diagnosis = Diagnosis(
+        design=design, seed=DiagnosisSeeds(noise_seed, diagnosis_seed, learn_seed), workers=workers
+    ).fit(_blind(rig), reference=reference)
     recorded_truth = json.loads(rig.attrs["true_parameters"])
     known = {**truth, "adhesion_torque": recorded_truth["adhesion_torque"]}
-    entry = _judged(spec, diagnosis, truth, oracle_gap(diagnosis.features_, spec, known),
-                    effect_visibility(diagnosis.case_, spec, known))
+    entry = _judged(
+        spec,
+        diagnosis,
+        truth,
+        oracle_gap(diagnosis.features_, spec, known),
+        effect_visibility(diagnosis.case_, spec, known),
+    )
     entry["seconds"] = time.perf_counter() - clock
     ranking = diagnosis.outcome_.ranking() if diagnosis.outcome_ is not None else []
-    write_text_atomic(folder / "diagnosis.json",
-                      json.dumps(json_clean({**entry, "ranking": ranking}), indent=2, default=json_default))
+    write_text_atomic(
+        folder / "diagnosis.json", json.dumps(json_clean({**entry, "ranking": ranking}), indent=2, default=json_default)
+    )
     return entry
 
 
-def _judged(spec: CampaignSpec, diagnosis: Diagnosis, truth: Mapping[str, float], visibility: float,
-            per_effect: Mapping[str, float]) -> dict[str, Any]:
+def _judged(
+    spec: CampaignSpec,
+    diagnosis: Diagnosis,
+    truth: Mapping[str, float],
+    visibility: float,
+    per_effect: Mapping[str, float],
+) -> dict[str, Any]:
     """A campaign's entry: its truth, what the diagnosis named, and whether that was right."""
     noise_gap = DEFAULT_SETTINGS.noise_gap
     decision, outcome = diagnosis.decision_, diagnosis.outcome_
@@ -91,19 +140,26 @@ def _judged(spec: CampaignSpec, diagnosis: Diagnosis, truth: Mapping[str, float]
     named = best if best is not None and best.effect == decision.verdict else None
     detectable = spec.truth == HEALTHY or visibility > noise_gap
     return {
-        "id": spec.identifier, "truth": spec.truth, "truth_effects": spec.truth_set(),
+        "id": spec.identifier,
+        "truth": spec.truth,
+        "truth_effects": spec.truth_set(),
         "effects_named": [chosen.entry.effect for chosen in diagnosis.effects_],
         "shrink_shares": [chosen.shrink_share for chosen in diagnosis.effects_],
         "strength": spec.strength,
-        "strength_value": spec.strength_value, "design": spec.design_name, "plan": spec.plan,
-        "nuisances": {key: value for key, value in spec.nuisances.items()},
-        "effect_values": spec.effect_values, "true_parameters": truth,
-        "verdict": decision.verdict, "reason": decision.reason,
+        "strength_value": spec.strength_value,
+        "design": spec.design_name,
+        "plan": spec.plan,
+        "nuisances": dict(spec.nuisances),
+        "effect_values": spec.effect_values,
+        "true_parameters": truth,
+        "verdict": decision.verdict,
+        "reason": decision.reason,
         "partial": bool(decision.partial),
         "borderline": [figure["figure"] for figure in decision.borderline],
         "correct": decision.verdict == spec.truth,
         "correct_detectable": decision.verdict == spec.truth or (not detectable and decision.verdict == HEALTHY),
-        "detectable": bool(detectable), "oracle_gap": visibility,
+        "detectable": bool(detectable),
+        "oracle_gap": visibility,
         "nominal_gap": outcome.nominal_gap if outcome is not None else float("nan"),
         "effect_visibility": dict(per_effect),
         "identifiable_effects": [name for name, gap in per_effect.items() if gap > noise_gap],
@@ -112,17 +168,29 @@ def _judged(spec: CampaignSpec, diagnosis: Diagnosis, truth: Mapping[str, float]
         "best_candidate": best.effect if best is not None else None,
         "best_score": best.score if best is not None else None,
         # run-outs the lines cannot tell from the gears' own pitch errors (reported, not named)
-        "cannot_tell": ([f"{entry['effect']}[{entry['shaft']}]" for entry in outcome.cannot_tell()]
-                        if outcome is not None else []),
-        "sideband_phase_log_ratios": ({evidence.shaft: evidence.log_ratio for evidence in outcome.modulation}
-                                      if outcome is not None else {}),
+        "cannot_tell": (
+            [f"{entry['effect']}[{entry['shaft']}]" for entry in outcome.cannot_tell()] if outcome is not None else []
+        ),
+        "sideband_phase_log_ratios": (
+            {evidence.shaft: evidence.log_ratio for evidence in outcome.modulation} if outcome is not None else {}
+        ),
     }
 
 
-def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: int | np.random.SeedSequence = 0,
-              effects: Sequence[str] | None = None, designs: Sequence[str] = ("reference", "second"),
-              n_healthy: int | None = None, n_ops: int = 8, duration: float = 1.0, workers: int | None = None,
-              report: bool = True, suite: str = "library") -> dict[str, Any]:
+def blindtest(
+    out_dir: str | os.PathLike[str],
+    *,
+    n_per_effect: int = 3,
+    seed: int | np.random.SeedSequence = 0,
+    effects: Sequence[str] | None = None,
+    designs: Sequence[str] = ("reference", "second"),
+    n_healthy: int | None = None,
+    n_ops: int = 8,
+    duration: float = 1.0,
+    workers: int | None = None,
+    report: bool = True,
+    suite: str = "library",
+) -> dict[str, Any]:
     """Run a blind test of the diagnosis and write ``blindtest.json``, ``blindtest.nc`` and ``report.html``.
 
     Parameters
@@ -177,8 +245,9 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
     if suite not in SUITES:
         raise DiagnosisError(f"suite: expected one of {', '.join(SUITES)}; got {suite!r}")
     if suite == "library":
-        specs = plan_campaigns(n_per_effect, np.random.default_rng(plan_seed), effects=effect_names,
-                               designs=designs, n_healthy=n_healthy)
+        specs = plan_campaigns(
+            n_per_effect, np.random.default_rng(plan_seed), effects=effect_names, designs=designs, n_healthy=n_healthy
+        )
     else:
         specs = plan_real_world(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
         effect_names = tuple(dict.fromkeys(name for spec in specs for name in spec.truth_set()))
@@ -187,12 +256,21 @@ def blindtest(out_dir: str | os.PathLike[str], *, n_per_effect: int = 3, seed: i
     designs_by_name = {"reference": reference, "second": second_design(reference)}
     # nothing appears in out_dir until the whole blind test is written
     with OutputFolder(out_dir) as out:
-        campaigns = [diagnose_campaign(spec, designs_by_name[spec.design_name], campaign_seed,
-                                       out / "campaigns" / spec.identifier, n_ops=n_ops, duration=duration,
-                                       workers=workers)
-                     for spec, campaign_seed in zip(specs, campaign_seeds)]
-        content = summarise(campaigns, effect_names, seconds=time.perf_counter() - started,
-                            seed_text=str(seed_sequence.entropy))
+        campaigns = [
+            diagnose_campaign(
+                spec,
+                designs_by_name[spec.design_name],
+                campaign_seed,
+                out / "campaigns" / spec.identifier,
+                n_ops=n_ops,
+                duration=duration,
+                workers=workers,
+            )
+            for spec, campaign_seed in zip(specs, campaign_seeds)
+        ]
+        content = summarise(
+            campaigns, effect_names, seconds=time.perf_counter() - started, seed_text=str(seed_sequence.entropy)
+        )
         save_result(blindtest_dataset(content), out / "blindtest.nc", seed=seed_sequence)
         write_text_atomic(out / "blindtest.json", json.dumps(json_clean(content), indent=2, default=json_default))
         if report:

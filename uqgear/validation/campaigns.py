@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -24,8 +25,12 @@ from ..diagnosis.effects import LIBRARY
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..rig.transfer_path import apply_transfer_path
-from ..rig.virtual_rig import (DEFAULT_DRIVE_TORQUES, DEFAULT_PINION_SPEEDS, bearing_check_operating_points,
-                               simulate_campaign)
+from ..rig.virtual_rig import (
+    DEFAULT_DRIVE_TORQUES,
+    DEFAULT_PINION_SPEEDS,
+    bearing_check_operating_points,
+    simulate_campaign,
+)
 
 #: Label of the healthy controls (the verdict they should get).
 HEALTHY = "none"
@@ -88,8 +93,14 @@ def check_count(name: str, value: object, lowest: int) -> int:
     return int(value)
 
 
-def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequence[str] | None = None,
-                   designs: Sequence[str] = DESIGNS, n_healthy: int | None = None) -> list[CampaignSpec]:
+def plan_campaigns(
+    n_per_effect: int,
+    rng: np.random.Generator,
+    *,
+    effects: Sequence[str] | None = None,
+    designs: Sequence[str] = DESIGNS,
+    n_healthy: int | None = None,
+) -> list[CampaignSpec]:
     """The campaigns of a blind test: per effect ``n_per_effect`` over the strength ladder and designs.
 
     True nominal parameters scatter around the design (stiffness scale
@@ -119,26 +130,32 @@ def plan_campaigns(n_per_effect: int, rng: np.random.Generator, *, effects: Sequ
             design_name = designs[(k // len(PLANS) if truth == HEALTHY else k) % len(designs)]
             true_parameters = _scattered_truth(rng)
             if truth == HEALTHY:
-                specs.append(CampaignSpec(f"{truth}-{k}", truth, "-", 0.0, design_name, {}, true_parameters,
-                                          PLANS[k % len(PLANS)]))
+                specs.append(
+                    CampaignSpec(
+                        f"{truth}-{k}", truth, "-", 0.0, design_name, {}, true_parameters, PLANS[k % len(PLANS)]
+                    )
+                )
                 continue
             level = order[k % 3]
             family = effect_family(truth)
             strength = family.ladder[level]
             effect_values = effect_draw(truth, strength, rng)
             plan = family.plan
-            specs.append(CampaignSpec(f"{truth}-{k}", truth, STRENGTHS[level], strength, design_name,
-                                      effect_values, true_parameters, plan))
+            specs.append(
+                CampaignSpec(
+                    f"{truth}-{k}", truth, STRENGTHS[level], strength, design_name, effect_values, true_parameters, plan
+                )
+            )
     return specs
 
 
 # The real-world suite's kinds, each a function of the draw. Strengths are the ladder's strong level
 # (the public campaigns' own) or medium, so that a miss is the rig's doing, not the effect's weakness.
-_RESONANCE = {"transfer_path": (2500.0, 0.05)}
-_WANDER = {"speed_wander": [(0.005, 1.3)]}
-_PITCH = {"pitch_errors": 7}
-_MAINS_NOISE = {"line_interference": {50.0: 0.5, 150.0: 0.2}, "relative_noise": 0.03}
-_ALL_NUISANCES = {**_WANDER, **_PITCH, **_MAINS_NOISE}
+_RESONANCE: dict[str, object] = {"transfer_path": (2500.0, 0.05)}
+_WANDER: dict[str, object] = {"speed_wander": [(0.005, 1.3)]}
+_PITCH: dict[str, object] = {"pitch_errors": 7}
+_MAINS_NOISE: dict[str, object] = {"line_interference": {50.0: 0.5, 150.0: 0.2}, "relative_noise": 0.03}
+_ALL_NUISANCES: dict[str, object] = {**_WANDER, **_PITCH, **_MAINS_NOISE}
 _REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = (
     # (kind, effects (leading first), nuisances)
     ("two_effects", ("eccentricity", "tooth_damage"), {}),
@@ -174,8 +191,9 @@ def _scattered_truth(rng: np.random.Generator) -> dict[str, float]:
     }
 
 
-def plan_real_world(n_per_kind: int, rng: np.random.Generator, *, designs: Sequence[str] = DESIGNS
-                    ) -> list[CampaignSpec]:
+def plan_real_world(
+    n_per_kind: int, rng: np.random.Generator, *, designs: Sequence[str] = DESIGNS
+) -> list[CampaignSpec]:
     """The real-world suite: campaigns that are not the model plus one effect on a clean rig.
 
     Per kind (``n_per_kind`` each, alternating the designs): two effects of
@@ -204,24 +222,40 @@ def plan_real_world(n_per_kind: int, rng: np.random.Generator, *, designs: Seque
                 drawn.append((name, strength, STRENGTHS[level], effect_draw(name, strength, rng)))
             if drawn:
                 leading = drawn[0]
-                specs.append(CampaignSpec(f"{kind}-{'+'.join(effect_names)}-{k}", leading[0], leading[2], leading[1],
-                                          design_name, leading[3], truth, "service",
-                                          tuple((name, values) for name, _, _, values in drawn[1:]),
-                                          dict(nuisances)))
+                specs.append(
+                    CampaignSpec(
+                        f"{kind}-{'+'.join(effect_names)}-{k}",
+                        leading[0],
+                        leading[2],
+                        leading[1],
+                        design_name,
+                        leading[3],
+                        truth,
+                        "service",
+                        tuple((name, values) for name, _, _, values in drawn[1:]),
+                        dict(nuisances),
+                    )
+                )
             else:
-                specs.append(CampaignSpec(f"{kind}-{k}", HEALTHY, "-", 0.0, design_name, {}, truth, "service", (),
-                                          dict(nuisances)))
+                specs.append(
+                    CampaignSpec(
+                        f"{kind}-{k}", HEALTHY, "-", 0.0, design_name, {}, truth, "service", (), dict(nuisances)
+                    )
+                )
     return specs
 
 
 def true_values(spec: CampaignSpec, design: Design) -> dict[str, float]:
     """The campaign's true nominal parameters in natural units (its scatter applied to the design's)."""
     factors = spec.true_parameters
-    return {"mesh_stiffness_scale": factors["mesh_stiffness_scale"],
-            "zeta_mesh": design.zeta_mesh * factors["zeta_mesh_factor"],
-            "ste_amplitude": design.ste_amplitude * factors["ste_amplitude_factor"],
-            "k1": design.k1 * factors["k1_factor"], "k2": design.k2 * factors["k2_factor"],
-            "backlash": design.backlash * factors["backlash_factor"]}
+    return {
+        "mesh_stiffness_scale": factors["mesh_stiffness_scale"],
+        "zeta_mesh": design.zeta_mesh * factors["zeta_mesh_factor"],
+        "ste_amplitude": design.ste_amplitude * factors["ste_amplitude_factor"],
+        "k1": design.k1 * factors["k1_factor"],
+        "k2": design.k2 * factors["k2_factor"],
+        "backlash": design.backlash * factors["backlash_factor"],
+    }
 
 
 def operating_points_of(plan: str, design: Design, n_ops: int = 8) -> dict[str, np.ndarray]:
@@ -238,15 +272,33 @@ def operating_points_of(plan: str, design: Design, n_ops: int = 8) -> dict[str, 
     return {name: np.asarray(values)[index] for name, values in table.items()}
 
 
-def rig_campaign(spec: CampaignSpec, design: Design, operating_points: Mapping[str, np.ndarray],
-                  truth: Mapping[str, float], effects: Sequence[Effect], seed: np.random.SeedSequence,
-                  duration: float, title: str) -> xr.Dataset:
+def rig_campaign(
+    spec: CampaignSpec,
+    design: Design,
+    operating_points: Mapping[str, np.ndarray],
+    truth: Mapping[str, float],
+    effects: Sequence[Effect],
+    seed: np.random.SeedSequence,
+    duration: float,
+    title: str,
+) -> xr.Dataset:
     """A blind-test campaign from the virtual rig, with the spec's nuisances (transfer path last)."""
-    options = {key: value for key, value in spec.nuisances.items() if key not in ("transfer_path", "reference")}
-    rig = simulate_campaign(design, operating_points, true_parameters=dict(truth), effects=effects, seed=seed,
-                            duration=duration, run_in=0.3, title=title, **options)
+    options: dict[str, Any] = {
+        key: value for key, value in spec.nuisances.items() if key not in ("transfer_path", "reference")
+    }
+    rig = simulate_campaign(
+        design,
+        operating_points,
+        true_parameters=dict(truth),
+        effects=effects,
+        seed=seed,
+        duration=duration,
+        run_in=0.3,
+        title=title,
+        **options,
+    )
     if "transfer_path" in spec.nuisances:
-        frequency, damping = spec.nuisances["transfer_path"]  # type: ignore[misc]
+        frequency, damping = cast(tuple[float, float], spec.nuisances["transfer_path"])
         rig = apply_transfer_path(rig, "acc_pinion", frequency, damping)
     return rig
 
@@ -258,8 +310,21 @@ def check_designs(designs: Sequence[str]) -> None:
             raise DiagnosisError(f"designs: {name!r} unknown; expected 'reference' and/or 'second'")
 
 
-
-
-__all__ = ["HEALTHY", "STRENGTHS", "PLANS", "SUITES", "DESIGNS", "LIBRARY_EFFECTS", "CampaignSpec", "second_design",
-           "plan_campaigns", "plan_real_world", "effect_draw", "true_values", "operating_points_of", "rig_campaign",
-           "check_count", "check_designs"]
+__all__ = [
+    "HEALTHY",
+    "STRENGTHS",
+    "PLANS",
+    "SUITES",
+    "DESIGNS",
+    "LIBRARY_EFFECTS",
+    "CampaignSpec",
+    "second_design",
+    "plan_campaigns",
+    "plan_real_world",
+    "effect_draw",
+    "true_values",
+    "operating_points_of",
+    "rig_campaign",
+    "check_count",
+    "check_designs",
+]

@@ -40,8 +40,9 @@ def oracle_gap(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any]) -> f
     periodicity = "free"
     with_effect, without = [], []
     for op in range(case.n_op):
-        with_effect.append(execute_run(case, RunTask(op, design, scale, float(adhesion[op]), tuple(effect),
-                                                     periodicity))[0])
+        with_effect.append(
+            execute_run(case, RunTask(op, design, scale, float(adhesion[op]), tuple(effect), periodicity))[0]
+        )
         without.append(execute_run(case, RunTask(op, design, scale, float(adhesion[op]), (), "mesh"))[0])
     columns = case.layout.columns
     # the noise the rig's records carry, as the diagnosis estimates it
@@ -51,8 +52,9 @@ def oracle_gap(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any]) -> f
 
 def _true_model(case: RigCase, truth: Mapping[str, Any]) -> tuple[Design, float, np.ndarray]:
     """The true design, mesh-stiffness scale and per-run T2 of a campaign's truth."""
-    design = case.design.replace(**{key: float(truth[key]) for key in ("zeta_mesh", "ste_amplitude", "k1", "k2",
-                                                                      "backlash")})
+    design = case.design.replace(
+        **{key: float(truth[key]) for key in ("zeta_mesh", "ste_amplitude", "k1", "k2", "backlash")}
+    )
     return design, float(truth["mesh_stiffness_scale"]), np.asarray(truth["adhesion_torque"], dtype=float)
 
 
@@ -86,8 +88,10 @@ def effect_visibility(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any
         return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
 
     recorded = expected_rig_features(features(effects), case.noise_std, case.noise, case.layout)
-    return {name: _capped_gap(case, recorded, features(effects[:index] + effects[index + 1:]))
-            for index, name in enumerate(names)}
+    return {
+        name: _capped_gap(case, recorded, features(effects[:index] + effects[index + 1 :]))
+        for index, name in enumerate(names)
+    }
 
 
 __all__ = ["oracle_gap", "effect_visibility"]

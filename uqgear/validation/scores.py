@@ -17,8 +17,9 @@ from .campaigns import HEALTHY
 NOT_EFFECTS: tuple[str, ...] = (HEALTHY, "unexplained", "inconclusive")
 
 
-def _thresholds(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], noise_gap: float
-                ) -> list[dict[str, Any]]:
+def _thresholds(
+    campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], noise_gap: float
+) -> list[dict[str, Any]]:
     """Per effect: the weakest strength detected above which all were, and the strongest one missed."""
     rows = []
     for effect in effects:
@@ -35,8 +36,16 @@ def _thresholds(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], 
         invisible = [c for c in cases if c["verdict"] != effect and not c["detectable"]]
         if invisible:
             note = f"{len(invisible)} missed below detectability (oracle gap <= {noise_gap:g})"
-        rows.append({"effect": effect, "parameter": parameter, "detected_from": detected_from,
-                     "missed_up_to": max(missed) if missed else None, "n": len(cases), "note": note})
+        rows.append(
+            {
+                "effect": effect,
+                "parameter": parameter,
+                "detected_from": detected_from,
+                "missed_up_to": max(missed) if missed else None,
+                "n": len(cases),
+                "note": note,
+            }
+        )
     return rows
 
 
@@ -72,39 +81,62 @@ def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -
         acting = [c for c in campaigns if name in _truth_set(c)]
         hits = sum(1 for c in named if name in _truth_set(c))
         # its share of the shrink where it was rightly named (campaigns that record the shares)
-        shares = [c["shrink_shares"][list(c["effects_named"]).index(name)] for c in named
-                  if name in _truth_set(c) and c.get("shrink_shares") is not None]
-        rows.append({"effect": name, "named": len(named), "acting": len(acting), "correct": hits,
-                     "precision": hits / len(named) if named else None,
-                     "recall": hits / len(acting) if acting else None,
-                     "shrink_share_median": float(np.median(shares)) if shares else None})
-    exact = [(_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == HEALTHY)
-             for c in campaigns]
+        shares = [
+            c["shrink_shares"][list(c["effects_named"]).index(name)]
+            for c in named
+            if name in _truth_set(c) and c.get("shrink_shares") is not None
+        ]
+        rows.append(
+            {
+                "effect": name,
+                "named": len(named),
+                "acting": len(acting),
+                "correct": hits,
+                "precision": hits / len(named) if named else None,
+                "recall": hits / len(acting) if acting else None,
+                "shrink_share_median": float(np.median(shares)) if shares else None,
+            }
+        )
+    exact = [(_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == HEALTHY) for c in campaigns]
     # against the effects the data can tell (effect_visibility) where the campaign records them
-    identifiable = [set(c["identifiable_effects"]) if c.get("identifiable_effects") is not None else _truth_set(c)
-                    for c in campaigns]
-    exact_identifiable = [_named_set(c) == wanted if _truth_set(c) else c["verdict"] == HEALTHY
-                          for c, wanted in zip(campaigns, identifiable)]
+    identifiable = [
+        set(c["identifiable_effects"]) if c.get("identifiable_effects") is not None else _truth_set(c)
+        for c in campaigns
+    ]
+    exact_identifiable = [
+        _named_set(c) == wanted if _truth_set(c) else c["verdict"] == HEALTHY
+        for c, wanted in zip(campaigns, identifiable)
+    ]
     multi = [ok for c, ok in zip(campaigns, exact) if len(_truth_set(c)) > 1]
     controls = [c for c in campaigns if not _truth_set(c)]
     # effects missed but reported as not told apart from the gears' own errors (campaigns that record it)
     recorded = [c for c in campaigns if c.get("cannot_tell") is not None]
     missed = [(c, name) for c in recorded for name in sorted(_truth_set(c) - _named_set(c))]
-    return {"per_effect": rows, "set_exact": sum(exact) / len(exact) if exact else math.nan,
-            "set_exact_identifiable": sum(exact_identifiable) / len(exact_identifiable) if exact_identifiable
-            else math.nan,
-            "effects_not_identifiable": sum(len(_truth_set(c) - wanted) for c, wanted in zip(campaigns, identifiable)),
-            "n_multi_effect": len(multi), "set_exact_multi_effect": sum(multi) / len(multi) if multi else None,
-            "n_controls": len(controls),
-            "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c)),
-            "effects_missed": len(missed),
-            "effects_missed_reported_cannot_tell": sum(
-                1 for c, name in missed if any(label.startswith(f"{name}[") for label in c["cannot_tell"])),
-            "controls_with_cannot_tell": sum(1 for c in controls if c.get("cannot_tell"))}
+    return {
+        "per_effect": rows,
+        "set_exact": sum(exact) / len(exact) if exact else math.nan,
+        "set_exact_identifiable": sum(exact_identifiable) / len(exact_identifiable) if exact_identifiable else math.nan,
+        "effects_not_identifiable": sum(len(_truth_set(c) - wanted) for c, wanted in zip(campaigns, identifiable)),
+        "n_multi_effect": len(multi),
+        "set_exact_multi_effect": sum(multi) / len(multi) if multi else None,
+        "n_controls": len(controls),
+        "controls_with_an_effect_named": sum(1 for c in controls if _named_set(c)),
+        "effects_missed": len(missed),
+        "effects_missed_reported_cannot_tell": sum(
+            1 for c, name in missed if any(label.startswith(f"{name}[") for label in c["cannot_tell"])
+        ),
+        "controls_with_cannot_tell": sum(1 for c in controls if c.get("cannot_tell")),
+    }
 
 
-def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *, seconds: float = math.nan,
-              seed_text: str = "", noise_gap: float = DEFAULT_SETTINGS.noise_gap) -> dict[str, Any]:
+def summarise(
+    campaigns: Sequence[Mapping[str, Any]],
+    effects: Sequence[str],
+    *,
+    seconds: float = math.nan,
+    seed_text: str = "",
+    noise_gap: float = DEFAULT_SETTINGS.noise_gap,
+) -> dict[str, Any]:
     """Confusion matrix, accuracies, false alarms, shrink statistics, thresholds and effect-set scores.
 
     The confusion matrix and the accuracies score the verdict (the leading
@@ -117,8 +149,14 @@ def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *,
     for c in campaigns:
         counts[labels.index(c["truth"]), verdicts.index(c["verdict"])] += 1
     n = len(campaigns)
-    shrinks = np.array([c["shrink_fraction"] for c in campaigns if c["correct"] and c["truth"] != HEALTHY
-                        and c["shrink_fraction"] is not None], dtype=float)
+    shrinks = np.array(
+        [
+            c["shrink_fraction"]
+            for c in campaigns
+            if c["correct"] and c["truth"] != HEALTHY and c["shrink_fraction"] is not None
+        ],
+        dtype=float,
+    )
     false_alarms = sum(1 for c in campaigns if c["truth"] == HEALTHY and c["verdict"] not in NOT_EFFECTS)
     return {
         "n_campaigns": n,
@@ -128,11 +166,13 @@ def summarise(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str], *,
         "false_alarms": false_alarms,
         "healthy_controls": sum(1 for c in campaigns if c["truth"] == HEALTHY),
         "confusion": {"truth": labels, "verdicts": verdicts, "counts": counts.tolist()},
-        "shrink": {"n": int(shrinks.size),
-                   "median": float(np.median(shrinks)) if shrinks.size else None,
-                   "q25": float(np.quantile(shrinks, 0.25)) if shrinks.size else None,
-                   "q75": float(np.quantile(shrinks, 0.75)) if shrinks.size else None,
-                   "minimum": float(shrinks.min()) if shrinks.size else None},
+        "shrink": {
+            "n": int(shrinks.size),
+            "median": float(np.median(shrinks)) if shrinks.size else None,
+            "q25": float(np.quantile(shrinks, 0.25)) if shrinks.size else None,
+            "q75": float(np.quantile(shrinks, 0.75)) if shrinks.size else None,
+            "minimum": float(shrinks.min()) if shrinks.size else None,
+        },
         "thresholds": _thresholds(campaigns, effects, noise_gap),
         "effect_sets": set_scores(campaigns, effects),
         "campaigns": list(campaigns),
@@ -149,30 +189,56 @@ def blindtest_dataset(content: Mapping[str, Any]) -> xr.Dataset:
         return np.array([default if c[key] is None else c[key] for c in campaigns], dtype=float)
 
     ds = xr.Dataset(
-        {"confusion": (("truth", "verdict"), np.array(content["confusion"]["counts"], dtype=np.int64),
-                       {"long_name": "campaigns per true effect and verdict", "units": "1"}),
-         "strength_value": (("campaign",), column("strength_value"),
-                            {"long_name": "value of the effect's strength parameter", "units": "effect units"}),
-         "oracle_gap": (("campaign",), column("oracle_gap"),
-                        {"long_name": "gap between the true model with and without the effect", "units": "1"}),
-         "nominal_gap": (("campaign",), column("nominal_gap"),
-                         {"long_name": "held-out gap of the fitted nominal model", "units": "1"}),
-         "shrink_fraction": (("campaign",), column("shrink_fraction"),
-                             {"long_name": "held-out gap shrink when the effect is named", "units": "1"}),
-         "correct": (("campaign",), np.array([int(c["correct"]) for c in campaigns], dtype=np.int8),
-                     {"long_name": "verdict equals the true label", "units": "1"}),
-         "seconds": (("campaign",), column("seconds"), {"long_name": "generation and diagnosis time",
-                                                        "units": "s"})},
-        coords={"truth": ("truth", list(content["confusion"]["truth"])),
-                "verdict": ("verdict", list(content["confusion"]["verdicts"])),
-                "campaign": ("campaign", [c["id"] for c in campaigns]),
-                "campaign_truth": ("campaign", [c["truth"] for c in campaigns]),
-                "campaign_verdict": ("campaign", [c["verdict"] for c in campaigns]),
-                "campaign_design": ("campaign", [c["design"] for c in campaigns]),
-                "campaign_plan": ("campaign", [c.get("plan", "service") for c in campaigns]),
-                "campaign_strength": ("campaign", [c["strength"] for c in campaigns])})
-    ds.attrs.update(title="uqgear blind test of the gap diagnosis", accuracy=content["accuracy"],
-                    accuracy_detectable=content["accuracy_detectable"], false_alarms=content["false_alarms"])
+        {
+            "confusion": (
+                ("truth", "verdict"),
+                np.array(content["confusion"]["counts"], dtype=np.int64),
+                {"long_name": "campaigns per true effect and verdict", "units": "1"},
+            ),
+            "strength_value": (
+                ("campaign",),
+                column("strength_value"),
+                {"long_name": "value of the effect's strength parameter", "units": "effect units"},
+            ),
+            "oracle_gap": (
+                ("campaign",),
+                column("oracle_gap"),
+                {"long_name": "gap between the true model with and without the effect", "units": "1"},
+            ),
+            "nominal_gap": (
+                ("campaign",),
+                column("nominal_gap"),
+                {"long_name": "held-out gap of the fitted nominal model", "units": "1"},
+            ),
+            "shrink_fraction": (
+                ("campaign",),
+                column("shrink_fraction"),
+                {"long_name": "held-out gap shrink when the effect is named", "units": "1"},
+            ),
+            "correct": (
+                ("campaign",),
+                np.array([int(c["correct"]) for c in campaigns], dtype=np.int8),
+                {"long_name": "verdict equals the true label", "units": "1"},
+            ),
+            "seconds": (("campaign",), column("seconds"), {"long_name": "generation and diagnosis time", "units": "s"}),
+        },
+        coords={
+            "truth": ("truth", list(content["confusion"]["truth"])),
+            "verdict": ("verdict", list(content["confusion"]["verdicts"])),
+            "campaign": ("campaign", [c["id"] for c in campaigns]),
+            "campaign_truth": ("campaign", [c["truth"] for c in campaigns]),
+            "campaign_verdict": ("campaign", [c["verdict"] for c in campaigns]),
+            "campaign_design": ("campaign", [c["design"] for c in campaigns]),
+            "campaign_plan": ("campaign", [c.get("plan", "service") for c in campaigns]),
+            "campaign_strength": ("campaign", [c["strength"] for c in campaigns]),
+        },
+    )
+    ds.attrs.update(
+        title="uqgear blind test of the gap diagnosis",
+        accuracy=content["accuracy"],
+        accuracy_detectable=content["accuracy_detectable"],
+        false_alarms=content["false_alarms"],
+    )
     return ds
 
 

@@ -59,16 +59,16 @@ class GainCurve:
         return int(np.sum(self.weights < _DROPPED_WEIGHT))
 
     @classmethod
-    def flat(cls, mean: float = 0.0, scatter: float = DIRECT_FLOOR) -> "GainCurve":
+    def flat(cls, mean: float = 0.0, scatter: float = DIRECT_FLOOR) -> GainCurve:
         """Too few lines to learn from: a constant gain, a small uncertainty."""
         return cls(np.zeros(0), np.zeros(0), np.zeros(0), mean, _AMPLITUDE_BOUNDS[0], 1.0, scatter)
 
     def _kernel(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return _kernel(a, b, self.amplitude, self.length)
 
-    def prepare(self) -> "GainCurve":
+    def prepare(self) -> GainCurve:
         if self.x.size:
-            matrix = self._kernel(self.x, self.x) + np.diag(self.scatter ** 2 / self.weights)
+            matrix = self._kernel(self.x, self.x) + np.diag(self.scatter**2 / self.weights)
             self._factor = scipy.linalg.cho_factor(matrix, lower=True)
             self._alpha = scipy.linalg.cho_solve(self._factor, self.y - self.mean)
         return self
@@ -81,8 +81,8 @@ class GainCurve:
             return np.full(f.shape, self.mean), np.full(f.shape, self.scatter)
         cross = self._kernel(x.ravel(), self.x)
         mean = self.mean + cross @ self._alpha
-        variance = self.amplitude ** 2 - np.sum(cross * scipy.linalg.cho_solve(self._factor, cross.T).T, axis=1)
-        spread = np.sqrt(np.maximum(variance, 0.0) + self.scatter ** 2)
+        variance = self.amplitude**2 - np.sum(cross * scipy.linalg.cho_solve(self._factor, cross.T).T, axis=1)
+        spread = np.sqrt(np.maximum(variance, 0.0) + self.scatter**2)
         return mean.reshape(f.shape), spread.reshape(f.shape)
 
 
@@ -93,12 +93,12 @@ _ROBUST_ITERATIONS = 6
 
 
 def _kernel(a: np.ndarray, b: np.ndarray, amplitude: float, length: float) -> np.ndarray:
-    return amplitude ** 2 * np.exp(-0.5 * ((a[:, None] - b[None, :]) / length) ** 2)
+    return amplitude**2 * np.exp(-0.5 * ((a[:, None] - b[None, :]) / length) ** 2)
 
 
 def _negative_log_evidence(log_parameters: np.ndarray, x: np.ndarray, y: np.ndarray, weights: np.ndarray) -> float:
     amplitude, length, scatter = np.exp(log_parameters)
-    matrix = _kernel(x, x, amplitude, length) + np.diag(scatter ** 2 / weights)
+    matrix = _kernel(x, x, amplitude, length) + np.diag(scatter**2 / weights)
     try:
         factor = scipy.linalg.cho_factor(matrix, lower=True)
     except np.linalg.LinAlgError:
@@ -132,10 +132,17 @@ def fit_gain_curve(frequencies: np.ndarray, log_ratios: np.ndarray) -> GainCurve
     starts = [np.log([spread, length, 0.3 * spread]) for length in (0.06, 0.2, 0.8)]
     curve = None
     for _ in range(_ROBUST_ITERATIONS):
-        best = min((scipy.optimize.minimize(_negative_log_evidence, start, args=(x, y, weights), method="L-BFGS-B",
-                                            bounds=bounds) for start in starts), key=lambda found: found.fun)
+        best = min(
+            (
+                scipy.optimize.minimize(
+                    _negative_log_evidence, start, args=(x, y, weights), method="L-BFGS-B", bounds=bounds
+                )
+                for start in starts
+            ),
+            key=lambda found: found.fun,
+        )
         amplitude, length, scatter = (float(v) for v in np.exp(best.x))
-        matrix = _kernel(x, x, amplitude, length) + np.diag(scatter ** 2 / weights)
+        matrix = _kernel(x, x, amplitude, length) + np.diag(scatter**2 / weights)
         factor = scipy.linalg.cho_factor(matrix, lower=True)
         ones = np.ones(x.size)
         solved = scipy.linalg.cho_solve(factor, ones)
@@ -145,14 +152,15 @@ def fit_gain_curve(frequencies: np.ndarray, log_ratios: np.ndarray) -> GainCurve
         # point's own down-weighted noise, so that a far line cannot talk its weight back up
         inverse_diagonal = np.diag(scipy.linalg.cho_solve(factor, np.eye(x.size)))
         loo = curve._alpha / inverse_diagonal
-        latent = np.maximum(1.0 / inverse_diagonal - scatter ** 2 / weights, 0.0)
-        standardised = loo / np.sqrt(latent + scatter ** 2)
-        updated = (_STUDENT_DOF + 1.0) / (_STUDENT_DOF + standardised ** 2)
+        latent = np.maximum(1.0 / inverse_diagonal - scatter**2 / weights, 0.0)
+        standardised = loo / np.sqrt(latent + scatter**2)
+        updated = (_STUDENT_DOF + 1.0) / (_STUDENT_DOF + standardised**2)
         updated = np.clip(updated, 1e-3, 1.0)
         starts = [best.x] + starts[1:]
         if np.allclose(updated, weights, atol=0.02):
             break
         weights = updated
+    assert curve is not None  # the loop runs at least once
     return curve
 
 

@@ -19,7 +19,7 @@ is left out.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -71,9 +71,17 @@ def amplitude_spectrum(record: np.ndarray, taper: np.ndarray) -> np.ndarray:
     return np.abs(np.fft.rfft((record - record.mean()) * taper)) * (2.0 / taper.sum())
 
 
-def fixed_frequency_lines(records: np.ndarray, noise_std: np.ndarray, speeds: np.ndarray, fs: float,
-                          limit: float, *, usable: np.ndarray | None = None, threshold: float = PEAK_THRESHOLD,
-                          minimum_runs: int = MIN_RUNS) -> list[dict[str, Any]]:
+def fixed_frequency_lines(
+    records: np.ndarray,
+    noise_std: np.ndarray,
+    speeds: np.ndarray,
+    fs: float,
+    limit: float,
+    *,
+    usable: np.ndarray | None = None,
+    threshold: float = PEAK_THRESHOLD,
+    minimum_runs: int = MIN_RUNS,
+) -> list[dict[str, Any]]:
     """Spectral lines of one channel that keep their frequency, not their order, across runs.
 
     Peaks of each run's amplitude spectrum more than ``threshold`` times a
@@ -113,7 +121,7 @@ def fixed_frequency_lines(records: np.ndarray, noise_std: np.ndarray, speeds: np
         if not usable[op] or not math.isfinite(noise_std[op]) or np.isnan(records[op]).any():
             continue
         amplitude = amplitude_spectrum(records[op], taper)
-        line_scale = noise_std[op] * math.sqrt(2.0 * np.sum(taper ** 2)) / taper.sum()
+        line_scale = noise_std[op] * math.sqrt(2.0 * np.sum(taper**2)) / taper.sum()
         index, _ = scipy.signal.find_peaks(np.where(inside, amplitude, 0.0), height=threshold * line_scale)
         strongest = index[np.argsort(amplitude[index])[::-1][:60]]
         peaks.extend((float(frequency[i]), op, float(amplitude[i])) for i in strongest if frequency[i] > resolution)
@@ -138,10 +146,18 @@ def fixed_frequency_lines(records: np.ndarray, noise_std: np.ndarray, speeds: np
     return lines
 
 
-def interference_lines(records: dict[str, np.ndarray], noise_std: dict[str, np.ndarray],
-                       usable: dict[str, np.ndarray], speeds: np.ndarray, fs: float, band: tuple[float, float],
-                       channels: Sequence[str], *, threshold: float = PEAK_THRESHOLD,
-                       minimum_runs: int = MIN_RUNS) -> LineInterference:
+def interference_lines(
+    records: Mapping[str, np.ndarray],
+    noise_std: Mapping[str, np.ndarray],
+    usable: Mapping[str, np.ndarray],
+    speeds: np.ndarray,
+    fs: float,
+    band: tuple[float, float],
+    channels: Sequence[str],
+    *,
+    threshold: float = PEAK_THRESHOLD,
+    minimum_runs: int = MIN_RUNS,
+) -> LineInterference:
     """Fixed-frequency lines inside ``band`` on a channel other than the TE, absent from the TE (module docstring).
 
     ``threshold`` and ``minimum_runs`` as in :func:`fixed_frequency_lines`.
@@ -156,14 +172,30 @@ def interference_lines(records: dict[str, np.ndarray], noise_std: dict[str, np.n
     size = records[GEAR_CHANNEL].shape[1]
     resolution = fs / size
     upper = band[1] + (NOTCH_HALF_WIDTH + 1) * resolution
-    gear_lines = fixed_frequency_lines(records[GEAR_CHANNEL], noise_std[GEAR_CHANNEL], speeds, fs, upper,
-                                       usable=usable[GEAR_CHANNEL], threshold=threshold, minimum_runs=minimum_runs)
+    gear_lines = fixed_frequency_lines(
+        records[GEAR_CHANNEL],
+        noise_std[GEAR_CHANNEL],
+        speeds,
+        fs,
+        upper,
+        usable=usable[GEAR_CHANNEL],
+        threshold=threshold,
+        minimum_runs=minimum_runs,
+    )
     found = []
     for channel in channels:
         if channel == GEAR_CHANNEL:
             continue
-        for line in fixed_frequency_lines(records[channel], noise_std[channel], speeds, fs, upper,
-                                          usable=usable[channel], threshold=threshold, minimum_runs=minimum_runs):
+        for line in fixed_frequency_lines(
+            records[channel],
+            noise_std[channel],
+            speeds,
+            fs,
+            upper,
+            usable=usable[channel],
+            threshold=threshold,
+            minimum_runs=minimum_runs,
+        ):
             if not band[0] - NOTCH_HALF_WIDTH * resolution <= line["frequency"] <= upper:
                 continue
             if any(abs(line["frequency"] - other["frequency"]) <= 1.5 * resolution for other in gear_lines):
@@ -172,5 +204,13 @@ def interference_lines(records: dict[str, np.ndarray], noise_std: dict[str, np.n
     return LineInterference(found)
 
 
-__all__ = ["LineInterference", "PEAK_THRESHOLD", "MIN_RUNS", "NOTCH_HALF_WIDTH", "GEAR_CHANNEL", "amplitude_spectrum",
-           "fixed_frequency_lines", "interference_lines"]
+__all__ = [
+    "LineInterference",
+    "PEAK_THRESHOLD",
+    "MIN_RUNS",
+    "NOTCH_HALF_WIDTH",
+    "GEAR_CHANNEL",
+    "amplitude_spectrum",
+    "fixed_frequency_lines",
+    "interference_lines",
+]

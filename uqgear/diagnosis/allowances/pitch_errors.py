@@ -105,36 +105,49 @@ class PitchErrorAllowance:
         """The case with this allowance added to its model error (the case itself where it is not applied)."""
         if not self.applied:
             return case
-        return replace(case, model_error_before_allowance=case.model_error, pitch_allowance=self,
-                       model_error=FeatureModelError.combined(case.model_error, self.absolute))
+        return replace(
+            case,
+            model_error_before_allowance=case.model_error,
+            pitch_allowance=self,
+            model_error=FeatureModelError.combined(case.model_error, self.absolute),
+        )
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready record (``pitch_errors`` of ``diagnosis.json``)."""
-        return {"applied": self.applied, "reason": self.reason,
-                "classes": None if self.classes is None else list(self.classes),
-                "visible_sidebands": {family: {str(order): {"visible": count, "of": total}
-                                               for order, (count, total) in orders.items()}
-                                      for family, orders in self.visible.items()},
-                "draws": self.draws, "largest_line_error_to_noise": self.largest_line_ratio,
-                "noise_floor_share_of_lines": self.floor_share,
-                "run_out_within_pitch_errors_m": dict(self.run_out_bound),
-                "order_factors": factors_summary(self.factors, self.factor_bounds, drawn_amplitudes(self.drawn_errors),
-                                                 self.class_shares) if self.factors else {},
-                "seconds": self.seconds,
-                "method": "the nominal fit simulated with random ISO 1328-1 pitch-error draws over the stated "
-                          "classes; each feature's mean square change becomes absolute model error"}
+        return {
+            "applied": self.applied,
+            "reason": self.reason,
+            "classes": None if self.classes is None else list(self.classes),
+            "visible_sidebands": {
+                family: {str(order): {"visible": count, "of": total} for order, (count, total) in orders.items()}
+                for family, orders in self.visible.items()
+            },
+            "draws": self.draws,
+            "largest_line_error_to_noise": self.largest_line_ratio,
+            "noise_floor_share_of_lines": self.floor_share,
+            "run_out_within_pitch_errors_m": dict(self.run_out_bound),
+            "order_factors": factors_summary(
+                self.factors, self.factor_bounds, drawn_amplitudes(self.drawn_errors), self.class_shares
+            )
+            if self.factors
+            else {},
+            "seconds": self.seconds,
+            "method": "the nominal fit simulated with random ISO 1328-1 pitch-error draws over the stated "
+            "classes; each feature's mean square change becomes absolute model error",
+        }
 
 
 def _sideband_order(name: str) -> int:
-    """Shaft order j of a sideband feature (``mesh{k}_sb_{shaft}{+j}``, :func:`uqgear.rig.features.feature_definitions`)."""
+    """Shaft order j of a sideband feature, ``mesh{k}_sb_{shaft}{+j}`` (rig.features.feature_definitions)."""
     found = re.search(r"[+-](\d+)$", name)
     if found is None:  # an internal invariant: the layout names every sideband so
         raise ValueError(f"{name!r} is not a sideband feature name")
     return int(found.group(1))
 
 
-def visible_sidebands(case: RigCase, nominal: FitResult, *, min_snr: float = DEFAULT_SETTINGS.min_sideband_snr
-                      ) -> dict[str, dict[int, tuple[int, int]]]:
+def visible_sidebands(
+    case: RigCase, nominal: FitResult, *, min_snr: float = DEFAULT_SETTINGS.min_sideband_snr
+) -> dict[str, dict[int, tuple[int, int]]]:
     """Per shaft's sideband family and shaft order: how many of the rig's sidebands stand ``min_snr`` noise
     spreads clear of the nominal fit, of how many (usable runs and channels, both sides of every harmonic)."""
     model = nominal.model[..., case.layout.columns]
@@ -148,14 +161,21 @@ def visible_sidebands(case: RigCase, nominal: FitResult, *, min_snr: float = DEF
         for index, (name, kind) in enumerate(zip(case.layout.names, case.layout.families)):
             if kind == family:
                 orders.setdefault(_sideband_order(name), []).append(index)
-        counts[family] = {order: (int(clear[..., chosen].sum()), int(usable[..., chosen].sum()))
-                          for order, chosen in sorted(orders.items())}
+        counts[family] = {
+            order: (int(clear[..., chosen].sum()), int(usable[..., chosen].sum()))
+            for order, chosen in sorted(orders.items())
+        }
     return counts
 
 
-def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[float, float] | None,
-                          seed: np.random.SeedSequence, settings: DiagnosisSettings = DEFAULT_SETTINGS
-                          ) -> PitchErrorAllowance:
+def pitch_error_allowance(
+    case: RigCase,
+    nominal: FitResult,
+    *,
+    classes: tuple[float, float] | None,
+    seed: np.random.SeedSequence,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+) -> PitchErrorAllowance:
     """The model error that pitch errors of ``classes`` add to the nominal fit's features (module docstring).
 
     Parameters
@@ -181,16 +201,26 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
 
     if classes is None:
         return not_applied("no pitch-error classes stated: the gears are taken as perfect")
-    short = [f"{family.split('_')[1]} order {order}: {count} of {total}"
-             for family, orders in visible.items() for order, (count, total) in orders.items()
-             if total == 0 or count < fraction * total]
+    short = [
+        f"{family.split('_')[1]} order {order}: {count} of {total}"
+        for family, orders in visible.items()
+        for order, (count, total) in orders.items()
+        if total == 0 or count < fraction * total
+    ]
     if short or not all(visible.values()):
-        return not_applied(f"the rig's first sidebands do not show pitch errors at every order on both shafts "
-                           f"(clear of the nominal fit by {settings.min_sideband_snr:g} noise std: {', '.join(short)}; "
-                           f"at least {100 * fraction:.0f} % needed at each)")
+        return not_applied(
+            f"the rig's first sidebands do not show pitch errors at every order on both shafts "
+            f"(clear of the nominal fit by {settings.min_sideband_snr:g} noise std: {', '.join(short)}; "
+            f"at least {100 * fraction:.0f} % needed at each)"
+        )
     rng = np.random.default_rng(seed)
-    bounds = run_out_bounds(case.design, classes, np.random.default_rng(child_seed(seed, 0)),
-                            quantile=settings.run_out_quantile, draws=_RUN_OUT_DRAWS)
+    bounds = run_out_bounds(
+        case.design,
+        classes,
+        np.random.default_rng(child_seed(seed, 0)),
+        quantile=settings.run_out_quantile,
+        draws=_RUN_OUT_DRAWS,
+    )
     positions = (np.arange(draws) + 0.5) / draws
     drawn_errors = [draw_in_classes(case.design, classes, position, rng) for position in positions]
     absolute, forest_share = allowance_errors(case, nominal.problem, nominal.vector, drawn_errors)
@@ -201,19 +231,35 @@ def pitch_error_allowance(case: RigCase, nominal: FitResult, *, classes: tuple[f
     line = np.array(case.layout.kinds) == "line"
     ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
     finite = ratio[np.isfinite(ratio)]
-    shown = ", ".join(f"{family.split('_')[1]} {sum(c for c, _ in orders.values())} of "
-                      f"{sum(t for _, t in orders.values())}" for family, orders in visible.items())
-    reason = (f"ISO 1328-1 classes {classes[0]:g} to {classes[1]:g}: the rig's first sidebands show pitch errors "
-              f"at every order on both shafts ({shown} clear of the nominal fit)")
-    return PitchErrorAllowance(True, reason, classes, visible, draws, absolute,
-                               float(finite.max()) if finite.size else 0.0,
-                               float(np.median(forest_share[case.usable])) if case.usable.any() else 0.0,
-                               time.perf_counter() - started, bounds, tuple(drawn_errors), ranges, factors,
-                               share_below(spread, factors))
+    shown = ", ".join(
+        f"{family.split('_')[1]} {sum(c for c, _ in orders.values())} of {sum(t for _, t in orders.values())}"
+        for family, orders in visible.items()
+    )
+    reason = (
+        f"ISO 1328-1 classes {classes[0]:g} to {classes[1]:g}: the rig's first sidebands show pitch errors "
+        f"at every order on both shafts ({shown} clear of the nominal fit)"
+    )
+    return PitchErrorAllowance(
+        True,
+        reason,
+        classes,
+        visible,
+        draws,
+        absolute,
+        float(finite.max()) if finite.size else 0.0,
+        float(np.median(forest_share[case.usable])) if case.usable.any() else 0.0,
+        time.perf_counter() - started,
+        bounds,
+        tuple(drawn_errors),
+        ranges,
+        factors,
+        share_below(spread, factors),
+    )
 
 
-def allowance_errors(case: RigCase, problem: FitProblem, vector: np.ndarray, drawn_errors: Sequence[PitchErrors]
-                     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def allowance_errors(
+    case: RigCase, problem: FitProblem, vector: np.ndarray, drawn_errors: Sequence[PitchErrors]
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Each feature's absolute model error: the model at ``vector`` simulated without and with each pitch-error draw.
 
     Parameters
@@ -233,20 +279,19 @@ def allowance_errors(case: RigCase, problem: FitProblem, vector: np.ndarray, dra
     forest_share : ndarray (n_op, n_channel)
         The share of each record's noise power that the draws' forest of lines alone reads as.
     """
-    clean = [replace(problem.run_task(vector, op), periodicity="free", phasors=True)
-             for op in range(case.n_op)]
+    clean = [replace(problem.run_task(vector, op), periodicity="free", phasors=True) for op in range(case.n_op)]
     tasks = list(clean)
     for errors in drawn_errors:
         tasks += [replace(task, pitch_errors=errors) for task in clean]
     draws = len(drawn_errors)
     everything = np.stack([values for values, _ in case.execute(tasks)])
     results = everything[..., case.layout.columns]
-    base = results[:case.n_op]
-    drawn = results[case.n_op:].reshape(draws, case.n_op, *base.shape[1:])
+    base = results[: case.n_op]
+    drawn = results[case.n_op :].reshape(draws, case.n_op, *base.shape[1:])
     # the noise floor the draws' forest of shaft-order lines alone reads as (noise-free records)
     column = case.processors[0].columns["noise_std"]
-    forest = everything[case.n_op:, :, column].real.reshape(draws, case.n_op, -1)
-    forest_share = np.clip(np.mean(forest ** 2, axis=0) / np.maximum(case.noise_std ** 2, 1e-300), 0.0, 1.0)
+    forest = everything[case.n_op :, :, column].real.reshape(draws, case.n_op, -1)
+    forest_share = np.clip(np.mean(forest**2, axis=0) / np.maximum(case.noise_std**2, 1e-300), 0.0, 1.0)
     kinds = np.array(case.layout.kinds)
     absolute: dict[str, np.ndarray] = {}
     with np.errstate(invalid="ignore"):
@@ -258,16 +303,17 @@ def allowance_errors(case: RigCase, problem: FitProblem, vector: np.ndarray, dra
             change = np.abs(drawn[..., chosen]) ** 2 - np.abs(base[..., chosen]) ** 2
             # the rig's noise power is read from a floor the forest raises: up to that share of it may be
             # the lines', not noise, so the noise power these features expect is that uncertain too
-            noise_power = case.noise_std ** 2 * np.array([getattr(noise, moments)[0] for noise in case.noise])[:, None]
-            absolute[kind] = np.sqrt(np.mean(change ** 2, axis=0) + (forest_share * noise_power)[..., None] ** 2)
+            noise_power = case.noise_std**2 * np.array([getattr(noise, moments)[0] for noise in case.noise])[:, None]
+            absolute[kind] = np.sqrt(np.mean(change**2, axis=0) + (forest_share * noise_power)[..., None] ** 2)
         chosen = kinds == "kurtosis"
         absolute["kurtosis"] = np.sqrt(np.mean((drawn[..., chosen].real - base[..., chosen].real) ** 2, axis=0))
     absolute = {kind: np.nan_to_num(values, nan=0.0, posinf=0.0) for kind, values in absolute.items()}
     return absolute, forest_share
 
 
-def allowance_for_fit(case: RigCase, result: FitResult, allowance: PitchErrorAllowance,
-                      base_error: Mapping[str, float]) -> FeatureModelError:
+def allowance_for_fit(
+    case: RigCase, result: FitResult, allowance: PitchErrorAllowance, base_error: Mapping[str, float]
+) -> FeatureModelError:
     """The model error of a fit with effects: ``base_error`` plus what the allowance's draws do to *its* features.
 
     What pitch errors do to the features depends on the model they act in:
@@ -288,8 +334,7 @@ def allowance_for_fit(case: RigCase, result: FitResult, allowance: PitchErrorAll
     return FeatureModelError.combined(base_error, absolute)
 
 
-def with_own_allowance(result: FitResult, *, max_evaluations: int = DEFAULT_SETTINGS.full_fit_evaluations
-                       ) -> FitResult:
+def with_own_allowance(result: FitResult, *, max_evaluations: int = DEFAULT_SETTINGS.full_fit_evaluations) -> FitResult:
     """A fit with effects refitted with its own model's pitch-error allowance (:func:`allowance_for_fit`).
 
     Unchanged when the case has no allowance applied or the fit has no
@@ -303,8 +348,13 @@ def with_own_allowance(result: FitResult, *, max_evaluations: int = DEFAULT_SETT
         return result
     base_error = case.model_error_before_allowance
     own = allowance_for_fit(case, result, allowance, case.model_error if base_error is None else base_error)
-    refit = fit(result.problem.with_model_error(own), [result.vector], free=result.free,
-                max_evaluations=max_evaluations, tolerance=1e-3)
+    refit = fit(
+        result.problem.with_model_error(own),
+        [result.vector],
+        free=result.free,
+        max_evaluations=max_evaluations,
+        tolerance=1e-3,
+    )
     return refit.after(result)
 
 
@@ -332,7 +382,7 @@ def modulation_gain(result: FitResult) -> float:
 
 
 def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[float, float]]:
-    """Per gear: the run-out its first-order lines read as (m, along the line of action) and the share of class gears below.
+    """Per gear: the run-out its first-order lines read as (m, along the line of action), and its share among gears.
 
     The run-out is the allowance draws' RMS |E_1| scaled by the factor the
     nominal fit read off the rig (:func:`.pitch_orders.scaled_to_rig`); the
@@ -342,9 +392,11 @@ def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[
     if allowance is None or not allowance.applied or not allowance.class_shares:
         return {}
     amplitudes = drawn_amplitudes(allowance.drawn_errors)
-    return {shaft: (amplitudes[(shaft, 1)] * math.sqrt(allowance.factors[(shaft, 1)]),
-                    allowance.class_shares[(shaft, 1)])
-            for shaft in ("pinion", "gear") if (shaft, 1) in allowance.class_shares}
+    return {
+        shaft: (amplitudes[(shaft, 1)] * math.sqrt(allowance.factors[(shaft, 1)]), allowance.class_shares[(shaft, 1)])
+        for shaft in ("pinion", "gear")
+        if (shaft, 1) in allowance.class_shares
+    }
 
 
 #: A gear whose first-order errors read larger than this share of the stated classes' gears is reported
@@ -352,8 +404,9 @@ def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[
 LARGE_RUN_OUT_SHARE = DEFAULT_SETTINGS.large_run_out_share
 
 
-def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts: Sequence[str], *,
-                            share_threshold: float = LARGE_RUN_OUT_SHARE) -> list[dict[str, Any]]:
+def run_outs_not_told_apart(
+    allowance: PitchErrorAllowance | None, named_shafts: Sequence[str], *, share_threshold: float = LARGE_RUN_OUT_SHARE
+) -> list[dict[str, Any]]:
     """Gears whose first-order errors read as a run-out large for their classes, with no eccentricity named there.
 
     A gear's first-order pitch error is a run-out exactly as an eccentric
@@ -387,17 +440,36 @@ def run_outs_not_told_apart(allowance: PitchErrorAllowance | None, named_shafts:
     for shaft, (run_out, share) in first_order_reads(allowance).items():
         if share < share_threshold or shaft in named_shafts:
             continue
-        found.append({
-            "effect": "eccentricity", "shaft": shaft, "run_out_m": run_out, "share_of_class_gears_below": share,
-            "classes": [low, high], "run_out_95_m": allowance.run_out_bound.get(shaft),
-            "reason": f"the {shaft}'s first-order lines read as a run-out of {1e6 * run_out:.3g} um along the line "
-                      f"of action, more than {100 * share:.0f} % of ISO 1328-1 class {low:g} to {high:g} "
-                      f"{shaft}s have from their pitch errors: an eccentric {shaft} shaft may be part of it, and "
-                      f"the lines cannot tell a shaft's run-out from the {shaft}'s own first-order errors here "
-                      f"(a run-out measurement of the {shaft} can)"})
+        found.append(
+            {
+                "effect": "eccentricity",
+                "shaft": shaft,
+                "run_out_m": run_out,
+                "share_of_class_gears_below": share,
+                "classes": [low, high],
+                "run_out_95_m": allowance.run_out_bound.get(shaft),
+                "reason": f"the {shaft}'s first-order lines read as a run-out of {1e6 * run_out:.3g} um along the line "
+                f"of action, more than {100 * share:.0f} % of ISO 1328-1 class {low:g} to {high:g} "
+                f"{shaft}s have from their pitch errors: an eccentric {shaft} shaft may be part of it, and "
+                f"the lines cannot tell a shaft's run-out from the {shaft}'s own first-order errors here "
+                f"(a run-out measurement of the {shaft} can)",
+            }
+        )
     return found
 
 
-__all__ = ["DEFAULT_CLASSES", "LARGE_RUN_OUT_SHARE", "PitchErrorAllowance", "check_classes", "run_out_bounds",
-           "visible_sidebands", "pitch_error_allowance", "allowance_errors", "allowance_for_fit", "with_own_allowance",
-           "modulation_gain", "first_order_reads", "run_outs_not_told_apart"]
+__all__ = [
+    "DEFAULT_CLASSES",
+    "LARGE_RUN_OUT_SHARE",
+    "PitchErrorAllowance",
+    "check_classes",
+    "run_out_bounds",
+    "visible_sidebands",
+    "pitch_error_allowance",
+    "allowance_errors",
+    "allowance_for_fit",
+    "with_own_allowance",
+    "modulation_gain",
+    "first_order_reads",
+    "run_outs_not_told_apart",
+]

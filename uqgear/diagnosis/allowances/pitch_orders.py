@@ -61,20 +61,27 @@ _GEARS = ("pinion", "gear")
 
 def _mean_powers(drawn_errors: Sequence[PitchErrors]) -> dict[str, np.ndarray]:
     """Per gear, the mean |E_j|^2 (one per order of :data:`ORDERS`) over pitch-error draws."""
-    return {gear: np.mean([order_powers(getattr(errors, gear)) for errors in drawn_errors], axis=0)
-            for gear in _GEARS}
+    return {gear: np.mean([order_powers(getattr(errors, gear)) for errors in drawn_errors], axis=0) for gear in _GEARS}
 
 
 def drawn_amplitudes(drawn_errors: Sequence[PitchErrors]) -> dict[tuple[str, int], float]:
     """Per (gear, order): the RMS |E_j| over the draws the allowance simulated (m, along the line of action)."""
-    return {(gear, order): float(math.sqrt(power))
-            for gear, powers in _mean_powers(drawn_errors).items() for order, power in zip(ORDERS, powers)}
+    return {
+        (gear, order): float(math.sqrt(power))
+        for gear, powers in _mean_powers(drawn_errors).items()
+        for order, power in zip(ORDERS, powers)
+    }
 
 
-def class_powers(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
-                 rng: np.random.Generator, *, draws: int = _BOUND_DRAWS
-                 ) -> dict[tuple[str, int], tuple[np.ndarray, float]]:
-    """Per (gear, order): |E_j|^2 of ``draws`` gears of ``classes`` (tooth positions only), and the allowance draws' mean.
+def class_powers(
+    design: Design,
+    classes: tuple[float, float],
+    drawn_errors: Sequence[PitchErrors],
+    rng: np.random.Generator,
+    *,
+    draws: int = _BOUND_DRAWS,
+) -> dict[tuple[str, int], tuple[np.ndarray, float]]:
+    """Per (gear, order): |E_j|^2 of ``draws`` gears of ``classes`` (tooth positions only), and the allowance's mean.
 
     Levels are drawn uniformly over the classes (tolerances grow by sqrt(2)
     a class), as the allowance spreads its draws. The spread of the gears
@@ -86,13 +93,17 @@ def class_powers(design: Design, classes: tuple[float, float], drawn_errors: Seq
         drawn = draw_in_classes(design, classes, rng.random(), rng)
         for gear in _GEARS:
             powers[gear][index] = order_powers(getattr(drawn, gear))
-    return {(gear, order): (powers[gear][:, position], max(float(allowed[position]), 1e-300))
-            for gear, allowed in _mean_powers(drawn_errors).items() for position, order in enumerate(ORDERS)}
+    return {
+        (gear, order): (powers[gear][:, position], max(float(allowed[position]), 1e-300))
+        for gear, allowed in _mean_powers(drawn_errors).items()
+        for position, order in enumerate(ORDERS)
+    }
 
 
-def bounds_of(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
-              quantiles: tuple[float, ...] = FACTOR_QUANTILES) -> dict[tuple[str, int], tuple[float, float]]:
-    """Per group, the ``quantiles`` of :func:`class_powers` over the allowance's mean: the range its factor is held to."""
+def bounds_of(
+    spread: Mapping[tuple[str, int], tuple[np.ndarray, float]], quantiles: tuple[float, ...] = FACTOR_QUANTILES
+) -> dict[tuple[str, int], tuple[float, float]]:
+    """Per group, ``quantiles`` of :func:`class_powers` over the allowance's mean: the range its factor is held to."""
     bounds = {}
     for key, (powers, mean) in spread.items():
         low, high = np.quantile(powers, quantiles)
@@ -100,24 +111,37 @@ def bounds_of(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
     return bounds
 
 
-def factor_bounds(design: Design, classes: tuple[float, float], drawn_errors: Sequence[PitchErrors],
-                  rng: np.random.Generator, *, quantiles: tuple[float, ...] = FACTOR_QUANTILES,
-                  draws: int = _BOUND_DRAWS) -> dict[tuple[str, int], tuple[float, float]]:
+def factor_bounds(
+    design: Design,
+    classes: tuple[float, float],
+    drawn_errors: Sequence[PitchErrors],
+    rng: np.random.Generator,
+    *,
+    quantiles: tuple[float, ...] = FACTOR_QUANTILES,
+    draws: int = _BOUND_DRAWS,
+) -> dict[tuple[str, int], tuple[float, float]]:
     """Per (gear, order): the range of |E_j|^2 that gears of ``classes`` give, over the allowance draws' mean."""
     return bounds_of(class_powers(design, classes, drawn_errors, rng, draws=draws), quantiles)
 
 
-def share_below(spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
-                factors: Mapping[tuple[str, int], float]) -> dict[tuple[str, int], float]:
+def share_below(
+    spread: Mapping[tuple[str, int], tuple[np.ndarray, float]], factors: Mapping[tuple[str, int], float]
+) -> dict[tuple[str, int], float]:
     """Per group, the share of gears of the stated classes whose |E_j| is below the one a fit read (its factor)."""
-    return {key: float(np.mean(spread[key][0] < factor * spread[key][1]))
-            for key, factor in factors.items() if key in spread}
+    return {
+        key: float(np.mean(spread[key][0] < factor * spread[key][1]))
+        for key, factor in factors.items()
+        if key in spread
+    }
 
 
 def line_groups(case: RigCase) -> dict[tuple[str, int], np.ndarray]:
     """Positions, among the layout's line features, of each (gear, order) group: shaft line j and sidebands +-j."""
-    lines = [(name, family) for name, family, kind in zip(case.layout.names, case.layout.families,
-                                                          case.layout.kinds) if kind == "line"]
+    lines = [
+        (name, family)
+        for name, family, kind in zip(case.layout.names, case.layout.families, case.layout.kinds)
+        if kind == "line"
+    ]
     groups: dict[tuple[str, int], list[int]] = {}
     for position, (name, family) in enumerate(lines):
         for gear in _GEARS:
@@ -138,13 +162,20 @@ def line_groups(case: RigCase) -> dict[tuple[str, int], np.ndarray]:
 def _rice_log_density(observed: np.ndarray, nu: np.ndarray, variance: np.ndarray) -> np.ndarray:
     """Log density of a Rice amplitude (per-quadrature variance ``variance``), stable for large nu/sigma."""
     argument = observed * nu / variance
-    return (np.log(np.maximum(observed, 1e-300) / variance) - (observed - nu) ** 2 / (2.0 * variance)
-            + np.log(np.maximum(scipy.special.i0e(argument), 1e-300)))
+    return (
+        np.log(np.maximum(observed, 1e-300) / variance)
+        - (observed - nu) ** 2 / (2.0 * variance)
+        + np.log(np.maximum(scipy.special.i0e(argument), 1e-300))
+    )
 
 
-def fitted_factors(case: RigCase, model: np.ndarray, allowance_line: np.ndarray,
-                   base_error: Mapping[str, float], bounds: Mapping[tuple[str, int], tuple[float, float]]
-                   ) -> dict[tuple[str, int], float]:
+def fitted_factors(
+    case: RigCase,
+    model: np.ndarray,
+    allowance_line: np.ndarray,
+    base_error: Mapping[str, float],
+    bounds: Mapping[tuple[str, int], tuple[float, float]],
+) -> dict[tuple[str, int], float]:
     """Per (gear, order) group: the factor on the allowance's variance that makes the rig's lines most likely.
 
     Parameters
@@ -163,8 +194,11 @@ def fitted_factors(case: RigCase, model: np.ndarray, allowance_line: np.ndarray,
     observed = case.observed[..., line]
     nu = np.abs(model[..., case.layout.columns][..., line])
     usable = case.mask()[..., line] & np.isfinite(nu)
-    fixed = (case.line_noise_sigma()[..., line] ** 2 + (base_error["line"] * nu) ** 2
-             + np.broadcast_to(absolute_model_error(base_error, "line"), nu.shape) ** 2)
+    fixed = (
+        case.line_noise_sigma()[..., line] ** 2
+        + (base_error["line"] * nu) ** 2
+        + np.broadcast_to(absolute_model_error(base_error, "line"), nu.shape) ** 2
+    )
     factors = {}
     for key, positions in line_groups(case).items():
         low, high = bounds[key]
@@ -184,8 +218,9 @@ def fitted_factors(case: RigCase, model: np.ndarray, allowance_line: np.ndarray,
     return factors
 
 
-def scaled_line_errors(case: RigCase, allowance_line: np.ndarray,
-                       factors: Mapping[tuple[str, int], float]) -> np.ndarray:
+def scaled_line_errors(
+    case: RigCase, allowance_line: np.ndarray, factors: Mapping[tuple[str, int], float]
+) -> np.ndarray:
     """The allowance's line errors with each group's variance scaled by its factor (other lines unchanged)."""
     scaled = np.array(allowance_line, dtype=float, copy=True)
     for key, positions in line_groups(case).items():
@@ -193,18 +228,24 @@ def scaled_line_errors(case: RigCase, allowance_line: np.ndarray,
     return scaled
 
 
-def scaled_to_rig(case: RigCase, model: np.ndarray, allowance_line: np.ndarray, base_error: Mapping[str, float],
-                  bounds: Mapping[tuple[str, int], tuple[float, float]]
-                  ) -> tuple[np.ndarray, dict[tuple[str, int], float]]:
+def scaled_to_rig(
+    case: RigCase,
+    model: np.ndarray,
+    allowance_line: np.ndarray,
+    base_error: Mapping[str, float],
+    bounds: Mapping[tuple[str, int], tuple[float, float]],
+) -> tuple[np.ndarray, dict[tuple[str, int], float]]:
     """A model's allowance line errors scaled by its own fitted factors (:func:`fitted_factors`), and the factors."""
     factors = fitted_factors(case, model, allowance_line, base_error, bounds)
     return scaled_line_errors(case, allowance_line, factors), factors
 
 
-def factors_summary(factors: Mapping[tuple[str, int], float],
-                    bounds: Mapping[tuple[str, int], tuple[float, float]],
-                    amplitudes: Mapping[tuple[str, int], float],
-                    shares: Mapping[tuple[str, int], float] | None = None) -> dict[str, dict[str, dict[str, Any]]]:
+def factors_summary(
+    factors: Mapping[tuple[str, int], float],
+    bounds: Mapping[tuple[str, int], tuple[float, float]],
+    amplitudes: Mapping[tuple[str, int], float],
+    shares: Mapping[tuple[str, int], float] | None = None,
+) -> dict[str, dict[str, dict[str, Any]]]:
     """JSON-ready: per gear and order, the fitted factor and its range, and what they are as |E_j| in m.
 
     ``amplitudes`` are the draws' RMS |E_j| (:func:`drawn_amplitudes`): the
@@ -218,13 +259,28 @@ def factors_summary(factors: Mapping[tuple[str, int], float],
         low, high = bounds[(gear, order)]
         rms = amplitudes[(gear, order)]
         summary.setdefault(gear, {})[str(order)] = {
-            "factor": factor, "low": low, "high": high, "amplitude_m": rms * math.sqrt(factor),
-            "amplitude_range_m": [rms * math.sqrt(low), rms * math.sqrt(high)]}
+            "factor": factor,
+            "low": low,
+            "high": high,
+            "amplitude_m": rms * math.sqrt(factor),
+            "amplitude_range_m": [rms * math.sqrt(low), rms * math.sqrt(high)],
+        }
         if shares is not None and (gear, order) in shares:
             summary[gear][str(order)]["share_of_class_gears_below"] = shares[(gear, order)]
     return summary
 
 
-__all__ = ["ORDERS", "FACTOR_QUANTILES", "drawn_amplitudes", "class_powers", "factor_bounds",
-           "bounds_of", "share_below", "line_groups",
-           "fitted_factors", "scaled_line_errors", "scaled_to_rig", "factors_summary"]
+__all__ = [
+    "ORDERS",
+    "FACTOR_QUANTILES",
+    "drawn_amplitudes",
+    "class_powers",
+    "factor_bounds",
+    "bounds_of",
+    "share_below",
+    "line_groups",
+    "fitted_factors",
+    "scaled_line_errors",
+    "scaled_to_rig",
+    "factors_summary",
+]

@@ -10,12 +10,10 @@ then names what changed between the two instead of the rig's own structure.
 
 Method (docs/model.md section 6.1):
 
-1. **Compatibility.** Both campaigns must state the same design (every key
-   of the ``design`` attribute) and the reference must hold every channel of
-   the test campaign; every test operating point needs a reference point at
-   the same pinion speed and drive torque (``speed_tolerance`` and
-   ``torque_tolerance`` of :class:`~uqgear.diagnosis.DiagnosisSettings`).
-   Otherwise :class:`DiagnosisError` names the file and what differs.
+1. **Compatibility** (:mod:`.compatibility`). Both campaigns must state the
+   same design and channels and every test operating point needs a
+   reference point at the same speed and torque; otherwise
+   :class:`~uqgear.diagnosis.DiagnosisError` names the file and what differs.
 2. **Reference fit.** The reference is prepared like any campaign
    (:func:`~uqgear.diagnosis.case.prepare_case`) and the nominal model fitted
    to it (:func:`~uqgear.diagnosis.fitting.fit_nominal`).
@@ -40,7 +38,6 @@ Method (docs/model.md section 6.1):
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, replace
@@ -51,16 +48,11 @@ import xarray as xr
 
 from ...physics.design import Design
 from ..case import FeatureModelError, RigCase, prepare_case
-from ..errors import DiagnosisError
 from ..execution import RunExecutor, transferred_rms
 from ..fitting import fit_nominal
-from ..settings import DEFAULT_SETTINGS
+from .compatibility import SPEED_TOLERANCE, TORQUE_TOLERANCE, match_operating_points
 from .gain_curve import DIRECT_FLOOR, GainCurve, fit_gain_curve
 
-#: Relative tolerance on pinion speed for matching a test run to a reference run.
-SPEED_TOLERANCE = DEFAULT_SETTINGS.speed_tolerance
-#: Relative tolerance on drive torque for matching a test run to a reference run.
-TORQUE_TOLERANCE = DEFAULT_SETTINGS.torque_tolerance
 #: A line enters the learned correction when rig and model both stand this many per-quadrature noise spreads up.
 MIN_LINE_SNR = 5.0
 # Frequencies of the gain curve stored in diagnosis.json (per channel).
@@ -77,82 +69,6 @@ _LOCAL_MIN_BINS = 20
 
 # ---------------------------------------------------------------------------------------------- compatibility
 
-def _design_dict(rig: xr.Dataset, where: str) -> dict[str, Any]:
-    try:
-        design = json.loads(str(rig.attrs.get("design", "")))
-    except ValueError:
-        raise DiagnosisError(f"{where}: design: expected a JSON object") from None
-    if not isinstance(design, dict):
-        raise DiagnosisError(f"{where}: design: expected a JSON object")
-    return design
-
-
-def _same(a: Any, b: Any) -> bool:
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
-        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-15)
-    return a == b
-
-
-def check_design_match(test: xr.Dataset, reference: xr.Dataset, *, where: str) -> None:
-    """Refuse a reference campaign whose stated design or channels differ from the test campaign's.
-
-    Raises
-    ------
-    DiagnosisError
-        Naming ``where`` (the reference file) and the first keys that differ.
-    """
-    ours, theirs = _design_dict(test, "rig data"), _design_dict(reference, where)
-    differ = [key for key in sorted(set(ours) | set(theirs))
-              if key not in ours or key not in theirs or not _same(ours[key], theirs[key])]
-    if differ:
-        shown = ", ".join(f"{key} {theirs.get(key, 'missing')} (test {ours.get(key, 'missing')})" for key in differ[:4])
-        more = f" and {len(differ) - 4} more" if len(differ) > 4 else ""
-        raise DiagnosisError(f"reference {where}: design differs from the test campaign's: {shown}{more}; "
-                             "expected a campaign of the same gear pair on the same rig")
-    from ...rig.sampling import SIGNAL_CHANNELS
-
-    missing = [name for name in SIGNAL_CHANNELS if name in test.data_vars and name not in reference.data_vars]
-    if missing:
-        raise DiagnosisError(f"reference {where}: no channel {', '.join(missing)}; expected every channel of the "
-                             "test campaign")
-
-
-def match_operating_points(test: xr.Dataset, reference: xr.Dataset, *, where: str,
-                           speed_tolerance: float = SPEED_TOLERANCE,
-                           torque_tolerance: float = TORQUE_TOLERANCE) -> np.ndarray:
-    """For each test operating point the reference one at the same speed and drive torque.
-
-    Returns
-    -------
-    ndarray of int (n_op,)
-        Index of the matched reference run (the closest in relative speed and torque).
-
-    Raises
-    ------
-    DiagnosisError
-        A test run without a reference run within the tolerances (the first one is named).
-    """
-    speeds = np.asarray(test["pinion_speed"].values, dtype=float)
-    torques = np.asarray(test["drive_torque"].values, dtype=float)
-    ref_speeds = np.asarray(reference["pinion_speed"].values, dtype=float)
-    ref_torques = np.asarray(reference["drive_torque"].values, dtype=float)
-    matched = np.zeros(speeds.size, dtype=int)
-    for op, (speed, torque) in enumerate(zip(speeds, torques)):
-        speed_off = np.abs(ref_speeds - speed) / speed
-        # a torque near zero is matched against a small absolute scale (1 N m)
-        torque_off = np.abs(ref_torques - torque) / max(abs(torque), 1.0)
-        fits = (speed_off <= speed_tolerance) & (torque_off <= torque_tolerance)
-        if not fits.any():
-            raise DiagnosisError(
-                f"reference {where}: test operating point {op} ({speed:g} rpm, {torque:g} N m) has no reference "
-                f"operating point within {speed_tolerance:.0%} in pinion speed and {torque_tolerance:.0%} in "
-                "drive torque; expected a reference campaign covering the test plan")
-        distance = np.where(fits, speed_off / speed_tolerance + torque_off / torque_tolerance, np.inf)
-        matched[op] = int(np.argmin(distance))
-    return matched
-
-
-# ---------------------------------------------------------------------------------------------- the correction
 
 @dataclass
 class ReferenceCorrection:
@@ -220,18 +136,28 @@ class ReferenceCorrection:
         widened = spread[..., case.layout.columns]
         kinds = np.array(case.layout.kinds)
         # a log-gain spread s is a relative error of about s on an amplitude
-        model_error = FeatureModelError(case.model_error,
-                                        {kind: widened[..., kinds == kind] for kind in set(case.layout.kinds)})
+        model_error = FeatureModelError(
+            case.model_error, {kind: widened[..., kinds == kind] for kind in set(case.layout.kinds)}
+        )
         # the RMS through the path line by line (transferred_rms), then scaled by its direct correction
-        corrected = replace(case, observed_all=observed_all, observed=observed_all[..., case.layout.columns],
-                            transfer=gain / colour, line_gain=line_gain, model_error=model_error)
+        corrected = replace(
+            case,
+            observed_all=observed_all,
+            observed=observed_all[..., case.layout.columns],
+            transfer=gain / colour,
+            line_gain=line_gain,
+            model_error=model_error,
+        )
         line = kinds == "line"
         usable = np.isfinite(corrected.observed[..., line])
         return corrected, {
             "noise_colour_range": [float(np.min(colour)), float(np.max(colour))],
-            "gain_range": [float(np.nanmin(compared[..., line][usable])) if usable.any() else None,
-                           float(np.nanmax(compared[..., line][usable])) if usable.any() else None],
-            "largest_added_relative_error": float(np.max(widened)) if widened.size else 0.0}
+            "gain_range": [
+                float(np.nanmin(compared[..., line][usable])) if usable.any() else None,
+                float(np.nanmax(compared[..., line][usable])) if usable.any() else None,
+            ],
+            "largest_added_relative_error": float(np.max(widened)) if widened.size else 0.0,
+        }
 
 
 def _kinds_of_all(case: RigCase) -> np.ndarray:
@@ -310,7 +236,7 @@ def _line_points(case: RigCase, model_all: np.ndarray, colour: np.ndarray) -> di
             with np.errstate(divide="ignore", invalid="ignore"):
                 clear = (observed >= MIN_LINE_SNR * scale) & (model >= MIN_LINE_SNR * scale) & (scale > 0)
                 # the Rice mean's bias is removed to first order: E|A + n|^2 = A^2 + 2 sigma^2
-                rig = np.sqrt(np.maximum(observed ** 2 - 2.0 * scale ** 2, 0.25 * observed ** 2))
+                rig = np.sqrt(np.maximum(observed**2 - 2.0 * scale**2, 0.25 * observed**2))
                 ratio = np.log(rig / model)
             # lines merged with an earlier one (within a bin) report that line: count each frequency once
             chosen = np.flatnonzero(clear & np.isfinite(ratio))
@@ -360,15 +286,17 @@ def _direct_corrections(case: RigCase, model_all: np.ndarray, line_gain: np.ndar
             if not case.usable[op, c]:
                 continue
             sigma2 = case.noise_std[op, c] ** 2
-            through_path = {"low_band_rms": model_all[op, c, names.index("low_band_rms")],
-                            "rms": float(transferred_rms(model_all[op, c], line_gain[op, c], case.processors[op]))}
+            through_path = {
+                "low_band_rms": model_all[op, c, names.index("low_band_rms")],
+                "rms": float(transferred_rms(model_all[op, c], line_gain[op, c], case.processors[op])),
+            }
             for kind, name, power in (("band", "low_band_rms", noise.band_power), ("rms", "rms", noise.total_power)):
                 observed = case.observed_all[op, c, names.index(name)]
                 model = through_path[name]
-                signal = observed ** 2 - sigma2 * power[0]
+                signal = observed**2 - sigma2 * power[0]
                 # only where the signal stands clear of the noise power's own scatter
                 if np.isfinite(signal) and model > 0 and signal > MIN_LINE_SNR * sigma2 * power[1]:
-                    out[kind][op, c] = 0.5 * math.log(signal / model ** 2)
+                    out[kind][op, c] = 0.5 * math.log(signal / model**2)
             rms_model = through_path["rms"]
             kurtosis_model = model_all[op, c, names.index("kurtosis")]
             observed = case.observed_all[op, c, names.index("kurtosis")]
@@ -377,15 +305,19 @@ def _direct_corrections(case: RigCase, model_all: np.ndarray, line_gain: np.ndar
                 noise_power = sigma2 * noise.total_power[0]
                 # the noise-free kurtosis that, with this noise, gives what the rig recorded (the inverse
                 # of discrepancy._noisy_kurtosis)
-                kurtosis = (observed * (signal_power + noise_power) ** 2 - 6.0 * signal_power * noise_power
-                            - 3.0 * noise_power ** 2) / signal_power ** 2
+                kurtosis = (
+                    observed * (signal_power + noise_power) ** 2
+                    - 6.0 * signal_power * noise_power
+                    - 3.0 * noise_power**2
+                ) / signal_power**2
                 if kurtosis > 0:
                     out["kurtosis"][op, c] = math.log(kurtosis / kurtosis_model)
     return out
 
 
-def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.random.SeedSequence,
-                    workers: int = 1) -> ReferenceCorrection:
+def learn_reference(
+    rig: xr.Dataset, design: Design, *, source: str, seed: np.random.SeedSequence, workers: int = 1
+) -> ReferenceCorrection:
     """Fit the nominal model to a healthy reference campaign and learn each channel's transfer correction.
 
     Parameters
@@ -428,49 +360,77 @@ def learn_reference(rig: xr.Dataset, design: Design, *, source: str, seed: np.ra
         mean, sd = curve.predict(grid)
         peak = int(np.argmax(np.abs(mean)))
         channels_summary[channel] = {
-            "lines": int(frequencies.size), "lines_dropped": curve.dropped,
-            "mean_log_gain": curve.mean, "amplitude": curve.amplitude, "length_scale_ln_f": curve.length,
+            "lines": int(frequencies.size),
+            "lines_dropped": curve.dropped,
+            "mean_log_gain": curve.mean,
+            "amplitude": curve.amplitude,
+            "length_scale_ln_f": curve.length,
             "scatter": curve.scatter,
-            "largest_gain": {"frequency": float(grid[peak]), "gain": float(np.exp(mean[peak])),
-                             "interval_2sd": [float(np.exp(mean[peak] - 2 * sd[peak])),
-                                              float(np.exp(mean[peak] + 2 * sd[peak]))]},
+            "largest_gain": {
+                "frequency": float(grid[peak]),
+                "gain": float(np.exp(mean[peak])),
+                "interval_2sd": [float(np.exp(mean[peak] - 2 * sd[peak])), float(np.exp(mean[peak] + 2 * sd[peak]))],
+            },
             "points": {"frequency": frequencies.tolist(), "log_ratio": ratios.tolist()},
-            "curve": {"frequency": grid.tolist(), "gain": np.exp(mean).tolist(),
-                      "low": np.exp(mean - 2 * sd).tolist(), "high": np.exp(mean + 2 * sd).tolist()},
+            "curve": {
+                "frequency": grid.tolist(),
+                "gain": np.exp(mean).tolist(),
+                "low": np.exp(mean - 2 * sd).tolist(),
+                "high": np.exp(mean + 2 * sd).tolist(),
+            },
         }
     summary = {
         "file": source,
         "method": "per-channel log gain rig/model as a Gaussian process in ln(frequency) over lines clear of "
-                  "the noise; band power, RMS and kurtosis read at the matched reference run",
-        "nominal_fit": {"parameters": nominal.values, "adhesion_torque": list(map(float, nominal.adhesion_torques)),
-                        "cost": nominal.cost, "converged": bool(nominal.converged)},
+        "the noise; band power, RMS and kurtosis read at the matched reference run",
+        "nominal_fit": {
+            "parameters": nominal.values,
+            "adhesion_torque": list(map(float, nominal.adhesion_torques)),
+            "cost": nominal.cost,
+            "converged": bool(nominal.converged),
+        },
         "operating_points": {"pinion_speed": case.speeds.tolist(), "drive_torque": case.drive_torques.tolist()},
         "channels": channels_summary,
         "direct": {kind: values.tolist() for kind, values in direct.items()},
         "seconds": time.perf_counter() - started,
     }
-    return ReferenceCorrection(source=source, rig=rig, channels=case.channels, curves=curves, direct=direct,
-                               summary=summary)
+    return ReferenceCorrection(
+        source=source, rig=rig, channels=case.channels, curves=curves, direct=direct, summary=summary
+    )
 
 
-def attach_reference(case: RigCase, correction: ReferenceCorrection, test: xr.Dataset, *,
-                     speed_tolerance: float = SPEED_TOLERANCE, torque_tolerance: float = TORQUE_TOLERANCE
-                     ) -> tuple[RigCase, dict[str, Any]]:
+def attach_reference(
+    case: RigCase,
+    correction: ReferenceCorrection,
+    test: xr.Dataset,
+    *,
+    speed_tolerance: float = SPEED_TOLERANCE,
+    torque_tolerance: float = TORQUE_TOLERANCE,
+) -> tuple[RigCase, dict[str, Any]]:
     """The test campaign corrected by a learned reference (its runs matched to the reference's), and the
     ``reference`` summary of ``diagnosis.json``."""
-    matched = match_operating_points(test, correction.rig, where=correction.source, speed_tolerance=speed_tolerance,
-                                     torque_tolerance=torque_tolerance)
+    matched = match_operating_points(
+        test,
+        correction.rig,
+        where=correction.source,
+        speed_tolerance=speed_tolerance,
+        torque_tolerance=torque_tolerance,
+    )
     corrected, applied = correction.apply(case, matched)
     summary = dict(correction.summary)
     summary["matched_operating_points"] = [
-        {"op": op, "reference_op": int(ref), "pinion_speed": float(test["pinion_speed"].values[op]),
-         "reference_pinion_speed": float(correction.rig["pinion_speed"].values[ref]),
-         "drive_torque": float(test["drive_torque"].values[op]),
-         "reference_drive_torque": float(correction.rig["drive_torque"].values[ref])}
-        for op, ref in enumerate(matched)]
+        {
+            "op": op,
+            "reference_op": int(ref),
+            "pinion_speed": float(test["pinion_speed"].values[op]),
+            "reference_pinion_speed": float(correction.rig["pinion_speed"].values[ref]),
+            "drive_torque": float(test["drive_torque"].values[op]),
+            "reference_drive_torque": float(correction.rig["drive_torque"].values[ref]),
+        }
+        for op, ref in enumerate(matched)
+    ]
     summary["applied"] = applied
     return corrected, summary
 
 
-__all__ = ["SPEED_TOLERANCE", "TORQUE_TOLERANCE", "MIN_LINE_SNR", "ReferenceCorrection", "check_design_match",
-           "match_operating_points", "noise_colour", "line_gains", "learn_reference", "attach_reference"]
+__all__ = ["MIN_LINE_SNR", "ReferenceCorrection", "noise_colour", "line_gains", "learn_reference", "attach_reference"]

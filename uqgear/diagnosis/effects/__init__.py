@@ -19,17 +19,39 @@ Examples
 
 from __future__ import annotations
 
-from .base import START_PHASES, EffectFamily
-from .eccentricity import EccentricityFamily
-from .tooth_damage import ToothDamageFamily
-from .friction import FrictionFamily
-from .torque_ripple import TorqueRippleFamily
 from .adhesion_oscillation import AdhesionOscillationFamily
+from .base import START_PHASES, EffectFamily
 from .bearing_clearance import BearingClearanceFamily
-from .registry import (LIBRARY, candidates_for, check_effects, effect_family, effect_names, register_effect,
-                       signature_hints, unregister_effect)
+from .eccentricity import EccentricityFamily
+from .friction import FrictionFamily
+from .registry import (
+    LIBRARY,
+    candidates_for,
+    check_effects,
+    effect_family,
+    effect_names,
+    register_effect,
+    signature_hints,
+    unregister_effect,
+)
+from .tooth_damage import ToothDamageFamily
+from .torque_ripple import TorqueRippleFamily
 
-__all__ = ["EffectFamily", "LIBRARY", "START_PHASES", "register_effect", "unregister_effect", "effect_names",
-           "effect_family", "candidates_for", "signature_hints", "check_effects",
-           "EccentricityFamily", "ToothDamageFamily", "FrictionFamily", "TorqueRippleFamily",
-           "AdhesionOscillationFamily", "BearingClearanceFamily"]
+__all__ = [
+    "EffectFamily",
+    "LIBRARY",
+    "START_PHASES",
+    "register_effect",
+    "unregister_effect",
+    "effect_names",
+    "effect_family",
+    "candidates_for",
+    "signature_hints",
+    "check_effects",
+    "EccentricityFamily",
+    "ToothDamageFamily",
+    "FrictionFamily",
+    "TorqueRippleFamily",
+    "AdhesionOscillationFamily",
+    "BearingClearanceFamily",
+]

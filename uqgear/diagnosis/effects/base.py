@@ -78,13 +78,20 @@ class EffectFamily:
 
     # ---- helpers for the variants
 
-    def candidate(self, label: str, choices: Sequence[tuple[str, object]], fitted: Sequence[ParameterSpec],
-                  starts: Sequence[dict[str, float]], periodicity: str) -> Candidate:
+    def candidate(
+        self,
+        label: str,
+        choices: Sequence[tuple[str, object]],
+        fitted: Sequence[ParameterSpec],
+        starts: Sequence[dict[str, float]],
+        periodicity: str,
+    ) -> Candidate:
         """One screening variant of this family."""
         return Candidate(self.name, label, tuple(choices), tuple(fitted), tuple(starts), periodicity, self.physics)
 
-    def parameter(self, parameter: str, unit: float, lower: float | None = None,
-                  upper: float | None = None) -> ParameterSpec:
+    def parameter(
+        self, parameter: str, unit: float, lower: float | None = None, upper: float | None = None
+    ) -> ParameterSpec:
         """A fitted parameter on a linear scale (a phase, a frequency), inside what the effect accepts."""
         definition = self.physics.PARAMETERS[parameter]
         # the search range never reaches past what the effect itself accepts
@@ -102,8 +109,9 @@ class EffectFamily:
         """
         definition = self.physics.PARAMETERS[parameter]
         high = definition.upper if upper is None else min(upper, definition.upper)
-        return ParameterSpec(f"{self.name}.{parameter}", True, centre, 1.0, max(centre * 1e-6, definition.lower),
-                             high, False)
+        return ParameterSpec(
+            f"{self.name}.{parameter}", True, centre, 1.0, max(centre * 1e-6, definition.lower), high, False
+        )
 
     def grid(self, **axes: Sequence[float]) -> tuple[dict[str, float], ...]:
         """Every combination of the start values, keyed ``FAMILY.PARAMETER``."""

@@ -32,8 +32,10 @@ class BearingClearanceFamily(EffectFamily):
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         fitted = (self.strength_parameter("clearance", 2e-5),)
         starts = self.grid(clearance=(1e-6, 1e-5, 1e-4))
-        return [self.candidate(f"bearing_clearance[{bearing}]", (("bearing", bearing),), fitted, starts, "mesh")
-                for bearing in ("pinion", "gear", "both")]
+        return [
+            self.candidate(f"bearing_clearance[{bearing}]", (("bearing", bearing),), fitted, starts, "mesh")
+            for bearing in ("pinion", "gear", "both")
+        ]
 
     def campaign_values(self, strength: float, phase: float, rng: np.random.Generator) -> dict[str, object]:
         return {self.strength: strength, "bearing": ("pinion", "gear", "both")[int(rng.integers(3))]}

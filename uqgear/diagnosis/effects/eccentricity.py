@@ -30,8 +30,11 @@ class EccentricityFamily(EffectFamily):
     ladder = (3e-8, 3e-7, 12e-6)
 
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
-        fitted = (self.strength_parameter("amplitude", 1e-6, upper=1e-4),
-                  self.parameter("phase", 1.0, 0.0, 2.0 * np.pi), self.strength_parameter("kappa", 1e-3, upper=0.3))
+        fitted = (
+            self.strength_parameter("amplitude", 1e-6, upper=1e-4),
+            self.parameter("phase", 1.0, 0.0, 2.0 * np.pi),
+            self.strength_parameter("kappa", 1e-3, upper=0.3),
+        )
         variants = []
         for shaft in ("pinion", "gear"):
             amplitude = float(np.clip(hints.get(f"eccentricity_{shaft}", 5e-6), 1e-9, 5e-5))
@@ -53,5 +56,9 @@ class EccentricityFamily(EffectFamily):
 
     def campaign_values(self, strength: float, phase: float, rng: np.random.Generator) -> dict[str, object]:
         # stiffness modulation in proportion (the public campaign: 12 um with kappa 0.03)
-        return {self.strength: strength, "shaft": ("pinion", "gear")[int(rng.integers(2))], "phase": phase,
-                "kappa": float(strength / 4e-4)}
+        return {
+            self.strength: strength,
+            "shaft": ("pinion", "gear")[int(rng.integers(2))],
+            "phase": phase,
+            "kappa": float(strength / 4e-4),
+        }

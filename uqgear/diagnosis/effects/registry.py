@@ -19,8 +19,14 @@ from .tooth_damage import ToothDamageFamily
 from .torque_ripple import TorqueRippleFamily
 
 #: The library's families, in the order a diagnosis screens them (and ranks ties).
-LIBRARY: tuple[EffectFamily, ...] = (EccentricityFamily(), ToothDamageFamily(), FrictionFamily(),
-                                     TorqueRippleFamily(), AdhesionOscillationFamily(), BearingClearanceFamily())
+LIBRARY: tuple[EffectFamily, ...] = (
+    EccentricityFamily(),
+    ToothDamageFamily(),
+    FrictionFamily(),
+    TorqueRippleFamily(),
+    AdhesionOscillationFamily(),
+    BearingClearanceFamily(),
+)
 
 _REGISTRY: dict[str, EffectFamily] = {family.name: family for family in LIBRARY}
 
@@ -64,8 +70,9 @@ def effect_family(name: str) -> EffectFamily:
     try:
         return _REGISTRY[name]
     except (KeyError, TypeError):
-        raise DiagnosisError(f"effects: {name!r} is not a library effect; expected one of "
-                             f"{', '.join(_REGISTRY)}") from None
+        raise DiagnosisError(
+            f"effects: {name!r} is not a library effect; expected one of {', '.join(_REGISTRY)}"
+        ) from None
 
 
 def candidates_for(effect: str, design: Design, *, hints: Mapping[str, float] | None = None) -> list[Candidate]:
@@ -101,8 +108,9 @@ def check_effects(effects: Sequence[str] | str | None) -> tuple[str, ...]:
     chosen: list[str] = []
     for name in effects:
         if not isinstance(name, str) or name not in _REGISTRY:
-            raise DiagnosisError(f"effects: {name!r} is not a library effect; expected one or more of "
-                                 f"{', '.join(_REGISTRY)}")
+            raise DiagnosisError(
+                f"effects: {name!r} is not a library effect; expected one or more of {', '.join(_REGISTRY)}"
+            )
         if name not in chosen:
             chosen.append(name)
     if not chosen:
@@ -110,5 +118,13 @@ def check_effects(effects: Sequence[str] | str | None) -> tuple[str, ...]:
     return tuple(chosen)
 
 
-__all__ = ["LIBRARY", "register_effect", "unregister_effect", "effect_names", "effect_family", "candidates_for",
-           "signature_hints", "check_effects"]
+__all__ = [
+    "LIBRARY",
+    "register_effect",
+    "unregister_effect",
+    "effect_names",
+    "effect_family",
+    "candidates_for",
+    "signature_hints",
+    "check_effects",
+]

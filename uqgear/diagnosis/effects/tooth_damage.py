@@ -29,9 +29,14 @@ class ToothDamageFamily(EffectFamily):
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         fitted = (self.strength_parameter("depth", 0.05, upper=0.9),)
         starts = self.grid(depth=(0.005, 0.05, 0.4))
-        return [self.candidate(f"tooth_damage[{gear}]", (("gear", gear), ("tooth", 0.0)), fitted, starts, gear)
-                for gear in ("pinion", "gear")]
+        return [
+            self.candidate(f"tooth_damage[{gear}]", (("gear", gear), ("tooth", 0.0)), fitted, starts, gear)
+            for gear in ("pinion", "gear")
+        ]
 
     def campaign_values(self, strength: float, phase: float, rng: np.random.Generator) -> dict[str, object]:
-        return {self.strength: strength, "gear": ("pinion", "gear")[int(rng.integers(2))],
-                "tooth": float(rng.integers(0, 17))}
+        return {
+            self.strength: strength,
+            "gear": ("pinion", "gear")[int(rng.integers(2))],
+            "tooth": float(rng.integers(0, 17)),
+        }
