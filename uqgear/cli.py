@@ -15,8 +15,10 @@
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler, a rig file without usable signal) ends with exit status
 2 and a one-line message on standard error, without a traceback, and leaves no
-partial output: ``run`` writes into a hidden sibling folder ``.DIR.partial``
-and renames it to ``DIR`` only when everything is written. Such mistakes are
+partial output: every command that writes a folder writes into a hidden
+sibling folder ``.DIR.partial`` and renames it to ``DIR`` only when everything
+is written (:class:`~uqgear.common.transaction.OutputFolder`, which the Python
+API's writers use too). Such mistakes are
 found before the work starts. An interrupted run (Ctrl-C, a killed job) keeps
 that folder, with its chunk checkpoints, so that ``--resume`` continues where
 it stopped.
