@@ -106,3 +106,30 @@ def test_the_python_api_leaves_nothing_for_a_mistake_in_its_input(tmp_path):
             call(broken, out)
         assert not (tmp_path / "deep").exists()
     assert _listing(tmp_path) == ["broken.nc"]
+
+
+def test_a_python_study_run_is_published_whole_and_kept_for_resume_on_failure(tmp_path, monkeypatch):
+    """uqgear.run_study as the command's run: a failed analysis leaves no result folder, its work resumable."""
+    from uqgear import parse_study, run_study
+    from uqgear.common.errors import internal_step
+    from uqgear.study import analyses
+
+    from test_cli import TINY
+
+    study = parse_study(TINY)
+    real = analyses.ANALYSES["monte_carlo"]
+
+    def failing(context):
+        with internal_step("sample"):
+            raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setitem(analyses.ANALYSES, "monte_carlo", failing)
+    out = tmp_path / "out"
+    with pytest.raises(InternalError) as caught:
+        run_study(study, out, show_progress=False)
+    assert not out.exists() and "--resume" in caught.value.kept
+    assert (partial_folder(out) / "bifurcation.nc").is_file()
+    monkeypatch.setitem(analyses.ANALYSES, "monte_carlo", real)
+    written = run_study(study, out, show_progress=False, resume=True)
+    assert [path.name for path in written] == ["bifurcation.nc", "monte_carlo.nc"]
+    assert _listing(out) == ["bifurcation.nc", "monte_carlo.nc"] and not partial_folder(out).exists()

@@ -36,7 +36,6 @@ folder for ``--resume``.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import warnings
 from collections.abc import Sequence
@@ -44,7 +43,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from .common.errors import InternalError, UqgearError, UqgearWarning
-from .common.transaction import OutputFolder, is_empty_folder
+from .common.transaction import OutputFolder, is_empty_folder, partial_folder
 
 #: Exit status of an internal failure after the input was accepted.
 EXIT_INTERNAL_ERROR = 1
@@ -52,9 +51,6 @@ EXIT_INTERNAL_ERROR = 1
 EXIT_USER_ERROR = 2
 #: Exit status after Ctrl-C.
 EXIT_INTERRUPTED = 130
-
-#: Folder of chunk checkpoints inside the work folder.
-CHECKPOINTS = ".checkpoints"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -135,18 +131,6 @@ def _command_validate(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------- run
 
 
-def _copy_previous(out: Path, work: Path) -> None:
-    """Copy a finished run's results and checkpoints into the work folder (for --resume)."""
-    for item in out.iterdir():
-        target = work / item.name
-        if target.exists():
-            continue
-        if item.is_dir():
-            shutil.copytree(item, target)
-        elif item.suffix == ".nc":
-            shutil.copy2(item, target)
-
-
 def _command_run(args: argparse.Namespace) -> int:
     from .study.schema import load_study
 
@@ -158,37 +142,29 @@ def _command_run(args: argparse.Namespace) -> int:
             f"--out {out}: folder exists and is not empty; choose a new folder, remove it, "
             "or pass --resume to continue or update that run"
         )
-    folder = OutputFolder(out, where="--out", existing="replace", resumable=True, resume=args.resume)
-    folder.check()
+    OutputFolder(out, where="--out", existing="replace").check()
     if args.workers is not None and args.workers < 1:
         return _fail(f"--workers: expected a positive integer; got {args.workers}")
     # the study is validated completely before anything is created
     study = load_study(args.study)
 
-    from .report.study_report import write_report
-    from .study.analyses import run_study
+    from .study.running import run_study
 
     try:
-        with folder as work:
-            if args.resume and out.is_dir():
-                _copy_previous(out, work)
-            run_study(
-                study,
-                work,
-                scheduler=args.scheduler,
-                workers=args.workers,
-                resume=args.resume,
-                show_progress=not args.quiet,
-                checkpoint_dir=work / CHECKPOINTS,
-            )
-            if study.outputs.report:
-                write_report(work, dpi=study.outputs.dpi)
-            # chunk checkpoints only serve an interrupted run; a finished analysis is reused
-            # from its result file on --resume
-            shutil.rmtree(work / CHECKPOINTS, ignore_errors=True)
+        run_study(
+            study,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            resume=args.resume,
+            show_progress=not args.quiet,
+            report=study.outputs.report,
+            dpi=study.outputs.dpi,
+            existing="replace",
+        )
     except KeyboardInterrupt:
         print(
-            f"uqgear: interrupted; finished work is kept in {folder.work}; run again with --resume to continue",
+            f"uqgear: interrupted; finished work is kept in {partial_folder(out)}; run again with --resume to continue",
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
