@@ -298,7 +298,10 @@ def _public_names(path: Path) -> tuple[set[str], list[str] | None]:
         elif isinstance(node, ast.Assign):
             for target in node.targets:
                 if isinstance(target, ast.Name) and target.id == "__all__":
-                    declared = list(ast.literal_eval(node.value))
+                    try:
+                        declared = list(ast.literal_eval(node.value))
+                    except ValueError:  # built at import (the package's lazy face): taken as it stands
+                        declared = sorted(bound)
                 elif isinstance(target, ast.Name):
                     bound.add(target.id)
         elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):

@@ -83,7 +83,7 @@ class RunProcessor:
     def set_notch(self, frequencies: Sequence[float], half_width: int) -> None:
         """Leave the bins within ``half_width`` of each frequency (Hz) out of the low band, rig and model alike.
 
-        For line interference (:mod:`uqgear.diagnosis.interference`). The rig's
+        For line interference (:mod:`uqgear.diagnosis.allowances.interference`). The rig's
         low band is then computed by :meth:`model_features`'s formula too.
         """
         resolution = self.fs / self.size
