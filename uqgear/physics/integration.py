@@ -725,3 +725,6 @@ class BatchEvaluator:
 
 __all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period", "BatchEvaluator",
            "QOI_INFO", "METHODS"]
+
+#: Public names of the fast integrator and its history columns (the diagnosis simulates campaigns with them).
+integrate_fast, HISTORY_COLUMNS = _integrate_fast, _HISTORY_COLUMNS

@@ -627,17 +627,22 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     spectra) with the content of its ``diagnosis.json`` (verdict, gap and
     shrink, where, ranking) in attribute ``diagnosis``. With ``reference``
     (a healthy campaign of the same rig, ``uqgear diagnose --reference``) its
-    learned transfer correction is carried over and recorded there.
+    learned transfer correction is carried over and recorded there. Its
+    ``settings`` (the documented decision thresholds of
+    :class:`~uqgear.diagnosis.DiagnosisSettings`) replace the defaults.
     """
-    from ..diagnosis.workflow import diagnosis_result
+    from ..diagnosis import Diagnosis, DiagnosisSettings
     from .schema import reference_path, rig_path
 
     effects = list(context.options["effects"])
     rig = rig_path(context.study, context.spec)
     reference = reference_path(context.study, context.spec)
-    content, result = diagnosis_result(rig, design=context.design, effects=effects, seed=context.stage_seed(0),
-                                       workers=context.threads, reference=reference,
-                                       pitch_classes=context.options["pitch_classes"])
+    settings = DiagnosisSettings.from_mapping(context.options.get("settings"),
+                                              where=f"analyses[{context.spec.index}].settings")
+    diagnosis = Diagnosis(effects=effects, settings=settings, design=context.design, seed=context.stage_seed(0),
+                          workers=context.threads, pitch_classes=context.options["pitch_classes"]
+                          ).fit(rig, reference=reference)
+    content, result = diagnosis.to_dict(), diagnosis.result_.copy()
     result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
                         effects=json.dumps(effects), rig=str(rig))
     if reference is not None:

@@ -26,6 +26,20 @@ INTERVAL_FALLBACKS: tuple[str, ...] = ("scan", "optimize", "none")
 SAMPLING_METHODS: tuple[str, ...] = ("monte_carlo", "latin_hypercube", "sobol", "halton")
 
 
+def diagnosis_settings(value: Any, path: str) -> dict[str, Any]:
+    """Checker of a ``diagnose`` analysis's ``settings``: documented thresholds of the diagnosis by name."""
+    from ..common.errors import StudyError, shown
+    from ..diagnosis import DiagnosisError, DiagnosisSettings
+
+    if not isinstance(value, dict):
+        raise StudyError(f"{path}: expected a mapping of diagnosis settings to values; got {shown(value)}")
+    try:
+        DiagnosisSettings.from_mapping(value, where=path, keys=DiagnosisSettings.study_keys())
+    except DiagnosisError as exc:
+        raise StudyError(str(exc)) from None
+    return dict(value)
+
+
 def _qoi_list() -> Checker:
     return list_of(choice(*QOIS), unique=True, what="a list of QoI names")
 
@@ -110,6 +124,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "reference": string(),
         # ISO 1328-1 classes of the rig's gears: what their pitch errors do is model error (none: perfect gears)
         "pitch_classes": class_range(1, 11),
+        # the documented decision thresholds of uqgear.diagnosis.DiagnosisSettings
+        "settings": diagnosis_settings,
     },
     "continuation": {
         "parameter": choice(*VARIABLES),
