@@ -327,15 +327,20 @@ def _shifted(s, h, d):
 
 
 @nb.njit(**INLINED)
-def rk4_combine(s, h, d1, d2, d3, d4):
-    """The classical RK4 update of ``s`` over ``h`` from its four stage derivatives."""
-    w = h / 6.0
+def rk4_combine_weighted(s, w, d1, d2, d3, d4):
+    """The classical RK4 update of ``s`` from its four stage derivatives, with the weight w = h / 6 given."""
     return (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
             s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
             s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
             s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
             s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
             s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
+
+
+@nb.njit(**INLINED)
+def rk4_combine(s, h, d1, d2, d3, d4):
+    """The classical RK4 update of ``s`` over ``h`` from its four stage derivatives."""
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
 
 
 @nb.njit(**INLINED)
@@ -348,12 +353,18 @@ def _rk4(s, h, d1, mid, end, p):
 
 
 @nb.njit(**INLINED)
-def rk4_step(s, h, d1, mid, end, c):
-    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e'') and :func:`coefficients`."""
+def rk4_step_weighted(s, h, w, d1, mid, end, c):
+    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients` and w = h / 6."""
     d2, _ = state_derivative(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c)
     d3, _ = state_derivative(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c)
     d4, _ = state_derivative(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c)
-    return rk4_combine(s, h, d1, d2, d3, d4)
+    return rk4_combine_weighted(s, w, d1, d2, d3, d4)
+
+
+@nb.njit(**INLINED)
+def rk4_step(s, h, d1, mid, end, c):
+    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e'') and :func:`coefficients`."""
+    return rk4_step_weighted(s, h, h / 6.0, d1, mid, end, c)
 
 
 @nb.njit(**JIT_OPTIONS)

@@ -484,9 +484,8 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
         groups, rest = np.empty((0, _lanes.LANES), dtype=np.int64), np.arange(len(params), dtype=np.int64)
     if len(groups):
         refused = np.zeros(len(params), dtype=np.bool_)
-        with _lanes.slp_vectorised():
-            # compiles (or loads) the lane kernel here, before the threads call it
-            _lanes.integrate_lanes(0, 0, groups, *arrays, refused)
+        # compiles (or loads) the lane kernel here, before the threads call it
+        _lanes.compile_lanes(groups, arrays, refused)
         spread(lambda first, last: _lanes.integrate_lanes(first, last, groups, *arrays, refused), len(groups), threads)
         rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)
     if len(rest):
