@@ -13,9 +13,15 @@ vector instructions, one per IEEE operation of the step for all eight runs
 
 Each lane computes exactly the operations of the one-sample kernel
 (:func:`uqgear.physics._rhs.classical_step`, through the same
-:func:`~uqgear.physics._rhs.state_derivative`; no fast-math, so nothing is
-reassociated or fused, and selects rather than branches for the dead zones
-and the damping switch), so its numbers are the same, bit for bit. What
+:func:`~uqgear.physics._rhs.state_derivative_by`; no fast-math, so nothing
+is reassociated or contracted, and selects rather than branches for the dead
+zones and the damping switch), so its numbers are the same, bit for bit. Its
+twelve divisions by m1, m2 and m_e a sub-step, the slowest vector
+instructions, are :func:`uqgear.physics._quotient.quotient`: a multiplication
+by 1/m and fused multiply-adds that give the IEEE quotient's bits (a lane
+whose dividend falls outside the range where that is proven redoes its
+sub-step with IEEE divisions; a run whose divisors do not qualify is not a
+lane). What
 differs between lanes is data: its own parameters, forcing table, times and
 contact state; a lane whose step changes its contact region is redone on
 its own by the one-sample code (:func:`~uqgear.physics._rhs._split_at_contact`).
@@ -37,12 +43,16 @@ import numba as nb
 import numpy as np
 from numba.core.compiler_lock import global_compiler_lock
 
+from uqgear.physics._quotient import exact_divisors, quotient
 from uqgear.physics._rhs import (
     ADHESION_AMPLITUDE,
     ECC_AMPLITUDE,
     ECC_KAPPA,
     INLINED,
     JIT_OPTIONS,
+    M1,
+    M2,
+    ME,
     N_ACCUMULATORS,
     OMEGA_MESH,
     PITCH_ERRORS,
@@ -66,8 +76,11 @@ from uqgear.physics._rhs import (
     _split_at_contact,
     build_schedule,
     coefficients,
+    contact_region,
+    rk4_step,
     rk4_step_weighted,
     state_derivative,
+    state_derivative_by,
     static_transmission_error,
 )
 
@@ -82,17 +95,25 @@ N_COEFFICIENTS = 12
 # Rows of a lane group's work array: row r of lane l is element r * LANES + l, so that a row is a
 # vector of the lanes and every offset a constant (the loop vectoriser then proves that the rows
 # do not overlap). The state, the sub-step's result, its first stage, the mesh force and the
-# bearing accelerations at its start, its crossing flag, each lane's coefficients and drive term.
+# bearing accelerations at its start, what is left to do for the lane (REDO_*), each lane's
+# coefficients, drive term and the inverses 1/m1, 1/m2, 1/m_e of its divisors.
 W_STATE = 0
 W_TRIAL = 6
 W_SLOPE = 12
 W_FORCE = 18
 W_A1 = 19
 W_A2 = 20
-W_CROSSED = 21
+W_REDO = 21
 W_COEFFICIENTS = 22
 W_DRIVE = W_COEFFICIENTS + N_COEFFICIENTS
-N_ROWS = W_DRIVE + 1
+W_INVERSE = W_DRIVE + 1
+N_ROWS = W_INVERSE + 3
+#: What a lane's sub-step leaves to the one-sample code: nothing; its split at a contact boundary
+#: (the step changes the contact region); the whole sub-step (a quotient outside the range where
+#: the exact quotient is proven, see uqgear.physics._quotient).
+REDO_NONE = 0.0
+REDO_SPLIT = 1.0
+REDO_STEP = 2.0
 # Fields of a sub-step in a lane group's forcing table (sub-step s, field f, lane l at element
 # [s, f * LANES + l]): (k, friction term, e'') at the start, middle and end, the width
 # h and h / 6 (RK4's weight, divided once here rather than every step: the same number).
@@ -137,8 +158,10 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
 def lane_ready(params: np.ndarray) -> np.ndarray:
     """Which runs (rows of parameter vectors) the lanes take: those whose forcing repeats every mesh period."""
     p = np.atleast_2d(params)
-    return ((p[:, PITCH_ERRORS] == 0.0) & (p[:, TOOTH_FACTORS] == 0.0) & (p[:, ECC_AMPLITUDE] == 0.0)
-            & (p[:, ECC_KAPPA] == 0.0) & (p[:, RIPPLE_AMPLITUDE] == 0.0) & (p[:, ADHESION_AMPLITUDE] == 0.0))
+    periodic = ((p[:, PITCH_ERRORS] == 0.0) & (p[:, TOOTH_FACTORS] == 0.0) & (p[:, ECC_AMPLITUDE] == 0.0)
+                & (p[:, ECC_KAPPA] == 0.0) & (p[:, RIPPLE_AMPLITUDE] == 0.0) & (p[:, ADHESION_AMPLITUDE] == 0.0))
+    # the lanes divide by a multiplication and fused multiply-adds, exact for these divisors
+    return periodic & exact_divisors(p[:, M1]) & exact_divisors(p[:, M2]) & exact_divisors(p[:, ME])
 
 
 @nb.njit(**INLINED)
@@ -149,25 +172,30 @@ def _row(W, row, lane):
 @nb.njit(**INLINED)
 def _lane_step(W, table, sub, lane):
     """Sub-step ``sub`` of one lane: the one-sample kernel's RK4 step (:func:`~uqgear.physics._rhs.classical_step`
-    between its splits), with its start's force and bearing accelerations and whether it changes the
-    contact region (1, else 0) written to ``W``."""
+    between its splits), with its start's force and bearing accelerations, and what is left to the
+    one-sample code (``REDO_*``), written to ``W``. Returns 1 if something is left, else 0."""
     s = (_row(W, W_STATE, lane), _row(W, W_STATE + 1, lane), _row(W, W_STATE + 2, lane),
          _row(W, W_STATE + 3, lane), _row(W, W_STATE + 4, lane), _row(W, W_STATE + 5, lane))
     c = (_row(W, W_COEFFICIENTS, lane), _row(W, W_COEFFICIENTS + 1, lane), _row(W, W_COEFFICIENTS + 2, lane),
          _row(W, W_COEFFICIENTS + 3, lane), _row(W, W_COEFFICIENTS + 4, lane), _row(W, W_COEFFICIENTS + 5, lane),
          _row(W, W_COEFFICIENTS + 6, lane), _row(W, W_COEFFICIENTS + 7, lane), _row(W, W_COEFFICIENTS + 8, lane),
          _row(W, W_COEFFICIENTS + 9, lane), _row(W, W_COEFFICIENTS + 10, lane), _row(W, W_COEFFICIENTS + 11, lane))
+    inverse = (_row(W, W_INVERSE, lane), _row(W, W_INVERSE + 1, lane), _row(W, W_INVERSE + 2, lane))
     drive = _row(W, W_DRIVE, lane)
     # the sub-step's row: its index is checked for wrap-around once, outside the loop over the lanes
     f = table[sub]
-    d1, force = state_derivative(s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c)
+    d1, force, exact = state_derivative_by(s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c,
+                                           quotient, inverse)
     mid = (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane))
     end = (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane))
-    new = rk4_step_weighted(s, _row(f, T_WIDTH, lane), _row(f, T_WEIGHT, lane), d1, mid, end, c)
+    new, exact_later = rk4_step_weighted(s, _row(f, T_WIDTH, lane), _row(f, T_WEIGHT, lane), d1, mid, end, c,
+                                         quotient, inverse)
     b = c[0]
     x = s[2]
-    # the one-sample kernel's test (contact_region before and after differ), as a choice between values
-    crossed = 1 if ((x > b) != (new[2] > b)) | ((x < -b) != (new[2] < -b)) else 0
+    # the one-sample kernel's test (contact_region before and after differ), as choices between values
+    crossed = ((x > b) != (new[2] > b)) | ((x < -b) != (new[2] < -b))
+    redo = REDO_SPLIT if crossed else REDO_NONE
+    redo = redo if exact & exact_later else REDO_STEP
     # written out, not a loop over the tuples: a tuple indexed by a variable goes through memory
     W[W_TRIAL * LANES + lane] = new[0]
     W[(W_TRIAL + 1) * LANES + lane] = new[1]
@@ -184,24 +212,24 @@ def _lane_step(W, table, sub, lane):
     W[W_FORCE * LANES + lane] = force
     W[W_A1 * LANES + lane] = d1[3]
     W[W_A2 * LANES + lane] = d1[4]
-    W[W_CROSSED * LANES + lane] = float(crossed)
-    return crossed
+    W[W_REDO * LANES + lane] = redo
+    return 0 if redo == REDO_NONE else 1
 
 
 @nb.njit(**INLINED)
 def _step_lanes(W, table, sub, lanes):
-    """Sub-step ``sub`` of the first ``lanes`` lanes (all of them: ``LANES``); returns how many crossed a
-    contact boundary.
+    """Sub-step ``sub`` of the first ``lanes`` lanes (all of them: ``LANES``); returns how many leave
+    something to the one-sample code (:func:`_redo_lane`).
 
     One loop over the lanes, which the loop vectoriser compiles into vector instructions. Its trip
     count comes from the caller at run time: a constant one would have LLVM unroll the loop before
     the vectoriser sees it (its body is still a call then), and treat it as too short for the
     check that ``W`` and ``table`` do not overlap.
     """
-    crossed = 0
+    left = 0
     for lane in range(lanes):
-        crossed += _lane_step(W, table, sub, lane)
-    return crossed
+        left += _lane_step(W, table, sub, lane)
+    return left
 
 
 @nb.njit(**INLINED)
@@ -230,27 +258,51 @@ def _lane_samples(members, lyapunov):
     return samples, written
 
 
+@nb.njit(**INLINED)
+def _lane_state(W, first, lane):
+    return (_row(W, first, lane), _row(W, first + 1, lane), _row(W, first + 2, lane), _row(W, first + 3, lane),
+            _row(W, first + 4, lane), _row(W, first + 5, lane))
+
+
+@nb.njit(**INLINED)
+def _put_state(W, first, lane, s):
+    W[first * LANES + lane] = s[0]
+    W[(first + 1) * LANES + lane] = s[1]
+    W[(first + 2) * LANES + lane] = s[2]
+    W[(first + 3) * LANES + lane] = s[3]
+    W[(first + 4) * LANES + lane] = s[4]
+    W[(first + 5) * LANES + lane] = s[5]
+
+
 @nb.njit(**JIT_OPTIONS)
-def _split_lane(lane, n, sub, W, widths, offsets, refs, period, i, params, pair_tables, period_tables, table_index,
-                factor_pinion, factor_gear):
-    """Redo a lane's sub-step that changed its contact region, as the one-sample kernel does."""
+def _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, i, params, pair_tables, period_tables,
+               table_index, factor_pinion, factor_gear):
+    """Finish a lane's sub-step on the one-sample code: its split at a contact boundary, or (a quotient the
+    lanes cannot vouch for) the whole sub-step, with IEEE divisions, as the one-sample kernel does."""
     p = params[i]
     table_i = table_index[i]
     start = n * period[lane]
-    s = (_row(W, W_STATE, lane), _row(W, W_STATE + 1, lane), _row(W, W_STATE + 2, lane),
-         _row(W, W_STATE + 3, lane), _row(W, W_STATE + 4, lane), _row(W, W_STATE + 5, lane))
-    d1 = (_row(W, W_SLOPE, lane), _row(W, W_SLOPE + 1, lane), _row(W, W_SLOPE + 2, lane),
-          _row(W, W_SLOPE + 3, lane), _row(W, W_SLOPE + 4, lane), _row(W, W_SLOPE + 5, lane))
-    attempt = (_row(W, W_TRIAL, lane), _row(W, W_TRIAL + 1, lane), _row(W, W_TRIAL + 2, lane),
-               _row(W, W_TRIAL + 3, lane), _row(W, W_TRIAL + 4, lane), _row(W, W_TRIAL + 5, lane))
-    done = _split_at_contact(start + offsets[sub, lane], widths[sub, lane], s, d1, attempt, start + refs[sub, lane],
-                             p, pair_tables[table_i], period_tables[table_i], factor_pinion[i], factor_gear[i])
-    W[W_TRIAL * LANES + lane] = done[0]
-    W[(W_TRIAL + 1) * LANES + lane] = done[1]
-    W[(W_TRIAL + 2) * LANES + lane] = done[2]
-    W[(W_TRIAL + 3) * LANES + lane] = done[3]
-    W[(W_TRIAL + 4) * LANES + lane] = done[4]
-    W[(W_TRIAL + 5) * LANES + lane] = done[5]
+    s = _lane_state(W, W_STATE, lane)
+    d1 = _lane_state(W, W_SLOPE, lane)
+    attempt = _lane_state(W, W_TRIAL, lane)
+    h = widths[sub, lane]
+    if _row(W, W_REDO, lane) == REDO_STEP:
+        c = coefficients(p)
+        drive = _row(W, W_DRIVE, lane)
+        f = table[sub]
+        d1, force = state_derivative(s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c)
+        attempt = rk4_step(s, h, d1, (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane)),
+                           (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane)), c)
+        _put_state(W, W_SLOPE, lane, d1)
+        W[W_FORCE * LANES + lane] = force
+        W[W_A1 * LANES + lane] = d1[3]
+        W[W_A2 * LANES + lane] = d1[4]
+        if contact_region(s[2], c[0]) == contact_region(attempt[2], c[0]):
+            _put_state(W, W_TRIAL, lane, attempt)
+            return
+    done = _split_at_contact(start + offsets[sub, lane], h, s, d1, attempt, start + refs[sub, lane], p,
+                             pair_tables[table_i], period_tables[table_i], factor_pinion[i], factor_gear[i])
+    _put_state(W, W_TRIAL, lane, done)
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
@@ -323,6 +375,9 @@ def _integrate_group(members, states, params, pair_tables, period_tables, table_
         c = coefficients(p)
         for k in range(N_COEFFICIENTS):
             W[(W_COEFFICIENTS + k) * LANES + lane] = c[k]
+        W[W_INVERSE * LANES + lane] = 1.0 / p[M1]
+        W[(W_INVERSE + 1) * LANES + lane] = 1.0 / p[M2]
+        W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
         period[lane] = TWO_PI / p[OMEGA_MESH]
     _run_lanes(samples, written, W, table, widths, offsets, refs, period, first_sub, steps, stride, states,
                params, pair_tables, period_tables, table_index, factor_pinion, factor_gear, n_periods, keep_periods,
@@ -363,18 +418,17 @@ def _run_lanes(samples, written, W, table, widths, offsets, refs, period, first_
                     poincare[samples[lane], n - first_kept, 1] = _row(W, W_STATE + 5, lane)
         for j in range(steps):
             for sub in range(first_sub[j], first_sub[j + 1]):
-                crossed = _step_lanes(W, table, sub, lanes)
+                if _step_lanes(W, table, sub, lanes) != 0:
+                    for lane in range(LANES):
+                        # an empty lane's numbers are never read: it is not redone
+                        if _row(W, W_REDO, lane) != REDO_NONE and live[lane]:
+                            _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, samples[lane], params,
+                                       pair_tables, period_tables, table_index, factor_pinion, factor_gear)
                 if sub == first_sub[j] and kept:
                     _accumulate(acc, W, lanes)
                     if stride > 0 and j % stride == 0:
                         _record(history, row, rig_channels, W, samples, written, n, j, steps, period, params)
                         row += 1
-                if crossed != 0:
-                    for lane in range(LANES):
-                        # an empty lane's numbers are never read: it is not redone
-                        if _row(W, W_CROSSED, lane) != 0.0 and live[lane]:
-                            _split_lane(lane, n, sub, W, widths, offsets, refs, period, samples[lane], params,
-                                        pair_tables, period_tables, table_index, factor_pinion, factor_gear)
                 _advance(W, lanes)
         if lyapunov:
             for lane in range(half):

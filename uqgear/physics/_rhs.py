@@ -261,19 +261,45 @@ def coefficients(p):
 
 
 @nb.njit(**INLINED)
-def _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping):
-    """ds/dt and the mesh force F from the forcing values, :func:`coefficients`, f(x) and the mesh damping."""
+def divided(x, y, z):
+    """(x / y by IEEE division, True); ``z`` (1 / y) unused. The quotient of the one-sample kernels."""
+    return x / y, True
+
+
+#: The ``inverse`` argument of :func:`state_derivative_by` where the quotient does not read it.
+NO_INVERSE = (1.0, 1.0, 1.0)
+
+
+@nb.njit(**INLINED)
+def _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse):
+    """(ds/dt, mesh force F, whether each quotient is exact) from the forcing values, :func:`coefficients`,
+    f(x), the mesh damping and a quotient function ``divide(x, y, 1 / y)`` (:func:`divided`, or
+    :func:`uqgear.physics._quotient.quotient` with ``inverse`` = (1/m1, 1/m2, 1/m_e))."""
     _, _, _, k1, k2, clearance1, clearance2, c1, c2, m1, m2, me = c
     vx = s[5]
     force = k * fx + damping * vx
     bearing1 = k1 * dead_zone(s[0], clearance1)
     bearing2 = k2 * dead_zone(s[1], clearance2)
-    a1 = (-c1 * s[3] - bearing1 - force) / m1
-    a2 = (-c2 * s[4] - bearing2 + force) / m2
+    a1, exact1 = divide(-c1 * s[3] - bearing1 - force, m1, inverse[0])
+    a2, exact2 = divide(-c2 * s[4] - bearing2 + force, m2, inverse[1])
+    per_mass, exact3 = divide(force, me, inverse[2])
     # R1 theta1'' - R2 theta2'' with the rigid-body rotation eliminated; tooth friction
     # (zero unless the friction effect is on) is linear in f(x), its time part precomputed
-    relative = drive - force / me - fx * friction_term
-    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - ste_acc), force
+    relative = drive - per_mass - fx * friction_term
+    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - ste_acc), force, exact1 & exact2 & exact3
+
+
+@nb.njit(**INLINED)
+def state_derivative_by(s, k, friction_term, drive, ste_acc, c, divide, inverse):
+    """:func:`state_derivative` with the quotient function ``divide`` (see :func:`_accelerations`).
+
+    Returns (ds/dt, F, whether every quotient is exact).
+    """
+    fx = dead_zone(s[2], c[0])
+    damping = c[1]
+    if (c[2] == 0.0) & (fx == 0.0):  # no short circuit: a select, not a branch
+        damping = 0.0
+    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse)
 
 
 @nb.njit(**INLINED)
@@ -283,14 +309,11 @@ def state_derivative(s, k, friction_term, drive, ste_acc, c):
     ``s`` = (y1, y2, x, y1', y2', x'); ``k``, ``friction_term``, ``drive``
     and ``ste_acc`` are the terms 0, 1, 2 and 4 of :func:`forcing`.
     Returns (ds/dt as a 6-tuple, mesh force F). The one expression of the
-    model's accelerations: the one-sample and the lane kernels both call it,
-    so they round alike.
+    model's accelerations: the one-sample and the lane kernels both call it
+    (the lanes through :func:`state_derivative_by`), so they round alike.
     """
-    fx = dead_zone(s[2], c[0])
-    damping = c[1]
-    if (c[2] == 0.0) & (fx == 0.0):  # no short circuit: a select, not a branch
-        damping = 0.0
-    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping)
+    d, force, _ = state_derivative_by(s, k, friction_term, drive, ste_acc, c, divided, NO_INVERSE)
+    return d, force
 
 
 @nb.njit(**INLINED)
@@ -307,7 +330,8 @@ def side_derivative(s, k, friction_term, drive, ste_acc, c, region):
     damping = c[1]
     if (c[2] == 0.0) & (region == 0):
         damping = 0.0
-    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping)
+    d, force, _ = _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divided, NO_INVERSE)
+    return d, force
 
 
 @nb.njit(**INLINED)
@@ -353,18 +377,20 @@ def _rk4(s, h, d1, mid, end, p):
 
 
 @nb.njit(**INLINED)
-def rk4_step_weighted(s, h, w, d1, mid, end, c):
-    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients` and w = h / 6."""
-    d2, _ = state_derivative(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c)
-    d3, _ = state_derivative(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c)
-    d4, _ = state_derivative(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c)
-    return rk4_combine_weighted(s, w, d1, d2, d3, d4)
+def rk4_step_weighted(s, h, w, d1, mid, end, c, divide, inverse):
+    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients`, w = h / 6 and a
+    quotient function (:func:`state_derivative_by`). Returns (new state, whether every quotient is exact)."""
+    d2, _, exact2 = state_derivative_by(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
+    d3, _, exact3 = state_derivative_by(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
+    d4, _, exact4 = state_derivative_by(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c, divide, inverse)
+    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact2 & exact3 & exact4
 
 
 @nb.njit(**INLINED)
 def rk4_step(s, h, d1, mid, end, c):
     """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e'') and :func:`coefficients`."""
-    return rk4_step_weighted(s, h, h / 6.0, d1, mid, end, c)
+    new, _ = rk4_step_weighted(s, h, h / 6.0, d1, mid, end, c, divided, NO_INVERSE)
+    return new
 
 
 @nb.njit(**JIT_OPTIONS)
