@@ -70,6 +70,8 @@ from uqgear.physics._rhs import (
     Q_X_SQ,
     Q_X_SUM,
     RIPPLE_AMPLITUDE,
+    T1,
+    T2,
     TOOTH_FACTORS,
     TWO_PI,
     _forcing_row,
@@ -343,35 +345,31 @@ def _integrate_group(members, states, params, pair_tables, period_tables, table_
     refs = np.empty((n_sub, LANES))
     W = np.zeros(N_ROWS * LANES)
     period = np.empty(LANES)
+    filled = -1
     for lane in range(LANES):
         i = samples[lane]
-        t_i = table_index[i]
-        schedule = build_schedule(params[i], pair_tables[t_i], period_tables[t_i], breakpoints[i], steps)
-        same = (steps_per_period[i] == steps and history_stride[i] == stride
-                and np.array_equal(schedule[0], first_sub) and np.array_equal(schedule[4][:n_sub], pairs[:n_sub]))
-        if not same:
-            # run one at a time by the caller; this lane repeats the lead run and writes nothing
-            refused[i] = True
-            written[lane] = False
-            i = lead
-            samples[lane] = lead
-            t_i = lead_table
-            schedule = build_schedule(params[i], pair_tables[t_i], period_tables[t_i], breakpoints[i], steps)
+        if filled >= 0 and _same_forcing(params, i, samples[filled], table_index, breakpoints):
+            # the same speed and design as the lane before, another torque: the same table, its own drive
+            _copy_lane(table, widths, offsets, refs, filled, lane)
+            W[W_DRIVE * LANES + lane] = _forcing_row(0.0, 0, layout[5], 0, 0, pairs[0], params[i], factor_pinion[i],
+                                                     factor_gear[i])[2]
+        else:
+            t_i = table_index[i]
+            schedule = layout if i == lead else build_schedule(params[i], pair_tables[t_i], period_tables[t_i],
+                                                               breakpoints[i], steps)
+            same = (steps_per_period[i] == steps and history_stride[i] == stride
+                    and np.array_equal(schedule[0], first_sub) and np.array_equal(schedule[4][:n_sub], pairs[:n_sub]))
+            if not same:
+                # run one at a time by the caller; this lane repeats the lead run and writes nothing
+                refused[i] = True
+                written[lane] = False
+                i = lead
+                samples[lane] = lead
+                schedule = layout
+            _fill_lane(table, widths, offsets, refs, W, lane, schedule, n_sub, params[i], factor_pinion[i],
+                       factor_gear[i])
+            filled = lane
         p = params[i]
-        _, sub_offsets, sub_widths, sub_refs, sub_pairs, stages = schedule
-        for sub in range(n_sub):
-            widths[sub, lane] = sub_widths[sub]
-            offsets[sub, lane] = sub_offsets[sub]
-            refs[sub, lane] = sub_refs[sub]
-            for stage in range(3):
-                # t and the mesh period n do not enter the forcing of a lane-ready run
-                terms = _forcing_row(0.0, 0, stages, sub, stage, sub_pairs[sub], p, factor_pinion[i], factor_gear[i])
-                table[sub, (3 * stage) * LANES + lane] = terms[0]
-                table[sub, (3 * stage + 1) * LANES + lane] = terms[1]
-                table[sub, (3 * stage + 2) * LANES + lane] = terms[4]
-                W[W_DRIVE * LANES + lane] = terms[2]
-            table[sub, T_WIDTH * LANES + lane] = sub_widths[sub]
-            table[sub, T_WEIGHT * LANES + lane] = sub_widths[sub] / 6.0
         c = coefficients(p)
         for k in range(N_COEFFICIENTS):
             W[(W_COEFFICIENTS + k) * LANES + lane] = c[k]
@@ -382,6 +380,52 @@ def _integrate_group(members, states, params, pair_tables, period_tables, table_
     _run_lanes(samples, written, W, table, widths, offsets, refs, period, first_sub, steps, stride, states,
                params, pair_tables, period_tables, table_index, factor_pinion, factor_gear, n_periods, keep_periods,
                lyapunov, scales, accumulators, poincare, history, final_states)
+
+
+@nb.njit(**JIT_OPTIONS)
+def _same_forcing(params, i, j, table_index, breakpoints):
+    """Whether runs ``i`` and ``j`` have the same forcing table: the same parameters but for the torques T1
+    and T2 (which enter the drive term alone), stiffness tables and breakpoints."""
+    if table_index[i] != table_index[j]:
+        return False
+    for k in range(params.shape[1]):
+        if k != T1 and k != T2 and params[i, k] != params[j, k]:
+            return False
+    for k in range(breakpoints.shape[1]):
+        a = breakpoints[i, k]
+        b = breakpoints[j, k]
+        if a != b and not (a != a and b != b):  # noqa: PLR0124  (both NaN: padding)
+            return False
+    return True
+
+
+@nb.njit(**JIT_OPTIONS)
+def _copy_lane(table, widths, offsets, refs, source, lane):
+    for sub in range(table.shape[0]):
+        for field in range(N_TABLE):
+            table[sub, field * LANES + lane] = table[sub, field * LANES + source]
+        widths[sub, lane] = widths[sub, source]
+        offsets[sub, lane] = offsets[sub, source]
+        refs[sub, lane] = refs[sub, source]
+
+
+@nb.njit(**JIT_OPTIONS)
+def _fill_lane(table, widths, offsets, refs, W, lane, schedule, n_sub, p, fp, fg):
+    """A lane's columns of the forcing table and its drive term, from its schedule and parameters."""
+    _, sub_offsets, sub_widths, sub_refs, sub_pairs, stages = schedule
+    for sub in range(n_sub):
+        widths[sub, lane] = sub_widths[sub]
+        offsets[sub, lane] = sub_offsets[sub]
+        refs[sub, lane] = sub_refs[sub]
+        for stage in range(3):
+            # t and the mesh period n do not enter the forcing of a lane-ready run
+            terms = _forcing_row(0.0, 0, stages, sub, stage, sub_pairs[sub], p, fp, fg)
+            table[sub, (3 * stage) * LANES + lane] = terms[0]
+            table[sub, (3 * stage + 1) * LANES + lane] = terms[1]
+            table[sub, (3 * stage + 2) * LANES + lane] = terms[4]
+            W[W_DRIVE * LANES + lane] = terms[2]
+        table[sub, T_WIDTH * LANES + lane] = sub_widths[sub]
+        table[sub, T_WEIGHT * LANES + lane] = sub_widths[sub] / 6.0
 
 
 @nb.njit(**JIT_OPTIONS)

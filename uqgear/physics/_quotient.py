@@ -41,8 +41,6 @@ otherwise.
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 from llvmlite import ir
@@ -90,15 +88,16 @@ def quotient(x, y, z):
     return (q2 if inside else q0), exact
 
 
-def exact_divisor(y: float) -> bool:
-    """Whether :func:`quotient` divides by ``y`` exactly: positive, 2^-60 to 2^60, significand below 2^53 - 2^10."""
-    if not (math.isfinite(y) and DIVISOR_RANGE[0] <= y <= DIVISOR_RANGE[1]):
-        return False
-    significand = int(math.ldexp(math.frexp(y)[0], 53))
-    return significand < LARGEST_SIGNIFICAND
-
-
 def exact_divisors(values: np.ndarray) -> np.ndarray:
-    """:func:`exact_divisor` of each element (an array of bools of the same shape)."""
-    flat = np.asarray(values, dtype=float)
-    return np.vectorize(exact_divisor, otypes=[bool])(flat) if flat.size else np.zeros(flat.shape, dtype=bool)
+    """Whether :func:`quotient` divides by each element exactly: positive, 2^-60 to 2^60, significand below
+    2^53 - 2^10 (an array of bools of the same shape)."""
+    y = np.asarray(values, dtype=float)
+    with np.errstate(invalid="ignore"):
+        inside = (y >= DIVISOR_RANGE[0]) & (y <= DIVISOR_RANGE[1])
+    significand, _ = np.frexp(np.where(inside, y, 1.0))
+    return inside & (np.ldexp(significand, 53) < LARGEST_SIGNIFICAND)
+
+
+def exact_divisor(y: float) -> bool:
+    """:func:`exact_divisors` of one number."""
+    return bool(exact_divisors(np.array([y]))[0])
