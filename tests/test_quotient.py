@@ -99,15 +99,13 @@ def test_the_models_divisors_are_exact_and_the_lanes_take_them():
         _assert_ieee(x, np.full(x.size, mass))
 
 
-def test_special_values_and_the_range():
-    y = np.full(8, 3.0)
-    x = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, SMALLEST, LARGEST, -SMALLEST])
+def test_zeros_and_what_is_left_to_ieee_division():
+    y = np.full(5, 3.0)
+    x = np.array([0.0, -0.0, SMALLEST, LARGEST, -SMALLEST])
     q, exact = _quotients(x, y)
     assert exact.all()
-    assert q.view(np.int64)[:4].tolist() == (x[:4] / 3.0).view(np.int64).tolist()   # signed zeros, infinities
-    assert np.isnan(q[4])
-    assert q.view(np.int64)[5:].tolist() == (x[5:] / 3.0).view(np.int64).tolist()
-    outside = np.array([SMALLEST / 2.0, -1e-300, 5e-324, LARGEST * 2.0, -1e300])
+    assert q.view(np.int64).tolist() == (x / 3.0).view(np.int64).tolist()   # zeros keep their sign
+    outside = np.array([SMALLEST / 2.0, -1e-300, 5e-324, LARGEST * 2.0, -1e300, np.inf, -np.inf, np.nan])
     _, exact = _quotients(outside, np.full(outside.size, 3.0))
     assert not exact.any()   # the caller divides these by IEEE division
 

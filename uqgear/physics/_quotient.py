@@ -26,11 +26,11 @@ q2 is RN(x / y), for y = Y 2^e with a 53-bit significand Y and Q = x / y in
   holds for every significand Y < 2^53 - 2^10: then no midpoint lies between
   Q and the refined value, and q2 = RN(Q).
 
-:func:`exact_divisor` says whether a divisor qualifies (positive, 2^-60 to
+:func:`exact_divisors` says whether a divisor qualifies (positive, 2^-60 to
 2^60, significand below 2^53 - 2^10: all but one in 2^43 of them).
 :func:`quotient` is exact for dividends of magnitude 2^-900 to 2^900 and for
-0, infinities and NaN (then x z is x / y); for any other dividend it says
-so, and the caller divides by IEEE division instead.
+0 (then x z is x / y); for any other dividend it says so, and the caller
+divides by IEEE division instead.
 ``tests/test_quotient.py`` compares it with IEEE division bit for bit on
 random and on hard cases (quotients next to a midpoint).
 
@@ -73,19 +73,19 @@ def fma(typingctx, a, b, c):
 
 @nb.njit(**INLINED)
 def quotient(x, y, z):
-    """(RN(x / y), whether that is what it is) for a divisor :func:`exact_divisor` accepts and z = RN(1 / y).
+    """(RN(x / y), whether that is what it is) for a divisor :func:`exact_divisors` accepts and z = RN(1 / y).
 
-    The second value is False only for a finite dividend outside SMALLEST to
-    LARGEST in magnitude (not 0): divide those by IEEE division instead.
+    The second value is False for a dividend outside SMALLEST to LARGEST in
+    magnitude but 0 (tiny or huge, infinite, NaN): divide those by IEEE
+    division instead.
     """
     q0 = x * z
     q1 = fma(fma(-q0, y, x), z, q0)
     q2 = fma(fma(-q1, y, x), z, q1)
     size = abs(x)
     inside = (size >= SMALLEST) & (size <= LARGEST)
-    # 0, infinities and NaN: x z is x / y (the same zero, infinity or NaN); choices, not branches
-    exact = inside | (size == 0.0) | (size == np.inf) | (x != x)  # noqa: PLR0124  (x != x: NaN)
-    return (q2 if inside else q0), exact
+    # 0: x z is x / y, the zero of the right sign (a choice, not a branch)
+    return (q2 if inside else q0), inside | (size == 0.0)
 
 
 def exact_divisors(values: np.ndarray) -> np.ndarray:
