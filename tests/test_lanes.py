@@ -141,3 +141,18 @@ def test_a_job_compiles_only_the_kernel_family_it_uses(tmp_path):
     """)
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["1", "0", "0", "0"]
+
+
+def test_a_quotient_outside_the_proven_range_is_redone_with_ieee_division(design):
+    # at rest, unloaded and without transmission error, velocities of 1e-280 leave every acceleration's
+    # numerator below the range where the lanes' quotient is proven exact: each sub-step is redone on
+    # the one-sample code, and the tiny motion shows any bit it got wrong
+    n = 5
+    samples = uqgear.samples_from_mapping({"pinion_speed": np.linspace(1000.0, 3000.0, n),
+                                           "drive_torque": np.zeros(n), "adhesion_torque": np.zeros(n),
+                                           "ste_amplitude": np.zeros(n)})
+    states = np.zeros((n, 6))
+    states[:, 3:] = np.array([1e-280, -3e-281, 7e-281])
+    lanes, one = _both(design, samples, n_periods=6, keep_periods=6, initial_states=states, final_state=True)
+    assert 0.0 < np.abs(lanes["final_state"].values).max() < 1e-250
+    assert _differing(lanes, one) == []

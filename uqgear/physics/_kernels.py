@@ -34,9 +34,9 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
     Q_X_SUM, R1, R2, RIPPLE_AMPLITUDE, RIPPLE_OMEGA, RIPPLE_PHASE, STE_AMPLITUDE, STE_PHASE, STIFFNESS_SCALE, T1,
     T2, TOOTH_FACTORS, TWO_PI, USE_PERIOD_TABLE, Z1, Z2, _add_substep, _crossing_fraction, _forcing_row,
     _friction_arms, _friction_term, _interp_uniform, _mesh_position, _rk4, _shifted, _split_at_contact,
-    _tabulate_stage, _time_terms, build_schedule, classical_step, coefficients, contact_region, dead_zone,
-    derivative, forcing, mesh_contact, mesh_terms, rk4_combine, rk4_step, state_derivative,
-    static_transmission_error)
+    _tabulate_stage, _time_terms, build_schedule, classical_step, coefficients, contact_region,
+    crossed_boundary, dead_zone, derivative, forcing, mesh_contact, mesh_terms, rk4_combine, rk4_step, side_derivative,
+    state_derivative, static_transmission_error)
 
 
 @nb.njit(**JIT_OPTIONS)

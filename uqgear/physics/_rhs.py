@@ -261,31 +261,77 @@ def coefficients(p):
 
 
 @nb.njit(**INLINED)
+def divided(x, y, z):
+    """(x / y by IEEE division, True); ``z`` (1 / y) unused. The quotient of the one-sample kernels."""
+    return x / y, True
+
+
+#: The ``inverse`` argument of :func:`state_derivative_by` where the quotient does not read it.
+NO_INVERSE = (1.0, 1.0, 1.0)
+
+
+@nb.njit(**INLINED)
+def _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse):
+    """(ds/dt, mesh force F, whether each quotient is exact) from the forcing values, :func:`coefficients`,
+    f(x), the mesh damping and a quotient function ``divide(x, y, 1 / y)`` (:func:`divided`, or
+    :func:`uqgear.physics._quotient.quotient` with ``inverse`` = (1/m1, 1/m2, 1/m_e))."""
+    _, _, _, k1, k2, clearance1, clearance2, c1, c2, m1, m2, me = c
+    vx = s[5]
+    force = k * fx + damping * vx
+    bearing1 = k1 * dead_zone(s[0], clearance1)
+    bearing2 = k2 * dead_zone(s[1], clearance2)
+    a1, exact1 = divide(-c1 * s[3] - bearing1 - force, m1, inverse[0])
+    a2, exact2 = divide(-c2 * s[4] - bearing2 + force, m2, inverse[1])
+    per_mass, exact3 = divide(force, me, inverse[2])
+    # R1 theta1'' - R2 theta2'' with the rigid-body rotation eliminated; tooth friction
+    # (zero unless the friction effect is on) is linear in f(x), its time part precomputed
+    relative = drive - per_mass - fx * friction_term
+    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - ste_acc), force, exact1 & exact2 & exact3
+
+
+@nb.njit(**INLINED)
+def state_derivative_by(s, k, friction_term, drive, ste_acc, c, divide, inverse):
+    """:func:`state_derivative` with the quotient function ``divide`` (see :func:`_accelerations`).
+
+    Returns (ds/dt, F, whether every quotient is exact).
+    """
+    fx = dead_zone(s[2], c[0])
+    damping = c[1]
+    if (c[2] == 0.0) & (fx == 0.0):  # no short circuit: a select, not a branch
+        damping = 0.0
+    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse)
+
+
+@nb.njit(**INLINED)
 def state_derivative(s, k, friction_term, drive, ste_acc, c):
     """State-dependent part of the right-hand side from the forcing values and :func:`coefficients`.
 
     ``s`` = (y1, y2, x, y1', y2', x'); ``k``, ``friction_term``, ``drive``
     and ``ste_acc`` are the terms 0, 1, 2 and 4 of :func:`forcing`.
     Returns (ds/dt as a 6-tuple, mesh force F). The one expression of the
-    model's accelerations: the one-sample and the lane kernels both call it,
-    so they round alike.
+    model's accelerations: the one-sample and the lane kernels both call it
+    (the lanes through :func:`state_derivative_by`), so they round alike.
     """
-    b, cm, damp_in_separation, k1, k2, clearance1, clearance2, c1, c2, m1, m2, me = c
-    x = s[2]
-    vx = s[5]
-    fx = dead_zone(x, b)
-    damping = cm
-    if (damp_in_separation == 0.0) & (fx == 0.0):  # no short circuit: a select, not a branch
+    d, force, _ = state_derivative_by(s, k, friction_term, drive, ste_acc, c, divided, NO_INVERSE)
+    return d, force
+
+
+@nb.njit(**INLINED)
+def side_derivative(s, k, friction_term, drive, ste_acc, c, region):
+    """:func:`state_derivative` with the mesh damping of contact region ``region`` (1, 0, -1), whatever x is.
+
+    Without damping in separation the damping force switches at |x| = b; a
+    step split there evaluates each part with its own side's damping, so
+    that neither part sees the other side's vector field (its stages may
+    stray across the boundary by round-off or by the step's own error).
+    With damping in separation this is :func:`state_derivative`, bit for bit.
+    """
+    fx = dead_zone(s[2], c[0])
+    damping = c[1]
+    if (c[2] == 0.0) & (region == 0):
         damping = 0.0
-    force = k * fx + damping * vx
-    bearing1 = k1 * dead_zone(s[0], clearance1)
-    bearing2 = k2 * dead_zone(s[1], clearance2)
-    a1 = (-c1 * s[3] - bearing1 - force) / m1
-    a2 = (-c2 * s[4] - bearing2 + force) / m2
-    # R1 theta1'' - R2 theta2'' with the rigid-body rotation eliminated; tooth friction
-    # (zero unless the friction effect is on) is linear in f(x), its time part precomputed
-    relative = drive - force / me - fx * friction_term
-    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - ste_acc), force
+    d, force, _ = _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divided, NO_INVERSE)
+    return d, force
 
 
 @nb.njit(**INLINED)
@@ -305,15 +351,20 @@ def _shifted(s, h, d):
 
 
 @nb.njit(**INLINED)
-def rk4_combine(s, h, d1, d2, d3, d4):
-    """The classical RK4 update of ``s`` over ``h`` from its four stage derivatives."""
-    w = h / 6.0
+def rk4_combine_weighted(s, w, d1, d2, d3, d4):
+    """The classical RK4 update of ``s`` from its four stage derivatives, with the weight w = h / 6 given."""
     return (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
             s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
             s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
             s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
             s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
             s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
+
+
+@nb.njit(**INLINED)
+def rk4_combine(s, h, d1, d2, d3, d4):
+    """The classical RK4 update of ``s`` over ``h`` from its four stage derivatives."""
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
 
 
 @nb.njit(**INLINED)
@@ -326,12 +377,20 @@ def _rk4(s, h, d1, mid, end, p):
 
 
 @nb.njit(**INLINED)
+def rk4_step_weighted(s, h, w, d1, mid, end, c, divide, inverse):
+    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients`, w = h / 6 and a
+    quotient function (:func:`state_derivative_by`). Returns (new state, whether every quotient is exact)."""
+    d2, _, exact2 = state_derivative_by(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
+    d3, _, exact3 = state_derivative_by(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
+    d4, _, exact4 = state_derivative_by(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c, divide, inverse)
+    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact2 & exact3 & exact4
+
+
+@nb.njit(**INLINED)
 def rk4_step(s, h, d1, mid, end, c):
     """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e'') and :func:`coefficients`."""
-    d2, _ = state_derivative(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c)
-    d3, _ = state_derivative(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c)
-    d4, _ = state_derivative(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c)
-    return rk4_combine(s, h, d1, d2, d3, d4)
+    new, _ = rk4_step_weighted(s, h, h / 6.0, d1, mid, end, c, divided, NO_INVERSE)
+    return new
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -356,29 +415,64 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
     return 0.5 * (lo + hi)
 
 
+@nb.njit(**INLINED)
+def _rk4_side(s, h, d1, mid, end, p, region):
+    """:func:`_rk4` with the later stages on the mesh damping of contact region ``region`` (:func:`side_derivative`)."""
+    c = coefficients(p)
+    d2, _ = side_derivative(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[4], c, region)
+    d3, _ = side_derivative(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[4], c, region)
+    d4, _ = side_derivative(_shifted(s, h, d3), end[0], end[1], end[2], end[4], c, region)
+    return rk4_combine(s, h, d1, d2, d3, d4)
+
+
+@nb.njit(**INLINED)
+def crossed_boundary(before, after, b):
+    """(boundary level, region entered) of a step from contact region ``before`` to ``after``.
+
+    The level is that of the boundary next to the side the step leaves; the region entered is the
+    one just beyond it (a step from one contact side to the other enters separation first).
+    """
+    if before == 1 or (before == 0 and after == -1):
+        level = b if before == 1 else -b
+    else:
+        level = -b if before == -1 else b
+    entered = 0 if before != 0 else (1 if level > 0.0 else -1)
+    return level, entered
+
+
 @nb.njit(**JIT_OPTIONS)
 def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
     """``trial`` (the step from ``s`` over [t, t+h]), redone in two parts where it changes the
-    contact region, split where the cubic Hermite interpolant of x crosses the boundary."""
+    contact region, split where the cubic Hermite interpolant of x crosses the boundary.
+
+    Each part is integrated with the mesh damping of its own side of the boundary
+    (:func:`side_derivative`), the second from the derivative at the split point on the side the
+    step enters. Without damping in separation the damping force switches at the boundary, and a
+    stage evaluated with the other side's damping costs an error of the order of the step at
+    every crossing (first-order convergence); the crossing is then also located on the step taken
+    with the first side's damping throughout, not on ``trial``, whose later stages mix the two
+    sides. With damping in separation the vector field is continuous there and both sides'
+    damping is the same: the parts are the plain RK4 steps, bit for bit.
+    """
     b = p[HALF_BACKLASH]
     before = contact_region(s[2], b)
     after = contact_region(trial[2], b)
     if before == after:
         return trial
-    if before == 1 or (before == 0 and after == -1):
-        level = b if before == 1 else -b
-    else:
-        level = -b if before == -1 else b
+    level, entered = crossed_boundary(before, after, b)
+    end = forcing(t + h, t_ref, p, pair_k, period_k, fp, fg)
+    if p[DAMP_IN_SEPARATION] == 0.0:
+        trial = _rk4_side(s, h, d1, forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg), end, p, before)
     theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, level)
     if not 1e-9 < theta < 1.0 - 1e-9:
         return trial
     h_a = theta * h
     h_b = h - h_a
     middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-    part = _rk4(s, h_a, d1, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p)
-    d_middle, _ = derivative(part, middle, p)
-    return _rk4(part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg),
-                forcing(t + h, t_ref, p, pair_k, period_k, fp, fg), p)
+    part = _rk4_side(s, h_a, d1, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p, before)
+    d_middle, _ = side_derivative(part, middle[0], middle[1], middle[2], middle[4], coefficients(p), entered)
+    return _rk4_side(part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg), end, p,
+                     entered)
 
 
 # ---------------------------------------------------------------- one mesh period tabulated

@@ -2,7 +2,9 @@
 
 One compiled pass integrates the state with the fast path's RK4 scheme (the same sub-steps, split at
 the stiffness breakpoints of :func:`~uqgear.physics._kernels.build_schedule` and at the contact
-boundaries |x| = b) and, alongside, the variational equation Phi' = J(t, s) Phi from Phi(0) = I.
+boundaries |x| = b, each part of a split step on its own side's mesh damping as in
+:func:`~uqgear.physics._rhs._split_at_contact`) and, alongside, the variational equation
+Phi' = J(t, s) Phi from Phi(0) = I.
 Each RK4 stage of Phi uses the Jacobian at that stage's state, so Phi is the derivative of the
 discrete RK4 map within every smooth piece. Across a switching surface the variational solution
 jumps by the saltation matrix
@@ -37,8 +39,8 @@ import numba as nb
 import numpy as np
 
 from ._kernels import (C1, C2, CLEARANCE1, CLEARANCE2, CM, DAMP_IN_SEPARATION, HALF_BACKLASH, INLINED, JIT_OPTIONS,
-                       K1, K2, M1, M2, ME, OMEGA_MESH, TWO_PI, build_schedule, contact_region, dead_zone,
-                       derivative, forcing)
+                       K1, K2, M1, M2, ME, OMEGA_MESH, TWO_PI, build_schedule, coefficients, contact_region,
+                       crossed_boundary, dead_zone, derivative, forcing, side_derivative)
 
 # layout of the orbit measures a pass returns
 (O_X_MIN, O_X_MAX, O_F_MAX, O_F_MIN, O_N_DRIVE, O_N_SEP, O_N_BACK, O_COUNT, O_X_MIN_CURVE, O_CROSSINGS,
@@ -66,13 +68,23 @@ def _mesh_damping(x, p):
     return p[CM]
 
 
+@nb.njit(**INLINED)
+def _stage(s, terms, p, side):
+    """ds/dt and F at a stage: :func:`derivative`, with the mesh damping of contact region ``side``
+    unless ``side`` is 2 (the state's own; see :func:`~uqgear.physics._rhs.side_derivative`)."""
+    if side == 2:
+        return derivative(s, terms, p)
+    return side_derivative(s, terms[0], terms[1], terms[2], terms[4], coefficients(p), side)
+
+
 @nb.njit(**JIT_OPTIONS)
-def _jacobian_times(s, terms, p, phi, out, region):
+def _jacobian_times(s, terms, p, phi, out, region, side):
     """out = J(t, s) phi for the 6 x 6 ``phi``; J = [[0, I], [A, C]] of :func:`derivative`.
 
     The contact region of the mesh terms is the state's own when ``region`` is 2, else ``region``
     (1, 0, -1: the smooth piece a split step is on, whatever side of the boundary round-off puts
-    a stage state).
+    a stage state). ``side`` (2: as ``region`` says) sets the mesh damping alone, as the stage's
+    :func:`_stage` does.
     """
     k = terms[0]
     x = s[2]
@@ -80,6 +92,8 @@ def _jacobian_times(s, terms, p, phi, out, region):
         x = p[HALF_BACKLASH] * (2.0 * region) if region != 0 else 0.0
     slope_x = _slope(x, p[HALF_BACKLASH])
     damping = _mesh_damping(x, p)
+    if side != 2:
+        damping = 0.0 if (p[DAMP_IN_SEPARATION] == 0.0 and side == 0) else p[CM]
     stiff = k * slope_x
     m1 = p[M1]
     m2 = p[M2]
@@ -113,19 +127,19 @@ def _shift(s, h, d):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, region):
+def _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, region, side):
     """One RK4 step of the state tuple ``s`` and, with ``with_matrix``, of ``phi`` in place.
 
     ``work`` holds five 6 x 6 scratch matrices (four stage slopes and a stage matrix); ``region``
-    as in :func:`_jacobian_times`.
+    and ``side`` as in :func:`_jacobian_times` (``side`` also sets the stages' damping).
     """
-    d1, _ = derivative(s, start, p)
+    d1, _ = _stage(s, start, p, side)
     s2 = _shift(s, 0.5 * h, d1)
-    d2, _ = derivative(s2, mid, p)
+    d2, _ = _stage(s2, mid, p, side)
     s3 = _shift(s, 0.5 * h, d2)
-    d3, _ = derivative(s3, mid, p)
+    d3, _ = _stage(s3, mid, p, side)
     s4 = _shift(s, h, d3)
-    d4, _ = derivative(s4, end, p)
+    d4, _ = _stage(s4, end, p, side)
     w = h / 6.0
     new = (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
            s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
@@ -139,19 +153,19 @@ def _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, region):
         k3 = work[2]
         k4 = work[3]
         stage = work[4]
-        _jacobian_times(s, start, p, phi, k1, region)
+        _jacobian_times(s, start, p, phi, k1, region, side)
         for r in range(6):
             for c in range(6):
                 stage[r, c] = phi[r, c] + 0.5 * h * k1[r, c]
-        _jacobian_times(s2, mid, p, stage, k2, region)
+        _jacobian_times(s2, mid, p, stage, k2, region, side)
         for r in range(6):
             for c in range(6):
                 stage[r, c] = phi[r, c] + 0.5 * h * k2[r, c]
-        _jacobian_times(s3, mid, p, stage, k3, region)
+        _jacobian_times(s3, mid, p, stage, k3, region, side)
         for r in range(6):
             for c in range(6):
                 stage[r, c] = phi[r, c] + h * k3[r, c]
-        _jacobian_times(s4, end, p, stage, k4, region)
+        _jacobian_times(s4, end, p, stage, k4, region, side)
         for r in range(6):
             for c in range(6):
                 phi[r, c] += w * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
@@ -238,22 +252,24 @@ def _saltation(phi, jump, p):
 
 @nb.njit(**JIT_OPTIONS)
 def _two_parts(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, with_matrix, phi, work, regions,
-               jump):
+               sides, jump):
     """The step from ``s`` over [t, t + h] in two RK4 steps split at fraction ``theta``.
 
-    With ``with_matrix`` ``phi`` is carried along with the Jacobians of ``regions`` (a pair, see
-    :func:`_jacobian_times`), times the saltation matrix of a damping jump ``jump`` (N s/m) between
-    the parts. Returns (state at the split, state at the end).
+    Each part's stages take the mesh damping of its side of the boundary (``sides``, a pair), as
+    the fast path's split step does. With ``with_matrix`` ``phi`` is carried along with the
+    Jacobians of ``regions`` (a pair, see :func:`_jacobian_times`), times the saltation matrix of
+    a damping jump ``jump`` (N s/m) between the parts. Returns (state at the split, state at the
+    end).
     """
     h_a = theta * h
     h_b = h - h_a
     middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
     part = _rk4_variational(s, h_a, start, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle,
-                            p, phi, with_matrix, work, regions[0])
+                            p, phi, with_matrix, work, regions[0], sides[0])
     if with_matrix and jump != 0.0:
         _saltation(phi, jump, p)
     new = _rk4_variational(part, h_b, middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg),
-                           end, p, phi, with_matrix, work, regions[1])
+                           end, p, phi, with_matrix, work, regions[1], sides[1])
     return part, new
 
 
@@ -269,7 +285,7 @@ def _hermite_weights(theta):
 
 @nb.njit(**JIT_OPTIONS)
 def _crossing_sensitivity(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, x0, v0, x1, v1, phi,
-                          work, phi_start, trial_x, trial_v):
+                          work, phi_start, trial_x, trial_v, sides):
     """Add to ``phi`` the term of the discrete map's derivative that comes from moving the split point.
 
     The split fraction theta solves H(theta) = level on the Hermite interpolant of the unsplit
@@ -282,9 +298,9 @@ def _crossing_sensitivity(s, t, h, theta, t_ref, start, end, p, pair_k, period_k
         return
     delta = min(1e-7, 0.5 * theta, 0.5 * (1.0 - theta))
     _, plus = _two_parts(s, t, h, theta + delta, t_ref, start, end, p, pair_k, period_k, fp, fg, False, phi, work,
-                         (2, 2), 0.0)
+                         (2, 2), sides, 0.0)
     _, minus = _two_parts(s, t, h, theta - delta, t_ref, start, end, p, pair_k, period_k, fp, fg, False, phi, work,
-                          (2, 2), 0.0)
+                          (2, 2), sides, 0.0)
     for col in range(6):
         d_theta = -(values[0] * phi_start[2, col] + values[1] * h * phi_start[5, col] + values[2] * trial_x[col]
                     + values[3] * h * trial_v[col]) / slope
@@ -303,17 +319,21 @@ def _substep(s, t, h, t_ref, p, pair_k, period_k, fp, fg, with_matrix, discrete,
         for r in range(6):
             for c in range(6):
                 backup[r, c] = phi[r, c]
-    trial = _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, 2)
+    trial = _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, 2, 2)
     b = p[HALF_BACKLASH]
     before = contact_region(s[2], b)
     after = contact_region(trial[2], b)
     if before == after:
         measures[O_X_MIN_CURVE] = min(measures[O_X_MIN_CURVE], _curve_minimum(s[2], s[5], trial[2], trial[5], h))
         return trial
-    if before == 1 or (before == 0 and after == -1):
-        level = b if before == 1 else -b
-    else:
-        level = -b if before == -1 else b
+    level, entered = crossed_boundary(before, after, b)
+    if p[DAMP_IN_SEPARATION] == 0.0:
+        # as the fast path: the crossing is located on the step with the first side's damping throughout
+        if with_matrix:
+            for r in range(6):
+                for c in range(6):
+                    phi[r, c] = backup[r, c]
+        trial = _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, 2, before)
     theta = _crossing(s[2], s[5], trial[2], trial[5], h, level)
     measures[O_CROSSINGS] += 1.0
     if not 1e-9 < theta < 1.0 - 1e-9:
@@ -327,17 +347,16 @@ def _substep(s, t, h, t_ref, p, pair_k, period_k, fp, fg, with_matrix, discrete,
             trial_rows[1, c] = phi[5, c]
             for r in range(6):
                 phi[r, c] = backup[r, c]
-    # the region on the far side of the boundary crossed first
-    entered = 0 if before != 0 else (1 if level > 0.0 else -1)
     # discrete: the derivative of the discrete map (stage regions as the state's); else the flow's
     # variational equation on each smooth piece and the saltation matrix between them
     regions = (2, 2) if discrete else (before, entered)
     jump = 0.0 if discrete else _jump_in_damping(before, entered, p)
+    sides = (before, entered)
     part, new = _two_parts(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, with_matrix, phi, work,
-                           regions, jump)
+                           regions, sides, jump)
     if with_matrix and discrete:
         _crossing_sensitivity(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, s[2], s[5], trial[2],
-                              trial[5], phi, work, backup, trial_rows[0], trial_rows[1])
+                              trial[5], phi, work, backup, trial_rows[0], trial_rows[1], sides)
     measures[O_X_MIN_CURVE] = min(measures[O_X_MIN_CURVE], _curve_minimum(s[2], s[5], part[2], part[5], theta * h),
                                   _curve_minimum(part[2], part[5], new[2], new[5], h - theta * h))
     return new

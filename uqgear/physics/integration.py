@@ -101,7 +101,11 @@ def _highest_mode(design: Design, stiffness_scale: float) -> float:
     return _HIGHEST_MODES[key]
 
 
-def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int = 32,
+#: Fewest grid steps a mesh period.
+MINIMUM_STEPS = 32
+
+
+def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int = MINIMUM_STEPS,
                      multiple_of: int = 1) -> int:
     """Grid steps per mesh period for the fast integrator.
 
@@ -110,8 +114,25 @@ def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int =
     up to a multiple of ``multiple_of`` (the output sampling).
     """
     f_high = _highest_mode(setup.design, float(setup.parameters[K.STIFFNESS_SCALE]))
-    needed = max(minimum, math.ceil(steps_per_mode * f_high / setup.mesh_frequency))
+    return _steps_for(f_high, setup.mesh_frequency, steps_per_mode, minimum, multiple_of)
+
+
+def _steps_for(f_high: float, mesh_frequency: float, steps_per_mode: int, minimum: int, multiple_of: int) -> int:
+    needed = max(minimum, math.ceil(steps_per_mode * f_high / mesh_frequency))
     return int(math.ceil(needed / multiple_of) * multiple_of)
+
+
+def _batch_steps(setups: Sequence[ModelSetup], steps_per_mode: int, multiple_of: int) -> np.ndarray:
+    """:func:`steps_per_period` of each set-up, the highest mode looked up once per design and stiffness scale."""
+    highest: dict[tuple[int, float], float] = {}
+    steps = np.empty(len(setups), dtype=np.int64)
+    for i, setup in enumerate(setups):
+        # the set-ups hold their designs, so an id stands for one design while this runs
+        key = (id(setup.design), float(setup.parameters[K.STIFFNESS_SCALE]))
+        if key not in highest:
+            highest[key] = _highest_mode(setup.design, key[1])
+        steps[i] = _steps_for(highest[key], setup.mesh_frequency, steps_per_mode, MINIMUM_STEPS, multiple_of)
+    return steps
 
 
 def _attrs(setup: ModelSetup, method: str, n_periods: int, keep_periods: int, steps: int) -> dict:
@@ -484,9 +505,8 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
         groups, rest = np.empty((0, _lanes.LANES), dtype=np.int64), np.arange(len(params), dtype=np.int64)
     if len(groups):
         refused = np.zeros(len(params), dtype=np.bool_)
-        with _lanes.slp_vectorised():
-            # compiles (or loads) the lane kernel here, before the threads call it
-            _lanes.integrate_lanes(0, 0, groups, *arrays, refused)
+        # compiles (or loads) the lane kernel here, before the threads call it
+        _lanes.compile_lanes(groups, arrays, refused)
         spread(lambda first, last: _lanes.integrate_lanes(first, last, groups, *arrays, refused), len(groups), threads)
         rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)
     if len(rest):
@@ -559,7 +579,7 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
                          stiffness=stiffness, pitch_errors=pitch_errors)
     n = len(setups)
     multiple = max(int(history_per_period), 1)
-    steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=multiple) for s in setups], dtype=np.int64)
+    steps = _batch_steps(setups, steps_per_mode, multiple)
     params = np.stack([s.parameters for s in setups]) if n else np.empty((0, K.N_PARAMS))
     pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
     breakpoints = breakpoint_table(setups)
