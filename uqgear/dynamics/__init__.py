@@ -14,8 +14,14 @@ May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 from __future__ import annotations
 
 from .regimes import (
-    detect_period, count_distinct_points, zero_one_test, ResponseClass, classify_response,
-    classify_dataset, classify_batch)
+    detect_period,
+    count_distinct_points,
+    zero_one_test,
+    ResponseClass,
+    classify_response,
+    classify_dataset,
+    classify_batch,
+)
 from .spectra import amplitude_spectrum, spectrum_dataset
 from .response import phase_plane, poincare_section, contact_fractions, response_qois
 from .sweeps import bifurcation, sweep_grid
@@ -26,10 +32,36 @@ from .continuation import Continuation, ContinuationSettings
 from .branches import bifurcation_table
 
 __all__ = [
-    'detect_period', 'count_distinct_points', 'zero_one_test', 'ResponseClass', 'classify_response',
-    'classify_dataset', 'classify_batch', 'amplitude_spectrum', 'spectrum_dataset', 'phase_plane',
-    'poincare_section', 'contact_fractions', 'response_qois', 'bifurcation', 'sweep_grid',
-    'MultiStart', 'MultiStartSearch', 'StartedEvaluator', 'extremes_over_attractors', 'floquet_multipliers',
-    'unstable_counts', 'is_stable', 'floquet_exponents', 'Shooting', 'ShootingSettings', 'ShootingError',
-    'PeriodicOrbit', 'PoincareMap', 'setup_at', 'Continuation', 'ContinuationSettings', 'bifurcation_table',
+    "detect_period",
+    "count_distinct_points",
+    "zero_one_test",
+    "ResponseClass",
+    "classify_response",
+    "classify_dataset",
+    "classify_batch",
+    "amplitude_spectrum",
+    "spectrum_dataset",
+    "phase_plane",
+    "poincare_section",
+    "contact_fractions",
+    "response_qois",
+    "bifurcation",
+    "sweep_grid",
+    "MultiStart",
+    "MultiStartSearch",
+    "StartedEvaluator",
+    "extremes_over_attractors",
+    "floquet_multipliers",
+    "unstable_counts",
+    "is_stable",
+    "floquet_exponents",
+    "Shooting",
+    "ShootingSettings",
+    "ShootingError",
+    "PeriodicOrbit",
+    "PoincareMap",
+    "setup_at",
+    "Continuation",
+    "ContinuationSettings",
+    "bifurcation_table",
 ]

@@ -6,22 +6,61 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics` and :mod:`uqgear.uq`.
 from __future__ import annotations
 
 from .format import (
-    CONVENTIONS, RIG_COORDINATES, validate_rig, read_rig, rig_design, usable_runs, make_rig_dataset,
-    write_rig)
+    CONVENTIONS,
+    RIG_COORDINATES,
+    validate_rig,
+    read_rig,
+    rig_design,
+    usable_runs,
+    make_rig_dataset,
+    write_rig,
+)
 from .features import (
-    SIGNAL_CHANNELS, FEATURE_FAMILIES, FeatureDefinition, feature_definitions, sampling_rate,
-    order_spectrum, line_amplitudes, extract_features)
+    SIGNAL_CHANNELS,
+    FEATURE_FAMILIES,
+    FeatureDefinition,
+    feature_definitions,
+    sampling_rate,
+    order_spectrum,
+    line_amplitudes,
+    extract_features,
+)
 from .usability import check_usable_signal, record_states
 from .transfer_path import apply_transfer_path, transfer_path_gain
 from .virtual_rig import (
-    simulate_campaign, synth_rig, default_operating_points, adhesion_torque_bounds,
-    true_parameters_of, bearing_check_operating_points)
+    simulate_campaign,
+    synth_rig,
+    default_operating_points,
+    adhesion_torque_bounds,
+    true_parameters_of,
+    bearing_check_operating_points,
+)
 
 __all__ = [
-    'CONVENTIONS', 'RIG_COORDINATES', 'validate_rig', 'read_rig', 'rig_design', 'usable_runs',
-    'make_rig_dataset', 'write_rig', 'SIGNAL_CHANNELS', 'FEATURE_FAMILIES', 'FeatureDefinition',
-    'feature_definitions', 'sampling_rate', 'order_spectrum', 'line_amplitudes', 'extract_features',
-    'simulate_campaign', 'synth_rig', 'default_operating_points', 'adhesion_torque_bounds',
-    'true_parameters_of', 'bearing_check_operating_points',
-    'check_usable_signal', 'record_states', 'apply_transfer_path', 'transfer_path_gain',
+    "CONVENTIONS",
+    "RIG_COORDINATES",
+    "validate_rig",
+    "read_rig",
+    "rig_design",
+    "usable_runs",
+    "make_rig_dataset",
+    "write_rig",
+    "SIGNAL_CHANNELS",
+    "FEATURE_FAMILIES",
+    "FeatureDefinition",
+    "feature_definitions",
+    "sampling_rate",
+    "order_spectrum",
+    "line_amplitudes",
+    "extract_features",
+    "simulate_campaign",
+    "synth_rig",
+    "default_operating_points",
+    "adhesion_torque_bounds",
+    "true_parameters_of",
+    "bearing_check_operating_points",
+    "check_usable_signal",
+    "record_states",
+    "apply_transfer_path",
+    "transfer_path_gain",
 ]

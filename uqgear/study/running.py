@@ -34,9 +34,18 @@ def copy_previous(out: Path, work: Path) -> None:
             shutil.copy2(item, target)
 
 
-def run_study(study: Study, out_dir: str | os.PathLike[str], *, scheduler: str | None = None,
-              workers: int | None = None, resume: bool = False, show_progress: bool = True, report: bool = False,
-              dpi: int = 110, existing: Existing = "merge") -> list[Path]:
+def run_study(
+    study: Study,
+    out_dir: str | os.PathLike[str],
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    resume: bool = False,
+    show_progress: bool = True,
+    report: bool = False,
+    dpi: int = 110,
+    existing: Existing = "merge",
+) -> list[Path]:
     """Run every analysis of a study and write ``<out_dir>/<name>.nc`` for each, the folder as a whole.
 
     Parameters
@@ -80,8 +89,15 @@ def run_study(study: Study, out_dir: str | os.PathLike[str], *, scheduler: str |
     with OutputFolder(out, existing=existing, resumable=True, resume=resume) as work:
         if resume and out.is_dir():
             copy_previous(out, work)
-        written = run_analyses(study, work, scheduler=scheduler, workers=workers, resume=resume,
-                               show_progress=show_progress, checkpoint_dir=work / CHECKPOINTS)
+        written = run_analyses(
+            study,
+            work,
+            scheduler=scheduler,
+            workers=workers,
+            resume=resume,
+            show_progress=show_progress,
+            checkpoint_dir=work / CHECKPOINTS,
+        )
         if report:
             from ..report.study_report import write_report
 

@@ -21,6 +21,7 @@ from .parameters import Distribution, Fixed, Interval, Parameter, parse_paramete
 from .sampling import UNIT_EPSILON, sample_space
 from .seeds import SeedLike
 
+
 class ParameterSpace:
     """Named uncertain and fixed parameters.
 
@@ -44,13 +45,14 @@ class ParameterSpace:
 
     def __init__(self, parameters: Mapping[str, Parameter | Any]) -> None:
         if not isinstance(parameters, Mapping) or not parameters:
-            raise ParameterSpaceError(f"parameter space: expected a non-empty mapping of parameter names to "
-                                      f"Interval/Distribution/Fixed; got {parameters!r}")
+            raise ParameterSpaceError(
+                f"parameter space: expected a non-empty mapping of parameter names to "
+                f"Interval/Distribution/Fixed; got {parameters!r}"
+            )
         parsed: dict[str, Parameter] = {}
         for name, spec in parameters.items():
             if not isinstance(name, str) or not name.isidentifier():
-                raise ParameterSpaceError(f"parameter name {name!r}: expected an identifier such as "
-                                          f"'adhesion_torque'")
+                raise ParameterSpaceError(f"parameter name {name!r}: expected an identifier such as 'adhesion_torque'")
             parsed[name] = parse_parameter(name, spec)
         self._parameters = MappingProxyType(parsed)
 
@@ -90,8 +92,9 @@ class ParameterSpace:
         try:
             return self._parameters[name]
         except KeyError:
-            raise ParameterSpaceError(f"parameter {name!r}: not in the parameter space; "
-                                      f"known: {', '.join(self.names)}") from None
+            raise ParameterSpaceError(
+                f"parameter {name!r}: not in the parameter space; known: {', '.join(self.names)}"
+            ) from None
 
     def __contains__(self, name: object) -> bool:
         return name in self._parameters
@@ -202,8 +205,14 @@ class ParameterSpace:
 
     # -- sampling -------------------------------------------------------------------
 
-    def sample(self, n: int, method: str = "monte_carlo", *, seed: SeedLike | None = None,
-               interval_treatment: str | None = None) -> xr.Dataset:
+    def sample(
+        self,
+        n: int,
+        method: str = "monte_carlo",
+        *,
+        seed: SeedLike | None = None,
+        interval_treatment: str | None = None,
+    ) -> xr.Dataset:
         """Draw samples of all parameters.
 
         Parameters

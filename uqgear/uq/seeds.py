@@ -19,8 +19,9 @@ from ..common.errors import ParameterSpaceError
 SeedLike = Union[np.random.SeedSequence, int]
 
 
-def as_seed_sequence(seed: SeedLike, *, setting: str = "seed",
-                     error: type[ValueError] | None = None) -> np.random.SeedSequence:
+def as_seed_sequence(
+    seed: SeedLike, *, setting: str = "seed", error: type[ValueError] | None = None
+) -> np.random.SeedSequence:
     """Turn ``seed`` into a :class:`numpy.random.SeedSequence`.
 
     Parameters
@@ -47,7 +48,8 @@ def as_seed_sequence(seed: SeedLike, *, setting: str = "seed",
     if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
         return np.random.SeedSequence(int(seed))
     raise (error or ParameterSpaceError)(
-        f"{setting}: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
+        f"{setting}: expected a non-negative integer or a numpy SeedSequence; got {seed!r}"
+    )
 
 
 def child_seed(seed_sequence: np.random.SeedSequence, index: int) -> np.random.SeedSequence:
@@ -58,14 +60,18 @@ def child_seed(seed_sequence: np.random.SeedSequence, index: int) -> np.random.S
     child from the spawn key keeps "same seed, same numbers" true however
     often an analysis is run.
     """
-    return np.random.SeedSequence(entropy=seed_sequence.entropy,
-                                  spawn_key=tuple(seed_sequence.spawn_key) + (int(index),),
-                                  pool_size=seed_sequence.pool_size)
+    return np.random.SeedSequence(
+        entropy=seed_sequence.entropy,
+        spawn_key=tuple(seed_sequence.spawn_key) + (int(index),),
+        pool_size=seed_sequence.pool_size,
+    )
 
 
 def seed_attributes(seed_sequence: np.random.SeedSequence | None) -> dict[str, str]:
     """NetCDF-safe attributes describing a seed (entropy may exceed 64 bits, so strings)."""
     if seed_sequence is None:
         return {"seed_entropy": "none (deterministic)", "seed_spawn_key": ""}
-    return {"seed_entropy": str(seed_sequence.entropy),
-            "seed_spawn_key": json.dumps([int(k) for k in seed_sequence.spawn_key])}
+    return {
+        "seed_entropy": str(seed_sequence.entropy),
+        "seed_spawn_key": json.dumps([int(k) for k in seed_sequence.spawn_key]),
+    }
