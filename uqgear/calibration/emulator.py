@@ -67,7 +67,7 @@ class PolynomialEmulator:
         columns = legendre[:, np.arange(self.dimensions)[None, :], self.indices]
         return np.prod(columns, axis=2)
 
-    def fit(self, z: np.ndarray, values: np.ndarray) -> "PolynomialEmulator":
+    def fit(self, z: np.ndarray, values: np.ndarray) -> PolynomialEmulator:
         """Fit outputs ``values`` (N, F) at inputs ``z`` (N, dimensions); sets ``coefficients_`` and
         the leave-one-out residuals ``loo_residuals_`` (N, F) and RMS ``loo_rms_`` (F)."""
         matrix = self.basis(z)

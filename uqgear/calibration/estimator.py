@@ -222,7 +222,7 @@ class Calibration:
 
     # ------------------------------------------------------------------ fit
 
-    def fit(self, rig: xr.Dataset | str | os.PathLike[str]) -> "Calibration":
+    def fit(self, rig: xr.Dataset | str | os.PathLike[str]) -> Calibration:
         """Calibrate on a rig campaign.
 
         Parameters

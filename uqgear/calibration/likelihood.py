@@ -142,7 +142,7 @@ class StageLikelihood:
         self.inverse_total = np.where(used, 1.0 / total, 0.0)
         self.log_normaliser = np.where(used, -0.5 * np.log(2.0 * np.pi * total), 0.0).sum(axis=1)  # (K, C, H)
 
-    def with_features(self, features: Features) -> "StageLikelihood":
+    def with_features(self, features: Features) -> StageLikelihood:
         """The likelihood of other observed features (a corrected copy) on the same box and emulators."""
         return StageLikelihood(self.box_lower, self.box_upper, self._emulators, self._loo, features, self._n_global)
 

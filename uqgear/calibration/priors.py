@@ -92,7 +92,7 @@ def resolve_parameters(parameters: Sequence[str]) -> tuple[str, ...]:
     """
     if isinstance(parameters, str) or not isinstance(parameters, Sequence):
         raise CalibrationError(f"parameters: expected a list of names; got {parameters!r}")
-    known = ["mesh_stiffness_scale", *[key for key in BATCH_DESIGN_KEYS]]
+    known = ["mesh_stiffness_scale", *BATCH_DESIGN_KEYS]
     resolved: list[str] = []
     for name in parameters:
         canonical = PARAMETER_ALIASES.get(name, name)

@@ -27,7 +27,6 @@ from scipy.stats import qmc
 from .convergence import ConvergenceCriteria
 from .likelihood import StageLikelihood
 
-
 #: The first 1/BURN_IN_DIVISOR of the final chain is burn-in (module docstring).
 BURN_IN_DIVISOR = 10
 

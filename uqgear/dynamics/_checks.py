@@ -11,7 +11,6 @@ import xarray as xr
 
 from ..common.errors import UqgearError
 
-
 Seed = int | np.random.SeedSequence
 
 

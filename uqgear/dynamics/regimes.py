@@ -71,7 +71,6 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from ..common.errors import UqgearError
 from ._checks import Seed, _check_positive, _require
 
-
 #: Regime labels :func:`classify_response` can return besides ``period-n``.
 QUASI_PERIODIC = "quasi-periodic"
 CHAOTIC = "chaotic"

@@ -11,7 +11,6 @@ import xarray as xr
 from ..common.errors import UqgearError
 from ._checks import _require, _require_attr
 
-
 _CONTACT_STATES = {"fraction_drive_contact": 1, "fraction_separation": 0, "fraction_back_contact": -1}
 _CONTACT_LONG_NAMES = {
     "fraction_drive_contact": "fraction of time in drive-side contact (x > b)",

@@ -28,12 +28,12 @@ import math
 import numba as nb
 
 from uqgear.physics._rhs import (
-    CONTACT_RATIO,
-    CM,
     C1,
     C2,
     CLEARANCE1,
     CLEARANCE2,
+    CM,
+    CONTACT_RATIO,
     DAMP_IN_SEPARATION,
     ECC_KAPPA,
     ECC_OMEGA,

@@ -168,7 +168,7 @@ class Design:
     @classmethod
     def from_mapping(
         cls, values: Mapping[str, Any], *, name: str = "custom", operation: Operation | None = None, where: str = ""
-    ) -> "Design":
+    ) -> Design:
         """Validate a mapping of design keys and build a design.
 
         Parameters
@@ -223,7 +223,7 @@ class Design:
         check_geometry(design, where=where)
         return design
 
-    def replace(self, **changes: Any) -> "Design":
+    def replace(self, **changes: Any) -> Design:
         """Return a validated copy with some design keys changed."""
         values = self.to_dict()
         unknown = sorted(set(changes) - set(values) - set(_OPTIONAL_DESIGN_KEYS))

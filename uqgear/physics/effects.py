@@ -75,7 +75,7 @@ class Effect:
         inner = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
         return f"{type(self).__name__}({inner})"
 
-    def with_values(self, **changes: Any) -> "Effect":
+    def with_values(self, **changes: Any) -> Effect:
         """A copy with some parameters changed (validated)."""
         return type(self)({**self.values, **changes})
 

@@ -23,8 +23,8 @@ from __future__ import annotations
 import functools
 import math
 import warnings
-from types import SimpleNamespace
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import brentq

@@ -84,7 +84,7 @@ class PitchErrors:
         object.__setattr__(self, "pinion", _per_tooth("pitch_errors.pinion", self.pinion, None))
         object.__setattr__(self, "gear", _per_tooth("pitch_errors.gear", self.gear, None))
 
-    def check(self, design: Design) -> "PitchErrors":
+    def check(self, design: Design) -> PitchErrors:
         """Self, after checking one value per tooth of the design (z1 pinion, z2 gear values)."""
         _per_tooth("pitch_errors.pinion", self.pinion, design.z1)
         _per_tooth("pitch_errors.gear", self.gear, design.z2)
@@ -96,7 +96,7 @@ class PitchErrors:
         return bool(np.any(self.pinion != 0.0) or np.any(self.gear != 0.0))
 
     @classmethod
-    def zeros(cls, design: Design) -> "PitchErrors":
+    def zeros(cls, design: Design) -> PitchErrors:
         """No pitch errors (the results equal those without any, bit for bit)."""
         return cls(np.zeros(design.z1), np.zeros(design.z2))
 

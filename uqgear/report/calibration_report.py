@@ -15,7 +15,7 @@ from __future__ import annotations
 import html
 import os
 from collections.abc import Mapping, Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -250,7 +250,7 @@ def _table(rows: Sequence[Sequence[Any]], header: Sequence[str]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def corner_figure(calibration: "Calibration", truth: Mapping[str, Any] | None = None) -> Figure:
+def corner_figure(calibration: Calibration, truth: Mapping[str, Any] | None = None) -> Figure:
     """Pairwise marginals of the global parameters (2-D histograms) with 1-D histograms on the diagonal."""
     names = list(calibration.parameters)
     draws = {name: calibration.posterior_[name].values.ravel() * _display(name)[2] for name in names}
@@ -290,7 +290,7 @@ def corner_figure(calibration: "Calibration", truth: Mapping[str, Any] | None = 
     return figure
 
 
-def trace_figure(calibration: "Calibration", walkers: int = 12) -> Figure:
+def trace_figure(calibration: Calibration, walkers: int = 12) -> Figure:
     """Traces of the stored (burnt-in, thinned) draws of the global parameters for some walkers."""
     names = list(calibration.parameters)
     figure = new_figure(9.0, 1.6 * len(names) + 0.6)
@@ -308,7 +308,7 @@ def trace_figure(calibration: "Calibration", walkers: int = 12) -> Figure:
     return figure
 
 
-def predictive_figure(calibration: "Calibration") -> Figure:
+def predictive_figure(calibration: Calibration) -> Figure:
     """Observed mesh-harmonic amplitudes against the posterior predictive of the real model, per channel."""
     predictive = calibration.predictive_
     channels = [str(c) for c in predictive["channel"].values]
@@ -371,9 +371,7 @@ def _truth_rows(truth: Mapping[str, Any] | None, name: str, q05: float, q95: flo
     return [value, bool(q05 <= value <= q95)]
 
 
-def calibration_report_html(
-    calibration: "Calibration", *, truth: Mapping[str, Any] | None = None, dpi: int = 100
-) -> str:
+def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any] | None = None, dpi: int = 100) -> str:
     """The report as one HTML document (see the module docstring)."""
     if not hasattr(calibration, "posterior_"):
         raise UqgearError("calibration report: the calibration is not fitted; call fit(rig) first")
@@ -403,7 +401,7 @@ def calibration_report_html(
                 ("model runs", str(calibration.timing_["model_runs"])),
                 ("wall time", f"{calibration.timing_['wall_s']:.1f} s"),
                 ("CPU time", f"{calibration.timing_['cpu_s']:.1f} s"),
-                ("report created", datetime.now(timezone.utc).isoformat(timespec="seconds")),
+                ("report created", datetime.now(UTC).isoformat(timespec="seconds")),
             ],
             ("item", "value"),
         ),
@@ -536,7 +534,7 @@ def calibration_report_html(
 
 
 def write_calibration_report(
-    calibration: "Calibration", path: str | os.PathLike[str], *, truth: Mapping[str, Any] | None = None, dpi: int = 100
+    calibration: Calibration, path: str | os.PathLike[str], *, truth: Mapping[str, Any] | None = None, dpi: int = 100
 ) -> Path:
     """Write the HTML report of a fitted calibration atomically.
 

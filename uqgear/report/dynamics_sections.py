@@ -408,7 +408,7 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
     if condition:
         others = [dim for dim in points.dims if dim not in (parameter, "period", condition)]
         if others:
-            points = points.isel({dim: 0 for dim in others})
+            points = points.isel(dict.fromkeys(others, 0))
         condition_values = np.asarray(ds[condition].values, dtype=float)
         cmap = colormaps["cividis"]
         for index, level in enumerate(condition_values):
@@ -509,7 +509,7 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
 @renderer("regime_map")
 def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
-    axes_names = _json_attr(ds, "axes", [d for d in ds["regime"].dims][:2])
+    axes_names = _json_attr(ds, "axes", list(ds["regime"].dims)[:2])
     first, second = axes_names[0], axes_names[1]
     regime = ds["regime"].transpose(first, second)
     figure = new_figure(9.0, 5.2)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-
 # name -> (label, unit shown, factor from SI to the unit shown)
 _DISPLAY: dict[str, tuple[str, str, float]] = {
     "pinion_speed": ("pinion speed $n_1$", "rpm", 1.0),

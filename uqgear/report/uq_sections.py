@@ -13,12 +13,11 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from ..uq.interval import FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR, FLAG_VERTEX_EXCEEDED
+from .coexistence_sections import attractor_bound_sentences
 from .findings import _range_text, _runs_of_values
 from .page import new_figure
 from .presentation import _LINE_STYLES, _MARKERS, axis_label, display, format_value, short_name
-from .coexistence_sections import attractor_bound_sentences
 from .sections import Section, _add_figure, _json_attr, _list, _section, renderer
-
 
 # interval flags that say something about the QoI itself (not just "recomputed by the fallback")
 _OWN_FLAGS = FLAG_VERTEX_EXCEEDED | FLAG_SURROGATE_ERROR | FLAG_NONSMOOTH | FLAG_NONFINITE

@@ -26,9 +26,9 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from ..physics.design import Design, design_from_json
-from ..common.fileio import atomic_path
 from ..common.errors import DesignError, RigDataError
+from ..common.fileio import atomic_path
+from ..physics.design import Design, design_from_json
 from .features import SIGNAL_CHANNELS, sampling_rate
 from .order_tracking import TACHOMETER_VARIABLE
 

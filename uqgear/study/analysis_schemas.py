@@ -12,7 +12,6 @@ from ..physics.effects import EFFECTS
 from .checkers import Checker, boolean, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
 
-
 #: Scalar quantities of interest of a simulation run (see uqgear.physics.integration.QOI_INFO).
 QOIS: tuple[str, ...] = (
     "dte_mean",

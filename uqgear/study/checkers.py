@@ -13,7 +13,6 @@ from typing import Any
 
 from ..common.errors import StudyError, shown
 
-
 _NAME_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
 
 

@@ -24,8 +24,8 @@ response that jumps between attractors is the non-smooth case surrogates cannot 
 
 from __future__ import annotations
 
-import json
 import functools
+import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 

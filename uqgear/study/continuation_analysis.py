@@ -2,10 +2,11 @@
 
 For every combination of ``points`` values across each ``envelope`` parameter (an interval: from end
 to end, by default both ends, wet and dry rail for T2; a distribution: its 5 % to 95 % quantiles)
-the period-1 branch is followed over the range of ``parameter`` (the span of its sweep, or its interval) with :class:`~uqgear.dynamics.continuation.Continuation`, switching
-onto doubled branches at period doublings up to ``max_period``. The result stacks the cases along dim
-``case`` (:func:`~uqgear.dynamics.branches.stack_cases`): each bifurcation point of each case, so
-the interval of a bifurcation point over T2 is the spread of its location over the cases.
+the period-1 branch is followed over the range of ``parameter`` (the span of its sweep, or its
+interval) with :class:`~uqgear.dynamics.continuation.Continuation`, switching onto doubled branches
+at period doublings up to ``max_period``. The result stacks the cases along dim ``case``
+(:func:`~uqgear.dynamics.branches.stack_cases`): each bifurcation point of each case, so the
+interval of a bifurcation point over T2 is the spread of its location over the cases.
 
 With ``compare_sweeps`` (default) the same cases are also swept by brute force at the sweep's values,
 from rest, and up and down with each run starting from its neighbour's final state

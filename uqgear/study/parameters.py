@@ -10,13 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from ..physics.design import _DESIGN_KEYS, STANDARD_GRAVITY, Design
 from ..common.errors import StudyError, UqgearError, shown
-from ..uq.parameters import Distribution, Interval
+from ..physics.design import _DESIGN_KEYS, STANDARD_GRAVITY, Design
 from ..uq.parameter_space import ParameterSpace
+from ..uq.parameters import Distribution, Interval
 from .checkers import Checker, _fail, check_mapping, choice, list_of, number, string
 from .variables import OPERATING_VARIABLES, VARIABLE_DESIGN_KEYS, VARIABLES, variable_unit, variable_units_short
-
 
 # ---------------------------------------------------------------------------- value specs
 
@@ -253,7 +252,7 @@ def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) 
         choice(*DISTRIBUTIONS)(distribution, f"{path}.distribution")
         required, optional = DISTRIBUTIONS[distribution]
         schema: dict[str, Checker] = {"distribution": string()}
-        schema.update({key: element for key in required + optional})
+        schema.update(dict.fromkeys(required + optional, element))
         spec = check_mapping(raw, path, schema, required=required)
         parameters = {key: value for key, value in spec.items() if key != "distribution"}
         try:

@@ -31,14 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from ..physics.design import _DESIGN_KEYS, Design, load_design
 from ..common.errors import StudyError, UqgearError
 from ..common.resources import bundled_by_name, bundled_names
 from ..common.yamlio import YAMLError, load_yaml
+from ..physics.design import _DESIGN_KEYS, Design, load_design
 from .analysis_schemas import RIG_TYPES
-from .limits import DPI
 from .analysis_specs import AnalysisSpec, _analysis
 from .checkers import _fail, _type_name, boolean, check_mapping, identifier, number, string
+from .limits import DPI
 from .parameters import UncertainParameter, ValueSpec, _check_parameter_range, _operating_points, _uncertain_parameter
 from .settings import SimulationSettings, _simulation
 from .variables import OPERATING_VARIABLES, VARIABLES
@@ -107,7 +107,7 @@ def _resolve_rig(value: str, base_dir: Path | None) -> Path:
     return bundled_by_name("rig", value, candidate) or candidate
 
 
-def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
+def rig_path(study: Study, spec: AnalysisSpec) -> Path:
     """The rig file of a ``calibrate``/``diagnose`` analysis.
 
     A path is relative to the study file's folder; a bare name such as
@@ -117,7 +117,7 @@ def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
     return _resolve_rig(spec.options["rig"], Path(study.path).parent if study.path else None)
 
 
-def reference_path(study: "Study", spec: "AnalysisSpec") -> Path | None:
+def reference_path(study: Study, spec: AnalysisSpec) -> Path | None:
     """The healthy reference campaign of a ``diagnose`` analysis (key ``reference``), resolved like ``rig``; or None."""
     value = spec.options.get("reference")
     if value is None:
@@ -153,7 +153,7 @@ def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any
     overrides = spec.get("overrides") or {}
     if not isinstance(overrides, Mapping):
         raise _fail("design.overrides", "a mapping of design keys to values", overrides)
-    for key, value in overrides.items():
+    for key in overrides:
         if key not in _DESIGN_KEYS and key != "motor_pole_pairs":
             raise StudyError(f"design.overrides.{key}: unknown design key; expected one of {', '.join(_DESIGN_KEYS)}")
     source = spec.get("path", spec.get("name"))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from ..physics.design import _DESIGN_KEYS
 
-
 #: Operating variables a study may fix or sweep, with units and plausible ranges.
 #: Design keys (bearing stiffness, backlash, ...) may be swept or made uncertain too.
 OPERATING_VARIABLES: dict[str, tuple[str, float, float]] = {

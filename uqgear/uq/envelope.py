@@ -31,10 +31,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from ..physics.design import Design
+from ..common.errors import OperatingPointError
 from ..dynamics.regimes import REGIME_LABELS
 from ..dynamics.sweeps import sweep_grid
-from ..common.errors import OperatingPointError
+from ..physics.design import Design
 from ..physics.integration import BatchEvaluator
 from .runner import Runner
 

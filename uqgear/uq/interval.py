@@ -53,8 +53,8 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import ParameterSpaceError
-from .checks import check_count
 from .chebyshev import chebyshev_bounds
+from .checks import check_count
 from .interval_bounds import (
     FLAG_FALLBACK,
     FLAG_MEANINGS,
@@ -190,7 +190,7 @@ class IntervalAnalysis:
 
     def fit(
         self, evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None = None
-    ) -> "IntervalAnalysis":
+    ) -> IntervalAnalysis:
         """Bound every QoI over the interval parameters of ``space`` at every sweep point.
 
         Parameters

@@ -46,7 +46,7 @@ class Bounds:
     reasons: dict[tuple[int, int], list[str]] = field(default_factory=dict)
 
     @classmethod
-    def empty(cls, sweep_index: np.ndarray, responses: int) -> "Bounds":
+    def empty(cls, sweep_index: np.ndarray, responses: int) -> Bounds:
         shape = (len(sweep_index), responses)
         return cls(
             sweep_index,

@@ -141,19 +141,19 @@ class ParameterSpace:
 
     # -- derived spaces -------------------------------------------------------------
 
-    def select(self, names: Iterable[str]) -> "ParameterSpace":
+    def select(self, names: Iterable[str]) -> ParameterSpace:
         """Sub-space with the parameters ``names`` (in that order)."""
         names = list(names)
         return ParameterSpace({name: self[name] for name in names})
 
-    def fix(self, values: Mapping[str, float]) -> "ParameterSpace":
+    def fix(self, values: Mapping[str, float]) -> ParameterSpace:
         """Copy with the parameters in ``values`` turned into :class:`Fixed` ones."""
         parameters = dict(self._parameters)
         for name, value in values.items():
             parameters[name] = Fixed(value, units=self[name].units)
         return ParameterSpace(parameters)
 
-    def with_nominal(self, keep: Iterable[str]) -> "ParameterSpace":
+    def with_nominal(self, keep: Iterable[str]) -> ParameterSpace:
         """Copy where every uncertain parameter not in ``keep`` is fixed at its nominal value."""
         keep = set(keep)
         return self.fix({name: self.nominal(name) for name in self.uncertain_names if name not in keep})

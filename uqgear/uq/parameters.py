@@ -21,13 +21,13 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Union
+from typing import Any
 
 import chaospy
 import numpy as np
 
-from ..physics.design import STANDARD_GRAVITY
 from ..common.errors import ParameterSpaceError
+from ..physics.design import STANDARD_GRAVITY
 from .checks import finite_number
 
 
@@ -60,7 +60,7 @@ class Interval:
             raise ParameterSpaceError(f"Interval units: expected a string; got {self.units!r}")
 
     @classmethod
-    def from_adhesion(cls, mu_lower: float, mu_upper: float, axle_load_kg: float, wheel_radius: float) -> "Interval":
+    def from_adhesion(cls, mu_lower: float, mu_upper: float, axle_load_kg: float, wheel_radius: float) -> Interval:
         """Adhesion torque interval T2 = mu Q R_w from adhesion-coefficient bounds.
 
         Parameters
@@ -395,7 +395,7 @@ def _rebuild_distribution(name: str, units: str, params: dict[str, float]) -> Di
     return Distribution(name, units=units, **params)
 
 
-Parameter = Union[Interval, Distribution, Fixed]
+Parameter = Interval | Distribution | Fixed
 
 _SPEC_KEYS = {
     "interval": ("interval", "units"),

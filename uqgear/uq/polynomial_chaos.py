@@ -128,7 +128,7 @@ class PolynomialChaos:
 
     def fit(
         self, evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None = None
-    ) -> "PolynomialChaos":
+    ) -> PolynomialChaos:
         """Sample, run the model once (all sweep points in one batch) and fit.
 
         Parameters
@@ -154,7 +154,7 @@ class PolynomialChaos:
         outputs = evaluate_on_sweep(evaluate, samples, sweep_spec, qoi=self.qoi)
         return self.fit_samples(samples, outputs, space)
 
-    def fit_samples(self, samples: xr.Dataset, outputs: xr.Dataset, space: ParameterSpace) -> "PolynomialChaos":
+    def fit_samples(self, samples: xr.Dataset, outputs: xr.Dataset, space: ParameterSpace) -> PolynomialChaos:
         """Fit expansions to given samples and outputs (dims ``(*sweep, "sample")``)."""
         names = _uncertain_names(space)
         _check_training_data(names, samples, outputs, self.min_order)

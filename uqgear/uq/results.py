@@ -22,7 +22,7 @@ import json
 import os
 import platform
 from collections.abc import Hashable, Mapping
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import xarray as xr
 
-from ..common.fileio import atomic_path
 from ..common.errors import UqgearError
+from ..common.fileio import atomic_path
 
 if TYPE_CHECKING:
     from ..physics.design import Design
@@ -367,7 +367,7 @@ def provenance_attrs(
         "uqgear_version": uqgear_version(),
         "provenance_versions": json.dumps(package_versions(), sort_keys=True),
         "numba_target_cpu": numba_target_cpu(),
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     if seed is not None:
         attrs.update(_seed_attrs(seed))

@@ -9,14 +9,13 @@ gives the same numbers however often an analysis is run.
 from __future__ import annotations
 
 import json
-from typing import Union
 
 import numpy as np
 
 from ..common.errors import ParameterSpaceError
 
 #: A seed: a SeedSequence or an integer entropy for one.
-SeedLike = Union[np.random.SeedSequence, int]
+SeedLike = np.random.SeedSequence | int
 
 
 def as_seed_sequence(

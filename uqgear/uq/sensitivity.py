@@ -257,7 +257,7 @@ class SobolAnalysis:
 
     def fit(
         self, evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None = None
-    ) -> "SobolAnalysis":
+    ) -> SobolAnalysis:
         """Sample, run the model once on all samples at all sweep points, analyse.
 
         Parameters
