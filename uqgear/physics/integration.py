@@ -16,43 +16,29 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import xarray as xr
-from scipy.integrate import solve_ivp
 
+from ..common.errors import OperatingPointError
 from . import _kernels as K
 from . import _lanes
-from .design import DESIGN_KEYS, Design
+
+# BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
+from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
+from .batch_setup import breakpoint_table, build_batch, lane_groups, shared_stiffness_tables
+from .design import Design
 from .effects import Effect
-from ..common.errors import OperatingPointError
-from .model import ModelSetup, build_model, natural_frequencies
+from .model import HISTORY_COLUMNS, ModelSetup, build_model, natural_frequencies
 from .pitch_errors import PitchErrors
+from .scipy_reference import integrate_scipy
 from .threads import spread
 
 METHODS = ("fast", "scipy")
-OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
-#: Design keys a batch may vary (the tooth counts fix the tables' layout).
-BATCH_DESIGN_KEYS = tuple(key for key in DESIGN_KEYS if key not in ("z1", "z2"))
 #: The state vector's components, in order.
 STATE_NAMES = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity")
 
-_HISTORY_COLUMNS = (
-    "y1",
-    "y2",
-    "x",
-    "y1_velocity",
-    "y2_velocity",
-    "x_velocity",
-    "y1_acceleration",
-    "y2_acceleration",
-    "mesh_force",
-    "mesh_stiffness",
-    "ste",
-    "contact",
-)
 _UNITS = {
     "y1": "m",
     "y2": "m",
@@ -217,7 +203,7 @@ def _integrate_fast(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     steps = steps_per_period(setup, steps_per_mode, multiple_of=samples_per_period)
     stride = steps // samples_per_period
-    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
+    history = np.empty((keep_periods * samples_per_period, len(HISTORY_COLUMNS)))
     poincare = np.empty((keep_periods, 6))
     kernel = K.integrate_history_pairs if setup.parameters[K.PITCH_ERRORS] != 0.0 else K.integrate_history
     kernel(
@@ -236,145 +222,6 @@ def _integrate_fast(
         poincare,
     )
     return history, poincare, steps
-
-
-def _record_grid(
-    history: np.ndarray,
-    grid: np.ndarray,
-    sol: Any,
-    state: np.ndarray,
-    t_a: float,
-    t_end: float,
-    period: float,
-    first_row: int,
-    args: tuple,
-    deriv: np.ndarray,
-    contact: Callable[[float], int],
-) -> None:
-    """Write the history rows of the grid points in [t_a, t_end) from one solve_ivp piece.
-
-    Each grid point is recorded once, by the piece that starts it (the state
-    itself at t_a, the dense output inside).
-    """
-    for i in np.nonzero((grid >= t_a - 1e-12 * period) & (grid < t_end))[0]:
-        t = grid[i]
-        y = np.ascontiguousarray(sol.sol(t)) if t > t_a else state
-        row = first_row + i
-        force, k, ste = K.record(t, y, *args, deriv)
-        history[row, :6] = y
-        history[row, 6] = deriv[3]
-        history[row, 7] = deriv[4]
-        history[row, 8:11] = (force, k, ste)
-        history[row, 11] = contact(y[2])
-
-
-def _pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], int]:
-    """The contact state of x with the pairs in mesh (``newest``, ``count``): the history's contact column."""
-    return lambda x: K._pairs.pair_contact(x, newest, count, p)
-
-
-def _integrate_scipy(
-    setup: ModelSetup,
-    n_periods: int,
-    keep_periods: int,
-    samples_per_period: int,
-    initial_state: np.ndarray,
-    rtol: float,
-    atol: float | None,
-    solver: str = "DOP853",
-) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The scipy reference: DOP853 between stiffness breakpoints, a terminal event at every contact boundary.
-
-    ``solver`` names another :func:`scipy.integrate.solve_ivp` method on the
-    same segments and events (``benchmarks/integrator.py`` times LSODA so).
-
-    Within a segment between breakpoints the contact boundaries are fixed:
-    x = -b and x = +b for the mesh as a whole, and with pitch errors
-    x = e_i - b and x = e_i + b for each pair in mesh (its offset e_i, the
-    pairs fixed within the segment). Each boundary is an event directed away
-    from the side x is on (tracked across events), so every kink of the dead
-    zones is resolved.
-    """
-    p = setup.parameters
-    args = (p, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
-    period = 1.0 / setup.mesh_frequency
-    b = p[K.HALF_BACKLASH]
-    atol_vector = setup.state_scale() * (rtol if atol is None else atol)
-    phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
-    first_kept = n_periods - keep_periods
-    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
-    poincare = np.empty((keep_periods, 6))
-    deriv = np.empty(6)
-    state = initial_state.astype(float).copy()
-    stats = {"rhs_evaluations": 0, "contact_events": 0, "segments": 0}
-    with_pairs = p[K.PITCH_ERRORS] != 0.0
-    levels = np.array([-b, b])
-    above = state[2] > levels
-
-    def mesh_contact(x: float) -> int:
-        return 1 if x > b else (-1 if x < -b else 0)
-
-    contact: Callable[[float], int] = mesh_contact
-
-    def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
-        def event(t: float, y: np.ndarray) -> float:
-            return y[2] - level
-
-        event.terminal = True  # type: ignore[attr-defined]
-        event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
-        return event
-
-    for n in range(n_periods):
-        kept = n >= first_kept
-        if kept:
-            poincare[n - first_kept] = state
-            grid = (n + np.arange(samples_per_period) / samples_per_period) * period
-        for u_a, u_b in zip(phases[:-1], phases[1:]):
-            t_a, t_b = (n + u_a) * period, (n + u_b) * period
-            t_ref = 0.5 * (t_a + t_b)
-            if with_pairs:
-                newest, count = K._pairs.pair_state(t_ref, p)
-                offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
-                levels = np.unique([e + side for e in offsets for side in (b, -b)])
-                above = state[2] > levels
-                contact = _pair_contact(newest, count, p)
-            out = np.empty(6)
-
-            def fun(t, y, t_ref=t_ref, out=out):
-                K.rhs(t, y, t_ref, *args, out)
-                return out.copy()
-
-            while t_a < t_b:
-                events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
-                sol = solve_ivp(
-                    fun, (t_a, t_b), state, method=solver, rtol=rtol, atol=atol_vector, events=events, dense_output=kept
-                )
-                stats["rhs_evaluations"] += sol.nfev
-                stats["segments"] += 1
-                t_end = sol.t[-1]
-                if kept:
-                    _record_grid(
-                        history,
-                        grid,
-                        sol,
-                        state,
-                        t_a,
-                        t_end,
-                        period,
-                        (n - first_kept) * samples_per_period,
-                        args,
-                        deriv,
-                        contact,
-                    )
-                state = sol.y[:, -1].copy()
-                if sol.status == 1:
-                    stats["contact_events"] += 1
-                    fired = next(i for i, te in enumerate(sol.t_events) if te.size)
-                    above[fired] = not above[fired]
-                else:
-                    above = state[2] > levels
-                t_a = t_end
-    return history, poincare, stats
 
 
 def simulate(
@@ -466,7 +313,7 @@ def simulate(
         )
         extra = {"steps_per_mode": steps_per_mode}
     else:
-        history, poincare, stats = _integrate_scipy(
+        history, poincare, stats = integrate_scipy(
             setup, n_periods, keep_periods, samples_per_period, state0, rtol, atol
         )
         steps = samples_per_period
@@ -475,7 +322,7 @@ def simulate(
     first_kept = n_periods - keep_periods
     time = (first_kept + np.arange(keep_periods * samples_per_period) / samples_per_period) * period
     data = {}
-    for column, name in enumerate(_HISTORY_COLUMNS):
+    for column, name in enumerate(HISTORY_COLUMNS):
         values = history[:, column].astype(np.int8) if name == "contact" else history[:, column]
         data[name] = ("time", values, {"units": _UNITS[name], "long_name": _LONG_NAMES[name]})
     te = history[:, 2] - history[:, 0] + history[:, 1] + history[:, 10]
@@ -499,142 +346,6 @@ def simulate(
 
 
 # ---------------------------------------------------------------------------- batches
-
-
-def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]:
-    if "sample" not in samples.dims:
-        raise OperatingPointError("samples: expected a Dataset with dimension 'sample'")
-    n = samples.sizes["sample"]
-    known = set(OPERATING_VARIABLES) | set(BATCH_DESIGN_KEYS)
-    values: dict[str, np.ndarray] = {}
-    for name in samples.data_vars:
-        if name not in known and "." not in name:
-            raise OperatingPointError(
-                f"samples.{name}: unknown variable; expected one of {', '.join(sorted(known))} or EFFECT.PARAMETER"
-            )
-        array = np.asarray(samples[name].values, dtype=float)
-        if array.shape != (n,):
-            raise OperatingPointError(f"samples.{name}: expected dims ('sample',); got {samples[name].dims}")
-        values[name] = array
-    if "pinion_speed" not in values:
-        raise OperatingPointError("samples.pinion_speed: missing; expected pinion speeds in rpm")
-    values.setdefault("drive_torque", np.full(n, design.operation.drive_torque))
-    # without a given T2 the adhesion torque balances the drive torque (no rigid acceleration)
-    values.setdefault("adhesion_torque", values["drive_torque"] * design.z2 / design.z1)
-    values.setdefault("mesh_stiffness_scale", np.ones(n))
-    return values
-
-
-def build_batch(
-    design: Design,
-    samples: xr.Dataset,
-    *,
-    effects: Sequence[Effect] = (),
-    damping_in_separation: bool = True,
-    stiffness: str = "ishikawa",
-    pitch_errors: PitchErrors | None = None,
-) -> list[ModelSetup]:
-    """One :class:`ModelSetup` per sample (design keys and effect parameters may vary; the pitch errors,
-    if any, are those of every sample)."""
-    values = _sample_values(samples, design)
-    n = samples.sizes["sample"]
-    design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
-    effect_keys = [key for key in values if "." in key]
-    by_name = {effect.name: effect for effect in effects}
-    for key in effect_keys:
-        name, _, parameter = key.partition(".")
-        if name not in by_name:
-            raise OperatingPointError(
-                f"samples.{key}: effect {name!r} is not among the model's effects ({', '.join(by_name) or 'none'})"
-            )
-        if parameter not in by_name[name].PARAMETERS:
-            raise OperatingPointError(
-                f"samples.{key}: unknown parameter of {name}; expected one of {', '.join(by_name[name].PARAMETERS)}"
-            )
-    designs: dict[tuple, Design] = {}
-    setups = []
-    for i in range(n):
-        design_key = tuple(float(values[key][i]) for key in design_keys)
-        if design_key not in designs:
-            designs[design_key] = design.replace(**dict(zip(design_keys, design_key))) if design_keys else design
-        sample_effects = list(effects)
-        if effect_keys:
-            changes: dict[str, dict[str, float]] = {}
-            for key in effect_keys:
-                name, _, parameter = key.partition(".")
-                changes.setdefault(name, {})[parameter] = float(values[key][i])
-            sample_effects = [e.with_values(**changes[e.name]) if e.name in changes else e for e in effects]
-        setups.append(
-            build_model(
-                designs[design_key],
-                values["pinion_speed"][i],
-                values["drive_torque"][i],
-                values["adhesion_torque"][i],
-                mesh_stiffness_scale=values["mesh_stiffness_scale"][i],
-                effects=sample_effects,
-                damping_in_separation=damping_in_separation,
-                stiffness=stiffness,
-                pitch_errors=pitch_errors,
-            )
-        )
-    return setups
-
-
-def shared_stiffness_tables(setups: Sequence[ModelSetup]) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
-    """The distinct stiffness tables of a batch's set-ups and, per set-up, the index of its own.
-
-    Set-ups of one design share their tables (the model's stiffness cache),
-    so a batch passes each table to the kernels once, not once per sample.
-    """
-    tables: dict[tuple[int, int], int] = {}
-    pair_tables: list[np.ndarray] = []
-    period_tables: list[np.ndarray] = []
-    table_index = np.empty(len(setups), dtype=np.int64)
-    for i, setup in enumerate(setups):
-        key = id(setup.pair_stiffness), id(setup.period_stiffness)
-        if key not in tables:
-            tables[key] = len(pair_tables)
-            pair_tables.append(setup.pair_stiffness)
-            period_tables.append(setup.period_stiffness)
-        table_index[i] = tables[key]
-    return pair_tables, period_tables, table_index
-
-
-def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
-    """Breakpoints of a batch's set-ups, one row each, padded with NaN (one column at least)."""
-    width = max((len(setup.breakpoints) for setup in setups), default=0)
-    breakpoints = np.full((len(setups), max(width, 1)), np.nan)
-    for i, setup in enumerate(setups):
-        breakpoints[i, : len(setup.breakpoints)] = setup.breakpoints
-    return breakpoints
-
-
-def lane_groups(
-    params: np.ndarray, steps: np.ndarray, breakpoints: np.ndarray, strides: np.ndarray, lyapunov: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Lane groups of a batch's lane-ready runs, and the runs left to the one-sample kernels.
-
-    Runs with the same sub-step layout (steps per mesh period, stiffness
-    breakpoints, history stride) share a group of
-    :data:`~uqgear.physics._lanes.LANES` lanes (half as many runs with
-    ``lyapunov``: each run's shadow takes a lane); groups come most steps
-    first, so that the threads end on the short ones.
-    """
-    ready = np.nonzero(_lanes.lane_ready(params))[0]
-    rest = np.nonzero(~_lanes.lane_ready(params))[0]
-    width = _lanes.LANES // 2 if lyapunov else _lanes.LANES
-    layouts: dict[tuple, list[int]] = {}
-    for i in ready:
-        layouts.setdefault((int(steps[i]), breakpoints[i].tobytes(), int(strides[i])), []).append(int(i))
-    rows: list[tuple[int, list[int]]] = []
-    for key, members in layouts.items():
-        for start in range(0, len(members), width):
-            rows.append((key[0], members[start : start + width]))
-    rows.sort(key=lambda row: -row[0])
-    groups = np.full((len(rows), _lanes.LANES), -1, dtype=np.int64)
-    for g, (_, members) in enumerate(rows):
-        groups[g, : len(members)] = members
-    return groups, rest.astype(np.int64)
 
 
 def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
@@ -1005,5 +716,5 @@ __all__ = [
     "METHODS",
 ]
 
-#: Public names of the fast integrator and its history columns (the diagnosis simulates campaigns with them).
-integrate_fast, HISTORY_COLUMNS = _integrate_fast, _HISTORY_COLUMNS
+#: Public name of the fast integrator (the diagnosis simulates campaigns with it and the history columns).
+integrate_fast = _integrate_fast

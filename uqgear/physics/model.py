@@ -20,14 +20,31 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from ..common.errors import OperatingPointError
 from . import _kernels as K
 from .design import Design
-from ..common.errors import OperatingPointError
 from .geometry import pair_geometry
 from .pitch_errors import PitchErrors
 from .stiffness import StiffnessTables, stiffness_tables
 
 STIFFNESS_MODES = ("ishikawa", "fourier", "constant")
+
+#: Columns of a simulated history, in the order the kernels write them (the state, both accelerations,
+#: mesh force, mesh stiffness, static transmission error and contact state).
+HISTORY_COLUMNS = (
+    "y1",
+    "y2",
+    "x",
+    "y1_velocity",
+    "y2_velocity",
+    "x_velocity",
+    "y1_acceleration",
+    "y2_acceleration",
+    "mesh_force",
+    "mesh_stiffness",
+    "ste",
+    "contact",
+)
 
 
 #: Design keys that determine the tooth geometry and hence the stiffness tables.

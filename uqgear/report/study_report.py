@@ -36,13 +36,13 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import xarray as xr
 
-from ..common.fileio import write_text_atomic
 from ..common.errors import UqgearError
+from ..common.fileio import write_text_atomic
 from ..uq.results import load_result
 
 # imported for their renderers, which register themselves in RENDERERS
@@ -165,7 +165,7 @@ def _summary_rows(results: Sequence[xr.Dataset], sections: Sequence[Section]) ->
         ("model runs", str(total_runs)),
         ("run time", f"{total_time:.1f} s (sum over analyses)"),
         ("results created", str(first.attrs.get("created", ""))),
-        ("report created", datetime.now(timezone.utc).isoformat(timespec="seconds")),
+        ("report created", datetime.now(UTC).isoformat(timespec="seconds")),
     ]
 
 
@@ -194,7 +194,7 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
     Parameters
     ----------
     results : sequence of xarray.Dataset
-        Analysis results as written by :func:`uqgear.study.analyses.run_study`
+        Analysis results as written by :func:`uqgear.study.running.run_analyses`
         (with their provenance attributes), in analysis order.
     dpi : int
         Figure resolution.

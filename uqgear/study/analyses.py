@@ -10,9 +10,8 @@ figures, a renderer in one of the ``uqgear.report.*_sections`` modules).
 All model runs go through :func:`evaluate_batch`, a picklable model function
 ``samples -> results`` executed by a :class:`uqgear.uq.runner.Runner`: in-process
 (all local cores), or on a dask scheduler, chunked and checkpointed so a
-killed run resumes. :func:`run_study` runs every analysis of a study and
-writes one ``<name>.nc`` per analysis with provenance; an analysis whose file
-is already there with the same inputs is not run again on resume.
+killed run resumes. :func:`uqgear.study.running.run_analyses` runs every
+analysis of a study and writes one ``<name>.nc`` per analysis with provenance.
 
 Randomness: one :class:`numpy.random.SeedSequence` per study (the ``seed``
 key), one child per analysis in list order (:meth:`Study.seed_sequences`),
@@ -22,39 +21,34 @@ and children of that per stage. Same seed, same numbers.
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
 import uqgear.dynamics as dynamics
-from ..physics.design import Design
-from ..common.errors import StudyError, UqgearError
-from ..physics.integration import QOI_INFO, BatchEvaluator, simulate
+
 from ..common.progress import progress
-from ..uq.results import load_result, save_result
-from ..uq.runner import Runner
-from .analysis_specs import AnalysisSpec
-from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
-from .model_runs import RunnerModel
-from .schema import Study
-from .settings import SimulationSettings
-from .variables import OPERATING_VARIABLES, VARIABLES, variable_units_short
+from ..physics.design import Design
+from ..physics.integration import QOI_INFO, BatchEvaluator
 from ..uq.monte_carlo import monte_carlo_statistics
 from ..uq.parameter_space import ParameterSpace
 from ..uq.parameters import Fixed
 from ..uq.polynomial_chaos import PolynomialChaos
+from ..uq.runner import Runner
 from ..uq.seeds import child_seed
 from ..uq.sweeps import evaluate_on_sweep
+from .analysis_specs import AnalysisSpec
+from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
+from .model_runs import RunnerModel
+from .point_run import simulate_point
+from .schema import Study
+from .settings import SimulationSettings
+from .variables import variable_units_short
 
-#: Design keys an operating point may set.
-DESIGN_VARIABLES: frozenset[str] = frozenset(name for name in VARIABLES if name not in OPERATING_VARIABLES)
 #: Attribute holding the hash of an analysis's inputs (reuse on resume).
 ANALYSIS_KEY_ATTR = "analysis_key"
 
@@ -299,143 +293,7 @@ def _grid_run(context: AnalysisContext, axes: Mapping[str, np.ndarray], *, lyapu
     return gridded
 
 
-def _qoi_attrs(name: str) -> dict[str, str]:
-    units, long_name = QOI_INFO[name]
-    return {"units": units, "long_name": long_name}
-
-
 # ---------------------------------------------------------------------------- analyses
-
-
-def simulate_point(
-    design: Design,
-    point: Mapping[str, float],
-    *,
-    simulation: SimulationSettings,
-    samples_per_period: int = 64,
-    method: str = "fast",
-    largest_lyapunov: float | None = None,
-    seed: np.random.SeedSequence | int = 0,
-    label: str = "",
-) -> xr.Dataset:
-    """One full simulation with its Poincare points, DTE spectrum, QoIs and regime.
-
-    Parameters
-    ----------
-    design : Design
-    point : mapping
-        ``pinion_speed`` (rpm), ``drive_torque`` and ``adhesion_torque``
-        (N m), optionally ``mesh_stiffness_scale`` and design keys.
-    simulation : SimulationSettings
-    samples_per_period : int
-        History samples per mesh period.
-    method : {"fast", "scipy"}
-    largest_lyapunov : float, optional
-        Largest Lyapunov exponent in 1/s (from a batch run of the same
-        point); it decides chaotic against quasi-periodic.
-    seed : SeedSequence or int
-        Seed of the 0-1 test frequencies.
-    label : str
-        A label for reports (e.g. "period-1").
-
-    Returns
-    -------
-    xarray.Dataset
-        Histories on ``mesh_cycle`` (time in mesh periods), Poincare points
-        on ``period``, the DTE amplitude spectrum on ``order``; scalars:
-        the inputs, QoIs, ``regime``, ``response_period``, ``zero_one_k``,
-        ``regime_reason``.
-    """
-    design_keys = {key: value for key, value in point.items() if key in DESIGN_VARIABLES}
-    run_design = design.replace(**design_keys) if design_keys else design
-    run = simulate(
-        run_design,
-        point["pinion_speed"],
-        point["drive_torque"],
-        point["adhesion_torque"],
-        method=method,
-        n_periods=simulation.n_periods,
-        keep_periods=simulation.keep_periods,
-        samples_per_period=samples_per_period,
-        mesh_stiffness_scale=point.get("mesh_stiffness_scale", 1.0),
-        damping_in_separation=simulation.damping_in_separation,
-        stiffness=simulation.stiffness,
-        steps_per_mode=simulation.steps_per_mode,
-    )
-    if largest_lyapunov is not None:
-        run["largest_lyapunov"] = ((), float(largest_lyapunov), _qoi_attrs("largest_lyapunov"))
-    response = dynamics.classify_dataset(run, seed=seed)
-    spectrum = dynamics.spectrum_dataset(run, "x", against="order")["x"]
-    qois = dynamics.response_qois(run)
-    mesh_cycle = run["time"].values / run.attrs["mesh_period"]
-    frequency = (
-        spectrum["frequency"].values
-        if "frequency" in spectrum.coords
-        else spectrum["order"].values * point["pinion_speed"] / 60.0
-    )
-    data: dict[str, Any] = {
-        "time_s": ("mesh_cycle", run["time"].values, {"units": "s", "long_name": "time"}),
-        "spectrum_x": (
-            "order",
-            spectrum.values,
-            {"units": "m", "long_name": "amplitude spectrum of the DTE x (Hann window)"},
-        ),
-        "spectrum_frequency": ("order", frequency, {"units": "Hz", "long_name": "frequency of the bin"}),
-        "regime": ((), response.label, {"long_name": "response regime"}),
-        "response_period": ((), int(response.period), {"units": "1", "long_name": "period n, 0 if none"}),
-        "zero_one_k": (
-            (),
-            float(response.evidence["zero_one_k"]),
-            {"units": "1", "long_name": "median K of the 0-1 test"},
-        ),
-        "regime_reason": ((), response.reason, {"long_name": "evidence for the regime"}),
-        "label": ((), label, {"long_name": "label given in the study"}),
-        "mesh_frequency": ((), float(run.attrs["mesh_frequency"]), {"units": "Hz"}),
-        "static_mesh_force": ((), float(run.attrs["static_mesh_force"]), {"units": "N"}),
-        "half_backlash": ((), float(run.attrs["half_backlash"]), {"units": "m"}),
-        "largest_lyapunov": (
-            (),
-            float("nan") if largest_lyapunov is None else float(largest_lyapunov),
-            _qoi_attrs("largest_lyapunov"),
-        ),
-    }
-    for name in (
-        "x",
-        "x_velocity",
-        "y1",
-        "y2",
-        "y1_acceleration",
-        "y2_acceleration",
-        "mesh_force",
-        "mesh_stiffness",
-        "contact",
-    ):
-        data[name] = ("mesh_cycle", run[name].values, dict(run[name].attrs))
-    for name in ("poincare_x", "poincare_x_velocity"):
-        data[name] = ("period", run[name].values, dict(run[name].attrs))
-    for name, value in point.items():
-        data[name] = ((), float(value), {"units": variable_units_short(name)})
-    for name in qois.data_vars:
-        data[name] = ((), float(qois[name].values), dict(qois[name].attrs))
-    coords = {
-        "mesh_cycle": ("mesh_cycle", mesh_cycle, {"units": "1", "long_name": "time in mesh periods"}),
-        "period": ("period", run["period"].values, {"units": "1", "long_name": "mesh period index"}),
-        "order": (
-            "order",
-            spectrum["order"].values,
-            {"units": "1", "long_name": "order (multiples of the pinion rotation)"},
-        ),
-    }
-    attrs = {
-        "z1": run.attrs["z1"],
-        "z2": run.attrs["z2"],
-        "mesh_period": run.attrs["mesh_period"],
-        "n_periods": simulation.n_periods,
-        "keep_periods": simulation.keep_periods,
-        "samples_per_period": samples_per_period,
-        "method": method,
-    }
-    return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 def quick_run(
@@ -820,166 +678,4 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     return result
 
 
-# ---------------------------------------------------------------------------- running a study
-
-
-def analysis_key(study: Study, spec: AnalysisSpec) -> str:
-    """Hash of everything an analysis's result depends on (its entry, the study-wide inputs)."""
-    payload = {
-        "analysis": spec.raw,
-        "index": spec.index,
-        "seed": study.seed,
-        "design": study.design.to_dict(),
-        "operating_points": {name: list(s.values) for name, s in spec.operating_points.items()},
-        "uncertain": {name: p.to_dict() for name, p in study.uncertain.items()},
-        "simulation": spec.simulation.to_dict(),
-    }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def _analysis_attrs(study: Study, spec: AnalysisSpec, key: str, seconds: float) -> dict[str, Any]:
-    return {
-        "analysis_type": spec.type,
-        "analysis_name": spec.name,
-        "analysis_index": spec.index,
-        "analysis_description": spec.description,
-        ANALYSIS_KEY_ATTR: key,
-        "analysis_options": json.dumps(dict(spec.options), default=list),
-        "operating_points": json.dumps(
-            {name: list(s.values) if s.sweep else s.value for name, s in spec.operating_points.items()}
-        ),
-        "uncertain_parameters": json.dumps({name: p.to_dict() for name, p in study.uncertain.items()}),
-        "simulation_settings": json.dumps(spec.simulation.to_dict()),
-        "study_name": study.name,
-        "study_description": study.description,
-        "study_path": study.path,
-        "study_seed": str(study.seed),
-        "design_name": study.design.name,
-        "design_source": study.design_source,
-        "design_overrides": json.dumps(dict(study.design_overrides)),
-        "run_time_s": float(seconds),
-    }
-
-
-def run_analysis(
-    study: Study,
-    spec: AnalysisSpec,
-    *,
-    runner: Runner,
-    resume: bool = False,
-    threads: int | None = None,
-    seed: np.random.SeedSequence | None = None,
-) -> xr.Dataset:
-    """Run one analysis of a study and return its Dataset (not saved).
-
-    Parameters
-    ----------
-    study : Study
-    spec : AnalysisSpec
-        One of ``study.analyses``.
-    runner : Runner
-        Executes the model batches.
-    resume : bool
-        Reuse the runner's checkpoints.
-    threads : int, optional
-        Threads for in-process batch integration.
-    seed : SeedSequence, optional
-        The analysis's seed; default its child of the study seed.
-    """
-    if spec.type not in ANALYSES:
-        raise StudyError(
-            f"analyses[{spec.index}].type: {spec.type!r} has no implementation; expected one of {', '.join(ANALYSES)}"
-        )
-    seed = seed if seed is not None else study.seed_sequences()[spec.index]
-    context = AnalysisContext(study=study, spec=spec, seed=seed, runner=runner, resume=resume, threads=threads)
-    started = time.perf_counter()
-    result = ANALYSES[spec.type](context)
-    result.attrs.update(_analysis_attrs(study, spec, analysis_key(study, spec), time.perf_counter() - started))
-    if context.notes:
-        result.attrs["notes"] = json.dumps(context.notes)
-    return result
-
-
-def _reusable(path: Path, key: str) -> bool:
-    if not path.is_file():
-        return False
-    try:
-        return load_result(path).attrs.get(ANALYSIS_KEY_ATTR) == key
-    except UqgearError:
-        return False
-
-
-def run_study(
-    study: Study,
-    out_dir: str | Path,
-    *,
-    scheduler: str | None = None,
-    workers: int | None = None,
-    resume: bool = False,
-    show_progress: bool = True,
-    checkpoint_dir: str | Path | None = None,
-) -> list[Path]:
-    """Run every analysis of a study, writing ``<out_dir>/<name>.nc`` for each.
-
-    Parameters
-    ----------
-    study : Study
-    out_dir : str or Path
-        Existing folder for the results.
-    scheduler : str, optional
-        Address of a dask scheduler; None runs in-process on all local cores.
-    workers : int, optional
-        With a scheduler: how many of its workers to use. Without: the number
-        of threads of the in-process integrator.
-    resume : bool
-        Skip analyses whose result file is already in ``out_dir`` with the
-        same inputs, and reuse the chunk checkpoints of the others.
-    show_progress : bool
-        Progress bars (shown only in a terminal).
-    checkpoint_dir : str or Path, optional
-        Folder of chunk checkpoints (default ``out_dir/.checkpoints``).
-
-    Returns
-    -------
-    list of Path
-        The result files, in analysis order.
-    """
-    out = Path(out_dir)
-    checkpoints = Path(checkpoint_dir) if checkpoint_dir is not None else out / ".checkpoints"
-    runner = Runner(
-        chunk_size=study.chunk_size,
-        scheduler=scheduler,
-        workers=workers if scheduler is not None else None,
-        checkpoint_dir=checkpoints,
-        progress=show_progress,
-    )
-    threads = workers if scheduler is None else None
-    seeds = study.seed_sequences()
-    written = []
-    bar = progress(study.analyses, desc="analyses", unit="analysis", enabled=show_progress)
-    for spec in bar:
-        bar.set_postfix_str(spec.name)
-        path = out / f"{spec.name}.nc"
-        key = analysis_key(study, spec)
-        if resume and _reusable(path, key):
-            written.append(path)
-            continue
-        result = run_analysis(study, spec, runner=runner, resume=resume, threads=threads, seed=seeds[spec.index])
-        save_result(result, path, seed=seeds[spec.index], design=study.design, study_text=study.text)
-        written.append(path)
-    return written
-
-
-__all__ = [
-    "ANALYSES",
-    "register",
-    "evaluate_batch",
-    "simulate_point",
-    "quick_run",
-    "RunnerModel",
-    "AnalysisContext",
-    "run_analysis",
-    "run_study",
-    "analysis_key",
-    "ANALYSIS_KEY_ATTR",
-]
+__all__ = ["ANALYSES", "register", "evaluate_batch", "quick_run", "RunnerModel", "AnalysisContext", "ANALYSIS_KEY_ATTR"]
