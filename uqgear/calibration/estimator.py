@@ -327,7 +327,7 @@ class Calibration:
                 self.posterior_, self.summary_, np.random.default_rng(seeds[4]), draws=self.predictive_draws
             )
         # read at the end: the pitch-error correction may replace the features, and its resumed search the box
-        features, likelihood = work.features, work.likelihood
+        features, likelihood = work.features, work.fitted_likelihood()
         self._features, self._likelihood = features, likelihood
         self.log_observed_, self.noise_variance_ = features.log_observed, features.noise_variance
         self.box_lower_, self.box_upper_, self.loo_rms_ = likelihood.box_lower, likelihood.box_upper, likelihood.loo_rms

@@ -18,7 +18,7 @@ with the sensor-noise standard deviation of each amplitude.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 import numba as nb
@@ -343,7 +343,7 @@ def model_harmonics(
             info,
         )
         spread(lambda start, stop: _harmonics_batch(start, stop, *arrays), n, threads)
-    coords: dict[str, Any] = {"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1)}
+    coords: dict[Hashable, Any] = {"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1)}
     for name in samples.data_vars:
         coords[name] = ("sample", samples[name].values)
     return xr.Dataset(
@@ -364,7 +364,8 @@ def _batch_setups(
     design: Design, samples: xr.Dataset, effects: Sequence[Effect], steps_per_mode: int, samples_per_period: int
 ) -> tuple[list[Any], np.ndarray]:
     """Model set-ups of the samples and each one's integration steps per mesh period."""
-    setups, step_counts = [], []
+    setups: list[Any] = []
+    step_counts: list[int] = []
     # in chunks, so that each run's step count is found while the model's
     # per-design stiffness cache still holds its design
     for start in range(0, samples.sizes["sample"], 256):

@@ -91,9 +91,8 @@ def prior_box(
     bounds: Mapping[str, tuple[float, float]], parameters: Sequence[str], operating: Mapping[str, np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper prior bounds of the sampled vector: the global parameters, then each run's T2."""
-    lower = [bounds[name][0] for name in parameters] + list(operating["adhesion_torque_lower"])
-    upper = [bounds[name][1] for name in parameters] + list(operating["adhesion_torque_upper"])
-    lower, upper = np.array(lower), np.array(upper)
+    lower = np.array([bounds[name][0] for name in parameters] + list(operating["adhesion_torque_lower"]))
+    upper = np.array([bounds[name][1] for name in parameters] + list(operating["adhesion_torque_upper"]))
     # a run with a fixed T2 (lower == upper) still gets a tiny box so the emulator input is defined
     degenerate = upper - lower <= 1e-9 * np.maximum(np.abs(upper), 1.0)
     upper = np.where(degenerate, lower * (1 + 1e-9) + 1e-9, upper)

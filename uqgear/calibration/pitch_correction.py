@@ -364,10 +364,10 @@ def pitch_error_correction(
         for level in levels:
             scaled = harmonics(simulate(draw_at_level(design, level, draw_rng)))
             changes.append(np.log(scaled["amplitude"].values) - base)
-    changes = np.array(changes)
-    finite = np.all(np.isfinite(changes), axis=0)
-    shift = np.where(finite, changes.mean(axis=0), 0.0)
-    variance = np.where(finite, changes.var(axis=0, ddof=1) if draws > 1 else 0.0, 0.0)
+    change = np.array(changes)
+    finite = np.all(np.isfinite(change), axis=0)
+    shift = np.where(finite, change.mean(axis=0), 0.0)
+    variance = np.where(finite, change.var(axis=0, ddof=1) if draws > 1 else 0.0, 0.0)
     read = (
         f"the sidebands read as {scale:.2f} (x/ {math.exp(log_sd):.2f}) of class-{REFERENCE_CLASS} pitch "
         f"errors, about class {REFERENCE_CLASS + 2.0 * math.log2(scale):.1f} ({count} sidebands)"

@@ -111,6 +111,11 @@ class PosteriorFit:
         self.likelihood = StageLikelihood(box_lower, box_upper, emulators, loo, self.features, self.n_global)
         return self.likelihood
 
+    def fitted_likelihood(self) -> StageLikelihood:
+        """The likelihood of the last search box (the search sets it before anything reads it)."""
+        assert self.likelihood is not None, "read before the first search"
+        return self.likelihood
+
     def search(
         self,
         rng: np.random.Generator,
@@ -137,7 +142,9 @@ class PosteriorFit:
         truncated : bool
             Whether the last stage's posterior is truncated by its box.
         """
-        resumed = {} if start_points is None else {"start_likelihood": self.likelihood, "start_points": start_points}
+        resumed: dict[str, Any] = (
+            {} if start_points is None else {"start_likelihood": self.likelihood, "start_points": start_points}
+        )
         return search_box(
             self.fit_stage,
             self.prior_lower,
@@ -219,7 +226,7 @@ class PosteriorFit:
         with steps.step("search the posterior box again (corrected features)") as found:
             self.features = correction.apply(self.features)
             # resumed in the last box, on its emulators: only the features changed
-            self.likelihood = self.likelihood.with_features(self.features)
+            self.likelihood = self.fitted_likelihood().with_features(self.features)
             points, truncated = self.search(rng, seeds[1], seeds[2], start_points=points)
             found.update(stages=self.stages, truncated=truncated)
         return correction, points, truncated
@@ -262,7 +269,7 @@ class PosteriorFit:
         """
         names = list(self.model.parameters) + [f"adhesion_torque[{op}]" for op in range(self.n_op)]
         verdict, physical, log_likelihood = final_sampling(
-            self.likelihood,
+            self.fitted_likelihood(),
             start_points,
             rng,
             seed,
@@ -287,7 +294,7 @@ class PosteriorFit:
             parameters=parameters,
             bounds=self.bounds,
             operating=operating,
-            likelihood=self.likelihood,
+            likelihood=self.fitted_likelihood(),
             features=self.features,
         )
         return verdict, posterior, summary
@@ -319,7 +326,7 @@ class PosteriorFit:
             parameters=self.model.parameters,
             draws=draws,
             features=self.features,
-            likelihood=self.likelihood,
+            likelihood=self.fitted_likelihood(),
             model_error=summary["model_error"],
             pinion_speed=self.model.operating["pinion_speed"],
             run_model=self.model,

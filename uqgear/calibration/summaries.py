@@ -39,7 +39,7 @@ def posterior_dataset(
     """The posterior draws (``posterior_``) from kept physical draws (draw, chain, dim)."""
     n_global, n_op = len(parameters), len(operating["pinion_speed"])
     draws = np.transpose(physical, (1, 0, 2))  # (chain, draw, dim)
-    data = {}
+    data: dict[str, tuple[Any, ...]] = {}
     for index, name in enumerate(parameters):
         data[name] = (
             ("chain", "draw"),
@@ -62,7 +62,11 @@ def posterior_dataset(
         log_likelihood.T,
         {"units": "1", "long_name": "log likelihood (emulated, model error integrated out)"},
     )
-    coords = {"chain": np.arange(draws.shape[0]), "draw": np.arange(draws.shape[1]), "op": np.arange(n_op)}
+    coords: dict[str, Any] = {
+        "chain": np.arange(draws.shape[0]),
+        "draw": np.arange(draws.shape[1]),
+        "op": np.arange(n_op),
+    }
     for name, values in operating.items():
         coords[name] = ("op", values, {"units": "rpm" if name == "pinion_speed" else "N m"})
     posterior = xr.Dataset(data, coords=coords)
@@ -116,7 +120,7 @@ def model_error_summary(unit: np.ndarray, likelihood: StageLikelihood, features:
                 continue
             cumulative = np.cumsum(weights[:, c, h])
             quantile = {
-                q: float(grid[min(np.searchsorted(cumulative, q), cumulative.size - 1)]) for q in (0.05, 0.5, 0.95)
+                q: float(grid[min(int(np.searchsorted(cumulative, q)), cumulative.size - 1)]) for q in (0.05, 0.5, 0.95)
             }
             result[f"{channel}_mesh{h + 1}"] = {
                 "q05": quantile[0.05],

@@ -431,7 +431,7 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
                 ],
                 axis=1,
             )
-            entry = {name: float(run[name].values) for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)}
+            entry: dict[str, Any] = {name: float(run[name].values) for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)}
             entry.update(regime=str(run["regime"].values), points=points[np.all(np.isfinite(points), axis=1)])
             if entry["points"].size == 0:
                 membership[i, j] = -1

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
@@ -348,7 +348,7 @@ def stack_cases(datasets: Sequence[xr.Dataset], values: Mapping[str, Sequence[fl
             if variable.dtype.kind in "US":
                 array = array.astype(str)
             variables[name] = (variable.dims, array, dict(variable.attrs))
-        coords = {dim: (dim, np.arange(size)) for dim, size in sizes.items()}
+        coords: dict[Hashable, Any] = {dim: (dim, np.arange(size)) for dim, size in sizes.items()}
         coords.update({name: ds[name] for name in ("state", "multiplier") if name in ds.coords})
         padded.append(xr.Dataset(variables, coords=coords))
     stacked = xr.concat(padded, dim="case", combine_attrs="drop_conflicts")
@@ -372,9 +372,10 @@ def bifurcation_table(ds: xr.Dataset) -> pd.DataFrame:
     >>> len(bifurcation_table(empty))
     0
     """
+    # the table's variables are named by strings
     columns = {
         name.removeprefix("bifurcation_"): ds[name].values
-        for name in ds.data_vars
+        for name in cast(Iterable[str], ds.data_vars)
         if name.startswith("bifurcation_") and ds[name].dims == ("bifurcation",)
     }
     return pd.DataFrame(columns)

@@ -223,10 +223,11 @@ class _Tracer:
         """The DTE at the start of each mesh period of a period-n orbit (its n Poincare points)."""
         values = [point.state[2]]
         state = point.state
-        mapping = self.mapping(point.parameter) if period > 1 else None
-        for _ in range(period - 1):
-            state = mapping(state, 1, with_matrix=False).state
-            values.append(state[2])
+        if period > 1:
+            mapping = self.mapping(point.parameter)
+            for _ in range(period - 1):
+                state = mapping(state, 1, with_matrix=False).state
+                values.append(state[2])
         self.passes += period - 1
         return np.array(values)
 

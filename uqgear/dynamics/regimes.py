@@ -171,7 +171,7 @@ def _component_scale(points: np.ndarray, scale: Any) -> np.ndarray:
 
 
 def detect_period(
-    points: Any, max_period: int = 8, rtol: float = 1e-3, scale: float | Sequence[float] | None = None
+    points: Any, max_period: int = 8, rtol: float = 1e-3, scale: float | Sequence[float] | np.ndarray | None = None
 ) -> int:
     """Smallest period of a Poincare sequence.
 
@@ -210,7 +210,9 @@ def detect_period(
     return 0
 
 
-def count_distinct_points(points: Any, rtol: float = 1e-3, scale: float | Sequence[float] | None = None) -> int:
+def count_distinct_points(
+    points: Any, rtol: float = 1e-3, scale: float | Sequence[float] | np.ndarray | None = None
+) -> int:
     """Number of distinct Poincare points: clusters of diameter <= ``rtol * scale``.
 
     Complete-linkage clustering with the Chebyshev distance on the scaled
@@ -406,7 +408,7 @@ def classify_response(
     *,
     max_period: int | None = None,
     rtol: float = 1e-3,
-    scale: float | Sequence[float] | None = None,
+    scale: float | Sequence[float] | np.ndarray | None = None,
     lyapunov: float | None = None,
     seed: Seed = 0,
     n_c: int = 100,
@@ -716,18 +718,19 @@ def classify_batch(
 
     def per_run(value: xr.DataArray | float) -> np.ndarray:
         # One number per run, in the flattened run order of the points.
-        if isinstance(value, xr.DataArray):
-            value = value.broadcast_like(template).transpose(*run_dims).values
-        return np.broadcast_to(np.asarray(value, dtype=float), template.shape).reshape(-1)
+        values = (
+            value.broadcast_like(template).transpose(*run_dims).values if isinstance(value, xr.DataArray) else value
+        )
+        return np.broadcast_to(np.asarray(values, dtype=float), template.shape).reshape(-1)
 
     points = [poincare_x.transpose(*run_dims, "period").values.reshape(-1, poincare_x.sizes["period"])]
     if has_velocity:
         points.append(ds["poincare_x_velocity"].transpose(*run_dims, "period").values.reshape(points[0].shape))
     x_scale = per_run(ds["dte_peak_to_peak"]) if "dte_peak_to_peak" in ds.variables else None
-    angular = _mesh_angular_frequency(ds)
-    angular = per_run(angular) if angular is not None else None
-    exponent = _lyapunov_per_period(ds)
-    exponent = per_run(exponent) if exponent is not None else None
+    mesh_angular = _mesh_angular_frequency(ds)
+    angular = per_run(mesh_angular) if mesh_angular is not None else None
+    per_period = _lyapunov_per_period(ds)
+    exponent = per_run(per_period) if per_period is not None else None
 
     runs = _classify_runs(
         points,

@@ -293,6 +293,7 @@ def newton_orbit(
         if not math.isfinite(norm):
             return None
         if norm < settings.tolerance:
+            assert result.monodromy is not None  # the map computes its matrix unless asked not to
             return PeriodicOrbit(
                 state=state,
                 period=period,

@@ -126,6 +126,7 @@ def amplitude_spectrum(
         name="amplitude",
     )
     if against == "order":
+        assert shaft_speed_rpm is not None  # checked above for a spectrum against order
         shaft_frequency = shaft_speed_rpm / 60.0
         order = xr.Variable(
             "frequency",

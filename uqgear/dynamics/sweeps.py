@@ -130,7 +130,7 @@ def bifurcation(
 
 def sweep_grid(
     design: Any,
-    parameters: Mapping[str, Sequence[float]],
+    parameters: Mapping[str, Sequence[float] | np.ndarray],
     *,
     fixed: Mapping[str, float] | None = None,
     n_periods: int = 400,

@@ -144,8 +144,9 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
     compiler lock and reset before anything else compiles.
     """
     with global_compiler_lock:
-        saved = nb.config.SLP_VECTORIZE
-        nb.config.SLP_VECTORIZE = 0
+        # numba.config's options are module attributes it sets at import: no static type knows them
+        saved = nb.config.SLP_VECTORIZE  # type: ignore[attr-defined]
+        nb.config.SLP_VECTORIZE = 0  # type: ignore[attr-defined]
         try:
             ll.set_option("", f"-force-vector-width={LANES}")
             try:
@@ -154,7 +155,7 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
                 ll.set_option("", "-force-vector-width=0")
             integrate_lanes(0, 0, groups, *arrays, refused)
         finally:
-            nb.config.SLP_VECTORIZE = saved
+            nb.config.SLP_VECTORIZE = saved  # type: ignore[attr-defined]
 
 
 def lane_ready(params: np.ndarray) -> np.ndarray:

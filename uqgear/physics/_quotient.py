@@ -80,7 +80,8 @@ def quotient(x, y, z):
     division instead.
     """
     q0 = x * z
-    q1 = fma(fma(-q0, y, x), z, q0)
+    # fma is a numba intrinsic: its Python signature (typing context first) is not the call's
+    q1 = fma(fma(-q0, y, x), z, q0)  # type: ignore[call-arg, var-annotated]
     q2 = fma(fma(-q1, y, x), z, q1)
     size = abs(x)
     inside = (size >= SMALLEST) & (size <= LARGEST)

@@ -29,6 +29,7 @@ clear the cache (``__pycache__/*.nbi``, ``*.nbc``) of the physics package.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -157,7 +158,7 @@ TWO_PI = 2.0 * math.pi
 #: different last bits on a first and a later run (and may on another CPU).
 #: Without it the kernels are bit-identical cold, warm and uncached;
 #: ``benchmarks/integrator.py`` measures what fastmath would buy.
-JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
+JIT_OPTIONS: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 #: Options of the helpers the stepping code calls on every stage. They are inlined by LLVM
 #: (``forceinline``: the ``alwaysinline`` attribute), which gave the same numbers, bit for bit, as
 #: numba's own ``inline="always"`` and compiles far faster: numba copies and retypes a callee's
@@ -165,7 +166,7 @@ JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
 #: batch and harmonic kernels before, 91 s with LLVM inlining and serial batch kernels). A plain
 #: call is no option: passing the eleven arrays of a step costs their reference counts on every
 #: grid step (measured: twice the run time).
-INLINED = {**JIT_OPTIONS, "forceinline": True}
+INLINED: dict[str, Any] = {**JIT_OPTIONS, "forceinline": True}
 
 
 @nb.njit(**INLINED)

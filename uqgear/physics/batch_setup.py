@@ -9,7 +9,8 @@ sub-step layout into SIMD lanes (:mod:`uqgear.physics._lanes`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
+from typing import cast
 
 import numpy as np
 import xarray as xr
@@ -33,7 +34,8 @@ def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]
     n = samples.sizes["sample"]
     known = set(OPERATING_VARIABLES) | set(BATCH_DESIGN_KEYS)
     values: dict[str, np.ndarray] = {}
-    for name in samples.data_vars:
+    # sample variables are named by strings (design keys, operating variables, EFFECT.PARAMETER)
+    for name in cast(Iterable[str], samples.data_vars):
         if name not in known and "." not in name:
             raise OperatingPointError(
                 f"samples.{name}: unknown variable; expected one of {', '.join(sorted(known))} or EFFECT.PARAMETER"

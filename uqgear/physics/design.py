@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -293,7 +294,8 @@ def bundled_designs() -> list[str]:
 
 
 def load_design(
-    name_or_path: str | Path | Design | Mapping[str, Any] = "locomotive", overrides: Mapping[str, Any] | None = None
+    name_or_path: str | os.PathLike[str] | Design | Mapping[str, Any] = "locomotive",
+    overrides: Mapping[str, Any] | None = None,
 ) -> Design:
     """Load and validate a gear design.
 

@@ -145,7 +145,7 @@ def undercut(corner: RackCorner, tip_radius: float) -> Undercut | None:
 
     def gaps(roll: float | np.ndarray) -> np.ndarray:
         radius = np.sqrt(r_b * r_b + np.asarray(roll, dtype=float) ** 2)
-        return corner.trochoid_half_angle(radius) - corner.involute_half_angle(radius)
+        return np.asarray(corner.trochoid_half_angle(radius) - corner.involute_half_angle(radius))
 
     def gap(roll: float) -> float:
         return float(gaps(roll))

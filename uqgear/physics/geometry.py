@@ -187,6 +187,7 @@ def _tooth(teeth: int, shift: float, module: float, alpha: float, addendum: floa
     else:
         # the corner passed beyond the tangency point and cut the involute's foot away
         cut = undercut(corner, tip_radius)
+        assert cut is not None  # limit < 0 is the corner's limit < 0, where undercut finds the cut
         form_radius = cut.form_radius
         effective = form_radius if math.isfinite(form_radius) else base_radius
         neck = cut.neck_thickness

@@ -16,7 +16,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -311,7 +312,7 @@ def simulate(
         history, poincare, steps = _integrate_fast(
             setup, n_periods, keep_periods, samples_per_period, steps_per_mode, state0
         )
-        extra = {"steps_per_mode": steps_per_mode}
+        extra: dict[str, Any] = {"steps_per_mode": steps_per_mode}
     else:
         history, poincare, stats = integrate_scipy(
             setup, n_periods, keep_periods, samples_per_period, state0, rtol, atol
@@ -370,11 +371,11 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
         pitch = params[rest, K.PITCH_ERRORS] != 0.0
         for kernel, order in ((K.integrate_batch, rest[~pitch]), (K.integrate_batch_pairs, rest[pitch])):
             if len(order):
-                spread(
-                    lambda start, stop, kernel=kernel, order=order: kernel(start, stop, order, *arrays),
-                    len(order),
-                    threads,
-                )
+
+                def run_range(start: int, stop: int, kernel: Any = kernel, order: np.ndarray = order) -> None:
+                    kernel(start, stop, order, *arrays)
+
+                spread(run_range, len(order), threads)
 
 
 def simulate_batch(
@@ -523,7 +524,7 @@ def simulate_batch(
     }
     if lyapunov:
         qois["largest_lyapunov"] = accumulators[:, K.Q_LYAPUNOV]
-    data = {
+    data: dict[str, tuple[Any, ...]] = {
         name: ("sample", value, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
         for name, value in qois.items()
     }
@@ -544,7 +545,9 @@ def simulate_batch(
         {"units": "Hz", "long_name": "mesh frequency"},
     )
     data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "RK4 steps per mesh period"})
-    coords = {"period": ("period", np.arange(n_periods - keep_periods, n_periods), {"units": "1"})}
+    coords: dict[Hashable, tuple[Any, ...]] = {
+        "period": ("period", np.arange(n_periods - keep_periods, n_periods), {"units": "1"})
+    }
     for name in samples.data_vars:
         coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
     for name in samples.coords:
@@ -686,7 +689,7 @@ class BatchEvaluator:
 
     def key(self) -> str:
         """A text identifying the settings (for checkpoint hashing)."""
-        settings = (
+        settings: tuple[Any, ...] = (
             self.design.to_json(),
             sorted(self.fixed.items()),
             self.n_periods,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -191,6 +192,12 @@ def draw_pitch_errors(design: Design, tolerance_class: int, rng: np.random.Gener
     return PitchErrors(
         _draw_gear(rng, design.z1, pinion_tolerance, cos_alpha), _draw_gear(rng, design.z2, gear_tolerance, cos_alpha)
     )
+
+
+@overload
+def class_level(classes: tuple[float, float], position: float) -> float: ...
+@overload
+def class_level(classes: tuple[float, float], position: np.ndarray) -> np.ndarray: ...
 
 
 def class_level(classes: tuple[float, float], position: float | np.ndarray) -> float | np.ndarray:

@@ -32,18 +32,35 @@ class Calibration(Protocol):
     """What the report reads of a fitted :class:`uqgear.calibration.Calibration`.
 
     The report sits below the calibration in the package's layers, so it
-    names the attributes it uses instead of importing the class.
+    names the attributes it uses instead of importing the class (read-only: the report only reads them).
     """
 
-    parameters: Sequence[str]
-    posterior_: Any
-    predictive_: Any
-    predictive_check_: Any
-    summary_: Mapping[str, Any]
-    converged_: bool
-    diagnostics_: Mapping[str, Any]
-    timing_: Mapping[str, Any]
-    emulator_: Any
+    @property
+    def parameters(self) -> Sequence[str]: ...
+
+    @property
+    def posterior_(self) -> Any: ...
+
+    @property
+    def predictive_(self) -> Any: ...
+
+    @property
+    def predictive_check_(self) -> Any: ...
+
+    @property
+    def summary_(self) -> Mapping[str, Any]: ...
+
+    @property
+    def converged_(self) -> bool: ...
+
+    @property
+    def diagnostics_(self) -> Mapping[str, Any]: ...
+
+    @property
+    def timing_(self) -> Mapping[str, Any]: ...
+
+    @property
+    def emulator_(self) -> Any: ...
 
     def to_dict(self) -> dict[str, Any]: ...
 

@@ -85,11 +85,10 @@ def coexistence_sentences(ds: xr.Dataset, sweep: str, condition: str | None = No
     for level in levels:
         selected = count if level is None else count.isel({condition: level})
         column = np.asarray(selected.transpose(sweep, ...).values).reshape(values.size, -1).max(axis=1)
-        where = (
-            ""
-            if level is None
-            else (f" at {short_name(condition)} = {format_value(condition, float(ds[condition].values[level]))}")
-        )
+        where = ""
+        if level is not None:
+            assert condition is not None  # levels are positions along the condition
+            where = f" at {short_name(condition)} = {format_value(condition, float(ds[condition].values[level]))}"
         for start, stop in _runs(column > 1):
             parts = []
             for index in range(start, min(stop, start + 3) + 1):
@@ -158,7 +157,7 @@ def coexistence_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
         return []
     ds = max(candidates, key=lambda item: item["attractor_count"].size)
     condition = next((dim for dim in ds["attractor_count"].dims if dim != "pinion_speed"), None)
-    sentences = coexistence_sentences(ds, "pinion_speed", condition)
+    sentences = coexistence_sentences(ds, "pinion_speed", None if condition is None else str(condition))
     source = str(ds.attrs.get("analysis_name", "analysis"))
     count = ds["attractor_count"]
     facts = {"source": source, "points_with_several": int((count > 1).sum()), "most": int(count.max())}

@@ -10,7 +10,7 @@ interval over the cases.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -38,8 +38,13 @@ BIFURCATION_MARKERS = {
 JUMP_FRACTION = 0.1
 
 
+def _names(ds: xr.Dataset) -> list[str]:
+    """The variable names of a continuation result (strings, as the analysis writes them)."""
+    return cast(list[str], list(ds.data_vars))
+
+
 def _case_label(ds: xr.Dataset, case: int) -> str:
-    names = [name[len("case_") :] for name in ds.data_vars if name.startswith("case_")]
+    names = [name[len("case_") :] for name in _names(ds) if name.startswith("case_")]
     if not names:
         fixed = _json_attr(ds, "fixed_inputs", {})
         shown = [
@@ -62,7 +67,7 @@ def _table(ds: xr.Dataset, case: int) -> list[dict[str, Any]]:
         rows.append(
             {
                 name[len("bifurcation_") :]: ds[name].values[case, k].item()
-                for name in ds.data_vars
+                for name in _names(ds)
                 if name.startswith("bifurcation_") and ds[name].dims == ("case", "bifurcation")
             }
         )

@@ -182,7 +182,7 @@ def separation_findings(fraction: xr.DataArray, sweep: str, condition: str) -> l
     if middle.size and (middle > 0.0).any():
         sentences.append(
             f"teeth separate (contact loss) at the {middle.shape[1]} {label} values in between "
-            f"too: all of it {where((middle > 0.0).any(axis=1))}, up to "
+            f"too: all of it {where(np.asarray((middle > 0.0).any(axis=1)))}, up to "
             f"{100 * float(np.nanmax(middle)):.3g} % of the time"
         )
     return sentences

@@ -219,7 +219,7 @@ def separation_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
         column = g.values[:, j].astype(float)
         ranges = _ranges(column > 0.0, g.speeds)
         peak = int(np.nanargmax(column)) if np.isfinite(column).any() else 0
-        facts = {
+        facts: dict[str, Any] = {
             "source": g.source,
             "t2": float(g.t2[j]),
             "end": end,
@@ -264,7 +264,7 @@ def back_contact_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
         )
         return [Finding(text, facts, "back_contact")]
     values = g.values.astype(float)
-    by_t2 = [
+    by_t2: list[dict[str, Any]] = [
         {"t2": float(g.t2[k]), "ranges": _ranges(values[:, k] > 0.0, g.speeds)}
         for k in range(g.t2.size)
         if (values[:, k] > 0.0).any()
@@ -294,7 +294,7 @@ def regime_findings_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
     labels = g.values.astype(str)
     other = labels != "period-1"
     found = list(dict.fromkeys(labels.T[other.T].tolist()))  # in order of T2, then speed
-    windows = []
+    windows: list[dict[str, Any]] = []
     for j in range(g.t2.size):
         if other[:, j].any():
             ranges = _runs(other[:, j])
@@ -354,7 +354,7 @@ def sobol_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
             else:
                 speeds = np.array([np.nan])
                 totals, half = totals.transpose("param").values[None], half.transpose("param").values[None]
-            points = []
+            points: list[dict[str, Any]] = []
             for k in range(speeds.size):
                 if not np.isfinite(totals[k]).any():
                     points.append({"speed": float(speeds[k]), "top": None})

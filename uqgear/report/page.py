@@ -12,12 +12,15 @@ import html
 import io
 import multiprocessing
 from collections.abc import Callable, Iterable, Sequence
+from typing import Any, Literal
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 
-def new_figure(width: float, height: float, *, layout: str | None = "constrained") -> Figure:
+def new_figure(
+    width: float, height: float, *, layout: Literal["constrained", "compressed", "tight"] | None = "constrained"
+) -> Figure:
     """A matplotlib Figure on an Agg canvas, outside pyplot; size in inches."""
     figure = Figure(figsize=(width, height), layout=layout)
     FigureCanvasAgg(figure)
@@ -27,7 +30,8 @@ def new_figure(width: float, height: float, *, layout: str | None = "constrained
 def figure_png(figure: Figure, dpi: int, *, tight: bool = False) -> bytes:
     """PNG bytes of a figure at ``dpi``; ``tight`` crops the canvas to what is drawn."""
     buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi, **({"bbox_inches": "tight"} if tight else {}))
+    crop: dict[str, Any] = {"bbox_inches": "tight"} if tight else {}
+    figure.savefig(buffer, format="png", dpi=dpi, **crop)
     return buffer.getvalue()
 
 

@@ -117,7 +117,7 @@ def _render_calibrate(ds: xr.Dataset, dpi: int) -> Section:
     ):
         if key in diagnostics:
             section.facts.append((label, f"{float(diagnostics[key]):.4g}"))
-    names = [name for name in ds.data_vars if set(ds[name].dims) == {"chain", "draw"}]
+    names = [str(name) for name in ds.data_vars if set(ds[name].dims) == {"chain", "draw"}]
     if names:
         figure = new_figure(9.0, 1.9 * ((len(names) + 2) // 3))
         axes = np.atleast_1d(figure.subplots((len(names) + 2) // 3, 3)).ravel()

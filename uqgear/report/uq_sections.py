@@ -442,11 +442,11 @@ def _sobol_lines(ds: xr.Dataset, name: str, sweep: str, parameters: Sequence[str
 
 def _sobol_findings(ds: xr.Dataset, name: str, sweep: str | None, parameters: Sequence[str]) -> list[str]:
     title = display(name)[0]
-    totals = ds[name].sel(index="ST")
-    totals = totals.transpose(sweep, "param").values if sweep else totals.transpose("param").values[None, :]
+    selected = ds[name].sel(index="ST")
+    totals = selected.transpose(sweep, "param").values if sweep else selected.transpose("param").values[None, :]
     defined = np.isfinite(totals).any(axis=1)
     dominant = np.where(defined, np.argmax(np.nan_to_num(totals, nan=-np.inf), axis=1), -1)
-    values = np.asarray(ds[sweep].values, float) if sweep else None
+    values = np.asarray(ds[sweep].values, float) if sweep else np.empty(0)
     sentences = []
     for start, stop in _runs_of_values(dominant):
         where = "" if sweep is None else " " + _range_text(sweep, values, start, stop)
@@ -483,7 +483,7 @@ def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
             for ax, where in zip(axes, points):
                 _sobol_bars(ax, indices.isel(where), None if confidence is None else confidence.isel(where), parameters)
                 title = f"{display(name)[0]}: Sobol indices, {100 * level:g} % confidence intervals"
-                if where:
+                if sweep is not None:  # then each point selects one value along it
                     title += f" at {format_value(sweep, float(ds[sweep].values[where[sweep]]))}"
                 ax.set_title(title, fontsize=9)
             _add_figure(

@@ -232,8 +232,8 @@ def _canonical_units(ds: xr.Dataset) -> None:
     """Replace accepted unit spellings by the format's own, in place."""
     for name, (_, units, _) in RIG_COORDINATES.items():
         ds[name].attrs["units"] = units
-    for name in ds.data_vars:
-        ds[name].attrs["units"] = "rpm" if name == TACHOMETER_VARIABLE else SIGNAL_CHANNELS[str(name)][0]
+    for variable in ds.data_vars:
+        ds[variable].attrs["units"] = "rpm" if variable == TACHOMETER_VARIABLE else SIGNAL_CHANNELS[str(variable)][0]
 
 
 def read_rig(path: str | os.PathLike[str], *, design: Design | None = None) -> xr.Dataset:
@@ -350,10 +350,10 @@ def make_rig_dataset(
     }
     arrays = {name: np.asarray(values, dtype=float) for name, values in per_run.items()}
     n_op = arrays["pinion_speed"].size
-    for name, values in arrays.items():
-        if values.ndim != 1 or values.size != n_op:
+    for name, array in arrays.items():
+        if array.ndim != 1 or array.size != n_op:
             raise RigDataError(
-                f"{where}: {name}: expected one value per run ({n_op}, as pinion_speed); got shape {values.shape}"
+                f"{where}: {name}: expected one value per run ({n_op}, as pinion_speed); got shape {array.shape}"
             )
     time_values = np.asarray(time, dtype=float)
     if time_values.ndim != 1:
@@ -425,7 +425,7 @@ def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
     # Encodings inherited from a file read earlier (chunking, source) must not leak into the new file.
     out = ds.drop_encoding()
     encoding: dict[str, dict[str, object]] = {
-        name: {"dtype": "float32", "_FillValue": np.float32(np.nan)} for name in out.data_vars
+        str(name): {"dtype": "float32", "_FillValue": np.float32(np.nan)} for name in out.data_vars
     }
     encoding.update({name: {"dtype": "float64", "_FillValue": None} for name in RIG_COORDINATES})
     with atomic_path(path) as temporary:

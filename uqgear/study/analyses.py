@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -380,7 +380,7 @@ def simulate_analysis(context: AnalysisContext) -> xr.Dataset:
     if "attractor_count" in batch:
         # every steady response the point holds, besides the panels' one from rest
         result = result.merge(
-            batch[[name for name in batch.data_vars if name.startswith("attractor_")]]
+            batch[[name for name in cast(Iterable[str], batch.data_vars) if name.startswith("attractor_")]]
             .rename({"sample": "run"})
             .drop_vars(list(batch.coords), errors="ignore")
         )

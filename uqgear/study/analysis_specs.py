@@ -212,7 +212,7 @@ def _analysis(
         raise _fail(path, "a mapping with a 'type' key", raw)
     if "type" not in raw:
         raise StudyError(f"{path}.type: missing; expected one of {', '.join(ANALYSIS_SCHEMAS)}")
-    kind = choice(*ANALYSIS_SCHEMAS)(raw["type"], f"{path}.type")
+    kind: str = choice(*ANALYSIS_SCHEMAS)(raw["type"], f"{path}.type")
     schema = {**_COMMON_KEYS, **ANALYSIS_SCHEMAS[kind]}
     values = check_mapping(raw, path, schema, required=_REQUIRED_KEYS.get(kind, ()))
     options = dict(ANALYSIS_DEFAULTS[kind])

@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -106,7 +106,7 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
     out = xr.Dataset(
         coords={
             name: ("sample", samples[name].values)
-            for name in samples.data_vars
+            for name in cast(Iterable[str], samples.data_vars)  # sample variables are named by strings
             if samples[name].dims == ("sample",) and not name.startswith("initial_")
         }
     )
@@ -185,6 +185,7 @@ def started_model(context: Any, simulation: SimulationSettings) -> RunnerModel:
 
 def multi_start_model(context: Any, simulation: SimulationSettings, poincare: bool) -> MultiStartModel:
     """The multi-start model of an analysis (``simulation.starts`` set)."""
+    assert simulation.starts is not None  # the caller's condition
     return MultiStartModel(
         started_model(context, simulation), context.design, simulation.starts, context.stage_seed(98), poincare
     )

@@ -172,7 +172,9 @@ class UncertainParameter:
         """Value used where the parameter is not propagated: interval midpoint or distribution median."""
         if self.is_interval:
             return 0.5 * (self.lower + self.upper)
-        return float(self.to_parameter().median())
+        distribution = self.to_parameter()
+        assert isinstance(distribution, Distribution)  # not an interval
+        return float(distribution.median())
 
     def describe(self) -> str:
         """One line for reports, with units."""
@@ -286,7 +288,9 @@ def _check_parameter_range(parameter: UncertainParameter, path: str) -> None:
         return
     # a distribution's tails may reach implausible values (a normal damping ratio below 0)
     # with negligible probability; its central 99.8 % must be plausible
-    chaospy_distribution = parameter.to_parameter().to_chaospy()
+    distribution = parameter.to_parameter()
+    assert isinstance(distribution, Distribution)  # not an interval
+    chaospy_distribution = distribution.to_chaospy()
     low, high = (float(chaospy_distribution.inv(q)) for q in (0.001, 0.999))
     if not (lower <= low and high <= upper):
         raise StudyError(

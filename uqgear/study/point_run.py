@@ -136,8 +136,8 @@ def simulate_point(
         data[name] = ("period", run[name].values, dict(run[name].attrs))
     for name, value in point.items():
         data[name] = ((), float(value), {"units": variable_units_short(name)})
-    for name in qois.data_vars:
-        data[name] = ((), float(qois[name].values), dict(qois[name].attrs))
+    for qoi in qois.data_vars:
+        data[str(qoi)] = ((), float(qois[qoi].values), dict(qois[qoi].attrs))
     coords = {
         "mesh_cycle": ("mesh_cycle", mesh_cycle, {"units": "1", "long_name": "time in mesh periods"}),
         "period": ("period", run["period"].values, {"units": "1", "long_name": "mesh period index"}),

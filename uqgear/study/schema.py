@@ -142,6 +142,7 @@ _TOP_LEVEL_KEYS = (
 def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any]]:
     if raw is None:
         raw = "locomotive"
+    spec: Mapping[str, Any]
     if isinstance(raw, str):
         spec = {"name": raw}
     elif isinstance(raw, Mapping):
@@ -156,7 +157,7 @@ def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any
     for key in overrides:
         if key not in _DESIGN_KEYS and key != "motor_pole_pairs":
             raise StudyError(f"design.overrides.{key}: unknown design key; expected one of {', '.join(_DESIGN_KEYS)}")
-    source = spec.get("path", spec.get("name"))
+    source = spec["path"] if "path" in spec else spec["name"]  # exactly one of them, checked above
     location: str | Path = source
     candidate = Path(source)
     if "path" in spec or candidate.suffix:
@@ -317,7 +318,8 @@ def load_study(path: str | Path) -> Study:
         schema; the message starts with the file name and the key path.
     """
     source = Path(path)
-    source = bundled_by_name("study", path, source) or source
+    # a name is only ever typed text: a path object never names a bundled study
+    source = (bundled_by_name("study", path, source) if isinstance(path, str) else None) or source
     if source.is_dir():
         raise StudyError(f"{source}: is a folder; expected a study YAML file")
     if not source.is_file():

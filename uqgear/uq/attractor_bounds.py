@@ -16,13 +16,14 @@ from __future__ import annotations
 import itertools
 import json
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 
 from ..common.errors import ParameterSpaceError
 from .parameter_space import ParameterSpace
+from .parameters import Fixed, Interval
 from .sweeps import ModelFunction, batch_samples, make_sweep
 
 
@@ -60,9 +61,11 @@ def scan_over_attractors(
     if not names:
         raise ParameterSpaceError("space: expected at least one interval parameter")
     sweep_spec = make_sweep(sweep, space)
-    axes = [np.linspace(space[name].lower, space[name].upper, int(points)) for name in names]
+    intervals = {name: cast(Interval, space[name]) for name in names}  # interval_names: each an Interval
+    axes = [np.linspace(intervals[name].lower, intervals[name].upper, int(points)) for name in names]
     nodes = np.array(list(itertools.product(*axes)), dtype=float).reshape(-1, len(names))
-    fixed = {name: float(space[name].value) for name in space.names if name not in names}
+    # random parameters are refused above: the others are Fixed
+    fixed = {name: float(cast(Fixed, space[name]).value) for name in space.names if name not in names}
     n_nodes, n_points = nodes.shape[0], sweep_spec.size
     flat: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
@@ -141,7 +144,7 @@ def scan_over_attractors(
         attrs={
             "analysis": "scan_over_attractors",
             "interval_parameters": json.dumps(
-                {name: [space[name].lower, space[name].upper, space[name].units] for name in names}
+                {name: [bound.lower, bound.upper, bound.units] for name, bound in intervals.items()}
             ),
             "grid_points": int(points),
         },

@@ -108,6 +108,7 @@ def chebyshev_bounds(
     checks = interior_check_points(check_points, dimensions)
     values, regime = evaluate_nodes(responses, sweep_index, np.vstack([nodes, checks]))
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     count, responses_count = len(sweep_index), values.shape[2]
     node_values, check_values = values[:, : nodes.shape[0]], values[:, nodes.shape[0] :]
     bounds = Bounds.empty(sweep_index, responses_count)

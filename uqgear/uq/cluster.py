@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import uuid
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import xarray as xr
 
@@ -122,7 +122,7 @@ def run_on_cluster(
                 pure=False,
                 **placement,
             )
-            in_flight[future.key] = (index, attempt, future)
+            in_flight[cast(str, future.key)] = (index, attempt, future)  # the string key given above
             return future
 
         completed = as_completed([submit(index, 1) for index in pending], loop=client.loop)

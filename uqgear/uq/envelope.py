@@ -138,7 +138,7 @@ def qoi_envelope(
     if missing:
         raise OperatingPointError(
             f"qois: {missing[0]!r} not in the grid; expected among "
-            f"{', '.join(v for v in grid.data_vars if grid[v].dims == (SPEED, ADHESION))}"
+            f"{', '.join(str(v) for v in grid.data_vars if grid[v].dims == (SPEED, ADHESION))}"
         )
     out = xr.Dataset(coords={SPEED: grid[SPEED], "bound": ["lower", "upper"]})
     for name in qois:

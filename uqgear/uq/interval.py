@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -69,6 +69,7 @@ from .interval_optimize import optimize_bounds
 from .interval_responses import ModelResponses, PboxResponses
 from .interval_scan import scan_bounds, vertex_bounds
 from .parameter_space import ParameterSpace
+from .parameters import Interval
 from .seeds import SeedLike, as_seed_sequence, child_seed, seed_attributes
 from .sweeps import ModelFunction, Sweep, make_sweep
 
@@ -219,6 +220,7 @@ class IntervalAnalysis:
         responses = ModelResponses(evaluate, space, sweep_spec, self.qoi, self.regime_variables)
         bounds = self._bound(responses, sweep_spec, len(intervals))
         names = responses.names
+        assert names is not None  # set by the model's first call, which every bounding method makes
         coords = self._coords(sweep_spec, names)
         data_vars = _band_variables(bounds, responses, sweep_spec)
         data_vars.update(bound_diagnostics(bounds, responses, sweep_spec, names, [[r] for r in range(len(names))]))
@@ -259,6 +261,7 @@ class IntervalAnalysis:
                 responses, sweep_index, dimensions, self.order, self.check_points, self.tolerance, regime
             )
         screen = self.screen_points or 20 * dimensions
+        assert self.seed_sequence is not None  # __init__ refuses no seed where optimize runs
         return optimize_bounds(
             responses,
             sweep_index,
@@ -308,7 +311,7 @@ class IntervalAnalysis:
             "analysis": kind,
             "method": self.method,
             "interval_parameters": json.dumps(
-                {name: [space[name].lower, space[name].upper, space[name].units] for name in space.interval_names}
+                {name: [bound.lower, bound.upper, bound.units] for name, bound in _intervals(space).items()}
             ),
             "parameter_space": space.to_json(),
             "tolerance": self.tolerance,
@@ -341,10 +344,16 @@ class IntervalAnalysis:
         return attrs
 
 
+def _intervals(space: ParameterSpace) -> dict[str, Interval]:
+    """The interval parameters of ``space`` by name."""
+    return {name: cast(Interval, space[name]) for name in space.interval_names}
+
+
 def _band_variables(bounds: Bounds, responses: ModelResponses, sweep: Sweep) -> dict[str, Any]:
     """Per QoI: the band (dims ``(*sweep, "bound")``) and the estimated error of its bounds."""
     data_vars = {}
     shape = sweep.shape
+    assert responses.names is not None  # set by the model's first call, which every bounding method makes
     for r, name in enumerate(responses.names):
         band = np.stack([bounds.lower[:, r], bounds.upper[:, r]], axis=-1).reshape(*shape, 2)
         data_vars[name] = (

@@ -132,7 +132,7 @@ def find_jumps(grid: np.ndarray, coordinates: np.ndarray, width: np.ndarray) -> 
     return found
 
 
-def _regime_changes(regime: np.ndarray) -> list[list[str]]:
+def _regime_changes(regime: np.ndarray) -> list[list[int]]:
     """Per sweep point, the regime variables (by position) that change over the nodes."""
     changes = []
     for point in regime:

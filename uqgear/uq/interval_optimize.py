@@ -103,6 +103,7 @@ def optimize_bounds(
     screen_nodes = np.vstack(screen)
     values, regime = evaluate_nodes(responses, sweep_index, screen_nodes)
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     responses_count = values.shape[2]
     bounds = Bounds.empty(sweep_index, responses_count)
     bounds.observe(values)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -77,7 +78,12 @@ class ModelResponses:
                 f"function (it returned {', '.join(map(str, outputs.data_vars))})"
             )
         if self.names is None:
-            names = self._qoi if self._qoi is not None else [n for n in outputs.data_vars if n not in self._regime]
+            # the model's outputs are named by strings
+            names = (
+                self._qoi
+                if self._qoi is not None
+                else [cast(str, n) for n in outputs.data_vars if n not in self._regime]
+            )
             if not names:
                 raise ParameterSpaceError("qoi: the model function returned only regime variables")
             self.names = list(names)
@@ -127,7 +133,7 @@ class PboxResponses(ModelResponses):
             units[name] = self._space.units(name)
         outputs = call_model(self._evaluate, batch_samples(expanded, units), self._qoi)
         if self.qoi_names is None:
-            self.qoi_names = list(outputs.data_vars)
+            self.qoi_names = cast(list[str], list(outputs.data_vars))  # the model's outputs are named by strings
             self.units = {name: outputs[name].attrs.get("units", "") for name in self.qoi_names}
             self.long_names = {name: outputs[name].attrs.get("long_name", name) for name in self.qoi_names}
             self.names = [

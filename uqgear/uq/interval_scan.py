@@ -39,6 +39,7 @@ def scan_bounds(
     axis = np.linspace(0.0, 1.0, points)
     values, regime = evaluate_nodes(responses, sweep_index, tensor_grid([axis] * dimensions))
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     bounds = Bounds.empty(sweep_index, values.shape[2])
     bounds.observe(values)
     bounds.lower, bounds.upper = bounds.observed_lower.copy(), bounds.observed_upper.copy()
@@ -114,6 +115,7 @@ def vertex_bounds(
     checks = np.vstack([np.full((1, dimensions), 0.5), interior_check_points(check_points, dimensions)])
     values, regime = evaluate_nodes(responses, sweep_index, np.vstack([corners, checks]))
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     corner_values, check_values = values[:, : corners.shape[0]], values[:, corners.shape[0] :]
     bounds = Bounds.empty(sweep_index, values.shape[2])
     with warnings.catch_warnings():

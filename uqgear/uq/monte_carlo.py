@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -47,7 +48,9 @@ def monte_carlo_statistics(
             f"variables: {', '.join(map(str, outputs.data_vars)) or 'none'}"
         )
     data_vars = {}
-    coords = {name: outputs.coords[name] for name in outputs.coords if dim not in outputs.coords[name].dims}
+    coords: dict[Hashable, Any] = {
+        name: outputs.coords[name] for name in outputs.coords if dim not in outputs.coords[name].dims
+    }
     for name in names:
         variable = outputs[name].transpose(..., dim)
         values = np.asarray(variable.values, dtype=float)

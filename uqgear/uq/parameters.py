@@ -21,7 +21,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
+from typing import Any, cast
 
 import chaospy
 import numpy as np
@@ -413,7 +413,7 @@ def parse_parameter(name: str, spec: Any) -> Parameter:
         if isinstance(spec, (bool, np.bool_)):
             raise ParameterSpaceError(f"{name}: expected a number, [lower, upper] or a mapping; got {spec!r}")
         if isinstance(spec, (int, float, np.integer, np.floating)):
-            return Fixed(spec)
+            return Fixed(cast(float, spec))  # a NumPy number too: Fixed converts it
         if isinstance(spec, Sequence) and not isinstance(spec, str):
             if len(spec) != 2:
                 raise ParameterSpaceError(f"expected [lower, upper]; got {list(spec)!r}")
@@ -439,10 +439,12 @@ def _parse_parameter_mapping(spec: Mapping[str, Any]) -> Parameter:
     if kind == "distribution":
         params = {key: value for key, value in spec.items() if key not in ("distribution", "units")}
         return Distribution(spec["distribution"], units=units, **params)
-    unknown = sorted(set(map(str, spec)) - set(_SPEC_KEYS[kind]))
+    keys = _SPEC_KEYS[kind]
+    assert keys is not None  # only a distribution has open keys, handled above
+    unknown = sorted(set(map(str, spec)) - set(keys))
     if unknown:
         raise ParameterSpaceError(
-            f"unknown key(s) {', '.join(unknown)} for a {kind} parameter; expected {', '.join(_SPEC_KEYS[kind])}"
+            f"unknown key(s) {', '.join(unknown)} for a {kind} parameter; expected {', '.join(keys)}"
         )
     if kind == "interval":
         bounds = spec["interval"]

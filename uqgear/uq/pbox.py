@@ -149,6 +149,7 @@ def pbox(
         analysis.seed_sequence = child_seed(seed_sequence, 1)
     bounds = analysis._bound(responses, sweep_spec, len(intervals))
     qoi_names = responses.qoi_names
+    assert qoi_names is not None  # set by the model's first call, which every bounding method makes
     per_qoi = 2 + levels.size
     coords = analysis._coords(sweep_spec, qoi_names)
     coords.update(statistic=("statistic", ["mean", "std"]), quantile=("quantile", levels, {"units": "1"}))
@@ -170,6 +171,7 @@ def pbox(
 def _statistic_variables(bounds: Bounds, responses: PboxResponses, sweep: Sweep, levels: np.ndarray) -> dict[str, Any]:
     """Per QoI: bounds of its mean and std, of its quantiles (the p-box) and their largest error."""
     qoi_names = responses.qoi_names
+    assert qoi_names is not None  # set by the model's first call, which every bounding method makes
     per_qoi = 2 + levels.size
     shape = sweep.shape
     data_vars = {}
@@ -206,11 +208,14 @@ def _statistic_variables(bounds: Bounds, responses: PboxResponses, sweep: Sweep,
 def _relabel_reasons(bounds: Bounds, responses: PboxResponses, levels: np.ndarray) -> None:
     """Name the statistic in each flag reason (``dte_rms quantile 0.95``, not ``dte_rms|q2``)."""
     qoi_names = responses.qoi_names
+    assert qoi_names is not None  # set by the model's first call, which every bounding method makes
     per_qoi = 2 + levels.size
     readable = {}
     for q, name in enumerate(qoi_names):
         labels = ["mean", "std"] + [f"quantile {level:g}" for level in levels]
         for k, label in enumerate(labels):
             readable[q * per_qoi + k] = f"{name} {label}"
+    names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     for key, texts in bounds.reasons.items():
-        bounds.reasons[key] = [text.replace(responses.names[key[1]], readable[key[1]], 1) for text in texts]
+        bounds.reasons[key] = [text.replace(names[key[1]], readable[key[1]], 1) for text in texts]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 import chaospy
@@ -207,7 +207,9 @@ class PolynomialChaos:
                 values.reshape(*self._sweep_shape, n),
                 dict(self.outputs_[name].attrs),
             )
-        coords = {d: self.outputs_.coords[d] for d in self._sweep_dims if d in self.outputs_.coords}
+        coords: dict[Hashable, Any] = {
+            d: self.outputs_.coords[d] for d in self._sweep_dims if d in self.outputs_.coords
+        }
         coords["sample"] = samples["sample"].values
         return xr.Dataset(data_vars, coords=coords, attrs={"method": "polynomial_chaos_surrogate"})
 
@@ -242,7 +244,7 @@ class PolynomialChaos:
         quantile_values = self._surrogate_quantiles()
 
         sweep_dims, shape = self._sweep_dims, self._sweep_shape
-        coords: dict[str, Any] = {d: outputs.coords[d] for d in sweep_dims if d in outputs.coords}
+        coords: dict[Hashable, Any] = {d: outputs.coords[d] for d in sweep_dims if d in outputs.coords}
         coords.update(
             statistic=("statistic", ["mean", "std", "variance"]),
             quantile=("quantile", self.quantiles, {"units": "1"}),

@@ -25,7 +25,7 @@ from collections.abc import Hashable, Mapping
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import xarray as xr
@@ -67,7 +67,7 @@ _PROVENANCE_PACKAGES: tuple[str, ...] = (
 
 _FALLBACK_VERSION = "0.1.0"
 _INT64 = np.iinfo(np.int64)
-_NETCDF_ENGINE = "netcdf4"
+_NETCDF_ENGINE: Final = "netcdf4"
 
 
 def uqgear_version() -> str:
@@ -104,8 +104,9 @@ def numba_target_cpu() -> str:
     """
     from numba.core import config
 
-    if config.CPU_NAME:
-        return str(config.CPU_NAME)
+    # numba.config's options are module attributes it sets at import: no static type knows them
+    if config.CPU_NAME:  # type: ignore[attr-defined]
+        return str(config.CPU_NAME)  # type: ignore[attr-defined]
     import llvmlite.binding
 
     return str(llvmlite.binding.get_host_cpu_name())

@@ -122,6 +122,7 @@ def sample_space(
     if method == "grid":
         columns = grid_columns(n, [name in intervals for name in sampled])
     else:
+        assert seed_sequence is not None  # set above for every method but grid
         columns = unit_hypercube(n, len(sampled), method, seed_sequence)
     size = columns.shape[0]
     data_vars = {}

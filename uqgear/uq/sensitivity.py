@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Hashable, Mapping, Sequence
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -196,9 +196,10 @@ class SobolAnalysis:
                 f"outputs: expected an xarray.Dataset with dimension 'sample' of length "
                 f"{size} (one value per Saltelli sample)"
             )
+        # the model's outputs are named by strings
         qoi_names = [
             name
-            for name, variable in outputs.data_vars.items()
+            for name, variable in cast(Mapping[str, xr.DataArray], outputs.data_vars).items()
             if "sample" in variable.dims and np.issubdtype(variable.dtype, np.number)
         ]
         if self.qoi is not None:
@@ -226,7 +227,7 @@ class SobolAnalysis:
             data_vars.update(variables)
             if bad:
                 nonfinite[name] = bad
-        coords: dict[str, Any] = {
+        coords: dict[Hashable, Any] = {
             dim: outputs.coords[dim] for dim in outputs.coords if "sample" not in outputs.coords[dim].dims
         }
         coords.update(param=("param", list(names)), index=("index", list(SOBOL_INDICES)))

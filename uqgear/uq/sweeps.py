@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -213,7 +213,8 @@ def evaluate_on_sweep(
     point_values = sweep.point_values()
     flat: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
-    for name, variable in samples.data_vars.items():
+    # sample variables are named by strings (model inputs)
+    for name, variable in cast(Mapping[str, xr.DataArray], samples.data_vars).items():
         if name in point_values or variable.dims != ("sample",):
             continue
         flat[name] = np.tile(np.asarray(variable.values, dtype=float), sweep.size)
