@@ -50,6 +50,7 @@ import uqgear
 from uqgear.physics import _kernels as K
 from uqgear.physics import integration
 from uqgear.physics.model import build_model
+from uqgear.physics.scipy_reference import integrate_scipy
 from uqgear.physics.threads import default_threads
 
 SCALAR_LIMIT_NS = 70.0
@@ -241,9 +242,8 @@ def _scipy_curve(setup, kw, tight, solver: str, tolerances) -> list[tuple[float,
     points = []
     for rtol in tolerances:
         start = time.perf_counter()
-        history, _, _ = integration._integrate_scipy(setup, kw["n_periods"], kw["keep_periods"],
-                                                     kw["samples_per_period"], setup.static_state(), rtol, None,
-                                                     solver=solver)
+        history, _, _ = integrate_scipy(setup, kw["n_periods"], kw["keep_periods"], kw["samples_per_period"],
+                                        setup.static_state(), rtol, None, solver=solver)
         points.append((_relative_rms(history[:, 2], tight), time.perf_counter() - start))
     return points
 

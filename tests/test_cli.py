@@ -15,7 +15,7 @@ import pytest
 import xarray as xr
 
 import uqgear.common
-from uqgear.study import analyses
+from uqgear.study import analyses, running
 from uqgear.cli import main
 from uqgear.common.errors import UqgearError
 from uqgear.uq.results import load_result
@@ -304,7 +304,7 @@ def test_same_seed_gives_the_same_numbers():
 
     def once(seed_text: str) -> xr.Dataset:
         changed = parse_study(TINY.replace("seed: 5", seed_text))
-        return analyses.run_analysis(changed, changed.analyses[1], runner=Runner(progress=False))
+        return running.run_analysis(changed, changed.analyses[1], runner=Runner(progress=False))
 
     first, second, other = once("seed: 5"), once("seed: 5"), once("seed: 6")
     assert spec.type == "monte_carlo"

@@ -9,18 +9,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import xarray as xr
 
 import uqgear.common
-from uqgear.study.analyses import run_study
 from uqgear.common.errors import UqgearError
 from uqgear.report.findings import regime_findings
 from uqgear.report.presentation import axis_label
 from uqgear.report.study_report import REPORT_NAME, build_report, load_results, write_report
-from uqgear.uq.results import save_result
+from uqgear.study.running import run_analyses as run_study
 from uqgear.study.schema import load_study
 from uqgear.study.variables import VARIABLES
+from uqgear.uq.results import save_result
 
 ROOT = Path(__file__).resolve().parent.parent
 # the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)

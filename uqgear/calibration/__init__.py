@@ -78,8 +78,19 @@ from .outputs import calibrate, write_calibration
 from .priors import DEFAULT_PARAMETERS, PRIOR_RULES, prior_bounds, resolve_parameters
 
 __all__ = [
-    'Calibration', 'CalibrationError', 'calibrate', 'write_calibration', 'model_harmonics',
-    'observed_harmonics', 'PolynomialEmulator', 'split_rhat', 'effective_sample_size',
-    'integrated_autocorrelation_time', 'prior_bounds', 'resolve_parameters', 'DEFAULT_PARAMETERS',
-    'PRIOR_RULES', 'HARMONIC_CHANNELS',
+    "Calibration",
+    "CalibrationError",
+    "calibrate",
+    "write_calibration",
+    "model_harmonics",
+    "observed_harmonics",
+    "PolynomialEmulator",
+    "split_rhat",
+    "effective_sample_size",
+    "integrated_autocorrelation_time",
+    "prior_bounds",
+    "resolve_parameters",
+    "DEFAULT_PARAMETERS",
+    "PRIOR_RULES",
+    "HARMONIC_CHANNELS",
 ]

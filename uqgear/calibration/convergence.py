@@ -53,7 +53,7 @@ def split_rhat(chains: np.ndarray, *, rank_normalize: bool = True) -> float:
     """
     array = _as_chains(chains, "split_rhat")
     half = array.shape[1] // 2
-    split = np.concatenate([array[:, :half], array[:, array.shape[1] - half:]], axis=0)
+    split = np.concatenate([array[:, :half], array[:, array.shape[1] - half :]], axis=0)
     if rank_normalize:
         ranks = scipy.stats.rankdata(split, method="average").reshape(split.shape)
         split = scipy.stats.norm.ppf((ranks - 0.375) / (split.size + 0.25))
@@ -86,7 +86,6 @@ def effective_sample_size(chains: np.ndarray) -> float:
     return float(array.size / max(integrated_autocorrelation_time(array), 1.0))
 
 
-
 @dataclass(frozen=True)
 class ConvergenceCriteria:
     """What a converged chain must satisfy (module docstring)."""
@@ -95,8 +94,9 @@ class ConvergenceCriteria:
     rhat_threshold: float
     min_ess: float
 
-    def verdict(self, chain: np.ndarray, acceptance: np.ndarray, truncated: bool,
-                names: Sequence[str]) -> dict[str, Any]:
+    def verdict(
+        self, chain: np.ndarray, acceptance: np.ndarray, truncated: bool, names: Sequence[str]
+    ) -> dict[str, Any]:
         """Diagnostics of a chain (step, walker, parameter) after burn-in and whether it converged.
 
         Parameters
@@ -114,8 +114,10 @@ class ConvergenceCriteria:
         length = chain.shape[0]
         reasons = []
         if length < self.autocorr_factor * tau_max:
-            reasons.append(f"chain of {length} steps after burn-in is shorter than {self.autocorr_factor:g} "
-                           f"autocorrelation times ({tau_max:.0f} steps)")
+            reasons.append(
+                f"chain of {length} steps after burn-in is shorter than {self.autocorr_factor:g} "
+                f"autocorrelation times ({tau_max:.0f} steps)"
+            )
         worst_rhat = max(entry["rhat"] for entry in per_parameter.values())
         if worst_rhat > self.rhat_threshold:
             reasons.append(f"split R-hat {worst_rhat:.3f} > {self.rhat_threshold:g}")
@@ -127,10 +129,18 @@ class ConvergenceCriteria:
             reasons.append(f"mean acceptance fraction {mean_acceptance:.3f} outside [0.1, 0.9]")
         if truncated:
             reasons.append("posterior truncated by the emulator box after the last stage")
-        return {"converged": not reasons, "reasons": reasons, "tau_max": tau_max, "rhat_max": float(worst_rhat),
-                "ess_min": float(lowest_ess), "acceptance_mean": mean_acceptance,
-                "acceptance_min": float(np.min(acceptance)), "acceptance_max": float(np.max(acceptance)),
-                "steps_after_burn_in": int(length), "parameters": per_parameter}
+        return {
+            "converged": not reasons,
+            "reasons": reasons,
+            "tau_max": tau_max,
+            "rhat_max": float(worst_rhat),
+            "ess_min": float(lowest_ess),
+            "acceptance_mean": mean_acceptance,
+            "acceptance_min": float(np.min(acceptance)),
+            "acceptance_max": float(np.max(acceptance)),
+            "steps_after_burn_in": int(length),
+            "parameters": per_parameter,
+        }
 
 
 def parameter_diagnostics(chain: np.ndarray, names: Sequence[str]) -> dict[str, dict[str, float]]:
@@ -140,7 +150,7 @@ def parameter_diagnostics(chain: np.ndarray, names: Sequence[str]) -> dict[str, 
     """
     per_parameter = {}
     for index, name in enumerate(names):
-        draws = chain[:, :, index].T                                      # (walker, step)
+        draws = chain[:, :, index].T  # (walker, step)
         if np.ptp(draws) == 0:
             tau, ess, rhat = 1.0, float(draws.size), 1.0
         else:

@@ -67,19 +67,21 @@ class PolynomialEmulator:
         columns = legendre[:, np.arange(self.dimensions)[None, :], self.indices]
         return np.prod(columns, axis=2)
 
-    def fit(self, z: np.ndarray, values: np.ndarray) -> "PolynomialEmulator":
+    def fit(self, z: np.ndarray, values: np.ndarray) -> PolynomialEmulator:
         """Fit outputs ``values`` (N, F) at inputs ``z`` (N, dimensions); sets ``coefficients_`` and
         the leave-one-out residuals ``loo_residuals_`` (N, F) and RMS ``loo_rms_`` (F)."""
         matrix = self.basis(z)
         if matrix.shape[0] <= matrix.shape[1]:
-            raise CalibrationError(f"emulator: {matrix.shape[0]} training runs for {matrix.shape[1]} polynomial "
-                                   f"terms; expected more runs than terms")
+            raise CalibrationError(
+                f"emulator: {matrix.shape[0]} training runs for {matrix.shape[1]} polynomial "
+                f"terms; expected more runs than terms"
+            )
         q, r = np.linalg.qr(matrix)
         self.coefficients_ = np.linalg.solve(r, q.T @ values)
-        leverage = np.sum(q ** 2, axis=1)
+        leverage = np.sum(q**2, axis=1)
         residuals = values - matrix @ self.coefficients_
         self.loo_residuals_ = residuals / np.maximum(1.0 - leverage, 1e-8)[:, None]
-        self.loo_rms_ = np.sqrt(np.mean(self.loo_residuals_ ** 2, axis=0))
+        self.loo_rms_ = np.sqrt(np.mean(self.loo_residuals_**2, axis=0))
         return self
 
     def predict(self, z: np.ndarray) -> np.ndarray:
@@ -104,10 +106,10 @@ class JointEmulator:
 
     def __init__(self, emulators: Sequence[PolynomialEmulator], n_global: int) -> None:
         self.n_global = n_global
-        indices = emulators[0].indices                                          # (T, n_global + 1)
+        indices = emulators[0].indices  # (T, n_global + 1)
         global_indices = np.unique(indices[:, :n_global], axis=0)
         lookup = {tuple(row): number for number, row in enumerate(global_indices)}
-        self.global_indices = global_indices                                    # (T_g, n_global)
+        self.global_indices = global_indices  # (T_g, n_global)
         self.term_global = np.array([lookup[tuple(row[:n_global])] for row in indices])
         self.term_t2 = indices[:, n_global].copy()
         self.coefficients = np.stack([emulator.coefficients_ for emulator in emulators])  # (op, T, F)
@@ -117,7 +119,7 @@ class JointEmulator:
         """Outputs (M, op, F) at inputs ``z`` (M, n_global + op) in [-1, 1]: the global ones, then each run's T2."""
         legendre = legendre_table(z, z.shape[1], self.degree)
         n_global = self.n_global
-        shared = legendre[:, np.arange(n_global)[None, :], self.global_indices].prod(axis=2)    # (M, T_g)
-        own = legendre[:, n_global:, :]                                                         # (M, op, degree+1)
-        basis = shared[:, None, self.term_global] * own[:, :, self.term_t2]                     # (M, op, T)
+        shared = legendre[:, np.arange(n_global)[None, :], self.global_indices].prod(axis=2)  # (M, T_g)
+        own = legendre[:, n_global:, :]  # (M, op, degree+1)
+        basis = shared[:, None, self.term_global] * own[:, :, self.term_t2]  # (M, op, T)
         return np.matmul(basis.transpose(1, 0, 2), self.coefficients).transpose(1, 0, 2)

@@ -30,8 +30,18 @@ from .posterior_fit import PosteriorFit
 from .priors import DEFAULT_PARAMETERS, prior_bounds, resolve_parameters
 from .rig_input import accept_rig
 from .sampling import walker_count
-from .settings import (as_seed, check_bool, check_channels, check_design, check_float, check_int,
-                       check_model_error_range, check_n_training, check_pitch_classes, check_priors)
+from .settings import (
+    as_seed,
+    check_bool,
+    check_channels,
+    check_design,
+    check_float,
+    check_int,
+    check_model_error_range,
+    check_n_training,
+    check_pitch_classes,
+    check_priors,
+)
 from .summaries import result_content
 from .training import ModelRuns
 
@@ -122,17 +132,36 @@ class Calibration:
         The pitch-error correction (None when switched off).
     """
 
-    def __init__(self, parameters: Sequence[str] = DEFAULT_PARAMETERS, *, design: Design | None = None,
-                 priors: Mapping[str, Sequence[float]] | None = None,
-                 channels: Sequence[str] = HARMONIC_CHANNELS, n_harmonics: int = 3, min_snr: float = 5.0,
-                 model_error_range: tuple[float, float] = (0.01, 0.5), effects: Sequence[Effect] = (),
-                 n_training: int = 256, emulator_degree: int = 3, max_stages: int = 5,
-                 n_walkers: int | None = None, stage_steps: int = 1500, chunk_steps: int = 2000,
-                 max_steps: int = 30000, autocorr_factor: float = 50.0, rhat_threshold: float = 1.01,
-                 min_ess: float = 400.0, predictive_draws: int = 16, transient: float = 0.2, window: float = 0.1,
-                 seed: np.random.SeedSequence | int | None = None, threads: int | None = None,
-                 pitch_correction: bool = True, pitch_draws: int = 4,
-                 pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> None:
+    def __init__(
+        self,
+        parameters: Sequence[str] = DEFAULT_PARAMETERS,
+        *,
+        design: Design | None = None,
+        priors: Mapping[str, Sequence[float]] | None = None,
+        channels: Sequence[str] = HARMONIC_CHANNELS,
+        n_harmonics: int = 3,
+        min_snr: float = 5.0,
+        model_error_range: tuple[float, float] = (0.01, 0.5),
+        effects: Sequence[Effect] = (),
+        n_training: int = 256,
+        emulator_degree: int = 3,
+        max_stages: int = 5,
+        n_walkers: int | None = None,
+        stage_steps: int = 1500,
+        chunk_steps: int = 2000,
+        max_steps: int = 30000,
+        autocorr_factor: float = 50.0,
+        rhat_threshold: float = 1.01,
+        min_ess: float = 400.0,
+        predictive_draws: int = 16,
+        transient: float = 0.2,
+        window: float = 0.1,
+        seed: np.random.SeedSequence | int | None = None,
+        threads: int | None = None,
+        pitch_correction: bool = True,
+        pitch_draws: int = 4,
+        pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+    ) -> None:
         self.parameters = resolve_parameters(parameters)
         self.design = check_design(design)
         self.priors = check_priors(priors, self.parameters)
@@ -164,22 +193,36 @@ class Calibration:
 
     def settings(self) -> dict[str, Any]:
         """The settings as a JSON-ready mapping."""
-        return {"parameters": list(self.parameters), "priors": {k: list(v) for k, v in self.priors.items()},
-                "channels": list(self.channels), "n_harmonics": self.n_harmonics, "min_snr": self.min_snr,
-                "model_error_range": list(self.model_error_range),
-                "effects": [{"name": e.name, "values": dict(e.values)} for e in self.effects],
-                "n_training": self.n_training, "emulator_degree": self.emulator_degree,
-                "max_stages": self.max_stages, "n_walkers": self.n_walkers, "stage_steps": self.stage_steps,
-                "chunk_steps": self.chunk_steps, "max_steps": self.max_steps,
-                "autocorr_factor": self.autocorr_factor, "rhat_threshold": self.rhat_threshold,
-                "min_ess": self.min_ess, "predictive_draws": self.predictive_draws, "transient": self.transient,
-                "window": self.window, "pitch_correction": self.pitch_correction, "pitch_draws": self.pitch_draws,
-                "pitch_classes": None if self.pitch_classes is None else list(self.pitch_classes),
-                "seed_entropy": str(self.seed.entropy)}
+        return {
+            "parameters": list(self.parameters),
+            "priors": {k: list(v) for k, v in self.priors.items()},
+            "channels": list(self.channels),
+            "n_harmonics": self.n_harmonics,
+            "min_snr": self.min_snr,
+            "model_error_range": list(self.model_error_range),
+            "effects": [{"name": e.name, "values": dict(e.values)} for e in self.effects],
+            "n_training": self.n_training,
+            "emulator_degree": self.emulator_degree,
+            "max_stages": self.max_stages,
+            "n_walkers": self.n_walkers,
+            "stage_steps": self.stage_steps,
+            "chunk_steps": self.chunk_steps,
+            "max_steps": self.max_steps,
+            "autocorr_factor": self.autocorr_factor,
+            "rhat_threshold": self.rhat_threshold,
+            "min_ess": self.min_ess,
+            "predictive_draws": self.predictive_draws,
+            "transient": self.transient,
+            "window": self.window,
+            "pitch_correction": self.pitch_correction,
+            "pitch_draws": self.pitch_draws,
+            "pitch_classes": None if self.pitch_classes is None else list(self.pitch_classes),
+            "seed_entropy": str(self.seed.entropy),
+        }
 
     # ------------------------------------------------------------------ fit
 
-    def fit(self, rig: xr.Dataset | str | os.PathLike[str]) -> "Calibration":
+    def fit(self, rig: xr.Dataset | str | os.PathLike[str]) -> Calibration:
         """Calibrate on a rig campaign.
 
         Parameters
@@ -211,8 +254,13 @@ class Calibration:
         seeds = [child_seed(self.seed, index) for index in range(8)]
         # the data's features and the prior box are input: a problem with them is the user's (exit 2)
         features = observed_features(
-            rig, design, channels=self.channels, n_harmonics=self.n_harmonics, min_snr=self.min_snr,
-            model_error_range=self.model_error_range)
+            rig,
+            design,
+            channels=self.channels,
+            n_harmonics=self.n_harmonics,
+            min_snr=self.min_snr,
+            model_error_range=self.model_error_range,
+        )
         self.observed_, self.used_, self.model_error_grid_ = features.observed, features.used, features.model_error_grid
         self.n_op_, self.operating_ = rig.sizes["op"], operating_points(rig)
         self.bounds_ = prior_bounds(design, self.parameters, self.priors)
@@ -222,13 +270,29 @@ class Calibration:
         # from here on the input is accepted: a failure is ours, reported with its step
         self.steps_ = steps = StepLog()
         stage_rng = np.random.default_rng(seeds[0])
-        model = ModelRuns(design=design, parameters=self.parameters, operating=self.operating_, effects=self.effects,
-                          n_harmonics=self.n_harmonics, transient=self.transient, window=self.window,
-                          threads=self.threads)
-        work = PosteriorFit(features, model, bounds=self.bounds_, prior_lower=self.prior_lower_,
-                            prior_upper=self.prior_upper_, n_training=self.n_training, degree=self.emulator_degree,
-                            walkers=walker_count(self.n_walkers, self.n_dim_), stage_steps=self.stage_steps,
-                            max_stages=self.max_stages, error_floor=self.model_error_range[0])
+        model = ModelRuns(
+            design=design,
+            parameters=self.parameters,
+            operating=self.operating_,
+            effects=self.effects,
+            n_harmonics=self.n_harmonics,
+            transient=self.transient,
+            window=self.window,
+            threads=self.threads,
+        )
+        work = PosteriorFit(
+            features,
+            model,
+            bounds=self.bounds_,
+            prior_lower=self.prior_lower_,
+            prior_upper=self.prior_upper_,
+            n_training=self.n_training,
+            degree=self.emulator_degree,
+            walkers=walker_count(self.n_walkers, self.n_dim_),
+            stage_steps=self.stage_steps,
+            max_stages=self.max_stages,
+            error_floor=self.model_error_range[0],
+        )
         self.emulator_ = {"stages": work.stages}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
             start_points, truncated = work.search(stage_rng, seeds[1], seeds[2])
@@ -236,28 +300,47 @@ class Calibration:
         self.pitch_errors_ = None
         if self.pitch_correction:
             self.pitch_errors_, start_points, truncated = work.correct_pitch_errors(
-                rig, start_points, truncated, stage_rng, seeds[5:8], steps, channels=self.channels,
-                draws=self.pitch_draws, classes=self.pitch_classes)
+                rig,
+                start_points,
+                truncated,
+                stage_rng,
+                seeds[5:8],
+                steps,
+                channels=self.channels,
+                draws=self.pitch_draws,
+                classes=self.pitch_classes,
+            )
         with steps.step("final sampling") as found:
             self.diagnostics_, self.posterior_, self.summary_ = work.final_sampling(
-                start_points, stage_rng, seeds[3], truncated, chunk_steps=self.chunk_steps, max_steps=self.max_steps,
-                criteria=ConvergenceCriteria(self.autocorr_factor, self.rhat_threshold, self.min_ess))
+                start_points,
+                stage_rng,
+                seeds[3],
+                truncated,
+                chunk_steps=self.chunk_steps,
+                max_steps=self.max_steps,
+                criteria=ConvergenceCriteria(self.autocorr_factor, self.rhat_threshold, self.min_ess),
+            )
             self.converged_ = bool(self.diagnostics_["converged"])
             found.update(converged=self.converged_)
         with steps.step("posterior predictive check"):
             self.predictive_, self.predictive_check_ = work.predictive_check(
-                self.posterior_, self.summary_, np.random.default_rng(seeds[4]), draws=self.predictive_draws)
+                self.posterior_, self.summary_, np.random.default_rng(seeds[4]), draws=self.predictive_draws
+            )
         # read at the end: the pitch-error correction may replace the features, and its resumed search the box
-        features, likelihood = work.features, work.likelihood
+        features, likelihood = work.features, work.fitted_likelihood()
         self._features, self._likelihood = features, likelihood
         self.log_observed_, self.noise_variance_ = features.log_observed, features.noise_variance
         self.box_lower_, self.box_upper_, self.loo_rms_ = likelihood.box_lower, likelihood.box_upper, likelihood.loo_rms
         self.model_runs_ = model.count
-        self.timing_ = {"wall_s": time.perf_counter() - wall_start, "cpu_s": time.process_time() - cpu_start,
-                        "model_runs": int(self.model_runs_), "order_tracking_s": tracking_s,
-                        "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds,
-                        # each step's wall time, in order (the box search, any correction, sampling, the check)
-                        "steps_s": {entry["step"]: entry["seconds"] for entry in steps.finished}}
+        self.timing_ = {
+            "wall_s": time.perf_counter() - wall_start,
+            "cpu_s": time.process_time() - cpu_start,
+            "model_runs": int(self.model_runs_),
+            "order_tracking_s": tracking_s,
+            "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds,
+            # each step's wall time, in order (the box search, any correction, sampling, the check)
+            "steps_s": {entry["step"]: entry["seconds"] for entry in steps.finished},
+        }
         return self
 
     # ------------------------------------------------------------------ results
@@ -266,19 +349,31 @@ class Calibration:
         """What keeps the fit from being a result (:func:`~uqgear.calibration.failure.failure_causes`)."""
         if not hasattr(self, "posterior_"):
             raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
-        return failure_causes(diagnostics=self.diagnostics_, summary=self.summary_,
-                              predictive_check=self.predictive_check_, predictive=self.predictive_,
-                              model_error_cap=self.model_error_range[1])
+        return failure_causes(
+            diagnostics=self.diagnostics_,
+            summary=self.summary_,
+            predictive_check=self.predictive_check_,
+            predictive=self.predictive_,
+            model_error_cap=self.model_error_range[1],
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """The calibration result as a JSON-ready mapping (the content of ``calibration.json``)."""
         if not hasattr(self, "posterior_"):
             raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
-        content = result_content(rig=self.rig_source_, converged=self.converged_, design=self.design_.to_dict(),
-                                 diagnostics=self.diagnostics_, summary=self.summary_,
-                                 predictive_check=self.predictive_check_, emulator=self.emulator_,
-                                 timing=self.timing_, settings=self.settings(), speed=self.speed_,
-                                 failure=self.failure())
+        content = result_content(
+            rig=self.rig_source_,
+            converged=self.converged_,
+            design=self.design_.to_dict(),
+            diagnostics=self.diagnostics_,
+            summary=self.summary_,
+            predictive_check=self.predictive_check_,
+            emulator=self.emulator_,
+            timing=self.timing_,
+            settings=self.settings(),
+            speed=self.speed_,
+            failure=self.failure(),
+        )
         # what the model did with the design's geometry (an undercut tooth), for the report and the record
         content["design_notes"] = geometry_notes(self.design_)
         content["pitch_errors"] = None if self.pitch_errors_ is None else self.pitch_errors_.summary(self.used_)

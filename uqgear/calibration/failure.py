@@ -38,8 +38,11 @@ def parameters_at_bounds(parameters: Mapping[str, Mapping[str, Any]]) -> list[di
 
 def model_errors_at_cap(model_error: Mapping[str, Mapping[str, float]], cap: float) -> list[dict[str, Any]]:
     """Model-error groups whose posterior median reached the cap of their grid."""
-    return [{"group": group, "median": entry["q50"], "cap": cap}
-            for group, entry in model_error.items() if entry["q50"] >= _AT_CAP * cap]
+    return [
+        {"group": group, "median": entry["q50"], "cap": cap}
+        for group, entry in model_error.items()
+        if entry["q50"] >= _AT_CAP * cap
+    ]
 
 
 def worst_misfits(predictive: xr.Dataset) -> list[dict[str, Any]]:
@@ -53,16 +56,26 @@ def worst_misfits(predictive: xr.Dataset) -> list[dict[str, Any]]:
         op, channel, harmonic = np.unravel_index(flat, z.shape)
         if not np.isfinite(z[op, channel, harmonic]):
             break
-        rows.append({"op": int(op), "pinion_speed": float(predictive["pinion_speed"].values[op]),
-                     "feature": f"{predictive['channel'].values[channel]} mesh{predictive['harmonic'].values[harmonic]}",
-                     "z": float(predictive["z_total"].values[op, channel, harmonic]),
-                     "relative_difference": float(predictive["relative_difference"].values[op, channel, harmonic])})
+        rows.append(
+            {
+                "op": int(op),
+                "pinion_speed": float(predictive["pinion_speed"].values[op]),
+                "feature": f"{predictive['channel'].values[channel]} mesh{predictive['harmonic'].values[harmonic]}",
+                "z": float(predictive["z_total"].values[op, channel, harmonic]),
+                "relative_difference": float(predictive["relative_difference"].values[op, channel, harmonic]),
+            }
+        )
     return rows
 
 
-def failure_causes(*, diagnostics: Mapping[str, Any], summary: Mapping[str, Any],
-                   predictive_check: Mapping[str, Any], predictive: xr.Dataset,
-                   model_error_cap: float) -> dict[str, Any]:
+def failure_causes(
+    *,
+    diagnostics: Mapping[str, Any],
+    summary: Mapping[str, Any],
+    predictive_check: Mapping[str, Any],
+    predictive: xr.Dataset,
+    model_error_cap: float,
+) -> dict[str, Any]:
     """What is wrong with a fit, each cause with its numbers.
 
     Returns
@@ -75,37 +88,63 @@ def failure_causes(*, diagnostics: Mapping[str, Any], summary: Mapping[str, Any]
     causes: list[dict[str, Any]] = []
     if predictive_check.get("passed") is False:
         misfits = worst_misfits(predictive)
-        worst = "; ".join(f"{m['feature']} at {m['pinion_speed']:g} rpm off by {100 * m['relative_difference']:+.0f} % "
-                          f"({m['z']:+.1f} sigma)" for m in misfits)
-        causes.append({"kind": "predictive_misfit", "misfits": misfits,
-                       "text": (f"the model does not reproduce the features: "
-                                f"{100 * predictive_check['fraction_within_2_sigma']:.0f} % within 2 sigma "
-                                f"(90 % needed), median difference "
-                                f"{100 * predictive_check['median_abs_relative_difference']:.0f} %"
-                                + (f"; worst {worst}" if worst else ""))})
+        worst = "; ".join(
+            f"{m['feature']} at {m['pinion_speed']:g} rpm off by {100 * m['relative_difference']:+.0f} % "
+            f"({m['z']:+.1f} sigma)"
+            for m in misfits
+        )
+        causes.append(
+            {
+                "kind": "predictive_misfit",
+                "misfits": misfits,
+                "text": (
+                    f"the model does not reproduce the features: "
+                    f"{100 * predictive_check['fraction_within_2_sigma']:.0f} % within 2 sigma "
+                    f"(90 % needed), median difference "
+                    f"{100 * predictive_check['median_abs_relative_difference']:.0f} %"
+                    + (f"; worst {worst}" if worst else "")
+                ),
+            }
+        )
     at_bounds = parameters_at_bounds(summary.get("parameters", {}))
     if at_bounds:
-        causes.append({"kind": "parameter_at_bound", "parameters": at_bounds,
-                       "text": "parameters pile against their prior bounds: " + ", ".join(
-                           f"{b['parameter']} median {b['median']:.4g} at its {b['bound']} bound {b['value']:.4g}"
-                           for b in at_bounds)})
+        causes.append(
+            {
+                "kind": "parameter_at_bound",
+                "parameters": at_bounds,
+                "text": "parameters pile against their prior bounds: "
+                + ", ".join(
+                    f"{b['parameter']} median {b['median']:.4g} at its {b['bound']} bound {b['value']:.4g}"
+                    for b in at_bounds
+                ),
+            }
+        )
     capped = model_errors_at_cap(summary.get("model_error", {}), model_error_cap)
     if capped:
-        causes.append({"kind": "model_error_at_cap", "groups": capped,
-                       "text": "the model-error terms reach their cap {:.2g} to absorb a misfit: {}".format(
-                           model_error_cap, ", ".join(g["group"] for g in capped))})
+        causes.append(
+            {
+                "kind": "model_error_at_cap",
+                "groups": capped,
+                "text": "the model-error terms reach their cap {:.2g} to absorb a misfit: {}".format(
+                    model_error_cap, ", ".join(g["group"] for g in capped)
+                ),
+            }
+        )
     reasons = [str(reason) for reason in diagnostics.get("reasons", [])]
     if reasons:
-        causes.append({"kind": "sampler", "reasons": reasons,
-                       "text": "the sampler did not converge: " + "; ".join(reasons)})
+        causes.append(
+            {"kind": "sampler", "reasons": reasons, "text": "the sampler did not converge: " + "; ".join(reasons)}
+        )
     if not causes:
         return {"causes": [], "message": ""}
     physical = [cause for cause in causes if cause["kind"] != "sampler"]
     if physical:
-        message = ("the model does not fit these data, so the estimates are not a result: "
-                   + "; ".join(cause["text"] for cause in physical)
-                   + ". An effect the model lacks, or a record it cannot read (check the speed estimate), "
-                     "is the likely cause: run `uqgear diagnose` on the same file")
+        message = (
+            "the model does not fit these data, so the estimates are not a result: "
+            + "; ".join(cause["text"] for cause in physical)
+            + ". An effect the model lacks, or a record it cannot read (check the speed estimate), "
+            "is the likely cause: run `uqgear diagnose` on the same file"
+        )
         if reasons:
             message += "; the chain statistics also fail (" + "; ".join(reasons) + ")"
     else:

@@ -18,7 +18,7 @@ with the sensor-noise standard deviation of each amplitude.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 import numba as nb
@@ -44,6 +44,7 @@ HARMONIC_CHANNELS: tuple[str, ...] = ("te", "acc_pinion", "acc_gear")
 # ---------------------------------------------------------------------------
 # numba kernels
 # ---------------------------------------------------------------------------
+
 
 @nb.njit(cache=True)
 def _scaled_change(a, b, scale):
@@ -97,8 +98,26 @@ def _shoot(state, p, pair_k, period_k, fp, fg, schedule, scale, tolerance, max_n
 
 # numba-inlined into its only caller (not compiled and emitted twice; see uqgear.physics._kernels.INLINED)
 @nb.njit(cache=True, inline="always")
-def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, transient_periods, min_periods,
-                      max_periods, tolerance, scale, n_harmonics, shoot, out, info):
+def _steady_harmonics(
+    state,
+    p,
+    pair_k,
+    period_k,
+    fp,
+    fg,
+    bps,
+    steps,
+    stride,
+    transient_periods,
+    min_periods,
+    max_periods,
+    tolerance,
+    scale,
+    n_harmonics,
+    shoot,
+    out,
+    info,
+):
     schedule = K.build_schedule(p, pair_k, period_k, bps, steps)
     previous = np.empty(6)
     start = np.empty(6)
@@ -175,25 +194,73 @@ def _steady_harmonics(state, p, pair_k, period_k, fp, fg, bps, steps, stride, tr
 
 
 @nb.njit(cache=True, nogil=True)
-def _harmonics_batch(start, stop, states, params, pair_tables, period_tables, table_index, factor_pinion,
-                     factor_gear, breakpoints, steps, stride, transient_periods, min_periods, max_periods, tolerance,
-                     scales, n_harmonics, shoot, out, info):
+def _harmonics_batch(
+    start,
+    stop,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    breakpoints,
+    steps,
+    stride,
+    transient_periods,
+    min_periods,
+    max_periods,
+    tolerance,
+    scales,
+    n_harmonics,
+    shoot,
+    out,
+    info,
+):
     """Samples ``start`` to ``stop - 1`` (GIL released; threads share a batch by ranges)."""
     for i in range(start, stop):
         state = states[i].copy()
         table = table_index[i]
-        _steady_harmonics(state, params[i], pair_tables[table], period_tables[table], factor_pinion[i],
-                          factor_gear[i], breakpoints[i], steps[i], stride[i], transient_periods[i], min_periods,
-                          max_periods[i], tolerance, scales[i], n_harmonics, shoot, out[i], info[i])
+        _steady_harmonics(
+            state,
+            params[i],
+            pair_tables[table],
+            period_tables[table],
+            factor_pinion[i],
+            factor_gear[i],
+            breakpoints[i],
+            steps[i],
+            stride[i],
+            transient_periods[i],
+            min_periods,
+            max_periods[i],
+            tolerance,
+            scales[i],
+            n_harmonics,
+            shoot,
+            out[i],
+            info[i],
+        )
 
 
 # ---------------------------------------------------------------------------
 # model features
 # ---------------------------------------------------------------------------
 
-def model_harmonics(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect] = (), n_harmonics: int = 3,
-                    transient: float = 0.2, window: float = 0.1, samples_per_period: int = 64,
-                    tolerance: float = 1e-6, steps_per_mode: int = 24, threads: int | None = None) -> xr.Dataset:
+
+def model_harmonics(
+    design: Design,
+    samples: xr.Dataset,
+    *,
+    effects: Sequence[Effect] = (),
+    n_harmonics: int = 3,
+    transient: float = 0.2,
+    window: float = 0.1,
+    samples_per_period: int = 64,
+    tolerance: float = 1e-6,
+    steps_per_mode: int = 24,
+    threads: int | None = None,
+) -> xr.Dataset:
     """Steady mesh-harmonic amplitudes of te, acc_pinion and acc_gear, many samples in parallel.
 
     Parameters
@@ -234,8 +301,10 @@ def model_harmonics(design: Design, samples: xr.Dataset, *, effects: Sequence[Ef
     if isinstance(n_harmonics, bool) or not isinstance(n_harmonics, (int, np.integer)) or not 1 <= n_harmonics:
         raise CalibrationError(f"n_harmonics: expected an integer >= 1; got {n_harmonics!r}")
     if samples_per_period < 2 * n_harmonics + 2:
-        raise CalibrationError(f"samples_per_period: expected at least {2 * n_harmonics + 2} for "
-                               f"{n_harmonics} harmonics; got {samples_per_period!r}")
+        raise CalibrationError(
+            f"samples_per_period: expected at least {2 * n_harmonics + 2} for "
+            f"{n_harmonics} harmonics; got {samples_per_period!r}"
+        )
     setups, steps = _batch_setups(design, samples, effects, steps_per_mode, samples_per_period)
     n = len(setups)
     stride = steps // samples_per_period
@@ -252,28 +321,51 @@ def model_harmonics(design: Design, samples: xr.Dataset, *, effects: Sequence[Ef
     out = np.zeros((n, 3, int(n_harmonics)))
     info = np.zeros((n, 2))
     if n:
-        arrays = (np.stack([s.static_state() for s in setups]), np.stack([s.parameters for s in setups]),
-                  np.stack(pair_tables), np.stack(period_tables), table_index,
-                  np.stack([s.factor_pinion for s in setups]), np.stack([s.factor_gear for s in setups]),
-                  breakpoints, steps, stride, transient_periods, 2, window_periods, float(tolerance),
-                  scales, int(n_harmonics), periodic_model, out, info)
+        arrays = (
+            np.stack([s.static_state() for s in setups]),
+            np.stack([s.parameters for s in setups]),
+            np.stack(pair_tables),
+            np.stack(period_tables),
+            table_index,
+            np.stack([s.factor_pinion for s in setups]),
+            np.stack([s.factor_gear for s in setups]),
+            breakpoints,
+            steps,
+            stride,
+            transient_periods,
+            2,
+            window_periods,
+            float(tolerance),
+            scales,
+            int(n_harmonics),
+            periodic_model,
+            out,
+            info,
+        )
         spread(lambda start, stop: _harmonics_batch(start, stop, *arrays), n, threads)
-    coords: dict[str, Any] = {"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1)}
+    coords: dict[Hashable, Any] = {"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1)}
     for name in samples.data_vars:
         coords[name] = ("sample", samples[name].values)
     return xr.Dataset(
-        {"amplitude": (("sample", "channel", "harmonic"), out,
-                       {"long_name": "steady mesh-harmonic amplitude",
-                        "units": "m (te), m s-2 (acc_pinion, acc_gear)"}),
-         "periodic": ("sample", info[:, 1] > 0, {"long_name": "steady response periodic in the mesh period"}),
-         "window_periods": ("sample", info[:, 0].astype(int), {"long_name": "mesh periods averaged"})},
-        coords=coords)
+        {
+            "amplitude": (
+                ("sample", "channel", "harmonic"),
+                out,
+                {"long_name": "steady mesh-harmonic amplitude", "units": "m (te), m s-2 (acc_pinion, acc_gear)"},
+            ),
+            "periodic": ("sample", info[:, 1] > 0, {"long_name": "steady response periodic in the mesh period"}),
+            "window_periods": ("sample", info[:, 0].astype(int), {"long_name": "mesh periods averaged"}),
+        },
+        coords=coords,
+    )
 
 
-def _batch_setups(design: Design, samples: xr.Dataset, effects: Sequence[Effect], steps_per_mode: int,
-                  samples_per_period: int) -> tuple[list[Any], np.ndarray]:
+def _batch_setups(
+    design: Design, samples: xr.Dataset, effects: Sequence[Effect], steps_per_mode: int, samples_per_period: int
+) -> tuple[list[Any], np.ndarray]:
     """Model set-ups of the samples and each one's integration steps per mesh period."""
-    setups, step_counts = [], []
+    setups: list[Any] = []
+    step_counts: list[int] = []
     # in chunks, so that each run's step count is found while the model's
     # per-design stiffness cache still holds its design
     for start in range(0, samples.sizes["sample"], 256):
@@ -288,8 +380,9 @@ def _state_scales(setups: Sequence[Any]) -> np.ndarray:
     n = len(setups)
     scales = np.empty((n, 6))
     for i, setup in enumerate(setups):
-        length = abs(setup.derived["static_mesh_force"]) / (setup.derived["k_mean"]
-                                                             * setup.parameters[K.STIFFNESS_SCALE])
+        length = abs(setup.derived["static_mesh_force"]) / (
+            setup.derived["k_mean"] * setup.parameters[K.STIFFNESS_SCALE]
+        )
         length = max(length, float(setup.parameters[K.STE_AMPLITUDE]), 1e-9)
         velocity = length * setup.derived["omega_n"]
         scales[i] = (length, length, length, velocity, velocity, velocity)
@@ -300,6 +393,7 @@ def _state_scales(setups: Sequence[Any]) -> np.ndarray:
 # observed features
 # ---------------------------------------------------------------------------
 
+
 def line_noise_factor(size: int, window: str = "hann") -> float:
     """Std of a line amplitude from a weighted least-squares fit in white noise of unit std.
 
@@ -308,11 +402,12 @@ def line_noise_factor(size: int, window: str = "hann") -> float:
     amplitude has the same standard deviation.
     """
     weights = scipy.signal.get_window(window, size, fftbins=False)
-    return math.sqrt(2.0 * np.sum(weights ** 2) / np.sum(weights) ** 2)
+    return math.sqrt(2.0 * np.sum(weights**2) / np.sum(weights) ** 2)
 
 
-def observed_harmonics(rig: xr.Dataset, design: Design, *, channels: Sequence[str] = HARMONIC_CHANNELS,
-                       n_harmonics: int = 3) -> xr.Dataset:
+def observed_harmonics(
+    rig: xr.Dataset, design: Design, *, channels: Sequence[str] = HARMONIC_CHANNELS, n_harmonics: int = 3
+) -> xr.Dataset:
     """Mesh-harmonic amplitudes of rig data with their noise standard deviations, and their first sidebands.
 
     Returns
@@ -327,11 +422,19 @@ def observed_harmonics(rig: xr.Dataset, design: Design, *, channels: Sequence[st
     """
     present = [name for name in channels if name in rig.data_vars]
     if not present:
-        raise CalibrationError(f"channels: none of {', '.join(channels)} is in the rig data "
-                               f"(found {', '.join(map(str, rig.data_vars))})")
+        raise CalibrationError(
+            f"channels: none of {', '.join(channels)} is in the rig data (found {', '.join(map(str, rig.data_vars))})"
+        )
     # sidebands stay in the joint line fit and out of the noise floor, should the rig have any
-    features = extract_features(rig, design, channels=present, n_harmonics=n_harmonics,
-                                n_sidebands=min(3, design.z1 - 1), n_shaft_orders=0, n_motor_lines=0)
+    features = extract_features(
+        rig,
+        design,
+        channels=present,
+        n_harmonics=n_harmonics,
+        n_sidebands=min(3, design.z1 - 1),
+        n_shaft_orders=0,
+        n_motor_lines=0,
+    )
     return harmonic_lines(features, rig.sizes["time"], n_harmonics)
 
 
@@ -340,7 +443,7 @@ def harmonic_lines(features: xr.Dataset, size: int, n_harmonics: int) -> xr.Data
     ``size`` samples), with every sideband order they hold."""
     n_op = features.sizes["op"]
     names = [str(name) for name in features["feature"].values]
-    labels = [name[len("mesh1_sb_"):] for name in names if name.startswith("mesh1_sb_")]
+    labels = [name[len("mesh1_sb_") :] for name in names if name.startswith("mesh1_sb_")]
     amplitude = np.full((n_op, len(HARMONIC_CHANNELS), n_harmonics), np.nan)
     noise = np.full_like(amplitude, np.nan)
     sideband = np.full((n_op, len(HARMONIC_CHANNELS), n_harmonics, len(labels)), np.nan)
@@ -349,17 +452,31 @@ def harmonic_lines(features: xr.Dataset, size: int, n_harmonics: int) -> xr.Data
         if name not in features.data_vars:
             continue
         values = features[name]
-        amplitude[:, index, :] = values.sel(feature=[f"mesh{k}" for k in range(1, n_harmonics + 1)]
-                                            ).transpose("op", "feature").values
+        amplitude[:, index, :] = (
+            values.sel(feature=[f"mesh{k}" for k in range(1, n_harmonics + 1)]).transpose("op", "feature").values
+        )
         noise[:, index, :] = (values.sel(feature="noise_std").values * factor)[:, None]
         for k in range(n_harmonics):
             row = [f"mesh{k + 1}_sb_{label}" for label in labels]
             sideband[:, index, k, :] = values.sel(feature=row).transpose("op", "feature").values
     return xr.Dataset(
-        {"amplitude": (("op", "channel", "harmonic"), amplitude, {"long_name": "observed mesh-harmonic amplitude"}),
-         "amplitude_std": (("op", "channel", "harmonic"), noise,
-                           {"long_name": "sensor-noise standard deviation of the amplitude"}),
-         "sideband_amplitude": (("op", "channel", "harmonic", "sideband"), sideband,
-                                {"long_name": "amplitude of the shaft-order sidebands of each mesh harmonic"})},
-        coords={"channel": list(HARMONIC_CHANNELS), "harmonic": np.arange(1, n_harmonics + 1),
-                "sideband": labels, "pinion_speed": ("op", features["pinion_speed"].values)})
+        {
+            "amplitude": (("op", "channel", "harmonic"), amplitude, {"long_name": "observed mesh-harmonic amplitude"}),
+            "amplitude_std": (
+                ("op", "channel", "harmonic"),
+                noise,
+                {"long_name": "sensor-noise standard deviation of the amplitude"},
+            ),
+            "sideband_amplitude": (
+                ("op", "channel", "harmonic", "sideband"),
+                sideband,
+                {"long_name": "amplitude of the shaft-order sidebands of each mesh harmonic"},
+            ),
+        },
+        coords={
+            "channel": list(HARMONIC_CHANNELS),
+            "harmonic": np.arange(1, n_harmonics + 1),
+            "sideband": labels,
+            "pinion_speed": ("op", features["pinion_speed"].values),
+        },
+    )

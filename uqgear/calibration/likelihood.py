@@ -44,8 +44,15 @@ class Features:
     model_error_grid: np.ndarray
 
 
-def observed_features(rig: xr.Dataset, design: Design, *, channels: Sequence[str], n_harmonics: int,
-                      min_snr: float, model_error_range: tuple[float, float]) -> Features:
+def observed_features(
+    rig: xr.Dataset,
+    design: Design,
+    *,
+    channels: Sequence[str],
+    n_harmonics: int,
+    min_snr: float,
+    model_error_range: tuple[float, float],
+) -> Features:
     """The features of ``rig`` that enter the likelihood.
 
     Raises
@@ -62,11 +69,17 @@ def observed_features(rig: xr.Dataset, design: Design, *, channels: Sequence[str
     channel_used = np.array([name in channels for name in HARMONIC_CHANNELS])
     used = np.isfinite(log_amplitude) & np.isfinite(snr) & (snr >= min_snr) & channel_used[None, :, None]
     if not used.any():
-        raise CalibrationError(f"rig data: no mesh-harmonic feature with signal-to-noise ratio >= "
-                               f"{min_snr:g} in channels {', '.join(channels)}")
-    return Features(observed=observed, used=used, log_observed=np.where(used, log_amplitude, 0.0),
-                    noise_variance=np.where(used, (noise / np.where(used, amplitude, 1.0)) ** 2, 1.0),
-                    model_error_grid=np.geomspace(model_error_range[0], model_error_range[1], 32))
+        raise CalibrationError(
+            f"rig data: no mesh-harmonic feature with signal-to-noise ratio >= "
+            f"{min_snr:g} in channels {', '.join(channels)}"
+        )
+    return Features(
+        observed=observed,
+        used=used,
+        log_observed=np.where(used, log_amplitude, 0.0),
+        noise_variance=np.where(used, (noise / np.where(used, amplitude, 1.0)) ** 2, 1.0),
+        model_error_grid=np.geomspace(model_error_range[0], model_error_range[1], 32),
+    )
 
 
 def operating_points(rig: xr.Dataset) -> dict[str, np.ndarray]:
@@ -74,12 +87,12 @@ def operating_points(rig: xr.Dataset) -> dict[str, np.ndarray]:
     return {name: rig[name].values.astype(float) for name in OPERATING_VARIABLES}
 
 
-def prior_box(bounds: Mapping[str, tuple[float, float]], parameters: Sequence[str],
-              operating: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def prior_box(
+    bounds: Mapping[str, tuple[float, float]], parameters: Sequence[str], operating: Mapping[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper prior bounds of the sampled vector: the global parameters, then each run's T2."""
-    lower = [bounds[name][0] for name in parameters] + list(operating["adhesion_torque_lower"])
-    upper = [bounds[name][1] for name in parameters] + list(operating["adhesion_torque_upper"])
-    lower, upper = np.array(lower), np.array(upper)
+    lower = np.array([bounds[name][0] for name in parameters] + list(operating["adhesion_torque_lower"]))
+    upper = np.array([bounds[name][1] for name in parameters] + list(operating["adhesion_torque_upper"]))
     # a run with a fixed T2 (lower == upper) still gets a tiny box so the emulator input is defined
     degenerate = upper - lower <= 1e-9 * np.maximum(np.abs(upper), 1.0)
     upper = np.where(degenerate, lower * (1 + 1e-9) + 1e-9, upper)
@@ -103,8 +116,15 @@ class StageLikelihood:
         Number of global parameters.
     """
 
-    def __init__(self, box_lower: np.ndarray, box_upper: np.ndarray, emulators: Sequence[PolynomialEmulator],
-                 loo: np.ndarray, features: Features, n_global: int) -> None:
+    def __init__(
+        self,
+        box_lower: np.ndarray,
+        box_upper: np.ndarray,
+        emulators: Sequence[PolynomialEmulator],
+        loo: np.ndarray,
+        features: Features,
+        n_global: int,
+    ) -> None:
         self.box_lower, self.box_upper = box_lower.copy(), box_upper.copy()
         self.n_dim = self.box_lower.size
         self._emulators, self._loo, self._n_global = tuple(emulators), loo, n_global
@@ -116,12 +136,12 @@ class StageLikelihood:
         #: Leave-one-out RMS error of the emulated log features (op, channel, harmonic).
         self.loo_rms = np.sqrt(loo_variance)
         variance = np.where(features.used, features.noise_variance + loo_variance, 1.0)
-        total = variance[None] + features.model_error_grid[:, None, None, None] ** 2     # (K, op, C, H)
+        total = variance[None] + features.model_error_grid[:, None, None, None] ** 2  # (K, op, C, H)
         used = features.used[None]
         self.inverse_total = np.where(used, 1.0 / total, 0.0)
         self.log_normaliser = np.where(used, -0.5 * np.log(2.0 * np.pi * total), 0.0).sum(axis=1)  # (K, C, H)
 
-    def with_features(self, features: Features) -> "StageLikelihood":
+    def with_features(self, features: Features) -> StageLikelihood:
         """The likelihood of other observed features (a corrected copy) on the same box and emulators."""
         return StageLikelihood(self.box_lower, self.box_upper, self._emulators, self._loo, features, self._n_global)
 
@@ -147,12 +167,13 @@ class StageLikelihood:
         """Log likelihood per (point, model-error grid value, channel, harmonic), summed over runs."""
         count = residual.shape[0]
         n_op = self.shape[0]
-        squares = (residual ** 2).reshape(count, n_op, -1)
+        squares = (residual**2).reshape(count, n_op, -1)
         inverse = self.inverse_total.reshape(self.inverse_total.shape[0], n_op, -1)
         # sum over runs for each (grid value, feature group)
-        weighted = np.matmul(squares.transpose(2, 0, 1), inverse.transpose(2, 1, 0))        # (g, M, K)
+        weighted = np.matmul(squares.transpose(2, 0, 1), inverse.transpose(2, 1, 0))  # (g, M, K)
         return self.log_normaliser[None] - 0.5 * weighted.transpose(1, 2, 0).reshape(
-            count, inverse.shape[0], *residual.shape[2:])
+            count, inverse.shape[0], *residual.shape[2:]
+        )
 
     def group_log_likelihood(self, residual: np.ndarray) -> np.ndarray:
         """Log likelihood per (point, channel, harmonic) group, the model error integrated out on its

@@ -21,8 +21,9 @@ from .pitch_correction import DEFAULT_CLASSES
 from .priors import DEFAULT_PARAMETERS
 
 
-def write_calibration(calibration: Calibration, out_dir: str | os.PathLike[str], *,
-                      truth: Mapping[str, Any] | None = None) -> dict[str, Path]:
+def write_calibration(
+    calibration: Calibration, out_dir: str | os.PathLike[str], *, truth: Mapping[str, Any] | None = None
+) -> dict[str, Path]:
     """Write ``posterior.nc``, ``calibration.json`` and ``report.html`` of a fitted calibration.
 
     Parameters
@@ -45,18 +46,25 @@ def write_calibration(calibration: Calibration, out_dir: str | os.PathLike[str],
     folder = Path(out_dir)
     folder.mkdir(parents=True, exist_ok=True)
     content = calibration.to_dict()
-    posterior_path = save_result(calibration.posterior_, folder / "posterior.nc", seed=calibration.seed,
-                                 design=calibration.design_)
+    posterior_path = save_result(
+        calibration.posterior_, folder / "posterior.nc", seed=calibration.seed, design=calibration.design_
+    )
     json_path = folder / "calibration.json"
     write_text_atomic(json_path, json.dumps(content, indent=2, default=float))
     report_path = write_calibration_report(calibration, folder / "report.html", truth=truth)
     return {"posterior": posterior_path, "json": json_path, "report": report_path}
 
 
-def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
-              design: Design | str | os.PathLike[str] | None = None, params: Sequence[str] | None = None,
-              seed: np.random.SeedSequence | int | None = 0, threads: int | None = None,
-              pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES) -> Calibration:
+def calibrate(
+    rig_path: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    design: Design | str | os.PathLike[str] | None = None,
+    params: Sequence[str] | None = None,
+    seed: np.random.SeedSequence | int | None = 0,
+    threads: int | None = None,
+    pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+) -> Calibration:
     """Calibrate the model on a rig file and write the results (``uqgear calibrate``).
 
     Parameters
@@ -95,8 +103,13 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
         the error's ``kept`` names it.
     """
     nominal = None if design is None else (design if isinstance(design, Design) else load_design(design))
-    calibration = Calibration(params if params is not None else DEFAULT_PARAMETERS, design=nominal, seed=seed,
-                              threads=threads, pitch_classes=pitch_classes)
+    calibration = Calibration(
+        params if params is not None else DEFAULT_PARAMETERS,
+        design=nominal,
+        seed=seed,
+        threads=threads,
+        pitch_classes=pitch_classes,
+    )
     # nothing appears in out_dir until everything is written (a mistake in the input leaves nothing)
     with OutputFolder(out_dir) as work:
         try:
@@ -109,10 +122,16 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
                     truth = json.loads(rig.attrs["true_parameters"])
                 write_calibration(calibration, work, truth=truth)
         except InternalError as exc:
-            write_failure_record(work, exc, command="calibration",
-                                 inputs={"rig": str(rig_path), "params": list(calibration.parameters),
-                                         "seed": str(seed),
-                                         "design": design if isinstance(design, (str, os.PathLike)) else None})
+            write_failure_record(
+                work,
+                exc,
+                command="calibration",
+                inputs={
+                    "rig": str(rig_path),
+                    "params": list(calibration.parameters),
+                    "seed": str(seed),
+                    "design": design if isinstance(design, (str, os.PathLike)) else None,
+                },
+            )
             raise
     return calibration
-

@@ -56,8 +56,14 @@ import xarray as xr
 
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..physics.pitch_errors import (DEFAULT_CLASSES, REFERENCE_CLASS, PitchErrors, class_level, draw_at_level,
-                                    draw_pitch_errors)
+from ..physics.pitch_errors import (
+    DEFAULT_CLASSES,
+    REFERENCE_CLASS,
+    PitchErrors,
+    class_level,
+    draw_at_level,
+    draw_pitch_errors,
+)
 from ..rig.features import extract_features, sampling_rate
 from ..rig.virtual_rig import simulate_campaign
 from .harmonics import HARMONIC_CHANNELS, harmonic_lines, observed_harmonics
@@ -110,38 +116,53 @@ class PitchCorrection:
         if not self.applied:
             return features
         used = features.used
-        return replace(features, log_observed=np.where(used, features.log_observed - self.shift, 0.0),
-                       noise_variance=np.where(used, features.noise_variance + self.variance, 1.0))
+        return replace(
+            features,
+            log_observed=np.where(used, features.log_observed - self.shift, 0.0),
+            noise_variance=np.where(used, features.noise_variance + self.variance, 1.0),
+        )
 
     def summary(self, used: np.ndarray) -> dict[str, Any]:
         """JSON-ready record (``pitch_errors`` of ``calibration.json``)."""
         shift = np.abs(self.shift[used]) if self.applied else np.zeros(0)
         spread = np.sqrt(self.variance[used]) if self.applied else np.zeros(0)
-        return {"applied": self.applied, "reason": self.reason,
-                "classes": None if self.classes is None else list(self.classes),
-                "scale_to_class_7": self.scale, "scale_log_sd": self.log_sd if math.isfinite(self.log_sd) else None,
-                "equivalent_iso1328_class": self.equivalent_class,
-                "sidebands_used": self.sidebands_used, "draws": self.draws,
-                "max_abs_log_shift": float(shift.max()) if shift.size else 0.0,
-                "median_abs_log_shift": float(np.median(shift)) if shift.size else 0.0,
-                "max_draw_spread": float(spread.max()) if spread.size else 0.0,
-                "seconds": self.seconds,
-                "method": "rig sidebands vs the model's with ISO 1328-1 class-7 draws at the posterior medians "
-                          "give the level; the mean change of the log mesh harmonics over scaled draws is "
-                          "taken off the observed ones, their spread added to the variance"}
+        return {
+            "applied": self.applied,
+            "reason": self.reason,
+            "classes": None if self.classes is None else list(self.classes),
+            "scale_to_class_7": self.scale,
+            "scale_log_sd": self.log_sd if math.isfinite(self.log_sd) else None,
+            "equivalent_iso1328_class": self.equivalent_class,
+            "sidebands_used": self.sidebands_used,
+            "draws": self.draws,
+            "max_abs_log_shift": float(shift.max()) if shift.size else 0.0,
+            "median_abs_log_shift": float(np.median(shift)) if shift.size else 0.0,
+            "max_draw_spread": float(spread.max()) if spread.size else 0.0,
+            "seconds": self.seconds,
+            "method": "rig sidebands vs the model's with ISO 1328-1 class-7 draws at the posterior medians "
+            "give the level; the mean change of the log mesh harmonics over scaled draws is "
+            "taken off the observed ones, their spread added to the variance",
+        }
 
 
-def sideband_amplitudes(rig: xr.Dataset, design: Design, *, channels: Sequence[str] = HARMONIC_CHANNELS,
-                        n_harmonics: int = 3) -> xr.Dataset:
+def sideband_amplitudes(
+    rig: xr.Dataset, design: Design, *, channels: Sequence[str] = HARMONIC_CHANNELS, n_harmonics: int = 3
+) -> xr.Dataset:
     """:func:`~.harmonics.observed_harmonics` with the sidebands of shaft orders j = 1..:data:`SIDEBAND_ORDERS`.
 
     Far enough out to see the tooth-to-tooth part of the pitch errors (white
     over the orders), not only the few low orders of their running sum.
     """
     present = [name for name in channels if name in rig.data_vars]
-    features = extract_features(rig, design, channels=present, n_harmonics=n_harmonics,
-                                n_sidebands=min(SIDEBAND_ORDERS, (design.z1 - 1) // 2), n_shaft_orders=0,
-                                n_motor_lines=0)
+    features = extract_features(
+        rig,
+        design,
+        channels=present,
+        n_harmonics=n_harmonics,
+        n_sidebands=min(SIDEBAND_ORDERS, (design.z1 - 1) // 2),
+        n_shaft_orders=0,
+        n_motor_lines=0,
+    )
     return harmonic_lines(features, rig.sizes["time"], n_harmonics)
 
 
@@ -160,8 +181,9 @@ def _visible_sidebands(observed: xr.Dataset, channels: Sequence[str]) -> tuple[i
     return visible, int(np.sum(channel_used & np.isfinite(amplitude) & np.isfinite(noise)))
 
 
-def _sideband_level(observed: xr.Dataset, clean: xr.Dataset, reference: xr.Dataset,
-                    channels: Sequence[str]) -> tuple[float | None, float, int]:
+def _sideband_level(
+    observed: xr.Dataset, clean: xr.Dataset, reference: xr.Dataset, channels: Sequence[str]
+) -> tuple[float | None, float, int]:
     """Scale of the rig's pitch errors relative to the reference draw, the standard deviation of its log, and how
     many sidebands were used.
 
@@ -172,12 +194,17 @@ def _sideband_level(observed: xr.Dataset, clean: xr.Dataset, reference: xr.Datas
     uncertainty the spread of those medians over the square root of their count.
     """
     channel_used, noise = _channels_and_noise(observed, channels)
-    rig_power = observed["sideband_amplitude"].values ** 2 - noise ** 2
+    rig_power = observed["sideband_amplitude"].values ** 2 - noise**2
     model_power = clean["sideband_amplitude"].values ** 2
     raised = reference["sideband_amplitude"].values ** 2 - model_power
     with np.errstate(invalid="ignore"):
-        usable = (channel_used & np.isfinite(rig_power) & np.isfinite(raised) & np.isfinite(model_power)
-                  & (raised >= (MIN_SIDEBAND_SNR * noise) ** 2))
+        usable = (
+            channel_used
+            & np.isfinite(rig_power)
+            & np.isfinite(raised)
+            & np.isfinite(model_power)
+            & (raised >= (MIN_SIDEBAND_SNR * noise) ** 2)
+        )
     count = int(usable.sum())
     if count < MIN_SIDEBANDS:
         return None, math.inf, count
@@ -185,20 +212,31 @@ def _sideband_level(observed: xr.Dataset, clean: xr.Dataset, reference: xr.Datas
     excess = np.maximum(rig_power - model_power, (0.1 * noise) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         log_ratio = np.log(excess / raised)
-    order_medians = [float(np.median(log_ratio[..., j][usable[..., j]]))
-                     for j in range(log_ratio.shape[-1]) if usable[..., j].any()]
+    order_medians = [
+        float(np.median(log_ratio[..., j][usable[..., j]])) for j in range(log_ratio.shape[-1]) if usable[..., j].any()
+    ]
     level = float(np.mean(order_medians))
-    spread = float(np.std(order_medians, ddof=1) / math.sqrt(len(order_medians))) if len(order_medians) > 1 \
-        else math.inf
+    spread = (
+        float(np.std(order_medians, ddof=1) / math.sqrt(len(order_medians))) if len(order_medians) > 1 else math.inf
+    )
     # power ratios to amplitude scale
     return math.exp(0.5 * level), 0.5 * spread, count
 
 
-def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, point: Mapping[str, float],
-                           adhesion_torque: Sequence[float], *, seed: np.random.SeedSequence,
-                           effects: Sequence[Effect] = (), channels: Sequence[str] = HARMONIC_CHANNELS,
-                           n_harmonics: int = 3, draws: int = 4,
-                           classes: tuple[float, float] | None = DEFAULT_CLASSES) -> PitchCorrection:
+def pitch_error_correction(
+    rig: xr.Dataset,
+    design: Design,
+    features: Features,
+    point: Mapping[str, float],
+    adhesion_torque: Sequence[float],
+    *,
+    seed: np.random.SeedSequence,
+    effects: Sequence[Effect] = (),
+    channels: Sequence[str] = HARMONIC_CHANNELS,
+    n_harmonics: int = 3,
+    draws: int = 4,
+    classes: tuple[float, float] | None = DEFAULT_CLASSES,
+) -> PitchCorrection:
     """The pitch-error correction of ``features`` (module docstring).
 
     Parameters
@@ -234,8 +272,10 @@ def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, 
     fs = sampling_rate(rig["time"].values, where="rig data: time")
     duration = rig.sizes["time"] / fs
     operating = rig[[name for name in OPERATING_VARIABLES if name in rig]]
-    true_parameters = {**{name: float(value) for name, value in point.items()},
-                       "adhesion_torque": [float(value) for value in adhesion_torque]}
+    true_parameters = {
+        **{name: float(value) for name, value in point.items()},
+        "adhesion_torque": [float(value) for value in adhesion_torque],
+    }
     shape = features.used.shape
     record_seed, draw_seed = seed.spawn(2)
     draw_rng = np.random.default_rng(draw_seed)
@@ -243,11 +283,19 @@ def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, 
     def simulate(pitch_errors: PitchErrors | None) -> xr.Dataset:
         """The model's noise-free campaign at the current estimate."""
         # the same record seed for every simulation: the same record starts, so differences are the pitch errors'
-        return simulate_campaign(design, operating, true_parameters=true_parameters, effects=effects,
-                                 relative_noise=0.0, fs=fs, duration=duration, run_in=RUN_IN,
-                                 seed=np.random.SeedSequence(record_seed.entropy, spawn_key=record_seed.spawn_key),
-                                 channels=[name for name in HARMONIC_CHANNELS if name in rig.data_vars],
-                                 pitch_errors=pitch_errors)
+        return simulate_campaign(
+            design,
+            operating,
+            true_parameters=true_parameters,
+            effects=effects,
+            relative_noise=0.0,
+            fs=fs,
+            duration=duration,
+            run_in=RUN_IN,
+            seed=np.random.SeedSequence(record_seed.entropy, spawn_key=record_seed.spawn_key),
+            channels=[name for name in HARMONIC_CHANNELS if name in rig.data_vars],
+            pitch_errors=pitch_errors,
+        )
 
     def harmonics(campaign: xr.Dataset) -> xr.Dataset:
         return observed_harmonics(campaign, design, channels=channels, n_harmonics=n_harmonics)
@@ -256,31 +304,53 @@ def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, 
         return sideband_amplitudes(campaign, design, channels=channels, n_harmonics=n_harmonics)
 
     def not_applied(reason: str, scale: float | None, log_sd: float, count: int) -> PitchCorrection:
-        return PitchCorrection(applied=False, reason=reason, scale=scale, log_sd=log_sd, classes=classes,
-                               sidebands_used=count, draws=0,
-                               shift=np.zeros(shape), variance=np.zeros(shape),
-                               seconds=time.perf_counter() - started)
+        return PitchCorrection(
+            applied=False,
+            reason=reason,
+            scale=scale,
+            log_sd=log_sd,
+            classes=classes,
+            sidebands_used=count,
+            draws=0,
+            shift=np.zeros(shape),
+            variance=np.zeros(shape),
+            seconds=time.perf_counter() - started,
+        )
 
     # the gate reads the first sidebands the features already hold: a gear without errors costs nothing
     visible, total = _visible_sidebands(features.observed, channels)
     needed = max(MIN_SIDEBANDS, math.ceil(MIN_VISIBLE_FRACTION * total))
     if visible < needed:
         # nothing to read a level from, and no simulation spent on finding that out
-        return not_applied(f"{visible} of {total} sidebands stand {MIN_SIDEBAND_SNR:g} noise std above the rig's "
-                           f"noise (at least {needed} needed): no pitch-error level to correct for, or one this "
-                           "rig's noise hides", None, math.inf, visible)
+        return not_applied(
+            f"{visible} of {total} sidebands stand {MIN_SIDEBAND_SNR:g} noise std above the rig's "
+            f"noise (at least {needed} needed): no pitch-error level to correct for, or one this "
+            "rig's noise hides",
+            None,
+            math.inf,
+            visible,
+        )
     observed = sideband_amplitudes(rig, design, channels=channels, n_harmonics=n_harmonics)
     clean = simulate(None)
     reference = simulate(draw_pitch_errors(design, REFERENCE_CLASS, draw_rng))
     scale, log_sd, count = _sideband_level(observed, sidebands(clean), sidebands(reference), channels)
     if scale is None:
-        return not_applied(f"only {count} sidebands of a class-{REFERENCE_CLASS} gear would stand out of this "
-                           f"rig's noise (at least {MIN_SIDEBANDS} needed): the pitch-error level cannot be read, "
-                           "and no correction is made", None, log_sd, count)
+        return not_applied(
+            f"only {count} sidebands of a class-{REFERENCE_CLASS} gear would stand out of this "
+            f"rig's noise (at least {MIN_SIDEBANDS} needed): the pitch-error level cannot be read, "
+            "and no correction is made",
+            None,
+            log_sd,
+            count,
+        )
     if scale < MIN_SCALE:
-        return not_applied(f"sidebands at {scale:.2f} of class-{REFERENCE_CLASS} pitch errors (below "
-                           f"{MIN_SCALE}): their change of the mesh harmonics is below the model-error floor",
-                           scale, log_sd, count)
+        return not_applied(
+            f"sidebands at {scale:.2f} of class-{REFERENCE_CLASS} pitch errors (below "
+            f"{MIN_SCALE}): their change of the mesh harmonics is below the model-error floor",
+            scale,
+            log_sd,
+            count,
+        )
     with np.errstate(divide="ignore", invalid="ignore"):
         base = np.log(harmonics(clean)["amplitude"].values)
         changes = []
@@ -294,15 +364,25 @@ def pitch_error_correction(rig: xr.Dataset, design: Design, features: Features, 
         for level in levels:
             scaled = harmonics(simulate(draw_at_level(design, level, draw_rng)))
             changes.append(np.log(scaled["amplitude"].values) - base)
-    changes = np.array(changes)
-    finite = np.all(np.isfinite(changes), axis=0)
-    shift = np.where(finite, changes.mean(axis=0), 0.0)
-    variance = np.where(finite, changes.var(axis=0, ddof=1) if draws > 1 else 0.0, 0.0)
-    read = (f"the sidebands read as {scale:.2f} (x/ {math.exp(log_sd):.2f}) of class-{REFERENCE_CLASS} pitch "
-            f"errors, about class {REFERENCE_CLASS + 2.0 * math.log2(scale):.1f} ({count} sidebands)")
-    reason = read if classes is None else \
-        f"ISO 1328-1 classes {classes[0]:g} to {classes[1]:g} as stated; {read}"
+    change = np.array(changes)
+    finite = np.all(np.isfinite(change), axis=0)
+    shift = np.where(finite, change.mean(axis=0), 0.0)
+    variance = np.where(finite, change.var(axis=0, ddof=1) if draws > 1 else 0.0, 0.0)
+    read = (
+        f"the sidebands read as {scale:.2f} (x/ {math.exp(log_sd):.2f}) of class-{REFERENCE_CLASS} pitch "
+        f"errors, about class {REFERENCE_CLASS + 2.0 * math.log2(scale):.1f} ({count} sidebands)"
+    )
+    reason = read if classes is None else f"ISO 1328-1 classes {classes[0]:g} to {classes[1]:g} as stated; {read}"
 
-    return PitchCorrection(applied=True, reason=reason, scale=scale, log_sd=log_sd, classes=classes,
-                           sidebands_used=count, draws=draws,
-                           shift=shift, variance=variance, seconds=time.perf_counter() - started)
+    return PitchCorrection(
+        applied=True,
+        reason=reason,
+        scale=scale,
+        log_sd=log_sd,
+        classes=classes,
+        sidebands_used=count,
+        draws=draws,
+        shift=shift,
+        variance=variance,
+        seconds=time.perf_counter() - started,
+    )

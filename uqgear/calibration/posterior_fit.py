@@ -61,9 +61,21 @@ class PosteriorFit:
         A record of each box stage, appended as the search goes on.
     """
 
-    def __init__(self, features: Features, model: ModelRuns, *, bounds: Mapping[str, tuple[float, float]],
-                 prior_lower: np.ndarray, prior_upper: np.ndarray, n_training: int, degree: int, walkers: int,
-                 stage_steps: int, max_stages: int, error_floor: float) -> None:
+    def __init__(
+        self,
+        features: Features,
+        model: ModelRuns,
+        *,
+        bounds: Mapping[str, tuple[float, float]],
+        prior_lower: np.ndarray,
+        prior_upper: np.ndarray,
+        n_training: int,
+        degree: int,
+        walkers: int,
+        stage_steps: int,
+        max_stages: int,
+        error_floor: float,
+    ) -> None:
         self.features, self.model, self.bounds = features, model, bounds
         self.prior_lower, self.prior_upper = prior_lower, prior_upper
         self.n_training, self.degree, self.walkers = n_training, degree, walkers
@@ -72,8 +84,7 @@ class PosteriorFit:
         self.likelihood: StageLikelihood | None = None
         self.stages: list[dict[str, Any]] = []
 
-    def fit_stage(self, box_lower: np.ndarray, box_upper: np.ndarray,
-                  seed: np.random.SeedSequence) -> StageLikelihood:
+    def fit_stage(self, box_lower: np.ndarray, box_upper: np.ndarray, seed: np.random.SeedSequence) -> StageLikelihood:
         """Train the emulators in a box and make their likelihood the current one.
 
         Parameters
@@ -87,13 +98,31 @@ class PosteriorFit:
         -------
         StageLikelihood
         """
-        emulators, loo = train_emulators(box_lower, box_upper, seed, run_model=self.model, n_global=self.n_global,
-                                         n_op=self.n_op, n_training=self.n_training, degree=self.degree)
+        emulators, loo = train_emulators(
+            box_lower,
+            box_upper,
+            seed,
+            run_model=self.model,
+            n_global=self.n_global,
+            n_op=self.n_op,
+            n_training=self.n_training,
+            degree=self.degree,
+        )
         self.likelihood = StageLikelihood(box_lower, box_upper, emulators, loo, self.features, self.n_global)
         return self.likelihood
 
-    def search(self, rng: np.random.Generator, design_seed: np.random.SeedSequence,
-               chain_seed: np.random.SeedSequence, start_points: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+    def fitted_likelihood(self) -> StageLikelihood:
+        """The likelihood of the last search box (the search sets it before anything reads it)."""
+        assert self.likelihood is not None, "read before the first search"
+        return self.likelihood
+
+    def search(
+        self,
+        rng: np.random.Generator,
+        design_seed: np.random.SeedSequence,
+        chain_seed: np.random.SeedSequence,
+        start_points: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, bool]:
         """The staged box search (:func:`~uqgear.calibration.sampling.search_box`).
 
         Parameters
@@ -113,17 +142,38 @@ class PosteriorFit:
         truncated : bool
             Whether the last stage's posterior is truncated by its box.
         """
-        resumed = {} if start_points is None else {"start_likelihood": self.likelihood,
-                                                   "start_points": start_points}
-        return search_box(self.fit_stage, self.prior_lower, self.prior_upper, used=self.features.used,
-                          walkers=self.walkers, stage_steps=self.stage_steps, max_stages=self.max_stages,
-                          error_floor=self.error_floor, rng=rng, design_seed=design_seed, chain_seed=chain_seed,
-                          stages=self.stages, **resumed)
+        resumed: dict[str, Any] = (
+            {} if start_points is None else {"start_likelihood": self.likelihood, "start_points": start_points}
+        )
+        return search_box(
+            self.fit_stage,
+            self.prior_lower,
+            self.prior_upper,
+            used=self.features.used,
+            walkers=self.walkers,
+            stage_steps=self.stage_steps,
+            max_stages=self.max_stages,
+            error_floor=self.error_floor,
+            rng=rng,
+            design_seed=design_seed,
+            chain_seed=chain_seed,
+            stages=self.stages,
+            **resumed,
+        )
 
-    def correct_pitch_errors(self, rig: xr.Dataset, points: np.ndarray, truncated: bool, rng: np.random.Generator,
-                             seeds: Sequence[np.random.SeedSequence], steps: StepLog, *, channels: Sequence[str],
-                             draws: int, classes: tuple[float, float] | None
-                             ) -> tuple[PitchCorrection, np.ndarray, bool]:
+    def correct_pitch_errors(
+        self,
+        rig: xr.Dataset,
+        points: np.ndarray,
+        truncated: bool,
+        rng: np.random.Generator,
+        seeds: Sequence[np.random.SeedSequence],
+        steps: StepLog,
+        *,
+        channels: Sequence[str],
+        draws: int,
+        classes: tuple[float, float] | None,
+    ) -> tuple[PitchCorrection, np.ndarray, bool]:
         """The pitch-error correction at the medians of posterior draws and, where applied, the box search
         resumed on the corrected features (:mod:`~uqgear.calibration.pitch_correction`).
 
@@ -158,23 +208,40 @@ class PosteriorFit:
         with steps.step("pitch-error correction (rig sidebands, model draws at the posterior medians)") as found:
             medians = np.median(points, axis=0)
             correction = pitch_error_correction(
-                rig, self.model.design, self.features, dict(zip(self.model.parameters, medians[:self.n_global])),
-                medians[self.n_global:], seed=seeds[0], effects=self.model.effects, channels=channels,
-                n_harmonics=self.model.n_harmonics, draws=draws, classes=classes)
+                rig,
+                self.model.design,
+                self.features,
+                dict(zip(self.model.parameters, medians[: self.n_global])),
+                medians[self.n_global :],
+                seed=seeds[0],
+                effects=self.model.effects,
+                channels=channels,
+                n_harmonics=self.model.n_harmonics,
+                draws=draws,
+                classes=classes,
+            )
             found.update(applied=correction.applied, reason=correction.reason)
         if not correction.applied:
             return correction, points, truncated
         with steps.step("search the posterior box again (corrected features)") as found:
             self.features = correction.apply(self.features)
             # resumed in the last box, on its emulators: only the features changed
-            self.likelihood = self.likelihood.with_features(self.features)
+            self.likelihood = self.fitted_likelihood().with_features(self.features)
             points, truncated = self.search(rng, seeds[1], seeds[2], start_points=points)
             found.update(stages=self.stages, truncated=truncated)
         return correction, points, truncated
 
-    def final_sampling(self, start_points: np.ndarray, rng: np.random.Generator, seed: np.random.SeedSequence,
-                       truncated: bool, *, criteria: ConvergenceCriteria, chunk_steps: int,
-                       max_steps: int) -> tuple[dict[str, Any], xr.Dataset, dict[str, Any]]:
+    def final_sampling(
+        self,
+        start_points: np.ndarray,
+        rng: np.random.Generator,
+        seed: np.random.SeedSequence,
+        truncated: bool,
+        *,
+        criteria: ConvergenceCriteria,
+        chunk_steps: int,
+        max_steps: int,
+    ) -> tuple[dict[str, Any], xr.Dataset, dict[str, Any]]:
         """The final run on the last stage's emulators (:func:`~uqgear.calibration.sampling.final_sampling`).
 
         Parameters
@@ -202,17 +269,39 @@ class PosteriorFit:
         """
         names = list(self.model.parameters) + [f"adhesion_torque[{op}]" for op in range(self.n_op)]
         verdict, physical, log_likelihood = final_sampling(
-            self.likelihood, start_points, rng, seed, walkers=self.walkers, chunk_steps=chunk_steps,
-            max_steps=max_steps, criteria=criteria, names=names, truncated=truncated)
+            self.fitted_likelihood(),
+            start_points,
+            rng,
+            seed,
+            walkers=self.walkers,
+            chunk_steps=chunk_steps,
+            max_steps=max_steps,
+            criteria=criteria,
+            names=names,
+            truncated=truncated,
+        )
         parameters, operating = self.model.parameters, self.model.operating
-        posterior = posterior_dataset(physical, log_likelihood, parameters=parameters, bounds=self.bounds,
-                                      operating=operating, converged=bool(verdict["converged"]))
-        summary = posterior_summary(physical, parameters=parameters, bounds=self.bounds, operating=operating,
-                                    likelihood=self.likelihood, features=self.features)
+        posterior = posterior_dataset(
+            physical,
+            log_likelihood,
+            parameters=parameters,
+            bounds=self.bounds,
+            operating=operating,
+            converged=bool(verdict["converged"]),
+        )
+        summary = posterior_summary(
+            physical,
+            parameters=parameters,
+            bounds=self.bounds,
+            operating=operating,
+            likelihood=self.fitted_likelihood(),
+            features=self.features,
+        )
         return verdict, posterior, summary
 
-    def predictive_check(self, posterior: xr.Dataset, summary: Mapping[str, Any], rng: np.random.Generator, *,
-                         draws: int) -> tuple[xr.Dataset, dict[str, Any]]:
+    def predictive_check(
+        self, posterior: xr.Dataset, summary: Mapping[str, Any], rng: np.random.Generator, *, draws: int
+    ) -> tuple[xr.Dataset, dict[str, Any]]:
         """The posterior predictive check (:func:`~uqgear.calibration.predictive.predictive_check`).
 
         Parameters
@@ -231,7 +320,14 @@ class PosteriorFit:
         predictive : xarray.Dataset
         check : dict
         """
-        return predictive_check(posterior, rng, parameters=self.model.parameters, draws=draws,
-                                features=self.features, likelihood=self.likelihood,
-                                model_error=summary["model_error"], pinion_speed=self.model.operating["pinion_speed"],
-                                run_model=self.model)
+        return predictive_check(
+            posterior,
+            rng,
+            parameters=self.model.parameters,
+            draws=draws,
+            features=self.features,
+            likelihood=self.fitted_likelihood(),
+            model_error=summary["model_error"],
+            pinion_speed=self.model.operating["pinion_speed"],
+            run_model=self.model,
+        )

@@ -12,9 +12,11 @@ from .harmonics import HARMONIC_CHANNELS
 from .likelihood import Features, StageLikelihood
 
 #: How the check is passed.
-CRITERION = ("posterior-predictive median of the real model within 2 sigma (sensor noise + "
-             "posterior median model error) for >= 90 % of the features used, and within 4 sigma "
-             "for all")
+CRITERION = (
+    "posterior-predictive median of the real model within 2 sigma (sensor noise + "
+    "posterior median model error) for >= 90 % of the features used, and within 4 sigma "
+    "for all"
+)
 
 _DIMS = ("op", "channel", "harmonic")
 
@@ -29,10 +31,18 @@ def median_model_error(model_error: Mapping[str, Mapping[str, float]], n_harmoni
     return sigma_model
 
 
-def predictive_check(posterior: xr.Dataset, rng: np.random.Generator, *, parameters: Sequence[str],
-                     draws: int, features: Features, likelihood: StageLikelihood,
-                     model_error: Mapping[str, Mapping[str, float]], pinion_speed: np.ndarray,
-                     run_model: Callable[[list[np.ndarray]], np.ndarray]) -> tuple[xr.Dataset, dict[str, Any]]:
+def predictive_check(
+    posterior: xr.Dataset,
+    rng: np.random.Generator,
+    *,
+    parameters: Sequence[str],
+    draws: int,
+    features: Features,
+    likelihood: StageLikelihood,
+    model_error: Mapping[str, Mapping[str, float]],
+    pinion_speed: np.ndarray,
+    run_model: Callable[[list[np.ndarray]], np.ndarray],
+) -> tuple[xr.Dataset, dict[str, Any]]:
     """The posterior predictive check (``predictive_``) and its summary (``predictive_check_``).
 
     ``draws`` posterior draws, chosen with ``rng``, are rerun with the real
@@ -41,8 +51,11 @@ def predictive_check(posterior: xr.Dataset, rng: np.random.Generator, *, paramet
     """
     n_global = len(parameters)
     n_op, _, n_harmonics = features.used.shape
-    stacked = np.concatenate([posterior[name].values.reshape(-1, 1) for name in parameters]
-                             + [posterior["adhesion_torque"].values.reshape(-1, n_op)], axis=1)
+    stacked = np.concatenate(
+        [posterior[name].values.reshape(-1, 1) for name in parameters]
+        + [posterior["adhesion_torque"].values.reshape(-1, n_op)],
+        axis=1,
+    )
     count = min(draws, stacked.shape[0])
     sigma_model = median_model_error(model_error, n_harmonics)
     used = features.used
@@ -64,33 +77,48 @@ def predictive_check(posterior: xr.Dataset, rng: np.random.Generator, *, paramet
     z_noise = (features.log_observed - median) / np.sqrt(features.noise_variance)
     emulator_error = emulated - real
     relative = np.exp(features.log_observed - median) - 1.0
-    data.update({
-        "predicted_median": (_DIMS, np.exp(median)),
-        "predicted_q05": (_DIMS, np.exp(np.quantile(real, 0.05, axis=0))),
-        "predicted_q95": (_DIMS, np.exp(np.quantile(real, 0.95, axis=0))),
-        "z_total": (_DIMS, np.where(used, z_total, np.nan)),
-        "z_noise": (_DIMS, np.where(used, z_noise, np.nan)),
-        "relative_difference": (_DIMS, np.where(used, relative, np.nan)),
-        "emulator_error_rms": (_DIMS, np.sqrt(np.mean(emulator_error ** 2, axis=0))),
-        "emulator_loo_rms": (_DIMS, likelihood.loo_rms),
-    })
-    predictive = xr.Dataset(data, coords={"channel": list(HARMONIC_CHANNELS),
-                                          "harmonic": np.arange(1, n_harmonics + 1),
-                                          "pinion_speed": ("op", pinion_speed)})
+    data.update(
+        {
+            "predicted_median": (_DIMS, np.exp(median)),
+            "predicted_q05": (_DIMS, np.exp(np.quantile(real, 0.05, axis=0))),
+            "predicted_q95": (_DIMS, np.exp(np.quantile(real, 0.95, axis=0))),
+            "z_total": (_DIMS, np.where(used, z_total, np.nan)),
+            "z_noise": (_DIMS, np.where(used, z_noise, np.nan)),
+            "relative_difference": (_DIMS, np.where(used, relative, np.nan)),
+            "emulator_error_rms": (_DIMS, np.sqrt(np.mean(emulator_error**2, axis=0))),
+            "emulator_loo_rms": (_DIMS, likelihood.loo_rms),
+        }
+    )
+    predictive = xr.Dataset(
+        data,
+        coords={
+            "channel": list(HARMONIC_CHANNELS),
+            "harmonic": np.arange(1, n_harmonics + 1),
+            "pinion_speed": ("op", pinion_speed),
+        },
+    )
     return predictive, _check_summary(count, used, z_total, z_noise, relative, emulator_error, likelihood.loo_rms)
 
 
-def _check_summary(count: int, used: np.ndarray, z_total: np.ndarray, z_noise: np.ndarray, relative: np.ndarray,
-                   emulator_error: np.ndarray, loo_rms: np.ndarray) -> dict[str, Any]:
+def _check_summary(
+    count: int,
+    used: np.ndarray,
+    z_total: np.ndarray,
+    z_noise: np.ndarray,
+    relative: np.ndarray,
+    emulator_error: np.ndarray,
+    loo_rms: np.ndarray,
+) -> dict[str, Any]:
     """Summary of the check: how many features lie within 2 sigma, the largest misfits, the emulator error."""
     used_z = np.abs(z_total[used])
     used_noise = np.abs(z_noise[used])
-    emulator_ratio = float(np.sqrt(np.mean(emulator_error[:, used] ** 2))
-                           / np.sqrt(np.mean(loo_rms[used] ** 2)))
+    emulator_ratio = float(np.sqrt(np.mean(emulator_error[:, used] ** 2)) / np.sqrt(np.mean(loo_rms[used] ** 2)))
     within = float(np.mean(used_z <= 2.0))
     return {
-        "draws": int(count), "features_used": int(used.sum()),
-        "fraction_within_2_sigma": within, "max_abs_z": float(used_z.max()),
+        "draws": int(count),
+        "features_used": int(used.sum()),
+        "fraction_within_2_sigma": within,
+        "max_abs_z": float(used_z.max()),
         "fraction_within_2_noise_sigma": float(np.mean(used_noise <= 2.0)),
         "median_abs_relative_difference": float(np.median(np.abs(relative[used]))),
         "max_abs_relative_difference": float(np.max(np.abs(relative[used]))),

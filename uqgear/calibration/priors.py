@@ -66,9 +66,20 @@ DEFAULT_PARAMETERS: tuple[str, ...] = tuple(PRIOR_RULES)
 #: Accepted aliases of parameter names.
 PARAMETER_ALIASES: dict[str, str] = {"k1_scale": "k1", "k2_scale": "k2"}
 
-_DESIGN_UNITS = {"module": "m", "face_width": "m", "youngs_modulus": "Pa", "m1": "kg", "m2": "kg",
-                 "I1": "kg m2", "I2": "kg m2", "k1": "N m-1", "k2": "N m-1", "backlash": "m",
-                 "ste_amplitude": "m", "pressure_angle": "deg"}
+_DESIGN_UNITS = {
+    "module": "m",
+    "face_width": "m",
+    "youngs_modulus": "Pa",
+    "m1": "kg",
+    "m2": "kg",
+    "I1": "kg m2",
+    "I2": "kg m2",
+    "k1": "N m-1",
+    "k2": "N m-1",
+    "backlash": "m",
+    "ste_amplitude": "m",
+    "pressure_angle": "deg",
+}
 
 
 def resolve_parameters(parameters: Sequence[str]) -> tuple[str, ...]:
@@ -81,14 +92,16 @@ def resolve_parameters(parameters: Sequence[str]) -> tuple[str, ...]:
     """
     if isinstance(parameters, str) or not isinstance(parameters, Sequence):
         raise CalibrationError(f"parameters: expected a list of names; got {parameters!r}")
-    known = ["mesh_stiffness_scale", *[key for key in BATCH_DESIGN_KEYS]]
+    known = ["mesh_stiffness_scale", *BATCH_DESIGN_KEYS]
     resolved: list[str] = []
     for name in parameters:
         canonical = PARAMETER_ALIASES.get(name, name)
         if canonical not in known:
-            raise CalibrationError(f"parameters: {name!r} is not a calibration parameter; expected "
-                                   f"mesh_stiffness_scale or a design key ({', '.join(BATCH_DESIGN_KEYS)}), "
-                                   f"aliases {', '.join(PARAMETER_ALIASES)}")
+            raise CalibrationError(
+                f"parameters: {name!r} is not a calibration parameter; expected "
+                f"mesh_stiffness_scale or a design key ({', '.join(BATCH_DESIGN_KEYS)}), "
+                f"aliases {', '.join(PARAMETER_ALIASES)}"
+            )
         if canonical in resolved:
             raise CalibrationError(f"parameters: {name!r} given twice (as {canonical})")
         resolved.append(canonical)
@@ -97,8 +110,9 @@ def resolve_parameters(parameters: Sequence[str]) -> tuple[str, ...]:
     return tuple(resolved)
 
 
-def prior_bounds(design: Design, parameters: Sequence[str],
-                 priors: Mapping[str, Sequence[float]] | None = None) -> dict[str, tuple[float, float]]:
+def prior_bounds(
+    design: Design, parameters: Sequence[str], priors: Mapping[str, Sequence[float]] | None = None
+) -> dict[str, tuple[float, float]]:
     """Uniform prior bounds of each parameter (see the module docstring for the defaults).
 
     Parameters
@@ -145,15 +159,19 @@ def prior_bounds(design: Design, parameters: Sequence[str],
                 valid_lower, valid_upper = design_key_bounds(name)
                 lower, upper = max(lower, valid_lower), min(upper, valid_upper)
         if not (math.isfinite(lower) and math.isfinite(upper) and lower < upper):
-            raise CalibrationError(f"priors.{name}: expected finite bounds with lower < upper; got [{lower!r}, {upper!r}]")
+            raise CalibrationError(
+                f"priors.{name}: expected finite bounds with lower < upper; got [{lower!r}, {upper!r}]"
+            )
         if name == "mesh_stiffness_scale" and lower <= 0:
             raise CalibrationError(f"priors.{name}: expected a positive lower bound; got {lower!r}")
         if name != "mesh_stiffness_scale":
             valid_lower, valid_upper = design_key_bounds(name)
             if lower < valid_lower or upper > valid_upper:
-                raise CalibrationError(f"priors.{name}: expected bounds within [{valid_lower:g}, {valid_upper:g}] "
-                                       f"{parameter_units(name)} (the design's plausible range); "
-                                       f"got [{lower!r}, {upper!r}]")
+                raise CalibrationError(
+                    f"priors.{name}: expected bounds within [{valid_lower:g}, {valid_upper:g}] "
+                    f"{parameter_units(name)} (the design's plausible range); "
+                    f"got [{lower!r}, {upper!r}]"
+                )
         bounds[name] = (lower, upper)
     _check_prior_designs(design, bounds)
     return bounds
@@ -188,8 +206,10 @@ def _check_prior_designs(design: Design, bounds: Mapping[str, tuple[float, float
         for value in bounds[name]:
             problem = refused({name: value})
             if problem is not None:
-                raise CalibrationError(f"priors.{name}: the design at {name} = {value:g} is not a working gear "
-                                       f"pair ({problem}); expected a prior inside the range the design accepts")
+                raise CalibrationError(
+                    f"priors.{name}: the design at {name} = {value:g} is not a working gear "
+                    f"pair ({problem}); expected a prior inside the range the design accepts"
+                )
     if len(keys) > _MAX_CORNER_KEYS:
         return
     for corner in product(*(bounds[name] for name in keys)):
@@ -197,8 +217,10 @@ def _check_prior_designs(design: Design, bounds: Mapping[str, tuple[float, float
         problem = refused(changes)
         if problem is not None:
             shown = ", ".join(f"{name} = {value:g}" for name, value in changes.items())
-            raise CalibrationError(f"priors: the design at the corner {shown} of the prior box is not a working "
-                                   f"gear pair ({problem}); expected priors inside the range the design accepts")
+            raise CalibrationError(
+                f"priors: the design at the corner {shown} of the prior box is not a working "
+                f"gear pair ({problem}); expected priors inside the range the design accepts"
+            )
 
 
 def parameter_units(name: str) -> str:
@@ -206,4 +228,3 @@ def parameter_units(name: str) -> str:
     if name in PRIOR_RULES:
         return PRIOR_RULES[name].units
     return _DESIGN_UNITS.get(name, "1")
-

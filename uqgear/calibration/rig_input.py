@@ -69,5 +69,6 @@ def accept_rig(rig: xr.Dataset | str | os.PathLike[str], design: Design | None) 
     tracking_start = time.perf_counter()
     rig = track_orders(rig, design)
     speed = speed_summary(rig)
-    return AcceptedRig(rig=rig, source=source, design=design, speed=speed,
-                       tracking_s=time.perf_counter() - tracking_start)
+    return AcceptedRig(
+        rig=rig, source=source, design=design, speed=speed, tracking_s=time.perf_counter() - tracking_start
+    )

@@ -27,7 +27,6 @@ from scipy.stats import qmc
 from .convergence import ConvergenceCriteria
 from .likelihood import StageLikelihood
 
-
 #: The first 1/BURN_IN_DIVISOR of the final chain is burn-in (module docstring).
 BURN_IN_DIVISOR = 10
 
@@ -38,8 +37,9 @@ def walker_count(n_walkers: int | None, n_dim: int) -> int:
     return count + count % 2
 
 
-def start_walkers(likelihood: StageLikelihood, start_points: np.ndarray | None, rng: np.random.Generator,
-                  count: int) -> np.ndarray:
+def start_walkers(
+    likelihood: StageLikelihood, start_points: np.ndarray | None, rng: np.random.Generator, count: int
+) -> np.ndarray:
     """Unit-box start positions (count, n_dim) of the walkers, from earlier draws or a Sobol design."""
     if start_points is None:
         # the best of a Sobol design over the box: spread over every region the data favour
@@ -80,11 +80,12 @@ class SnookerMove(emcee.moves.RedBlueMove):
         self.gammas = gammas
         super().__init__(nsplits=4)
 
-    def get_proposal(self, s: np.ndarray, c: Sequence[np.ndarray], random: np.random.RandomState
-                     ) -> tuple[np.ndarray, np.ndarray]:
+    def get_proposal(
+        self, s: np.ndarray, c: Sequence[np.ndarray], random: np.random.RandomState
+    ) -> tuple[np.ndarray, np.ndarray]:
         count, n_dim = s.shape
         picks = np.stack([group[random.randint(len(group), size=count)] for group in c[:3]], axis=1)
-        order = np.argsort(random.random_sample((count, 3)), axis=1)           # emcee shuffles the three
+        order = np.argsort(random.random_sample((count, 3)), axis=1)  # emcee shuffles the three
         picks = np.take_along_axis(picks, order[:, :, None], axis=1)
         z, z1, z2 = picks[:, 0], picks[:, 1], picks[:, 2]
         delta = s - z
@@ -127,7 +128,7 @@ class IndependenceMove(emcee.moves.MHMove):
 
     def _log_density(self, points: np.ndarray) -> np.ndarray:
         whitened = np.linalg.solve(self.cholesky, (points - self.mean).T)
-        return -0.5 * (self.dof + points.shape[1]) * np.log1p(np.sum(whitened ** 2, axis=0) / self.dof)
+        return -0.5 * (self.dof + points.shape[1]) * np.log1p(np.sum(whitened**2, axis=0) / self.dof)
 
     def _proposal(self, coords: np.ndarray, random: np.random.RandomState) -> tuple[np.ndarray, np.ndarray]:
         count, n_dim = coords.shape
@@ -137,8 +138,9 @@ class IndependenceMove(emcee.moves.MHMove):
         return proposal, self._log_density(coords) - self._log_density(proposal)
 
 
-def make_sampler(likelihood: StageLikelihood, count: int, seed: np.random.SeedSequence,
-                 proposal_draws: np.ndarray | None = None) -> emcee.EnsembleSampler:
+def make_sampler(
+    likelihood: StageLikelihood, count: int, seed: np.random.SeedSequence, proposal_draws: np.ndarray | None = None
+) -> emcee.EnsembleSampler:
     """An emcee ensemble sampler of the stage likelihood, vectorised over walkers, seeded from ``seed``.
 
     With ``proposal_draws`` (unit-box posterior draws, more than ``4 n_dim``)
@@ -148,23 +150,24 @@ def make_sampler(likelihood: StageLikelihood, count: int, seed: np.random.SeedSe
     if proposal_draws is not None and proposal_draws.shape[0] > 4 * likelihood.n_dim:
         # measured on healthy_b.nc: autocorrelation time 58 -> 10 steps, 12000 -> 2000 steps to converge
         moves = [(emcee.moves.DEMove(), 0.4), (SnookerMove(), 0.1), (IndependenceMove(proposal_draws), 0.5)]
-    sampler = emcee.EnsembleSampler(count, likelihood.n_dim, likelihood.log_likelihood, vectorize=True,
-                                    moves=moves)
+    sampler = emcee.EnsembleSampler(count, likelihood.n_dim, likelihood.log_likelihood, vectorize=True, moves=moves)
     # emcee draws from its own RandomState: seed it from our SeedSequence
     sampler.random_state = np.random.RandomState(np.random.MT19937(seed)).get_state()
     return sampler
 
 
-def sample(likelihood: StageLikelihood, walkers: np.ndarray, steps: int,
-           seed: np.random.SeedSequence) -> tuple[np.ndarray, np.ndarray]:
+def sample(
+    likelihood: StageLikelihood, walkers: np.ndarray, steps: int, seed: np.random.SeedSequence
+) -> tuple[np.ndarray, np.ndarray]:
     """Chain (step, walker, dim) and acceptance fractions of ``steps`` steps from ``walkers``."""
     sampler = make_sampler(likelihood, walkers.shape[0], seed)
     sampler.run_mcmc(walkers, steps)
     return sampler.get_chain(), sampler.acceptance_fraction
 
 
-def next_box(physical: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarray, prior_lower: np.ndarray,
-             prior_upper: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+def next_box(
+    physical: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarray, prior_lower: np.ndarray, prior_upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, bool]:
     """The next stage's box around posterior draws, and whether the draws press against a non-prior side."""
     low, high = physical.min(axis=0), physical.max(axis=0)
     width = box_upper - box_lower
@@ -180,12 +183,23 @@ def next_box(physical: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarray,
     return new_lower, new_upper, truncated
 
 
-def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequence], StageLikelihood],
-               prior_lower: np.ndarray, prior_upper: np.ndarray, *, used: np.ndarray, walkers: int,
-               stage_steps: int, max_stages: int, error_floor: float, rng: np.random.Generator,
-               design_seed: np.random.SeedSequence, chain_seed: np.random.SeedSequence,
-               stages: list[dict[str, Any]], start_likelihood: StageLikelihood | None = None,
-               start_points: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+def search_box(
+    fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequence], StageLikelihood],
+    prior_lower: np.ndarray,
+    prior_upper: np.ndarray,
+    *,
+    used: np.ndarray,
+    walkers: int,
+    stage_steps: int,
+    max_stages: int,
+    error_floor: float,
+    rng: np.random.Generator,
+    design_seed: np.random.SeedSequence,
+    chain_seed: np.random.SeedSequence,
+    stages: list[dict[str, Any]],
+    start_likelihood: StageLikelihood | None = None,
+    start_points: np.ndarray | None = None,
+) -> tuple[np.ndarray, bool]:
     """Shrink the emulator box in stages around the posterior (module docstring).
 
     Parameters
@@ -221,24 +235,36 @@ def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequen
     truncated : bool
         Whether the last stage's posterior is truncated by its box.
     """
-    box_lower, box_upper = (prior_lower.copy(), prior_upper.copy()) if start_likelihood is None else \
-        (start_likelihood.box_lower.copy(), start_likelihood.box_upper.copy())
+    box_lower, box_upper = (
+        (prior_lower.copy(), prior_upper.copy())
+        if start_likelihood is None
+        else (start_likelihood.box_lower.copy(), start_likelihood.box_upper.copy())
+    )
     design_seeds, chain_seeds = design_seed.spawn(max_stages), chain_seed.spawn(max_stages)
     for stage in range(max_stages):
-        likelihood = start_likelihood if stage == 0 and start_likelihood is not None else \
-            fit_stage(box_lower, box_upper, design_seeds[stage])
+        likelihood = (
+            start_likelihood
+            if stage == 0 and start_likelihood is not None
+            else fit_stage(box_lower, box_upper, design_seeds[stage])
+        )
         start = start_walkers(likelihood, start_points, rng, walkers)
         chain, accept = sample(likelihood, start, stage_steps, chain_seeds[stage])
-        kept = chain[chain.shape[0] // 2:].reshape(-1, likelihood.n_dim)
+        kept = chain[chain.shape[0] // 2 :].reshape(-1, likelihood.n_dim)
         physical = likelihood.to_physical(kept)
         new_lower, new_upper, truncated = next_box(physical, box_lower, box_upper, prior_lower, prior_upper)
         old_width = box_upper - box_lower
         new_width = new_upper - new_lower
-        stages.append({
-            "stage": stage, "box_lower": box_lower.tolist(), "box_upper": box_upper.tolist(),
-            "loo_rms_median": float(np.median(likelihood.loo_rms[used])),
-            "loo_rms_max": float(np.max(likelihood.loo_rms[used])),
-            "acceptance": float(np.mean(accept)), "truncated": truncated})
+        stages.append(
+            {
+                "stage": stage,
+                "box_lower": box_lower.tolist(),
+                "box_upper": box_upper.tolist(),
+                "loo_rms_median": float(np.median(likelihood.loo_rms[used])),
+                "loo_rms_max": float(np.max(likelihood.loo_rms[used])),
+                "acceptance": float(np.mean(accept)),
+                "truncated": truncated,
+            }
+        )
         start_points = physical[rng.choice(physical.shape[0], size=min(physical.shape[0], 4096), replace=False)]
         shrinking = np.any(new_width < 0.6 * old_width)
         # refining further gains nothing once the emulator error is small against the model-error floor
@@ -251,10 +277,19 @@ def search_box(fit_stage: Callable[[np.ndarray, np.ndarray, np.random.SeedSequen
     raise AssertionError("unreachable: the last stage returns")
 
 
-def final_sampling(likelihood: StageLikelihood, start_points: np.ndarray, rng: np.random.Generator,
-                   seed: np.random.SeedSequence, *, walkers: int, chunk_steps: int, max_steps: int,
-                   criteria: ConvergenceCriteria, names: Sequence[str],
-                   truncated: bool) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+def final_sampling(
+    likelihood: StageLikelihood,
+    start_points: np.ndarray,
+    rng: np.random.Generator,
+    seed: np.random.SeedSequence,
+    *,
+    walkers: int,
+    chunk_steps: int,
+    max_steps: int,
+    criteria: ConvergenceCriteria,
+    names: Sequence[str],
+    truncated: bool,
+) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     """Sample in chunks until converged or ``max_steps``; burn in and thin.
 
     Returns
@@ -281,7 +316,7 @@ def final_sampling(likelihood: StageLikelihood, start_points: np.ndarray, rng: n
             break
     # the last chunk's chain and burn-in (max_steps >= chunk_steps: the loop ran)
     thin = max(1, int(verdict["tau_max"] // 2))
-    kept = chain[burn::thin]                                              # (draw, chain, dim)
+    kept = chain[burn::thin]  # (draw, chain, dim)
     log_likelihood = sampler.get_log_prob()[burn::thin]
     verdict.update(n_steps=int(total), burn_in=int(burn), thin=int(thin), n_walkers=int(chain.shape[1]))
     return verdict, likelihood.to_physical(kept), log_likelihood

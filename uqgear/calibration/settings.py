@@ -42,8 +42,11 @@ def check_int(name: str, value: object, lowest: int) -> int:
 
 def check_float(name: str, value: object, lower: float, upper: float, unit: str = "") -> float:
     """``value`` as a float, if it is a number in [lower, upper]."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not lower <= float(value) <= upper:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not lower <= float(value) <= upper
+    ):
         raise CalibrationError(f"{name}: expected a number in [{lower:g}, {upper:g}]{unit}; got {value!r}")
     return float(value)
 
@@ -53,8 +56,7 @@ def check_priors(priors: Mapping[str, Sequence[float]] | None, parameters: Seque
     priors = dict(priors or {})
     for name in priors:
         if PARAMETER_ALIASES.get(name, name) not in parameters:
-            raise CalibrationError(f"priors.{name}: not among the calibrated parameters "
-                                   f"({', '.join(parameters)})")
+            raise CalibrationError(f"priors.{name}: not among the calibrated parameters ({', '.join(parameters)})")
     return priors
 
 
@@ -63,8 +65,7 @@ def check_channels(channels: Sequence[str]) -> tuple[str, ...]:
     channels = list(channels)
     for name in channels:
         if name not in HARMONIC_CHANNELS:
-            raise CalibrationError(f"channels: {name!r} is not a rig channel; expected "
-                                   f"{', '.join(HARMONIC_CHANNELS)}")
+            raise CalibrationError(f"channels: {name!r} is not a rig channel; expected {', '.join(HARMONIC_CHANNELS)}")
     if not channels:
         raise CalibrationError("channels: expected at least one channel")
     return tuple(channels)
@@ -75,8 +76,9 @@ def check_model_error_range(model_error_range: tuple[float, float]) -> tuple[flo
     try:
         low, high = (float(v) for v in model_error_range)
     except (TypeError, ValueError):
-        raise CalibrationError(f"model_error_range: expected (lower, upper) relative errors; "
-                               f"got {model_error_range!r}") from None
+        raise CalibrationError(
+            f"model_error_range: expected (lower, upper) relative errors; got {model_error_range!r}"
+        ) from None
     if not 0 < low < high:
         raise CalibrationError(f"model_error_range: expected 0 < lower < upper (relative); got {model_error_range!r}")
     return low, high

@@ -18,30 +18,55 @@ from .priors import PRIOR_RULES, parameter_units
 def summarise(values: np.ndarray) -> dict[str, float]:
     """Mean, standard deviation and 5/50/95 % quantiles of draws."""
     q05, q50, q95 = np.quantile(values, [0.05, 0.5, 0.95])
-    return {"mean": float(np.mean(values)), "sd": float(np.std(values)), "q05": float(q05), "q50": float(q50),
-            "q95": float(q95)}
+    return {
+        "mean": float(np.mean(values)),
+        "sd": float(np.std(values)),
+        "q05": float(q05),
+        "q50": float(q50),
+        "q95": float(q95),
+    }
 
 
-def posterior_dataset(physical: np.ndarray, log_likelihood: np.ndarray, *, parameters: Sequence[str],
-                      bounds: Mapping[str, tuple[float, float]], operating: Mapping[str, np.ndarray],
-                      converged: bool) -> xr.Dataset:
+def posterior_dataset(
+    physical: np.ndarray,
+    log_likelihood: np.ndarray,
+    *,
+    parameters: Sequence[str],
+    bounds: Mapping[str, tuple[float, float]],
+    operating: Mapping[str, np.ndarray],
+    converged: bool,
+) -> xr.Dataset:
     """The posterior draws (``posterior_``) from kept physical draws (draw, chain, dim)."""
     n_global, n_op = len(parameters), len(operating["pinion_speed"])
-    draws = np.transpose(physical, (1, 0, 2))                               # (chain, draw, dim)
-    data = {}
+    draws = np.transpose(physical, (1, 0, 2))  # (chain, draw, dim)
+    data: dict[str, tuple[Any, ...]] = {}
     for index, name in enumerate(parameters):
-        data[name] = (("chain", "draw"), draws[:, :, index],
-                      {"units": parameter_units(name),
-                       "long_name": PRIOR_RULES[name].long_name if name in PRIOR_RULES else name,
-                       "prior": "uniform", "prior_lower": bounds[name][0],
-                       "prior_upper": bounds[name][1]})
-    data["adhesion_torque"] = (("chain", "draw", "op"), draws[:, :, n_global:],
-                               {"units": "N m", "long_name": "adhesion torque T2 of each run",
-                                "prior": "uniform on the file's interval"})
-    data["log_likelihood"] = (("chain", "draw"), log_likelihood.T,
-                              {"units": "1", "long_name": "log likelihood (emulated, model error integrated out)"})
-    coords = {"chain": np.arange(draws.shape[0]), "draw": np.arange(draws.shape[1]),
-              "op": np.arange(n_op)}
+        data[name] = (
+            ("chain", "draw"),
+            draws[:, :, index],
+            {
+                "units": parameter_units(name),
+                "long_name": PRIOR_RULES[name].long_name if name in PRIOR_RULES else name,
+                "prior": "uniform",
+                "prior_lower": bounds[name][0],
+                "prior_upper": bounds[name][1],
+            },
+        )
+    data["adhesion_torque"] = (
+        ("chain", "draw", "op"),
+        draws[:, :, n_global:],
+        {"units": "N m", "long_name": "adhesion torque T2 of each run", "prior": "uniform on the file's interval"},
+    )
+    data["log_likelihood"] = (
+        ("chain", "draw"),
+        log_likelihood.T,
+        {"units": "1", "long_name": "log likelihood (emulated, model error integrated out)"},
+    )
+    coords: dict[str, Any] = {
+        "chain": np.arange(draws.shape[0]),
+        "draw": np.arange(draws.shape[1]),
+        "op": np.arange(n_op),
+    }
     for name, values in operating.items():
         coords[name] = ("op", values, {"units": "rpm" if name == "pinion_speed" else "N m"})
     posterior = xr.Dataset(data, coords=coords)
@@ -49,22 +74,34 @@ def posterior_dataset(physical: np.ndarray, log_likelihood: np.ndarray, *, param
     return posterior
 
 
-def posterior_summary(physical: np.ndarray, *, parameters: Sequence[str],
-                      bounds: Mapping[str, tuple[float, float]], operating: Mapping[str, np.ndarray],
-                      likelihood: StageLikelihood, features: Features) -> dict[str, Any]:
+def posterior_summary(
+    physical: np.ndarray,
+    *,
+    parameters: Sequence[str],
+    bounds: Mapping[str, tuple[float, float]],
+    operating: Mapping[str, np.ndarray],
+    likelihood: StageLikelihood,
+    features: Features,
+) -> dict[str, Any]:
     """The summary (``summary_``) of kept physical draws (draw, chain, dim)."""
     n_global, n_op = len(parameters), len(operating["pinion_speed"])
     flat = physical.reshape(-1, likelihood.n_dim)
     summary: dict[str, Any] = {"parameters": {}, "adhesion_torque": []}
     for index, name in enumerate(parameters):
         summary["parameters"][name] = summarise(flat[:, index]) | {
-            "units": parameter_units(name), "prior": list(bounds[name])}
+            "units": parameter_units(name),
+            "prior": list(bounds[name]),
+        }
     for op in range(n_op):
         summary["adhesion_torque"].append(
-            {"op": op, "pinion_speed": float(operating["pinion_speed"][op]), "units": "N m",
-             "prior": [float(operating["adhesion_torque_lower"][op]),
-                       float(operating["adhesion_torque_upper"][op])]}
-            | summarise(flat[:, n_global + op]))
+            {
+                "op": op,
+                "pinion_speed": float(operating["pinion_speed"][op]),
+                "units": "N m",
+                "prior": [float(operating["adhesion_torque_lower"][op]), float(operating["adhesion_torque_upper"][op])],
+            }
+            | summarise(flat[:, n_global + op])
+        )
     summary["model_error"] = model_error_summary(likelihood.to_unit(flat), likelihood, features)
     return summary
 
@@ -82,17 +119,32 @@ def model_error_summary(unit: np.ndarray, likelihood: StageLikelihood, features:
             if not used[:, c, h].any():
                 continue
             cumulative = np.cumsum(weights[:, c, h])
-            quantile = {q: float(grid[min(np.searchsorted(cumulative, q), cumulative.size - 1)])
-                        for q in (0.05, 0.5, 0.95)}
-            result[f"{channel}_mesh{h + 1}"] = {"q05": quantile[0.05], "q50": quantile[0.5],
-                                                "q95": quantile[0.95], "n_features": int(used[:, c, h].sum())}
+            quantile = {
+                q: float(grid[min(int(np.searchsorted(cumulative, q)), cumulative.size - 1)]) for q in (0.05, 0.5, 0.95)
+            }
+            result[f"{channel}_mesh{h + 1}"] = {
+                "q05": quantile[0.05],
+                "q50": quantile[0.5],
+                "q95": quantile[0.95],
+                "n_features": int(used[:, c, h].sum()),
+            }
     return result
 
 
-def result_content(*, rig: str, converged: bool, design: Mapping[str, Any], diagnostics: dict[str, Any],
-                   summary: dict[str, Any], predictive_check: dict[str, Any], emulator: dict[str, Any],
-                   timing: dict[str, Any], settings: dict[str, Any],
-                   speed: list[dict[str, Any]], failure: Mapping[str, Any]) -> dict[str, Any]:
+def result_content(
+    *,
+    rig: str,
+    converged: bool,
+    design: Mapping[str, Any],
+    diagnostics: dict[str, Any],
+    summary: dict[str, Any],
+    predictive_check: dict[str, Any],
+    emulator: dict[str, Any],
+    timing: dict[str, Any],
+    settings: dict[str, Any],
+    speed: list[dict[str, Any]],
+    failure: Mapping[str, Any],
+) -> dict[str, Any]:
     """The content of ``calibration.json``: estimates only if converged.
 
     ``failure`` is :func:`uqgear.calibration.failure.failure_causes` of the
@@ -106,11 +158,16 @@ def result_content(*, rig: str, converged: bool, design: Mapping[str, Any], diag
     """
     estimates = {"parameters": summary["parameters"], "adhesion_torque": summary["adhesion_torque"]}
     result: dict[str, Any] = {
-        "rig": rig, "converged": converged,
+        "rig": rig,
+        "converged": converged,
         "design": design,
-        "diagnostics": diagnostics, "model_error": summary["model_error"],
-        "predictive_check": predictive_check, "emulator": emulator, "timing": timing,
-        "settings": settings, "speed": speed,
+        "diagnostics": diagnostics,
+        "model_error": summary["model_error"],
+        "predictive_check": predictive_check,
+        "emulator": emulator,
+        "timing": timing,
+        "settings": settings,
+        "speed": speed,
     }
     causes = failure["causes"]
     if converged:
@@ -118,7 +175,11 @@ def result_content(*, rig: str, converged: bool, design: Mapping[str, Any], diag
         # a converged fit may still misfit, lean on a bound or on its model-error terms: say so, keep the result
         result["warnings"] = [cause["text"] for cause in causes]
     else:
-        result.update(parameters=None, adhesion_torque=None, unconverged_estimates=estimates,
-                      message=failure["message"],
-                      causes=causes)
+        result.update(
+            parameters=None,
+            adhesion_torque=None,
+            unconverged_estimates=estimates,
+            message=failure["message"],
+            causes=causes,
+        )
     return result

@@ -13,23 +13,55 @@ May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 
 from __future__ import annotations
 
-from .regimes import (
-    detect_period, count_distinct_points, zero_one_test, ResponseClass, classify_response,
-    classify_dataset, classify_batch)
-from .spectra import amplitude_spectrum, spectrum_dataset
-from .response import phase_plane, poincare_section, contact_fractions, response_qois
-from .sweeps import bifurcation, sweep_grid
 from .attractors import MultiStart, MultiStartSearch, StartedEvaluator, extremes_over_attractors
-from .floquet import floquet_multipliers, unstable_counts, is_stable, floquet_exponents
-from .shooting import Shooting, ShootingSettings, ShootingError, PeriodicOrbit, PoincareMap, setup_at
-from .continuation import Continuation, ContinuationSettings
 from .branches import bifurcation_table
+from .continuation import Continuation, ContinuationSettings
+from .floquet import floquet_exponents, floquet_multipliers, is_stable, unstable_counts
+from .regimes import (
+    ResponseClass,
+    classify_batch,
+    classify_dataset,
+    classify_response,
+    count_distinct_points,
+    detect_period,
+    zero_one_test,
+)
+from .response import contact_fractions, phase_plane, poincare_section, response_qois
+from .shooting import PeriodicOrbit, PoincareMap, Shooting, ShootingError, ShootingSettings, setup_at
+from .spectra import amplitude_spectrum, spectrum_dataset
+from .sweeps import bifurcation, sweep_grid
 
 __all__ = [
-    'detect_period', 'count_distinct_points', 'zero_one_test', 'ResponseClass', 'classify_response',
-    'classify_dataset', 'classify_batch', 'amplitude_spectrum', 'spectrum_dataset', 'phase_plane',
-    'poincare_section', 'contact_fractions', 'response_qois', 'bifurcation', 'sweep_grid',
-    'MultiStart', 'MultiStartSearch', 'StartedEvaluator', 'extremes_over_attractors', 'floquet_multipliers',
-    'unstable_counts', 'is_stable', 'floquet_exponents', 'Shooting', 'ShootingSettings', 'ShootingError',
-    'PeriodicOrbit', 'PoincareMap', 'setup_at', 'Continuation', 'ContinuationSettings', 'bifurcation_table',
+    "detect_period",
+    "count_distinct_points",
+    "zero_one_test",
+    "ResponseClass",
+    "classify_response",
+    "classify_dataset",
+    "classify_batch",
+    "amplitude_spectrum",
+    "spectrum_dataset",
+    "phase_plane",
+    "poincare_section",
+    "contact_fractions",
+    "response_qois",
+    "bifurcation",
+    "sweep_grid",
+    "MultiStart",
+    "MultiStartSearch",
+    "StartedEvaluator",
+    "extremes_over_attractors",
+    "floquet_multipliers",
+    "unstable_counts",
+    "is_stable",
+    "floquet_exponents",
+    "Shooting",
+    "ShootingSettings",
+    "ShootingError",
+    "PeriodicOrbit",
+    "PoincareMap",
+    "setup_at",
+    "Continuation",
+    "ContinuationSettings",
+    "bifurcation_table",
 ]

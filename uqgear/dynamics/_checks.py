@@ -11,7 +11,6 @@ import xarray as xr
 
 from ..common.errors import UqgearError
 
-
 Seed = int | np.random.SeedSequence
 
 
@@ -30,14 +29,15 @@ def _require(ds: xr.Dataset, names: Sequence[str], what: str) -> None:
         raise UqgearError(f"{what}: expected an xarray Dataset; got {type(ds).__name__}")
     missing = [name for name in names if name not in ds.variables]
     if missing:
-        raise UqgearError(f"{what}: the Dataset lacks variable(s) {', '.join(missing)}; "
-                          f"it has {', '.join(sorted(map(str, ds.data_vars))) or 'none'}")
+        raise UqgearError(
+            f"{what}: the Dataset lacks variable(s) {', '.join(missing)}; "
+            f"it has {', '.join(sorted(map(str, ds.data_vars))) or 'none'}"
+        )
 
 
 def _require_attr(ds: xr.Dataset, name: str, what: str) -> float:
     if name not in ds.attrs:
-        raise UqgearError(f"{what}: the Dataset lacks the attribute {name!r} "
-                          f"(expected a simulate() result)")
+        raise UqgearError(f"{what}: the Dataset lacks the attribute {name!r} (expected a simulate() result)")
     try:
         return float(ds.attrs[name])
     except (TypeError, ValueError):

@@ -55,9 +55,19 @@ COMPARED_FRACTIONS = ("fraction_separation", "fraction_back_contact")
 #: Factor on both tolerances when either response is not periodic.
 NON_PERIODIC_FACTOR = 5.0
 #: QoIs every attractor keeps.
-ATTRACTOR_QOIS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms", "dte_peak_to_peak",
-                  "dte_mean", "acc_pinion_rms", "acc_gear_rms", "fraction_drive_contact", "fraction_separation",
-                  "fraction_back_contact")
+ATTRACTOR_QOIS = (
+    "peak_mesh_force",
+    "dynamic_load_factor",
+    "load_factor_rated",
+    "dte_rms",
+    "dte_peak_to_peak",
+    "dte_mean",
+    "acc_pinion_rms",
+    "acc_gear_rms",
+    "fraction_drive_contact",
+    "fraction_separation",
+    "fraction_back_contact",
+)
 
 
 @dataclass(frozen=True)
@@ -98,8 +108,9 @@ class MultiStart:
         values = dict(values or {})
         unknown = sorted(set(values) - set(cls.__dataclass_fields__))
         if unknown:
-            raise UqgearError(f"{where}.{unknown[0]}: unknown key; expected among "
-                              f"{', '.join(cls.__dataclass_fields__)}")
+            raise UqgearError(
+                f"{where}.{unknown[0]}: unknown key; expected among {', '.join(cls.__dataclass_fields__)}"
+            )
         settings = cls(**values)
         if isinstance(settings.seeded, bool) or not isinstance(settings.seeded, int) or not 0 <= settings.seeded <= 64:
             raise UqgearError(f"{where}.seeded: expected an integer in [0, 64]; got {settings.seeded!r}")
@@ -140,9 +151,12 @@ class StartedEvaluator:
             states = np.stack([np.asarray(samples[name].values, dtype=float) for name in INITIAL_VARIABLES], axis=1)
             rest = ~np.all(np.isfinite(states), axis=1)
             if rest.any():
-                setups = build_batch(self.design, inputs.isel(sample=np.nonzero(rest)[0]),
-                                     damping_in_separation=self.options.get("damping_in_separation", True),
-                                     stiffness=self.options.get("stiffness", "ishikawa"))
+                setups = build_batch(
+                    self.design,
+                    inputs.isel(sample=np.nonzero(rest)[0]),
+                    damping_in_separation=self.options.get("damping_in_separation", True),
+                    stiffness=self.options.get("stiffness", "ishikawa"),
+                )
                 states[rest] = np.stack([setup.static_state() for setup in setups])
         result = simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
         final = result["final_state"].values
@@ -156,8 +170,11 @@ class StartedEvaluator:
 def _velocity_scale(samples: xr.Dataset, design: Design) -> np.ndarray:
     """omega_h b per sample (mesh angular frequency times the half backlash)."""
     speed = np.asarray(samples["pinion_speed"].values, dtype=float)
-    backlash = (np.asarray(samples["backlash"].values, dtype=float) if "backlash" in samples
-                else np.full(speed.size, design.backlash))
+    backlash = (
+        np.asarray(samples["backlash"].values, dtype=float)
+        if "backlash" in samples
+        else np.full(speed.size, design.backlash)
+    )
     return 2.0 * math.pi * design.z1 * speed / 60.0 * 0.5 * backlash
 
 
@@ -165,8 +182,11 @@ def sweep_order(samples: xr.Dataset, variable: str) -> list[np.ndarray]:
     """The samples grouped by every input but ``variable``, each group sorted by it (sample indices)."""
     if variable not in samples:
         return [np.array([i]) for i in range(samples.sizes["sample"])]
-    others = [name for name in samples.data_vars if name != variable and name not in INITIAL_VARIABLES
-              and samples[name].dims == ("sample",)]
+    others = [
+        name
+        for name in samples.data_vars
+        if name != variable and name not in INITIAL_VARIABLES and samples[name].dims == ("sample",)
+    ]
     keys = [tuple(float(samples[name].values[i]) for name in others) for i in range(samples.sizes["sample"])]
     groups: dict[tuple, list[int]] = {}
     for index, key in enumerate(keys):
@@ -186,17 +206,24 @@ def _final_states(result: xr.Dataset) -> np.ndarray:
     return np.stack([np.asarray(result[name].values, dtype=float) for name in FINAL_VARIABLES], axis=1)
 
 
-def _sweep_runs(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, rest: xr.Dataset,
-                groups: Sequence[np.ndarray], rest_index: np.ndarray | None = None) -> dict[str, xr.Dataset]:
+def _sweep_runs(
+    evaluate: Callable[[xr.Dataset], xr.Dataset],
+    samples: xr.Dataset,
+    rest: xr.Dataset,
+    groups: Sequence[np.ndarray],
+    rest_index: np.ndarray | None = None,
+) -> dict[str, xr.Dataset]:
     """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions.
 
     ``rest`` holds the rest runs of the samples ``rest_index`` (default: all), which must include
     each group's first and last member: the sweeps start there.
     """
-    rows_of = {int(sample): row for row, sample in enumerate(
-        np.arange(samples.sizes["sample"]) if rest_index is None else rest_index)}
+    rows_of = {
+        int(sample): row
+        for row, sample in enumerate(np.arange(samples.sizes["sample"]) if rest_index is None else rest_index)
+    }
     finals = _final_states(rest)
-    carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}   # sample index -> the final state it passes on
+    carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}  # sample index -> the final state it passes on
     for direction in ("up", "down"):
         for members in groups:
             first = members[0] if direction == "up" else members[-1]
@@ -227,14 +254,21 @@ def _sweep_runs(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Datase
         firsts = np.array([int(m[0] if direction == "up" else m[-1]) for m in groups], dtype=int)
         parts = [(firsts, rest.isel(sample=[rows_of[int(i)] for i in firsts]))] + pieces[direction]
         order = np.concatenate([indices for indices, _ in parts])
-        stacked = xr.concat([part for _, part in parts], dim="sample", coords="minimal", compat="override",
-                            join="override", combine_attrs="drop_conflicts")
+        stacked = xr.concat(
+            [part for _, part in parts],
+            dim="sample",
+            coords="minimal",
+            compat="override",
+            join="override",
+            combine_attrs="drop_conflicts",
+        )
         out[direction] = stacked.isel(sample=np.argsort(order, kind="stable"))
     return out
 
 
-def up_down_sweeps(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset,
-                   variable: str = "pinion_speed") -> dict[str, xr.Dataset]:
+def up_down_sweeps(
+    evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, variable: str = "pinion_speed"
+) -> dict[str, xr.Dataset]:
     """Brute-force up- and down-sweeps along ``variable``: each run starts from its neighbour's final state.
 
     Only the first point of each sweep starts from rest. Returns ``{"up": runs, "down": runs}``, each
@@ -294,8 +328,9 @@ class MultiStartSearch:
         self.settings = settings or MultiStart()
         self.seed = seed
 
-    def fit(self, evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset,
-            design: Design | None = None) -> MultiStartSearch:
+    def fit(
+        self, evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, design: Design | None = None
+    ) -> MultiStartSearch:
         """Run the starts and group the responses (``design`` only for the box's scales; default the
         evaluator's ``design``)."""
         if "sample" not in samples.dims or "pinion_speed" not in samples:
@@ -321,9 +356,19 @@ class MultiStartSearch:
                 stages[f"seeded-{k + 1}"] = seeded.isel(sample=slice(k * n, (k + 1) * n))
             runs += n * settings.seeded
         labels = settings.start_labels()
-        stacked = xr.concat([stages[label].drop_vars([v for v in INITIAL_VARIABLES if v in stages[label].variables])
-                             .assign_coords(sample=np.arange(n)) for label in labels], dim="start",
-                            coords="minimal", compat="override", join="override", combine_attrs="drop_conflicts")
+        stacked = xr.concat(
+            [
+                stages[label]
+                .drop_vars([v for v in INITIAL_VARIABLES if v in stages[label].variables])
+                .assign_coords(sample=np.arange(n))
+                for label in labels
+            ],
+            dim="start",
+            coords="minimal",
+            compat="override",
+            join="override",
+            combine_attrs="drop_conflicts",
+        )
         stacked = stacked.assign_coords(start=("start", labels))
         self.runs_ = stacked
         self.attractors_ = group_attractors(stacked, design, settings)
@@ -336,8 +381,9 @@ class MultiStartSearch:
         settings = self.settings
         inputs = samples.drop_vars([v for v in INITIAL_VARIABLES if v in samples.variables])
         static = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
-        half_backlash = 0.5 * (np.asarray(samples["backlash"].values, float) if "backlash" in samples
-                               else np.full(n, design.backlash))
+        half_backlash = 0.5 * (
+            np.asarray(samples["backlash"].values, float) if "backlash" in samples else np.full(n, design.backlash)
+        )
         velocity = np.maximum(_velocity_scale(samples, design)[:, None], np.abs(_final_states(rest)[:, 3:]))
         widths = settings.box * np.concatenate([np.repeat(half_backlash[:, None], 3, axis=1), velocity], axis=1)
         seed = self.seed if isinstance(self.seed, np.random.SeedSequence) else np.random.SeedSequence(self.seed)
@@ -378,9 +424,14 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
         groups: list[list[int]] = []
         for j in range(len(labels)):
             run = runs.isel(sample=i, start=j)
-            points = np.stack([np.asarray(run["poincare_x"].values) / half_backlash,
-                               np.asarray(run["poincare_x_velocity"].values) / omega_b], axis=1)
-            entry = {name: float(run[name].values) for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)}
+            points = np.stack(
+                [
+                    np.asarray(run["poincare_x"].values) / half_backlash,
+                    np.asarray(run["poincare_x_velocity"].values) / omega_b,
+                ],
+                axis=1,
+            )
+            entry: dict[str, Any] = {name: float(run[name].values) for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)}
             entry.update(regime=str(run["regime"].values), points=points[np.all(np.isfinite(points), axis=1)])
             if entry["points"].size == 0:
                 membership[i, j] = -1
@@ -416,14 +467,23 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
             first[i, k] = labels[group[0]]
             which[i, k] = ",".join(labels[j] for j in group)
             share[i, k] = len(group) / total
-    data.update({
-        "regime": (("sample", "attractor"), regime.astype(str), {"long_name": "response regime of the attractor"}),
-        "first_start": (("sample", "attractor"), first.astype(str), {"long_name": "first start that reached it"}),
-        "starts": (("sample", "attractor"), which.astype(str), {"long_name": "starts that reached it"}),
-        "share": (("sample", "attractor"), share, {"units": "1", "long_name": "share of the starts that reached it"}),
-        "attractor_count": ("sample", np.array([len(g) for g in members], dtype=np.int64),
-                            {"units": "1", "long_name": "distinct steady responses found"}),
-    })
+    data.update(
+        {
+            "regime": (("sample", "attractor"), regime.astype(str), {"long_name": "response regime of the attractor"}),
+            "first_start": (("sample", "attractor"), first.astype(str), {"long_name": "first start that reached it"}),
+            "starts": (("sample", "attractor"), which.astype(str), {"long_name": "starts that reached it"}),
+            "share": (
+                ("sample", "attractor"),
+                share,
+                {"units": "1", "long_name": "share of the starts that reached it"},
+            ),
+            "attractor_count": (
+                "sample",
+                np.array([len(g) for g in members], dtype=np.int64),
+                {"units": "1", "long_name": "distinct steady responses found"},
+            ),
+        }
+    )
     out = xr.Dataset(data, coords={"attractor": ("attractor", np.arange(width))})
     out.attrs.update(settings.to_dict())
     out.attrs["_membership"] = membership
@@ -442,13 +502,29 @@ def extremes_over_attractors(attractors: xr.Dataset, qois: Sequence[str]) -> xr.
             index = np.array([pick(row) if np.isfinite(row).any() else 0 for row in finite], dtype=np.int64)
             rows = np.arange(values.shape[0])
             units, long_name = QOI_INFO[name]
-            out[f"{name}_{bound}"] = ("sample", finite[rows, index],
-                                      {"units": units, "long_name": f"{bound} over attractors of {name}"})
+            out[f"{name}_{bound}"] = (
+                "sample",
+                finite[rows, index],
+                {"units": units, "long_name": f"{bound} over attractors of {name}"},
+            )
             out[f"{name}_{bound}_attractor"] = ("sample", index, {"long_name": f"attractor giving {name}_{bound}"})
-            out[f"{name}_{bound}_start"] = ("sample", attractors["first_start"].values[rows, index].astype(str),
-                                            {"long_name": f"first start reaching the attractor of {name}_{bound}"})
+            out[f"{name}_{bound}_start"] = (
+                "sample",
+                attractors["first_start"].values[rows, index].astype(str),
+                {"long_name": f"first start reaching the attractor of {name}_{bound}"},
+            )
     return out
 
 
-__all__ = ["MultiStart", "MultiStartSearch", "StartedEvaluator", "group_attractors", "extremes_over_attractors",
-           "sweep_order", "up_down_sweeps", "INITIAL_VARIABLES", "FINAL_VARIABLES", "ATTRACTOR_QOIS"]
+__all__ = [
+    "MultiStart",
+    "MultiStartSearch",
+    "StartedEvaluator",
+    "group_attractors",
+    "extremes_over_attractors",
+    "sweep_order",
+    "up_down_sweeps",
+    "INITIAL_VARIABLES",
+    "FINAL_VARIABLES",
+    "ATTRACTOR_QOIS",
+]

@@ -26,8 +26,15 @@ from typing import Any
 
 import numpy as np
 
-from .floquet import (BRANCH_POINT, FOLD, NEIMARK_SACKER, PERIOD_DOUBLING, UnstableCounts, crossing_types,
-                      unstable_counts)
+from .floquet import (
+    BRANCH_POINT,
+    FOLD,
+    NEIMARK_SACKER,
+    PERIOD_DOUBLING,
+    UnstableCounts,
+    crossing_types,
+    unstable_counts,
+)
 
 GRAZING_SEPARATION = "grazing_separation"
 GRAZING_BACK_SIDE = "grazing_back_side"
@@ -143,9 +150,17 @@ _TESTS: dict[str, Callable[[BranchPoint], Any]] = {
 }
 
 
-def locate(kind: str, test: Callable[[BranchPoint], Any], before: BranchPoint, after: BranchPoint, step: float,
-           correct: Callable[[float], BranchPoint | None], tolerance: float, parameter_scale: float,
-           branch: int) -> Bifurcation:
+def locate(
+    kind: str,
+    test: Callable[[BranchPoint], Any],
+    before: BranchPoint,
+    after: BranchPoint,
+    step: float,
+    correct: Callable[[float], BranchPoint | None],
+    tolerance: float,
+    parameter_scale: float,
+    branch: int,
+) -> Bifurcation:
     """Bisect in arclength between ``before`` and ``after`` (``step`` apart) for the change of ``test``.
 
     ``correct(s)`` returns the branch point at arclength ``s`` from ``before`` (predicted along its
@@ -178,18 +193,35 @@ def locate(kind: str, test: Callable[[BranchPoint], Any], before: BranchPoint, a
         # the new condition (separation, contact on the back side, one more unstable multiplier) holds
         # on the far side in the direction of travel when the test grew across the point
         side = int(travel if test(after) > reference else -travel)
-    return Bifurcation(kind=kind, branch=branch, point=near, parameter=float(location), tolerance=float(width),
-                       side=side, stable_before=before.stable, stable_after=after.stable,
-                       arclength=before.arclength + 0.5 * (low + high))
+    return Bifurcation(
+        kind=kind,
+        branch=branch,
+        point=near,
+        parameter=float(location),
+        tolerance=float(width),
+        side=side,
+        stable_before=before.stable,
+        stable_after=after.stable,
+        arclength=before.arclength + 0.5 * (low + high),
+    )
 
 
-def _narrow_enough(kind: str, low: BranchPoint, high: BranchPoint, width: float, tolerance: float,
-                   parameter_scale: float) -> bool:
+def _narrow_enough(
+    kind: str, low: BranchPoint, high: BranchPoint, width: float, tolerance: float, parameter_scale: float
+) -> bool:
     if kind == FOLD:
         # near a fold the parameter moves with the square of the arclength
-        return abs(high.parameter - low.parameter) < tolerance and 0.5 * width ** 2 * parameter_scale < tolerance
+        return abs(high.parameter - low.parameter) < tolerance and 0.5 * width**2 * parameter_scale < tolerance
     return abs(high.parameter - low.parameter) < 2.0 * tolerance
 
 
-__all__ = ["BranchPoint", "Bifurcation", "detect", "locate", "BIFURCATION_TYPES", "GRAZING_SEPARATION",
-           "GRAZING_BACK_SIDE", "MAX_BISECTIONS"]
+__all__ = [
+    "BranchPoint",
+    "Bifurcation",
+    "detect",
+    "locate",
+    "BIFURCATION_TYPES",
+    "GRAZING_SEPARATION",
+    "GRAZING_BACK_SIDE",
+    "MAX_BISECTIONS",
+]

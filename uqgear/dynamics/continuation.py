@@ -101,8 +101,15 @@ class ContinuationSettings:
 class _Tracer:
     """The predictor-corrector machinery for one design, fixed inputs and parameter."""
 
-    def __init__(self, design: Design, parameter: str, fixed: Mapping[str, float], bounds: tuple[float, float],
-                 settings: ContinuationSettings, model: Mapping[str, Any]) -> None:
+    def __init__(
+        self,
+        design: Design,
+        parameter: str,
+        fixed: Mapping[str, float],
+        bounds: tuple[float, float],
+        settings: ContinuationSettings,
+        model: Mapping[str, Any],
+    ) -> None:
         self.design, self.parameter, self.fixed = design, parameter, dict(fixed)
         self.low, self.high = min(bounds), max(bounds)
         self.span = self.high - self.low
@@ -128,14 +135,19 @@ class _Tracer:
         residual = (result.state - state) / self.scale
         jacobian = result.monodromy * self.scale[None, :] / self.scale[:, None] - np.eye(6)
         column = (shifted.state - result.state) / self.scale / PARAMETER_DIFFERENCE
-        return residual, jacobian, column, {"monodromy": result.monodromy, "measures": result.measures,
-                                            "setup": base.setup}
+        return (
+            residual,
+            jacobian,
+            column,
+            {"monodromy": result.monodromy, "measures": result.measures, "setup": base.setup},
+        )
 
     def scaled(self, point: BranchPoint) -> np.ndarray:
         return np.concatenate([point.state / self.scale, [(point.parameter - self.low) / self.span]])
 
-    def correct(self, predicted: np.ndarray, tangent: np.ndarray, period: int,
-                previous_tangent: np.ndarray) -> BranchPoint | None:
+    def correct(
+        self, predicted: np.ndarray, tangent: np.ndarray, period: int, previous_tangent: np.ndarray
+    ) -> BranchPoint | None:
         """Newton on the extended system from ``predicted``; the corrected point with its tangent, or None.
 
         The iterations taken are left in ``iterations`` (for the step control).
@@ -163,17 +175,23 @@ class _Tracer:
             x = x + update
         return None
 
-    def _point(self, x: np.ndarray, jacobian: np.ndarray, column: np.ndarray, extra: dict,
-               previous_tangent: np.ndarray) -> BranchPoint:
+    def _point(
+        self, x: np.ndarray, jacobian: np.ndarray, column: np.ndarray, extra: dict, previous_tangent: np.ndarray
+    ) -> BranchPoint:
         bordered = np.zeros((7, 7))
         bordered[:6, :6], bordered[:6, 6], bordered[6] = jacobian, column, previous_tangent
         tangent = np.linalg.solve(bordered, np.eye(7)[6])
         tangent /= np.linalg.norm(tangent)
         if tangent @ previous_tangent < 0:
             tangent = -tangent
-        return BranchPoint(parameter=float(self.low + x[6] * self.span), state=x[:6] * self.scale, tangent=tangent,
-                           multipliers=floquet_multipliers(extra["monodromy"]), monodromy=extra["monodromy"],
-                           qois=orbit_qois(extra["measures"], extra["setup"]))
+        return BranchPoint(
+            parameter=float(self.low + x[6] * self.span),
+            state=x[:6] * self.scale,
+            tangent=tangent,
+            multipliers=floquet_multipliers(extra["monodromy"]),
+            monodromy=extra["monodromy"],
+            qois=orbit_qois(extra["measures"], extra["setup"]),
+        )
 
     def first_point(self, value: float, guess: np.ndarray, period: int, direction: float) -> BranchPoint:
         """The orbit at a fixed parameter value by plain shooting, as a branch point heading ``direction``."""
@@ -187,8 +205,10 @@ class _Tracer:
             orbit = newton_orbit(mapping, guess, period, self.settings.shooting, self.scale)
         self.passes += mapping.passes
         if orbit is None:
-            raise ShootingError(f"{self.parameter} = {value:g}: no period-{period} orbit found from the start state; "
-                                "give initial_state on or near the orbit")
+            raise ShootingError(
+                f"{self.parameter} = {value:g}: no period-{period} orbit found from the start state; "
+                "give initial_state on or near the orbit"
+            )
         x = np.concatenate([orbit.state / self.scale, [(value - self.low) / self.span]])
         residual, jacobian, column, extra = self._evaluate(x, period, mapping.steps)
         heading = np.zeros(7)
@@ -203,10 +223,11 @@ class _Tracer:
         """The DTE at the start of each mesh period of a period-n orbit (its n Poincare points)."""
         values = [point.state[2]]
         state = point.state
-        mapping = self.mapping(point.parameter) if period > 1 else None
-        for _ in range(period - 1):
-            state = mapping(state, 1, with_matrix=False).state
-            values.append(state[2])
+        if period > 1:
+            mapping = self.mapping(point.parameter)
+            for _ in range(period - 1):
+                state = mapping(state, 1, with_matrix=False).state
+                values.append(state[2])
         self.passes += period - 1
         return np.array(values)
 
@@ -253,9 +274,17 @@ class Continuation:
     ['fold', 'grazing_separation']
     """
 
-    def __init__(self, parameter: str = "pinion_speed", start: float = 200.0, stop: float = 6000.0, *,
-                 settings: ContinuationSettings | None = None, damping_in_separation: bool = True,
-                 stiffness: str = "ishikawa", effects: Sequence[Any] = ()) -> None:
+    def __init__(
+        self,
+        parameter: str = "pinion_speed",
+        start: float = 200.0,
+        stop: float = 6000.0,
+        *,
+        settings: ContinuationSettings | None = None,
+        damping_in_separation: bool = True,
+        stiffness: str = "ishikawa",
+        effects: Sequence[Any] = (),
+    ) -> None:
         self.parameter = parameter
         self.start = start
         self.stop = stop
@@ -275,8 +304,9 @@ class Continuation:
             raise UqgearError(f"fixed: {self.parameter!r} is the continuation parameter; leave it out of fixed")
         return start, stop
 
-    def fit(self, design: Design, fixed: Mapping[str, float] | None = None, *,
-            initial_state: np.ndarray | None = None) -> Continuation:
+    def fit(
+        self, design: Design, fixed: Mapping[str, float] | None = None, *, initial_state: np.ndarray | None = None
+    ) -> Continuation:
         """Follow the period-1 branch from ``start`` to ``stop`` and every doubled branch off it.
 
         Parameters
@@ -291,12 +321,18 @@ class Continuation:
         fixed = dict(fixed or {})
         start, stop = self._check(fixed)
         if self.parameter != "pinion_speed" and "pinion_speed" not in fixed:
-            raise UqgearError("fixed: pinion_speed missing; the orbit needs a speed when another parameter is "
-                              "continued")
+            raise UqgearError(
+                "fixed: pinion_speed missing; the orbit needs a speed when another parameter is continued"
+            )
         began = self._began = time.perf_counter()
-        tracer = _Tracer(design, self.parameter, fixed, (start, stop), self.settings,
-                         {"damping_in_separation": self.damping_in_separation, "stiffness": self.stiffness,
-                          "effects": self.effects})
+        tracer = _Tracer(
+            design,
+            self.parameter,
+            fixed,
+            (start, stop),
+            self.settings,
+            {"damping_in_separation": self.damping_in_separation, "stiffness": self.stiffness, "effects": self.effects},
+        )
         tolerance = self.settings.tolerance if self.settings.tolerance is not None else 1e-5 * tracer.span
         width = self.settings.min_fold_width if self.settings.min_fold_width is not None else 1e-3 * tracer.span
         self.folds_dropped_ = 0
@@ -305,12 +341,15 @@ class Continuation:
         branches: list[Branch] = []
         bifurcations: list[Bifurcation] = []
         queue: list[tuple[Branch, BranchPoint, np.ndarray | None, list[float]]] = [
-            (Branch(1, [first]), first, None, [])]
+            (Branch(1, [first]), first, None, [])
+        ]
         while queue:
             branch, point, heading, parent_doublings = queue.pop(0)
-            if any(other.period == branch.period and abs(other.merged_at - point.parameter) < 10 * tolerance
-                   for other in branches):
-                continue   # reached already from its other end
+            if any(
+                other.period == branch.period and abs(other.merged_at - point.parameter) < 10 * tolerance
+                for other in branches
+            ):
+                continue  # reached already from its other end
             index = len(branches)
             branches.append(branch)
             found = self._trace(tracer, branch, index, point, heading, tolerance, parent_doublings)
@@ -332,21 +371,42 @@ class Continuation:
         self.tolerance_ = tolerance
         self.orbit_passes_ = tracer.passes
         self.seconds_ = time.perf_counter() - began
-        self.result_ = branches_dataset(branches, bifurcations, parameter=self.parameter, design=design, fixed=fixed,
-                                        tolerance=tolerance, attrs=self._attrs(tracer))
+        self.result_ = branches_dataset(
+            branches,
+            bifurcations,
+            parameter=self.parameter,
+            design=design,
+            fixed=fixed,
+            tolerance=tolerance,
+            attrs=self._attrs(tracer),
+        )
         return self
 
     def _attrs(self, tracer: _Tracer) -> dict[str, Any]:
-        return {"start": float(self.start), "stop": float(self.stop), "orbit_passes": int(tracer.passes),
-                "run_time_s": float(time.perf_counter() - self._began),
-                "damping_in_separation": int(self.damping_in_separation), "stiffness": self.stiffness,
-                "effects": "; ".join(repr(e) for e in self.effects) or "none",
-                "steps_per_mode": self.settings.shooting.steps_per_mode,
-                "newton_tolerance": self.settings.shooting.tolerance, "max_period": self.settings.max_period,
-                "folds_dropped": int(self.folds_dropped_)}
+        return {
+            "start": float(self.start),
+            "stop": float(self.stop),
+            "orbit_passes": int(tracer.passes),
+            "run_time_s": float(time.perf_counter() - self._began),
+            "damping_in_separation": int(self.damping_in_separation),
+            "stiffness": self.stiffness,
+            "effects": "; ".join(repr(e) for e in self.effects) or "none",
+            "steps_per_mode": self.settings.shooting.steps_per_mode,
+            "newton_tolerance": self.settings.shooting.tolerance,
+            "max_period": self.settings.max_period,
+            "folds_dropped": int(self.folds_dropped_),
+        }
 
-    def _trace(self, tracer: _Tracer, branch: Branch, index: int, point: BranchPoint, heading: np.ndarray | None,
-               tolerance: float, parent_doublings: Sequence[float] = ()) -> list[Bifurcation]:
+    def _trace(
+        self,
+        tracer: _Tracer,
+        branch: Branch,
+        index: int,
+        point: BranchPoint,
+        heading: np.ndarray | None,
+        tolerance: float,
+        parent_doublings: Sequence[float] = (),
+    ) -> list[Bifurcation]:
         """Follow ``branch`` from ``point`` (or, for a switched branch, from the bifurcation along ``heading``).
 
         ``parent_doublings``: the period doublings of a switched branch's parent, where it can merge back.
@@ -359,8 +419,8 @@ class Continuation:
         x = tracer.scaled(current)
         tangent = current.tangent if heading is None else heading
         if heading is not None:
-            current = None   # type: ignore[assignment]
-        widest = 0.0   # largest distance between the halves of a doubled orbit so far
+            current = None  # type: ignore[assignment]
+        widest = 0.0  # largest distance between the halves of a doubled orbit so far
         leaps = 0
         while len(branch.points) < settings.max_points:
             predicted = x + step * tangent
@@ -371,8 +431,9 @@ class Continuation:
                     continue
                 # stuck at a kink of the discrete map (a contact crossing appearing at a grid point, say):
                 # leap over it once with the first step size, the turn not checked
-                leap = tracer.correct(x + settings.step * tangent, tangent, period, tangent) if leaps < MAX_LEAPS \
-                    else None
+                leap = (
+                    tracer.correct(x + settings.step * tangent, tangent, period, tangent) if leaps < MAX_LEAPS else None
+                )
                 if leap is None or current is None:
                     branch.end = "corrector failed" if new is None else "branch turns too sharply"
                     break
@@ -393,8 +454,11 @@ class Continuation:
                     return tracer.correct(start_x + s * t, t, period, t)
 
                 located = locate(kind, test, current, new, step, corrected, tolerance, tracer.span, index)
-                if kind in (FOLD, BRANCH_POINT) and period % 2 == 0 and \
-                        tracer.half_distance(located.point, period) < MERGE_FRACTION * widest:
+                if (
+                    kind in (FOLD, BRANCH_POINT)
+                    and period % 2 == 0
+                    and tracer.half_distance(located.point, period) < MERGE_FRACTION * widest
+                ):
                     # a doubled orbit's two halves meet: the parent's period doubling, reached from this side
                     merged = True
                     branch.merged_at = located.parameter
@@ -408,8 +472,9 @@ class Continuation:
                 if distance < COLLAPSE_FRACTION * widest:
                     # the corrector slid onto the parent orbit (a period-2n solution too) across the merge,
                     # which is the parent's period doubling nearest to here
-                    branch.merged_at = min(parent_doublings, key=lambda v: abs(v - new.parameter),
-                                           default=new.parameter)
+                    branch.merged_at = min(
+                        parent_doublings, key=lambda v: abs(v - new.parameter), default=new.parameter
+                    )
                     branch.end = f"merges into the period-{period // 2} branch at {branch.merged_at:.6g}"
                     break
                 widest = max(widest, distance)
@@ -442,8 +507,9 @@ class Continuation:
         return replace(point, tangent=heading / norm), heading / norm
 
 
-def _drop_fold_pairs(found: list[Bifurcation], width: float,
-                     origin: float | None = None) -> tuple[list[Bifurcation], int]:
+def _drop_fold_pairs(
+    found: list[Bifurcation], width: float, origin: float | None = None
+) -> tuple[list[Bifurcation], int]:
     """Drop pairs of neighbouring folds of one branch closer than ``width`` (see ``min_fold_width``), and
     on a switched branch a fold closer than that to the period doubling it starts from."""
     kept = list(found)

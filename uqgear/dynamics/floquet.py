@@ -123,7 +123,7 @@ def crossing_types(before: UnstableCounts, after: UnstableCounts, turned: bool) 
     ['period_doubling']
     """
     found = []
-    changed = after.total != before.total     # a collision on the real axis outside the circle changes no total
+    changed = after.total != before.total  # a collision on the real axis outside the circle changes no total
     if turned:
         found.append(FOLD)
     elif after.real_plus != before.real_plus and changed:
@@ -146,6 +146,19 @@ def floquet_exponents(multipliers: np.ndarray, period: float) -> np.ndarray:
     return np.log(np.asarray(multipliers, dtype=complex)) / float(period)
 
 
-__all__ = ["floquet_multipliers", "is_real", "UnstableCounts", "unstable_counts", "is_stable", "crossing_types",
-           "floquet_exponents", "CROSSING_TYPES", "FOLD", "BRANCH_POINT", "PERIOD_DOUBLING", "NEIMARK_SACKER",
-           "REAL_TOLERANCE", "UNIT_CIRCLE_MARGIN"]
+__all__ = [
+    "floquet_multipliers",
+    "is_real",
+    "UnstableCounts",
+    "unstable_counts",
+    "is_stable",
+    "crossing_types",
+    "floquet_exponents",
+    "CROSSING_TYPES",
+    "FOLD",
+    "BRANCH_POINT",
+    "PERIOD_DOUBLING",
+    "NEIMARK_SACKER",
+    "REAL_TOLERANCE",
+    "UNIT_CIRCLE_MARGIN",
+]

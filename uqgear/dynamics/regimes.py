@@ -71,7 +71,6 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from ..common.errors import UqgearError
 from ._checks import Seed, _check_positive, _require
 
-
 #: Regime labels :func:`classify_response` can return besides ``period-n``.
 QUASI_PERIODIC = "quasi-periodic"
 CHAOTIC = "chaotic"
@@ -94,6 +93,7 @@ MIN_ZERO_ONE_POINTS = 20
 # ----------------------------------------------------------------------------
 # input checks
 # ----------------------------------------------------------------------------
+
 
 def _check_min_repeats(min_repeats: Any) -> int:
     if isinstance(min_repeats, bool) or not isinstance(min_repeats, (int, np.integer)) or min_repeats < 1:
@@ -128,19 +128,21 @@ def _as_points(points: Any, name: str = "points") -> np.ndarray:
     if array.ndim == 1:
         array = array[:, np.newaxis]
     if array.ndim != 2:
-        raise UqgearError(f"{name}: expected a 1-D sequence (x per period) or a 2-D array "
-                          f"(period, component); got an array of shape {array.shape}")
+        raise UqgearError(
+            f"{name}: expected a 1-D sequence (x per period) or a 2-D array "
+            f"(period, component); got an array of shape {array.shape}"
+        )
     if array.shape[0] == 0 or array.shape[1] == 0:
         raise UqgearError(f"{name}: expected at least one Poincare point; got an empty array")
     if not np.all(np.isfinite(array)):
-        raise UqgearError(f"{name}: expected finite values; got NaN or infinity "
-                          f"(a diverged or failed run?)")
+        raise UqgearError(f"{name}: expected finite values; got NaN or infinity (a diverged or failed run?)")
     return array
 
 
 # ----------------------------------------------------------------------------
 # periodicity and the 0-1 test
 # ----------------------------------------------------------------------------
+
 
 def _component_scale(points: np.ndarray, scale: Any) -> np.ndarray:
     n_components = points.shape[1]
@@ -149,17 +151,17 @@ def _component_scale(points: np.ndarray, scale: Any) -> np.ndarray:
         # RMS value, so that a period-1 sequence (no spread) is judged
         # against its magnitude rather than against its own noise.
         spread = np.ptp(points, axis=0)
-        rms = np.sqrt(np.mean(points ** 2, axis=0))
+        rms = np.sqrt(np.mean(points**2, axis=0))
         result = np.maximum(spread, rms)
     else:
         try:
             result = np.asarray(scale, dtype=float)
         except (TypeError, ValueError):
-            raise UqgearError(f"scale: expected one number or one per component ({n_components}); "
-                              f"got {scale!r}") from None
+            raise UqgearError(
+                f"scale: expected one number or one per component ({n_components}); got {scale!r}"
+            ) from None
         if result.ndim > 1 or result.size not in (1, n_components):
-            raise UqgearError(f"scale: expected one number or one per component ({n_components}); "
-                              f"got {scale!r}")
+            raise UqgearError(f"scale: expected one number or one per component ({n_components}); got {scale!r}")
         result = np.broadcast_to(result.reshape(-1), (n_components,)).copy()
         if not np.all(np.isfinite(result)) or np.any(result < 0.0):
             raise UqgearError(f"scale: expected non-negative finite numbers; got {scale!r}")
@@ -168,8 +170,9 @@ def _component_scale(points: np.ndarray, scale: Any) -> np.ndarray:
     return np.where(result > 0.0, result, np.finfo(float).tiny)
 
 
-def detect_period(points: Any, max_period: int = 8, rtol: float = 1e-3,
-                  scale: float | Sequence[float] | None = None) -> int:
+def detect_period(
+    points: Any, max_period: int = 8, rtol: float = 1e-3, scale: float | Sequence[float] | np.ndarray | None = None
+) -> int:
     """Smallest period of a Poincare sequence.
 
     Parameters
@@ -207,8 +210,9 @@ def detect_period(points: Any, max_period: int = 8, rtol: float = 1e-3,
     return 0
 
 
-def count_distinct_points(points: Any, rtol: float = 1e-3,
-                          scale: float | Sequence[float] | None = None) -> int:
+def count_distinct_points(
+    points: Any, rtol: float = 1e-3, scale: float | Sequence[float] | np.ndarray | None = None
+) -> int:
     """Number of distinct Poincare points: clusters of diameter <= ``rtol * scale``.
 
     Complete-linkage clustering with the Chebyshev distance on the scaled
@@ -253,11 +257,11 @@ def _zero_one_median(series: np.ndarray, frequencies: np.ndarray, constant_toler
         msd[:, index] = np.mean((p[:, lag:] - p[:, :-lag]) ** 2 + (q[:, lag:] - q[:, :-lag]) ** 2, axis=1)
     # Modified mean-square displacement D_c(n) = M_c(n) - V_osc(c, n): the
     # oscillatory term of a non-zero mean is removed before correlating.
-    oscillation = mean ** 2 * (1.0 - np.cos(np.outer(frequencies, lags))) / (1.0 - np.cos(frequencies))[:, None]
+    oscillation = mean**2 * (1.0 - np.cos(np.outer(frequencies, lags))) / (1.0 - np.cos(frequencies))[:, None]
     displacement = msd - oscillation
     centred_lags = lags - lags.mean()
     centred = displacement - displacement.mean(axis=1, keepdims=True)
-    norms = np.sqrt(np.sum(centred ** 2, axis=1) * np.sum(centred_lags ** 2))
+    norms = np.sqrt(np.sum(centred**2, axis=1) * np.sum(centred_lags**2))
     with np.errstate(invalid="ignore", divide="ignore"):
         correlation = np.where(norms > 0.0, centred @ centred_lags / norms, 0.0)
     return float(np.median(correlation))
@@ -297,8 +301,10 @@ def zero_one_test(series: Any, seed: Seed = 0, n_c: int = 100) -> float:
     if array.ndim != 1:
         raise UqgearError(f"series: expected a 1-D sequence; got an array of shape {array.shape}")
     if array.size < MIN_ZERO_ONE_POINTS:
-        raise UqgearError(f"series: the 0-1 test needs at least {MIN_ZERO_ONE_POINTS} values "
-                          f"(keep more Poincare periods); got {array.size}")
+        raise UqgearError(
+            f"series: the 0-1 test needs at least {MIN_ZERO_ONE_POINTS} values "
+            f"(keep more Poincare periods); got {array.size}"
+        )
     if not np.all(np.isfinite(array)):
         raise UqgearError("series: expected finite values; got NaN or infinity")
     return _zero_one_median(array, _zero_one_frequencies(seed, n_c))
@@ -307,6 +313,7 @@ def zero_one_test(series: Any, seed: Seed = 0, n_c: int = 100) -> float:
 # ----------------------------------------------------------------------------
 # classification
 # ----------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class ResponseClass:
@@ -343,26 +350,42 @@ class ResponseClass:
         return str(self.evidence.get("reason", ""))
 
 
-def _decide(period: int, k: float, lyapunov: float | None, n_distinct: int, n_points: int,
-            max_period: int, rtol: float, k_threshold: float, lyapunov_threshold: float,
-            min_repeats: int) -> tuple[str, int, str]:
+def _decide(
+    period: int,
+    k: float,
+    lyapunov: float | None,
+    n_distinct: int,
+    n_points: int,
+    max_period: int,
+    rtol: float,
+    k_threshold: float,
+    lyapunov_threshold: float,
+    min_repeats: int,
+) -> tuple[str, int, str]:
     k_chaotic = k > k_threshold
     k_text = f"0-1 test K={k:.3f} {'>' if k_chaotic else '<='} {k_threshold:g}"
     lyapunov_text = ""
     if lyapunov is not None:
-        lyapunov_text = (f"largest Lyapunov exponent {lyapunov:.3g} per mesh period "
-                         f"{'>' if lyapunov > lyapunov_threshold else '<='} {lyapunov_threshold:g}")
+        lyapunov_text = (
+            f"largest Lyapunov exponent {lyapunov:.3g} per mesh period "
+            f"{'>' if lyapunov > lyapunov_threshold else '<='} {lyapunov_threshold:g}"
+        )
     if period > 0 and period * min_repeats <= n_points:
-        reason = (f"the Poincare sequence repeats every {period} mesh period(s) to within "
-                  f"rtol={rtol:g} ({n_distinct} distinct point(s) of {n_points})")
+        reason = (
+            f"the Poincare sequence repeats every {period} mesh period(s) to within "
+            f"rtol={rtol:g} ({n_distinct} distinct point(s) of {n_points})"
+        )
         if lyapunov is not None and lyapunov > lyapunov_threshold:
             reason += f"; note: Lyapunov exponent {lyapunov:.3g} > {lyapunov_threshold:g} disagrees"
         return f"period-{period}", period, reason
     if period > 0:
-        reason = (f"the Poincare sequence repeats every {period} mesh periods to within rtol={rtol:g}, "
-                  f"but only {n_points / period:.3g} times in {n_points} kept periods (fewer than "
-                  f"{min_repeats}): a long period or a quasi-periodic orbit, not told apart ({k_text}"
-                  + (f"; {lyapunov_text}" if lyapunov_text else "") + ")")
+        reason = (
+            f"the Poincare sequence repeats every {period} mesh periods to within rtol={rtol:g}, "
+            f"but only {n_points / period:.3g} times in {n_points} kept periods (fewer than "
+            f"{min_repeats}): a long period or a quasi-periodic orbit, not told apart ({k_text}"
+            + (f"; {lyapunov_text}" if lyapunov_text else "")
+            + ")"
+        )
         return LONG_PERIOD, 0, reason
     start = f"no period <= {max_period}, {n_distinct} distinct points of {n_points}; "
     if lyapunov is not None:
@@ -380,11 +403,19 @@ def _decide(period: int, k: float, lyapunov: float | None, n_distinct: int, n_po
     return QUASI_PERIODIC, 0, start + k_text + ": bounded, regular, non-repeating"
 
 
-def classify_response(poincare_points: Any, *, max_period: int | None = None, rtol: float = 1e-3,
-                      scale: float | Sequence[float] | None = None, lyapunov: float | None = None,
-                      seed: Seed = 0, n_c: int = 100, k_threshold: float = 0.5,
-                      lyapunov_threshold: float = 0.01,
-                      min_repeats: int = MIN_PERIOD_REPEATS) -> ResponseClass:
+def classify_response(
+    poincare_points: Any,
+    *,
+    max_period: int | None = None,
+    rtol: float = 1e-3,
+    scale: float | Sequence[float] | np.ndarray | None = None,
+    lyapunov: float | None = None,
+    seed: Seed = 0,
+    n_c: int = 100,
+    k_threshold: float = 0.5,
+    lyapunov_threshold: float = 0.01,
+    min_repeats: int = MIN_PERIOD_REPEATS,
+) -> ResponseClass:
     """Classify a steady response from its Poincare points.
 
     Parameters
@@ -421,8 +452,10 @@ def classify_response(poincare_points: Any, *, max_period: int | None = None, rt
     rtol = _check_positive("rtol", rtol)
     array = _as_points(poincare_points, "poincare_points")
     if array.shape[0] < MIN_ZERO_ONE_POINTS:
-        raise UqgearError(f"poincare_points: expected at least {MIN_ZERO_ONE_POINTS} Poincare points "
-                          f"(keep more periods); got {array.shape[0]}")
+        raise UqgearError(
+            f"poincare_points: expected at least {MIN_ZERO_ONE_POINTS} Poincare points "
+            f"(keep more periods); got {array.shape[0]}"
+        )
     max_period = _resolve_max_period(max_period, array.shape[0])
     min_repeats = _check_min_repeats(min_repeats)
     if lyapunov is not None:
@@ -433,20 +466,44 @@ def classify_response(poincare_points: Any, *, max_period: int | None = None, rt
         if math.isnan(lyapunov):
             lyapunov = None
     component_scale = _component_scale(array, scale)
-    return _classify_points(array, component_scale, _zero_one_frequencies(seed, n_c), max_period, rtol,
-                            lyapunov, float(k_threshold), float(lyapunov_threshold), min_repeats)
+    return _classify_points(
+        array,
+        component_scale,
+        _zero_one_frequencies(seed, n_c),
+        max_period,
+        rtol,
+        lyapunov,
+        float(k_threshold),
+        float(lyapunov_threshold),
+        min_repeats,
+    )
 
 
-def _classify_points(array: np.ndarray, component_scale: np.ndarray, frequencies: np.ndarray,
-                     max_period: int, rtol: float, lyapunov: float | None, k_threshold: float,
-                     lyapunov_threshold: float, min_repeats: int = MIN_PERIOD_REPEATS) -> ResponseClass:
+def _classify_points(
+    array: np.ndarray,
+    component_scale: np.ndarray,
+    frequencies: np.ndarray,
+    max_period: int,
+    rtol: float,
+    lyapunov: float | None,
+    k_threshold: float,
+    lyapunov_threshold: float,
+    min_repeats: int = MIN_PERIOD_REPEATS,
+) -> ResponseClass:
     repeat = detect_period(array, max_period, rtol, component_scale)
     n_distinct = count_distinct_points(array, rtol, component_scale)
     k = _zero_one_median(array[:, 0], frequencies, constant_tolerance=rtol * component_scale[0])
-    label, period, reason = _decide(repeat, k, lyapunov, n_distinct, array.shape[0], max_period, rtol,
-                                    k_threshold, lyapunov_threshold, min_repeats)
-    evidence = {"n_points": int(array.shape[0]), "distinct_points": n_distinct, "zero_one_k": k,
-                "largest_lyapunov": lyapunov, "repeat_period": int(repeat), "reason": reason}
+    label, period, reason = _decide(
+        repeat, k, lyapunov, n_distinct, array.shape[0], max_period, rtol, k_threshold, lyapunov_threshold, min_repeats
+    )
+    evidence = {
+        "n_points": int(array.shape[0]),
+        "distinct_points": n_distinct,
+        "zero_one_k": k,
+        "largest_lyapunov": lyapunov,
+        "repeat_period": int(repeat),
+        "reason": reason,
+    }
     return ResponseClass(label, period, evidence)
 
 
@@ -472,15 +529,18 @@ def _lyapunov_per_period(ds: xr.Dataset) -> xr.DataArray | None:
     if units in {"s-1", "1/s", "hz", "s^-1"}:
         angular = _mesh_angular_frequency(ds)
         if angular is None:
-            warnings.warn("largest_lyapunov is in 1/s but the Dataset gives no mesh frequency "
-                          "(mesh_frequency, or pinion_speed and attrs z1); the exponent is ignored",
-                          stacklevel=3)
+            warnings.warn(
+                "largest_lyapunov is in 1/s but the Dataset gives no mesh frequency "
+                "(mesh_frequency, or pinion_speed and attrs z1); the exponent is ignored",
+                stacklevel=3,
+            )
             return None
         return exponent * (2.0 * math.pi / angular)
     if units in {"", "1", "1/period", "period-1", "permeshperiod", "1/meshperiod", "meshperiod-1"}:
         return exponent
-    warnings.warn(f"largest_lyapunov has units {units!r}, expected 1/s or per mesh period; "
-                  f"the exponent is ignored", stacklevel=3)
+    warnings.warn(
+        f"largest_lyapunov has units {units!r}, expected 1/s or per mesh period; the exponent is ignored", stacklevel=3
+    )
     return None
 
 
@@ -494,9 +554,17 @@ def _scale_array(x_scale: Any, angular: Any, has_velocity: bool) -> np.ndarray |
     return np.array([x_scale, x_scale * angular], dtype=float)
 
 
-def classify_dataset(ds: xr.Dataset, *, max_period: int | None = None, rtol: float = 1e-3, seed: Seed = 0,
-                     n_c: int = 100, k_threshold: float = 0.5, lyapunov_threshold: float = 0.01,
-                     min_repeats: int = MIN_PERIOD_REPEATS) -> ResponseClass:
+def classify_dataset(
+    ds: xr.Dataset,
+    *,
+    max_period: int | None = None,
+    rtol: float = 1e-3,
+    seed: Seed = 0,
+    n_c: int = 100,
+    k_threshold: float = 0.5,
+    lyapunov_threshold: float = 0.01,
+    min_repeats: int = MIN_PERIOD_REPEATS,
+) -> ResponseClass:
     """Classify the response of one :func:`~uqgear.physics.integration.simulate` run.
 
     Uses ``poincare_x`` and, when present, ``poincare_x_velocity``. The scale
@@ -509,8 +577,10 @@ def classify_dataset(ds: xr.Dataset, *, max_period: int | None = None, rtol: flo
     """
     _require(ds, ["poincare_x"], "classify_dataset")
     if set(ds["poincare_x"].dims) != {"period"}:
-        raise UqgearError(f"classify_dataset: poincare_x should have the single dim 'period'; "
-                          f"it has {ds['poincare_x'].dims} (use classify_batch for a batch)")
+        raise UqgearError(
+            f"classify_dataset: poincare_x should have the single dim 'period'; "
+            f"it has {ds['poincare_x'].dims} (use classify_batch for a batch)"
+        )
     columns = [ds["poincare_x"].values]
     has_velocity = "poincare_x_velocity" in ds.variables
     if has_velocity:
@@ -519,15 +589,33 @@ def classify_dataset(ds: xr.Dataset, *, max_period: int | None = None, rtol: flo
     scale = _scale_array(x_scale, _mesh_angular_frequency(ds), has_velocity)
     exponent = _lyapunov_per_period(ds)
     lyapunov = None if exponent is None else float(exponent)
-    return classify_response(np.column_stack(columns), max_period=max_period, rtol=rtol, scale=scale,
-                             lyapunov=lyapunov, seed=seed, n_c=n_c, k_threshold=k_threshold,
-                             lyapunov_threshold=lyapunov_threshold, min_repeats=min_repeats)
+    return classify_response(
+        np.column_stack(columns),
+        max_period=max_period,
+        rtol=rtol,
+        scale=scale,
+        lyapunov=lyapunov,
+        seed=seed,
+        n_c=n_c,
+        k_threshold=k_threshold,
+        lyapunov_threshold=lyapunov_threshold,
+        min_repeats=min_repeats,
+    )
 
 
-def _classify_runs(points: list[np.ndarray], x_scale: np.ndarray | None, angular: np.ndarray | None,
-                   exponent: np.ndarray | None, has_velocity: bool, frequencies: np.ndarray, max_period: int,
-                   rtol: float, k_threshold: float, lyapunov_threshold: float,
-                   min_repeats: int = MIN_PERIOD_REPEATS) -> dict[str, np.ndarray]:
+def _classify_runs(
+    points: list[np.ndarray],
+    x_scale: np.ndarray | None,
+    angular: np.ndarray | None,
+    exponent: np.ndarray | None,
+    has_velocity: bool,
+    frequencies: np.ndarray,
+    max_period: int,
+    rtol: float,
+    k_threshold: float,
+    lyapunov_threshold: float,
+    min_repeats: int = MIN_PERIOD_REPEATS,
+) -> dict[str, np.ndarray]:
     """Regime, period, 0-1 test K, Lyapunov exponent per mesh period, distinct points and reason of each
     run (rows of the ``points`` components)."""
     n_runs = points[0].shape[0]
@@ -543,8 +631,9 @@ def _classify_runs(points: list[np.ndarray], x_scale: np.ndarray | None, angular
             regime[run] = UNDETERMINED
             reason[run] = "non-finite Poincare points (a failed or diverged run)"
             continue
-        scale = _scale_array(None if x_scale is None else x_scale[run],
-                             None if angular is None else angular[run], has_velocity)
+        scale = _scale_array(
+            None if x_scale is None else x_scale[run], None if angular is None else angular[run], has_velocity
+        )
         if scale is not None and not np.all(np.isfinite(scale)):
             scale = None
         component_scale = _component_scale(array, scale)
@@ -552,20 +641,43 @@ def _classify_runs(points: list[np.ndarray], x_scale: np.ndarray | None, angular
         if exponent is not None and np.isfinite(exponent[run]):
             lyapunov = float(exponent[run])
             lyapunov_per_period[run] = lyapunov
-        result = _classify_points(array, component_scale, frequencies, max_period, rtol, lyapunov,
-                                  k_threshold, lyapunov_threshold, min_repeats)
+        result = _classify_points(
+            array,
+            component_scale,
+            frequencies,
+            max_period,
+            rtol,
+            lyapunov,
+            k_threshold,
+            lyapunov_threshold,
+            min_repeats,
+        )
         regime[run] = result.label
         reason[run] = result.reason
         response_period[run] = result.period
         zero_one_k[run] = result.evidence["zero_one_k"]
         distinct[run] = result.evidence["distinct_points"]
-    return {"regime": regime, "response_period": response_period, "zero_one_k": zero_one_k,
-            "lyapunov_per_period": lyapunov_per_period, "distinct_points": distinct, "regime_reason": reason}
+    return {
+        "regime": regime,
+        "response_period": response_period,
+        "zero_one_k": zero_one_k,
+        "lyapunov_per_period": lyapunov_per_period,
+        "distinct_points": distinct,
+        "regime_reason": reason,
+    }
 
 
-def classify_batch(ds: xr.Dataset, *, max_period: int | None = None, rtol: float = 1e-3, seed: Seed = 0,
-                   n_c: int = 100, k_threshold: float = 0.5, lyapunov_threshold: float = 0.01,
-                   min_repeats: int = MIN_PERIOD_REPEATS) -> xr.Dataset:
+def classify_batch(
+    ds: xr.Dataset,
+    *,
+    max_period: int | None = None,
+    rtol: float = 1e-3,
+    seed: Seed = 0,
+    n_c: int = 100,
+    k_threshold: float = 0.5,
+    lyapunov_threshold: float = 0.01,
+    min_repeats: int = MIN_PERIOD_REPEATS,
+) -> xr.Dataset:
     """Classify every run of a :func:`~uqgear.physics.integration.simulate_batch` result.
 
     Every dim of ``poincare_x`` other than ``period`` (``sample``, or the
@@ -593,8 +705,10 @@ def classify_batch(ds: xr.Dataset, *, max_period: int | None = None, rtol: float
         raise UqgearError(f"classify_batch: poincare_x should have a 'period' dim; it has {poincare_x.dims}")
     rtol = _check_positive("rtol", rtol)
     if poincare_x.sizes["period"] < MIN_ZERO_ONE_POINTS:
-        raise UqgearError(f"classify_batch: expected at least {MIN_ZERO_ONE_POINTS} Poincare periods "
-                          f"(keep_periods); got {poincare_x.sizes['period']}")
+        raise UqgearError(
+            f"classify_batch: expected at least {MIN_ZERO_ONE_POINTS} Poincare periods "
+            f"(keep_periods); got {poincare_x.sizes['period']}"
+        )
     max_period = _resolve_max_period(max_period, poincare_x.sizes["period"])
     min_repeats = _check_min_repeats(min_repeats)
     frequencies = _zero_one_frequencies(seed, n_c)
@@ -604,21 +718,33 @@ def classify_batch(ds: xr.Dataset, *, max_period: int | None = None, rtol: float
 
     def per_run(value: xr.DataArray | float) -> np.ndarray:
         # One number per run, in the flattened run order of the points.
-        if isinstance(value, xr.DataArray):
-            value = value.broadcast_like(template).transpose(*run_dims).values
-        return np.broadcast_to(np.asarray(value, dtype=float), template.shape).reshape(-1)
+        values = (
+            value.broadcast_like(template).transpose(*run_dims).values if isinstance(value, xr.DataArray) else value
+        )
+        return np.broadcast_to(np.asarray(values, dtype=float), template.shape).reshape(-1)
 
     points = [poincare_x.transpose(*run_dims, "period").values.reshape(-1, poincare_x.sizes["period"])]
     if has_velocity:
         points.append(ds["poincare_x_velocity"].transpose(*run_dims, "period").values.reshape(points[0].shape))
     x_scale = per_run(ds["dte_peak_to_peak"]) if "dte_peak_to_peak" in ds.variables else None
-    angular = _mesh_angular_frequency(ds)
-    angular = per_run(angular) if angular is not None else None
-    exponent = _lyapunov_per_period(ds)
-    exponent = per_run(exponent) if exponent is not None else None
+    mesh_angular = _mesh_angular_frequency(ds)
+    angular = per_run(mesh_angular) if mesh_angular is not None else None
+    per_period = _lyapunov_per_period(ds)
+    exponent = per_run(per_period) if per_period is not None else None
 
-    runs = _classify_runs(points, x_scale, angular, exponent, has_velocity, frequencies, max_period, rtol,
-                          float(k_threshold), float(lyapunov_threshold), min_repeats)
+    runs = _classify_runs(
+        points,
+        x_scale,
+        angular,
+        exponent,
+        has_velocity,
+        frequencies,
+        max_period,
+        rtol,
+        float(k_threshold),
+        float(lyapunov_threshold),
+        min_repeats,
+    )
 
     def build(values: np.ndarray, attrs: dict[str, str]) -> xr.DataArray:
         return template.copy(data=values.reshape(template.shape)).assign_attrs(attrs)
@@ -627,19 +753,34 @@ def classify_batch(ds: xr.Dataset, *, max_period: int | None = None, rtol: float
     reasons = np.array([str(text) for text in runs["regime_reason"]], dtype=str)
     return xr.Dataset(
         {
-            "regime": build(labels, {"long_name": "response regime (period-n, quasi_periodic_or_long_period, "
-                                                  "quasi-periodic, chaotic, uncertain, undetermined)"}),
-            "response_period": build(runs["response_period"],
-                                     {"units": "1", "long_name": "period n of a period-n response, 0 otherwise"}),
-            "zero_one_k": build(runs["zero_one_k"],
-                                {"units": "1", "long_name": "median K of the 0-1 test for chaos"}),
-            "lyapunov_per_period": build(runs["lyapunov_per_period"], {
-                "units": "1", "long_name": "largest Lyapunov exponent in nats per mesh period "
-                                           "(largest_lyapunov in s-1 times the mesh period)"}),
+            "regime": build(
+                labels,
+                {
+                    "long_name": "response regime (period-n, quasi_periodic_or_long_period, "
+                    "quasi-periodic, chaotic, uncertain, undetermined)"
+                },
+            ),
+            "response_period": build(
+                runs["response_period"], {"units": "1", "long_name": "period n of a period-n response, 0 otherwise"}
+            ),
+            "zero_one_k": build(runs["zero_one_k"], {"units": "1", "long_name": "median K of the 0-1 test for chaos"}),
+            "lyapunov_per_period": build(
+                runs["lyapunov_per_period"],
+                {
+                    "units": "1",
+                    "long_name": "largest Lyapunov exponent in nats per mesh period "
+                    "(largest_lyapunov in s-1 times the mesh period)",
+                },
+            ),
             "distinct_points": build(runs["distinct_points"], {"units": "1", "long_name": "distinct Poincare points"}),
             "regime_reason": build(reasons, {"long_name": "evidence for the regime"}),
         },
-        attrs={"max_period": max_period, "rtol": rtol, "k_threshold": float(k_threshold),
-               "lyapunov_threshold": float(lyapunov_threshold), "min_repeats": min_repeats,
-               "zero_one_n_c": int(frequencies.size)},
+        attrs={
+            "max_period": max_period,
+            "rtol": rtol,
+            "k_threshold": float(k_threshold),
+            "lyapunov_threshold": float(lyapunov_threshold),
+            "min_repeats": min_repeats,
+            "zero_one_n_c": int(frequencies.size),
+        },
     )

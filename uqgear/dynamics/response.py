@@ -4,13 +4,13 @@ contact-state fractions and the response quantities of interest."""
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 import xarray as xr
 
 from ..common.errors import UqgearError
 from ._checks import _require, _require_attr
-
 
 _CONTACT_STATES = {"fraction_drive_contact": 1, "fraction_separation": 0, "fraction_back_contact": -1}
 _CONTACT_LONG_NAMES = {
@@ -41,10 +41,8 @@ def phase_plane(ds: xr.Dataset, variable: str = "x") -> xr.Dataset:
     _require(ds, [variable, velocity_name], "phase_plane")
     displacement = ds[variable].copy()
     velocity = ds[velocity_name].copy()
-    displacement.attrs = {"units": ds[variable].attrs.get("units", "m"),
-                          "long_name": f"{variable} displacement"}
-    velocity.attrs = {"units": ds[velocity_name].attrs.get("units", "m s-1"),
-                      "long_name": f"{variable} velocity"}
+    displacement.attrs = {"units": ds[variable].attrs.get("units", "m"), "long_name": f"{variable} displacement"}
+    velocity.attrs = {"units": ds[velocity_name].attrs.get("units", "m s-1"), "long_name": f"{variable} velocity"}
     return xr.Dataset({"displacement": displacement, "velocity": velocity}, attrs={"variable": variable})
 
 
@@ -61,8 +59,9 @@ def poincare_section(ds: xr.Dataset) -> xr.Dataset:
         raise UqgearError(f"poincare_section: expected an xarray Dataset; got {type(ds).__name__}")
     names = [name for name in ds.data_vars if str(name).startswith("poincare_")]
     if not names:
-        raise UqgearError("poincare_section: the Dataset has no poincare_* variables "
-                          "(expected poincare_x, poincare_x_velocity, ...)")
+        raise UqgearError(
+            "poincare_section: the Dataset has no poincare_* variables (expected poincare_x, poincare_x_velocity, ...)"
+        )
     return ds[names].copy()
 
 
@@ -86,8 +85,20 @@ def contact_fractions(ds: xr.Dataset) -> xr.Dataset:
     unexpected = sorted(set(values.tolist()) - {-1, 0, 1})
     if unexpected:
         raise UqgearError(f"contact_fractions: 'contact' should hold only -1, 0 and 1; got {unexpected[:5]}")
-    return xr.Dataset({name: (contact == state).mean("time").astype(float).assign_attrs(
-        units="1", long_name=_CONTACT_LONG_NAMES[name]) for name, state in _CONTACT_STATES.items()})
+    return xr.Dataset(
+        {
+            name: (contact == state)
+            .mean("time")
+            .astype(float)
+            .assign_attrs(units="1", long_name=_CONTACT_LONG_NAMES[name])
+            for name, state in _CONTACT_STATES.items()
+        }
+    )
+
+
+def _sqrt(values: xr.DataArray) -> xr.DataArray:
+    """np.sqrt of a DataArray, which stays a DataArray (NumPy's stubs type the result as an ndarray)."""
+    return cast(xr.DataArray, np.sqrt(values))
 
 
 def response_qois(ds: xr.Dataset) -> xr.Dataset:
@@ -117,8 +128,10 @@ def response_qois(ds: xr.Dataset) -> xr.Dataset:
         raise UqgearError(f"response_qois: 'x' should have a 'time' dim; it has {ds['x'].dims}")
     static_force = _require_attr(ds, "static_mesh_force", "response_qois")
     if static_force == 0.0 or not math.isfinite(static_force):
-        raise UqgearError(f"response_qois: attribute static_mesh_force should be a non-zero number "
-                          f"(a loaded mesh); got {static_force!r}")
+        raise UqgearError(
+            f"response_qois: attribute static_mesh_force should be a non-zero number "
+            f"(a loaded mesh); got {static_force!r}"
+        )
     rated_force = float(ds.attrs.get("rated_mesh_force", math.nan))
     if not (math.isfinite(rated_force) and rated_force > 0.0):
         rated_force = math.nan
@@ -127,21 +140,25 @@ def response_qois(ds: xr.Dataset) -> xr.Dataset:
     mean = x.mean("time")
     qois = {
         "dte_mean": mean.assign_attrs(units="m", long_name="mean dynamic transmission error x"),
-        "dte_rms": np.sqrt(((x - mean) ** 2).mean("time")).assign_attrs(
-            units="m", long_name="RMS of the dynamic transmission error about its mean"),
+        "dte_rms": _sqrt(((x - mean) ** 2).mean("time")).assign_attrs(
+            units="m", long_name="RMS of the dynamic transmission error about its mean"
+        ),
         "dte_peak_to_peak": (x.max("time") - x.min("time")).assign_attrs(
-            units="m", long_name="peak-to-peak dynamic transmission error"),
-        "dynamic_load_factor": ((ds["mesh_force"] * math.copysign(1.0, static_force)).max("time")
-                                / abs(static_force)).assign_attrs(
-            units="1", long_name="peak mesh force over the run's own static mesh force F_T (moves with T2)"),
-        "peak_mesh_force": peak_force.assign_attrs(
-            units="N", long_name="largest mesh force F in the kept section"),
+            units="m", long_name="peak-to-peak dynamic transmission error"
+        ),
+        "dynamic_load_factor": (
+            (ds["mesh_force"] * math.copysign(1.0, static_force)).max("time") / abs(static_force)
+        ).assign_attrs(units="1", long_name="peak mesh force over the run's own static mesh force F_T (moves with T2)"),
+        "peak_mesh_force": peak_force.assign_attrs(units="N", long_name="largest mesh force F in the kept section"),
         "load_factor_rated": (peak_force / rated_force).assign_attrs(
-            units="1", long_name="peak mesh force over the rated mesh force T1_rated / r_b1"),
-        "acc_pinion_rms": np.sqrt((ds["y1_acceleration"] ** 2).mean("time")).assign_attrs(
-            units="m s-2", long_name="RMS pinion acceleration along the line of action"),
-        "acc_gear_rms": np.sqrt((ds["y2_acceleration"] ** 2).mean("time")).assign_attrs(
-            units="m s-2", long_name="RMS gear acceleration along the line of action"),
+            units="1", long_name="peak mesh force over the rated mesh force T1_rated / r_b1"
+        ),
+        "acc_pinion_rms": _sqrt((ds["y1_acceleration"] ** 2).mean("time")).assign_attrs(
+            units="m s-2", long_name="RMS pinion acceleration along the line of action"
+        ),
+        "acc_gear_rms": _sqrt((ds["y2_acceleration"] ** 2).mean("time")).assign_attrs(
+            units="m s-2", long_name="RMS gear acceleration along the line of action"
+        ),
     }
     result = xr.Dataset(qois)
     return result.merge(contact_fractions(ds))

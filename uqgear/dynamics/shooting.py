@@ -49,8 +49,14 @@ class ShootingError(UqgearError):
     """No periodic orbit was found from the given start (Newton did not converge)."""
 
 
-def setup_at(design: Design, values: Mapping[str, float], *, damping_in_separation: bool = True,
-             stiffness: str = "ishikawa", effects: Sequence[Any] = ()) -> ModelSetup:
+def setup_at(
+    design: Design,
+    values: Mapping[str, float],
+    *,
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    effects: Sequence[Any] = (),
+) -> ModelSetup:
     """The model set-up at one operating point given as ``{variable: value}``.
 
     Parameters
@@ -72,17 +78,25 @@ def setup_at(design: Design, values: Mapping[str, float], *, damping_in_separati
     """
     unknown = [name for name in values if name not in ORBIT_VARIABLES and name not in BATCH_DESIGN_KEYS]
     if unknown:
-        raise OperatingPointError(f"{unknown[0]}: not a variable of the model; expected one of "
-                                  f"{', '.join(ORBIT_VARIABLES)} or a design key")
+        raise OperatingPointError(
+            f"{unknown[0]}: not a variable of the model; expected one of {', '.join(ORBIT_VARIABLES)} or a design key"
+        )
     if "pinion_speed" not in values:
         raise OperatingPointError("pinion_speed: missing; expected the pinion speed in rpm")
     keys = {name: float(value) for name, value in values.items() if name in BATCH_DESIGN_KEYS}
     local = design.replace(**keys) if keys else design
     drive = float(values.get("drive_torque", design.operation.drive_torque))
     adhesion = float(values.get("adhesion_torque", drive * design.z2 / design.z1))
-    setup = build_model(local, float(values["pinion_speed"]), drive, adhesion,
-                        mesh_stiffness_scale=float(values.get("mesh_stiffness_scale", 1.0)), effects=effects,
-                        damping_in_separation=damping_in_separation, stiffness=stiffness)
+    setup = build_model(
+        local,
+        float(values["pinion_speed"]),
+        drive,
+        adhesion,
+        mesh_stiffness_scale=float(values.get("mesh_stiffness_scale", 1.0)),
+        effects=effects,
+        damping_in_separation=damping_in_separation,
+        stiffness=stiffness,
+    )
     check_mesh_periodic(setup)
     return setup
 
@@ -91,11 +105,15 @@ def check_mesh_periodic(setup: ModelSetup) -> None:
     """Refuse a model that does not repeat every mesh period (no periodic orbit of the mesh-period map)."""
     others = [effect.name for effect in setup.effects if effect.name not in MESH_PERIODIC_EFFECTS]
     if others:
-        raise OperatingPointError(f"effects: {others[0]} breaks the mesh periodicity the Poincare map needs; "
-                                  f"periodic orbits allow only {', '.join(MESH_PERIODIC_EFFECTS)}")
+        raise OperatingPointError(
+            f"effects: {others[0]} breaks the mesh periodicity the Poincare map needs; "
+            f"periodic orbits allow only {', '.join(MESH_PERIODIC_EFFECTS)}"
+        )
     if setup.parameters[K.PITCH_ERRORS] != 0.0 or setup.parameters[K.TOOTH_FACTORS] != 0.0:
-        raise OperatingPointError("pitch_errors: per-tooth errors repeat only once per hunting period, not every "
-                                  "mesh period; periodic orbits need a model without them")
+        raise OperatingPointError(
+            "pitch_errors: per-tooth errors repeat only once per hunting period, not every "
+            "mesh period; periodic orbits need a model without them"
+        )
 
 
 @dataclass(frozen=True)
@@ -142,8 +160,9 @@ class PoincareMap:
     (6, 6)
     """
 
-    def __init__(self, setup: ModelSetup, *, steps: int | None = None, steps_per_mode: int = 24,
-                 discrete: bool = True) -> None:
+    def __init__(
+        self, setup: ModelSetup, *, steps: int | None = None, steps_per_mode: int = 24, discrete: bool = True
+    ) -> None:
         check_mesh_periodic(setup)
         self.setup = setup
         self.discrete = discrete
@@ -160,9 +179,21 @@ class PoincareMap:
         setup = self.setup
         phi = np.empty((6, 6))
         measures = np.empty(V.N_MEASURES)
-        end = V.orbit_pass(np.ascontiguousarray(state, dtype=float), int(n_periods), setup.parameters,
-                           setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear,
-                           setup.breakpoints, self.steps, bool(with_matrix), self.discrete, phi, measures)
+        end = V.orbit_pass(
+            np.ascontiguousarray(state, dtype=float),
+            int(n_periods),
+            setup.parameters,
+            setup.pair_stiffness,
+            setup.period_stiffness,
+            setup.factor_pinion,
+            setup.factor_gear,
+            setup.breakpoints,
+            self.steps,
+            bool(with_matrix),
+            self.discrete,
+            phi,
+            measures,
+        )
         self.passes += int(n_periods)
         return MapResult(end, phi if with_matrix else None, dict(zip(V.MEASURE_NAMES, measures.tolist())))
 
@@ -174,13 +205,15 @@ def orbit_qois(measures: Mapping[str, float], setup: ModelSetup) -> dict[str, fl
     return {
         "peak_mesh_force": measures["force_max"],
         "dynamic_load_factor": measures["force_max"] / setup.derived["static_mesh_force"]
-        if setup.derived["static_mesh_force"] > 0 else math.nan,
+        if setup.derived["static_mesh_force"] > 0
+        else math.nan,
         "load_factor_rated": measures["force_max"] / setup.derived["rated_mesh_force"],
         "dte_rms": math.sqrt(max(measures["x_square_sum"] / count - mean * mean, 0.0)),
         "dte_peak_to_peak": measures["x_max"] - measures["x_min"],
         "fraction_separation": measures["n_separation"] / count,
         "fraction_back_contact": measures["n_back"] / count,
-        "x_min": measures["x_min_curve"], "x_max": measures["x_max"],
+        "x_min": measures["x_min_curve"],
+        "x_max": measures["x_max"],
         # signed distances of the orbit's lowest DTE from the contact boundaries (< 0: it crosses)
         "separation_margin": measures["x_min_curve"] - float(setup.parameters[K.HALF_BACKLASH]),
         "back_side_margin": measures["x_min_curve"] + float(setup.parameters[K.HALF_BACKLASH]),
@@ -247,8 +280,9 @@ class ShootingSettings:
     steps_per_mode: int = 24
 
 
-def newton_orbit(mapping: PoincareMap, guess: np.ndarray, period: int, settings: ShootingSettings,
-                 scale: np.ndarray | None = None) -> PeriodicOrbit | None:
+def newton_orbit(
+    mapping: PoincareMap, guess: np.ndarray, period: int, settings: ShootingSettings, scale: np.ndarray | None = None
+) -> PeriodicOrbit | None:
     """Newton on P^n(s) - s = 0 from ``guess``, with a backtracking line search; None if it fails."""
     scale = mapping.setup.state_scale() if scale is None else scale
     state = np.asarray(guess, dtype=float).copy()
@@ -259,10 +293,16 @@ def newton_orbit(mapping: PoincareMap, guess: np.ndarray, period: int, settings:
         if not math.isfinite(norm):
             return None
         if norm < settings.tolerance:
-            return PeriodicOrbit(state=state, period=period, monodromy=result.monodromy,
-                                 multipliers=floquet_multipliers(result.monodromy),
-                                 qois=orbit_qois(result.measures, mapping.setup), residual=norm,
-                                 iterations=iteration)
+            assert result.monodromy is not None  # the map computes its matrix unless asked not to
+            return PeriodicOrbit(
+                state=state,
+                period=period,
+                monodromy=result.monodromy,
+                multipliers=floquet_multipliers(result.monodromy),
+                qois=orbit_qois(result.measures, mapping.setup),
+                residual=norm,
+                iterations=iteration,
+            )
         jacobian = result.monodromy * scale[None, :] / scale[:, None] - np.eye(6)
         try:
             update = np.linalg.solve(jacobian, -residual)
@@ -320,13 +360,27 @@ class Shooting:
         mapping = PoincareMap(setup, steps_per_mode=self.settings.steps_per_mode)
         orbit = newton_orbit(mapping, guess, int(self.period), self.settings)
         if orbit is None:
-            raise ShootingError(f"no period-{self.period} orbit found from this start in "
-                                f"{self.settings.max_iterations} Newton iterations; start from a state on or near "
-                                "the orbit (e.g. the final state of a long run)")
+            raise ShootingError(
+                f"no period-{self.period} orbit found from this start in "
+                f"{self.settings.max_iterations} Newton iterations; start from a state on or near "
+                "the orbit (e.g. the final state of a long run)"
+            )
         self.map_ = mapping
         self.orbit_ = orbit
         return self
 
 
-__all__ = ["Shooting", "ShootingSettings", "ShootingError", "PeriodicOrbit", "PoincareMap", "MapResult", "setup_at",
-           "check_mesh_periodic", "orbit_qois", "newton_orbit", "MESH_PERIODIC_EFFECTS", "ORBIT_VARIABLES"]
+__all__ = [
+    "Shooting",
+    "ShootingSettings",
+    "ShootingError",
+    "PeriodicOrbit",
+    "PoincareMap",
+    "MapResult",
+    "setup_at",
+    "check_mesh_periodic",
+    "orbit_qois",
+    "newton_orbit",
+    "MESH_PERIODIC_EFFECTS",
+    "ORBIT_VARIABLES",
+]

@@ -24,17 +24,24 @@ def _as_signal(signal: Any, dim: str) -> tuple[xr.DataArray, str, Any]:
     else:
         values = np.asarray(signal, dtype=float)
         if values.ndim != 1:
-            raise UqgearError(f"signal: expected a 1-D array (or a DataArray with dim {dim!r}); "
-                              f"got an array of shape {values.shape}")
+            raise UqgearError(
+                f"signal: expected a 1-D array (or a DataArray with dim {dim!r}); got an array of shape {values.shape}"
+            )
         data_array = xr.DataArray(values, dims=[dim])
         units, name = "", None
     return data_array, units, name
 
 
-def amplitude_spectrum(signal: Any, sample_rate: float, *,
-                       against: Literal["frequency", "order"] = "frequency",
-                       shaft_speed_rpm: float | None = None, window: str = "hann",
-                       remove_mean: bool = True, dim: str = "time") -> xr.DataArray:
+def amplitude_spectrum(
+    signal: Any,
+    sample_rate: float,
+    *,
+    against: Literal["frequency", "order"] = "frequency",
+    shaft_speed_rpm: float | None = None,
+    window: str = "hann",
+    remove_mean: bool = True,
+    dim: str = "time",
+) -> xr.DataArray:
     """Single-sided amplitude spectrum, amplitude-correct for lines on a bin.
 
     The window's coherent gain is divided out, so a sine of amplitude ``A``
@@ -88,8 +95,10 @@ def amplitude_spectrum(signal: Any, sample_rate: float, *,
     try:
         taper = scipy.signal.get_window(window, n_samples, fftbins=True)
     except (ValueError, TypeError) as error:
-        raise UqgearError(f"window: expected a window name of scipy.signal.get_window "
-                          f"(hann, hamming, flattop, boxcar, ...); got {window!r} ({error})") from None
+        raise UqgearError(
+            f"window: expected a window name of scipy.signal.get_window "
+            f"(hann, hamming, flattop, boxcar, ...); got {window!r} ({error})"
+        ) from None
     if remove_mean:
         values = values - values.mean(axis=-1, keepdims=True)
     transform = np.fft.rfft(values * taper, axis=-1)
@@ -101,15 +110,29 @@ def amplitude_spectrum(signal: Any, sample_rate: float, *,
     frequency = np.fft.rfftfreq(n_samples, d=1.0 / sample_rate)
     other_dims = [d for d in data_array.transpose(..., dim).dims if d != dim]
     coords = {name_: coord for name_, coord in data_array.coords.items() if dim not in coord.dims}
-    attrs = {"units": units, "long_name": "single-sided amplitude spectrum" + (f" of {name}" if name else ""),
-             "window": window, "sample_rate": sample_rate, "mean_removed": int(bool(remove_mean))}
+    attrs = {
+        "units": units,
+        "long_name": "single-sided amplitude spectrum" + (f" of {name}" if name else ""),
+        "window": window,
+        "sample_rate": sample_rate,
+        "mean_removed": int(bool(remove_mean)),
+    }
     frequency_coord = xr.Variable("frequency", frequency, {"units": "Hz", "long_name": "frequency"})
-    result = xr.DataArray(amplitude, dims=[*other_dims, "frequency"],
-                          coords={**coords, "frequency": frequency_coord}, attrs=attrs, name="amplitude")
+    result = xr.DataArray(
+        amplitude,
+        dims=[*other_dims, "frequency"],
+        coords={**coords, "frequency": frequency_coord},
+        attrs=attrs,
+        name="amplitude",
+    )
     if against == "order":
+        assert shaft_speed_rpm is not None  # checked above for a spectrum against order
         shaft_frequency = shaft_speed_rpm / 60.0
-        order = xr.Variable("frequency", frequency / shaft_frequency,
-                            {"units": "1", "long_name": "order (multiples of the shaft rotation frequency)"})
+        order = xr.Variable(
+            "frequency",
+            frequency / shaft_frequency,
+            {"units": "1", "long_name": "order (multiples of the shaft rotation frequency)"},
+        )
         result = result.assign_coords(order=order).swap_dims({"frequency": "order"})
         result.attrs["shaft_speed_rpm"] = shaft_speed_rpm
     return result
@@ -128,9 +151,14 @@ def _time_step(ds: xr.Dataset, what: str) -> float:
     return step
 
 
-def spectrum_dataset(ds: xr.Dataset, variable: str | Sequence[str] = "x", *,
-                     against: Literal["frequency", "order"] = "frequency", window: str = "hann",
-                     remove_mean: bool = True) -> xr.Dataset:
+def spectrum_dataset(
+    ds: xr.Dataset,
+    variable: str | Sequence[str] = "x",
+    *,
+    against: Literal["frequency", "order"] = "frequency",
+    window: str = "hann",
+    remove_mean: bool = True,
+) -> xr.Dataset:
     """Amplitude spectra of variables of a :func:`~uqgear.physics.integration.simulate` run.
 
     The sample rate comes from the ``time`` coord, the shaft speed for orders
@@ -158,15 +186,19 @@ def spectrum_dataset(ds: xr.Dataset, variable: str | Sequence[str] = "x", *,
     _require(ds, names, "spectrum_dataset")
     for name in names:
         if "time" not in ds[name].dims:
-            raise UqgearError(f"spectrum_dataset: variable {name!r} has no 'time' dim "
-                              f"(dims {ds[name].dims}); expected a time history")
+            raise UqgearError(
+                f"spectrum_dataset: variable {name!r} has no 'time' dim (dims {ds[name].dims}); expected a time history"
+            )
     sample_rate = 1.0 / _time_step(ds, "spectrum_dataset")
     shaft_speed = None
     if against == "order":
         shaft_speed = _require_attr(ds, "pinion_speed", "spectrum_dataset")
-    spectra = {name: amplitude_spectrum(ds[name], sample_rate, against=against, shaft_speed_rpm=shaft_speed,
-                                        window=window, remove_mean=remove_mean).rename(name)
-               for name in names}
+    spectra = {
+        name: amplitude_spectrum(
+            ds[name], sample_rate, against=against, shaft_speed_rpm=shaft_speed, window=window, remove_mean=remove_mean
+        ).rename(name)
+        for name in names
+    }
     attrs = {key: ds.attrs[key] for key in ("pinion_speed", "mesh_frequency") if key in ds.attrs}
     if "z1" in ds.attrs:
         attrs["mesh_order"] = ds.attrs["z1"]

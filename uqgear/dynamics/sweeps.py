@@ -39,9 +39,17 @@ def _check_fixed(fixed: Mapping[str, float] | None, swept: Sequence[str]) -> dic
     return result
 
 
-def _run_and_classify(design: Any, samples: xr.Dataset, n_periods: int, keep_periods: int,
-                      lyapunov: bool, max_period: int | None, rtol: float, seed: Seed,
-                      evaluate: Callable[[xr.Dataset], xr.Dataset] | None = None) -> xr.Dataset:
+def _run_and_classify(
+    design: Any,
+    samples: xr.Dataset,
+    n_periods: int,
+    keep_periods: int,
+    lyapunov: bool,
+    max_period: int | None,
+    rtol: float,
+    seed: Seed,
+    evaluate: Callable[[xr.Dataset], xr.Dataset] | None = None,
+) -> xr.Dataset:
     if evaluate is not None:
         result = evaluate(samples)
     else:
@@ -50,16 +58,26 @@ def _run_and_classify(design: Any, samples: xr.Dataset, n_periods: int, keep_per
         from ..physics.design import load_design
         from ..physics.integration import simulate_batch
 
-        result = simulate_batch(load_design(design), samples, n_periods=n_periods, keep_periods=keep_periods,
-                                lyapunov=bool(lyapunov))
+        result = simulate_batch(
+            load_design(design), samples, n_periods=n_periods, keep_periods=keep_periods, lyapunov=bool(lyapunov)
+        )
     classes = classify_batch(result, max_period=max_period, rtol=rtol, seed=seed)
     return result.merge(classes, compat="override")
 
 
-def bifurcation(design: Any, parameter: str, values: Sequence[float], *,
-                fixed: Mapping[str, float] | None = None, n_periods: int = 400, keep_periods: int = 200,
-                lyapunov: bool = True, max_period: int | None = None, rtol: float = 1e-3,
-                seed: Seed = 0) -> xr.Dataset:
+def bifurcation(
+    design: Any,
+    parameter: str,
+    values: Sequence[float],
+    *,
+    fixed: Mapping[str, float] | None = None,
+    n_periods: int = 400,
+    keep_periods: int = 200,
+    lyapunov: bool = True,
+    max_period: int | None = None,
+    rtol: float = 1e-3,
+    seed: Seed = 0,
+) -> xr.Dataset:
     """Bifurcation diagram: Poincare values and regime against one parameter.
 
     Builds one ``samples`` Dataset (the swept ``parameter`` plus the ``fixed``
@@ -94,17 +112,35 @@ def bifurcation(design: Any, parameter: str, values: Sequence[float], *,
         ``zero_one_k`` and ``distinct_points``.
     """
     if not isinstance(parameter, str) or not parameter or parameter in ("sample", "period"):
-        raise UqgearError(f"parameter: expected the name of a sample variable such as 'pinion_speed'; "
-                          f"got {parameter!r}")
-    return sweep_grid(design, {parameter: values}, fixed=fixed, n_periods=n_periods,
-                      keep_periods=keep_periods, lyapunov=lyapunov, max_period=max_period, rtol=rtol,
-                      seed=seed)
+        raise UqgearError(
+            f"parameter: expected the name of a sample variable such as 'pinion_speed'; got {parameter!r}"
+        )
+    return sweep_grid(
+        design,
+        {parameter: values},
+        fixed=fixed,
+        n_periods=n_periods,
+        keep_periods=keep_periods,
+        lyapunov=lyapunov,
+        max_period=max_period,
+        rtol=rtol,
+        seed=seed,
+    )
 
 
-def sweep_grid(design: Any, parameters: Mapping[str, Sequence[float]], *,
-               fixed: Mapping[str, float] | None = None, n_periods: int = 400, keep_periods: int = 200,
-               lyapunov: bool = True, max_period: int | None = None, rtol: float = 1e-3,
-               seed: Seed = 0, evaluate: Callable[[xr.Dataset], xr.Dataset] | None = None) -> xr.Dataset:
+def sweep_grid(
+    design: Any,
+    parameters: Mapping[str, Sequence[float] | np.ndarray],
+    *,
+    fixed: Mapping[str, float] | None = None,
+    n_periods: int = 400,
+    keep_periods: int = 200,
+    lyapunov: bool = True,
+    max_period: int | None = None,
+    rtol: float = 1e-3,
+    seed: Seed = 0,
+    evaluate: Callable[[xr.Dataset], xr.Dataset] | None = None,
+) -> xr.Dataset:
     """Regime map over the full grid of several parameters (e.g. speed x adhesion torque).
 
     Parameters
@@ -144,8 +180,7 @@ def sweep_grid(design: Any, parameters: Mapping[str, Sequence[float]], *,
     data = {name: ("sample", index.get_level_values(name).to_numpy(dtype=float)) for name in names}
     data.update({name: ("sample", np.full(n_samples, value)) for name, value in constants.items()})
     samples = xr.Dataset(data)
-    result = _run_and_classify(design, samples, n_periods, keep_periods, lyapunov, max_period, rtol, seed,
-                               evaluate)
+    result = _run_and_classify(design, samples, n_periods, keep_periods, lyapunov, max_period, rtol, seed, evaluate)
     result = result.drop_vars([name for name in names if name in result.variables])
     if "sample" in result.variables:
         result = result.drop_vars("sample")

@@ -15,35 +15,118 @@ checks it).
 from __future__ import annotations
 
 from .design import (
-    Design, Operation, load_design, bundled_designs, design_from_json, DESIGN_KEYS,
-    OPTIONAL_DESIGN_KEYS, STANDARD_GRAVITY)
-from .geometry import (involute, ToothGeometry, PairGeometry, pair_geometry, check_geometry, geometry_notes,
-                       least_shift)
-from .generation import RackCorner, Undercut, undercut, tip_penetration
-from .stiffness import (
-    tooth_compliance, contact_compliance, single_pair_stiffness, iso6336_stiffness, mesh_stiffness,
-    stiffness_tables, StiffnessTables)
-from .model import (
-    build_model, ModelSetup, equivalent_mass, mean_mesh_force, rated_mesh_force, natural_frequencies, dimensionless,
-    STIFFNESS_MODES)
+    DESIGN_KEYS,
+    OPTIONAL_DESIGN_KEYS,
+    STANDARD_GRAVITY,
+    Design,
+    Operation,
+    bundled_designs,
+    design_from_json,
+    load_design,
+)
 from .effects import (
-    Effect, EffectParameter, EffectError, EFFECTS, make_effect, parse_effect, Eccentricity,
-    ToothDamage, Friction, TorqueRipple, AdhesionOscillation, BearingClearance)
-from .pitch_errors import PitchErrors, iso1328_single_pitch_tolerance, draw_pitch_errors
+    EFFECTS,
+    AdhesionOscillation,
+    BearingClearance,
+    Eccentricity,
+    Effect,
+    EffectError,
+    EffectParameter,
+    Friction,
+    ToothDamage,
+    TorqueRipple,
+    make_effect,
+    parse_effect,
+)
+from .generation import RackCorner, Undercut, tip_penetration, undercut
+from .geometry import PairGeometry, ToothGeometry, check_geometry, geometry_notes, involute, least_shift, pair_geometry
 from .integration import (
-    simulate, simulate_batch, build_batch, samples_from_mapping, steps_per_period, BatchEvaluator,
-    QOI_INFO, METHODS)
+    METHODS,
+    QOI_INFO,
+    BatchEvaluator,
+    build_batch,
+    samples_from_mapping,
+    simulate,
+    simulate_batch,
+    steps_per_period,
+)
+from .model import (
+    STIFFNESS_MODES,
+    ModelSetup,
+    build_model,
+    dimensionless,
+    equivalent_mass,
+    mean_mesh_force,
+    natural_frequencies,
+    rated_mesh_force,
+)
+from .pitch_errors import PitchErrors, draw_pitch_errors, iso1328_single_pitch_tolerance
+from .stiffness import (
+    StiffnessTables,
+    contact_compliance,
+    iso6336_stiffness,
+    mesh_stiffness,
+    single_pair_stiffness,
+    stiffness_tables,
+    tooth_compliance,
+)
 
 __all__ = [
-    'Design', 'Operation', 'load_design', 'bundled_designs', 'design_from_json', 'DESIGN_KEYS',
-    'OPTIONAL_DESIGN_KEYS', 'STANDARD_GRAVITY', 'involute', 'ToothGeometry', 'PairGeometry',
-    'pair_geometry', 'check_geometry', 'geometry_notes', 'least_shift', 'RackCorner', 'Undercut', 'undercut',
-    'tip_penetration', 'tooth_compliance', 'contact_compliance',
-    'single_pair_stiffness', 'iso6336_stiffness', 'mesh_stiffness', 'stiffness_tables',
-    'StiffnessTables', 'build_model', 'ModelSetup', 'equivalent_mass', 'mean_mesh_force', 'rated_mesh_force',
-    'natural_frequencies', 'dimensionless', 'STIFFNESS_MODES', 'Effect', 'EffectParameter',
-    'EffectError', 'EFFECTS', 'make_effect', 'parse_effect', 'Eccentricity', 'ToothDamage',
-    'Friction', 'TorqueRipple', 'AdhesionOscillation', 'BearingClearance', 'simulate',
-    'simulate_batch', 'build_batch', 'samples_from_mapping', 'steps_per_period', 'BatchEvaluator',
-    'QOI_INFO', 'METHODS', 'PitchErrors', 'iso1328_single_pitch_tolerance', 'draw_pitch_errors',
+    "Design",
+    "Operation",
+    "load_design",
+    "bundled_designs",
+    "design_from_json",
+    "DESIGN_KEYS",
+    "OPTIONAL_DESIGN_KEYS",
+    "STANDARD_GRAVITY",
+    "involute",
+    "ToothGeometry",
+    "PairGeometry",
+    "pair_geometry",
+    "check_geometry",
+    "geometry_notes",
+    "least_shift",
+    "RackCorner",
+    "Undercut",
+    "undercut",
+    "tip_penetration",
+    "tooth_compliance",
+    "contact_compliance",
+    "single_pair_stiffness",
+    "iso6336_stiffness",
+    "mesh_stiffness",
+    "stiffness_tables",
+    "StiffnessTables",
+    "build_model",
+    "ModelSetup",
+    "equivalent_mass",
+    "mean_mesh_force",
+    "rated_mesh_force",
+    "natural_frequencies",
+    "dimensionless",
+    "STIFFNESS_MODES",
+    "Effect",
+    "EffectParameter",
+    "EffectError",
+    "EFFECTS",
+    "make_effect",
+    "parse_effect",
+    "Eccentricity",
+    "ToothDamage",
+    "Friction",
+    "TorqueRipple",
+    "AdhesionOscillation",
+    "BearingClearance",
+    "simulate",
+    "simulate_batch",
+    "build_batch",
+    "samples_from_mapping",
+    "steps_per_period",
+    "BatchEvaluator",
+    "QOI_INFO",
+    "METHODS",
+    "PitchErrors",
+    "iso1328_single_pitch_tolerance",
+    "draw_pitch_errors",
 ]

@@ -26,17 +26,102 @@ import numpy as np
 
 from uqgear.physics import _pairs
 from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family's one namespace)
-    ADHESION_AMPLITUDE, ADHESION_OMEGA, ADHESION_PHASE, BASE_PITCH, C1, C2, CLEARANCE1, CLEARANCE2, CM,
-    CONTACT_RATIO, DAMP_IN_SEPARATION, ECC_AMPLITUDE, ECC_KAPPA, ECC_OMEGA, ECC_PHASE, F_ARM_GEAR, F_ARM_PINION,
-    F_K, F_SINE, FRICTION, HALF_BACKLASH, I1, I2, INLINED, JIT_OPTIONS, K1, K2, LOA_LENGTH, M1, M2, MAX_PAIRS, ME,
-    N_ACCUMULATORS, N_FIELDS, N_PARAMS, OMEGA_MESH, PARAMETER_SLOTS, PATH_START, PITCH_ERRORS, PITCH_POSITION,
-    Q_A1_SQ, Q_A2_SQ, Q_COUNT, Q_F_MAX, Q_F_MIN, Q_LYAPUNOV, Q_N_BACK, Q_N_DRIVE, Q_N_SEP, Q_X_MAX, Q_X_MIN, Q_X_SQ,
-    Q_X_SUM, R1, R2, RIPPLE_AMPLITUDE, RIPPLE_OMEGA, RIPPLE_PHASE, STE_AMPLITUDE, STE_PHASE, STIFFNESS_SCALE, T1,
-    T2, TOOTH_FACTORS, TWO_PI, USE_PERIOD_TABLE, Z1, Z2, _add_substep, _crossing_fraction, _forcing_row,
-    _friction_arms, _friction_term, _interp_uniform, _mesh_position, _rk4, _shifted, _split_at_contact,
-    _tabulate_stage, _time_terms, build_schedule, classical_step, coefficients, contact_region,
-    crossed_boundary, dead_zone, derivative, forcing, mesh_contact, mesh_terms, rk4_combine, rk4_step, side_derivative,
-    state_derivative, static_transmission_error)
+    ADHESION_AMPLITUDE,
+    ADHESION_OMEGA,
+    ADHESION_PHASE,
+    BASE_PITCH,
+    C1,
+    C2,
+    CLEARANCE1,
+    CLEARANCE2,
+    CM,
+    CONTACT_RATIO,
+    DAMP_IN_SEPARATION,
+    ECC_AMPLITUDE,
+    ECC_KAPPA,
+    ECC_OMEGA,
+    ECC_PHASE,
+    F_ARM_GEAR,
+    F_ARM_PINION,
+    F_K,
+    F_SINE,
+    FRICTION,
+    HALF_BACKLASH,
+    I1,
+    I2,
+    INLINED,
+    JIT_OPTIONS,
+    K1,
+    K2,
+    LOA_LENGTH,
+    M1,
+    M2,
+    MAX_PAIRS,
+    ME,
+    N_ACCUMULATORS,
+    N_FIELDS,
+    N_PARAMS,
+    OMEGA_MESH,
+    PARAMETER_SLOTS,
+    PATH_START,
+    PITCH_ERRORS,
+    PITCH_POSITION,
+    Q_A1_SQ,
+    Q_A2_SQ,
+    Q_COUNT,
+    Q_F_MAX,
+    Q_F_MIN,
+    Q_LYAPUNOV,
+    Q_N_BACK,
+    Q_N_DRIVE,
+    Q_N_SEP,
+    Q_X_MAX,
+    Q_X_MIN,
+    Q_X_SQ,
+    Q_X_SUM,
+    R1,
+    R2,
+    RIPPLE_AMPLITUDE,
+    RIPPLE_OMEGA,
+    RIPPLE_PHASE,
+    STE_AMPLITUDE,
+    STE_PHASE,
+    STIFFNESS_SCALE,
+    T1,
+    T2,
+    TOOTH_FACTORS,
+    TWO_PI,
+    USE_PERIOD_TABLE,
+    Z1,
+    Z2,
+    _add_substep,
+    _crossing_fraction,
+    _forcing_row,
+    _friction_arms,
+    _friction_term,
+    _interp_uniform,
+    _mesh_position,
+    _rk4,
+    _shifted,
+    _split_at_contact,
+    _tabulate_stage,
+    _time_terms,
+    build_schedule,
+    classical_step,
+    coefficients,
+    contact_region,
+    crossed_boundary,
+    dead_zone,
+    derivative,
+    forcing,
+    mesh_contact,
+    mesh_terms,
+    rk4_combine,
+    rk4_step,
+    side_derivative,
+    state_derivative,
+    static_transmission_error,
+)
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -50,8 +135,7 @@ def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     if p[PITCH_ERRORS] != 0.0:
         # per-pair deflections (docs/model.md section 2.6); the branch leaves the classical path as it was
         terms = _pairs.forcing_pairs(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
-        d, force = _pairs.derivative_pairs((state[0], state[1], state[2], state[3], state[4], state[5]),
-                                           terms, p)
+        d, force = _pairs.derivative_pairs((state[0], state[1], state[2], state[3], state[4], state[5]), terms, p)
         for j in range(6):
             out[j] = d[j]
         return force, terms[0], terms[3]
@@ -109,8 +193,23 @@ def record(t, state, p, pair_k, period_k, fp, fg, deriv):
 
 
 @nb.njit(**JIT_OPTIONS, inline="always")
-def _history(step, contact, state0, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period,
-             n_periods, keep_periods, stride, history, poincare):
+def _history(
+    step,
+    contact,
+    state0,
+    p,
+    pair_k,
+    period_k,
+    fp,
+    fg,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    stride,
+    history,
+    poincare,
+):
     """Integrate one run, storing histories of the kept periods.
 
     ``history`` has shape (keep_periods * steps_per_period // stride, 12):
@@ -156,32 +255,106 @@ def _history(step, contact, state0, p, pair_k, period_k, fp, fg, breakpoints, st
 
 
 @nb.njit(**JIT_OPTIONS)
-def integrate_history(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period,
-                      n_periods, keep_periods, stride, history, poincare):
+def integrate_history(
+    state0,
+    p,
+    pair_k,
+    period_k,
+    fp,
+    fg,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    stride,
+    history,
+    poincare,
+):
     """Integrate one run without pitch errors, storing histories of the kept periods.
 
     ``history`` has shape (keep_periods * steps_per_period // stride, 12):
     y1, y2, x, v1, v2, vx, a1, a2, F, k, e, contact. ``poincare`` has shape
     (keep_periods, 6): the state at each kept period start.
     """
-    return _history(classical_step, mesh_contact, state0, p, pair_k, period_k, fp, fg, breakpoints,
-                    steps_per_period, n_periods, keep_periods, stride, history, poincare)
+    return _history(
+        classical_step,
+        mesh_contact,
+        state0,
+        p,
+        pair_k,
+        period_k,
+        fp,
+        fg,
+        breakpoints,
+        steps_per_period,
+        n_periods,
+        keep_periods,
+        stride,
+        history,
+        poincare,
+    )
 
 
 @nb.njit(**JIT_OPTIONS)
-def integrate_history_pairs(state0, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period,
-                            n_periods, keep_periods, stride, history, poincare):
+def integrate_history_pairs(
+    state0,
+    p,
+    pair_k,
+    period_k,
+    fp,
+    fg,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    stride,
+    history,
+    poincare,
+):
     """:func:`integrate_history` with pitch errors (the per-pair path)."""
-    return _history(_pairs.scheduled_step_pairs, _pairs.pair_contact, state0, p, pair_k, period_k, fp, fg,
-                    breakpoints, steps_per_period, n_periods, keep_periods, stride, history, poincare)
+    return _history(
+        _pairs.scheduled_step_pairs,
+        _pairs.pair_contact,
+        state0,
+        p,
+        pair_k,
+        period_k,
+        fp,
+        fg,
+        breakpoints,
+        steps_per_period,
+        n_periods,
+        keep_periods,
+        stride,
+        history,
+        poincare,
+    )
 
 
 # numba-inlined into its callers, so that it is not compiled (and its machine code emitted)
 # a second time as a kernel of its own; ``step`` and ``contact`` are compiled functions
 # (numba compiles one specialisation per pair of functions passed)
 @nb.njit(**JIT_OPTIONS, inline="always")
-def _integrate_qoi(step, contact, state, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, n_periods,
-                   keep_periods, history_stride, acc, poincare, history, lyapunov, scale):
+def _integrate_qoi(
+    step,
+    contact,
+    state,
+    p,
+    pair_k,
+    period_k,
+    fp,
+    fg,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    history_stride,
+    acc,
+    poincare,
+    history,
+    lyapunov,
+    scale,
+):
     """Integrate one run keeping only accumulators, Poincare points and decimated histories.
 
     ``history`` has shape (channels, points): channel 0 is x; with 4 channels
@@ -254,9 +427,14 @@ def _integrate_qoi(step, contact, state, p, pair_k, period_k, fp, fg, breakpoint
                 if kept:
                     log_growth += math.log(distance / separation)
                 ratio = separation / distance
-                shadow = (s[0] + (shadow[0] - s[0]) * ratio, s[1] + (shadow[1] - s[1]) * ratio,
-                          s[2] + (shadow[2] - s[2]) * ratio, s[3] + (shadow[3] - s[3]) * ratio,
-                          s[4] + (shadow[4] - s[4]) * ratio, s[5] + (shadow[5] - s[5]) * ratio)
+                shadow = (
+                    s[0] + (shadow[0] - s[0]) * ratio,
+                    s[1] + (shadow[1] - s[1]) * ratio,
+                    s[2] + (shadow[2] - s[2]) * ratio,
+                    s[3] + (shadow[3] - s[3]) * ratio,
+                    s[4] + (shadow[4] - s[4]) * ratio,
+                    s[5] + (shadow[5] - s[5]) * ratio,
+                )
             else:
                 shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
     for c in range(6):
@@ -268,24 +446,82 @@ def _integrate_qoi(step, contact, state, p, pair_k, period_k, fp, fg, breakpoint
 
 
 @nb.njit(**JIT_OPTIONS, inline="always")
-def _batch(step, contact, start, stop, order, states, params, pair_tables, period_tables, table_index, factor_pinion,
-           factor_gear, breakpoints, steps_per_period, n_periods, keep_periods, history_stride, lyapunov, scales,
-           accumulators, poincare, history, final_states):
+def _batch(
+    step,
+    contact,
+    start,
+    stop,
+    order,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    history_stride,
+    lyapunov,
+    scales,
+    accumulators,
+    poincare,
+    history,
+    final_states,
+):
     for k in range(start, stop):
         i = order[k]
         state = states[i].copy()
         table = table_index[i]
-        _integrate_qoi(step, contact, state, params[i], pair_tables[table], period_tables[table],
-                       factor_pinion[i], factor_gear[i], breakpoints[i], steps_per_period[i],
-                       n_periods, keep_periods, history_stride[i], accumulators[i], poincare[i],
-                       history[i], lyapunov, scales[i])
+        _integrate_qoi(
+            step,
+            contact,
+            state,
+            params[i],
+            pair_tables[table],
+            period_tables[table],
+            factor_pinion[i],
+            factor_gear[i],
+            breakpoints[i],
+            steps_per_period[i],
+            n_periods,
+            keep_periods,
+            history_stride[i],
+            accumulators[i],
+            poincare[i],
+            history[i],
+            lyapunov,
+            scales[i],
+        )
         final_states[i, :] = state
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_batch(start, stop, order, states, params, pair_tables, period_tables, table_index, factor_pinion,
-                    factor_gear, breakpoints, steps_per_period, n_periods, keep_periods,
-                    history_stride, lyapunov, scales, accumulators, poincare, history, final_states):
+def integrate_batch(
+    start,
+    stop,
+    order,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    history_stride,
+    lyapunov,
+    scales,
+    accumulators,
+    poincare,
+    history,
+    final_states,
+):
     """Integrate runs ``order[start:stop]`` of a batch without pitch errors, one at a time (GIL released).
 
     ``states`` holds each run's state at t = 0 and is not changed; each run's state
@@ -296,16 +532,80 @@ def integrate_batch(start, stop, order, states, params, pair_tables, period_tabl
     which thread or range computes it. Not a ``prange``: numba's parallel
     lowering tripled the kernel's cold compilation time.
     """
-    _batch(classical_step, mesh_contact, start, stop, order, states, params, pair_tables, period_tables, table_index,
-           factor_pinion, factor_gear, breakpoints, steps_per_period, n_periods, keep_periods, history_stride,
-           lyapunov, scales, accumulators, poincare, history, final_states)
+    _batch(
+        classical_step,
+        mesh_contact,
+        start,
+        stop,
+        order,
+        states,
+        params,
+        pair_tables,
+        period_tables,
+        table_index,
+        factor_pinion,
+        factor_gear,
+        breakpoints,
+        steps_per_period,
+        n_periods,
+        keep_periods,
+        history_stride,
+        lyapunov,
+        scales,
+        accumulators,
+        poincare,
+        history,
+        final_states,
+    )
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_batch_pairs(start, stop, order, states, params, pair_tables, period_tables, table_index, factor_pinion,
-                          factor_gear, breakpoints, steps_per_period, n_periods, keep_periods,
-                          history_stride, lyapunov, scales, accumulators, poincare, history, final_states):
+def integrate_batch_pairs(
+    start,
+    stop,
+    order,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    history_stride,
+    lyapunov,
+    scales,
+    accumulators,
+    poincare,
+    history,
+    final_states,
+):
     """:func:`integrate_batch` for runs with pitch errors (the per-pair path)."""
-    _batch(_pairs.scheduled_step_pairs, _pairs.pair_contact, start, stop, order, states, params, pair_tables,
-           period_tables, table_index, factor_pinion, factor_gear, breakpoints, steps_per_period, n_periods,
-           keep_periods, history_stride, lyapunov, scales, accumulators, poincare, history, final_states)
+    _batch(
+        _pairs.scheduled_step_pairs,
+        _pairs.pair_contact,
+        start,
+        stop,
+        order,
+        states,
+        params,
+        pair_tables,
+        period_tables,
+        table_index,
+        factor_pinion,
+        factor_gear,
+        breakpoints,
+        steps_per_period,
+        n_periods,
+        keep_periods,
+        history_stride,
+        lyapunov,
+        scales,
+        accumulators,
+        poincare,
+        history,
+        final_states,
+    )

@@ -144,8 +144,9 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
     compiler lock and reset before anything else compiles.
     """
     with global_compiler_lock:
-        saved = nb.config.SLP_VECTORIZE
-        nb.config.SLP_VECTORIZE = 0
+        # numba.config's options are module attributes it sets at import: no static type knows them
+        saved = nb.config.SLP_VECTORIZE  # type: ignore[attr-defined]
+        nb.config.SLP_VECTORIZE = 0  # type: ignore[attr-defined]
         try:
             ll.set_option("", f"-force-vector-width={LANES}")
             try:
@@ -154,14 +155,20 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
                 ll.set_option("", "-force-vector-width=0")
             integrate_lanes(0, 0, groups, *arrays, refused)
         finally:
-            nb.config.SLP_VECTORIZE = saved
+            nb.config.SLP_VECTORIZE = saved  # type: ignore[attr-defined]
 
 
 def lane_ready(params: np.ndarray) -> np.ndarray:
     """Which runs (rows of parameter vectors) the lanes take: those whose forcing repeats every mesh period."""
     p = np.atleast_2d(params)
-    periodic = ((p[:, PITCH_ERRORS] == 0.0) & (p[:, TOOTH_FACTORS] == 0.0) & (p[:, ECC_AMPLITUDE] == 0.0)
-                & (p[:, ECC_KAPPA] == 0.0) & (p[:, RIPPLE_AMPLITUDE] == 0.0) & (p[:, ADHESION_AMPLITUDE] == 0.0))
+    periodic = (
+        (p[:, PITCH_ERRORS] == 0.0)
+        & (p[:, TOOTH_FACTORS] == 0.0)
+        & (p[:, ECC_AMPLITUDE] == 0.0)
+        & (p[:, ECC_KAPPA] == 0.0)
+        & (p[:, RIPPLE_AMPLITUDE] == 0.0)
+        & (p[:, ADHESION_AMPLITUDE] == 0.0)
+    )
     # the lanes divide by a multiplication and fused multiply-adds, exact for these divisors
     return periodic & exact_divisors(p[:, M1]) & exact_divisors(p[:, M2]) & exact_divisors(p[:, ME])
 
@@ -176,22 +183,40 @@ def _lane_step(W, table, sub, lane):
     """Sub-step ``sub`` of one lane: the one-sample kernel's RK4 step (:func:`~uqgear.physics._rhs.classical_step`
     between its splits), with its start's force and bearing accelerations, and what is left to the
     one-sample code (``REDO_*``), written to ``W``. Returns 1 if something is left, else 0."""
-    s = (_row(W, W_STATE, lane), _row(W, W_STATE + 1, lane), _row(W, W_STATE + 2, lane),
-         _row(W, W_STATE + 3, lane), _row(W, W_STATE + 4, lane), _row(W, W_STATE + 5, lane))
-    c = (_row(W, W_COEFFICIENTS, lane), _row(W, W_COEFFICIENTS + 1, lane), _row(W, W_COEFFICIENTS + 2, lane),
-         _row(W, W_COEFFICIENTS + 3, lane), _row(W, W_COEFFICIENTS + 4, lane), _row(W, W_COEFFICIENTS + 5, lane),
-         _row(W, W_COEFFICIENTS + 6, lane), _row(W, W_COEFFICIENTS + 7, lane), _row(W, W_COEFFICIENTS + 8, lane),
-         _row(W, W_COEFFICIENTS + 9, lane), _row(W, W_COEFFICIENTS + 10, lane), _row(W, W_COEFFICIENTS + 11, lane))
+    s = (
+        _row(W, W_STATE, lane),
+        _row(W, W_STATE + 1, lane),
+        _row(W, W_STATE + 2, lane),
+        _row(W, W_STATE + 3, lane),
+        _row(W, W_STATE + 4, lane),
+        _row(W, W_STATE + 5, lane),
+    )
+    c = (
+        _row(W, W_COEFFICIENTS, lane),
+        _row(W, W_COEFFICIENTS + 1, lane),
+        _row(W, W_COEFFICIENTS + 2, lane),
+        _row(W, W_COEFFICIENTS + 3, lane),
+        _row(W, W_COEFFICIENTS + 4, lane),
+        _row(W, W_COEFFICIENTS + 5, lane),
+        _row(W, W_COEFFICIENTS + 6, lane),
+        _row(W, W_COEFFICIENTS + 7, lane),
+        _row(W, W_COEFFICIENTS + 8, lane),
+        _row(W, W_COEFFICIENTS + 9, lane),
+        _row(W, W_COEFFICIENTS + 10, lane),
+        _row(W, W_COEFFICIENTS + 11, lane),
+    )
     inverse = (_row(W, W_INVERSE, lane), _row(W, W_INVERSE + 1, lane), _row(W, W_INVERSE + 2, lane))
     drive = _row(W, W_DRIVE, lane)
     # the sub-step's row: its index is checked for wrap-around once, outside the loop over the lanes
     f = table[sub]
-    d1, force, exact = state_derivative_by(s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c,
-                                           quotient, inverse)
+    d1, force, exact = state_derivative_by(
+        s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c, quotient, inverse
+    )
     mid = (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane))
     end = (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane))
-    new, exact_later = rk4_step_weighted(s, _row(f, T_WIDTH, lane), _row(f, T_WEIGHT, lane), d1, mid, end, c,
-                                         quotient, inverse)
+    new, exact_later = rk4_step_weighted(
+        s, _row(f, T_WIDTH, lane), _row(f, T_WEIGHT, lane), d1, mid, end, c, quotient, inverse
+    )
     b = c[0]
     x = s[2]
     # the one-sample kernel's test (contact_region before and after differ), as choices between values
@@ -262,8 +287,14 @@ def _lane_samples(members, lyapunov):
 
 @nb.njit(**INLINED)
 def _lane_state(W, first, lane):
-    return (_row(W, first, lane), _row(W, first + 1, lane), _row(W, first + 2, lane), _row(W, first + 3, lane),
-            _row(W, first + 4, lane), _row(W, first + 5, lane))
+    return (
+        _row(W, first, lane),
+        _row(W, first + 1, lane),
+        _row(W, first + 2, lane),
+        _row(W, first + 3, lane),
+        _row(W, first + 4, lane),
+        _row(W, first + 5, lane),
+    )
 
 
 @nb.njit(**INLINED)
@@ -277,8 +308,24 @@ def _put_state(W, first, lane, s):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, i, params, pair_tables, period_tables,
-               table_index, factor_pinion, factor_gear):
+def _redo_lane(
+    lane,
+    n,
+    sub,
+    W,
+    table,
+    widths,
+    offsets,
+    refs,
+    period,
+    i,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+):
     """Finish a lane's sub-step on the one-sample code: its split at a contact boundary, or (a quotient the
     lanes cannot vouch for) the whole sub-step, with IEEE divisions, as the one-sample kernel does."""
     p = params[i]
@@ -293,8 +340,14 @@ def _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, i, params,
         drive = _row(W, W_DRIVE, lane)
         f = table[sub]
         d1, force = state_derivative(s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c)
-        attempt = rk4_step(s, h, d1, (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane)),
-                           (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane)), c)
+        attempt = rk4_step(
+            s,
+            h,
+            d1,
+            (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane)),
+            (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane)),
+            c,
+        )
         _put_state(W, W_SLOPE, lane, d1)
         W[W_FORCE * LANES + lane] = force
         W[W_A1 * LANES + lane] = d1[3]
@@ -302,15 +355,47 @@ def _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, i, params,
         if contact_region(s[2], c[0]) == contact_region(attempt[2], c[0]):
             _put_state(W, W_TRIAL, lane, attempt)
             return
-    done = _split_at_contact(start + offsets[sub, lane], h, s, d1, attempt, start + refs[sub, lane], p,
-                             pair_tables[table_i], period_tables[table_i], factor_pinion[i], factor_gear[i])
+    done = _split_at_contact(
+        start + offsets[sub, lane],
+        h,
+        s,
+        d1,
+        attempt,
+        start + refs[sub, lane],
+        p,
+        pair_tables[table_i],
+        period_tables[table_i],
+        factor_pinion[i],
+        factor_gear[i],
+    )
     _put_state(W, W_TRIAL, lane, done)
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_lanes(first, last, groups, states, params, pair_tables, period_tables, table_index, factor_pinion,
-                    factor_gear, breakpoints, steps_per_period, n_periods, keep_periods, history_stride, lyapunov,
-                    scales, accumulators, poincare, history, final_states, refused):
+def integrate_lanes(
+    first,
+    last,
+    groups,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    history_stride,
+    lyapunov,
+    scales,
+    accumulators,
+    poincare,
+    history,
+    final_states,
+    refused,
+):
     """Integrate lane groups ``first`` to ``last - 1`` of a batch (GIL released).
 
     ``groups`` has one row of ``LANES`` sample indices per group (-1: an
@@ -321,15 +406,53 @@ def integrate_lanes(first, last, groups, states, params, pair_tables, period_tab
     integrated: ``refused`` says so, and the caller runs it one at a time.
     """
     for g in range(first, last):
-        _integrate_group(groups[g], states, params, pair_tables, period_tables, table_index, factor_pinion,
-                         factor_gear, breakpoints, steps_per_period, n_periods, keep_periods, history_stride,
-                         lyapunov, scales, accumulators, poincare, history, final_states, refused)
+        _integrate_group(
+            groups[g],
+            states,
+            params,
+            pair_tables,
+            period_tables,
+            table_index,
+            factor_pinion,
+            factor_gear,
+            breakpoints,
+            steps_per_period,
+            n_periods,
+            keep_periods,
+            history_stride,
+            lyapunov,
+            scales,
+            accumulators,
+            poincare,
+            history,
+            final_states,
+            refused,
+        )
 
 
 @nb.njit(**JIT_OPTIONS)
-def _integrate_group(members, states, params, pair_tables, period_tables, table_index, factor_pinion, factor_gear,
-                     breakpoints, steps_per_period, n_periods, keep_periods, history_stride, lyapunov, scales,
-                     accumulators, poincare, history, final_states, refused):
+def _integrate_group(
+    members,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    breakpoints,
+    steps_per_period,
+    n_periods,
+    keep_periods,
+    history_stride,
+    lyapunov,
+    scales,
+    accumulators,
+    poincare,
+    history,
+    final_states,
+    refused,
+):
     samples, written = _lane_samples(members, lyapunov)
     lead = samples[0]
     steps = steps_per_period[lead]
@@ -351,14 +474,22 @@ def _integrate_group(members, states, params, pair_tables, period_tables, table_
         if filled >= 0 and _same_forcing(params, i, samples[filled], table_index, breakpoints):
             # the same speed and design as the lane before, another torque: the same table, its own drive
             _copy_lane(table, widths, offsets, refs, filled, lane)
-            W[W_DRIVE * LANES + lane] = _forcing_row(0.0, 0, layout[5], 0, 0, pairs[0], params[i], factor_pinion[i],
-                                                     factor_gear[i])[2]
+            W[W_DRIVE * LANES + lane] = _forcing_row(
+                0.0, 0, layout[5], 0, 0, pairs[0], params[i], factor_pinion[i], factor_gear[i]
+            )[2]
         else:
             t_i = table_index[i]
-            schedule = layout if i == lead else build_schedule(params[i], pair_tables[t_i], period_tables[t_i],
-                                                               breakpoints[i], steps)
-            same = (steps_per_period[i] == steps and history_stride[i] == stride
-                    and np.array_equal(schedule[0], first_sub) and np.array_equal(schedule[4][:n_sub], pairs[:n_sub]))
+            schedule = (
+                layout
+                if i == lead
+                else build_schedule(params[i], pair_tables[t_i], period_tables[t_i], breakpoints[i], steps)
+            )
+            same = (
+                steps_per_period[i] == steps
+                and history_stride[i] == stride
+                and np.array_equal(schedule[0], first_sub)
+                and np.array_equal(schedule[4][:n_sub], pairs[:n_sub])
+            )
             if not same:
                 # run one at a time by the caller; this lane repeats the lead run and writes nothing
                 refused[i] = True
@@ -366,8 +497,9 @@ def _integrate_group(members, states, params, pair_tables, period_tables, table_
                 i = lead
                 samples[lane] = lead
                 schedule = layout
-            _fill_lane(table, widths, offsets, refs, W, lane, schedule, n_sub, params[i], factor_pinion[i],
-                       factor_gear[i])
+            _fill_lane(
+                table, widths, offsets, refs, W, lane, schedule, n_sub, params[i], factor_pinion[i], factor_gear[i]
+            )
             filled = lane
         p = params[i]
         c = coefficients(p)
@@ -377,9 +509,34 @@ def _integrate_group(members, states, params, pair_tables, period_tables, table_
         W[(W_INVERSE + 1) * LANES + lane] = 1.0 / p[M2]
         W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
         period[lane] = TWO_PI / p[OMEGA_MESH]
-    _run_lanes(samples, written, W, table, widths, offsets, refs, period, first_sub, steps, stride, states,
-               params, pair_tables, period_tables, table_index, factor_pinion, factor_gear, n_periods, keep_periods,
-               lyapunov, scales, accumulators, poincare, history, final_states)
+    _run_lanes(
+        samples,
+        written,
+        W,
+        table,
+        widths,
+        offsets,
+        refs,
+        period,
+        first_sub,
+        steps,
+        stride,
+        states,
+        params,
+        pair_tables,
+        period_tables,
+        table_index,
+        factor_pinion,
+        factor_gear,
+        n_periods,
+        keep_periods,
+        lyapunov,
+        scales,
+        accumulators,
+        poincare,
+        history,
+        final_states,
+    )
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -429,9 +586,34 @@ def _fill_lane(table, widths, offsets, refs, W, lane, schedule, n_sub, p, fp, fg
 
 
 @nb.njit(**JIT_OPTIONS)
-def _run_lanes(samples, written, W, table, widths, offsets, refs, period, first_sub, steps, stride, states,
-               params, pair_tables, period_tables, table_index, factor_pinion, factor_gear, n_periods, keep_periods,
-               lyapunov, scales, accumulators, poincare, history, final_states):
+def _run_lanes(
+    samples,
+    written,
+    W,
+    table,
+    widths,
+    offsets,
+    refs,
+    period,
+    first_sub,
+    steps,
+    stride,
+    states,
+    params,
+    pair_tables,
+    period_tables,
+    table_index,
+    factor_pinion,
+    factor_gear,
+    n_periods,
+    keep_periods,
+    lyapunov,
+    scales,
+    accumulators,
+    poincare,
+    history,
+    final_states,
+):
     """The time loop of a lane group: the one-sample kernel's loop, lane by lane (see the module doc)."""
     half = LANES // 2
     # LANES, but not a constant to LLVM (see _step_lanes)
@@ -466,8 +648,24 @@ def _run_lanes(samples, written, W, table, widths, offsets, refs, period, first_
                     for lane in range(LANES):
                         # an empty lane's numbers are never read: it is not redone
                         if _row(W, W_REDO, lane) != REDO_NONE and live[lane]:
-                            _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, samples[lane], params,
-                                       pair_tables, period_tables, table_index, factor_pinion, factor_gear)
+                            _redo_lane(
+                                lane,
+                                n,
+                                sub,
+                                W,
+                                table,
+                                widths,
+                                offsets,
+                                refs,
+                                period,
+                                samples[lane],
+                                params,
+                                pair_tables,
+                                period_tables,
+                                table_index,
+                                factor_pinion,
+                                factor_gear,
+                            )
                 if sub == first_sub[j] and kept:
                     _accumulate(acc, W, lanes)
                     if stride > 0 and j % stride == 0:
@@ -535,8 +733,9 @@ def _record(history, row, rig_channels, W, samples, written, n, j, steps, period
         if rig_channels:
             # the rig's channels: te = x - y1 + y2 + e, and the bearing accelerations
             t = n * period[lane] + j * (period[lane] / steps)
-            history[i, 1, row] = x - _row(W, W_STATE, lane) + _row(W, W_STATE + 1, lane) + static_transmission_error(
-                t, params[i])
+            history[i, 1, row] = (
+                x - _row(W, W_STATE, lane) + _row(W, W_STATE + 1, lane) + static_transmission_error(t, params[i])
+            )
             history[i, 2, row] = _row(W, W_A1, lane)
             history[i, 3, row] = _row(W, W_A2, lane)
 

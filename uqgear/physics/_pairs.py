@@ -28,11 +28,48 @@ import math
 import numba as nb
 
 from uqgear.physics._rhs import (
-    CONTACT_RATIO, CM, C1, C2, CLEARANCE1, CLEARANCE2, DAMP_IN_SEPARATION, ECC_KAPPA, ECC_OMEGA, ECC_PHASE,
-    F_K, F_SINE, FRICTION, HALF_BACKLASH, INLINED, JIT_OPTIONS, K1, K2, M1, M2, MAX_PAIRS, ME, N_PARAMS,
-    OMEGA_MESH, STE_PHASE, STIFFNESS_SCALE, TOOTH_FACTORS, TWO_PI, USE_PERIOD_TABLE, Z1, Z2, _crossing_fraction,
-    _friction_arms, _friction_term, _interp_uniform, _mesh_position, _shifted, _time_terms, contact_region,
-    dead_zone, rk4_combine)
+    C1,
+    C2,
+    CLEARANCE1,
+    CLEARANCE2,
+    CM,
+    CONTACT_RATIO,
+    DAMP_IN_SEPARATION,
+    ECC_KAPPA,
+    ECC_OMEGA,
+    ECC_PHASE,
+    F_K,
+    F_SINE,
+    FRICTION,
+    HALF_BACKLASH,
+    INLINED,
+    JIT_OPTIONS,
+    K1,
+    K2,
+    M1,
+    M2,
+    MAX_PAIRS,
+    ME,
+    N_PARAMS,
+    OMEGA_MESH,
+    STE_PHASE,
+    STIFFNESS_SCALE,
+    TOOTH_FACTORS,
+    TWO_PI,
+    USE_PERIOD_TABLE,
+    Z1,
+    Z2,
+    _crossing_fraction,
+    _friction_arms,
+    _friction_term,
+    _interp_uniform,
+    _mesh_position,
+    _shifted,
+    _time_terms,
+    contact_region,
+    dead_zone,
+    rk4_combine,
+)
 
 # positions in the forcing tuple of a pair path
 PAIR_COUNT = 5
@@ -77,8 +114,26 @@ def _pack(count, a, b, c, d, scale, drive, ste, ste_acc, p):
     f1 = _friction_term(b[1] * scale, b[2] * scale, p)
     f2 = _friction_term(c[1] * scale, c[2] * scale, p)
     f3 = _friction_term(d[1] * scale, d[2] * scale, p)
-    return (k0 + k1 + k2 + k3, f0 + f1 + f2 + f3, drive, ste, ste_acc, float(count),
-            k0, k1, k2, k3, f0, f1, f2, f3, a[3], b[3], c[3], d[3])
+    return (
+        k0 + k1 + k2 + k3,
+        f0 + f1 + f2 + f3,
+        drive,
+        ste,
+        ste_acc,
+        float(count),
+        k0,
+        k1,
+        k2,
+        k3,
+        f0,
+        f1,
+        f2,
+        f3,
+        a[3],
+        b[3],
+        c[3],
+        d[3],
+    )
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -107,10 +162,18 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
     if p[ECC_KAPPA] != 0.0:
         scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
     drive, ste, ste_acc = _time_terms(t, math.sin(p[OMEGA_MESH] * t + p[STE_PHASE]), p)
-    return _pack(count, _pair(0, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
-                 _pair(1, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
-                 _pair(2, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
-                 _pair(3, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg), scale, drive, ste, ste_acc, p)
+    return _pack(
+        count,
+        _pair(0, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
+        _pair(1, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
+        _pair(2, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
+        _pair(3, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg),
+        scale,
+        drive,
+        ste,
+        ste_acc,
+        p,
+    )
 
 
 @nb.njit(**INLINED)
@@ -144,10 +207,18 @@ def _forcing_row_pairs(t, n, table, sub, stage, n_pairs, p, fp, fg):
     if p[ECC_KAPPA] != 0.0:
         scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
     drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
-    return _pack(n_pairs, _row_pair(0, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
-                 _row_pair(1, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
-                 _row_pair(2, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
-                 _row_pair(3, n, table, sub, stage, n_pairs, ratio, p, fp, fg), scale, drive, ste, ste_acc, p)
+    return _pack(
+        n_pairs,
+        _row_pair(0, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
+        _row_pair(1, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
+        _row_pair(2, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
+        _row_pair(3, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
+        scale,
+        drive,
+        ste,
+        ste_acc,
+        p,
+    )
 
 
 @nb.njit(**INLINED)
@@ -231,8 +302,14 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
         t += h_a
         h -= h_a
         d1, _ = derivative_pairs(s, middle, p)
-        trial = _rk4_pairs(s, h, d1, forcing_pairs(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg),
-                           forcing_pairs(t + h, t_ref, p, pair_k, period_k, fp, fg), p)
+        trial = _rk4_pairs(
+            s,
+            h,
+            d1,
+            forcing_pairs(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg),
+            forcing_pairs(t + h, t_ref, p, pair_k, period_k, fp, fg),
+            p,
+        )
     return trial
 
 
@@ -254,9 +331,21 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
             force = f
             a1 = d1[3]
             a2 = d1[4]
-        s = _step_pairs(t, h, s, d1, _forcing_row_pairs(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
-                        _forcing_row_pairs(t + h, n, table, sub, 2, n_pairs, p, fp, fg), terms,
-                        start + refs[sub], p, pair_k, period_k, fp, fg)
+        s = _step_pairs(
+            t,
+            h,
+            s,
+            d1,
+            _forcing_row_pairs(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
+            _forcing_row_pairs(t + h, n, table, sub, 2, n_pairs, p, fp, fg),
+            terms,
+            start + refs[sub],
+            p,
+            pair_k,
+            period_k,
+            fp,
+            fg,
+        )
     return s, force, a1, a2
 
 

@@ -50,12 +50,12 @@ from numba.core.extending import intrinsic
 from uqgear.physics._rhs import INLINED
 
 #: Dividends |x| from SMALLEST to LARGEST: the proof's range (no underflow in the remainder).
-SMALLEST = 2.0 ** -900
-LARGEST = 2.0 ** 900
+SMALLEST = 2.0**-900
+LARGEST = 2.0**900
 #: Divisors y from 2^-60 to 2^60 (quotients of the dividends above stay normal), significands below
 #: 2^53 - 2^10.
-DIVISOR_RANGE = (2.0 ** -60, 2.0 ** 60)
-LARGEST_SIGNIFICAND = 2 ** 53 - 2 ** 10
+DIVISOR_RANGE = (2.0**-60, 2.0**60)
+LARGEST_SIGNIFICAND = 2**53 - 2**10
 
 
 @intrinsic
@@ -80,7 +80,8 @@ def quotient(x, y, z):
     division instead.
     """
     q0 = x * z
-    q1 = fma(fma(-q0, y, x), z, q0)
+    # fma is a numba intrinsic: its Python signature (typing context first) is not the call's
+    q1 = fma(fma(-q0, y, x), z, q0)  # type: ignore[call-arg, var-annotated]
     q2 = fma(fma(-q1, y, x), z, q1)
     size = abs(x)
     inside = (size >= SMALLEST) & (size <= LARGEST)

@@ -29,19 +29,57 @@ clear the cache (``__pycache__/*.nbi``, ``*.nbc``) of the physics package.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba as nb
 import numpy as np
 
 # ---------------------------------------------------------------- parameter slots
-(M1, M2, ME, K1, K2, C1, C2, CM, HALF_BACKLASH, R1, R2, I1, I2, T1, T2, OMEGA_MESH,
- STE_AMPLITUDE, STE_PHASE, STIFFNESS_SCALE, DAMP_IN_SEPARATION,
- RIPPLE_AMPLITUDE, RIPPLE_OMEGA, RIPPLE_PHASE,
- ADHESION_AMPLITUDE, ADHESION_OMEGA, ADHESION_PHASE,
- ECC_AMPLITUDE, ECC_OMEGA, ECC_PHASE, ECC_KAPPA,
- FRICTION, CLEARANCE1, CLEARANCE2,
- PATH_START, BASE_PITCH, LOA_LENGTH, PITCH_POSITION, CONTACT_RATIO,
- USE_PERIOD_TABLE, Z1, Z2, TOOTH_FACTORS, PITCH_ERRORS) = range(43)
+(
+    M1,
+    M2,
+    ME,
+    K1,
+    K2,
+    C1,
+    C2,
+    CM,
+    HALF_BACKLASH,
+    R1,
+    R2,
+    I1,
+    I2,
+    T1,
+    T2,
+    OMEGA_MESH,
+    STE_AMPLITUDE,
+    STE_PHASE,
+    STIFFNESS_SCALE,
+    DAMP_IN_SEPARATION,
+    RIPPLE_AMPLITUDE,
+    RIPPLE_OMEGA,
+    RIPPLE_PHASE,
+    ADHESION_AMPLITUDE,
+    ADHESION_OMEGA,
+    ADHESION_PHASE,
+    ECC_AMPLITUDE,
+    ECC_OMEGA,
+    ECC_PHASE,
+    ECC_KAPPA,
+    FRICTION,
+    CLEARANCE1,
+    CLEARANCE2,
+    PATH_START,
+    BASE_PITCH,
+    LOA_LENGTH,
+    PITCH_POSITION,
+    CONTACT_RATIO,
+    USE_PERIOD_TABLE,
+    Z1,
+    Z2,
+    TOOTH_FACTORS,
+    PITCH_ERRORS,
+) = range(43)
 #: Number of named slots. The parameter vector goes on with the per-tooth pitch offsets
 #: (m): z1 of the pinion from index ``N_PARAMS``, then z2 of the gear (docs/model.md
 #: section 2.6); ``PITCH_ERRORS`` is 1 when any of them is not zero.
@@ -49,18 +87,67 @@ N_PARAMS = 43
 
 #: Names of the parameter slots, in order (for error messages and tests).
 PARAMETER_SLOTS = (
-    "m1", "m2", "me", "k1", "k2", "c1", "c2", "cm", "half_backlash", "R1", "R2", "I1", "I2",
-    "T1", "T2", "omega_mesh", "ste_amplitude", "ste_phase", "stiffness_scale",
-    "damp_in_separation", "ripple_amplitude", "ripple_omega", "ripple_phase",
-    "adhesion_amplitude", "adhesion_omega", "adhesion_phase", "ecc_amplitude", "ecc_omega",
-    "ecc_phase", "ecc_kappa", "friction", "clearance1", "clearance2", "path_start",
-    "base_pitch", "loa_length", "pitch_position", "contact_ratio", "use_period_table", "z1", "z2",
-    "tooth_factors", "pitch_errors",
+    "m1",
+    "m2",
+    "me",
+    "k1",
+    "k2",
+    "c1",
+    "c2",
+    "cm",
+    "half_backlash",
+    "R1",
+    "R2",
+    "I1",
+    "I2",
+    "T1",
+    "T2",
+    "omega_mesh",
+    "ste_amplitude",
+    "ste_phase",
+    "stiffness_scale",
+    "damp_in_separation",
+    "ripple_amplitude",
+    "ripple_omega",
+    "ripple_phase",
+    "adhesion_amplitude",
+    "adhesion_omega",
+    "adhesion_phase",
+    "ecc_amplitude",
+    "ecc_omega",
+    "ecc_phase",
+    "ecc_kappa",
+    "friction",
+    "clearance1",
+    "clearance2",
+    "path_start",
+    "base_pitch",
+    "loa_length",
+    "pitch_position",
+    "contact_ratio",
+    "use_period_table",
+    "z1",
+    "z2",
+    "tooth_factors",
+    "pitch_errors",
 )
 
 # QoI accumulator layout of the batch kernel
-(Q_X_SUM, Q_X_SQ, Q_X_MIN, Q_X_MAX, Q_F_MAX, Q_A1_SQ, Q_A2_SQ, Q_N_DRIVE, Q_N_SEP, Q_N_BACK,
- Q_COUNT, Q_LYAPUNOV, Q_F_MIN) = range(13)
+(
+    Q_X_SUM,
+    Q_X_SQ,
+    Q_X_MIN,
+    Q_X_MAX,
+    Q_F_MAX,
+    Q_A1_SQ,
+    Q_A2_SQ,
+    Q_N_DRIVE,
+    Q_N_SEP,
+    Q_N_BACK,
+    Q_COUNT,
+    Q_LYAPUNOV,
+    Q_F_MIN,
+) = range(13)
 N_ACCUMULATORS = 13
 
 TWO_PI = 2.0 * math.pi
@@ -71,7 +158,7 @@ TWO_PI = 2.0 * math.pi
 #: different last bits on a first and a later run (and may on another CPU).
 #: Without it the kernels are bit-identical cold, warm and uncached;
 #: ``benchmarks/integrator.py`` measures what fastmath would buy.
-JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
+JIT_OPTIONS: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 #: Options of the helpers the stepping code calls on every stage. They are inlined by LLVM
 #: (``forceinline``: the ``alwaysinline`` attribute), which gave the same numbers, bit for bit, as
 #: numba's own ``inline="always"`` and compiles far faster: numba copies and retypes a callee's
@@ -79,7 +166,7 @@ JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
 #: batch and harmonic kernels before, 91 s with LLVM inlining and serial batch kernels). A plain
 #: call is no option: passing the eleven arrays of a step costs their reference counts on every
 #: grid step (measured: twice the run time).
-INLINED = {**JIT_OPTIONS, "forceinline": True}
+INLINED: dict[str, Any] = {**JIT_OPTIONS, "forceinline": True}
 
 
 @nb.njit(**INLINED)
@@ -208,6 +295,7 @@ def static_transmission_error(t, p):
 # (registers) rather than scratch arrays: slicing rows out of a work array costs reference
 # counting on every stage, which made an RK4 step about ten times slower.
 
+
 @nb.njit(**INLINED)
 def _time_terms(t, sine, p):
     """(relative drive acceleration, e(t), e''(t)) given sin(omega t + STE phase)."""
@@ -256,8 +344,20 @@ def _friction_term(arm_pinion, arm_gear, p):
 @nb.njit(**INLINED)
 def coefficients(p):
     """The parameter slots the state-dependent part of the right-hand side reads, as a tuple (registers)."""
-    return (p[HALF_BACKLASH], p[CM], p[DAMP_IN_SEPARATION], p[K1], p[K2], p[CLEARANCE1], p[CLEARANCE2],
-            p[C1], p[C2], p[M1], p[M2], p[ME])
+    return (
+        p[HALF_BACKLASH],
+        p[CM],
+        p[DAMP_IN_SEPARATION],
+        p[K1],
+        p[K2],
+        p[CLEARANCE1],
+        p[CLEARANCE2],
+        p[C1],
+        p[C2],
+        p[M1],
+        p[M2],
+        p[ME],
+    )
 
 
 @nb.njit(**INLINED)
@@ -346,19 +446,20 @@ def derivative(s, terms, p):
 
 @nb.njit(**INLINED)
 def _shifted(s, h, d):
-    return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4],
-            s[5] + h * d[5])
+    return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4], s[5] + h * d[5])
 
 
 @nb.njit(**INLINED)
 def rk4_combine_weighted(s, w, d1, d2, d3, d4):
     """The classical RK4 update of ``s`` from its four stage derivatives, with the weight w = h / 6 given."""
-    return (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
-            s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
-            s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
-            s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
-            s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
-            s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
+    return (
+        s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
+        s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
+        s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
+        s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
+        s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
+        s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]),
+    )
 
 
 @nb.njit(**INLINED)
@@ -402,10 +503,10 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
     for _ in range(40):
         mid = 0.5 * (lo + hi)
         s = mid
-        h00 = 2 * s ** 3 - 3 * s ** 2 + 1
-        h10 = s ** 3 - 2 * s ** 2 + s
-        h01 = -2 * s ** 3 + 3 * s ** 2
-        h11 = s ** 3 - s ** 2
+        h00 = 2 * s**3 - 3 * s**2 + 1
+        h10 = s**3 - 2 * s**2 + s
+        h01 = -2 * s**3 + 3 * s**2
+        h11 = s**3 - s**2
         value = h00 * x0 + h10 * h * v0 + h01 * x1 + h11 * h * v1 - level
         if (value > 0.0) == (g_lo > 0.0):
             lo = mid
@@ -471,8 +572,9 @@ def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
     middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
     part = _rk4_side(s, h_a, d1, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p, before)
     d_middle, _ = side_derivative(part, middle[0], middle[1], middle[2], middle[4], coefficients(p), entered)
-    return _rk4_side(part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg), end, p,
-                     entered)
+    return _rk4_side(
+        part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg), end, p, entered
+    )
 
 
 # ---------------------------------------------------------------- one mesh period tabulated
@@ -556,8 +658,7 @@ def build_schedule(p, pair_k, period_k, breakpoints, steps_per_period):
         for bp in breakpoints:
             if u0 + 1e-12 < bp < u0 + du - 1e-12:
                 t_break = (base + bp) * TWO_PI / p[OMEGA_MESH]
-                count = _add_substep(t_now, t_break, count, p, pair_k, period_k, offsets, widths, refs, pairs,
-                                     table)
+                count = _add_substep(t_now, t_break, count, p, pair_k, period_k, offsets, widths, refs, pairs, table)
                 t_now = t_break
         count = _add_substep(t_now, end, count, p, pair_k, period_k, offsets, widths, refs, pairs, table)
     first_sub[steps_per_period] = count
@@ -627,8 +728,14 @@ def classical_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
             force = f
             a1 = d1[3]
             a2 = d1[4]
-        trial = _rk4(s, h, d1, _forcing_row(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
-                     _forcing_row(t + h, n, table, sub, 2, n_pairs, p, fp, fg), p)
+        trial = _rk4(
+            s,
+            h,
+            d1,
+            _forcing_row(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
+            _forcing_row(t + h, n, table, sub, 2, n_pairs, p, fp, fg),
+            p,
+        )
         if contact_region(s[2], p[HALF_BACKLASH]) == contact_region(trial[2], p[HALF_BACKLASH]):
             s = trial
         else:

@@ -38,18 +38,65 @@ import math
 import numba as nb
 import numpy as np
 
-from ._kernels import (C1, C2, CLEARANCE1, CLEARANCE2, CM, DAMP_IN_SEPARATION, HALF_BACKLASH, INLINED, JIT_OPTIONS,
-                       K1, K2, M1, M2, ME, OMEGA_MESH, TWO_PI, build_schedule, coefficients, contact_region,
-                       crossed_boundary, dead_zone, derivative, forcing, side_derivative)
+from ._kernels import (
+    C1,
+    C2,
+    CLEARANCE1,
+    CLEARANCE2,
+    CM,
+    DAMP_IN_SEPARATION,
+    HALF_BACKLASH,
+    INLINED,
+    JIT_OPTIONS,
+    K1,
+    K2,
+    M1,
+    M2,
+    ME,
+    OMEGA_MESH,
+    TWO_PI,
+    build_schedule,
+    coefficients,
+    contact_region,
+    crossed_boundary,
+    dead_zone,
+    derivative,
+    forcing,
+    side_derivative,
+)
 
 # layout of the orbit measures a pass returns
-(O_X_MIN, O_X_MAX, O_F_MAX, O_F_MIN, O_N_DRIVE, O_N_SEP, O_N_BACK, O_COUNT, O_X_MIN_CURVE, O_CROSSINGS,
- O_X_RMS_SUM, O_X_SUM) = range(12)
+(
+    O_X_MIN,
+    O_X_MAX,
+    O_F_MAX,
+    O_F_MIN,
+    O_N_DRIVE,
+    O_N_SEP,
+    O_N_BACK,
+    O_COUNT,
+    O_X_MIN_CURVE,
+    O_CROSSINGS,
+    O_X_RMS_SUM,
+    O_X_SUM,
+) = range(12)
 #: Number of orbit measures.
 N_MEASURES = 12
 #: Names of the orbit measures, in order.
-MEASURE_NAMES = ("x_min", "x_max", "force_max", "force_min", "n_drive", "n_separation", "n_back", "n_grid",
-                 "x_min_curve", "crossings", "x_square_sum", "x_sum")
+MEASURE_NAMES = (
+    "x_min",
+    "x_max",
+    "force_max",
+    "force_min",
+    "n_drive",
+    "n_separation",
+    "n_back",
+    "n_grid",
+    "x_min_curve",
+    "crossings",
+    "x_square_sum",
+    "x_sum",
+)
 
 
 @nb.njit(**INLINED)
@@ -117,8 +164,14 @@ def _jacobian_times(s, terms, p, phi, out, region, side):
         d2 = a2_y2 * phi[1, col] + a2_x * phi[2, col] + a2_v2 * phi[4, col] + a2_vx * phi[5, col]
         out[3, col] = d1
         out[4, col] = d2
-        out[5, col] = (a1_y1 * phi[0, col] - a2_y2 * phi[1, col] + ax_x * phi[2, col] + a1_v1 * phi[3, col]
-                       - a2_v2 * phi[4, col] + ax_vx * phi[5, col])
+        out[5, col] = (
+            a1_y1 * phi[0, col]
+            - a2_y2 * phi[1, col]
+            + ax_x * phi[2, col]
+            + a1_v1 * phi[3, col]
+            - a2_v2 * phi[4, col]
+            + ax_vx * phi[5, col]
+        )
 
 
 @nb.njit(**INLINED)
@@ -141,12 +194,14 @@ def _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, region, s
     s4 = _shift(s, h, d3)
     d4, _ = _stage(s4, end, p, side)
     w = h / 6.0
-    new = (s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
-           s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
-           s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
-           s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
-           s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
-           s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]))
+    new = (
+        s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
+        s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
+        s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
+        s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
+        s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
+        s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]),
+    )
     if with_matrix:
         k1 = work[0]
         k2 = work[1]
@@ -182,8 +237,13 @@ def _crossing(x0, v0, x1, v1, h, level):
         mid = 0.5 * (lo + hi)
         m2 = mid * mid
         m3 = m2 * mid
-        value = ((2 * m3 - 3 * m2 + 1) * x0 + (m3 - 2 * m2 + mid) * h * v0 + (-2 * m3 + 3 * m2) * x1
-                 + (m3 - m2) * h * v1 - level)
+        value = (
+            (2 * m3 - 3 * m2 + 1) * x0
+            + (m3 - 2 * m2 + mid) * h * v0
+            + (-2 * m3 + 3 * m2) * x1
+            + (m3 - m2) * h * v1
+            - level
+        )
         if (value > 0.0) == (g_lo > 0.0):
             lo = mid
             g_lo = value
@@ -220,8 +280,12 @@ def _curve_minimum(x0, v0, x1, v1, h):
         if 0.0 < theta < 1.0:
             t2 = theta * theta
             t3 = t2 * theta
-            value = ((2 * t3 - 3 * t2 + 1) * x0 + (t3 - 2 * t2 + theta) * h * v0 + (-2 * t3 + 3 * t2) * x1
-                     + (t3 - t2) * h * v1)
+            value = (
+                (2 * t3 - 3 * t2 + 1) * x0
+                + (t3 - 2 * t2 + theta) * h * v0
+                + (-2 * t3 + 3 * t2) * x1
+                + (t3 - t2) * h * v1
+            )
             if value < best:
                 best = value
     return best
@@ -251,8 +315,9 @@ def _saltation(phi, jump, p):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _two_parts(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, with_matrix, phi, work, regions,
-               sides, jump):
+def _two_parts(
+    s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, with_matrix, phi, work, regions, sides, jump
+):
     """The step from ``s`` over [t, t + h] in two RK4 steps split at fraction ``theta``.
 
     Each part's stages take the mesh damping of its side of the boundary (``sides``, a pair), as
@@ -264,12 +329,34 @@ def _two_parts(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, w
     h_a = theta * h
     h_b = h - h_a
     middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-    part = _rk4_variational(s, h_a, start, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle,
-                            p, phi, with_matrix, work, regions[0], sides[0])
+    part = _rk4_variational(
+        s,
+        h_a,
+        start,
+        forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg),
+        middle,
+        p,
+        phi,
+        with_matrix,
+        work,
+        regions[0],
+        sides[0],
+    )
     if with_matrix and jump != 0.0:
         _saltation(phi, jump, p)
-    new = _rk4_variational(part, h_b, middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg),
-                           end, p, phi, with_matrix, work, regions[1], sides[1])
+    new = _rk4_variational(
+        part,
+        h_b,
+        middle,
+        forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg),
+        end,
+        p,
+        phi,
+        with_matrix,
+        work,
+        regions[1],
+        sides[1],
+    )
     return part, new
 
 
@@ -284,8 +371,30 @@ def _hermite_weights(theta):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _crossing_sensitivity(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, x0, v0, x1, v1, phi,
-                          work, phi_start, trial_x, trial_v, sides):
+def _crossing_sensitivity(
+    s,
+    t,
+    h,
+    theta,
+    t_ref,
+    start,
+    end,
+    p,
+    pair_k,
+    period_k,
+    fp,
+    fg,
+    x0,
+    v0,
+    x1,
+    v1,
+    phi,
+    work,
+    phi_start,
+    trial_x,
+    trial_v,
+    sides,
+):
     """Add to ``phi`` the term of the discrete map's derivative that comes from moving the split point.
 
     The split fraction theta solves H(theta) = level on the Hermite interpolant of the unsplit
@@ -297,13 +406,22 @@ def _crossing_sensitivity(s, t, h, theta, t_ref, start, end, p, pair_k, period_k
     if slope == 0.0:
         return
     delta = min(1e-7, 0.5 * theta, 0.5 * (1.0 - theta))
-    _, plus = _two_parts(s, t, h, theta + delta, t_ref, start, end, p, pair_k, period_k, fp, fg, False, phi, work,
-                         (2, 2), sides, 0.0)
-    _, minus = _two_parts(s, t, h, theta - delta, t_ref, start, end, p, pair_k, period_k, fp, fg, False, phi, work,
-                          (2, 2), sides, 0.0)
+    _, plus = _two_parts(
+        s, t, h, theta + delta, t_ref, start, end, p, pair_k, period_k, fp, fg, False, phi, work, (2, 2), sides, 0.0
+    )
+    _, minus = _two_parts(
+        s, t, h, theta - delta, t_ref, start, end, p, pair_k, period_k, fp, fg, False, phi, work, (2, 2), sides, 0.0
+    )
     for col in range(6):
-        d_theta = -(values[0] * phi_start[2, col] + values[1] * h * phi_start[5, col] + values[2] * trial_x[col]
-                    + values[3] * h * trial_v[col]) / slope
+        d_theta = (
+            -(
+                values[0] * phi_start[2, col]
+                + values[1] * h * phi_start[5, col]
+                + values[2] * trial_x[col]
+                + values[3] * h * trial_v[col]
+            )
+            / slope
+        )
         for row in range(6):
             phi[row, col] += (plus[row] - minus[row]) / (2.0 * delta) * d_theta
 
@@ -352,19 +470,46 @@ def _substep(s, t, h, t_ref, p, pair_k, period_k, fp, fg, with_matrix, discrete,
     regions = (2, 2) if discrete else (before, entered)
     jump = 0.0 if discrete else _jump_in_damping(before, entered, p)
     sides = (before, entered)
-    part, new = _two_parts(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, with_matrix, phi, work,
-                           regions, sides, jump)
+    part, new = _two_parts(
+        s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, with_matrix, phi, work, regions, sides, jump
+    )
     if with_matrix and discrete:
-        _crossing_sensitivity(s, t, h, theta, t_ref, start, end, p, pair_k, period_k, fp, fg, s[2], s[5], trial[2],
-                              trial[5], phi, work, backup, trial_rows[0], trial_rows[1], sides)
-    measures[O_X_MIN_CURVE] = min(measures[O_X_MIN_CURVE], _curve_minimum(s[2], s[5], part[2], part[5], theta * h),
-                                  _curve_minimum(part[2], part[5], new[2], new[5], h - theta * h))
+        _crossing_sensitivity(
+            s,
+            t,
+            h,
+            theta,
+            t_ref,
+            start,
+            end,
+            p,
+            pair_k,
+            period_k,
+            fp,
+            fg,
+            s[2],
+            s[5],
+            trial[2],
+            trial[5],
+            phi,
+            work,
+            backup,
+            trial_rows[0],
+            trial_rows[1],
+            sides,
+        )
+    measures[O_X_MIN_CURVE] = min(
+        measures[O_X_MIN_CURVE],
+        _curve_minimum(s[2], s[5], part[2], part[5], theta * h),
+        _curve_minimum(part[2], part[5], new[2], new[5], h - theta * h),
+    )
     return new
 
 
 @nb.njit(**JIT_OPTIONS)
-def orbit_pass(state0, n_periods, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, with_matrix,
-               discrete, phi, measures):
+def orbit_pass(
+    state0, n_periods, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, with_matrix, discrete, phi, measures
+):
     """Integrate ``n_periods`` mesh periods from ``state0`` at t = 0; return the end state.
 
     With ``with_matrix`` also the monodromy matrix d(end state)/d(state0) into ``phi`` (6 x 6).
@@ -413,8 +558,22 @@ def orbit_pass(state0, n_periods, p, pair_k, period_k, fp, fg, breakpoints, step
                     else:
                         measures[O_N_BACK] += 1.0
                     measures[O_COUNT] += 1.0
-                s = _substep(s, t, widths[sub], base + refs[sub], p, pair_k, period_k, fp, fg, with_matrix,
-                             discrete, phi, work, measures)
+                s = _substep(
+                    s,
+                    t,
+                    widths[sub],
+                    base + refs[sub],
+                    p,
+                    pair_k,
+                    period_k,
+                    fp,
+                    fg,
+                    with_matrix,
+                    discrete,
+                    phi,
+                    work,
+                    measures,
+                )
     out = np.empty(6)
     for c in range(6):
         out[c] = s[c]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,7 +53,7 @@ _DESIGN_KEYS: dict[str, tuple[float, float, str, bool]] = {
     "ste_amplitude": (0.0, 5e-4, "m", False),
 }
 _OPTIONAL_DESIGN_KEYS: dict[str, tuple[float, float, str, bool]] = {
-    "motor_pole_pairs": (1, 24, "pole pairs of the traction motor", True),
+    "motor_pole_pairs": (1, 24, "pole pairs of the traction motor", True)
 }
 
 _OPERATION_KEYS: dict[str, tuple[float, float, str]] = {
@@ -85,20 +86,17 @@ def design_key_bounds(key: str) -> tuple[float, float]:
     return float(lower), float(upper)
 
 
-
-def _check_number(key: str, value: Any, lower: float, upper: float, unit: str,
-                  integer: bool, where: str) -> float | int:
+def _check_number(
+    key: str, value: Any, lower: float, upper: float, unit: str, integer: bool, where: str
+) -> float | int:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DesignError(f"{where}{key}: expected a number in [{lower:g}, {upper:g}] {unit}; "
-                          f"got {shown(value)}")
+        raise DesignError(f"{where}{key}: expected a number in [{lower:g}, {upper:g}] {unit}; got {shown(value)}")
     if integer:
         if float(value) != int(value):
-            raise DesignError(f"{where}{key}: expected an integer in [{lower:g}, {upper:g}] {unit}; "
-                              f"got {shown(value)}")
+            raise DesignError(f"{where}{key}: expected an integer in [{lower:g}, {upper:g}] {unit}; got {shown(value)}")
         value = int(value)
     if not math.isfinite(value) or not lower <= value <= upper:
-        raise DesignError(f"{where}{key}: expected a value in [{lower:g}, {upper:g}] {unit}; "
-                          f"got {shown(value)}")
+        raise DesignError(f"{where}{key}: expected a value in [{lower:g}, {upper:g}] {unit}; got {shown(value)}")
     return value if integer else float(value)
 
 
@@ -169,8 +167,9 @@ class Design:
     operation: Operation = field(default_factory=Operation)
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], *, name: str = "custom",
-                     operation: Operation | None = None, where: str = "") -> "Design":
+    def from_mapping(
+        cls, values: Mapping[str, Any], *, name: str = "custom", operation: Operation | None = None, where: str = ""
+    ) -> Design:
         """Validate a mapping of design keys and build a design.
 
         Parameters
@@ -200,34 +199,39 @@ class Design:
             raise DesignError(f"{where}design: expected a mapping of design keys; got {type(values).__name__}")
         unknown = sorted(set(values) - set(_DESIGN_KEYS) - set(_OPTIONAL_DESIGN_KEYS))
         if unknown:
-            raise DesignError(f"{where}{unknown[0]}: unknown design key; expected one of "
-                              f"{', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}")
+            raise DesignError(
+                f"{where}{unknown[0]}: unknown design key; expected one of "
+                f"{', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}"
+            )
         missing = [key for key in _DESIGN_KEYS if key not in values]
         if missing:
-            raise DesignError(f"{where}{missing[0]}: missing design key "
-                              f"(expected {_DESIGN_KEYS[missing[0]][2]})")
+            raise DesignError(f"{where}{missing[0]}: missing design key (expected {_DESIGN_KEYS[missing[0]][2]})")
         checked: dict[str, Any] = {}
         for key, (lower, upper, unit, integer) in {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}.items():
             if key in values and values[key] is not None:
                 checked[key] = _check_number(key, values[key], lower, upper, unit, integer, where)
         if checked["dedendum_coefficient"] <= checked["addendum_coefficient"]:
-            raise DesignError(f"{where}dedendum_coefficient: expected more than addendum_coefficient "
-                              f"({checked['addendum_coefficient']:g}) to leave tip clearance; "
-                              f"got {checked['dedendum_coefficient']:g}")
+            raise DesignError(
+                f"{where}dedendum_coefficient: expected more than addendum_coefficient "
+                f"({checked['addendum_coefficient']:g}) to leave tip clearance; "
+                f"got {checked['dedendum_coefficient']:g}"
+            )
         design = cls(**checked, name=name, operation=operation or Operation())
         # Geometry-level checks (interference, contact ratio; an undercut warns) need the
         # involute geometry; importing here avoids a module cycle.
         from .geometry import check_geometry
+
         check_geometry(design, where=where)
         return design
 
-    def replace(self, **changes: Any) -> "Design":
+    def replace(self, **changes: Any) -> Design:
         """Return a validated copy with some design keys changed."""
         values = self.to_dict()
         unknown = sorted(set(changes) - set(values) - set(_OPTIONAL_DESIGN_KEYS))
         if unknown:
-            raise DesignError(f"{unknown[0]}: unknown design key; expected one of "
-                              f"{', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}")
+            raise DesignError(
+                f"{unknown[0]}: unknown design key; expected one of {', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}"
+            )
         values.update(changes)
         return Design.from_mapping(values, name=self.name, operation=self.operation)
 
@@ -266,9 +270,11 @@ def _parse_operation(raw: Any, where: str) -> Operation:
     for key, (lower, upper, unit) in _OPERATION_KEYS.items():
         if key in raw:
             values[key] = _check_number(key, raw[key], lower, upper, unit, False, f"{where}operation.")
-    for key, lower, upper, unit in (("adhesion_coefficient", 0.0, 1.5, "-"),
-                                    ("pinion_speed_service", 0.0, 1e5, "rpm"),
-                                    ("pinion_speed_sweep", 0.0, 1e5, "rpm")):
+    for key, lower, upper, unit in (
+        ("adhesion_coefficient", 0.0, 1.5, "-"),
+        ("pinion_speed_service", 0.0, 1e5, "rpm"),
+        ("pinion_speed_sweep", 0.0, 1e5, "rpm"),
+    ):
         if key not in raw:
             continue
         pair = raw[key]
@@ -287,8 +293,10 @@ def bundled_designs() -> list[str]:
     return list(bundled_names("design"))
 
 
-def load_design(name_or_path: str | Path | Design | Mapping[str, Any] = "locomotive",
-                overrides: Mapping[str, Any] | None = None) -> Design:
+def load_design(
+    name_or_path: str | os.PathLike[str] | Design | Mapping[str, Any] = "locomotive",
+    overrides: Mapping[str, Any] | None = None,
+) -> Design:
     """Load and validate a gear design.
 
     Parameters
@@ -314,16 +322,19 @@ def load_design(name_or_path: str | Path | Design | Mapping[str, Any] = "locomot
     elif isinstance(name_or_path, Mapping):
         raw = dict(name_or_path)
         if "design" in raw:
-            design = Design.from_mapping(raw["design"], name=str(raw.get("name", "custom")),
-                                         operation=_parse_operation(raw.get("operation"), ""))
+            design = Design.from_mapping(
+                raw["design"], name=str(raw.get("name", "custom")), operation=_parse_operation(raw.get("operation"), "")
+            )
         else:
             design = Design.from_mapping(raw)
     else:
         path = Path(name_or_path)
         path = bundled_by_name("design", str(name_or_path), path) or path
         if not path.suffix and not path.exists():
-            raise DesignError(f"design {str(name_or_path)[:80]!r}: not a bundled design "
-                              f"({', '.join(bundled_designs())}) nor an existing file")
+            raise DesignError(
+                f"design {str(name_or_path)[:80]!r}: not a bundled design "
+                f"({', '.join(bundled_designs())}) nor an existing file"
+            )
         if not path.is_file():
             raise DesignError(f"{path}: design file not found")
         try:
@@ -335,10 +346,15 @@ def load_design(name_or_path: str | Path | Design | Mapping[str, Any] = "locomot
             raise DesignError(f"{where}expected a mapping with a 'design' key holding the design keys")
         unknown = sorted(set(raw) - {"name", "description", "design", "operation"})
         if unknown:
-            raise DesignError(f"{where}{unknown[0]}: unknown top-level key; expected name, description, "
-                              f"design, operation")
-        design = Design.from_mapping(raw["design"], name=str(raw.get("name", path.stem)),
-                                     operation=_parse_operation(raw.get("operation"), where), where=where)
+            raise DesignError(
+                f"{where}{unknown[0]}: unknown top-level key; expected name, description, design, operation"
+            )
+        design = Design.from_mapping(
+            raw["design"],
+            name=str(raw.get("name", path.stem)),
+            operation=_parse_operation(raw.get("operation"), where),
+            where=where,
+        )
     if overrides:
         design = design.replace(**dict(overrides))
     return design
@@ -351,12 +367,21 @@ def design_from_json(text: str, *, where: str = "design") -> Design:
     except (TypeError, json.JSONDecodeError) as exc:
         raise DesignError(f"{where}: not a JSON object ({shown(str(exc), 120)})") from None
     except RecursionError:
-        raise DesignError(f"{where}: not a design: the JSON is nested too deeply; expected one flat object "
-                          "of design keys") from None
+        raise DesignError(
+            f"{where}: not a design: the JSON is nested too deeply; expected one flat object of design keys"
+        ) from None
     if not isinstance(values, dict):
         raise DesignError(f"{where}: expected a JSON object of design keys; got {shown(values)}")
     return Design.from_mapping(values, name="rig", where=f"{where}.")
 
 
-__all__ = ["Design", "Operation", "load_design", "bundled_designs", "design_from_json",
-           "DESIGN_KEYS", "OPTIONAL_DESIGN_KEYS", "STANDARD_GRAVITY"]
+__all__ = [
+    "Design",
+    "Operation",
+    "load_design",
+    "bundled_designs",
+    "design_from_json",
+    "DESIGN_KEYS",
+    "OPTIONAL_DESIGN_KEYS",
+    "STANDARD_GRAVITY",
+]

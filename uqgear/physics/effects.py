@@ -47,8 +47,10 @@ class Effect:
         values = dict(values or {})
         unknown = sorted(set(values) - set(self.PARAMETERS) - set(self.CHOICES))
         if unknown:
-            raise EffectError(f"{self.name}.{unknown[0]}: unknown parameter; expected one of "
-                              f"{', '.join(list(self.PARAMETERS) + list(self.CHOICES))}")
+            raise EffectError(
+                f"{self.name}.{unknown[0]}: unknown parameter; expected one of "
+                f"{', '.join(list(self.PARAMETERS) + list(self.CHOICES))}"
+            )
         self.values: dict[str, Any] = {}
         for key, options in self.CHOICES.items():
             choice = values.get(key, options[0])
@@ -60,18 +62,20 @@ class Effect:
             try:
                 value = float(raw)
             except (TypeError, ValueError):
-                raise EffectError(f"{self.name}.{key}: expected a number in [{spec.lower:g}, {spec.upper:g}] "
-                                  f"{spec.unit}; got {raw!r}") from None
+                raise EffectError(
+                    f"{self.name}.{key}: expected a number in [{spec.lower:g}, {spec.upper:g}] {spec.unit}; got {raw!r}"
+                ) from None
             if not math.isfinite(value) or not spec.lower <= value <= spec.upper:
-                raise EffectError(f"{self.name}.{key}: expected a value in [{spec.lower:g}, {spec.upper:g}] "
-                                  f"{spec.unit}; got {raw!r}")
+                raise EffectError(
+                    f"{self.name}.{key}: expected a value in [{spec.lower:g}, {spec.upper:g}] {spec.unit}; got {raw!r}"
+                )
             self.values[key] = value
 
     def __repr__(self) -> str:
         inner = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
         return f"{type(self).__name__}({inner})"
 
-    def with_values(self, **changes: Any) -> "Effect":
+    def with_values(self, **changes: Any) -> Effect:
         """A copy with some parameters changed (validated)."""
         return type(self)({**self.values, **changes})
 
@@ -118,8 +122,9 @@ class ToothDamage(Effect):
         factors = setup.factor_pinion if self.values["gear"] == "pinion" else setup.factor_gear
         tooth = int(round(self.values["tooth"]))
         if tooth >= factors.size:
-            raise EffectError(f"tooth_damage.tooth: expected 0..{factors.size - 1} for the "
-                              f"{self.values['gear']}; got {tooth}")
+            raise EffectError(
+                f"tooth_damage.tooth: expected 0..{factors.size - 1} for the {self.values['gear']}; got {tooth}"
+            )
         factors[tooth] *= 1.0 - self.values["depth"]
 
 
@@ -143,15 +148,15 @@ class TorqueRipple(Effect):
     PARAMETERS = {
         "amplitude": EffectParameter(0.05, 0.0, 0.5, "1", "relative ripple amplitude r"),
         "phase": EffectParameter(0.0, -2 * math.pi, 2 * math.pi, "rad", "ripple phase"),
-        "pole_pairs": EffectParameter(0.0, 0.0, 24.0, "1",
-                                      "motor pole pairs p (0: the design's motor_pole_pairs)", calibrate=False),
+        "pole_pairs": EffectParameter(
+            0.0, 0.0, 24.0, "1", "motor pole pairs p (0: the design's motor_pole_pairs)", calibrate=False
+        ),
     }
 
     def apply(self, setup) -> None:
         pole_pairs = int(round(self.values["pole_pairs"])) or setup.design.motor_pole_pairs
         if not pole_pairs:
-            raise EffectError("torque_ripple.pole_pairs: the design has no motor_pole_pairs; "
-                              "expected pole_pairs >= 1")
+            raise EffectError("torque_ripple.pole_pairs: the design has no motor_pole_pairs; expected pole_pairs >= 1")
         setup.set_slot("ripple_amplitude", self.values["amplitude"])
         setup.set_slot("ripple_omega", 6.0 * pole_pairs * setup.pinion_rotation)
         setup.set_slot("ripple_phase", self.values["phase"])
@@ -188,9 +193,9 @@ class BearingClearance(Effect):
 
 
 #: The effect library by name.
-EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in
-                                    (Eccentricity, ToothDamage, Friction, TorqueRipple,
-                                     AdhesionOscillation, BearingClearance)}
+EFFECTS: dict[str, type[Effect]] = {
+    cls.name: cls for cls in (Eccentricity, ToothDamage, Friction, TorqueRipple, AdhesionOscillation, BearingClearance)
+}
 
 
 def make_effect(name: str, values: Mapping[str, Any] | None = None) -> Effect:
@@ -212,6 +217,17 @@ def parse_effect(text: str) -> Effect:
     return make_effect(name.strip(), values)
 
 
-__all__ = ["Effect", "EffectParameter", "EffectError", "EFFECTS", "make_effect", "parse_effect",
-           "Eccentricity", "ToothDamage", "Friction", "TorqueRipple", "AdhesionOscillation",
-           "BearingClearance"]
+__all__ = [
+    "Effect",
+    "EffectParameter",
+    "EffectError",
+    "EFFECTS",
+    "make_effect",
+    "parse_effect",
+    "Eccentricity",
+    "ToothDamage",
+    "Friction",
+    "TorqueRipple",
+    "AdhesionOscillation",
+    "BearingClearance",
+]

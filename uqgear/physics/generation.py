@@ -68,8 +68,7 @@ class RackCorner:
     @property
     def limit(self) -> float:
         """l = r sin(alpha) - u / sin(alpha); negative when the tooth is undercut, m."""
-        return (self.pitch_radius * math.sin(self.pressure_angle)
-                - self.depth / math.sin(self.pressure_angle))
+        return self.pitch_radius * math.sin(self.pressure_angle) - self.depth / math.sin(self.pressure_angle)
 
     def involute_half_angle(self, radius: float | np.ndarray) -> float | np.ndarray:
         """Half angle of the involute flank at ``radius`` (>= r_b), rad."""
@@ -85,7 +84,7 @@ class RackCorner:
         """
         r_c = self.lowest_radius
         # t: the corner's position along the rolling line, measured from its deepest point
-        t = np.sqrt(np.maximum(np.asarray(radius, dtype=float) ** 2 - r_c ** 2, 0.0))
+        t = np.sqrt(np.maximum(np.asarray(radius, dtype=float) ** 2 - r_c**2, 0.0))
         approach = -np.arctan2(t, r_c) + (t + self.offset) / self.pitch_radius
         leave = np.arctan2(t, r_c) - (t - self.offset) / self.pitch_radius
         return np.minimum(approach, leave)
@@ -94,10 +93,14 @@ class RackCorner:
         """Half angle B(rho) of the generated tooth: involute, trochoid below r_Ff, the corner's
         angle at its deepest below r_c (the unmodelled tip fillet taken as straight below it), rad."""
         rho = np.asarray(radius, dtype=float)
-        corner = np.where(rho >= self.lowest_radius, self.trochoid_half_angle(np.maximum(rho, self.lowest_radius)),
-                          self.offset / self.pitch_radius)
-        involute = np.where(rho >= self.base_radius, self.involute_half_angle(np.maximum(rho, self.base_radius)),
-                            np.inf)
+        corner = np.where(
+            rho >= self.lowest_radius,
+            self.trochoid_half_angle(np.maximum(rho, self.lowest_radius)),
+            self.offset / self.pitch_radius,
+        )
+        involute = np.where(
+            rho >= self.base_radius, self.involute_half_angle(np.maximum(rho, self.base_radius)), np.inf
+        )
         return np.minimum(corner, involute)
 
 
@@ -142,12 +145,12 @@ def undercut(corner: RackCorner, tip_radius: float) -> Undercut | None:
 
     def gaps(roll: float | np.ndarray) -> np.ndarray:
         radius = np.sqrt(r_b * r_b + np.asarray(roll, dtype=float) ** 2)
-        return corner.trochoid_half_angle(radius) - corner.involute_half_angle(radius)
+        return np.asarray(corner.trochoid_half_angle(radius) - corner.involute_half_angle(radius))
 
     def gap(roll: float) -> float:
         return float(gaps(roll))
 
-    top = math.sqrt(max(tip_radius ** 2 - r_b ** 2, 0.0))
+    top = math.sqrt(max(tip_radius**2 - r_b**2, 0.0))
     if top <= 0.0 or gap(top) < 0.0:
         return Undercut(form_radius=float("nan"), neck_thickness=float("nan"))
     # first sign change on a geometric grid starting well below |l|, where the crossing is
@@ -172,6 +175,7 @@ def _neck(corner: RackCorner, form_radius: float) -> float:
     neck tends to the base-circle thickness as the undercut vanishes, and the
     stiffness is continuous at the least shift.
     """
+
     def chord(radius: float) -> float:
         return float(2.0 * radius * np.sin(corner.tooth_half_angle(radius)))
 
@@ -187,9 +191,19 @@ def _neck(corner: RackCorner, form_radius: float) -> float:
 
 
 @lru_cache(maxsize=256)
-def tip_penetration(corner: RackCorner, teeth: int, root_radius: float, tip_radius: float, *,
-                    mate_teeth: int, mate_tip_radius: float, mate_tip_half_angle: float,
-                    centre_distance: float, n_angles: int = 4001, n_tip_points: int = 9) -> float:
+def tip_penetration(
+    corner: RackCorner,
+    teeth: int,
+    root_radius: float,
+    tip_radius: float,
+    *,
+    mate_teeth: int,
+    mate_tip_radius: float,
+    mate_tip_half_angle: float,
+    centre_distance: float,
+    n_angles: int = 4001,
+    n_tip_points: int = 9,
+) -> float:
     """How deep the mating gear's tip land cuts into the generated tooth while the pair meshes, m.
 
     The pair is placed with zero backlash (the working pressure angle makes
@@ -226,7 +240,7 @@ def tip_penetration(corner: RackCorner, teeth: int, root_radius: float, tip_radi
     local = fixed * np.exp(-1j * theta)
     radius = np.abs(local)
     beta = np.arctan2(local.real, local.imag)
-    beta = np.abs((beta + 0.5 * pitch) % pitch - 0.5 * pitch)   # from the nearest tooth's centre line
+    beta = np.abs((beta + 0.5 * pitch) % pitch - 0.5 * pitch)  # from the nearest tooth's centre line
     inside = radius <= tip_radius
     if not np.any(inside):
         return -math.inf

@@ -16,41 +16,56 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import xarray as xr
-from scipy.integrate import solve_ivp
 
+from ..common.errors import OperatingPointError
 from . import _kernels as K
 from . import _lanes
-from .design import DESIGN_KEYS, Design
+
+# BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
+from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
+from .batch_setup import breakpoint_table, build_batch, lane_groups, shared_stiffness_tables
+from .design import Design
 from .effects import Effect
-from ..common.errors import OperatingPointError
-from .model import ModelSetup, build_model, natural_frequencies
+from .model import HISTORY_COLUMNS, ModelSetup, build_model, natural_frequencies
 from .pitch_errors import PitchErrors
+from .scipy_reference import integrate_scipy
 from .threads import spread
 
 METHODS = ("fast", "scipy")
-OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
-#: Design keys a batch may vary (the tooth counts fix the tables' layout).
-BATCH_DESIGN_KEYS = tuple(key for key in DESIGN_KEYS if key not in ("z1", "z2"))
 #: The state vector's components, in order.
 STATE_NAMES = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity")
 
-_HISTORY_COLUMNS = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity", "y1_acceleration",
-                    "y2_acceleration", "mesh_force", "mesh_stiffness", "ste", "contact")
-_UNITS = {"y1": "m", "y2": "m", "x": "m", "y1_velocity": "m s-1", "y2_velocity": "m s-1",
-          "x_velocity": "m s-1", "y1_acceleration": "m s-2", "y2_acceleration": "m s-2",
-          "mesh_force": "N", "mesh_stiffness": "N m-1", "ste": "m", "contact": "1", "te": "m"}
+_UNITS = {
+    "y1": "m",
+    "y2": "m",
+    "x": "m",
+    "y1_velocity": "m s-1",
+    "y2_velocity": "m s-1",
+    "x_velocity": "m s-1",
+    "y1_acceleration": "m s-2",
+    "y2_acceleration": "m s-2",
+    "mesh_force": "N",
+    "mesh_stiffness": "N m-1",
+    "ste": "m",
+    "contact": "1",
+    "te": "m",
+}
 _LONG_NAMES = {
     "y1": "pinion centre displacement along the line of action",
     "y2": "gear centre displacement along the line of action",
-    "x": "dynamic transmission error (DTE)", "y1_velocity": "pinion centre velocity",
-    "y2_velocity": "gear centre velocity", "x_velocity": "DTE velocity",
-    "y1_acceleration": "pinion centre acceleration", "y2_acceleration": "gear centre acceleration",
-    "mesh_force": "mesh force F = k f(x) + c_m x'", "mesh_stiffness": "mesh stiffness k(t)",
+    "x": "dynamic transmission error (DTE)",
+    "y1_velocity": "pinion centre velocity",
+    "y2_velocity": "gear centre velocity",
+    "x_velocity": "DTE velocity",
+    "y1_acceleration": "pinion centre acceleration",
+    "y2_acceleration": "gear centre acceleration",
+    "mesh_force": "mesh force F = k f(x) + c_m x'",
+    "mesh_stiffness": "mesh stiffness k(t)",
     "ste": "static transmission error e(t)",
     "contact": "contact state: 1 drive side, 0 separated, -1 back side",
     "te": "transmission error R1 theta1 - R2 theta2 = x - y1 + y2 + e",
@@ -61,19 +76,27 @@ QOI_INFO: dict[str, tuple[str, str]] = {
     "dte_mean": ("m", "mean dynamic transmission error"),
     "dte_rms": ("m", "RMS of the DTE about its mean"),
     "dte_peak_to_peak": ("m", "peak-to-peak DTE"),
-    "dynamic_load_factor": ("1", "maximum mesh force / the run's own static mesh force F_T "
-                                 "(from its T1 and T2, so it moves with T2)"),
+    "dynamic_load_factor": (
+        "1",
+        "maximum mesh force / the run's own static mesh force F_T (from its T1 and T2, so it moves with T2)",
+    ),
     "peak_mesh_force": ("N", "maximum mesh force F = k f(x) + c_m x' in the kept section"),
-    "load_factor_rated": ("1", "maximum mesh force / rated mesh force T1_rated / r_b1 "
-                               "(the design's rated drive torque on the pinion base circle)"),
+    "load_factor_rated": (
+        "1",
+        "maximum mesh force / rated mesh force T1_rated / r_b1 "
+        "(the design's rated drive torque on the pinion base circle)",
+    ),
     "acc_pinion_rms": ("m s-2", "RMS pinion centre acceleration"),
     "acc_gear_rms": ("m s-2", "RMS gear centre acceleration"),
     "fraction_drive_contact": ("1", "fraction of time in drive-side contact"),
     "fraction_separation": ("1", "fraction of time with the teeth apart"),
     "fraction_back_contact": ("1", "fraction of time in back-side contact (impact)"),
-    "largest_lyapunov": ("s-1", "largest Lyapunov exponent in 1/s: Benettin log growth over the kept time "
-                                "(renormalised once per mesh period; times the mesh period for nats per "
-                                "mesh period)"),
+    "largest_lyapunov": (
+        "s-1",
+        "largest Lyapunov exponent in 1/s: Benettin log growth over the kept time "
+        "(renormalised once per mesh period; times the mesh period for nats per "
+        "mesh period)",
+    ),
 }
 
 
@@ -81,8 +104,9 @@ def _check_counts(n_periods: int, keep_periods: int) -> None:
     if int(n_periods) != n_periods or n_periods < 1:
         raise OperatingPointError(f"n_periods: expected a positive integer; got {n_periods!r}")
     if int(keep_periods) != keep_periods or not 1 <= keep_periods <= n_periods:
-        raise OperatingPointError(f"keep_periods: expected an integer in [1, n_periods={n_periods}]; "
-                                  f"got {keep_periods!r}")
+        raise OperatingPointError(
+            f"keep_periods: expected an integer in [1, n_periods={n_periods}]; got {keep_periods!r}"
+        )
 
 
 _HIGHEST_MODES: dict[tuple, float] = {}
@@ -105,8 +129,9 @@ def _highest_mode(design: Design, stiffness_scale: float) -> float:
 MINIMUM_STEPS = 32
 
 
-def steps_per_period(setup: ModelSetup, steps_per_mode: int = 24, minimum: int = MINIMUM_STEPS,
-                     multiple_of: int = 1) -> int:
+def steps_per_period(
+    setup: ModelSetup, steps_per_mode: int = 24, minimum: int = MINIMUM_STEPS, multiple_of: int = 1
+) -> int:
     """Grid steps per mesh period for the fast integrator.
 
     Enough steps for ``steps_per_mode`` per period of the highest natural
@@ -138,154 +163,88 @@ def _batch_steps(setups: Sequence[ModelSetup], steps_per_mode: int, multiple_of:
 def _attrs(setup: ModelSetup, method: str, n_periods: int, keep_periods: int, steps: int) -> dict:
     p = setup.parameters
     attrs = {f"design_{key}": value for key, value in setup.design.to_dict().items()}
-    attrs.update({
-        "design_name": setup.design.name,
-        "pinion_speed": float(p[K.OMEGA_MESH] * 60.0 / (2.0 * math.pi * setup.design.z1)),
-        "drive_torque": float(p[K.T1]), "adhesion_torque": float(p[K.T2]),
-        "mesh_stiffness_scale": float(p[K.STIFFNESS_SCALE]),
-        "mesh_frequency": setup.mesh_frequency, "mesh_period": 1.0 / setup.mesh_frequency,
-        "half_backlash": float(p[K.HALF_BACKLASH]), "z1": setup.design.z1, "z2": setup.design.z2,
-        "method": method, "n_periods": n_periods, "keep_periods": keep_periods,
-        "steps_per_period": steps, "damping_in_separation": int(p[K.DAMP_IN_SEPARATION]),
-        "stiffness": setup.stiffness,
-        "mesh_damping": float(p[K.CM]), "effects": "; ".join(repr(e) for e in setup.effects) or "none",
-        "units_note": "SI units; pinion_speed in rpm",
-    })
+    attrs.update(
+        {
+            "design_name": setup.design.name,
+            "pinion_speed": float(p[K.OMEGA_MESH] * 60.0 / (2.0 * math.pi * setup.design.z1)),
+            "drive_torque": float(p[K.T1]),
+            "adhesion_torque": float(p[K.T2]),
+            "mesh_stiffness_scale": float(p[K.STIFFNESS_SCALE]),
+            "mesh_frequency": setup.mesh_frequency,
+            "mesh_period": 1.0 / setup.mesh_frequency,
+            "half_backlash": float(p[K.HALF_BACKLASH]),
+            "z1": setup.design.z1,
+            "z2": setup.design.z2,
+            "method": method,
+            "n_periods": n_periods,
+            "keep_periods": keep_periods,
+            "steps_per_period": steps,
+            "damping_in_separation": int(p[K.DAMP_IN_SEPARATION]),
+            "stiffness": setup.stiffness,
+            "mesh_damping": float(p[K.CM]),
+            "effects": "; ".join(repr(e) for e in setup.effects) or "none",
+            "units_note": "SI units; pinion_speed in rpm",
+        }
+    )
     attrs.update({key: float(value) for key, value in setup.derived.items()})
     if setup.pitch_errors is not None:
-        attrs.update(pitch_errors_pinion=setup.pitch_errors.pinion.copy(),
-                     pitch_errors_gear=setup.pitch_errors.gear.copy())
+        attrs.update(
+            pitch_errors_pinion=setup.pitch_errors.pinion.copy(), pitch_errors_gear=setup.pitch_errors.gear.copy()
+        )
     return attrs
 
 
-def _integrate_fast(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
-                    steps_per_mode: int, initial_state: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def _integrate_fast(
+    setup: ModelSetup,
+    n_periods: int,
+    keep_periods: int,
+    samples_per_period: int,
+    steps_per_mode: int,
+    initial_state: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, int]:
     steps = steps_per_period(setup, steps_per_mode, multiple_of=samples_per_period)
     stride = steps // samples_per_period
-    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
+    history = np.empty((keep_periods * samples_per_period, len(HISTORY_COLUMNS)))
     poincare = np.empty((keep_periods, 6))
     kernel = K.integrate_history_pairs if setup.parameters[K.PITCH_ERRORS] != 0.0 else K.integrate_history
-    kernel(initial_state.astype(float), setup.parameters, setup.pair_stiffness,
-                        setup.period_stiffness, setup.factor_pinion, setup.factor_gear,
-                        setup.breakpoints, steps, n_periods, keep_periods, stride, history, poincare)
+    kernel(
+        initial_state.astype(float),
+        setup.parameters,
+        setup.pair_stiffness,
+        setup.period_stiffness,
+        setup.factor_pinion,
+        setup.factor_gear,
+        setup.breakpoints,
+        steps,
+        n_periods,
+        keep_periods,
+        stride,
+        history,
+        poincare,
+    )
     return history, poincare, steps
 
 
-def _record_grid(history: np.ndarray, grid: np.ndarray, sol: Any, state: np.ndarray, t_a: float, t_end: float,
-                 period: float, first_row: int, args: tuple, deriv: np.ndarray, contact: Callable[[float], int]) -> None:
-    """Write the history rows of the grid points in [t_a, t_end) from one solve_ivp piece.
-
-    Each grid point is recorded once, by the piece that starts it (the state
-    itself at t_a, the dense output inside).
-    """
-    for i in np.nonzero((grid >= t_a - 1e-12 * period) & (grid < t_end))[0]:
-        t = grid[i]
-        y = np.ascontiguousarray(sol.sol(t)) if t > t_a else state
-        row = first_row + i
-        force, k, ste = K.record(t, y, *args, deriv)
-        history[row, :6] = y
-        history[row, 6] = deriv[3]
-        history[row, 7] = deriv[4]
-        history[row, 8:11] = (force, k, ste)
-        history[row, 11] = contact(y[2])
-
-
-def _pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], int]:
-    """The contact state of x with the pairs in mesh (``newest``, ``count``): the history's contact column."""
-    return lambda x: K._pairs.pair_contact(x, newest, count, p)
-
-
-def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
-                     initial_state: np.ndarray, rtol: float, atol: float | None,
-                     solver: str = "DOP853") -> tuple[np.ndarray, np.ndarray, dict]:
-    """The scipy reference: DOP853 between stiffness breakpoints, a terminal event at every contact boundary.
-
-    ``solver`` names another :func:`scipy.integrate.solve_ivp` method on the
-    same segments and events (``benchmarks/integrator.py`` times LSODA so).
-
-    Within a segment between breakpoints the contact boundaries are fixed:
-    x = -b and x = +b for the mesh as a whole, and with pitch errors
-    x = e_i - b and x = e_i + b for each pair in mesh (its offset e_i, the
-    pairs fixed within the segment). Each boundary is an event directed away
-    from the side x is on (tracked across events), so every kink of the dead
-    zones is resolved.
-    """
-    p = setup.parameters
-    args = (p, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
-    period = 1.0 / setup.mesh_frequency
-    b = p[K.HALF_BACKLASH]
-    atol_vector = setup.state_scale() * (rtol if atol is None else atol)
-    phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
-    first_kept = n_periods - keep_periods
-    history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
-    poincare = np.empty((keep_periods, 6))
-    deriv = np.empty(6)
-    state = initial_state.astype(float).copy()
-    stats = {"rhs_evaluations": 0, "contact_events": 0, "segments": 0}
-    with_pairs = p[K.PITCH_ERRORS] != 0.0
-    levels = np.array([-b, b])
-    above = state[2] > levels
-
-    def mesh_contact(x: float) -> int:
-        return 1 if x > b else (-1 if x < -b else 0)
-
-    contact: Callable[[float], int] = mesh_contact
-
-    def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
-        def event(t: float, y: np.ndarray) -> float:
-            return y[2] - level
-        event.terminal = True  # type: ignore[attr-defined]
-        event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
-        return event
-
-    for n in range(n_periods):
-        kept = n >= first_kept
-        if kept:
-            poincare[n - first_kept] = state
-            grid = (n + np.arange(samples_per_period) / samples_per_period) * period
-        for u_a, u_b in zip(phases[:-1], phases[1:]):
-            t_a, t_b = (n + u_a) * period, (n + u_b) * period
-            t_ref = 0.5 * (t_a + t_b)
-            if with_pairs:
-                newest, count = K._pairs.pair_state(t_ref, p)
-                offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
-                levels = np.unique([e + side for e in offsets for side in (b, -b)])
-                above = state[2] > levels
-                contact = _pair_contact(newest, count, p)
-            out = np.empty(6)
-
-            def fun(t, y, t_ref=t_ref, out=out):
-                K.rhs(t, y, t_ref, *args, out)
-                return out.copy()
-
-            while t_a < t_b:
-                events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
-                sol = solve_ivp(fun, (t_a, t_b), state, method=solver, rtol=rtol, atol=atol_vector,
-                                events=events, dense_output=kept)
-                stats["rhs_evaluations"] += sol.nfev
-                stats["segments"] += 1
-                t_end = sol.t[-1]
-                if kept:
-                    _record_grid(history, grid, sol, state, t_a, t_end, period, (n - first_kept) * samples_per_period,
-                                 args, deriv, contact)
-                state = sol.y[:, -1].copy()
-                if sol.status == 1:
-                    stats["contact_events"] += 1
-                    fired = next(i for i, te in enumerate(sol.t_events) if te.size)
-                    above[fired] = not above[fired]
-                else:
-                    above = state[2] > levels
-                t_a = t_end
-    return history, poincare, stats
-
-
-def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_torque: float, *,
-             method: str = "fast", n_periods: int = 400, keep_periods: int = 200,
-             samples_per_period: int = 64, mesh_stiffness_scale: float = 1.0,
-             effects: Sequence[Effect] = (), damping_in_separation: bool = True,
-             stiffness: str = "ishikawa", steps_per_mode: int = 24, rtol: float = 1e-10,
-             atol: float | None = None, initial_state: np.ndarray | None = None,
-             pitch_errors: PitchErrors | None = None) -> xr.Dataset:
+def simulate(
+    design: Design,
+    pinion_speed: float,
+    drive_torque: float,
+    adhesion_torque: float,
+    *,
+    method: str = "fast",
+    n_periods: int = 400,
+    keep_periods: int = 200,
+    samples_per_period: int = 64,
+    mesh_stiffness_scale: float = 1.0,
+    effects: Sequence[Effect] = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    steps_per_mode: int = 24,
+    rtol: float = 1e-10,
+    atol: float | None = None,
+    initial_state: np.ndarray | None = None,
+    pitch_errors: PitchErrors | None = None,
+) -> xr.Dataset:
     """Simulate one operating point of the gear pair.
 
     Parameters
@@ -333,163 +292,61 @@ def simulate(design: Design, pinion_speed: float, drive_torque: float, adhesion_
     _check_counts(n_periods, keep_periods)
     if int(samples_per_period) != samples_per_period or samples_per_period < 1:
         raise OperatingPointError(f"samples_per_period: expected a positive integer; got {samples_per_period!r}")
-    setup = build_model(design, pinion_speed, drive_torque, adhesion_torque,
-                        mesh_stiffness_scale=mesh_stiffness_scale, effects=effects,
-                        damping_in_separation=damping_in_separation, stiffness=stiffness,
-                        pitch_errors=pitch_errors)
+    setup = build_model(
+        design,
+        pinion_speed,
+        drive_torque,
+        adhesion_torque,
+        mesh_stiffness_scale=mesh_stiffness_scale,
+        effects=effects,
+        damping_in_separation=damping_in_separation,
+        stiffness=stiffness,
+        pitch_errors=pitch_errors,
+    )
     state0 = setup.static_state() if initial_state is None else np.asarray(initial_state, dtype=float)
     if state0.shape != (6,):
-        raise OperatingPointError(f"initial_state: expected 6 values (y1, y2, x, y1', y2', x'); "
-                                  f"got shape {state0.shape}")
+        raise OperatingPointError(
+            f"initial_state: expected 6 values (y1, y2, x, y1', y2', x'); got shape {state0.shape}"
+        )
     if method == "fast":
-        history, poincare, steps = _integrate_fast(setup, n_periods, keep_periods, samples_per_period,
-                                                   steps_per_mode, state0)
-        extra = {"steps_per_mode": steps_per_mode}
+        history, poincare, steps = _integrate_fast(
+            setup, n_periods, keep_periods, samples_per_period, steps_per_mode, state0
+        )
+        extra: dict[str, Any] = {"steps_per_mode": steps_per_mode}
     else:
-        history, poincare, stats = _integrate_scipy(setup, n_periods, keep_periods, samples_per_period,
-                                                    state0, rtol, atol)
+        history, poincare, stats = integrate_scipy(
+            setup, n_periods, keep_periods, samples_per_period, state0, rtol, atol
+        )
         steps = samples_per_period
         extra = {"rtol": rtol, "solver": "DOP853", **stats}
     period = 1.0 / setup.mesh_frequency
     first_kept = n_periods - keep_periods
     time = (first_kept + np.arange(keep_periods * samples_per_period) / samples_per_period) * period
     data = {}
-    for column, name in enumerate(_HISTORY_COLUMNS):
+    for column, name in enumerate(HISTORY_COLUMNS):
         values = history[:, column].astype(np.int8) if name == "contact" else history[:, column]
         data[name] = ("time", values, {"units": _UNITS[name], "long_name": _LONG_NAMES[name]})
     te = history[:, 2] - history[:, 0] + history[:, 1] + history[:, 10]
     data["te"] = ("time", te, {"units": "m", "long_name": _LONG_NAMES["te"]})
     for column, name in enumerate(("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity")):
-        data[f"poincare_{name}"] = ("period", poincare[:, column],
-                                    {"units": _UNITS[name], "long_name": f"{name} once per mesh period"})
-    ds = xr.Dataset(data, coords={
-        "time": ("time", time, {"units": "s", "long_name": "time"}),
-        "period": ("period", np.arange(first_kept, n_periods), {"units": "1", "long_name": "mesh period index"}),
-    })
+        data[f"poincare_{name}"] = (
+            "period",
+            poincare[:, column],
+            {"units": _UNITS[name], "long_name": f"{name} once per mesh period"},
+        )
+    ds = xr.Dataset(
+        data,
+        coords={
+            "time": ("time", time, {"units": "s", "long_name": "time"}),
+            "period": ("period", np.arange(first_kept, n_periods), {"units": "1", "long_name": "mesh period index"}),
+        },
+    )
     ds.attrs.update(_attrs(setup, method, n_periods, keep_periods, steps))
     ds.attrs.update(samples_per_period=samples_per_period, **extra)
     return ds
 
 
 # ---------------------------------------------------------------------------- batches
-
-def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]:
-    if "sample" not in samples.dims:
-        raise OperatingPointError("samples: expected a Dataset with dimension 'sample'")
-    n = samples.sizes["sample"]
-    known = set(OPERATING_VARIABLES) | set(BATCH_DESIGN_KEYS)
-    values: dict[str, np.ndarray] = {}
-    for name in samples.data_vars:
-        if name not in known and "." not in name:
-            raise OperatingPointError(
-                f"samples.{name}: unknown variable; expected one of {', '.join(sorted(known))} "
-                f"or EFFECT.PARAMETER")
-        array = np.asarray(samples[name].values, dtype=float)
-        if array.shape != (n,):
-            raise OperatingPointError(f"samples.{name}: expected dims ('sample',); got {samples[name].dims}")
-        values[name] = array
-    if "pinion_speed" not in values:
-        raise OperatingPointError("samples.pinion_speed: missing; expected pinion speeds in rpm")
-    values.setdefault("drive_torque", np.full(n, design.operation.drive_torque))
-    # without a given T2 the adhesion torque balances the drive torque (no rigid acceleration)
-    values.setdefault("adhesion_torque", values["drive_torque"] * design.z2 / design.z1)
-    values.setdefault("mesh_stiffness_scale", np.ones(n))
-    return values
-
-
-def build_batch(design: Design, samples: xr.Dataset, *, effects: Sequence[Effect] = (),
-                damping_in_separation: bool = True, stiffness: str = "ishikawa",
-                pitch_errors: PitchErrors | None = None) -> list[ModelSetup]:
-    """One :class:`ModelSetup` per sample (design keys and effect parameters may vary; the pitch errors,
-    if any, are those of every sample)."""
-    values = _sample_values(samples, design)
-    n = samples.sizes["sample"]
-    design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
-    effect_keys = [key for key in values if "." in key]
-    by_name = {effect.name: effect for effect in effects}
-    for key in effect_keys:
-        name, _, parameter = key.partition(".")
-        if name not in by_name:
-            raise OperatingPointError(f"samples.{key}: effect {name!r} is not among the model's effects "
-                                      f"({', '.join(by_name) or 'none'})")
-        if parameter not in by_name[name].PARAMETERS:
-            raise OperatingPointError(f"samples.{key}: unknown parameter of {name}; expected one of "
-                                      f"{', '.join(by_name[name].PARAMETERS)}")
-    designs: dict[tuple, Design] = {}
-    setups = []
-    for i in range(n):
-        design_key = tuple(float(values[key][i]) for key in design_keys)
-        if design_key not in designs:
-            designs[design_key] = design.replace(**dict(zip(design_keys, design_key))) if design_keys else design
-        sample_effects = list(effects)
-        if effect_keys:
-            changes: dict[str, dict[str, float]] = {}
-            for key in effect_keys:
-                name, _, parameter = key.partition(".")
-                changes.setdefault(name, {})[parameter] = float(values[key][i])
-            sample_effects = [e.with_values(**changes[e.name]) if e.name in changes else e for e in effects]
-        setups.append(build_model(designs[design_key], values["pinion_speed"][i], values["drive_torque"][i],
-                                  values["adhesion_torque"][i],
-                                  mesh_stiffness_scale=values["mesh_stiffness_scale"][i],
-                                  effects=sample_effects, damping_in_separation=damping_in_separation,
-                                  stiffness=stiffness, pitch_errors=pitch_errors))
-    return setups
-
-
-def shared_stiffness_tables(setups: Sequence[ModelSetup]) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
-    """The distinct stiffness tables of a batch's set-ups and, per set-up, the index of its own.
-
-    Set-ups of one design share their tables (the model's stiffness cache),
-    so a batch passes each table to the kernels once, not once per sample.
-    """
-    tables: dict[tuple[int, int], int] = {}
-    pair_tables: list[np.ndarray] = []
-    period_tables: list[np.ndarray] = []
-    table_index = np.empty(len(setups), dtype=np.int64)
-    for i, setup in enumerate(setups):
-        key = id(setup.pair_stiffness), id(setup.period_stiffness)
-        if key not in tables:
-            tables[key] = len(pair_tables)
-            pair_tables.append(setup.pair_stiffness)
-            period_tables.append(setup.period_stiffness)
-        table_index[i] = tables[key]
-    return pair_tables, period_tables, table_index
-
-
-def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
-    """Breakpoints of a batch's set-ups, one row each, padded with NaN (one column at least)."""
-    width = max((len(setup.breakpoints) for setup in setups), default=0)
-    breakpoints = np.full((len(setups), max(width, 1)), np.nan)
-    for i, setup in enumerate(setups):
-        breakpoints[i, :len(setup.breakpoints)] = setup.breakpoints
-    return breakpoints
-
-
-def lane_groups(params: np.ndarray, steps: np.ndarray, breakpoints: np.ndarray, strides: np.ndarray,
-                lyapunov: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Lane groups of a batch's lane-ready runs, and the runs left to the one-sample kernels.
-
-    Runs with the same sub-step layout (steps per mesh period, stiffness
-    breakpoints, history stride) share a group of
-    :data:`~uqgear.physics._lanes.LANES` lanes (half as many runs with
-    ``lyapunov``: each run's shadow takes a lane); groups come most steps
-    first, so that the threads end on the short ones.
-    """
-    ready = np.nonzero(_lanes.lane_ready(params))[0]
-    rest = np.nonzero(~_lanes.lane_ready(params))[0]
-    width = _lanes.LANES // 2 if lyapunov else _lanes.LANES
-    layouts: dict[tuple, list[int]] = {}
-    for i in ready:
-        layouts.setdefault((int(steps[i]), breakpoints[i].tobytes(), int(strides[i])), []).append(int(i))
-    rows: list[tuple[int, list[int]]] = []
-    for key, members in layouts.items():
-        for start in range(0, len(members), width):
-            rows.append((key[0], members[start:start + width]))
-    rows.sort(key=lambda row: -row[0])
-    groups = np.full((len(rows), _lanes.LANES), -1, dtype=np.int64)
-    for g, (_, members) in enumerate(rows):
-        groups[g, :len(members)] = members
-    return groups, rest.astype(np.int64)
 
 
 def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
@@ -514,17 +371,32 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
         pitch = params[rest, K.PITCH_ERRORS] != 0.0
         for kernel, order in ((K.integrate_batch, rest[~pitch]), (K.integrate_batch_pairs, rest[pitch])):
             if len(order):
-                spread(lambda start, stop, kernel=kernel, order=order: kernel(start, stop, order, *arrays),
-                       len(order), threads)
+
+                def run_range(start: int, stop: int, kernel: Any = kernel, order: np.ndarray = order) -> None:
+                    kernel(start, stop, order, *arrays)
+
+                spread(run_range, len(order), threads)
 
 
-def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400, keep_periods: int = 200,
-                   history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
-                   effects: Sequence[Effect] = (),
-                   damping_in_separation: bool = True, stiffness: str = "ishikawa",
-                   steps_per_mode: int = 24, threads: int | None = None,
-                   pitch_errors: PitchErrors | None = None, initial_states: np.ndarray | None = None,
-                   final_state: bool = False, lanes: bool = True) -> xr.Dataset:
+def simulate_batch(
+    design: Design,
+    samples: xr.Dataset,
+    *,
+    n_periods: int = 400,
+    keep_periods: int = 200,
+    history_per_period: int = 0,
+    rig_channels: bool = False,
+    lyapunov: bool = False,
+    effects: Sequence[Effect] = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    steps_per_mode: int = 24,
+    threads: int | None = None,
+    pitch_errors: PitchErrors | None = None,
+    initial_states: np.ndarray | None = None,
+    final_state: bool = False,
+    lanes: bool = True,
+) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
 
     Parameters
@@ -575,8 +447,14 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         coordinates on ``sample``.
     """
     _check_counts(n_periods, keep_periods)
-    setups = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation,
-                         stiffness=stiffness, pitch_errors=pitch_errors)
+    setups = build_batch(
+        design,
+        samples,
+        effects=effects,
+        damping_in_separation=damping_in_separation,
+        stiffness=stiffness,
+        pitch_errors=pitch_errors,
+    )
     n = len(setups)
     multiple = max(int(history_per_period), 1)
     steps = _batch_steps(setups, steps_per_mode, multiple)
@@ -588,8 +466,10 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     else:
         states = np.array(initial_states, dtype=float)
         if states.shape != (n, 6) or not np.all(np.isfinite(states)):
-            raise OperatingPointError(f"initial_states: expected finite values of shape ({n}, 6) "
-                                      f"(y1, y2, x, y1', y2', x' per sample); got shape {states.shape}")
+            raise OperatingPointError(
+                f"initial_states: expected finite values of shape ({n}, 6) "
+                f"(y1, y2, x, y1', y2', x' per sample); got shape {states.shape}"
+            )
     final_states = np.empty((n, 6))
     scales = np.stack([s.state_scale() for s in setups]) if n else np.empty((0, 6))
     factor_pinion = np.stack([s.factor_pinion for s in setups]) if n else np.empty((0, design.z1))
@@ -600,9 +480,26 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     channels = 4 if rig_channels and history_per_period > 0 else 1
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
     if n:
-        arrays = (states, params, np.stack(pair_tables), np.stack(period_tables), table_index, factor_pinion,
-                  factor_gear, breakpoints, steps, n_periods, keep_periods, history_stride.astype(np.int64),
-                  bool(lyapunov), scales, accumulators, poincare, history, final_states)
+        arrays = (
+            states,
+            params,
+            np.stack(pair_tables),
+            np.stack(period_tables),
+            table_index,
+            factor_pinion,
+            factor_gear,
+            breakpoints,
+            steps,
+            n_periods,
+            keep_periods,
+            history_stride.astype(np.int64),
+            bool(lyapunov),
+            scales,
+            accumulators,
+            poincare,
+            history,
+            final_states,
+        )
         _run_batch(arrays, threads, lanes)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
     mean_x = accumulators[:, K.Q_X_SUM] / count
@@ -610,60 +507,99 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     rated_force = np.array([s.derived["rated_mesh_force"] for s in setups])
     qois = {
         "dte_mean": mean_x,
-        "dte_rms": np.sqrt(np.maximum(accumulators[:, K.Q_X_SQ] / count - mean_x ** 2, 0.0)),
+        "dte_rms": np.sqrt(np.maximum(accumulators[:, K.Q_X_SQ] / count - mean_x**2, 0.0)),
         "dte_peak_to_peak": accumulators[:, K.Q_X_MAX] - accumulators[:, K.Q_X_MIN],
-        "dynamic_load_factor": np.divide(accumulators[:, K.Q_F_MAX], mean_force,
-                                         out=np.full(n, np.nan), where=mean_force > 0),
+        "dynamic_load_factor": np.divide(
+            accumulators[:, K.Q_F_MAX], mean_force, out=np.full(n, np.nan), where=mean_force > 0
+        ),
         "acc_pinion_rms": np.sqrt(accumulators[:, K.Q_A1_SQ] / count),
         "acc_gear_rms": np.sqrt(accumulators[:, K.Q_A2_SQ] / count),
         "fraction_drive_contact": accumulators[:, K.Q_N_DRIVE] / count,
         "fraction_separation": accumulators[:, K.Q_N_SEP] / count,
         "fraction_back_contact": accumulators[:, K.Q_N_BACK] / count,
         "peak_mesh_force": accumulators[:, K.Q_F_MAX].copy(),
-        "load_factor_rated": np.divide(accumulators[:, K.Q_F_MAX], rated_force,
-                                       out=np.full(n, np.nan), where=rated_force > 0),
+        "load_factor_rated": np.divide(
+            accumulators[:, K.Q_F_MAX], rated_force, out=np.full(n, np.nan), where=rated_force > 0
+        ),
     }
     if lyapunov:
         qois["largest_lyapunov"] = accumulators[:, K.Q_LYAPUNOV]
-    data = {name: ("sample", value, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
-            for name, value in qois.items()}
-    data["poincare_x"] = (("sample", "period"), poincare[:, :, 0], {"units": "m", "long_name": "DTE once per mesh period"})
-    data["poincare_x_velocity"] = (("sample", "period"), poincare[:, :, 1],
-                                   {"units": "m s-1", "long_name": "DTE velocity once per mesh period"})
+    data: dict[str, tuple[Any, ...]] = {
+        name: ("sample", value, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
+        for name, value in qois.items()
+    }
+    data["poincare_x"] = (
+        ("sample", "period"),
+        poincare[:, :, 0],
+        {"units": "m", "long_name": "DTE once per mesh period"},
+    )
+    data["poincare_x_velocity"] = (
+        ("sample", "period"),
+        poincare[:, :, 1],
+        {"units": "m s-1", "long_name": "DTE velocity once per mesh period"},
+    )
     data["static_mesh_force"] = ("sample", mean_force, {"units": "N", "long_name": "mean mesh force F_T"})
-    data["mesh_frequency"] = ("sample", np.array([s.mesh_frequency for s in setups]),
-                              {"units": "Hz", "long_name": "mesh frequency"})
+    data["mesh_frequency"] = (
+        "sample",
+        np.array([s.mesh_frequency for s in setups]),
+        {"units": "Hz", "long_name": "mesh frequency"},
+    )
     data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "RK4 steps per mesh period"})
-    coords = {"period": ("period", np.arange(n_periods - keep_periods, n_periods), {"units": "1"})}
+    coords: dict[Hashable, tuple[Any, ...]] = {
+        "period": ("period", np.arange(n_periods - keep_periods, n_periods), {"units": "1"})
+    }
     for name in samples.data_vars:
         coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
     for name in samples.coords:
         if samples[name].dims == ("sample",) and name not in coords:
             coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
     if history_per_period > 0:
-        data["x_history"] = (("sample", "mesh_cycle"), history[:, 0], {"units": "m", "long_name": "decimated DTE history"})
+        data["x_history"] = (
+            ("sample", "mesh_cycle"),
+            history[:, 0],
+            {"units": "m", "long_name": "decimated DTE history"},
+        )
         if channels == 4:
-            data["te_history"] = (("sample", "mesh_cycle"), history[:, 1],
-                                  {"units": "m", "long_name": _LONG_NAMES["te"]})
-            data["acc_pinion_history"] = (("sample", "mesh_cycle"), history[:, 2],
-                                          {"units": "m s-2", "long_name": _LONG_NAMES["y1_acceleration"]})
-            data["acc_gear_history"] = (("sample", "mesh_cycle"), history[:, 3],
-                                        {"units": "m s-2", "long_name": _LONG_NAMES["y2_acceleration"]})
-        coords["mesh_cycle"] = ("mesh_cycle", n_periods - keep_periods
-                                + np.arange(keep_periods * history_per_period) / history_per_period,
-                                {"units": "1", "long_name": "time in mesh periods"})
+            data["te_history"] = (
+                ("sample", "mesh_cycle"),
+                history[:, 1],
+                {"units": "m", "long_name": _LONG_NAMES["te"]},
+            )
+            data["acc_pinion_history"] = (
+                ("sample", "mesh_cycle"),
+                history[:, 2],
+                {"units": "m s-2", "long_name": _LONG_NAMES["y1_acceleration"]},
+            )
+            data["acc_gear_history"] = (
+                ("sample", "mesh_cycle"),
+                history[:, 3],
+                {"units": "m s-2", "long_name": _LONG_NAMES["y2_acceleration"]},
+            )
+        coords["mesh_cycle"] = (
+            "mesh_cycle",
+            n_periods - keep_periods + np.arange(keep_periods * history_per_period) / history_per_period,
+            {"units": "1", "long_name": "time in mesh periods"},
+        )
     if final_state:
-        data["final_state"] = (("sample", "state"), final_states,
-                               {"units": "m, m, m, m s-1, m s-1, m s-1",
-                                "long_name": "state at the end of the last period"})
+        data["final_state"] = (
+            ("sample", "state"),
+            final_states,
+            {"units": "m, m, m, m s-1, m s-1, m s-1", "long_name": "state at the end of the last period"},
+        )
         coords["state"] = ("state", list(STATE_NAMES), {"long_name": "state component"})
     ds = xr.Dataset(data, coords=coords)
     half_backlash = np.array([s.parameters[K.HALF_BACKLASH] for s in setups])
-    ds.attrs.update(method="fast", n_periods=n_periods, keep_periods=keep_periods,
-                    steps_per_mode=steps_per_mode, design_name=design.name,
-                    damping_in_separation=int(damping_in_separation), stiffness=stiffness,
-                    effects="; ".join(repr(e) for e in effects) or "none",
-                    **{f"design_{key}": value for key, value in design.to_dict().items()})
+    ds.attrs.update(
+        method="fast",
+        n_periods=n_periods,
+        keep_periods=keep_periods,
+        steps_per_mode=steps_per_mode,
+        design_name=design.name,
+        damping_in_separation=int(damping_in_separation),
+        stiffness=stiffness,
+        effects="; ".join(repr(e) for e in effects) or "none",
+        **{f"design_{key}": value for key, value in design.to_dict().items()},
+    )
     if n and np.all(half_backlash == half_backlash[0]):
         ds.attrs["half_backlash"] = float(half_backlash[0])
     if pitch_errors is not None:
@@ -678,8 +614,6 @@ def samples_from_mapping(values: Mapping[str, Sequence[float] | np.ndarray]) -> 
     if len(lengths) > 1:
         raise OperatingPointError(f"samples: expected equal lengths; got {sorted(lengths)}")
     return xr.Dataset({name: ("sample", a) for name, a in arrays.items()})
-
-
 
 
 class BatchEvaluator:
@@ -700,11 +634,23 @@ class BatchEvaluator:
         results, so :meth:`key` leaves it out).
     """
 
-    def __init__(self, design: Design, *, fixed: Mapping[str, float] | None = None, n_periods: int = 400,
-                 keep_periods: int = 200, history_per_period: int = 0, rig_channels: bool = False,
-                 lyapunov: bool = False, effects: Sequence[Effect] = (), damping_in_separation: bool = True,
-                 stiffness: str = "ishikawa", steps_per_mode: int = 24, threads: int | None = None,
-                 pitch_errors: PitchErrors | None = None) -> None:
+    def __init__(
+        self,
+        design: Design,
+        *,
+        fixed: Mapping[str, float] | None = None,
+        n_periods: int = 400,
+        keep_periods: int = 200,
+        history_per_period: int = 0,
+        rig_channels: bool = False,
+        lyapunov: bool = False,
+        effects: Sequence[Effect] = (),
+        damping_in_separation: bool = True,
+        stiffness: str = "ishikawa",
+        steps_per_mode: int = 24,
+        threads: int | None = None,
+        pitch_errors: PitchErrors | None = None,
+    ) -> None:
         _check_counts(n_periods, keep_periods)
         self.design = design
         self.fixed = dict(fixed or {})
@@ -725,26 +671,53 @@ class BatchEvaluator:
         for name, value in self.fixed.items():
             if name not in samples.data_vars:
                 samples[name] = ("sample", np.full(samples.sizes["sample"], float(value)))
-        return simulate_batch(self.design, samples, n_periods=self.n_periods, keep_periods=self.keep_periods,
-                              history_per_period=self.history_per_period, rig_channels=self.rig_channels,
-                              lyapunov=self.lyapunov,
-                              effects=self.effects, damping_in_separation=self.damping_in_separation,
-                              stiffness=self.stiffness, steps_per_mode=self.steps_per_mode, threads=self.threads,
-                              pitch_errors=self.pitch_errors)
+        return simulate_batch(
+            self.design,
+            samples,
+            n_periods=self.n_periods,
+            keep_periods=self.keep_periods,
+            history_per_period=self.history_per_period,
+            rig_channels=self.rig_channels,
+            lyapunov=self.lyapunov,
+            effects=self.effects,
+            damping_in_separation=self.damping_in_separation,
+            stiffness=self.stiffness,
+            steps_per_mode=self.steps_per_mode,
+            threads=self.threads,
+            pitch_errors=self.pitch_errors,
+        )
 
     def key(self) -> str:
         """A text identifying the settings (for checkpoint hashing)."""
-        settings = (self.design.to_json(), sorted(self.fixed.items()), self.n_periods, self.keep_periods,
-                    self.history_per_period, self.rig_channels, self.lyapunov, [repr(e) for e in self.effects],
-                    self.damping_in_separation, self.stiffness, self.steps_per_mode)
+        settings: tuple[Any, ...] = (
+            self.design.to_json(),
+            sorted(self.fixed.items()),
+            self.n_periods,
+            self.keep_periods,
+            self.history_per_period,
+            self.rig_channels,
+            self.lyapunov,
+            [repr(e) for e in self.effects],
+            self.damping_in_separation,
+            self.stiffness,
+            self.steps_per_mode,
+        )
         if self.pitch_errors is not None:
             # only then: the keys of existing checkpoints stay as they were
             settings += (self.pitch_errors.to_dict(),)
         return repr(settings)
 
 
-__all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period", "BatchEvaluator",
-           "QOI_INFO", "METHODS"]
+__all__ = [
+    "simulate",
+    "simulate_batch",
+    "build_batch",
+    "samples_from_mapping",
+    "steps_per_period",
+    "BatchEvaluator",
+    "QOI_INFO",
+    "METHODS",
+]
 
-#: Public names of the fast integrator and its history columns (the diagnosis simulates campaigns with them).
-integrate_fast, HISTORY_COLUMNS = _integrate_fast, _HISTORY_COLUMNS
+#: Public name of the fast integrator (the diagnosis simulates campaigns with it and the history columns).
+integrate_fast = _integrate_fast

@@ -20,19 +20,47 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from ..common.errors import OperatingPointError
 from . import _kernels as K
 from .design import Design
-from ..common.errors import OperatingPointError
 from .geometry import pair_geometry
 from .pitch_errors import PitchErrors
 from .stiffness import StiffnessTables, stiffness_tables
 
 STIFFNESS_MODES = ("ishikawa", "fourier", "constant")
 
+#: Columns of a simulated history, in the order the kernels write them (the state, both accelerations,
+#: mesh force, mesh stiffness, static transmission error and contact state).
+HISTORY_COLUMNS = (
+    "y1",
+    "y2",
+    "x",
+    "y1_velocity",
+    "y2_velocity",
+    "x_velocity",
+    "y1_acceleration",
+    "y2_acceleration",
+    "mesh_force",
+    "mesh_stiffness",
+    "ste",
+    "contact",
+)
+
 
 #: Design keys that determine the tooth geometry and hence the stiffness tables.
-GEOMETRY_KEYS = ("z1", "z2", "module", "pressure_angle", "x1", "x2", "addendum_coefficient",
-                 "dedendum_coefficient", "face_width", "youngs_modulus", "poisson_ratio")
+GEOMETRY_KEYS = (
+    "z1",
+    "z2",
+    "module",
+    "pressure_angle",
+    "x1",
+    "x2",
+    "addendum_coefficient",
+    "dedendum_coefficient",
+    "face_width",
+    "youngs_modulus",
+    "poisson_ratio",
+)
 
 
 def geometry_key(design: Design) -> tuple:
@@ -58,15 +86,16 @@ def equivalent_mass(design: Design) -> float:
     """m_e = I1 I2 / (I1 R2^2 + I2 R1^2) in kg."""
     geometry = pair_geometry(design)
     r1, r2 = geometry.pinion.base_radius, geometry.gear.base_radius
-    return design.I1 * design.I2 / (design.I1 * r2 ** 2 + design.I2 * r1 ** 2)
+    return design.I1 * design.I2 / (design.I1 * r2**2 + design.I2 * r1**2)
 
 
 def mean_mesh_force(design: Design, drive_torque: float, adhesion_torque: float) -> float:
     """F_T = m_e (R1 T1 / I1 + R2 T2 / I2), the mean mesh force in N."""
     geometry = pair_geometry(design)
     me = equivalent_mass(design)
-    return me * (geometry.pinion.base_radius * drive_torque / design.I1
-                 + geometry.gear.base_radius * adhesion_torque / design.I2)
+    return me * (
+        geometry.pinion.base_radius * drive_torque / design.I1 + geometry.gear.base_radius * adhesion_torque / design.I2
+    )
 
 
 def rated_mesh_force(design: Design) -> float:
@@ -90,9 +119,13 @@ def natural_frequencies(design: Design, mesh_stiffness: float | None = None) -> 
     k = mesh_stiffness if mesh_stiffness is not None else _cached_tables(design, "ishikawa").k_mean
     me = equivalent_mass(design)
     # accelerations of (y1, y2, x) for F = k x
-    a = np.array([[-design.k1 / design.m1, 0.0, -k / design.m1],
-                  [0.0, -design.k2 / design.m2, k / design.m2],
-                  [-design.k1 / design.m1, design.k2 / design.m2, -k / design.m1 - k / design.m2 - k / me]])
+    a = np.array(
+        [
+            [-design.k1 / design.m1, 0.0, -k / design.m1],
+            [0.0, -design.k2 / design.m2, k / design.m2],
+            [-design.k1 / design.m1, design.k2 / design.m2, -k / design.m1 - k / design.m2 - k / me],
+        ]
+    )
     omega2 = np.sort(np.real(np.linalg.eigvals(-a)))
     return np.sqrt(np.maximum(omega2, 0.0)) / (2.0 * math.pi)
 
@@ -184,8 +217,9 @@ class ModelSetup:
 
     def state_scale(self) -> np.ndarray:
         """Typical magnitudes of the state components (for Lyapunov distances)."""
-        length = max(self.parameters[K.HALF_BACKLASH],
-                     abs(self.derived["static_mesh_force"]) / self.derived["k_mean"], 1e-9)
+        length = max(
+            self.parameters[K.HALF_BACKLASH], abs(self.derived["static_mesh_force"]) / self.derived["k_mean"], 1e-9
+        )
         omega = self.derived["omega_n"]
         return np.array([length, length, length, length * omega, length * omega, length * omega])
 
@@ -201,10 +235,18 @@ def _check_operating(name: str, value: float, lower: float, unit: str, strict: b
     return value
 
 
-def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesion_torque: float, *,
-                mesh_stiffness_scale: float = 1.0, effects: Sequence = (),
-                damping_in_separation: bool = True, stiffness: str = "ishikawa",
-                pitch_errors: PitchErrors | None = None) -> ModelSetup:
+def build_model(
+    design: Design,
+    pinion_speed: float,
+    drive_torque: float,
+    adhesion_torque: float,
+    *,
+    mesh_stiffness_scale: float = 1.0,
+    effects: Sequence = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    pitch_errors: PitchErrors | None = None,
+) -> ModelSetup:
     """Assemble the model for one operating point.
 
     Parameters
@@ -255,8 +297,9 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     k_mean = tables.k_mean
     omega_mesh = 2.0 * math.pi * design.z1 * pinion_speed / 60.0
     if pitch_errors is not None and not isinstance(pitch_errors, PitchErrors):
-        raise OperatingPointError(f"pitch_errors: expected a PitchErrors (per-tooth offsets in m) or None; "
-                                  f"got {type(pitch_errors).__name__}")
+        raise OperatingPointError(
+            f"pitch_errors: expected a PitchErrors (per-tooth offsets in m) or None; got {type(pitch_errors).__name__}"
+        )
     if pitch_errors is not None:
         pitch_errors.check(design)
     # the named slots, then the per-tooth pitch offsets of pinion and gear (zero without pitch errors)
@@ -282,22 +325,37 @@ def build_model(design: Design, pinion_speed: float, drive_torque: float, adhesi
     p[K.Z1], p[K.Z2] = design.z1, design.z2
     static_force = me * (r1 * drive_torque / design.I1 + r2 * adhesion_torque / design.I2)
     derived = {
-        "equivalent_mass": me, "k_mean": k_mean, "static_mesh_force": static_force,
+        "equivalent_mass": me,
+        "k_mean": k_mean,
+        "static_mesh_force": static_force,
         "omega_n": math.sqrt(k_mean * mesh_stiffness_scale / me),
-        "mesh_frequency": omega_mesh / (2.0 * math.pi), "contact_ratio": geometry.contact_ratio,
-        "pinion_base_radius": r1, "gear_base_radius": r2,
+        "mesh_frequency": omega_mesh / (2.0 * math.pi),
+        "contact_ratio": geometry.contact_ratio,
+        "pinion_base_radius": r1,
+        "gear_base_radius": r2,
         "rated_mesh_force": design.operation.drive_torque / r1,
     }
-    setup = ModelSetup(design=design, parameters=p, pair_stiffness=tables.pair_stiffness,
-                       period_stiffness=period_table, factor_pinion=np.ones(design.z1),
-                       factor_gear=np.ones(design.z2), breakpoints=np.empty(0), derived=derived,
-                       effects=tuple(effects), stiffness=stiffness, pitch_errors=pitch_errors)
+    setup = ModelSetup(
+        design=design,
+        parameters=p,
+        pair_stiffness=tables.pair_stiffness,
+        period_stiffness=period_table,
+        factor_pinion=np.ones(design.z1),
+        factor_gear=np.ones(design.z2),
+        breakpoints=np.empty(0),
+        derived=derived,
+        effects=tuple(effects),
+        stiffness=stiffness,
+        pitch_errors=pitch_errors,
+    )
     if pitch_errors is not None and pitch_errors.any:
         if geometry.contact_ratio >= K.MAX_PAIRS:
-            raise OperatingPointError(f"pitch_errors: the per-pair path holds at most {K.MAX_PAIRS} pairs in mesh; "
-                                      f"the contact ratio is {geometry.contact_ratio:.3f}")
-        p[K.N_PARAMS:K.N_PARAMS + design.z1] = pitch_errors.pinion
-        p[K.N_PARAMS + design.z1:] = pitch_errors.gear
+            raise OperatingPointError(
+                f"pitch_errors: the per-pair path holds at most {K.MAX_PAIRS} pairs in mesh; "
+                f"the contact ratio is {geometry.contact_ratio:.3f}"
+            )
+        p[K.N_PARAMS : K.N_PARAMS + design.z1] = pitch_errors.pinion
+        p[K.N_PARAMS + design.z1 :] = pitch_errors.gear
         p[K.PITCH_ERRORS] = 1.0
     for effect in effects:
         effect.apply(setup)
@@ -343,13 +401,27 @@ def dimensionless(ds: xr.Dataset, characteristic_length: float | None = None) ->
     out = xr.Dataset(coords={"tau": ("time", tau, {"units": "1", "long_name": "dimensionless time w_n t"})})
     for name, label in (("x", "X"), ("y1", "Y1"), ("y2", "Y2")):
         out[label] = ("time", ds[name].values / b_c, {"units": "1", "long_name": f"{name} / b_c"})
-        out[f"{label}_velocity"] = ("time", ds[f"{name}_velocity"].values / (b_c * omega_n),
-                                    {"units": "1", "long_name": f"d{label}/dtau"})
-    out.attrs.update(characteristic_length=b_c, omega_n=omega_n,
-                     Omega=2.0 * math.pi * ds.attrs["mesh_frequency"] / omega_n,
-                     dimensionless_backlash=ds.attrs["half_backlash"] / b_c)
+        out[f"{label}_velocity"] = (
+            "time",
+            ds[f"{name}_velocity"].values / (b_c * omega_n),
+            {"units": "1", "long_name": f"d{label}/dtau"},
+        )
+    out.attrs.update(
+        characteristic_length=b_c,
+        omega_n=omega_n,
+        Omega=2.0 * math.pi * ds.attrs["mesh_frequency"] / omega_n,
+        dimensionless_backlash=ds.attrs["half_backlash"] / b_c,
+    )
     return out
 
 
-__all__ = ["build_model", "ModelSetup", "equivalent_mass", "mean_mesh_force", "rated_mesh_force", "natural_frequencies",
-           "dimensionless", "STIFFNESS_MODES"]
+__all__ = [
+    "build_model",
+    "ModelSetup",
+    "equivalent_mass",
+    "mean_mesh_force",
+    "rated_mesh_force",
+    "natural_frequencies",
+    "dimensionless",
+    "STIFFNESS_MODES",
+]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -48,8 +49,10 @@ def _per_tooth(name: str, values: ArrayLike, teeth: int | None) -> np.ndarray:
     bad = ~np.isfinite(array) | (np.abs(array) > MAX_PITCH_OFFSET)
     if np.any(bad):
         index = int(np.argmax(bad))
-        raise OperatingPointError(f"{name}[{index}]: expected a finite offset within +-{MAX_PITCH_OFFSET:g} m "
-                                  f"(SI metres: 10 um is 1e-5); got {array[index]!r}")
+        raise OperatingPointError(
+            f"{name}[{index}]: expected a finite offset within +-{MAX_PITCH_OFFSET:g} m "
+            f"(SI metres: 10 um is 1e-5); got {array[index]!r}"
+        )
     array.setflags(write=False)
     return array
 
@@ -82,7 +85,7 @@ class PitchErrors:
         object.__setattr__(self, "pinion", _per_tooth("pitch_errors.pinion", self.pinion, None))
         object.__setattr__(self, "gear", _per_tooth("pitch_errors.gear", self.gear, None))
 
-    def check(self, design: Design) -> "PitchErrors":
+    def check(self, design: Design) -> PitchErrors:
         """Self, after checking one value per tooth of the design (z1 pinion, z2 gear values)."""
         _per_tooth("pitch_errors.pinion", self.pinion, design.z1)
         _per_tooth("pitch_errors.gear", self.gear, design.z2)
@@ -94,7 +97,7 @@ class PitchErrors:
         return bool(np.any(self.pinion != 0.0) or np.any(self.gear != 0.0))
 
     @classmethod
-    def zeros(cls, design: Design) -> "PitchErrors":
+    def zeros(cls, design: Design) -> PitchErrors:
         """No pitch errors (the results equal those without any, bit for bit)."""
         return cls(np.zeros(design.z1), np.zeros(design.z2))
 
@@ -105,6 +108,7 @@ class PitchErrors:
     def __repr__(self) -> str:
         def span(a: np.ndarray) -> str:
             return f"{a.size} teeth, |e| <= {1e6 * float(np.max(np.abs(a))):.2f} um"
+
         return f"PitchErrors(pinion: {span(self.pinion)}; gear: {span(self.gear)})"
 
 
@@ -124,10 +128,14 @@ def iso1328_single_pitch_tolerance(reference_diameter: float, module: float, tol
     tolerance_class : int
         A in 1..11.
     """
-    if isinstance(tolerance_class, bool) or not isinstance(tolerance_class, (int, np.integer)) \
-            or int(tolerance_class) not in ISO1328_CLASSES:
-        raise OperatingPointError(f"pitch_errors: expected an ISO 1328-1 flank tolerance class, an integer in "
-                                  f"1..11; got {tolerance_class!r}")
+    if (
+        isinstance(tolerance_class, bool)
+        or not isinstance(tolerance_class, (int, np.integer))
+        or int(tolerance_class) not in ISO1328_CLASSES
+    ):
+        raise OperatingPointError(
+            f"pitch_errors: expected an ISO 1328-1 flank tolerance class, an integer in 1..11; got {tolerance_class!r}"
+        )
     for name, value in (("reference_diameter", reference_diameter), ("module", module)):
         if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
             raise OperatingPointError(f"{name}: expected a length > 0 in m; got {value!r}")
@@ -181,8 +189,15 @@ def draw_pitch_errors(design: Design, tolerance_class: int, rng: np.random.Gener
     pinion_tolerance = iso1328_single_pitch_tolerance(design.module * design.z1, design.module, tolerance_class)
     gear_tolerance = iso1328_single_pitch_tolerance(design.module * design.z2, design.module, tolerance_class)
     cos_alpha = math.cos(math.radians(design.pressure_angle))
-    return PitchErrors(_draw_gear(rng, design.z1, pinion_tolerance, cos_alpha),
-                       _draw_gear(rng, design.z2, gear_tolerance, cos_alpha))
+    return PitchErrors(
+        _draw_gear(rng, design.z1, pinion_tolerance, cos_alpha), _draw_gear(rng, design.z2, gear_tolerance, cos_alpha)
+    )
+
+
+@overload
+def class_level(classes: tuple[float, float], position: float) -> float: ...
+@overload
+def class_level(classes: tuple[float, float], position: np.ndarray) -> np.ndarray: ...
 
 
 def class_level(classes: tuple[float, float], position: float | np.ndarray) -> float | np.ndarray:
@@ -200,8 +215,9 @@ def draw_at_level(design: Design, level: float, rng: np.random.Generator) -> Pit
     return PitchErrors(errors.pinion * level, errors.gear * level)
 
 
-def draw_in_classes(design: Design, classes: tuple[float, float], position: float,
-                    rng: np.random.Generator) -> PitchErrors:
+def draw_in_classes(
+    design: Design, classes: tuple[float, float], position: float, rng: np.random.Generator
+) -> PitchErrors:
     """Pitch errors drawn at :data:`REFERENCE_CLASS` and scaled to the class at ``position`` across ``classes``."""
     return draw_at_level(design, class_level(classes, position), rng)
 
@@ -213,8 +229,9 @@ def check_classes(classes: object, *, error: type[ValueError] = OperatingPointEr
     try:
         low, high = (float(value) for value in classes)  # type: ignore[attr-defined]
     except (TypeError, ValueError):
-        raise error(f"pitch_classes: expected two ISO 1328-1 classes (lowest, highest) in 1..11 or "
-                    f"none; got {classes!r:.80}") from None
+        raise error(
+            f"pitch_classes: expected two ISO 1328-1 classes (lowest, highest) in 1..11 or none; got {classes!r:.80}"
+        ) from None
     if not (1.0 <= low <= high <= 11.0):
         raise error(f"pitch_classes: expected 1 <= lowest <= highest <= 11; got ({low:g}, {high:g})")
     return low, high
@@ -228,12 +245,13 @@ def order_powers(errors: np.ndarray, orders: tuple[int, ...] = (1, 2, 3)) -> np.
     """
     errors = np.asarray(errors, dtype=float)
     teeth = errors.shape[-1]
-    phases = np.exp(-2j * np.pi * np.outer(np.arange(teeth), np.asarray(orders)) / teeth)   # (z, orders)
+    phases = np.exp(-2j * np.pi * np.outer(np.arange(teeth), np.asarray(orders)) / teeth)  # (z, orders)
     return np.abs(2.0 / teeth * (errors @ phases)) ** 2
 
 
-def run_out_bounds(design: Design, classes: tuple[float, float], rng: np.random.Generator, *,
-                   quantile: float = 0.95, draws: int = 4000) -> dict[str, float]:
+def run_out_bounds(
+    design: Design, classes: tuple[float, float], rng: np.random.Generator, *, quantile: float = 0.95, draws: int = 4000
+) -> dict[str, float]:
     """Per gear, the first-order run-out (m, along the line of action) that pitch errors of ``classes`` stay under.
 
     The running sum of a gear's pitch errors is a kinematic run-out: its
@@ -254,6 +272,17 @@ def run_out_bounds(design: Design, classes: tuple[float, float], rng: np.random.
     return bounds
 
 
-__all__ = ["PitchErrors", "iso1328_single_pitch_tolerance", "draw_pitch_errors", "ISO1328_CLASSES",
-           "REFERENCE_CLASS", "DEFAULT_CLASSES", "class_level", "draw_at_level", "draw_in_classes", "check_classes",
-           "order_powers", "run_out_bounds"]
+__all__ = [
+    "PitchErrors",
+    "iso1328_single_pitch_tolerance",
+    "draw_pitch_errors",
+    "ISO1328_CLASSES",
+    "REFERENCE_CLASS",
+    "DEFAULT_CLASSES",
+    "class_level",
+    "draw_at_level",
+    "draw_in_classes",
+    "check_classes",
+    "order_powers",
+    "run_out_bounds",
+]

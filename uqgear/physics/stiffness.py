@@ -32,9 +32,14 @@ from .geometry import PairGeometry, ToothGeometry, pair_geometry
 _ISO_Q_COEFFICIENTS = (0.04723, 0.15551, 0.25791, -0.00635, -0.11654, -0.00193, -0.24188, 0.00529, 0.00182)
 
 
-def tooth_compliance(tooth: ToothGeometry, contact_radius: np.ndarray, face_width: float,
-                     youngs_modulus: float, poisson_ratio: float,
-                     shear_factor: float = 1.0) -> dict[str, np.ndarray]:
+def tooth_compliance(
+    tooth: ToothGeometry,
+    contact_radius: np.ndarray,
+    face_width: float,
+    youngs_modulus: float,
+    poisson_ratio: float,
+    shear_factor: float = 1.0,
+) -> dict[str, np.ndarray]:
     """Ishikawa compliances of one tooth loaded at ``contact_radius``.
 
     Parameters
@@ -67,34 +72,41 @@ def tooth_compliance(tooth: ToothGeometry, contact_radius: np.ndarray, face_widt
     rho = (h_i - h_x) / length
     cos2 = np.cos(tooth.load_angle(r_x)) ** 2
     e_b = youngs_modulus * face_width
-    bending_rectangle = 12.0 * cos2 / (e_b * s_r ** 3) * (h_x * h_r * (h_x - h_r) + h_r ** 3 / 3.0)
-    bending_trapezoid = 6.0 * cos2 * length ** 3 / (e_b * s_f ** 3) * (rho * (4.0 - rho) - 2.0 * np.log(rho) - 3.0)
+    bending_rectangle = 12.0 * cos2 / (e_b * s_r**3) * (h_x * h_r * (h_x - h_r) + h_r**3 / 3.0)
+    bending_trapezoid = 6.0 * cos2 * length**3 / (e_b * s_f**3) * (rho * (4.0 - rho) - 2.0 * np.log(rho) - 3.0)
     if s_r == s_f:
         # one thickness: the form of docs/model.md section 4.1, evaluated as it always was
         shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / (e_b * s_f) * (h_r + length * np.log(1.0 / rho))
     else:
-        shear = (shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / e_b
-                 * (h_r / s_r + length * np.log(1.0 / rho) / s_f))
-    foundation = 24.0 * h_x ** 2 * cos2 / (math.pi * e_b * s_r ** 2)
+        shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / e_b * (h_r / s_r + length * np.log(1.0 / rho) / s_f)
+    foundation = 24.0 * h_x**2 * cos2 / (math.pi * e_b * s_r**2)
     total = bending_rectangle + bending_trapezoid + shear + foundation
-    return {"bending_rectangle": bending_rectangle, "bending_trapezoid": bending_trapezoid,
-            "shear": shear, "foundation": foundation, "total": total}
+    return {
+        "bending_rectangle": bending_rectangle,
+        "bending_trapezoid": bending_trapezoid,
+        "shear": shear,
+        "foundation": foundation,
+        "total": total,
+    }
 
 
 def contact_compliance(face_width: float, youngs_modulus: float, poisson_ratio: float) -> float:
     """Ishikawa's contact (Hertzian approach) compliance of one pair, m/N."""
-    return 4.0 * (1.0 - poisson_ratio ** 2) / (math.pi * youngs_modulus * face_width)
+    return 4.0 * (1.0 - poisson_ratio**2) / (math.pi * youngs_modulus * face_width)
 
 
-def single_pair_stiffness(design, s: np.ndarray, geometry: PairGeometry | None = None,
-                          shear_factor: float = 1.0) -> np.ndarray:
+def single_pair_stiffness(
+    design, s: np.ndarray, geometry: PairGeometry | None = None, shear_factor: float = 1.0
+) -> np.ndarray:
     """Stiffness of one tooth pair at path coordinates ``s`` (from T1), N/m."""
     geometry = geometry or pair_geometry(design)
     r1, r2 = geometry.contact_radii(s)
     args = (design.face_width, design.youngs_modulus, design.poisson_ratio, shear_factor)
-    compliance = (tooth_compliance(geometry.pinion, r1, *args)["total"]
-                  + tooth_compliance(geometry.gear, r2, *args)["total"]
-                  + contact_compliance(design.face_width, design.youngs_modulus, design.poisson_ratio))
+    compliance = (
+        tooth_compliance(geometry.pinion, r1, *args)["total"]
+        + tooth_compliance(geometry.gear, r2, *args)["total"]
+        + contact_compliance(design.face_width, design.youngs_modulus, design.poisson_ratio)
+    )
     return 1.0 / compliance
 
 
@@ -113,14 +125,22 @@ def iso6336_stiffness(design, geometry: PairGeometry | None = None) -> dict[str,
     geometry = geometry or pair_geometry(design)
     c = _ISO_Q_COEFFICIENTS
     z1, z2, x1, x2 = design.z1, design.z2, design.x1, design.x2
-    q_prime = (c[0] + c[1] / z1 + c[2] / z2 + c[3] * x1 + c[4] * x1 / z1 + c[5] * x2
-               + c[6] * x2 / z2 + c[7] * x1 ** 2 + c[8] * x2 ** 2)
+    q_prime = (
+        c[0]
+        + c[1] / z1
+        + c[2] / z2
+        + c[3] * x1
+        + c[4] * x1 / z1
+        + c[5] * x2
+        + c[6] * x2 / z2
+        + c[7] * x1**2
+        + c[8] * x2**2
+    )
     c_b = (1.0 + 0.5 * (1.2 - design.dedendum_coefficient)) * (1.0 - 0.02 * (20.0 - design.pressure_angle))
     c_prime = 0.8 * 1.0 * c_b / q_prime
     c_gamma = c_prime * (0.75 * geometry.contact_ratio + 0.25)
     # N/(mm um) x mm = N/um = 1e6 N/m
-    return {"c_prime": c_prime, "c_gamma": c_gamma,
-            "mesh_stiffness": c_gamma * design.face_width * 1e3 * 1e6}
+    return {"c_prime": c_prime, "c_gamma": c_gamma, "mesh_stiffness": c_gamma * design.face_width * 1e3 * 1e6}
 
 
 @dataclass(frozen=True)
@@ -164,8 +184,7 @@ def _sum_pairs(phase: np.ndarray, contact_ratio: float, pair_k) -> tuple[np.ndar
     return total, count
 
 
-def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15,
-                   shear_factor: float = 1.0) -> xr.Dataset:
+def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15, shear_factor: float = 1.0) -> xr.Dataset:
     """Ishikawa mesh stiffness of a design over one mesh period.
 
     Parameters
@@ -208,8 +227,8 @@ def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15,
     k_period, count = _sum_pairs(phase, eps, pair_k)
     spectrum = np.fft.rfft(k_period) / n_points
     harmonics = np.arange(1, n_harmonics + 1)
-    cos_coef = 2.0 * spectrum.real[1:n_harmonics + 1]
-    sin_coef = -2.0 * spectrum.imag[1:n_harmonics + 1]
+    cos_coef = 2.0 * spectrum.real[1 : n_harmonics + 1]
+    sin_coef = -2.0 * spectrum.imag[1 : n_harmonics + 1]
     k_mean = float(spectrum.real[0])
     angle = 2.0 * math.pi * np.outer(phase, harmonics)
     k_fourier = k_mean + np.cos(angle) @ cos_coef + np.sin(angle) @ sin_coef
@@ -218,13 +237,22 @@ def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15,
     ds = xr.Dataset(
         data_vars={
             "single_pair_stiffness": ("s", k_pair, {"units": "N m-1", "long_name": "single tooth-pair stiffness"}),
-            "pinion_compliance": (("s", "component"), np.stack([pinion[c] for c in components], axis=1),
-                                  {"units": "m N-1", "long_name": "pinion tooth compliance components"}),
-            "gear_compliance": (("s", "component"), np.stack([gear[c] for c in components], axis=1),
-                                {"units": "m N-1", "long_name": "gear tooth compliance components"}),
+            "pinion_compliance": (
+                ("s", "component"),
+                np.stack([pinion[c] for c in components], axis=1),
+                {"units": "m N-1", "long_name": "pinion tooth compliance components"},
+            ),
+            "gear_compliance": (
+                ("s", "component"),
+                np.stack([gear[c] for c in components], axis=1),
+                {"units": "m N-1", "long_name": "gear tooth compliance components"},
+            ),
             "mesh_stiffness": ("mesh_phase", k_period, {"units": "N m-1", "long_name": "mesh stiffness k (Ishikawa)"}),
-            "mesh_stiffness_fourier": ("mesh_phase", k_fourier,
-                                       {"units": "N m-1", "long_name": f"mesh stiffness, {n_harmonics}-harmonic Fourier series"}),
+            "mesh_stiffness_fourier": (
+                "mesh_phase",
+                k_fourier,
+                {"units": "N m-1", "long_name": f"mesh stiffness, {n_harmonics}-harmonic Fourier series"},
+            ),
             "pairs_in_contact": ("mesh_phase", count, {"units": "1", "long_name": "tooth pairs in contact"}),
             "fourier_cos": ("harmonic", cos_coef, {"units": "N m-1", "long_name": "cosine coefficients a_n of k(u)"}),
             "fourier_sin": ("harmonic", sin_coef, {"units": "N m-1", "long_name": "sine coefficients b_n of k(u)"}),
@@ -240,20 +268,27 @@ def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15,
             "harmonic": harmonics,
         },
         attrs={
-            "k_mean": k_mean, "k_min": float(k_period.min()), "k_max": float(k_period.max()),
-            "contact_ratio": eps, "double_contact_fraction": float(np.mean(count >= 2)),
-            "iso_c_prime": iso["c_prime"], "iso_c_gamma": iso["c_gamma"],
+            "k_mean": k_mean,
+            "k_min": float(k_period.min()),
+            "k_max": float(k_period.max()),
+            "contact_ratio": eps,
+            "double_contact_fraction": float(np.mean(count >= 2)),
+            "iso_c_prime": iso["c_prime"],
+            "iso_c_gamma": iso["c_gamma"],
             "iso_mesh_stiffness": iso["mesh_stiffness"],
-            "contact_compliance": d_contact, "shear_factor": shear_factor,
-            "thickness": "chordal", "n_harmonics": n_harmonics,
+            "contact_compliance": d_contact,
+            "shear_factor": shear_factor,
+            "thickness": "chordal",
+            "n_harmonics": n_harmonics,
             "method": "Ishikawa (rectangle + trapezoid cantilever, foundation, contact)",
         },
     )
     return ds
 
 
-def stiffness_tables(design, *, n_points: int = 1024, mode: str = "ishikawa",
-                     n_harmonics: int = 15, shear_factor: float = 1.0) -> StiffnessTables:
+def stiffness_tables(
+    design, *, n_points: int = 1024, mode: str = "ishikawa", n_harmonics: int = 15, shear_factor: float = 1.0
+) -> StiffnessTables:
     """Tables of single-pair and period stiffness for the integrators.
 
     Parameters
@@ -269,14 +304,25 @@ def stiffness_tables(design, *, n_points: int = 1024, mode: str = "ishikawa",
         period = ds["mesh_stiffness_fourier"].values
     else:
         from ..common.errors import UqgearError
+
         raise UqgearError(f"stiffness: expected 'ishikawa' or 'fourier'; got {mode!r}")
     # close the table so linear interpolation on u in [0, 1] needs no wrap logic
     closed = np.append(period, period[0])
-    return StiffnessTables(pair_position=ds["pair_position"].values.copy(),
-                           pair_stiffness=ds["single_pair_stiffness"].values.copy(),
-                           period_stiffness=closed, contact_ratio=ds.attrs["contact_ratio"],
-                           k_mean=ds.attrs["k_mean"])
+    return StiffnessTables(
+        pair_position=ds["pair_position"].values.copy(),
+        pair_stiffness=ds["single_pair_stiffness"].values.copy(),
+        period_stiffness=closed,
+        contact_ratio=ds.attrs["contact_ratio"],
+        k_mean=ds.attrs["k_mean"],
+    )
 
 
-__all__ = ["tooth_compliance", "contact_compliance", "single_pair_stiffness", "iso6336_stiffness",
-           "mesh_stiffness", "stiffness_tables", "StiffnessTables"]
+__all__ = [
+    "tooth_compliance",
+    "contact_compliance",
+    "single_pair_stiffness",
+    "iso6336_stiffness",
+    "mesh_stiffness",
+    "stiffness_tables",
+    "StiffnessTables",
+]

@@ -27,7 +27,7 @@ def default_threads() -> int:
     CPU this process may run on (its affinity): one setting for the threaded
     kernels and numba's own parallel code.
     """
-    return max(1, int(numba.config.NUMBA_NUM_THREADS))
+    return max(1, int(numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # set at numba's import
 
 
 def spread(run_range: Callable[[int, int], None], n: int, threads: int | None = None) -> None:

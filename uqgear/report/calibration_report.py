@@ -15,7 +15,7 @@ from __future__ import annotations
 import html
 import os
 from collections.abc import Mapping, Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -32,20 +32,38 @@ class Calibration(Protocol):
     """What the report reads of a fitted :class:`uqgear.calibration.Calibration`.
 
     The report sits below the calibration in the package's layers, so it
-    names the attributes it uses instead of importing the class.
+    names the attributes it uses instead of importing the class (read-only: the report only reads them).
     """
 
-    parameters: Sequence[str]
-    posterior_: Any
-    predictive_: Any
-    predictive_check_: Any
-    summary_: Mapping[str, Any]
-    converged_: bool
-    diagnostics_: Mapping[str, Any]
-    timing_: Mapping[str, Any]
-    emulator_: Any
+    @property
+    def parameters(self) -> Sequence[str]: ...
+
+    @property
+    def posterior_(self) -> Any: ...
+
+    @property
+    def predictive_(self) -> Any: ...
+
+    @property
+    def predictive_check_(self) -> Any: ...
+
+    @property
+    def summary_(self) -> Mapping[str, Any]: ...
+
+    @property
+    def converged_(self) -> bool: ...
+
+    @property
+    def diagnostics_(self) -> Mapping[str, Any]: ...
+
+    @property
+    def timing_(self) -> Mapping[str, Any]: ...
+
+    @property
+    def emulator_(self) -> Any: ...
 
     def to_dict(self) -> dict[str, Any]: ...
+
 
 # parameter -> (label, unit shown, factor from SI)
 _DISPLAY: dict[str, tuple[str, str, float]] = {
@@ -89,80 +107,146 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
     findings = []
     diagnostics = content.get("diagnostics") or {}
     converged = bool(content.get("converged"))
-    numbers = {key: float(diagnostics[key]) for key in ("tau_max", "rhat_max", "ess_min", "acceptance_mean")
-               if key in diagnostics}
+    numbers = {
+        key: float(diagnostics[key])
+        for key in ("tau_max", "rhat_max", "ess_min", "acceptance_mean")
+        if key in diagnostics
+    }
     if converged:
-        text = ("The sampler converged" + (f": largest autocorrelation time {numbers['tau_max']:.0f} steps, "
-                                           f"largest split R-hat {numbers['rhat_max']:.3f}, smallest effective "
-                                           f"sample size {numbers['ess_min']:.0f}"
-                                           if {"tau_max", "rhat_max", "ess_min"} <= set(numbers) else "") + ".")
+        text = (
+            "The sampler converged"
+            + (
+                f": largest autocorrelation time {numbers['tau_max']:.0f} steps, "
+                f"largest split R-hat {numbers['rhat_max']:.3f}, smallest effective "
+                f"sample size {numbers['ess_min']:.0f}"
+                if {"tau_max", "rhat_max", "ess_min"} <= set(numbers)
+                else ""
+            )
+            + "."
+        )
     else:
         reasons = [str(r) for r in diagnostics.get("reasons", [])]
         message = str(content.get("message") or "")
-        text = (("NOT converged: " + message) if message else
-                ("NOT converged, so the estimates are not a result"
-                 + (": " + "; ".join(reasons) if reasons else ""))) + "."
-    findings.append(Finding(text, {"converged": converged, "reasons": list(diagnostics.get("reasons", [])),
-                                   **numbers}, "convergence"))
+        text = (
+            ("NOT converged: " + message)
+            if message
+            else ("NOT converged, so the estimates are not a result" + (": " + "; ".join(reasons) if reasons else ""))
+        ) + "."
+    findings.append(
+        Finding(
+            text, {"converged": converged, "reasons": list(diagnostics.get("reasons", [])), **numbers}, "convergence"
+        )
+    )
     warnings = [str(w) for w in content.get("warnings") or []]
     if warnings:
-        findings.append(Finding("Caution, the result leans on: " + "; ".join(warnings) + ".",
-                                {"warnings": warnings}, "warnings"))
+        findings.append(
+            Finding("Caution, the result leans on: " + "; ".join(warnings) + ".", {"warnings": warnings}, "warnings")
+        )
     speed_rows = [row for row in content.get("speed") or [] if row.get("wander") is not None]
     if speed_rows:
         widest = max(speed_rows, key=lambda row: row["wander"])
         tracked = [row["op"] for row in speed_rows if row.get("order_tracked")]
-        findings.append(Finding(
-            f"Pinion speed within a record wandered by up to +-{100 * widest['wander']:.2f} % (run {widest['op']}, "
-            f"{widest['mean_rpm']:.0f} rpm); "
-            + (f"runs {', '.join(map(str, tracked))} were resampled to uniform pinion angle (order tracking) "
-               "before their features were read." if tracked else "no run needed order tracking."),
-            {"max_wander": widest["wander"], "order_tracked_runs": tracked}, "speed"))
+        findings.append(
+            Finding(
+                f"Pinion speed within a record wandered by up to +-{100 * widest['wander']:.2f} % (run {widest['op']}, "
+                f"{widest['mean_rpm']:.0f} rpm); "
+                + (
+                    f"runs {', '.join(map(str, tracked))} were resampled to uniform pinion angle (order tracking) "
+                    "before their features were read."
+                    if tracked
+                    else "no run needed order tracking."
+                ),
+                {"max_wander": widest["wander"], "order_tracked_runs": tracked},
+                "speed",
+            )
+        )
     pitch = content.get("pitch_errors")
     if pitch:
         if pitch.get("applied"):
-            text = (f"Pitch errors: the observed mesh harmonics were corrected for random pitch errors "
-                    f"({pitch['reason']}; {pitch['draws']} model draws, largest change "
-                    f"{100 * pitch['max_abs_log_shift']:.1f} %, median {100 * pitch['median_abs_log_shift']:.2f} %, "
-                    f"spread between draws up to {100 * pitch['max_draw_spread']:.1f} %, added to the variance).")
+            text = (
+                f"Pitch errors: the observed mesh harmonics were corrected for random pitch errors "
+                f"({pitch['reason']}; {pitch['draws']} model draws, largest change "
+                f"{100 * pitch['max_abs_log_shift']:.1f} %, median {100 * pitch['median_abs_log_shift']:.2f} %, "
+                f"spread between draws up to {100 * pitch['max_draw_spread']:.1f} %, added to the variance)."
+            )
         else:
             text = f"Pitch errors: no correction ({pitch['reason']})."
-        findings.append(Finding(text, {key: pitch.get(key) for key in ("applied", "scale_to_class_7", "classes",
-                                                                        "max_abs_log_shift")}, "pitch_errors"))
+        findings.append(
+            Finding(
+                text,
+                {key: pitch.get(key) for key in ("applied", "scale_to_class_7", "classes", "max_abs_log_shift")},
+                "pitch_errors",
+            )
+        )
     estimates = content.get("parameters") if converged else None
     if estimates:
         parts, facts = [], {}
         for name, entry in estimates.items():
             label, unit, factor = _display(name)
             shown = "" if unit in ("1", "SI") else f" {unit}"
-            parts.append(f"{label} {entry['q50'] * factor:.4g}{shown} [{entry['q05'] * factor:.4g}, "
-                         f"{entry['q95'] * factor:.4g}]")
-            facts[name] = {"q05": float(entry["q05"]), "q50": float(entry["q50"]), "q95": float(entry["q95"]),
-                           "factor": factor, "unit": unit}
-        findings.append(Finding("Estimates, median [90 % credible interval]: " + "; ".join(parts) + ".",
-                                {"parameters": facts}, "estimates"))
-        shares = {name: (float(entry["q95"]) - float(entry["q05"])) / (float(entry["prior"][1])
-                                                                        - float(entry["prior"][0]))
-                  for name, entry in estimates.items()}
+            parts.append(
+                f"{label} {entry['q50'] * factor:.4g}{shown} [{entry['q05'] * factor:.4g}, {entry['q95'] * factor:.4g}]"
+            )
+            facts[name] = {
+                "q05": float(entry["q05"]),
+                "q50": float(entry["q50"]),
+                "q95": float(entry["q95"]),
+                "factor": factor,
+                "unit": unit,
+            }
+        findings.append(
+            Finding(
+                "Estimates, median [90 % credible interval]: " + "; ".join(parts) + ".",
+                {"parameters": facts},
+                "estimates",
+            )
+        )
+        shares = {
+            name: (float(entry["q95"]) - float(entry["q05"])) / (float(entry["prior"][1]) - float(entry["prior"][0]))
+            for name, entry in estimates.items()
+        }
         weak = [name for name, share in shares.items() if share >= NOT_IDENTIFIABLE_SHARE]
         if weak:
-            text = ("Not identifiable from these data (posterior close to its prior): " + "; ".join(
-                f"{_display(name)[0]} (90 % interval spans {100 * shares[name]:.0f} % of the prior range)"
-                for name in weak) + ".")
+            text = (
+                "Not identifiable from these data (posterior close to its prior): "
+                + "; ".join(
+                    f"{_display(name)[0]} (90 % interval spans {100 * shares[name]:.0f} % of the prior range)"
+                    for name in weak
+                )
+                + "."
+            )
         else:
-            text = (f"Every parameter is identified: the 90 % intervals span at most "
-                    f"{100 * max(shares.values()):.0f} % of their prior ranges.")
-        findings.append(Finding(text, {"shares": shares, "not_identifiable": weak,
-                                       "threshold": NOT_IDENTIFIABLE_SHARE}, "identifiability"))
+            text = (
+                f"Every parameter is identified: the 90 % intervals span at most "
+                f"{100 * max(shares.values()):.0f} % of their prior ranges."
+            )
+        findings.append(
+            Finding(
+                text,
+                {"shares": shares, "not_identifiable": weak, "threshold": NOT_IDENTIFIABLE_SHARE},
+                "identifiability",
+            )
+        )
     check = content.get("predictive_check") or {}
     if "fraction_within_2_sigma" in check:
         share = float(check["fraction_within_2_sigma"])
-        text = (f"Posterior predictive check with the real model {'passed' if check.get('passed') else 'FAILED'}: "
-                f"{100 * share:.0f} % of the {int(check.get('features_used', 0))} features within 2 sigma "
-                f"(noise and model error) of the data, largest |z| {float(check.get('max_abs_z', np.nan)):.3g}.")
-        findings.append(Finding(text, {"fraction_within_2_sigma": share, "passed": bool(check.get("passed")),
-                                       "features_used": int(check.get("features_used", 0)),
-                                       "max_abs_z": float(check.get("max_abs_z", np.nan))}, "predictive_check"))
+        text = (
+            f"Posterior predictive check with the real model {'passed' if check.get('passed') else 'FAILED'}: "
+            f"{100 * share:.0f} % of the {int(check.get('features_used', 0))} features within 2 sigma "
+            f"(noise and model error) of the data, largest |z| {float(check.get('max_abs_z', np.nan)):.3g}."
+        )
+        findings.append(
+            Finding(
+                text,
+                {
+                    "fraction_within_2_sigma": share,
+                    "passed": bool(check.get("passed")),
+                    "features_used": int(check.get("features_used", 0)),
+                    "max_abs_z": float(check.get("max_abs_z", np.nan)),
+                },
+                "predictive_check",
+            )
+        )
     return findings
 
 
@@ -177,12 +261,13 @@ def _table(rows: Sequence[Sequence[Any]], header: Sequence[str]) -> str:
         if isinstance(value, bool):
             return f'<td class="{"ok" if value else "bad"}">{"yes" if value else "no"}</td>'
         return f'<td class="text">{html.escape(str(value))}</td>'
+
     head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(cell(v) for v in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def corner_figure(calibration: "Calibration", truth: Mapping[str, Any] | None = None) -> Figure:
+def corner_figure(calibration: Calibration, truth: Mapping[str, Any] | None = None) -> Figure:
     """Pairwise marginals of the global parameters (2-D histograms) with 1-D histograms on the diagonal."""
     names = list(calibration.parameters)
     draws = {name: calibration.posterior_[name].values.ravel() * _display(name)[2] for name in names}
@@ -205,11 +290,9 @@ def corner_figure(calibration: "Calibration", truth: Mapping[str, Any] | None = 
             else:
                 axis.hist2d(x, draws[y_name], bins=40, cmap="cividis")
             if truth and x_name in truth:
-                axis.axvline(float(truth[x_name]) * _display(x_name)[2], color="#d62728", linestyle="--",
-                             linewidth=1.0)
+                axis.axvline(float(truth[x_name]) * _display(x_name)[2], color="#d62728", linestyle="--", linewidth=1.0)
             if truth and y_name in truth and row != column:
-                axis.axhline(float(truth[y_name]) * _display(y_name)[2], color="#d62728", linestyle="--",
-                             linewidth=1.0)
+                axis.axhline(float(truth[y_name]) * _display(y_name)[2], color="#d62728", linestyle="--", linewidth=1.0)
             label_x, unit_x, _ = _display(x_name)
             label_y, unit_y, _ = _display(y_name)
             if row == n - 1:
@@ -224,7 +307,7 @@ def corner_figure(calibration: "Calibration", truth: Mapping[str, Any] | None = 
     return figure
 
 
-def trace_figure(calibration: "Calibration", walkers: int = 12) -> Figure:
+def trace_figure(calibration: Calibration, walkers: int = 12) -> Figure:
     """Traces of the stored (burnt-in, thinned) draws of the global parameters for some walkers."""
     names = list(calibration.parameters)
     figure = new_figure(9.0, 1.6 * len(names) + 0.6)
@@ -242,7 +325,7 @@ def trace_figure(calibration: "Calibration", walkers: int = 12) -> Figure:
     return figure
 
 
-def predictive_figure(calibration: "Calibration") -> Figure:
+def predictive_figure(calibration: Calibration) -> Figure:
     """Observed mesh-harmonic amplitudes against the posterior predictive of the real model, per channel."""
     predictive = calibration.predictive_
     channels = [str(c) for c in predictive["channel"].values]
@@ -258,18 +341,33 @@ def predictive_figure(calibration: "Calibration") -> Figure:
             observed = predictive["observed"].sel(channel=channel, harmonic=harmonic).values
             used = predictive["used"].sel(channel=channel, harmonic=harmonic).values
             offset = (index - 1) * 0.012 * (speed.max() - speed.min() + 1.0)
-            axis.plot(speed + offset, observed, marker=marker, linestyle="none", color="k", markersize=7,
-                      markerfacecolor="none", label=f"data mesh{harmonic}")
+            axis.plot(
+                speed + offset,
+                observed,
+                marker=marker,
+                linestyle="none",
+                color="k",
+                markersize=7,
+                markerfacecolor="none",
+                label=f"data mesh{harmonic}",
+            )
             if "predicted_median" in predictive:
                 median = predictive["predicted_median"].sel(channel=channel, harmonic=harmonic).values
                 low = predictive["predicted_q05"].sel(channel=channel, harmonic=harmonic).values
                 high = predictive["predicted_q95"].sel(channel=channel, harmonic=harmonic).values
-                axis.errorbar(speed + offset, median, yerr=[median - low, high - median], marker=marker,
-                              linestyle="none", color="#1f77b4", markersize=3, capsize=2,
-                              label=f"model mesh{harmonic} (median, 5-95 %)")
+                axis.errorbar(
+                    speed + offset,
+                    median,
+                    yerr=[median - low, high - median],
+                    marker=marker,
+                    linestyle="none",
+                    color="#1f77b4",
+                    markersize=3,
+                    capsize=2,
+                    label=f"model mesh{harmonic} (median, 5-95 %)",
+                )
                 z = predictive["z_total"].sel(channel=channel, harmonic=harmonic).values
-                z_axis.plot(speed[used], z[used], marker=marker, linestyle="-", linewidth=0.6,
-                            label=f"mesh{harmonic}")
+                z_axis.plot(speed[used], z[used], marker=marker, linestyle="-", linewidth=0.6, label=f"mesh{harmonic}")
         axis.set_yscale("log")
         axis.set_ylabel(f"{channel} amplitude [{_CHANNEL_UNITS.get(channel, '')}]")
         axis.set_xlabel("pinion speed [rpm]")
@@ -290,85 +388,171 @@ def _truth_rows(truth: Mapping[str, Any] | None, name: str, q05: float, q95: flo
     return [value, bool(q05 <= value <= q95)]
 
 
-def calibration_report_html(calibration: "Calibration", *, truth: Mapping[str, Any] | None = None,
-                            dpi: int = 100) -> str:
+def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any] | None = None, dpi: int = 100) -> str:
     """The report as one HTML document (see the module docstring)."""
     if not hasattr(calibration, "posterior_"):
         raise UqgearError("calibration report: the calibration is not fitted; call fit(rig) first")
     content = calibration.to_dict()
     summary = calibration.summary_
     converged = calibration.converged_
-    verdict = ('<p class="ok">Converged: the posterior below is a result.</p>' if converged else
-               '<p class="bad">NOT converged: the estimates below are not a result.</p>'
-               + "<ul>" + "".join(f"<li>{html.escape(r)}</li>" for r in calibration.diagnostics_["reasons"])
-               + "</ul>")
+    verdict = (
+        '<p class="ok">Converged: the posterior below is a result.</p>'
+        if converged
+        else '<p class="bad">NOT converged: the estimates below are not a result.</p>'
+        + "<ul>"
+        + "".join(f"<li>{html.escape(r)}</li>" for r in calibration.diagnostics_["reasons"])
+        + "</ul>"
+    )
     # what the model did with the design's geometry (an undercut tooth is modelled, not refused)
-    design_notes = "".join(f'<p class="note"><b>Design:</b> {html.escape(str(note))}.</p>'
-                           for note in content.get("design_notes") or [])
-    parts = ["<h1>uqgear calibration report</h1>",
-             headline_html(calibration_findings(content), "Details, figures and diagnostics below."), verdict,
-             design_notes,
-             _table([("rig data", content["rig"]), ("model runs", str(calibration.timing_["model_runs"])),
-                     ("wall time", f"{calibration.timing_['wall_s']:.1f} s"),
-                     ("CPU time", f"{calibration.timing_['cpu_s']:.1f} s"),
-                     ("report created", datetime.now(timezone.utc).isoformat(timespec="seconds"))],
-                    ("item", "value"))]
+    design_notes = "".join(
+        f'<p class="note"><b>Design:</b> {html.escape(str(note))}.</p>' for note in content.get("design_notes") or []
+    )
+    parts = [
+        "<h1>uqgear calibration report</h1>",
+        headline_html(calibration_findings(content), "Details, figures and diagnostics below."),
+        verdict,
+        design_notes,
+        _table(
+            [
+                ("rig data", content["rig"]),
+                ("model runs", str(calibration.timing_["model_runs"])),
+                ("wall time", f"{calibration.timing_['wall_s']:.1f} s"),
+                ("CPU time", f"{calibration.timing_['cpu_s']:.1f} s"),
+                ("report created", datetime.now(UTC).isoformat(timespec="seconds")),
+            ],
+            ("item", "value"),
+        ),
+    ]
     parts.append("<h2>Posterior of the global parameters</h2>")
     rows = []
     for name, entry in summary["parameters"].items():
         label, unit, factor = _display(name)
-        rows.append([name, entry["units"], f"[{entry['prior'][0]:.4g}, {entry['prior'][1]:.4g}]", entry["mean"],
-                     entry["sd"], entry["q05"], entry["q50"], entry["q95"],
-                     *_truth_rows(truth, name, entry["q05"], entry["q95"])])
-    parts.append(_table(rows, ("parameter", "units", "prior (uniform)", "mean", "sd", "q05", "q50", "q95",
-                               "true", "true in 90 % CI")))
+        rows.append(
+            [
+                name,
+                entry["units"],
+                f"[{entry['prior'][0]:.4g}, {entry['prior'][1]:.4g}]",
+                entry["mean"],
+                entry["sd"],
+                entry["q05"],
+                entry["q50"],
+                entry["q95"],
+                *_truth_rows(truth, name, entry["q05"], entry["q95"]),
+            ]
+        )
+    parts.append(
+        _table(
+            rows,
+            ("parameter", "units", "prior (uniform)", "mean", "sd", "q05", "q50", "q95", "true", "true in 90 % CI"),
+        )
+    )
     parts.append("<h2>Adhesion torque per run (latent)</h2>")
     true_t2 = (truth or {}).get("adhesion_torque")
     rows = []
     for entry in summary["adhesion_torque"]:
         op = entry["op"]
         true_value = float(true_t2[op]) if true_t2 is not None else None
-        rows.append([op, entry["pinion_speed"], f"[{entry['prior'][0]:.0f}, {entry['prior'][1]:.0f}]",
-                     entry["mean"], entry["q05"], entry["q50"], entry["q95"],
-                     true_value if true_value is not None else "",
-                     bool(entry["q05"] <= true_value <= entry["q95"]) if true_value is not None else ""])
-    parts.append(_table(rows, ("op", "pinion speed [rpm]", "prior [N m]", "mean", "q05", "q50", "q95", "true",
-                               "true in 90 % CI")))
-    parts.append(_figure_html(corner_figure(calibration, truth),
-                              "Corner plot of the global parameters (dotted: 5 and 95 % quantiles; "
-                              "dashed red: true values where known)", dpi))
+        rows.append(
+            [
+                op,
+                entry["pinion_speed"],
+                f"[{entry['prior'][0]:.0f}, {entry['prior'][1]:.0f}]",
+                entry["mean"],
+                entry["q05"],
+                entry["q50"],
+                entry["q95"],
+                true_value if true_value is not None else "",
+                bool(entry["q05"] <= true_value <= entry["q95"]) if true_value is not None else "",
+            ]
+        )
+    parts.append(
+        _table(
+            rows, ("op", "pinion speed [rpm]", "prior [N m]", "mean", "q05", "q50", "q95", "true", "true in 90 % CI")
+        )
+    )
+    parts.append(
+        _figure_html(
+            corner_figure(calibration, truth),
+            "Corner plot of the global parameters (dotted: 5 and 95 % quantiles; dashed red: true values where known)",
+            dpi,
+        )
+    )
     parts.append("<h2>Convergence diagnostics</h2>")
     diagnostics = calibration.diagnostics_
-    parts.append(_table([(key, diagnostics[key]) for key in
-                         ("converged", "n_walkers", "n_steps", "burn_in", "thin", "steps_after_burn_in", "tau_max",
-                          "rhat_max", "ess_min", "acceptance_mean", "acceptance_min", "acceptance_max")],
-                        ("diagnostic", "value")))
-    parts.append(_table([(name, entry["tau"], entry["ess"], entry["rhat"])
-                         for name, entry in diagnostics["parameters"].items()],
-                        ("parameter", "autocorrelation time [steps]", "effective sample size", "split R-hat")))
+    parts.append(
+        _table(
+            [
+                (key, diagnostics[key])
+                for key in (
+                    "converged",
+                    "n_walkers",
+                    "n_steps",
+                    "burn_in",
+                    "thin",
+                    "steps_after_burn_in",
+                    "tau_max",
+                    "rhat_max",
+                    "ess_min",
+                    "acceptance_mean",
+                    "acceptance_min",
+                    "acceptance_max",
+                )
+            ],
+            ("diagnostic", "value"),
+        )
+    )
+    parts.append(
+        _table(
+            [(name, entry["tau"], entry["ess"], entry["rhat"]) for name, entry in diagnostics["parameters"].items()],
+            ("parameter", "autocorrelation time [steps]", "effective sample size", "split R-hat"),
+        )
+    )
     parts.append(_figure_html(trace_figure(calibration), "Walker traces of the stored draws", dpi))
     parts.append("<h2>Posterior predictive check (real model)</h2>")
     check = calibration.predictive_check_
     parts.append(_table([(key, value) for key, value in check.items()], ("item", "value")))
     if "predicted_median" in calibration.predictive_:
-        parts.append(_figure_html(predictive_figure(calibration),
-                                  "Mesh-harmonic amplitudes: data (black) and the real model at posterior draws "
-                                  "(blue: median and 5-95 %); right: residuals in units of the noise plus the "
-                                  "posterior model error (grey band: +-2)", dpi))
+        parts.append(
+            _figure_html(
+                predictive_figure(calibration),
+                "Mesh-harmonic amplitudes: data (black) and the real model at posterior draws "
+                "(blue: median and 5-95 %); right: residuals in units of the noise plus the "
+                "posterior model error (grey band: +-2)",
+                dpi,
+            )
+        )
     parts.append("<h2>Model error (relative, per channel and harmonic)</h2>")
-    parts.append(_table([(group, entry["q05"], entry["q50"], entry["q95"], entry["n_features"])
-                         for group, entry in summary["model_error"].items()],
-                        ("group", "q05", "q50", "q95", "features")))
+    parts.append(
+        _table(
+            [
+                (group, entry["q05"], entry["q50"], entry["q95"], entry["n_features"])
+                for group, entry in summary["model_error"].items()
+            ],
+            ("group", "q05", "q50", "q95", "features"),
+        )
+    )
     parts.append("<h2>Emulator stages</h2>")
-    parts.append(_table([(stage["stage"], stage["loo_rms_median"], stage["loo_rms_max"], stage["acceptance"],
-                          bool(stage["truncated"])) for stage in calibration.emulator_["stages"]],
-                        ("stage", "LOO error median [log]", "LOO error max [log]", "acceptance",
-                         "posterior truncated")))
+    parts.append(
+        _table(
+            [
+                (
+                    stage["stage"],
+                    stage["loo_rms_median"],
+                    stage["loo_rms_max"],
+                    stage["acceptance"],
+                    bool(stage["truncated"]),
+                )
+                for stage in calibration.emulator_["stages"]
+            ],
+            ("stage", "LOO error median [log]", "LOO error max [log]", "acceptance", "posterior truncated"),
+        )
+    )
     return html_page("uqgear calibration report", _STYLE + HEADLINE_STYLE, parts)
 
 
-def write_calibration_report(calibration: "Calibration", path: str | os.PathLike[str], *,
-                             truth: Mapping[str, Any] | None = None, dpi: int = 100) -> Path:
+def write_calibration_report(
+    calibration: Calibration, path: str | os.PathLike[str], *, truth: Mapping[str, Any] | None = None, dpi: int = 100
+) -> Path:
     """Write the HTML report of a fitted calibration atomically.
 
     Parameters
@@ -392,5 +576,11 @@ def write_calibration_report(calibration: "Calibration", path: str | os.PathLike
     return write_text_atomic(target, calibration_report_html(calibration, truth=truth, dpi=dpi))
 
 
-__all__ = ["write_calibration_report", "calibration_report_html", "calibration_findings", "corner_figure",
-           "trace_figure", "predictive_figure"]
+__all__ = [
+    "write_calibration_report",
+    "calibration_report_html",
+    "calibration_findings",
+    "corner_figure",
+    "trace_figure",
+    "predictive_figure",
+]

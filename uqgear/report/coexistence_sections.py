@@ -38,8 +38,16 @@ def draw_sweep_starts(ax: Any, ds: xr.Dataset, parameter: str, condition: str | 
         points = points.reshape(ds.sizes[parameter], -1, points.shape[-1])
         rows, members = np.nonzero(several)
         shown = points[rows, members]
-        ax.plot(np.repeat(values[rows], shown.shape[1]), shown.ravel(), linestyle="none", marker=marker,
-                markersize=3.0, color=colour, alpha=0.8, label=label)
+        ax.plot(
+            np.repeat(values[rows], shown.shape[1]),
+            shown.ravel(),
+            linestyle="none",
+            marker=marker,
+            markersize=3.0,
+            color=colour,
+            alpha=0.8,
+            label=label,
+        )
     return True
 
 
@@ -52,8 +60,17 @@ def mark_coexistence(ax: Any, ds: xr.Dataset, first: str, second: str, scales: t
     y = np.asarray(ds[second].values, dtype=float) * scales[1]
     rows, columns = np.nonzero(count > 1)
     if rows.size:
-        ax.plot(x[rows], y[columns], linestyle="none", marker="s", markersize=11, markerfacecolor="none",
-                markeredgecolor="#D55E00", markeredgewidth=1.6, label="two or more responses coexist")
+        ax.plot(
+            x[rows],
+            y[columns],
+            linestyle="none",
+            marker="s",
+            markersize=11,
+            markerfacecolor="none",
+            markeredgecolor="#D55E00",
+            markeredgewidth=1.6,
+            label="two or more responses coexist",
+        )
 
 
 def coexistence_sentences(ds: xr.Dataset, sweep: str, condition: str | None = None) -> list[str]:
@@ -68,8 +85,10 @@ def coexistence_sentences(ds: xr.Dataset, sweep: str, condition: str | None = No
     for level in levels:
         selected = count if level is None else count.isel({condition: level})
         column = np.asarray(selected.transpose(sweep, ...).values).reshape(values.size, -1).max(axis=1)
-        where = "" if level is None else (
-            f" at {short_name(condition)} = {format_value(condition, float(ds[condition].values[level]))}")
+        where = ""
+        if level is not None:
+            assert condition is not None  # levels are positions along the condition
+            where = f" at {short_name(condition)} = {format_value(condition, float(ds[condition].values[level]))}"
         for start, stop in _runs(column > 1):
             parts = []
             for index in range(start, min(stop, start + 3) + 1):
@@ -78,13 +97,20 @@ def coexistence_sentences(ds: xr.Dataset, sweep: str, condition: str | None = No
                 cell = forces.isel({sweep: index}) if level is None else forces.isel({sweep: index, condition: level})
                 found = np.sort(np.asarray(cell.values, dtype=float).ravel())
                 found = found[np.isfinite(found)]
-                parts.append(f"{' or '.join(f'{v / 1e3:.4g}' for v in found)} kN at "
-                             f"{format_value(sweep, values[index])}")
-            span = (f"at {format_value(sweep, values[start])}" if start == stop else
-                    f"between {format_value(sweep, values[start])} and {format_value(sweep, values[stop])}")
-            sentences.append(f"{int(column[start:stop + 1].max())} steady responses coexist {span}{where}"
-                             + (f": peak mesh force {'; '.join(parts)}" if parts else "")
-                             + (" ..." if stop - start > 3 else "") + " (which one depends on the start)")
+                parts.append(
+                    f"{' or '.join(f'{v / 1e3:.4g}' for v in found)} kN at {format_value(sweep, values[index])}"
+                )
+            span = (
+                f"at {format_value(sweep, values[start])}"
+                if start == stop
+                else f"between {format_value(sweep, values[start])} and {format_value(sweep, values[stop])}"
+            )
+            sentences.append(
+                f"{int(column[start : stop + 1].max())} steady responses coexist {span}{where}"
+                + (f": peak mesh force {'; '.join(parts)}" if parts else "")
+                + (" ..." if stop - start > 3 else "")
+                + " (which one depends on the start)"
+            )
     if not sentences:
         sentences.append(f"one steady response at every point (every point run from {_starts_text(ds)})")
     return sentences
@@ -100,10 +126,13 @@ def attractor_bound_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> l
     other = [i for i, start in enumerate(starts) if start != "rest"]
     if not other:
         return [f"{short_name(name)}: every upper bound is reached from rest"]
-    shown = ", ".join(f"{format_value(sweep, values[i])} ({format_value(name, upper[i])}, {starts[i]} start)"
-                      for i in other[:6])
-    return [f"{short_name(name)}: the upper bound comes from a response not reached from rest at {shown}"
-            + (" ..." if len(other) > 6 else "")]
+    shown = ", ".join(
+        f"{format_value(sweep, values[i])} ({format_value(name, upper[i])}, {starts[i]} start)" for i in other[:6]
+    )
+    return [
+        f"{short_name(name)}: the upper bound comes from a response not reached from rest at {shown}"
+        + (" ..." if len(other) > 6 else "")
+    ]
 
 
 def _starts_text(ds: xr.Dataset) -> str:
@@ -128,13 +157,20 @@ def coexistence_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
         return []
     ds = max(candidates, key=lambda item: item["attractor_count"].size)
     condition = next((dim for dim in ds["attractor_count"].dims if dim != "pinion_speed"), None)
-    sentences = coexistence_sentences(ds, "pinion_speed", condition)
+    sentences = coexistence_sentences(ds, "pinion_speed", None if condition is None else str(condition))
     source = str(ds.attrs.get("analysis_name", "analysis"))
     count = ds["attractor_count"]
     facts = {"source": source, "points_with_several": int((count > 1).sum()), "most": int(count.max())}
-    return [Finding(sentence[0].upper() + sentence[1:] + f" ({source}).", facts, "coexistence")
-            for sentence in sentences]
+    return [
+        Finding(sentence[0].upper() + sentence[1:] + f" ({source}).", facts, "coexistence") for sentence in sentences
+    ]
 
 
-__all__ = ["attractor_bound_sentences", "draw_sweep_starts", "mark_coexistence", "coexistence_sentences",
-           "coexistence_headline", "START_STYLE"]
+__all__ = [
+    "attractor_bound_sentences",
+    "draw_sweep_starts",
+    "mark_coexistence",
+    "coexistence_sentences",
+    "coexistence_headline",
+    "START_STYLE",
+]

@@ -15,8 +15,17 @@ from matplotlib.figure import Figure
 from .coexistence_sections import coexistence_sentences, draw_sweep_starts, mark_coexistence
 from .findings import regime_findings, separation_findings
 from .page import figure_png, new_figure
-from .presentation import (_MARKERS, REGIME_CODES, REGIME_FIXED_COLOURS, REGIME_ORDER, axis_label, display,
-                           format_value, regime_legend, short_name)
+from .presentation import (
+    _MARKERS,
+    REGIME_CODES,
+    REGIME_FIXED_COLOURS,
+    REGIME_ORDER,
+    axis_label,
+    display,
+    format_value,
+    regime_legend,
+    short_name,
+)
 from .sections import Section, _add_figure, _json_attr, _section, renderer
 
 #: Dynamic range of the DTE spectra drawn: floored this many dB below their peak.
@@ -111,8 +120,7 @@ def _draw_simulation(figure: Figure, run: xr.Dataset, spectrum_axis: str = "orde
     ax.plot(x, velocity, color="0.35", linewidth=0.5)
     poincare_x = np.asarray(run["poincare_x"].values) * 1e6
     poincare_v = np.asarray(run["poincare_x_velocity"].values) * 1e3
-    ax.plot(poincare_x, poincare_v, linestyle="none", marker="o", markersize=3, color="black",
-            label="Poincaré points")
+    ax.plot(poincare_x, poincare_v, linestyle="none", marker="o", markersize=3, color="black", label="Poincaré points")
     ax.set_xlabel("DTE $x$ [µm]")
     ax.set_ylabel("DTE velocity $\\dot{x}$ [mm/s]")
     ax.set_title("phase plane", fontsize=9)
@@ -154,9 +162,11 @@ def _draw_simulation(figure: Figure, run: xr.Dataset, spectrum_axis: str = "orde
 
 
 def _run_title(run: xr.Dataset, swept: Sequence[str]) -> str:
-    parts = [f"{short_name(name)} = {format_value(name, float(run[name].values))}"
-             for name in ("pinion_speed", "drive_torque", "adhesion_torque", *swept)
-             if name in run and run[name].ndim == 0 and name not in ("run",)]
+    parts = [
+        f"{short_name(name)} = {format_value(name, float(run[name].values))}"
+        for name in ("pinion_speed", "drive_torque", "adhesion_torque", *swept)
+        if name in run and run[name].ndim == 0 and name not in ("run",)
+    ]
     if "mesh_stiffness_scale" in swept and "mesh_stiffness" in run:
         # the stiffness itself, not only the factor: mean of k(t) over the kept whole mesh periods
         parts.append(f"mean mesh stiffness {float(run['mesh_stiffness'].mean()) / 1e9:.3g} GN/m")
@@ -187,8 +197,15 @@ def _render_simulate(ds: xr.Dataset, dpi: int) -> Section:
         title = _run_title(run, swept)
         figure = new_figure(9.0, 6.6)
         _draw_simulation(figure, run, axis, title)
-        _add_figure(section, figure, title + ". " + str(run["regime_reason"].values)
-                    + f". Spectrum floored at {SPECTRUM_RANGE_DB:g} dB below its peak.", dpi)
+        _add_figure(
+            section,
+            figure,
+            title
+            + ". "
+            + str(run["regime_reason"].values)
+            + f". Spectrum floored at {SPECTRUM_RANGE_DB:g} dB below its peak.",
+            dpi,
+        )
         label = str(run["label"].values) if "label" in run else ""
         regime = str(run["regime"].values)
         loads = ""
@@ -197,14 +214,18 @@ def _render_simulate(ds: xr.Dataset, dpi: int) -> Section:
             if "load_factor_rated" in run and np.isfinite(float(run["load_factor_rated"].values)):
                 loads += f" ({float(run['load_factor_rated'].values):.3g} x the rated mesh force)"
             loads += ", "
-        text = (f"{title}; {loads}RMS DTE {format_value('dte_rms', float(run['dte_rms'].values))}, dynamic load "
-                f"factor {float(run['dynamic_load_factor'].values):.3g} (over the run's own F_T), teeth apart "
-                f"{100 * float(run['fraction_separation'].values):.3g} % and in back-side contact "
-                f"{100 * float(run['fraction_back_contact'].values):.3g} % of the time")
+        text = (
+            f"{title}; {loads}RMS DTE {format_value('dte_rms', float(run['dte_rms'].values))}, dynamic load "
+            f"factor {float(run['dynamic_load_factor'].values):.3g} (over the run's own F_T), teeth apart "
+            f"{100 * float(run['fraction_separation'].values):.3g} % and in back-side contact "
+            f"{100 * float(run['fraction_back_contact'].values):.3g} % of the time"
+        )
         section.findings.append(text)
         if label and not _label_matches(label, regime):
-            section.caveats.append(f"run {index} was listed as '{label}' in the study but is classified "
-                                   f"'{regime}': the representative speeds need updating")
+            section.caveats.append(
+                f"run {index} was listed as '{label}' in the study but is classified "
+                f"'{regime}': the representative speeds need updating"
+            )
     return section
 
 
@@ -220,6 +241,7 @@ def _label_matches(label: str, regime: str) -> bool:
 
 def _collapse_periods(labels: np.ndarray, keep: int = 4) -> np.ndarray:
     """Long periods merged into one class, so a map with many of them stays readable."""
+
     def merged(label: str) -> str:
         if label.startswith("period-"):
             try:
@@ -268,24 +290,29 @@ def _edges(values: np.ndarray) -> np.ndarray:
     if values.size == 1:
         return np.array([values[0] - 0.5, values[0] + 0.5])
     middle = 0.5 * (values[1:] + values[:-1])
-    return np.concatenate([[values[0] - (middle[0] - values[0])], middle,
-                           [values[-1] + (values[-1] - middle[-1])]])
+    return np.concatenate([[values[0] - (middle[0] - values[0])], middle, [values[-1] + (values[-1] - middle[-1])]])
 
 
 def _classification_caveat(ds: xr.Dataset) -> str:
     settings = _json_attr(ds, "simulation_settings", {})
     keep = settings.get("keep_periods", "?")
-    repeats = ("period-n only where the period repeats at least 10 times (n <= "
-               + (f"{int(keep) // 10}" if isinstance(keep, int) else "kept/10")
-               + "), quasi_periodic_or_long_period where it repeats fewer times")
+    repeats = (
+        "period-n only where the period repeats at least 10 times (n <= "
+        + (f"{int(keep) // 10}" if isinstance(keep, int) else "kept/10")
+        + "), quasi_periodic_or_long_period where it repeats fewer times"
+    )
     if settings.get("lyapunov"):
-        return (f"regimes classified from {keep} Poincaré points: period-n by repetition (0.1 % of the "
-                f"orbit size), {repeats}; chaotic or quasi-periodic where the largest Lyapunov exponent "
-                "(threshold 0.01 per mesh period) and the 0-1 test (K = 0.5) agree, uncertain where they "
-                "disagree")
-    return (f"regimes classified from {keep} Poincaré points without a Lyapunov exponent ({repeats}): "
-            "chaotic vs quasi-periodic rests on the 0-1 test, which converges slowly for quasi-periodic "
-            "responses (set simulation.lyapunov: true to confirm)")
+        return (
+            f"regimes classified from {keep} Poincaré points: period-n by repetition (0.1 % of the "
+            f"orbit size), {repeats}; chaotic or quasi-periodic where the largest Lyapunov exponent "
+            "(threshold 0.01 per mesh period) and the 0-1 test (K = 0.5) agree, uncertain where they "
+            "disagree"
+        )
+    return (
+        f"regimes classified from {keep} Poincaré points without a Lyapunov exponent ({repeats}): "
+        "chaotic vs quasi-periodic rests on the 0-1 test, which converges slowly for quasi-periodic "
+        "responses (set simulation.lyapunov: true to confirm)"
+    )
 
 
 def _half_backlash(ds: xr.Dataset, parameter: str) -> float | np.ndarray | None:
@@ -307,16 +334,26 @@ def _draw_contact_boundaries(ax: Any, values: np.ndarray, half_backlash: float |
     b = np.broadcast_to(np.asarray(half_backlash, dtype=float) * 1e6, values.shape)
     existing = ax.get_legend()
     lines = []
-    for sign, text, style in ((1.0, "x = +b: drive-side contact above,\nteeth apart below", "--"),
-                              (-1.0, "x = -b: back-side contact\n(impact) below", ":")):
+    for sign, text, style in (
+        (1.0, "x = +b: drive-side contact above,\nteeth apart below", "--"),
+        (-1.0, "x = -b: back-side contact\n(impact) below", ":"),
+    ):
         if b.size > 1 and np.ptp(b) > 0:
-            line, = ax.plot(values, sign * b, color="0.35", linestyle=style, linewidth=1.0, zorder=1, label=text)
+            (line,) = ax.plot(values, sign * b, color="0.35", linestyle=style, linewidth=1.0, zorder=1, label=text)
         else:
-            line = ax.axhline(sign * float(b.flat[0]), color="0.35", linestyle=style, linewidth=1.0, zorder=1,
-                              label=text)
+            line = ax.axhline(
+                sign * float(b.flat[0]), color="0.35", linestyle=style, linewidth=1.0, zorder=1, label=text
+            )
         lines.append(line)
-    ax.legend(handles=lines, fontsize=7, loc="lower left", bbox_to_anchor=(1.01, 0.0), borderaxespad=0,
-              title=f"contact boundaries (b = {float(b.flat[-1]):.4g} µm)", title_fontsize=7)
+    ax.legend(
+        handles=lines,
+        fontsize=7,
+        loc="lower left",
+        bbox_to_anchor=(1.01, 0.0),
+        borderaxespad=0,
+        title=f"contact boundaries (b = {float(b.flat[-1]):.4g} µm)",
+        title_fontsize=7,
+    )
     if existing is not None:
         ax.add_artist(existing)
     return lines
@@ -350,8 +387,9 @@ def _mean_mesh_stiffness(ds: xr.Dataset) -> float | None:
 def _stiffness_axis(ax: Any, k_mean: float) -> None:
     """A top axis giving the mesh stiffness scale as the mean mesh stiffness s_k k_mean in GN/m."""
     per_unit = k_mean / 1e9
-    secondary = ax.secondary_xaxis("top", functions=(lambda scale: scale * per_unit,
-                                                     lambda stiffness: stiffness / per_unit))
+    secondary = ax.secondary_xaxis(
+        "top", functions=(lambda scale: scale * per_unit, lambda stiffness: stiffness / per_unit)
+    )
     secondary.set_xlabel("mean mesh stiffness $s_k k_{mean}$ [GN/m]", fontsize=8)
     secondary.tick_params(labelsize=7)
 
@@ -370,30 +408,55 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
     if condition:
         others = [dim for dim in points.dims if dim not in (parameter, "period", condition)]
         if others:
-            points = points.isel({dim: 0 for dim in others})
+            points = points.isel(dict.fromkeys(others, 0))
         condition_values = np.asarray(ds[condition].values, dtype=float)
         cmap = colormaps["cividis"]
         for index, level in enumerate(condition_values):
             column = points.sel({condition: level}).transpose(parameter, "period").values * 1e6
             colour = cmap(index / max(len(condition_values) - 1, 1))
-            top.plot(np.repeat(values * scale, column.shape[1]), column.ravel(), linestyle="none",
-                     marker=_MARKERS[index % len(_MARKERS)], markersize=2.2, color=colour, alpha=0.8,
-                     label=f"{short_name(condition)} = {format_value(condition, level)}")
-        top.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0,
-                   markerscale=2.5, title="envelope member", title_fontsize=7)
-        top.set_title(f"bifurcation envelope: union of Poincaré points over {short_name(condition)} "
-                      f"in [{format_value(condition, condition_values[0])}, "
-                      f"{format_value(condition, condition_values[-1])}]", fontsize=9)
+            top.plot(
+                np.repeat(values * scale, column.shape[1]),
+                column.ravel(),
+                linestyle="none",
+                marker=_MARKERS[index % len(_MARKERS)],
+                markersize=2.2,
+                color=colour,
+                alpha=0.8,
+                label=f"{short_name(condition)} = {format_value(condition, level)}",
+            )
+        top.legend(
+            fontsize=7,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            borderaxespad=0,
+            markerscale=2.5,
+            title="envelope member",
+            title_fontsize=7,
+        )
+        top.set_title(
+            f"bifurcation envelope: union of Poincaré points over {short_name(condition)} "
+            f"in [{format_value(condition, condition_values[0])}, "
+            f"{format_value(condition, condition_values[-1])}]",
+            fontsize=9,
+        )
         regime = ds["regime"].transpose(parameter, condition, ...)
     else:
         column = points.transpose(parameter, "period").values * 1e6
-        top.plot(np.repeat(values * scale, column.shape[1]), column.ravel(), linestyle="none", marker=".",
-                 markersize=2.0, color="black")
+        top.plot(
+            np.repeat(values * scale, column.shape[1]),
+            column.ravel(),
+            linestyle="none",
+            marker=".",
+            markersize=2.0,
+            color="black",
+        )
         top.set_title("bifurcation diagram: Poincaré points of the DTE", fontsize=9)
         regime = ds["regime"]
     if draw_sweep_starts(top, ds, parameter, condition, scale):
-        top.set_title(top.get_title() + "\nwhere two or more responses coexist: blue ▲ up-sweep start, "
-                      "orange ▼ down-sweep start", fontsize=9)
+        top.set_title(
+            top.get_title() + "\nwhere two or more responses coexist: blue ▲ up-sweep start, orange ▼ down-sweep start",
+            fontsize=9,
+        )
     top.set_ylabel("Poincaré points of DTE $x_n$ [µm]")
     half_backlash = _half_backlash(ds, parameter)
     if half_backlash is not None:
@@ -410,30 +473,43 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
         bottom.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
         bottom.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
         bottom.xaxis.set_minor_formatter(NullFormatter())
-    _add_figure(section, figure, f"Bifurcation diagram against {short_name(parameter)}"
-                + (f", over {short_name(condition)} (colour and marker)" if condition else "")
-                + ("; dashed: the contact boundaries x = ±b (b the half backlash): points above +b in "
-                   "drive-side contact, between them teeth apart, below -b back-side impact"
-                   if half_backlash is not None else "")
-                + (f"; top axis: mean mesh stiffness (k_mean = {k_mean / 1e9:.4g} GN/m at scale 1)"
-                   if k_mean is not None else "")
-                + "; below: response regime per column.", dpi)
+    _add_figure(
+        section,
+        figure,
+        f"Bifurcation diagram against {short_name(parameter)}"
+        + (f", over {short_name(condition)} (colour and marker)" if condition else "")
+        + (
+            "; dashed: the contact boundaries x = ±b (b the half backlash): points above +b in "
+            "drive-side contact, between them teeth apart, below -b back-side impact"
+            if half_backlash is not None
+            else ""
+        )
+        + (
+            f"; top axis: mean mesh stiffness (k_mean = {k_mean / 1e9:.4g} GN/m at scale 1)"
+            if k_mean is not None
+            else ""
+        )
+        + "; below: response regime per column.",
+        dpi,
+    )
     if k_mean is not None:
         section.facts.append(("mean mesh stiffness at scale 1", f"{k_mean:.4g} N/m"))
     section.findings.extend(regime_findings(regime, parameter, condition))
     section.findings.extend(coexistence_sentences(ds, parameter, condition))
     section.caveats.append(_classification_caveat(ds))
     if condition:
-        section.caveats.append(f"the envelope is the union over {ds.sizes[condition]} values of "
-                               f"{short_name(condition)} across its interval; regimes confined between "
-                               "these values can be missed")
+        section.caveats.append(
+            f"the envelope is the union over {ds.sizes[condition]} values of "
+            f"{short_name(condition)} across its interval; regimes confined between "
+            "these values can be missed"
+        )
     return section
 
 
 @renderer("regime_map")
 def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
-    axes_names = _json_attr(ds, "axes", [d for d in ds["regime"].dims][:2])
+    axes_names = _json_attr(ds, "axes", list(ds["regime"].dims)[:2])
     first, second = axes_names[0], axes_names[1]
     regime = ds["regime"].transpose(first, second)
     figure = new_figure(9.0, 5.2)
@@ -452,19 +528,33 @@ def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
                 if labels[i, j] == "period-1":
                     continue
                 dark = _is_dark(colours[shown[i, j]])
-                ax.text(x_value, y_value, _regime_code(labels[i, j]), ha="center", va="center", fontsize=6,
-                        color="white" if dark else "black")
-    ax.set_title(f"response regime over {short_name(first)} x {short_name(second)} "
-                 "(cell code: period n, L quasi-periodic or long period, Q quasi-periodic, C chaotic, "
-                 "U uncertain; blank: period 1)", fontsize=9)
+                ax.text(
+                    x_value,
+                    y_value,
+                    _regime_code(labels[i, j]),
+                    ha="center",
+                    va="center",
+                    fontsize=6,
+                    color="white" if dark else "black",
+                )
+    ax.set_title(
+        f"response regime over {short_name(first)} x {short_name(second)} "
+        "(cell code: period n, L quasi-periodic or long period, Q quasi-periodic, C chaotic, "
+        "U uncertain; blank: period 1)",
+        fontsize=9,
+    )
     _add_figure(section, figure, f"Regime map over {short_name(first)} and {short_name(second)}.", dpi)
     if "fraction_separation" in ds:
         figure = new_figure(9.0, 4.6)
         ax = figure.subplots()
         separation = ds["fraction_separation"].transpose(first, second).values * 100
-        mesh = ax.pcolormesh(_edges(np.asarray(ds[first].values, float) * display(first)[2]),
-                             _edges(np.asarray(ds[second].values, float) * display(second)[2]),
-                             separation.T, cmap="viridis", shading="flat")
+        mesh = ax.pcolormesh(
+            _edges(np.asarray(ds[first].values, float) * display(first)[2]),
+            _edges(np.asarray(ds[second].values, float) * display(second)[2]),
+            separation.T,
+            cmap="viridis",
+            shading="flat",
+        )
         figure.colorbar(mesh, ax=ax, label="tooth separation [% of time]")
         ax.set_xlabel(axis_label(first))
         ax.set_ylabel(axis_label(second))

@@ -44,8 +44,7 @@ class Finding:
 def headline_html(findings: Sequence[Finding], note: str = "") -> str:
     """The ``<section id="what-this-shows">`` block: the findings as a list, then an optional note."""
     items = "".join(f"\n<li>{html.escape(finding.text)}</li>" for finding in findings)
-    body = (f"<ul>{items}\n</ul>" if items
-            else "<p>No headline figures for these results; see the sections below.</p>")
+    body = f"<ul>{items}\n</ul>" if items else "<p>No headline figures for these results; see the sections below.</p>"
     tail = f'\n<p class="note">{html.escape(note)}</p>' if note else ""
     return f'<section id="{HEADLINE_ID}"><h2>What this shows</h2>{body}{tail}\n</section>'
 

@@ -54,8 +54,7 @@ def _condition_text(name: str, values: np.ndarray, present: np.ndarray) -> str:
     if contiguous and indices[0] == 0:
         return f"when {label} <= {format_value(name, values[indices[-1]])}"
     if contiguous:
-        return (f"for {label} in [{format_value(name, values[indices[0]])}, "
-                f"{format_value(name, values[indices[-1]])}]")
+        return f"for {label} in [{format_value(name, values[indices[0]])}, {format_value(name, values[indices[-1]])}]"
     shown = ", ".join(format_value(name, values[i]) for i in indices[:6])
     return f"for {label} = {shown}" + (" ..." if indices.size > 6 else "")
 
@@ -89,22 +88,25 @@ def regime_findings(regime: xr.DataArray, sweep: str, condition: str | None = No
     labels = np.asarray(regime.transpose(sweep, ...).values).astype(str)
     if labels.ndim == 1:
         labels = labels[:, None]
-    condition_values = (np.asarray(regime[condition].values, dtype=float) if condition else None)
+    condition_values = np.asarray(regime[condition].values, dtype=float) if condition else None
     sentences = []
     subharmonic = np.char.startswith(labels, "period-") & (labels != "period-1")
     groups = [("period-n (n > 1)", subharmonic)] if subharmonic.any() else []
     # every other label is named too (quasi_periodic_or_long_period, uncertain, labels added later)
-    others = sorted({str(label) for label in labels.ravel() if not str(label).startswith("period-")},
-                    key=lambda label: (REGIME_ORDER.index(label) if label in REGIME_ORDER else len(REGIME_ORDER),
-                                       label))
+    others = sorted(
+        {str(label) for label in labels.ravel() if not str(label).startswith("period-")},
+        key=lambda label: (REGIME_ORDER.index(label) if label in REGIME_ORDER else len(REGIME_ORDER), label),
+    )
     groups += [(label, labels == label) for label in others]
     for label, present in groups:
         ranges = _runs(present.any(axis=1))
         if len(ranges) > 3:
             # many short windows (a rich bifurcation diagram): one sentence listing them
             _, unit, factor = display(sweep)
-            spans = ", ".join(f"{values[a] * factor:.4g}" if a == b else
-                              f"{values[a] * factor:.4g}-{values[b] * factor:.4g}" for a, b in ranges)
+            spans = ", ".join(
+                f"{values[a] * factor:.4g}" if a == b else f"{values[a] * factor:.4g}-{values[b] * factor:.4g}"
+                for a, b in ranges
+            )
             text = f"{label} in {len(ranges)} windows: {spans}" + ("" if unit in ("-", "") else f" {unit}")
             if label.startswith("period-n"):
                 periods = sorted({int(item.split("-", 1)[1]) for item in labels[present]})
@@ -116,17 +118,20 @@ def regime_findings(regime: xr.DataArray, sweep: str, condition: str | None = No
         for start, stop in ranges:
             text = f"{label} {_range_text(sweep, values, start, stop)}"
             if label.startswith("period-n"):
-                members = labels[start:stop + 1][present[start:stop + 1]]
+                members = labels[start : stop + 1][present[start : stop + 1]]
                 periods = sorted({int(item.split("-", 1)[1]) for item in members})
-                text = (f"period-{periods[0]} " if len(periods) == 1 else
-                        f"period-n (n = {', '.join(map(str, periods))}) ") + text[len(label) + 1:]
+                text = (
+                    f"period-{periods[0]} " if len(periods) == 1 else f"period-n (n = {', '.join(map(str, periods))}) "
+                ) + text[len(label) + 1 :]
             if condition is not None and condition_values is not None:
-                text += " " + _condition_text(condition, condition_values, present[start:stop + 1].any(axis=0))
+                text += " " + _condition_text(condition, condition_values, present[start : stop + 1].any(axis=0))
             sentences.append(text)
     if not sentences:
         span = f"[{format_value(sweep, values[0])}, {format_value(sweep, values[-1])}]"
-        sentences.append(f"period-1 (harmonic) response everywhere on {short_name(sweep)} in {span}"
-                         + (f" and over all {short_name(condition)} values" if condition else ""))
+        sentences.append(
+            f"period-1 (harmonic) response everywhere on {short_name(sweep)} in {span}"
+            + (f" and over all {short_name(condition)} values" if condition else "")
+        )
     return sentences
 
 
@@ -164,16 +169,22 @@ def separation_findings(fraction: xr.DataArray, sweep: str, condition: str) -> l
         column = data[:, j]
         at = f"at {label} = {format_value(condition, levels[j])}"
         if (column > 0.0).any():
-            sentences.append(f"teeth separate (contact loss) {where(column > 0.0)} {at}, up to "
-                             f"{100 * float(np.nanmax(column)):.3g} % of the time")
+            sentences.append(
+                f"teeth separate (contact loss) {where(column > 0.0)} {at}, up to "
+                f"{100 * float(np.nanmax(column)):.3g} % of the time"
+            )
         else:
-            sentences.append(f"no contact loss {at} anywhere on {short_name(sweep)} in "
-                             f"[{format_value(sweep, values[0])}, {format_value(sweep, values[-1])}]")
+            sentences.append(
+                f"no contact loss {at} anywhere on {short_name(sweep)} in "
+                f"[{format_value(sweep, values[0])}, {format_value(sweep, values[-1])}]"
+            )
     middle = data[:, 1:-1]
     if middle.size and (middle > 0.0).any():
-        sentences.append(f"teeth separate (contact loss) at the {middle.shape[1]} {label} values in between "
-                         f"too: all of it {where((middle > 0.0).any(axis=1))}, up to "
-                         f"{100 * float(np.nanmax(middle)):.3g} % of the time")
+        sentences.append(
+            f"teeth separate (contact loss) at the {middle.shape[1]} {label} values in between "
+            f"too: all of it {where(np.asarray((middle > 0.0).any(axis=1)))}, up to "
+            f"{100 * float(np.nanmax(middle)):.3g} % of the time"
+        )
     return sentences
 
 
@@ -187,10 +198,10 @@ T2 = "adhesion_torque"
 class Grid:
     """One result variable on the pinion speed x T2 grid of an analysis (both axes ascending)."""
 
-    source: str            # analysis name
-    speeds: np.ndarray     # rpm, (n_speed,)
-    t2: np.ndarray         # N m, (n_t2,); one NaN where T2 is not known
-    values: np.ndarray     # (n_speed, n_t2)
+    source: str  # analysis name
+    speeds: np.ndarray  # rpm, (n_speed,)
+    t2: np.ndarray  # N m, (n_t2,); one NaN where T2 is not known
+    values: np.ndarray  # (n_speed, n_t2)
 
 
 def _fixed_t2(ds: xr.Dataset) -> float:
@@ -216,8 +227,12 @@ def grid(ds: xr.Dataset, name: str) -> Grid | None:
         values = np.asarray(variable.values)[:, None]
     speeds = np.asarray(ds[SPEED].values, dtype=float)
     rows, columns = np.argsort(speeds, kind="stable"), np.argsort(t2, kind="stable")
-    return Grid(str(ds.attrs.get("analysis_name", ds.attrs.get("analysis_type", "analysis"))), speeds[rows],
-                t2[columns], values[np.ix_(rows, columns)])
+    return Grid(
+        str(ds.attrs.get("analysis_name", ds.attrs.get("analysis_type", "analysis"))),
+        speeds[rows],
+        t2[columns],
+        values[np.ix_(rows, columns)],
+    )
 
 
 def grids(results: Sequence[xr.Dataset], name: str) -> list[Grid]:

@@ -95,8 +95,12 @@ def _labels_text(labels: Sequence[str]) -> str:
     periods = [label for label in labels if label.startswith("period-")]
     if len(periods) <= 3:
         return ", ".join(labels)
-    numbers = ", ".join(sorted((label.split("-", 1)[1] for label in periods),
-                               key=lambda n: (not n.isdigit(), int(n) if n.isdigit() else 0, n)))
+    numbers = ", ".join(
+        sorted(
+            (label.split("-", 1)[1] for label in periods),
+            key=lambda n: (not n.isdigit(), int(n) if n.isdigit() else 0, n),
+        )
+    )
     shown = [f"period-n with n = {numbers}"] + [label for label in labels if not label.startswith("period-")]
     return ", ".join(shown)
 
@@ -139,25 +143,40 @@ def worst_load_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     value, g, i, j = _grid_max(found)
     runs = _finite_runs(found)
     sources = list(dict.fromkeys(item.source for item in found))
-    facts: dict[str, Any] = {"qoi": name, "value": value, "speed": float(g.speeds[i]), "t2": float(g.t2[j]),
-                             "source": g.source, "runs": runs, "sources": sources}
+    facts: dict[str, Any] = {
+        "qoi": name,
+        "value": value,
+        "speed": float(g.speeds[i]),
+        "t2": float(g.t2[j]),
+        "source": g.source,
+        "runs": runs,
+        "sources": sources,
+    }
     where = f"at {_speed(g.speeds[i])}, {_t2_where(g.t2[j], interval)}"
     of_runs = f"; largest of the {runs} runs of {' and '.join(sources)}."
     if name == "dynamic_load_factor":
-        text = ("Worst dynamic load factor (peak mesh force over the run's own static mesh force, not over the "
-                f"rated load) {value:.3g} {where}{of_runs}")
+        text = (
+            "Worst dynamic load factor (peak mesh force over the run's own static mesh force, not over the "
+            f"rated load) {value:.3g} {where}{of_runs}"
+        )
         return [Finding(text, facts, "worst_load")]
     text = f"Worst dynamic load: peak mesh force {value / 1e3:.4g} kN {where}"
     rated = [g for g in grids(results, "load_factor_rated") if np.isfinite(g.values.astype(float)).any()]
     if rated:
         factor, g_rated, a, b = _grid_max(rated)
-        facts.update(factor_rated=factor, factor_speed=float(g_rated.speeds[a]), factor_t2=float(g_rated.t2[b]),
-                     factor_source=g_rated.source)
+        facts.update(
+            factor_rated=factor,
+            factor_speed=float(g_rated.speeds[a]),
+            factor_t2=float(g_rated.t2[b]),
+            factor_source=g_rated.source,
+        )
         if (g_rated.speeds[a], g_rated.t2[b]) == (g.speeds[i], g.t2[j]):
             text += f", {factor:.3g} x the mesh force at rated torque"
         else:
-            text += (f"; the largest factor over the mesh force at rated torque, {factor:.3g}, is at "
-                     f"{_speed(g_rated.speeds[a])}, {_t2_where(g_rated.t2[b], interval)}")
+            text += (
+                f"; the largest factor over the mesh force at rated torque, {factor:.3g}, is at "
+                f"{_speed(g_rated.speeds[a])}, {_t2_where(g_rated.t2[b], interval)}"
+            )
     return [Finding(text + of_runs, facts, "worst_load")]
 
 
@@ -200,17 +219,26 @@ def separation_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
         column = g.values[:, j].astype(float)
         ranges = _ranges(column > 0.0, g.speeds)
         peak = int(np.nanargmax(column)) if np.isfinite(column).any() else 0
-        facts = {"source": g.source, "t2": float(g.t2[j]), "end": end, "ranges": ranges,
-                 "max_fraction": float(np.nanmax(column)) if np.isfinite(column).any() else float("nan"),
-                 "max_speed": float(g.speeds[peak])}
+        facts: dict[str, Any] = {
+            "source": g.source,
+            "t2": float(g.t2[j]),
+            "end": end,
+            "ranges": ranges,
+            "max_fraction": float(np.nanmax(column)) if np.isfinite(column).any() else float("nan"),
+            "max_speed": float(g.speeds[peak]),
+        }
         lead = _t2_lead(g.t2[j], interval)
         if ranges:
-            text = (f"{lead}: teeth separate {_ranges_text(ranges, g.speeds)}, up to "
-                    f"{100 * facts['max_fraction']:.3g} % of the time (at {_speed(g.speeds[peak])}); "
-                    f"{_resolution(g)}.")
+            text = (
+                f"{lead}: teeth separate {_ranges_text(ranges, g.speeds)}, up to "
+                f"{100 * facts['max_fraction']:.3g} % of the time (at {_speed(g.speeds[peak])}); "
+                f"{_resolution(g)}."
+            )
         else:
-            text = (f"{lead}: the teeth stay in contact at every speed from {g.speeds[0]:.4g} to "
-                    f"{_speed(g.speeds[-1])}{_failed(int((~np.isfinite(column)).sum()))}; {_resolution(g)}.")
+            text = (
+                f"{lead}: the teeth stay in contact at every speed from {g.speeds[0]:.4g} to "
+                f"{_speed(g.speeds[-1])}{_failed(int((~np.isfinite(column)).sum()))}; {_resolution(g)}."
+            )
         findings.append(Finding(text, facts, "separation"))
     return findings
 
@@ -230,18 +258,26 @@ def back_contact_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     if value <= 0.0:
         t2 = _t2_span(np.concatenate([item.t2 for item in found]))
         span = f"speed {speeds.min():.4g}-{_speed(speeds.max())}" + (f", {t2}" if t2 else "")
-        text = (f"No back-side contact (impact on the rear flanks) in any of the {runs} runs of "
-                f"{' and '.join(sources)} ({span}){_failed(failed)}.")
+        text = (
+            f"No back-side contact (impact on the rear flanks) in any of the {runs} runs of "
+            f"{' and '.join(sources)} ({span}){_failed(failed)}."
+        )
         return [Finding(text, facts, "back_contact")]
     values = g.values.astype(float)
-    by_t2 = [{"t2": float(g.t2[k]), "ranges": _ranges(values[:, k] > 0.0, g.speeds)}
-             for k in range(g.t2.size) if (values[:, k] > 0.0).any()]
+    by_t2: list[dict[str, Any]] = [
+        {"t2": float(g.t2[k]), "ranges": _ranges(values[:, k] > 0.0, g.speeds)}
+        for k in range(g.t2.size)
+        if (values[:, k] > 0.0).any()
+    ]
     facts.update(speed=float(g.speeds[i]), t2=float(g.t2[j]), source=g.source, by_t2=by_t2)
-    shown = "; ".join(f"{_t2_where(entry['t2'], interval)} {_ranges_text(entry['ranges'], g.speeds)}"
-                      for entry in by_t2[:4])
+    shown = "; ".join(
+        f"{_t2_where(entry['t2'], interval)} {_ranges_text(entry['ranges'], g.speeds)}" for entry in by_t2[:4]
+    )
     more = f"; and at {len(by_t2) - 4} more T2 values" if len(by_t2) > 4 else ""
-    text = (f"Back-side contact (impact on the rear flanks) occurs, up to {100 * value:.3g} % of the time at "
-            f"{_speed(g.speeds[i])}, {_t2_where(g.t2[j], interval)}; in {g.source}: {shown}{more}.")
+    text = (
+        f"Back-side contact (impact on the rear flanks) occurs, up to {100 * value:.3g} % of the time at "
+        f"{_speed(g.speeds[i])}, {_t2_where(g.t2[j], interval)}; in {g.source}: {shown}{more}."
+    )
     return [Finding(text, facts, "back_contact")]
 
 
@@ -257,27 +293,39 @@ def regime_findings_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
     interval = _t2_interval(results)
     labels = g.values.astype(str)
     other = labels != "period-1"
-    found = list(dict.fromkeys(labels.T[other.T].tolist()))    # in order of T2, then speed
-    windows = []
+    found = list(dict.fromkeys(labels.T[other.T].tolist()))  # in order of T2, then speed
+    windows: list[dict[str, Any]] = []
     for j in range(g.t2.size):
         if other[:, j].any():
             ranges = _runs(other[:, j])
-            windows.append({"t2": float(g.t2[j]),
-                            "ranges": [(float(g.speeds[a]), float(g.speeds[b])) for a, b in ranges],
-                            "labels": [list(dict.fromkeys(labels[a:b + 1, j].tolist())) for a, b in ranges]})
+            windows.append(
+                {
+                    "t2": float(g.t2[j]),
+                    "ranges": [(float(g.speeds[a]), float(g.speeds[b])) for a, b in ranges],
+                    "labels": [list(dict.fromkeys(labels[a : b + 1, j].tolist())) for a, b in ranges],
+                }
+            )
     quiet = ~other.any(axis=0)
-    facts: dict[str, Any] = {"source": g.source, "labels": found, "windows": windows,
-                             "period1_t2": [float(v) for v in g.t2[quiet]], "points": int(labels.size)}
+    facts: dict[str, Any] = {
+        "source": g.source,
+        "labels": found,
+        "windows": windows,
+        "period1_t2": [float(v) for v in g.t2[quiet]],
+        "points": int(labels.size),
+    }
     span = f"speed {g.speeds[0]:.4g}-{_speed(g.speeds[-1])}"
     if not windows:
         t2 = _t2_span(g.t2)
         text = f"Period-1 (harmonic) response at all {labels.size} points of {g.source} ({span}" + (
-            f", {t2})." if t2 else ").")
+            f", {t2})." if t2 else ")."
+        )
         return [Finding(text, facts, "regimes")]
     parts = []
     for window in windows:
-        spans = ", ".join(f"{_ranges_text([r], g.speeds, top=False)} ({_labels_text(names)})"
-                          for r, names in zip(window["ranges"], window["labels"]))
+        spans = ", ".join(
+            f"{_ranges_text([r], g.speeds, top=False)} ({_labels_text(names)})"
+            for r, names in zip(window["ranges"], window["labels"])
+        )
         parts.append(f"at {_t2_where(window['t2'], interval)} {spans}")
     text = f"Response not period-1 (labels found: {_labels_text(found)}): " + "; ".join(parts)
     if quiet.any():
@@ -306,7 +354,7 @@ def sobol_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
             else:
                 speeds = np.array([np.nan])
                 totals, half = totals.transpose("param").values[None], half.transpose("param").values[None]
-            points = []
+            points: list[dict[str, Any]] = []
             for k in range(speeds.size):
                 if not np.isfinite(totals[k]).any():
                     points.append({"speed": float(speeds[k]), "top": None})
@@ -314,13 +362,28 @@ def sobol_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
                 order = np.argsort(-np.nan_to_num(totals[k], nan=-np.inf), kind="stable")
                 top, second = int(order[0]), (int(order[1]) if order.size > 1 else None)
                 resolved = second is None or bool(totals[k, top] - half[k, top] > totals[k, second] + half[k, second])
-                points.append({"speed": float(speeds[k]), "top": parameters[top], "st": float(totals[k, top]),
-                               "runner_up": None if second is None else parameters[second],
-                               "runner_up_st": None if second is None else float(totals[k, second]),
-                               "resolved": resolved})
-            findings.append(Finding(_sobol_text(name, points, level),
-                                    {"source": str(ds.attrs.get("analysis_name", "sobol")), "qoi": name,
-                                     "points": points, "conf_level": level}, "sobol"))
+                points.append(
+                    {
+                        "speed": float(speeds[k]),
+                        "top": parameters[top],
+                        "st": float(totals[k, top]),
+                        "runner_up": None if second is None else parameters[second],
+                        "runner_up_st": None if second is None else float(totals[k, second]),
+                        "resolved": resolved,
+                    }
+                )
+            findings.append(
+                Finding(
+                    _sobol_text(name, points, level),
+                    {
+                        "source": str(ds.attrs.get("analysis_name", "sobol")),
+                        "qoi": name,
+                        "points": points,
+                        "conf_level": level,
+                    },
+                    "sobol",
+                )
+            )
     return findings
 
 
@@ -351,7 +414,9 @@ def _sobol_text(name: str, points: list[dict[str, Any]], level: float) -> str:
     if unresolved:
         text += f"; the lead is within the {100 * level:g} % confidence intervals of the runner-up " + ", ".join(
             ("" if not np.isfinite(p["speed"]) else f"at {_speed(p['speed'])} ")
-            + f"({short_name(p['runner_up'])}, {p['runner_up_st']:.2f})" for p in unresolved)
+            + f"({short_name(p['runner_up'])}, {p['runner_up_st']:.2f})"
+            for p in unresolved
+        )
     return text + "."
 
 
@@ -369,10 +434,16 @@ def rig_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
 
 def headline_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     """Every headline statement of a study's results, in the order the report shows them."""
-    return [*worst_load_findings(results), *separation_findings(results), *back_contact_findings(results),
-            *regime_findings_headline(results), *coexistence_headline(results), *continuation_findings(results),
-            *sobol_findings(results),
-            *rig_findings(results)]
+    return [
+        *worst_load_findings(results),
+        *separation_findings(results),
+        *back_contact_findings(results),
+        *regime_findings_headline(results),
+        *coexistence_headline(results),
+        *continuation_findings(results),
+        *sobol_findings(results),
+        *rig_findings(results),
+    ]
 
 
 def headline_note(results: Sequence[xr.Dataset]) -> str:
@@ -380,15 +451,27 @@ def headline_note(results: Sequence[xr.Dataset]) -> str:
     for ds in results:
         if grid(ds, "regime") is None and grid(ds, "fraction_separation") is None:
             continue
-        fixed = {k: v for k, v in _json_attr(ds, "fixed_inputs", {}).items()
-                 if isinstance(v, (int, float)) and k not in (SPEED, T2)}
+        fixed = {
+            k: v
+            for k, v in _json_attr(ds, "fixed_inputs", {}).items()
+            if isinstance(v, (int, float)) and k not in (SPEED, T2)
+        }
         if fixed:
-            return ("Speed sweeps run with " + ", ".join(f"{short_name(k)} = {format_value(k, v)}"
-                                                              for k, v in fixed.items())
-                    + ". Details, figures and caveats below; provenance at the end.")
+            return (
+                "Speed sweeps run with "
+                + ", ".join(f"{short_name(k)} = {format_value(k, v)}" for k, v in fixed.items())
+                + ". Details, figures and caveats below; provenance at the end."
+            )
     return "Details, figures and caveats below; provenance at the end."
 
 
-__all__ = ["headline_findings", "headline_note", "worst_load_findings",
-           "separation_findings", "back_contact_findings", "regime_findings_headline", "sobol_findings",
-           "rig_findings"]
+__all__ = [
+    "headline_findings",
+    "headline_note",
+    "worst_load_findings",
+    "separation_findings",
+    "back_contact_findings",
+    "regime_findings_headline",
+    "sobol_findings",
+    "rig_findings",
+]

@@ -12,12 +12,15 @@ import html
 import io
 import multiprocessing
 from collections.abc import Callable, Iterable, Sequence
+from typing import Any, Literal
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 
-def new_figure(width: float, height: float, *, layout: str | None = "constrained") -> Figure:
+def new_figure(
+    width: float, height: float, *, layout: Literal["constrained", "compressed", "tight"] | None = "constrained"
+) -> Figure:
     """A matplotlib Figure on an Agg canvas, outside pyplot; size in inches."""
     figure = Figure(figsize=(width, height), layout=layout)
     FigureCanvasAgg(figure)
@@ -27,7 +30,8 @@ def new_figure(width: float, height: float, *, layout: str | None = "constrained
 def figure_png(figure: Figure, dpi: int, *, tight: bool = False) -> bytes:
     """PNG bytes of a figure at ``dpi``; ``tight`` crops the canvas to what is drawn."""
     buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi, **({"bbox_inches": "tight"} if tight else {}))
+    crop: dict[str, Any] = {"bbox_inches": "tight"} if tight else {}
+    figure.savefig(buffer, format="png", dpi=dpi, **crop)
     return buffer.getvalue()
 
 
@@ -40,8 +44,9 @@ def _draw_pending(index: int, dpi: int, tight: bool) -> bytes:
     return figure_png(_PENDING[index](), dpi, tight=tight)
 
 
-def figure_pngs(makers: Sequence[Callable[[], Figure]], dpi: int, *, tight: bool = False,
-                processes: int = 2) -> list[bytes]:
+def figure_pngs(
+    makers: Sequence[Callable[[], Figure]], dpi: int, *, tight: bool = False, processes: int = 2
+) -> list[bytes]:
     """PNG bytes of the figures the ``makers`` draw, in order, drawn in up to ``processes`` forked processes.
 
     Laying out and rasterising a figure is single-threaded Python in
@@ -53,8 +58,12 @@ def figure_pngs(makers: Sequence[Callable[[], Figure]], dpi: int, *, tight: bool
     """
     global _PENDING
     makers = list(makers)
-    if (len(makers) < 2 or processes < 2 or "fork" not in multiprocessing.get_all_start_methods()
-            or multiprocessing.current_process().daemon):
+    if (
+        len(makers) < 2
+        or processes < 2
+        or "fork" not in multiprocessing.get_all_start_methods()
+        or multiprocessing.current_process().daemon
+    ):
         return [figure_png(make(), dpi, tight=tight) for make in makers]
     _PENDING = makers
     try:
@@ -81,9 +90,16 @@ def html_page(title: str, style: str, body: Iterable[str]) -> str:
 
     The parts are joined by newlines, as is the skeleton around them.
     """
-    return "\n".join(["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
-                      f"<title>{html.escape(title)}</title>", f"<style>{style}</style></head><body>",
-                      *body, "</body></html>"])
+    return "\n".join(
+        [
+            "<!DOCTYPE html>",
+            '<html lang="en"><head><meta charset="utf-8">',
+            f"<title>{html.escape(title)}</title>",
+            f"<style>{style}</style></head><body>",
+            *body,
+            "</body></html>",
+        ]
+    )
 
 
 __all__ = ["new_figure", "figure_png", "img_tag", "figure_html", "html_page"]

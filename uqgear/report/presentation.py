@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-
 # name -> (label, unit shown, factor from SI to the unit shown)
 _DISPLAY: dict[str, tuple[str, str, float]] = {
     "pinion_speed": ("pinion speed $n_1$", "rpm", 1.0),
@@ -43,11 +42,21 @@ _DISPLAY: dict[str, tuple[str, str, float]] = {
 # non-periodic labels in the order legends list them.
 
 #: Legend order of the labels other than period-n.
-REGIME_ORDER: tuple[str, ...] = ("quasi_periodic_or_long_period", "quasi-periodic", "chaotic", "uncertain",
-                                 "undetermined")
+REGIME_ORDER: tuple[str, ...] = (
+    "quasi_periodic_or_long_period",
+    "quasi-periodic",
+    "chaotic",
+    "uncertain",
+    "undetermined",
+)
 #: One-letter cell codes of the regime map (period-n shows n).
-REGIME_CODES: dict[str, str] = {"quasi_periodic_or_long_period": "L", "quasi-periodic": "Q", "chaotic": "C",
-                                "uncertain": "U", "undetermined": "?"}
+REGIME_CODES: dict[str, str] = {
+    "quasi_periodic_or_long_period": "L",
+    "quasi-periodic": "Q",
+    "chaotic": "C",
+    "uncertain": "U",
+    "undetermined": "?",
+}
 #: Legend text of a regime label, where the label alone does not say it.
 REGIME_LEGEND: dict[str, str] = {
     "quasi_periodic_or_long_period": "quasi-periodic or long period (repeats < 10 times)",
@@ -63,10 +72,17 @@ def regime_legend(label: str) -> str:
     return REGIME_LEGEND.get(label, label)
 
 
-_SHORT_NAMES = {"adhesion_torque": "T2", "drive_torque": "T1", "pinion_speed": "speed",
-                "mesh_stiffness_scale": "mesh stiffness scale", "zeta_mesh": "mesh damping",
-                "ste_amplitude": "STE amplitude", "k1": "pinion bearing stiffness",
-                "k2": "gear bearing stiffness", "backlash": "backlash"}
+_SHORT_NAMES = {
+    "adhesion_torque": "T2",
+    "drive_torque": "T1",
+    "pinion_speed": "speed",
+    "mesh_stiffness_scale": "mesh stiffness scale",
+    "zeta_mesh": "mesh damping",
+    "ste_amplitude": "STE amplitude",
+    "k1": "pinion bearing stiffness",
+    "k2": "gear bearing stiffness",
+    "backlash": "backlash",
+}
 _LINE_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)), (0, (3, 1, 1, 1, 1, 1)))
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
 

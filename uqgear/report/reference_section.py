@@ -42,8 +42,9 @@ def reference_gain_plot(reference: Mapping[str, Any]):
     for axis, (channel, entry) in zip(axes, channels.items()):
         curve = entry["curve"]
         frequency = np.asarray(curve["frequency"], dtype=float)
-        axis.fill_between(frequency, curve["low"], curve["high"], color="tab:blue", alpha=0.2, lw=0,
-                          label="2-sigma band")
+        axis.fill_between(
+            frequency, curve["low"], curve["high"], color="tab:blue", alpha=0.2, lw=0, label="2-sigma band"
+        )
         axis.plot(frequency, curve["gain"], color="tab:blue", label="learned gain")
         points = entry["points"]
         if points["frequency"]:
@@ -74,29 +75,53 @@ def reference_section_html(content: Mapping[str, Any]) -> list[str]:
     if not reference:
         return []
     fit = reference.get("nominal_fit", {})
-    parts = ["<h2>Reference: what the healthy campaign of this rig shows against the model</h2>",
-             f'<p class="note">reference campaign {html.escape(str(reference["file"]))}: the nominal model '
-             f'fitted to it (robust cost {_number(fit.get("cost"))}); per channel the gain rig/model of its '
-             'lines as a smooth function of frequency (the transfer path), carried to this campaign: its model '
-             'features are multiplied by the gain and their model error widened by its uncertainty.</p>']
+    parts = [
+        "<h2>Reference: what the healthy campaign of this rig shows against the model</h2>",
+        f'<p class="note">reference campaign {html.escape(str(reference["file"]))}: the nominal model '
+        f"fitted to it (robust cost {_number(fit.get('cost'))}); per channel the gain rig/model of its "
+        "lines as a smooth function of frequency (the transfer path), carried to this campaign: its model "
+        "features are multiplied by the gain and their model error widened by its uncertainty.</p>",
+    ]
     if reference.get("channels"):
-        parts.append(img_tag(figure_png(reference_gain_plot(reference), 90, tight=True),
-                             "learned gain per channel"))
-        parts.append(_table(
-            ["channel", "lines", "down-weighted", "largest gain", "at (Hz)", "2-sigma interval", "scatter (ln)"],
-            [[channel, entry["lines"], entry["lines_dropped"], entry["largest_gain"]["gain"],
-              entry["largest_gain"]["frequency"],
-              "{:.3g} to {:.3g}".format(*entry["largest_gain"]["interval_2sd"]), entry["scatter"]]
-             for channel, entry in reference["channels"].items()]))
+        parts.append(img_tag(figure_png(reference_gain_plot(reference), 90, tight=True), "learned gain per channel"))
+        parts.append(
+            _table(
+                ["channel", "lines", "down-weighted", "largest gain", "at (Hz)", "2-sigma interval", "scatter (ln)"],
+                [
+                    [
+                        channel,
+                        entry["lines"],
+                        entry["lines_dropped"],
+                        entry["largest_gain"]["gain"],
+                        entry["largest_gain"]["frequency"],
+                        "{:.3g} to {:.3g}".format(*entry["largest_gain"]["interval_2sd"]),
+                        entry["scatter"],
+                    ]
+                    for channel, entry in reference["channels"].items()
+                ],
+            )
+        )
     parameters = fit.get("parameters") or {}
     if parameters:
         parts.append(_table(["reference fit: " + name for name in parameters], [list(parameters.values())]))
     matched = reference.get("matched_operating_points") or []
     if matched:
-        parts.append(_table(["run", "reference run", "speed (rpm)", "reference speed", "T1 (N m)",
-                             "reference T1"],
-                            [[m["op"], m["reference_op"], m["pinion_speed"], m["reference_pinion_speed"],
-                              m["drive_torque"], m["reference_drive_torque"]] for m in matched]))
+        parts.append(
+            _table(
+                ["run", "reference run", "speed (rpm)", "reference speed", "T1 (N m)", "reference T1"],
+                [
+                    [
+                        m["op"],
+                        m["reference_op"],
+                        m["pinion_speed"],
+                        m["reference_pinion_speed"],
+                        m["drive_torque"],
+                        m["reference_drive_torque"],
+                    ]
+                    for m in matched
+                ],
+            )
+        )
     return parts
 
 

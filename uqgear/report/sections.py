@@ -45,6 +45,7 @@ RENDERERS: dict[str, Renderer] = {}
 
 def renderer(kind: str) -> Callable[[Renderer], Renderer]:
     """Decorator registering the report renderer of an analysis type."""
+
     def decorate(function: Renderer) -> Renderer:
         RENDERERS[kind] = function
         return function
@@ -67,8 +68,12 @@ def _json_attr(ds: xr.Dataset | xr.DataArray, name: str, default: Any) -> Any:
 def _section(ds: xr.Dataset) -> Section:
     name = str(ds.attrs.get("analysis_name", "analysis"))
     kind = str(ds.attrs.get("analysis_type", "unknown"))
-    section = Section(name=name, kind=kind, title=f"{name} ({kind.replace('_', ' ')})",
-                      description=str(ds.attrs.get("analysis_description", "")))
+    section = Section(
+        name=name,
+        kind=kind,
+        title=f"{name} ({kind.replace('_', ' ')})",
+        description=str(ds.attrs.get("analysis_description", "")),
+    )
     runs = ds.attrs.get("model_runs")
     if runs is not None:
         section.facts.append(("model runs", f"{int(runs)}"))
@@ -77,16 +82,22 @@ def _section(ds: xr.Dataset) -> Section:
         section.facts.append(("run time", f"{float(seconds):.1f} s"))
     settings = _json_attr(ds, "simulation_settings", {})
     if settings:
-        section.facts.append(("simulation", f"{settings.get('n_periods')} mesh periods, last "
-                                            f"{settings.get('keep_periods')} kept"
-                                            + (", Lyapunov exponent" if settings.get("lyapunov") else "")))
+        section.facts.append(
+            (
+                "simulation",
+                f"{settings.get('n_periods')} mesh periods, last "
+                f"{settings.get('keep_periods')} kept" + (", Lyapunov exponent" if settings.get("lyapunov") else ""),
+            )
+        )
     points = _json_attr(ds, "operating_points", {})
     # the inputs actually held fixed (with the nominal values of uncertain parameters and defaults)
     fixed = _json_attr(ds, "fixed_inputs", None) or {
-        key: value for key, value in points.items() if not isinstance(value, list)}
+        key: value for key, value in points.items() if not isinstance(value, list)
+    }
     if fixed:
-        section.facts.append(("fixed inputs", ", ".join(f"{short_name(k)} = {format_value(k, v)}"
-                                                        for k, v in fixed.items())))
+        section.facts.append(
+            ("fixed inputs", ", ".join(f"{short_name(k)} = {format_value(k, v)}" for k, v in fixed.items()))
+        )
     return section
 
 

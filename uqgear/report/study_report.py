@@ -36,14 +36,15 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import xarray as xr
 
-from ..common.fileio import write_text_atomic
 from ..common.errors import UqgearError
+from ..common.fileio import write_text_atomic
 from ..uq.results import load_result
+
 # imported for their renderers, which register themselves in RENDERERS
 from . import continuation_sections, dynamics_sections, rig_sections, uq_sections  # noqa: F401
 from .finding import HEADLINE_STYLE, headline_html
@@ -57,14 +58,17 @@ REPORT_NAME = "report.html"
 
 def _render_generic(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
-    rows = "".join(f"<tr><td>{html.escape(str(name))}</td><td>{html.escape(str(dict(ds[name].sizes)))}</td>"
-                   f"<td>{html.escape(str(ds[name].attrs.get('units', '')))}</td></tr>"
-                   for name in ds.data_vars)
+    rows = "".join(
+        f"<tr><td>{html.escape(str(name))}</td><td>{html.escape(str(dict(ds[name].sizes)))}</td>"
+        f"<td>{html.escape(str(ds[name].attrs.get('units', '')))}</td></tr>"
+        for name in ds.data_vars
+    )
     section.tables.append(f"<table><tr><th>variable</th><th>dims</th><th>units</th></tr>{rows}</table>")
     return section
 
 
-_STYLE = """
+_STYLE = (
+    """
 body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em; color: #111; }
 h1 { font-size: 1.6em; } h2 { font-size: 1.3em; border-bottom: 1px solid #999; margin-top: 2em; }
 h3 { font-size: 1.1em; }
@@ -77,15 +81,33 @@ figcaption { font-size: 0.9em; color: #333; }
 pre { background: #f4f4f4; padding: 0.5em; overflow-x: auto; font-size: 0.85em; }
 details#provenance { margin-top: 2.5em; border-top: 1px solid #999; padding-top: 0.5em; }
 details#provenance > summary { font-size: 1.2em; font-weight: bold; cursor: pointer; }
-""" + HEADLINE_STYLE
+"""
+    + HEADLINE_STYLE
+)
+
 
 def _design_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
     design = _json_attr(ds, "design", {})
-    units = {"module": "m", "pressure_angle": "deg", "face_width": "m", "youngs_modulus": "Pa",
-             "m1": "kg", "m2": "kg", "I1": "kg m²", "I2": "kg m²", "k1": "N/m", "k2": "N/m",
-             "backlash": "m (total, 2b)", "ste_amplitude": "m", "z1": "teeth", "z2": "teeth"}
-    return [(key, f"{value:.6g} {units.get(key, '')}".strip() if isinstance(value, (int, float)) else str(value))
-            for key, value in design.items()]
+    units = {
+        "module": "m",
+        "pressure_angle": "deg",
+        "face_width": "m",
+        "youngs_modulus": "Pa",
+        "m1": "kg",
+        "m2": "kg",
+        "I1": "kg m²",
+        "I2": "kg m²",
+        "k1": "N/m",
+        "k2": "N/m",
+        "backlash": "m (total, 2b)",
+        "ste_amplitude": "m",
+        "z1": "teeth",
+        "z2": "teeth",
+    }
+    return [
+        (key, f"{value:.6g} {units.get(key, '')}".strip() if isinstance(value, (int, float)) else str(value))
+        for key, value in design.items()
+    ]
 
 
 def _design_notes(ds: xr.Dataset) -> list[str]:
@@ -105,7 +127,7 @@ def _uncertain_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
     rows = []
     for name, entry in _json_attr(ds, "uncertain_parameters", {}).items():
         if entry.get("kind") == "interval":
-            text = (f"interval [{format_value(name, entry['lower'])}, {format_value(name, entry['upper'])}]")
+            text = f"interval [{format_value(name, entry['lower'])}, {format_value(name, entry['upper'])}]"
         else:
             parameters = ", ".join(f"{k}={v:.6g}" for k, v in entry.get("parameters", {}).items())
             text = f"{entry.get('distribution')}({parameters}) [{display(name)[1]}]"
@@ -125,25 +147,34 @@ def _summary_rows(results: Sequence[xr.Dataset], sections: Sequence[Section]) ->
         ("description", str(first.attrs.get("study_description", ""))),
         ("study file", str(first.attrs.get("study_path", ""))),
         ("design", f"{first.attrs.get('design_name', '')} (from {first.attrs.get('design_source', '')})"),
-        ("design overrides", ", ".join(f"{k} = {v}" for k, v in _json_attr(first, "design_overrides", {}).items())
-         or "none"),
+        (
+            "design overrides",
+            ", ".join(f"{k} = {v}" for k, v in _json_attr(first, "design_overrides", {}).items()) or "none",
+        ),
         ("seed", str(first.attrs.get("study_seed", first.attrs.get("seed", "")))),
-        ("seed spawn key per analysis", ", ".join(
-            f"{ds.attrs.get('analysis_name', '?')} {ds.attrs['seed_spawn_key']}" for ds in results
-            if "seed_spawn_key" in ds.attrs) or "none recorded"),
+        (
+            "seed spawn key per analysis",
+            ", ".join(
+                f"{ds.attrs.get('analysis_name', '?')} {ds.attrs['seed_spawn_key']}"
+                for ds in results
+                if "seed_spawn_key" in ds.attrs
+            )
+            or "none recorded",
+        ),
         ("analyses", ", ".join(f"{s.name} ({s.kind})" for s in sections)),
         ("model runs", str(total_runs)),
         ("run time", f"{total_time:.1f} s (sum over analyses)"),
         ("results created", str(first.attrs.get("created", ""))),
-        ("report created", datetime.now(timezone.utc).isoformat(timespec="seconds")),
+        ("report created", datetime.now(UTC).isoformat(timespec="seconds")),
     ]
 
 
 def _section_html(section: Section) -> list[str]:
     """The parts of one analysis's section: facts, figures, tables, findings and caveats."""
-    parts = [f'<section class="analysis" id="analysis-{html.escape(section.name)}" '
-             f'data-type="{html.escape(section.kind)}">',
-             f"<h2>{html.escape(section.title)}</h2>"]
+    parts = [
+        f'<section class="analysis" id="analysis-{html.escape(section.name)}" data-type="{html.escape(section.kind)}">',
+        f"<h2>{html.escape(section.title)}</h2>",
+    ]
     if section.description:
         parts.append(f"<p>{html.escape(section.description)}</p>")
     if section.facts:
@@ -163,7 +194,7 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
     Parameters
     ----------
     results : sequence of xarray.Dataset
-        Analysis results as written by :func:`uqgear.study.analyses.run_study`
+        Analysis results as written by :func:`uqgear.study.running.run_analyses`
         (with their provenance attributes), in analysis order.
     dpi : int
         Figure resolution.
@@ -204,19 +235,23 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
     # provenance last and collapsed: what was run, with what, by which versions and seeds
     parts += [
         '<details id="provenance"><summary>Provenance: study, design, parameters, versions, seeds</summary>',
-        '<section id="summary"><h2>Study summary</h2>', _table(summary, table_id="summary-table"),
-        '<h3 id="design">Design</h3>', _table(_design_rows(first), ("key", "value"), "design-table"),
+        '<section id="summary"><h2>Study summary</h2>',
+        _table(summary, table_id="summary-table"),
+        '<h3 id="design">Design</h3>',
+        _table(_design_rows(first), ("key", "value"), "design-table"),
         '<h3 id="uncertain">Uncertain parameters</h3>',
         _table(_uncertain_rows(first), ("parameter", "definition"), "uncertain-table")
-        if _uncertain_rows(first) else "<p>None.</p>",
-        '<h3 id="versions">Versions</h3>', _table(sorted(versions.items()), ("package", "version"),
-                                                  "versions-table"),
+        if _uncertain_rows(first)
+        else "<p>None.</p>",
+        '<h3 id="versions">Versions</h3>',
+        _table(sorted(versions.items()), ("package", "version"), "versions-table"),
         "</section>",
     ]
     study_text = str(first.attrs.get("study", ""))
     if study_text:
-        parts.append(f'<section id="study-text"><h2>Study definition</h2><pre>{html.escape(study_text)}</pre>'
-                     "</section>")
+        parts.append(
+            f'<section id="study-text"><h2>Study definition</h2><pre>{html.escape(study_text)}</pre></section>'
+        )
     parts.append("</details>")
     return html_page(f"uqgear report: {study_name}", _STYLE, parts)
 

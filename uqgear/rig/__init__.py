@@ -5,23 +5,62 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics` and :mod:`uqgear.uq`.
 
 from __future__ import annotations
 
-from .format import (
-    CONVENTIONS, RIG_COORDINATES, validate_rig, read_rig, rig_design, usable_runs, make_rig_dataset,
-    write_rig)
 from .features import (
-    SIGNAL_CHANNELS, FEATURE_FAMILIES, FeatureDefinition, feature_definitions, sampling_rate,
-    order_spectrum, line_amplitudes, extract_features)
-from .usability import check_usable_signal, record_states
+    FEATURE_FAMILIES,
+    SIGNAL_CHANNELS,
+    FeatureDefinition,
+    extract_features,
+    feature_definitions,
+    line_amplitudes,
+    order_spectrum,
+    sampling_rate,
+)
+from .format import (
+    CONVENTIONS,
+    RIG_COORDINATES,
+    make_rig_dataset,
+    read_rig,
+    rig_design,
+    usable_runs,
+    validate_rig,
+    write_rig,
+)
 from .transfer_path import apply_transfer_path, transfer_path_gain
+from .usability import check_usable_signal, record_states
 from .virtual_rig import (
-    simulate_campaign, synth_rig, default_operating_points, adhesion_torque_bounds,
-    true_parameters_of, bearing_check_operating_points)
+    adhesion_torque_bounds,
+    bearing_check_operating_points,
+    default_operating_points,
+    simulate_campaign,
+    synth_rig,
+    true_parameters_of,
+)
 
 __all__ = [
-    'CONVENTIONS', 'RIG_COORDINATES', 'validate_rig', 'read_rig', 'rig_design', 'usable_runs',
-    'make_rig_dataset', 'write_rig', 'SIGNAL_CHANNELS', 'FEATURE_FAMILIES', 'FeatureDefinition',
-    'feature_definitions', 'sampling_rate', 'order_spectrum', 'line_amplitudes', 'extract_features',
-    'simulate_campaign', 'synth_rig', 'default_operating_points', 'adhesion_torque_bounds',
-    'true_parameters_of', 'bearing_check_operating_points',
-    'check_usable_signal', 'record_states', 'apply_transfer_path', 'transfer_path_gain',
+    "CONVENTIONS",
+    "RIG_COORDINATES",
+    "validate_rig",
+    "read_rig",
+    "rig_design",
+    "usable_runs",
+    "make_rig_dataset",
+    "write_rig",
+    "SIGNAL_CHANNELS",
+    "FEATURE_FAMILIES",
+    "FeatureDefinition",
+    "feature_definitions",
+    "sampling_rate",
+    "order_spectrum",
+    "line_amplitudes",
+    "extract_features",
+    "simulate_campaign",
+    "synth_rig",
+    "default_operating_points",
+    "adhesion_torque_bounds",
+    "true_parameters_of",
+    "bearing_check_operating_points",
+    "check_usable_signal",
+    "record_states",
+    "apply_transfer_path",
+    "transfer_path_gain",
 ]

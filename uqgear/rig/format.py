@@ -26,9 +26,9 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from ..physics.design import Design, design_from_json
-from ..common.fileio import atomic_path
 from ..common.errors import DesignError, RigDataError
+from ..common.fileio import atomic_path
+from ..physics.design import Design, design_from_json
 from .features import SIGNAL_CHANNELS, sampling_rate
 from .order_tracking import TACHOMETER_VARIABLE
 
@@ -136,8 +136,10 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
     upper = ds["adhesion_torque_upper"].values
     if np.any(lower > upper):
         index = int(np.argmax(lower > upper))
-        raise RigDataError(f"{where}: adhesion_torque_lower: expected <= adhesion_torque_upper; op {index} has "
-                           f"lower {lower[index]:g} N m > upper {upper[index]:g} N m")
+        raise RigDataError(
+            f"{where}: adhesion_torque_lower: expected <= adhesion_torque_upper; op {index} has "
+            f"lower {lower[index]:g} N m > upper {upper[index]:g} N m"
+        )
 
     channels = [str(name) for name in ds.data_vars]
     if not channels:
@@ -150,19 +152,24 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
             raise RigDataError(f"{where}: {TACHOMETER_VARIABLE}: expected dims ('op', 'time'); got {tachometer.dims}")
         _check_units(where, TACHOMETER_VARIABLE, tachometer.attrs, "rpm")
         if not channels:
-            raise RigDataError(f"{where}: no channel variable besides {TACHOMETER_VARIABLE}; expected at least "
-                               f"one of {', '.join(SIGNAL_CHANNELS)}")
+            raise RigDataError(
+                f"{where}: no channel variable besides {TACHOMETER_VARIABLE}; expected at least "
+                f"one of {', '.join(SIGNAL_CHANNELS)}"
+            )
     for name in channels:
         if name not in SIGNAL_CHANNELS:
-            raise RigDataError(f"{where}: {name}: unknown data variable; expected channels "
-                               f"{', '.join(SIGNAL_CHANNELS)} (and optionally {TACHOMETER_VARIABLE})")
+            raise RigDataError(
+                f"{where}: {name}: unknown data variable; expected channels "
+                f"{', '.join(SIGNAL_CHANNELS)} (and optionally {TACHOMETER_VARIABLE})"
+            )
         variable = ds[name]
         units = SIGNAL_CHANNELS[name][0]
         if variable.dims != ("op", "time"):
             raise RigDataError(f"{where}: {name}: expected dims ('op', 'time'); got {variable.dims}")
         if not np.issubdtype(variable.dtype, np.floating):
-            raise RigDataError(f"{where}: {name}: expected floating-point samples (NaN where missing); "
-                               f"got dtype {variable.dtype}")
+            raise RigDataError(
+                f"{where}: {name}: expected floating-point samples (NaN where missing); got dtype {variable.dtype}"
+            )
         _check_units(where, name, variable.attrs, units)
         long_name = variable.attrs.get("long_name")
         if not isinstance(long_name, str) or not long_name.strip():
@@ -171,8 +178,12 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
             noise = variable.attrs["noise_std"]
             if isinstance(noise, np.generic):
                 noise = noise.item()
-            if (isinstance(noise, bool) or not isinstance(noise, (int, float))
-                    or not math.isfinite(float(noise)) or float(noise) < 0):
+            if (
+                isinstance(noise, bool)
+                or not isinstance(noise, (int, float))
+                or not math.isfinite(float(noise))
+                or float(noise) < 0
+            ):
                 raise RigDataError(f"{where}: {name}: noise_std: expected a number >= 0 in {units}; got {noise!r}")
         if np.any(np.isinf(variable.values)):
             raise RigDataError(f"{where}: {name}: expected finite samples (NaN where missing); found inf")
@@ -189,8 +200,10 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
     fastest = float(speed.max())
     needed = 6.0 * design.z1 * fastest / 60.0
     if not fs > needed:
-        raise RigDataError(f"{where}: time: sampling rate {fs:g} Hz does not resolve the third mesh harmonic at "
-                           f"{fastest:g} rpm; expected fs > 6 z1 n1_max/60 = {needed:g} Hz")
+        raise RigDataError(
+            f"{where}: time: sampling rate {fs:g} Hz does not resolve the third mesh harmonic at "
+            f"{fastest:g} rpm; expected fs > 6 z1 n1_max/60 = {needed:g} Hz"
+        )
     return design
 
 
@@ -202,8 +215,9 @@ def _nominal_design(text: str, where: str, replacement: Design | None) -> Design
         except DesignError as exc:
             raise RigDataError(str(exc)) from None
     if not isinstance(replacement, Design):
-        raise RigDataError(f"{where}: design: expected a uqgear Design to replace the file's; "
-                           f"got {type(replacement).__name__}")
+        raise RigDataError(
+            f"{where}: design: expected a uqgear Design to replace the file's; got {type(replacement).__name__}"
+        )
     # replaced: the file's copy is not used, so it is held to the format (a JSON object) only
     try:
         values = json.loads(text)
@@ -218,8 +232,8 @@ def _canonical_units(ds: xr.Dataset) -> None:
     """Replace accepted unit spellings by the format's own, in place."""
     for name, (_, units, _) in RIG_COORDINATES.items():
         ds[name].attrs["units"] = units
-    for name in ds.data_vars:
-        ds[name].attrs["units"] = "rpm" if name == TACHOMETER_VARIABLE else SIGNAL_CHANNELS[str(name)][0]
+    for variable in ds.data_vars:
+        ds[variable].attrs["units"] = "rpm" if variable == TACHOMETER_VARIABLE else SIGNAL_CHANNELS[str(variable)][0]
 
 
 def read_rig(path: str | os.PathLike[str], *, design: Design | None = None) -> xr.Dataset:
@@ -283,10 +297,20 @@ def usable_runs(ds: xr.Dataset) -> xr.DataArray:
     return usable.rename("usable_runs")
 
 
-def make_rig_dataset(*, time: ArrayLike, pinion_speed: ArrayLike, drive_torque: ArrayLike,
-                     adhesion_torque_lower: ArrayLike, adhesion_torque_upper: ArrayLike,
-                     channels: Mapping[str, ArrayLike], design: Design, title: str, source: str, history: str,
-                     noise_std: Mapping[str, float] | None = None) -> xr.Dataset:
+def make_rig_dataset(
+    *,
+    time: ArrayLike,
+    pinion_speed: ArrayLike,
+    drive_torque: ArrayLike,
+    adhesion_torque_lower: ArrayLike,
+    adhesion_torque_upper: ArrayLike,
+    channels: Mapping[str, ArrayLike],
+    design: Design,
+    title: str,
+    source: str,
+    history: str,
+    noise_std: Mapping[str, float] | None = None,
+) -> xr.Dataset:
     """Build a validated rig Dataset (channels stored as float32, as in the format's files).
 
     Parameters
@@ -318,30 +342,35 @@ def make_rig_dataset(*, time: ArrayLike, pinion_speed: ArrayLike, drive_torque: 
     where = "new rig data"
     if not isinstance(design, Design):
         raise RigDataError(f"{where}: design: expected a uqgear Design; got {type(design).__name__}")
-    per_run = {"pinion_speed": pinion_speed, "drive_torque": drive_torque,
-               "adhesion_torque_lower": adhesion_torque_lower, "adhesion_torque_upper": adhesion_torque_upper}
+    per_run = {
+        "pinion_speed": pinion_speed,
+        "drive_torque": drive_torque,
+        "adhesion_torque_lower": adhesion_torque_lower,
+        "adhesion_torque_upper": adhesion_torque_upper,
+    }
     arrays = {name: np.asarray(values, dtype=float) for name, values in per_run.items()}
     n_op = arrays["pinion_speed"].size
-    for name, values in arrays.items():
-        if values.ndim != 1 or values.size != n_op:
-            raise RigDataError(f"{where}: {name}: expected one value per run ({n_op}, as pinion_speed); "
-                               f"got shape {values.shape}")
+    for name, array in arrays.items():
+        if array.ndim != 1 or array.size != n_op:
+            raise RigDataError(
+                f"{where}: {name}: expected one value per run ({n_op}, as pinion_speed); got shape {array.shape}"
+            )
     time_values = np.asarray(time, dtype=float)
     if time_values.ndim != 1:
         raise RigDataError(f"{where}: time: expected a 1-D array of sample instants; got shape {time_values.shape}")
     noise_std = dict(noise_std or {})
     unknown = sorted(set(noise_std) - set(channels))
     if unknown:
-        raise RigDataError(f"{where}: noise_std: {unknown[0]} is not one of the channels given "
-                           f"({', '.join(channels)})")
+        raise RigDataError(f"{where}: noise_std: {unknown[0]} is not one of the channels given ({', '.join(channels)})")
     data_vars = {}
     for name, values in channels.items():
         if name not in SIGNAL_CHANNELS:
             raise RigDataError(f"{where}: {name}: unknown channel; expected {', '.join(SIGNAL_CHANNELS)}")
         samples = np.asarray(values, dtype=np.float32)
         if samples.shape != (n_op, time_values.size):
-            raise RigDataError(f"{where}: {name}: expected shape (op, time) = ({n_op}, {time_values.size}); "
-                               f"got {samples.shape}")
+            raise RigDataError(
+                f"{where}: {name}: expected shape (op, time) = ({n_op}, {time_values.size}); got {samples.shape}"
+            )
         units, long_name = SIGNAL_CHANNELS[name]
         attrs: dict[str, object] = {"units": units, "long_name": long_name}
         if name in noise_std:
@@ -349,9 +378,17 @@ def make_rig_dataset(*, time: ArrayLike, pinion_speed: ArrayLike, drive_torque: 
         data_vars[name] = (("op", "time"), samples, attrs)
     coords = {"time": ("time", time_values)}
     coords.update({name: ("op", values) for name, values in arrays.items()})
-    ds = xr.Dataset(data_vars, coords=coords,
-                    attrs={"conventions": CONVENTIONS, "design": design.to_json(), "title": title,
-                           "source": source, "history": history})
+    ds = xr.Dataset(
+        data_vars,
+        coords=coords,
+        attrs={
+            "conventions": CONVENTIONS,
+            "design": design.to_json(),
+            "title": title,
+            "source": source,
+            "history": history,
+        },
+    )
     for name, (_, units, long_name) in RIG_COORDINATES.items():
         ds[name].attrs.update(units=units, long_name=long_name)
     validate_rig(ds, where=where)
@@ -387,13 +424,23 @@ def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
         raise RigDataError(f"{path}: folder {path.parent} does not exist")
     # Encodings inherited from a file read earlier (chunking, source) must not leak into the new file.
     out = ds.drop_encoding()
-    encoding: dict[str, dict[str, object]] = {name: {"dtype": "float32", "_FillValue": np.float32(np.nan)}
-                                              for name in out.data_vars}
+    encoding: dict[str, dict[str, object]] = {
+        str(name): {"dtype": "float32", "_FillValue": np.float32(np.nan)} for name in out.data_vars
+    }
     encoding.update({name: {"dtype": "float64", "_FillValue": None} for name in RIG_COORDINATES})
     with atomic_path(path) as temporary:
         out.to_netcdf(temporary, format="NETCDF4", engine="netcdf4", encoding=encoding)
     return path
 
 
-__all__ = ["CONVENTIONS", "RIG_COORDINATES", "TEXT_ATTRIBUTES", "validate_rig", "read_rig", "rig_design",
-           "usable_runs", "make_rig_dataset", "write_rig"]
+__all__ = [
+    "CONVENTIONS",
+    "RIG_COORDINATES",
+    "TEXT_ATTRIBUTES",
+    "validate_rig",
+    "read_rig",
+    "rig_design",
+    "usable_runs",
+    "make_rig_dataset",
+    "write_rig",
+]

@@ -49,8 +49,10 @@ def sampling_rate(time: ArrayLike, *, where: str = "time") -> float:
     worst = int(np.argmax(np.abs(steps - step)))
     # Instants stored as float64 k/fs deviate from uniform by rounding only.
     if abs(steps[worst] - step) > 1e-6 * step:
-        raise RigDataError(f"{where}: expected uniform spacing 1/fs; step {worst} is {steps[worst]:.9g} s "
-                           f"against a median of {step:.9g} s")
+        raise RigDataError(
+            f"{where}: expected uniform spacing 1/fs; step {worst} is {steps[worst]:.9g} s "
+            f"against a median of {step:.9g} s"
+        )
     # The end-to-end span is less affected by rounding than any single step.
     return (values.size - 1) / (values[-1] - values[0])
 

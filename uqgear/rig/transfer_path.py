@@ -48,8 +48,12 @@ _RUN_IN_TIME_CONSTANTS = 12.0
 
 
 def _check_positive(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)) or float(value) <= 0.0:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(float(value))
+        or float(value) <= 0.0
+    ):
         raise RigDataError(f"transfer path: {name}: expected a positive finite number; got {value!r}")
     return float(value)
 
@@ -57,14 +61,15 @@ def _check_positive(name: str, value: object) -> float:
 def _analogue(frequency: float, damping: float, gain: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Numerator and denominator of H(s) (highest power first), w0 in rad/s."""
     w0 = 2.0 * math.pi * frequency
-    denominator = np.array([1.0, 2.0 * damping * w0, w0 ** 2])
+    denominator = np.array([1.0, 2.0 * damping * w0, w0**2])
     if gain is None:
-        return np.array([w0 ** 2]), denominator
-    return np.array([1.0, 2.0 * gain * damping * w0, w0 ** 2]), denominator
+        return np.array([w0**2]), denominator
+    return np.array([1.0, 2.0 * gain * damping * w0, w0**2]), denominator
 
 
-def transfer_path_coefficients(frequency: float, damping: float, fs: float, gain: float | None = None
-                               ) -> tuple[np.ndarray, np.ndarray]:
+def transfer_path_coefficients(
+    frequency: float, damping: float, fs: float, gain: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Digital filter (b, a) of the resonance: bilinear transform prewarped at ``frequency``.
 
     Parameters
@@ -90,8 +95,9 @@ def transfer_path_coefficients(frequency: float, damping: float, fs: float, gain
     return scipy.signal.bilinear(numerator, denominator, fs)
 
 
-def transfer_path_gain(frequencies: np.ndarray, frequency: float, damping: float, fs: float | None = None,
-                       gain: float | None = None) -> np.ndarray:
+def transfer_path_gain(
+    frequencies: np.ndarray, frequency: float, damping: float, fs: float | None = None, gain: float | None = None
+) -> np.ndarray:
     """Gain |H| of the resonance at ``frequencies`` (Hz), analogue or (with ``fs``) the digital filter's.
 
     The digital filter's gain at f is the analogue one (resonance prewarped)
@@ -103,14 +109,15 @@ def transfer_path_gain(frequencies: np.ndarray, frequency: float, damping: float
         f0 = fs / math.pi * math.tan(math.pi * frequency / fs)
         f = fs / math.pi * np.tan(np.pi * np.clip(f, 0.0, 0.5 * fs * (1 - 1e-12)) / fs)
     r = f / f0
-    denominator = np.sqrt((1.0 - r ** 2) ** 2 + (2.0 * damping * r) ** 2)
+    denominator = np.sqrt((1.0 - r**2) ** 2 + (2.0 * damping * r) ** 2)
     if gain is None:
         return 1.0 / denominator
-    return np.sqrt((1.0 - r ** 2) ** 2 + (2.0 * gain * damping * r) ** 2) / denominator
+    return np.sqrt((1.0 - r**2) ** 2 + (2.0 * gain * damping * r) ** 2) / denominator
 
 
-def apply_transfer_path(campaign: xr.Dataset, channel: str, frequency: float, damping: float,
-                        gain: float | None = None) -> xr.Dataset:
+def apply_transfer_path(
+    campaign: xr.Dataset, channel: str, frequency: float, damping: float, gain: float | None = None
+) -> xr.Dataset:
     """Filter one channel of a rig campaign through a second-order transfer-path resonance.
 
     Parameters
@@ -148,16 +155,19 @@ def apply_transfer_path(campaign: xr.Dataset, channel: str, frequency: float, da
         raise RigDataError(f"transfer path: expected a rig campaign Dataset; got {type(campaign).__name__}")
     if channel not in SIGNAL_CHANNELS or channel not in campaign.data_vars:
         present = [name for name in SIGNAL_CHANNELS if name in campaign.data_vars]
-        raise RigDataError(f"transfer path: channel {channel!r}: expected a signal of the campaign, one of "
-                           f"{', '.join(present) or 'none (the campaign has no signal)'}")
+        raise RigDataError(
+            f"transfer path: channel {channel!r}: expected a signal of the campaign, one of "
+            f"{', '.join(present) or 'none (the campaign has no signal)'}"
+        )
     if "time" not in campaign.coords:
         raise RigDataError("transfer path: the campaign has no time coordinate")
     fs = sampling_rate(np.asarray(campaign["time"].values, dtype=float), where="transfer path: time")
     frequency = _check_positive("frequency", frequency)
     damping = _check_positive("damping", damping)
     if frequency >= 0.5 * fs:
-        raise RigDataError(f"transfer path: frequency: expected below the Nyquist frequency {0.5 * fs:g} Hz; "
-                           f"got {frequency:g}")
+        raise RigDataError(
+            f"transfer path: frequency: expected below the Nyquist frequency {0.5 * fs:g} Hz; got {frequency:g}"
+        )
     if damping >= 1.0:
         raise RigDataError(f"transfer path: damping: expected a damping ratio below 1; got {damping:g}")
     if gain is not None:
@@ -177,17 +187,28 @@ def apply_transfer_path(campaign: xr.Dataset, channel: str, frequency: float, da
     out = campaign.copy()
     attrs = dict(signal.attrs)
     attrs.pop("noise_std", None)
-    entry = {"kind": "sensor" if gain is None else "resonance", "frequency": frequency, "damping": damping,
-             "peak_gain": float(transfer_path_gain(np.array([frequency]), frequency, damping, fs, gain)[0]),
-             "discretisation": "bilinear, prewarped at the resonance", "fs": fs}
+    entry = {
+        "kind": "sensor" if gain is None else "resonance",
+        "frequency": frequency,
+        "damping": damping,
+        "peak_gain": float(transfer_path_gain(np.array([frequency]), frequency, damping, fs, gain)[0]),
+        "discretisation": "bilinear, prewarped at the resonance",
+        "fs": fs,
+    }
     previous = json.loads(attrs[TRANSFER_PATH_ATTRIBUTE]) if TRANSFER_PATH_ATTRIBUTE in attrs else []
     attrs[TRANSFER_PATH_ATTRIBUTE] = json.dumps(previous + [entry])
     order = signal.transpose(..., "time").dims
-    result = xr.DataArray(filtered.reshape(values.shape).astype(signal.dtype, copy=False), dims=order,
-                          coords=signal.transpose(..., "time").coords, attrs=attrs).transpose(*signal.dims)
+    result = xr.DataArray(
+        filtered.reshape(values.shape).astype(signal.dtype, copy=False),
+        dims=order,
+        coords=signal.transpose(..., "time").coords,
+        attrs=attrs,
+    ).transpose(*signal.dims)
     out[channel] = result
-    note = (f"{channel} filtered through a transfer-path resonance at {frequency:g} Hz, damping {damping:g}, "
-            f"peak gain {entry['peak_gain']:.3g} (uqgear.rig.apply_transfer_path)")
+    note = (
+        f"{channel} filtered through a transfer-path resonance at {frequency:g} Hz, damping {damping:g}, "
+        f"peak gain {entry['peak_gain']:.3g} (uqgear.rig.apply_transfer_path)"
+    )
     history = str(out.attrs.get("history", "")).strip()
     out.attrs["history"] = f"{history}; {note}" if history else note
     return out

@@ -62,8 +62,14 @@ def _describe_dead(states: dict[str, tuple[np.ndarray, np.ndarray]], ds: xr.Data
     return "constant (a sensor stuck at one value)"
 
 
-def check_usable_signal(ds: xr.Dataset, *, where: str = "rig data", min_operating_points: int = 1,
-                        purpose: str = "the analysis", why: str = "") -> np.ndarray:
+def check_usable_signal(
+    ds: xr.Dataset,
+    *,
+    where: str = "rig data",
+    min_operating_points: int = 1,
+    purpose: str = "the analysis",
+    why: str = "",
+) -> np.ndarray:
     """Refuse a campaign without usable signal; return the operating points that carry some.
 
     Checked in this order, each failure one :class:`RigDataError` naming the
@@ -102,17 +108,23 @@ def check_usable_signal(ds: xr.Dataset, *, where: str = "rig data", min_operatin
     because = f" ({why})" if why else ""
     n_op = int(ds.sizes.get("op", 0))
     if n_op < 1:
-        raise RigDataError(f"{where}: op: the campaign holds no operating point; {purpose} needs at least "
-                           f"{max(min_operating_points, 1)}{because}")
+        raise RigDataError(
+            f"{where}: op: the campaign holds no operating point; {purpose} needs at least "
+            f"{max(min_operating_points, 1)}{because}"
+        )
     if n_op < min_operating_points:
-        raise RigDataError(f"{where}: op: the campaign holds {n_op} operating point{'s' if n_op != 1 else ''}; "
-                           f"{purpose} needs at least {min_operating_points}{because}")
+        raise RigDataError(
+            f"{where}: op: the campaign holds {n_op} operating point{'s' if n_op != 1 else ''}; "
+            f"{purpose} needs at least {min_operating_points}{because}"
+        )
     for name in ("drive_torque", "adhesion_torque_lower"):
         values = np.asarray(ds[name].values, dtype=float)
         if np.any(values < 0):
             index = int(np.argmax(values < 0))
-            raise RigDataError(f"{where}: {name}: expected torques >= 0 N m (the model's sign convention: T1 drives "
-                               f"the pinion, T2 brakes the wheelset); op {index} has {values[index]:g}")
+            raise RigDataError(
+                f"{where}: {name}: expected torques >= 0 N m (the model's sign convention: T1 drives "
+                f"the pinion, T2 brakes the wheelset); op {index} has {values[index]:g}"
+            )
 
     speed = np.asarray(ds["pinion_speed"].values, dtype=float)
     fs = sampling_rate(ds["time"].values, where=f"{where}: time")
@@ -121,10 +133,12 @@ def check_usable_signal(ds: xr.Dataset, *, where: str = "rig data", min_operatin
     revolution = 60.0 / float(speed[slowest])
     duration = size / fs
     if duration < revolution * (1.0 - 1e-9):
-        raise RigDataError(f"{where}: time: records of {size} samples at {fs:g} Hz last {duration:.4g} s, shorter "
-                           f"than one pinion revolution at the slowest operating point (op {slowest}, "
-                           f"{speed[slowest]:g} rpm: {revolution:.4g} s); expected records of at least "
-                           f"{math.ceil(revolution * fs)} samples")
+        raise RigDataError(
+            f"{where}: time: records of {size} samples at {fs:g} Hz last {duration:.4g} s, shorter "
+            f"than one pinion revolution at the slowest operating point (op {slowest}, "
+            f"{speed[slowest]:g} rpm: {revolution:.4g} s); expected records of at least "
+            f"{math.ceil(revolution * fs)} samples"
+        )
 
     states = record_states(ds)
     channels = ", ".join(states)
@@ -132,15 +146,19 @@ def check_usable_signal(ds: xr.Dataset, *, where: str = "rig data", min_operatin
     for missing, constant in states.values():
         usable |= ~missing & ~constant
     if not usable.any():
-        raise RigDataError(f"{where}: {channels}: no usable signal: every record of every channel is "
-                           f"{_describe_dead(states, ds)}; expected records that vary in at least "
-                           f"{max(min_operating_points, 1)} operating point{'s' if min_operating_points > 1 else ''}")
+        raise RigDataError(
+            f"{where}: {channels}: no usable signal: every record of every channel is "
+            f"{_describe_dead(states, ds)}; expected records that vary in at least "
+            f"{max(min_operating_points, 1)} operating point{'s' if min_operating_points > 1 else ''}"
+        )
     count = int(usable.sum())
     if count < min_operating_points:
         kept = ", ".join(f"op {op} at {speed[op]:g} rpm" for op in np.flatnonzero(usable))
-        raise RigDataError(f"{where}: {channels}: only {count} of {n_op} operating points carry usable signal "
-                           f"({kept}); {purpose} needs at least {min_operating_points}{because}; the records of "
-                           f"the others are missing (NaN) or constant in every channel")
+        raise RigDataError(
+            f"{where}: {channels}: only {count} of {n_op} operating points carry usable signal "
+            f"({kept}); {purpose} needs at least {min_operating_points}{because}; the records of "
+            f"the others are missing (NaN) or constant in every channel"
+        )
     return np.flatnonzero(usable)
 
 

@@ -7,18 +7,27 @@ report, calibration, diagnosis, validation); only the command line sits above.
 
 from __future__ import annotations
 
-from .schema import (Study, load_study, parse_study, study_from_mapping)
-from .analysis_specs import AnalysisSpec
-from .settings import SimulationSettings
-from .analysis_schemas import ANALYSIS_SCHEMAS
-from .variables import VARIABLES
-from .analyses import (ANALYSES, register, run_analysis)
-from .running import run_study
 # registers the continuation analysis in ANALYSES
 from . import continuation_analysis  # noqa: F401
+from .analyses import ANALYSES, register
+from .analysis_schemas import ANALYSIS_SCHEMAS
+from .analysis_specs import AnalysisSpec
+from .running import run_analysis, run_study
+from .schema import Study, load_study, parse_study, study_from_mapping
+from .settings import SimulationSettings
+from .variables import VARIABLES
 
 __all__ = [
-    'Study', 'AnalysisSpec', 'SimulationSettings', 'load_study', 'parse_study',
-    'study_from_mapping', 'ANALYSIS_SCHEMAS', 'VARIABLES', 'ANALYSES', 'register', 'run_analysis',
-    'run_study',
+    "Study",
+    "AnalysisSpec",
+    "SimulationSettings",
+    "load_study",
+    "parse_study",
+    "study_from_mapping",
+    "ANALYSIS_SCHEMAS",
+    "VARIABLES",
+    "ANALYSES",
+    "register",
+    "run_analysis",
+    "run_study",
 ]

@@ -10,9 +10,8 @@ figures, a renderer in one of the ``uqgear.report.*_sections`` modules).
 All model runs go through :func:`evaluate_batch`, a picklable model function
 ``samples -> results`` executed by a :class:`uqgear.uq.runner.Runner`: in-process
 (all local cores), or on a dask scheduler, chunked and checkpointed so a
-killed run resumes. :func:`run_study` runs every analysis of a study and
-writes one ``<name>.nc`` per analysis with provenance; an analysis whose file
-is already there with the same inputs is not run again on resume.
+killed run resumes. :func:`uqgear.study.running.run_analyses` runs every
+analysis of a study and writes one ``<name>.nc`` per analysis with provenance.
 
 Randomness: one :class:`numpy.random.SeedSequence` per study (the ``seed``
 key), one child per analysis in list order (:meth:`Study.seed_sequences`),
@@ -22,39 +21,34 @@ and children of that per stage. Same seed, same numbers.
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
-import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 
 import uqgear.dynamics as dynamics
-from ..physics.design import Design
-from ..common.errors import StudyError, UqgearError
-from ..physics.integration import QOI_INFO, BatchEvaluator, simulate
+
 from ..common.progress import progress
-from ..uq.results import load_result, save_result
-from ..uq.runner import Runner
-from .analysis_specs import AnalysisSpec
-from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
-from .model_runs import RunnerModel
-from .schema import Study
-from .settings import SimulationSettings
-from .variables import OPERATING_VARIABLES, VARIABLES, variable_units_short
+from ..physics.design import Design
+from ..physics.integration import QOI_INFO, BatchEvaluator
 from ..uq.monte_carlo import monte_carlo_statistics
 from ..uq.parameter_space import ParameterSpace
 from ..uq.parameters import Fixed
 from ..uq.polynomial_chaos import PolynomialChaos
+from ..uq.runner import Runner
 from ..uq.seeds import child_seed
 from ..uq.sweeps import evaluate_on_sweep
+from .analysis_specs import AnalysisSpec
+from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
+from .model_runs import RunnerModel
+from .point_run import simulate_point
+from .schema import Study
+from .settings import SimulationSettings
+from .variables import variable_units_short
 
-#: Design keys an operating point may set.
-DESIGN_VARIABLES: frozenset[str] = frozenset(name for name in VARIABLES if name not in OPERATING_VARIABLES)
 #: Attribute holding the hash of an analysis's inputs (reuse on resume).
 ANALYSIS_KEY_ATTR = "analysis_key"
 
@@ -65,6 +59,7 @@ ANALYSES: dict[str, AnalysisFunction] = {}
 
 def register(kind: str) -> Callable[[AnalysisFunction], AnalysisFunction]:
     """Decorator registering the function of an analysis type."""
+
     def decorate(function: AnalysisFunction) -> AnalysisFunction:
         ANALYSES[kind] = function
         return function
@@ -75,10 +70,16 @@ def register(kind: str) -> Callable[[AnalysisFunction], AnalysisFunction]:
 # ---------------------------------------------------------------------------- the model
 
 
-def evaluate_batch(samples: xr.Dataset, *, design: Design, simulation: SimulationSettings,
-                   threads: int | None = None, classify: bool = False,
-                   classify_seed: np.random.SeedSequence | None = None,
-                   poincare: bool = True) -> xr.Dataset:
+def evaluate_batch(
+    samples: xr.Dataset,
+    *,
+    design: Design,
+    simulation: SimulationSettings,
+    threads: int | None = None,
+    classify: bool = False,
+    classify_seed: np.random.SeedSequence | None = None,
+    poincare: bool = True,
+) -> xr.Dataset:
     """The gear model as a batch function: samples in, QoIs and Poincare points out.
 
     Module-level (picklable) so that a dask worker can run it. The model call
@@ -112,10 +113,16 @@ def evaluate_batch(samples: xr.Dataset, *, design: Design, simulation: Simulatio
         The :func:`~uqgear.physics.integration.simulate_batch` outputs (dims
         ``sample``, ``period``), input variables as coordinates.
     """
-    model = BatchEvaluator(design, n_periods=simulation.n_periods, keep_periods=simulation.keep_periods,
-                           lyapunov=simulation.lyapunov, damping_in_separation=simulation.damping_in_separation,
-                           stiffness=simulation.stiffness, steps_per_mode=simulation.steps_per_mode,
-                           threads=threads)
+    model = BatchEvaluator(
+        design,
+        n_periods=simulation.n_periods,
+        keep_periods=simulation.keep_periods,
+        lyapunov=simulation.lyapunov,
+        damping_in_separation=simulation.damping_in_separation,
+        stiffness=simulation.stiffness,
+        steps_per_mode=simulation.steps_per_mode,
+        threads=threads,
+    )
     result = model(samples)
     if classify:
         seed = classify_seed if classify_seed is not None else 0
@@ -170,8 +177,9 @@ class AnalysisContext:
         """Seed of one stage of this analysis (sampling, validation, bootstrap, ...)."""
         return child_seed(self.seed, stage)
 
-    def model(self, *, classify: bool = False, lyapunov: bool | None = None,
-              poincare: bool = True) -> RunnerModel | MultiStartModel:
+    def model(
+        self, *, classify: bool = False, lyapunov: bool | None = None, poincare: bool = True
+    ) -> RunnerModel | MultiStartModel:
         """The gear model for this analysis, evaluated through the runner.
 
         ``poincare=False`` drops the Poincare points from the outputs (scalar
@@ -183,15 +191,28 @@ class AnalysisContext:
             simulation = SimulationSettings(**{**simulation.to_dict(), "lyapunov": lyapunov})
         if simulation.starts is not None:
             return multi_start_model(self, simulation, poincare)
-        function = functools.partial(evaluate_batch, design=self.design, simulation=simulation,
-                                     threads=self.threads, classify=classify,
-                                     classify_seed=self.stage_seed(99) if classify else None,
-                                     poincare=poincare)
+        function = functools.partial(
+            evaluate_batch,
+            design=self.design,
+            simulation=simulation,
+            threads=self.threads,
+            classify=classify,
+            classify_seed=self.stage_seed(99) if classify else None,
+            poincare=poincare,
+        )
         # the runner's checkpoint hash covers the samples and the function name, not the
         # partial's arguments: the key carries them
-        key = json.dumps({"analysis": self.spec.name, "design": self.design.to_dict(),
-                          "simulation": simulation.to_dict(), "classify": classify, "poincare": poincare,
-                          "seed": [str(self.seed.entropy), list(self.seed.spawn_key)]}, sort_keys=True)
+        key = json.dumps(
+            {
+                "analysis": self.spec.name,
+                "design": self.design.to_dict(),
+                "simulation": simulation.to_dict(),
+                "classify": classify,
+                "poincare": poincare,
+                "seed": [str(self.seed.entropy), list(self.seed.spawn_key)],
+            },
+            sort_keys=True,
+        )
         return RunnerModel(self.runner, function, key, self.resume)
 
     def fixed_values(self, exclude: Sequence[str] = ()) -> dict[str, float]:
@@ -208,11 +229,13 @@ class AnalysisContext:
                 values[name] = parameter.nominal
         for name in exclude:
             values.pop(name, None)
-        if "drive_torque" not in values and "drive_torque" not in exclude \
-                and "drive_torque" not in self.spec.sweeps:
+        if "drive_torque" not in values and "drive_torque" not in exclude and "drive_torque" not in self.spec.sweeps:
             values["drive_torque"] = self.design.operation.drive_torque
-        if "adhesion_torque" not in values and "adhesion_torque" not in exclude \
-                and "adhesion_torque" not in self.spec.sweeps:
+        if (
+            "adhesion_torque" not in values
+            and "adhesion_torque" not in exclude
+            and "adhesion_torque" not in self.spec.sweeps
+        ):
             drive = values.get("drive_torque", self.design.operation.drive_torque)
             values["adhesion_torque"] = drive * self.design.z2 / self.design.z1
         return values
@@ -233,17 +256,21 @@ class AnalysisContext:
 
     def sweep(self) -> dict[str, xr.DataArray]:
         """The operating sweeps as DataArrays with units (the uncertainty layer's sweep)."""
-        return {name: xr.DataArray(np.asarray(spec.values), dims=name,
-                                   attrs={"units": variable_units_short(name)})
-                for name, spec in self.spec.sweeps.items()}
+        return {
+            name: xr.DataArray(np.asarray(spec.values), dims=name, attrs={"units": variable_units_short(name)})
+            for name, spec in self.spec.sweeps.items()
+        }
 
 
 # ---------------------------------------------------------------------------- helpers
 
 
 def _coordinate(name: str, values: Sequence[float]) -> tuple[str, np.ndarray, dict[str, str]]:
-    return (name, np.asarray(values, dtype=float),
-            {"units": variable_units_short(name), "long_name": name.replace("_", " ")})
+    return (
+        name,
+        np.asarray(values, dtype=float),
+        {"units": variable_units_short(name), "long_name": name.replace("_", " ")},
+    )
 
 
 def _grid_samples(axes: Mapping[str, np.ndarray], fixed: Mapping[str, float]) -> xr.Dataset:
@@ -255,8 +282,7 @@ def _grid_samples(axes: Mapping[str, np.ndarray], fixed: Mapping[str, float]) ->
     return xr.Dataset(data)
 
 
-def _grid_run(context: AnalysisContext, axes: Mapping[str, np.ndarray], *,
-              lyapunov: bool | None = None) -> xr.Dataset:
+def _grid_run(context: AnalysisContext, axes: Mapping[str, np.ndarray], *, lyapunov: bool | None = None) -> xr.Dataset:
     """Run and classify the model on a grid; dims are the axes (in order) and ``period``."""
     fixed = context.fixed_values(exclude=list(axes))
     model = context.model(lyapunov=lyapunov)
@@ -267,112 +293,39 @@ def _grid_run(context: AnalysisContext, axes: Mapping[str, np.ndarray], *,
     return gridded
 
 
-def _qoi_attrs(name: str) -> dict[str, str]:
-    units, long_name = QOI_INFO[name]
-    return {"units": units, "long_name": long_name}
-
-
 # ---------------------------------------------------------------------------- analyses
 
 
-def simulate_point(design: Design, point: Mapping[str, float], *, simulation: SimulationSettings,
-                   samples_per_period: int = 64, method: str = "fast",
-                   largest_lyapunov: float | None = None,
-                   seed: np.random.SeedSequence | int = 0, label: str = "") -> xr.Dataset:
-    """One full simulation with its Poincare points, DTE spectrum, QoIs and regime.
-
-    Parameters
-    ----------
-    design : Design
-    point : mapping
-        ``pinion_speed`` (rpm), ``drive_torque`` and ``adhesion_torque``
-        (N m), optionally ``mesh_stiffness_scale`` and design keys.
-    simulation : SimulationSettings
-    samples_per_period : int
-        History samples per mesh period.
-    method : {"fast", "scipy"}
-    largest_lyapunov : float, optional
-        Largest Lyapunov exponent in 1/s (from a batch run of the same
-        point); it decides chaotic against quasi-periodic.
-    seed : SeedSequence or int
-        Seed of the 0-1 test frequencies.
-    label : str
-        A label for reports (e.g. "period-1").
-
-    Returns
-    -------
-    xarray.Dataset
-        Histories on ``mesh_cycle`` (time in mesh periods), Poincare points
-        on ``period``, the DTE amplitude spectrum on ``order``; scalars:
-        the inputs, QoIs, ``regime``, ``response_period``, ``zero_one_k``,
-        ``regime_reason``.
-    """
-    design_keys = {key: value for key, value in point.items() if key in DESIGN_VARIABLES}
-    run_design = design.replace(**design_keys) if design_keys else design
-    run = simulate(run_design, point["pinion_speed"], point["drive_torque"], point["adhesion_torque"],
-                   method=method, n_periods=simulation.n_periods, keep_periods=simulation.keep_periods,
-                   samples_per_period=samples_per_period,
-                   mesh_stiffness_scale=point.get("mesh_stiffness_scale", 1.0),
-                   damping_in_separation=simulation.damping_in_separation, stiffness=simulation.stiffness,
-                   steps_per_mode=simulation.steps_per_mode)
-    if largest_lyapunov is not None:
-        run["largest_lyapunov"] = ((), float(largest_lyapunov), _qoi_attrs("largest_lyapunov"))
-    response = dynamics.classify_dataset(run, seed=seed)
-    spectrum = dynamics.spectrum_dataset(run, "x", against="order")["x"]
-    qois = dynamics.response_qois(run)
-    mesh_cycle = run["time"].values / run.attrs["mesh_period"]
-    frequency = (spectrum["frequency"].values if "frequency" in spectrum.coords
-                 else spectrum["order"].values * point["pinion_speed"] / 60.0)
-    data: dict[str, Any] = {
-        "time_s": ("mesh_cycle", run["time"].values, {"units": "s", "long_name": "time"}),
-        "spectrum_x": ("order", spectrum.values,
-                       {"units": "m", "long_name": "amplitude spectrum of the DTE x (Hann window)"}),
-        "spectrum_frequency": ("order", frequency, {"units": "Hz", "long_name": "frequency of the bin"}),
-        "regime": ((), response.label, {"long_name": "response regime"}),
-        "response_period": ((), int(response.period), {"units": "1", "long_name": "period n, 0 if none"}),
-        "zero_one_k": ((), float(response.evidence["zero_one_k"]),
-                       {"units": "1", "long_name": "median K of the 0-1 test"}),
-        "regime_reason": ((), response.reason, {"long_name": "evidence for the regime"}),
-        "label": ((), label, {"long_name": "label given in the study"}),
-        "mesh_frequency": ((), float(run.attrs["mesh_frequency"]), {"units": "Hz"}),
-        "static_mesh_force": ((), float(run.attrs["static_mesh_force"]), {"units": "N"}),
-        "half_backlash": ((), float(run.attrs["half_backlash"]), {"units": "m"}),
-        "largest_lyapunov": ((), float("nan") if largest_lyapunov is None else float(largest_lyapunov),
-                             _qoi_attrs("largest_lyapunov")),
-    }
-    for name in ("x", "x_velocity", "y1", "y2", "y1_acceleration", "y2_acceleration", "mesh_force",
-                 "mesh_stiffness", "contact"):
-        data[name] = ("mesh_cycle", run[name].values, dict(run[name].attrs))
-    for name in ("poincare_x", "poincare_x_velocity"):
-        data[name] = ("period", run[name].values, dict(run[name].attrs))
-    for name, value in point.items():
-        data[name] = ((), float(value), {"units": variable_units_short(name)})
-    for name in qois.data_vars:
-        data[name] = ((), float(qois[name].values), dict(qois[name].attrs))
-    coords = {"mesh_cycle": ("mesh_cycle", mesh_cycle, {"units": "1", "long_name": "time in mesh periods"}),
-              "period": ("period", run["period"].values, {"units": "1", "long_name": "mesh period index"}),
-              "order": ("order", spectrum["order"].values,
-                        {"units": "1", "long_name": "order (multiples of the pinion rotation)"})}
-    attrs = {"z1": run.attrs["z1"], "z2": run.attrs["z2"], "mesh_period": run.attrs["mesh_period"],
-             "n_periods": simulation.n_periods, "keep_periods": simulation.keep_periods,
-             "samples_per_period": samples_per_period, "method": method}
-    return xr.Dataset(data, coords=coords, attrs=attrs)
-
-
-def quick_run(design: Design, pinion_speed: float, drive_torque: float, adhesion_torque: float, *,
-              n_periods: int = 400, keep_periods: int = 200, samples_per_period: int = 64) -> xr.Dataset:
+def quick_run(
+    design: Design,
+    pinion_speed: float,
+    drive_torque: float,
+    adhesion_torque: float,
+    *,
+    n_periods: int = 400,
+    keep_periods: int = 200,
+    samples_per_period: int = 64,
+) -> xr.Dataset:
     """One operating point, classified with the help of its Lyapunov exponent (``uqgear simulate``).
 
     Returns the Dataset of :func:`simulate_point`, with the QoIs, the regime
     and its reason also as attributes.
     """
     simulation = SimulationSettings(n_periods=n_periods, keep_periods=keep_periods, lyapunov=True)
-    point = {"pinion_speed": float(pinion_speed), "drive_torque": float(drive_torque),
-             "adhesion_torque": float(adhesion_torque)}
+    point = {
+        "pinion_speed": float(pinion_speed),
+        "drive_torque": float(drive_torque),
+        "adhesion_torque": float(adhesion_torque),
+    }
     samples = xr.Dataset({name: ("sample", [value]) for name, value in point.items()})
     batch = evaluate_batch(samples, design=design, simulation=simulation)
-    run = simulate_point(design, point, simulation=simulation, samples_per_period=samples_per_period,
-                         largest_lyapunov=float(batch["largest_lyapunov"].values[0]))
+    run = simulate_point(
+        design,
+        point,
+        simulation=simulation,
+        samples_per_period=samples_per_period,
+        largest_lyapunov=float(batch["largest_lyapunov"].values[0]),
+    )
     for name, variable in run.data_vars.items():
         if variable.ndim == 0:
             value = variable.values.item()
@@ -394,34 +347,51 @@ def simulate_analysis(context: AnalysisContext) -> xr.Dataset:
     options = context.options
     sweeps = {name: np.asarray(s.values) for name, s in spec.sweeps.items()}
     fixed = context.fixed_values(exclude=list(sweeps))
-    grid = _grid_samples(sweeps, fixed) if sweeps else xr.Dataset(
-        {name: ("sample", [float(value)]) for name, value in fixed.items()})
-    points = [{name: float(grid[name].values[i]) for name in grid.data_vars}
-              for i in range(grid.sizes["sample"])]
+    grid = (
+        _grid_samples(sweeps, fixed)
+        if sweeps
+        else xr.Dataset({name: ("sample", [float(value)]) for name, value in fixed.items()})
+    )
+    points = [{name: float(grid[name].values[i]) for name in grid.data_vars} for i in range(grid.sizes["sample"])]
     # Lyapunov exponents from a batch run of the same points decide chaotic vs quasi-periodic
     model = context.model(classify=False, lyapunov=True)
     batch = model(grid)
     # the panels start from rest: with several starts, the rest start's exponent
     exponent = batch["largest_lyapunov_rest" if "largest_lyapunov_rest" in batch else "largest_lyapunov"].values
     labels = list(options["labels"]) or [""] * len(points)
-    runs = [simulate_point(context.design, point, simulation=spec.simulation,
-                           samples_per_period=options["samples_per_period"], method=options["method"],
-                           largest_lyapunov=float(exponent[index]),
-                           seed=context.stage_seed(0), label=labels[index])
-            for index, point in enumerate(progress(points, desc=f"{spec.name}: simulate", unit="run"))]
+    runs = [
+        simulate_point(
+            context.design,
+            point,
+            simulation=spec.simulation,
+            samples_per_period=options["samples_per_period"],
+            method=options["method"],
+            largest_lyapunov=float(exponent[index]),
+            seed=context.stage_seed(0),
+            label=labels[index],
+        )
+        for index, point in enumerate(progress(points, desc=f"{spec.name}: simulate", unit="run"))
+    ]
     # the runs share sample counts, periods and spectrum bins (same settings), so they stack
-    result = xr.concat(runs, dim="run", coords="minimal", compat="override", join="override",
-                       combine_attrs="drop_conflicts")
+    result = xr.concat(
+        runs, dim="run", coords="minimal", compat="override", join="override", combine_attrs="drop_conflicts"
+    )
     result = result.assign_coords(run=("run", np.arange(len(points)), {"units": "1"}))
     if "attractor_count" in batch:
         # every steady response the point holds, besides the panels' one from rest
-        result = result.merge(batch[[name for name in batch.data_vars if name.startswith("attractor_")]]
-                              .rename({"sample": "run"}).drop_vars(list(batch.coords), errors="ignore"))
-    result.attrs.update(model_runs=len(points) + int(model.runs), swept=json.dumps(list(sweeps)),
-                        fixed_inputs=json.dumps(fixed),
-                        spectrum_axis=options["spectrum"],
-                        classification="period from the Poincare sequence; chaotic vs quasi-periodic by "
-                                       "the largest Lyapunov exponent of a batch run of the same point")
+        result = result.merge(
+            batch[[name for name in cast(Iterable[str], batch.data_vars) if name.startswith("attractor_")]]
+            .rename({"sample": "run"})
+            .drop_vars(list(batch.coords), errors="ignore")
+        )
+    result.attrs.update(
+        model_runs=len(points) + int(model.runs),
+        swept=json.dumps(list(sweeps)),
+        fixed_inputs=json.dumps(fixed),
+        spectrum_axis=options["spectrum"],
+        classification="period from the Poincare sequence; chaotic vs quasi-periodic by "
+        "the largest Lyapunov exponent of a batch run of the same point",
+    )
     return result
 
 
@@ -472,27 +442,40 @@ def monte_carlo_analysis(context: AnalysisContext) -> xr.Dataset:
         from ..uq.interval import IntervalAnalysis
         from ..uq.pbox import pbox
 
-        result = pbox(model, space, n_samples=options["samples"], seed=context.stage_seed(0),
-                      sweep=context.sweep(), quantiles=options["quantiles"], sampling=options["sampling"],
-                      qoi=list(options["qois"]),
-                      analysis=IntervalAnalysis("scan", scan_points=options["points"]))
-        result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names),
-                            fixed_inputs=json.dumps(fixed), interval_treatment="p-box: statistics bounded over "
-                            "the interval parameters (no distribution assumed for them)")
+        result = pbox(
+            model,
+            space,
+            n_samples=options["samples"],
+            seed=context.stage_seed(0),
+            sweep=context.sweep(),
+            quantiles=options["quantiles"],
+            sampling=options["sampling"],
+            qoi=list(options["qois"]),
+            analysis=IntervalAnalysis("scan", scan_points=options["points"]),
+        )
+        result.attrs.update(
+            model_runs=int(model.runs),
+            parameters=json.dumps(names),
+            fixed_inputs=json.dumps(fixed),
+            interval_treatment="p-box: statistics bounded over "
+            "the interval parameters (no distribution assumed for them)",
+        )
         return result
-    samples = space.sample(options["samples"], options["sampling"], seed=context.stage_seed(0),
-                           interval_treatment="uniform")
+    samples = space.sample(
+        options["samples"], options["sampling"], seed=context.stage_seed(0), interval_treatment="uniform"
+    )
     outputs = evaluate_on_sweep(model, samples, context.sweep(), qoi=list(options["qois"]))
     statistics = monte_carlo_statistics(outputs, quantiles=options["quantiles"])
     for name in options["qois"]:
         statistics[f"{name}_samples"] = outputs[name]
     for name in names:
-        statistics[f"input_{name}"] = ("sample", samples[name].values,
-                                       {"units": variable_units_short(name),
-                                        "long_name": f"sampled {name}"})
+        statistics[f"input_{name}"] = (
+            "sample",
+            samples[name].values,
+            {"units": variable_units_short(name), "long_name": f"sampled {name}"},
+        )
     statistics.attrs.update(samples.attrs)
-    statistics.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names),
-                            fixed_inputs=json.dumps(fixed))
+    statistics.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
     return statistics
 
 
@@ -510,13 +493,19 @@ def pce_analysis(context: AnalysisContext) -> xr.Dataset:
     fixed = context.fixed_values(exclude=names)
     space = context.parameter_space(names, fixed)
     model = context.model(poincare=False)
-    chaos = PolynomialChaos(max_order=options["order"], min_order=options["min_order"],
-                            n_samples=options["samples"] or None, sampling=options["sampling"],
-                            qoi=list(options["qois"]), seed=context.stage_seed(0))
+    chaos = PolynomialChaos(
+        max_order=options["order"],
+        min_order=options["min_order"],
+        n_samples=options["samples"] or None,
+        sampling=options["sampling"],
+        qoi=list(options["qois"]),
+        seed=context.stage_seed(0),
+    )
     chaos.fit(model, space, context.sweep())
     result = chaos.result_.copy()
-    check_samples = space.sample(options["validation_samples"], "monte_carlo", seed=context.stage_seed(1),
-                                 interval_treatment="uniform")
+    check_samples = space.sample(
+        options["validation_samples"], "monte_carlo", seed=context.stage_seed(1), interval_treatment="uniform"
+    )
     truth = evaluate_on_sweep(model, check_samples, context.sweep(), qoi=list(options["qois"]))
     predicted = chaos.predict(check_samples)
     for name in options["qois"]:
@@ -526,13 +515,20 @@ def pce_analysis(context: AnalysisContext) -> xr.Dataset:
         spread = model_values.std("check")
         relative = (error / spread.where(spread > 0)).fillna(0.0).where(np.isfinite(error))
         result[f"{name}_validation_error"] = relative.assign_attrs(
-            units="1", long_name=f"RMS surrogate error at independent check points / std of {name}")
+            units="1", long_name=f"RMS surrogate error at independent check points / std of {name}"
+        )
         result[f"{name}_validation_model"] = model_values.drop_vars("check", errors="ignore").assign_attrs(
-            units=QOI_INFO[name][0], long_name=f"{name} from the model at the check points")
+            units=QOI_INFO[name][0], long_name=f"{name} from the model at the check points"
+        )
         result[f"{name}_validation_surrogate"] = surrogate_values.drop_vars("check", errors="ignore").assign_attrs(
-            units=QOI_INFO[name][0], long_name=f"{name} from the surrogate at the check points")
-    result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names),
-                        fixed_inputs=json.dumps(fixed), validation_samples=options["validation_samples"])
+            units=QOI_INFO[name][0], long_name=f"{name} from the surrogate at the check points"
+        )
+    result.attrs.update(
+        model_runs=int(model.runs),
+        parameters=json.dumps(names),
+        fixed_inputs=json.dumps(fixed),
+        validation_samples=options["validation_samples"],
+    )
     return result
 
 
@@ -558,16 +554,24 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
     space = context.parameter_space(names, fixed)
     regime_variables = [name for name in ("fraction_separation", "fraction_back_contact") if name not in qois]
     model = context.model(poincare=False)
-    analysis = IntervalAnalysis(options["method"], order=options["order"], scan_points=options["points"],
-                                tolerance=options["tolerance"], fallback=options["fallback"],
-                                regime_variables=regime_variables, qoi=qois, seed=context.stage_seed(0))
+    analysis = IntervalAnalysis(
+        options["method"],
+        order=options["order"],
+        scan_points=options["points"],
+        tolerance=options["tolerance"],
+        fallback=options["fallback"],
+        regime_variables=regime_variables,
+        qoi=qois,
+        seed=context.stage_seed(0),
+    )
     result = analysis.fit(model, space, context.sweep()).result_.copy()
     midpoint = {**fixed, **{name: context.study.uncertain[name].nominal for name in names}}
     one = xr.Dataset({name: ("sample", [float(value)]) for name, value in midpoint.items()})
     nominal = evaluate_on_sweep(model, one, context.sweep(), qoi=qois).isel(sample=0, drop=True)
     for name in qois:
         result[f"{name}_nominal"] = nominal[name].assign_attrs(
-            units=QOI_INFO[name][0], long_name=f"{name} at the interval midpoints")
+            units=QOI_INFO[name][0], long_name=f"{name} at the interval midpoints"
+        )
     result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
     return result
 
@@ -586,9 +590,15 @@ def sobol_analysis(context: AnalysisContext) -> xr.Dataset:
     fixed = context.fixed_values(exclude=names)
     space = context.parameter_space(names, fixed)
     model = context.model(poincare=False)
-    analysis = SobolAnalysis(options["samples"], second_order=options["second_order"], parameters=names,
-                             num_resamples=options["bootstrap"], conf_level=options["confidence_level"],
-                             qoi=list(options["qois"]), seed=context.stage_seed(0))
+    analysis = SobolAnalysis(
+        options["samples"],
+        second_order=options["second_order"],
+        parameters=names,
+        num_resamples=options["bootstrap"],
+        conf_level=options["confidence_level"],
+        qoi=list(options["qois"]),
+        seed=context.stage_seed(0),
+    )
     result = analysis.fit(model, space, context.sweep()).result_.copy()
     result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
     return result
@@ -608,13 +618,21 @@ def calibrate_analysis(context: AnalysisContext) -> xr.Dataset:
     from .schema import rig_path
 
     names = list(context.options["parameters"])
-    calibration = Calibration(parameters=names, design=context.design, seed=context.stage_seed(0),
-                              threads=context.threads, pitch_classes=context.options["pitch_classes"]
-                              ).fit(rig_path(context.study, context.spec))
+    calibration = Calibration(
+        parameters=names,
+        design=context.design,
+        seed=context.stage_seed(0),
+        threads=context.threads,
+        pitch_classes=context.options["pitch_classes"],
+    ).fit(rig_path(context.study, context.spec))
     result = calibration.posterior_.copy()
     summary = calibration.to_dict()
-    result.attrs.update(calibration=json.dumps(summary, default=float), converged=int(bool(summary["converged"])),
-                        parameters=json.dumps(names), rig=str(summary["rig"]))
+    result.attrs.update(
+        calibration=json.dumps(summary, default=float),
+        converged=int(bool(summary["converged"])),
+        parameters=json.dumps(names),
+        rig=str(summary["rig"]),
+    )
     return result
 
 
@@ -637,144 +655,27 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     effects = list(context.options["effects"])
     rig = rig_path(context.study, context.spec)
     reference = reference_path(context.study, context.spec)
-    settings = DiagnosisSettings.from_mapping(context.options.get("settings"),
-                                              where=f"analyses[{context.spec.index}].settings")
-    diagnosis = Diagnosis(effects=effects, settings=settings, design=context.design, seed=context.stage_seed(0),
-                          workers=context.threads, pitch_classes=context.options["pitch_classes"]
-                          ).fit(rig, reference=reference)
+    settings = DiagnosisSettings.from_mapping(
+        context.options.get("settings"), where=f"analyses[{context.spec.index}].settings"
+    )
+    diagnosis = Diagnosis(
+        effects=effects,
+        settings=settings,
+        design=context.design,
+        seed=context.stage_seed(0),
+        workers=context.threads,
+        pitch_classes=context.options["pitch_classes"],
+    ).fit(rig, reference=reference)
     content, result = diagnosis.to_dict(), diagnosis.result_.copy()
-    result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
-                        effects=json.dumps(effects), rig=str(rig))
+    result.attrs.update(
+        diagnosis=json.dumps(content, default=float),
+        verdict=str(content["verdict"]),
+        effects=json.dumps(effects),
+        rig=str(rig),
+    )
     if reference is not None:
         result.attrs["reference"] = str(reference)
     return result
 
 
-# ---------------------------------------------------------------------------- running a study
-
-
-def analysis_key(study: Study, spec: AnalysisSpec) -> str:
-    """Hash of everything an analysis's result depends on (its entry, the study-wide inputs)."""
-    payload = {
-        "analysis": spec.raw, "index": spec.index, "seed": study.seed,
-        "design": study.design.to_dict(),
-        "operating_points": {name: list(s.values) for name, s in spec.operating_points.items()},
-        "uncertain": {name: p.to_dict() for name, p in study.uncertain.items()},
-        "simulation": spec.simulation.to_dict(),
-    }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def _analysis_attrs(study: Study, spec: AnalysisSpec, key: str, seconds: float) -> dict[str, Any]:
-    return {
-        "analysis_type": spec.type, "analysis_name": spec.name, "analysis_index": spec.index,
-        "analysis_description": spec.description, ANALYSIS_KEY_ATTR: key,
-        "analysis_options": json.dumps(dict(spec.options), default=list),
-        "operating_points": json.dumps({name: list(s.values) if s.sweep else s.value
-                                        for name, s in spec.operating_points.items()}),
-        "uncertain_parameters": json.dumps({name: p.to_dict() for name, p in study.uncertain.items()}),
-        "simulation_settings": json.dumps(spec.simulation.to_dict()),
-        "study_name": study.name, "study_description": study.description, "study_path": study.path,
-        "study_seed": str(study.seed), "design_name": study.design.name,
-        "design_source": study.design_source,
-        "design_overrides": json.dumps(dict(study.design_overrides)),
-        "run_time_s": float(seconds),
-    }
-
-
-def run_analysis(study: Study, spec: AnalysisSpec, *, runner: Runner, resume: bool = False,
-                 threads: int | None = None,
-                 seed: np.random.SeedSequence | None = None) -> xr.Dataset:
-    """Run one analysis of a study and return its Dataset (not saved).
-
-    Parameters
-    ----------
-    study : Study
-    spec : AnalysisSpec
-        One of ``study.analyses``.
-    runner : Runner
-        Executes the model batches.
-    resume : bool
-        Reuse the runner's checkpoints.
-    threads : int, optional
-        Threads for in-process batch integration.
-    seed : SeedSequence, optional
-        The analysis's seed; default its child of the study seed.
-    """
-    if spec.type not in ANALYSES:
-        raise StudyError(f"analyses[{spec.index}].type: {spec.type!r} has no implementation; "
-                         f"expected one of {', '.join(ANALYSES)}")
-    seed = seed if seed is not None else study.seed_sequences()[spec.index]
-    context = AnalysisContext(study=study, spec=spec, seed=seed, runner=runner, resume=resume,
-                              threads=threads)
-    started = time.perf_counter()
-    result = ANALYSES[spec.type](context)
-    result.attrs.update(_analysis_attrs(study, spec, analysis_key(study, spec),
-                                        time.perf_counter() - started))
-    if context.notes:
-        result.attrs["notes"] = json.dumps(context.notes)
-    return result
-
-
-def _reusable(path: Path, key: str) -> bool:
-    if not path.is_file():
-        return False
-    try:
-        return load_result(path).attrs.get(ANALYSIS_KEY_ATTR) == key
-    except UqgearError:
-        return False
-
-
-def run_study(study: Study, out_dir: str | Path, *, scheduler: str | None = None,
-              workers: int | None = None, resume: bool = False, show_progress: bool = True,
-              checkpoint_dir: str | Path | None = None) -> list[Path]:
-    """Run every analysis of a study, writing ``<out_dir>/<name>.nc`` for each.
-
-    Parameters
-    ----------
-    study : Study
-    out_dir : str or Path
-        Existing folder for the results.
-    scheduler : str, optional
-        Address of a dask scheduler; None runs in-process on all local cores.
-    workers : int, optional
-        With a scheduler: how many of its workers to use. Without: the number
-        of threads of the in-process integrator.
-    resume : bool
-        Skip analyses whose result file is already in ``out_dir`` with the
-        same inputs, and reuse the chunk checkpoints of the others.
-    show_progress : bool
-        Progress bars (shown only in a terminal).
-    checkpoint_dir : str or Path, optional
-        Folder of chunk checkpoints (default ``out_dir/.checkpoints``).
-
-    Returns
-    -------
-    list of Path
-        The result files, in analysis order.
-    """
-    out = Path(out_dir)
-    checkpoints = Path(checkpoint_dir) if checkpoint_dir is not None else out / ".checkpoints"
-    runner = Runner(chunk_size=study.chunk_size, scheduler=scheduler,
-                    workers=workers if scheduler is not None else None,
-                    checkpoint_dir=checkpoints, progress=show_progress)
-    threads = workers if scheduler is None else None
-    seeds = study.seed_sequences()
-    written = []
-    bar = progress(study.analyses, desc="analyses", unit="analysis", enabled=show_progress)
-    for spec in bar:
-        bar.set_postfix_str(spec.name)
-        path = out / f"{spec.name}.nc"
-        key = analysis_key(study, spec)
-        if resume and _reusable(path, key):
-            written.append(path)
-            continue
-        result = run_analysis(study, spec, runner=runner, resume=resume, threads=threads,
-                              seed=seeds[spec.index])
-        save_result(result, path, seed=seeds[spec.index], design=study.design, study_text=study.text)
-        written.append(path)
-    return written
-
-
-__all__ = ["ANALYSES", "register", "evaluate_batch", "simulate_point", "quick_run", "RunnerModel",
-           "AnalysisContext", "run_analysis", "run_study", "analysis_key", "ANALYSIS_KEY_ATTR"]
+__all__ = ["ANALYSES", "register", "evaluate_batch", "quick_run", "RunnerModel", "AnalysisContext", "ANALYSIS_KEY_ATTR"]

@@ -12,12 +12,20 @@ from ..physics.effects import EFFECTS
 from .checkers import Checker, boolean, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
 
-
 #: Scalar quantities of interest of a simulation run (see uqgear.physics.integration.QOI_INFO).
 QOIS: tuple[str, ...] = (
-    "dte_mean", "dte_rms", "dte_peak_to_peak", "dynamic_load_factor", "peak_mesh_force",
-    "load_factor_rated", "acc_pinion_rms", "acc_gear_rms", "fraction_drive_contact", "fraction_separation",
-    "fraction_back_contact", "largest_lyapunov",
+    "dte_mean",
+    "dte_rms",
+    "dte_peak_to_peak",
+    "dynamic_load_factor",
+    "peak_mesh_force",
+    "load_factor_rated",
+    "acc_pinion_rms",
+    "acc_gear_rms",
+    "fraction_drive_contact",
+    "fraction_separation",
+    "fraction_back_contact",
+    "largest_lyapunov",
 )
 DEFAULT_QOIS: tuple[str, ...] = ("dte_rms", "dynamic_load_factor", "fraction_separation")
 
@@ -112,8 +120,23 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
     },
     "calibrate": {
         "rig": string(),
-        "parameters": list_of(choice("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2",
-                                     "k1_scale", "k2_scale", "zeta1", "zeta2", "m1", "m2"), unique=True),
+        "parameters": list_of(
+            choice(
+                "mesh_stiffness_scale",
+                "zeta_mesh",
+                "backlash",
+                "ste_amplitude",
+                "k1",
+                "k2",
+                "k1_scale",
+                "k2_scale",
+                "zeta1",
+                "zeta2",
+                "m1",
+                "m2",
+            ),
+            unique=True,
+        ),
         # ISO 1328-1 classes of the rig's gears, for the pitch-error correction (none: read from the sidebands)
         "pitch_classes": class_range(1, 11),
     },
@@ -142,22 +165,44 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "bifurcation": {"envelope": (), "points": 5},
     "continuation": {"envelope": (), "points": 2, "max_period": 8, "compare_sweeps": True},
     "regime_map": {"points": 9},
-    "interval": {"method": "chebyshev", "order": 6, "points": None, "fallback": "scan",
-                 "tolerance": 0.02, "qois": DEFAULT_QOIS},
-    "monte_carlo": {"intervals": "uniform", "points": 5, "samples": 256, "sampling": "latin_hypercube",
-                    "quantiles": (0.05, 0.5, 0.95),
-                    "qois": DEFAULT_QOIS},
-    "pce": {"order": 3, "min_order": 1, "samples": 0, "validation_samples": 32, "sampling": "halton",
-            "qois": DEFAULT_QOIS},
-    "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200,
-              "qois": DEFAULT_QOIS},
-    "calibrate": {"parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"),
-                  "pitch_classes": (6.0, 8.0)},
+    "interval": {
+        "method": "chebyshev",
+        "order": 6,
+        "points": None,
+        "fallback": "scan",
+        "tolerance": 0.02,
+        "qois": DEFAULT_QOIS,
+    },
+    "monte_carlo": {
+        "intervals": "uniform",
+        "points": 5,
+        "samples": 256,
+        "sampling": "latin_hypercube",
+        "quantiles": (0.05, 0.5, 0.95),
+        "qois": DEFAULT_QOIS,
+    },
+    "pce": {
+        "order": 3,
+        "min_order": 1,
+        "samples": 0,
+        "validation_samples": 32,
+        "sampling": "halton",
+        "qois": DEFAULT_QOIS,
+    },
+    "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200, "qois": DEFAULT_QOIS},
+    "calibrate": {
+        "parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"),
+        "pitch_classes": (6.0, 8.0),
+    },
     "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
 }
-_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "continuation": ("parameter",),
-                                              "regime_map": ("axes",),
-                                              "calibrate": ("rig",), "diagnose": ("rig",)}
+_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
+    "bifurcation": ("parameter",),
+    "continuation": ("parameter",),
+    "regime_map": ("axes",),
+    "calibrate": ("rig",),
+    "diagnose": ("rig",),
+}
 #: Analysis types that read a rig data file (key ``rig``, relative to the study file).
 RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")
 #: Analysis types that propagate uncertain parameters (``parameters`` key).

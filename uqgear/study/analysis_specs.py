@@ -12,8 +12,14 @@ from typing import Any
 import numpy as np
 
 from ..common.errors import StudyError
-from .analysis_schemas import (_COMMON_KEYS, _REQUIRED_KEYS, ANALYSIS_DEFAULTS, ANALYSIS_SCHEMAS,
-                               MAX_SIMULATE_RUNS, PROPAGATING_TYPES)
+from .analysis_schemas import (
+    _COMMON_KEYS,
+    _REQUIRED_KEYS,
+    ANALYSIS_DEFAULTS,
+    ANALYSIS_SCHEMAS,
+    MAX_SIMULATE_RUNS,
+    PROPAGATING_TYPES,
+)
 from .checkers import _fail, check_mapping, choice
 from .parameters import UncertainParameter, ValueSpec, _operating_points
 from .settings import SimulationSettings, _simulation
@@ -68,31 +74,42 @@ def _check_axis(spec: AnalysisSpec, intervals: list[str], name: str, key: str, p
     """An axis of a bifurcation or regime map must be swept or an uncertain interval parameter."""
     if name in spec.operating_points:
         if not spec.operating_points[name].sweep:
-            raise StudyError(f"{path}.{key}: {name} is fixed in operating_points; expected a sweep "
-                             "(a list or {start, stop, num}) or an uncertain interval parameter")
+            raise StudyError(
+                f"{path}.{key}: {name} is fixed in operating_points; expected a sweep "
+                "(a list or {start, stop, num}) or an uncertain interval parameter"
+            )
     elif name not in intervals:
-        raise StudyError(f"{path}.{key}: {name} is neither swept in operating_points nor an "
-                         "uncertain interval parameter; expected one of "
-                         f"{', '.join(list(spec.sweeps) + intervals) or '(none defined)'}")
+        raise StudyError(
+            f"{path}.{key}: {name} is neither swept in operating_points nor an "
+            "uncertain interval parameter; expected one of "
+            f"{', '.join(list(spec.sweeps) + intervals) or '(none defined)'}"
+        )
 
 
-def _check_bifurcation(spec: AnalysisSpec, intervals: list[str], path: str,
-                       envelope_names: list[str] | None = None) -> None:
+def _check_bifurcation(
+    spec: AnalysisSpec, intervals: list[str], path: str, envelope_names: list[str] | None = None
+) -> None:
     options = spec.options
     _check_axis(spec, intervals, options["parameter"], "parameter", path)
     others = [name for name in spec.sweeps if name != options["parameter"]]
     if others:
-        raise StudyError(f"{path}.operating_points.{others[0]}: a {spec.type} sweeps only its "
-                         f"parameter ({options['parameter']}); expected a single value")
+        raise StudyError(
+            f"{path}.operating_points.{others[0]}: a {spec.type} sweeps only its "
+            f"parameter ({options['parameter']}); expected a single value"
+        )
     allowed = intervals if envelope_names is None else envelope_names
     for name in options["envelope"]:
         if name not in allowed:
             kind = "interval parameter" if envelope_names is None else "parameter"
-            raise StudyError(f"{path}.envelope: {name} is not an uncertain {kind}; "
-                             f"expected one of {', '.join(allowed) or '(none defined)'}")
+            raise StudyError(
+                f"{path}.envelope: {name} is not an uncertain {kind}; "
+                f"expected one of {', '.join(allowed) or '(none defined)'}"
+            )
         if name == options["parameter"] or name in spec.operating_points:
-            raise StudyError(f"{path}.envelope: {name} is also the swept parameter or fixed in "
-                             "operating_points; give it in one place")
+            raise StudyError(
+                f"{path}.envelope: {name} is also the swept parameter or fixed in "
+                "operating_points; give it in one place"
+            )
 
 
 def _check_regime_map(spec: AnalysisSpec, intervals: list[str], path: str) -> None:
@@ -103,8 +120,10 @@ def _check_regime_map(spec: AnalysisSpec, intervals: list[str], path: str) -> No
         _check_axis(spec, intervals, name, "axes", path)
     others = [name for name in spec.sweeps if name not in options["axes"]]
     if others:
-        raise StudyError(f"{path}.operating_points.{others[0]}: a regime map sweeps only its axes "
-                         f"({', '.join(options['axes'])}); expected a single value")
+        raise StudyError(
+            f"{path}.operating_points.{others[0]}: a regime map sweeps only its axes "
+            f"({', '.join(options['axes'])}); expected a single value"
+        )
 
 
 def _check_propagation(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter], path: str) -> None:
@@ -113,54 +132,59 @@ def _check_propagation(spec: AnalysisSpec, uncertain: Mapping[str, UncertainPara
     parameters = options["parameters"]
     for name in parameters:
         if name not in uncertain:
-            raise StudyError(f"{path}.parameters: {name} is not an uncertain parameter; expected "
-                             f"one of {', '.join(uncertain) or '(none defined in uncertain)'}")
+            raise StudyError(
+                f"{path}.parameters: {name} is not an uncertain parameter; expected "
+                f"one of {', '.join(uncertain) or '(none defined in uncertain)'}"
+            )
         if name in spec.operating_points:
-            raise StudyError(f"{path}.parameters: {name} is also given in operating_points; "
-                             "give it in one place")
+            raise StudyError(f"{path}.parameters: {name} is also given in operating_points; give it in one place")
     if spec.type == "interval":
         bad = [name for name in parameters if not uncertain[name].is_interval]
         if bad:
-            raise StudyError(f"{path}.parameters: {bad[0]} has a distribution; an interval "
-                             "analysis expects interval parameters")
+            raise StudyError(
+                f"{path}.parameters: {bad[0]} has a distribution; an interval analysis expects interval parameters"
+            )
     if spec.type == "sobol":
         samples = options["samples"]
         if samples & (samples - 1):
-            raise StudyError(f"{path}.samples: expected a power of 2 (Sobol' sequence "
-                             f"balance); got {samples}")
+            raise StudyError(f"{path}.samples: expected a power of 2 (Sobol' sequence balance); got {samples}")
     if spec.type == "monte_carlo" and options["intervals"] == "pbox":
         kinds = {uncertain[name].is_interval for name in parameters}
         if kinds != {True, False}:
-            raise StudyError(f"{path}.intervals: 'pbox' bounds statistics over interval parameters of "
-                             "the random ones; expected both interval and distribution parameters "
-                             f"among parameters ({', '.join(parameters)})")
-    if spec.type == "monte_carlo" and options["sampling"] == "sobol" \
-            and options["samples"] & (options["samples"] - 1):
-        raise StudyError(f"{path}.samples: expected a power of 2 with sampling 'sobol'; "
-                         f"got {options['samples']}")
+            raise StudyError(
+                f"{path}.intervals: 'pbox' bounds statistics over interval parameters of "
+                "the random ones; expected both interval and distribution parameters "
+                f"among parameters ({', '.join(parameters)})"
+            )
+    if spec.type == "monte_carlo" and options["sampling"] == "sobol" and options["samples"] & (options["samples"] - 1):
+        raise StudyError(f"{path}.samples: expected a power of 2 with sampling 'sobol'; got {options['samples']}")
     if spec.type == "pce":
         if options["min_order"] > options["order"]:
-            raise StudyError(f"{path}.min_order: expected at most order ({options['order']}); "
-                             f"got {options['min_order']}")
+            raise StudyError(
+                f"{path}.min_order: expected at most order ({options['order']}); got {options['min_order']}"
+            )
         needed = math.comb(len(parameters) + options["min_order"], options["min_order"]) + 2
         if options["samples"] and options["samples"] < needed:
-            raise StudyError(f"{path}.samples: expected at least {needed} training samples for order "
-                             f"{options['min_order']} in {len(parameters)} parameter(s); "
-                             f"got {options['samples']}")
+            raise StudyError(
+                f"{path}.samples: expected at least {needed} training samples for order "
+                f"{options['min_order']} in {len(parameters)} parameter(s); "
+                f"got {options['samples']}"
+            )
 
 
 def _check_simulate(spec: AnalysisSpec, path: str) -> None:
     count = int(np.prod([len(s.values) for s in spec.sweeps.values()])) if spec.sweeps else 1
     if count > MAX_SIMULATE_RUNS:
-        raise StudyError(f"{path}.operating_points: expected at most {MAX_SIMULATE_RUNS} runs "
-                         f"for a simulate analysis (each keeps full histories); the sweeps give {count}")
+        raise StudyError(
+            f"{path}.operating_points: expected at most {MAX_SIMULATE_RUNS} runs "
+            f"for a simulate analysis (each keeps full histories); the sweeps give {count}"
+        )
     labels = spec.options["labels"]
     if labels and len(labels) != count:
         raise StudyError(f"{path}.labels: expected one label per run ({count}); got {len(labels)}")
 
 
-def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter],
-                              path: str) -> None:
+def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter], path: str) -> None:
     """The analysis's options against the study's sweeps and uncertain parameters."""
     intervals = [name for name, parameter in uncertain.items() if parameter.is_interval]
     if spec.type == "bifurcation":
@@ -176,14 +200,19 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
         _check_simulate(spec, path)
 
 
-def _analysis(raw: Any, index: int, study_points: Mapping[str, ValueSpec],
-              study_simulation: SimulationSettings, uncertain: Mapping[str, UncertainParameter]) -> AnalysisSpec:
+def _analysis(
+    raw: Any,
+    index: int,
+    study_points: Mapping[str, ValueSpec],
+    study_simulation: SimulationSettings,
+    uncertain: Mapping[str, UncertainParameter],
+) -> AnalysisSpec:
     path = f"analyses[{index}]"
     if not isinstance(raw, Mapping):
         raise _fail(path, "a mapping with a 'type' key", raw)
     if "type" not in raw:
         raise StudyError(f"{path}.type: missing; expected one of {', '.join(ANALYSIS_SCHEMAS)}")
-    kind = choice(*ANALYSIS_SCHEMAS)(raw["type"], f"{path}.type")
+    kind: str = choice(*ANALYSIS_SCHEMAS)(raw["type"], f"{path}.type")
     schema = {**_COMMON_KEYS, **ANALYSIS_SCHEMAS[kind]}
     values = check_mapping(raw, path, schema, required=_REQUIRED_KEYS.get(kind, ()))
     options = dict(ANALYSIS_DEFAULTS[kind])
@@ -191,16 +220,24 @@ def _analysis(raw: Any, index: int, study_points: Mapping[str, ValueSpec],
     if kind in PROPAGATING_TYPES and "parameters" not in options:
         overridden = _operating_points(raw.get("operating_points"), f"{path}.operating_points")
         options["parameters"] = tuple(
-            name for name, parameter in uncertain.items()
-            if name not in overridden and (parameter.is_interval or kind != "interval"))
+            name
+            for name, parameter in uncertain.items()
+            if name not in overridden and (parameter.is_interval or kind != "interval")
+        )
         if not options["parameters"]:
-            raise StudyError(f"{path}.parameters: no uncertain parameters to propagate; define some "
-                             "under 'uncertain'")
+            raise StudyError(f"{path}.parameters: no uncertain parameters to propagate; define some under 'uncertain'")
     points = dict(study_points)
     points.update(_operating_points(raw.get("operating_points"), f"{path}.operating_points"))
     simulation = _simulation(raw.get("simulation"), f"{path}.simulation", study_simulation)
-    spec = AnalysisSpec(index=index, type=kind, name=values.get("name", kind),
-                        description=values.get("description", ""), options=options,
-                        operating_points=points, simulation=simulation, raw=dict(raw))
+    spec = AnalysisSpec(
+        index=index,
+        type=kind,
+        name=values.get("name", kind),
+        description=values.get("description", ""),
+        options=options,
+        operating_points=points,
+        simulation=simulation,
+        raw=dict(raw),
+    )
     _check_analysis_variables(spec, uncertain, path)
     return spec

@@ -13,7 +13,6 @@ from typing import Any
 
 from ..common.errors import StudyError, shown
 
-
 _NAME_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
 
 
@@ -25,12 +24,17 @@ def _fail(path: str, expected: str, value: Any) -> StudyError:
 
 
 def _type_name(value: Any) -> str:
-    return "a mapping" if isinstance(value, Mapping) else (
-        "a list" if isinstance(value, list) else shown(value))
+    return "a mapping" if isinstance(value, Mapping) else ("a list" if isinstance(value, list) else shown(value))
 
 
-def number(unit: str = "", lower: float | None = None, upper: float | None = None, *,
-           integer: bool = False, lower_open: bool = False) -> Checker:
+def number(
+    unit: str = "",
+    lower: float | None = None,
+    upper: float | None = None,
+    *,
+    integer: bool = False,
+    lower_open: bool = False,
+) -> Checker:
     """Checker of a finite number (optionally an integer) in a range."""
     kind = "an integer" if integer else "a number"
     if lower is not None and upper is not None:
@@ -64,9 +68,9 @@ def number(unit: str = "", lower: float | None = None, upper: float | None = Non
     return check
 
 
-
 def _checker(accepts: Callable[[Any], bool], expected: str) -> Checker:
     """Checker of a value that ``accepts`` takes, returned unchanged."""
+
     def check(value: Any, path: str) -> Any:
         if not accepts(value):
             raise _fail(path, expected, value)
@@ -92,13 +96,15 @@ def string() -> Checker:
 
 def identifier() -> Checker:
     """Checker of a name usable as a file name (letters, digits, _ and -)."""
-    return _checker(lambda value: isinstance(value, str) and bool(_NAME_PATTERN.match(value)),
-                    "a name of letters, digits, '_' and '-' starting with a letter")
+    return _checker(
+        lambda value: isinstance(value, str) and bool(_NAME_PATTERN.match(value)),
+        "a name of letters, digits, '_' and '-' starting with a letter",
+    )
 
 
-def list_of(item: Checker, *, min_length: int = 1, unique: bool = False,
-            what: str = "a list") -> Checker:
+def list_of(item: Checker, *, min_length: int = 1, unique: bool = False, what: str = "a list") -> Checker:
     """Checker of a list whose items pass ``item``; a single item is accepted as a list of one."""
+
     def check(value: Any, path: str) -> tuple:
         items = value if isinstance(value, list) else [value]
         if isinstance(value, (Mapping, tuple)) or value is None:
@@ -114,13 +120,13 @@ def list_of(item: Checker, *, min_length: int = 1, unique: bool = False,
     return check
 
 
-def check_mapping(value: Any, path: str, schema: Mapping[str, Checker], *,
-                  required: Sequence[str] = ()) -> dict[str, Any]:
+def check_mapping(
+    value: Any, path: str, schema: Mapping[str, Checker], *, required: Sequence[str] = ()
+) -> dict[str, Any]:
     """Validate a mapping against ``schema``: unknown keys, missing keys, each value."""
     where = path or "study"
     if not isinstance(value, Mapping):
-        raise StudyError(f"{where}: expected a mapping with keys {', '.join(schema)}; got "
-                         f"{_type_name(value)}")
+        raise StudyError(f"{where}: expected a mapping with keys {', '.join(schema)}; got {_type_name(value)}")
     prefix = f"{path}." if path else ""
     for key in value:
         if not isinstance(key, str) or key not in schema:
@@ -138,8 +144,11 @@ def class_range(lowest: float, highest: float) -> Checker:
     def check(value: Any, path: str) -> tuple[float, float] | None:
         if value is None or value == "none":
             return None
-        if not isinstance(value, list) or len(value) != 2 or not all(
-                isinstance(entry, (int, float)) and not isinstance(entry, bool) for entry in value):
+        if (
+            not isinstance(value, list)
+            or len(value) != 2
+            or not all(isinstance(entry, (int, float)) and not isinstance(entry, bool) for entry in value)
+        ):
             raise _fail(path, expected, value)
         low, high = float(value[0]), float(value[1])
         if not lowest <= low <= high <= highest:

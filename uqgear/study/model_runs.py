@@ -17,8 +17,7 @@ class RunnerModel:
     and checkpoints every chunk (so a killed run resumes).
     """
 
-    def __init__(self, runner: Runner, model: Callable[[xr.Dataset], xr.Dataset], key: str,
-                 resume: bool) -> None:
+    def __init__(self, runner: Runner, model: Callable[[xr.Dataset], xr.Dataset], key: str, resume: bool) -> None:
         self.runner = runner
         self.model = model
         self.key = key

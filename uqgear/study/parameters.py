@@ -10,16 +10,15 @@ from typing import Any
 
 import numpy as np
 
-from ..physics.design import _DESIGN_KEYS, STANDARD_GRAVITY, Design
 from ..common.errors import StudyError, UqgearError, shown
-from ..uq.parameters import Distribution, Interval
+from ..physics.design import _DESIGN_KEYS, STANDARD_GRAVITY, Design
 from ..uq.parameter_space import ParameterSpace
+from ..uq.parameters import Distribution, Interval
 from .checkers import Checker, _fail, check_mapping, choice, list_of, number, string
-from .variables import (OPERATING_VARIABLES, VARIABLE_DESIGN_KEYS, VARIABLES, variable_unit,
-                        variable_units_short)
-
+from .variables import OPERATING_VARIABLES, VARIABLE_DESIGN_KEYS, VARIABLES, variable_unit, variable_units_short
 
 # ---------------------------------------------------------------------------- value specs
+
 
 @dataclass(frozen=True)
 class ValueSpec:
@@ -50,14 +49,23 @@ def _value_spec(name: str, raw: Any, path: str) -> ValueSpec:
     unit, lower, upper = OPERATING_VARIABLES.get(name, (variable_unit(name), None, None))
     element = number(unit, lower, upper, lower_open=name == "pinion_speed")
     if isinstance(raw, Mapping):
-        spec = check_mapping(raw, path, {"start": element, "stop": element,
-                                         "num": number("", 1, 10000, integer=True),
-                                         "spacing": choice("linear", "log")},
-                             required=("start", "stop", "num"))
+        spec = check_mapping(
+            raw,
+            path,
+            {
+                "start": element,
+                "stop": element,
+                "num": number("", 1, 10000, integer=True),
+                "spacing": choice("linear", "log"),
+            },
+            required=("start", "stop", "num"),
+        )
         if spec.get("spacing") == "log":
             if spec["start"] <= 0 or spec["stop"] <= 0:
-                raise StudyError(f"{path}: expected positive start and stop for log spacing; got "
-                                 f"start {spec['start']:g}, stop {spec['stop']:g}")
+                raise StudyError(
+                    f"{path}: expected positive start and stop for log spacing; got "
+                    f"start {spec['start']:g}, stop {spec['stop']:g}"
+                )
             values = np.geomspace(spec["start"], spec["stop"], spec["num"])
         else:
             values = np.linspace(spec["start"], spec["stop"], spec["num"])
@@ -74,8 +82,7 @@ def _value_spec(name: str, raw: Any, path: str) -> ValueSpec:
         lower, upper, unit_text, _ = _DESIGN_KEYS[name]
         for value in result.values:
             if not lower <= value <= upper:
-                raise StudyError(f"{path}: expected values in [{lower:g}, {upper:g}] {unit_text}; "
-                                 f"got {shown(value)}")
+                raise StudyError(f"{path}: expected values in [{lower:g}, {upper:g}] {unit_text}; got {shown(value)}")
     return result
 
 
@@ -83,14 +90,19 @@ def _operating_points(raw: Any, path: str) -> dict[str, ValueSpec]:
     if raw is None:
         return {}
     if not isinstance(raw, Mapping):
-        raise _fail(path, f"a mapping of variable to value(s) (variables: {', '.join(OPERATING_VARIABLES)} "
-                          "or a design key)", raw)
+        raise _fail(
+            path,
+            f"a mapping of variable to value(s) (variables: {', '.join(OPERATING_VARIABLES)} or a design key)",
+            raw,
+        )
     result = {}
     for name, value in raw.items():
         if name not in VARIABLES:
-            raise StudyError(f"{path}.{name}: unknown variable; expected one of "
-                             f"{', '.join(OPERATING_VARIABLES)} or a design key "
-                             f"({', '.join(VARIABLE_DESIGN_KEYS)})")
+            raise StudyError(
+                f"{path}.{name}: unknown variable; expected one of "
+                f"{', '.join(OPERATING_VARIABLES)} or a design key "
+                f"({', '.join(VARIABLE_DESIGN_KEYS)})"
+            )
         result[name] = _value_spec(name, value, f"{path}.{name}")
     return result
 
@@ -160,7 +172,9 @@ class UncertainParameter:
         """Value used where the parameter is not propagated: interval midpoint or distribution median."""
         if self.is_interval:
             return 0.5 * (self.lower + self.upper)
-        return float(self.to_parameter().median())
+        distribution = self.to_parameter()
+        assert isinstance(distribution, Distribution)  # not an interval
+        return float(distribution.median())
 
     def describe(self) -> str:
         """One line for reports, with units."""
@@ -173,9 +187,15 @@ class UncertainParameter:
         return text + (f" ({self.source})" if self.source else "")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "kind": self.kind, "lower": self.lower, "upper": self.upper,
-                "distribution": self.distribution, "parameters": dict(self.parameters),
-                "source": self.source}
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "lower": self.lower,
+            "upper": self.upper,
+            "distribution": self.distribution,
+            "parameters": dict(self.parameters),
+            "source": self.source,
+        }
 
 
 def _bounds(raw: Any, path: str, element: Checker, unit: str) -> tuple[float, float]:
@@ -190,33 +210,43 @@ def _bounds(raw: Any, path: str, element: Checker, unit: str) -> tuple[float, fl
 def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) -> UncertainParameter:
     unit = variable_unit(name)
     element = number(unit)
-    if name == "adhesion_torque" and isinstance(raw, Mapping) and "interval" not in raw \
-            and "distribution" not in raw:
-        spec = check_mapping(raw, path, {
-            "adhesion_coefficient": lambda v, p: _bounds(v, p, number("", 0.0, 1.5), "(adhesion coefficient mu)"),
-            # plausible railway values: a load in tonnes or a diameter in mm is caught
-            "axle_load": number("kg", 1000.0, 100_000.0),
-            "wheel_radius": number("m", 0.2, 1.5),
-        })
+    if name == "adhesion_torque" and isinstance(raw, Mapping) and "interval" not in raw and "distribution" not in raw:
+        spec = check_mapping(
+            raw,
+            path,
+            {
+                "adhesion_coefficient": lambda v, p: _bounds(v, p, number("", 0.0, 1.5), "(adhesion coefficient mu)"),
+                # plausible railway values: a load in tonnes or a diameter in mm is caught
+                "axle_load": number("kg", 1000.0, 100_000.0),
+                "wheel_radius": number("m", 0.2, 1.5),
+            },
+        )
         operation = design.operation if design is not None else None
         mu = spec.get("adhesion_coefficient", operation.adhesion_coefficient if operation else (0.15, 0.33))
         axle_load = spec.get("axle_load", operation.axle_load if operation else 23000.0)
         wheel_radius = spec.get("wheel_radius", operation.wheel_radius if operation else 0.625)
         if mu[0] >= mu[1]:
-            raise StudyError(f"{path}.adhesion_coefficient: expected lower < upper; got "
-                             f"[{mu[0]:g}, {mu[1]:g}]")
+            raise StudyError(f"{path}.adhesion_coefficient: expected lower < upper; got [{mu[0]:g}, {mu[1]:g}]")
         force = axle_load * STANDARD_GRAVITY
         return UncertainParameter(
-            name, "interval", lower=mu[0] * force * wheel_radius, upper=mu[1] * force * wheel_radius,
-            source=(f"T2 = mu Q R_w: mu in [{mu[0]:g}, {mu[1]:g}], axle load {axle_load:g} kg x "
-                    f"g = {force:.6g} N, wheel radius {wheel_radius:g} m"))
+            name,
+            "interval",
+            lower=mu[0] * force * wheel_radius,
+            upper=mu[1] * force * wheel_radius,
+            source=(
+                f"T2 = mu Q R_w: mu in [{mu[0]:g}, {mu[1]:g}], axle load {axle_load:g} kg x "
+                f"g = {force:.6g} N, wheel radius {wheel_radius:g} m"
+            ),
+        )
     if not isinstance(raw, Mapping):
-        raise _fail(path, "a mapping with 'interval: [lower, upper]' or 'distribution: NAME'"
-                    + (" or adhesion_coefficient/axle_load/wheel_radius" if name == "adhesion_torque" else ""),
-                    raw)
+        raise _fail(
+            path,
+            "a mapping with 'interval: [lower, upper]' or 'distribution: NAME'"
+            + (" or adhesion_coefficient/axle_load/wheel_radius" if name == "adhesion_torque" else ""),
+            raw,
+        )
     if "interval" in raw:
-        spec = check_mapping(raw, path, {"interval": lambda v, p: _bounds(v, p, element, unit)},
-                             required=("interval",))
+        spec = check_mapping(raw, path, {"interval": lambda v, p: _bounds(v, p, element, unit)}, required=("interval",))
         lower, upper = spec["interval"]
         return UncertainParameter(name, "interval", lower=lower, upper=upper, source="given")
     if "distribution" in raw:
@@ -224,7 +254,7 @@ def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) 
         choice(*DISTRIBUTIONS)(distribution, f"{path}.distribution")
         required, optional = DISTRIBUTIONS[distribution]
         schema: dict[str, Checker] = {"distribution": string()}
-        schema.update({key: element for key in required + optional})
+        schema.update(dict.fromkeys(required + optional, element))
         spec = check_mapping(raw, path, schema, required=required)
         parameters = {key: value for key, value in spec.items() if key != "distribution"}
         try:
@@ -232,8 +262,9 @@ def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) 
             lower, upper = ParameterSpace({name: built}).bounds(name)
         except UqgearError as exc:
             raise StudyError(f"{path}: {exc}") from None
-        return UncertainParameter(name, "distribution", lower=lower, upper=upper,
-                                  distribution=distribution, parameters=dict(built.params))
+        return UncertainParameter(
+            name, "distribution", lower=lower, upper=upper, distribution=distribution, parameters=dict(built.params)
+        )
     expected = "'interval: [lower, upper]' or 'distribution: NAME'"
     if name == "adhesion_torque":
         expected += " or adhesion_coefficient/axle_load/wheel_radius"
@@ -250,13 +281,19 @@ def _check_parameter_range(parameter: UncertainParameter, path: str) -> None:
         return
     if parameter.is_interval:
         if not (lower <= parameter.lower and parameter.upper <= upper):
-            raise StudyError(f"{path}: expected bounds in [{lower:g}, {upper:g}] {unit}; "
-                             f"got [{parameter.lower:g}, {parameter.upper:g}]")
+            raise StudyError(
+                f"{path}: expected bounds in [{lower:g}, {upper:g}] {unit}; "
+                f"got [{parameter.lower:g}, {parameter.upper:g}]"
+            )
         return
     # a distribution's tails may reach implausible values (a normal damping ratio below 0)
     # with negligible probability; its central 99.8 % must be plausible
-    chaospy_distribution = parameter.to_parameter().to_chaospy()
+    distribution = parameter.to_parameter()
+    assert isinstance(distribution, Distribution)  # not an interval
+    chaospy_distribution = distribution.to_chaospy()
     low, high = (float(chaospy_distribution.inv(q)) for q in (0.001, 0.999))
     if not (lower <= low and high <= upper):
-        raise StudyError(f"{path}: expected a distribution whose 0.1 % to 99.9 % quantiles lie in "
-                         f"[{lower:g}, {upper:g}] {unit}; got [{low:.6g}, {high:.6g}]")
+        raise StudyError(
+            f"{path}: expected a distribution whose 0.1 % to 99.9 % quantiles lie in "
+            f"[{lower:g}, {upper:g}] {unit}; got [{low:.6g}, {high:.6g}]"
+        )

@@ -6,20 +6,184 @@ checkpoints inside it; it becomes the output folder only when every result
 (and the report, when asked for) is written. An interruption or an internal
 failure keeps the work folder, so that ``resume=True`` continues where it
 stopped; a mistake in the input leaves nothing.
+
+Inside it, :func:`run_analyses` runs every analysis (:func:`run_analysis`, the
+registered function of its type) and writes one ``<name>.nc`` per analysis
+with provenance; an analysis whose file is already there with the same inputs
+(:func:`analysis_key`) is not run again on resume.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import shutil
+import time
 from pathlib import Path
+from typing import Any
 
+import numpy as np
+import xarray as xr
+
+from ..common.errors import StudyError, UqgearError
+from ..common.progress import progress
 from ..common.transaction import Existing, OutputFolder
-from .analyses import run_study as run_analyses
+from ..uq.results import load_result, save_result
+from ..uq.runner import Runner
+from .analyses import ANALYSES, ANALYSIS_KEY_ATTR, AnalysisContext
+from .analysis_specs import AnalysisSpec
 from .schema import Study
 
 #: Folder of chunk checkpoints inside the work folder.
 CHECKPOINTS = ".checkpoints"
+
+
+def analysis_key(study: Study, spec: AnalysisSpec) -> str:
+    """Hash of everything an analysis's result depends on (its entry, the study-wide inputs)."""
+    payload = {
+        "analysis": spec.raw,
+        "index": spec.index,
+        "seed": study.seed,
+        "design": study.design.to_dict(),
+        "operating_points": {name: list(s.values) for name, s in spec.operating_points.items()},
+        "uncertain": {name: p.to_dict() for name, p in study.uncertain.items()},
+        "simulation": spec.simulation.to_dict(),
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _analysis_attrs(study: Study, spec: AnalysisSpec, key: str, seconds: float) -> dict[str, Any]:
+    return {
+        "analysis_type": spec.type,
+        "analysis_name": spec.name,
+        "analysis_index": spec.index,
+        "analysis_description": spec.description,
+        ANALYSIS_KEY_ATTR: key,
+        "analysis_options": json.dumps(dict(spec.options), default=list),
+        "operating_points": json.dumps(
+            {name: list(s.values) if s.sweep else s.value for name, s in spec.operating_points.items()}
+        ),
+        "uncertain_parameters": json.dumps({name: p.to_dict() for name, p in study.uncertain.items()}),
+        "simulation_settings": json.dumps(spec.simulation.to_dict()),
+        "study_name": study.name,
+        "study_description": study.description,
+        "study_path": study.path,
+        "study_seed": str(study.seed),
+        "design_name": study.design.name,
+        "design_source": study.design_source,
+        "design_overrides": json.dumps(dict(study.design_overrides)),
+        "run_time_s": float(seconds),
+    }
+
+
+def run_analysis(
+    study: Study,
+    spec: AnalysisSpec,
+    *,
+    runner: Runner,
+    resume: bool = False,
+    threads: int | None = None,
+    seed: np.random.SeedSequence | None = None,
+) -> xr.Dataset:
+    """Run one analysis of a study and return its Dataset (not saved).
+
+    Parameters
+    ----------
+    study : Study
+    spec : AnalysisSpec
+        One of ``study.analyses``.
+    runner : Runner
+        Executes the model batches.
+    resume : bool
+        Reuse the runner's checkpoints.
+    threads : int, optional
+        Threads for in-process batch integration.
+    seed : SeedSequence, optional
+        The analysis's seed; default its child of the study seed.
+    """
+    if spec.type not in ANALYSES:
+        raise StudyError(
+            f"analyses[{spec.index}].type: {spec.type!r} has no implementation; expected one of {', '.join(ANALYSES)}"
+        )
+    seed = seed if seed is not None else study.seed_sequences()[spec.index]
+    context = AnalysisContext(study=study, spec=spec, seed=seed, runner=runner, resume=resume, threads=threads)
+    started = time.perf_counter()
+    result = ANALYSES[spec.type](context)
+    result.attrs.update(_analysis_attrs(study, spec, analysis_key(study, spec), time.perf_counter() - started))
+    if context.notes:
+        result.attrs["notes"] = json.dumps(context.notes)
+    return result
+
+
+def _reusable(path: Path, key: str) -> bool:
+    if not path.is_file():
+        return False
+    try:
+        return load_result(path).attrs.get(ANALYSIS_KEY_ATTR) == key
+    except UqgearError:
+        return False
+
+
+def run_analyses(
+    study: Study,
+    out_dir: str | Path,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    resume: bool = False,
+    show_progress: bool = True,
+    checkpoint_dir: str | Path | None = None,
+) -> list[Path]:
+    """Run every analysis of a study, writing ``<out_dir>/<name>.nc`` for each.
+
+    Parameters
+    ----------
+    study : Study
+    out_dir : str or Path
+        Existing folder for the results.
+    scheduler : str, optional
+        Address of a dask scheduler; None runs in-process on all local cores.
+    workers : int, optional
+        With a scheduler: how many of its workers to use. Without: the number
+        of threads of the in-process integrator.
+    resume : bool
+        Skip analyses whose result file is already in ``out_dir`` with the
+        same inputs, and reuse the chunk checkpoints of the others.
+    show_progress : bool
+        Progress bars (shown only in a terminal).
+    checkpoint_dir : str or Path, optional
+        Folder of chunk checkpoints (default ``out_dir/.checkpoints``).
+
+    Returns
+    -------
+    list of Path
+        The result files, in analysis order.
+    """
+    out = Path(out_dir)
+    checkpoints = Path(checkpoint_dir) if checkpoint_dir is not None else out / ".checkpoints"
+    runner = Runner(
+        chunk_size=study.chunk_size,
+        scheduler=scheduler,
+        workers=workers if scheduler is not None else None,
+        checkpoint_dir=checkpoints,
+        progress=show_progress,
+    )
+    threads = workers if scheduler is None else None
+    seeds = study.seed_sequences()
+    written = []
+    bar = progress(study.analyses, desc="analyses", unit="analysis", enabled=show_progress)
+    for spec in bar:
+        bar.set_postfix_str(spec.name)
+        path = out / f"{spec.name}.nc"
+        key = analysis_key(study, spec)
+        if resume and _reusable(path, key):
+            written.append(path)
+            continue
+        result = run_analysis(study, spec, runner=runner, resume=resume, threads=threads, seed=seeds[spec.index])
+        save_result(result, path, seed=seeds[spec.index], design=study.design, study_text=study.text)
+        written.append(path)
+    return written
 
 
 def copy_previous(out: Path, work: Path) -> None:
@@ -34,9 +198,18 @@ def copy_previous(out: Path, work: Path) -> None:
             shutil.copy2(item, target)
 
 
-def run_study(study: Study, out_dir: str | os.PathLike[str], *, scheduler: str | None = None,
-              workers: int | None = None, resume: bool = False, show_progress: bool = True, report: bool = False,
-              dpi: int = 110, existing: Existing = "merge") -> list[Path]:
+def run_study(
+    study: Study,
+    out_dir: str | os.PathLike[str],
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    resume: bool = False,
+    show_progress: bool = True,
+    report: bool = False,
+    dpi: int = 110,
+    existing: Existing = "merge",
+) -> list[Path]:
     """Run every analysis of a study and write ``<out_dir>/<name>.nc`` for each, the folder as a whole.
 
     Parameters
@@ -80,8 +253,15 @@ def run_study(study: Study, out_dir: str | os.PathLike[str], *, scheduler: str |
     with OutputFolder(out, existing=existing, resumable=True, resume=resume) as work:
         if resume and out.is_dir():
             copy_previous(out, work)
-        written = run_analyses(study, work, scheduler=scheduler, workers=workers, resume=resume,
-                               show_progress=show_progress, checkpoint_dir=work / CHECKPOINTS)
+        written = run_analyses(
+            study,
+            work,
+            scheduler=scheduler,
+            workers=workers,
+            resume=resume,
+            show_progress=show_progress,
+            checkpoint_dir=work / CHECKPOINTS,
+        )
         if report:
             from ..report.study_report import write_report
 
@@ -91,4 +271,4 @@ def run_study(study: Study, out_dir: str | os.PathLike[str], *, scheduler: str |
     return [out / path.name for path in written]
 
 
-__all__ = ["CHECKPOINTS", "copy_previous", "run_study"]
+__all__ = ["CHECKPOINTS", "analysis_key", "run_analysis", "run_analyses", "copy_previous", "run_study"]

@@ -31,16 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from ..physics.design import _DESIGN_KEYS, Design, load_design
 from ..common.errors import StudyError, UqgearError
 from ..common.resources import bundled_by_name, bundled_names
 from ..common.yamlio import YAMLError, load_yaml
+from ..physics.design import _DESIGN_KEYS, Design, load_design
 from .analysis_schemas import RIG_TYPES
-from .limits import DPI
 from .analysis_specs import AnalysisSpec, _analysis
 from .checkers import _fail, _type_name, boolean, check_mapping, identifier, number, string
-from .parameters import (UncertainParameter, ValueSpec, _check_parameter_range, _operating_points,
-                         _uncertain_parameter)
+from .limits import DPI
+from .parameters import UncertainParameter, ValueSpec, _check_parameter_range, _operating_points, _uncertain_parameter
 from .settings import SimulationSettings, _simulation
 from .variables import OPERATING_VARIABLES, VARIABLES
 
@@ -92,8 +91,9 @@ class Study:
         for spec in self.analyses:
             if spec.name == name:
                 return spec
-        raise StudyError(f"analysis {name!r}: not in the study; expected one of "
-                         f"{', '.join(spec.name for spec in self.analyses)}")
+        raise StudyError(
+            f"analysis {name!r}: not in the study; expected one of {', '.join(spec.name for spec in self.analyses)}"
+        )
 
 
 def _resolve(path: str, base_dir: Path | None) -> Path:
@@ -107,7 +107,7 @@ def _resolve_rig(value: str, base_dir: Path | None) -> Path:
     return bundled_by_name("rig", value, candidate) or candidate
 
 
-def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
+def rig_path(study: Study, spec: AnalysisSpec) -> Path:
     """The rig file of a ``calibrate``/``diagnose`` analysis.
 
     A path is relative to the study file's folder; a bare name such as
@@ -117,7 +117,7 @@ def rig_path(study: "Study", spec: "AnalysisSpec") -> Path:
     return _resolve_rig(spec.options["rig"], Path(study.path).parent if study.path else None)
 
 
-def reference_path(study: "Study", spec: "AnalysisSpec") -> Path | None:
+def reference_path(study: Study, spec: AnalysisSpec) -> Path | None:
     """The healthy reference campaign of a ``diagnose`` analysis (key ``reference``), resolved like ``rig``; or None."""
     value = spec.options.get("reference")
     if value is None:
@@ -125,18 +125,28 @@ def reference_path(study: "Study", spec: "AnalysisSpec") -> Path | None:
     return _resolve_rig(value, Path(study.path).parent if study.path else None)
 
 
-_TOP_LEVEL_KEYS = ("name", "description", "seed", "design", "operating_points", "uncertain",
-                   "simulation", "analyses", "outputs", "execution")
+_TOP_LEVEL_KEYS = (
+    "name",
+    "description",
+    "seed",
+    "design",
+    "operating_points",
+    "uncertain",
+    "simulation",
+    "analyses",
+    "outputs",
+    "execution",
+)
 
 
 def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any]]:
     if raw is None:
         raw = "locomotive"
+    spec: Mapping[str, Any]
     if isinstance(raw, str):
         spec = {"name": raw}
     elif isinstance(raw, Mapping):
-        spec = check_mapping(raw, "design", {"name": string(), "path": string(),
-                                             "overrides": lambda v, p: v})
+        spec = check_mapping(raw, "design", {"name": string(), "path": string(), "overrides": lambda v, p: v})
     else:
         raise _fail("design", "a bundled design name, or a mapping with name or path and overrides", raw)
     if ("name" in spec) == ("path" in spec):
@@ -144,11 +154,10 @@ def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any
     overrides = spec.get("overrides") or {}
     if not isinstance(overrides, Mapping):
         raise _fail("design.overrides", "a mapping of design keys to values", overrides)
-    for key, value in overrides.items():
+    for key in overrides:
         if key not in _DESIGN_KEYS and key != "motor_pole_pairs":
-            raise StudyError(f"design.overrides.{key}: unknown design key; expected one of "
-                             f"{', '.join(_DESIGN_KEYS)}")
-    source = spec.get("path", spec.get("name"))
+            raise StudyError(f"design.overrides.{key}: unknown design key; expected one of {', '.join(_DESIGN_KEYS)}")
+    source = spec["path"] if "path" in spec else spec["name"]  # exactly one of them, checked above
     location: str | Path = source
     candidate = Path(source)
     if "path" in spec or candidate.suffix:
@@ -166,9 +175,7 @@ def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any
     return design, str(source), dict(overrides)
 
 
-
-def study_from_mapping(raw: Any, *, text: str = "", path: str = "",
-                       base_dir: str | Path | None = None) -> Study:
+def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: str | Path | None = None) -> Study:
     """Validate a parsed study mapping and build a :class:`Study`.
 
     Parameters
@@ -188,8 +195,7 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "",
         The first problem found, with its key path.
     """
     if not isinstance(raw, Mapping):
-        raise StudyError(f"study: expected a mapping with keys {', '.join(_TOP_LEVEL_KEYS)}; got "
-                         f"{_type_name(raw)}")
+        raise StudyError(f"study: expected a mapping with keys {', '.join(_TOP_LEVEL_KEYS)}; got {_type_name(raw)}")
     for key in raw:
         if key not in _TOP_LEVEL_KEYS:
             raise StudyError(f"{key}: unknown key; expected one of {', '.join(_TOP_LEVEL_KEYS)}")
@@ -206,49 +212,69 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "",
     uncertain = {}
     for key, entry in uncertain_raw.items():
         if key not in VARIABLES:
-            raise StudyError(f"uncertain.{key}: unknown parameter; expected one of "
-                             f"{', '.join(OPERATING_VARIABLES)} or a design key")
+            raise StudyError(
+                f"uncertain.{key}: unknown parameter; expected one of {', '.join(OPERATING_VARIABLES)} or a design key"
+            )
         if key in points:
-            raise StudyError(f"uncertain.{key}: also given in operating_points; give a study-wide "
-                             "value in one place (an analysis may fix it in its own operating_points)")
+            raise StudyError(
+                f"uncertain.{key}: also given in operating_points; give a study-wide "
+                "value in one place (an analysis may fix it in its own operating_points)"
+            )
         parameter = _uncertain_parameter(key, entry, f"uncertain.{key}", design)
         _check_parameter_range(parameter, f"uncertain.{key}")
         uncertain[key] = parameter
     simulation = _simulation(raw.get("simulation"), "simulation", SimulationSettings())
-    outputs_raw = check_mapping(raw.get("outputs") or {}, "outputs",
-                                {"report": boolean(), "dpi": DPI})
+    outputs_raw = check_mapping(raw.get("outputs") or {}, "outputs", {"report": boolean(), "dpi": DPI})
     outputs = Outputs(**outputs_raw)
-    execution = check_mapping(raw.get("execution") or {}, "execution",
-                              {"chunk_size": number("samples per chunk", 1, 1_000_000, integer=True)})
+    execution = check_mapping(
+        raw.get("execution") or {}, "execution", {"chunk_size": number("samples per chunk", 1, 1_000_000, integer=True)}
+    )
     analyses_raw = raw["analyses"]
     if not isinstance(analyses_raw, list) or not analyses_raw:
         raise _fail("analyses", "a non-empty list of analyses", analyses_raw)
-    analyses = tuple(_analysis(entry, index, points, simulation, uncertain)
-                     for index, entry in enumerate(analyses_raw))
+    analyses = tuple(_analysis(entry, index, points, simulation, uncertain) for index, entry in enumerate(analyses_raw))
     names = [spec.name for spec in analyses]
     for index, spec in enumerate(analyses):
         if names.count(spec.name) > 1:
-            raise StudyError(f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
-                             "expected unique names (give each a 'name')")
+            raise StudyError(
+                f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
+                "expected unique names (give each a 'name')"
+            )
     for spec in analyses:
         if spec.type in RIG_TYPES:
             rig = _resolve_rig(spec.options["rig"], Path(base_dir) if base_dir else None)
             if not rig.is_file():
-                raise StudyError(f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
-                                 "netCDF file (relative paths start at the study file's folder) or a bundled "
-                                 f"campaign ({', '.join(bundled_names('rig'))})")
+                raise StudyError(
+                    f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
+                    "netCDF file (relative paths start at the study file's folder) or a bundled "
+                    f"campaign ({', '.join(bundled_names('rig'))})"
+                )
             reference = spec.options.get("reference")
             if reference is not None:
                 found = _resolve_rig(reference, Path(base_dir) if base_dir else None)
                 if not found.is_file():
-                    raise StudyError(f"analyses[{spec.index}].reference: file {found} not found; expected a "
-                                     "uqgear-rig/1 netCDF file of the same rig with a healthy gearbox (relative "
-                                     "paths start at the study file's folder) or a bundled campaign "
-                                     f"({', '.join(bundled_names('rig'))})")
-    return Study(name=name, description=description, seed=seed, design=design,
-                 design_source=design_source, design_overrides=overrides, operating_points=points,
-                 uncertain=uncertain, simulation=simulation, analyses=analyses, outputs=outputs,
-                 chunk_size=execution.get("chunk_size", 64), text=text, path=path)
+                    raise StudyError(
+                        f"analyses[{spec.index}].reference: file {found} not found; expected a "
+                        "uqgear-rig/1 netCDF file of the same rig with a healthy gearbox (relative "
+                        "paths start at the study file's folder) or a bundled campaign "
+                        f"({', '.join(bundled_names('rig'))})"
+                    )
+    return Study(
+        name=name,
+        description=description,
+        seed=seed,
+        design=design,
+        design_source=design_source,
+        design_overrides=overrides,
+        operating_points=points,
+        uncertain=uncertain,
+        simulation=simulation,
+        analyses=analyses,
+        outputs=outputs,
+        chunk_size=execution.get("chunk_size", 64),
+        text=text,
+        path=path,
+    )
 
 
 def parse_study(text: str, *, path: str = "", base_dir: str | Path | None = None) -> Study:
@@ -292,7 +318,8 @@ def load_study(path: str | Path) -> Study:
         schema; the message starts with the file name and the key path.
     """
     source = Path(path)
-    source = bundled_by_name("study", path, source) or source
+    # a name is only ever typed text: a path object never names a bundled study
+    source = (bundled_by_name("study", path, source) if isinstance(path, str) else None) or source
     if source.is_dir():
         raise StudyError(f"{source}: is a folder; expected a study YAML file")
     if not source.is_file():
@@ -306,7 +333,6 @@ def load_study(path: str | Path) -> Study:
         return parse_study(content, path=str(source), base_dir=source.parent)
     except StudyError as exc:
         raise StudyError(f"{source}: {exc}") from None
-
 
 
 __all__ = ["Study", "Outputs", "load_study", "parse_study", "study_from_mapping", "rig_path", "reference_path"]

@@ -62,8 +62,10 @@ def _starts(value: Any, path: str) -> MultiStart | None:
     if value is True:
         return MultiStart()
     if not isinstance(value, Mapping):
-        raise StudyError(f"{path}: expected true, false or a mapping with keys "
-                         f"{', '.join(MultiStart.__dataclass_fields__)}; got {value!r}")
+        raise StudyError(
+            f"{path}: expected true, false or a mapping with keys "
+            f"{', '.join(MultiStart.__dataclass_fields__)}; got {value!r}"
+        )
     try:
         return MultiStart.from_mapping(value, where=path)
     except (UqgearError, TypeError) as error:

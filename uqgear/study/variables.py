@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from ..physics.design import _DESIGN_KEYS
 
-
 #: Operating variables a study may fix or sweep, with units and plausible ranges.
 #: Design keys (bearing stiffness, backlash, ...) may be swept or made uncertain too.
 OPERATING_VARIABLES: dict[str, tuple[str, float, float]] = {
@@ -33,7 +32,15 @@ def variable_units_short(name: str) -> str:
     """A short unit for axis labels (``rpm``, ``N m``, ``N/m``, ``1``)."""
     unit = variable_unit(name)
     short = unit.split(" (")[0].split(",")[0].strip()
-    if name in ("zeta1", "zeta2", "zeta_mesh", "poisson_ratio", "x1", "x2",
-                "addendum_coefficient", "dedendum_coefficient"):
+    if name in (
+        "zeta1",
+        "zeta2",
+        "zeta_mesh",
+        "poisson_ratio",
+        "x1",
+        "x2",
+        "addendum_coefficient",
+        "dedendum_coefficient",
+    ):
         return "1"
     return short or "1"

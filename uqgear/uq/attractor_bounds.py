@@ -16,18 +16,20 @@ from __future__ import annotations
 import itertools
 import json
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 
 from ..common.errors import ParameterSpaceError
 from .parameter_space import ParameterSpace
+from .parameters import Fixed, Interval
 from .sweeps import ModelFunction, batch_samples, make_sweep
 
 
-def scan_over_attractors(evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None,
-                         qois: Sequence[str], points: int) -> xr.Dataset:
+def scan_over_attractors(
+    evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None, qois: Sequence[str], points: int
+) -> xr.Dataset:
     """Bound each QoI over the interval parameters of ``space`` and the attractors, at every sweep point.
 
     Parameters
@@ -51,15 +53,19 @@ def scan_over_attractors(evaluate: ModelFunction, space: ParameterSpace, sweep: 
         (the most attractors at any node) and ``coexisting`` (any node with more than one).
     """
     if space.random_names:
-        raise ParameterSpaceError(f"space: {', '.join(space.random_names)} have distributions; bounds over "
-                                  "attractors take interval parameters only")
+        raise ParameterSpaceError(
+            f"space: {', '.join(space.random_names)} have distributions; bounds over "
+            "attractors take interval parameters only"
+        )
     names = list(space.interval_names)
     if not names:
         raise ParameterSpaceError("space: expected at least one interval parameter")
     sweep_spec = make_sweep(sweep, space)
-    axes = [np.linspace(space[name].lower, space[name].upper, int(points)) for name in names]
+    intervals = {name: cast(Interval, space[name]) for name in names}  # interval_names: each an Interval
+    axes = [np.linspace(intervals[name].lower, intervals[name].upper, int(points)) for name in names]
     nodes = np.array(list(itertools.product(*axes)), dtype=float).reshape(-1, len(names))
-    fixed = {name: float(space[name].value) for name in space.names if name not in names}
+    # random parameters are refused above: the others are Fixed
+    fixed = {name: float(cast(Fixed, space[name]).value) for name in space.names if name not in names}
     n_nodes, n_points = nodes.shape[0], sweep_spec.size
     flat: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
@@ -91,28 +97,58 @@ def scan_over_attractors(evaluate: ModelFunction, space: ParameterSpace, sweep: 
                 held[row, column] = counts[row, node]
                 where[row, column] = nodes[node]
         attrs = dict(result[f"{qoi}_max"].attrs)
-        data[qoi] = ((*sweep_spec.names, "bound"), band.reshape(shape),
-                     {"units": attrs.get("units", ""), "long_name": f"bounds of {qoi} over the interval parameters "
-                                                                    "and the coexisting responses"})
-        data[f"{qoi}_start"] = ((*sweep_spec.names, "bound"), starts.astype(str).reshape(shape),
-                                {"long_name": f"start whose attractor gives each bound of {qoi}"})
-        data[f"{qoi}_attractors"] = ((*sweep_spec.names, "bound"), held.reshape(shape),
-                                     {"units": "1", "long_name": "attractors at the point giving each bound"})
+        data[qoi] = (
+            (*sweep_spec.names, "bound"),
+            band.reshape(shape),
+            {
+                "units": attrs.get("units", ""),
+                "long_name": f"bounds of {qoi} over the interval parameters and the coexisting responses",
+            },
+        )
+        data[f"{qoi}_start"] = (
+            (*sweep_spec.names, "bound"),
+            starts.astype(str).reshape(shape),
+            {"long_name": f"start whose attractor gives each bound of {qoi}"},
+        )
+        data[f"{qoi}_attractors"] = (
+            (*sweep_spec.names, "bound"),
+            held.reshape(shape),
+            {"units": "1", "long_name": "attractors at the point giving each bound"},
+        )
         for column, name in enumerate(names):
-            data[f"{qoi}_at_{name}"] = ((*sweep_spec.names, "bound"), where[:, :, column].reshape(shape),
-                                        {"units": space.units(name), "long_name": f"{name} giving each bound"})
+            data[f"{qoi}_at_{name}"] = (
+                (*sweep_spec.names, "bound"),
+                where[:, :, column].reshape(shape),
+                {"units": space.units(name), "long_name": f"{name} giving each bound"},
+            )
     counts = np.asarray(result["attractor_count"].values).reshape(n_points, n_nodes)
-    data["attractor_count"] = (sweep_spec.names, counts.max(axis=1).reshape(sweep_spec.shape),
-                               {"units": "1", "long_name": "most attractors at any point of the box"})
-    data["coexisting"] = (sweep_spec.names, (counts.max(axis=1) > 1).reshape(sweep_spec.shape),
-                          {"long_name": "responses coexist somewhere in the box"})
-    data["runs"] = (sweep_spec.names, np.full(sweep_spec.shape, n_nodes),
-                    {"units": "1", "long_name": "grid points per sweep point (each run from several starts)"})
+    data["attractor_count"] = (
+        sweep_spec.names,
+        counts.max(axis=1).reshape(sweep_spec.shape),
+        {"units": "1", "long_name": "most attractors at any point of the box"},
+    )
+    data["coexisting"] = (
+        sweep_spec.names,
+        (counts.max(axis=1) > 1).reshape(sweep_spec.shape),
+        {"long_name": "responses coexist somewhere in the box"},
+    )
+    data["runs"] = (
+        sweep_spec.names,
+        np.full(sweep_spec.shape, n_nodes),
+        {"units": "1", "long_name": "grid points per sweep point (each run from several starts)"},
+    )
     coords: dict[str, Any] = {**sweep_spec.coords(), "bound": ("bound", ["lower", "upper"])}
-    return xr.Dataset(data, coords=coords, attrs={
-        "analysis": "scan_over_attractors", "interval_parameters": json.dumps(
-            {name: [space[name].lower, space[name].upper, space[name].units] for name in names}),
-        "grid_points": int(points)})
+    return xr.Dataset(
+        data,
+        coords=coords,
+        attrs={
+            "analysis": "scan_over_attractors",
+            "interval_parameters": json.dumps(
+                {name: [bound.lower, bound.upper, bound.units] for name, bound in intervals.items()}
+            ),
+            "grid_points": int(points),
+        },
+    )
 
 
 __all__ = ["scan_over_attractors"]

@@ -16,8 +16,16 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.polynomial import chebyshev as cheb
 
-from .interval_bounds import (FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR, Bounds, flag_common_problems, find_jumps,
-                              interior_check_points, relative_error, tensor_grid)
+from .interval_bounds import (
+    FLAG_NONSMOOTH,
+    FLAG_SURROGATE_ERROR,
+    Bounds,
+    find_jumps,
+    flag_common_problems,
+    interior_check_points,
+    relative_error,
+    tensor_grid,
+)
 from .interval_responses import ModelResponses, evaluate_nodes
 
 # series values evaluated per (sweep point, QoI) when scanning a Chebyshev series
@@ -73,19 +81,26 @@ def _series_extremes(coefficients: np.ndarray, dimensions: int) -> tuple[np.ndar
     vander = cheb.chebvander(grid, coefficients.shape[-1] - 1)
     lower = np.empty(coefficients.shape[0])
     upper = np.empty(coefficients.shape[0])
-    chunk = max(1, 5_000_000 // per_axis ** dimensions)
+    chunk = max(1, 5_000_000 // per_axis**dimensions)
     for start in range(0, coefficients.shape[0], chunk):
-        values = coefficients[start:start + chunk]
+        values = coefficients[start : start + chunk]
         for axis in range(1, dimensions + 1):
             values = np.moveaxis(np.tensordot(vander, values, axes=([1], [axis])), 0, axis)
         flat = values.reshape(values.shape[0], -1)
-        lower[start:start + chunk] = flat.min(axis=1)
-        upper[start:start + chunk] = flat.max(axis=1)
+        lower[start : start + chunk] = flat.min(axis=1)
+        upper[start : start + chunk] = flat.max(axis=1)
     return lower, upper
 
 
-def chebyshev_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensions: int, order: int,
-                     check_points: int, tolerance: float, regime_names: Sequence[str]) -> Bounds:
+def chebyshev_bounds(
+    responses: ModelResponses,
+    sweep_index: np.ndarray,
+    dimensions: int,
+    order: int,
+    check_points: int,
+    tolerance: float,
+    regime_names: Sequence[str],
+) -> Bounds:
     """The ``chebyshev`` method: bounds of a tensor series of ``order`` per axis, with an error estimate."""
     m = order + 1
     nodes_1d = chebyshev_nodes(m)
@@ -93,15 +108,15 @@ def chebyshev_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensi
     checks = interior_check_points(check_points, dimensions)
     values, regime = evaluate_nodes(responses, sweep_index, np.vstack([nodes, checks]))
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     count, responses_count = len(sweep_index), values.shape[2]
-    node_values, check_values = values[:, :nodes.shape[0]], values[:, nodes.shape[0]:]
+    node_values, check_values = values[:, : nodes.shape[0]], values[:, nodes.shape[0] :]
     bounds = Bounds.empty(sweep_index, responses_count)
     bounds.observe(values)
     grid = node_values.reshape(count, *([m] * dimensions), responses_count)
     series = np.moveaxis(grid, -1, 1).reshape(count * responses_count, *([m] * dimensions))
     fittable = np.isfinite(series.reshape(series.shape[0], -1)).all(axis=1)
-    coefficients = chebyshev_coefficients(np.where(fittable.reshape(-1, *([1] * dimensions)), series, 0.0),
-                                          dimensions)
+    coefficients = chebyshev_coefficients(np.where(fittable.reshape(-1, *([1] * dimensions)), series, 0.0), dimensions)
     series_lower, series_upper = _series_extremes(coefficients, dimensions)
     # truncation estimate: the coefficients of the two highest orders in any
     # variable (two, because an odd or even response has every other one zero)
@@ -127,11 +142,16 @@ def chebyshev_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensi
     bounds.upper = np.fmax(series_upper, bounds.observed_upper)
     relative = relative_error(error, bounds.lower, bounds.upper)
     for s, r in zip(*np.nonzero(relative > tolerance)):
-        bounds.add_reason(s, r, FLAG_SURROGATE_ERROR,
-                          f"{names[r]}: Chebyshev surrogate error {error[s, r]:.3g} is {100 * relative[s, r]:.3g}% "
-                          f"of the band width (tolerance {100 * tolerance:.3g}%)")
+        bounds.add_reason(
+            s,
+            r,
+            FLAG_SURROGATE_ERROR,
+            f"{names[r]}: Chebyshev surrogate error {error[s, r]:.3g} is {100 * relative[s, r]:.3g}% "
+            f"of the band width (tolerance {100 * tolerance:.3g}%)",
+        )
     for s, r in zip(*np.nonzero(find_jumps(grid, nodes_1d, bounds.upper - bounds.lower))):
-        bounds.add_reason(s, r, FLAG_NONSMOOTH, f"{names[r]}: jump between neighbouring Chebyshev nodes: "
-                                                f"non-smooth response")
+        bounds.add_reason(
+            s, r, FLAG_NONSMOOTH, f"{names[r]}: jump between neighbouring Chebyshev nodes: non-smooth response"
+        )
     flag_common_problems(bounds, values, regime, regime_names, names)
     return bounds

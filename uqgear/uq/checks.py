@@ -35,8 +35,12 @@ def check_count(value: Any, setting: str, minimum: int = 1, maximum: int | None 
         Naming ``setting`` and the expected range.
     """
     upper_text = "" if maximum is None else f" and <= {maximum}"
-    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer))
-            or value < minimum or (maximum is not None and value > maximum)):
+    if (
+        isinstance(value, (bool, np.bool_))
+        or not isinstance(value, (int, np.integer))
+        or value < minimum
+        or (maximum is not None and value > maximum)
+    ):
         raise ParameterSpaceError(f"{setting}: expected an integer >= {minimum}{upper_text}; got {value!r}")
     return int(value)
 
@@ -46,9 +50,13 @@ def check_quantiles(quantiles: Iterable[float], setting: str = "quantiles") -> n
     try:
         levels = np.asarray(list(quantiles), dtype=float)
     except (TypeError, ValueError):
-        raise ParameterSpaceError(f"{setting}: expected a sequence of numbers in [0, 1]; "
-                                  f"got {quantiles!r}") from None
-    if levels.ndim != 1 or levels.size == 0 or not np.all(np.isfinite(levels)) \
-            or np.any(levels < 0) or np.any(levels > 1):
+        raise ParameterSpaceError(f"{setting}: expected a sequence of numbers in [0, 1]; got {quantiles!r}") from None
+    if (
+        levels.ndim != 1
+        or levels.size == 0
+        or not np.all(np.isfinite(levels))
+        or np.any(levels < 0)
+        or np.any(levels > 1)
+    ):
         raise ParameterSpaceError(f"{setting}: expected a sequence of numbers in [0, 1]; got {quantiles!r}")
     return levels

@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import uuid
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import xarray as xr
 
@@ -56,7 +56,8 @@ def connect(scheduler: str | Client, timeout: float) -> tuple[Client, bool]:
             f"scheduler {scheduler}: cannot connect within {timeout:g} s "
             f"({type(exc).__name__}: {exc}); expected a running dask scheduler at this "
             "address (start one with `dask scheduler` and workers with "
-            "`dask worker <address>`)") from None
+            "`dask worker <address>`)"
+        ) from None
     return client, True
 
 
@@ -70,7 +71,8 @@ def select_workers(client: Client, workers: int | None, timeout: float, label: s
         if workers is not None:
             raise ExecutionError(
                 f"workers: expected at least {workers} workers at scheduler "
-                f"{label}; {connected} connected after {timeout:g} s") from None
+                f"{label}; {connected} connected after {timeout:g} s"
+            ) from None
         logger.warning("scheduler %s has no workers yet; chunks wait until workers join", label)
     if workers is None:
         return None
@@ -78,11 +80,20 @@ def select_workers(client: Client, workers: int | None, timeout: float, label: s
     return addresses[:workers]
 
 
-def run_on_cluster(scheduler: str | Client, evaluate: Callable[[xr.Dataset], xr.Dataset],
-                   chunks: Sequence[xr.Dataset], spans: Sequence[tuple[int, int]], pending: Sequence[int],
-                   finish: Callable[[int, Any], None], *,
-                   workers: int | None, attempts: int, timeout: float, failed: FailedChunk,
-                   retrying: RetryingChunk) -> int:
+def run_on_cluster(
+    scheduler: str | Client,
+    evaluate: Callable[[xr.Dataset], xr.Dataset],
+    chunks: Sequence[xr.Dataset],
+    spans: Sequence[tuple[int, int]],
+    pending: Sequence[int],
+    finish: Callable[[int, Any], None],
+    *,
+    workers: int | None,
+    attempts: int,
+    timeout: float,
+    failed: FailedChunk,
+    retrying: RetryingChunk,
+) -> int:
     """Evaluate the ``pending`` chunks (samples ``spans``) on the cluster, each result to ``finish`` as it arrives.
 
     A chunk whose evaluation raises is submitted again until ``attempts``
@@ -101,14 +112,17 @@ def run_on_cluster(scheduler: str | Client, evaluate: Callable[[xr.Dataset], xr.
     in_flight: dict[str, tuple[int, int, Future]] = {}
     try:
         restrict = select_workers(client, workers, timeout, scheduler_text(scheduler))
-        placement: dict[str, Any] = ({} if restrict is None
-                                     else {"workers": restrict, "allow_other_workers": False})
+        placement: dict[str, Any] = {} if restrict is None else {"workers": restrict, "allow_other_workers": False}
 
         def submit(index: int, attempt: int) -> Future:
-            future = client.submit(evaluate, chunks[index],
-                                   key=f"uqgear-chunk-{index}-{attempt}-{uuid.uuid4().hex[:12]}",
-                                   pure=False, **placement)
-            in_flight[future.key] = (index, attempt, future)
+            future = client.submit(
+                evaluate,
+                chunks[index],
+                key=f"uqgear-chunk-{index}-{attempt}-{uuid.uuid4().hex[:12]}",
+                pure=False,
+                **placement,
+            )
+            in_flight[cast(str, future.key)] = (index, attempt, future)  # the string key given above
             return future
 
         completed = as_completed([submit(index, 1) for index in pending], loop=client.loop)
@@ -121,8 +135,10 @@ def run_on_cluster(scheduler: str | Client, evaluate: Callable[[xr.Dataset], xr.
                 finish(index, result)
                 continue
             if future.status == "cancelled":
-                raise ExecutionError(f"chunk {index} (samples {spans[index][0]} to {spans[index][1] - 1}) was "
-                                     f"cancelled by the scheduler {scheduler_text(scheduler)} (lost connection?)")
+                raise ExecutionError(
+                    f"chunk {index} (samples {spans[index][0]} to {spans[index][1] - 1}) was "
+                    f"cancelled by the scheduler {scheduler_text(scheduler)} (lost connection?)"
+                )
             exc = future.exception()
             if isinstance(exc, UqgearError):
                 raise exc

@@ -31,10 +31,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import xarray as xr
 
-from ..physics.design import Design
+from ..common.errors import OperatingPointError
 from ..dynamics.regimes import REGIME_LABELS
 from ..dynamics.sweeps import sweep_grid
-from ..common.errors import OperatingPointError
+from ..physics.design import Design
 from ..physics.integration import BatchEvaluator
 from .runner import Runner
 
@@ -49,11 +49,21 @@ def _values(name: str, values: Sequence[float]) -> np.ndarray:
     return array
 
 
-def speed_adhesion_grid(design: Design, pinion_speed: Sequence[float], adhesion_torque: Sequence[float], *,
-                        fixed: Mapping[str, float] | None = None, n_periods: int = 400,
-                        keep_periods: int = 200, history_per_period: int = 0, lyapunov: bool = True,
-                        effects: Sequence = (), runner: Runner | None = None, resume: bool = False,
-                        seed: int = 0) -> xr.Dataset:
+def speed_adhesion_grid(
+    design: Design,
+    pinion_speed: Sequence[float],
+    adhesion_torque: Sequence[float],
+    *,
+    fixed: Mapping[str, float] | None = None,
+    n_periods: int = 400,
+    keep_periods: int = 200,
+    history_per_period: int = 0,
+    lyapunov: bool = True,
+    effects: Sequence = (),
+    runner: Runner | None = None,
+    resume: bool = False,
+    seed: int = 0,
+) -> xr.Dataset:
     """Simulate every (speed, T2) cell and classify its response.
 
     Parameters
@@ -87,8 +97,14 @@ def speed_adhesion_grid(design: Design, pinion_speed: Sequence[float], adhesion_
         raise OperatingPointError(f"{SPEED}: expected values > 0 rpm; got min {speeds.min():g}")
     if np.any(torques < 0):
         raise OperatingPointError(f"{ADHESION}: expected values >= 0 N m; got min {torques.min():g}")
-    evaluator = BatchEvaluator(design, n_periods=n_periods, keep_periods=keep_periods,
-                               history_per_period=history_per_period, lyapunov=lyapunov, effects=effects)
+    evaluator = BatchEvaluator(
+        design,
+        n_periods=n_periods,
+        keep_periods=keep_periods,
+        history_per_period=history_per_period,
+        lyapunov=lyapunov,
+        effects=effects,
+    )
     runner = runner or Runner(chunk_size=max(64, speeds.size * torques.size // 8))
 
     def evaluate(samples: xr.Dataset) -> xr.Dataset:
@@ -97,13 +113,18 @@ def speed_adhesion_grid(design: Design, pinion_speed: Sequence[float], adhesion_
     grid = sweep_grid(design, {SPEED: speeds, ADHESION: torques}, fixed=fixed, seed=seed, evaluate=evaluate)
     grid[SPEED].attrs.update(units="rpm", long_name="pinion speed")
     grid[ADHESION].attrs.update(units="N m", long_name="adhesion torque T2")
-    grid.attrs.update(analysis="speed_adhesion_grid", fixed=repr(dict(fixed or {})),
-                      interval_lower=float(torques.min()), interval_upper=float(torques.max()))
+    grid.attrs.update(
+        analysis="speed_adhesion_grid",
+        fixed=repr(dict(fixed or {})),
+        interval_lower=float(torques.min()),
+        interval_upper=float(torques.max()),
+    )
     return grid
 
 
-def qoi_envelope(grid: xr.Dataset, qois: Sequence[str] = ("dte_rms", "dynamic_load_factor",
-                                                          "fraction_separation")) -> xr.Dataset:
+def qoi_envelope(
+    grid: xr.Dataset, qois: Sequence[str] = ("dte_rms", "dynamic_load_factor", "fraction_separation")
+) -> xr.Dataset:
     """Lower and upper QoI bands against speed over the T2 values of ``grid``.
 
     Returns
@@ -115,8 +136,10 @@ def qoi_envelope(grid: xr.Dataset, qois: Sequence[str] = ("dte_rms", "dynamic_lo
     """
     missing = [q for q in qois if q not in grid.data_vars]
     if missing:
-        raise OperatingPointError(f"qois: {missing[0]!r} not in the grid; expected among "
-                                  f"{', '.join(v for v in grid.data_vars if grid[v].dims == (SPEED, ADHESION))}")
+        raise OperatingPointError(
+            f"qois: {missing[0]!r} not in the grid; expected among "
+            f"{', '.join(str(v) for v in grid.data_vars if grid[v].dims == (SPEED, ADHESION))}"
+        )
     out = xr.Dataset(coords={SPEED: grid[SPEED], "bound": ["lower", "upper"]})
     for name in qois:
         # a grid run from several starts: the bounds over the attractors too, and the start giving each
@@ -127,13 +150,24 @@ def qoi_envelope(grid: xr.Dataset, qois: Sequence[str] = ("dte_rms", "dynamic_lo
         band = xr.concat([lows.min(ADHESION), highs.max(ADHESION)], dim="bound")
         out[name] = band.transpose(SPEED, "bound").assign_attrs(grid[name].attrs)
         at = xr.concat([grid[ADHESION][lower_index], grid[ADHESION][upper_index]], dim="bound")
-        out[f"{name}_adhesion_at_bound"] = at.drop_vars(ADHESION, errors="ignore").transpose(SPEED, "bound") \
+        out[f"{name}_adhesion_at_bound"] = (
+            at.drop_vars(ADHESION, errors="ignore")
+            .transpose(SPEED, "bound")
             .assign_attrs(units="N m", long_name=f"T2 attaining each bound of {name}")
+        )
         if several and f"{name}_max_start" in grid:
-            starts = xr.concat([grid[f"{name}_min_start"].isel({ADHESION: lower_index}),
-                                grid[f"{name}_max_start"].isel({ADHESION: upper_index})], dim="bound")
-            out[f"{name}_start_at_bound"] = starts.drop_vars(ADHESION, errors="ignore").transpose(SPEED, "bound") \
+            starts = xr.concat(
+                [
+                    grid[f"{name}_min_start"].isel({ADHESION: lower_index}),
+                    grid[f"{name}_max_start"].isel({ADHESION: upper_index}),
+                ],
+                dim="bound",
+            )
+            out[f"{name}_start_at_bound"] = (
+                starts.drop_vars(ADHESION, errors="ignore")
+                .transpose(SPEED, "bound")
                 .assign_attrs(long_name=f"start whose attractor attains each bound of {name}")
+            )
     reasons = []
     for i in range(grid.sizes[SPEED]):
         cell = grid.isel({SPEED: i})
@@ -148,13 +182,19 @@ def qoi_envelope(grid: xr.Dataset, qois: Sequence[str] = ("dte_rms", "dynamic_lo
         if any(not str(label).startswith("period-") for label in labels):
             why.append("non-periodic response")
         reasons.append("; ".join(why))
-    out["non_smooth"] = (SPEED, np.array([bool(r) for r in reasons]),
-                         {"long_name": "response non-smooth in T2 at this speed (bands from the scan, no surrogate)"})
+    out["non_smooth"] = (
+        SPEED,
+        np.array([bool(r) for r in reasons]),
+        {"long_name": "response non-smooth in T2 at this speed (bands from the scan, no surrogate)"},
+    )
     out["non_smooth_reason"] = (SPEED, np.array(reasons, dtype=str))
-    out.attrs.update(analysis="qoi_envelope", method="scan",
-                     interval_lower=grid.attrs.get("interval_lower", float(grid[ADHESION].min())),
-                     interval_upper=grid.attrs.get("interval_upper", float(grid[ADHESION].max())),
-                     n_adhesion_values=grid.sizes[ADHESION])
+    out.attrs.update(
+        analysis="qoi_envelope",
+        method="scan",
+        interval_lower=grid.attrs.get("interval_lower", float(grid[ADHESION].min())),
+        interval_upper=grid.attrs.get("interval_upper", float(grid[ADHESION].max())),
+        n_adhesion_values=grid.sizes[ADHESION],
+    )
     return out
 
 
@@ -173,25 +213,49 @@ def bifurcation_envelope(grid: xr.Dataset) -> xr.Dataset:
     flat = points.values.reshape(n_speed, n_torque * n_period)
     adhesion = np.repeat(grid[ADHESION].values, n_period)
     out = xr.Dataset(
-        {"poincare_x": ((SPEED, "point"), flat, dict(grid["poincare_x"].attrs)),
-         "poincare_x_envelope": ((SPEED, "bound"), np.stack([np.nanmin(flat, axis=1), np.nanmax(flat, axis=1)], 1),
-                                 {"units": "m", "long_name": "range of Poincare DTE over the T2 interval"})},
-        coords={SPEED: grid[SPEED], "bound": ["lower", "upper"],
-                "point_adhesion_torque": ("point", adhesion, {"units": "N m", "long_name": "T2 of each point"}),
-                "point_period": ("point", np.tile(grid["period"].values, n_torque), {"units": "1"})})
+        {
+            "poincare_x": ((SPEED, "point"), flat, dict(grid["poincare_x"].attrs)),
+            "poincare_x_envelope": (
+                (SPEED, "bound"),
+                np.stack([np.nanmin(flat, axis=1), np.nanmax(flat, axis=1)], 1),
+                {"units": "m", "long_name": "range of Poincare DTE over the T2 interval"},
+            ),
+        },
+        coords={
+            SPEED: grid[SPEED],
+            "bound": ["lower", "upper"],
+            "point_adhesion_torque": ("point", adhesion, {"units": "N m", "long_name": "T2 of each point"}),
+            "point_period": ("point", np.tile(grid["period"].values, n_torque), {"units": "1"}),
+        },
+    )
     out.attrs.update(analysis="bifurcation_envelope", half_backlash=grid.attrs.get("half_backlash", np.nan))
     return out
 
 
 def regime_map(grid: xr.Dataset) -> xr.Dataset:
     """Regime label and evidence per (speed, T2) cell."""
-    names = [v for v in ("regime", "regime_reason", "response_period", "zero_one_k", "distinct_points",
-                         "largest_lyapunov", "lyapunov_per_period", "fraction_separation",
-                         "fraction_back_contact", "dte_rms") if v in grid]
+    names = [
+        v
+        for v in (
+            "regime",
+            "regime_reason",
+            "response_period",
+            "zero_one_k",
+            "distinct_points",
+            "largest_lyapunov",
+            "lyapunov_per_period",
+            "fraction_separation",
+            "fraction_back_contact",
+            "dte_rms",
+        )
+        if v in grid
+    ]
     out = grid[names].copy()
-    out.attrs = {"analysis": "regime_map",
-                 "labels": ", ".join(REGIME_LABELS),
-                 "evidence": "Poincare period detection, 0-1 test K, largest Lyapunov exponent"}
+    out.attrs = {
+        "analysis": "regime_map",
+        "labels": ", ".join(REGIME_LABELS),
+        "evidence": "Poincare period detection, 0-1 test K, largest Lyapunov exponent",
+    }
     return out
 
 
@@ -220,13 +284,26 @@ def time_response_envelope(grid: xr.Dataset) -> xr.Dataset:
         lower = np.nanmin(masked, axis=1)
         upper = np.nanmax(masked_max, axis=1)
     out = xr.Dataset(
-        {"x_last_period": ((SPEED, ADHESION, "mesh_phase"), last,
-                           {"units": "m", "long_name": "DTE over the last kept mesh period"}),
-         "x_envelope": ((SPEED, "bound", "mesh_phase"), np.stack([lower, upper], axis=1),
-                        {"units": "m", "long_name": "DTE band over the T2 interval (periodic cells, all kept periods)"}),
-         "periodic_cells": (SPEED, periodic.sum(axis=1), {"units": "1", "long_name": "periodic T2 cells used"})},
-        coords={SPEED: grid[SPEED], ADHESION: grid[ADHESION], "bound": ["lower", "upper"],
-                "mesh_phase": ("mesh_phase", phase, {"units": "1", "long_name": "fraction of a mesh period"})})
+        {
+            "x_last_period": (
+                (SPEED, ADHESION, "mesh_phase"),
+                last,
+                {"units": "m", "long_name": "DTE over the last kept mesh period"},
+            ),
+            "x_envelope": (
+                (SPEED, "bound", "mesh_phase"),
+                np.stack([lower, upper], axis=1),
+                {"units": "m", "long_name": "DTE band over the T2 interval (periodic cells, all kept periods)"},
+            ),
+            "periodic_cells": (SPEED, periodic.sum(axis=1), {"units": "1", "long_name": "periodic T2 cells used"}),
+        },
+        coords={
+            SPEED: grid[SPEED],
+            ADHESION: grid[ADHESION],
+            "bound": ["lower", "upper"],
+            "mesh_phase": ("mesh_phase", phase, {"units": "1", "long_name": "fraction of a mesh period"}),
+        },
+    )
     out.attrs.update(analysis="time_response_envelope")
     return out
 

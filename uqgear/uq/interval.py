@@ -47,20 +47,29 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 
 from ..common.errors import ParameterSpaceError
-from .checks import check_count
 from .chebyshev import chebyshev_bounds
-from .interval_bounds import (FLAG_FALLBACK, FLAG_MEANINGS, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR,
-                              FLAG_VERTEX_EXCEEDED, Bounds, relative_error)
+from .checks import check_count
+from .interval_bounds import (
+    FLAG_FALLBACK,
+    FLAG_MEANINGS,
+    FLAG_NONFINITE,
+    FLAG_NONSMOOTH,
+    FLAG_SURROGATE_ERROR,
+    FLAG_VERTEX_EXCEEDED,
+    Bounds,
+    relative_error,
+)
 from .interval_optimize import optimize_bounds
 from .interval_responses import ModelResponses, PboxResponses
 from .interval_scan import scan_bounds, vertex_bounds
 from .parameter_space import ParameterSpace
+from .parameters import Interval
 from .seeds import SeedLike, as_seed_sequence, child_seed, seed_attributes
 from .sweeps import ModelFunction, Sweep, make_sweep
 
@@ -123,14 +132,27 @@ class IntervalAnalysis:
         and ``<qoi>_surrogate_error`` (absolute, in the QoI's units).
     """
 
-    def __init__(self, method: str = "chebyshev", *, order: int = 6, scan_points: int | None = None,
-                 check_points: int = 4, tolerance: float = 0.02, fallback: str = "scan", n_starts: int = 2,
-                 screen_points: int | None = None, max_iterations: int = 40,
-                 finite_difference_step: float = 1e-6, regime_variables: Sequence[str] = (),
-                 qoi: Sequence[str] | None = None, seed: SeedLike | None = None) -> None:
+    def __init__(
+        self,
+        method: str = "chebyshev",
+        *,
+        order: int = 6,
+        scan_points: int | None = None,
+        check_points: int = 4,
+        tolerance: float = 0.02,
+        fallback: str = "scan",
+        n_starts: int = 2,
+        screen_points: int | None = None,
+        max_iterations: int = 40,
+        finite_difference_step: float = 1e-6,
+        regime_variables: Sequence[str] = (),
+        qoi: Sequence[str] | None = None,
+        seed: SeedLike | None = None,
+    ) -> None:
         if method not in METHODS:
-            raise ParameterSpaceError(f"method: unknown interval method {method!r}; expected one of "
-                                      f"{', '.join(METHODS)}")
+            raise ParameterSpaceError(
+                f"method: unknown interval method {method!r}; expected one of {', '.join(METHODS)}"
+            )
         if fallback not in FALLBACKS:
             raise ParameterSpaceError(f"fallback: expected one of {', '.join(FALLBACKS)}; got {fallback!r}")
         self.method = method
@@ -138,17 +160,20 @@ class IntervalAnalysis:
         self.scan_points = None if scan_points is None else check_count(scan_points, "scan_points", 2)
         self.check_points = check_count(check_points, "check_points", 0)
         if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not 0 < tolerance < 1:
-            raise ParameterSpaceError(f"tolerance: expected a fraction of the band width in (0, 1); "
-                                      f"got {tolerance!r}")
+            raise ParameterSpaceError(f"tolerance: expected a fraction of the band width in (0, 1); got {tolerance!r}")
         self.tolerance = float(tolerance)
         self.fallback = fallback
         self.n_starts = check_count(n_starts, "n_starts", 1)
         self.screen_points = None if screen_points is None else check_count(screen_points, "screen_points", 1)
         self.max_iterations = check_count(max_iterations, "max_iterations", 1)
-        if (isinstance(finite_difference_step, bool) or not isinstance(finite_difference_step, (int, float))
-                or not 0 < finite_difference_step < 0.1):
-            raise ParameterSpaceError(f"finite_difference_step: expected a number in (0, 0.1); "
-                                      f"got {finite_difference_step!r}")
+        if (
+            isinstance(finite_difference_step, bool)
+            or not isinstance(finite_difference_step, (int, float))
+            or not 0 < finite_difference_step < 0.1
+        ):
+            raise ParameterSpaceError(
+                f"finite_difference_step: expected a number in (0, 0.1); got {finite_difference_step!r}"
+            )
         self.finite_difference_step = float(finite_difference_step)
         if isinstance(regime_variables, str):
             regime_variables = [regime_variables]
@@ -164,8 +189,9 @@ class IntervalAnalysis:
 
     # -- public ---------------------------------------------------------------------
 
-    def fit(self, evaluate: ModelFunction, space: ParameterSpace,
-            sweep: Mapping[str, Any] | None = None) -> "IntervalAnalysis":
+    def fit(
+        self, evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None = None
+    ) -> IntervalAnalysis:
         """Bound every QoI over the interval parameters of ``space`` at every sweep point.
 
         Parameters
@@ -185,19 +211,20 @@ class IntervalAnalysis:
         """
         intervals = self._check_space(space)
         if space.random_names:
-            raise ParameterSpaceError(f"space: {', '.join(space.random_names)} have distributions; interval "
-                                      f"analysis bounds over intervals only: fix them, or use pbox() for "
-                                      f"bounds on statistics")
+            raise ParameterSpaceError(
+                f"space: {', '.join(space.random_names)} have distributions; interval "
+                f"analysis bounds over intervals only: fix them, or use pbox() for "
+                f"bounds on statistics"
+            )
         sweep_spec = make_sweep(sweep, space)
         responses = ModelResponses(evaluate, space, sweep_spec, self.qoi, self.regime_variables)
         bounds = self._bound(responses, sweep_spec, len(intervals))
         names = responses.names
+        assert names is not None  # set by the model's first call, which every bounding method makes
         coords = self._coords(sweep_spec, names)
         data_vars = _band_variables(bounds, responses, sweep_spec)
-        data_vars.update(bound_diagnostics(bounds, responses, sweep_spec, names,
-                                           [[r] for r in range(len(names))]))
-        self.result_ = xr.Dataset(data_vars, coords=coords,
-                                  attrs=self._attrs(space, responses, "interval_analysis"))
+        data_vars.update(bound_diagnostics(bounds, responses, sweep_spec, names, [[r] for r in range(len(names))]))
+        self.result_ = xr.Dataset(data_vars, coords=coords, attrs=self._attrs(space, responses, "interval_analysis"))
         return self
 
     # -- internals ------------------------------------------------------------------
@@ -207,40 +234,59 @@ class IntervalAnalysis:
             raise ParameterSpaceError(f"space: expected a ParameterSpace; got {type(space).__name__}")
         intervals = list(space.interval_names)
         if not intervals:
-            raise ParameterSpaceError("space: interval analysis needs at least one Interval parameter; "
-                                      f"the space has {', '.join(space.names)}")
+            raise ParameterSpaceError(
+                "space: interval analysis needs at least one Interval parameter; "
+                f"the space has {', '.join(space.names)}"
+            )
         if self.method == "vertex" and len(intervals) > 16:
-            raise ParameterSpaceError(f"method: vertex with {len(intervals)} intervals needs "
-                                      f"2^{len(intervals)} runs; expected at most 16 intervals")
+            raise ParameterSpaceError(
+                f"method: vertex with {len(intervals)} intervals needs "
+                f"2^{len(intervals)} runs; expected at most 16 intervals"
+            )
         return intervals
 
     def _scan_points(self, dimensions: int) -> int:
         return self.scan_points or _SCAN_POINTS.get(dimensions, 5)
 
-    def _run_method(self, method: str, responses: ModelResponses, sweep_index: np.ndarray,
-                    dimensions: int) -> Bounds:
+    def _run_method(self, method: str, responses: ModelResponses, sweep_index: np.ndarray, dimensions: int) -> Bounds:
         regime = [] if isinstance(responses, PboxResponses) else self.regime_variables
         if method == "scan":
-            return scan_bounds(responses, sweep_index, dimensions, self._scan_points(dimensions), self.tolerance,
-                               regime)
+            return scan_bounds(
+                responses, sweep_index, dimensions, self._scan_points(dimensions), self.tolerance, regime
+            )
         if method == "vertex":
             return vertex_bounds(responses, sweep_index, dimensions, self.check_points, regime)
         if method == "chebyshev":
-            return chebyshev_bounds(responses, sweep_index, dimensions, self.order, self.check_points, self.tolerance,
-                                    regime)
+            return chebyshev_bounds(
+                responses, sweep_index, dimensions, self.order, self.check_points, self.tolerance, regime
+            )
         screen = self.screen_points or 20 * dimensions
-        return optimize_bounds(responses, sweep_index, dimensions,
-                               child_seed(self.seed_sequence, 1 if method == self.method else 2),
-                               self.n_starts, screen, self.max_iterations, self.finite_difference_step, regime)
+        assert self.seed_sequence is not None  # __init__ refuses no seed where optimize runs
+        return optimize_bounds(
+            responses,
+            sweep_index,
+            dimensions,
+            child_seed(self.seed_sequence, 1 if method == self.method else 2),
+            self.n_starts,
+            screen,
+            self.max_iterations,
+            self.finite_difference_step,
+            regime,
+        )
 
     def _bound(self, responses: ModelResponses, sweep: Sweep, dimensions: int) -> Bounds:
         everything = np.arange(sweep.size)
-        nodes = {"scan": self._scan_points(dimensions) ** dimensions, "vertex": 2 ** dimensions,
-                 "chebyshev": (self.order + 1) ** dimensions}
+        nodes = {
+            "scan": self._scan_points(dimensions) ** dimensions,
+            "vertex": 2**dimensions,
+            "chebyshev": (self.order + 1) ** dimensions,
+        }
         if nodes.get(self.method, 0) > 1_000_000:
-            raise ParameterSpaceError(f"{'order' if self.method == 'chebyshev' else 'scan_points'}: "
-                                      f"{nodes[self.method]} nodes per sweep point in {dimensions} dimensions; "
-                                      f"expected at most 1e6")
+            raise ParameterSpaceError(
+                f"{'order' if self.method == 'chebyshev' else 'scan_points'}: "
+                f"{nodes[self.method]} nodes per sweep point in {dimensions} dimensions; "
+                f"expected at most 1e6"
+            )
         bounds = self._run_method(self.method, responses, everything, dimensions)
         self.fallback_runs_ = 0
         if self.method in ("scan", "optimize") or self.fallback == "none":
@@ -264,8 +310,9 @@ class IntervalAnalysis:
         attrs: dict[str, Any] = {
             "analysis": kind,
             "method": self.method,
-            "interval_parameters": json.dumps({name: [space[name].lower, space[name].upper, space[name].units]
-                                               for name in space.interval_names}),
+            "interval_parameters": json.dumps(
+                {name: [bound.lower, bound.upper, bound.units] for name, bound in _intervals(space).items()}
+            ),
             "parameter_space": space.to_json(),
             "tolerance": self.tolerance,
             "fallback": self.fallback if self.method in ("vertex", "chebyshev") else "none",
@@ -276,34 +323,55 @@ class IntervalAnalysis:
             **seed_attributes(self.seed_sequence),
         }
         if self.method == "chebyshev":
-            attrs.update(order=self.order, check_points=self.check_points,
-                         reference="Wu, Luo, Zhang, Zhang, Chen (2013) Int J Numer Meth Eng: Chebyshev "
-                                   "inclusion function at Gauss-Chebyshev nodes, bounds by dense scan of the series")
+            attrs.update(
+                order=self.order,
+                check_points=self.check_points,
+                reference="Wu, Luo, Zhang, Zhang, Chen (2013) Int J Numer Meth Eng: Chebyshev "
+                "inclusion function at Gauss-Chebyshev nodes, bounds by dense scan of the series",
+            )
         if self.method == "vertex":
             attrs.update(check_points=self.check_points + 1)
         if self.method == "scan" or self.fallback == "scan":
             attrs.update(scan_points=self._scan_points(len(space.interval_names)))
         if self.method == "optimize" or self.fallback == "optimize":
-            attrs.update(n_starts=self.n_starts, max_iterations=self.max_iterations,
-                         finite_difference_step=self.finite_difference_step)
+            attrs.update(
+                n_starts=self.n_starts,
+                max_iterations=self.max_iterations,
+                finite_difference_step=self.finite_difference_step,
+            )
         if self.regime_variables:
             attrs.update(regime_variables=json.dumps(self.regime_variables))
         return attrs
+
+
+def _intervals(space: ParameterSpace) -> dict[str, Interval]:
+    """The interval parameters of ``space`` by name."""
+    return {name: cast(Interval, space[name]) for name in space.interval_names}
 
 
 def _band_variables(bounds: Bounds, responses: ModelResponses, sweep: Sweep) -> dict[str, Any]:
     """Per QoI: the band (dims ``(*sweep, "bound")``) and the estimated error of its bounds."""
     data_vars = {}
     shape = sweep.shape
+    assert responses.names is not None  # set by the model's first call, which every bounding method makes
     for r, name in enumerate(responses.names):
         band = np.stack([bounds.lower[:, r], bounds.upper[:, r]], axis=-1).reshape(*shape, 2)
-        data_vars[name] = ((*sweep.names, "bound"), band,
-                           {"units": responses.units[name],
-                            "long_name": f"bounds of {responses.long_names[name]} over the interval parameters"})
-        data_vars[f"{name}_surrogate_error"] = (sweep.names, bounds.error[:, r].reshape(shape),
-                                                {"units": responses.units[name],
-                                                 "long_name": f"estimated error of the bounds of {name} "
-                                                              f"(NaN: no estimate)"})
+        data_vars[name] = (
+            (*sweep.names, "bound"),
+            band,
+            {
+                "units": responses.units[name],
+                "long_name": f"bounds of {responses.long_names[name]} over the interval parameters",
+            },
+        )
+        data_vars[f"{name}_surrogate_error"] = (
+            sweep.names,
+            bounds.error[:, r].reshape(shape),
+            {
+                "units": responses.units[name],
+                "long_name": f"estimated error of the bounds of {name} (NaN: no estimate)",
+            },
+        )
     return data_vars
 
 
@@ -327,8 +395,9 @@ def _merge_fallback(bounds: Bounds, again: Bounds, redo: np.ndarray, fallback: s
             bounds.add_reason(row, r, FLAG_FALLBACK, f"bounds from the {fallback} fallback")
 
 
-def bound_diagnostics(bounds: Bounds, responses: ModelResponses, sweep: Sweep, qoi_names: Sequence[str],
-                      groups: Sequence[Sequence[int]]) -> dict[str, Any]:
+def bound_diagnostics(
+    bounds: Bounds, responses: ModelResponses, sweep: Sweep, qoi_names: Sequence[str], groups: Sequence[Sequence[int]]
+) -> dict[str, Any]:
     """Runs per sweep point, and per QoI (the responses ``groups[q]``) the relative error and the flags.
 
     The flags carry their reasons (``flag_reasons``, JSON), labelled by sweep point.
@@ -348,15 +417,28 @@ def bound_diagnostics(bounds: Bounds, responses: ModelResponses, sweep: Sweep, q
                 where = f"at {sweep.label(int(bounds.sweep_index[row]))}: " if sweep.names else ""
                 reasons.append(where + "; ".join(dict.fromkeys(texts)))
     return {
-        "runs": (sweep.names, responses.runs.reshape(shape),
-                 {"units": "1", "long_name": "model runs spent per sweep point"}),
-        "surrogate_error_relative": (("qoi", *sweep.names), errors.reshape(len(qoi_names), *shape),
-                                     {"units": "1", "long_name": "estimated error of the bounds relative to "
-                                                                 "the band width (NaN: no estimate)"}),
-        "flag": (("qoi", *sweep.names), flags.reshape(len(qoi_names), *shape),
-                 {"units": "1", "long_name": "quality flags of the bounds (bit mask, 0: none)",
-                  "flag_masks": np.array([FLAG_VERTEX_EXCEEDED, FLAG_SURROGATE_ERROR, FLAG_NONSMOOTH,
-                                          FLAG_NONFINITE, FLAG_FALLBACK], dtype=np.int8),
-                  "flag_meanings": FLAG_MEANINGS,
-                  "flag_reasons": json.dumps(reasons)}),
+        "runs": (
+            sweep.names,
+            responses.runs.reshape(shape),
+            {"units": "1", "long_name": "model runs spent per sweep point"},
+        ),
+        "surrogate_error_relative": (
+            ("qoi", *sweep.names),
+            errors.reshape(len(qoi_names), *shape),
+            {"units": "1", "long_name": "estimated error of the bounds relative to the band width (NaN: no estimate)"},
+        ),
+        "flag": (
+            ("qoi", *sweep.names),
+            flags.reshape(len(qoi_names), *shape),
+            {
+                "units": "1",
+                "long_name": "quality flags of the bounds (bit mask, 0: none)",
+                "flag_masks": np.array(
+                    [FLAG_VERTEX_EXCEEDED, FLAG_SURROGATE_ERROR, FLAG_NONSMOOTH, FLAG_NONFINITE, FLAG_FALLBACK],
+                    dtype=np.int8,
+                ),
+                "flag_meanings": FLAG_MEANINGS,
+                "flag_reasons": json.dumps(reasons),
+            },
+        ),
     }

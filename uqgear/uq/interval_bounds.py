@@ -21,8 +21,10 @@ FLAG_SURROGATE_ERROR = 2
 FLAG_NONSMOOTH = 4
 FLAG_NONFINITE = 8
 FLAG_FALLBACK = 16
-FLAG_MEANINGS = ("vertex_bounds_exceeded_at_interior_check_points surrogate_error_large_relative_to_band "
-                 "nonsmooth_response nonfinite_model_output bounds_from_fallback_method")
+FLAG_MEANINGS = (
+    "vertex_bounds_exceeded_at_interior_check_points surrogate_error_large_relative_to_band "
+    "nonsmooth_response nonfinite_model_output bounds_from_fallback_method"
+)
 
 # a step between neighbouring nodes is a jump when it is this many times the
 # neighbouring steps (per unit length) and at least this fraction of the band
@@ -34,20 +36,27 @@ _JUMP_FRACTION = 0.2
 class Bounds:
     """Bounds of every response at the analysed sweep points."""
 
-    sweep_index: np.ndarray          # (S,) flat sweep point numbers
-    lower: np.ndarray                # (S, R)
+    sweep_index: np.ndarray  # (S,) flat sweep point numbers
+    lower: np.ndarray  # (S, R)
     upper: np.ndarray
-    observed_lower: np.ndarray       # extremes of the model values actually seen
+    observed_lower: np.ndarray  # extremes of the model values actually seen
     observed_upper: np.ndarray
-    error: np.ndarray                # estimated absolute error of the bounds (NaN: no estimate)
-    flag: np.ndarray                 # int bit mask
+    error: np.ndarray  # estimated absolute error of the bounds (NaN: no estimate)
+    flag: np.ndarray  # int bit mask
     reasons: dict[tuple[int, int], list[str]] = field(default_factory=dict)
 
     @classmethod
-    def empty(cls, sweep_index: np.ndarray, responses: int) -> "Bounds":
+    def empty(cls, sweep_index: np.ndarray, responses: int) -> Bounds:
         shape = (len(sweep_index), responses)
-        return cls(sweep_index, np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.inf),
-                   np.full(shape, -np.inf), np.full(shape, np.nan), np.zeros(shape, dtype=np.int64))
+        return cls(
+            sweep_index,
+            np.full(shape, np.nan),
+            np.full(shape, np.nan),
+            np.full(shape, np.inf),
+            np.full(shape, -np.inf),
+            np.full(shape, np.nan),
+            np.zeros(shape, dtype=np.int64),
+        )
 
     def add_reason(self, row: int, response: int, bit: int, text: str) -> None:
         self.flag[row, response] |= bit
@@ -123,7 +132,7 @@ def find_jumps(grid: np.ndarray, coordinates: np.ndarray, width: np.ndarray) -> 
     return found
 
 
-def _regime_changes(regime: np.ndarray) -> list[list[str]]:
+def _regime_changes(regime: np.ndarray) -> list[list[int]]:
     """Per sweep point, the regime variables (by position) that change over the nodes."""
     changes = []
     for point in regime:
@@ -137,17 +146,21 @@ def _regime_changes(regime: np.ndarray) -> list[list[str]]:
     return changes
 
 
-def flag_common_problems(bounds: Bounds, values: np.ndarray, regime: np.ndarray, regime_names: Sequence[str],
-                         names: Sequence[str]) -> None:
+def flag_common_problems(
+    bounds: Bounds, values: np.ndarray, regime: np.ndarray, regime_names: Sequence[str], names: Sequence[str]
+) -> None:
     """Flag non-finite model values and regime variables that change over the interval box."""
     nonfinite = ~np.isfinite(values).all(axis=1)
     for s, r in zip(*np.nonzero(nonfinite)):
         count = int((~np.isfinite(values[s, :, r])).sum())
-        bounds.add_reason(s, r, FLAG_NONFINITE, f"{names[r]}: {count} of {values.shape[1]} model values "
-                                                f"non-finite")
+        bounds.add_reason(s, r, FLAG_NONFINITE, f"{names[r]}: {count} of {values.shape[1]} model values non-finite")
     for s, changed in enumerate(_regime_changes(regime)):
         if changed:
             which = ", ".join(regime_names[g] for g in changed)
             for r in range(values.shape[2]):
-                bounds.add_reason(s, r, FLAG_NONSMOOTH, f"regime variable(s) {which} change over the interval "
-                                                        f"box: response not smooth")
+                bounds.add_reason(
+                    s,
+                    r,
+                    FLAG_NONSMOOTH,
+                    f"regime variable(s) {which} change over the interval box: response not smooth",
+                )

@@ -82,17 +82,28 @@ class _LockstepBatcher:
                 self._condition.notify_all()
 
 
-def optimize_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensions: int,
-                    seed_sequence: np.random.SeedSequence, n_starts: int, screen_points: int,
-                    max_iterations: int, step: float, regime_names: Sequence[str]) -> Bounds:
+def optimize_bounds(
+    responses: ModelResponses,
+    sweep_index: np.ndarray,
+    dimensions: int,
+    seed_sequence: np.random.SeedSequence,
+    n_starts: int,
+    screen_points: int,
+    max_iterations: int,
+    step: float,
+    regime_names: Sequence[str],
+) -> Bounds:
     """The ``optimize`` method: bounds from multi-start L-BFGS-B searches after a seeded screening."""
-    screen = [np.full((1, dimensions), 0.5), unit_hypercube(screen_points, dimensions, "latin_hypercube",
-                                                            seed_sequence)]
+    screen = [
+        np.full((1, dimensions), 0.5),
+        unit_hypercube(screen_points, dimensions, "latin_hypercube", seed_sequence),
+    ]
     if dimensions <= 6:
         screen.insert(0, tensor_grid([np.array([0.0, 1.0])] * dimensions))
     screen_nodes = np.vstack(screen)
     values, regime = evaluate_nodes(responses, sweep_index, screen_nodes)
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     responses_count = values.shape[2]
     bounds = Bounds.empty(sweep_index, responses_count)
     bounds.observe(values)
@@ -113,9 +124,16 @@ def optimize_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensio
             if not np.all(np.isfinite(result)):
                 raise _NonFinite
             return sign * result[0], sign * (result[1:] - result[0]) / steps
+
         try:
-            minimize(objective, start, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * dimensions,
-                     options={"maxiter": max_iterations, "maxfun": 2 * max_iterations})
+            minimize(
+                objective,
+                start,
+                jac=True,
+                method="L-BFGS-B",
+                bounds=[(0.0, 1.0)] * dimensions,
+                options={"maxiter": max_iterations, "maxfun": 2 * max_iterations},
+            )
         except _NonFinite:
             with lock:
                 nonfinite_seen[row, r] = True
@@ -141,7 +159,7 @@ def optimize_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensio
         results, position = {}, 0
         for w in workers:
             size = len(requests[w][1])
-            results[w] = found[position:position + size]
+            results[w] = found[position : position + size]
             position += size
         return results
 
@@ -161,8 +179,9 @@ def optimize_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensio
     return bounds
 
 
-def _starting_points(values: np.ndarray, screen_nodes: np.ndarray,
-                     n_starts: int) -> list[tuple[int, int, float, np.ndarray]]:
+def _starting_points(
+    values: np.ndarray, screen_nodes: np.ndarray, n_starts: int
+) -> list[tuple[int, int, float, np.ndarray]]:
     """(sweep row, response, sign, start) of every local search: the best finite screening nodes.
 
     ``values`` (S, k, R) are the responses at the ``screen_nodes``; sign +1

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -25,8 +26,14 @@ class ModelResponses:
 
     runs_per_row = 1
 
-    def __init__(self, evaluate: ModelFunction, space: ParameterSpace, sweep: Sweep,
-                 qoi: Sequence[str] | None, regime_variables: Sequence[str]) -> None:
+    def __init__(
+        self,
+        evaluate: ModelFunction,
+        space: ParameterSpace,
+        sweep: Sweep,
+        qoi: Sequence[str] | None,
+        regime_variables: Sequence[str],
+    ) -> None:
         self._evaluate = evaluate
         self._space = space
         self._sweep = sweep
@@ -47,8 +54,11 @@ class ModelResponses:
         for name in self._space.names:
             if name in self._point_values:
                 continue
-            columns[name] = self._space.from_unit(name, unit_points[:, self.interval_names.index(name)]) \
-                if name in self.interval_names else np.full(len(sweep_index), self._space.nominal(name))
+            columns[name] = (
+                self._space.from_unit(name, unit_points[:, self.interval_names.index(name)])
+                if name in self.interval_names
+                else np.full(len(sweep_index), self._space.nominal(name))
+            )
             units[name] = self._space.units(name)
         for position, (name, values) in enumerate(self._point_values.items()):
             columns[name] = values[sweep_index]
@@ -63,18 +73,28 @@ class ModelResponses:
         outputs = call_model(self._evaluate, batch_samples(columns, units), request)
         missing = [name for name in self._regime if name not in outputs]
         if missing:
-            raise ParameterSpaceError(f"regime_variables: {', '.join(missing)} not returned by the model "
-                                      f"function (it returned {', '.join(map(str, outputs.data_vars))})")
+            raise ParameterSpaceError(
+                f"regime_variables: {', '.join(missing)} not returned by the model "
+                f"function (it returned {', '.join(map(str, outputs.data_vars))})"
+            )
         if self.names is None:
-            names = self._qoi if self._qoi is not None else [n for n in outputs.data_vars if n not in self._regime]
+            # the model's outputs are named by strings
+            names = (
+                self._qoi
+                if self._qoi is not None
+                else [cast(str, n) for n in outputs.data_vars if n not in self._regime]
+            )
             if not names:
                 raise ParameterSpaceError("qoi: the model function returned only regime variables")
             self.names = list(names)
             self.units = {name: outputs[name].attrs.get("units", "") for name in self.names}
             self.long_names = {name: outputs[name].attrs.get("long_name", name) for name in self.names}
         values = np.stack([outputs[name].values for name in self.names], axis=1)
-        regime = (np.stack([outputs[name].values for name in self._regime], axis=1) if self._regime
-                  else np.empty((len(sweep_index), 0)))
+        regime = (
+            np.stack([outputs[name].values for name in self._regime], axis=1)
+            if self._regime
+            else np.empty((len(sweep_index), 0))
+        )
         np.add.at(self.runs, sweep_index, self.runs_per_row)
         self.batch_calls += 1
         return values, regime
@@ -83,9 +103,17 @@ class ModelResponses:
 class PboxResponses(ModelResponses):
     """Statistics over the random parameters at rows of (sweep point, interval point)."""
 
-    def __init__(self, evaluate: ModelFunction, space: ParameterSpace, sweep: Sweep, qoi: Sequence[str] | None,
-                 n_samples: int, sampling: str, quantiles: np.ndarray,
-                 seed_sequence: np.random.SeedSequence) -> None:
+    def __init__(
+        self,
+        evaluate: ModelFunction,
+        space: ParameterSpace,
+        sweep: Sweep,
+        qoi: Sequence[str] | None,
+        n_samples: int,
+        sampling: str,
+        quantiles: np.ndarray,
+        seed_sequence: np.random.SeedSequence,
+    ) -> None:
         super().__init__(evaluate, space, sweep, qoi, ())
         self.runs_per_row = n_samples
         self.quantiles = quantiles
@@ -105,11 +133,14 @@ class PboxResponses(ModelResponses):
             units[name] = self._space.units(name)
         outputs = call_model(self._evaluate, batch_samples(expanded, units), self._qoi)
         if self.qoi_names is None:
-            self.qoi_names = list(outputs.data_vars)
+            self.qoi_names = cast(list[str], list(outputs.data_vars))  # the model's outputs are named by strings
             self.units = {name: outputs[name].attrs.get("units", "") for name in self.qoi_names}
             self.long_names = {name: outputs[name].attrs.get("long_name", name) for name in self.qoi_names}
-            self.names = [f"{q}|{s}" for q in self.qoi_names
-                          for s in ["mean", "std"] + [f"q{i}" for i in range(self.quantiles.size)]]
+            self.names = [
+                f"{q}|{s}"
+                for q in self.qoi_names
+                for s in ["mean", "std"] + [f"q{i}" for i in range(self.quantiles.size)]
+            ]
         values = np.stack([outputs[name].values.reshape(len(sweep_index), n) for name in self.qoi_names], axis=1)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -123,11 +154,11 @@ class PboxResponses(ModelResponses):
         return statistics.reshape(len(sweep_index), -1), np.empty((len(sweep_index), 0))
 
 
-def evaluate_nodes(responses: ModelResponses, sweep_index: np.ndarray,
-                   nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def evaluate_nodes(
+    responses: ModelResponses, sweep_index: np.ndarray, nodes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Values (S, k, R) and regime variables (S, k, G) at every node of every sweep point."""
     rows_sweep = np.repeat(sweep_index, nodes.shape[0])
     rows_points = np.tile(nodes, (len(sweep_index), 1))
     values, regime = responses(rows_sweep, rows_points)
-    return (values.reshape(len(sweep_index), nodes.shape[0], -1),
-            regime.reshape(len(sweep_index), nodes.shape[0], -1))
+    return (values.reshape(len(sweep_index), nodes.shape[0], -1), regime.reshape(len(sweep_index), nodes.shape[0], -1))

@@ -13,18 +13,33 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .interval_bounds import (FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR, FLAG_VERTEX_EXCEEDED, Bounds,
-                              flag_common_problems, find_jumps, interior_check_points, relative_error,
-                              tensor_grid)
+from .interval_bounds import (
+    FLAG_NONSMOOTH,
+    FLAG_SURROGATE_ERROR,
+    FLAG_VERTEX_EXCEEDED,
+    Bounds,
+    find_jumps,
+    flag_common_problems,
+    interior_check_points,
+    relative_error,
+    tensor_grid,
+)
 from .interval_responses import ModelResponses, evaluate_nodes
 
 
-def scan_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensions: int, points: int,
-                tolerance: float, regime_names: Sequence[str]) -> Bounds:
+def scan_bounds(
+    responses: ModelResponses,
+    sweep_index: np.ndarray,
+    dimensions: int,
+    points: int,
+    tolerance: float,
+    regime_names: Sequence[str],
+) -> Bounds:
     """The ``scan`` method: bounds from a tensor grid of ``points`` per axis, with an error estimate."""
     axis = np.linspace(0.0, 1.0, points)
     values, regime = evaluate_nodes(responses, sweep_index, tensor_grid([axis] * dimensions))
     names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     bounds = Bounds.empty(sweep_index, values.shape[2])
     bounds.observe(values)
     bounds.lower, bounds.upper = bounds.observed_lower.copy(), bounds.observed_upper.copy()
@@ -34,17 +49,23 @@ def scan_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensions: 
         coarse = coarse.reshape(len(sweep_index), -1, values.shape[2])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            bounds.error = np.fmax(np.abs(bounds.lower - np.nanmin(coarse, axis=1)),
-                                   np.abs(bounds.upper - np.nanmax(coarse, axis=1)))
+            bounds.error = np.fmax(
+                np.abs(bounds.lower - np.nanmin(coarse, axis=1)), np.abs(bounds.upper - np.nanmax(coarse, axis=1))
+            )
     bounds.error = np.fmax(bounds.error, _parabolic_refinement(grid))
     relative = relative_error(bounds.error, bounds.lower, bounds.upper)
     for s, r in zip(*np.nonzero(relative > tolerance)):
-        bounds.add_reason(s, r, FLAG_SURROGATE_ERROR,
-                          f"{names[r]}: scan grid coarse: the bounds from every other grid point differ by "
-                          f"{100 * relative[s, r]:.3g}% of the band width")
+        bounds.add_reason(
+            s,
+            r,
+            FLAG_SURROGATE_ERROR,
+            f"{names[r]}: scan grid coarse: the bounds from every other grid point differ by "
+            f"{100 * relative[s, r]:.3g}% of the band width",
+        )
     for s, r in zip(*np.nonzero(find_jumps(grid, axis, bounds.upper - bounds.lower))):
-        bounds.add_reason(s, r, FLAG_NONSMOOTH, f"{names[r]}: jump between neighbouring scan points: "
-                                                f"non-smooth response")
+        bounds.add_reason(
+            s, r, FLAG_NONSMOOTH, f"{names[r]}: jump between neighbouring scan points: non-smooth response"
+        )
     flag_common_problems(bounds, values, regime, regime_names, names)
     return bounds
 
@@ -86,14 +107,16 @@ def _parabolic_refinement(grid: np.ndarray) -> np.ndarray:
     return estimate
 
 
-def vertex_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensions: int, check_points: int,
-                  regime_names: Sequence[str]) -> Bounds:
+def vertex_bounds(
+    responses: ModelResponses, sweep_index: np.ndarray, dimensions: int, check_points: int, regime_names: Sequence[str]
+) -> Bounds:
     """The ``vertex`` method: bounds from the corners, checked at the centre and ``check_points`` more."""
     corners = tensor_grid([np.array([0.0, 1.0])] * dimensions)
     checks = np.vstack([np.full((1, dimensions), 0.5), interior_check_points(check_points, dimensions)])
     values, regime = evaluate_nodes(responses, sweep_index, np.vstack([corners, checks]))
     names = responses.names
-    corner_values, check_values = values[:, :corners.shape[0]], values[:, corners.shape[0]:]
+    assert names is not None  # set by the model's first call, which every bounding method makes
+    corner_values, check_values = values[:, : corners.shape[0]], values[:, corners.shape[0] :]
     bounds = Bounds.empty(sweep_index, values.shape[2])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -106,9 +129,13 @@ def vertex_bounds(responses: ModelResponses, sweep_index: np.ndarray, dimensions
     # report at least every value seen; a flagged point is refined by the fallback
     bounds.lower, bounds.upper = bounds.observed_lower.copy(), bounds.observed_upper.copy()
     for s, r in zip(*np.nonzero(exceed > 1e-9 * scale)):
-        bounds.add_reason(s, r, FLAG_VERTEX_EXCEEDED,
-                          f"{names[r]}: vertex bounds exceeded at interior check points: non-monotone response "
-                          f"(vertex band [{lower[s, r]:.6g}, {upper[s, r]:.6g}], check values "
-                          f"[{check_lower[s, r]:.6g}, {check_upper[s, r]:.6g}])")
+        bounds.add_reason(
+            s,
+            r,
+            FLAG_VERTEX_EXCEEDED,
+            f"{names[r]}: vertex bounds exceeded at interior check points: non-monotone response "
+            f"(vertex band [{lower[s, r]:.6g}, {upper[s, r]:.6g}], check values "
+            f"[{check_lower[s, r]:.6g}, {check_upper[s, r]:.6g}])",
+        )
     flag_common_problems(bounds, values, regime, regime_names, names)
     return bounds

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -14,8 +15,9 @@ from .checks import check_quantiles
 MONTE_CARLO_STATISTICS: tuple[str, ...] = ("mean", "std", "mean_standard_error", "min", "max")
 
 
-def monte_carlo_statistics(outputs: xr.Dataset, *, quantiles: Sequence[float] = (0.05, 0.5, 0.95),
-                           dim: str = "sample") -> xr.Dataset:
+def monte_carlo_statistics(
+    outputs: xr.Dataset, *, quantiles: Sequence[float] = (0.05, 0.5, 0.95), dim: str = "sample"
+) -> xr.Dataset:
     """Mean, standard deviation, extremes and quantiles of each QoI over ``dim``.
 
     Non-finite values (failed runs) are left out and counted.
@@ -41,10 +43,14 @@ def monte_carlo_statistics(outputs: xr.Dataset, *, quantiles: Sequence[float] = 
     levels = check_quantiles(quantiles)
     names = [name for name, variable in outputs.data_vars.items() if dim in variable.dims]
     if not names:
-        raise ParameterSpaceError(f"outputs: no variable has the dimension {dim!r}; "
-                                  f"variables: {', '.join(map(str, outputs.data_vars)) or 'none'}")
+        raise ParameterSpaceError(
+            f"outputs: no variable has the dimension {dim!r}; "
+            f"variables: {', '.join(map(str, outputs.data_vars)) or 'none'}"
+        )
     data_vars = {}
-    coords = {name: outputs.coords[name] for name in outputs.coords if dim not in outputs.coords[name].dims}
+    coords: dict[Hashable, Any] = {
+        name: outputs.coords[name] for name in outputs.coords if dim not in outputs.coords[name].dims
+    }
     for name in names:
         variable = outputs[name].transpose(..., dim)
         values = np.asarray(variable.values, dtype=float)
@@ -57,19 +63,35 @@ def monte_carlo_statistics(outputs: xr.Dataset, *, quantiles: Sequence[float] = 
             warnings.simplefilter("ignore", RuntimeWarning)
             mean = np.nanmean(masked, axis=-1)
             std = np.nanstd(masked, axis=-1, ddof=1)
-            stats = np.stack([mean, std, std / np.sqrt(np.maximum(count, 1)),
-                              np.nanmin(masked, axis=-1), np.nanmax(masked, axis=-1)], axis=-1)
+            stats = np.stack(
+                [
+                    mean,
+                    std,
+                    std / np.sqrt(np.maximum(count, 1)),
+                    np.nanmin(masked, axis=-1),
+                    np.nanmax(masked, axis=-1),
+                ],
+                axis=-1,
+            )
             quantile_values = np.moveaxis(np.nanquantile(masked, levels, axis=-1), 0, -1)
-        data_vars[name] = ((*other_dims, "statistic"), stats,
-                           {"units": units, "long_name": f"Monte Carlo statistics of {name}"})
-        data_vars[f"{name}_quantile"] = ((*other_dims, "quantile"), quantile_values,
-                                         {"units": units, "long_name": f"empirical quantiles of {name}"})
-        data_vars[f"{name}_count"] = (other_dims, count.astype(np.int64),
-                                      {"units": "1", "long_name": f"finite samples of {name} used"})
+        data_vars[name] = (
+            (*other_dims, "statistic"),
+            stats,
+            {"units": units, "long_name": f"Monte Carlo statistics of {name}"},
+        )
+        data_vars[f"{name}_quantile"] = (
+            (*other_dims, "quantile"),
+            quantile_values,
+            {"units": units, "long_name": f"empirical quantiles of {name}"},
+        )
+        data_vars[f"{name}_count"] = (
+            other_dims,
+            count.astype(np.int64),
+            {"units": "1", "long_name": f"finite samples of {name} used"},
+        )
     coords["statistic"] = ("statistic", list(MONTE_CARLO_STATISTICS))
     coords["quantile"] = ("quantile", levels, {"units": "1"})
-    attrs = {"method": "monte_carlo_statistics", "std_ddof": 1,
-             "n_samples": int(outputs.sizes[dim])}
+    attrs = {"method": "monte_carlo_statistics", "std_ddof": 1, "n_samples": int(outputs.sizes[dim])}
     for key in ("seed_entropy", "seed_spawn_key", "interval_treatment", "parameter_space"):
         if key in outputs.attrs:
             attrs[key] = outputs.attrs[key]

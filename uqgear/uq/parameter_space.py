@@ -21,6 +21,7 @@ from .parameters import Distribution, Fixed, Interval, Parameter, parse_paramete
 from .sampling import UNIT_EPSILON, sample_space
 from .seeds import SeedLike
 
+
 class ParameterSpace:
     """Named uncertain and fixed parameters.
 
@@ -44,13 +45,14 @@ class ParameterSpace:
 
     def __init__(self, parameters: Mapping[str, Parameter | Any]) -> None:
         if not isinstance(parameters, Mapping) or not parameters:
-            raise ParameterSpaceError(f"parameter space: expected a non-empty mapping of parameter names to "
-                                      f"Interval/Distribution/Fixed; got {parameters!r}")
+            raise ParameterSpaceError(
+                f"parameter space: expected a non-empty mapping of parameter names to "
+                f"Interval/Distribution/Fixed; got {parameters!r}"
+            )
         parsed: dict[str, Parameter] = {}
         for name, spec in parameters.items():
             if not isinstance(name, str) or not name.isidentifier():
-                raise ParameterSpaceError(f"parameter name {name!r}: expected an identifier such as "
-                                          f"'adhesion_torque'")
+                raise ParameterSpaceError(f"parameter name {name!r}: expected an identifier such as 'adhesion_torque'")
             parsed[name] = parse_parameter(name, spec)
         self._parameters = MappingProxyType(parsed)
 
@@ -90,8 +92,9 @@ class ParameterSpace:
         try:
             return self._parameters[name]
         except KeyError:
-            raise ParameterSpaceError(f"parameter {name!r}: not in the parameter space; "
-                                      f"known: {', '.join(self.names)}") from None
+            raise ParameterSpaceError(
+                f"parameter {name!r}: not in the parameter space; known: {', '.join(self.names)}"
+            ) from None
 
     def __contains__(self, name: object) -> bool:
         return name in self._parameters
@@ -138,19 +141,19 @@ class ParameterSpace:
 
     # -- derived spaces -------------------------------------------------------------
 
-    def select(self, names: Iterable[str]) -> "ParameterSpace":
+    def select(self, names: Iterable[str]) -> ParameterSpace:
         """Sub-space with the parameters ``names`` (in that order)."""
         names = list(names)
         return ParameterSpace({name: self[name] for name in names})
 
-    def fix(self, values: Mapping[str, float]) -> "ParameterSpace":
+    def fix(self, values: Mapping[str, float]) -> ParameterSpace:
         """Copy with the parameters in ``values`` turned into :class:`Fixed` ones."""
         parameters = dict(self._parameters)
         for name, value in values.items():
             parameters[name] = Fixed(value, units=self[name].units)
         return ParameterSpace(parameters)
 
-    def with_nominal(self, keep: Iterable[str]) -> "ParameterSpace":
+    def with_nominal(self, keep: Iterable[str]) -> ParameterSpace:
         """Copy where every uncertain parameter not in ``keep`` is fixed at its nominal value."""
         keep = set(keep)
         return self.fix({name: self.nominal(name) for name in self.uncertain_names if name not in keep})
@@ -202,8 +205,14 @@ class ParameterSpace:
 
     # -- sampling -------------------------------------------------------------------
 
-    def sample(self, n: int, method: str = "monte_carlo", *, seed: SeedLike | None = None,
-               interval_treatment: str | None = None) -> xr.Dataset:
+    def sample(
+        self,
+        n: int,
+        method: str = "monte_carlo",
+        *,
+        seed: SeedLike | None = None,
+        interval_treatment: str | None = None,
+    ) -> xr.Dataset:
         """Draw samples of all parameters.
 
         Parameters

@@ -21,14 +21,15 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Union
+from typing import Any, cast
 
 import chaospy
 import numpy as np
 
-from ..physics.design import STANDARD_GRAVITY
 from ..common.errors import ParameterSpaceError
+from ..physics.design import STANDARD_GRAVITY
 from .checks import finite_number
+
 
 @dataclass(frozen=True)
 class Interval:
@@ -59,8 +60,7 @@ class Interval:
             raise ParameterSpaceError(f"Interval units: expected a string; got {self.units!r}")
 
     @classmethod
-    def from_adhesion(cls, mu_lower: float, mu_upper: float, axle_load_kg: float,
-                      wheel_radius: float) -> "Interval":
+    def from_adhesion(cls, mu_lower: float, mu_upper: float, axle_load_kg: float, wheel_radius: float) -> Interval:
         """Adhesion torque interval T2 = mu Q R_w from adhesion-coefficient bounds.
 
         Parameters
@@ -116,11 +116,13 @@ def _check_interval_bounds(lower: Any, upper: Any, where: str) -> tuple[float, f
     lower = finite_number(lower, f"{where} lower bound")
     upper = finite_number(upper, f"{where} upper bound")
     if lower > upper:
-        raise ParameterSpaceError(f"{where}: inverted interval, expected lower < upper; "
-                                  f"got lower={lower!r} > upper={upper!r}")
+        raise ParameterSpaceError(
+            f"{where}: inverted interval, expected lower < upper; got lower={lower!r} > upper={upper!r}"
+        )
     if lower == upper:
-        raise ParameterSpaceError(f"{where}: empty interval (lower == upper == {lower!r}); "
-                                  f"use a fixed value for a known parameter")
+        raise ParameterSpaceError(
+            f"{where}: empty interval (lower == upper == {lower!r}); use a fixed value for a known parameter"
+        )
     return lower, upper
 
 
@@ -163,10 +165,13 @@ def _positive(*names: str) -> Callable[[Mapping[str, float]], str | None]:
             if params[name] <= 0:
                 return f"{name} must be > 0; got {params[name]!r}"
         return None
+
     return check
 
 
-def _ordered(*names: str, strict_pairs: tuple[tuple[str, str], ...] = ()) -> Callable[[Mapping[str, float]], str | None]:
+def _ordered(
+    *names: str, strict_pairs: tuple[tuple[str, str], ...] = ()
+) -> Callable[[Mapping[str, float]], str | None]:
     def check(params: Mapping[str, float]) -> str | None:
         values = [params[name] for name in names]
         if any(a > b for a, b in zip(values, values[1:])):
@@ -175,6 +180,7 @@ def _ordered(*names: str, strict_pairs: tuple[tuple[str, str], ...] = ()) -> Cal
             if not params[first] < params[second]:
                 return f"expected {first} < {second}; got {first}={params[first]!r}, {second}={params[second]!r}"
         return None
+
     return check
 
 
@@ -185,6 +191,7 @@ def _both(*checks: Callable[[Mapping[str, float]], str | None]) -> Callable[[Map
             if problem:
                 return problem
         return None
+
     return check
 
 
@@ -194,44 +201,69 @@ def _half(params: Mapping[str, float]) -> tuple[float, float]:
 
 _DISTRIBUTIONS: dict[str, _DistributionKind] = {
     "normal": _DistributionKind(
-        ("mu", "sigma"), {}, _positive("sigma"),
+        ("mu", "sigma"),
+        {},
+        _positive("sigma"),
         lambda p: chaospy.Normal(p["mu"], p["sigma"]),
-        lambda p: (chaospy.Normal(0.0, 1.0), p["mu"], p["sigma"])),
+        lambda p: (chaospy.Normal(0.0, 1.0), p["mu"], p["sigma"]),
+    ),
     "uniform": _DistributionKind(
-        ("lower", "upper"), {}, _ordered("lower", "upper", strict_pairs=(("lower", "upper"),)),
+        ("lower", "upper"),
+        {},
+        _ordered("lower", "upper", strict_pairs=(("lower", "upper"),)),
         lambda p: chaospy.Uniform(p["lower"], p["upper"]),
-        lambda p: (chaospy.Uniform(-1.0, 1.0), *_half(p))),
+        lambda p: (chaospy.Uniform(-1.0, 1.0), *_half(p)),
+    ),
     # log(x - shift) ~ normal(mu, sigma); the median of x - shift is exp(mu)
     "lognormal": _DistributionKind(
-        ("mu", "sigma"), {"shift": 0.0}, _positive("sigma"),
+        ("mu", "sigma"),
+        {"shift": 0.0},
+        _positive("sigma"),
         lambda p: chaospy.LogNormal(p["mu"], p["sigma"], p["shift"]),
-        lambda p: (chaospy.LogNormal(0.0, p["sigma"]), p["shift"], math.exp(p["mu"]))),
+        lambda p: (chaospy.LogNormal(0.0, p["sigma"]), p["shift"], math.exp(p["mu"])),
+    ),
     "beta": _DistributionKind(
-        ("alpha", "beta"), {"lower": 0.0, "upper": 1.0},
+        ("alpha", "beta"),
+        {"lower": 0.0, "upper": 1.0},
         _both(_positive("alpha", "beta"), _ordered("lower", "upper", strict_pairs=(("lower", "upper"),))),
         lambda p: chaospy.Beta(p["alpha"], p["beta"], p["lower"], p["upper"]),
-        lambda p: (chaospy.Beta(p["alpha"], p["beta"], -1.0, 1.0), *_half(p))),
+        lambda p: (chaospy.Beta(p["alpha"], p["beta"], -1.0, 1.0), *_half(p)),
+    ),
     "truncnormal": _DistributionKind(
-        ("mu", "sigma", "lower", "upper"), {},
+        ("mu", "sigma", "lower", "upper"),
+        {},
         _both(_positive("sigma"), _ordered("lower", "upper", strict_pairs=(("lower", "upper"),))),
         lambda p: chaospy.TruncNormal(p["lower"], p["upper"], p["mu"], p["sigma"]),
-        lambda p: (chaospy.TruncNormal((p["lower"] - p["mu"]) / p["sigma"],
-                                       (p["upper"] - p["mu"]) / p["sigma"], 0.0, 1.0),
-                   p["mu"], p["sigma"])),
+        lambda p: (
+            chaospy.TruncNormal((p["lower"] - p["mu"]) / p["sigma"], (p["upper"] - p["mu"]) / p["sigma"], 0.0, 1.0),
+            p["mu"],
+            p["sigma"],
+        ),
+    ),
     "triangle": _DistributionKind(
-        ("lower", "mode", "upper"), {},
+        ("lower", "mode", "upper"),
+        {},
         _ordered("lower", "mode", "upper", strict_pairs=(("lower", "upper"),)),
         lambda p: chaospy.Triangle(p["lower"], p["mode"], p["upper"]),
-        lambda p: (chaospy.Triangle(-1.0, (2 * p["mode"] - p["lower"] - p["upper"]) / (p["upper"] - p["lower"]),
-                                    1.0), *_half(p))),
+        lambda p: (
+            chaospy.Triangle(-1.0, (2 * p["mode"] - p["lower"] - p["upper"]) / (p["upper"] - p["lower"]), 1.0),
+            *_half(p),
+        ),
+    ),
     "gamma": _DistributionKind(
-        ("shape", "scale"), {"shift": 0.0}, _positive("shape", "scale"),
+        ("shape", "scale"),
+        {"shift": 0.0},
+        _positive("shape", "scale"),
         lambda p: chaospy.Gamma(p["shape"], p["scale"], p["shift"]),
-        lambda p: (chaospy.Gamma(p["shape"], 1.0, 0.0), p["shift"], p["scale"])),
+        lambda p: (chaospy.Gamma(p["shape"], 1.0, 0.0), p["shift"], p["scale"]),
+    ),
     "exponential": _DistributionKind(
-        ("scale",), {"shift": 0.0}, _positive("scale"),
+        ("scale",),
+        {"shift": 0.0},
+        _positive("scale"),
         lambda p: chaospy.Exponential(p["scale"], p["shift"]),
-        lambda p: (chaospy.Exponential(1.0, 0.0), p["shift"], p["scale"])),
+        lambda p: (chaospy.Exponential(1.0, 0.0), p["shift"], p["scale"]),
+    ),
 }
 
 #: Names accepted by :class:`Distribution`.
@@ -273,8 +305,9 @@ class Distribution:
 
     def __init__(self, name: str, *, units: str = "", **params: float) -> None:
         if not isinstance(name, str) or name.lower() not in _DISTRIBUTIONS:
-            raise ParameterSpaceError(f"distribution {name!r}: unknown; expected one of "
-                                      f"{', '.join(DISTRIBUTION_NAMES)}")
+            raise ParameterSpaceError(
+                f"distribution {name!r}: unknown; expected one of {', '.join(DISTRIBUTION_NAMES)}"
+            )
         name = name.lower()
         kind = _DISTRIBUTIONS[name]
         where = f"distribution {_signature_text(name)}"
@@ -362,7 +395,7 @@ def _rebuild_distribution(name: str, units: str, params: dict[str, float]) -> Di
     return Distribution(name, units=units, **params)
 
 
-Parameter = Union[Interval, Distribution, Fixed]
+Parameter = Interval | Distribution | Fixed
 
 _SPEC_KEYS = {
     "interval": ("interval", "units"),
@@ -380,7 +413,7 @@ def parse_parameter(name: str, spec: Any) -> Parameter:
         if isinstance(spec, (bool, np.bool_)):
             raise ParameterSpaceError(f"{name}: expected a number, [lower, upper] or a mapping; got {spec!r}")
         if isinstance(spec, (int, float, np.integer, np.floating)):
-            return Fixed(spec)
+            return Fixed(cast(float, spec))  # a NumPy number too: Fixed converts it
         if isinstance(spec, Sequence) and not isinstance(spec, str):
             if len(spec) != 2:
                 raise ParameterSpaceError(f"expected [lower, upper]; got {list(spec)!r}")
@@ -389,24 +422,30 @@ def parse_parameter(name: str, spec: Any) -> Parameter:
             return _parse_parameter_mapping(spec)
     except ParameterSpaceError as error:
         raise ParameterSpaceError(f"{name}: {error}") from None
-    raise ParameterSpaceError(f"{name}: expected Interval, Distribution, Fixed, a number, [lower, upper] "
-                              f"or a mapping with one of the keys {', '.join(_SPEC_KEYS)}; got {spec!r}")
+    raise ParameterSpaceError(
+        f"{name}: expected Interval, Distribution, Fixed, a number, [lower, upper] "
+        f"or a mapping with one of the keys {', '.join(_SPEC_KEYS)}; got {spec!r}"
+    )
 
 
 def _parse_parameter_mapping(spec: Mapping[str, Any]) -> Parameter:
     kinds = [key for key in _SPEC_KEYS if key in spec]
     if len(kinds) != 1:
-        raise ParameterSpaceError(f"expected exactly one of the keys {', '.join(_SPEC_KEYS)}; "
-                                  f"got keys {', '.join(map(str, spec)) or 'none'}")
+        raise ParameterSpaceError(
+            f"expected exactly one of the keys {', '.join(_SPEC_KEYS)}; got keys {', '.join(map(str, spec)) or 'none'}"
+        )
     kind = kinds[0]
     units = spec.get("units", "")
     if kind == "distribution":
         params = {key: value for key, value in spec.items() if key not in ("distribution", "units")}
         return Distribution(spec["distribution"], units=units, **params)
-    unknown = sorted(set(map(str, spec)) - set(_SPEC_KEYS[kind]))
+    keys = _SPEC_KEYS[kind]
+    assert keys is not None  # only a distribution has open keys, handled above
+    unknown = sorted(set(map(str, spec)) - set(keys))
     if unknown:
-        raise ParameterSpaceError(f"unknown key(s) {', '.join(unknown)} for a {kind} parameter; "
-                                  f"expected {', '.join(_SPEC_KEYS[kind])}")
+        raise ParameterSpaceError(
+            f"unknown key(s) {', '.join(unknown)} for a {kind} parameter; expected {', '.join(keys)}"
+        )
     if kind == "interval":
         bounds = spec["interval"]
         if isinstance(bounds, str) or not isinstance(bounds, Sequence) or len(bounds) != 2:

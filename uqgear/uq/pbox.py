@@ -30,10 +30,20 @@ from .seeds import SeedLike, as_seed_sequence, child_seed, seed_attributes
 from .sweeps import ModelFunction, Sweep, make_sweep
 
 
-def response_envelope(evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any], *,
-                      method: str = "chebyshev", order: int = 6, scan_points: int | None = None,
-                      check_points: int = 4, tolerance: float = 0.02, fallback: str = "scan",
-                      qoi: Sequence[str] | None = None, seed: SeedLike | None = None) -> xr.Dataset:
+def response_envelope(
+    evaluate: ModelFunction,
+    space: ParameterSpace,
+    sweep: Mapping[str, Any],
+    *,
+    method: str = "chebyshev",
+    order: int = 6,
+    scan_points: int | None = None,
+    check_points: int = 4,
+    tolerance: float = 0.02,
+    fallback: str = "scan",
+    qoi: Sequence[str] | None = None,
+    seed: SeedLike | None = None,
+) -> xr.Dataset:
     """Band of each QoI over the interval parameters along a sweep axis.
 
     A shorthand for ``IntervalAnalysis(method, ...).fit(evaluate, space,
@@ -41,15 +51,31 @@ def response_envelope(evaluate: ModelFunction, space: ParameterSpace, sweep: Map
     """
     if not sweep:
         raise ParameterSpaceError("sweep: a response envelope needs a sweep, e.g. {'pinion_speed': speeds}")
-    analysis = IntervalAnalysis(method, order=order, scan_points=scan_points, check_points=check_points,
-                                tolerance=tolerance, fallback=fallback, qoi=qoi, seed=seed)
+    analysis = IntervalAnalysis(
+        method,
+        order=order,
+        scan_points=scan_points,
+        check_points=check_points,
+        tolerance=tolerance,
+        fallback=fallback,
+        qoi=qoi,
+        seed=seed,
+    )
     return analysis.fit(evaluate, space, sweep).result_
 
 
-def pbox(evaluate: ModelFunction, space: ParameterSpace, *, n_samples: int, seed: SeedLike,
-         sweep: Mapping[str, Any] | None = None, quantiles: Sequence[float] = (0.05, 0.5, 0.95),
-         sampling: str = "latin_hypercube", qoi: Sequence[str] | None = None,
-         analysis: IntervalAnalysis | None = None) -> xr.Dataset:
+def pbox(
+    evaluate: ModelFunction,
+    space: ParameterSpace,
+    *,
+    n_samples: int,
+    seed: SeedLike,
+    sweep: Mapping[str, Any] | None = None,
+    quantiles: Sequence[float] = (0.05, 0.5, 0.95),
+    sampling: str = "latin_hypercube",
+    qoi: Sequence[str] | None = None,
+    analysis: IntervalAnalysis | None = None,
+) -> xr.Dataset:
     """Bounds on statistics over interval parameters: a probability box.
 
     For every interval node the model runs the same ``n_samples`` random
@@ -94,24 +120,36 @@ def pbox(evaluate: ModelFunction, space: ParameterSpace, *, n_samples: int, seed
         raise ParameterSpaceError(f"analysis: expected an IntervalAnalysis; got {type(analysis).__name__}")
     intervals = analysis._check_space(space)
     if not space.random_names:
-        raise ParameterSpaceError("space: a p-box needs at least one random (Distribution) parameter; "
-                                  "use IntervalAnalysis for intervals alone")
+        raise ParameterSpaceError(
+            "space: a p-box needs at least one random (Distribution) parameter; "
+            "use IntervalAnalysis for intervals alone"
+        )
     if analysis.regime_variables:
         raise ParameterSpaceError("analysis: regime_variables are not used by pbox(); leave them out")
     n_samples = check_count(n_samples, "n_samples", 2)
     if sampling not in SAMPLING_METHODS or sampling == "grid":
-        raise ParameterSpaceError(f"sampling: expected one of monte_carlo, latin_hypercube, sobol, halton; "
-                                  f"got {sampling!r}")
+        raise ParameterSpaceError(
+            f"sampling: expected one of monte_carlo, latin_hypercube, sobol, halton; got {sampling!r}"
+        )
     levels = check_quantiles(quantiles)
     seed_sequence = as_seed_sequence(seed)
     sweep_spec = make_sweep(sweep, space)
-    responses = PboxResponses(evaluate, space, sweep_spec, None if qoi is None else list(qoi), n_samples,
-                              sampling, levels, child_seed(seed_sequence, 0))
+    responses = PboxResponses(
+        evaluate,
+        space,
+        sweep_spec,
+        None if qoi is None else list(qoi),
+        n_samples,
+        sampling,
+        levels,
+        child_seed(seed_sequence, 0),
+    )
     if analysis.seed_sequence is None:
         analysis = copy.copy(analysis)  # leave the caller's object as it was
         analysis.seed_sequence = child_seed(seed_sequence, 1)
     bounds = analysis._bound(responses, sweep_spec, len(intervals))
     qoi_names = responses.qoi_names
+    assert qoi_names is not None  # set by the model's first call, which every bounding method makes
     per_qoi = 2 + levels.size
     coords = analysis._coords(sweep_spec, qoi_names)
     coords.update(statistic=("statistic", ["mean", "std"]), quantile=("quantile", levels, {"units": "1"}))
@@ -120,16 +158,20 @@ def pbox(evaluate: ModelFunction, space: ParameterSpace, *, n_samples: int, seed
     _relabel_reasons(bounds, responses, levels)
     data_vars.update(bound_diagnostics(bounds, responses, sweep_spec, qoi_names, groups))
     attrs = analysis._attrs(space, responses, "pbox")
-    attrs.update(n_samples=n_samples, sampling=sampling, random_parameters=json.dumps({name: space[name].describe() for name in space.random_names}),
-                 random_numbers="common random numbers: the same random samples at every interval node",
-                 **{f"pbox_{k}": v for k, v in seed_attributes(seed_sequence).items()})
+    attrs.update(
+        n_samples=n_samples,
+        sampling=sampling,
+        random_parameters=json.dumps({name: space[name].describe() for name in space.random_names}),
+        random_numbers="common random numbers: the same random samples at every interval node",
+        **{f"pbox_{k}": v for k, v in seed_attributes(seed_sequence).items()},
+    )
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
-def _statistic_variables(bounds: Bounds, responses: PboxResponses, sweep: Sweep,
-                         levels: np.ndarray) -> dict[str, Any]:
+def _statistic_variables(bounds: Bounds, responses: PboxResponses, sweep: Sweep, levels: np.ndarray) -> dict[str, Any]:
     """Per QoI: bounds of its mean and std, of its quantiles (the p-box) and their largest error."""
     qoi_names = responses.qoi_names
+    assert qoi_names is not None  # set by the model's first call, which every bounding method makes
     per_qoi = 2 + levels.size
     shape = sweep.shape
     data_vars = {}
@@ -138,31 +180,42 @@ def _statistic_variables(bounds: Bounds, responses: PboxResponses, sweep: Sweep,
         lower, upper = bounds.lower[:, columns], bounds.upper[:, columns]
         band = np.stack([lower, upper], axis=-1).reshape(*shape, per_qoi, 2)
         units = responses.units[name]
-        data_vars[name] = ((*sweep.names, "statistic", "bound"), band[..., :2, :],
-                           {"units": units, "long_name": f"bounds over the interval parameters of the mean and "
-                                                         f"standard deviation of {name} over the random ones"})
-        data_vars[f"{name}_quantile"] = ((*sweep.names, "quantile", "bound"), band[..., 2:, :],
-                                         {"units": units, "long_name": f"bounds of the quantiles of {name} "
-                                                                       f"(p-box)"})
+        data_vars[name] = (
+            (*sweep.names, "statistic", "bound"),
+            band[..., :2, :],
+            {
+                "units": units,
+                "long_name": f"bounds over the interval parameters of the mean and "
+                f"standard deviation of {name} over the random ones",
+            },
+        )
+        data_vars[f"{name}_quantile"] = (
+            (*sweep.names, "quantile", "bound"),
+            band[..., 2:, :],
+            {"units": units, "long_name": f"bounds of the quantiles of {name} (p-box)"},
+        )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            error = np.nanmax(np.where(np.isnan(bounds.error[:, columns]), -np.inf, bounds.error[:, columns]),
-                              axis=1)
-        data_vars[f"{name}_surrogate_error"] = (sweep.names, np.where(np.isinf(error) & (error < 0), np.nan,
-                                                                      error).reshape(shape),
-                                                {"units": units, "long_name": f"largest estimated error of the "
-                                                                              f"bounds of the statistics of {name}"})
+            error = np.nanmax(np.where(np.isnan(bounds.error[:, columns]), -np.inf, bounds.error[:, columns]), axis=1)
+        data_vars[f"{name}_surrogate_error"] = (
+            sweep.names,
+            np.where(np.isinf(error) & (error < 0), np.nan, error).reshape(shape),
+            {"units": units, "long_name": f"largest estimated error of the bounds of the statistics of {name}"},
+        )
     return data_vars
 
 
 def _relabel_reasons(bounds: Bounds, responses: PboxResponses, levels: np.ndarray) -> None:
     """Name the statistic in each flag reason (``dte_rms quantile 0.95``, not ``dte_rms|q2``)."""
     qoi_names = responses.qoi_names
+    assert qoi_names is not None  # set by the model's first call, which every bounding method makes
     per_qoi = 2 + levels.size
     readable = {}
     for q, name in enumerate(qoi_names):
         labels = ["mean", "std"] + [f"quantile {level:g}" for level in levels]
         for k, label in enumerate(labels):
             readable[q * per_qoi + k] = f"{name} {label}"
+    names = responses.names
+    assert names is not None  # set by the model's first call, which every bounding method makes
     for key, texts in bounds.reasons.items():
-        bounds.reasons[key] = [text.replace(responses.names[key[1]], readable[key[1]], 1) for text in texts]
+        bounds.reasons[key] = [text.replace(names[key[1]], readable[key[1]], 1) for text in texts]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 import chaospy
@@ -23,6 +23,7 @@ from .sampling import SAMPLING_METHODS, UNIT_EPSILON, unit_hypercube
 from .seeds import SeedLike, as_seed_sequence, child_seed, seed_attributes
 from .sweeps import ModelFunction, evaluate_on_sweep, make_sweep
 
+
 def total_degree_indices(dimensions: int, order: int) -> np.ndarray:
     """Multi-indices of total degree <= ``order``, sorted by degree (graded).
 
@@ -32,8 +33,9 @@ def total_degree_indices(dimensions: int, order: int) -> np.ndarray:
         Shape ``(terms, dimensions)``; the first row is all zeros, and the
         indices of degree <= p form a prefix for every p.
     """
-    indices = np.asarray(chaospy.glexindex(start=0, stop=order + 1, dimensions=dimensions,
-                                           graded=True, reverse=True), dtype=int).reshape(-1, dimensions)
+    indices = np.asarray(
+        chaospy.glexindex(start=0, stop=order + 1, dimensions=dimensions, graded=True, reverse=True), dtype=int
+    ).reshape(-1, dimensions)
     degree = indices.sum(axis=1)
     return indices[np.argsort(degree, kind="stable")]
 
@@ -89,10 +91,19 @@ class PolynomialChaos:
         The training samples and model outputs.
     """
 
-    def __init__(self, max_order: int = 6, *, min_order: int = 1, n_samples: int | None = None,
-                 oversampling: float = 2.0, sampling: str = "halton",
-                 quantiles: Sequence[float] = (0.05, 0.5, 0.95), surrogate_samples: int = 20_000,
-                 qoi: Sequence[str] | None = None, seed: SeedLike | None = None) -> None:
+    def __init__(
+        self,
+        max_order: int = 6,
+        *,
+        min_order: int = 1,
+        n_samples: int | None = None,
+        oversampling: float = 2.0,
+        sampling: str = "halton",
+        quantiles: Sequence[float] = (0.05, 0.5, 0.95),
+        surrogate_samples: int = 20_000,
+        qoi: Sequence[str] | None = None,
+        seed: SeedLike | None = None,
+    ) -> None:
         self.max_order = check_count(max_order, "max_order", 1, 30)
         self.min_order = check_count(min_order, "min_order", 0, 30)
         if self.min_order > self.max_order:
@@ -102,8 +113,9 @@ class PolynomialChaos:
         if self.oversampling < 1:
             raise ParameterSpaceError(f"oversampling: expected a number >= 1; got {oversampling!r}")
         if sampling not in SAMPLING_METHODS or sampling == "grid":
-            raise ParameterSpaceError(f"sampling: expected one of monte_carlo, latin_hypercube, sobol, halton; "
-                                      f"got {sampling!r}")
+            raise ParameterSpaceError(
+                f"sampling: expected one of monte_carlo, latin_hypercube, sobol, halton; got {sampling!r}"
+            )
         self.sampling = sampling
         self.quantiles = check_quantiles(quantiles)
         self.surrogate_samples = check_count(surrogate_samples, "surrogate_samples", 10)
@@ -114,8 +126,9 @@ class PolynomialChaos:
 
     # -- public ----------------------------------------------------------------------
 
-    def fit(self, evaluate: ModelFunction, space: ParameterSpace,
-            sweep: Mapping[str, Any] | None = None) -> "PolynomialChaos":
+    def fit(
+        self, evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None = None
+    ) -> PolynomialChaos:
         """Sample, run the model once (all sweep points in one batch) and fit.
 
         Parameters
@@ -137,20 +150,18 @@ class PolynomialChaos:
         n = self.n_samples or int(math.ceil(self.oversampling * number_of_terms(len(names), self.max_order)))
         if self.sampling == "sobol":
             n = 1 << (n - 1).bit_length()
-        samples = space.sample(n, self.sampling, seed=child_seed(self.seed_sequence, 0),
-                               interval_treatment="uniform")
+        samples = space.sample(n, self.sampling, seed=child_seed(self.seed_sequence, 0), interval_treatment="uniform")
         outputs = evaluate_on_sweep(evaluate, samples, sweep_spec, qoi=self.qoi)
         return self.fit_samples(samples, outputs, space)
 
-    def fit_samples(self, samples: xr.Dataset, outputs: xr.Dataset, space: ParameterSpace) -> "PolynomialChaos":
+    def fit_samples(self, samples: xr.Dataset, outputs: xr.Dataset, space: ParameterSpace) -> PolynomialChaos:
         """Fit expansions to given samples and outputs (dims ``(*sweep, "sample")``)."""
         names = _uncertain_names(space)
         _check_training_data(names, samples, outputs, self.min_order)
         n = samples.sizes["sample"]
         self._names = names
         self._maps = [space.standardized(name) for name in names]
-        self._univariate = [chaospy.generate_expansion(self.max_order, dist, normed=True)
-                            for dist, _, _ in self._maps]
+        self._univariate = [chaospy.generate_expansion(self.max_order, dist, normed=True) for dist, _, _ in self._maps]
         self._indices = total_degree_indices(len(names), self.max_order)
         design = self._basis(self._standard_coordinates(samples))
 
@@ -159,8 +170,9 @@ class PolynomialChaos:
             raise ParameterSpaceError("outputs: no variable ends with the dimension 'sample'")
         sweep_dims = outputs[qoi_names[0]].dims[:-1]
         sweep_shape = tuple(outputs.sizes[d] for d in sweep_dims)
-        columns = np.stack([outputs[name].transpose(*sweep_dims, "sample").values.reshape(-1, n)
-                            for name in qoi_names])  # (qoi, sweep point, sample)
+        columns = np.stack(
+            [outputs[name].transpose(*sweep_dims, "sample").values.reshape(-1, n) for name in qoi_names]
+        )  # (qoi, sweep point, sample)
         orders = np.arange(self.min_order, self.max_order + 1)
         loo, coefficients, chosen, used = _fit_orders(design, columns, orders, len(names))
         self._coefficients = coefficients
@@ -190,9 +202,14 @@ class PolynomialChaos:
         data_vars = {}
         for q, name in enumerate(self._qoi_names):
             values = self._coefficients[q] @ design.T  # (sweep point, sample)
-            data_vars[name] = ((*self._sweep_dims, "sample"), values.reshape(*self._sweep_shape, n),
-                               dict(self.outputs_[name].attrs))
-        coords = {d: self.outputs_.coords[d] for d in self._sweep_dims if d in self.outputs_.coords}
+            data_vars[name] = (
+                (*self._sweep_dims, "sample"),
+                values.reshape(*self._sweep_shape, n),
+                dict(self.outputs_[name].attrs),
+            )
+        coords: dict[Hashable, Any] = {
+            d: self.outputs_.coords[d] for d in self._sweep_dims if d in self.outputs_.coords
+        }
         coords["sample"] = samples["sample"].values
         return xr.Dataset(data_vars, coords=coords, attrs={"method": "polynomial_chaos_surrogate"})
 
@@ -206,63 +223,104 @@ class PolynomialChaos:
 
     def _basis(self, standard: np.ndarray) -> np.ndarray:
         """Design matrix (samples x terms) of the orthonormal product basis."""
-        univariate = [np.atleast_2d(np.asarray(poly(standard[:, j]), dtype=float))
-                      for j, poly in enumerate(self._univariate)]
+        univariate = [
+            np.atleast_2d(np.asarray(poly(standard[:, j]), dtype=float)) for j, poly in enumerate(self._univariate)
+        ]
         design = np.ones((standard.shape[0], self._indices.shape[0]))
         for j, values in enumerate(univariate):
             design *= values[self._indices[:, j]].T
         return design
 
-    def _result(self, outputs: xr.Dataset, orders: np.ndarray, loo: np.ndarray, chosen: np.ndarray,
-                used: np.ndarray, space: ParameterSpace) -> xr.Dataset:
+    def _result(
+        self,
+        outputs: xr.Dataset,
+        orders: np.ndarray,
+        loo: np.ndarray,
+        chosen: np.ndarray,
+        used: np.ndarray,
+        space: ParameterSpace,
+    ) -> xr.Dataset:
         mean, variance, first, total = _variance_decomposition(self._coefficients, self._indices)
         quantile_values = self._surrogate_quantiles()
 
         sweep_dims, shape = self._sweep_dims, self._sweep_shape
-        coords: dict[str, Any] = {d: outputs.coords[d] for d in sweep_dims if d in outputs.coords}
-        coords.update(statistic=("statistic", ["mean", "std", "variance"]),
-                      quantile=("quantile", self.quantiles, {"units": "1"}),
-                      param=("param", list(self._names)), index=("index", ["S1", "ST"]),
-                      order=("order", orders.astype(np.int64)))
+        coords: dict[Hashable, Any] = {d: outputs.coords[d] for d in sweep_dims if d in outputs.coords}
+        coords.update(
+            statistic=("statistic", ["mean", "std", "variance"]),
+            quantile=("quantile", self.quantiles, {"units": "1"}),
+            param=("param", list(self._names)),
+            index=("index", ["S1", "ST"]),
+            order=("order", orders.astype(np.int64)),
+        )
         data_vars = {}
         for q, name in enumerate(self._qoi_names):
             units = outputs[name].attrs.get("units", "")
             moments = np.stack([mean[q], np.sqrt(variance[q]), variance[q]], axis=-1)
-            data_vars[name] = ((*sweep_dims, "statistic"), moments.reshape(*shape, 3),
-                               {"units": units, "variance_units": f"({units})^2" if units else "",
-                                "long_name": f"PCE moments of {name}"})
-            data_vars[f"{name}_quantile"] = ((*sweep_dims, "quantile"),
-                                             quantile_values[q].reshape(*shape, -1),
-                                             {"units": units, "long_name": f"PCE quantiles of {name}",
-                                              "method": f"empirical quantiles of {self.surrogate_samples} "
-                                                        f"surrogate samples"})
+            data_vars[name] = (
+                (*sweep_dims, "statistic"),
+                moments.reshape(*shape, 3),
+                {
+                    "units": units,
+                    "variance_units": f"({units})^2" if units else "",
+                    "long_name": f"PCE moments of {name}",
+                },
+            )
+            data_vars[f"{name}_quantile"] = (
+                (*sweep_dims, "quantile"),
+                quantile_values[q].reshape(*shape, -1),
+                {
+                    "units": units,
+                    "long_name": f"PCE quantiles of {name}",
+                    "method": f"empirical quantiles of {self.surrogate_samples} surrogate samples",
+                },
+            )
             sobol = np.stack([first[q], total[q]], axis=-1)
-            data_vars[f"{name}_sobol"] = ((*sweep_dims, "param", "index"),
-                                          sobol.reshape(*shape, len(self._names), 2),
-                                          {"units": "1", "long_name": f"PCE Sobol indices of {name}"})
-            data_vars[f"{name}_loo_error"] = ((*sweep_dims, "order"), loo[q].reshape(*shape, orders.size),
-                                              {"units": "1", "long_name": "relative leave-one-out error: mean "
-                                               "squared LOO residual / sample variance (NaN: too few samples)"})
-            data_vars[f"{name}_order"] = (sweep_dims, chosen[q].reshape(shape),
-                                          {"units": "1", "long_name": "order chosen by minimal LOO error "
-                                                                      "(-1: no usable order)"})
-            data_vars[f"{name}_samples_used"] = (sweep_dims, used[q].reshape(shape),
-                                                 {"units": "1", "long_name": "finite model outputs used"})
-        distributions = {name: ("uniform on " + space[name].describe() if name in space.interval_names
-                                else space[name].describe()) for name in self._names}
+            data_vars[f"{name}_sobol"] = (
+                (*sweep_dims, "param", "index"),
+                sobol.reshape(*shape, len(self._names), 2),
+                {"units": "1", "long_name": f"PCE Sobol indices of {name}"},
+            )
+            data_vars[f"{name}_loo_error"] = (
+                (*sweep_dims, "order"),
+                loo[q].reshape(*shape, orders.size),
+                {
+                    "units": "1",
+                    "long_name": "relative leave-one-out error: mean "
+                    "squared LOO residual / sample variance (NaN: too few samples)",
+                },
+            )
+            data_vars[f"{name}_order"] = (
+                sweep_dims,
+                chosen[q].reshape(shape),
+                {"units": "1", "long_name": "order chosen by minimal LOO error (-1: no usable order)"},
+            )
+            data_vars[f"{name}_samples_used"] = (
+                sweep_dims,
+                used[q].reshape(shape),
+                {"units": "1", "long_name": "finite model outputs used"},
+            )
+        distributions = {
+            name: ("uniform on " + space[name].describe() if name in space.interval_names else space[name].describe())
+            for name in self._names
+        }
         attrs = {
             "method": "polynomial_chaos_regression",
-            "interval_treatment": ("interval parameters treated as uniform on their bounds for the PCE "
-                                   "(an assumption: an interval implies no distribution)"
-                                   if space.interval_names else "none (no interval parameters)"),
+            "interval_treatment": (
+                "interval parameters treated as uniform on their bounds for the PCE "
+                "(an assumption: an interval implies no distribution)"
+                if space.interval_names
+                else "none (no interval parameters)"
+            ),
             "distributions": json.dumps(distributions),
             "basis": "orthonormal polynomials of each standardized input (chaospy.generate_expansion), "
-                     "total-degree truncation",
+            "total-degree truncation",
             "regression": "ordinary least squares; order chosen by minimal leave-one-out error",
             "sobol_method": "from the coefficients of the orthonormal expansion (Sudret 2008), "
-                            "equal to chaospy.Sens_m / Sens_t",
-            "min_order": self.min_order, "max_order": self.max_order,
-            "n_samples": int(self.samples_.sizes["sample"]), "sampling": self.sampling,
+            "equal to chaospy.Sens_m / Sens_t",
+            "min_order": self.min_order,
+            "max_order": self.max_order,
+            "n_samples": int(self.samples_.sizes["sample"]),
+            "sampling": self.sampling,
             "runs": int(self.samples_.sizes["sample"]) * int(np.prod(shape, dtype=int)),
             "surrogate_samples": self.surrogate_samples,
             "parameter_space": space.to_json(),
@@ -274,14 +332,15 @@ class PolynomialChaos:
         rng_seed = child_seed(self.seed_sequence, 1)
         unit = unit_hypercube(self.surrogate_samples, len(self._names), "monte_carlo", rng_seed)
         unit = np.clip(unit, UNIT_EPSILON, 1 - UNIT_EPSILON)
-        standard = np.stack([np.asarray(dist.inv(unit[:, j]), dtype=float)
-                             for j, (dist, _, _) in enumerate(self._maps)], axis=1)
+        standard = np.stack(
+            [np.asarray(dist.inv(unit[:, j]), dtype=float) for j, (dist, _, _) in enumerate(self._maps)], axis=1
+        )
         coefficients = self._coefficients.reshape(-1, self._indices.shape[0])
         values = np.empty((coefficients.shape[0], standard.shape[0]))
         chunk = 8192  # bound the design-matrix memory: chunk x terms floats
         for start in range(0, standard.shape[0], chunk):
-            design = self._basis(standard[start:start + chunk])
-            values[:, start:start + chunk] = coefficients @ design.T
+            design = self._basis(standard[start : start + chunk])
+            values[:, start : start + chunk] = coefficients @ design.T
         result = np.quantile(values, self.quantiles, axis=1).T  # (qoi*sweep, quantile)
         return result.reshape(*self._coefficients.shape[:2], self.quantiles.size)
 
@@ -296,8 +355,9 @@ def _uncertain_names(space: ParameterSpace) -> list[str]:
     return names
 
 
-def _variance_decomposition(coefficients: np.ndarray,
-                            indices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _variance_decomposition(
+    coefficients: np.ndarray, indices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Mean, variance and first-order and total Sobol indices from orthonormal-expansion coefficients.
 
     ``coefficients`` has shape (qoi, sweep point, terms) on the multi-indices
@@ -320,21 +380,25 @@ def _check_training_data(names: list[str], samples: xr.Dataset, outputs: xr.Data
     if not isinstance(samples, xr.Dataset) or "sample" not in samples.dims:
         raise ParameterSpaceError("samples: expected an xarray.Dataset with dimension 'sample'")
     if not isinstance(outputs, xr.Dataset) or outputs.sizes.get("sample") != samples.sizes["sample"]:
-        raise ParameterSpaceError(f"outputs: expected an xarray.Dataset with dimension 'sample' of length "
-                                  f"{samples.sizes['sample']}")
+        raise ParameterSpaceError(
+            f"outputs: expected an xarray.Dataset with dimension 'sample' of length {samples.sizes['sample']}"
+        )
     missing = [name for name in names if name not in samples]
     if missing:
         raise ParameterSpaceError(f"samples: missing parameter(s) {', '.join(missing)}")
     n = samples.sizes["sample"]
     terms_needed = number_of_terms(len(names), min_order) + 2
     if n < terms_needed:
-        raise ParameterSpaceError(f"n_samples: {n} samples cannot fit order {min_order} in "
-                                  f"{len(names)} parameters ({terms_needed - 2} terms); expected at least "
-                                  f"{terms_needed}")
+        raise ParameterSpaceError(
+            f"n_samples: {n} samples cannot fit order {min_order} in "
+            f"{len(names)} parameters ({terms_needed - 2} terms); expected at least "
+            f"{terms_needed}"
+        )
 
 
-def _fit_orders(design: np.ndarray, columns: np.ndarray, orders: np.ndarray,
-                dimensions: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _fit_orders(
+    design: np.ndarray, columns: np.ndarray, orders: np.ndarray, dimensions: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit every order to every (QoI, sweep point) column and keep the one of least LOO error.
 
     Parameters
@@ -376,7 +440,7 @@ def _fit_orders(design: np.ndarray, columns: np.ndarray, orders: np.ndarray,
                 continue
             key = np.packbits(finite).tobytes()
             if key not in factorizations:
-                factorizations[key] = np.linalg.qr(design[finite][:, :terms_by_order[usable[-1]]])
+                factorizations[key] = np.linalg.qr(design[finite][:, : terms_by_order[usable[-1]]])
             q_factor, r_factor = factorizations[key]
             best = np.inf
             for k in usable:
@@ -397,7 +461,7 @@ def _fit_with_loo(q_factor: np.ndarray, r_factor: np.ndarray, y: np.ndarray) -> 
     For ordinary least squares the LOO residual is ``r_i / (1 - h_i)`` with
     ``h_i`` the diagonal of the hat matrix, so no refit is needed.
     """
-    leverage = np.sum(q_factor ** 2, axis=1)
+    leverage = np.sum(q_factor**2, axis=1)
     try:
         coefficients = np.linalg.solve(r_factor, q_factor.T @ y)
     except np.linalg.LinAlgError:
@@ -408,6 +472,5 @@ def _fit_with_loo(q_factor: np.ndarray, r_factor: np.ndarray, y: np.ndarray) -> 
     loo_mean_square = float(np.mean((residual / denominator) ** 2))
     variance = float(np.var(y))
     if variance == 0.0:
-        return coefficients, (0.0 if loo_mean_square <= 1e-28 * max(float(np.mean(y ** 2)), 1e-300)
-                              else np.inf)
+        return coefficients, (0.0 if loo_mean_square <= 1e-28 * max(float(np.mean(y**2)), 1e-300) else np.inf)
     return coefficients, loo_mean_square / variance

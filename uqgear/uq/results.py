@@ -22,16 +22,16 @@ import json
 import os
 import platform
 from collections.abc import Hashable, Mapping
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import xarray as xr
 
-from ..common.fileio import atomic_path
 from ..common.errors import UqgearError
+from ..common.fileio import atomic_path
 
 if TYPE_CHECKING:
     from ..physics.design import Design
@@ -42,18 +42,32 @@ ENCODED_ATTRS_MARKER = "uqgear_encoded_attrs"
 
 #: Attributes added by :func:`save_result`.
 PROVENANCE_ATTRS: tuple[str, ...] = (
-    "uqgear_version", "provenance_versions", "numba_target_cpu", "created", "seed",
-    "seed_spawn_key", "design", "study",
+    "uqgear_version",
+    "provenance_versions",
+    "numba_target_cpu",
+    "created",
+    "seed",
+    "seed_spawn_key",
+    "design",
+    "study",
 )
 
 #: Distributions whose versions are recorded in ``provenance_versions``.
 _PROVENANCE_PACKAGES: tuple[str, ...] = (
-    "numpy", "scipy", "xarray", "netCDF4", "chaospy", "SALib", "emcee", "numba", "llvmlite",
+    "numpy",
+    "scipy",
+    "xarray",
+    "netCDF4",
+    "chaospy",
+    "SALib",
+    "emcee",
+    "numba",
+    "llvmlite",
 )
 
 _FALLBACK_VERSION = "0.1.0"
 _INT64 = np.iinfo(np.int64)
-_NETCDF_ENGINE = "netcdf4"
+_NETCDF_ENGINE: Final = "netcdf4"
 
 
 def uqgear_version() -> str:
@@ -89,9 +103,12 @@ def numba_target_cpu() -> str:
     the output files alone.
     """
     from numba.core import config
-    if config.CPU_NAME:
-        return str(config.CPU_NAME)
+
+    # numba.config's options are module attributes it sets at import: no static type knows them
+    if config.CPU_NAME:  # type: ignore[attr-defined]
+        return str(config.CPU_NAME)  # type: ignore[attr-defined]
     import llvmlite.binding
+
     return str(llvmlite.binding.get_host_cpu_name())
 
 
@@ -127,14 +144,14 @@ def _encode_value(value: Any, where: str) -> tuple[Any, str | None]:
         return value, None
     if isinstance(value, np.ndarray):
         # netCDF attributes are 1-D and a length-1 array reads back as a scalar
-        if (value.ndim == 1 and value.size >= 2 and value.dtype.kind in "iuf"
-                and value.dtype != np.float16):
+        if value.ndim == 1 and value.size >= 2 and value.dtype.kind in "iuf" and value.dtype != np.float16:
             return value, None
         if value.dtype.kind not in "biuf":
-            raise UqgearError(f"{where}: cannot store an attribute array of dtype {value.dtype} "
-                              "in netCDF; expected a numeric or boolean array")
-        text = json.dumps({"dtype": value.dtype.str, "shape": list(value.shape),
-                           "data": value.tolist()})
+            raise UqgearError(
+                f"{where}: cannot store an attribute array of dtype {value.dtype} "
+                "in netCDF; expected a numeric or boolean array"
+            )
+        text = json.dumps({"dtype": value.dtype.str, "shape": list(value.shape), "data": value.tolist()})
         return text, "ndarray"
     if isinstance(value, (list, tuple, dict)):
         # lists always go through JSON: a netCDF list of one element reads back
@@ -142,10 +159,14 @@ def _encode_value(value: Any, where: str) -> tuple[Any, str | None]:
         try:
             return json.dumps(value, default=json_default), "json"
         except (TypeError, ValueError) as exc:
-            raise UqgearError(f"{where}: cannot store this attribute in netCDF ({exc}); "
-                              "expected lists/dicts of strings, numbers, booleans or None") from None
-    raise UqgearError(f"{where}: cannot store an attribute of type {type(value).__name__} in "
-                      "netCDF; expected a string, number, bool, None, list, dict or numpy array")
+            raise UqgearError(
+                f"{where}: cannot store this attribute in netCDF ({exc}); "
+                "expected lists/dicts of strings, numbers, booleans or None"
+            ) from None
+    raise UqgearError(
+        f"{where}: cannot store an attribute of type {type(value).__name__} in "
+        "netCDF; expected a string, number, bool, None, list, dict or numpy array"
+    )
 
 
 def _encode_attrs(attrs: Mapping[Hashable, Any], where: str) -> dict[str, Any]:
@@ -155,8 +176,9 @@ def _encode_attrs(attrs: Mapping[Hashable, Any], where: str) -> dict[str, Any]:
         if name == ENCODED_ATTRS_MARKER:
             continue
         if not isinstance(name, str):
-            raise UqgearError(f"{where}attribute {name!r}: netCDF attribute names must be "
-                              f"strings; got {type(name).__name__}")
+            raise UqgearError(
+                f"{where}attribute {name!r}: netCDF attribute names must be strings; got {type(name).__name__}"
+            )
         stored, kind = _encode_value(value, f"{where}attribute {name!r}")
         encoded[name] = stored
         if kind is not None:
@@ -177,8 +199,10 @@ def _decode_value(stored: Any, kind: str, where: str) -> Any:
             return np.asarray(spec["data"], dtype=np.dtype(spec["dtype"])).reshape(spec["shape"])
     except (TypeError, ValueError, KeyError) as exc:
         raise UqgearError(f"{where}: cannot decode the stored {kind} value ({exc})") from None
-    raise UqgearError(f"{where}: unknown attribute encoding {kind!r}; expected json, bool or "
-                      "ndarray (file written by a newer uqgear?)")
+    raise UqgearError(
+        f"{where}: unknown attribute encoding {kind!r}; expected json, bool or "
+        "ndarray (file written by a newer uqgear?)"
+    )
 
 
 def _decode_attrs(attrs: Mapping[Hashable, Any], where: str) -> dict[Hashable, Any]:
@@ -189,8 +213,7 @@ def _decode_attrs(attrs: Mapping[Hashable, Any], where: str) -> dict[Hashable, A
     try:
         kinds = json.loads(marker)
     except (TypeError, ValueError):
-        raise UqgearError(f"{where}{ENCODED_ATTRS_MARKER}: expected a JSON object; "
-                          f"got {marker!r}") from None
+        raise UqgearError(f"{where}{ENCODED_ATTRS_MARKER}: expected a JSON object; got {marker!r}") from None
     for name, kind in kinds.items():
         if name in decoded:
             decoded[name] = _decode_value(decoded[name], kind, f"{where}attribute {name!r}")
@@ -261,8 +284,7 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     target = Path(path)
     folder = target.parent
     if not folder.is_dir():
-        raise UqgearError(f"{target}: the folder {folder} does not exist; create it or choose "
-                          "another output path")
+        raise UqgearError(f"{target}: the folder {folder} does not exist; create it or choose another output path")
     if target.is_dir():
         raise UqgearError(f"{target}: is a folder; expected a file path for the netCDF output")
     encoded = _encode_dataset(ds)
@@ -270,8 +292,7 @@ def write_dataset(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
         with atomic_path(target) as temporary:
             encoded.to_netcdf(temporary, engine=_NETCDF_ENGINE)
     except (OSError, ValueError, TypeError, RuntimeError) as exc:
-        raise UqgearError(f"{target}: could not write the netCDF file ({type(exc).__name__}: "
-                          f"{exc})") from exc
+        raise UqgearError(f"{target}: could not write the netCDF file ({type(exc).__name__}: {exc})") from exc
     return target
 
 
@@ -293,8 +314,7 @@ def read_dataset(path: str | os.PathLike[str]) -> xr.Dataset:
         with xr.open_dataset(source, engine=_NETCDF_ENGINE) as opened:
             ds = opened.load()
     except (OSError, ValueError, TypeError, RuntimeError) as exc:
-        raise UqgearError(f"{source}: not a readable netCDF file ({type(exc).__name__}: {exc})"
-                          ) from None
+        raise UqgearError(f"{source}: not a readable netCDF file ({type(exc).__name__}: {exc})") from None
     return _decode_dataset(ds, str(source))
 
 
@@ -303,24 +323,29 @@ def read_dataset(path: str | os.PathLike[str]) -> xr.Dataset:
 
 def _seed_attrs(seed: int | np.random.SeedSequence) -> dict[str, str]:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer, np.random.SeedSequence)):
-        raise UqgearError(f"seed: expected a non-negative integer or a numpy SeedSequence; "
-                          f"got {seed!r}")
+        raise UqgearError(f"seed: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
     if not isinstance(seed, np.random.SeedSequence):
         if int(seed) < 0:
             raise UqgearError(f"seed: expected a non-negative integer; got {seed!r}")
         seed = np.random.SeedSequence(int(seed))
     entropy = seed.entropy
     # entropy is usually a 128-bit integer, too large for a netCDF integer attribute
-    attrs = {"seed": str(entropy) if isinstance(entropy, (int, np.integer))
-             else json.dumps(list(np.asarray(entropy).tolist()))}
+    attrs = {
+        "seed": str(entropy)
+        if isinstance(entropy, (int, np.integer))
+        else json.dumps(list(np.asarray(entropy).tolist()))
+    }
     if seed.spawn_key:
         attrs["seed_spawn_key"] = json.dumps([int(k) for k in seed.spawn_key])
     return attrs
 
 
-def provenance_attrs(*, seed: int | np.random.SeedSequence | None = None,
-                     design: Design | str | None = None,
-                     study_text: str | None = None) -> dict[str, str]:
+def provenance_attrs(
+    *,
+    seed: int | np.random.SeedSequence | None = None,
+    design: Design | str | None = None,
+    study_text: str | None = None,
+) -> dict[str, str]:
     """The provenance attributes :func:`save_result` adds to a result.
 
     Parameters
@@ -343,7 +368,7 @@ def provenance_attrs(*, seed: int | np.random.SeedSequence | None = None,
         "uqgear_version": uqgear_version(),
         "provenance_versions": json.dumps(package_versions(), sort_keys=True),
         "numba_target_cpu": numba_target_cpu(),
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     if seed is not None:
         attrs.update(_seed_attrs(seed))
@@ -352,26 +377,27 @@ def provenance_attrs(*, seed: int | np.random.SeedSequence | None = None,
             try:
                 json.loads(design)
             except ValueError:
-                raise UqgearError(f"design: expected a Design or its JSON text; got {design[:60]!r}"
-                                  ) from None
+                raise UqgearError(f"design: expected a Design or its JSON text; got {design[:60]!r}") from None
             attrs["design"] = design
         elif callable(getattr(design, "to_json", None)):
             attrs["design"] = design.to_json()
         else:
-            raise UqgearError(f"design: expected a Design or its JSON text; "
-                              f"got {type(design).__name__}")
+            raise UqgearError(f"design: expected a Design or its JSON text; got {type(design).__name__}")
     if study_text is not None:
         if not isinstance(study_text, str):
-            raise UqgearError(f"study_text: expected the study YAML as a string; "
-                              f"got {type(study_text).__name__}")
+            raise UqgearError(f"study_text: expected the study YAML as a string; got {type(study_text).__name__}")
         attrs["study"] = study_text
     return attrs
 
 
-def save_result(ds: xr.Dataset, path: str | os.PathLike[str], *,
-                seed: int | np.random.SeedSequence | None = None,
-                design: Design | str | None = None,
-                study_text: str | None = None) -> Path:
+def save_result(
+    ds: xr.Dataset,
+    path: str | os.PathLike[str],
+    *,
+    seed: int | np.random.SeedSequence | None = None,
+    design: Design | str | None = None,
+    study_text: str | None = None,
+) -> Path:
     """Save an analysis result as netCDF with provenance attributes.
 
     Parameters
@@ -400,8 +426,7 @@ def save_result(ds: xr.Dataset, path: str | os.PathLike[str], *,
         raise UqgearError(f"{path}: expected an xarray Dataset to save; got {type(ds).__name__}")
     stamped = ds.copy(deep=False)
     # provenance of an earlier save (a loaded result saved again) is replaced, not mixed
-    stamped.attrs = {name: value for name, value in ds.attrs.items()
-                     if name not in PROVENANCE_ATTRS}
+    stamped.attrs = {name: value for name, value in ds.attrs.items() if name not in PROVENANCE_ATTRS}
     stamped.attrs.update(provenance_attrs(seed=seed, design=design, study_text=study_text))
     return write_dataset(stamped, path)
 
@@ -421,5 +446,15 @@ def load_result(path: str | os.PathLike[str]) -> xr.Dataset:
     return read_dataset(path)
 
 
-__all__ = ["save_result", "load_result", "write_dataset", "read_dataset", "provenance_attrs",
-           "package_versions", "numba_target_cpu", "uqgear_version", "PROVENANCE_ATTRS", "ENCODED_ATTRS_MARKER"]
+__all__ = [
+    "save_result",
+    "load_result",
+    "write_dataset",
+    "read_dataset",
+    "provenance_attrs",
+    "package_versions",
+    "numba_target_cpu",
+    "uqgear_version",
+    "PROVENANCE_ATTRS",
+    "ENCODED_ATTRS_MARKER",
+]

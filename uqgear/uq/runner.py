@@ -117,8 +117,12 @@ def chunk_hash(chunk: xr.Dataset, key: str, evaluate: Any) -> str:
         variable = chunk.variables[name]
         values = np.asarray(variable.values)
         is_text = values.dtype.kind in "OUS"
-        header = [str(name), [str(dim) for dim in variable.dims],
-                  "text" if is_text else values.dtype.str, list(values.shape)]
+        header = [
+            str(name),
+            [str(dim) for dim in variable.dims],
+            "text" if is_text else values.dtype.str,
+            list(values.shape),
+        ]
         digest.update(json.dumps(header).encode())
         digest.update(_attrs_fingerprint(variable.attrs))
         if is_text:
@@ -161,33 +165,42 @@ class Runner:
         If an argument has the wrong type or range.
     """
 
-    def __init__(self, chunk_size: int = 256, *, scheduler: str | Client | None = None,
-                 workers: int | None = None, checkpoint_dir: str | os.PathLike[str] | None = None,
-                 retries: int = 2, progress: bool = True, connect_timeout: float = 5.0) -> None:
-        if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
-                or chunk_size < 1:
+    def __init__(
+        self,
+        chunk_size: int = 256,
+        *,
+        scheduler: str | Client | None = None,
+        workers: int | None = None,
+        checkpoint_dir: str | os.PathLike[str] | None = None,
+        retries: int = 2,
+        progress: bool = True,
+        connect_timeout: float = 5.0,
+    ) -> None:
+        if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
             raise ExecutionError(f"chunk_size: expected a positive integer; got {chunk_size!r}")
         if isinstance(retries, bool) or not isinstance(retries, (int, np.integer)) or retries < 0:
             raise ExecutionError(f"retries: expected a non-negative integer; got {retries!r}")
-        if workers is not None and (isinstance(workers, bool)
-                                    or not isinstance(workers, (int, np.integer)) or workers < 1):
+        if workers is not None and (
+            isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
+        ):
             raise ExecutionError(f"workers: expected None or a positive integer; got {workers!r}")
         if scheduler is None:
             if workers is not None and workers != 1:
                 raise ExecutionError(
                     f"workers: expected None or 1 without a scheduler (in-process runs evaluate "
                     f"one chunk at a time and the model uses all local cores); got {workers}; "
-                    "give a scheduler address to spread chunks over several workers")
+                    "give a scheduler address to spread chunks over several workers"
+                )
         elif isinstance(scheduler, str):
             if not scheduler.strip():
-                raise ExecutionError("scheduler: expected an address like 'tcp://host:8786'; "
-                                     "got an empty string")
+                raise ExecutionError("scheduler: expected an address like 'tcp://host:8786'; got an empty string")
         elif not is_dask_client(scheduler):
-            raise ExecutionError(f"scheduler: expected None, an address like 'tcp://host:8786' "
-                                 f"or a distributed.Client; got {type(scheduler).__name__}")
+            raise ExecutionError(
+                f"scheduler: expected None, an address like 'tcp://host:8786' "
+                f"or a distributed.Client; got {type(scheduler).__name__}"
+            )
         if not isinstance(connect_timeout, (int, float)) or not connect_timeout > 0:
-            raise ExecutionError(f"connect_timeout: expected a positive number of seconds; "
-                                 f"got {connect_timeout!r}")
+            raise ExecutionError(f"connect_timeout: expected a positive number of seconds; got {connect_timeout!r}")
         self.chunk_size = int(chunk_size)
         self.scheduler = scheduler
         self.workers = None if workers is None else int(workers)
@@ -200,8 +213,7 @@ class Runner:
 
     # ------------------------------------------------------------------ public
 
-    def run(self, evaluate: Evaluate, samples: xr.Dataset, *, key: str = "",
-            resume: bool = False) -> xr.Dataset:
+    def run(self, evaluate: Evaluate, samples: xr.Dataset, *, key: str = "", resume: bool = False) -> xr.Dataset:
         """Evaluate ``evaluate`` on all samples and return the results in sample order.
 
         Parameters
@@ -234,24 +246,23 @@ class Runner:
             Raised by the model itself (passed through, not retried).
         """
         if not callable(evaluate):
-            raise ExecutionError(f"evaluate: expected a callable model; "
-                                 f"got {type(evaluate).__name__}")
+            raise ExecutionError(f"evaluate: expected a callable model; got {type(evaluate).__name__}")
         if not isinstance(samples, xr.Dataset) or "sample" not in samples.dims:
-            found = (f"a Dataset with dims {tuple(samples.dims)}" if isinstance(samples, xr.Dataset)
-                     else type(samples).__name__)
-            raise ExecutionError(f"samples: expected an xarray Dataset with dim 'sample'; "
-                                 f"got {found}")
+            found = (
+                f"a Dataset with dims {tuple(samples.dims)}"
+                if isinstance(samples, xr.Dataset)
+                else type(samples).__name__
+            )
+            raise ExecutionError(f"samples: expected an xarray Dataset with dim 'sample'; got {found}")
         n_samples = samples.sizes["sample"]
         if n_samples == 0:
             raise ExecutionError("samples: expected at least one sample; got none")
         if not isinstance(key, str):
             raise ExecutionError(f"key: expected a string; got {type(key).__name__}")
         if resume and self.checkpoint_dir is None:
-            raise ExecutionError("resume: expected a checkpoint_dir to resume from; "
-                                 "the runner has none")
+            raise ExecutionError("resume: expected a checkpoint_dir to resume from; the runner has none")
 
-        spans = [(start, min(start + self.chunk_size, n_samples))
-                 for start in range(0, n_samples, self.chunk_size)]
+        spans = [(start, min(start + self.chunk_size, n_samples)) for start in range(0, n_samples, self.chunk_size)]
         chunks = [samples.isel(sample=slice(start, stop)) for start, stop in spans]
         results: list[xr.Dataset | None] = [None] * len(spans)
         checkpoint_paths = self._checkpoint_paths(chunks, key, evaluate)
@@ -259,14 +270,12 @@ class Runner:
             self._load_checkpoints(checkpoint_paths, spans, results)
         reused = sum(result is not None for result in results)
         if self.checkpoint_dir is not None:
-            logger.info("%d of %d chunks reused from checkpoints in %s", reused, len(spans),
-                        self.checkpoint_dir)
+            logger.info("%d of %d chunks reused from checkpoints in %s", reused, len(spans), self.checkpoint_dir)
 
         pending = [index for index, result in enumerate(results) if result is None]
         executor = "in-process" if self.scheduler is None else scheduler_text(self.scheduler)
         with progress(n_samples, desc="evaluating", unit="sample", enabled=self.progress) as bar:
-            bar.update(sum(stop - start for (start, stop), result in zip(spans, results)
-                           if result is not None))
+            bar.update(sum(stop - start for (start, stop), result in zip(spans, results) if result is not None))
 
             def finish(index: int, result: Any) -> None:
                 start, stop = spans[index]
@@ -283,34 +292,47 @@ class Runner:
             else:
                 attempts = self.retries + 1
                 retried = run_on_cluster(
-                    self.scheduler, evaluate, chunks, spans, pending, finish, workers=self.workers,
-                    attempts=attempts, timeout=self.connect_timeout,
+                    self.scheduler,
+                    evaluate,
+                    chunks,
+                    spans,
+                    pending,
+                    finish,
+                    workers=self.workers,
+                    attempts=attempts,
+                    timeout=self.connect_timeout,
                     failed=lambda index, made, exc: self._chunk_failed(index, spans[index], made, exc),
-                    retrying=lambda index, attempt, exc: self._log_retry(index, attempt, attempts, exc))
+                    retrying=lambda index, attempt, exc: self._log_retry(index, attempt, attempts, exc),
+                )
 
-        self.last_report = RunReport(n_samples=n_samples, n_chunks=len(spans),
-                                     reused_chunks=reused, evaluated_chunks=len(pending),
-                                     retried_attempts=retried, executor=executor)
+        self.last_report = RunReport(
+            n_samples=n_samples,
+            n_chunks=len(spans),
+            reused_chunks=reused,
+            evaluated_chunks=len(pending),
+            retried_attempts=retried,
+            executor=executor,
+        )
         return self._concatenate([result for result in results if result is not None])
 
     # ------------------------------------------------------------------ checkpoints
 
-    def _checkpoint_paths(self, chunks: list[xr.Dataset], key: str,
-                          evaluate: Any) -> list[Path]:
+    def _checkpoint_paths(self, chunks: list[xr.Dataset], key: str, evaluate: Any) -> list[Path]:
         if self.checkpoint_dir is None:
             return []
         try:
             self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise ExecutionError(f"checkpoint_dir {self.checkpoint_dir}: cannot create the folder "
-                                 f"({exc})") from None
+            raise ExecutionError(f"checkpoint_dir {self.checkpoint_dir}: cannot create the folder ({exc})") from None
         width = max(6, len(str(len(chunks) - 1)))
-        names = (f"chunk-{index:0{width}d}-{chunk_hash(chunk, key, evaluate)[:20]}.nc"
-                 for index, chunk in enumerate(chunks))
+        names = (
+            f"chunk-{index:0{width}d}-{chunk_hash(chunk, key, evaluate)[:20]}.nc" for index, chunk in enumerate(chunks)
+        )
         return [self.checkpoint_dir / name for name in names]
 
-    def _load_checkpoints(self, paths: list[Path], spans: list[tuple[int, int]],
-                          results: list[xr.Dataset | None]) -> None:
+    def _load_checkpoints(
+        self, paths: list[Path], spans: list[tuple[int, int]], results: list[xr.Dataset | None]
+    ) -> None:
         for index, path in enumerate(paths):
             if not path.is_file():
                 continue
@@ -325,9 +347,14 @@ class Runner:
 
     # ------------------------------------------------------------------ execution
 
-    def _run_in_process(self, evaluate: Evaluate, chunks: list[xr.Dataset],
-                        spans: list[tuple[int, int]], pending: list[int],
-                        finish: Callable[[int, Any], None]) -> int:
+    def _run_in_process(
+        self,
+        evaluate: Evaluate,
+        chunks: list[xr.Dataset],
+        spans: list[tuple[int, int]],
+        pending: list[int],
+        finish: Callable[[int, Any], None],
+    ) -> int:
         retried = 0
         for index in pending:
             attempts = self.retries + 1
@@ -354,25 +381,36 @@ class Runner:
     def _check_result(result: Any, index: int, start: int, stop: int) -> None:
         expected = stop - start
         if not isinstance(result, xr.Dataset):
-            raise ExecutionError(f"chunk {index}: the model returned {type(result).__name__}; "
-                                 f"expected an xarray Dataset with dim 'sample' of length {expected}")
+            raise ExecutionError(
+                f"chunk {index}: the model returned {type(result).__name__}; "
+                f"expected an xarray Dataset with dim 'sample' of length {expected}"
+            )
         if result.sizes.get("sample") != expected:
             found = result.sizes.get("sample", "no 'sample' dim")
-            raise ExecutionError(f"chunk {index}: the model returned a Dataset with sample length "
-                                 f"{found}; expected dim 'sample' of length {expected} "
-                                 f"(samples {start} to {stop - 1})")
+            raise ExecutionError(
+                f"chunk {index}: the model returned a Dataset with sample length "
+                f"{found}; expected dim 'sample' of length {expected} "
+                f"(samples {start} to {stop - 1})"
+            )
 
     @staticmethod
-    def _chunk_failed(index: int, span: tuple[int, int], attempts: int,
-                      exc: BaseException) -> ExecutionError:
-        return ExecutionError(f"chunk {index} (samples {span[0]} to {span[1] - 1}) failed after "
-                              f"{attempts} attempt{'s' if attempts > 1 else ''}: "
-                              f"{type(exc).__name__}: {exc}")
+    def _chunk_failed(index: int, span: tuple[int, int], attempts: int, exc: BaseException) -> ExecutionError:
+        return ExecutionError(
+            f"chunk {index} (samples {span[0]} to {span[1] - 1}) failed after "
+            f"{attempts} attempt{'s' if attempts > 1 else ''}: "
+            f"{type(exc).__name__}: {exc}"
+        )
 
     @staticmethod
     def _log_retry(index: int, attempt: int, attempts: int, exc: BaseException) -> None:
-        logger.warning("chunk %d failed (%s: %s); evaluating it again (attempt %d of %d)",
-                       index, type(exc).__name__, exc, attempt + 1, attempts)
+        logger.warning(
+            "chunk %d failed (%s: %s); evaluating it again (attempt %d of %d)",
+            index,
+            type(exc).__name__,
+            exc,
+            attempt + 1,
+            attempts,
+        )
 
     @staticmethod
     def _concatenate(parts: list[xr.Dataset]) -> xr.Dataset:
@@ -381,12 +419,21 @@ class Runner:
         try:
             # only variables with a sample dim are stacked; the others (a time axis, ...)
             # must agree between chunks, which is checked rather than assumed
-            return xr.concat(parts, dim="sample", data_vars="minimal", coords="minimal",
-                             compat="equals", join="exact", combine_attrs="override")
+            return xr.concat(
+                parts,
+                dim="sample",
+                data_vars="minimal",
+                coords="minimal",
+                compat="equals",
+                join="exact",
+                combine_attrs="override",
+            )
         except (ValueError, KeyError) as exc:
-            raise ExecutionError(f"the chunk results do not fit together along 'sample' "
-                                 f"({exc}); expected every chunk to return the same variables "
-                                 "and the same non-sample coordinates") from None
+            raise ExecutionError(
+                f"the chunk results do not fit together along 'sample' "
+                f"({exc}); expected every chunk to return the same variables "
+                "and the same non-sample coordinates"
+            ) from None
 
 
 __all__ = ["Runner", "RunReport", "Evaluate", "chunk_hash"]

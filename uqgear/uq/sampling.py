@@ -32,8 +32,7 @@ INTERVAL_TREATMENTS: tuple[str, ...] = ("uniform", "exclude")
 UNIT_EPSILON = 1e-12
 
 
-def unit_hypercube(n: int, dimensions: int, method: str,
-                   seed_sequence: np.random.SeedSequence) -> np.ndarray:
+def unit_hypercube(n: int, dimensions: int, method: str, seed_sequence: np.random.SeedSequence) -> np.ndarray:
     """``n`` points in [0, 1)^dimensions by a random or scrambled quasi-random method.
 
     Parameters
@@ -59,20 +58,24 @@ def unit_hypercube(n: int, dimensions: int, method: str,
         return qmc.LatinHypercube(d=dimensions, rng=rng).random(n)
     if method == "sobol":
         if n & (n - 1):
-            raise ParameterSpaceError(f"n: the 'sobol' sampling method needs a power of 2; got {n} "
-                                      f"(nearest: {2 ** int(round(math.log2(n)))})")
+            raise ParameterSpaceError(
+                f"n: the 'sobol' sampling method needs a power of 2; got {n} (nearest: {2 ** int(round(math.log2(n)))})"
+            )
         return qmc.Sobol(d=dimensions, scramble=True, rng=rng).random(n)
     if method == "halton":
         return qmc.Halton(d=dimensions, scramble=True, rng=rng).random(n)
-    raise ParameterSpaceError(f"method: unknown sampling method {method!r}; expected one of "
-                              f"{', '.join(SAMPLING_METHODS)}")
+    raise ParameterSpaceError(
+        f"method: unknown sampling method {method!r}; expected one of {', '.join(SAMPLING_METHODS)}"
+    )
 
 
 def grid_columns(n: int, is_interval: Sequence[bool]) -> np.ndarray:
     dimensions = len(is_interval)
-    if n ** dimensions > 10_000_000:
-        raise ParameterSpaceError(f"n: a grid of {n} points per parameter in {dimensions} dimensions has "
-                                  f"{n ** dimensions} points; expected at most 1e7")
+    if n**dimensions > 10_000_000:
+        raise ParameterSpaceError(
+            f"n: a grid of {n} points per parameter in {dimensions} dimensions has "
+            f"{n**dimensions} points; expected at most 1e7"
+        )
     axes = []
     for interval in is_interval:
         if interval:
@@ -85,24 +88,32 @@ def grid_columns(n: int, is_interval: Sequence[bool]) -> np.ndarray:
     return np.stack([axis.ravel() for axis in mesh], axis=1)
 
 
-def sample_space(space: Any, n: int, method: str = "monte_carlo", *, seed: SeedLike | None = None,
-                 interval_treatment: str | None = None) -> xr.Dataset:
+def sample_space(
+    space: Any,
+    n: int,
+    method: str = "monte_carlo",
+    *,
+    seed: SeedLike | None = None,
+    interval_treatment: str | None = None,
+) -> xr.Dataset:
     """Samples of every parameter of ``space``: see :meth:`ParameterSpace.sample`."""
     if method not in SAMPLING_METHODS:
-        raise ParameterSpaceError(f"method: unknown sampling method {method!r}; expected one of "
-                                  f"{', '.join(SAMPLING_METHODS)}")
+        raise ParameterSpaceError(
+            f"method: unknown sampling method {method!r}; expected one of {', '.join(SAMPLING_METHODS)}"
+        )
     n = check_count(n, "n")
     if interval_treatment is not None and interval_treatment not in INTERVAL_TREATMENTS:
-        raise ParameterSpaceError(f"interval_treatment: expected None or one of "
-                                  f"{', '.join(INTERVAL_TREATMENTS)}; got {interval_treatment!r}")
+        raise ParameterSpaceError(
+            f"interval_treatment: expected None or one of {', '.join(INTERVAL_TREATMENTS)}; got {interval_treatment!r}"
+        )
     intervals = space.interval_names
     if intervals and interval_treatment is None:
         raise ParameterSpaceError(
             f"interval parameter(s) {', '.join(intervals)}: an interval implies no distribution; pass "
             f"interval_treatment='uniform' to sample it uniformly anyway, 'exclude' to leave it out, "
-            f"or use uqgear.uq.interval for interval analysis")
-    sampled = [name for name in space.uncertain_names
-               if not (name in intervals and interval_treatment == "exclude")]
+            f"or use uqgear.uq.interval for interval analysis"
+        )
+    sampled = [name for name in space.uncertain_names if not (name in intervals and interval_treatment == "exclude")]
     seed_sequence = None
     if method != "grid":
         if seed is None:
@@ -111,6 +122,7 @@ def sample_space(space: Any, n: int, method: str = "monte_carlo", *, seed: SeedL
     if method == "grid":
         columns = grid_columns(n, [name in intervals for name in sampled])
     else:
+        assert seed_sequence is not None  # set above for every method but grid
         columns = unit_hypercube(n, len(sampled), method, seed_sequence)
     size = columns.shape[0]
     data_vars = {}
@@ -123,17 +135,25 @@ def sample_space(space: Any, n: int, method: str = "monte_carlo", *, seed: SeedL
         else:
             continue
         kind = {Interval: "interval", Distribution: "distribution", Fixed: "fixed"}[type(parameter)]
-        data_vars[name] = ("sample", values, {"units": parameter.units, "kind": kind,
-                                              "description": parameter.describe()})
+        data_vars[name] = (
+            "sample",
+            values,
+            {"units": parameter.units, "kind": kind, "description": parameter.describe()},
+        )
     if not intervals:
         treatment = "none (no interval parameters)"
     elif interval_treatment == "uniform":
-        treatment = ("uniform on the interval bounds (an assumption for sampling only: "
-                     "an interval implies no distribution)")
+        treatment = (
+            "uniform on the interval bounds (an assumption for sampling only: an interval implies no distribution)"
+        )
     else:
         treatment = "excluded (interval parameters not sampled)"
-    attrs = {"method": method, "interval_treatment": treatment,
-             "parameter_space": space.to_json(), **seed_attributes(seed_sequence)}
+    attrs = {
+        "method": method,
+        "interval_treatment": treatment,
+        "parameter_space": space.to_json(),
+        **seed_attributes(seed_sequence),
+    }
     if method == "grid":
         attrs["grid_points_per_parameter"] = n
     return xr.Dataset(data_vars, coords={"sample": np.arange(size)}, attrs=attrs)

@@ -9,18 +9,18 @@ gives the same numbers however often an analysis is run.
 from __future__ import annotations
 
 import json
-from typing import Union
 
 import numpy as np
 
 from ..common.errors import ParameterSpaceError
 
 #: A seed: a SeedSequence or an integer entropy for one.
-SeedLike = Union[np.random.SeedSequence, int]
+SeedLike = np.random.SeedSequence | int
 
 
-def as_seed_sequence(seed: SeedLike, *, setting: str = "seed",
-                     error: type[ValueError] | None = None) -> np.random.SeedSequence:
+def as_seed_sequence(
+    seed: SeedLike, *, setting: str = "seed", error: type[ValueError] | None = None
+) -> np.random.SeedSequence:
     """Turn ``seed`` into a :class:`numpy.random.SeedSequence`.
 
     Parameters
@@ -47,7 +47,8 @@ def as_seed_sequence(seed: SeedLike, *, setting: str = "seed",
     if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
         return np.random.SeedSequence(int(seed))
     raise (error or ParameterSpaceError)(
-        f"{setting}: expected a non-negative integer or a numpy SeedSequence; got {seed!r}")
+        f"{setting}: expected a non-negative integer or a numpy SeedSequence; got {seed!r}"
+    )
 
 
 def child_seed(seed_sequence: np.random.SeedSequence, index: int) -> np.random.SeedSequence:
@@ -58,14 +59,18 @@ def child_seed(seed_sequence: np.random.SeedSequence, index: int) -> np.random.S
     child from the spawn key keeps "same seed, same numbers" true however
     often an analysis is run.
     """
-    return np.random.SeedSequence(entropy=seed_sequence.entropy,
-                                  spawn_key=tuple(seed_sequence.spawn_key) + (int(index),),
-                                  pool_size=seed_sequence.pool_size)
+    return np.random.SeedSequence(
+        entropy=seed_sequence.entropy,
+        spawn_key=tuple(seed_sequence.spawn_key) + (int(index),),
+        pool_size=seed_sequence.pool_size,
+    )
 
 
 def seed_attributes(seed_sequence: np.random.SeedSequence | None) -> dict[str, str]:
     """NetCDF-safe attributes describing a seed (entropy may exceed 64 bits, so strings)."""
     if seed_sequence is None:
         return {"seed_entropy": "none (deterministic)", "seed_spawn_key": ""}
-    return {"seed_entropy": str(seed_sequence.entropy),
-            "seed_spawn_key": json.dumps([int(k) for k in seed_sequence.spawn_key])}
+    return {
+        "seed_entropy": str(seed_sequence.entropy),
+        "seed_spawn_key": json.dumps([int(k) for k in seed_sequence.spawn_key]),
+    }

@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Hashable, Mapping, Sequence
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -75,14 +75,23 @@ class SobolAnalysis:
         Set by :meth:`fit`.
     """
 
-    def __init__(self, n_base: int = 1024, *, second_order: bool = False,
-                 parameters: Sequence[str] | None = None, num_resamples: int = 100, conf_level: float = 0.95,
-                 qoi: Sequence[str] | None = None, seed: SeedLike | None = None) -> None:
+    def __init__(
+        self,
+        n_base: int = 1024,
+        *,
+        second_order: bool = False,
+        parameters: Sequence[str] | None = None,
+        num_resamples: int = 100,
+        conf_level: float = 0.95,
+        qoi: Sequence[str] | None = None,
+        seed: SeedLike | None = None,
+    ) -> None:
         n_base = check_count(n_base, "n_base", _MINIMUM_BASE)
         if n_base & (n_base - 1):
             lower = 1 << (n_base.bit_length() - 1)
-            raise ParameterSpaceError(f"n_base: the Sobol sequence needs a power of 2; got {n_base} "
-                                      f"(try {lower} or {2 * lower})")
+            raise ParameterSpaceError(
+                f"n_base: the Sobol sequence needs a power of 2; got {n_base} (try {lower} or {2 * lower})"
+            )
         self.n_base = n_base
         if not isinstance(second_order, (bool, np.bool_)):
             raise ParameterSpaceError(f"second_order: expected True or False; got {second_order!r}")
@@ -96,8 +105,9 @@ class SobolAnalysis:
         self.conf_level = float(conf_level)
         self.qoi = None if qoi is None else ([qoi] if isinstance(qoi, str) else list(qoi))
         if seed is None:
-            raise ParameterSpaceError("seed: the Sobol design is scrambled and the confidence intervals "
-                                      "are bootstrapped; pass seed=")
+            raise ParameterSpaceError(
+                "seed: the Sobol design is scrambled and the confidence intervals are bootstrapped; pass seed="
+            )
         self.seed_sequence = as_seed_sequence(seed)
 
     # -- steps ----------------------------------------------------------------------
@@ -125,16 +135,16 @@ class SobolAnalysis:
         with warnings.catch_warnings():
             # SALib warns about sample sizes; ours are checked to be powers of 2
             warnings.simplefilter("ignore", UserWarning)
-            unit = salib_sample.sample(problem, self.n_base, calc_second_order=self.second_order, scramble=True,
-                                       seed=rng)
+            unit = salib_sample.sample(
+                problem, self.n_base, calc_second_order=self.second_order, scramble=True, seed=rng
+            )
         data_vars = {}
         for name in space.names:
             if name in names:
                 values = analysed_space.from_unit(name, unit[:, names.index(name)])
             else:
                 values = np.full(unit.shape[0], analysed_space.nominal(name))
-            data_vars[name] = ("sample", values, {"units": space.units(name),
-                                                  "description": space[name].describe()})
+            data_vars[name] = ("sample", values, {"units": space.units(name), "description": space[name].describe()})
         attrs = {
             "method": "saltelli_sobol_design (SALib.sample.sobol.sample, scrambled)",
             "n_base": self.n_base,
@@ -170,54 +180,85 @@ class SobolAnalysis:
             ``nonfinite_outputs``).
         """
         if not isinstance(samples, xr.Dataset) or "sobol_parameters" not in samples.attrs:
-            raise ParameterSpaceError("samples: expected the Dataset returned by SobolAnalysis.sample "
-                                      "(attribute sobol_parameters missing)")
+            raise ParameterSpaceError(
+                "samples: expected the Dataset returned by SobolAnalysis.sample (attribute sobol_parameters missing)"
+            )
         names = json.loads(samples.attrs["sobol_parameters"])
         second_order = bool(samples.attrs["second_order"])
         if second_order != self.second_order:
-            raise ParameterSpaceError(f"second_order: the samples were drawn with second_order={second_order}, "
-                                      f"this analysis has second_order={self.second_order}")
+            raise ParameterSpaceError(
+                f"second_order: the samples were drawn with second_order={second_order}, "
+                f"this analysis has second_order={self.second_order}"
+            )
         size = samples.sizes["sample"]
         if not isinstance(outputs, xr.Dataset) or outputs.sizes.get("sample") != size:
-            raise ParameterSpaceError(f"outputs: expected an xarray.Dataset with dimension 'sample' of length "
-                                      f"{size} (one value per Saltelli sample)")
-        qoi_names = [name for name, variable in outputs.data_vars.items() if "sample" in variable.dims
-                     and np.issubdtype(variable.dtype, np.number)]
+            raise ParameterSpaceError(
+                f"outputs: expected an xarray.Dataset with dimension 'sample' of length "
+                f"{size} (one value per Saltelli sample)"
+            )
+        # the model's outputs are named by strings
+        qoi_names = [
+            name
+            for name, variable in cast(Mapping[str, xr.DataArray], outputs.data_vars).items()
+            if "sample" in variable.dims and np.issubdtype(variable.dtype, np.number)
+        ]
         if self.qoi is not None:
             missing = [name for name in self.qoi if name not in qoi_names]
             if missing:
-                raise ParameterSpaceError(f"qoi: {', '.join(missing)} not among the outputs "
-                                          f"({', '.join(qoi_names)})")
+                raise ParameterSpaceError(f"qoi: {', '.join(missing)} not among the outputs ({', '.join(qoi_names)})")
             qoi_names = list(self.qoi)
         if not qoi_names:
             raise ParameterSpaceError("outputs: no numeric variable with dimension 'sample'")
         problem = _unit_problem(names)
-        bootstrap_seed = int(child_seed(self.seed_sequence, 1).generate_state(1, np.uint32)[0]) % (2 ** 31 - 1) + 1
+        bootstrap_seed = int(child_seed(self.seed_sequence, 1).generate_state(1, np.uint32)[0]) % (2**31 - 1) + 1
         data_vars: dict[str, Any] = {}
         nonfinite: dict[str, int] = {}
         for name in qoi_names:
-            variables, bad = _qoi_indices(name, outputs[name], problem, names, second_order=second_order,
-                                          num_resamples=self.num_resamples, conf_level=self.conf_level,
-                                          seed=bootstrap_seed)
+            variables, bad = _qoi_indices(
+                name,
+                outputs[name],
+                problem,
+                names,
+                second_order=second_order,
+                num_resamples=self.num_resamples,
+                conf_level=self.conf_level,
+                seed=bootstrap_seed,
+            )
             data_vars.update(variables)
             if bad:
                 nonfinite[name] = bad
-        coords: dict[str, Any] = {dim: outputs.coords[dim] for dim in outputs.coords
-                                  if "sample" not in outputs.coords[dim].dims}
+        coords: dict[Hashable, Any] = {
+            dim: outputs.coords[dim] for dim in outputs.coords if "sample" not in outputs.coords[dim].dims
+        }
         coords.update(param=("param", list(names)), index=("index", list(SOBOL_INDICES)))
         if second_order:
             coords["param_2"] = ("param_2", list(names))
-        attrs = {key: samples.attrs[key] for key in ("n_base", "second_order", "distribution_assumed",
-                                                      "held_at_nominal", "parameter_space", "seed_entropy",
-                                                      "seed_spawn_key") if key in samples.attrs}
-        attrs.update(method="sobol (SALib.analyze.sobol.analyze, Saltelli 2010 / Jansen estimators)",
-                     num_resamples=self.num_resamples, conf_level=self.conf_level,
-                     bootstrap_seed=bootstrap_seed, runs=int(np.prod(list(outputs[qoi_names[0]].shape))),
-                     nonfinite_outputs=json.dumps(nonfinite))
+        attrs = {
+            key: samples.attrs[key]
+            for key in (
+                "n_base",
+                "second_order",
+                "distribution_assumed",
+                "held_at_nominal",
+                "parameter_space",
+                "seed_entropy",
+                "seed_spawn_key",
+            )
+            if key in samples.attrs
+        }
+        attrs.update(
+            method="sobol (SALib.analyze.sobol.analyze, Saltelli 2010 / Jansen estimators)",
+            num_resamples=self.num_resamples,
+            conf_level=self.conf_level,
+            bootstrap_seed=bootstrap_seed,
+            runs=int(np.prod(list(outputs[qoi_names[0]].shape))),
+            nonfinite_outputs=json.dumps(nonfinite),
+        )
         return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
-    def fit(self, evaluate: ModelFunction, space: ParameterSpace,
-            sweep: Mapping[str, Any] | None = None) -> "SobolAnalysis":
+    def fit(
+        self, evaluate: ModelFunction, space: ParameterSpace, sweep: Mapping[str, Any] | None = None
+    ) -> SobolAnalysis:
         """Sample, run the model once on all samples at all sweep points, analyse.
 
         Parameters
@@ -250,8 +291,10 @@ class SobolAnalysis:
         names = list(self.parameters) if self.parameters is not None else uncertain
         for name in names:
             if name not in uncertain:
-                raise ParameterSpaceError(f"parameters: {name!r} is not an interval or random parameter of the "
-                                          f"space; expected some of {', '.join(uncertain) or '(none)'}")
+                raise ParameterSpaceError(
+                    f"parameters: {name!r} is not an interval or random parameter of the "
+                    f"space; expected some of {', '.join(uncertain) or '(none)'}"
+                )
         if len(set(names)) != len(names):
             raise ParameterSpaceError(f"parameters: duplicate names in {names}")
         if not names:
@@ -272,16 +315,26 @@ def _assumed_distributions(space: ParameterSpace, names: Sequence[str]) -> str:
     assumed = {}
     for name in names:
         if name in space.interval_names:
-            assumed[name] = (f"uniform on {space[name].describe()} (assumed for variance-based sensitivity "
-                             f"only: an interval implies no distribution)")
+            assumed[name] = (
+                f"uniform on {space[name].describe()} (assumed for variance-based sensitivity "
+                f"only: an interval implies no distribution)"
+            )
         else:
             assumed[name] = space[name].describe()
     return json.dumps(assumed)
 
 
-def _qoi_indices(name: str, output: xr.DataArray, problem: Mapping[str, Any], names: Sequence[str], *,
-                 second_order: bool, num_resamples: int, conf_level: float,
-                 seed: int) -> tuple[dict[str, Any], int]:
+def _qoi_indices(
+    name: str,
+    output: xr.DataArray,
+    problem: Mapping[str, Any],
+    names: Sequence[str],
+    *,
+    second_order: bool,
+    num_resamples: int,
+    conf_level: float,
+    seed: int,
+) -> tuple[dict[str, Any], int]:
     """The index variables of one QoI (:meth:`SobolAnalysis.analyze`), and how many of its sample columns
     had non-finite values (their indices are NaN)."""
     variable = output.transpose(..., "sample")
@@ -301,9 +354,15 @@ def _qoi_indices(name: str, output: xr.DataArray, problem: Mapping[str, Any], na
             continue  # variance zero: the indices are undefined
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            indices = salib_analyze.analyze(problem, y, calc_second_order=second_order,
-                                            num_resamples=num_resamples, conf_level=conf_level,
-                                            print_to_console=False, seed=seed)
+            indices = salib_analyze.analyze(
+                problem,
+                y,
+                calc_second_order=second_order,
+                num_resamples=num_resamples,
+                conf_level=conf_level,
+                print_to_console=False,
+                seed=seed,
+            )
         first_total[row] = np.stack([indices["S1"], indices["ST"]], axis=-1)
         confidence[row] = np.stack([indices["S1_conf"], indices["ST_conf"]], axis=-1)
         if second_order:
@@ -311,18 +370,25 @@ def _qoi_indices(name: str, output: xr.DataArray, problem: Mapping[str, Any], na
             second_confidence[row] = indices["S2_conf"]
     units_note = {"units": "1"}
     data_vars: dict[str, Any] = {}
-    data_vars[name] = ((*other_dims, "param", "index"), first_total.reshape(*shape, len(names), 2),
-                       {**units_note, "long_name": f"Sobol indices of {name}"})
-    data_vars[f"{name}_conf"] = ((*other_dims, "param", "index"), confidence.reshape(*shape, len(names), 2),
-                                 {**units_note, "long_name": f"half-width of the {conf_level:g} "
-                                                             f"bootstrap confidence interval"})
+    data_vars[name] = (
+        (*other_dims, "param", "index"),
+        first_total.reshape(*shape, len(names), 2),
+        {**units_note, "long_name": f"Sobol indices of {name}"},
+    )
+    data_vars[f"{name}_conf"] = (
+        (*other_dims, "param", "index"),
+        confidence.reshape(*shape, len(names), 2),
+        {**units_note, "long_name": f"half-width of the {conf_level:g} bootstrap confidence interval"},
+    )
     if second_order:
-        data_vars[f"{name}_S2"] = ((*other_dims, "param", "param_2"),
-                                   second.reshape(*shape, len(names), len(names)),
-                                   {**units_note, "long_name": f"second-order Sobol indices of {name} "
-                                                               f"(upper triangle)"})
-        data_vars[f"{name}_S2_conf"] = ((*other_dims, "param", "param_2"),
-                                        second_confidence.reshape(*shape, len(names), len(names)),
-                                        {**units_note, "long_name": "half-width of the bootstrap "
-                                                                    "confidence interval"})
+        data_vars[f"{name}_S2"] = (
+            (*other_dims, "param", "param_2"),
+            second.reshape(*shape, len(names), len(names)),
+            {**units_note, "long_name": f"second-order Sobol indices of {name} (upper triangle)"},
+        )
+        data_vars[f"{name}_S2_conf"] = (
+            (*other_dims, "param", "param_2"),
+            second_confidence.reshape(*shape, len(names), len(names)),
+            {**units_note, "long_name": "half-width of the bootstrap confidence interval"},
+        )
     return data_vars, bad

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
@@ -80,8 +80,9 @@ def make_sweep(sweep: Mapping[str, Any] | None, space: ParameterSpace | None = N
         if not isinstance(name, str) or not name.isidentifier():
             raise ParameterSpaceError(f"sweep: expected identifier names; got {name!r}")
         if space is not None and name in space.uncertain_names:
-            raise ParameterSpaceError(f"sweep {name}: {name} is an uncertain parameter of the space; "
-                                      f"a sweep variable must be deterministic")
+            raise ParameterSpaceError(
+                f"sweep {name}: {name} is an uncertain parameter of the space; a sweep variable must be deterministic"
+            )
         units = ""
         if isinstance(raw, xr.DataArray):
             extra = dict(raw.attrs)
@@ -95,8 +96,7 @@ def make_sweep(sweep: Mapping[str, Any] | None, space: ParameterSpace | None = N
         except (TypeError, ValueError):
             raise ParameterSpaceError(f"sweep {name}: expected 1-D numbers; got {raw!r}") from None
         if array.ndim != 1 or array.size == 0 or not np.all(np.isfinite(array)):
-            raise ParameterSpaceError(f"sweep {name}: expected a non-empty 1-D sequence of finite numbers; "
-                                      f"got {raw!r}")
+            raise ParameterSpaceError(f"sweep {name}: expected a non-empty 1-D sequence of finite numbers; got {raw!r}")
         if len(np.unique(array)) != array.size:
             raise ParameterSpaceError(f"sweep {name}: values must be distinct")
         if units and "units" not in extra:
@@ -107,8 +107,7 @@ def make_sweep(sweep: Mapping[str, Any] | None, space: ParameterSpace | None = N
     return Sweep(tuple(names), tuple(values), tuple(attrs))
 
 
-def call_model(evaluate: ModelFunction, batch: xr.Dataset,
-               qoi: Sequence[str] | None = None) -> xr.Dataset:
+def call_model(evaluate: ModelFunction, batch: xr.Dataset, qoi: Sequence[str] | None = None) -> xr.Dataset:
     """Run ``evaluate`` on ``batch`` once and check what comes back.
 
     Parameters
@@ -135,43 +134,59 @@ def call_model(evaluate: ModelFunction, batch: xr.Dataset,
     size = batch.sizes["sample"]
     result = evaluate(batch)
     if not isinstance(result, xr.Dataset):
-        raise ExecutionError(f"model function: expected an xarray.Dataset with dimension 'sample'; "
-                             f"got {type(result).__name__}")
+        raise ExecutionError(
+            f"model function: expected an xarray.Dataset with dimension 'sample'; got {type(result).__name__}"
+        )
     if result.sizes.get("sample") != size:
-        raise ExecutionError(f"model function: expected dimension 'sample' of length {size}; "
-                             f"got dims {dict(result.sizes)}")
+        raise ExecutionError(
+            f"model function: expected dimension 'sample' of length {size}; got dims {dict(result.sizes)}"
+        )
     if qoi is None:
-        names = [name for name, variable in result.data_vars.items()
-                 if variable.dims == ("sample",) and np.issubdtype(variable.dtype, np.number)]
+        names = [
+            name
+            for name, variable in result.data_vars.items()
+            if variable.dims == ("sample",) and np.issubdtype(variable.dtype, np.number)
+        ]
         if not names:
             raise ExecutionError("model function: returned no numeric variable with dimension ('sample',)")
     else:
         names = list(qoi)
         for name in names:
             if name not in result.data_vars:
-                raise ExecutionError(f"qoi {name!r}: not returned by the model function; it returned "
-                                     f"{', '.join(map(str, result.data_vars)) or 'nothing'}")
+                raise ExecutionError(
+                    f"qoi {name!r}: not returned by the model function; it returned "
+                    f"{', '.join(map(str, result.data_vars)) or 'nothing'}"
+                )
             variable = result[name]
             if variable.dims != ("sample",) or not np.issubdtype(variable.dtype, np.number):
-                raise ExecutionError(f"qoi {name!r}: expected a numeric variable with dims ('sample',); "
-                                     f"got dims {variable.dims}, dtype {variable.dtype}")
-    selected = xr.Dataset({name: ("sample", np.asarray(result[name].values, dtype=float),
-                                  dict(result[name].attrs)) for name in names},
-                          coords={"sample": np.arange(size)})
+                raise ExecutionError(
+                    f"qoi {name!r}: expected a numeric variable with dims ('sample',); "
+                    f"got dims {variable.dims}, dtype {variable.dtype}"
+                )
+    selected = xr.Dataset(
+        {name: ("sample", np.asarray(result[name].values, dtype=float), dict(result[name].attrs)) for name in names},
+        coords={"sample": np.arange(size)},
+    )
     return selected
 
 
 def batch_samples(samples: Mapping[str, np.ndarray], units: Mapping[str, str]) -> xr.Dataset:
     """Dataset (dimension ``sample``) from flat arrays of equal length."""
-    data_vars = {name: ("sample", np.asarray(values, dtype=float), {"units": units.get(name, "")})
-                 for name, values in samples.items()}
+    data_vars = {
+        name: ("sample", np.asarray(values, dtype=float), {"units": units.get(name, "")})
+        for name, values in samples.items()
+    }
     size = len(next(iter(samples.values()))) if samples else 0
     return xr.Dataset(data_vars, coords={"sample": np.arange(size)})
 
 
-def evaluate_on_sweep(evaluate: ModelFunction, samples: xr.Dataset,
-                      sweep: Mapping[str, Any] | Sweep | None = None, *,
-                      qoi: Sequence[str] | None = None) -> xr.Dataset:
+def evaluate_on_sweep(
+    evaluate: ModelFunction,
+    samples: xr.Dataset,
+    sweep: Mapping[str, Any] | Sweep | None = None,
+    *,
+    qoi: Sequence[str] | None = None,
+) -> xr.Dataset:
     """Evaluate the model on every sample at every sweep point, in one batch call.
 
     Parameters
@@ -198,7 +213,8 @@ def evaluate_on_sweep(evaluate: ModelFunction, samples: xr.Dataset,
     point_values = sweep.point_values()
     flat: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
-    for name, variable in samples.data_vars.items():
+    # sample variables are named by strings (model inputs)
+    for name, variable in cast(Mapping[str, xr.DataArray], samples.data_vars).items():
         if name in point_values or variable.dims != ("sample",):
             continue
         flat[name] = np.tile(np.asarray(variable.values, dtype=float), sweep.size)
@@ -207,7 +223,10 @@ def evaluate_on_sweep(evaluate: ModelFunction, samples: xr.Dataset,
         flat[name] = np.repeat(values, n)
         units[name] = sweep.attrs[sweep.names.index(name)].get("units", "")
     outputs = call_model(evaluate, batch_samples(flat, units), qoi)
-    data_vars = {name: ((*sweep.names, "sample"), variable.values.reshape(*sweep.shape, n), variable.attrs)
-                 for name, variable in outputs.data_vars.items()}
-    return xr.Dataset(data_vars, coords={**sweep.coords(), "sample": samples["sample"].values},
-                      attrs={"runs": sweep.size * n})
+    data_vars = {
+        name: ((*sweep.names, "sample"), variable.values.reshape(*sweep.shape, n), variable.attrs)
+        for name, variable in outputs.data_vars.items()
+    }
+    return xr.Dataset(
+        data_vars, coords={**sweep.coords(), "sample": samples["sample"].values}, attrs={"runs": sweep.size * n}
+    )

@@ -1,0 +1,175 @@
+"""Batch set-up: one model set-up per sample, the tables they share and the lane groups they run in.
+
+:func:`build_batch` turns a Dataset of samples into :class:`~uqgear.physics.model.ModelSetup`
+objects (design keys and effect parameters may vary per sample);
+:func:`shared_stiffness_tables` and :func:`breakpoint_table` lay them out for
+the batch kernels, and :func:`lane_groups` groups the runs that share a
+sub-step layout into SIMD lanes (:mod:`uqgear.physics._lanes`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import cast
+
+import numpy as np
+import xarray as xr
+
+from ..common.errors import OperatingPointError
+from . import _lanes
+from .design import DESIGN_KEYS, Design
+from .effects import Effect
+from .model import ModelSetup, build_model
+from .pitch_errors import PitchErrors
+
+#: Operating variables a batch sample may set.
+OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
+#: Design keys a batch may vary (the tooth counts fix the tables' layout).
+BATCH_DESIGN_KEYS = tuple(key for key in DESIGN_KEYS if key not in ("z1", "z2"))
+
+
+def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]:
+    if "sample" not in samples.dims:
+        raise OperatingPointError("samples: expected a Dataset with dimension 'sample'")
+    n = samples.sizes["sample"]
+    known = set(OPERATING_VARIABLES) | set(BATCH_DESIGN_KEYS)
+    values: dict[str, np.ndarray] = {}
+    # sample variables are named by strings (design keys, operating variables, EFFECT.PARAMETER)
+    for name in cast(Iterable[str], samples.data_vars):
+        if name not in known and "." not in name:
+            raise OperatingPointError(
+                f"samples.{name}: unknown variable; expected one of {', '.join(sorted(known))} or EFFECT.PARAMETER"
+            )
+        array = np.asarray(samples[name].values, dtype=float)
+        if array.shape != (n,):
+            raise OperatingPointError(f"samples.{name}: expected dims ('sample',); got {samples[name].dims}")
+        values[name] = array
+    if "pinion_speed" not in values:
+        raise OperatingPointError("samples.pinion_speed: missing; expected pinion speeds in rpm")
+    values.setdefault("drive_torque", np.full(n, design.operation.drive_torque))
+    # without a given T2 the adhesion torque balances the drive torque (no rigid acceleration)
+    values.setdefault("adhesion_torque", values["drive_torque"] * design.z2 / design.z1)
+    values.setdefault("mesh_stiffness_scale", np.ones(n))
+    return values
+
+
+def build_batch(
+    design: Design,
+    samples: xr.Dataset,
+    *,
+    effects: Sequence[Effect] = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    pitch_errors: PitchErrors | None = None,
+) -> list[ModelSetup]:
+    """One :class:`ModelSetup` per sample (design keys and effect parameters may vary; the pitch errors,
+    if any, are those of every sample)."""
+    values = _sample_values(samples, design)
+    n = samples.sizes["sample"]
+    design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
+    effect_keys = [key for key in values if "." in key]
+    by_name = {effect.name: effect for effect in effects}
+    for key in effect_keys:
+        name, _, parameter = key.partition(".")
+        if name not in by_name:
+            raise OperatingPointError(
+                f"samples.{key}: effect {name!r} is not among the model's effects ({', '.join(by_name) or 'none'})"
+            )
+        if parameter not in by_name[name].PARAMETERS:
+            raise OperatingPointError(
+                f"samples.{key}: unknown parameter of {name}; expected one of {', '.join(by_name[name].PARAMETERS)}"
+            )
+    designs: dict[tuple, Design] = {}
+    setups = []
+    for i in range(n):
+        design_key = tuple(float(values[key][i]) for key in design_keys)
+        if design_key not in designs:
+            designs[design_key] = design.replace(**dict(zip(design_keys, design_key))) if design_keys else design
+        sample_effects = list(effects)
+        if effect_keys:
+            changes: dict[str, dict[str, float]] = {}
+            for key in effect_keys:
+                name, _, parameter = key.partition(".")
+                changes.setdefault(name, {})[parameter] = float(values[key][i])
+            sample_effects = [e.with_values(**changes[e.name]) if e.name in changes else e for e in effects]
+        setups.append(
+            build_model(
+                designs[design_key],
+                values["pinion_speed"][i],
+                values["drive_torque"][i],
+                values["adhesion_torque"][i],
+                mesh_stiffness_scale=values["mesh_stiffness_scale"][i],
+                effects=sample_effects,
+                damping_in_separation=damping_in_separation,
+                stiffness=stiffness,
+                pitch_errors=pitch_errors,
+            )
+        )
+    return setups
+
+
+def shared_stiffness_tables(setups: Sequence[ModelSetup]) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """The distinct stiffness tables of a batch's set-ups and, per set-up, the index of its own.
+
+    Set-ups of one design share their tables (the model's stiffness cache),
+    so a batch passes each table to the kernels once, not once per sample.
+    """
+    tables: dict[tuple[int, int], int] = {}
+    pair_tables: list[np.ndarray] = []
+    period_tables: list[np.ndarray] = []
+    table_index = np.empty(len(setups), dtype=np.int64)
+    for i, setup in enumerate(setups):
+        key = id(setup.pair_stiffness), id(setup.period_stiffness)
+        if key not in tables:
+            tables[key] = len(pair_tables)
+            pair_tables.append(setup.pair_stiffness)
+            period_tables.append(setup.period_stiffness)
+        table_index[i] = tables[key]
+    return pair_tables, period_tables, table_index
+
+
+def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
+    """Breakpoints of a batch's set-ups, one row each, padded with NaN (one column at least)."""
+    width = max((len(setup.breakpoints) for setup in setups), default=0)
+    breakpoints = np.full((len(setups), max(width, 1)), np.nan)
+    for i, setup in enumerate(setups):
+        breakpoints[i, : len(setup.breakpoints)] = setup.breakpoints
+    return breakpoints
+
+
+def lane_groups(
+    params: np.ndarray, steps: np.ndarray, breakpoints: np.ndarray, strides: np.ndarray, lyapunov: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lane groups of a batch's lane-ready runs, and the runs left to the one-sample kernels.
+
+    Runs with the same sub-step layout (steps per mesh period, stiffness
+    breakpoints, history stride) share a group of
+    :data:`~uqgear.physics._lanes.LANES` lanes (half as many runs with
+    ``lyapunov``: each run's shadow takes a lane); groups come most steps
+    first, so that the threads end on the short ones.
+    """
+    ready = np.nonzero(_lanes.lane_ready(params))[0]
+    rest = np.nonzero(~_lanes.lane_ready(params))[0]
+    width = _lanes.LANES // 2 if lyapunov else _lanes.LANES
+    layouts: dict[tuple, list[int]] = {}
+    for i in ready:
+        layouts.setdefault((int(steps[i]), breakpoints[i].tobytes(), int(strides[i])), []).append(int(i))
+    rows: list[tuple[int, list[int]]] = []
+    for key, members in layouts.items():
+        for start in range(0, len(members), width):
+            rows.append((key[0], members[start : start + width]))
+    rows.sort(key=lambda row: -row[0])
+    groups = np.full((len(rows), _lanes.LANES), -1, dtype=np.int64)
+    for g, (_, members) in enumerate(rows):
+        groups[g, : len(members)] = members
+    return groups, rest.astype(np.int64)
+
+
+__all__ = [
+    "OPERATING_VARIABLES",
+    "BATCH_DESIGN_KEYS",
+    "build_batch",
+    "shared_stiffness_tables",
+    "breakpoint_table",
+    "lane_groups",
+]
