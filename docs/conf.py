@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -40,36 +41,64 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
-exclude_patterns = ["_build", "**.ipynb_checkpoints", "auto_examples/*.ipynb", "auto_examples/*.py",
-                    "auto_examples/*.zip", "auto_examples/*.md5", "auto_examples/*.json",
-                    "auto_examples/*.codeobj.json", "api/generated/*.examples"]
+exclude_patterns = [
+    "_build",
+    "**.ipynb_checkpoints",
+    "auto_examples/*.ipynb",
+    "auto_examples/*.py",
+    "auto_examples/*.zip",
+    "auto_examples/*.md5",
+    "auto_examples/*.json",
+    "auto_examples/*.codeobj.json",
+    "api/generated/*.examples",
+]
 myst_heading_anchors = 4
 myst_enable_extensions = ["colon_fence", "deflist"]
 
 # ------------------------------------------------------------------ API reference
 autosummary_generate = True
-autodoc_typehints = "none"          # numpydoc puts the types in the parameter lists
+autodoc_typehints = "none"  # numpydoc puts the types in the parameter lists
 autodoc_member_order = "bysource"
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False
 
 #: The subpackages along the data path, in the order the reference lists them.
-SUBPACKAGES = ("common", "physics", "dynamics", "uq", "report", "rig", "calibration", "diagnosis",
-               "study")
+SUBPACKAGES = (
+    "common",
+    "physics",
+    "dynamics",
+    "uq",
+    "report",
+    "rig",
+    "calibration",
+    "diagnosis",
+    "study",
+)
 
 
 def _api_pages() -> None:
     """Write ``api/index.rst`` and one page per subpackage from the ``__all__`` lists."""
     api = DOCS / "api"
+    # autosummary writes a page per listed name into api/generated; pages of names no longer
+    # listed would stay behind as orphans, so the folder is made afresh
+    shutil.rmtree(api / "generated", ignore_errors=True)
     api.mkdir(exist_ok=True)
     lines = [
-        "API reference", "=============", "",
+        "API reference",
+        "=============",
+        "",
         "Everything ``import uqgear`` offers, then each subpackage's public names along the data "
-        "path. Each name links to its page, generated from its docstring.", "",
-        ".. currentmodule:: uqgear", "",
-        "Top level (``uqgear``)", "----------------------", "",
-        ".. autosummary::", "   :toctree: generated", "",
+        "path. Each name links to its page, generated from its docstring.",
+        "",
+        ".. currentmodule:: uqgear",
+        "",
+        "Top level (``uqgear``)",
+        "----------------------",
+        "",
+        ".. autosummary::",
+        "   :toctree: generated",
+        "",
     ]
     top = [name for name in uqgear.__all__ if not name.startswith("__")]
     lines += [f"   {name}" for name in top]
@@ -78,10 +107,36 @@ def _api_pages() -> None:
     _write_if_changed(api / "index.rst", "\n".join(lines) + "\n")
     for name in SUBPACKAGES:
         module = importlib.import_module(f"uqgear.{name}")
+        # a name ``import uqgear`` also offers has its page at the top level (one page per object)
+        shared = [
+            member
+            for member in module.__all__
+            if getattr(uqgear, member, None) is getattr(module, member)
+        ]
+        own = [member for member in module.__all__ if member not in shared]
         title = f"``uqgear.{name}``"
-        body = [title, "=" * len(title), "", f".. automodule:: uqgear.{name}", "   :no-members:", "",
-                f".. currentmodule:: uqgear.{name}", "", ".. autosummary::", "   :toctree: generated", ""]
-        body += [f"   {member}" for member in module.__all__]
+        body = [
+            title,
+            "=" * len(title),
+            "",
+            f".. automodule:: uqgear.{name}",
+            "   :no-members:",
+            "",
+            f".. currentmodule:: uqgear.{name}",
+            "",
+        ]
+        if own:
+            body += (
+                [".. autosummary::", "   :toctree: generated", ""]
+                + [f"   {member}" for member in own]
+                + [""]
+            )
+        if shared:
+            body += [
+                "Also in this subpackage, documented at the top level: "
+                + ", ".join(f":obj:`uqgear.{member}`" for member in shared)
+                + "."
+            ]
         _write_if_changed(api / f"{name}.rst", "\n".join(body) + "\n")
 
 
