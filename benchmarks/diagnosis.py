@@ -1,6 +1,6 @@
 """Diagnosis benchmark: one 8-op campaign, all six candidate effects, on 2 worker processes.
 
-Runs :func:`uqgear.diagnosis.workflow.diagnose` on a labelled campaign of data/rig/
+Runs :func:`uqgear.diagnosis.diagnose` on a labelled campaign of data/rig/
 (default ``tooth_damage.nc``) and prints the verdict, the wall time, the CPU
 time (this process and its workers) and where the time went (nominal fit,
 screening of the candidates, full fits). The acceptance figure of issue 6 is
@@ -23,7 +23,7 @@ import time
 import warnings
 from pathlib import Path
 
-from uqgear.diagnosis.workflow import diagnose
+from uqgear.diagnosis import diagnose
 from uqgear.physics.design import load_design
 from uqgear.physics.effects import Eccentricity
 from uqgear.common.errors import UndercutWarning

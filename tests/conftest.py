@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uqgear.diagnosis import prepare_case
+from uqgear.diagnosis.case import prepare_case
 from uqgear.physics.design import load_design
 from uqgear.rig.format import read_rig, rig_design
 

@@ -1,4 +1,4 @@
-"""Tests of the blind checks of the gap diagnosis (uqgear.diagnosis.blind_test).
+"""Tests of the blind checks of the gap diagnosis (uqgear.validation).
 
 The scoring (confusion matrix, accuracies, false alarms, thresholds) is
 checked on hand-made verdicts; the campaign plan on its counts and ladder;
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.diagnosis import blind_test as B
+from uqgear import validation as B
 from uqgear.physics.design import load_design
 from uqgear.diagnosis import EFFECT_NAMES, DiagnosisError
 

@@ -1,4 +1,4 @@
-"""Tests of the sim-to-real gap diagnosis (uqgear.diagnosis.pipeline).
+"""Tests of the sim-to-real gap diagnosis (uqgear.diagnosis).
 
 Fast tests check the pieces against independent truths: Rice-distributed
 line amplitudes drawn from complex Gaussian noise, closed-form Rice moments,
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,13 +21,17 @@ import pytest
 import scipy.stats
 import xarray as xr
 
-from uqgear.diagnosis import DiagnosisError, decide, decide_verdict, diagnose, prepare_case
-from uqgear.diagnosis import candidates, fitting, pipeline, scoring, signatures, workflow
-from uqgear.diagnosis import case as rig_case, discrepancy as disc, simulation as sim, verdict as verdicts
+from uqgear.diagnosis import DiagnosisError, decide, decide_verdict, diagnose
+from uqgear.diagnosis import effects, fit_problem, fitting, inputs, scoring, screening, signatures
+from uqgear.diagnosis import case as rig_case, discrepancy as disc, execution as runs, processing, simulation as sim
+from uqgear.diagnosis.case import prepare_case
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.physics.design import load_design
 from uqgear.common.errors import RigDataError, UqgearError
 from uqgear.rig.features import extract_features
 from uqgear.rig.format import make_rig_dataset, read_rig
+
+from helpers import candidate_score
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
@@ -161,9 +166,7 @@ def test_shrink_fraction_and_bootstrap():
 
 # ---------------------------------------------------------------------------------------------- verdict rules
 
-def _entry(effect, score, shrink, low=None):
-    return {"effect": effect, "score": score, "shrink_fraction": shrink,
-            "shrink_interval": [shrink - 0.1 if low is None else low, min(shrink + 0.1, 1.0)]}
+_entry = candidate_score
 
 
 def test_verdict_none_when_nominal_within_noise():
@@ -182,15 +185,15 @@ def test_verdict_names_effect_with_score_and_shrink():
 def test_verdict_unexplained_when_no_candidate_removes_the_gap():
     assert decide_verdict(3.0, [_entry("eccentricity", 200.0, 0.2)])[0] == "unexplained"
     # a gap just above noise that the effect brings within noise is explained, though it shrank < 50 %
-    friction = {**_entry("friction", 160.0, 0.4, low=0.3), "gap_with_effect": 0.44}
+    friction = _entry("friction", 160.0, 0.4, low=0.3, gap_with_effect=0.44)
     verdict, reason = decide_verdict(0.74, [friction])
     assert verdict == "friction" and "within noise" in reason
     # one that leaves a significant gap is named only as a partial explanation, with the rest unexplained
-    partial = decide(0.74, [{**friction, "gap_with_effect": 0.6}])
+    partial = decide(0.74, [replace(friction, gap_with_effect=0.6)])
     assert partial.verdict == "friction" and partial.partial and partial.remaining_gap == 0.6
-    assert decide_verdict(0.74, [{**friction, "gap_with_effect": 0.6,
-                                    "shrink_interval": [0.1, 0.6]}])[0] == "unexplained"
-    assert decide_verdict(0.74, [{**friction, "shrink_interval": [-0.1, 1.0]}])[0] == "unexplained"
+    assert decide_verdict(0.74, [replace(friction, gap_with_effect=0.6, shrink_interval=(0.1, 0.6))])[0] \
+        == "unexplained"
+    assert decide_verdict(0.74, [replace(friction, shrink_interval=(-0.1, 1.0))])[0] == "unexplained"
     assert decide_verdict(3.0, [_entry("eccentricity", 5.0, 0.9)])[0] == "unexplained"
     # a shrink whose interval reaches below zero is not evidence
     assert decide_verdict(3.0, [_entry("friction", 50.0, 0.6, low=-0.2)])[0] == "unexplained"
@@ -200,9 +203,9 @@ def test_verdict_unexplained_when_no_candidate_removes_the_gap():
 def test_verdict_never_names_an_effect_that_adds_nothing_to_its_fit():
     """A candidate as good with its effect off owes its score to the refitted nominal parameters."""
     damage = _entry("tooth_damage", 130.0, 1.0)
-    assert decide_verdict(0.58, [{**damage, "effect_gain": 40.0}])[0] == "tooth_damage"
-    assert decide_verdict(0.58, [{**damage, "effect_gain": 0.3}])[0] == "unexplained"
-    assert decide_verdict(0.3, [{**damage, "effect_gain": 0.3}])[0] == "none"
+    assert decide_verdict(0.58, [replace(damage, effect_gain=40.0)])[0] == "tooth_damage"
+    assert decide_verdict(0.58, [replace(damage, effect_gain=0.3)])[0] == "unexplained"
+    assert decide_verdict(0.3, [replace(damage, effect_gain=0.3)])[0] == "none"
 
 
 # ---------------------------------------------------------------------------------------------- processing
@@ -210,7 +213,7 @@ def test_verdict_never_names_an_effect_that_adds_nothing_to_its_fit():
 @pytest.fixture(scope="module")
 def short_processor(design):
     options = dict(rig_case.FEATURE_OPTIONS, band_limit=20480.0 / 2.56)
-    return sim.RunProcessor(design, 1250.0, 20480.0, 4096, options)
+    return processing.RunProcessor(design, 1250.0, 20480.0, 4096, options)
 
 
 def test_model_features_match_extract_features(design, short_processor):
@@ -244,7 +247,7 @@ def test_periodic_tiling_matches_full_simulation(design):
     periodic = simulator.run(0, design, 1.0, 30000.0, (), "pinion")
     full = simulator.run(0, design, 1.0, 30000.0, (), "free")
     assert periodic.periodic and not full.periodic
-    processor = sim.RunProcessor(design, 1250.0, 20480.0, 4096, dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0))
+    processor = processing.RunProcessor(design, 1250.0, 20480.0, 4096, dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0))
     names = processor.names
     for channel in ("te", "acc_pinion"):
         a = processor.model_features(periodic.records[channel][None])[0]
@@ -259,12 +262,12 @@ def test_runs_are_bit_identical_however_many_workers(healthy_case):
     count (and the dispatch order the executor picks from measured costs) never changes a bit."""
     case = healthy_case
     design = case.design
-    tasks = [rig_case.RunTask(op, design, scale, float(case.adhesion_lower[op]), (), "mesh")
+    tasks = [runs.RunTask(op, design, scale, float(case.adhesion_lower[op]), (), "mesh")
              for scale in (0.95, 1.0) for op in (0, 3, 7)]
-    tasks += [rig_case.RunTask(7, design, 1.0, float(case.adhesion_upper[7]), (), "free")]
-    alone = [rig_case.execute_run(case, task) for task in tasks]
-    sequential = rig_case.execute_runs(case, tasks)
-    executor = rig_case.RunExecutor(case, workers=2)
+    tasks += [runs.RunTask(7, design, 1.0, float(case.adhesion_upper[7]), (), "free")]
+    alone = [runs.execute_run(case, task) for task in tasks]
+    sequential = runs.execute_runs(case, tasks)
+    executor = runs.RunExecutor(case, workers=2)
     try:
         assert executor.pool is not None
         first = executor.map(tasks)
@@ -283,15 +286,15 @@ def test_runs_are_bit_identical_however_many_workers(healthy_case):
 
 
 def test_run_groups_hold_one_operating_point_each_and_keep_every_task():
-    task = rig_case.RunTask
+    task = runs.RunTask
     tasks = [task(op, None, 1.0, 0.0, (), "mesh") for op in [3, 1, 3, 3, 1] + [2] * 19]
-    groups = rig_case.run_groups(tasks)
+    groups = runs.run_groups(tasks)
     assert sorted(index for group in groups for index in group) == list(range(len(tasks)))
     assert all(len({tasks[i].op for i in group}) == 1 for group in groups)
-    assert max(len(group) for group in groups) == rig_case._GROUP_SIZE
+    assert max(len(group) for group in groups) == runs.GROUP_SIZE
     assert [len(group) for group in groups if tasks[group[0]].op == 2] == [8, 8, 3]
     with pytest.raises(RuntimeError, match="one operating point"):
-        rig_case.execute_group(None, tasks[:2])
+        runs.execute_group(None, tasks[:2])
 
 
 def test_frequency_locked_line_found_and_order_lines_ignored(design):
@@ -316,7 +319,7 @@ def test_frequency_locked_line_found_and_order_lines_ignored(design):
 def test_true_parameters_reproduce_healthy_campaign(healthy_case):
     """With the README's true parameters the model is within noise of healthy.nc (no fit)."""
     case = healthy_case
-    problem = fitting.FitProblem(case, None)
+    problem = fit_problem.FitProblem(case, None)
     lower, upper = case.adhesion_lower, case.adhesion_upper
     vector = problem.vector(HEALTHY_TRUTH, (np.array(HEALTHY_T2) - lower) / (upper - lower))
     vector = vector.copy()
@@ -335,21 +338,21 @@ def test_calibration_posterior_gives_the_nominal_start(healthy_case):
     posterior = xr.Dataset({name: (("chain", "draw"), value * (1 + 0.01 * rng.standard_normal((4, 51))))
                             for name, value in draws.items()})
     posterior["adhesion_torque"] = (("chain", "draw", "op"), np.broadcast_to(t2, (4, 51, case.n_op)).copy())
-    start, positions = pipeline.calibration_start(posterior, case)
+    start, positions = fitting.calibration_start(posterior, case)
     assert set(start) == set(draws)
     for name, value in draws.items():
         assert start[name] == pytest.approx(value, rel=0.01)
     assert np.allclose(positions, np.linspace(0.1, 0.9, case.n_op))
     with pytest.raises(DiagnosisError, match="calibration: the posterior has none of the parameters"):
-        pipeline.calibration_start(xr.Dataset({"other": ("draw", [1.0])}), case)
+        fitting.calibration_start(xr.Dataset({"other": ("draw", [1.0])}), case)
     with pytest.raises(DiagnosisError, match="calibration: .*no such file"):
-        workflow.load_calibration(DATA / "no_such_calibration")
+        inputs.load_calibration(DATA / "no_such_calibration")
 
 
 def test_adhesion_profile_finds_each_runs_torque(healthy_case):
     """From the bottom of every interval, the grid profile puts T2 within a grid step of the truth."""
     case = healthy_case
-    problem = fitting.FitProblem(case, None)
+    problem = fit_problem.FitProblem(case, None)
     lower, upper = case.adhesion_lower, case.adhesion_upper
     truth = (np.array(HEALTHY_T2) - lower) / (upper - lower)
     profiled = fitting.profile_adhesion(problem, problem.vector(HEALTHY_TRUTH, 0.0))
@@ -361,7 +364,7 @@ def test_adhesion_profile_finds_each_runs_torque(healthy_case):
 def test_improved_nominal_escapes_a_stuck_nominal_fit(healthy_case):
     """A fit that moved the nominal parameters to a better optimum restarts the nominal fit; a worse one does not."""
     case = healthy_case
-    problem = fitting.FitProblem(case, None)
+    problem = fit_problem.FitProblem(case, None)
     lower, upper = case.adhesion_lower, case.adhesion_upper
     positions = (np.array(HEALTHY_T2) - lower) / (upper - lower)
     # a nominal fit stopped far off: damping and STE amplitude 60 % high, two solver steps
@@ -369,12 +372,12 @@ def test_improved_nominal_escapes_a_stuck_nominal_fit(healthy_case):
                  ste_amplitude=1.6 * HEALTHY_TRUTH["ste_amplitude"])
     stuck = fitting.fit(problem, [problem.vector(wrong, positions)], max_evaluations=2)
     good = fitting.fit(problem, [problem.vector(HEALTHY_TRUTH, positions)], max_evaluations=2)
-    assert good.cost < stuck.cost - pipeline._NOMINAL_MARGIN
-    better = pipeline.improved_nominal(stuck, [good])
-    assert better is not None and better.cost <= good.cost + pipeline._NOMINAL_MARGIN
+    assert good.cost < stuck.cost - DEFAULT_SETTINGS.nominal_margin
+    better = screening.improved_nominal(stuck, [good])
+    assert better is not None and better.cost <= good.cost + DEFAULT_SETTINGS.nominal_margin
     assert better.values["zeta_mesh"] == pytest.approx(HEALTHY_TRUTH["zeta_mesh"], rel=0.15)
-    assert pipeline.improved_nominal(good, [stuck]) is None
-    assert pipeline.improved_nominal(good, []) is None
+    assert screening.improved_nominal(good, [stuck]) is None
+    assert screening.improved_nominal(good, []) is None
 
 
 # ---------------------------------------------------------------------------------------------- bad input
@@ -383,7 +386,7 @@ def test_unknown_effect_is_rejected(tmp_path):
     with pytest.raises(DiagnosisError, match="effects: 'gear_whine' is not a library effect"):
         diagnose(DATA / "healthy.nc", tmp_path, effects=["gear_whine"])
     with pytest.raises(UqgearError, match="effects"):
-        candidates.candidates_for("wear", load_design("locomotive"))
+        effects.candidates_for("wear", load_design("locomotive"))
 
 
 def test_invalid_rig_inputs_are_rejected(tmp_path):
@@ -442,39 +445,38 @@ def test_labelled_campaign_verdict(name, tmp_path):
     ranking = content["ranking"]
     assert [entry["score"] for entry in ranking] == sorted((entry["score"] for entry in ranking), reverse=True)
     if LABELLED[name] == "none":
-        assert content["gap"]["baseline"] <= verdicts.NOISE_GAP_THRESHOLD
+        assert content["gap"]["baseline"] <= DEFAULT_SETTINGS.noise_gap
     else:
         assert ranking[0]["effect"] == LABELLED[name]
         assert content["gap"]["shrink_fraction"] >= 0.7
 
 
 def test_a_strong_effect_that_explains_part_of_the_gap_is_named_with_an_unexplained_remainder():
-    partial = {**_entry("bearing_clearance", 182.0, 0.45, low=0.3), "gap_with_effect": 1.4}
+    partial = _entry("bearing_clearance", 182.0, 0.45, low=0.3, gap_with_effect=1.4)
     decision = decide(2.6, [partial])
     assert decision.verdict == "bearing_clearance" and decision.partial
     assert decision.remaining_gap == 1.4 and "remains unexplained" in decision.reason
     # a shrink interval reaching below the partial threshold is not enough
-    weak = {**partial, "shrink_interval": [0.1, 0.6]}
+    weak = replace(partial, shrink_interval=(0.1, 0.6))
     assert decide(2.6, [weak]).verdict == "unexplained"
     # nor is an effect that adds nothing to its own fit
-    assert decide(2.6, [{**partial, "effect_gain": 1.0}]).verdict == "unexplained"
+    assert decide(2.6, [replace(partial, effect_gain=1.0)]).verdict == "unexplained"
     # a full explanation is not partial
-    full = decide(2.6, [{**partial, "shrink_fraction": 0.8, "shrink_interval": [0.6, 0.9]}])
+    full = decide(2.6, [replace(partial, shrink_fraction=0.8, shrink_interval=(0.6, 0.9))])
     assert full.verdict == "bearing_clearance" and not full.partial
 
 
 def test_a_figure_within_its_spread_of_its_threshold_is_flagged_borderline():
-    knife_edge = {**_entry("bearing_clearance", 182.0, 0.5, low=0.42), "gap_with_effect": 0.9,
-                  "standard_error": 40.0}
+    knife_edge = _entry("bearing_clearance", 182.0, 0.5, low=0.42, gap_with_effect=0.9, standard_error=40.0)
     decision = decide(2.6, [knife_edge], nominal_gap_interval=(2.1, 3.0))
     assert [entry["figure"] for entry in decision.borderline] == ["shrink_fraction"]
     assert decision.borderline[0]["interval"] == [0.42, 0.6]
     # a score whose own standard error reaches the threshold, and a nominal gap whose interval holds noise
-    close = {**_entry("friction", 12.0, 0.9), "standard_error": 5.0}
+    close = _entry("friction", 12.0, 0.9, standard_error=5.0)
     flagged = decide(0.6, [close], nominal_gap_interval=(0.3, 0.9)).borderline
     assert {entry["figure"] for entry in flagged} == {"score", "nominal_gap"}
     # clear decisions carry no flag
-    clear = {**_entry("friction", 120.0, 0.9), "standard_error": 5.0}
+    clear = _entry("friction", 120.0, 0.9, standard_error=5.0)
     assert decide(3.0, [clear], nominal_gap_interval=(2.5, 3.5)).borderline == ()
 
 

@@ -1,4 +1,4 @@
-"""Tests of the diagnosis with several effects at once (forward selection, uqgear.diagnosis.pipeline).
+"""Tests of the diagnosis with several effects at once (forward selection, uqgear.diagnosis.selection).
 
 Fast tests check the combination logic on its own: the period over which
 several effects repeat together, the parameter layout of a fit with a base
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -25,9 +26,15 @@ import pytest
 import xarray as xr
 
 from uqgear.common.steps import StepLog
-from uqgear.diagnosis import DiagnosisError, diagnose, prepare_case
-from uqgear.diagnosis import blind_test, candidates, fitting, pipeline, scoring
-from uqgear.diagnosis.verdict import NOISE_GAP_THRESHOLD, Decision
+from uqgear.diagnosis import Diagnosis, DiagnosisError, DiagnosisSettings, diagnose
+from uqgear.diagnosis import candidates, effects, fit_problem, fitting, scoring, selection, set_verdict, verdict
+from uqgear.diagnosis.effect_set import SelectedEffect, SelectionRound
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.diagnosis.state import DiagnosisState
+from uqgear.diagnosis.verdict import Decision
+from uqgear import validation as blind_test
+
+from helpers import candidate_score
 from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign
 
@@ -38,7 +45,7 @@ DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
 def _variant(design, label):
     effect = label.split("[")[0]
-    return next(c for c in candidates.candidates_for(effect, design) if c.label == label)
+    return next(c for c in effects.candidates_for(effect, design) if c.label == label)
 
 
 # ---------------------------------------------------------------------------------------------- combinations
@@ -66,7 +73,7 @@ def test_a_fit_with_a_base_lays_out_nominal_base_and_new_parameters(healthy_case
     run_out = _variant(case.design, "eccentricity[pinion]")
     damage = _variant(case.design, "tooth_damage[gear]")
     nominal = candidates.nominal_parameters(case.design)
-    problem = fitting.FitProblem(case, [run_out, damage])
+    problem = fit_problem.FitProblem(case, [run_out, damage])
     names = [spec.name for spec in problem.specs]
     assert names == ([spec.name for spec in nominal] + [spec.name for spec in run_out.fitted]
                      + [spec.name for spec in damage.fitted])
@@ -87,19 +94,19 @@ def test_a_fit_with_a_base_lays_out_nominal_base_and_new_parameters(healthy_case
     assert task.effects[1].values["gear"] == "gear" and task.effects[1].values["depth"] == pytest.approx(0.35)
     assert task.periodicity == "free"
     # one effect and the nominal model keep their old layout and periods
-    single = fitting.FitProblem(case, run_out)
+    single = fit_problem.FitProblem(case, run_out)
     assert single.candidates == (run_out,) and single.periodicity == "pinion"
     assert single.n_base_global == len(nominal)
-    plain = fitting.FitProblem(case, None)
+    plain = fit_problem.FitProblem(case, None)
     assert plain.candidate is None and plain.periodicity == "mesh" and plain.run_task(plain.vector({}), 0).effects == ()
     # a mesh-periodic effect on top of a gear one keeps the gear's period
-    assert fitting.FitProblem(case, [damage, _variant(case.design, "friction")]).periodicity == "gear"
+    assert fit_problem.FitProblem(case, [damage, _variant(case.design, "friction")]).periodicity == "gear"
 
 
 def test_an_effect_never_enters_a_model_twice(healthy_case):
     case = healthy_case
     with pytest.raises(DiagnosisError, match="effects: 'eccentricity' appears twice"):
-        fitting.FitProblem(case, [_variant(case.design, "eccentricity[pinion]"),
+        fit_problem.FitProblem(case, [_variant(case.design, "eccentricity[pinion]"),
                                   _variant(case.design, "eccentricity[gear]")])
     with pytest.raises(DiagnosisError, match="tooth_damage"):
         candidates.check_combination([_variant(case.design, "tooth_damage[gear]")] * 2)
@@ -109,7 +116,7 @@ def test_laplace_intervals_of_the_fitted_parameters(healthy_case):
     """On a fit with a known Jacobian the 90 % interval is +-1.645 sd in optimiser units, mapped to values."""
     case = healthy_case
     damage = _variant(case.design, "tooth_damage[gear]")
-    problem = fitting.FitProblem(case, damage)
+    problem = fit_problem.FitProblem(case, damage)
     vector = problem.vector({"tooth_damage.depth": 0.2}, 0.5)
     n_rows = int(problem.mask.sum()) + problem.prior_index.size
     jacobian = np.zeros((n_rows, problem.size))
@@ -126,7 +133,7 @@ def test_laplace_intervals_of_the_fitted_parameters(healthy_case):
     assert low == pytest.approx(0.2 * math.exp(-1.645 * 0.5), rel=1e-3)
     assert high == pytest.approx(0.2 * math.exp(1.645 * 0.5), rel=1e-3)
     entry = scoring.CandidateScore("tooth_damage", damage.label, result, None, "full", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                                   0.0, 0.0)
+                                   (0.0, 0.0))
     # only the candidate's own parameters, with its fixed choices
     assert entry.parameters() == {"gear": "gear", "tooth": 0.0, "depth": pytest.approx(0.2)}
     assert list(entry.parameter_intervals()) == ["depth"]
@@ -135,11 +142,11 @@ def test_laplace_intervals_of_the_fitted_parameters(healthy_case):
 # ---------------------------------------------------------------------------------------------- selection rules
 
 def test_shrink_shares_add_up_to_the_set_shrink():
-    shares = pipeline.shrink_shares(4.0, 0.5, [2.0, 0.4, 0.3])
+    shares = selection.shrink_shares(4.0, 0.5, [2.0, 0.4, 0.3])
     assert shares == pytest.approx([0.5, 0.4, 0.025])
     assert sum(shares) == pytest.approx(1.0 - 0.3 / 4.0)
-    assert pipeline.shrink_shares(4.0, 0.9, [0.4]) == [0.9]
-    assert pipeline.shrink_shares(4.0, 0.9, []) == []
+    assert selection.shrink_shares(4.0, 0.9, [0.4]) == [0.9]
+    assert selection.shrink_shares(4.0, 0.9, []) == []
 
 
 def _score(effect, label, score, gap, shrink, *, low=None, gain=50.0, candidate=None, fit=None):
@@ -149,7 +156,13 @@ def _score(effect, label, score, gap, shrink, *, low=None, gain=50.0, candidate=
                               values={spec.name: 1.0 for spec in candidate.fitted} if candidate else {})
     held = SimpleNamespace(z=np.zeros((2, 1, 1)), gap=gap)
     return scoring.CandidateScore(effect, label, fit, held, "full", score + 5.0, 1.0, 5.0, score, gap, shrink,
-                                  shrink - 0.1 if low is None else low, min(shrink + 0.1, 1.0), effect_gain=gain)
+                                  (shrink - 0.1 if low is None else low, min(shrink + 0.1, 1.0)), effect_gain=gain)
+
+
+def _state(case, base_gap=3.0, settings=DEFAULT_SETTINGS):
+    """The state a selection round reads: the stand-in case, every library effect, no hints."""
+    return DiagnosisState(case, settings, effects.effect_names(), {}, np.random.default_rng(0), StepLog(),
+                          {}, None, None, base_gap)
 
 
 class _StandIns:
@@ -160,13 +173,13 @@ class _StandIns:
         self.screened: list[str] = []
         self.full: list[str] = []
         self.bases: list[tuple[str, ...]] = []
-        monkeypatch.setattr(pipeline, "fit_candidate", self.fit_candidate)
-        monkeypatch.setattr(pipeline, "leave_one_out", lambda result: result.held)
-        monkeypatch.setattr(pipeline, "score_candidate", self.score_candidate)
-        monkeypatch.setattr(pipeline, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
+        monkeypatch.setattr(selection, "fit_candidate", self.fit_candidate)
+        monkeypatch.setattr(selection, "leave_one_out", lambda result: result.held)
+        monkeypatch.setattr(selection, "score_candidate", self.score_candidate)
+        monkeypatch.setattr(selection, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
         # no pitch-error allowance on these stand-ins: a full fit is scored as fitted
-        monkeypatch.setattr(pipeline, "with_own_allowance", lambda result: result)
-        monkeypatch.setattr(pipeline, "bootstrap_gap", lambda z, rng: (0.0, 1.0))
+        monkeypatch.setattr(selection, "with_own_allowance", lambda result, **_: result)
+        monkeypatch.setattr(selection, "bootstrap_gap", lambda z, rng, *_: (0.0, 1.0))
 
     def fit_candidate(self, case, candidate, base, *, full, max_evaluations, start=None):
         (self.full if full else self.screened).append(candidate.label)
@@ -176,7 +189,7 @@ class _StandIns:
                                   own_model_error=None)
         return SimpleNamespace(problem=problem, cost=0.0, values=values, held=SimpleNamespace(z=None), full=full)
 
-    def score_candidate(self, result, held, base_held, stage, rng):
+    def score_candidate(self, result, held, base_held, stage, rng, **_):
         """The table's (score, gap, shrink) of a variant; a full fit scores a nat more unless the table says;
         a gap of None is 0.6 of the base's."""
         label = result.problem.candidate.label
@@ -194,20 +207,19 @@ def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatc
     stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 0.3, 0.75),
                                         ("tooth_damage[gear]", "full"): (95.0, 0.2, 0.83),
                                         "friction": (12.0, 1.0, 0.15)})
-    selection = pipeline._next_effect(case, base, ["eccentricity"], pipeline.EFFECT_NAMES, {},
-                                      np.random.default_rng(0), StepLog())
+    round_ = selection.next_effect(_state(case), base, ["eccentricity"])
     # never eccentricity again, in either variant; every other library effect's variants screened
     assert not any(label.startswith("eccentricity") for label in stand_ins.screened)
-    expected = [c.label for name in pipeline.EFFECT_NAMES if name != "eccentricity"
-                for c in candidates.candidates_for(name, design)]
+    expected = [c.label for name in effects.effect_names() if name != "eccentricity"
+                for c in effects.candidates_for(name, design)]
     assert stand_ins.screened == expected
     # all on top of the base, and only the best screened variant fitted in full
     assert set(stand_ins.bases) == {("eccentricity[pinion]",)}
     assert stand_ins.full == ["tooth_damage[gear]"]
-    assert selection.added == "tooth_damage" and selection.scores[0].stage == "full"
-    assert selection.base == ("eccentricity[pinion]",) and selection.gap_before == 1.2
-    assert [s.effect for s in selection.scores][0] == "tooth_damage"
-    assert len({s.effect for s in selection.scores}) == len(selection.scores)
+    assert round_.added == "tooth_damage" and round_.scores[0].stage == "full"
+    assert round_.base == ("eccentricity[pinion]",) and round_.gap_before == 1.2
+    assert [s.effect for s in round_.scores][0] == "tooth_damage"
+    assert len({s.effect for s in round_.scores}) == len(round_.scores)
 
 
 def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design):
@@ -216,9 +228,8 @@ def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design)
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     # a fair score but no real shrink of what remains (soaking up noise): not added
     _StandIns(monkeypatch, {"friction": (14.0, 1.15, 0.04)})
-    selection = pipeline._next_effect(case, base, ["eccentricity"], pipeline.EFFECT_NAMES, {},
-                                      np.random.default_rng(0), StepLog())
-    assert selection.added is None and selection.scores[0].effect == "friction"
+    round_ = selection.next_effect(_state(case), base, ["eccentricity"])
+    assert round_.added is None and round_.scores[0].effect == "friction"
 
 
 def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design):
@@ -228,65 +239,63 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     # within noise after the first effect: no round at all
     stand_ins = _StandIns(monkeypatch, {})
     done = _score("eccentricity", run_out.label, 300.0, 0.3, 0.9, candidate=run_out)
-    selected, rounds = pipeline.forward_selection(case, 3.0, done, first_decision, pipeline.EFFECT_NAMES, {},
-                                                  np.random.default_rng(0), StepLog())
+    selected, rounds = selection.forward_selection(_state(case), done, first_decision)
     assert [s.entry.effect for s in selected] == ["eccentricity"] and rounds == [] and stand_ins.screened == []
     assert selected[0].shrink_share == 0.9
     # with the pitch-error allowance a gap within noise may still hide an effect: one round is run
     allowed = SimpleNamespace(design=design, pitch_allowance=object(), run_out_allowance={})
     stand_ins = _StandIns(monkeypatch, {})
-    selected, rounds = pipeline.forward_selection(allowed, 3.0, done, first_decision, pipeline.EFFECT_NAMES, {},
-                                                  np.random.default_rng(0), StepLog())
+    selected, rounds = selection.forward_selection(_state(allowed), done, first_decision)
     assert [s.entry.effect for s in selected] == ["eccentricity"] and len(rounds) == 1
     assert rounds[0].added is None and stand_ins.screened
     # every round adds an effect that halves the remaining gap: capped at three effects
     first = _score("eccentricity", run_out.label, 300.0, 2.0, 1.0 / 3.0, low=0.25, candidate=run_out)
     table = {c.label: (60.0 + k, None, 0.5 + 0.01 * k)
-             for k, c in enumerate(c for name in pipeline.EFFECT_NAMES for c in candidates.candidates_for(name, design))}
+             for k, c in enumerate(c for name in effects.effect_names() for c in effects.candidates_for(name, design))}
     stand_ins = _StandIns(monkeypatch, table)
-    selected, rounds = pipeline.forward_selection(case, 3.0, first, first_decision, pipeline.EFFECT_NAMES, {},
-                                                  np.random.default_rng(0), StepLog(), max_effects=3)
+    selected, rounds = selection.forward_selection(_state(case, settings=DiagnosisSettings(max_effects=3)), first,
+                                                   first_decision)
     names = [s.entry.effect for s in selected]
     assert len(names) == 3 and len(set(names)) == 3 and len(rounds) == 2
     # the third round's base holds both earlier effects
     assert max(len(base) for base in stand_ins.bases) == 2
     shares = [s.shrink_share for s in selected]
     assert all(share > 0 for share in shares)
-    assert sum(shares) == pytest.approx(1.0 - selected[-1].entry.gap / 3.0)
-    decision = pipeline.set_decision(first_decision, selected, rounds, 3.0)
-    assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap
-    assert "forward selection adds" in decision.reason
-    assert decision.partial == (selected[-1].entry.gap > NOISE_GAP_THRESHOLD and sum(shares) < 0.5)
+    assert sum(shares) == pytest.approx(1.0 - selected[-1].entry.gap_with_effect / 3.0)
+    decision = set_verdict.set_decision(first_decision, selected, rounds, 3.0)
+    assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap_with_effect
+    assert [entry.entry.effect for entry in selected[1:]] == [entry.added for entry in rounds]
+    assert decision.partial == (selected[-1].entry.gap_with_effect > DEFAULT_SETTINGS.noise_gap and sum(shares) < 0.5)
 
 
 def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carries():
-    strong = {"effect": "tooth_damage", "score": 1428.0, "effect_gain": 2053.0, "shrink_interval": [0.17, 0.28]}
-    assert pipeline._leads_a_set(strong)
-    assert not pipeline._leads_a_set({**strong, "score": 9.0})
-    assert not pipeline._leads_a_set({**strong, "effect_gain": 1.0})       # the refitted nominal part scores
-    assert not pipeline._leads_a_set({**strong, "shrink_interval": [-0.01, 0.3]})
+    strong = candidate_score("tooth_damage", 1428.0, 0.22, effect_gain=2053.0, shrink_interval=(0.17, 0.28))
+    assert verdict.leads_a_set(strong)
+    assert not verdict.leads_a_set(replace(strong, score=9.0))
+    assert not verdict.leads_a_set(replace(strong, effect_gain=1.0))       # the refitted nominal part scores
+    assert not verdict.leads_a_set(replace(strong, shrink_interval=(-0.01, 0.3)))
     # with the pitch-error allowance the score must hold at its 90 % lower bound (26.3 - 1.645 * 15.5 = 0.8)
-    weak = {**strong, "score": 26.3, "standard_error": 15.5}
-    assert pipeline._leads_a_set(weak) and not pipeline._leads_a_set(weak, pitch_allowance=True)
-    assert pipeline._leads_a_set({**weak, "standard_error": 5.0}, pitch_allowance=True)
+    weak = replace(strong, score=26.3, standard_error=15.5)
+    assert verdict.leads_a_set(weak) and not verdict.leads_a_set(weak, pitch_allowance=True)
+    assert verdict.leads_a_set(replace(weak, standard_error=5.0), pitch_allowance=True)
 
 
 def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():
     first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
-    first = pipeline.SelectedEffect(_score("eccentricity", "eccentricity[pinion]", 300.0, 2.0, 0.33), 3.0, 0.33,
+    first = SelectedEffect(_score("eccentricity", "eccentricity[pinion]", 300.0, 2.0, 0.33), 3.0, 0.33,
                                     first_decision)
     added = Decision("tooth_damage", "second")
-    explained = pipeline.SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 90.0, 0.3, 0.85), 2.0,
+    explained = SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 90.0, 0.3, 0.85), 2.0,
                                         (2.0 - 0.3) / 3.0, added)
-    rounds = [pipeline.SelectionRound(("eccentricity[pinion]",), 2.0, [explained.entry], "tooth_damage", "", added)]
-    decision = pipeline.set_decision(first_decision, [first, explained], rounds, 3.0)
+    rounds = [SelectionRound(("eccentricity[pinion]",), 2.0, [explained.entry], "tooth_damage", "", added)]
+    decision = set_verdict.set_decision(first_decision, [first, explained], rounds, 3.0)
     assert not decision.partial and decision.remaining_gap == 0.3
-    still = pipeline.SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 30.0, 1.6, 0.2, low=0.05), 2.0,
+    still = SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 30.0, 1.6, 0.2, low=0.05), 2.0,
                                     0.4 / 3.0, added)
-    decision = pipeline.set_decision(first_decision, [first, still], rounds, 3.0)
+    decision = set_verdict.set_decision(first_decision, [first, still], rounds, 3.0)
     assert decision.partial and "remains unexplained" in decision.reason
     # one effect and no round: the first decision itself
-    assert pipeline.set_decision(first_decision, [first], [], 3.0) is first_decision
+    assert set_verdict.set_decision(first_decision, [first], [], 3.0) is first_decision
 
 
 def test_blind_test_scores_effect_sets():
@@ -353,7 +362,8 @@ def test_real_world_plan_covers_every_kind():
     assert len(kinds) == 11
     two = [spec for spec in specs if len(spec.truth_set()) == 2]
     assert len(two) == 6 and all(len(set(spec.truth_set())) == 2 for spec in two)
-    assert all(spec.effect_values[blind_test._LADDER[spec.truth][0]] == blind_test._LADDER[spec.truth][1][2]
+    assert all(spec.effect_values[effects.effect_family(spec.truth).strength]
+               == effects.effect_family(spec.truth).ladder[2]
                for spec in specs if spec.truth != "none")      # the leading effect at the strong level
     controls = [spec for spec in specs if spec.truth == "none"]
     assert len(controls) == 10 and all(spec.nuisances for spec in controls)
@@ -418,9 +428,7 @@ def test_run_out_and_tooth_damage_together_are_both_named(design, tmp_path):
 def test_a_run_out_alone_is_named_alone(design):
     rig = _campaign(design, [make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 0.7,
                                                           "kappa": 0.03})], seed=8)
-    case = prepare_case(rig, design, seed=np.random.SeedSequence(1))
-    result = pipeline.run_diagnosis(case, effects=["eccentricity", "tooth_damage", "friction"],
-                                    seed=np.random.SeedSequence(2))
-    assert result.verdict == "eccentricity", result.reason
-    assert [chosen.entry.effect for chosen in result.selected] == ["eccentricity"]
-    assert result.selected[0].shrink_share == result.selected[0].entry.shrink
+    diagnosis = Diagnosis(effects=["eccentricity", "tooth_damage", "friction"], seed=2).fit(rig)
+    assert diagnosis.decision_.verdict == "eccentricity", diagnosis.decision_.reason
+    assert [chosen.entry.effect for chosen in diagnosis.effects_] == ["eccentricity"]
+    assert diagnosis.effects_[0].shrink_share == diagnosis.effects_[0].entry.shrink_fraction

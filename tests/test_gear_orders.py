@@ -1,4 +1,4 @@
-"""Tests of the pitch-error allowance scaled to the rig's own gears (uqgear.diagnosis.gear_orders).
+"""Tests of the pitch-error allowance scaled to the rig's own gears (uqgear.diagnosis.allowances.pitch_orders).
 
 Checked against closed forms and synthetic data with a known truth: the
 order powers of a pure cosine of tooth positions, the class scaling of the
@@ -17,11 +17,12 @@ import numpy as np
 import pytest
 
 from uqgear.diagnosis.discrepancy import FeatureLayout
-from uqgear.diagnosis.gear_orders import (ORDERS, bounds_of, class_powers, drawn_amplitudes, factor_bounds,
-                                          factors_summary, fitted_factors, line_groups, order_powers,
-                                          scaled_line_errors, share_below)
-from uqgear.diagnosis.manufacturing import LARGE_RUN_OUT_SHARE, PitchErrorAllowance, run_outs_not_told_apart
-from uqgear.physics.pitch_errors import draw_pitch_errors
+from uqgear.diagnosis.allowances.pitch_errors import (LARGE_RUN_OUT_SHARE, PitchErrorAllowance,
+                                                      run_outs_not_told_apart)
+from uqgear.diagnosis.allowances.pitch_orders import (ORDERS, bounds_of, class_powers, drawn_amplitudes,
+                                                      factor_bounds, factors_summary, fitted_factors, line_groups,
+                                                      scaled_line_errors, share_below)
+from uqgear.physics.pitch_errors import draw_pitch_errors, order_powers
 
 
 def test_order_powers_of_a_cosine_of_the_tooth_positions():

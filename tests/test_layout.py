@@ -29,12 +29,13 @@ ALLOWED: dict[str, set[str]] = {
     "rig": {"common", "physics", "uq"},
     "calibration": {"common", "physics", "uq", "rig", "report"},
     "diagnosis": {"common", "physics", "uq", "rig", "report", "calibration"},
-    "study": {"common", "physics", "dynamics", "uq", "rig", "report", "calibration", "diagnosis"},
-    "cli": {"common", "physics", "dynamics", "uq", "rig", "report", "calibration", "diagnosis", "study",
+    "validation": {"common", "physics", "uq", "rig", "report", "calibration", "diagnosis"},
+    "study": {"common", "physics", "dynamics", "uq", "rig", "report", "calibration", "diagnosis", "validation"},
+    "cli": {"common", "physics", "dynamics", "uq", "rig", "report", "calibration", "diagnosis", "validation", "study",
             "package"},
     # uqgear/__init__.py: the public face, and __main__
-    "package": {"common", "physics", "dynamics", "uq", "rig", "report", "calibration", "diagnosis", "study",
-                "cli"},
+    "package": {"common", "physics", "dynamics", "uq", "rig", "report", "calibration", "diagnosis", "validation",
+                "study", "cli"},
 }
 
 #: Third-party modules the physics may not import: plotting and file output.
@@ -42,6 +43,15 @@ PHYSICS_FORBIDDEN = ("matplotlib", "netCDF4", "h5netcdf", "tqdm", "dask")
 
 #: Longest module, in lines.
 MAX_MODULE_LINES = 800
+
+#: Parts of the package held to the stricter rules below (no private name imported across modules; every
+#: public name of a subpackage in its ``__all__``; the first two also to the sizes). The rest of the package
+#: follows as it is brought to them.
+STRICT = ("diagnosis", "validation", "common", "cli.py")
+SIZED = STRICT[:2]
+#: Their limits: lines of a module, lines of code of a function (without its docstring, comments and blank
+#: lines), lines of a class.
+STRICT_MODULE_LINES, STRICT_FUNCTION_CODE_LINES, STRICT_CLASS_LINES = 500, 80, 250
 
 
 def _module_name(path: Path) -> str:
@@ -194,3 +204,125 @@ def test_the_public_face_has_what_the_readme_uses(name):
 def test_unknown_attributes_are_attribute_errors():
     with pytest.raises(AttributeError, match="no_such_thing"):
         uqgear.no_such_thing  # noqa: B018
+
+
+def _strict_files(parts: tuple[str, ...] = STRICT) -> list[Path]:
+    files = []
+    for part in parts:
+        path = PACKAGE / part
+        files += sorted(path.rglob("*.py")) if path.is_dir() else [path]
+    return files
+
+
+def _code_lines(node: ast.AST, source: list[str]) -> int:
+    """Lines of code of a function: its lines less blank ones, comments and its docstring."""
+    body = getattr(node, "body", [])
+    skip: set[int] = set()
+    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        skip = set(range(body[0].lineno, body[0].end_lineno + 1))
+    lines = range(node.lineno, node.end_lineno + 1)
+    return sum(1 for number in lines if number not in skip and source[number - 1].strip()
+               and not source[number - 1].strip().startswith("#"))
+
+
+def test_modules_functions_and_classes_keep_their_size():
+    """A module does one job: under 500 lines, functions under 80 lines of code, classes under 250 lines."""
+    too_long = []
+    for path in _strict_files(SIZED):
+        text = path.read_text()
+        source = text.splitlines()
+        name = str(path.relative_to(PACKAGE))
+        if len(source) > STRICT_MODULE_LINES:
+            too_long.append(f"{name}: {len(source)} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and \
+                    (code := _code_lines(node, source)) > STRICT_FUNCTION_CODE_LINES:
+                too_long.append(f"{name}: function {node.name}: {code} lines of code")
+            elif isinstance(node, ast.ClassDef) and (lines := node.end_lineno - node.lineno + 1) > STRICT_CLASS_LINES:
+                too_long.append(f"{name}: class {node.name}: {lines} lines")
+    assert too_long == []
+
+
+def _private_imports(path: Path) -> list[str]:
+    """Private names (one leading underscore) a module takes from another uqgear module.
+
+    ``from .x import _name`` and ``module._name`` on a uqgear module imported
+    under a name (``from ..rig import features as feature_module``).
+    """
+    module = _module_name(path)
+    is_package = path.name == "__init__.py"
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found, modules = [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0 and not (node.module or "").startswith("uqgear"):
+                continue
+            base = module.split(".") if is_package else module.split(".")[:-1]
+            source = node.module if node.level == 0 else ".".join(
+                base[: len(base) - (node.level - 1)] + ([node.module] if node.module else []))
+            for alias in node.names:
+                if alias.name.startswith("_") and not alias.name.startswith("__"):
+                    found.append(f"{module} imports {alias.name} from {source}")
+                candidate = f"{source}.{alias.name}"
+                if (PACKAGE.parent / Path(*candidate.split("."))).with_suffix(".py").exists() or \
+                        (PACKAGE.parent / Path(*candidate.split(".")) / "__init__.py").exists():
+                    modules.add(alias.asname or alias.name)
+        elif isinstance(node, ast.Import):
+            modules |= {alias.asname or alias.name for alias in node.names if alias.name.startswith("uqgear")}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules \
+                and node.attr.startswith("_") and not node.attr.startswith("__"):
+            found.append(f"{module} reads {node.value.id}.{node.attr}")
+    return found
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name with a leading underscore is its module's own: another module that needs it needs a public name."""
+    offenders = [entry for path in _strict_files() for entry in _private_imports(path)]
+    assert offenders == []
+
+
+def _public_names(path: Path) -> tuple[set[str], list[str] | None]:
+    """Names a subpackage's ``__init__`` defines or takes from the package (not private), and its ``__all__``."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    bound: set[str] = set()
+    declared = None
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom):
+            # what it takes from the package itself (typing's names and the like are not its public parts)
+            if node.level > 0 or (node.module or "").startswith("uqgear"):
+                bound |= {alias.asname or alias.name for alias in node.names}
+        elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            bound.add(node.name)
+        elif isinstance(node, ast.Assign):
+            for target in node.targets:
+                if isinstance(target, ast.Name) and target.id == "__all__":
+                    try:
+                        declared = list(ast.literal_eval(node.value))
+                    except ValueError:  # built at import (the package's lazy face): taken as it stands
+                        declared = sorted(bound)
+                elif isinstance(target, ast.Name):
+                    bound.add(target.id)
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            bound.add(node.target.id)
+    return {name for name in bound if not name.startswith("_")}, declared
+
+
+def test_every_subpackage_names_its_public_parts_in_its_all():
+    """What a subpackage's ``__init__`` makes public is in its ``__all__``, and its ``__all__`` names only that."""
+    missing = []
+    for path in _strict_files():
+        if path.name != "__init__.py":
+            continue
+        public, declared = _public_names(path)
+        name = str(path.relative_to(PACKAGE))
+        if declared is None:
+            missing.append(f"{name}: no __all__")
+            continue
+        submodules = {child.stem for child in path.parent.iterdir()
+                      if child.suffix == ".py" or (child / "__init__.py").exists()}
+        missing += [f"{name}: {item} not in __all__" for item in sorted(public - set(declared) - submodules)]
+        missing += [f"{name}: __all__ names {item}, which it does not define" for item in declared
+                    if item not in public]
+    assert missing == []

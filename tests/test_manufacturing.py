@@ -1,4 +1,4 @@
-"""Tests of the diagnosis's allowance for the pitch errors of manufactured gears (uqgear.diagnosis.manufacturing).
+"""Tests of the diagnosis's allowance for the pitch errors of manufactured gears (uqgear.diagnosis.allowances).
 
 Fast tests check the pieces against closed forms: an absolute line error is
 a random phasor, so a line the model does not have follows a Rayleigh law
@@ -15,7 +15,7 @@ called noise, no other effect named (8 runs of 1 s, as the real-world blind
 test; on 4 runs of 0.5 s the allowance left a healthy gear a gap of 0.5-0.6).
 Campaigns of the real-world blind test rebuilt: tests/test_real_world_pitch_errors.py.
 
-Line interference (uqgear.diagnosis.interference): a fixed-frequency line on
+Line interference (uqgear.diagnosis.allowances.interference): a fixed-frequency line on
 an accelerometer alone is found, one that the TE carries too is not, and
 mains on a virtual rig's accelerometers is left out of the low band.
 """
@@ -23,25 +23,31 @@ mains on a virtual rig's accelerometers is left out of the low band.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.stats
 
-from uqgear.diagnosis import DiagnosisError, prepare_case
-from uqgear.diagnosis import blind_test, pipeline
-from uqgear.diagnosis.case import DEFAULT_MODEL_ERROR, FeatureModelError
+from uqgear.diagnosis import Diagnosis, DiagnosisError, DiagnosisSeeds, verdict
+from uqgear.diagnosis.allowances.pitch_errors import (allowance_errors, check_classes, pitch_error_allowance,
+                                                      visible_sidebands)
+from uqgear.diagnosis.case import FeatureModelError, prepare_case
 from uqgear.diagnosis.discrepancy import FeatureLayout, NoiseModel, absolute_model_error, standardised_discrepancy
 from uqgear.diagnosis.fitting import fit_nominal
-from uqgear.diagnosis.scoring import gap_metric, leave_one_out
-from uqgear.diagnosis.manufacturing import (allowance_errors, check_classes, pitch_error_allowance,
-                                            visible_sidebands)
-from uqgear.diagnosis.simulation import RunProcessor
+from uqgear.diagnosis.heldout import leave_one_out
+from uqgear.diagnosis.scoring import RunOutCheck, gap_metric
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.diagnosis.processing import RunProcessor
+from uqgear import validation as blind_test
 from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign
 
+from helpers import candidate_score
+
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
+DEFAULT_MODEL_ERROR = dict(DEFAULT_SETTINGS.model_error)
 
 
 def _one_line_layout() -> tuple[FeatureLayout, list[NoiseModel]]:
@@ -108,7 +114,7 @@ def test_the_classes_are_checked():
     with pytest.raises(DiagnosisError, match="pitch_classes: expected two ISO 1328-1 classes"):
         check_classes("seven")
     with pytest.raises(DiagnosisError, match="pitch_classes"):
-        pipeline.run_diagnosis(None, seed=np.random.SeedSequence(0), pitch_classes=(0, 3))
+        Diagnosis(pitch_classes=(0, 3))
 
 
 def test_a_healthy_gear_without_pitch_errors_gets_no_allowance_and_no_simulation(healthy_case):
@@ -139,11 +145,16 @@ def _pitch_campaign(design, effects, seed):
 _EFFECTS = ["eccentricity", "tooth_damage", "friction"]
 
 
+def _diagnosed(rig, design):
+    """The diagnosis of a campaign with its noise from SeedSequence(1) and its bootstrap from SeedSequence(2)."""
+    seeds = DiagnosisSeeds(np.random.SeedSequence(1), np.random.SeedSequence(2), np.random.SeedSequence(3))
+    return Diagnosis(effects=_EFFECTS, design=design, seed=seeds, workers=1).fit(rig)
+
+
 @pytest.mark.slow
 def test_a_healthy_class_7_gear_is_not_given_an_effect_nor_left_unexplained(design):
     rig = _pitch_campaign(design, [], seed=11)
-    case = prepare_case(rig, design, seed=np.random.SeedSequence(1))
-    result = pipeline.run_diagnosis(case, effects=_EFFECTS, seed=np.random.SeedSequence(2))
+    result = _diagnosed(rig, design).outcome_
     assert result.pitch_errors is not None and result.pitch_errors.applied, result.pitch_errors
     assert result.verdict == "none", result.reason
     assert result.selected == []
@@ -159,7 +170,7 @@ def test_a_run_out_on_class_7_gears_leads_and_nothing_else_is_named(design):
     """A 40 um pinion run-out on class-7 gears (classes 6-8 make first-order run-outs up to 22 um, 95 %).
 
     With the allowance at the classes' mean this run-out led the ranking and the verdict stayed
-    `unexplained`. Scaled to the rig's own gears (uqgear.diagnosis.gear_orders) the nominal model reads
+    `unexplained`. Scaled to the rig's own gears (allowances.pitch_orders) the nominal model reads
     it as the pinion's own first-order errors at 17 um and the gap is within noise; the run-out's fit
     holds 19.8 nats (effect gain 31), not at its lower bound, and is named because its run-out is
     beyond what the classes make. What must hold: not `none`, the run-out leads and nothing else is
@@ -167,10 +178,10 @@ def test_a_run_out_on_class_7_gears_leads_and_nothing_else_is_named(design):
     """
     run_out = make_effect("eccentricity", {"shaft": "pinion", "amplitude": 40e-6, "phase": 0.7, "kappa": 0.03})
     rig = _pitch_campaign(design, [run_out], seed=12)
-    case = prepare_case(rig, design, seed=np.random.SeedSequence(1))
-    result = pipeline.run_diagnosis(case, effects=_EFFECTS, seed=np.random.SeedSequence(2))
+    diagnosis = _diagnosed(rig, design)
+    result = diagnosis.outcome_
     assert result.pitch_errors.applied
-    assert 15e-6 < case.run_out_allowance["pinion"] < 30e-6
+    assert 15e-6 < diagnosis.case_.run_out_allowance["pinion"] < 30e-6
     assert result.verdict in ("eccentricity", "unexplained"), result.reason
     assert result.ranking()[0]["effect"] == "eccentricity"
     assert result.best.effect == "eccentricity" and result.best.score > 10.0, result.reason
@@ -179,8 +190,8 @@ def test_a_run_out_on_class_7_gears_leads_and_nothing_else_is_named(design):
 
 
 def test_first_order_run_out_of_pitch_errors_scales_with_the_class_and_guards_the_verdict(design):
-    from uqgear.diagnosis.manufacturing import run_out_bounds
     from uqgear.diagnosis.verdict import decide
+    from uqgear.physics.pitch_errors import run_out_bounds
 
     seven = run_out_bounds(design, (7, 7), np.random.default_rng(0), draws=2000)
     five = run_out_bounds(design, (5, 5), np.random.default_rng(0), draws=2000)
@@ -189,18 +200,18 @@ def test_first_order_run_out_of_pitch_errors_scales_with_the_class_and_guards_th
         assert seven[gear] == pytest.approx(2.0 * five[gear], rel=1e-9)
     # the running sum of 101 gear teeth wanders further than that of 21 pinion teeth
     assert seven["gear"] > 1.5 * seven["pinion"]
-    strong = {"effect": "eccentricity", "score": 200.0, "effect_gain": 300.0, "shrink_fraction": 0.9,
-              "shrink_interval": [0.8, 1.0], "gap_with_effect": 0.1}
+    strong = candidate_score("eccentricity", 200.0, 0.9, effect_gain=300.0, shrink_interval=(0.8, 1.0),
+                             gap_with_effect=0.1)
     assert decide(2.0, [strong]).verdict == "eccentricity"
-    within = {**strong, "within_pitch_errors": {"run_out": 12e-6, "bound": 22e-6}}
+    within = replace(strong, run_out=RunOutCheck(12e-6, 22e-6, modulated=False))
     decision = decide(2.0, [within])
     assert decision.verdict == "unexplained" and "run-out of 12.0 um, within" in decision.reason
     assert decide(0.3, [within]).verdict == "none"
-    assert not pipeline._leads_a_set({**within, "shrink_interval": [0.1, 0.3]})
+    assert not verdict.leads_a_set(replace(within, shrink_interval=(0.1, 0.3)))
 
 
 def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_below_the_gap(design):
-    """Pitch errors make a run-out but no mesh-stiffness modulation (manufacturing.modulation_gain).
+    """Pitch errors make a run-out but no mesh-stiffness modulation (allowances.pitch_errors.modulation_gain).
 
     An eccentricity fit whose run-out is within the classes' own is guarded
     unless switching its kappa off costs at least the effect-gain threshold;
@@ -211,43 +222,48 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
     """
     from types import SimpleNamespace
 
-    from uqgear.diagnosis.candidates import candidates_for
+    from uqgear.diagnosis.effects import candidates_for
     from uqgear.diagnosis.scoring import CandidateScore
-    from uqgear.diagnosis.verdict import EFFECT_GAIN_THRESHOLD, decide
+    from uqgear.diagnosis.verdict import decide, run_out_check
 
     variant = candidates_for("eccentricity", design)[0]
-    case = SimpleNamespace(run_out_allowance={"pinion": 22e-6})
-    fit = SimpleNamespace(problem=SimpleNamespace(candidate=variant, case=case),
+    bounds = {"pinion": 22e-6}
+    fit = SimpleNamespace(problem=SimpleNamespace(candidate=variant),
                           values={"eccentricity.amplitude": 0.5e-6, "eccentricity.phase": 0.3,
                                   "eccentricity.kappa": 0.03})
     held = SimpleNamespace(z=np.zeros((2, 1, 1)))
     score = CandidateScore("eccentricity", variant.label, fit, held, "full", 70.2, 20.0, 5.0, 65.2, 0.0, 0.0,
-                           0.0, 0.0, effect_gain=29.0)
-    assert pipeline._ranking_entry(score)["within_pitch_errors"]["run_out"] == 0.5e-6
-    score.modulation_gain = EFFECT_GAIN_THRESHOLD - 0.1
-    assert "within_pitch_errors" in pipeline._ranking_entry(score)
+                           (0.0, 0.0), effect_gain=29.0)
+    check = run_out_check(score, bounds)
+    assert check.run_out == 0.5e-6 and check.within
+    score.modulation_gain = DEFAULT_SETTINGS.effect_gain_threshold - 0.1
+    assert run_out_check(score, bounds).within
     score.modulation_gain = 34.0
-    entry = pipeline._ranking_entry(score)
-    assert "within_pitch_errors" not in entry and entry["modulation_gain"] == 34.0
+    entry = replace(score, run_out=run_out_check(score, bounds))
+    assert not entry.run_out.within and entry.modulation_gain == 34.0
     # a nominal gap of 0 (nothing to shrink): named on the density only with the allowance
     assert decide(0.0, [entry]).verdict == "none"
     decision = decide(0.0, [entry], pitch_allowance=True, density_evidence=True)
     assert decision.verdict == "eccentricity" and "lower bound 32.3" in decision.reason
-    weak = {**entry, "standard_error": 40.0}
+    weak = replace(entry, standard_error=40.0)
     assert decide(0.0, [weak], pitch_allowance=True, density_evidence=True).verdict == "none"
-    guarded = pipeline._ranking_entry(CandidateScore("eccentricity", variant.label, fit, held, "full", 70.2, 20.0,
-                                                     5.0, 65.2, 0.0, 0.0, 0.0, 0.0, effect_gain=29.0))
+    plain = CandidateScore("eccentricity", variant.label, fit, held, "full", 70.2, 20.0, 5.0, 65.2, 0.0, 0.0,
+                           (0.0, 0.0), effect_gain=29.0)
+    guarded = replace(plain, run_out=run_out_check(plain, bounds))
     assert decide(0.0, [guarded], pitch_allowance=True, density_evidence=True).verdict == "none"
-    assert decide(0.0, [{**entry, "effect_gain": 1.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
+    assert decide(0.0, [replace(entry, effect_gain=1.0)], pitch_allowance=True,
+                  density_evidence=True).verdict == "none"
     # below the gap the effect must carry the score threshold by its own gain (a nuisance-only control's
     # torque ripple: 30 nats, gain 5.9), whether the shrink or the density speaks for it
-    assert decide(0.0, [{**entry, "effect_gain": 6.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
-    shrinking = {**entry, "shrink_fraction": 0.3, "shrink_interval": [0.05, 0.6], "gap_with_effect": 0.2}
-    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
-    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}]).verdict == "eccentricity"
+    assert decide(0.0, [replace(entry, effect_gain=6.0)], pitch_allowance=True,
+                  density_evidence=True).verdict == "none"
+    shrinking = replace(entry, shrink_fraction=0.3, shrink_interval=(0.05, 0.6), gap_with_effect=0.2)
+    assert decide(0.4, [replace(shrinking, effect_gain=6.0)], pitch_allowance=True,
+                  density_evidence=True).verdict == "none"
+    assert decide(0.4, [replace(shrinking, effect_gain=6.0)]).verdict == "eccentricity"
     assert decide(0.4, [shrinking], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
     # a further effect (forward selection) gets the raised gain without the density route
-    assert decide(0.4, [{**shrinking, "effect_gain": 6.0}], pitch_allowance=True).verdict == "none"
+    assert decide(0.4, [replace(shrinking, effect_gain=6.0)], pitch_allowance=True).verdict == "none"
     assert decide(0.0, [entry], pitch_allowance=True).verdict == "none"
     with pytest.raises(ValueError, match="pitch_allowance"):
         decide(0.0, [entry], density_evidence=True)
@@ -266,21 +282,20 @@ def test_with_the_allowance_a_gap_just_above_noise_needs_the_density_to_hold_at_
     """
     from uqgear.diagnosis.verdict import decide
 
-    control = {"effect": "eccentricity", "score": 26.3, "standard_error": 15.5, "shrink_fraction": 0.14,
-               "shrink_interval": [0.03, 1.0], "gap_with_effect": 0.44, "effect_gain": 49.0,
-               "modulation_gain": 38.5}
+    control = candidate_score("eccentricity", 26.3, 0.14, standard_error=15.5, shrink_interval=(0.03, 1.0),
+                              gap_with_effect=0.44, effect_gain=49.0, modulation_gain=38.5)
     assert decide(0.51, [control]).verdict == "eccentricity"
     decision = decide(0.51, [control], pitch_allowance=True, density_evidence=True)
     assert decision.verdict == "unexplained" and "lower bound, and eccentricity's is 0.8" in decision.reason
     # as strong at its lower bound (26.3 - 1.645 * 5 = 18.1), or halving the gap, it is named
-    assert decide(0.51, [{**control, "standard_error": 5.0}], pitch_allowance=True,
+    assert decide(0.51, [replace(control, standard_error=5.0)], pitch_allowance=True,
                   density_evidence=True).verdict == "eccentricity"
-    halving = {**control, "shrink_fraction": 0.6, "shrink_interval": [0.3, 1.0], "gap_with_effect": 0.2}
+    halving = replace(control, shrink_fraction=0.6, shrink_interval=(0.3, 1.0), gap_with_effect=0.2)
     assert decide(0.51, [halving], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
     # a further effect (no density_evidence) keeps the shrink rule of forward selection
     assert decide(0.51, [control], pitch_allowance=True).verdict == "eccentricity"
     # just below the gap the same: no jump at the noise gap
-    below = decide(0.49, [{**control, "gap_with_effect": 0.42}], pitch_allowance=True, density_evidence=True)
+    below = decide(0.49, [replace(control, gap_with_effect=0.42)], pitch_allowance=True, density_evidence=True)
     assert below.verdict == "none" and "eccentricity's is 0.8" in below.reason
 
 
@@ -295,20 +310,20 @@ def test_a_run_out_beyond_what_the_classes_make_needs_its_point_score_only():
     """
     from uqgear.diagnosis.verdict import decide, holds_against_pitch_errors
 
-    fit = {"effect": "eccentricity", "score": 19.8, "standard_error": 9.0, "shrink_fraction": 0.0,
-           "shrink_interval": [0.0, 0.0], "gap_with_effect": 0.0, "effect_gain": 31.0}
-    beyond = {**fit, "beyond_pitch_errors": {"run_out": 40e-6, "bound": 22e-6}}
+    fit = candidate_score("eccentricity", 19.8, 0.0, standard_error=9.0, shrink_interval=(0.0, 0.0),
+                          gap_with_effect=0.0, effect_gain=31.0)
+    beyond = replace(fit, run_out=RunOutCheck(40e-6, 22e-6, modulated=False))
     assert not holds_against_pitch_errors(fit) and holds_against_pitch_errors(beyond)
     assert decide(0.0, [fit], pitch_allowance=True, density_evidence=True).verdict == "none"
     decision = decide(0.0, [beyond], pitch_allowance=True, density_evidence=True)
     assert decision.verdict == "eccentricity" and "lower bound 5.0" in decision.reason
-    assert decide(0.0, [{**beyond, "score": 9.0}], pitch_allowance=True, density_evidence=True).verdict == "none"
-    assert pipeline._leads_a_set({**beyond, "shrink_interval": [0.1, 0.5]}, pitch_allowance=True)
-    assert not pipeline._leads_a_set({**fit, "shrink_interval": [0.1, 0.5]}, pitch_allowance=True)
+    assert decide(0.0, [replace(beyond, score=9.0)], pitch_allowance=True, density_evidence=True).verdict == "none"
+    assert verdict.leads_a_set(replace(beyond, shrink_interval=(0.1, 0.5)), pitch_allowance=True)
+    assert not verdict.leads_a_set(replace(fit, shrink_interval=(0.1, 0.5)), pitch_allowance=True)
 
 
 def test_friction_acting_with_pitch_errors_widens_the_sidebands_the_nominal_allowance_leaves_narrow(design):
-    """What pitch errors do to a feature depends on the model they act in (manufacturing.allowance_for_fit).
+    """What pitch errors do to a feature depends on the model they act in (pitch_errors.allowance_for_fit).
 
     Sliding friction reverses at the pitch point, at instants that pitch
     errors shift tooth by tooth. On a virtual rig with class-7 gears,
@@ -319,8 +334,8 @@ def test_friction_acting_with_pitch_errors_widens_the_sidebands_the_nominal_allo
     sideband with friction (one draw of the same law) must stand within a
     few of those spreads.
     """
-    from uqgear.diagnosis.candidates import candidates_for
-    from uqgear.diagnosis.fitting import FitProblem
+    from uqgear.diagnosis.effects import candidates_for
+    from uqgear.diagnosis.fit_problem import FitProblem
     from uqgear.physics.pitch_errors import draw_pitch_errors
 
     ops = {"pinion_speed": np.array([600.0, 1250.0]), "drive_torque": np.array([5000.0, 5000.0]),
@@ -360,7 +375,7 @@ def _records(fs, size, speeds, lines, rng, noise=0.01):
 
 
 def test_a_fixed_line_on_an_accelerometer_alone_is_interference_a_line_on_the_te_too_is_not():
-    from uqgear.diagnosis.interference import interference_lines
+    from uqgear.diagnosis.allowances.interference import interference_lines
 
     rng = np.random.default_rng(3)
     fs, size, speeds = 4096.0, 4096, np.array([600.0, 900.0, 1300.0, 1800.0])
@@ -370,12 +385,12 @@ def test_a_fixed_line_on_an_accelerometer_alone_is_interference_a_line_on_the_te
                # mains at 50 Hz, the gear's 17 Hz line and an order-locked line
                "acc_pinion": _records(fs, size, speeds, [(50.0, 0.5), (17.0, 0.5), (-3.0, 0.5)], rng),
                "acc_gear": _records(fs, size, speeds, [(-21.0, 1.0)], rng)}
-    found = interference_lines(records, noise, usable, speeds, fs, (2.0, 80.0), ("te", "acc_pinion", "acc_gear"))
+    found = interference_lines(records, noise, usable, speeds, fs, (2.0, 80.0), ("te", "acc_pinion", "acc_gear")).lines
     assert [(line["channel"], line["frequency"]) for line in found] == [("acc_pinion", 50.0)]
     assert found[0]["ops"] == [0, 1, 2, 3] and found[0]["amplitude"] == pytest.approx(0.5, rel=0.05)
     # without a TE channel nothing can be told apart: nothing is left out
     assert interference_lines({k: v for k, v in records.items() if k != "te"}, noise, usable, speeds, fs,
-                              (2.0, 80.0), ("acc_pinion", "acc_gear")) == []
+                              (2.0, 80.0), ("acc_pinion", "acc_gear")).lines == []
 
 
 def test_mains_on_the_accelerometers_is_left_out_of_the_low_band(design):
@@ -384,8 +399,8 @@ def test_mains_on_the_accelerometers_is_left_out_of_the_low_band(design):
     mains = simulate_campaign(design, ops, seed=5, duration=0.5, run_in=0.3, line_interference={50.0: 0.5})
     plain_case = prepare_case(clean, design, seed=np.random.SeedSequence(1))
     mains_case = prepare_case(mains, design, seed=np.random.SeedSequence(1))
-    assert plain_case.interference == []
-    assert {line["frequency"] for line in mains_case.interference} == {50.0}
+    assert not plain_case.interference.applied
+    assert {line["frequency"] for line in mains_case.interference.lines} == {50.0}
     column = mains_case.layout.names.index("low_band_rms")
     acc = mains_case.channels.index("acc_gear")
     with_notch = mains_case.observed[:, acc, column]

@@ -370,7 +370,7 @@ def _refused_design_json() -> str:
 
 
 def test_design_given_replaces_the_rig_files_without_validating_it(tmp_path):
-    from uqgear.diagnosis.workflow import load_rig_input
+    from uqgear.diagnosis.inputs import load_rig_input
     from uqgear.rig.format import read_rig, validate_rig, write_rig
 
     design = quiet(PAIR_17_38)

@@ -1,7 +1,7 @@
 """Campaigns of the real-world blind test with pitch errors, rebuilt as ``uqgear blindtest`` builds them.
 
 Out-of-sample misses of the per-run allowance that the rig's own gears,
-order by order, fix (uqgear.diagnosis.gear_orders, docs/model.md section
+order by order, fix (uqgear.diagnosis.allowances.pitch_orders, docs/model.md section
 6.4): seed 3's healthy class-7 control is `none`, not `unexplained`, and
 seed 4's 12 um pinion run-out is named on its held-out density, not left
 `unexplained` behind a damaged tooth. Seed 2's friction and run-out under
@@ -16,14 +16,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from uqgear.diagnosis import blind_test, pipeline, prepare_case
-from uqgear.diagnosis.manufacturing import LARGE_RUN_OUT_SHARE
+from uqgear import validation as blind_test
+from uqgear.diagnosis import Diagnosis, DiagnosisSeeds
+from uqgear.diagnosis.allowances.pitch_errors import LARGE_RUN_OUT_SHARE
+from uqgear.validation.campaigns import true_values
 
 
 def _real_world_case(seed: int, prefix: str):
-    """One campaign of the real-world blind test, rebuilt as ``uqgear blindtest --suite real_world`` builds it.
+    """One campaign of the real-world blind test, rebuilt and diagnosed as ``uqgear blindtest --suite real_world`` does.
 
-    Returns the blind case, its spec and the diagnosis's seed.
+    Returns the fitted diagnosis and the campaign's spec.
     """
     from uqgear.physics.design import load_design
 
@@ -31,15 +33,15 @@ def _real_world_case(seed: int, prefix: str):
     specs = blind_test.plan_real_world(1, np.random.default_rng(plan_seed))
     index = next(k for k, spec in enumerate(specs) if spec.identifier.startswith(prefix))
     spec = specs[index]
-    generation, noise, diagnosis, _ = campaigns_seed.spawn(len(specs))[index].spawn(4)
-    reference = load_design("locomotive")
-    design = reference if spec.design_name == "reference" else blind_test.second_design(reference)
-    rig = blind_test._rig_campaign(spec, design, blind_test.operating_points_of(spec.plan, design, 8),
-                                   blind_test._true_values(spec, design), spec.effects(), generation, 1.0,
-                                   f"seed {seed}")
+    generation, noise, diagnosis, reference = campaigns_seed.spawn(len(specs))[index].spawn(4)
+    reference_design = load_design("locomotive")
+    design = reference_design if spec.design_name == "reference" else blind_test.second_design(reference_design)
+    rig = blind_test.rig_campaign(spec, design, blind_test.operating_points_of(spec.plan, design, 8),
+                                  true_values(spec, design), spec.effects(), generation, 1.0, f"seed {seed}")
     for name in ("true_parameters", "effects", "noise"):
         rig.attrs.pop(name, None)
-    return prepare_case(rig, design, seed=noise), spec, diagnosis
+    seeds = DiagnosisSeeds(noise, diagnosis, reference.spawn(2)[1])
+    return Diagnosis(design=design, seed=seeds, workers=1).fit(rig), spec
 
 
 @pytest.mark.slow
@@ -52,9 +54,9 @@ def test_a_healthy_class_7_control_whose_gear_came_out_fine_at_one_order_is_none
     `unexplained` (sessions 13-14). Scaled to the rig order by order, the
     gap is within noise and nothing is named.
     """
-    case, spec, diagnosis = _real_world_case(3, "control_pitch_errors")
+    diagnosis, spec = _real_world_case(3, "control_pitch_errors")
     assert spec.truth_set() == [] and spec.nuisances.get("pitch_errors") == 7
-    result = pipeline.run_diagnosis(case, seed=diagnosis)
+    result = diagnosis.outcome_
     assert result.pitch_errors.applied
     assert result.verdict == "none" and result.selected == [], result.reason
     assert result.nominal_gap <= 0.5
@@ -78,9 +80,9 @@ def test_a_run_out_on_class_7_gears_is_named_not_left_unexplained_behind_a_damag
     `unexplained` (sessions 13-14). Scaled to the rig's own gears the gap
     is within noise and the run-out is named on its held-out density.
     """
-    case, spec, diagnosis = _real_world_case(4, "pitch_errors")
+    diagnosis, spec = _real_world_case(4, "pitch_errors")
     assert spec.truth_set() == ["eccentricity"] and spec.nuisances.get("pitch_errors") == 7
-    result = pipeline.run_diagnosis(case, seed=diagnosis)
+    result = diagnosis.outcome_
     assert result.pitch_errors.applied and result.nominal_gap <= 0.5
     assert result.verdict == "eccentricity", result.reason
     assert [chosen.entry.effect for chosen in result.selected] == ["eccentricity"]
@@ -101,9 +103,9 @@ def test_friction_on_class_7_gears_is_named_first_and_no_wrong_effect_with_it():
     rig, they take it (a run-out within what the classes make is not
     evidence of an eccentric shaft): friction alone, nothing wrong.
     """
-    case, spec, diagnosis = _real_world_case(2, "two_effects_nuisances")
+    diagnosis, spec = _real_world_case(2, "two_effects_nuisances")
     assert set(spec.truth_set()) == {"eccentricity", "friction"} and spec.nuisances.get("pitch_errors") == 7
-    result = pipeline.run_diagnosis(case, seed=diagnosis)
+    result = diagnosis.outcome_
     assert result.pitch_errors.applied
     named = [chosen.entry.effect for chosen in result.selected]
     assert named[:1] == ["friction"] and set(named) <= {"friction", "eccentricity"}, result.reason
@@ -128,12 +130,12 @@ def test_a_run_out_within_the_pinions_own_errors_is_named_by_its_sideband_phases
     not: 1013 nats in the blind test, far beyond the 200 that name it, with
     the most favourable run left out (docs/model.md 6.4).
     """
-    from uqgear.diagnosis.sideband_phase import PHASE_EVIDENCE_THRESHOLD
+    from uqgear.diagnosis.allowances.sideband_phase import PHASE_EVIDENCE_THRESHOLD
 
-    case, spec, diagnosis = _real_world_case(2, "pitch_errors")
+    diagnosis, spec = _real_world_case(2, "pitch_errors")
     assert spec.truth_set() == ["eccentricity"] and spec.nuisances.get("pitch_errors") == 7
     assert dict(spec.effects()[0].values)["shaft"] == "pinion"
-    result = pipeline.run_diagnosis(case, seed=diagnosis)
+    result = diagnosis.outcome_
     assert result.pitch_errors.applied
     assert result.verdict == "eccentricity" and result.named_shafts == ["pinion"], result.reason
     evidence = result.modulation[0]

@@ -25,8 +25,9 @@ import xarray as xr
 from uqgear.common.errors import RigDataError
 from uqgear.diagnosis import DiagnosisError, diagnose
 from uqgear.diagnosis.case import FeatureModelError
-from uqgear.diagnosis import blind_test
-from uqgear.diagnosis.reference import fit_gain_curve, match_operating_points
+from uqgear import validation as blind_test
+from uqgear.diagnosis.allowances.gain_curve import fit_gain_curve
+from uqgear.diagnosis.allowances.compatibility import match_operating_points
 from uqgear.physics.effects import make_effect
 from uqgear.rig import apply_transfer_path, read_rig, transfer_path_gain, write_rig
 from uqgear.rig.virtual_rig import simulate_campaign
@@ -244,7 +245,7 @@ def test_a_reference_with_the_rigs_resonance_keeps_the_diagnosis_right(design, t
 
 def test_the_rms_through_the_path_is_that_of_the_record_with_its_lines_scaled(healthy_case):
     """Closed form: a record of known lines plus a broadband rest; the path scales some lines only."""
-    from uqgear.diagnosis.case import transferred_rms
+    from uqgear.diagnosis.execution import transferred_rms
 
     processor = healthy_case.processors[3]
     time_axis = np.arange(processor.size) / processor.fs
@@ -272,11 +273,10 @@ def test_the_rms_through_the_path_is_that_of_the_record_with_its_lines_scaled(he
 
 def test_the_noise_colour_of_a_shaft_line_in_the_low_band_is_read_off_the_nearest_free_bins(healthy_case):
     """Noise 5 times stronger in amplitude below 1 kHz than above: a 10 Hz line's colour follows it, not 1."""
-    import copy
+    from dataclasses import replace
 
-    from uqgear.diagnosis.reference import noise_colour
+    from uqgear.diagnosis.allowances.reference import noise_colour
 
-    case = copy.copy(healthy_case)
     rig = healthy_case.rig.copy(deep=True)
     rng = np.random.default_rng(2)
     size = rig.sizes["time"]
@@ -284,7 +284,7 @@ def test_the_noise_colour_of_a_shaft_line_in_the_low_band_is_read_off_the_neares
     frequencies = np.fft.rfftfreq(size, 1.0 / healthy_case.fs)
     spectrum[:, frequencies < 1000.0] *= 5.0
     rig["acc_pinion"].values[...] = np.fft.irfft(spectrum, n=size, axis=1)
-    case.rig = rig
+    case = replace(healthy_case, rig=rig)
     colour = noise_colour(case)
     channel = case.channels.index("acc_pinion")
     for op, processor in enumerate(case.processors):

@@ -1,4 +1,4 @@
-"""The sideband phase-sum test of an eccentric shaft (uqgear.diagnosis.sideband_phase).
+"""The sideband phase-sum test of an eccentric shaft (uqgear.diagnosis.allowances.sideband_phase).
 
 Checked against what the phase sum is built to be: blind to where a record
 starts and to the modulation's own phase, sure of a pure amplitude
@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from uqgear.diagnosis.sideband_phase import (MIN_SIDEBAND_ORDERS, ModulationEvidence, log_density, phase_sums,
-                                             sideband_triples, shafts_tested)
+from uqgear.diagnosis.allowances.sideband_phase import (MIN_SIDEBAND_ORDERS, ModulationEvidence, log_density,
+                                                        phase_sums, sideband_triples, shafts_tested)
 
 _NAMES = ["pinion1", "mesh1", "mesh1_sb_pinion+1", "mesh1_sb_pinion-1", "mesh2", "mesh2_sb_pinion+1",
           "mesh2_sb_pinion-1", "mesh1_sb_gear+1", "mesh1_sb_gear-1"]

@@ -24,7 +24,9 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -38,16 +40,21 @@ from uqgear.calibration.training import train_emulators
 from uqgear.cli import main
 from uqgear.common.errors import InternalError, RigDataError, UqgearError, internal_step
 from uqgear.common.steps import FAILURE_RECORD, StepLog
-from uqgear.diagnosis import VERDICTS, decide, pipeline, prepare_case, workflow
-from uqgear.diagnosis.candidates import ParameterSpec, candidates_for, nominal_parameters
-from uqgear.diagnosis.fitting import FitProblem, fit
-from uqgear.diagnosis.scoring import leave_one_out
+from uqgear.diagnosis import VERDICTS, decide
+from uqgear.diagnosis import estimator as diagnosis_estimator, nominal as nominal_step
+from uqgear.diagnosis.candidates import ParameterSpec, nominal_parameters
+from uqgear.diagnosis.case import prepare_case
+from uqgear.diagnosis.effects import candidates_for, effect_names
+from uqgear.diagnosis.fit_problem import FitProblem
+from uqgear.diagnosis.fitting import fit
+from uqgear.diagnosis.heldout import leave_one_out
 from uqgear.physics.design import design_key_bounds
-from uqgear.physics.effects import EFFECTS, EffectError
+from uqgear.physics.effects import EffectError
 from uqgear.rig.format import read_rig, rig_design
 from uqgear.rig.usability import check_usable_signal
 from uqgear.study import analyses
 
+from helpers import candidate_score
 from test_cli import TINY  # the tiny in-process study of the CLI tests
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -126,7 +133,7 @@ FAULTS = ["all_nan", "all_zero", "two_samples", "short_records", "single_operati
 def test_diagnose_refuses_a_campaign_without_usable_signal_with_one_line(fault, bad_campaigns, tmp_path, capsys,
                                                                          monkeypatch):
     path, message = bad_campaigns[fault]
-    monkeypatch.setattr(workflow, "prepare_case", _no_work)
+    monkeypatch.setattr(diagnosis_estimator, "prepare_case", _no_work)
     out = tmp_path / "out"
     assert main(["diagnose", str(path), "--out", str(out)]) == 2
     err = capsys.readouterr().err
@@ -178,7 +185,7 @@ def test_usable_signal_check_names_what_it_refuses(healthy):
 
 def test_noise_only_campaign_is_inconclusive_not_none(noise_only, tmp_path, capsys, monkeypatch):
     """Valid data at the noise floor: the verdict says it cannot decide, without fitting noise."""
-    monkeypatch.setattr(workflow, "run_diagnosis", _no_work)
+    monkeypatch.setattr(diagnosis_estimator, "fit_nominal_model", _no_work)
     out = tmp_path / "out"
     assert main(["diagnose", str(noise_only), "--out", str(out), "--workers", "1"]) == 0
     printed = capsys.readouterr().out
@@ -194,8 +201,7 @@ def test_noise_only_campaign_is_inconclusive_not_none(noise_only, tmp_path, caps
 
 
 def test_a_gap_that_could_not_be_measured_is_inconclusive_never_none():
-    strong = {"effect": "friction", "score": 80.0, "shrink_fraction": 0.0, "shrink_interval": [0.0, 0.0],
-              "gap_with_effect": math.nan}
+    strong = candidate_score("friction", 80.0, 0.0, shrink_interval=(0.0, 0.0), gap_with_effect=math.nan)
     for ranking in ([], [strong]):
         decision = decide(math.nan, ranking)
         assert decision.verdict == "inconclusive" and "could not be measured" in decision.reason
@@ -236,7 +242,7 @@ def test_internal_failure_in_the_diagnosis_exits_1_names_the_step_and_keeps_what
     def past_its_bound(*args, **kwargs):
         raise EffectError("friction.coefficient: expected a value in [0, 0.3] 1; got 0.30000000000000004")
 
-    monkeypatch.setattr(pipeline, "fit_nominal", past_its_bound)
+    monkeypatch.setattr(nominal_step, "fit_nominal", past_its_bound)
     out = tmp_path / "out"
     assert main(["diagnose", str(HEALTHY), "--out", str(out), "--workers", "1"]) == 1
     err = capsys.readouterr().err
@@ -337,7 +343,7 @@ def test_no_parameter_of_any_fit_can_leave_what_its_constructor_accepts(changes)
             for value in values:
                 design.replace(**{spec.name: value})
     hints = {"eccentricity_pinion": 1.0, "eccentricity_gear": 0.0, "adhesion_frequency": 1e4}
-    for effect in EFFECTS:
+    for effect in effect_names():
         for candidate in candidates_for(effect, design, hints=hints):
             for corner in ("low", "high"):
                 values = {}
@@ -356,22 +362,22 @@ def healthy_case(healthy):
 
 
 def _stub_model(case, favoured):
-    """Model features that fit the rig better the larger ``favoured(task)`` is: the optimiser runs to a bound."""
+    """The case with model features that fit the rig better the larger ``favoured(task)`` is: the optimiser
+    runs to a bound."""
     def execute(tasks):
         results = []
         for task in tasks:
             shortfall = 1.0 - favoured(task)
             results.append((case.observed_all[task.op] * (1.0 + 0.05 * shortfall), True))
         return results
-    return execute
+    return replace(case, executor=SimpleNamespace(map=execute))
 
 
-def test_fits_driven_to_the_upper_bounds_never_propose_past_them(healthy_case, monkeypatch):
-    case = healthy_case
+def test_fits_driven_to_the_upper_bounds_never_propose_past_them(healthy_case):
     # friction's coefficient: its upper bound 0.3 is not hit exactly by the log transform's arithmetic
-    friction = candidates_for("friction", case.design)[0]
+    friction = candidates_for("friction", healthy_case.design)[0]
+    case = _stub_model(healthy_case, lambda task: task.effects[0].values["coefficient"] / 0.3)
     problem = FitProblem(case, friction)
-    monkeypatch.setattr(case, "execute", _stub_model(case, lambda task: task.effects[0].values["coefficient"] / 0.3))
     free = np.zeros(problem.size, dtype=bool)
     free[problem.n_global - 1] = True
     # one start on the bound itself (a start grid, a calibration or a clipped Newton step puts it there)
@@ -384,9 +390,9 @@ def test_fits_driven_to_the_upper_bounds_never_propose_past_them(healthy_case, m
     held = leave_one_out(result)
     assert np.all(held.vectors <= problem.upper) and np.isfinite(held.z).any()
     # a design at the end of its bearing-stiffness range: the fit's k1 stays inside what the design accepts
-    monkeypatch.setattr(case, "design", case.design.replace(k1=1e13))
+    stiff = healthy_case.with_design(healthy_case.design.replace(k1=1e13))
+    case = _stub_model(stiff, lambda task: math.log10(task.design.k1) - 12.0)
     problem = FitProblem(case, None)
-    monkeypatch.setattr(case, "execute", _stub_model(case, lambda task: math.log10(task.design.k1) - 12.0))
     free = np.zeros(problem.size, dtype=bool)
     free[[spec.name for spec in problem.specs].index("k1")] = True
     result = fit(problem, [problem.vector({"k1": 6e12})], free=free, max_evaluations=20)

@@ -13,7 +13,8 @@ the layers below it (``tests/test_layout.py`` checks the graph):
 ``report``         HTML reports from result Datasets
 ``rig``            rig-file format, features, virtual rig
 ``calibration``    Bayesian calibration against rig campaigns
-``diagnosis``      sim-to-real gap diagnosis and its blind test
+``diagnosis``      sim-to-real gap diagnosis
+``validation``     the diagnosis's blind test on virtual-rig campaigns
 ``study``          YAML studies and the analyses they run
 ``cli``            the ``uqgear`` command
 =================  ==========================================================
@@ -49,7 +50,8 @@ _PUBLIC: dict[str, str] = {
     # rig data, calibration, diagnosis
     "read_rig": "rig", "write_rig": "rig", "simulate_campaign": "rig", "extract_features": "rig",
     "Calibration": "calibration", "calibrate": "calibration",
-    "diagnose": "diagnosis", "diagnosis_result": "diagnosis", "blindtest": "diagnosis",
+    "Diagnosis": "diagnosis", "DiagnosisSettings": "diagnosis", "diagnose": "diagnosis",
+    "blindtest": "validation",
     # files shipped with the package
     "example_rig_file": "common", "bundled_names": "common",
     # errors

@@ -15,8 +15,10 @@
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler, a rig file without usable signal) ends with exit status
 2 and a one-line message on standard error, without a traceback, and leaves no
-partial output: ``run`` writes into a hidden sibling folder ``.DIR.partial``
-and renames it to ``DIR`` only when everything is written. Such mistakes are
+partial output: every command that writes a folder writes into a hidden
+sibling folder ``.DIR.partial`` and renames it to ``DIR`` only when everything
+is written (:class:`~uqgear.common.transaction.OutputFolder`, which the Python
+API's writers use too). Such mistakes are
 found before the work starts. An interrupted run (Ctrl-C, a killed job) keeps
 that folder, with its chunk checkpoints, so that ``--resume`` continues where
 it stopped.
@@ -34,16 +36,14 @@ folder for ``--resume``.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
-import tempfile
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
 from .common.errors import InternalError, UqgearError, UqgearWarning
+from .common.transaction import OutputFolder, is_empty_folder, partial_folder
 
 #: Exit status of an internal failure after the input was accepted.
 EXIT_INTERNAL_ERROR = 1
@@ -51,10 +51,6 @@ EXIT_INTERNAL_ERROR = 1
 EXIT_USER_ERROR = 2
 #: Exit status after Ctrl-C.
 EXIT_INTERRUPTED = 130
-
-PARTIAL_SUFFIX = ".partial"
-#: Folder of chunk checkpoints inside the work folder.
-CHECKPOINTS = ".checkpoints"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -91,8 +87,15 @@ def _run_command(args: argparse.Namespace) -> int:
 
 
 #: What each command computes, for the message of an internal failure.
-_WORK = {"run": "study run", "calibrate": "calibration", "diagnose": "diagnosis", "blindtest": "blind test",
-         "simulate": "simulation", "synth-rig": "virtual rig simulation", "report": "report"}
+_WORK = {
+    "run": "study run",
+    "calibrate": "calibration",
+    "diagnose": "diagnosis",
+    "blindtest": "blind test",
+    "simulate": "simulation",
+    "synth-rig": "virtual rig simulation",
+    "report": "report",
+}
 
 
 def _internal_failure(command: str, exc: InternalError) -> int:
@@ -103,8 +106,13 @@ def _internal_failure(command: str, exc: InternalError) -> int:
 
         record = Path(exc.kept) / FAILURE_RECORD
         kept = f"; finished outputs kept in {exc.kept}" + (f" (see {FAILURE_RECORD})" if record.is_file() else "")
-    print(_one_line(f"uqgear: internal error during {_WORK.get(command, command)} step '{exc.step}': "
-                    f"{exc.detail}{kept}; this is not a mistake in the input, please report it"), file=sys.stderr)
+    print(
+        _one_line(
+            f"uqgear: internal error during {_WORK.get(command, command)} step '{exc.step}': "
+            f"{exc.detail}{kept}; this is not a mistake in the input, please report it"
+        ),
+        file=sys.stderr,
+    )
     return EXIT_INTERNAL_ERROR
 
 
@@ -123,96 +131,45 @@ def _command_validate(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------- run
 
 
-def _partial_dir(out: Path) -> Path:
-    return out.parent / f".{out.name}{PARTIAL_SUFFIX}"
-
-
-def _is_empty_dir(path: Path) -> bool:
-    return path.is_dir() and not any(path.iterdir())
-
-
-def _copy_previous(out: Path, work: Path) -> None:
-    """Copy a finished run's results and checkpoints into the work folder (for --resume)."""
-    for item in out.iterdir():
-        target = work / item.name
-        if target.exists():
-            continue
-        if item.is_dir():
-            shutil.copytree(item, target)
-        elif item.suffix == ".nc":
-            shutil.copy2(item, target)
-
-
-def _publish(work: Path, out: Path) -> None:
-    """Move the finished work folder to ``out`` (replacing a previous run's folder)."""
-    if out.exists():
-        if _is_empty_dir(out):
-            out.rmdir()
-        else:
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-            old.rmdir()
-            out.rename(old)
-            work.rename(out)
-            shutil.rmtree(old, ignore_errors=True)
-            return
-    work.rename(out)
-
-
 def _command_run(args: argparse.Namespace) -> int:
     from .study.schema import load_study
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         return _fail(f"--out {out}: exists and is not a folder; expected a new or empty folder")
-    if out.is_dir() and not _is_empty_dir(out) and not args.resume:
-        return _fail(f"--out {out}: folder exists and is not empty; choose a new folder, remove it, "
-                     "or pass --resume to continue or update that run")
-    _check_parents(out, "--out")
+    if out.is_dir() and not is_empty_folder(out) and not args.resume:
+        return _fail(
+            f"--out {out}: folder exists and is not empty; choose a new folder, remove it, "
+            "or pass --resume to continue or update that run"
+        )
+    OutputFolder(out, where="--out", existing="replace").check()
     if args.workers is not None and args.workers < 1:
         return _fail(f"--workers: expected a positive integer; got {args.workers}")
     # the study is validated completely before anything is created
     study = load_study(args.study)
-    parents = _make_parents(out)
 
-    from .study.analyses import run_study
-    from .report.study_report import write_report
+    from .study.running import run_study
 
-    work = _partial_dir(out)
-    created = False
-    if work.exists() and not args.resume:
-        shutil.rmtree(work)  # left by an interrupted run; a fresh run was asked for
-    if not work.exists():
-        work.mkdir()
-        created = True
     try:
-        if args.resume and out.is_dir():
-            _copy_previous(out, work)
-        run_study(study, work, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
-                  show_progress=not args.quiet, checkpoint_dir=work / CHECKPOINTS)
-        if study.outputs.report:
-            write_report(work, dpi=study.outputs.dpi)
-        # chunk checkpoints only serve an interrupted run; a finished analysis is reused
-        # from its result file on --resume
-        shutil.rmtree(work / CHECKPOINTS, ignore_errors=True)
-        _publish(work, out)
+        run_study(
+            study,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            resume=args.resume,
+            show_progress=not args.quiet,
+            report=study.outputs.report,
+            dpi=study.outputs.dpi,
+            existing="replace",
+        )
     except KeyboardInterrupt:
-        print(f"uqgear: interrupted; finished work is kept in {work}; run again with --resume "
-              "to continue", file=sys.stderr)
+        print(
+            f"uqgear: interrupted; finished work is kept in {partial_folder(out)}; run again with --resume to continue",
+            file=sys.stderr,
+        )
         return EXIT_INTERRUPTED
-    except InternalError as exc:
-        # the study was valid: finished analyses and checkpoints stay for --resume
-        exc.kept = f"{work} (run again with --resume to continue)"
-        raise
-    except BaseException:
-        # no partial output: drop what this invocation created; a folder left by an earlier
-        # interrupted run stays for --resume
-        if created or not args.resume:
-            shutil.rmtree(work, ignore_errors=True)
-        _remove_if_empty(parents)
-        raise
     if not args.quiet:
-        print(f"results written to {out}" + (f" (report: {out / 'report.html'})"
-                                              if study.outputs.report else ""))
+        print(f"results written to {out}" + (f" (report: {out / 'report.html'})" if study.outputs.report else ""))
     return 0
 
 
@@ -250,8 +207,9 @@ def _command_examples(args: argparse.Namespace) -> int:
     print("Bundled designs (design: {name: NAME} in a study, --design NAME on the command line):")
     for name in bundled_names("design"):
         print(f"  {name:24s} {bundled_file('design', name)}")
-    print("Example rig campaigns (uqgear calibrate FILE / uqgear diagnose FILE; "
-          "uqgear.example_rig_file(NAME) in Python):")
+    print(
+        "Example rig campaigns (uqgear calibrate FILE / uqgear diagnose FILE; uqgear.example_rig_file(NAME) in Python):"
+    )
     for name in bundled_names("rig"):
         print(f"  {name:24s} {bundled_file('rig', name)}")
     return 0
@@ -262,8 +220,7 @@ def _copy_example(args: argparse.Namespace) -> int:
     from .common.resources import bundled_file
 
     if args.name is None or args.dest is None:
-        return _fail("examples copy: expected a study name and a destination: "
-                     "uqgear examples copy NAME DEST.yaml")
+        return _fail("examples copy: expected a study name and a destination: uqgear examples copy NAME DEST.yaml")
     source = bundled_file("study", args.name)
     dest = Path(args.dest)
     if dest.is_dir():
@@ -303,25 +260,36 @@ def _command_simulate(args: argparse.Namespace) -> int:
         _check_new_file(out, args.force)
     # the limits a study puts on the same values
     speed = check_operating_value("pinion_speed", args.speed, "--speed")
-    drive = (check_operating_value("drive_torque", args.drive_torque, "--drive-torque")
-             if args.drive_torque is not None else design.operation.drive_torque)
-    adhesion = (check_operating_value("adhesion_torque", args.adhesion_torque, "--adhesion-torque")
-                if args.adhesion_torque is not None else drive * design.z2 / design.z1)
-    n_periods, keep_periods = check_run_length(args.n_periods, args.keep_periods,
-                                               where=("--n-periods", "--keep-periods"))
+    drive = (
+        check_operating_value("drive_torque", args.drive_torque, "--drive-torque")
+        if args.drive_torque is not None
+        else design.operation.drive_torque
+    )
+    adhesion = (
+        check_operating_value("adhesion_torque", args.adhesion_torque, "--adhesion-torque")
+        if args.adhesion_torque is not None
+        else drive * design.z2 / design.z1
+    )
+    n_periods, keep_periods = check_run_length(
+        args.n_periods, args.keep_periods, where=("--n-periods", "--keep-periods")
+    )
     dpi = check_dpi(args.dpi, "--dpi")
 
-    from .study.analyses import quick_run
     from .report import simulation_figure_png
+    from .study.analyses import quick_run
     from .uq.results import save_result
 
     run = quick_run(design, speed, drive, adhesion, n_periods=n_periods, keep_periods=keep_periods)
-    print(f"pinion speed {speed:g} rpm, T1 {drive / 1e3:.4g} kN m, T2 {adhesion / 1e3:.4g} kN m "
-          f"({design.name}): {run.attrs['regime']} ({run.attrs['regime_reason']})")
-    print(f"  DTE RMS {run.attrs['dte_rms'] * 1e6:.4g} um, peak-to-peak "
-          f"{run.attrs['dte_peak_to_peak'] * 1e6:.4g} um, dynamic load factor "
-          f"{run.attrs['dynamic_load_factor']:.4g}, separated {100 * run.attrs['fraction_separation']:.3g} % "
-          f"of the time, back-side contact {100 * run.attrs['fraction_back_contact']:.3g} %")
+    print(
+        f"pinion speed {speed:g} rpm, T1 {drive / 1e3:.4g} kN m, T2 {adhesion / 1e3:.4g} kN m "
+        f"({design.name}): {run.attrs['regime']} ({run.attrs['regime_reason']})"
+    )
+    print(
+        f"  DTE RMS {run.attrs['dte_rms'] * 1e6:.4g} um, peak-to-peak "
+        f"{run.attrs['dte_peak_to_peak'] * 1e6:.4g} um, dynamic load factor "
+        f"{run.attrs['dynamic_load_factor']:.4g}, separated {100 * run.attrs['fraction_separation']:.3g} % "
+        f"of the time, back-side contact {100 * run.attrs['fraction_back_contact']:.3g} %"
+    )
     if out is not None:
         if out.suffix.lower() == ".png":
             from .common.fileio import atomic_path
@@ -366,66 +334,10 @@ def _parse_assignments(items: Sequence[str], option: str) -> dict[str, float]:
     return values
 
 
-@contextmanager
-def _output_folder(out: Path, option: str = "--out") -> Iterator[Path]:
-    """A hidden work folder that becomes ``out`` when the block succeeds and is removed when it fails.
-
-    ``out`` is checked first: it must not exist or be an empty folder, and its parent must exist.
-    """
-    if out.exists() and not _is_empty_dir(out):
-        raise UqgearError(f"{option} {out}: exists and is not an empty folder; choose a new folder")
-    _check_parents(out, option)
-    parents = _make_parents(out)
-    work = _partial_dir(out)
-    shutil.rmtree(work, ignore_errors=True)
-    work.mkdir()
-    try:
-        yield work
-    except InternalError as exc:
-        # the input was valid and work was done: what was finished is published, not thrown away
-        if any(work.iterdir()):
-            _publish(work, out)
-            exc.kept = str(out)
-        else:
-            work.rmdir()
-            _remove_if_empty(parents)
-        raise
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        _remove_if_empty(parents)
-        raise
-    _publish(work, out)
-
-
-def _check_parents(out: Path, option: str) -> None:
-    """Refuse an output path below a file (its missing folders are made once the input is valid)."""
-    for ancestor in out.absolute().parents:
-        if ancestor.exists():
-            if not ancestor.is_dir():
-                raise UqgearError(f"{option} {out}: {ancestor} is a file, not a folder")
-            return
-
-
-def _make_parents(out: Path) -> list[Path]:
-    """Create the missing folders above ``out``; return them, outermost first."""
-    missing = []
-    folder = out.absolute().parent
-    while not folder.exists():
-        missing.append(folder)
-        folder = folder.parent
-    missing.reverse()
-    for folder in missing:
-        folder.mkdir()
-    return missing
-
-
-def _remove_if_empty(folders: Sequence[Path]) -> None:
-    """Remove folders made by :func:`_make_parents` again, innermost first, while empty."""
-    for folder in reversed(folders):
-        try:
-            folder.rmdir()
-        except OSError:
-            return
+def _new_output_folder(out: Path) -> Path:
+    """``--out``: a new or empty folder, checked before any work (the library writes it as a whole)."""
+    OutputFolder(out, where="--out", existing="refuse").check()
+    return out
 
 
 def _comma_list(items: list[str] | None) -> list[str] | None:
@@ -447,8 +359,7 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     _check_new_file(out, args.force)
     if args.noise < 0:
         return _fail(f"--noise: expected a relative noise level >= 0; got {args.noise:g}")
-    synth_rig(design, out, effects=effects, true_parameters=true_parameters, seed=args.seed,
-              relative_noise=args.noise)
+    synth_rig(design, out, effects=effects, true_parameters=true_parameters, seed=args.seed, relative_noise=args.noise)
     described = "; ".join(repr(effect) for effect in effects) or "no effect"
     print(f"virtual rig campaign written to {out} ({design.name}, {described}, seed {args.seed})")
     return 0
@@ -463,8 +374,7 @@ def _pitch_classes(words: list[str]) -> tuple[float, float] | None:
     except ValueError:
         values = ()
     if len(values) != 2:
-        raise UqgearError(f"--pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; "
-                          f"got {' '.join(words)}")
+        raise UqgearError(f"--pitch-classes: expected two ISO 1328-1 classes (e.g. 6 8) or none; got {' '.join(words)}")
     return values[0], values[1]
 
 
@@ -475,10 +385,16 @@ def _command_calibrate(args: argparse.Namespace) -> int:
     if not rig.is_file():
         return _fail(f"{rig}: rig data file not found")
     classes = _pitch_classes(args.pitch_classes)
-    out = Path(args.out)
-    with _output_folder(out) as work:
-        result = calibrate(rig, work, design=args.design, params=_comma_list(args.params), seed=args.seed,
-                           threads=args.workers, pitch_classes=classes)
+    out = _new_output_folder(Path(args.out))
+    result = calibrate(
+        rig,
+        out,
+        design=args.design,
+        params=_comma_list(args.params),
+        seed=args.seed,
+        threads=args.workers,
+        pitch_classes=classes,
+    )
     summary = result.to_dict()
     state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
     print(f"calibration of {rig} {state}; results in {out}")
@@ -493,7 +409,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
 
 
 def _command_diagnose(args: argparse.Namespace) -> int:
-    from .diagnosis.workflow import diagnose
+    from .diagnosis import diagnose
 
     rig = Path(args.rig)
     if not rig.is_file():
@@ -502,37 +418,47 @@ def _command_diagnose(args: argparse.Namespace) -> int:
     if reference is not None and not reference.is_file():
         return _fail(f"--reference {reference}: rig data file not found")
     classes = _pitch_classes(args.pitch_classes)
-    out = Path(args.out)
-    with _output_folder(out) as work:
-        result = diagnose(rig, work, design=args.design, effects=_comma_list(args.effects), seed=args.seed,
-                          workers=args.workers, reference=reference, pitch_classes=classes)
+    out = _new_output_folder(Path(args.out))
+    result = diagnose(
+        rig,
+        out,
+        design=args.design,
+        effects=_comma_list(args.effects),
+        seed=args.seed,
+        workers=args.workers,
+        reference=reference,
+        pitch_classes=classes,
+    )
     gap = result.get("gap", {})
     if gap.get("baseline") is None:
         # nothing was compared (verdict inconclusive): the reason, not a row of Nones
-        print(f"diagnosis of {rig}: verdict {result['verdict']} ({_one_line(result.get('reason', ''))}); "
-              f"results in {out}")
+        print(
+            f"diagnosis of {rig}: verdict {result['verdict']} ({_one_line(result.get('reason', ''))}); results in {out}"
+        )
         return 0
     against = f" against reference {reference}" if reference is not None else ""
-    print(f"diagnosis of {rig}{against}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
-          f"{gap.get('baseline')} -> {gap.get('with_effect')} (shrink {gap.get('shrink_fraction')}); results in {out}")
+    print(
+        f"diagnosis of {rig}{against}: verdict {result['verdict']}; gap {gap.get('metric', '')} "
+        f"{gap.get('baseline')} -> {gap.get('with_effect')} (shrink {gap.get('shrink_fraction')}); results in {out}"
+    )
     return 0
 
 
 def _command_blindtest(args: argparse.Namespace) -> int:
-    from .diagnosis.blind_test import blindtest
+    from .validation import blindtest
 
     if args.n_per_effect < 1:
         return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
-    out = Path(args.out)
-    with _output_folder(out) as work:
-        result = blindtest(work, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers,
-                           suite=args.suite)
+    out = _new_output_folder(Path(args.out))
+    result = blindtest(out, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers, suite=args.suite)
     sets = result["effect_sets"]
-    print(f"blind test ({args.suite}): {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
-          f"({result['accuracy_detectable']:.2f} counting 'none' as right where the effect is invisible), "
-          f"effect sets exactly right {sets['set_exact']:.2f} ({sets['set_exact_identifiable']:.2f} against the "
-          f"effects the data can tell), false alarms on healthy controls "
-          f"{result['false_alarms']} of {result['healthy_controls']}; results in {out}")
+    print(
+        f"blind test ({args.suite}): {result['n_campaigns']} campaigns, accuracy {result['accuracy']:.2f} "
+        f"({result['accuracy_detectable']:.2f} counting 'none' as right where the effect is invisible), "
+        f"effect sets exactly right {sets['set_exact']:.2f} ({sets['set_exact_identifiable']:.2f} against the "
+        f"effects the data can tell), false alarms on healthy controls "
+        f"{result['false_alarms']} of {result['healthy_controls']}; results in {out}"
+    )
     return 0
 
 
@@ -541,148 +467,242 @@ def _command_blindtest(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``uqgear`` command."""
-    parser = _Parser(prog="uqgear", description="Dynamics of railway traction gears under uncertainty: "
-                     "run YAML studies, write netCDF results and self-contained HTML reports.")
+    parser = _Parser(
+        prog="uqgear",
+        description="Dynamics of railway traction gears under uncertainty: "
+        "run YAML studies, write netCDF results and self-contained HTML reports.",
+    )
     from . import __version__
 
     parser.add_argument("--version", action="version", version=f"uqgear {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     commands.required = True
 
-    validate = commands.add_parser("validate", help="check a study file against the schema",
-                                   description="Check a study file; print a summary or the first problem.")
+    validate = commands.add_parser(
+        "validate",
+        help="check a study file against the schema",
+        description="Check a study file; print a summary or the first problem.",
+    )
     validate.add_argument("study", metavar="STUDY.yaml")
     validate.set_defaults(handler=_command_validate)
 
-    run = commands.add_parser("run", help="run a study, write DIR/<analysis>.nc and DIR/report.html",
-                              description="Run every analysis of a study. Results appear in DIR only "
-                              "when the whole run has succeeded.")
-    run.add_argument("study", metavar="STUDY.yaml", help="a study file, or the name of a bundled study "
-                     "(uqgear examples lists them)")
-    run.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, "
-                     "or an earlier run's folder with --resume)")
-    run.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler address (tcp://host:8786); "
-                     "default: in-process on all local cores")
-    run.add_argument("--workers", type=int, metavar="N", help="with --scheduler: use N of its workers; "
-                     "without: N threads for the in-process integrator")
-    run.add_argument("--resume", action="store_true", help="reuse finished analyses and chunk "
-                     "checkpoints of an interrupted or earlier run into DIR")
+    run = commands.add_parser(
+        "run",
+        help="run a study, write DIR/<analysis>.nc and DIR/report.html",
+        description="Run every analysis of a study. Results appear in DIR only when the whole run has succeeded.",
+    )
+    run.add_argument(
+        "study", metavar="STUDY.yaml", help="a study file, or the name of a bundled study (uqgear examples lists them)"
+    )
+    run.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output folder (new or empty, or an earlier run's folder with --resume)",
+    )
+    run.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="dask scheduler address (tcp://host:8786); default: in-process on all local cores",
+    )
+    run.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="with --scheduler: use N of its workers; without: N threads for the in-process integrator",
+    )
+    run.add_argument(
+        "--resume",
+        action="store_true",
+        help="reuse finished analyses and chunk checkpoints of an interrupted or earlier run into DIR",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress bars or summary line")
     run.set_defaults(handler=_command_run)
 
-    examples = commands.add_parser("examples", help="list the bundled studies, designs and rig campaigns; "
-                                   "copy a study to edit",
-                                   description="Without arguments: list what ships with uqgear. "
-                                   "'examples copy NAME DEST' writes the bundled study NAME to DEST "
-                                   "(a .yaml file or a folder).")
+    examples = commands.add_parser(
+        "examples",
+        help="list the bundled studies, designs and rig campaigns; copy a study to edit",
+        description="Without arguments: list what ships with uqgear. "
+        "'examples copy NAME DEST' writes the bundled study NAME to DEST "
+        "(a .yaml file or a folder).",
+    )
     examples.add_argument("action", nargs="?", metavar="copy", help="copy a bundled study")
     examples.add_argument("name", nargs="?", metavar="NAME", help="bundled study name (see the list)")
     examples.add_argument("dest", nargs="?", metavar="DEST", help="destination file or folder")
     examples.add_argument("--force", action="store_true", help="overwrite DEST if it exists")
     examples.set_defaults(handler=_command_examples)
 
-    report = commands.add_parser("report", help="rebuild DIR/report.html from the saved results",
-                                 description="Rebuild the HTML report from the .nc files in DIR alone.")
+    report = commands.add_parser(
+        "report",
+        help="rebuild DIR/report.html from the saved results",
+        description="Rebuild the HTML report from the .nc files in DIR alone.",
+    )
     report.add_argument("directory", metavar="DIR")
     report.add_argument("--dpi", type=int, default=110, help="figure resolution (default 110)")
     report.set_defaults(handler=_command_report)
 
-    simulate = commands.add_parser("simulate", help="one quick run with a plot",
-                                   description="Simulate one operating point; print its regime and QoIs; "
-                                   "optionally write a figure (time history, phase plane, Poincare map, "
-                                   "spectrum) or the data.")
+    simulate = commands.add_parser(
+        "simulate",
+        help="one quick run with a plot",
+        description="Simulate one operating point; print its regime and QoIs; "
+        "optionally write a figure (time history, phase plane, Poincare map, "
+        "spectrum) or the data.",
+    )
     simulate.add_argument("--speed", type=float, required=True, metavar="RPM", help="pinion speed in rpm")
-    simulate.add_argument("--drive-torque", type=float, metavar="NM",
-                          help="drive torque T1 in N m (default: the design's rated torque)")
-    simulate.add_argument("--adhesion-torque", type=float, metavar="NM",
-                          help="adhesion torque T2 in N m (default: T1 z2/z1, balancing T1)")
-    simulate.add_argument("--design", default="locomotive", metavar="NAME|FILE",
-                          help="bundled design name or design YAML file (default: locomotive)")
+    simulate.add_argument(
+        "--drive-torque", type=float, metavar="NM", help="drive torque T1 in N m (default: the design's rated torque)"
+    )
+    simulate.add_argument(
+        "--adhesion-torque",
+        type=float,
+        metavar="NM",
+        help="adhesion torque T2 in N m (default: T1 z2/z1, balancing T1)",
+    )
+    simulate.add_argument(
+        "--design",
+        default="locomotive",
+        metavar="NAME|FILE",
+        help="bundled design name or design YAML file (default: locomotive)",
+    )
     simulate.add_argument("--out", metavar="FILE.png|FILE.nc", help="write a figure or the data")
     simulate.add_argument("--n-periods", type=int, default=400, help="mesh periods integrated (default 400)")
-    simulate.add_argument("--keep-periods", type=int, default=200,
-                          help="mesh periods kept after the transient (default 200)")
+    simulate.add_argument(
+        "--keep-periods", type=int, default=200, help="mesh periods kept after the transient (default 200)"
+    )
     simulate.add_argument("--dpi", type=int, default=110, help="figure resolution (default 110)")
     simulate.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     simulate.set_defaults(handler=_command_simulate)
 
-    synth = commands.add_parser("synth-rig", help="simulate a virtual-rig campaign in the rig format",
-                                description="Simulate a test-rig campaign (8 operating points by default) "
-                                "with chosen true parameters, sensor noise and unmodelled effects, and write "
-                                "it as a uqgear-rig/1 netCDF file.")
-    synth.add_argument("--design", default="locomotive", metavar="NAME|FILE",
-                       help="nominal design (bundled name or YAML file; default: locomotive)")
+    synth = commands.add_parser(
+        "synth-rig",
+        help="simulate a virtual-rig campaign in the rig format",
+        description="Simulate a test-rig campaign (8 operating points by default) "
+        "with chosen true parameters, sensor noise and unmodelled effects, and write "
+        "it as a uqgear-rig/1 netCDF file.",
+    )
+    synth.add_argument(
+        "--design",
+        default="locomotive",
+        metavar="NAME|FILE",
+        help="nominal design (bundled name or YAML file; default: locomotive)",
+    )
     synth.add_argument("--out", required=True, metavar="FILE.nc", help="rig file to write")
     synth.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    synth.add_argument("--effect", action="append", default=[], metavar="NAME:param=value,...",
-                       help="add an unmodelled effect, e.g. eccentricity:amplitude=12e-6,kappa=0.03 "
-                       "(repeatable)")
-    synth.add_argument("--true", action="append", default=[], metavar="KEY=VALUE",
-                       help="true value differing from the nominal design, e.g. mesh_stiffness_scale=0.97 "
-                       "or k1=1.05e9 (repeatable)")
+    synth.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        metavar="NAME:param=value,...",
+        help="add an unmodelled effect, e.g. eccentricity:amplitude=12e-6,kappa=0.03 (repeatable)",
+    )
+    synth.add_argument(
+        "--true",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="true value differing from the nominal design, e.g. mesh_stiffness_scale=0.97 or k1=1.05e9 (repeatable)",
+    )
     synth.add_argument("--seed", type=int, default=0, help="seed of noise and record starts (default 0)")
-    synth.add_argument("--noise", type=float, default=0.02,
-                       help="sensor noise as a fraction of each record's RMS (default 0.02)")
+    synth.add_argument(
+        "--noise", type=float, default=0.02, help="sensor noise as a fraction of each record's RMS (default 0.02)"
+    )
     synth.set_defaults(handler=_command_synth_rig)
 
-    calibrate = commands.add_parser("calibrate", help="Bayesian calibration of the model against rig data",
-                                    description="Calibrate mesh stiffness scale, mesh damping, backlash, STE "
-                                    "amplitude and bearing stiffness (and T2 per run) against a rig file with "
-                                    "emcee; write DIR/posterior.nc, DIR/calibration.json, DIR/report.html.")
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="Bayesian calibration of the model against rig data",
+        description="Calibrate mesh stiffness scale, mesh damping, backlash, STE "
+        "amplitude and bearing stiffness (and T2 per run) against a rig file with "
+        "emcee; write DIR/posterior.nc, DIR/calibration.json, DIR/report.html.",
+    )
     calibrate.add_argument("rig", metavar="RIG.nc")
     calibrate.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
-    calibrate.add_argument("--design", metavar="NAME|FILE", help="nominal design, replacing the rig file's "
-                           "(whose copy is then not checked; default: the rig file's design)")
-    calibrate.add_argument("--params", nargs="+", metavar="NAME",
-                           help="parameters to calibrate (default: mesh_stiffness_scale zeta_mesh backlash "
-                           "ste_amplitude k1 k2)")
+    calibrate.add_argument(
+        "--design",
+        metavar="NAME|FILE",
+        help="nominal design, replacing the rig file's "
+        "(whose copy is then not checked; default: the rig file's design)",
+    )
+    calibrate.add_argument(
+        "--params",
+        nargs="+",
+        metavar="NAME",
+        help="parameters to calibrate (default: mesh_stiffness_scale zeta_mesh backlash ste_amplitude k1 k2)",
+    )
     calibrate.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     calibrate.add_argument("--workers", type=int, metavar="N", help="integrator threads (default: all cores)")
-    calibrate.add_argument("--pitch-classes", nargs="+", default=["6", "8"], metavar="CLASS",
-                           help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest, for "
-                           "the pitch-error correction (default 6 8); 'none': read the level from the sidebands")
+    calibrate.add_argument(
+        "--pitch-classes",
+        nargs="+",
+        default=["6", "8"],
+        metavar="CLASS",
+        help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest, for "
+        "the pitch-error correction (default 6 8); 'none': read the level from the sidebands",
+    )
     calibrate.set_defaults(handler=_command_calibrate)
 
-    diagnose = commands.add_parser("diagnose", help="where model and rig disagree, which unmodelled effect "
-                                   "causes it, how far the gap shrinks",
-                                   description="Calibrate the nominal model, map the standardised gap over "
-                                   "op x channel x feature family, fit each candidate effect and score it on "
-                                   "held-out operating points; write DIR/diagnosis.json, DIR/diagnosis.nc, "
-                                   "DIR/report.html.")
+    diagnose = commands.add_parser(
+        "diagnose",
+        help="where model and rig disagree, which unmodelled effect causes it, how far the gap shrinks",
+        description="Calibrate the nominal model, map the standardised gap over "
+        "op x channel x feature family, fit each candidate effect and score it on "
+        "held-out operating points; write DIR/diagnosis.json, DIR/diagnosis.nc, "
+        "DIR/report.html.",
+    )
     diagnose.add_argument("rig", metavar="RIG.nc")
     diagnose.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
-    diagnose.add_argument("--design", metavar="NAME|FILE", help="nominal design, replacing the rig file's "
-                          "(whose copy is then not checked; default: the rig file's design)")
-    diagnose.add_argument("--effects", nargs="+", metavar="NAME",
-                          help="candidate effects (default: all six of the library)")
+    diagnose.add_argument(
+        "--design",
+        metavar="NAME|FILE",
+        help="nominal design, replacing the rig file's "
+        "(whose copy is then not checked; default: the rig file's design)",
+    )
+    diagnose.add_argument(
+        "--effects", nargs="+", metavar="NAME", help="candidate effects (default: all six of the library)"
+    )
     diagnose.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    diagnose.add_argument("--workers", type=int, metavar="N",
-                          help="worker processes (default: one per CPU, at most 8)")
-    diagnose.add_argument("--reference", metavar="HEALTHY.nc",
-                          help="a campaign of the same rig and test plan with a known good gearbox: what it "
-                          "shows against the fitted model (transfer paths, the rig's own structure) is learned "
-                          "and carried over, so the diagnosis names what changed")
-    diagnose.add_argument("--pitch-classes", nargs="+", default=["6", "8"], metavar="CLASS",
-                          help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest "
-                          "(default 6 8): where the sidebands show pitch errors on both shafts, what such "
-                          "errors do is model error, not an effect; 'none': perfect gears")
+    diagnose.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per CPU, at most 8)")
+    diagnose.add_argument(
+        "--reference",
+        metavar="HEALTHY.nc",
+        help="a campaign of the same rig and test plan with a known good gearbox: what it "
+        "shows against the fitted model (transfer paths, the rig's own structure) is learned "
+        "and carried over, so the diagnosis names what changed",
+    )
+    diagnose.add_argument(
+        "--pitch-classes",
+        nargs="+",
+        default=["6", "8"],
+        metavar="CLASS",
+        help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest "
+        "(default 6 8): where the sidebands show pitch errors on both shafts, what such "
+        "errors do is model error, not an effect; 'none': perfect gears",
+    )
     diagnose.set_defaults(handler=_command_diagnose)
 
-    blind = commands.add_parser("blindtest", help="blind check of the diagnosis on virtual-rig campaigns",
-                                description="Generate campaigns with withheld effects (and healthy controls), "
-                                "diagnose them, write the confusion matrix, shrink statistics and detection "
-                                "thresholds (DIR/blindtest.json, DIR/blindtest.nc, DIR/report.html). Campaigns "
-                                "follow the public campaigns' service points, bearing-clearance ones a light-load "
-                                "bearing check; healthy controls alternate both.")
+    blind = commands.add_parser(
+        "blindtest",
+        help="blind check of the diagnosis on virtual-rig campaigns",
+        description="Generate campaigns with withheld effects (and healthy controls), "
+        "diagnose them, write the confusion matrix, shrink statistics and detection "
+        "thresholds (DIR/blindtest.json, DIR/blindtest.nc, DIR/report.html). Campaigns "
+        "follow the public campaigns' service points, bearing-clearance ones a light-load "
+        "bearing check; healthy controls alternate both.",
+    )
     blind.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
     blind.add_argument("--n-per-effect", type=int, default=3, metavar="N", help="campaigns per effect (default 3)")
     blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    blind.add_argument("--suite", choices=("library", "real_world"), default="library",
-                       help="library: each effect alone on a clean rig (default); real_world: two effects at "
-                       "once, a transfer-path resonance with a healthy reference, speed wander, pitch errors and "
-                       "healthy controls with those nuisances (--n-per-effect campaigns of each kind)")
-    blind.add_argument("--workers", type=int, metavar="N",
-                       help="worker processes of each diagnosis (default: one per CPU, at most 8)")
+    blind.add_argument(
+        "--suite",
+        choices=("library", "real_world"),
+        default="library",
+        help="library: each effect alone on a clean rig (default); real_world: two effects at "
+        "once, a transfer-path resonance with a healthy reference, speed wander, pitch errors and "
+        "healthy controls with those nuisances (--n-per-effect campaigns of each kind)",
+    )
+    blind.add_argument(
+        "--workers", type=int, metavar="N", help="worker processes of each diagnosis (default: one per CPU, at most 8)"
+    )
     blind.set_defaults(handler=_command_blindtest)
     return parser
 

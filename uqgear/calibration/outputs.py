@@ -13,6 +13,7 @@ import numpy as np
 from ..common.errors import InternalError
 from ..common.fileio import write_text_atomic
 from ..common.steps import StepLog, write_failure_record
+from ..common.transaction import OutputFolder
 from ..physics.design import Design, load_design
 from ..rig.format import read_rig
 from .estimator import Calibration
@@ -63,7 +64,9 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     rig_path : path
         ``uqgear-rig/1`` file.
     out_dir : path
-        Folder for ``posterior.nc``, ``calibration.json`` and ``report.html``.
+        Folder for ``posterior.nc``, ``calibration.json`` and ``report.html``, written as a whole
+        (:class:`~uqgear.common.transaction.OutputFolder`): they appear once all are written, replacing
+        the files of an earlier calibration there; a mistake in the input leaves nothing.
     design : Design or design file/name, optional
         Nominal design; default the file's ``design`` attribute. When given it
         replaces the file's, which is then not validated as a design.
@@ -94,22 +97,22 @@ def calibrate(rig_path: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     nominal = None if design is None else (design if isinstance(design, Design) else load_design(design))
     calibration = Calibration(params if params is not None else DEFAULT_PARAMETERS, design=nominal, seed=seed,
                               threads=threads, pitch_classes=pitch_classes)
-    try:
-        calibration.fit(rig_path)
-        steps = getattr(calibration, "steps_", StepLog())
-        with steps.step("write the results"):
-            truth = None
-            rig = read_rig(rig_path, design=nominal)
-            if "true_parameters" in rig.attrs:
-                truth = json.loads(rig.attrs["true_parameters"])
-            write_calibration(calibration, out_dir, truth=truth)
-    except InternalError as exc:
-        folder = Path(out_dir)
-        folder.mkdir(parents=True, exist_ok=True)
-        write_failure_record(folder, exc, command="calibration",
-                             inputs={"rig": str(rig_path), "params": list(calibration.parameters), "seed": str(seed),
-                                     "design": design if isinstance(design, (str, os.PathLike)) else None})
-        exc.kept = str(folder)
-        raise
+    # nothing appears in out_dir until everything is written (a mistake in the input leaves nothing)
+    with OutputFolder(out_dir) as work:
+        try:
+            calibration.fit(rig_path)
+            steps = getattr(calibration, "steps_", StepLog())
+            with steps.step("write the results"):
+                truth = None
+                rig = read_rig(rig_path, design=nominal)
+                if "true_parameters" in rig.attrs:
+                    truth = json.loads(rig.attrs["true_parameters"])
+                write_calibration(calibration, work, truth=truth)
+        except InternalError as exc:
+            write_failure_record(work, exc, command="calibration",
+                                 inputs={"rig": str(rig_path), "params": list(calibration.parameters),
+                                         "seed": str(seed),
+                                         "design": design if isinstance(design, (str, os.PathLike)) else None})
+            raise
     return calibration
 

@@ -56,7 +56,8 @@ import xarray as xr
 
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..physics.pitch_errors import REFERENCE_CLASS, PitchErrors, class_level, draw_at_level, draw_pitch_errors
+from ..physics.pitch_errors import (DEFAULT_CLASSES, REFERENCE_CLASS, PitchErrors, class_level, draw_at_level,
+                                    draw_pitch_errors)
 from ..rig.features import extract_features, sampling_rate
 from ..rig.virtual_rig import simulate_campaign
 from .harmonics import HARMONIC_CHANNELS, harmonic_lines, observed_harmonics
@@ -73,8 +74,6 @@ MIN_SIDEBANDS = 12
 #: Fewest of the rig's sidebands, as a fraction, that must stand out before a level is looked for (a healthy,
 #: error-free gear's records show 2-3 % at 3 noise std: the model's own sidebands at low speed and chance).
 MIN_VISIBLE_FRACTION = 0.1
-#: ISO 1328-1 classes assumed when none are stated: the usual range of traction gears.
-DEFAULT_CLASSES = (6.0, 8.0)
 #: Run-in of the correction's simulations, s: the transients of the model decay within a few hundredths.
 RUN_IN = 0.25
 

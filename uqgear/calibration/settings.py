@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..physics.design import Design
+from ..physics.pitch_errors import check_classes
 from ..uq.seeds import as_seed_sequence
 from .errors import CalibrationError
 from .harmonics import HARMONIC_CHANNELS
@@ -91,13 +92,4 @@ def check_n_training(n_training: int) -> int:
 
 def check_pitch_classes(classes: object) -> tuple[float, float] | None:
     """None, or (lowest, highest) ISO 1328-1 flank tolerance classes within 1..11."""
-    if classes is None:
-        return None
-    try:
-        low, high = (float(value) for value in classes)  # type: ignore[union-attr]
-    except (TypeError, ValueError):
-        raise CalibrationError(f"pitch_classes: expected two ISO 1328-1 classes (lowest, highest) in 1..11 or "
-                               f"none; got {classes!r:.80}") from None
-    if not (1.0 <= low <= high <= 11.0):
-        raise CalibrationError(f"pitch_classes: expected 1 <= lowest <= highest <= 11; got ({low:g}, {high:g})")
-    return low, high
+    return check_classes(classes, error=CalibrationError)

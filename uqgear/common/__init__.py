@@ -7,19 +7,52 @@ Imports nothing of uqgear; every other subpackage may import it.
 from __future__ import annotations
 
 from .errors import (
-    shown, UqgearError, DesignError, OperatingPointError, ParameterSpaceError, StudyError, RigDataError,
-    ExecutionError, InternalError, internal_step, UqgearWarning, DesignWarning, UndercutWarning)
-from .fileio import (atomic_path, write_text_atomic)
-from .steps import FAILURE_RECORD, StepLog, write_failure_record
+    DesignError,
+    DesignWarning,
+    ExecutionError,
+    InternalError,
+    OperatingPointError,
+    ParameterSpaceError,
+    RigDataError,
+    StudyError,
+    UndercutWarning,
+    UqgearError,
+    UqgearWarning,
+    internal_step,
+    shown,
+)
+from .fileio import atomic_path, write_text_atomic
+from .progress import PROGRESS_ENVIRONMENT_VARIABLE, progress, progress_enabled
 from .resources import ResourceError, bundled_file, bundled_names, example_rig_file
-from .progress import (progress, progress_enabled, PROGRESS_ENVIRONMENT_VARIABLE)
-from .yamlio import (load_yaml, YAMLError)
+from .steps import FAILURE_RECORD, StepLog, write_failure_record
+from .yamlio import YAMLError, load_yaml
 
 __all__ = [
-    'ResourceError', 'bundled_file', 'bundled_names', 'example_rig_file',
-    'shown', 'UqgearError', 'DesignError', 'OperatingPointError', 'ParameterSpaceError', 'StudyError',
-    'RigDataError', 'ExecutionError', 'InternalError', 'internal_step', 'UqgearWarning', 'DesignWarning',
-    'UndercutWarning', 'atomic_path', 'write_text_atomic', 'progress',
-    'progress_enabled', 'PROGRESS_ENVIRONMENT_VARIABLE', 'load_yaml', 'YAMLError', 'FAILURE_RECORD', 'StepLog',
-    'write_failure_record',
+    "ResourceError",
+    "bundled_file",
+    "bundled_names",
+    "example_rig_file",
+    "shown",
+    "UqgearError",
+    "DesignError",
+    "OperatingPointError",
+    "ParameterSpaceError",
+    "StudyError",
+    "RigDataError",
+    "ExecutionError",
+    "InternalError",
+    "internal_step",
+    "UqgearWarning",
+    "DesignWarning",
+    "UndercutWarning",
+    "atomic_path",
+    "write_text_atomic",
+    "progress",
+    "progress_enabled",
+    "PROGRESS_ENVIRONMENT_VARIABLE",
+    "load_yaml",
+    "YAMLError",
+    "FAILURE_RECORD",
+    "StepLog",
+    "write_failure_record",
 ]

@@ -34,8 +34,7 @@ def progress_enabled() -> bool:
         return False
 
 
-def progress(iterable_or_total: Iterable[Item] | int, *, desc: str, unit: str = "it",
-             enabled: bool = True) -> tqdm:
+def progress(iterable_or_total: Iterable[Item] | int, *, desc: str, unit: str = "it", enabled: bool = True) -> tqdm:
     """A tqdm progress bar over an iterable, or over a count updated by hand.
 
     Parameters
@@ -59,11 +58,9 @@ def progress(iterable_or_total: Iterable[Item] | int, *, desc: str, unit: str = 
     """
     disable = not enabled or not progress_enabled()
     if isinstance(iterable_or_total, bool) or not isinstance(iterable_or_total, (int, Iterable)):
-        raise TypeError(f"progress: expected an iterable or an integer total; "
-                        f"got {type(iterable_or_total).__name__}")
+        raise TypeError(f"progress: expected an iterable or an integer total; got {type(iterable_or_total).__name__}")
     if isinstance(iterable_or_total, int):
-        return tqdm(total=iterable_or_total, desc=desc, unit=unit, disable=disable,
-                    dynamic_ncols=True)
+        return tqdm(total=iterable_or_total, desc=desc, unit=unit, disable=disable, dynamic_ncols=True)
     return tqdm(iterable_or_total, desc=desc, unit=unit, disable=disable, dynamic_ncols=True)
 
 

@@ -75,8 +75,9 @@ def _json_ready(value: Any) -> Any:
     return number if number == number and abs(number) != float("inf") else None
 
 
-def write_failure_record(folder: str | os.PathLike[str], error: InternalError, *, command: str,
-                         inputs: dict[str, Any] | None = None) -> Path:
+def write_failure_record(
+    folder: str | os.PathLike[str], error: InternalError, *, command: str, inputs: dict[str, Any] | None = None
+) -> Path:
     """Write ``failure.json`` into ``folder``: what failed, where, and what had finished.
 
     Parameters
@@ -109,7 +110,7 @@ def write_failure_record(folder: str | os.PathLike[str], error: InternalError, *
         "inputs": inputs or {},
         "traceback": "".join(traceback.format_exception(type(cause), cause, cause.__traceback__)),
         "note": "an internal failure of uqgear after the input was accepted, not a mistake in the input; "
-                "please report it with this file",
+        "please report it with this file",
     }
     path = folder / FAILURE_RECORD
     write_text_atomic(path, json.dumps(_json_ready(content), indent=2))

@@ -19,7 +19,6 @@ import yaml
 
 from .errors import shown
 
-
 #: Most values (scalars, lists and mappings, each alias counted at every use) a document may hold.
 MAX_VALUES = 200_000
 
@@ -39,9 +38,12 @@ class _Loader(yaml.SafeLoader):
                     continue  # unhashable: the base constructor reports it
                 if first is not None:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"key {shown(key, 60)} appears twice in one mapping "
+                        None,
+                        None,
+                        f"key {shown(key, 60)} appears twice in one mapping "
                         f"(lines {first + 1} and {key_node.start_mark.line + 1}); keep one",
-                        key_node.start_mark)
+                        key_node.start_mark,
+                    )
                 lines[key] = key_node.start_mark.line
         return super().construct_mapping(node, deep=deep)
 
@@ -103,8 +105,10 @@ def load_yaml(text: str) -> Any:
     except RecursionError:
         raise yaml.YAMLError("the document is nested too deeply to read") from None
     if isinstance(document, (dict, list)) and _expanded_size(document) > MAX_VALUES:
-        raise yaml.YAMLError(f"the document expands to more than {MAX_VALUES:,} values through "
-                             "aliases (&anchor / *alias); a study or design needs far fewer")
+        raise yaml.YAMLError(
+            f"the document expands to more than {MAX_VALUES:,} values through "
+            "aliases (&anchor / *alias); a study or design needs far fewer"
+        )
     return document
 
 

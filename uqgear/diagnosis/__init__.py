@@ -1,19 +1,25 @@
-"""Sim-to-real gap diagnosis: where model and rig disagree, which effect explains it.
+"""Sim-to-real gap diagnosis: where model and rig disagree, which unmodelled effect explains it.
 
-Also the blind test that scores the diagnosis on campaigns with withheld effects.
+:class:`Diagnosis` is the estimator (settings in ``__init__``, the six
+steps of docs/model.md section 6 in ``fit``, results in ``*_``
+attributes); :func:`diagnose` fits one and writes its folder. The modules
+along its steps:
 
-Modules along the data path: :mod:`.simulation` (model records, the rig's
-feature processing), :mod:`.discrepancy` (predictive distribution of the
-features), :mod:`.candidates` (fitted parameters and candidate effects),
-:mod:`.case` (a prepared campaign and its run execution), :mod:`.signatures`
-(frequency-locked lines, start hints), :mod:`.fitting`, :mod:`.manufacturing`
-(the gears' pitch errors as model error), :mod:`.gear_orders` (that model error scaled
-to the rig's own gears, order by order), :mod:`.scoring`
-(held-out predictions and the gap), :mod:`.verdict`, :mod:`.sideband_phase`
-(an eccentric shaft told from pitch errors by its sidebands' phases),
-:mod:`.pipeline` (:func:`run_diagnosis`), :mod:`.result` (what it returns),
-:mod:`.outputs` (summary and Dataset),
-:mod:`.workflow` (:func:`diagnose`) and :mod:`.blind_test`.
+- the estimator and its inputs: :mod:`.estimator`, :mod:`.inputs`,
+  :mod:`.settings` (every threshold and budget), :mod:`.writer`;
+- step 1, features: :mod:`.case` (a prepared campaign), :mod:`.simulation`
+  (model records and the rig's feature processing), :mod:`.execution`
+  (runs on worker processes);
+- step 2, predictive distribution: :mod:`.discrepancy`, :mod:`.gap_maps`;
+- step 3, fits: :mod:`.candidates` (parameters), :mod:`.fit_problem`,
+  :mod:`.fitting`, :mod:`.nominal`, :mod:`.screening`, :mod:`.signatures`;
+- step 4, held-out scoring: :mod:`.heldout`, :mod:`.scoring`;
+- step 5, verdict: :mod:`.verdict`, :mod:`.decision`;
+- step 6, several effects: :mod:`.selection`, :mod:`.effect_set`;
+- the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`;
+- the effect families as plug-ins: :mod:`.effects`;
+- what a campaign holds that is no effect (line interference, a healthy
+  reference, the gears' pitch errors, the sideband phase test): :mod:`.allowances`.
 
 May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
 :mod:`uqgear.rig`, :mod:`uqgear.report` and :mod:`uqgear.calibration`.
@@ -21,19 +27,34 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
 
 from __future__ import annotations
 
+from .decision import Decision
+from .effects import EffectFamily, effect_family, effect_names, register_effect, unregister_effect
 from .errors import DiagnosisError
-from .case import prepare_case
-from .verdict import decide, decide_verdict, Decision, EFFECT_NAMES, VERDICTS
-from .pipeline import run_diagnosis
+from .estimator import Diagnosis
+from .inputs import DiagnosisSeeds
 from .result import DiagnosisResult
-from .workflow import diagnose, diagnosis_result
-from .blind_test import (
-    blindtest, plan_campaigns, summarise, blindtest_dataset, oracle_gap, CampaignSpec, HEALTHY,
-    STRENGTHS, PLANS)
+from .scoring import CandidateScore
+from .settings import DiagnosisSettings
+from .verdict import EFFECT_NAMES, VERDICTS, decide, decide_verdict
+from .writer import diagnose, write_diagnosis
 
 __all__ = [
-    'diagnose', 'diagnosis_result', 'run_diagnosis', 'prepare_case', 'decide', 'decide_verdict',
-    'Decision', 'DiagnosisError', 'DiagnosisResult', 'EFFECT_NAMES', 'VERDICTS', 'blindtest',
-    'plan_campaigns', 'summarise', 'blindtest_dataset', 'oracle_gap', 'CampaignSpec', 'HEALTHY',
-    'STRENGTHS', 'PLANS',
+    "Diagnosis",
+    "DiagnosisSettings",
+    "DiagnosisSeeds",
+    "diagnose",
+    "write_diagnosis",
+    "decide",
+    "decide_verdict",
+    "Decision",
+    "DiagnosisError",
+    "DiagnosisResult",
+    "CandidateScore",
+    "EFFECT_NAMES",
+    "VERDICTS",
+    "EffectFamily",
+    "effect_family",
+    "effect_names",
+    "register_effect",
+    "unregister_effect",
 ]

@@ -1,17 +1,20 @@
-"""The fitted parameters: the nominal model's, with priors from the design, and each candidate effect's."""
+"""The fitted parameters: the nominal model's, with priors from the design, and the candidate effects' variants.
+
+The variants of each effect family come from its plug-in
+(:mod:`uqgear.diagnosis.effects`); here are the parameter transform, the
+nominal model's priors and what a model with several effects repeats over.
+"""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-
-import numpy as np
+from dataclasses import dataclass, field
 
 from ..physics.design import Design, design_key_bounds
-from ..physics.effects import EFFECTS, Effect, make_effect
+from ..physics.effects import Effect
 from .errors import DiagnosisError
-from .simulation import _MAX_STIFFNESS_SCALE, PERIODICITIES
+from .simulation import MAX_STIFFNESS_SCALE, PERIODICITIES
 
 
 @dataclass(frozen=True)
@@ -82,7 +85,7 @@ def nominal_parameters(design: Design) -> list[ParameterSpec]:
     zeta = max(design.zeta_mesh, _ZETA_MESH_FLOOR)
     ste = max(design.ste_amplitude, _STE_FLOOR)
     return [
-        ParameterSpec("mesh_stiffness_scale", True, 1.0, 0.15, 0.6, _MAX_STIFFNESS_SCALE, True),
+        ParameterSpec("mesh_stiffness_scale", True, 1.0, 0.15, 0.6, MAX_STIFFNESS_SCALE, True),
         _design_spec("zeta_mesh", zeta, 0.5, zeta / 5.0, min(zeta * 5.0, 0.9)),
         _design_spec("ste_amplitude", ste, 0.4, ste / 3.0, ste * 3.0),
         _design_spec("k1", design.k1, 0.25, design.k1 / 2.0, design.k1 * 2.0),
@@ -109,6 +112,8 @@ class Candidate:
         Starting values tried before the fit (signature grid).
     periodicity : str
         One of :data:`PERIODICITIES`.
+    physics : type of Effect
+        The model extension that simulates it (its family's physics slot).
     """
 
     effect: str
@@ -117,106 +122,13 @@ class Candidate:
     fitted: tuple[ParameterSpec, ...]
     starts: tuple[dict[str, float], ...]
     periodicity: str
+    physics: type[Effect] = field(default=Effect, compare=False, repr=False)
 
     def make(self, values: Mapping[str, float]) -> Effect:
         """The effect with fitted values ``{EFFECT.PARAM: value}`` and the fixed choices."""
         settings: dict[str, object] = dict(self.choices)
         settings.update({spec.name.split(".", 1)[1]: values[spec.name] for spec in self.fitted})
-        return make_effect(self.effect, settings)
-
-
-def _effect_spec(effect: str, parameter: str, unit: float, lower: float | None = None,
-                 upper: float | None = None) -> ParameterSpec:
-    definition = EFFECTS[effect].PARAMETERS[parameter]
-    # the search range never reaches past what the effect itself accepts
-    low = definition.lower if lower is None else max(lower, definition.lower)
-    high = definition.upper if upper is None else min(upper, definition.upper)
-    return ParameterSpec(f"{effect}.{parameter}", False, 0.0, unit, low, high, False)
-
-
-def _strength_spec(effect: str, parameter: str, centre: float, upper: float | None = None) -> ParameterSpec:
-    """An effect's strength (amplitude, depth, coefficient) on a log scale.
-
-    Differences and steps are then relative: an effect near the detection
-    limit is fitted as well as a strong one (a fixed step would dwarf a
-    weak amplitude). The lower bound, a millionth of ``centre``, stands for
-    "absent".
-    """
-    definition = EFFECTS[effect].PARAMETERS[parameter]
-    high = definition.upper if upper is None else min(upper, definition.upper)
-    return ParameterSpec(f"{effect}.{parameter}", True, centre, 1.0, max(centre * 1e-6, definition.lower), high,
-                         False)
-
-
-def _grid(**axes: Sequence[float]) -> tuple[dict[str, float], ...]:
-    keys = list(axes)
-    points: list[dict[str, float]] = [{}]
-    for key in keys:
-        points = [{**point, key: float(value)} for point in points for value in axes[key]]
-    return tuple(points)
-
-
-def candidates_for(effect: str, design: Design, *, hints: Mapping[str, float] | None = None) -> list[Candidate]:
-    """The candidate variants of one library effect for a design.
-
-    Tooth numbers and phases relative to the record start do not change
-    amplitude spectra, so tooth 0 and the adhesion phase 0 are fixed; the
-    eccentricity and ripple phases (relative to the mesh) are fitted.
-
-    Parameters
-    ----------
-    effect : str
-        Library name.
-    design : Design
-    hints : mapping, optional
-        Starting values read off the data's signature:
-        ``eccentricity_pinion`` and ``eccentricity_gear`` (run-out amplitude,
-        m, from the 1x shaft line of the transmission error) and
-        ``adhesion_frequency`` (Hz, a low-frequency line common to the runs).
-    """
-    hints = dict(hints or {})
-    if effect not in EFFECTS:
-        raise DiagnosisError(f"effects: {effect!r} is not a library effect; expected one of {', '.join(EFFECTS)}")
-    two_pi = 2.0 * math.pi
-    phases = (0.5 * math.pi, 1.5 * math.pi)
-    if effect == "eccentricity":
-        fitted = (_strength_spec(effect, "amplitude", 1e-6, upper=1e-4),
-                  _effect_spec(effect, "phase", 1.0, 0.0, two_pi), _strength_spec(effect, "kappa", 1e-3, upper=0.3))
-        variants = []
-        for shaft in ("pinion", "gear"):
-            amplitude = float(np.clip(hints.get(f"eccentricity_{shaft}", 5e-6), 1e-9, 5e-5))
-            # no modulation, or as much as the public campaign per metre of run-out (0.03 at 12 um)
-            starts = _grid(**{"eccentricity.amplitude": (amplitude,), "eccentricity.phase": phases,
-                              "eccentricity.kappa": (1e-9, min(2500.0 * amplitude, 0.1))})
-            variants.append(Candidate(effect, f"eccentricity[{shaft}]", (("shaft", shaft),), fitted, starts,
-                                      "pinion" if shaft == "pinion" else "gear"))
-        return variants
-    if effect == "tooth_damage":
-        fitted = (_strength_spec(effect, "depth", 0.05, upper=0.9),)
-        starts = _grid(**{"tooth_damage.depth": (0.005, 0.05, 0.4)})
-        return [Candidate(effect, f"tooth_damage[{gear}]", (("gear", gear), ("tooth", 0.0)), fitted, starts,
-                          "pinion" if gear == "pinion" else "gear") for gear in ("pinion", "gear")]
-    if effect == "friction":
-        fitted = (_strength_spec(effect, "coefficient", 0.03),)
-        return [Candidate(effect, "friction", (), fitted, _grid(**{"friction.coefficient": (0.03, 0.1)}),
-                          "mesh")]
-    if effect == "torque_ripple":
-        if design.motor_pole_pairs is None:
-            return []
-        fitted = (_strength_spec(effect, "amplitude", 0.01, upper=0.3), _effect_spec(effect, "phase", 1.0, 0.0, two_pi))
-        starts = _grid(**{"torque_ripple.amplitude": (0.003, 0.05), "torque_ripple.phase": phases})
-        return [Candidate(effect, "torque_ripple", (), fitted, starts, "pinion")]
-    if effect == "adhesion_oscillation":
-        fitted = (_strength_spec(effect, "amplitude", 0.01, upper=0.3),
-                  _effect_spec(effect, "frequency", 2.0, 1.0, 100.0))
-        frequencies = (hints["adhesion_frequency"],) if hints.get("adhesion_frequency") else (8.0, 30.0)
-        starts = _grid(**{"adhesion_oscillation.amplitude": (0.003, 0.03), "adhesion_oscillation.frequency": frequencies})
-        return [Candidate(effect, "adhesion_oscillation", (("phase", 0.0),), fitted, starts, "free")]
-    fitted = (_strength_spec(effect, "clearance", 2e-5),)
-    starts = _grid(**{"bearing_clearance.clearance": (1e-6, 1e-5, 1e-4)})
-    return [Candidate(effect, f"bearing_clearance[{bearing}]", (("bearing", bearing),), fitted, starts, "mesh")
-            for bearing in ("pinion", "gear", "both")]
-
+        return self.physics(settings)
 
 
 def combined_periodicity(periodicities: Sequence[str], design: Design | None = None) -> str:
@@ -274,7 +186,9 @@ def check_combination(candidates: Sequence[Candidate]) -> tuple[Candidate, ...]:
     seen: dict[str, str] = {}
     for candidate in chosen:
         if candidate.effect in seen:
-            raise DiagnosisError(f"effects: {candidate.effect!r} appears twice in one model ({seen[candidate.effect]} "
-                                 f"and {candidate.label}); each effect enters a model at most once")
+            raise DiagnosisError(
+                f"effects: {candidate.effect!r} appears twice in one model ({seen[candidate.effect]} "
+                f"and {candidate.label}); each effect enters a model at most once"
+            )
         seen[candidate.effect] = candidate.label
     return chosen

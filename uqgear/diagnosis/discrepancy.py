@@ -19,7 +19,7 @@ import scipy.stats
 
 from ..rig.features import FEATURE_FAMILIES
 from .errors import DiagnosisError
-from .simulation import RunProcessor
+from .processing import RunProcessor
 
 # Features compared with the model. The noise floor and the crest factor (a
 # maximum, driven by single noise samples) describe the record, not the gear.
@@ -77,9 +77,12 @@ def noise_model(processor: RunProcessor, rng: np.random.Generator, n_records: in
     values = processor.features(noise)
     band = values[:, processor.columns["low_band_rms"]] ** 2
     total = values[:, processor.columns["rms"]] ** 2
-    return NoiseModel(line_scale=processor.line_noise, band_power=np.array([band.mean(), band.std(ddof=1)]),
-                      total_power=np.array([total.mean(), total.std(ddof=1)]),
-                      kurtosis_spread=float(values[:, processor.columns["kurtosis"]].std(ddof=1)))
+    return NoiseModel(
+        line_scale=processor.line_noise,
+        band_power=np.array([band.mean(), band.std(ddof=1)]),
+        total_power=np.array([total.mean(), total.std(ddof=1)]),
+        kurtosis_spread=float(values[:, processor.columns["kurtosis"]].std(ddof=1)),
+    )
 
 
 def _rice_moments(nu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -87,7 +90,7 @@ def _rice_moments(nu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.nda
     b2 = 0.25 * (nu / sigma) ** 2
     laguerre = (1.0 + 2.0 * b2) * scipy.special.ive(0, b2) + 2.0 * b2 * scipy.special.ive(1, b2)
     mean = sigma * math.sqrt(math.pi / 2.0) * laguerre
-    variance = np.maximum(2.0 * sigma ** 2 + nu ** 2 - mean ** 2, 1e-300)
+    variance = np.maximum(2.0 * sigma**2 + nu**2 - mean**2, 1e-300)
     return mean, np.sqrt(variance)
 
 
@@ -121,10 +124,10 @@ class FeatureLayout:
     names: tuple[str, ...]
     families: tuple[str, ...]
     kinds: tuple[str, ...]
-    columns: np.ndarray     # positions in the processor's feature vector
+    columns: np.ndarray  # positions in the processor's feature vector
 
     @classmethod
-    def from_processor(cls, processor: RunProcessor) -> "FeatureLayout":
+    def from_processor(cls, processor: RunProcessor) -> FeatureLayout:
         chosen = [i for i, d in enumerate(processor.definitions) if d.name not in _COMPARED_EXCLUDED]
         names = tuple(processor.definitions[i].name for i in chosen)
         families = tuple(processor.definitions[i].family for i in chosen)
@@ -139,13 +142,19 @@ def absolute_model_error(model_error: Mapping[str, Any], kind: str) -> Any:
 
 def _noisy_kurtosis(kurtosis: np.ndarray, signal_power: np.ndarray, noise_power: np.ndarray) -> np.ndarray:
     """Kurtosis of a signal of this kurtosis and mean square plus independent Gaussian noise of this power."""
-    return (kurtosis * signal_power ** 2 + 6.0 * signal_power * noise_power + 3.0 * noise_power ** 2) / \
-        np.maximum((signal_power + noise_power) ** 2, 1e-300)
+    return (kurtosis * signal_power**2 + 6.0 * signal_power * noise_power + 3.0 * noise_power**2) / np.maximum(
+        (signal_power + noise_power) ** 2, 1e-300
+    )
 
 
-def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std: np.ndarray,
-                             noise: Sequence[NoiseModel], layout: FeatureLayout,
-                             model_error: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+def standardised_discrepancy(
+    observed: np.ndarray,
+    model: np.ndarray,
+    noise_std: np.ndarray,
+    noise: Sequence[NoiseModel],
+    layout: FeatureLayout,
+    model_error: Mapping[str, float],
+) -> tuple[np.ndarray, np.ndarray]:
     """Standardised discrepancies and predictive scales of rig features against model features.
 
     Parameters
@@ -176,17 +185,20 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
     z = np.full(observed.shape, np.nan)
     scale = np.full(observed.shape, np.nan)
     kinds = np.array(layout.kinds)
-    sigma_noise = np.asarray(noise_std, dtype=float)[..., None]            # (n_op, n_channel, 1)
+    sigma_noise = np.asarray(noise_std, dtype=float)[..., None]  # (n_op, n_channel, 1)
     line_sigma = line_noise_sigma(noise_std, noise, layout)
-    band = np.stack([n.band_power for n in noise])[:, None, :]             # (n_op, 1, 2)
+    band = np.stack([n.band_power for n in noise])[:, None, :]  # (n_op, 1, 2)
     total = np.stack([n.total_power for n in noise])[:, None, :]
     kurt_spread = np.array([n.kurtosis_spread for n in noise])[:, None]
 
     line = kinds == "line"
     if line.any():
         nu = np.abs(model[..., line])
-        sigma = np.sqrt(line_sigma[..., line] ** 2 + (model_error["line"] * nu) ** 2
-                        + absolute_model_error(model_error, "line") ** 2)
+        sigma = np.sqrt(
+            line_sigma[..., line] ** 2
+            + (model_error["line"] * nu) ** 2
+            + absolute_model_error(model_error, "line") ** 2
+        )
         sigma = np.maximum(sigma, 1e-300)
         z[..., line] = _line_discrepancy(observed[..., line], nu, sigma)
         scale[..., line] = sigma / np.maximum(line_sigma[..., line], 1e-300)
@@ -195,24 +207,30 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
         if not chosen.any():
             continue
         model_power = model[..., chosen] ** 2
-        noise_power = sigma_noise ** 2 * moments[..., 0:1]
+        noise_power = sigma_noise**2 * moments[..., 0:1]
         # noise power scatter, model error, and the signal-noise cross term
         relative_scatter = moments[..., 1:2] / moments[..., 0:1]
-        spread = np.sqrt((sigma_noise ** 2 * moments[..., 1:2]) ** 2 + (2.0 * model_error[kind] * model_power) ** 2
-                         + 2.0 * model_power * noise_power * relative_scatter ** 2
-                         + absolute_model_error(model_error, kind) ** 2)
+        spread = np.sqrt(
+            (sigma_noise**2 * moments[..., 1:2]) ** 2
+            + (2.0 * model_error[kind] * model_power) ** 2
+            + 2.0 * model_power * noise_power * relative_scatter**2
+            + absolute_model_error(model_error, kind) ** 2
+        )
         spread = np.maximum(spread, 1e-300)
         z[..., chosen] = (observed[..., chosen] ** 2 - model_power - noise_power) / spread
-        scale[..., chosen] = spread / np.maximum(sigma_noise ** 2 * moments[..., 1:2], 1e-300)
+        scale[..., chosen] = spread / np.maximum(sigma_noise**2 * moments[..., 1:2], 1e-300)
     chosen = kinds == "kurtosis"
     if chosen.any():
         index = layout.names.index("rms")
-        power = model[..., index:index + 1] ** 2
-        noise_power = sigma_noise ** 2 * total[..., 0:1]
+        power = model[..., index : index + 1] ** 2
+        noise_power = sigma_noise**2 * total[..., 0:1]
         kurt = model[..., chosen]
         predicted = _noisy_kurtosis(kurt, power, noise_power)
-        spread = np.sqrt((model_error["kurtosis"] * predicted) ** 2 + kurt_spread[..., None] ** 2
-                         + absolute_model_error(model_error, "kurtosis") ** 2)
+        spread = np.sqrt(
+            (model_error["kurtosis"] * predicted) ** 2
+            + kurt_spread[..., None] ** 2
+            + absolute_model_error(model_error, "kurtosis") ** 2
+        )
         z[..., chosen] = (observed[..., chosen] - predicted) / spread
         scale[..., chosen] = spread / np.maximum(kurt_spread[..., None], 1e-300)
     return z, scale
@@ -221,12 +239,13 @@ def standardised_discrepancy(observed: np.ndarray, model: np.ndarray, noise_std:
 def line_noise_sigma(noise_std: np.ndarray, noise: Sequence[NoiseModel], layout: FeatureLayout) -> np.ndarray:
     """Per-quadrature noise spread of each compared line (n_op, n_channel, F; NaN for features not lines):
     each record's noise std times the line's scale in its run's noise model."""
-    line_scale = np.stack([n.line_scale[layout.columns] for n in noise])[:, None, :]   # (n_op, 1, F)
+    line_scale = np.stack([n.line_scale[layout.columns] for n in noise])[:, None, :]  # (n_op, 1, F)
     return np.asarray(noise_std, dtype=float)[..., None] * line_scale
 
 
-def expected_rig_features(model: np.ndarray, noise_std: np.ndarray, noise: Sequence[NoiseModel],
-                          layout: FeatureLayout) -> np.ndarray:
+def expected_rig_features(
+    model: np.ndarray, noise_std: np.ndarray, noise: Sequence[NoiseModel], layout: FeatureLayout
+) -> np.ndarray:
     """What a rig records on average for noise-free model features (..., n_op, n_channel, F).
 
     Line amplitudes: the Rice mean about the model's amplitude; band and
@@ -240,17 +259,18 @@ def expected_rig_features(model: np.ndarray, noise_std: np.ndarray, noise: Seque
     band = np.stack([n.band_power[0] for n in noise])[:, None, None]
     total = np.stack([n.total_power[0] for n in noise])[:, None, None]
     line = kinds == "line"
-    sigma = np.broadcast_to(np.maximum(line_noise_sigma(noise_std, noise, layout)[..., line], 1e-300),
-                            model[..., line].shape)
+    sigma = np.broadcast_to(
+        np.maximum(line_noise_sigma(noise_std, noise, layout)[..., line], 1e-300), model[..., line].shape
+    )
     out[..., line] = _rice_moments(np.abs(model[..., line]), sigma)[0]
     for kind, power in (("band", band), ("rms", total)):
         chosen = kinds == kind
-        out[..., chosen] = np.sqrt(model[..., chosen] ** 2 + sigma_noise ** 2 * power)
+        out[..., chosen] = np.sqrt(model[..., chosen] ** 2 + sigma_noise**2 * power)
     chosen = kinds == "kurtosis"
     if chosen.any():
         index = layout.names.index("rms")
-        signal_power = model[..., index:index + 1] ** 2
-        noise_power = sigma_noise ** 2 * total
+        signal_power = model[..., index : index + 1] ** 2
+        noise_power = sigma_noise**2 * total
         out[..., chosen] = _noisy_kurtosis(model[..., chosen], signal_power, noise_power)
     return out
 
@@ -268,8 +288,11 @@ def robust_log_density(z: np.ndarray, scale: np.ndarray) -> np.ndarray:
     floor stays the same for every model.
     """
     z = np.asarray(z, dtype=float)
-    normal = (math.log1p(-_OUTLIER_SHARE) - 0.5 * z ** 2 - 0.5 * math.log(2.0 * math.pi)
-              - np.log(np.asarray(scale, dtype=float)))
+    normal = (
+        math.log1p(-_OUTLIER_SHARE)
+        - 0.5 * z**2
+        - 0.5 * math.log(2.0 * math.pi)
+        - np.log(np.asarray(scale, dtype=float))
+    )
     floor = math.log(_OUTLIER_SHARE / (2.0 * _OUTLIER_WIDTH))
     return np.logaddexp(normal, floor)
-

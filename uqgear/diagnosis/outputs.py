@@ -1,231 +1,40 @@
-"""What a diagnosis hands back: the JSON summary, the Dataset of gap maps and scores, held-out spectra."""
+"""What a diagnosis hands back as a record: the JSON-ready summary of ``diagnosis.json`` (data: :mod:`.dataset`)."""
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-import scipy.signal
-import xarray as xr
 
-from ..rig.features import FEATURE_FAMILIES
-from .case import RigCase, simulate_task
+from .case import RigCase
+from .gap_maps import line_signal_to_noise
 from .result import DiagnosisResult
-from .scoring import GAP_METRIC, _GAP_NOISE_LEVEL, CandidateScore, capped_squares
-from .interference import amplitude_spectrum
-from .verdict import (NOISE_GAP_THRESHOLD, PARTIAL_SHRINK_THRESHOLD, SCORE_THRESHOLD, SHRINK_THRESHOLD, SIGNAL_SNR,
-                      Decision, line_signal_to_noise)
-
-
-def _held_spectra(result: DiagnosisResult, ops: Sequence[int]) -> xr.Dataset:
-    """Amplitude spectra of the rig and of the held-out predictions (nominal, model with the effects) for some runs.
-
-    The model with the effects is the one with every named effect, or the
-    best candidate when none is named.
-    """
-    case = result.case
-    best = result.final if result.final is not None else result.best
-    sources = ["rig", "nominal"] + (["with_effect"] if best is not None else [])
-    taper = scipy.signal.get_window("hann", case.size)
-    frequency = np.fft.rfftfreq(case.size, 1.0 / case.fs)
-    top = min(case.processors[0].limit, 3.6 * case.design.z1 * float(case.speeds[list(ops)].max()) / 60.0)
-    keep = frequency <= top
-    values = np.full((len(ops), len(sources), len(case.channels), int(keep.sum())), np.nan)
-
-    def spectrum(record: np.ndarray) -> np.ndarray:
-        return amplitude_spectrum(record, taper)[keep]
-
-    for i, op in enumerate(ops):
-        for c, channel in enumerate(case.channels):
-            if case.usable[op, c]:
-                values[i, 0, c] = spectrum(case.rig[channel].values[op])
-        fits = [(1, result.nominal.problem, result.nominal_held.vectors[op])]
-        if best is not None:
-            fits.append((2, best.fit.problem, best.held.vectors[op]))
-        for source, problem, vector in fits:
-            run = simulate_task(case, problem.run_task(vector, op))
-            for c, channel in enumerate(case.channels):
-                values[i, source, c] = spectrum(run.records[channel])
-    # mean amplitude of the rig's white noise in a bin: s sqrt(pi/2), s its per-quadrature spread
-    floor = (case.noise_std[list(ops)] * math.sqrt(2.0 * np.sum(taper ** 2)) / taper.sum()
-             * math.sqrt(math.pi / 2.0))
-    return xr.Dataset(
-        {"amplitude_spectrum": (("spectrum_op", "source", "channel", "frequency"), values,
-                                {"long_name": "amplitude spectrum (Hann window), held-out prediction for the models",
-                                 "units": "channel units"}),
-         "spectrum_noise_floor": (("spectrum_op", "channel"), floor,
-                                  {"long_name": "mean amplitude of the rig's white noise in one bin",
-                                   "units": "channel units"})},
-        coords={"spectrum_op": ("spectrum_op", np.asarray(ops, dtype=int), {"long_name": "run index"}),
-                "source": ("source", sources), "channel": ("channel", list(case.channels)),
-                "frequency": ("frequency", frequency[keep], {"units": "Hz"})})
-
-
-def _family_map(z: np.ndarray, case: RigCase) -> np.ndarray:
-    """Excess RMS (capped) standardised discrepancy per run, channel and feature family."""
-    families = np.array(case.layout.families)
-    out = np.full((case.n_op, len(case.channels), len(FEATURE_FAMILIES)), np.nan)
-    for k, family in enumerate(FEATURE_FAMILIES):
-        chosen = families == family
-        if not chosen.any():
-            continue
-        squares = capped_squares(z[:, :, chosen])
-        # a family without a compared feature in a run (short records merge its lines) is NaN, silently
-        finite = np.isfinite(squares)
-        count = finite.sum(axis=-1)
-        mean = np.where(count > 0, np.where(finite, squares, 0.0).sum(axis=-1) / np.maximum(count, 1), np.nan)
-        out[:, :, k] = np.sqrt(np.maximum(mean - _GAP_NOISE_LEVEL, 0.0))
-    return out
-
-
-def result_dataset(result: DiagnosisResult, spectra: xr.Dataset | None = None) -> xr.Dataset:
-    """The gap maps and scores as a Dataset (written to ``diagnosis.nc``)."""
-    case = result.case
-    data = {**_gap_variables(result), **_score_variables(result.scores), **_selection_variables(result)}
-    coords = _coordinates(case, result.scores)
-    coords["selected_effect"] = ("selected_effect", [chosen.entry.label for chosen in result.selected],
-                                 {"long_name": "effects named, in the order forward selection added them"})
-    ds = xr.Dataset(data, coords=coords)
-    if spectra is not None:
-        ds = ds.merge(spectra)
-    ds.attrs.update(title="uqgear sim-to-real gap diagnosis", verdict=result.verdict, reason=result.reason,
-                    gap_metric=GAP_METRIC, nominal_gap=result.nominal_gap,
-                    model_error=json.dumps(case.model_error), effects_considered=json.dumps(list(result.effects)),
-                    nominal_parameters=json.dumps(result.nominal.values),
-                    effects=json.dumps([chosen.entry.effect for chosen in result.selected]),
-                    remaining_gap=result.remaining_gap)
-    return ds
-
-
-def _selection_variables(result: DiagnosisResult) -> dict[str, Any]:
-    """The named effect set: each effect's shrink share and the gap after it; the final model's gap map.
-
-    The final model's held-out discrepancies and gap map are written when
-    it holds more than one effect (with one they are ``z_with_effect_heldout``
-    and ``gap_map_with_effect``).
-    """
-    case = result.case
-    selected = result.selected
-    data: dict[str, Any] = {
-        "shrink_share": (("selected_effect",), [chosen.shrink_share for chosen in selected],
-                         {"long_name": "held-out gap shrink brought by the effect, fraction of the nominal gap",
-                          "units": "1"}),
-        "gap_after_effect": (("selected_effect",), [chosen.entry.gap for chosen in selected],
-                             {"long_name": "held-out gap with this and the earlier named effects", "units": "1"}),
-    }
-    if len(selected) > 1:
-        names = " + ".join(chosen.entry.label for chosen in selected)
-        dims = ("op", "channel", "feature")
-        held = selected[-1].entry.held
-        data["final_heldout_model"] = (dims, held.model[..., case.layout.columns],
-                                       {"long_name": f"model with {names}, run left out of the fit",
-                                        "units": "channel units"})
-        data["z_final_heldout"] = (dims, held.z, {
-            "long_name": f"standardised discrepancy on held-out runs, model with {names}", "units": "1"})
-        data["gap_map_final"] = (("op", "channel", "family"), _family_map(held.z, case), {
-            "long_name": f"excess RMS standardised discrepancy per feature family, held-out runs, with {names}",
-            "units": "1"})
-    return data
-
-
-def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
-    """Features, discrepancies and gap maps of the nominal model (and of the best effect) per run and channel."""
-    case = result.case
-    layout = case.layout
-    best = result.best
-    dims = ("op", "channel", "feature")
-    data: dict[str, Any] = {
-        "observed": (dims, case.observed, {"long_name": "rig features", "units": "channel units"}),
-        "nominal_model": (dims, result.nominal.model[..., layout.columns],
-                          {"long_name": "nominal model features (fitted to all runs)", "units": "channel units"}),
-        "nominal_heldout_model": (dims, result.nominal_held.model[..., layout.columns],
-                                  {"long_name": "nominal model features, run left out of the fit",
-                                   "units": "channel units"}),
-        "z_nominal": (dims, result.nominal.z, {"long_name": "standardised discrepancy, nominal fit", "units": "1"}),
-        "z_nominal_heldout": (dims, result.nominal_held.z,
-                              {"long_name": "standardised discrepancy on held-out runs, nominal model", "units": "1"}),
-        "gap_map_nominal": (("op", "channel", "family"), _family_map(result.nominal_held.z, case),
-                            {"long_name": "excess RMS standardised discrepancy (capped at 10) per feature family, "
-                                          "held-out runs, nominal model", "units": "1"}),
-        "noise_std": (("op", "channel"), case.noise_std, {"long_name": "white-noise level of the rig records",
-                                                          "units": "channel units"}),
-        "nominal_adhesion_torque": (("op",), result.nominal.adhesion_torques,
-                                    {"long_name": "adhesion torque T2 of the nominal fit", "units": "N m"}),
-        "nominal_periodic": (("op",), result.nominal.periodic.astype(np.int8),
-                             {"long_name": "nominal model's steady response repeats (1) or not (0)", "units": "1"}),
-    }
-    if best is not None:
-        data["with_effect_heldout_model"] = (dims, best.held.model[..., layout.columns],
-                                             {"long_name": f"model with {best.label}, run left out of the fit",
-                                              "units": "channel units"})
-        data["z_with_effect_heldout"] = (dims, best.held.z, {
-            "long_name": f"standardised discrepancy on held-out runs, model with {best.label}", "units": "1"})
-        data["gap_map_with_effect"] = (("op", "channel", "family"), _family_map(best.held.z, case), {
-            "long_name": f"excess RMS standardised discrepancy per feature family, held-out runs, with {best.label}",
-            "units": "1"})
-    return data
-
-
-def _score_variables(scores: Sequence[CandidateScore]) -> dict[str, Any]:
-    """Held-out scores of the candidates, best first."""
-    return {
-        "score": (("candidate",), [s.score for s in scores],
-                  {"long_name": "held-out log predictive density gain over nominal minus penalty", "units": "nat"}),
-        "delta_log_density": (("candidate",), [s.delta_log_density for s in scores],
-                              {"long_name": "held-out log predictive density gain over nominal", "units": "nat"}),
-        "delta_log_density_se": (("candidate",), [s.standard_error for s in scores],
-                                 {"long_name": "standard error of the gain (over runs)", "units": "nat"}),
-        "gap_with_effect": (("candidate",), [s.gap for s in scores],
-                            {"long_name": "held-out gap with the effect", "units": "1"}),
-        "shrink_fraction": (("candidate",), [s.shrink for s in scores],
-                            {"long_name": "1 - gap with effect / nominal gap, held-out runs", "units": "1"}),
-        "shrink_fraction_bounds": (("candidate", "bound"), [[s.shrink_low, s.shrink_high] for s in scores],
-                                   {"long_name": "5 % and 95 % bootstrap quantiles (runs resampled)",
-                                    "units": "1"}),
-    }
-
-
-def _coordinates(case: RigCase, scores: Sequence[CandidateScore]) -> dict[str, Any]:
-    """Coordinates of :func:`result_dataset`: runs, channels, features, families, candidates."""
-    layout = case.layout
-    return {
-        "op": ("op", np.arange(case.n_op)),
-        "pinion_speed": ("op", case.speeds, {"units": "rpm"}),
-        "drive_torque": ("op", case.drive_torques, {"units": "N m"}),
-        "channel": ("channel", list(case.channels)),
-        "feature": ("feature", list(layout.names)),
-        "feature_family": ("feature", list(layout.families)),
-        "feature_kind": ("feature", list(layout.kinds)),
-        "family": ("family", list(FEATURE_FAMILIES)),
-        "candidate": ("candidate", [s.label for s in scores]),
-        "candidate_effect": ("candidate", [s.effect for s in scores]),
-        "bound": ("bound", ["q05", "q95"]),
-    }
+from .scoring import GAP_METRIC
+from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 
 def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Mapping[str, float]) -> dict[str, Any]:
     """The JSON summary of a diagnosis (``diagnosis.json``)."""
-    case = result.case
+    case, settings = result.case, result.settings
     best = result.best
     named = best if best is not None and best.effect == result.verdict else None
     chosen = named if named is not None else best
     gap = {
         "metric": GAP_METRIC,
         "baseline": result.nominal_gap,
-        "with_effect": chosen.gap if chosen is not None else None,
+        "with_effect": chosen.gap_with_effect if chosen is not None else None,
         "effect": chosen.effect if chosen is not None else None,
         "effect_named": named is not None,
-        "shrink_fraction": chosen.shrink if chosen is not None else None,
-        "shrink_interval": [chosen.shrink_low, chosen.shrink_high] if chosen is not None else None,
+        "shrink_fraction": chosen.shrink_fraction if chosen is not None else None,
+        "shrink_interval": list(chosen.shrink_interval) if chosen is not None else None,
         "evaluated_on": _evaluated_on(case),
-        "noise_threshold": NOISE_GAP_THRESHOLD,
+        "noise_threshold": settings.noise_gap,
         "baseline_interval": [float(v) for v in result.nominal_gap_interval],
     }
-    decision = result.decision or Decision(result.verdict, result.reason)
-    return {
+    decision = result.decision
+    content = {
         "verdict": result.verdict,
         "reason": result.reason,
         "borderline": [dict(entry) for entry in decision.borderline],
@@ -238,23 +47,45 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "families": result.families,
         "frequency_locked_lines": result.locked_lines,
         "ranking": result.ranking(),
-        "nominal": {"parameters": result.nominal.values,
-                    "adhesion_torque": [float(v) for v in result.nominal.adhesion_torques],
-                    "periodic_runs": [bool(v) for v in result.nominal.periodic],
-                    "converged": result.nominal.converged},
-        "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
-                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD},
+        "nominal": {
+            "parameters": result.nominal.values,
+            "adhesion_torque": [float(v) for v in result.nominal.adhesion_torques],
+            "periodic_runs": [bool(v) for v in result.nominal.periodic],
+            "converged": result.nominal.converged,
+        },
+        "thresholds": _thresholds(settings),
         "model_error": case.model_error,
         "pitch_errors": result.pitch_errors.summary() if result.pitch_errors is not None else None,
         "cannot_tell": result.cannot_tell(),
         "sideband_phases": [evidence.summary() for evidence in result.modulation],
-        "line_interference": case.interference,
+        "line_interference": case.interference.summary(),
         "effects_considered": list(result.effects),
-        "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
-                "channels": list(case.channels), "speed": case.speed},
+        "rig": {
+            "source": source,
+            "title": str(case.rig.attrs.get("title", "")),
+            "n_op": case.n_op,
+            "channels": list(case.channels),
+            "speed": case.speed,
+        },
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+    if settings.changed():
+        content["settings"] = settings.changed()
+    return content
+
+
+def _thresholds(settings: DiagnosisSettings, *, signal: bool = False) -> dict[str, float]:
+    """The verdict's thresholds as ``diagnosis.json`` reports them."""
+    thresholds = {
+        "score": settings.score_threshold,
+        "shrink_fraction": settings.shrink_threshold,
+        "nominal_gap": settings.noise_gap,
+        "partial_shrink": settings.partial_shrink,
+    }
+    if signal:
+        thresholds["signal_snr"] = settings.signal_snr
+    return thresholds
 
 
 def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:
@@ -266,18 +97,24 @@ def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:
     per-run (operating point) values, both from the final model's held-out
     discrepancies.
     """
-    value = result.remaining_gap
-    return {"value": value, "interval": [float(v) for v in result.remaining_interval],
-            "unexplained": bool(math.isfinite(value) and value > NOISE_GAP_THRESHOLD),
-            "model": ["nominal"] + [chosen.entry.label for chosen in result.selected],
-            "where": result.remaining_where,
-            "families": [row for row in result.remaining_families if row["score"] > NOISE_GAP_THRESHOLD]}
+    value, noise_gap = result.remaining_gap, result.settings.noise_gap
+    return {
+        "value": value,
+        "interval": [float(v) for v in result.remaining_interval],
+        "unexplained": bool(math.isfinite(value) and value > noise_gap),
+        "model": ["nominal"] + [chosen.entry.label for chosen in result.selected],
+        "where": result.remaining_where,
+        "families": [row for row in result.remaining_families if row["score"] > noise_gap],
+    }
 
 
 def _evaluated_on(case: RigCase) -> dict[str, Any]:
-    return {"scheme": "leave-one-operating-point-out: each run predicted by the models fitted without it",
-            "ops": list(range(case.n_op)), "pinion_speed": [float(v) for v in case.speeds],
-            "drive_torque": [float(v) for v in case.drive_torques]}
+    return {
+        "scheme": "leave-one-operating-point-out: each run predicted by the models fitted without it",
+        "ops": list(range(case.n_op)),
+        "pinion_speed": [float(v) for v in case.speeds],
+        "drive_torque": [float(v) for v in case.drive_torques],
+    }
 
 
 def _strongest_lines(case: RigCase) -> list[float | None]:
@@ -286,18 +123,35 @@ def _strongest_lines(case: RigCase) -> list[float | None]:
     return [float(np.nanmax(ratio[op])) if np.isfinite(ratio[op]).any() else None for op in range(case.n_op)]
 
 
-def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Sequence[str], seed_text: str,
-                         timings: Mapping[str, float]) -> dict[str, Any]:
+def inconclusive_summary(
+    case: RigCase,
+    reason: str,
+    *,
+    source: str,
+    effects: Sequence[str],
+    seed_text: str,
+    timings: Mapping[str, float],
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+) -> dict[str, Any]:
     """The JSON summary of a diagnosis whose data cannot decide (verdict ``inconclusive``, nothing fitted).
 
     The same keys as :func:`summary`; what was not computed is None or empty
     (``nominal`` is None: no model was fitted to noise), and ``signal`` gives
     the strongest line of each run in noise spreads against the threshold.
     """
-    gap = {"metric": GAP_METRIC, "baseline": None, "with_effect": None, "effect": None, "effect_named": False,
-           "shrink_fraction": None, "shrink_interval": None, "evaluated_on": _evaluated_on(case),
-           "noise_threshold": NOISE_GAP_THRESHOLD, "baseline_interval": None}
-    return {
+    gap = {
+        "metric": GAP_METRIC,
+        "baseline": None,
+        "with_effect": None,
+        "effect": None,
+        "effect_named": False,
+        "shrink_fraction": None,
+        "shrink_interval": None,
+        "evaluated_on": _evaluated_on(case),
+        "noise_threshold": settings.noise_gap,
+        "baseline_interval": None,
+    }
+    content = {
         "verdict": "inconclusive",
         "reason": reason,
         "borderline": [],
@@ -311,53 +165,38 @@ def inconclusive_summary(case: RigCase, reason: str, *, source: str, effects: Se
         "frequency_locked_lines": [],
         "ranking": [],
         "nominal": None,
-        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": SIGNAL_SNR},
-        "thresholds": {"score": SCORE_THRESHOLD, "shrink_fraction": SHRINK_THRESHOLD,
-                       "nominal_gap": NOISE_GAP_THRESHOLD, "partial_shrink": PARTIAL_SHRINK_THRESHOLD,
-                       "signal_snr": SIGNAL_SNR},
+        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": settings.signal_snr},
+        "thresholds": _thresholds(settings, signal=True),
         "model_error": case.model_error,
         "pitch_errors": None,
         "cannot_tell": [],
         "sideband_phases": [],
-        "line_interference": case.interference,
+        "line_interference": case.interference.summary(),
         "effects_considered": list(effects),
-        "rig": {"source": source, "title": str(case.rig.attrs.get("title", "")), "n_op": case.n_op,
-                "channels": list(case.channels), "speed": case.speed},
+        "rig": {
+            "source": source,
+            "title": str(case.rig.attrs.get("title", "")),
+            "n_op": case.n_op,
+            "channels": list(case.channels),
+            "speed": case.speed,
+        },
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+    if settings.changed():
+        content["settings"] = settings.changed()
+    return content
 
 
-def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> xr.Dataset:
-    """The Dataset of ``diagnosis.nc`` for data that cannot decide: the rig's features and their signal-to-noise."""
-    layout = case.layout
-    dims = ("op", "channel", "feature")
-    data = {
-        "observed": (dims, case.observed, {"long_name": "rig features", "units": "channel units"}),
-        "line_snr": (dims, line_signal_to_noise(case),
-                     {"long_name": "line amplitude over its per-quadrature noise spread", "units": "1"}),
-        "noise_std": (("op", "channel"), case.noise_std, {"long_name": "white-noise level of the rig records",
-                                                          "units": "channel units"}),
-    }
-    coords = {"op": ("op", np.arange(case.n_op)), "pinion_speed": ("op", case.speeds, {"units": "rpm"}),
-              "drive_torque": ("op", case.drive_torques, {"units": "N m"}), "channel": ("channel", list(case.channels)),
-              "feature": ("feature", list(layout.names)), "feature_family": ("feature", list(layout.families)),
-              "feature_kind": ("feature", list(layout.kinds))}
-    ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(title="uqgear sim-to-real gap diagnosis", verdict="inconclusive", reason=reason,
-                    gap_metric=GAP_METRIC, model_error=json.dumps(case.model_error),
-                    effects_considered=json.dumps(list(effects)))
-    return ds
-
-
-def _json_clean(value: Any) -> Any:
+def json_clean(value: Any) -> Any:
     """Replace non-finite floats by None (JSON has no NaN)."""
     if isinstance(value, float) or isinstance(value, np.floating):
         return float(value) if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {key: _json_clean(item) for key, item in value.items()}
+        return {key: json_clean(item) for key, item in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_json_clean(item) for item in value]
+        return [json_clean(item) for item in value]
     return value
 
 
+__all__ = ["summary", "inconclusive_summary", "json_clean"]

@@ -1,92 +1,36 @@
-"""What a diagnosis found: the named effects in order, the forward-selection rounds, the whole result.
+"""Everything a diagnosis found: the nominal fit, the ranked candidates, the decision and the named set.
 
-The records :func:`uqgear.diagnosis.pipeline.run_diagnosis` returns and
+The record :class:`~uqgear.diagnosis.Diagnosis` keeps as ``outcome_`` and
 :mod:`.outputs` writes out.
 """
+
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from .allowances.pitch_errors import PitchErrorAllowance, run_outs_not_told_apart
+from .allowances.sideband_phase import ModulationEvidence
 from .case import RigCase
+from .decision import Decision
+from .effect_set import SelectedEffect, SelectionRound
 from .fitting import FitResult
-from .manufacturing import PitchErrorAllowance, run_outs_not_told_apart
-from .scoring import CandidateScore, HeldOut
-from .sideband_phase import ModulationEvidence
-from .verdict import Decision
-
-
-@dataclass
-class SelectedEffect:
-    """One effect of the named set, in the order forward selection added it.
-
-    Attributes
-    ----------
-    entry : CandidateScore
-        Its best fit with the effects named before it (its base) and its
-        held-out scores against the base's held-out predictions.
-    gap_before : float
-        Held-out gap of the base (the nominal model's for the first effect).
-    shrink_share : float
-        How far it shrank the held-out gap, as a fraction of the nominal
-        model's gap: (gap_before - gap with it) / nominal gap. The shares of
-        the set add up to 1 - final gap / nominal gap.
-    decision : Decision
-        The rule that added it (:func:`decide` on top of its base).
-    gap_interval : pair of float
-        Bootstrap 5 % and 95 % quantiles of the held-out gap with it.
-    """
-
-    entry: CandidateScore
-    gap_before: float
-    shrink_share: float
-    decision: Decision
-    gap_interval: tuple[float, float] = (math.nan, math.nan)
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready: effect, variant, fitted parameters with their 90 % intervals, shrink share, scores."""
-        entry = self.entry
-        return {"effect": entry.effect, "variant": entry.label, "parameters": entry.parameters(),
-                "parameter_intervals": entry.parameter_intervals(), "shrink_share": self.shrink_share,
-                "score": entry.score, "shrink_fraction": entry.shrink,
-                "shrink_interval": [entry.shrink_low, entry.shrink_high], "gap_before": self.gap_before,
-                "gap_after": entry.gap, "gap_after_interval": [float(v) for v in self.gap_interval],
-                "effect_gain": entry.effect_gain, "fit": entry.stage,
-                "partial": self.decision.partial}
-
-
-@dataclass
-class SelectionRound:
-    """A forward-selection round after the first effect: what was tried on top of which base, and the outcome."""
-
-    base: tuple[str, ...]
-    gap_before: float
-    scores: list[CandidateScore]          # best variant per effect against the base, best first
-    added: str | None
-    reason: str
-    decision: Decision | None = None
-    gap_interval: tuple[float, float] = (math.nan, math.nan)   # of the best candidate's held-out gap
-
-    def summary(self) -> dict[str, Any]:
-        return {"base": list(self.base), "gap_before": self.gap_before, "added": self.added, "reason": self.reason,
-                "candidates": [{"effect": s.effect, "variant": s.label, "score": s.score,
-                                "shrink_fraction": s.shrink, "shrink_interval": [s.shrink_low, s.shrink_high],
-                                "gap_with_effect": s.gap, "effect_gain": s.effect_gain, "fit": s.stage,
-                                "parameters": s.parameters()} for s in self.scores]}
+from .heldout import HeldOut
+from .scoring import CandidateScore
+from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 
 @dataclass
 class DiagnosisResult:
-    """Everything a diagnosis found (see :func:`run_diagnosis`)."""
+    """Everything a diagnosis found (the record of :meth:`uqgear.diagnosis.Diagnosis.fit`)."""
 
     case: RigCase
     nominal: FitResult
     nominal_held: HeldOut
-    scores: list[CandidateScore]          # best variant per effect, ranked best first
-    all_scores: list[CandidateScore]      # every variant and stage
-    verdict: str
-    reason: str
+    scores: list[CandidateScore]  # best variant per effect, ranked best first
+    all_scores: list[CandidateScore]  # every variant and stage
+    decision: Decision
     nominal_gap: float
     where: list[dict[str, Any]]
     families: list[dict[str, Any]]
@@ -94,7 +38,6 @@ class DiagnosisResult:
     hints: dict[str, float]
     effects: tuple[str, ...]
     timings: dict[str, float]
-    decision: Decision | None = None
     nominal_gap_interval: tuple[float, float] = (math.nan, math.nan)
     # forward selection: the named effects in order, the rounds after the first, and the final
     # model's held-out predictions (the nominal model's when nothing is named)
@@ -105,8 +48,17 @@ class DiagnosisResult:
     remaining_families: list[dict[str, Any]] = field(default_factory=list)
     remaining_interval: tuple[float, float] = (math.nan, math.nan)
     pitch_errors: PitchErrorAllowance | None = None
-    # the sideband phase-sum tests of the shafts with no eccentricity named (uqgear.diagnosis.sideband_phase)
+    # the sideband phase-sum tests of the shafts with no eccentricity named (allowances.sideband_phase)
     modulation: list[ModulationEvidence] = field(default_factory=list)
+    settings: DiagnosisSettings = DEFAULT_SETTINGS
+
+    @property
+    def verdict(self) -> str:
+        return self.decision.verdict
+
+    @property
+    def reason(self) -> str:
+        return self.decision.reason
 
     @property
     def best(self) -> CandidateScore | None:
@@ -120,23 +72,43 @@ class DiagnosisResult:
     @property
     def remaining_gap(self) -> float:
         """Held-out gap of the final model (the nominal model's when no effect is named)."""
-        return self.selected[-1].entry.gap if self.selected else self.nominal_gap
+        return self.selected[-1].entry.gap_with_effect if self.selected else self.nominal_gap
 
     def ranking(self) -> list[dict[str, Any]]:
         """JSON-ready ranking, best first (``modulation_gain`` where it was measured)."""
-        return [{**s.figures(), "variant": s.label, "delta_log_density": s.delta_log_density, "penalty": s.penalty,
-                 "parameters": s.parameters(), "fit": s.stage} for s in self.scores]
+        return [
+            {
+                **s.figures(),
+                "variant": s.label,
+                "delta_log_density": s.delta_log_density,
+                "penalty": s.penalty,
+                "parameters": s.parameters(),
+                "fit": s.stage,
+            }
+            for s in self.scores
+        ]
 
     @property
     def named_shafts(self) -> list[str]:
         """The shafts whose eccentricity the diagnosis named."""
-        return sorted({dict(candidate.choices)["shaft"] for chosen in self.selected
-                       for candidate in chosen.entry.fit.problem.candidates if candidate.effect == "eccentricity"})
+        return sorted(
+            {
+                str(dict(candidate.choices)["shaft"])
+                for chosen in self.selected
+                for candidate in chosen.entry.fit.problem.candidates
+                if candidate.effect == "eccentricity"
+            }
+        )
 
     def cannot_tell(self) -> list[dict[str, Any]]:
         """Run-outs the lines cannot tell from the gears' own pitch errors.
 
         The ``cannot_tell`` entries of ``diagnosis.json``
-        (:func:`~uqgear.diagnosis.manufacturing.run_outs_not_told_apart`).
+        (:func:`~uqgear.diagnosis.allowances.pitch_errors.run_outs_not_told_apart`).
         """
-        return run_outs_not_told_apart(self.pitch_errors, self.named_shafts)
+        return run_outs_not_told_apart(
+            self.pitch_errors, self.named_shafts, share_threshold=self.settings.large_run_out_share
+        )
+
+
+__all__ = ["DiagnosisResult", "SelectedEffect", "SelectionRound"]

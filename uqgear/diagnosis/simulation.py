@@ -1,29 +1,26 @@
-"""Model records of a campaign's runs on the rig's time grid, and the rig's feature processing for them.
+"""Model records of a campaign's runs on the rig's time grid.
 
 :class:`CampaignSimulator` integrates the model for each run (steady state
 after a run-in, one period tiled when the response repeats) and band-limits
-and resamples it like the rig's acquisition; :class:`RunProcessor` reduces
-records of either source with exactly the rig's feature processing.
+and resamples it like the rig's acquisition; :class:`~.processing.RunProcessor`
+then reduces records of either source with exactly the rig's feature processing.
 """
 
 from __future__ import annotations
 
 import math
-from functools import partial
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
-from ..physics.integration import _HISTORY_COLUMNS, _integrate_fast, steps_per_period
+from ..physics.integration import HISTORY_COLUMNS, integrate_fast, steps_per_period
 from ..physics.model import build_model
 from ..physics.pitch_errors import PitchErrors
-from ..rig import features as feature_module
-from ..rig.features import feature_definitions
 from ..rig.virtual_rig import frequency_filter
 from .errors import DiagnosisError
 
@@ -42,157 +39,7 @@ _PERIODIC_TOLERANCE = 1e-2
 _GUARD = 0.025
 # Highest mesh-stiffness scale for which the step count is fixed in advance,
 # so that finite-difference neighbours integrate on the same grid.
-_MAX_STIFFNESS_SCALE = 1.5
-
-
-# ---------------------------------------------------------------------------------------------- feature processing
-
-
-class RunProcessor:
-    """The rig's feature processing for one run (speed, sampling rate, record length), built once.
-
-    Wraps the line fit and the spectral estimates of :mod:`uqgear.rig.features`
-    so that model records of many parameter sets go through exactly the
-    processing that produced the rig's features, without rebuilding the
-    least-squares basis for every record.
-
-    Parameters
-    ----------
-    design : Design
-    speed : float
-        Pinion speed, rpm.
-    fs : float
-        Sampling rate, Hz.
-    size : int
-        Samples per record.
-    options : mapping
-        ``n_harmonics``, ``n_sidebands``, ``n_shaft_orders``, ``n_motor_lines``,
-        ``low_band``, ``band_limit`` and ``window`` as in
-        :func:`uqgear.rig.features.extract_features`.
-    """
-
-    def __init__(self, design: Design, speed: float, fs: float, size: int, options: Mapping[str, Any]) -> None:
-        self.speed = float(speed)
-        self.fs = float(fs)
-        self.size = int(size)
-        self.definitions = feature_definitions(
-            design, n_harmonics=options["n_harmonics"], n_sidebands=options["n_sidebands"],
-            n_shaft_orders=options["n_shaft_orders"], n_motor_lines=options["n_motor_lines"])
-        self.names = [definition.name for definition in self.definitions]
-        self.columns = {name: index for index, name in enumerate(self.names)}
-        self.line_columns = np.array([i for i, d in enumerate(self.definitions) if d.is_line], dtype=int)
-        # each feature's frequency at this speed, Hz (NaN for features that are not lines)
-        self.frequencies = np.array([d.order for d in self.definitions], dtype=float) * self.speed / 60.0
-        line_orders = np.array([self.definitions[i].order for i in self.line_columns])
-        self.limit = options["band_limit"]
-        self.low_band = tuple(options["low_band"])
-        self.taper = feature_module._window(options["window"], self.size)
-        self.fit = feature_module._LineFit(line_orders * self.speed / 60.0, self.fs, self.size, self.limit, self.taper)
-        # one column per fitted line (lines within a bin of each other share one fitted amplitude): sums of
-        # line power count each line once
-        _, first = np.unique(self.fit.groups, return_index=True)
-        self.distinct_line_columns = self.line_columns[self.fit.inside[first]]
-        frequencies = np.fft.rfftfreq(self.size, 1.0 / self.fs)
-        self.excluded = feature_module._excluded_bins(frequencies, self.speed, design, line_orders,
-                                                      options["n_sidebands"], self.low_band, self.limit,
-                                                      self.fs / self.size)
-        self.line_noise = self._line_noise_scale()
-        in_band = (frequencies >= self.low_band[0]) & (frequencies <= self.low_band[1])
-        self._band_bins = np.flatnonzero(in_band)
-        edge = (self._band_bins == 0) | ((self.size % 2 == 0) & (self._band_bins == self.size // 2))
-        self._band_weights = np.where(edge, 1.0, 2.0)
-        self._window_power = float(np.sum(self.taper ** 2))
-        self.notch: tuple[float, ...] = ()
-
-    def set_notch(self, frequencies: Sequence[float], half_width: int) -> None:
-        """Leave the bins within ``half_width`` of each frequency (Hz) out of the low band, rig and model alike.
-
-        For line interference (:mod:`uqgear.diagnosis.interference`). The rig's
-        low band is then computed by :meth:`model_features`'s formula too.
-        """
-        resolution = self.fs / self.size
-        keep = np.ones(self._band_bins.size, dtype=bool)
-        for frequency in frequencies:
-            keep &= np.abs(self._band_bins * resolution - frequency) > half_width * resolution + 1e-9
-        self._band_bins = self._band_bins[keep]
-        self._band_weights = self._band_weights[keep]
-        self.notch = self.notch + tuple(float(f) for f in frequencies)
-
-    def low_band_rms(self, records: np.ndarray) -> np.ndarray:
-        """RMS of the low band (without notched bins) of records (R, N): the one-sided periodogram density summed."""
-        return self._centred_low_band_rms(records - records.mean(axis=1, keepdims=True))
-
-    def _centred_low_band_rms(self, centred: np.ndarray) -> np.ndarray:
-        spectrum = np.fft.rfft(centred * self.taper, axis=1)
-        # one-sided periodogram density (scipy's 'density' scaling), summed over the band
-        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
-        return np.sqrt(density.sum(axis=1) * self.fs / self.size)
-
-    def features(self, records: np.ndarray, *, lines: bool = True) -> np.ndarray:
-        """Feature values (R, F) of records (R, N); NaN rows where a sample is NaN, NaN lines without ``lines``."""
-        records = np.atleast_2d(np.asarray(records, dtype=float))
-        out = np.full((records.shape[0], len(self.definitions)), np.nan)
-        usable = ~np.isnan(records).any(axis=1)
-        if usable.any():
-            out[usable] = feature_module._block_features(
-                records[usable], self.fit, self.excluded, self.fs, self.taper, self.low_band, self.columns,
-                self.line_columns, len(self.definitions), lines=lines)
-            if self.notch:
-                out[usable, self.columns["low_band_rms"]] = self.low_band_rms(records[usable])
-        return out
-
-    def model_features(self, records: np.ndarray) -> np.ndarray:
-        """Features (R, F) of noise-free model records (R, N) without NaN.
-
-        The same line fit, low-band power, RMS and kurtosis as :meth:`features`;
-        the noise floor and the crest factor, which describe noisy records,
-        are left NaN (they are not compared), which saves most of the time.
-        """
-        records = np.atleast_2d(np.asarray(records, dtype=float))
-        out = np.full((records.shape[0], len(self.definitions)), np.nan)
-        out[:, self.line_columns] = self.fit.amplitudes(records)
-        centred = records - records.mean(axis=1, keepdims=True)
-        out[:, self.columns["low_band_rms"]] = self._centred_low_band_rms(centred)
-        square = centred * centred
-        mean_square = np.mean(square, axis=1)
-        out[:, self.columns["rms"]] = np.sqrt(mean_square)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[:, self.columns["kurtosis"]] = np.where(mean_square > 0, np.mean(square * square, axis=1)
-                                                        / mean_square ** 2, np.nan)
-        return out
-
-    def model_phasors(self, records: np.ndarray) -> np.ndarray:
-        """:meth:`features` (noise floor included) with each line's complex phasor in place of its amplitude (R, F).
-
-        For model records with lines at every shaft order (pitch errors), whose
-        forest of lines raises the noise floor a rig's records are read with.
-        """
-        records = np.atleast_2d(np.asarray(records, dtype=float))
-        out = self.features(records, lines=False).astype(complex)
-        out[:, self.line_columns] = self.fit.phasors(records)
-        return out
-
-    def _line_noise_scale(self) -> np.ndarray:
-        """Per-quadrature standard deviation of each line's fitted amplitude for unit white noise.
-
-        The weighted least-squares coefficients are G^-1 (B w)^T x with
-        G = (B w)^T B, so their covariance for white noise of unit variance
-        is G^-1 (B w)^T (B w) G^-1; a line's two quadratures share the mean of
-        their variances (NaN for lines outside the band).
-        """
-        scale = np.full(len(self.definitions), np.nan)
-        fit = self.fit
-        if not fit.n_centres:
-            return scale
-        inverse_gram = scipy.linalg.cho_solve(fit.factor, np.eye(fit.weighted.shape[1]))
-        covariance = inverse_gram @ (fit.weighted.T @ fit.weighted) @ inverse_gram
-        diagonal = np.diag(covariance)
-        per_centre = np.sqrt(0.5 * (diagonal[1:1 + fit.n_centres] + diagonal[1 + fit.n_centres:]))
-        line_scale = np.full(self.line_columns.size, np.nan)
-        line_scale[fit.inside] = per_centre[fit.groups]
-        scale[self.line_columns] = line_scale
-        return scale
-
+MAX_STIFFNESS_SCALE = 1.5
 
 
 # ---------------------------------------------------------------------------------------------- model records
@@ -209,6 +56,114 @@ class SimulatedRun:
     records: dict[str, np.ndarray]
     periodic: bool
     window: str
+
+
+class RigGrid:
+    """Model records band-limited like the rig's anti-alias filter and read at the rig's sample times.
+
+    Filters, tapers and interpolation weights are built once per grid: they
+    are the same for every run of an operating point.
+
+    Parameters
+    ----------
+    fs : float
+        Rig sampling rate, Hz.
+    size : int
+        Samples per rig record.
+    channels : sequence of str
+        Rig channels produced (their filters: TE as is, accelerations as the second derivative).
+    """
+
+    def __init__(self, fs: float, size: int, channels: Sequence[str]) -> None:
+        self.fs = float(fs)
+        self.size = int(size)
+        self.channels = tuple(channels)
+        self.passband = self.fs / 2.56
+        self.stopband = self.fs / 2.0
+        self.rig_time = np.arange(self.size) / self.fs
+        self._grid_cache: dict[tuple[Any, ...], Any] = {}
+
+    def upsampling(self, rate: float) -> int:
+        """Upsampling factor from the simulation's ``rate`` to a grid fine enough for linear interpolation."""
+        return max(1, int(math.ceil(4.0 * self.fs / rate)))
+
+    def resampled(
+        self,
+        key: tuple[Any, ...],
+        centred: np.ndarray,
+        rate: float,
+        factor: int,
+        steps_per_second: float,
+        offset: float,
+        *,
+        periodic: bool,
+    ) -> np.ndarray:
+        """Channels sampled at ``rate`` band-limited, upsampled ``factor`` times and read at the rig's times.
+
+        The rig's time ``t`` sits at ``(t + offset) * steps_per_second`` steps
+        of the upsampled grid (periodic: wrapped).
+        """
+        size = centred.shape[1]
+        spectrum = np.fft.rfft(centred, axis=1) * self._filters(size, rate)
+        fine = np.fft.irfft(spectrum, n=size * factor, axis=1) * factor
+        index, following, weight = self._interpolation(
+            (*key, size * factor), offset, steps_per_second, size * factor, periodic=periodic
+        )
+        left = fine[:, index]
+        return left + weight * (fine[:, following] - left)
+
+    def _filters(self, size: int, rate: float) -> np.ndarray:
+        """The anti-alias filter (and derivative) of each channel, (n_channel, size // 2 + 1), built once per grid."""
+        key = ("filters", size, rate)
+        if key not in self._grid_cache:
+            self._grid_cache[key] = np.stack(
+                [
+                    frequency_filter(size, rate, self.passband, self.stopband, _raw_order(channel))
+                    for channel in self.channels
+                ]
+            )
+        return self._grid_cache[key]
+
+    def edge_taper(self, size: int, rate: float) -> np.ndarray:
+        """Raised-cosine edges of a non-periodic window (inside its guards), built once per grid."""
+        key = ("taper", size, rate)
+        if key not in self._grid_cache:
+            time = np.arange(size) / rate
+            taper = np.ones(size)
+            edge = 0.6 * _GUARD
+            left, right = time < edge, time > time[-1] - edge
+            taper[left] = 0.5 * (1.0 - np.cos(np.pi * time[left] / edge))
+            taper[right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[right]) / edge))
+            self._grid_cache[key] = taper
+        return self._grid_cache[key]
+
+    def _interpolation(
+        self, key: tuple[Any, ...], offset: float, steps_per_second: float, size: int, *, periodic: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Left and right neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
+
+        The rig's times sit at ``(t + offset) * steps_per_second`` grid steps
+        (computed on a cache miss only); a periodic grid wraps (its last point's
+        right neighbour is the first): that point's index is stored as -1, so
+        that ``index + 1`` is 0. Built once per grid: the rig's time points
+        are the same for every run.
+        """
+        if key not in self._grid_cache:
+            position = (self.rig_time + offset) * steps_per_second
+            if periodic:
+                position = np.mod(position, size)
+            index = np.clip(np.floor(position).astype(np.intp), 0, size - 2 if not periodic else size - 1)
+            weight = position - index
+            if periodic:
+                # the right neighbour of the last point is the first: a wrapped index
+                index = np.where(index >= size - 1, index - size, index)
+            self._grid_cache[key] = (index, index + 1, weight)
+        return self._grid_cache[key]
+
+
+def _raw_order(channel: str) -> int:
+    """Time derivatives between the simulated displacement and the channel (0: TE, 2: accelerations)."""
+    return 0 if channel == "te" else 2
 
 
 class CampaignSimulator:
@@ -240,8 +195,16 @@ class CampaignSimulator:
         RK4 steps per period of the fastest mode.
     """
 
-    def __init__(self, design: Design, speeds: Sequence[float], drive_torques: Sequence[float], fs: float,
-                 size: int, channels: Sequence[str], steps_per_mode: int = 24) -> None:
+    def __init__(
+        self,
+        design: Design,
+        speeds: Sequence[float] | np.ndarray,
+        drive_torques: Sequence[float] | np.ndarray,
+        fs: float,
+        size: int,
+        channels: Sequence[str],
+        steps_per_mode: int = 24,
+    ) -> None:
         self.design = design
         self.speeds = np.asarray(speeds, dtype=float)
         self.drive_torques = np.asarray(drive_torques, dtype=float)
@@ -250,20 +213,22 @@ class CampaignSimulator:
         self.duration = self.size / self.fs
         self.channels = tuple(channels)
         self.steps_per_mode = int(steps_per_mode)
-        self.passband = self.fs / 2.56
-        self.stopband = self.fs / 2.0
-        self.rig_time = np.arange(self.size) / self.fs
-        # filters, tapers and interpolation weights per grid: the same for every run of an operating point
-        self._grid_cache: dict[tuple, Any] = {}
+        self.grid = RigGrid(self.fs, self.size, self.channels)
+        self.stopband = self.grid.stopband
         # the stiffest bearings a fit may propose (candidates.nominal_parameters), inside the design's range
-        stiff = design.replace(k1=min(design.k1 * 2.0, design_key_bounds("k1")[1]),
-                               k2=min(design.k2 * 2.0, design_key_bounds("k2")[1]))
+        stiff = design.replace(
+            k1=min(design.k1 * 2.0, design_key_bounds("k1")[1]), k2=min(design.k2 * 2.0, design_key_bounds("k2")[1])
+        )
         self.samples_per_period = []
         for speed, torque in zip(self.speeds, self.drive_torques):
             # every neighbour of a fit integrates on the same grid: the steps of the stiffest model,
             # kept every step or (at twice the stop band and more) every other step
-            steps = steps_per_period(build_model(stiff, speed, torque, torque * design.z2 / design.z1,
-                                                 mesh_stiffness_scale=_MAX_STIFFNESS_SCALE), self.steps_per_mode)
+            steps = steps_per_period(
+                build_model(
+                    stiff, speed, torque, torque * design.z2 / design.z1, mesh_stiffness_scale=MAX_STIFFNESS_SCALE
+                ),
+                self.steps_per_mode,
+            )
             steps += steps % 2
             mesh_frequency = design.z1 * speed / 60.0
             half = steps // 2
@@ -282,8 +247,17 @@ class CampaignSimulator:
             return self.design.z2
         return int(math.ceil((self.duration + 2 * _GUARD) * self.mesh_frequency(op))) + 1
 
-    def run(self, op: int, design: Design, mesh_stiffness_scale: float, adhesion_torque: float,
-            effects: Sequence[Effect], periodicity: str, *, pitch_errors: PitchErrors | None = None) -> SimulatedRun:
+    def run(
+        self,
+        op: int,
+        design: Design,
+        mesh_stiffness_scale: float,
+        adhesion_torque: float,
+        effects: Sequence[Effect],
+        periodicity: str,
+        *,
+        pitch_errors: PitchErrors | None = None,
+    ) -> SimulatedRun:
         """Model records of run ``op`` (dict channel -> (N,) array on the rig grid).
 
         ``periodicity`` is the expected period of the steady response; a run
@@ -305,27 +279,50 @@ class CampaignSimulator:
         whole = self.window_periods("free", op)
         return self._whole(op, simulate(run_in + whole, whole)[0])
 
-    def _simulate(self, op: int, design: Design, scale: float, adhesion_torque: float, effects: Sequence[Effect],
-                  pitch_errors: PitchErrors | None,
-                  n_periods: int, keep_periods: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    def _simulate(
+        self,
+        op: int,
+        design: Design,
+        scale: float,
+        adhesion_torque: float,
+        effects: Sequence[Effect],
+        pitch_errors: PitchErrors | None,
+        n_periods: int,
+        keep_periods: int,
+    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """Displacements and TE over the kept periods, and the state at each kept period start.
 
         Calls the fast integrator directly: the full :func:`uqgear.simulate`
         Dataset (a dozen histories with attributes) costs as much as the
         integration of a short periodic window.
         """
-        setup = build_model(design, float(self.speeds[op]), float(self.drive_torques[op]), float(adhesion_torque),
-                            mesh_stiffness_scale=float(scale), effects=effects, pitch_errors=pitch_errors)
-        history, poincare, _ = _integrate_fast(setup, n_periods, keep_periods, self.samples_per_period[op],
-                                               self.steps_per_mode, setup.static_state())
-        columns = {name: index for index, name in enumerate(_HISTORY_COLUMNS)}
-        signals = {"y1": history[:, columns["y1"]], "y2": history[:, columns["y2"]], "x": history[:, columns["x"]],
-                   "te": history[:, columns["x"]] - history[:, columns["y1"]] + history[:, columns["y2"]]
-                   + history[:, columns["ste"]]}
+        setup = build_model(
+            design,
+            float(self.speeds[op]),
+            float(self.drive_torques[op]),
+            float(adhesion_torque),
+            mesh_stiffness_scale=float(scale),
+            effects=effects,
+            pitch_errors=pitch_errors,
+        )
+        history, poincare, _ = integrate_fast(
+            setup, n_periods, keep_periods, self.samples_per_period[op], self.steps_per_mode, setup.static_state()
+        )
+        columns = {name: index for index, name in enumerate(HISTORY_COLUMNS)}
+        signals = {
+            "y1": history[:, columns["y1"]],
+            "y2": history[:, columns["y2"]],
+            "x": history[:, columns["x"]],
+            "te": history[:, columns["x"]]
+            - history[:, columns["y1"]]
+            + history[:, columns["y2"]]
+            + history[:, columns["ste"]],
+        }
         return signals, poincare
 
-    def _tiled(self, op: int, signals: Mapping[str, np.ndarray], poincare: np.ndarray, window: int,
-               periodicity: str) -> SimulatedRun | None:
+    def _tiled(
+        self, op: int, signals: Mapping[str, np.ndarray], poincare: np.ndarray, window: int, periodicity: str
+    ) -> SimulatedRun | None:
         """Records tiled from the first ``window`` mesh periods of a simulation, or None if they do not repeat."""
         f_mesh = self.mesh_frequency(op)
         per_period = self.samples_per_period[op]
@@ -337,84 +334,28 @@ class CampaignSimulator:
             return None
         period = window / f_mesh
         rate = per_period * f_mesh
-        factor = self._upsampling(rate)
+        factor = self.grid.upsampling(rate)
         raw = np.stack([self._raw(signals, channel)[:kept] for channel in self.channels])
-        values = self._on_rig_grid(("periodic", op), raw - raw.mean(axis=1, keepdims=True), rate, factor,
-                                   kept * factor / period, 0.0, periodic=True)
+        values = self.grid.resampled(
+            ("periodic", op),
+            raw - raw.mean(axis=1, keepdims=True),
+            rate,
+            factor,
+            kept * factor / period,
+            0.0,
+            periodic=True,
+        )
         return SimulatedRun(dict(zip(self.channels, values)), True, periodicity)
 
     def _whole(self, op: int, signals: Mapping[str, np.ndarray]) -> SimulatedRun:
         """Records from a simulation of the whole record (with its guards), band-limited and resampled."""
         rate = self.samples_per_period[op] * self.mesh_frequency(op)
         size = signals["te"].size
-        factor = self._upsampling(rate)
+        factor = self.grid.upsampling(rate)
         raw = np.stack([self._raw(signals, channel) for channel in self.channels])
-        centred = (raw - raw.mean(axis=1, keepdims=True)) * self._edge_taper(size, rate)
-        values = self._on_rig_grid(("free", op), centred, rate, factor, rate * factor, _GUARD, periodic=False)
+        centred = (raw - raw.mean(axis=1, keepdims=True)) * self.grid.edge_taper(size, rate)
+        values = self.grid.resampled(("free", op), centred, rate, factor, rate * factor, _GUARD, periodic=False)
         return SimulatedRun(dict(zip(self.channels, values)), False, "free")
-
-    def _upsampling(self, rate: float) -> int:
-        """Upsampling factor from the simulation's ``rate`` to a grid fine enough for linear interpolation."""
-        return max(1, int(math.ceil(4.0 * self.fs / rate)))
-
-    def _on_rig_grid(self, key: tuple, centred: np.ndarray, rate: float, factor: int, steps_per_second: float,
-                     offset: float, *, periodic: bool) -> np.ndarray:
-        """Channels sampled at ``rate`` band-limited, upsampled ``factor`` times and read at the rig's times.
-
-        The rig's time ``t`` sits at ``(t + offset) * steps_per_second`` steps
-        of the upsampled grid (periodic: wrapped).
-        """
-        size = centred.shape[1]
-        spectrum = np.fft.rfft(centred, axis=1) * self._filters(size, rate)
-        fine = np.fft.irfft(spectrum, n=size * factor, axis=1) * factor
-        index, following, weight = self._interpolation((*key, size * factor), offset, steps_per_second,
-                                                       size * factor, periodic=periodic)
-        left = fine[:, index]
-        return left + weight * (fine[:, following] - left)
-
-    def _filters(self, size: int, rate: float) -> np.ndarray:
-        """The anti-alias filter (and derivative) of each channel, (n_channel, size // 2 + 1), built once per grid."""
-        key = ("filters", size, rate)
-        if key not in self._grid_cache:
-            self._grid_cache[key] = np.stack([
-                frequency_filter(size, rate, self.passband, self.stopband, self._raw_order(channel))
-                for channel in self.channels])
-        return self._grid_cache[key]
-
-    def _edge_taper(self, size: int, rate: float) -> np.ndarray:
-        """Raised-cosine edges of a non-periodic window (inside its guards), built once per grid."""
-        key = ("taper", size, rate)
-        if key not in self._grid_cache:
-            time = np.arange(size) / rate
-            taper = np.ones(size)
-            edge = 0.6 * _GUARD
-            left, right = time < edge, time > time[-1] - edge
-            taper[left] = 0.5 * (1.0 - np.cos(np.pi * time[left] / edge))
-            taper[right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[right]) / edge))
-            self._grid_cache[key] = taper
-        return self._grid_cache[key]
-
-    def _interpolation(self, key: tuple, offset: float, steps_per_second: float, size: int, *, periodic: bool
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Left and right neighbours and weights of linear interpolation on a uniform grid of ``size`` points.
-
-        The rig's times sit at ``(t + offset) * steps_per_second`` grid steps
-        (computed on a cache miss only); a periodic grid wraps (its last point's
-        right neighbour is the first): that point's index is stored as -1, so
-        that ``index + 1`` is 0. Built once per grid: the rig's time points
-        are the same for every run.
-        """
-        if key not in self._grid_cache:
-            position = (self.rig_time + offset) * steps_per_second
-            if periodic:
-                position = np.mod(position, size)
-            index = np.clip(np.floor(position).astype(np.intp), 0, size - 2 if not periodic else size - 1)
-            weight = position - index
-            if periodic:
-                # the right neighbour of the last point is the first: a wrapped index
-                index = np.where(index >= size - 1, index - size, index)
-            self._grid_cache[key] = (index, index + 1, weight)
-        return self._grid_cache[key]
 
     @staticmethod
     def _raw(signals: Mapping[str, np.ndarray], channel: str) -> np.ndarray:
@@ -422,9 +363,3 @@ class CampaignSimulator:
         if channel == "te":
             return signals["te"]
         return signals["y1" if channel == "acc_pinion" else "y2"]
-
-    @staticmethod
-    def _raw_order(channel: str) -> int:
-        """Time derivatives between the simulated displacement and the channel (0: TE, 2: accelerations)."""
-        return 0 if channel == "te" else 2
-

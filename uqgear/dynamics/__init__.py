@@ -2,7 +2,11 @@
 
 Period and regime classification (Poincare points, 0-1 test, largest
 Lyapunov exponent), spectra, phase planes, contact fractions, response QoIs,
-and bifurcation and sweep grids over the physics' batch integrator.
+and bifurcation and sweep grids over the physics' batch integrator; coexisting
+responses from several starts (``attractors``); periodic orbits by shooting
+with their Floquet multipliers (``shooting``, ``floquet``) and their
+continuation in a parameter with located bifurcations (``continuation``,
+``bifurcations``, ``branches``).
 
 May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 """
@@ -15,9 +19,17 @@ from .regimes import (
 from .spectra import amplitude_spectrum, spectrum_dataset
 from .response import phase_plane, poincare_section, contact_fractions, response_qois
 from .sweeps import bifurcation, sweep_grid
+from .attractors import MultiStart, MultiStartSearch, StartedEvaluator, extremes_over_attractors
+from .floquet import floquet_multipliers, unstable_counts, is_stable, floquet_exponents
+from .shooting import Shooting, ShootingSettings, ShootingError, PeriodicOrbit, PoincareMap, setup_at
+from .continuation import Continuation, ContinuationSettings
+from .branches import bifurcation_table
 
 __all__ = [
     'detect_period', 'count_distinct_points', 'zero_one_test', 'ResponseClass', 'classify_response',
     'classify_dataset', 'classify_batch', 'amplitude_spectrum', 'spectrum_dataset', 'phase_plane',
     'poincare_section', 'contact_fractions', 'response_qois', 'bifurcation', 'sweep_grid',
+    'MultiStart', 'MultiStartSearch', 'StartedEvaluator', 'extremes_over_attractors', 'floquet_multipliers',
+    'unstable_counts', 'is_stable', 'floquet_exponents', 'Shooting', 'ShootingSettings', 'ShootingError',
+    'PeriodicOrbit', 'PoincareMap', 'setup_at', 'Continuation', 'ContinuationSettings', 'bifurcation_table',
 ]

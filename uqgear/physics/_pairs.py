@@ -5,19 +5,20 @@ With per-tooth pitch offsets each tooth pair in mesh has its own deflection
 and gear tooth j), its own backlash dead zone and its own contact state, so
 the mesh force is ``sum_i k_i f(x - e_i) + c_m x'`` instead of ``k f(x) + c_m x'``.
 That sum is not the classical product even with every offset zero (floating
-point does not distribute), so :mod:`uqgear.physics._kernels` takes this path
-only when some offset is not zero (slot ``PITCH_ERRORS``) and is unchanged,
-bit for bit, otherwise.
+point does not distribute), so the kernels take this path only when some
+offset is not zero (slot ``PITCH_ERRORS``) and are unchanged, bit for bit,
+otherwise.
 
 The forcing of a pair path is an 18-tuple: the five terms of
-:func:`~uqgear.physics._kernels.forcing` (total k, total friction term,
+:func:`~uqgear.physics._rhs.forcing` (total k, total friction term,
 relative drive acceleration, e, e''), the number of pairs in mesh, then per
 pair slot (``MAX_PAIRS`` of them, zeros beyond the pairs in mesh) its
 stiffness, its friction term and its offset. Steps are split where any
 pair's deflection crosses its contact boundary ``+-b``, as the classical path
 splits at ``|x| = b``.
 
-Imported at the end of :mod:`uqgear.physics._kernels`, whose helpers it uses.
+Built on the helpers of :mod:`uqgear.physics._rhs`; :mod:`uqgear.physics._kernels`
+chooses between this path and the classical one.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import math
 
 import numba as nb
 
-from uqgear.physics._kernels import (
+from uqgear.physics._rhs import (
     CONTACT_RATIO, CM, C1, C2, CLEARANCE1, CLEARANCE2, DAMP_IN_SEPARATION, ECC_KAPPA, ECC_OMEGA, ECC_PHASE,
     F_K, F_SINE, FRICTION, HALF_BACKLASH, INLINED, JIT_OPTIONS, K1, K2, M1, M2, MAX_PAIRS, ME, N_PARAMS,
     OMEGA_MESH, STE_PHASE, STIFFNESS_SCALE, TOOTH_FACTORS, TWO_PI, USE_PERIOD_TABLE, Z1, Z2, _crossing_fraction,
@@ -114,7 +115,7 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
 
 @nb.njit(**INLINED)
 def _row_pair(i, n, table, sub, stage, n_pairs, ratio, p, fp, fg):
-    """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._kernels.build_schedule`."""
+    """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._rhs.build_schedule`."""
     if i >= n_pairs:
         return 0.0, 0.0, 0.0, 0.0
     kp = table[sub, stage, 4 + 3 * i] * ratio
@@ -151,7 +152,7 @@ def _forcing_row_pairs(t, n, table, sub, stage, n_pairs, p, fp, fg):
 
 @nb.njit(**INLINED)
 def derivative_pairs(s, terms, p):
-    """:func:`~uqgear.physics._kernels.derivative` with one dead zone per pair: F = sum k_i f(x - e_i) + c_m* x'.
+    """:func:`~uqgear.physics._rhs.derivative` with one dead zone per pair: F = sum k_i f(x - e_i) + c_m* x'.
 
     The mesh damper acts on x' (every pair deflects at that rate); with
     ``damping_in_separation`` off it stops when no pair is in contact.
@@ -182,7 +183,7 @@ def derivative_pairs(s, terms, p):
 
 @nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
-    """:func:`~uqgear.physics._kernels._rk4` with the pair-resolved derivative."""
+    """:func:`~uqgear.physics._rhs._rk4` with the pair-resolved derivative."""
     d2, _ = derivative_pairs(_shifted(s, 0.5 * h, d1), mid, p)
     d3, _ = derivative_pairs(_shifted(s, 0.5 * h, d2), mid, p)
     d4, _ = derivative_pairs(_shifted(s, h, d3), end, p)
@@ -200,7 +201,7 @@ def _first_crossing(s, trial, h, terms, p):
         after = contact_region(trial[2] - offset, b)
         if before == after:
             continue
-        # the boundary next to the side the pair leaves, as in _kernels._split_at_contact
+        # the boundary next to the side the pair leaves, as in _rhs._split_at_contact
         if before == 1 or (before == 0 and after == -1):
             level = b if before == 1 else -b
         else:
@@ -237,7 +238,7 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
 
 @nb.njit(**JIT_OPTIONS)
 def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
-    """:func:`~uqgear.physics._kernels.scheduled_step` with per-pair deflections (same returns)."""
+    """:func:`~uqgear.physics._rhs.classical_step` with per-pair deflections (same returns)."""
     first_sub, offsets, widths, refs, pairs, table = schedule
     start = n * period
     force = 0.0

@@ -24,6 +24,7 @@ import xarray as xr
 from scipy.integrate import solve_ivp
 
 from . import _kernels as K
+from . import _lanes
 from .design import DESIGN_KEYS, Design
 from .effects import Effect
 from ..common.errors import OperatingPointError
@@ -142,7 +143,8 @@ def _integrate_fast(setup: ModelSetup, n_periods: int, keep_periods: int, sample
     stride = steps // samples_per_period
     history = np.empty((keep_periods * samples_per_period, len(_HISTORY_COLUMNS)))
     poincare = np.empty((keep_periods, 6))
-    K.integrate_history(initial_state.astype(float), setup.parameters, setup.pair_stiffness,
+    kernel = K.integrate_history_pairs if setup.parameters[K.PITCH_ERRORS] != 0.0 else K.integrate_history
+    kernel(initial_state.astype(float), setup.parameters, setup.pair_stiffness,
                         setup.period_stiffness, setup.factor_pinion, setup.factor_gear,
                         setup.breakpoints, steps, n_periods, keep_periods, stride, history, poincare)
     return history, poincare, steps
@@ -173,9 +175,12 @@ def _pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], i
 
 
 def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, samples_per_period: int,
-                     initial_state: np.ndarray, rtol: float,
-                     atol: float | None) -> tuple[np.ndarray, np.ndarray, dict]:
+                     initial_state: np.ndarray, rtol: float, atol: float | None,
+                     solver: str = "DOP853") -> tuple[np.ndarray, np.ndarray, dict]:
     """The scipy reference: DOP853 between stiffness breakpoints, a terminal event at every contact boundary.
+
+    ``solver`` names another :func:`scipy.integrate.solve_ivp` method on the
+    same segments and events (``benchmarks/integrator.py`` times LSODA so).
 
     Within a segment between breakpoints the contact boundaries are fixed:
     x = -b and x = +b for the mesh as a whole, and with pitch errors
@@ -234,7 +239,7 @@ def _integrate_scipy(setup: ModelSetup, n_periods: int, keep_periods: int, sampl
 
             while t_a < t_b:
                 events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
-                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector,
+                sol = solve_ivp(fun, (t_a, t_b), state, method=solver, rtol=rtol, atol=atol_vector,
                                 events=events, dense_output=kept)
                 stats["rhs_evaluations"] += sol.nfev
                 stats["segments"] += 1
@@ -439,13 +444,67 @@ def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
     return breakpoints
 
 
+def lane_groups(params: np.ndarray, steps: np.ndarray, breakpoints: np.ndarray, strides: np.ndarray,
+                lyapunov: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Lane groups of a batch's lane-ready runs, and the runs left to the one-sample kernels.
+
+    Runs with the same sub-step layout (steps per mesh period, stiffness
+    breakpoints, history stride) share a group of
+    :data:`~uqgear.physics._lanes.LANES` lanes (half as many runs with
+    ``lyapunov``: each run's shadow takes a lane); groups come most steps
+    first, so that the threads end on the short ones.
+    """
+    ready = np.nonzero(_lanes.lane_ready(params))[0]
+    rest = np.nonzero(~_lanes.lane_ready(params))[0]
+    width = _lanes.LANES // 2 if lyapunov else _lanes.LANES
+    layouts: dict[tuple, list[int]] = {}
+    for i in ready:
+        layouts.setdefault((int(steps[i]), breakpoints[i].tobytes(), int(strides[i])), []).append(int(i))
+    rows: list[tuple[int, list[int]]] = []
+    for key, members in layouts.items():
+        for start in range(0, len(members), width):
+            rows.append((key[0], members[start:start + width]))
+    rows.sort(key=lambda row: -row[0])
+    groups = np.full((len(rows), _lanes.LANES), -1, dtype=np.int64)
+    for g, (_, members) in enumerate(rows):
+        groups[g, :len(members)] = members
+    return groups, rest.astype(np.int64)
+
+
+def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
+    """Integrate a batch: lane-ready runs in lane groups, the others (and any the lanes refuse) one at a time.
+
+    ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the range and the
+    order; each run's numbers are the same, bit for bit, whichever kernel and thread compute it.
+    """
+    params, steps, breakpoints, strides, lyapunov = arrays[1], arrays[8], arrays[7], arrays[11], arrays[12]
+    if lanes:
+        groups, rest = lane_groups(params, steps, breakpoints, strides, lyapunov)
+    else:
+        groups, rest = np.empty((0, _lanes.LANES), dtype=np.int64), np.arange(len(params), dtype=np.int64)
+    if len(groups):
+        refused = np.zeros(len(params), dtype=np.bool_)
+        with _lanes.slp_vectorised():
+            # compiles (or loads) the lane kernel here, before the threads call it
+            _lanes.integrate_lanes(0, 0, groups, *arrays, refused)
+        spread(lambda first, last: _lanes.integrate_lanes(first, last, groups, *arrays, refused), len(groups), threads)
+        rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)
+    if len(rest):
+        # the pair path is compiled only for a batch with pitch errors
+        pitch = params[rest, K.PITCH_ERRORS] != 0.0
+        for kernel, order in ((K.integrate_batch, rest[~pitch]), (K.integrate_batch_pairs, rest[pitch])):
+            if len(order):
+                spread(lambda start, stop, kernel=kernel, order=order: kernel(start, stop, order, *arrays),
+                       len(order), threads)
+
+
 def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400, keep_periods: int = 200,
                    history_per_period: int = 0, rig_channels: bool = False, lyapunov: bool = False,
                    effects: Sequence[Effect] = (),
                    damping_in_separation: bool = True, stiffness: str = "ishikawa",
                    steps_per_mode: int = 24, threads: int | None = None,
                    pitch_errors: PitchErrors | None = None, initial_states: np.ndarray | None = None,
-                   final_state: bool = False) -> xr.Dataset:
+                   final_state: bool = False, lanes: bool = True) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
 
     Parameters
@@ -483,6 +542,10 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
         start a later batch from it (sweeps that follow a branch). The restart
         continues a mesh-periodic run exactly; effects and pitch errors with a
         longer period start their own phase again at t = 0.
+    lanes : bool
+        Advance runs whose forcing repeats every mesh period eight at a time
+        as SIMD lanes (:mod:`uqgear.physics._lanes`); False runs every sample
+        on the one-sample kernel. The numbers are the same, bit for bit.
 
     Returns
     -------
@@ -517,14 +580,10 @@ def simulate_batch(design: Design, samples: xr.Dataset, *, n_periods: int = 400,
     channels = 4 if rig_channels and history_per_period > 0 else 1
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
     if n:
-        pair_stack, period_stack, strides = np.stack(pair_tables), np.stack(period_tables), history_stride.astype(np.int64)
-
-        def run_range(start: int, stop: int) -> None:
-            K.integrate_batch(start, stop, states, params, pair_stack, period_stack, table_index, factor_pinion,
-                              factor_gear, breakpoints, steps, n_periods, keep_periods, strides, lyapunov, scales,
-                              accumulators, poincare, history, final_states)
-
-        spread(run_range, n, threads)
+        arrays = (states, params, np.stack(pair_tables), np.stack(period_tables), table_index, factor_pinion,
+                  factor_gear, breakpoints, steps, n_periods, keep_periods, history_stride.astype(np.int64),
+                  bool(lyapunov), scales, accumulators, poincare, history, final_states)
+        _run_batch(arrays, threads, lanes)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
     mean_x = accumulators[:, K.Q_X_SUM] / count
     mean_force = np.array([s.derived["static_mesh_force"] for s in setups])
@@ -666,3 +725,6 @@ class BatchEvaluator:
 
 __all__ = ["simulate", "simulate_batch", "build_batch", "samples_from_mapping", "steps_per_period", "BatchEvaluator",
            "QOI_INFO", "METHODS"]
+
+#: Public names of the fast integrator and its history columns (the diagnosis simulates campaigns with them).
+integrate_fast, HISTORY_COLUMNS = _integrate_fast, _HISTORY_COLUMNS

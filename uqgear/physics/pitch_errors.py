@@ -31,6 +31,10 @@ MAX_PITCH_OFFSET = 1e-3
 #: Class at which pitch errors are drawn before being scaled to another (tolerances grow by sqrt(2) a class).
 REFERENCE_CLASS = 7
 
+#: ISO 1328-1 classes (lowest, highest) assumed for a rig's gears when none are stated: the usual range of
+#: traction gears.
+DEFAULT_CLASSES: tuple[float, float] = (6.0, 8.0)
+
 
 def _per_tooth(name: str, values: ArrayLike, teeth: int | None) -> np.ndarray:
     try:
@@ -202,5 +206,54 @@ def draw_in_classes(design: Design, classes: tuple[float, float], position: floa
     return draw_at_level(design, class_level(classes, position), rng)
 
 
+def check_classes(classes: object, *, error: type[ValueError] = OperatingPointError) -> tuple[float, float] | None:
+    """None, or (lowest, highest) ISO 1328-1 flank tolerance classes within 1..11 (``error`` names the key)."""
+    if classes is None:
+        return None
+    try:
+        low, high = (float(value) for value in classes)  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        raise error(f"pitch_classes: expected two ISO 1328-1 classes (lowest, highest) in 1..11 or "
+                    f"none; got {classes!r:.80}") from None
+    if not (1.0 <= low <= high <= 11.0):
+        raise error(f"pitch_classes: expected 1 <= lowest <= highest <= 11; got ({low:g}, {high:g})")
+    return low, high
+
+
+def order_powers(errors: np.ndarray, orders: tuple[int, ...] = (1, 2, 3)) -> np.ndarray:
+    """|E_j|^2 of tooth positions ``errors`` (..., z): the power of their j-th Fourier coefficient per revolution.
+
+    E_j drives a gear's shaft line of order j and its sidebands +-j around
+    every mesh harmonic; E_1 is the kinematic run-out its pitch errors make.
+    """
+    errors = np.asarray(errors, dtype=float)
+    teeth = errors.shape[-1]
+    phases = np.exp(-2j * np.pi * np.outer(np.arange(teeth), np.asarray(orders)) / teeth)   # (z, orders)
+    return np.abs(2.0 / teeth * (errors @ phases)) ** 2
+
+
+def run_out_bounds(design: Design, classes: tuple[float, float], rng: np.random.Generator, *,
+                   quantile: float = 0.95, draws: int = 4000) -> dict[str, float]:
+    """Per gear, the first-order run-out (m, along the line of action) that pitch errors of ``classes`` stay under.
+
+    The running sum of a gear's pitch errors is a kinematic run-out: its
+    first Fourier coefficient over the teeth, 2/z |sum e_i exp(-2 pi i i/z)|,
+    acts exactly as an eccentricity's e_s (both enter the TE along the line
+    of action), so a shaft run-out below such a bound is not evidence of an
+    eccentric shaft on gears of those classes. Levels are drawn uniformly
+    over the classes; tooth positions only, no simulation.
+    """
+    bounds = {}
+    for gear, teeth in (("pinion", design.z1), ("gear", design.z2)):
+        phases = np.exp(-2j * np.pi * np.arange(teeth) / teeth)
+        amplitudes = np.empty(draws)
+        for index in range(draws):
+            errors = getattr(draw_in_classes(design, classes, rng.random(), rng), gear)
+            amplitudes[index] = 2.0 / teeth * abs(np.sum(errors * phases))
+        bounds[gear] = float(np.quantile(amplitudes, quantile))
+    return bounds
+
+
 __all__ = ["PitchErrors", "iso1328_single_pitch_tolerance", "draw_pitch_errors", "ISO1328_CLASSES",
-           "REFERENCE_CLASS", "class_level", "draw_at_level", "draw_in_classes"]
+           "REFERENCE_CLASS", "DEFAULT_CLASSES", "class_level", "draw_at_level", "draw_in_classes", "check_classes",
+           "order_powers", "run_out_bounds"]

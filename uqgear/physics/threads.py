@@ -1,8 +1,9 @@
 """Spreading a batch of independent runs over threads.
 
-The batch kernels (:func:`uqgear.physics._kernels.integrate_batch` and the
-calibration's harmonic kernel) run samples ``start`` to ``stop - 1`` with the
-GIL released, so plain Python threads run them side by side. Each sample is
+The batch kernels (:func:`uqgear.physics._lanes.integrate_lanes` over lane
+groups, :func:`uqgear.physics._kernels.integrate_batch` and the calibration's
+harmonic kernel over samples) run items ``start`` to ``stop - 1`` with the GIL
+released, so plain Python threads run them side by side. Each sample is
 computed by one call from its own inputs, so the numbers are the same, bit
 for bit, for any number of threads and any order the chunks finish in.
 """

@@ -12,6 +12,7 @@ from matplotlib import colormaps
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 
+from .coexistence_sections import coexistence_sentences, draw_sweep_starts, mark_coexistence
 from .findings import regime_findings, separation_findings
 from .page import figure_png, new_figure
 from .presentation import (_MARKERS, REGIME_CODES, REGIME_FIXED_COLOURS, REGIME_ORDER, axis_label, display,
@@ -390,6 +391,9 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
                  markersize=2.0, color="black")
         top.set_title("bifurcation diagram: Poincaré points of the DTE", fontsize=9)
         regime = ds["regime"]
+    if draw_sweep_starts(top, ds, parameter, condition, scale):
+        top.set_title(top.get_title() + "\nwhere two or more responses coexist: blue ▲ up-sweep start, "
+                      "orange ▼ down-sweep start", fontsize=9)
     top.set_ylabel("Poincaré points of DTE $x_n$ [µm]")
     half_backlash = _half_backlash(ds, parameter)
     if half_backlash is not None:
@@ -417,6 +421,7 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
     if k_mean is not None:
         section.facts.append(("mean mesh stiffness at scale 1", f"{k_mean:.4g} N/m"))
     section.findings.extend(regime_findings(regime, parameter, condition))
+    section.findings.extend(coexistence_sentences(ds, parameter, condition))
     section.caveats.append(_classification_caveat(ds))
     if condition:
         section.caveats.append(f"the envelope is the union over {ds.sizes[condition]} values of "
@@ -434,6 +439,7 @@ def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
     figure = new_figure(9.0, 5.2)
     ax = figure.subplots()
     _regime_strip(ax, regime, first, second)
+    mark_coexistence(ax, ds, first, second, (display(first)[2], display(second)[2]))
     labels = np.asarray(regime.values).astype(str)
     if labels.size <= 600:
         x_values = np.asarray(ds[first].values, dtype=float) * display(first)[2]
@@ -465,6 +471,7 @@ def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
         ax.set_title("fraction of time with the teeth apart (contact loss)", fontsize=9)
         _add_figure(section, figure, "Contact loss over the same grid.", dpi)
     section.findings.extend(regime_findings(regime, first, second))
+    section.findings.extend(coexistence_sentences(ds, first, second))
     if "fraction_separation" in ds:
         # per end of the second axis (wet and dry rail): a range found at one T2 is never given to another
         section.findings.extend(separation_findings(ds["fraction_separation"], first, second))

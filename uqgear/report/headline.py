@@ -18,6 +18,8 @@ import numpy as np
 import xarray as xr
 
 from .calibration_report import calibration_findings
+from .coexistence_sections import coexistence_headline
+from .continuation_sections import continuation_findings
 from .diagnosis_report import diagnosis_findings
 from .finding import Finding
 from .findings import SPEED, T2, Grid, _condition_text, _runs, grid, grids
@@ -368,7 +370,9 @@ def rig_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
 def headline_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     """Every headline statement of a study's results, in the order the report shows them."""
     return [*worst_load_findings(results), *separation_findings(results), *back_contact_findings(results),
-            *regime_findings_headline(results), *sobol_findings(results), *rig_findings(results)]
+            *regime_findings_headline(results), *coexistence_headline(results), *continuation_findings(results),
+            *sobol_findings(results),
+            *rig_findings(results)]
 
 
 def headline_note(results: Sequence[xr.Dataset]) -> str:

@@ -1,7 +1,7 @@
 """The report section on a healthy reference campaign (``uqgear diagnose --reference``).
 
 :func:`reference_section_html` renders the ``reference`` entry of
-``diagnosis.json`` (:mod:`uqgear.diagnosis.reference`): the reference file
+``diagnosis.json`` (:mod:`uqgear.diagnosis.allowances.reference`): the reference file
 and its nominal fit, per channel the learned gain over frequency with its
 2-sigma band and the lines it rests on, and the matched operating points.
 It works on the JSON content only, so the diagnosis report can call it

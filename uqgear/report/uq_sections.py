@@ -17,6 +17,7 @@ from ..uq.interval import (FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_S
 from .findings import _range_text, _runs_of_values
 from .page import new_figure
 from .presentation import _LINE_STYLES, _MARKERS, axis_label, display, format_value, short_name
+from .coexistence_sections import attractor_bound_sentences
 from .sections import Section, _add_figure, _json_attr, _list, _section, renderer
 
 
@@ -76,6 +77,7 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
             ax.set_xticks([])
         ax.set_ylabel(f"{display(name)[0]} [{unit}]")
         _interval_findings(section, ds, name, sweep, label)
+        section.findings.extend(attractor_bound_sentences(ds, name, sweep))
     axes[-1].set_xlabel(axis_label(sweep) if sweep else "")
     method = ds.attrs.get("method", options.get("method", "?"))
     _add_figure(section, figure, f"QoI envelopes over {label} ({method} method; band: lower to upper "

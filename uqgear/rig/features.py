@@ -184,7 +184,7 @@ def feature_definitions(design: Design, *, n_harmonics: int = 3, n_sidebands: in
     return tuple(definitions)
 
 
-def _window(name: str, size: int) -> np.ndarray:
+def analysis_window(name: str, size: int) -> np.ndarray:
     try:
         return scipy.signal.get_window(name, size, fftbins=True)
     except (ValueError, TypeError) as exc:
@@ -255,7 +255,7 @@ def order_spectrum(signal: xr.DataArray, pinion_speed: float | xr.DataArray, *,
     padding = _check_count("padding", padding, 1)
     template, records, speeds, fs = _prepare(signal, pinion_speed, "")
     size = records.shape[1]
-    taper = _window(window, size)
+    taper = analysis_window(window, size)
     shaft_frequency = speeds / 60.0
     if orders is None:
         step = fs / (size * padding) / shaft_frequency.max()
@@ -282,7 +282,7 @@ def order_spectrum(signal: xr.DataArray, pinion_speed: float | xr.DataArray, *,
     return result
 
 
-class _LineFit:
+class LineFit:
     """Window-weighted joint least-squares fit of lines at known frequencies.
 
     Built once per pinion speed and applied to any number of records of that
@@ -319,7 +319,7 @@ class _LineFit:
         # Normal equations: one small Gram matrix per speed, shared by all records.
         self.factor = scipy.linalg.cho_factor(self.weighted.T @ basis)
 
-    def _coefficients(self, records: np.ndarray) -> np.ndarray:
+    def coefficients(self, records: np.ndarray) -> np.ndarray:
         """Least-squares coefficients (1 + 2 n_centres, R): the mean, then the cos and sin of each line."""
         return scipy.linalg.cho_solve(self.factor, self.weighted.T @ records.T)
 
@@ -327,7 +327,7 @@ class _LineFit:
         """Amplitudes (R, L) of the lines in float64 records (R, N) without NaN."""
         result = np.full((records.shape[0], self.size_out), np.nan)
         if self.n_centres:
-            coefficients = self._coefficients(records)
+            coefficients = self.coefficients(records)
             amplitude = np.hypot(coefficients[1:1 + self.n_centres], coefficients[1 + self.n_centres:]).T
             result[:, self.inside] = amplitude[:, self.groups]
         return result
@@ -336,7 +336,7 @@ class _LineFit:
         """Complex amplitudes (R, L), cos - i sin coefficients, whose moduli are :meth:`amplitudes`."""
         result = np.full((records.shape[0], self.size_out), np.nan, dtype=complex)
         if self.n_centres:
-            coefficients = self._coefficients(records)
+            coefficients = self.coefficients(records)
             phasor = (coefficients[1:1 + self.n_centres] - 1j * coefficients[1 + self.n_centres:]).T
             result[:, self.inside] = phasor[:, self.groups]
         return result
@@ -375,7 +375,7 @@ def line_amplitudes(signal: xr.DataArray, pinion_speed: float | xr.DataArray, or
         raise StudyError(f"orders: expected finite positive orders; got {order_values}")
     template, records, speeds, fs = _prepare(signal, pinion_speed, "")
     limit = _band_limit(band_limit, fs)
-    taper = _window(window, records.shape[1])
+    taper = analysis_window(window, records.shape[1])
     amplitudes = _lines_by_speed(records, speeds, order_values, fs, limit, taper)
     result = xr.DataArray(amplitudes.reshape(template.shape + (order_values.size,)),
                           dims=template.dims + ("order",), coords=template.coords).assign_coords(order=order_values)
@@ -388,7 +388,7 @@ def _lines_by_speed(records: np.ndarray, speeds: np.ndarray, orders: np.ndarray,
     """Line amplitudes (R, L); records sharing a speed share one fit; NaN rows where a sample is NaN."""
     amplitudes = np.full((records.shape[0], orders.size), np.nan)
     for speed in np.unique(speeds):
-        fit = _LineFit(orders * speed / 60.0, fs, records.shape[1], limit, taper)
+        fit = LineFit(orders * speed / 60.0, fs, records.shape[1], limit, taper)
         for block in _blocks(np.flatnonzero(speeds == speed), records.shape[1]):
             chunk = records[block].astype(float)
             usable = ~np.isnan(chunk).any(axis=1)
@@ -409,7 +409,7 @@ def _noise_std(periodogram: np.ndarray, fs: float, excluded: np.ndarray) -> floa
     return math.sqrt(density * 0.5 * fs)
 
 
-def _excluded_bins(frequencies: np.ndarray, speed: float, design: Design, line_orders: np.ndarray,
+def excluded_bins(frequencies: np.ndarray, speed: float, design: Design, line_orders: np.ndarray,
                    n_sidebands: int, low_band: tuple[float, float], limit: float, resolution: float) -> np.ndarray:
     """Periodogram bins that the noise floor must not use: lines, low band, beyond the band."""
     shaft_frequency = speed / 60.0
@@ -442,7 +442,7 @@ def _check_low_band(low_band: tuple[float, float], fs: float) -> tuple[float, fl
     return float(low_band[0]), float(low_band[1])
 
 
-def _block_features(records: np.ndarray, fit: _LineFit, excluded: np.ndarray, fs: float, taper: np.ndarray,
+def block_features(records: np.ndarray, fit: LineFit, excluded: np.ndarray, fs: float, taper: np.ndarray,
                     low_band: tuple[float, float], columns: dict[str, int], line_columns: np.ndarray,
                     n_features: int, *, lines: bool = True) -> np.ndarray:
     """Feature values (R, F) of float64 records (R, N) without NaN, all at one speed.
@@ -484,22 +484,22 @@ def _record_features(channel_records: Sequence[np.ndarray], channel_speeds: Sequ
     stay small whatever the batch size.
     """
     size = channel_records[0].shape[1]
-    taper = _window(window, size)
+    taper = analysis_window(window, size)
     columns = {definition.name: index for index, definition in enumerate(definitions)}
     line_columns = np.array([index for index, definition in enumerate(definitions) if definition.is_line], dtype=int)
     line_orders = np.array([definitions[index].order for index in line_columns])
     frequencies = np.fft.rfftfreq(size, 1.0 / fs)
     outputs = [np.full((records.shape[0], len(definitions)), np.nan) for records in channel_records]
     for speed in np.unique(np.concatenate(channel_speeds)):
-        fit = _LineFit(line_orders * speed / 60.0, fs, size, limit, taper)
-        excluded = _excluded_bins(frequencies, float(speed), design, line_orders, n_sidebands, low_band, limit,
+        fit = LineFit(line_orders * speed / 60.0, fs, size, limit, taper)
+        excluded = excluded_bins(frequencies, float(speed), design, line_orders, n_sidebands, low_band, limit,
                                   fs / size)
         for records, speeds, output in zip(channel_records, channel_speeds, outputs):
             for block in _blocks(np.flatnonzero(speeds == speed), size):
                 chunk = records[block].astype(float)
                 usable = ~np.isnan(chunk).any(axis=1)
                 if usable.any():
-                    output[block[usable]] = _block_features(chunk[usable], fit, excluded, fs, taper, low_band,
+                    output[block[usable]] = block_features(chunk[usable], fit, excluded, fs, taper, low_band,
                                                             columns, line_columns, len(definitions))
     return outputs
 
@@ -586,7 +586,7 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
                            f"got dims {speed.dims}")
     definitions = feature_definitions(design, n_harmonics=n_harmonics, n_sidebands=n_sidebands,
                                       n_shaft_orders=n_shaft_orders, n_motor_lines=n_motor_lines)
-    _window(window, 8)
+    analysis_window(window, 8)
 
     prepared = [_prepare(signals[name], speed, f"{where}{name}: ") for name in channels]
     fs = prepared[0][3]
@@ -638,4 +638,5 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
 
 
 __all__ = ["SIGNAL_CHANNELS", "FEATURE_FAMILIES", "DEFAULT_BAND_FRACTION", "FeatureDefinition",
-           "feature_definitions", "sampling_rate", "order_spectrum", "line_amplitudes", "extract_features"]
+           "feature_definitions", "sampling_rate", "order_spectrum", "line_amplitudes", "extract_features",
+           "analysis_window", "LineFit", "excluded_bins", "block_features"]

@@ -5,7 +5,7 @@ path from a bearing to its accelerometer, the accelerometer's own mounted
 resonance. :func:`apply_transfer_path` filters one channel of a
 ``uqgear-rig/1`` campaign (a file of ``data/rig/`` or a virtual rig's output)
 through a second-order resonance, to test what the diagnosis makes of such a
-path (``uqgear diagnose --reference``, :mod:`uqgear.diagnosis.reference`).
+path (``uqgear diagnose --reference``, :mod:`uqgear.diagnosis.allowances.reference`).
 
 Two shapes, both of unity gain at DC and at frequencies well below the
 resonance f0 (damping ratio zeta, w0 = 2 pi f0):

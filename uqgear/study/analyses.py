@@ -41,6 +41,8 @@ from ..common.progress import progress
 from ..uq.results import load_result, save_result
 from ..uq.runner import Runner
 from .analysis_specs import AnalysisSpec
+from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
+from .model_runs import RunnerModel
 from .schema import Study
 from .settings import SimulationSettings
 from .variables import OPERATING_VARIABLES, VARIABLES, variable_units_short
@@ -124,28 +126,6 @@ def evaluate_batch(samples: xr.Dataset, *, design: Design, simulation: Simulatio
     return result
 
 
-class RunnerModel:
-    """A model function ``samples -> results`` that evaluates through a :class:`Runner`.
-
-    The uncertainty layer calls a model once per stage with a whole batch;
-    this wrapper chunks the batch, spreads it over a scheduler if one is set
-    and checkpoints every chunk (so a killed run resumes).
-    """
-
-    def __init__(self, runner: Runner, model: Callable[[xr.Dataset], xr.Dataset], key: str,
-                 resume: bool) -> None:
-        self.runner = runner
-        self.model = model
-        self.key = key
-        self.resume = resume
-        #: Model runs requested through this wrapper.
-        self.runs = 0
-
-    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
-        self.runs += samples.sizes["sample"]
-        return self.runner.run(self.model, samples, key=self.key, resume=self.resume)
-
-
 # ---------------------------------------------------------------------------- context
 
 
@@ -191,15 +171,18 @@ class AnalysisContext:
         return child_seed(self.seed, stage)
 
     def model(self, *, classify: bool = False, lyapunov: bool | None = None,
-              poincare: bool = True) -> RunnerModel:
+              poincare: bool = True) -> RunnerModel | MultiStartModel:
         """The gear model for this analysis, evaluated through the runner.
 
         ``poincare=False`` drops the Poincare points from the outputs (scalar
-        QoIs only).
+        QoIs only). With ``simulation.starts`` every point is run from several
+        starts (:class:`~uqgear.study.coexistence.MultiStartModel`).
         """
         simulation = self.spec.simulation
         if lyapunov is not None and lyapunov != simulation.lyapunov:
             simulation = SimulationSettings(**{**simulation.to_dict(), "lyapunov": lyapunov})
+        if simulation.starts is not None:
+            return multi_start_model(self, simulation, poincare)
         function = functools.partial(evaluate_batch, design=self.design, simulation=simulation,
                                      threads=self.threads, classify=classify,
                                      classify_seed=self.stage_seed(99) if classify else None,
@@ -280,8 +263,7 @@ def _grid_run(context: AnalysisContext, axes: Mapping[str, np.ndarray], *,
     gridded = dynamics.sweep_grid(context.design, axes, fixed=fixed, seed=context.stage_seed(99), evaluate=model)
     for name in axes:
         gridded[name].attrs.update({"units": variable_units_short(name), "long_name": name.replace("_", " ")})
-    gridded.attrs.update(model_runs=int(np.prod([len(values) for values in axes.values()])),
-                         fixed_inputs=json.dumps(fixed))
+    gridded.attrs.update(model_runs=int(model.runs), fixed_inputs=json.dumps(fixed))
     return gridded
 
 
@@ -417,18 +399,25 @@ def simulate_analysis(context: AnalysisContext) -> xr.Dataset:
     points = [{name: float(grid[name].values[i]) for name in grid.data_vars}
               for i in range(grid.sizes["sample"])]
     # Lyapunov exponents from a batch run of the same points decide chaotic vs quasi-periodic
-    batch = context.model(classify=False, lyapunov=True)(grid)
+    model = context.model(classify=False, lyapunov=True)
+    batch = model(grid)
+    # the panels start from rest: with several starts, the rest start's exponent
+    exponent = batch["largest_lyapunov_rest" if "largest_lyapunov_rest" in batch else "largest_lyapunov"].values
     labels = list(options["labels"]) or [""] * len(points)
     runs = [simulate_point(context.design, point, simulation=spec.simulation,
                            samples_per_period=options["samples_per_period"], method=options["method"],
-                           largest_lyapunov=float(batch["largest_lyapunov"].values[index]),
+                           largest_lyapunov=float(exponent[index]),
                            seed=context.stage_seed(0), label=labels[index])
             for index, point in enumerate(progress(points, desc=f"{spec.name}: simulate", unit="run"))]
     # the runs share sample counts, periods and spectrum bins (same settings), so they stack
     result = xr.concat(runs, dim="run", coords="minimal", compat="override", join="override",
                        combine_attrs="drop_conflicts")
     result = result.assign_coords(run=("run", np.arange(len(points)), {"units": "1"}))
-    result.attrs.update(model_runs=2 * len(points), swept=json.dumps(list(sweeps)),
+    if "attractor_count" in batch:
+        # every steady response the point holds, besides the panels' one from rest
+        result = result.merge(batch[[name for name in batch.data_vars if name.startswith("attractor_")]]
+                              .rename({"sample": "run"}).drop_vars(list(batch.coords), errors="ignore"))
+    result.attrs.update(model_runs=len(points) + int(model.runs), swept=json.dumps(list(sweeps)),
                         fixed_inputs=json.dumps(fixed),
                         spectrum_axis=options["spectrum"],
                         classification="period from the Poincare sequence; chaotic vs quasi-periodic by "
@@ -564,6 +553,8 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
     names = list(options["parameters"])
     qois = list(options["qois"])
     fixed = context.fixed_values(exclude=names)
+    if context.spec.simulation.starts is not None:
+        return interval_over_attractors(context, names, qois, fixed)
     space = context.parameter_space(names, fixed)
     regime_variables = [name for name in ("fraction_separation", "fraction_back_contact") if name not in qois]
     model = context.model(poincare=False)
@@ -636,17 +627,22 @@ def diagnose_analysis(context: AnalysisContext) -> xr.Dataset:
     spectra) with the content of its ``diagnosis.json`` (verdict, gap and
     shrink, where, ranking) in attribute ``diagnosis``. With ``reference``
     (a healthy campaign of the same rig, ``uqgear diagnose --reference``) its
-    learned transfer correction is carried over and recorded there.
+    learned transfer correction is carried over and recorded there. Its
+    ``settings`` (the documented decision thresholds of
+    :class:`~uqgear.diagnosis.DiagnosisSettings`) replace the defaults.
     """
-    from ..diagnosis.workflow import diagnosis_result
+    from ..diagnosis import Diagnosis, DiagnosisSettings
     from .schema import reference_path, rig_path
 
     effects = list(context.options["effects"])
     rig = rig_path(context.study, context.spec)
     reference = reference_path(context.study, context.spec)
-    content, result = diagnosis_result(rig, design=context.design, effects=effects, seed=context.stage_seed(0),
-                                       workers=context.threads, reference=reference,
-                                       pitch_classes=context.options["pitch_classes"])
+    settings = DiagnosisSettings.from_mapping(context.options.get("settings"),
+                                              where=f"analyses[{context.spec.index}].settings")
+    diagnosis = Diagnosis(effects=effects, settings=settings, design=context.design, seed=context.stage_seed(0),
+                          workers=context.threads, pitch_classes=context.options["pitch_classes"]
+                          ).fit(rig, reference=reference)
+    content, result = diagnosis.to_dict(), diagnosis.result_.copy()
     result.attrs.update(diagnosis=json.dumps(content, default=float), verdict=str(content["verdict"]),
                         effects=json.dumps(effects), rig=str(rig))
     if reference is not None:

@@ -26,6 +26,20 @@ INTERVAL_FALLBACKS: tuple[str, ...] = ("scan", "optimize", "none")
 SAMPLING_METHODS: tuple[str, ...] = ("monte_carlo", "latin_hypercube", "sobol", "halton")
 
 
+def diagnosis_settings(value: Any, path: str) -> dict[str, Any]:
+    """Checker of a ``diagnose`` analysis's ``settings``: documented thresholds of the diagnosis by name."""
+    from ..common.errors import StudyError, shown
+    from ..diagnosis import DiagnosisError, DiagnosisSettings
+
+    if not isinstance(value, dict):
+        raise StudyError(f"{path}: expected a mapping of diagnosis settings to values; got {shown(value)}")
+    try:
+        DiagnosisSettings.from_mapping(value, where=path, keys=DiagnosisSettings.study_keys())
+    except DiagnosisError as exc:
+        raise StudyError(str(exc)) from None
+    return dict(value)
+
+
 def _qoi_list() -> Checker:
     return list_of(choice(*QOIS), unique=True, what="a list of QoI names")
 
@@ -110,6 +124,15 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "reference": string(),
         # ISO 1328-1 classes of the rig's gears: what their pitch errors do is model error (none: perfect gears)
         "pitch_classes": class_range(1, 11),
+        # the documented decision thresholds of uqgear.diagnosis.DiagnosisSettings
+        "settings": diagnosis_settings,
+    },
+    "continuation": {
+        "parameter": choice(*VARIABLES),
+        "envelope": _variable_list(),
+        "points": number("values across each interval", 2, 50, integer=True),
+        "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
+        "compare_sweeps": boolean(),
     },
 }
 
@@ -117,6 +140,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
 ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "simulate": {"samples_per_period": 64, "method": "fast", "spectrum": "order", "labels": ()},
     "bifurcation": {"envelope": (), "points": 5},
+    "continuation": {"envelope": (), "points": 2, "max_period": 8, "compare_sweeps": True},
     "regime_map": {"points": 9},
     "interval": {"method": "chebyshev", "order": 6, "points": None, "fallback": "scan",
                  "tolerance": 0.02, "qois": DEFAULT_QOIS},
@@ -131,7 +155,8 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
                   "pitch_classes": (6.0, 8.0)},
     "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
 }
-_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "regime_map": ("axes",),
+_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"bifurcation": ("parameter",), "continuation": ("parameter",),
+                                              "regime_map": ("axes",),
                                               "calibrate": ("rig",), "diagnose": ("rig",)}
 #: Analysis types that read a rig data file (key ``rig``, relative to the study file).
 RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")

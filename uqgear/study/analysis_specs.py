@@ -76,17 +76,20 @@ def _check_axis(spec: AnalysisSpec, intervals: list[str], name: str, key: str, p
                          f"{', '.join(list(spec.sweeps) + intervals) or '(none defined)'}")
 
 
-def _check_bifurcation(spec: AnalysisSpec, intervals: list[str], path: str) -> None:
+def _check_bifurcation(spec: AnalysisSpec, intervals: list[str], path: str,
+                       envelope_names: list[str] | None = None) -> None:
     options = spec.options
     _check_axis(spec, intervals, options["parameter"], "parameter", path)
     others = [name for name in spec.sweeps if name != options["parameter"]]
     if others:
-        raise StudyError(f"{path}.operating_points.{others[0]}: a bifurcation sweeps only its "
+        raise StudyError(f"{path}.operating_points.{others[0]}: a {spec.type} sweeps only its "
                          f"parameter ({options['parameter']}); expected a single value")
+    allowed = intervals if envelope_names is None else envelope_names
     for name in options["envelope"]:
-        if name not in intervals:
-            raise StudyError(f"{path}.envelope: {name} is not an uncertain interval parameter; "
-                             f"expected one of {', '.join(intervals) or '(none defined)'}")
+        if name not in allowed:
+            kind = "interval parameter" if envelope_names is None else "parameter"
+            raise StudyError(f"{path}.envelope: {name} is not an uncertain {kind}; "
+                             f"expected one of {', '.join(allowed) or '(none defined)'}")
         if name == options["parameter"] or name in spec.operating_points:
             raise StudyError(f"{path}.envelope: {name} is also the swept parameter or fixed in "
                              "operating_points; give it in one place")
@@ -162,6 +165,9 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
     intervals = [name for name, parameter in uncertain.items() if parameter.is_interval]
     if spec.type == "bifurcation":
         _check_bifurcation(spec, intervals, path)
+    elif spec.type == "continuation":
+        # a distribution's bifurcation points are mapped at its quantiles
+        _check_bifurcation(spec, intervals, path, list(uncertain))
     elif spec.type == "regime_map":
         _check_regime_map(spec, intervals, path)
     elif spec.type in PROPAGATING_TYPES:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from ..common.errors import StudyError
+from ..common.errors import StudyError, UqgearError
+from ..dynamics.attractors import MultiStart
 from .checkers import Checker, boolean, check_mapping, choice, number
 
 
@@ -27,6 +29,9 @@ class SimulationSettings:
         Mesh damping acts while the teeth are apart (the classical form).
     stiffness : {"ishikawa", "fourier"}
         Raw Ishikawa stiffness curve or its truncated Fourier series.
+    starts : MultiStart, optional
+        Start every point from several states and report every steady response found
+        (:mod:`uqgear.dynamics.attractors`); None (default): from rest only, as always.
     """
 
     n_periods: int = 400
@@ -35,9 +40,34 @@ class SimulationSettings:
     steps_per_mode: int = 32
     damping_in_separation: bool = True
     stiffness: str = "ishikawa"
+    starts: MultiStart | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.starts, Mapping):
+            object.__setattr__(self, "starts", MultiStart.from_mapping(self.starts))
 
     def to_dict(self) -> dict[str, Any]:
-        return {key: getattr(self, key) for key in self.__dataclass_fields__}
+        """The settings as plain values; ``starts`` only when set, so the keys of results run from rest
+        only (checkpoints, resumed studies) stay what they were."""
+        values = {key: getattr(self, key) for key in self.__dataclass_fields__ if key != "starts"}
+        if self.starts is not None:
+            values["starts"] = self.starts.to_dict()
+        return values
+
+
+def _starts(value: Any, path: str) -> MultiStart | None:
+    """``true`` (the default starts), ``false``/none (rest only) or a mapping of :class:`MultiStart` keys."""
+    if value is None or value is False or value == "none":
+        return None
+    if value is True:
+        return MultiStart()
+    if not isinstance(value, Mapping):
+        raise StudyError(f"{path}: expected true, false or a mapping with keys "
+                         f"{', '.join(MultiStart.__dataclass_fields__)}; got {value!r}")
+    try:
+        return MultiStart.from_mapping(value, where=path)
+    except (UqgearError, TypeError) as error:
+        raise StudyError(str(error)) from None
 
 
 _SIMULATION_SCHEMA: dict[str, Checker] = {
@@ -47,6 +77,7 @@ _SIMULATION_SCHEMA: dict[str, Checker] = {
     "steps_per_mode": number("steps", 8, 4096, integer=True),
     "damping_in_separation": boolean(),
     "stiffness": choice("ishikawa", "fourier"),
+    "starts": _starts,
 }
 
 

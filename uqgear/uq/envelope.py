@@ -7,7 +7,10 @@ checkpoints) and derives from it:
 
 * :func:`qoi_envelope`: lower and upper QoI bands against speed over the T2
   interval, with the T2 that attains each bound, and a flag where the response
-  is non-smooth in T2 (regime changes, contact loss appearing);
+  is non-smooth in T2 (regime changes, contact loss appearing); on a grid run
+  from several starts (``<qoi>_max`` / ``<qoi>_min`` over the attractors, see
+  :mod:`uqgear.dynamics.attractors`) the bands span the attractors too and
+  ``<qoi>_start_at_bound`` names the start that reached each;
 * :func:`bifurcation_envelope`: the union of Poincare points over the T2
   interval at each speed, every point keeping the T2 that made it;
 * :func:`regime_map`: period-n / quasi-periodic / chaotic label per
@@ -116,14 +119,21 @@ def qoi_envelope(grid: xr.Dataset, qois: Sequence[str] = ("dte_rms", "dynamic_lo
                                   f"{', '.join(v for v in grid.data_vars if grid[v].dims == (SPEED, ADHESION))}")
     out = xr.Dataset(coords={SPEED: grid[SPEED], "bound": ["lower", "upper"]})
     for name in qois:
-        values = grid[name]
-        lower_index = values.argmin(ADHESION)
-        upper_index = values.argmax(ADHESION)
-        band = xr.concat([values.min(ADHESION), values.max(ADHESION)], dim="bound")
-        out[name] = band.transpose(SPEED, "bound").assign_attrs(values.attrs)
+        # a grid run from several starts: the bounds over the attractors too, and the start giving each
+        several = f"{name}_max" in grid and f"{name}_min" in grid
+        lows, highs = (grid[f"{name}_min"], grid[f"{name}_max"]) if several else (grid[name], grid[name])
+        lower_index = lows.argmin(ADHESION)
+        upper_index = highs.argmax(ADHESION)
+        band = xr.concat([lows.min(ADHESION), highs.max(ADHESION)], dim="bound")
+        out[name] = band.transpose(SPEED, "bound").assign_attrs(grid[name].attrs)
         at = xr.concat([grid[ADHESION][lower_index], grid[ADHESION][upper_index]], dim="bound")
         out[f"{name}_adhesion_at_bound"] = at.drop_vars(ADHESION, errors="ignore").transpose(SPEED, "bound") \
             .assign_attrs(units="N m", long_name=f"T2 attaining each bound of {name}")
+        if several and f"{name}_max_start" in grid:
+            starts = xr.concat([grid[f"{name}_min_start"].isel({ADHESION: lower_index}),
+                                grid[f"{name}_max_start"].isel({ADHESION: upper_index})], dim="bound")
+            out[f"{name}_start_at_bound"] = starts.drop_vars(ADHESION, errors="ignore").transpose(SPEED, "bound") \
+                .assign_attrs(long_name=f"start whose attractor attains each bound of {name}")
     reasons = []
     for i in range(grid.sizes[SPEED]):
         cell = grid.isel({SPEED: i})

@@ -3,7 +3,7 @@
 A gear's first-order pitch error and an eccentric shaft's run-out move the
 shaft's first-order line alike, and the compared features are amplitudes,
 so a run-out of a size the gears' stated classes make is the gear's own to
-the fit (:mod:`.gear_orders`, :func:`.manufacturing.run_outs_not_told_apart`).
+the fit (:mod:`.pitch_orders`, :func:`.pitch_errors.run_outs_not_told_apart`).
 An eccentric shaft also modulates the mesh stiffness, k(t) (1 + kappa
 cos(W_s t + phase)), which pitch errors do not: it adds sidebands in a
 fixed phase relation to their mesh harmonic. The phase sum
@@ -13,43 +13,48 @@ fixed phase relation to their mesh harmonic. The phase sum
 of the n-th mesh harmonic's first sidebands of that shaft (orders in the
 shaft's rotations) does not depend on where the record starts nor on the
 eccentricity's phase, and for pitch errors it hardly depends on the draw
-(measured: 12 draws within a few degrees). Its distribution is simulated
+(docs/model.md section 6.4). Its distribution is simulated
 under the final model with pitch errors of the allowance (H0) and with an
 eccentricity of the run-out the fit read (H1), each over the fitted
 model's parameter spread, and the rig's phase sums are scored under both
 (von Mises densities widened by each sum's own noise). The log ratio is
 evidence for an eccentricity that the amplitudes cannot give.
 
-Only a shaft whose sidebands lie at least :data:`MIN_SIDEBAND_ORDERS`
-pinion orders from their carrier is tested: on the gear's (0.21 pinion
-orders for the reference design's 21:101) the test favoured a gear
-eccentricity that was not there on five of six blind campaigns, by 105 to
-435 nats.
+Only a shaft whose sidebands lie at least ``min_sideband_orders`` pinion
+orders from their carrier is tested (:class:`~uqgear.diagnosis.DiagnosisSettings`):
+nearer, as a gear's sidebands are on the reference design (0.21 pinion
+orders), they sit among the gear's other orders, which the line fit does not
+hold apart, and the sums mislead (docs/model.md section 6.4, "An eccentric
+shaft named by its sidebands' phases"; docs/validation/diagnosis.md).
 """
+
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.special
 
-from ..physics.effects import Eccentricity
-from .candidates import Candidate, candidates_for
-from .case import RigCase
-from .fitting import FitResult, fit_candidate
-from .scoring import CandidateScore, HeldOut, leave_one_out, score_candidate
+from ...physics.effects import Eccentricity
+from ..case import RigCase
+from ..effects import effect_family
+from ..fitting import FitResult, fit_candidate
+from ..heldout import HeldOut, leave_one_out
+from ..scoring import CandidateScore, score_candidate
+from ..settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 #: Mesh stiffness modulations the eccentric-shaft hypothesis is tried at (a profile over kappa).
-MODULATION_KAPPAS = (0.01, 0.03)
+MODULATION_KAPPAS = DEFAULT_SETTINGS.modulation_kappas
 #: Log ratio (nats) of the rig's phase sums under an eccentricity over pitch errors alone that names it.
-PHASE_EVIDENCE_THRESHOLD = 200.0
+PHASE_EVIDENCE_THRESHOLD = DEFAULT_SETTINGS.phase_evidence_threshold
 #: A shaft is tested only where its first sidebands lie this many pinion orders from their carrier.
-MIN_SIDEBAND_ORDERS = 0.5
+MIN_SIDEBAND_ORDERS = DEFAULT_SETTINGS.min_sideband_orders
 #: Pitch-error draws of the allowance simulated at each point of the parameter spread.
-DRAWS_PER_POINT = 4
+DRAWS_PER_POINT = DEFAULT_SETTINGS.phase_draws_per_point
 #: The fitted model's parameter spread the phase sums are pooled over: each factor up and down.
 PARAMETER_SPREAD = {"mesh_stiffness_scale": 1.03, "zeta_mesh": 1.25}
 _HARMONICS = (1, 2, 3)
@@ -62,8 +67,7 @@ class ModulationEvidence:
     The evidence for each modulation tried is the log ratio summed over the
     phase sums of every operating point but the one that favours the
     eccentricity most: a single run's sums (a resonance crossed, a burst of
-    wander) must not name an effect alone (measured: a healthy control's
-    91 of its 136 nats sat in one run of eight).
+    wander) must not name an effect alone.
 
     Attributes
     ----------
@@ -85,12 +89,33 @@ class ModulationEvidence:
     n_sums: int
     threshold: float = PHASE_EVIDENCE_THRESHOLD
     seconds: float = 0.0
+    #: Its entry in ``diagnosis.json`` (one per shaft tested).
+    key: ClassVar[str] = "sideband_phases"
+
+    @property
+    def applied(self) -> bool:
+        """Whether any phase sum was scored."""
+        return self.n_sums > 0
 
     @classmethod
-    def from_sums(cls, shaft: str, run_out: float, per_sum: dict[float, np.ndarray], n_sums: int, *,
-                  threshold: float = PHASE_EVIDENCE_THRESHOLD, seconds: float = 0.0) -> "ModulationEvidence":
-        return cls(shaft, float(run_out), {float(kappa): np.asarray(value, dtype=float)
-                                           for kappa, value in per_sum.items()}, int(n_sums), threshold, seconds)
+    def from_sums(
+        cls,
+        shaft: str,
+        run_out: float,
+        per_sum: dict[float, np.ndarray],
+        n_sums: int,
+        *,
+        threshold: float = PHASE_EVIDENCE_THRESHOLD,
+        seconds: float = 0.0,
+    ) -> ModulationEvidence:
+        return cls(
+            shaft,
+            float(run_out),
+            {float(kappa): np.asarray(value, dtype=float) for kappa, value in per_sum.items()},
+            int(n_sums),
+            threshold,
+            seconds,
+        )
 
     @property
     def log_ratios(self) -> dict[float, float]:
@@ -105,7 +130,7 @@ class ModulationEvidence:
     def kappa(self) -> float:
         """The modulation the phase sums favour most."""
         ratios = self.log_ratios
-        return max(ratios, key=ratios.get)
+        return max(ratios, key=lambda kappa: ratios[kappa])
 
     @property
     def log_ratio(self) -> float:
@@ -127,46 +152,60 @@ class ModulationEvidence:
 
     def reason(self) -> str:
         supported = ", ".join(f"{kappa:g}" for kappa in self.supported_kappas()) or "none"
-        return (f"the phase sums of the {self.shaft}'s first sidebands around the mesh harmonics "
-                f"({self.n_sums} harmonic x channel x run) are {self.log_ratio:.0f} nats more likely, without "
-                f"the run that favours it most ({self.total:.0f} with it), with an eccentric {self.shaft} shaft "
-                f"({1e6 * self.run_out:.3g} um run-out, mesh stiffness modulation {self.kappa:g}) than with the "
-                f"gears' pitch errors alone (threshold {self.threshold:g}; modulations tried that reach it: "
-                f"{supported}): a modulation pitch errors do not make")
+        return (
+            f"the phase sums of the {self.shaft}'s first sidebands around the mesh harmonics "
+            f"({self.n_sums} harmonic x channel x run) are {self.log_ratio:.0f} nats more likely, without "
+            f"the run that favours it most ({self.total:.0f} with it), with an eccentric {self.shaft} shaft "
+            f"({1e6 * self.run_out:.3g} um run-out, mesh stiffness modulation {self.kappa:g}) than with the "
+            f"gears' pitch errors alone (threshold {self.threshold:g}; modulations tried that reach it: "
+            f"{supported}): a modulation pitch errors do not make"
+        )
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready."""
-        return {"shaft": self.shaft, "run_out_m": self.run_out, "kappa": self.kappa,
-                "log_ratio": self.log_ratio, "log_ratio_all_runs": self.total,
-                "log_ratios": {f"{kappa:g}": value for kappa, value in self.log_ratios.items()},
-                "n_sums": self.n_sums, "threshold": self.threshold, "named": self.decisive,
-                "seconds": self.seconds}
+        return {
+            "shaft": self.shaft,
+            "run_out_m": self.run_out,
+            "kappa": self.kappa,
+            "log_ratio": self.log_ratio,
+            "log_ratio_all_runs": self.total,
+            "log_ratios": {f"{kappa:g}": value for kappa, value in self.log_ratios.items()},
+            "n_sums": self.n_sums,
+            "threshold": self.threshold,
+            "named": self.decisive,
+            "seconds": self.seconds,
+        }
 
 
 def sideband_triples(names: Sequence[str], shaft: str) -> list[tuple[int, int, int]]:
     """(carrier, upper, lower) positions in ``names`` of each mesh harmonic's first ``shaft`` sidebands."""
     position = {name: index for index, name in enumerate(names)}
-    triples = []
+    triples: list[tuple[int, int, int]] = []
     for harmonic in _HARMONICS:
-        wanted = (f"mesh{harmonic}", f"mesh{harmonic}_sb_{shaft}+1", f"mesh{harmonic}_sb_{shaft}-1")
-        if all(name in position for name in wanted):
-            triples.append(tuple(position[name] for name in wanted))
+        carrier, upper, lower = f"mesh{harmonic}", f"mesh{harmonic}_sb_{shaft}+1", f"mesh{harmonic}_sb_{shaft}-1"
+        if all(name in position for name in (carrier, upper, lower)):
+            triples.append((position[carrier], position[upper], position[lower]))
     return triples
 
 
 def phase_sums(phasors: np.ndarray, triples: Sequence[tuple[int, int, int]]) -> np.ndarray:
     """Q = arg P(upper) + arg P(lower) - 2 arg P(carrier), wrapped to (-pi, pi], per triple on the last axis."""
     angles = np.angle(phasors)
-    sums = np.stack([angles[..., upper] + angles[..., lower] - 2.0 * angles[..., carrier]
-                     for carrier, upper, lower in triples], axis=-1)
+    sums = np.stack(
+        [angles[..., upper] + angles[..., lower] - 2.0 * angles[..., carrier] for carrier, upper, lower in triples],
+        axis=-1,
+    )
     return np.angle(np.exp(1j * sums))
 
 
 def _concentration(resultant: np.ndarray) -> np.ndarray:
     """Von Mises concentration of a mean resultant length (Best and Fisher's approximation)."""
     r = np.clip(resultant, 1e-6, 0.999)
-    return np.where(r < 0.53, 2 * r + r ** 3 + 5 * r ** 5 / 6,
-                    np.where(r < 0.85, -0.4 + 1.39 * r + 0.43 / (1 - r), 1 / (r ** 3 - 4 * r ** 2 + 3 * r)))
+    return np.where(
+        r < 0.53,
+        2 * r + r**3 + 5 * r**5 / 6,
+        np.where(r < 0.85, -0.4 + 1.39 * r + 0.43 / (1 - r), 1 / (r**3 - 4 * r**2 + 3 * r)),
+    )
 
 
 def log_density(observed: np.ndarray, drawn: np.ndarray, noise_variance: np.ndarray) -> np.ndarray:
@@ -178,14 +217,17 @@ def log_density(observed: np.ndarray, drawn: np.ndarray, noise_variance: np.ndar
     """
     resultant = np.exp(1j * drawn).mean(axis=0)
     concentration = 1.0 / (1.0 / _concentration(np.abs(resultant)) + noise_variance)
-    return (concentration * np.cos(observed - np.angle(resultant))
-            - np.log(2.0 * math.pi * scipy.special.i0e(concentration)) - concentration)
+    return (
+        concentration * np.cos(observed - np.angle(resultant))
+        - np.log(2.0 * math.pi * scipy.special.i0e(concentration))
+        - concentration
+    )
 
 
 def _spread_vectors(base: FitResult) -> list[np.ndarray]:
     """The fit's optimiser vector and, for each :data:`PARAMETER_SPREAD` parameter, one step up and one down."""
     problem, values = base.problem, base.values
-    positions = base.vector[problem.n_global:]
+    positions = base.vector[problem.n_global :]
     vectors = [base.vector]
     for name, factor in PARAMETER_SPREAD.items():
         for scale in (factor, 1.0 / factor):
@@ -193,15 +235,22 @@ def _spread_vectors(base: FitResult) -> list[np.ndarray]:
     return vectors
 
 
-def shafts_tested(case: RigCase) -> list[str]:
-    """The shafts whose first sidebands lie far enough from their carrier (:data:`MIN_SIDEBAND_ORDERS`)."""
+def shafts_tested(case: RigCase, *, min_orders: float = MIN_SIDEBAND_ORDERS) -> list[str]:
+    """The shafts whose first sidebands lie at least ``min_orders`` pinion orders from their carrier."""
     pinion_orders = {"pinion": 1.0, "gear": case.design.z1 / case.design.z2}
-    return [shaft for shaft, orders in pinion_orders.items() if orders >= MIN_SIDEBAND_ORDERS]
+    return [shaft for shaft, orders in pinion_orders.items() if orders >= min_orders]
 
 
-def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: float, *,
-                        kappas: Sequence[float] = MODULATION_KAPPAS,
-                        threshold: float = PHASE_EVIDENCE_THRESHOLD) -> ModulationEvidence:
+def modulation_evidence(
+    case: RigCase,
+    base: FitResult,
+    shaft: str,
+    run_out: float,
+    *,
+    kappas: Sequence[float] = MODULATION_KAPPAS,
+    threshold: float = PHASE_EVIDENCE_THRESHOLD,
+    draws_per_point: int = DRAWS_PER_POINT,
+) -> ModulationEvidence:
     """Score the rig's sideband phase sums of ``shaft`` with and without an eccentric shaft.
 
     Parameters
@@ -216,6 +265,10 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
         Eccentricity amplitude of the hypothesis, m.
     kappas : sequence of float
         Mesh stiffness modulations tried.
+    threshold : float
+        Log ratio that names the eccentricity, nats.
+    draws_per_point : int
+        Pitch-error draws at each point of the parameter spread.
 
     Returns
     -------
@@ -223,14 +276,15 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
     """
     clock = time.perf_counter()
     allowance = case.pitch_allowance
-    drawn_errors = [] if allowance is None else list(allowance.drawn_errors)[:DRAWS_PER_POINT]
+    drawn_errors = [] if allowance is None else list(allowance.drawn_errors)[:draws_per_point]
     line = np.array(case.layout.kinds) == "line"
     line_columns = np.array(case.layout.columns)[line]
     names = [name for name, kind in zip(case.layout.names, case.layout.kinds) if kind == "line"]
     triples = sideband_triples(names, shaft)
     if not drawn_errors or not triples:
-        return ModulationEvidence.from_sums(shaft, run_out, {kappa: np.zeros((case.n_op, 1)) for kappa in kappas}, 0,
-                                           threshold=threshold)
+        return ModulationEvidence.from_sums(
+            shaft, run_out, {kappa: np.zeros((case.n_op, 1)) for kappa in kappas}, 0, threshold=threshold
+        )
     rig_phasors = np.zeros((case.n_op, len(case.channels), len(names)), dtype=complex)
     for op in range(case.n_op):
         for index, channel in enumerate(case.channels):
@@ -239,31 +293,58 @@ def modulation_evidence(case: RigCase, base: FitResult, shaft: str, run_out: flo
     sigma = case.line_noise_sigma()[..., line]
     observed = phase_sums(rig_phasors, triples)
     # a phase's noise variance is (sigma / |P|)^2 per quadrature; the carrier's counts twice over
-    noise_variance = np.stack([(sigma[..., upper] / np.abs(rig_phasors[..., upper])) ** 2
-                               + (sigma[..., lower] / np.abs(rig_phasors[..., lower])) ** 2
-                               + 4.0 * (sigma[..., carrier] / np.abs(rig_phasors[..., carrier])) ** 2
-                               for carrier, upper, lower in triples], axis=-1)
+    noise_variance = np.stack(
+        [
+            (sigma[..., upper] / np.abs(rig_phasors[..., upper])) ** 2
+            + (sigma[..., lower] / np.abs(rig_phasors[..., lower])) ** 2
+            + 4.0 * (sigma[..., carrier] / np.abs(rig_phasors[..., carrier])) ** 2
+            for carrier, upper, lower in triples
+        ],
+        axis=-1,
+    )
     usable = np.isfinite(observed) & np.isfinite(noise_variance) & case.usable[..., None]
     hypotheses: list[tuple[Eccentricity, ...]] = [()]
-    hypotheses += [(Eccentricity({"amplitude": run_out, "phase": 0.0, "kappa": float(kappa), "shaft": shaft}),)
-                   for kappa in kappas]
-    clean = [[replace(base.problem.run_task(vector, op), periodicity="free", phasors=True)
-              for op in range(case.n_op)] for vector in _spread_vectors(base)]
-    tasks = [replace(task, effects=(*task.effects, *extra), pitch_errors=errors)
-             for extra in hypotheses for runs in clean for errors in drawn_errors for task in runs]
+    hypotheses += [
+        (Eccentricity({"amplitude": run_out, "phase": 0.0, "kappa": float(kappa), "shaft": shaft}),) for kappa in kappas
+    ]
+    clean = [
+        [replace(base.problem.run_task(vector, op), periodicity="free", phasors=True) for op in range(case.n_op)]
+        for vector in _spread_vectors(base)
+    ]
+    tasks = [
+        replace(task, effects=(*task.effects, *extra), pitch_errors=errors)
+        for extra in hypotheses
+        for runs in clean
+        for errors in drawn_errors
+        for task in runs
+    ]
     values = np.stack([value for value, _ in case.execute(tasks)])[..., line_columns]
-    values = values.reshape(len(hypotheses), len(clean) * len(drawn_errors), case.n_op, len(case.channels),
-                            len(names))
-    scored = [np.where(usable, log_density(np.nan_to_num(observed), phase_sums(values[index], triples),
-                                           np.nan_to_num(noise_variance, nan=1e6)), 0.0)
-              for index in range(len(hypotheses))]
+    values = values.reshape(len(hypotheses), len(clean) * len(drawn_errors), case.n_op, len(case.channels), len(names))
+    scored = [
+        np.where(
+            usable,
+            log_density(
+                np.nan_to_num(observed), phase_sums(values[index], triples), np.nan_to_num(noise_variance, nan=1e6)
+            ),
+            0.0,
+        )
+        for index in range(len(hypotheses))
+    ]
     per_sum = {float(kappa): scored[index + 1] - scored[0] for index, kappa in enumerate(kappas)}
-    return ModulationEvidence.from_sums(shaft, run_out, per_sum, int(usable.sum()), threshold=threshold,
-                                       seconds=time.perf_counter() - clock)
+    return ModulationEvidence.from_sums(
+        shaft, run_out, per_sum, int(usable.sum()), threshold=threshold, seconds=time.perf_counter() - clock
+    )
 
 
-def fit_modulated_run_out(case: RigCase, base: FitResult, base_held: HeldOut, evidence: ModulationEvidence,
-                          rng: np.random.Generator) -> CandidateScore:
+def fit_modulated_run_out(
+    case: RigCase,
+    base: FitResult,
+    base_held: HeldOut,
+    evidence: ModulationEvidence,
+    rng: np.random.Generator,
+    *,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+) -> CandidateScore:
     """The eccentricity the phase sums name, fitted on top of the base and scored on held-out runs.
 
     Its modulation is held at the one the phase sums favour (the compared
@@ -272,14 +353,36 @@ def fit_modulated_run_out(case: RigCase, base: FitResult, base_held: HeldOut, ev
     new effect's parameters free (a screening fit), and its held-out gap
     against the base's gives its share of the shrink.
     """
-    library = next(candidate for candidate in candidates_for("eccentricity", case.design)
-                   if dict(candidate.choices)["shaft"] == evidence.shaft)
+    library = next(
+        candidate
+        for candidate in effect_family("eccentricity").variants(case.design, {})
+        if dict(candidate.choices)["shaft"] == evidence.shaft
+    )
     fitted = tuple(spec for spec in library.fitted if spec.name != "eccentricity.kappa")
-    starts = tuple({"eccentricity.amplitude": evidence.run_out, "eccentricity.phase": phase}
-                   for phase in (0.5 * math.pi, 1.5 * math.pi))
-    candidate = Candidate(library.effect, library.label, (*library.choices, ("kappa", evidence.kappa)), fitted,
-                          starts, library.periodicity)
-    result = fit_candidate(case, candidate, base, full=False, max_evaluations=6)
-    entry = score_candidate(result, leave_one_out(result), base_held, "screening", rng)
+    starts = tuple(
+        {"eccentricity.amplitude": evidence.run_out, "eccentricity.phase": phase}
+        for phase in (0.5 * math.pi, 1.5 * math.pi)
+    )
+    candidate = replace(library, choices=(*library.choices, ("kappa", evidence.kappa)), fitted=fitted, starts=starts)
+    result = fit_candidate(case, candidate, base, full=False, max_evaluations=settings.screening_evaluations)
+    entry = score_candidate(
+        result, leave_one_out(result), base_held, "screening", rng, n_resamples=settings.bootstrap_resamples
+    )
     entry.effect_gain = base.cost - result.cost
     return entry
+
+
+__all__ = [
+    "MODULATION_KAPPAS",
+    "PHASE_EVIDENCE_THRESHOLD",
+    "MIN_SIDEBAND_ORDERS",
+    "DRAWS_PER_POINT",
+    "PARAMETER_SPREAD",
+    "ModulationEvidence",
+    "sideband_triples",
+    "phase_sums",
+    "log_density",
+    "shafts_tested",
+    "modulation_evidence",
+    "fit_modulated_run_out",
+]

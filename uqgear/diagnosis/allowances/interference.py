@@ -3,36 +3,66 @@
 Mains pickup (50 or 60 Hz and their harmonics) on an accelerometer's cable
 is a line whose frequency stays put while the speed changes, on that
 sensor only. In the low band (2-80 Hz) it adds its power to the
-``low_band_rms`` feature, which the model cannot produce at any parameter:
-a healthy campaign with 50/150 Hz mains on its accelerometers was left
-`unexplained` (held-out gap 0.7-0.8, all of it the low band). A line at a
-fixed frequency can also be the gear's own (an adhesion oscillation, stick
-slip): then the transmission error, which measures the gears' relative
-motion and is the most sensitive channel at low frequencies, carries it
-too. So a line is taken as interference where it stands at the same
-frequency (not the same order) in most runs of an accelerometer channel
-and the TE shows no such line; its bins are then left out of the low band
-of every record, the rig's and the model's alike. Without a TE channel
-nothing is left out.
+``low_band_rms`` feature, which the model cannot produce at any parameter,
+so it would read as an unexplained gap. A line at a fixed frequency can
+also be the gear's own (an adhesion oscillation, stick slip): then the
+transmission error, which measures the gears' relative motion and is the
+most sensitive channel at low frequencies, carries it too. So a line is
+taken as interference where it stands at the same frequency (not the same
+order) in most runs of an accelerometer channel and the TE shows no such
+line; its bins are then left out of the low band of every record, the
+rig's and the model's alike (docs/model.md section 6.5; the campaign that
+shows it is in docs/validation/diagnosis.md). Without a TE channel nothing
+is left out.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.signal
 
-#: A peak counts this many per-quadrature noise spreads above zero.
-PEAK_THRESHOLD = 8.0
+from ..settings import DEFAULT_SETTINGS
+
+#: A peak counts this many per-quadrature noise spreads above zero (:class:`~uqgear.diagnosis.DiagnosisSettings`).
+PEAK_THRESHOLD = DEFAULT_SETTINGS.interference_threshold
 #: A fixed-frequency line must be met in at least this many runs (and half of them).
-MIN_RUNS = 3
+MIN_RUNS = DEFAULT_SETTINGS.interference_runs
 #: Bins on each side of an interference line left out of the band (the Hann main lobe spans +-2).
 NOTCH_HALF_WIDTH = 2
 #: Channels that carry the gears' own motion (a line there is not interference).
 GEAR_CHANNEL = "te"
+
+
+@dataclass(frozen=True)
+class LineInterference:
+    """The interference lines found on a campaign's accelerometers (the ``line_interference`` allowance).
+
+    Each line: ``frequency`` (Hz), ``channel``, ``ops`` (runs) and
+    ``amplitude``; their bins are left out of the low band of every record.
+    """
+
+    lines: list[dict[str, Any]]
+    #: Its entry in ``diagnosis.json``.
+    key: ClassVar[str] = "line_interference"
+
+    @property
+    def applied(self) -> bool:
+        """Whether any line was left out."""
+        return bool(self.lines)
+
+    @property
+    def frequencies(self) -> list[float]:
+        """The distinct frequencies left out, Hz, ascending."""
+        return sorted({line["frequency"] for line in self.lines})
+
+    def summary(self) -> list[dict[str, Any]]:
+        """JSON-ready: the lines."""
+        return self.lines
 
 
 def amplitude_spectrum(record: np.ndarray, taper: np.ndarray) -> np.ndarray:
@@ -41,9 +71,17 @@ def amplitude_spectrum(record: np.ndarray, taper: np.ndarray) -> np.ndarray:
     return np.abs(np.fft.rfft((record - record.mean()) * taper)) * (2.0 / taper.sum())
 
 
-def fixed_frequency_lines(records: np.ndarray, noise_std: np.ndarray, speeds: np.ndarray, fs: float,
-                          limit: float, *, usable: np.ndarray | None = None, threshold: float = PEAK_THRESHOLD,
-                          minimum_runs: int = MIN_RUNS) -> list[dict[str, Any]]:
+def fixed_frequency_lines(
+    records: np.ndarray,
+    noise_std: np.ndarray,
+    speeds: np.ndarray,
+    fs: float,
+    limit: float,
+    *,
+    usable: np.ndarray | None = None,
+    threshold: float = PEAK_THRESHOLD,
+    minimum_runs: int = MIN_RUNS,
+) -> list[dict[str, Any]]:
     """Spectral lines of one channel that keep their frequency, not their order, across runs.
 
     Peaks of each run's amplitude spectrum more than ``threshold`` times a
@@ -83,7 +121,7 @@ def fixed_frequency_lines(records: np.ndarray, noise_std: np.ndarray, speeds: np
         if not usable[op] or not math.isfinite(noise_std[op]) or np.isnan(records[op]).any():
             continue
         amplitude = amplitude_spectrum(records[op], taper)
-        line_scale = noise_std[op] * math.sqrt(2.0 * np.sum(taper ** 2)) / taper.sum()
+        line_scale = noise_std[op] * math.sqrt(2.0 * np.sum(taper**2)) / taper.sum()
         index, _ = scipy.signal.find_peaks(np.where(inside, amplitude, 0.0), height=threshold * line_scale)
         strongest = index[np.argsort(amplitude[index])[::-1][:60]]
         peaks.extend((float(frequency[i]), op, float(amplitude[i])) for i in strongest if frequency[i] > resolution)
@@ -108,32 +146,71 @@ def fixed_frequency_lines(records: np.ndarray, noise_std: np.ndarray, speeds: np
     return lines
 
 
-def interference_lines(records: dict[str, np.ndarray], noise_std: dict[str, np.ndarray],
-                       usable: dict[str, np.ndarray], speeds: np.ndarray, fs: float, band: tuple[float, float],
-                       channels: Sequence[str]) -> list[dict[str, Any]]:
+def interference_lines(
+    records: Mapping[str, np.ndarray],
+    noise_std: Mapping[str, np.ndarray],
+    usable: Mapping[str, np.ndarray],
+    speeds: np.ndarray,
+    fs: float,
+    band: tuple[float, float],
+    channels: Sequence[str],
+    *,
+    threshold: float = PEAK_THRESHOLD,
+    minimum_runs: int = MIN_RUNS,
+) -> LineInterference:
     """Fixed-frequency lines inside ``band`` on a channel other than the TE, absent from the TE (module docstring).
+
+    ``threshold`` and ``minimum_runs`` as in :func:`fixed_frequency_lines`.
 
     Returns
     -------
-    list of dict
-        ``frequency`` (Hz), ``channel``, ``ops`` and ``amplitude`` of each line; empty without a TE channel.
+    LineInterference
+        ``frequency`` (Hz), ``channel``, ``ops`` and ``amplitude`` of each line; none without a TE channel.
     """
     if GEAR_CHANNEL not in channels:
-        return []
+        return LineInterference([])
     size = records[GEAR_CHANNEL].shape[1]
     resolution = fs / size
     upper = band[1] + (NOTCH_HALF_WIDTH + 1) * resolution
-    gear_lines = fixed_frequency_lines(records[GEAR_CHANNEL], noise_std[GEAR_CHANNEL], speeds, fs, upper,
-                                       usable=usable[GEAR_CHANNEL])
+    gear_lines = fixed_frequency_lines(
+        records[GEAR_CHANNEL],
+        noise_std[GEAR_CHANNEL],
+        speeds,
+        fs,
+        upper,
+        usable=usable[GEAR_CHANNEL],
+        threshold=threshold,
+        minimum_runs=minimum_runs,
+    )
     found = []
     for channel in channels:
         if channel == GEAR_CHANNEL:
             continue
-        for line in fixed_frequency_lines(records[channel], noise_std[channel], speeds, fs, upper,
-                                          usable=usable[channel]):
+        for line in fixed_frequency_lines(
+            records[channel],
+            noise_std[channel],
+            speeds,
+            fs,
+            upper,
+            usable=usable[channel],
+            threshold=threshold,
+            minimum_runs=minimum_runs,
+        ):
             if not band[0] - NOTCH_HALF_WIDTH * resolution <= line["frequency"] <= upper:
                 continue
             if any(abs(line["frequency"] - other["frequency"]) <= 1.5 * resolution for other in gear_lines):
                 continue
             found.append({**line, "channel": channel})
-    return found
+    return LineInterference(found)
+
+
+__all__ = [
+    "LineInterference",
+    "PEAK_THRESHOLD",
+    "MIN_RUNS",
+    "NOTCH_HALF_WIDTH",
+    "GEAR_CHANNEL",
+    "amplitude_spectrum",
+    "fixed_frequency_lines",
+    "interference_lines",
+]

@@ -1,0 +1,143 @@
+"""Samples as SIMD lanes: the same numbers as the one-sample kernel, bit for bit, whatever a batch holds.
+
+Each check runs one batch twice, through the lanes (``simulate_batch``'s
+default) and through the one-sample kernel (``lanes=False``), and compares
+every float output byte for byte. The one-sample kernel is checked against
+scipy and closed forms in tests/test_integration.py.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import uqgear
+from uqgear.physics import effects as E
+from uqgear.physics import integration
+from uqgear.physics._lanes import LANES, lane_ready
+
+
+@pytest.fixture(scope="module")
+def design():
+    return uqgear.load_design("locomotive")
+
+
+def _differing(first, second) -> list[str]:
+    names = [name for name in first.data_vars if np.issubdtype(first[name].dtype, np.floating)]
+    assert names
+    return [name for name in names if first[name].values.tobytes() != second[name].values.tobytes()]
+
+
+def _both(design, samples, **kw):
+    lanes = uqgear.simulate_batch(design, samples, **kw)
+    one = uqgear.simulate_batch(design, samples, lanes=False, **kw)
+    return lanes, one
+
+
+def _speeds(n, lower=600.0, upper=5600.0, seed=0):
+    rng = np.random.default_rng(seed)
+    return uqgear.samples_from_mapping({"pinion_speed": rng.uniform(lower, upper, n),
+                                        "adhesion_torque": rng.uniform(21e3, 46e3, n)})
+
+
+def test_lanes_match_the_one_sample_kernel_through_separation_and_impacts(design):
+    # up to 5600 rpm: drive contact, contact loss and back-side impacts, groups of 8 and partly filled ones
+    samples = _speeds(29)
+    lanes, one = _both(design, samples, n_periods=120, keep_periods=40, final_state=True)
+    assert float(lanes["fraction_separation"].max()) > 0.05  # contact is lost, so lanes were split at |x| = b
+    assert _differing(lanes, one) == []
+
+
+@pytest.mark.parametrize("case", ["lyapunov", "rig_channels", "effects", "restart"])
+def test_lanes_match_the_one_sample_kernel(design, case):
+    samples = _speeds(11, seed=1)
+    kw: dict = {"n_periods": 80, "keep_periods": 30}
+    if case == "lyapunov":
+        kw["lyapunov"] = True  # a run and its shadow take two lanes
+    elif case == "rig_channels":
+        kw.update(history_per_period=16, rig_channels=True)
+    elif case == "effects":
+        # mesh-periodic effects and settings stay in the lanes
+        kw.update(effects=[E.make_effect("friction", {"coefficient": 0.08}), E.make_effect("bearing_clearance")],
+                  damping_in_separation=False, stiffness="fourier")
+    else:
+        kw.update(initial_states=np.column_stack([np.zeros((11, 2)), np.full(11, 1e-4), np.zeros((11, 3))]),
+                  final_state=True)
+    lanes, one = _both(design, samples, **kw)
+    assert _differing(lanes, one) == []
+
+
+def test_a_batch_mixes_lanes_and_one_sample_runs(design):
+    # torque ripple breaks the mesh period where its amplitude is not zero: those runs go one at a time
+    samples = _speeds(20, seed=2)
+    amplitude = np.where(np.arange(20) % 3 == 0, 0.05, 0.0)
+    samples["torque_ripple.amplitude"] = ("sample", amplitude)
+    kw = {"n_periods": 60, "keep_periods": 20, "effects": [E.make_effect("torque_ripple")]}
+    setups = integration.build_batch(design, samples, effects=kw["effects"])
+    ready = lane_ready(np.stack([s.parameters for s in setups]))
+    assert 0 < ready.sum() < len(ready)
+    lanes, one = _both(design, samples, **kw)
+    assert _differing(lanes, one) == []
+
+
+def test_runs_a_group_cannot_hold_are_run_one_at_a_time(design, monkeypatch):
+    # different profile shifts move the stiffness breakpoints: one group for all of them is refused
+    # lane by lane, and the refused runs go through the one-sample kernel
+    samples = uqgear.samples_from_mapping({"pinion_speed": np.full(LANES, 2500.0),
+                                           "x1": np.linspace(0.10, 0.40, LANES)})
+    kw = {"n_periods": 40, "keep_periods": 10}
+    one = uqgear.simulate_batch(design, samples, lanes=False, **kw)
+
+    def one_group(params, steps, breakpoints, strides, lyapunov):
+        return np.arange(len(params), dtype=np.int64)[None, :], np.empty(0, dtype=np.int64)
+
+    refused = []
+    original = integration._lanes.integrate_lanes
+
+    def spying(first, last, groups, *arrays):
+        original(first, last, groups, *arrays)
+        refused.append(arrays[-1].copy())
+
+    monkeypatch.setattr(integration, "lane_groups", one_group)
+    monkeypatch.setattr(integration._lanes, "integrate_lanes", spying)
+    lanes = uqgear.simulate_batch(design, samples, **kw)
+    assert np.any(refused[-1]) and not refused[-1][0]
+    assert _differing(lanes, one) == []
+
+
+def test_lane_groups_share_one_layout_and_put_the_longest_first(design):
+    samples = uqgear.samples_from_mapping({"pinion_speed": np.repeat([300.0, 3000.0, 5000.0], [3, 9, 4])})
+    setups = integration.build_batch(design, samples)
+    params = np.stack([s.parameters for s in setups])
+    steps = np.array([integration.steps_per_period(s) for s in setups])
+    groups, rest = integration.lane_groups(params, steps, integration.breakpoint_table(setups),
+                                           np.zeros(len(setups), dtype=np.int64), lyapunov=False)
+    assert rest.size == 0
+    members = [row[row >= 0] for row in groups]
+    assert sorted(np.concatenate(members).tolist()) == list(range(len(setups)))
+    assert all(len(set(steps[m])) == 1 for m in members)
+    assert [steps[m[0]] for m in members] == sorted((steps[m[0]] for m in members), reverse=True)
+    with_shadows, _ = integration.lane_groups(params, steps, integration.breakpoint_table(setups),
+                                              np.zeros(len(setups), dtype=np.int64), lyapunov=True)
+    assert np.all(with_shadows[:, LANES // 2:] == -1)
+
+
+def test_a_job_compiles_only_the_kernel_family_it_uses(tmp_path):
+    # a fresh interpreter: a plain batch loads (or compiles) the lanes alone, not the one-sample
+    # kernels nor the pitch-error path
+    script = textwrap.dedent("""
+        import numpy as np
+        import uqgear
+        from uqgear.physics import _kernels as K, _lanes as L
+        design = uqgear.load_design("locomotive")
+        uqgear.simulate_batch(design, uqgear.samples_from_mapping({"pinion_speed": np.full(3, 1500.0)}),
+                              n_periods=4, keep_periods=2)
+        print(len(L.integrate_lanes.signatures), len(K.integrate_batch.signatures),
+              len(K.integrate_batch_pairs.signatures), len(K.integrate_history_pairs.signatures))
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["1", "0", "0", "0"]

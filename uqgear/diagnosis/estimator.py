@@ -1,0 +1,426 @@
+"""The Diagnosis estimator: settings checked in ``__init__``, the work in ``fit``, results in ``*_`` attributes.
+
+``fit`` reads as the six steps of docs/model.md section 6; each step's code
+lives in its own module (features: :mod:`.case` and :mod:`.allowances`;
+predictive distribution: :mod:`.discrepancy`; fits: :mod:`.nominal`,
+:mod:`.screening`, :mod:`.fitting`; held-out scoring: :mod:`.heldout`,
+:mod:`.scoring`; verdict: :mod:`.verdict`; several effects: :mod:`.selection`).
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..common.steps import StepLog
+from ..physics.design import Design
+from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
+from .allowances.reference import attach_reference, learn_reference
+from .case import RigCase, prepare_case
+from .dataset import held_spectra, inconclusive_dataset, result_dataset
+from .decision import Decision
+from .effect_set import SelectedEffect
+from .effects import check_effects
+from .errors import DiagnosisError
+from .execution import RunExecutor
+from .fitting import FitResult
+from .gap_maps import family_character, uninformative_reason, where_gap
+from .inputs import DiagnosisInputs, DiagnosisSeeds, ReferenceInput, as_seed, check_workers, read_inputs, resolve_design
+from .nominal import allow_pitch_errors, fit_nominal_model, score_against_nominal
+from .outputs import inconclusive_summary, json_clean, summary
+from .result import DiagnosisResult
+from .scoring import CandidateScore, capped_squares
+from .selection import NamedSet, name_effect_set
+from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+from .signatures import frequency_locked_lines, signature_hints
+from .state import DiagnosisState
+from .verdict import FirstDecision, decide_first
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and of its finished worker processes, s."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def _worst_runs(outcome: DiagnosisResult) -> list[int]:
+    """The two runs the nominal model predicts worst on held-out runs, in run order (their spectra are kept)."""
+    z = outcome.nominal_held.z
+    worst = np.argsort([-np.nansum(capped_squares(z[op])) for op in range(outcome.case.n_op)])
+    return sorted(int(op) for op in worst[:2])
+
+
+def _completed(
+    content: dict[str, Any], maps: xr.Dataset, reference_summary: dict[str, Any] | None, design: Design
+) -> dict[str, Any]:
+    """The record with a reference's summary (and its fit's time) and what the model did with the design."""
+    from ..physics.geometry import geometry_notes
+
+    if reference_summary is not None:
+        content["reference"] = json_clean(reference_summary)
+        maps.attrs["reference"] = str(reference_summary["file"])
+        if isinstance(content.get("timing_s"), dict):
+            content["timing_s"]["reference_fit"] = reference_summary["seconds"]
+    # what the model did with the design's geometry (an undercut tooth)
+    content["design_notes"] = geometry_notes(design)
+    return content
+
+
+def _outcome(
+    state: DiagnosisState,
+    first: FirstDecision,
+    named: NamedSet,
+    *,
+    locked: list[dict[str, Any]],
+    hints: dict[str, float],
+    all_scores: list[CandidateScore],
+    allowance: PitchErrorAllowance,
+    effects: tuple[str, ...],
+    timings: dict[str, float],
+) -> DiagnosisResult:
+    """Everything steps 3 to 6 found, with where the final model's held-out gap lies."""
+    settings, case = state.settings, state.case
+    assert named.decision is not None  # internal invariant: step 6 always ends with a decision
+    selected = named.selected
+    final_held = selected[-1].entry.held if selected else state.nominal_held
+    if selected:
+        remaining_where = where_gap(final_held.z, case, where_z=settings.where_z)
+        remaining_families = family_character(
+            final_held.z, case, locked, noise_gap=settings.noise_gap, where_z=settings.where_z
+        )
+    else:
+        # with no effect named the final model is the nominal one: its maps are already made
+        remaining_where, remaining_families = first.where, first.families
+    return DiagnosisResult(
+        case=case,
+        nominal=state.nominal,
+        nominal_held=state.nominal_held,
+        scores=first.scores,
+        all_scores=all_scores,
+        decision=named.decision,
+        nominal_gap=state.nominal_gap,
+        where=first.where,
+        families=first.families,
+        locked_lines=locked,
+        hints=hints,
+        effects=effects,
+        timings=timings,
+        nominal_gap_interval=first.nominal_gap_interval,
+        selected=selected,
+        rounds=named.rounds,
+        final_held=final_held,
+        remaining_where=remaining_where,
+        remaining_families=remaining_families,
+        remaining_interval=selected[-1].gap_interval if selected else first.nominal_gap_interval,
+        pitch_errors=allowance,
+        modulation=named.modulation,
+        settings=settings,
+    )
+
+
+def _timings(timings: dict[str, float], started: float, cpu_started: float, workers: int) -> dict[str, float]:
+    """The stages' seconds with the whole diagnosis's wall and CPU time and the worker count."""
+    return dict(
+        timings,
+        total_wall=time.perf_counter() - started,
+        total_cpu=_cpu_seconds() - cpu_started,
+        workers=float(workers),
+    )
+
+
+def _features(
+    inputs: DiagnosisInputs, *, settings: DiagnosisSettings, seeds: DiagnosisSeeds, workers: int, steps: StepLog
+) -> tuple[RigCase, dict[str, Any] | None]:
+    """Step 1: the campaign's features and noise models, with a healthy reference's correction where given.
+
+    Returns the case and the reference's summary (None without a reference).
+    """
+    with steps.step("extract the rig features"):
+        case = prepare_case(inputs.rig, inputs.design, seed=seeds.noise, settings=settings)
+    if inputs.reference is None:
+        return case, None
+    learned = inputs.learned
+    if learned is None:
+        with steps.step("fit the nominal model to the reference campaign and learn its transfer correction") as found:
+            learned = learn_reference(
+                inputs.reference, inputs.design, source=inputs.reference_source, seed=seeds.reference, workers=workers
+            )
+            found.update(seconds=learned.summary["seconds"])
+    with steps.step("correct the model features by the reference's transfer correction"):
+        return attach_reference(
+            case,
+            learned,
+            inputs.rig,
+            speed_tolerance=settings.speed_tolerance,
+            torque_tolerance=settings.torque_tolerance,
+        )
+
+
+def _cannot_decide(case: RigCase, settings: DiagnosisSettings, steps: StepLog) -> str | None:
+    """Why the data cannot decide (no line above the noise floor in enough runs), or None."""
+    with steps.step("check that the data can decide") as found:
+        reason = uninformative_reason(case, snr=settings.signal_snr, min_runs=settings.min_informative_runs)
+        found.update(informative=reason is None)
+    return reason
+
+
+class Diagnosis:
+    """Sim-to-real gap diagnosis of a rig campaign: where model and rig disagree, which effect explains it.
+
+    Parameters
+    ----------
+    effects : sequence of str, optional
+        Candidate effects (default: every registered family, :mod:`uqgear.diagnosis.effects`).
+    settings : DiagnosisSettings, optional
+        Thresholds and budgets (default: the documented ones).
+    seed : int, SeedSequence or DiagnosisSeeds
+        Seeds the noise calibration, the bootstrap and a reference's fit
+        (children 0 to 2 of one seed, or a :class:`~.inputs.DiagnosisSeeds`).
+    workers : int, optional
+        Worker processes for the simulations (default: one per CPU, at most 8).
+    design : Design, design file or name, optional
+        The nominal design, replacing the rig file's (default: the file's).
+    calibration : path or xarray.Dataset, optional
+        A calibration of the campaign (``posterior.nc`` of ``uqgear calibrate``
+        or its folder): the nominal fit starts from its posterior medians.
+    pitch_classes : (float, float) or None
+        ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
+
+    Attributes
+    ----------
+    nominal_ : FitResult or None
+        The nominal model's fit (None when the data cannot decide).
+    ranking_ : list of CandidateScore
+        The best variant of each candidate effect, best first.
+    effects_ : list of SelectedEffect
+        The named effects in order, with their shares of the gap shrink.
+    decision_ : Decision
+        The verdict, its reason and the figures that decided it.
+    remaining_gap_ : float
+        The held-out gap the final model leaves.
+    result_ : xarray.Dataset
+        Gap maps over op x channel x family, scores, held-out spectra (``diagnosis.nc``).
+    summary_ : dict
+        The JSON-ready record (``diagnosis.json``); :meth:`to_dict` returns it.
+    outcome_ : DiagnosisResult or None
+        Everything found (None when the data cannot decide).
+    features_ : RigCase
+        The campaign as compared after step 1 (features, line interference, a reference's correction).
+    case_ : RigCase
+        The campaign the verdict was reached on (with the pitch-error allowance where it applies).
+    design_, steps_ : Design, StepLog
+        The nominal design; the finished steps with what they found (kept by a failure).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> diagnosis = uqgear.Diagnosis(effects=["eccentricity"], workers=1)  # doctest: +SKIP
+    >>> diagnosis.fit(uqgear.example_rig_file("eccentricity")).decision_.verdict  # doctest: +SKIP
+    'eccentricity'
+    """
+
+    outcome_: DiagnosisResult | None
+    nominal_: FitResult | None
+
+    def __init__(
+        self,
+        *,
+        effects: Sequence[str] | str | None = None,
+        settings: DiagnosisSettings | None = None,
+        seed: int | np.random.SeedSequence | DiagnosisSeeds = 0,
+        workers: int | None = None,
+        design: Design | str | os.PathLike[str] | None = None,
+        calibration: str | os.PathLike[str] | xr.Dataset | None = None,
+        pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+    ) -> None:
+        self.effects = check_effects(effects)
+        if settings is not None and not isinstance(settings, DiagnosisSettings):
+            raise DiagnosisError(f"settings: expected a DiagnosisSettings; got {type(settings).__name__}")
+        self.settings = DEFAULT_SETTINGS if settings is None else settings
+        self.pitch_classes = check_classes(pitch_classes)
+        if isinstance(seed, DiagnosisSeeds):
+            self.seed, self.seeds = seed.run, seed
+        else:
+            self.seed = as_seed(seed)
+            self.seeds = DiagnosisSeeds.from_seed(self.seed)
+        self.workers = check_workers(workers)
+        # a design given replaces the file's before the file is read: its copy is then not validated
+        self.design = None if design is None else resolve_design(design, None)
+        self.calibration = calibration
+
+    def fit(self, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None = None) -> Diagnosis:
+        """Diagnose a rig campaign (optionally against a healthy reference campaign of the same rig).
+
+        Parameters
+        ----------
+        rig : path or xarray.Dataset
+            A ``uqgear-rig/1`` file or Dataset.
+        reference : path, xarray.Dataset or ReferenceCorrection, optional
+            A campaign of the same rig and test plan with a known good gearbox
+            (docs/model.md section 6.1): what it shows against the fitted
+            nominal model is learned and carried over, so the verdict names
+            what changed. A correction already learned is reused.
+
+        Returns
+        -------
+        Diagnosis
+            ``self``, with the fitted attributes set.
+
+        Raises
+        ------
+        RigDataError
+            The rig data do not follow the format or carry no usable signal.
+        DiagnosisError
+            A reference of another design or test plan, a bad calibration posterior.
+        InternalError
+            A step failed after the input was accepted (``steps_`` holds the finished ones).
+        """
+        started, cpu_started = time.perf_counter(), _cpu_seconds()
+        inputs = read_inputs(rig, reference, design=self.design, calibration=self.calibration, settings=self.settings)
+        self.design_, self.steps_ = inputs.design, StepLog()
+        # 1. features: the records reduced as the model's will be (with the allowances that act on them)
+        case, reference_summary = _features(
+            inputs, settings=self.settings, seeds=self.seeds, workers=self.workers, steps=self.steps_
+        )
+        self.features_ = case
+        # 2. predictive distribution: the case's noise models; valid data may still carry no signal
+        reason = _cannot_decide(case, self.settings, self.steps_)
+        if reason is not None:
+            return self._conclude_inconclusive(case, reason, inputs, reference_summary, started, cpu_started)
+        with self.steps_.step("start the worker processes"):
+            executor = RunExecutor(case, self.workers)
+        try:
+            outcome = self._diagnose(case.with_executor(executor), inputs.posterior)
+            with self.steps_.step("simulate the held-out spectra"):
+                spectra = held_spectra(outcome, _worst_runs(outcome))
+        finally:
+            executor.close()
+        return self._conclude(outcome, spectra, inputs, reference_summary, started, cpu_started)
+
+    def _diagnose(self, case: RigCase, posterior: xr.Dataset | None) -> DiagnosisResult:
+        """Steps 3 to 6 on a prepared campaign whose simulations run on workers."""
+        steps, settings = self.steps_, self.settings
+        timings: dict[str, float] = {
+            "order_tracking": case.tracking_s,
+            "nominal_fit": 0.0,
+            "screening": 0.0,
+            "full_fits": 0.0,
+        }
+        # 3. fit: the nominal model, the pitch-error allowance where the sidebands call for it
+        case, nominal = fit_nominal_model(case, posterior, settings=settings, steps=steps, timings=timings)
+        case, nominal, allowance = allow_pitch_errors(
+            case,
+            nominal,
+            classes=self.pitch_classes,
+            seed=self.seeds.run,
+            settings=settings,
+            steps=steps,
+            timings=timings,
+        )
+        with steps.step("find frequency-locked lines and signature hints") as found:
+            locked = frequency_locked_lines(case, settings=settings)
+            hints = signature_hints(case, locked)
+            found.update(hints=dict(hints))
+        # 3-4. every candidate fitted and scored on held-out runs against the nominal model
+        state, best, all_scores = score_against_nominal(
+            case,
+            nominal,
+            effects=self.effects,
+            hints=hints,
+            rng=np.random.default_rng(self.seeds.run),
+            settings=settings,
+            steps=steps,
+            timings=timings,
+        )
+        # 5. verdict: the first effect, or none, unexplained, inconclusive
+        first = decide_first(state, best, locked)
+        # 6. several effects: forward selection, an eccentric shaft its sideband phases name
+        named = name_effect_set(state, first, allowance_applied=allowance.applied)
+        return _outcome(
+            state,
+            first,
+            named,
+            locked=locked,
+            hints=hints,
+            all_scores=all_scores,
+            allowance=allowance,
+            effects=self.effects,
+            timings=timings,
+        )
+
+    def _conclude(
+        self,
+        outcome: DiagnosisResult,
+        spectra: xr.Dataset,
+        inputs: DiagnosisInputs,
+        reference_summary: dict[str, Any] | None,
+        started: float,
+        cpu_started: float,
+    ) -> Diagnosis:
+        """The fitted attributes of a diagnosis that ran its six steps."""
+        with self.steps_.step("summarise the results"):
+            timings = _timings(outcome.timings, started, cpu_started, self.workers)
+            content = json_clean(
+                summary(outcome, source=inputs.source, seed_text=str(self.seed.entropy), timings=timings)
+            )
+            start = "calibration posterior medians" if inputs.posterior is not None else "design values"
+            content["nominal"]["start"] = start
+            maps = result_dataset(outcome, spectra)
+            maps.attrs["verdict"] = content["verdict"]
+        self.outcome_, self.case_ = outcome, outcome.case
+        self.nominal_ = outcome.nominal
+        self.ranking_: list[CandidateScore] = list(outcome.scores)
+        self.effects_: list[SelectedEffect] = list(outcome.selected)
+        self.decision_: Decision = outcome.decision
+        self.remaining_gap_ = outcome.remaining_gap
+        return self._record(content, maps, reference_summary)
+
+    def _conclude_inconclusive(
+        self,
+        case: RigCase,
+        reason: str,
+        inputs: DiagnosisInputs,
+        reference_summary: dict[str, Any] | None,
+        started: float,
+        cpu_started: float,
+    ) -> Diagnosis:
+        """The fitted attributes of valid data that cannot decide: said so at once, without fitting noise."""
+        with self.steps_.step("summarise the results"):
+            content = json_clean(
+                inconclusive_summary(
+                    case,
+                    reason,
+                    source=inputs.source,
+                    effects=self.effects,
+                    seed_text=str(self.seed.entropy),
+                    timings=_timings({}, started, cpu_started, self.workers),
+                    settings=self.settings,
+                )
+            )
+            maps = inconclusive_dataset(case, reason, self.effects)
+        self.outcome_, self.case_, self.nominal_ = None, case, None
+        self.ranking_, self.effects_ = [], []
+        self.decision_ = Decision("inconclusive", reason)
+        self.remaining_gap_ = float("nan")
+        return self._record(content, maps, reference_summary)
+
+    def _record(self, content: dict[str, Any], maps: xr.Dataset, reference_summary: dict[str, Any] | None) -> Diagnosis:
+        """``summary_`` and ``result_``, with the reference's record and the design's notes."""
+        self.summary_, self.result_ = _completed(content, maps, reference_summary, self.design_), maps
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """The diagnosis as a JSON-ready mapping (the content of ``diagnosis.json``)."""
+        if not hasattr(self, "summary_"):
+            raise DiagnosisError("diagnosis: not fitted yet; call fit(rig) first")
+        return self.summary_
+
+
+__all__ = ["Diagnosis"]

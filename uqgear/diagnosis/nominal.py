@@ -1,0 +1,148 @@
+"""The nominal model fitted to the campaign, the pitch-error allowance taken in, and its held-out refits.
+
+Step 3 of docs/model.md section 6 for the nominal model: the fit (from the
+design's values, or a calibration posterior's medians), the pitch-error
+allowance where the rig's sidebands show pitch errors (and the nominal refit
+it calls for), and the loop that scores the candidates against the nominal
+fit and restarts that fit where a candidate's fit shows it stopped in a
+local optimum.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+
+import numpy as np
+import xarray as xr
+
+from ..common.steps import StepLog
+from ..uq.seeds import child_seed
+from .allowances.pitch_errors import PitchErrorAllowance, pitch_error_allowance
+from .case import RigCase
+from .fitting import FitResult, calibration_start, fit, fit_nominal
+from .heldout import leave_one_out
+from .scoring import CandidateScore, gap_metric
+from .screening import improved_nominal, score_candidates
+from .settings import DiagnosisSettings
+from .state import DiagnosisState
+
+# Child of the diagnosis's run seed that draws the pitch errors (the bootstrap uses the seed itself).
+PITCH_ERROR_STREAM = 7
+
+
+def fit_nominal_model(
+    case: RigCase,
+    posterior: xr.Dataset | None,
+    *,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> tuple[RigCase, FitResult]:
+    """The nominal fit, from a calibration posterior's medians where one is given (its backlash taken over).
+
+    Returns the case (with the calibrated backlash in its design) and the fit.
+
+    Raises
+    ------
+    DiagnosisError
+        A calibration posterior without the nominal parameters (input: checked before the fit).
+    """
+    start, positions = None, None
+    if posterior is not None:
+        start, positions = calibration_start(posterior, case)
+        if "backlash" in start:
+            case = case.with_design(case.design.replace(backlash=start.pop("backlash")))
+    clock = time.perf_counter()
+    with steps.step("fit the nominal model") as found:
+        budget = settings.nominal_evaluations
+        nominal = (
+            fit_nominal(case, max_evaluations=budget)
+            if start is None
+            else fit_nominal(case, max_evaluations=budget, start=start, positions=positions)
+        )
+        found.update(parameters=nominal.values, adhesion_torque=list(nominal.adhesion_torques), cost=nominal.cost)
+    timings["nominal_fit"] += time.perf_counter() - clock
+    return case, nominal
+
+
+def allow_pitch_errors(
+    case: RigCase,
+    nominal: FitResult,
+    *,
+    classes: tuple[float, float] | None,
+    seed: np.random.SeedSequence,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> tuple[RigCase, FitResult, PitchErrorAllowance]:
+    """The pitch-error allowance of ``classes`` taken into the case's model error, and the nominal model refitted.
+
+    Where the allowance does not apply, the case and the fit come back as they were.
+    """
+    clock = time.perf_counter()
+    with steps.step("allow for the gears' pitch errors") as found:
+        allowance = pitch_error_allowance(
+            case, nominal, classes=classes, seed=child_seed(seed, PITCH_ERROR_STREAM), settings=settings
+        )
+        found.update(applied=allowance.applied, reason=allowance.reason)
+        if allowance.applied:
+            case = allowance.apply(case)
+            # the nominal parameters were pulled by what pitch errors did to the features: refit
+            nominal = fit(
+                nominal.problem.on_case(case),
+                [nominal.vector],
+                max_evaluations=settings.nominal_evaluations,
+                tolerance=1e-3,
+            ).after(nominal)
+            found.update(parameters=nominal.values, cost=nominal.cost)
+    timings["pitch_errors"] = time.perf_counter() - clock
+    return case, nominal, allowance
+
+
+def score_against_nominal(
+    case: RigCase,
+    nominal: FitResult,
+    *,
+    effects: tuple[str, ...],
+    hints: Mapping[str, float],
+    rng: np.random.Generator,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> tuple[DiagnosisState, dict[str, CandidateScore], list[CandidateScore]]:
+    """Every candidate scored against the nominal fit's held-out predictions (:func:`~.screening.score_candidates`).
+
+    Where a candidate's full fit shows that the nominal fit stopped in a
+    local optimum (:func:`~.screening.improved_nominal`), the nominal model
+    is refitted from there and the candidates are scored again against it,
+    at most ``nominal_refits`` times.
+
+    Returns the state the later steps share, the best score per effect and every score.
+    """
+    for attempt in range(settings.nominal_refits + 1):
+        clock = time.perf_counter()
+        with steps.step("predict held-out runs with the nominal model") as found:
+            held = leave_one_out(nominal)
+            gap = gap_metric(held.z)
+            found.update(nominal_gap=gap)
+        timings["nominal_fit"] += time.perf_counter() - clock
+        state = DiagnosisState(case, settings, effects, hints, rng, steps, timings, nominal, held, gap)
+        best, all_scores = score_candidates(state)
+        if attempt == settings.nominal_refits:
+            break
+        clock = time.perf_counter()
+        with steps.step("check the nominal fit against the candidate fits") as found:
+            better = improved_nominal(
+                nominal, [entry.fit for entry in all_scores if entry.stage == "full"], settings=settings
+            )
+            found.update(refitted=better is not None)
+        timings["nominal_fit"] += time.perf_counter() - clock
+        if better is None:
+            break
+        # the candidates were scored against a nominal fit stuck in a local optimum: score them again
+        nominal = better
+    return state, best, all_scores
+
+
+__all__ = ["PITCH_ERROR_STREAM", "fit_nominal_model", "allow_pitch_errors", "score_against_nominal"]

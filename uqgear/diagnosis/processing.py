@@ -1,0 +1,183 @@
+"""The rig's feature processing for one run, built once and applied to records of the rig and of the model alike."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from ..physics.design import Design
+from ..rig import features as feature_module
+from ..rig.features import feature_definitions
+
+
+class RunProcessor:
+    """The rig's feature processing for one run (speed, sampling rate, record length), built once.
+
+    Wraps the line fit and the spectral estimates of :mod:`uqgear.rig.features`
+    so that model records of many parameter sets go through exactly the
+    processing that produced the rig's features, without rebuilding the
+    least-squares basis for every record.
+
+    Parameters
+    ----------
+    design : Design
+    speed : float
+        Pinion speed, rpm.
+    fs : float
+        Sampling rate, Hz.
+    size : int
+        Samples per record.
+    options : mapping
+        ``n_harmonics``, ``n_sidebands``, ``n_shaft_orders``, ``n_motor_lines``,
+        ``low_band``, ``band_limit`` and ``window`` as in
+        :func:`uqgear.rig.features.extract_features`.
+    """
+
+    def __init__(self, design: Design, speed: float, fs: float, size: int, options: Mapping[str, Any]) -> None:
+        self.speed = float(speed)
+        self.fs = float(fs)
+        self.size = int(size)
+        self.definitions = feature_definitions(
+            design,
+            n_harmonics=options["n_harmonics"],
+            n_sidebands=options["n_sidebands"],
+            n_shaft_orders=options["n_shaft_orders"],
+            n_motor_lines=options["n_motor_lines"],
+        )
+        self.names = [definition.name for definition in self.definitions]
+        self.columns = {name: index for index, name in enumerate(self.names)}
+        self.line_columns = np.array([i for i, d in enumerate(self.definitions) if d.is_line], dtype=int)
+        # each feature's frequency at this speed, Hz (NaN for features that are not lines)
+        self.frequencies = np.array([d.order for d in self.definitions], dtype=float) * self.speed / 60.0
+        line_orders = np.array([self.definitions[i].order for i in self.line_columns])
+        self.limit = options["band_limit"]
+        self.low_band = tuple(options["low_band"])
+        self.taper = feature_module.analysis_window(options["window"], self.size)
+        self.fit = feature_module.LineFit(line_orders * self.speed / 60.0, self.fs, self.size, self.limit, self.taper)
+        # one column per fitted line (lines within a bin of each other share one fitted amplitude): sums of
+        # line power count each line once
+        _, first = np.unique(self.fit.groups, return_index=True)
+        self.distinct_line_columns = self.line_columns[self.fit.inside[first]]
+        frequencies = np.fft.rfftfreq(self.size, 1.0 / self.fs)
+        self.excluded = feature_module.excluded_bins(
+            frequencies,
+            self.speed,
+            design,
+            line_orders,
+            options["n_sidebands"],
+            self.low_band,
+            self.limit,
+            self.fs / self.size,
+        )
+        self.line_noise = self._line_noise_scale()
+        in_band = (frequencies >= self.low_band[0]) & (frequencies <= self.low_band[1])
+        self._band_bins = np.flatnonzero(in_band)
+        edge = (self._band_bins == 0) | ((self.size % 2 == 0) & (self._band_bins == self.size // 2))
+        self._band_weights = np.where(edge, 1.0, 2.0)
+        self._window_power = float(np.sum(self.taper**2))
+        self.notch: tuple[float, ...] = ()
+
+    def set_notch(self, frequencies: Sequence[float], half_width: int) -> None:
+        """Leave the bins within ``half_width`` of each frequency (Hz) out of the low band, rig and model alike.
+
+        For line interference (:mod:`uqgear.diagnosis.allowances.interference`). The rig's
+        low band is then computed by :meth:`model_features`'s formula too.
+        """
+        resolution = self.fs / self.size
+        keep = np.ones(self._band_bins.size, dtype=bool)
+        for frequency in frequencies:
+            keep &= np.abs(self._band_bins * resolution - frequency) > half_width * resolution + 1e-9
+        self._band_bins = self._band_bins[keep]
+        self._band_weights = self._band_weights[keep]
+        self.notch = self.notch + tuple(float(f) for f in frequencies)
+
+    def low_band_rms(self, records: np.ndarray) -> np.ndarray:
+        """RMS of the low band (without notched bins) of records (R, N): the one-sided periodogram density summed."""
+        return self._centred_low_band_rms(records - records.mean(axis=1, keepdims=True))
+
+    def _centred_low_band_rms(self, centred: np.ndarray) -> np.ndarray:
+        spectrum = np.fft.rfft(centred * self.taper, axis=1)
+        # one-sided periodogram density (scipy's 'density' scaling), summed over the band
+        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
+        return np.sqrt(density.sum(axis=1) * self.fs / self.size)
+
+    def features(self, records: np.ndarray, *, lines: bool = True) -> np.ndarray:
+        """Feature values (R, F) of records (R, N); NaN rows where a sample is NaN, NaN lines without ``lines``."""
+        records = np.atleast_2d(np.asarray(records, dtype=float))
+        out = np.full((records.shape[0], len(self.definitions)), np.nan)
+        usable = ~np.isnan(records).any(axis=1)
+        if usable.any():
+            out[usable] = feature_module.block_features(
+                records[usable],
+                self.fit,
+                self.excluded,
+                self.fs,
+                self.taper,
+                self.low_band,
+                self.columns,
+                self.line_columns,
+                len(self.definitions),
+                lines=lines,
+            )
+            if self.notch:
+                out[usable, self.columns["low_band_rms"]] = self.low_band_rms(records[usable])
+        return out
+
+    def model_features(self, records: np.ndarray) -> np.ndarray:
+        """Features (R, F) of noise-free model records (R, N) without NaN.
+
+        The same line fit, low-band power, RMS and kurtosis as :meth:`features`;
+        the noise floor and the crest factor, which describe noisy records,
+        are left NaN (they are not compared), which saves most of the time.
+        """
+        records = np.atleast_2d(np.asarray(records, dtype=float))
+        out = np.full((records.shape[0], len(self.definitions)), np.nan)
+        out[:, self.line_columns] = self.fit.amplitudes(records)
+        centred = records - records.mean(axis=1, keepdims=True)
+        out[:, self.columns["low_band_rms"]] = self._centred_low_band_rms(centred)
+        square = centred * centred
+        mean_square = np.mean(square, axis=1)
+        out[:, self.columns["rms"]] = np.sqrt(mean_square)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[:, self.columns["kurtosis"]] = np.where(
+                mean_square > 0, np.mean(square * square, axis=1) / mean_square**2, np.nan
+            )
+        return out
+
+    def model_phasors(self, records: np.ndarray) -> np.ndarray:
+        """:meth:`features` (noise floor included) with each line's complex phasor in place of its amplitude (R, F).
+
+        For model records with lines at every shaft order (pitch errors), whose
+        forest of lines raises the noise floor a rig's records are read with.
+        """
+        records = np.atleast_2d(np.asarray(records, dtype=float))
+        out = self.features(records, lines=False).astype(complex)
+        out[:, self.line_columns] = self.fit.phasors(records)
+        return out
+
+    def _line_noise_scale(self) -> np.ndarray:
+        """Per-quadrature standard deviation of each line's fitted amplitude for unit white noise.
+
+        The weighted least-squares coefficients are G^-1 (B w)^T x with
+        G = (B w)^T B, so their covariance for white noise of unit variance
+        is G^-1 (B w)^T (B w) G^-1; a line's two quadratures share the mean of
+        their variances (NaN for lines outside the band).
+        """
+        scale = np.full(len(self.definitions), np.nan)
+        fit = self.fit
+        if not fit.n_centres:
+            return scale
+        inverse_gram = scipy.linalg.cho_solve(fit.factor, np.eye(fit.weighted.shape[1]))
+        covariance = inverse_gram @ (fit.weighted.T @ fit.weighted) @ inverse_gram
+        diagonal = np.diag(covariance)
+        per_centre = np.sqrt(0.5 * (diagonal[1 : 1 + fit.n_centres] + diagonal[1 + fit.n_centres :]))
+        line_scale = np.full(self.line_columns.size, np.nan)
+        line_scale[fit.inside] = per_centre[fit.groups]
+        scale[self.line_columns] = line_scale
+        return scale
+
+
+__all__ = ["RunProcessor"]

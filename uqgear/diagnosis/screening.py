@@ -1,0 +1,254 @@
+"""Every candidate screened against the nominal fit, the best fitted in full, each scored on held-out runs.
+
+Steps 3 and 4 of docs/model.md section 6 for the candidates: each variant of
+each effect family is screened with its own parameters only (the nominal
+parameters and T2 stay at the nominal fit); the best effect, and runners-up
+with evidence of their own, are fitted in full (all parameters), warm-started
+from the screening fit; while the gap stays unexplained a few more variants
+get a full fit. Every fit is scored on held-out runs against the nominal
+model's held-out predictions.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .allowances.pitch_errors import modulation_gain, with_own_allowance
+from .case import RigCase
+from .effects import candidates_for
+from .fit_problem import robust_cost
+from .fitting import FitResult, fit, fit_candidate
+from .heldout import leave_one_out
+from .scoring import CandidateScore, score_candidate
+from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+from .state import DiagnosisState
+from .verdict import decide_verdict, ranked
+
+
+def effect_off_costs(
+    nominal: FitResult, fits: Sequence[FitResult], *, own_error: bool = False
+) -> tuple[list[np.ndarray], list[float]]:
+    """The base model at each fit's values of the base's parameters and T2 (its new effect off): vectors and costs.
+
+    ``nominal`` is the base fit: the nominal model's, or in forward selection
+    the model with the effects named before (the new effect is switched off,
+    the others stay at the fit's values). ``own_error``: each cost is taken
+    with that fit's model error (its own pitch-error allowance), so that an
+    effect's gain is what switching it off costs under one error model,
+    not what a wider allowance forgives; else with the base's.
+    """
+    problem = nominal.problem
+    names = {spec.name for spec in problem.specs}
+    starts = [
+        problem.vector(
+            {key: value for key, value in candidate.values.items() if key in names},
+            candidate.vector[candidate.problem.n_global :],
+        )
+        for candidate in fits
+    ]
+    if not starts:
+        return [], []
+    model, _ = problem.model_features(starts)
+    errors = [fit_result.problem.model_error if own_error else None for fit_result in fits]
+    return starts, [
+        robust_cost(problem.residual_vector(problem.discrepancy(model[index], errors[index])[0], v))
+        for index, v in enumerate(starts)
+    ]
+
+
+def improved_nominal(
+    nominal: FitResult, fits: Sequence[FitResult], *, settings: DiagnosisSettings = DEFAULT_SETTINGS
+) -> FitResult | None:
+    """A better nominal fit found through the candidates' full fits, or None.
+
+    Every candidate contains the nominal model (its effect at strength 0).
+    A full candidate fit refits the nominal parameters and T2 too; if the
+    nominal model alone, at those values, fits the data better than the
+    nominal fit did (by ``nominal_margin``), the nominal fit had stopped in a
+    local optimum (light loads, with contact loss near the bearing modes,
+    have several), and a candidate would otherwise be credited with what is
+    only the better optimum. The nominal model is then refitted from the
+    best such point.
+    """
+    margin = settings.nominal_margin
+    starts, costs = effect_off_costs(nominal, fits)
+    if not starts:
+        return None
+    best = int(np.argmin(costs))
+    if costs[best] >= nominal.cost - margin:
+        return None
+    refit = fit(nominal.problem, [starts[best]], max_evaluations=settings.nominal_evaluations, tolerance=1e-3)
+    refit.after(nominal)
+    return refit if refit.cost < nominal.cost - margin else None
+
+
+def found(entry: CandidateScore) -> dict[str, Any]:
+    """What a candidate's fit found, for the step log."""
+    return {
+        "score": entry.score,
+        "shrink_fraction": entry.shrink_fraction,
+        "gap_with_effect": entry.gap_with_effect,
+        "parameters": entry.parameters(),
+    }
+
+
+def supersedes(full: CandidateScore, best: CandidateScore) -> bool:
+    """Whether a full fit takes the place of its effect's best entry so far.
+
+    When it scores higher; and always over the screening of its own
+    variant when it was scored with its own pitch-error allowance (the
+    screening was scored with the nominal model's: the two are not on one
+    footing).
+    """
+    own = full.fit.problem.own_model_error is not None
+    return full.score > best.score or (own and best.stage == "screening" and best.label == full.label)
+
+
+def measure_modulation(case: RigCase, full: CandidateScore) -> None:
+    """Set an eccentricity full fit's ``modulation_gain`` where pitch errors apply.
+
+    Only there does the run-out check (:func:`~.verdict.run_out_check`) need
+    it; elsewhere it stays None at no cost.
+    """
+    if full.effect == "eccentricity" and case.run_out_allowance:
+        full.modulation_gain = modulation_gain(full.fit)
+
+
+def best_per_effect(entries: Sequence[CandidateScore]) -> dict[str, CandidateScore]:
+    """The highest-scoring entry of each effect (the first of equals), in order of first appearance."""
+    best: dict[str, CandidateScore] = {}
+    for entry in entries:
+        if entry.effect not in best or entry.score > best[entry.effect].score:
+            best[entry.effect] = entry
+    return best
+
+
+def screen(state: DiagnosisState) -> list[CandidateScore]:
+    """Every variant of every candidate effect fitted on top of the nominal fit (its own parameters only)."""
+    case, settings = state.case, state.settings
+    screened: list[CandidateScore] = []
+    for name in state.effects:
+        for candidate in candidates_for(name, case.design, hints=state.hints):
+            with state.steps.step(f"screen {candidate.label}") as finding:
+                result = fit_candidate(
+                    case, candidate, state.nominal, full=False, max_evaluations=settings.screening_evaluations
+                )
+                screened.append(
+                    score_candidate(
+                        result,
+                        leave_one_out(result),
+                        state.nominal_held,
+                        "screening",
+                        state.rng,
+                        n_resamples=settings.bootstrap_resamples,
+                    )
+                )
+                finding.update(found(screened[-1]))
+    return screened
+
+
+def fit_in_full(state: DiagnosisState, entry: CandidateScore) -> CandidateScore:
+    """A screened candidate fitted with all parameters free, with its own pitch-error allowance, and scored."""
+    case, settings = state.case, state.settings
+    candidate = entry.fit.problem.candidate
+    assert candidate is not None  # internal invariant: a screened entry has its candidate
+    with state.steps.step(f"fit {candidate.label} in full") as finding:
+        result = with_own_allowance(
+            fit_candidate(
+                case,
+                candidate,
+                state.nominal,
+                full=True,
+                max_evaluations=settings.full_fit_evaluations,
+                start=entry.fit,
+            ),
+            max_evaluations=settings.full_fit_evaluations,
+        )
+        full = score_candidate(
+            result,
+            leave_one_out(result),
+            state.nominal_held,
+            "full",
+            state.rng,
+            n_resamples=settings.bootstrap_resamples,
+        )
+        measure_modulation(case, full)
+        finding.update(found(full))
+    return full
+
+
+def _also_promoted(state: DiagnosisState, leader: CandidateScore) -> Callable[[CandidateScore], bool]:
+    """Which runners-up are fitted in full too.
+
+    Unless the screening already puts them far behind the leader. With a
+    pitch-error allowance the screening judged every candidate by the
+    nominal model's allowance, which an effect that acts together with the
+    pitch errors (friction) outgrows, so any runner-up with evidence of its
+    own is fitted (with its own allowance).
+    """
+    settings = state.settings
+    if state.pitch_allowance:
+        return lambda entry: entry.score >= settings.score_threshold
+    return lambda entry: entry.score > 0 and entry.score >= settings.runner_up_share * leader.score
+
+
+def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], list[CandidateScore]]:
+    """Screen every candidate against the nominal fit, fit the best ones in full; best score per effect and all."""
+    settings = state.settings
+    clock = time.perf_counter()
+    screened = screen(state)
+    state.timings["screening"] += time.perf_counter() - clock
+    clock = time.perf_counter()
+    best = best_per_effect(screened)
+    order = sorted(best.values(), key=lambda entry: -entry.score)
+    all_scores = list(screened)
+    promoted = _also_promoted(state, order[0]) if order else (lambda entry: False)
+    chosen = [entry for rank, entry in enumerate(order[: settings.promoted]) if rank == 0 or promoted(entry)]
+
+    def fitted(entry: CandidateScore) -> None:
+        full = fit_in_full(state, entry)
+        all_scores.append(full)
+        if supersedes(full, best[entry.effect]):
+            best[entry.effect] = full
+
+    for entry in chosen:
+        fitted(entry)
+    # An effect that changes the response only in a few runs (a bearing clearance where a bearing
+    # unloads) cannot be screened with the nominal parameters held where the nominal model put
+    # them to absorb that change: before a gap is called unexplained the next candidate variants
+    # get a full fit, best screened first, until one explains it.
+    remaining = sorted(
+        (entry for entry in screened if not any(entry is done for done in chosen)), key=lambda entry: -entry.score
+    )
+    for entry in remaining[: settings.extra_full_fits]:
+        if (
+            decide_verdict(state.nominal_gap, ranked(best, state.case, settings=settings), settings=settings)[0]
+            != "unexplained"
+        ):
+            break
+        fitted(entry)
+    full_fits = [entry for entry in all_scores if entry.stage == "full"]
+    with state.steps.step("switch the effects of the full fits off"):
+        costs = effect_off_costs(state.nominal, [entry.fit for entry in full_fits], own_error=True)[1]
+    for entry, cost in zip(full_fits, costs):
+        entry.effect_gain = cost - entry.fit.cost
+    for entry in screened:
+        entry.effect_gain = state.nominal.cost - entry.fit.cost
+    state.timings["full_fits"] += time.perf_counter() - clock
+    return best, all_scores
+
+
+__all__ = [
+    "effect_off_costs",
+    "improved_nominal",
+    "supersedes",
+    "measure_modulation",
+    "best_per_effect",
+    "screen",
+    "fit_in_full",
+    "score_candidates",
+]

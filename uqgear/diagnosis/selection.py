@@ -1,0 +1,330 @@
+"""Several effects at once: forward selection after the first effect, and an eccentric shaft its phases name.
+
+Step 6 of docs/model.md section 6 (section 6.2): while the model with the
+effects named so far leaves a significant held-out gap, it is the base of
+another round; the other effects are screened on top of it with their own
+parameters, the best is fitted in full with every effect present and scored
+against the base's held-out predictions, and :func:`~.verdict.decide` on
+the gap that remains adds it or not. Where the pitch-error allowance
+applies, a shaft's sideband phases can then name an eccentricity the line
+amplitudes cannot tell from the gears' own errors (section 6.4).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+from .allowances.pitch_errors import first_order_reads, with_own_allowance
+from .allowances.sideband_phase import ModulationEvidence, fit_modulated_run_out, modulation_evidence, shafts_tested
+from .decision import Decision
+from .effect_set import SelectedEffect, SelectionRound
+from .effects import candidates_for
+from .fitting import fit_candidate
+from .heldout import leave_one_out
+from .scoring import CandidateScore, bootstrap_gap, score_candidate
+from .screening import best_per_effect, effect_off_costs, found, measure_modulation, supersedes
+from .set_verdict import lead_decision, phase_named_decision, set_decision, unled_decision
+from .state import DiagnosisState
+from .verdict import FirstDecision, decide, leads_a_set, ranked
+
+
+def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
+    """Each named effect's share of the held-out gap shrink, as a fraction of the nominal model's gap.
+
+    The first effect's share is its shrink fraction (``first_shrink``, its
+    gap ``gaps[0]`` against the nominal model's); each later one's is
+    (gap before it - gap after it) / nominal gap, ``gaps`` being the
+    held-out gaps after each effect of the set, in order. The shares add up
+    to the shrink of the whole set, 1 - last gap / nominal gap.
+    """
+    shares = [float(first_shrink)] if gaps else []
+    for before, after in zip(gaps[:-1], gaps[1:]):
+        shares.append((before - after) / nominal_gap if nominal_gap > 0 else 0.0)
+    return shares
+
+
+def _screen_on_top(state: DiagnosisState, base: CandidateScore, named: Sequence[str]) -> list[CandidateScore]:
+    """The effects not yet named, each variant screened on top of the base (its own parameters only)."""
+    settings, base_fit = state.settings, base.fit
+    labels = " + ".join(candidate.label for candidate in base_fit.problem.candidates)
+    screened: list[CandidateScore] = []
+    for name in state.effects:
+        if name in named:
+            # an effect is never named twice, nor as another variant: it would only soak up noise
+            continue
+        for candidate in candidates_for(name, state.case.design, hints=state.hints):
+            with state.steps.step(f"forward selection: screen {candidate.label} on top of {labels}") as finding:
+                result = fit_candidate(
+                    state.case, candidate, base_fit, full=False, max_evaluations=settings.screening_evaluations
+                )
+                screened.append(
+                    score_candidate(
+                        result,
+                        leave_one_out(result),
+                        base.held,
+                        "screening",
+                        state.rng,
+                        n_resamples=settings.bootstrap_resamples,
+                    )
+                )
+                screened[-1].effect_gain = base_fit.cost - result.cost
+                finding.update(found(screened[-1]))
+    return screened
+
+
+def next_effect(state: DiagnosisState, base: CandidateScore, named: Sequence[str]) -> SelectionRound:
+    """One forward-selection round: the other effects screened on top of the base, the best fitted in full.
+
+    Only the new effect's parameters are screened (the base's fit, its
+    Jacobian and held-out predictions are reused); the best screened
+    variant is fitted in full with every effect present, and scored against
+    the base's held-out predictions; :func:`~.verdict.decide` on top of the
+    base adds it or not.
+    """
+    settings, base_fit = state.settings, base.fit
+    base_labels = tuple(candidate.label for candidate in base_fit.problem.candidates)
+    screened = _screen_on_top(state, base, named)
+    if not screened:
+        return SelectionRound(base_labels, base.gap_with_effect, [], None, "no other candidate effect is left to try")
+    best = best_per_effect(screened)
+    leader = max(screened, key=lambda entry: entry.score)
+    candidate = leader.fit.problem.candidate
+    assert candidate is not None  # internal invariant: a screened entry has its candidate
+    with state.steps.step(
+        f"forward selection: fit {candidate.label} in full on top of {' + '.join(base_labels)}"
+    ) as finding:
+        result = with_own_allowance(
+            fit_candidate(
+                state.case,
+                candidate,
+                base_fit,
+                full=True,
+                max_evaluations=settings.full_fit_evaluations,
+                start=leader.fit,
+            ),
+            max_evaluations=settings.full_fit_evaluations,
+        )
+        full = score_candidate(
+            result, leave_one_out(result), base.held, "full", state.rng, n_resamples=settings.bootstrap_resamples
+        )
+        full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
+        measure_modulation(state.case, full)
+        finding.update(found(full))
+    if supersedes(full, best[full.effect]):
+        best[full.effect] = full
+    ranking = sorted(best.values(), key=lambda entry: -entry.score)
+    chosen = ranked({full.effect: best[full.effect]}, state.case, settings=settings)[0]
+    chosen = replace(chosen, gap_interval=bootstrap_gap(chosen.held.z, state.rng, settings.bootstrap_resamples))
+    # no density evidence here: a further effect must shrink a gap that is there, or it only soaks up what
+    # the allowance already forgives (docs/model.md section 6.4)
+    decision = decide(base.gap_with_effect, [chosen], settings=settings, pitch_allowance=state.pitch_allowance)
+    added = chosen.effect if decision.verdict == chosen.effect else None
+    assert chosen.gap_interval is not None
+    return SelectionRound(
+        base_labels, base.gap_with_effect, ranking, added, decision.reason, decision, chosen.gap_interval
+    )
+
+
+def forward_selection(
+    state: DiagnosisState,
+    first: CandidateScore,
+    first_decision: Decision,
+    *,
+    first_gap_interval: Sequence[float] = (math.nan, math.nan),
+) -> tuple[list[SelectedEffect], list[SelectionRound]]:
+    """Add effects one at a time after the first while a significant held-out gap remains.
+
+    The first effect's fit (``first``, named by :func:`~.verdict.decide`) is
+    the base; each round (:func:`next_effect`) screens the effects not yet
+    named on top of it, fits the best in full with all effects present and
+    adds it when :func:`~.verdict.decide`, applied to the gap that remains,
+    names it; the model with it is the next base. Rounds stop when the
+    remaining gap is within ``noise_gap`` (where the pitch-error allowance
+    applies, only at a gap of 0: its widened error can hold a further
+    effect's evidence below the noise gap, and the effect is added when it
+    shrinks what is left), when a round adds nothing, or at ``max_effects``.
+
+    Returns
+    -------
+    selected : list of SelectedEffect
+        The named effects in order (the first one included), with their shrink shares.
+    rounds : list of SelectionRound
+        The rounds after the first, the last one possibly adding nothing.
+    """
+    settings = state.settings
+    entries, decisions = [first], [first_decision]
+    intervals: list[tuple[float, float]] = [(float(first_gap_interval[0]), float(first_gap_interval[1]))]
+    rounds: list[SelectionRound] = []
+    while len(entries) < settings.max_effects and (
+        entries[-1].gap_with_effect > settings.noise_gap
+        or (state.pitch_allowance and entries[-1].gap_with_effect > 0.0)
+    ):
+        selection = next_effect(state, entries[-1], [entry.effect for entry in entries])
+        rounds.append(selection)
+        if selection.added is None or selection.decision is None:
+            break
+        # the added effect's best fit leads its round's ranking (its full fit was started from the best screening)
+        entries.append(selection.scores[0])
+        decisions.append(selection.decision)
+        intervals.append(selection.gap_interval)
+    shares = shrink_shares(state.nominal_gap, first.shrink_fraction, [entry.gap_with_effect for entry in entries])
+    befores = [state.nominal_gap] + [entry.gap_with_effect for entry in entries[:-1]]
+    selected = [
+        SelectedEffect(entry, before, share, decision, interval)
+        for entry, before, share, decision, interval in zip(entries, befores, shares, decisions, intervals)
+    ]
+    return selected, rounds
+
+
+def phase_named_run_out(
+    state: DiagnosisState, selected: list[SelectedEffect], decision: Decision
+) -> tuple[list[ModulationEvidence], tuple[list[SelectedEffect], Decision] | None]:
+    """Test the shafts' sideband phase sums for an eccentricity the amplitudes cannot tell from pitch errors.
+
+    Each shaft :func:`~.allowances.sideband_phase.shafts_tested` admits is
+    tested against the final model
+    (:func:`~.allowances.sideband_phase.modulation_evidence`); the shaft with
+    the strongest decisive evidence gets its eccentricity fitted on top
+    (:func:`~.allowances.sideband_phase.fit_modulated_run_out`) and added to
+    the set, with its own share of the shrink (negative where it widens the
+    held-out gap).
+    """
+    settings, case = state.settings, state.case
+    base_fit = selected[-1].entry.fit if selected else state.nominal
+    base_held = selected[-1].entry.held if selected else state.nominal_held
+    base_gap = selected[-1].entry.gap_with_effect if selected else state.nominal_gap
+    reads = first_order_reads(case.pitch_allowance)  # type: ignore[arg-type]
+    found_evidence = []
+    for shaft in shafts_tested(case, min_orders=settings.min_sideband_orders):
+        if shaft not in reads:
+            continue
+        with state.steps.step(f"test the {shaft}'s sideband phases for an eccentric shaft") as finding:
+            evidence = modulation_evidence(
+                case,
+                base_fit,
+                shaft,
+                reads[shaft][0],
+                kappas=settings.modulation_kappas,
+                threshold=settings.phase_evidence_threshold,
+                draws_per_point=settings.phase_draws_per_point,
+            )
+            finding.update(evidence.summary())
+        found_evidence.append(evidence)
+    decisive = [evidence for evidence in found_evidence if evidence.decisive]
+    if not decisive:
+        return found_evidence, None
+    evidence = max(decisive, key=lambda item: item.log_ratio)
+    with state.steps.step(f"fit the eccentric {evidence.shaft} shaft the sideband phases name") as finding:
+        entry = fit_modulated_run_out(case, base_fit, base_held, evidence, state.rng, settings=settings)
+        finding.update(found(entry))
+    share = (base_gap - entry.gap_with_effect) / state.nominal_gap if state.nominal_gap > 0 else 0.0
+    run_out = float(entry.parameters()["amplitude"])  # type: ignore[arg-type]
+    low, high = entry.parameter_intervals().get("amplitude", (math.nan, math.nan))
+    # the amplitudes cannot tell the run-out from the gear's own first-order errors: its interval says how much
+    reason = (
+        f"{evidence.reason()}; fitted on top, its run-out is left open by the line amplitudes, which "
+        f"cannot tell it from the {evidence.shaft}'s own first-order errors ({1e6 * run_out:.3g} um, 90 % "
+        f"interval {1e6 * low:.3g} to {1e6 * high:.3g} um), and it changes the held-out gap from "
+        f"{base_gap:.2f} to {entry.gap_with_effect:.2f}"
+    )
+    added, whole = phase_named_decision(decision, reason, entry.gap_with_effect, set_named=bool(selected))
+    chosen = SelectedEffect(
+        entry, base_gap, share, added, bootstrap_gap(entry.held.z, state.rng, settings.bootstrap_resamples)
+    )
+    return found_evidence, ([*selected, chosen], whole)
+
+
+@dataclass
+class NamedSet:
+    """Step 6's outcome: the named effects in order, the rounds after the first, the decision, the phase tests."""
+
+    selected: list[SelectedEffect] = field(default_factory=list)
+    rounds: list[SelectionRound] = field(default_factory=list)
+    decision: Decision | None = None
+    modulation: list[ModulationEvidence] = field(default_factory=list)
+
+
+def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
+    """An unexplained gap whose strongest candidate leads a forward selection: the set, if it explains the gap.
+
+    Two effects of about equal size each explain less than half of the gap
+    alone: the strongest, clearly carried by its effect, is the base of a
+    forward selection, and the set is named only if it explains the gap
+    together (:func:`~.verdict.set_decision`'s rule).
+    """
+    clock = time.perf_counter()
+    lead = first.scores[0]
+    provisional = lead_decision(lead)
+    trial, trial_rounds = forward_selection(state, lead, provisional, first_gap_interval=first.leader_gap_interval)
+    state.timings["forward_selection"] = time.perf_counter() - clock
+    with state.steps.step("decide whether a set of effects explains the gap") as finding:
+        joint = (
+            set_decision(provisional, trial, trial_rounds, state.nominal_gap, settings=state.settings)
+            if len(trial) > 1
+            else None
+        )
+        if joint is not None and not joint.partial:
+            named = NamedSet(trial, trial_rounds, joint)
+        else:
+            named = NamedSet(decision=unled_decision(first.decision, lead, trial))
+        verdict = named.decision.verdict if named.decision is not None else first.decision.verdict
+        finding.update(effects=[chosen.entry.effect for chosen in named.selected], verdict=verdict)
+    return named
+
+
+def _grown_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
+    """The first effect named: further effects while a significant gap remains (forward selection)."""
+    clock = time.perf_counter()
+    selected, rounds = forward_selection(
+        state, first.scores[0], first.decision, first_gap_interval=first.leader_gap_interval
+    )
+    if rounds:
+        state.timings["forward_selection"] = time.perf_counter() - clock
+    with state.steps.step("decide the effect set") as finding:
+        decision = set_decision(first.decision, selected, rounds, state.nominal_gap, settings=state.settings)
+        finding.update(effects=[chosen.entry.effect for chosen in selected], partial=decision.partial)
+    return NamedSet(selected, rounds, decision)
+
+
+def name_effect_set(state: DiagnosisState, first: FirstDecision, *, allowance_applied: bool) -> NamedSet:
+    """Step 6: the set of effects named together, and an eccentric shaft its sideband phases name.
+
+    A forward selection runs from the named first effect, or from an
+    unexplained gap's strongest candidate where it meets the evidence rules
+    (:func:`~.verdict.leads_a_set`). Where the pitch-error allowance applies,
+    eccentricity is a candidate, the verdict is not ``unexplained`` and the
+    set has room for it, the sideband phase test may add an eccentric shaft
+    (:func:`phase_named_run_out`).
+    """
+    settings, decision = state.settings, first.decision
+    if (
+        decision.verdict == "unexplained"
+        and first.scores
+        and leads_a_set(first.ranking[0], pitch_allowance=state.pitch_allowance, settings=settings)
+    ):
+        named = _led_set(state, first)
+    elif decision.verdict in state.effects:
+        named = _grown_set(state, first)
+    else:
+        named = NamedSet(decision=decision)
+    assert named.decision is not None
+    in_set = [chosen.entry.effect for chosen in named.selected]
+    if (
+        allowance_applied
+        and "eccentricity" in state.effects
+        and named.decision.verdict != "unexplained"
+        and len(named.selected) < settings.max_effects
+        and "eccentricity" not in in_set
+    ):
+        clock = time.perf_counter()
+        named.modulation, added = phase_named_run_out(state, named.selected, named.decision)
+        if added is not None:
+            named.selected, named.decision = added
+        state.timings["sideband_phases"] = time.perf_counter() - clock
+    return named
+
+
+__all__ = ["shrink_shares", "next_effect", "forward_selection", "phase_named_run_out", "NamedSet", "name_effect_set"]

@@ -1,0 +1,454 @@
+"""Coexisting steady responses: every point run from several starts, the results grouped into attractors.
+
+A gear pair with backlash can hold more than one steady response at one operating point (the jump
+phenomenon): which one a run shows depends on where it starts. :class:`MultiStartSearch` runs each
+point of a batch from
+
+* **rest**: the static equilibrium (what every single run does);
+* **up** and **down**: the final state of the neighbouring point of an up-sweep and of a
+  down-sweep along ``sweep_variable`` (pinion speed by default), the points grouped by the values
+  of every other input, each sweep starting from rest at its first point;
+* **seeded-1 ... seeded-N**: states drawn uniformly (one SeedSequence, reproducible) from a box
+  around the static equilibrium: each displacement within +-``box`` times the half backlash b,
+  each velocity within +-``box`` times the larger of the mesh-frequency velocity across the
+  backlash (omega_h b) and the rest start's own steady velocity of that coordinate,
+
+and groups each point's steady responses into distinct attractors. Two runs reached the same
+attractor when their QoIs agree (peak mesh force, RMS and peak-to-peak DTE within ``tolerance``
+relative, time fractions in separation and back-side contact within ``tolerance`` absolute) and
+their Poincare sets are close: the Hausdorff distance between the sets of (x, x') points, x in
+units of b and x' of omega_h b, at most ``poincare_tolerance``. When either response is not
+periodic both tolerances are 5 times wider (:data:`NON_PERIODIC_FACTOR`): a torus or a strange
+attractor sampled twice gives two different point clouds and extremes. A run that has not settled
+(a transient near an unstable orbit decays slowly) shows as a response of its own: keep
+``n_periods`` long enough. Each attractor keeps its QoIs and regime (from its first start, in the order
+rest, up, down, seeded), the share of starts that reached it and which starts.
+
+The model is any ``evaluate(samples) -> Dataset`` that understands the sample variables
+``initial_<state>`` (a start state) and returns ``final_<state>`` (:class:`StartedEvaluator`
+wraps :func:`~uqgear.physics.integration.simulate_batch`); every stage is one batch call, the
+sweeps one call per step (all groups and both directions together).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from scipy.spatial.distance import directed_hausdorff
+
+from ..common.errors import UqgearError
+from ..physics.design import Design
+from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_batch
+from .regimes import classify_batch
+
+#: Sample variables of a start state, and of the final state a started run returns.
+INITIAL_VARIABLES = tuple(f"initial_{name}" for name in STATE_NAMES)
+FINAL_VARIABLES = tuple(f"final_{name}" for name in STATE_NAMES)
+#: QoIs compared between runs (relative tolerance) and time fractions (absolute tolerance).
+COMPARED_QOIS = ("peak_mesh_force", "dte_rms", "dte_peak_to_peak")
+COMPARED_FRACTIONS = ("fraction_separation", "fraction_back_contact")
+#: Factor on both tolerances when either response is not periodic.
+NON_PERIODIC_FACTOR = 5.0
+#: QoIs every attractor keeps.
+ATTRACTOR_QOIS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms", "dte_peak_to_peak",
+                  "dte_mean", "acc_pinion_rms", "acc_gear_rms", "fraction_drive_contact", "fraction_separation",
+                  "fraction_back_contact")
+
+
+@dataclass(frozen=True)
+class MultiStart:
+    """Which starts every point gets, and how steady responses are grouped.
+
+    Attributes
+    ----------
+    sweeps : bool
+        Also start from the neighbouring point's final state in an up- and a down-sweep.
+    seeded : int
+        Random starts per point.
+    box : float
+        Half-width of the random box (module docstring).
+    sweep_variable : str
+        The sample variable the sweeps run along.
+    tolerance, poincare_tolerance : float
+        Grouping tolerances (module docstring).
+    """
+
+    sweeps: bool = True
+    seeded: int = 2
+    box: float = 1.0
+    sweep_variable: str = "pinion_speed"
+    tolerance: float = 0.02
+    poincare_tolerance: float = 0.05
+
+    def start_labels(self) -> list[str]:
+        """The starts, in grouping order."""
+        return ["rest"] + (["up", "down"] if self.sweeps else []) + [f"seeded-{i + 1}" for i in range(self.seeded)]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {key: getattr(self, key) for key in self.__dataclass_fields__}
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any] | None, where: str = "starts") -> MultiStart:
+        """Settings from a mapping of some of the attributes (the rest default)."""
+        values = dict(values or {})
+        unknown = sorted(set(values) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise UqgearError(f"{where}.{unknown[0]}: unknown key; expected among "
+                              f"{', '.join(cls.__dataclass_fields__)}")
+        settings = cls(**values)
+        if isinstance(settings.seeded, bool) or not isinstance(settings.seeded, int) or not 0 <= settings.seeded <= 64:
+            raise UqgearError(f"{where}.seeded: expected an integer in [0, 64]; got {settings.seeded!r}")
+        for name in ("box", "tolerance", "poincare_tolerance"):
+            value = getattr(settings, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 10:
+                raise UqgearError(f"{where}.{name}: expected a number in (0, 10]; got {value!r}")
+        if not isinstance(settings.sweeps, bool):
+            raise UqgearError(f"{where}.sweeps: expected true or false; got {settings.sweeps!r}")
+        return settings
+
+
+class StartedEvaluator:
+    """The batch model with start states: ``initial_<state>`` sample variables in, ``final_<state>`` out.
+
+    A sample whose ``initial_*`` values are NaN starts from its static equilibrium. Picklable (the
+    runner ships it to workers). The outputs are those of :func:`simulate_batch` (QoIs, Poincare
+    points) plus the final state and the regime of each run (:func:`classify_batch`).
+
+    Parameters
+    ----------
+    design : Design
+    options : mapping
+        Keyword arguments of :func:`simulate_batch` (``n_periods``, ``keep_periods``, ...).
+    classify_seed : int or SeedSequence
+        Seed of the 0-1 test frequencies.
+    """
+
+    def __init__(self, design: Design, options: Mapping[str, Any] | None = None, classify_seed: Any = 0) -> None:
+        self.design = design
+        self.options = dict(options or {})
+        self.classify_seed = classify_seed
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        inputs = samples.drop_vars([name for name in INITIAL_VARIABLES if name in samples.variables])
+        states = None
+        if all(name in samples.variables for name in INITIAL_VARIABLES):
+            states = np.stack([np.asarray(samples[name].values, dtype=float) for name in INITIAL_VARIABLES], axis=1)
+            rest = ~np.all(np.isfinite(states), axis=1)
+            if rest.any():
+                setups = build_batch(self.design, inputs.isel(sample=np.nonzero(rest)[0]),
+                                     damping_in_separation=self.options.get("damping_in_separation", True),
+                                     stiffness=self.options.get("stiffness", "ishikawa"))
+                states[rest] = np.stack([setup.static_state() for setup in setups])
+        result = simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
+        final = result["final_state"].values
+        result = result.drop_vars(["final_state", "state"])
+        for index, name in enumerate(FINAL_VARIABLES):
+            result[name] = ("sample", final[:, index])
+        classes = classify_batch(result, seed=self.classify_seed)
+        return result.merge(classes[["regime", "response_period"]], compat="override")
+
+
+def _velocity_scale(samples: xr.Dataset, design: Design) -> np.ndarray:
+    """omega_h b per sample (mesh angular frequency times the half backlash)."""
+    speed = np.asarray(samples["pinion_speed"].values, dtype=float)
+    backlash = (np.asarray(samples["backlash"].values, dtype=float) if "backlash" in samples
+                else np.full(speed.size, design.backlash))
+    return 2.0 * math.pi * design.z1 * speed / 60.0 * 0.5 * backlash
+
+
+def sweep_order(samples: xr.Dataset, variable: str) -> list[np.ndarray]:
+    """The samples grouped by every input but ``variable``, each group sorted by it (sample indices)."""
+    if variable not in samples:
+        return [np.array([i]) for i in range(samples.sizes["sample"])]
+    others = [name for name in samples.data_vars if name != variable and name not in INITIAL_VARIABLES
+              and samples[name].dims == ("sample",)]
+    keys = [tuple(float(samples[name].values[i]) for name in others) for i in range(samples.sizes["sample"])]
+    groups: dict[tuple, list[int]] = {}
+    for index, key in enumerate(keys):
+        groups.setdefault(key, []).append(index)
+    values = np.asarray(samples[variable].values, dtype=float)
+    return [np.array(sorted(members, key=lambda i: values[i])) for members in groups.values()]
+
+
+def _with_starts(samples: xr.Dataset, index: np.ndarray, states: np.ndarray) -> xr.Dataset:
+    batch = samples.isel(sample=index)
+    for column, name in enumerate(INITIAL_VARIABLES):
+        batch[name] = ("sample", states[:, column])
+    return batch
+
+
+def _final_states(result: xr.Dataset) -> np.ndarray:
+    return np.stack([np.asarray(result[name].values, dtype=float) for name in FINAL_VARIABLES], axis=1)
+
+
+def _sweep_runs(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, rest: xr.Dataset,
+                groups: Sequence[np.ndarray], rest_index: np.ndarray | None = None) -> dict[str, xr.Dataset]:
+    """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions.
+
+    ``rest`` holds the rest runs of the samples ``rest_index`` (default: all), which must include
+    each group's first and last member: the sweeps start there.
+    """
+    rows_of = {int(sample): row for row, sample in enumerate(
+        np.arange(samples.sizes["sample"]) if rest_index is None else rest_index)}
+    finals = _final_states(rest)
+    carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}   # sample index -> the final state it passes on
+    for direction in ("up", "down"):
+        for members in groups:
+            first = members[0] if direction == "up" else members[-1]
+            carried[direction][int(first)] = finals[rows_of[int(first)]]
+    longest = max((len(members) for members in groups), default=0)
+    pieces: dict[str, list[tuple[np.ndarray, xr.Dataset]]] = {"up": [], "down": []}
+    for step in range(1, longest):
+        index, states, directions = [], [], []
+        for direction in ("up", "down"):
+            for members in groups:
+                if step >= len(members):
+                    continue
+                ordered = members if direction == "up" else members[::-1]
+                index.append(int(ordered[step]))
+                states.append(carried[direction][int(ordered[step - 1])])
+                directions.append(direction)
+        result = evaluate(_with_starts(samples, np.array(index), np.array(states)))
+        ends = _final_states(result)
+        for row, (sample, direction) in enumerate(zip(index, directions)):
+            carried[direction][sample] = ends[row]
+        for direction in ("up", "down"):
+            rows = np.array([row for row, d in enumerate(directions) if d == direction], dtype=int)
+            if rows.size:
+                pieces[direction].append((np.array(index)[rows], result.isel(sample=rows)))
+    out = {}
+    for direction in ("up", "down"):
+        # the first point of each sweep is its rest run
+        firsts = np.array([int(m[0] if direction == "up" else m[-1]) for m in groups], dtype=int)
+        parts = [(firsts, rest.isel(sample=[rows_of[int(i)] for i in firsts]))] + pieces[direction]
+        order = np.concatenate([indices for indices, _ in parts])
+        stacked = xr.concat([part for _, part in parts], dim="sample", coords="minimal", compat="override",
+                            join="override", combine_attrs="drop_conflicts")
+        out[direction] = stacked.isel(sample=np.argsort(order, kind="stable"))
+    return out
+
+
+def up_down_sweeps(evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset,
+                   variable: str = "pinion_speed") -> dict[str, xr.Dataset]:
+    """Brute-force up- and down-sweeps along ``variable``: each run starts from its neighbour's final state.
+
+    Only the first point of each sweep starts from rest. Returns ``{"up": runs, "down": runs}``, each
+    in the order of ``samples`` (one batch call per sweep step, both directions and every group of
+    the other inputs together).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> from uqgear.physics.integration import samples_from_mapping
+    >>> design = uqgear.load_design("locomotive")
+    >>> speeds = [3550.0, 3600.0, 3650.0, 3700.0]
+    >>> samples = samples_from_mapping({"pinion_speed": speeds, "adhesion_torque": [21150.0] * 4})
+    >>> runs = up_down_sweeps(StartedEvaluator(design, {"n_periods": 1500, "keep_periods": 300}), samples)
+    >>> [round(float(f) / 1e3) for f in runs["down"]["peak_mesh_force"].values]
+    [102, 177, 178, 180]
+    """
+    groups = sweep_order(samples, variable)
+    ends = np.unique(np.concatenate([[members[0], members[-1]] for members in groups])).astype(int)
+    rest = evaluate(_with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
+    return _sweep_runs(evaluate, samples, rest, groups, ends)
+
+
+class MultiStartSearch:
+    """Run every point of a batch from several starts and group the steady responses into attractors.
+
+    Parameters
+    ----------
+    settings : MultiStart, optional
+    seed : int or SeedSequence
+        Seed of the random starts.
+
+    Attributes
+    ----------
+    runs_ : xarray.Dataset
+        Every run: dims ``sample``, ``start`` (and ``period``): QoIs, ``regime``, Poincare points,
+        ``attractor`` (the index of the attractor it reached).
+    attractors_ : xarray.Dataset
+        Dims ``sample``, ``attractor``: QoIs, ``regime``, ``share`` (of starts), ``first_start``,
+        ``starts`` (comma-separated labels), ``attractor_count`` per sample; padded with NaN / ''.
+    model_runs_ : int
+        Model runs made.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> from uqgear.physics.integration import samples_from_mapping
+    >>> design = uqgear.load_design("locomotive")
+    >>> samples = samples_from_mapping({"pinion_speed": [3600.0, 3700.0], "adhesion_torque": [21150.0] * 2})
+    >>> model = StartedEvaluator(design, {"n_periods": 1500, "keep_periods": 300})
+    >>> found = MultiStartSearch(MultiStart(seeded=0)).fit(model, samples)
+    >>> [int(n) for n in found.attractors_["attractor_count"].values]
+    [2, 1]
+    """
+
+    def __init__(self, settings: MultiStart | None = None, seed: Any = 0) -> None:
+        self.settings = settings or MultiStart()
+        self.seed = seed
+
+    def fit(self, evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset,
+            design: Design | None = None) -> MultiStartSearch:
+        """Run the starts and group the responses (``design`` only for the box's scales; default the
+        evaluator's ``design``)."""
+        if "sample" not in samples.dims or "pinion_speed" not in samples:
+            raise UqgearError("samples: expected a Dataset with dimension 'sample' and variable 'pinion_speed'")
+        design = design if design is not None else getattr(evaluate, "design", None)
+        settings = self.settings
+        n = samples.sizes["sample"]
+        nan_states = np.full((n, 6), np.nan)
+        rest = evaluate(_with_starts(samples, np.arange(n), nan_states))
+        stages: dict[str, xr.Dataset] = {"rest": rest}
+        runs = n
+        if settings.sweeps:
+            groups = sweep_order(samples, settings.sweep_variable)
+            stages.update(_sweep_runs(evaluate, samples, rest, groups))
+            runs += 2 * n - 2 * len(groups)
+        if settings.seeded:
+            if design is None:
+                raise UqgearError("design: needed for the random starts' box (pass design=)")
+            starts = self._seeded_states(samples, rest, design)
+            tiled = samples.isel(sample=np.tile(np.arange(n), settings.seeded))
+            seeded = evaluate(_with_starts(tiled, np.arange(n * settings.seeded), starts))
+            for k in range(settings.seeded):
+                stages[f"seeded-{k + 1}"] = seeded.isel(sample=slice(k * n, (k + 1) * n))
+            runs += n * settings.seeded
+        labels = settings.start_labels()
+        stacked = xr.concat([stages[label].drop_vars([v for v in INITIAL_VARIABLES if v in stages[label].variables])
+                             .assign_coords(sample=np.arange(n)) for label in labels], dim="start",
+                            coords="minimal", compat="override", join="override", combine_attrs="drop_conflicts")
+        stacked = stacked.assign_coords(start=("start", labels))
+        self.runs_ = stacked
+        self.attractors_ = group_attractors(stacked, design, settings)
+        self.runs_["attractor"] = (("sample", "start"), self.attractors_.attrs.pop("_membership"))
+        self.model_runs_ = int(runs)
+        return self
+
+    def _seeded_states(self, samples: xr.Dataset, rest: xr.Dataset, design: Design) -> np.ndarray:
+        n = samples.sizes["sample"]
+        settings = self.settings
+        inputs = samples.drop_vars([v for v in INITIAL_VARIABLES if v in samples.variables])
+        static = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
+        half_backlash = 0.5 * (np.asarray(samples["backlash"].values, float) if "backlash" in samples
+                               else np.full(n, design.backlash))
+        velocity = np.maximum(_velocity_scale(samples, design)[:, None], np.abs(_final_states(rest)[:, 3:]))
+        widths = settings.box * np.concatenate([np.repeat(half_backlash[:, None], 3, axis=1), velocity], axis=1)
+        seed = self.seed if isinstance(self.seed, np.random.SeedSequence) else np.random.SeedSequence(self.seed)
+        rng = np.random.default_rng(seed)
+        draws = rng.uniform(-1.0, 1.0, size=(settings.seeded, n, 6))
+        return (static[None] + draws * widths[None]).reshape(settings.seeded * n, 6)
+
+
+def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
+    periodic = str(a["regime"]).startswith("period-") and str(b["regime"]).startswith("period-")
+    # a non-periodic response's extremes and point cloud are samples of the kept window: looser
+    widen = 1.0 if periodic else NON_PERIODIC_FACTOR
+    for name in COMPARED_QOIS:
+        scale = max(abs(a[name]), abs(b[name]), 1e-300)
+        if not abs(a[name] - b[name]) <= widen * settings.tolerance * scale:
+            return False
+    for name in COMPARED_FRACTIONS:
+        if not abs(a[name] - b[name]) <= widen * settings.tolerance:
+            return False
+    limit = widen * settings.poincare_tolerance
+    distance = max(directed_hausdorff(a["points"], b["points"])[0], directed_hausdorff(b["points"], a["points"])[0])
+    return bool(distance <= limit)
+
+
+def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiStart) -> xr.Dataset:
+    """Group the runs of every sample (dims ``sample``, ``start``) into attractors (see the module docstring)."""
+    n, labels = runs.sizes["sample"], [str(v) for v in runs["start"].values]
+    half_backlash = float(design.half_backlash) if design is not None else float(runs.attrs.get("half_backlash", 1.0))
+    speed = np.asarray(runs["pinion_speed"].values if "pinion_speed" in runs.coords else runs["pinion_speed"].values)
+    speed = speed if speed.ndim == 1 else speed[0]
+    z1 = design.z1 if design is not None else int(runs.attrs.get("design_z1", 1))
+    members: list[list[list[int]]] = []
+    representatives: list[list[dict[str, Any]]] = []
+    membership = np.zeros((n, len(labels)), dtype=np.int64)
+    for i in range(n):
+        omega_b = 2.0 * math.pi * z1 * float(np.ravel(speed)[i]) / 60.0 * half_backlash
+        found: list[dict[str, Any]] = []
+        groups: list[list[int]] = []
+        for j in range(len(labels)):
+            run = runs.isel(sample=i, start=j)
+            points = np.stack([np.asarray(run["poincare_x"].values) / half_backlash,
+                               np.asarray(run["poincare_x_velocity"].values) / omega_b], axis=1)
+            entry = {name: float(run[name].values) for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)}
+            entry.update(regime=str(run["regime"].values), points=points[np.all(np.isfinite(points), axis=1)])
+            if entry["points"].size == 0:
+                membership[i, j] = -1
+                continue
+            match = next((k for k, other in enumerate(found) if _same(other, entry, settings)), None)
+            if match is None:
+                found.append(entry)
+                groups.append([j])
+                membership[i, j] = len(found) - 1
+            else:
+                groups[match].append(j)
+                membership[i, j] = match
+        members.append(groups)
+        representatives.append(found)
+    width = max((len(groups) for groups in members), default=0)
+    data: dict[str, Any] = {}
+    for name in ATTRACTOR_QOIS:
+        if name not in runs:
+            continue
+        values = np.full((n, width), np.nan)
+        for i, groups in enumerate(members):
+            for k, group in enumerate(groups):
+                values[i, k] = float(runs[name].isel(sample=i, start=group[0]).values)
+        data[name] = (("sample", "attractor"), values, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
+    regime = np.full((n, width), "", dtype=object)
+    first = np.full((n, width), "", dtype=object)
+    which = np.full((n, width), "", dtype=object)
+    share = np.full((n, width), np.nan)
+    for i, groups in enumerate(members):
+        total = sum(len(group) for group in groups)
+        for k, group in enumerate(groups):
+            regime[i, k] = str(runs["regime"].isel(sample=i, start=group[0]).values)
+            first[i, k] = labels[group[0]]
+            which[i, k] = ",".join(labels[j] for j in group)
+            share[i, k] = len(group) / total
+    data.update({
+        "regime": (("sample", "attractor"), regime.astype(str), {"long_name": "response regime of the attractor"}),
+        "first_start": (("sample", "attractor"), first.astype(str), {"long_name": "first start that reached it"}),
+        "starts": (("sample", "attractor"), which.astype(str), {"long_name": "starts that reached it"}),
+        "share": (("sample", "attractor"), share, {"units": "1", "long_name": "share of the starts that reached it"}),
+        "attractor_count": ("sample", np.array([len(g) for g in members], dtype=np.int64),
+                            {"units": "1", "long_name": "distinct steady responses found"}),
+    })
+    out = xr.Dataset(data, coords={"attractor": ("attractor", np.arange(width))})
+    out.attrs.update(settings.to_dict())
+    out.attrs["_membership"] = membership
+    return out
+
+
+def extremes_over_attractors(attractors: xr.Dataset, qois: Sequence[str]) -> xr.Dataset:
+    """Per sample, the largest and smallest value of each QoI over its attractors, with which attractor and
+    first start gave it: ``<qoi>_max``, ``<qoi>_min``, ``<qoi>_max_start``, ``<qoi>_min_start`` and
+    ``<qoi>_max_attractor``, ``<qoi>_min_attractor``."""
+    out = xr.Dataset()
+    for name in qois:
+        values = attractors[name].values
+        finite = np.where(np.isfinite(values), values, np.nan)
+        for bound, pick in (("max", np.nanargmax), ("min", np.nanargmin)):
+            index = np.array([pick(row) if np.isfinite(row).any() else 0 for row in finite], dtype=np.int64)
+            rows = np.arange(values.shape[0])
+            units, long_name = QOI_INFO[name]
+            out[f"{name}_{bound}"] = ("sample", finite[rows, index],
+                                      {"units": units, "long_name": f"{bound} over attractors of {name}"})
+            out[f"{name}_{bound}_attractor"] = ("sample", index, {"long_name": f"attractor giving {name}_{bound}"})
+            out[f"{name}_{bound}_start"] = ("sample", attractors["first_start"].values[rows, index].astype(str),
+                                            {"long_name": f"first start reaching the attractor of {name}_{bound}"})
+    return out
+
+
+__all__ = ["MultiStart", "MultiStartSearch", "StartedEvaluator", "group_attractors", "extremes_over_attractors",
+           "sweep_order", "up_down_sweeps", "INITIAL_VARIABLES", "FINAL_VARIABLES", "ATTRACTOR_QOIS"]

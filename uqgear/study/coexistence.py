@@ -1,0 +1,174 @@
+"""The gear model of a study run from several starts per point (``simulation.starts``).
+
+With ``starts`` set, every analysis that runs the model gets :class:`MultiStartModel` in place of the
+single-start batch model (:meth:`uqgear.study.analyses.AnalysisContext.model`). It runs each point
+from rest, from the neighbouring points' final states in an up- and a down-sweep along the pinion
+speed, and from seeded random states (:mod:`uqgear.dynamics.attractors`), groups the steady
+responses into attractors and returns, per point:
+
+* every QoI of the **worst attractor** (the largest peak mesh force) under its plain name, with its
+  Poincare points as ``poincare_x`` / ``poincare_x_velocity``: statistics, Sobol indices,
+  surrogates, headline loads and the regime classification all see the response that loads the
+  gear most;
+* ``<qoi>_max`` and ``<qoi>_min`` over the attractors with ``<qoi>_max_start`` /
+  ``<qoi>_min_start`` (the first start that reached it) and ``_attractor`` (its index), and
+  ``<qoi>_rest`` (the rest start's value);
+* ``attractor_count`` and per attractor (dim ``attractor``) its peak mesh force, separation
+  fraction, regime, share of starts and starts;
+* the Poincare points of the rest, up- and down-sweep starts (``poincare_x_rest``, ``_up``,
+  ``_down``) for bifurcation diagrams that show coexistence.
+
+:func:`interval_over_attractors` bounds QoIs over interval parameters and attractors (a scan: a
+response that jumps between attractors is the non-smooth case surrogates cannot bound).
+"""
+
+from __future__ import annotations
+
+import json
+import functools
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..dynamics.attractors import ATTRACTOR_QOIS, MultiStart, MultiStartSearch, StartedEvaluator
+from ..physics.design import Design
+from ..physics.integration import QOI_INFO
+from ..uq.attractor_bounds import scan_over_attractors
+from .model_runs import RunnerModel
+from .settings import SimulationSettings
+from .variables import variable_units_short
+
+#: QoIs reported per attractor along dim ``attractor``.
+PER_ATTRACTOR = ("peak_mesh_force", "fraction_separation", "fraction_back_contact", "dte_rms")
+
+
+def evaluate_started(samples: xr.Dataset, *, design: Design, simulation: SimulationSettings, threads: int | None,
+                     classify_seed: Any) -> xr.Dataset:
+    """One batch with start states (``initial_<state>``), as :class:`StartedEvaluator`; module-level so that a
+    dask worker can run it."""
+    options = {"n_periods": simulation.n_periods, "keep_periods": simulation.keep_periods,
+               "lyapunov": simulation.lyapunov, "damping_in_separation": simulation.damping_in_separation,
+               "stiffness": simulation.stiffness, "steps_per_mode": simulation.steps_per_mode, "threads": threads}
+    return StartedEvaluator(design, options, classify_seed)(samples)
+
+
+class MultiStartModel:
+    """The model ``samples -> results`` with every point run from several starts (module docstring).
+
+    Parameters
+    ----------
+    inner : callable
+        The started batch model (a :class:`~uqgear.study.analyses.RunnerModel` of
+        :func:`evaluate_started`).
+    design : Design
+    settings : MultiStart
+    seed : SeedSequence
+        Seed of the random starts (the same for every call).
+    poincare : bool
+        Keep Poincare points.
+    """
+
+    def __init__(self, inner: Any, design: Design, settings: MultiStart, seed: Any, poincare: bool = True) -> None:
+        self.inner = inner
+        self.design = design
+        self.settings = settings
+        self.seed = seed
+        self.poincare = poincare
+
+    @property
+    def runs(self) -> int:
+        """Model runs made so far."""
+        return int(self.inner.runs)
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        search = MultiStartSearch(self.settings, self.seed).fit(self.inner, samples, self.design)
+        return summarise(search, samples, poincare=self.poincare)
+
+
+def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = True) -> xr.Dataset:
+    """Per-sample outputs of a multi-start search (the layout of the module docstring)."""
+    runs, attractors = search.runs_, search.attractors_
+    n = samples.sizes["sample"]
+    rows = np.arange(n)
+    peak = np.where(np.isfinite(attractors["peak_mesh_force"].values), attractors["peak_mesh_force"].values, -np.inf)
+    worst = np.argmax(peak, axis=1)
+    labels = [str(label) for label in runs["start"].values]
+    first = [labels.index(str(attractors["first_start"].values[i, worst[i]])) for i in range(n)]
+    out = xr.Dataset(coords={name: ("sample", samples[name].values) for name in samples.data_vars
+                             if samples[name].dims == ("sample",) and not name.startswith("initial_")})
+    for name in [*QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
+        if name not in runs:
+            continue
+        values = runs[name].transpose("sample", "start").values
+        out[name] = ("sample", values[rows, first], dict(runs[name].attrs))
+        out[f"{name}_rest"] = ("sample", values[:, 0], {**runs[name].attrs, "long_name": f"{name} from rest"})
+    for name in ATTRACTOR_QOIS:
+        if name not in attractors:
+            continue
+        values = np.where(np.isfinite(attractors[name].values), attractors[name].values, np.nan)
+        for bound, pick in (("max", np.nanargmax), ("min", np.nanargmin)):
+            index = np.array([pick(row) for row in values], dtype=np.int64)
+            out[f"{name}_{bound}"] = ("sample", values[rows, index],
+                                      {"units": QOI_INFO[name][0], "long_name": f"{bound} over attractors of {name}"})
+            out[f"{name}_{bound}_attractor"] = ("sample", index, {"long_name": f"attractor giving {name}_{bound}"})
+            out[f"{name}_{bound}_start"] = ("sample", attractors["first_start"].values[rows, index].astype(str),
+                                            {"long_name": f"first start that reached the attractor of {name}_{bound}"})
+    out["attractor_count"] = attractors["attractor_count"]
+    for name in PER_ATTRACTOR:
+        if name in attractors:
+            out[f"attractor_{name}"] = attractors[name]
+    for name in ("regime", "share", "starts", "first_start"):
+        out[f"attractor_{name}"] = attractors[name]
+    out["worst_attractor_start"] = ("sample", np.array([labels[j] for j in first], dtype=str),
+                                    {"long_name": "first start of the attractor with the largest peak mesh force"})
+    if poincare:
+        for name in ("poincare_x", "poincare_x_velocity"):
+            values = runs[name].transpose("sample", "start", "period").values
+            out[name] = (("sample", "period"), values[rows, first], dict(runs[name].attrs))
+        for start in ("rest", "up", "down"):
+            if start in labels:
+                out[f"poincare_x_{start}"] = (("sample", "period"), runs["poincare_x"].sel(start=start)
+                                              .transpose("sample", "period").values,
+                                              {"units": "m", "long_name": f"Poincare points of the DTE, {start} start"})
+        out = out.assign_coords(period=runs["period"].values)
+    out.attrs.update(starts=json.dumps(search.settings.to_dict()), model_runs_per_point=search.model_runs_ / max(n, 1))
+    return out
+
+
+def started_model(context: Any, simulation: SimulationSettings) -> RunnerModel:
+    """The batch model with start states of an analysis (an :class:`~uqgear.study.analyses.AnalysisContext`),
+    through the analysis's runner, checkpointed under a key of its own."""
+    function = functools.partial(evaluate_started, design=context.design, simulation=simulation,
+                                 threads=context.threads, classify_seed=context.stage_seed(99))
+    key = json.dumps({"analysis": context.spec.name, "design": context.design.to_dict(), "started": True,
+                      "simulation": simulation.to_dict(),
+                      "seed": [str(context.seed.entropy), list(context.seed.spawn_key)]}, sort_keys=True)
+    return RunnerModel(context.runner, function, key, context.resume)
+
+
+def multi_start_model(context: Any, simulation: SimulationSettings, poincare: bool) -> MultiStartModel:
+    """The multi-start model of an analysis (``simulation.starts`` set)."""
+    return MultiStartModel(started_model(context, simulation), context.design, simulation.starts,
+                           context.stage_seed(98), poincare)
+
+
+def interval_over_attractors(context: Any, names: Sequence[str], qois: Sequence[str],
+                             fixed: Mapping[str, float]) -> xr.Dataset:
+    """Bounds of each QoI over the interval parameters ``names`` and the attractors, at every operating point."""
+    space = context.parameter_space(names, fixed)
+    model = context.model(poincare=False)
+    points = int(context.options["points"] or 9)
+    result = scan_over_attractors(model, space, context.sweep(), qois, points)
+    for name in names:
+        if name in result.coords:
+            result[name].attrs.setdefault("units", variable_units_short(name))
+    result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(list(names)),
+                        fixed_inputs=json.dumps(dict(fixed)), method="scan over attractors",
+                        scan_points=points)
+    return result
+
+
+__all__ = ["MultiStartModel", "multi_start_model", "started_model", "evaluate_started", "summarise",
+           "interval_over_attractors", "PER_ATTRACTOR"]

@@ -1,0 +1,50 @@
+"""Validation of the diagnosis on virtual-rig campaigns whose effects are withheld: the blind test.
+
+:mod:`.campaigns` plans the campaigns of a suite and makes them with the
+virtual rig, :mod:`.oracle` judges how visible their effects are
+independently of the diagnosis, :mod:`.blind_test` diagnoses them blind and
+:mod:`.scores` scores the verdicts. The record of what the diagnosis's rules
+were measured on is docs/validation/diagnosis.md.
+
+May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
+:mod:`uqgear.rig`, :mod:`uqgear.report`, :mod:`uqgear.calibration` and
+:mod:`uqgear.diagnosis`.
+"""
+
+from __future__ import annotations
+
+from .blind_test import blindtest, diagnose_campaign
+from .campaigns import (
+    HEALTHY,
+    PLANS,
+    STRENGTHS,
+    SUITES,
+    CampaignSpec,
+    operating_points_of,
+    plan_campaigns,
+    plan_real_world,
+    rig_campaign,
+    second_design,
+)
+from .oracle import effect_visibility, oracle_gap
+from .scores import blindtest_dataset, set_scores, summarise
+
+__all__ = [
+    "blindtest",
+    "diagnose_campaign",
+    "plan_campaigns",
+    "plan_real_world",
+    "rig_campaign",
+    "summarise",
+    "set_scores",
+    "blindtest_dataset",
+    "oracle_gap",
+    "effect_visibility",
+    "second_design",
+    "operating_points_of",
+    "CampaignSpec",
+    "HEALTHY",
+    "STRENGTHS",
+    "PLANS",
+    "SUITES",
+]
