@@ -102,8 +102,39 @@ def diagnose(
 
     Examples
     --------
-    >>> import uqgear, tempfile
-    >>> content = uqgear.diagnose(uqgear.example_rig_file("healthy"), tempfile.mkdtemp())  # doctest: +SKIP
+    A virtual rig with a pinion 40 um eccentric (three short runs, a small
+    fitting budget; the default settings are sized for real campaigns):
+
+    >>> import pathlib, tempfile
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> runs = {"pinion_speed": [1250.0, 2200.0, 3400.0], "drive_torque": [6000.0, 7500.0, 5500.0]}
+    >>> rig = uqgear.simulate_campaign(design, runs, effects=[uqgear.make_effect("eccentricity", {"amplitude": 40e-6})],
+    ...                                seed=3, duration=0.25, run_in=0.2)
+    >>> budget = uqgear.DiagnosisSettings(nominal_refits=0, nominal_evaluations=10, screening_evaluations=3,
+    ...                                   full_fit_evaluations=4, bootstrap_resamples=50, extra_full_fits=0, promoted=1)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "diagnosis"
+    ...     content = uqgear.diagnose(rig, out, effects=["eccentricity"], settings=budget, workers=1,
+    ...                               pitch_classes=None, report=False)
+    ...     written = sorted(path.name for path in out.iterdir())
+    >>> content["verdict"], written
+    ('eccentricity', ['diagnosis.json', 'diagnosis.nc'])
+
+    A mistake in the options is found before any work and leaves no folder:
+
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "diagnosis"
+    ...     try:
+    ...         uqgear.diagnose(rig, out, effects=["eccentricty"])
+    ...     except uqgear.UqgearError as error:
+    ...         print(type(error).__name__, out.exists())
+    DiagnosisError False
+
+    The bundled healthy campaign with the default settings (about a minute):
+
+    >>> with tempfile.TemporaryDirectory() as folder:  # doctest: +SKIP
+    ...     content = uqgear.diagnose(uqgear.example_rig_file("healthy"), folder)
     >>> content["verdict"]  # doctest: +SKIP
     'none'
     """
