@@ -57,8 +57,9 @@ def test_examples_run(name, tmp_path, monkeypatch):
         warnings.simplefilter("ignore")
         for test in tests:
             runner.run(test, out=report.write)
-    assert runner.failures == 0, f"uqgear.{name}: {runner.failures} of {runner.tries} examples failed\n" \
-        f"{report.getvalue()}"
+    assert runner.failures == 0, (
+        f"uqgear.{name}: {runner.failures} of {runner.tries} examples failed\n{report.getvalue()}"
+    )
     assert runner.tries > 0, f"uqgear.{name}: every example is skipped"
     written = os.listdir(tmp_path)
     assert written == [], f"uqgear.{name}: the examples wrote {written} into the working directory"
