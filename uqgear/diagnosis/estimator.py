@@ -220,30 +220,9 @@ class Diagnosis:
 
     Examples
     --------
-    A virtual rig with a pinion 40 um eccentric, three short runs, two
-    candidate effects and a small fitting budget (seconds; the default
-    settings are sized for real campaigns):
-
     >>> import uqgear
-    >>> design = uqgear.load_design("locomotive")
-    >>> runs = {"pinion_speed": [1250.0, 2200.0, 3400.0], "drive_torque": [6000.0, 7500.0, 5500.0]}
-    >>> rig = uqgear.simulate_campaign(design, runs, effects=[uqgear.make_effect("eccentricity", {"amplitude": 40e-6})],
-    ...                                seed=3, duration=0.25, run_in=0.2)
-    >>> budget = uqgear.DiagnosisSettings(nominal_refits=0, nominal_evaluations=10, screening_evaluations=3,
-    ...                                   full_fit_evaluations=4, bootstrap_resamples=50, extra_full_fits=0, promoted=1)
-    >>> diagnosis = uqgear.Diagnosis(effects=["eccentricity", "tooth_damage"], settings=budget, workers=1,
-    ...                              pitch_classes=None).fit(rig)
-    >>> diagnosis.decision_.verdict, [entry["effect"] for entry in diagnosis.summary_["ranking"]]
-    ('eccentricity', ['eccentricity', 'tooth_damage'])
-    >>> found = diagnosis.summary_["effects"][0]
-    >>> low, high = found["parameter_intervals"]["amplitude"]       # m, the true 40 um inside
-    >>> found["variant"], low < 40e-6 < high
-    ('eccentricity[pinion]', True)
-
-    The bundled eccentricity campaign with the default settings (about a minute):
-
-    >>> diagnosis = uqgear.Diagnosis(effects=["eccentricity"], workers=1)  # doctest: +SKIP
-    >>> diagnosis.fit(uqgear.example_rig_file("eccentricity")).decision_.verdict  # doctest: +SKIP
+    >>> rig = uqgear.read_rig(uqgear.example_rig_file("eccentricity")).isel(op=[2, 4, 6], time=slice(0, 5120))
+    >>> uqgear.Diagnosis(effects=["eccentricity"], workers=1).fit(rig).decision_.verdict
     'eccentricity'
     """
 
