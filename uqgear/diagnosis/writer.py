@@ -102,21 +102,14 @@ def diagnose(
 
     Examples
     --------
-    A virtual rig with a pinion 40 um eccentric (three short runs, a small
-    fitting budget; the default settings are sized for real campaigns):
+    Three runs of the bundled eccentricity campaign, cut to 0.25 s each:
 
     >>> import pathlib, tempfile
     >>> import uqgear
-    >>> design = uqgear.load_design("locomotive")
-    >>> runs = {"pinion_speed": [1250.0, 2200.0, 3400.0], "drive_torque": [6000.0, 7500.0, 5500.0]}
-    >>> rig = uqgear.simulate_campaign(design, runs, effects=[uqgear.make_effect("eccentricity", {"amplitude": 40e-6})],
-    ...                                seed=3, duration=0.25, run_in=0.2)
-    >>> budget = uqgear.DiagnosisSettings(nominal_refits=0, nominal_evaluations=10, screening_evaluations=3,
-    ...                                   full_fit_evaluations=4, bootstrap_resamples=50, extra_full_fits=0, promoted=1)
+    >>> rig = uqgear.read_rig(uqgear.example_rig_file("eccentricity")).isel(op=[2, 4, 6], time=slice(0, 5120))
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     out = pathlib.Path(folder) / "diagnosis"
-    ...     content = uqgear.diagnose(rig, out, effects=["eccentricity"], settings=budget, workers=1,
-    ...                               pitch_classes=None, report=False)
+    ...     content = uqgear.diagnose(rig, out, effects=["eccentricity"], workers=1, report=False)
     ...     written = sorted(path.name for path in out.iterdir())
     >>> content["verdict"], written
     ('eccentricity', ['diagnosis.json', 'diagnosis.nc'])
