@@ -34,10 +34,10 @@ def _examples(name: str) -> list[doctest.DocTest]:
     return [test for test in finder.find(obj, f"uqgear.{name}", globs={}) if test.examples]
 
 
-def test_every_public_name_is_listed():
-    """The names run below are all of ``uqgear.__all__`` but ``__version__``."""
-    assert len(PUBLIC) == len(uqgear.__all__) - len(NOT_DOCUMENTED)
-    assert isinstance(uqgear.__version__, str)
+def test_only_plain_values_go_undocumented():
+    """A name is left out only when it is public and a plain value without a docstring of its own."""
+    assert NOT_DOCUMENTED <= set(uqgear.__all__)
+    assert all(isinstance(getattr(uqgear, name), str) for name in NOT_DOCUMENTED)
 
 
 @pytest.mark.parametrize("name", PUBLIC)
