@@ -9,18 +9,14 @@ fitted on top and scored on runs it was not fitted to. The verdict names the
 effect the evidence supports, with its fitted parameters and their intervals.
 """
 
-import tempfile
-from pathlib import Path
-
 import matplotlib.pyplot as plt
-import xarray as xr
 
 import uqgear
 
 rig = uqgear.example_rig_file("eccentricity")
-with tempfile.TemporaryDirectory() as folder:
-    summary = uqgear.diagnose(rig, Path(folder) / "diagnosis", seed=0, report=False)
-    gap_map = xr.load_dataset(Path(folder) / "diagnosis" / "diagnosis.nc")
+diagnosis = uqgear.Diagnosis(seed=0).fit(rig)   # settings in the constructor, the work in fit
+summary = diagnosis.to_dict()                   # what diagnosis.json holds
+gap_map = diagnosis.result_                     # what diagnosis.nc holds
 
 print(f"verdict: {summary['verdict']}")
 print(f"reason:  {summary['reason']}")
@@ -34,7 +30,7 @@ print("candidates, best first:")
 for entry in summary["ranking"]:
     print(
         f"  {entry['effect']:22s} held-out score {entry['score']:8.1f} nats, "
-        f"shrinks the gap by {entry['shrink_fraction']:.0%}"
+        f"shrinks the gap by {max(entry['shrink_fraction'], 0.0):.0%}"
     )
 
 # %%
