@@ -101,6 +101,29 @@ def calibrate(
         A step failed after the input was accepted: ``out_dir`` keeps
         ``failure.json`` (the failed step, the error, the finished steps) and
         the error's ``kept`` names it.
+
+    Examples
+    --------
+    A mistake in the input is found before any work and leaves no folder:
+
+    >>> import pathlib, tempfile
+    >>> import uqgear
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "calibration"
+    ...     try:
+    ...         uqgear.calibrate(pathlib.Path(folder) / "missing.nc", out)
+    ...     except uqgear.RigDataError as error:
+    ...         print(str(error).endswith("missing.nc: rig data file not found"), out.exists())
+    True False
+
+    The bundled healthy campaign, calibrated with the default settings
+    (minutes; :class:`Calibration` shows a small calibration that runs in
+    seconds):
+
+    >>> with tempfile.TemporaryDirectory() as folder:  # doctest: +SKIP
+    ...     calibration = uqgear.calibrate(uqgear.example_rig_file("healthy"), folder)
+    ...     print(sorted(path.name for path in pathlib.Path(folder).iterdir()))
+    ['calibration.json', 'posterior.nc', 'report.html']
     """
     nominal = None if design is None else (design if isinstance(design, Design) else load_design(design))
     calibration = Calibration(

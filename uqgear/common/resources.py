@@ -44,6 +44,16 @@ def bundled_names(kind: str) -> tuple[str, ...]:
     Returns
     -------
     tuple of str
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> uqgear.bundled_names("design")
+    ('locomotive', 'pair_17_38')
+    >>> "smoke" in uqgear.bundled_names("study"), "eccentricity" in uqgear.bundled_names("rig")
+    (True, True)
+    >>> all(uqgear.example_rig_file(name).is_file() for name in uqgear.bundled_names("rig"))
+    True
     """
     if kind not in _KINDS:
         raise ValueError(f"kind: expected one of {', '.join(_KINDS)}; got {kind!r}")
@@ -103,6 +113,21 @@ def example_rig_file(name: str = "healthy") -> Path:
     pathlib.Path
         A ``uqgear-rig/1`` netCDF file to try ``uqgear calibrate`` or
         ``uqgear diagnose`` on.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> path = uqgear.example_rig_file("healthy")
+    >>> path.name, path.is_file()
+    ('healthy.nc', True)
+    >>> rig = uqgear.read_rig(path)
+    >>> rig.attrs["conventions"], rig.sizes["op"], list(rig.data_vars)
+    ('uqgear-rig/1', 8, ['te', 'acc_pinion', 'acc_gear'])
+    >>> try:
+    ...     uqgear.example_rig_file("broken")
+    ... except uqgear.UqgearError as error:
+    ...     print(str(error).split(" (")[0])
+    'broken': not a bundled rig
     """
     return bundled_file("rig", name)
 

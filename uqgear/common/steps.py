@@ -29,17 +29,23 @@ FAILURE_RECORD = "failure.json"
 class StepLog:
     """The finished steps of one computation, in order, each with what it found.
 
-    Example
-    -------
-    ::
-
-        steps = StepLog()
-        with steps.step("fit the nominal model") as found:
-            nominal = fit_nominal(case)
-            found["parameters"] = nominal.values
-
     A failure inside a step is raised as :class:`InternalError` naming it;
     the steps finished before are attached to that error (``finished``).
+
+    Examples
+    --------
+    >>> from uqgear.common.steps import StepLog
+    >>> steps = StepLog()
+    >>> with steps.step("count the teeth") as found:
+    ...     found["teeth"] = 21 + 101
+    >>> [(record["step"], record["teeth"]) for record in steps.finished]
+    [('count the teeth', 122)]
+    >>> try:
+    ...     with steps.step("divide the load") as found:
+    ...         found["share"] = 1 / 0
+    ... except Exception as error:
+    ...     print(type(error).__name__, error.step, [record["step"] for record in error.finished])
+    InternalError divide the load ['count the teeth']
     """
 
     def __init__(self) -> None:

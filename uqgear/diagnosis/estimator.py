@@ -221,8 +221,8 @@ class Diagnosis:
     Examples
     --------
     >>> import uqgear
-    >>> diagnosis = uqgear.Diagnosis(effects=["eccentricity"], workers=1)  # doctest: +SKIP
-    >>> diagnosis.fit(uqgear.example_rig_file("eccentricity")).decision_.verdict  # doctest: +SKIP
+    >>> rig = uqgear.read_rig(uqgear.example_rig_file("eccentricity")).isel(op=[2, 4, 6], time=slice(0, 5120))
+    >>> uqgear.Diagnosis(effects=["eccentricity"], workers=1).fit(rig).decision_.verdict
     'eccentricity'
     """
 

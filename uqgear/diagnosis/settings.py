@@ -64,6 +64,21 @@ class DiagnosisSettings:
 
     Settings are checked when made: a value outside its range raises
     :class:`~uqgear.diagnosis.DiagnosisError` naming it.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> import uqgear
+    >>> settings = uqgear.DiagnosisSettings(score_threshold=20.0)
+    >>> settings.score_threshold, settings.changed()
+    (20.0, {'score_threshold': 20.0})
+    >>> uqgear.DiagnosisSettings.describe("score_threshold")["unit"]
+    'nat'
+    >>> try:
+    ...     dataclasses.replace(settings, max_effects=0)
+    ... except uqgear.UqgearError as error:
+    ...     print(type(error).__name__, "-", error)
+    DiagnosisError - settings.max_effects: expected a value in [1, inf] (effects); got 0
     """
 
     # ---- the verdict (step 5)

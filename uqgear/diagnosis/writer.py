@@ -102,8 +102,32 @@ def diagnose(
 
     Examples
     --------
-    >>> import uqgear, tempfile
-    >>> content = uqgear.diagnose(uqgear.example_rig_file("healthy"), tempfile.mkdtemp())  # doctest: +SKIP
+    Three runs of the bundled eccentricity campaign, cut to 0.25 s each:
+
+    >>> import pathlib, tempfile
+    >>> import uqgear
+    >>> rig = uqgear.read_rig(uqgear.example_rig_file("eccentricity")).isel(op=[2, 4, 6], time=slice(0, 5120))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "diagnosis"
+    ...     content = uqgear.diagnose(rig, out, effects=["eccentricity"], workers=1, report=False)
+    ...     written = sorted(path.name for path in out.iterdir())
+    >>> content["verdict"], written
+    ('eccentricity', ['diagnosis.json', 'diagnosis.nc'])
+
+    A mistake in the options is found before any work and leaves no folder:
+
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "diagnosis"
+    ...     try:
+    ...         uqgear.diagnose(rig, out, effects=["eccentricty"])
+    ...     except uqgear.UqgearError as error:
+    ...         print(type(error).__name__, out.exists())
+    DiagnosisError False
+
+    The bundled healthy campaign with the default settings (about a minute):
+
+    >>> with tempfile.TemporaryDirectory() as folder:  # doctest: +SKIP
+    ...     content = uqgear.diagnose(uqgear.example_rig_file("healthy"), folder)
     >>> content["verdict"]  # doctest: +SKIP
     'none'
     """

@@ -237,7 +237,7 @@ class PeriodicOrbit:
     qois : dict
         Peak mesh force, DTE extremes, separation fractions (:func:`orbit_qois`).
     residual : float
-        Scaled |P^n(s) - s| at the end.
+        Scaled ``|P^n(s) - s|`` at the end.
     iterations : int
         Newton iterations taken.
     """

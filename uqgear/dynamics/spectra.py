@@ -179,6 +179,21 @@ def spectrum_dataset(
         One amplitude spectrum per variable, same names, dim ``frequency`` or
         ``order``; attrs ``pinion_speed``, ``mesh_frequency`` (Hz) and
         ``mesh_order`` (z1) when the run gives them.
+
+    Examples
+    --------
+    A period-1 response holds the mesh order (z1 = 21 per pinion
+    revolution) and its harmonics, and nothing at half the mesh order:
+
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> run = uqgear.simulate(design, 2000.0, 7000.0, 33e3, n_periods=200, keep_periods=100)
+    >>> spectrum = uqgear.spectrum_dataset(run, "x", against="order")
+    >>> spectrum.attrs["mesh_order"], round(spectrum.attrs["mesh_frequency"], 6)
+    (21, 700.0)
+    >>> amplitude_um = spectrum["x"].sel(order=[10.5, 21, 42], method="nearest") * 1e6
+    >>> amplitude_um.round(1).values
+    array([ 0. ,  7.3, 11.1])
     """
     names = [variable] if isinstance(variable, str) else list(variable)
     if not names:

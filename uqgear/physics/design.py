@@ -116,6 +116,18 @@ class Operation:
         Bounds (lower, upper) of the wheel/rail adhesion coefficient mu.
     pinion_speed_service, pinion_speed_sweep : tuple of float
         Pinion speed ranges in rpm: in service and for dynamic sweeps.
+
+    Examples
+    --------
+    The adhesion torque interval is T2 = mu Q g R_w at the two bounds of mu:
+
+    >>> import uqgear
+    >>> operation = uqgear.load_design("locomotive").operation
+    >>> operation.axle_load, operation.wheel_radius, operation.adhesion_coefficient
+    (23000.0, 0.625, (0.15, 0.33))
+    >>> lower, upper = operation.adhesion_torque_bounds()
+    >>> round(lower), round(upper), round(0.33 * 23000.0 * 9.80665 * 0.625)
+    (21146, 46520, 46520)
     """
 
     drive_torque: float = 7000.0
@@ -138,6 +150,21 @@ class Design:
 
     Use :func:`load_design` or :meth:`from_mapping` to build one with
     validation; :meth:`replace` returns a validated copy with some keys changed.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> design.z1, design.z2, round(design.z2 / design.z1, 3)
+    (21, 101, 4.81)
+    >>> wider = design.replace(face_width=0.15)      # a validated copy; the original is unchanged
+    >>> wider.face_width, design.face_width
+    (0.15, 0.125)
+    >>> try:
+    ...     design.replace(face_width=-0.1)
+    ... except uqgear.DesignError as error:
+    ...     print(error)
+    face_width: expected a value in [0.001, 1.5] m; got -0.1
     """
 
     z1: int
@@ -289,7 +316,19 @@ def _parse_operation(raw: Any, where: str) -> Operation:
 
 
 def bundled_designs() -> list[str]:
-    """Names of the designs shipped with the package (``uqgear/data/designs``)."""
+    """Names of the designs shipped with the package (``uqgear/data/designs``).
+
+    Examples
+    --------
+    >>> import warnings
+    >>> import uqgear
+    >>> uqgear.bundled_designs()
+    ['locomotive', 'pair_17_38']
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore", uqgear.UndercutWarning)   # the 17-tooth pinion is undercut
+    ...     [(design.z1, design.z2) for design in map(uqgear.load_design, uqgear.bundled_designs())]
+    [(21, 101), (17, 38)]
+    """
     return list(bundled_names("design"))
 
 
@@ -316,6 +355,23 @@ def load_design(
     DesignError
         Unknown name, unreadable file, or a key that fails validation. The
         message names the file and the key.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> design.name, design.module, design.backlash
+    ('locomotive', 0.009, 0.0003)
+    >>> damped = uqgear.load_design("locomotive", overrides={"zeta_mesh": 0.08})
+    >>> damped.zeta_mesh, damped.z1
+    (0.08, 21)
+    >>> uqgear.load_design(damped) is damped            # a Design passes through
+    True
+    >>> try:
+    ...     uqgear.load_design("locomotive", overrides={"backlash": -1e-4})
+    ... except uqgear.DesignError as error:
+    ...     print(error)
+    backlash: expected a value in [0, 0.005] m, total backlash 2b; got -0.0001
     """
     if isinstance(name_or_path, Design):
         design = name_or_path

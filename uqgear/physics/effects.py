@@ -199,7 +199,46 @@ EFFECTS: dict[str, type[Effect]] = {
 
 
 def make_effect(name: str, values: Mapping[str, Any] | None = None) -> Effect:
-    """Build an effect of the library by name."""
+    """Build an effect of the library by name.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`EFFECTS` (``"eccentricity"``, ``"tooth_damage"``, ...).
+    values : mapping, optional
+        Parameters and choices of the effect; the defaults for the others.
+
+    Returns
+    -------
+    Effect
+
+    Raises
+    ------
+    EffectError
+        An unknown effect or parameter, or a value outside its bounds.
+
+    Examples
+    --------
+    A pinion tooth with 30 % stiffness loss widens the DTE range once per
+    pinion revolution (42 kept periods: two revolutions of the 21 teeth):
+
+    >>> import uqgear
+    >>> damage = uqgear.make_effect("tooth_damage", {"depth": 0.3})
+    >>> damage
+    ToothDamage(gear='pinion', tooth=0.0, depth=0.3)
+    >>> design = uqgear.load_design("locomotive")
+    >>> samples = uqgear.samples_from_mapping({"pinion_speed": [2000.0]})
+    >>> healthy = uqgear.simulate_batch(design, samples, n_periods=60, keep_periods=42)
+    >>> damaged = uqgear.simulate_batch(design, samples, n_periods=60, keep_periods=42, effects=[damage])
+    >>> print(f"DTE peak to peak {float(healthy['dte_peak_to_peak'][0]) * 1e6:.1f} um healthy, "
+    ...       f"{float(damaged['dte_peak_to_peak'][0]) * 1e6:.1f} um damaged")
+    DTE peak to peak 33.3 um healthy, 54.1 um damaged
+    >>> try:
+    ...     uqgear.make_effect("eccentricity", {"amplitude": -1e-5})
+    ... except uqgear.UqgearError as error:
+    ...     print(error)
+    eccentricity.amplitude: expected a value in [0, 0.0002] m; got -1e-05
+    """
     if name not in EFFECTS:
         raise EffectError(f"effect {name!r}: unknown; expected one of {', '.join(EFFECTS)}")
     return EFFECTS[name](values)

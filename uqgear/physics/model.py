@@ -83,7 +83,21 @@ def _cached_tables(design: Design, mode: str) -> StiffnessTables:
 
 
 def equivalent_mass(design: Design) -> float:
-    """m_e = I1 I2 / (I1 R2^2 + I2 R1^2) in kg."""
+    """m_e = I1 I2 / (I1 R2^2 + I2 R1^2) in kg.
+
+    Examples
+    --------
+    The base radii are m z cos(alpha) / 2:
+
+    >>> import math
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> cos_alpha = math.cos(math.radians(design.pressure_angle))
+    >>> r1, r2 = (design.module * z * cos_alpha / 2 for z in (design.z1, design.z2))
+    >>> mass = uqgear.equivalent_mass(design)
+    >>> round(mass, 2), math.isclose(mass, design.I1 * design.I2 / (design.I1 * r2**2 + design.I2 * r1**2))
+    (120.96, True)
+    """
     geometry = pair_geometry(design)
     r1, r2 = geometry.pinion.base_radius, geometry.gear.base_radius
     return design.I1 * design.I2 / (design.I1 * r2**2 + design.I2 * r1**2)
@@ -115,6 +129,27 @@ def natural_frequencies(design: Design, mesh_stiffness: float | None = None) -> 
     design : Design
     mesh_stiffness : float, optional
         Mesh stiffness in N/m; the Ishikawa mean by default.
+
+    Returns
+    -------
+    ndarray
+        The three frequencies in Hz, ascending.
+
+    Examples
+    --------
+    >>> import math
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> uqgear.natural_frequencies(design).round(1)
+    array([ 274.4,  434.1, 1546.5])
+
+    Without mesh stiffness the shafts vibrate alone on their bearings, at
+    sqrt(k/m) / 2 pi, and the gear pair turns freely (0 Hz):
+
+    >>> uqgear.natural_frequencies(design, mesh_stiffness=0.0).round(1)
+    array([  0. , 355.9, 649.7])
+    >>> [round(math.sqrt(k / m) / (2 * math.pi), 1) for k, m in ((design.k2, design.m2), (design.k1, design.m1))]
+    [355.9, 649.7]
     """
     k = mesh_stiffness if mesh_stiffness is not None else _cached_tables(design, "ishikawa").k_mean
     me = equivalent_mass(design)
@@ -276,6 +311,22 @@ def build_model(
     Returns
     -------
     ModelSetup
+
+    Examples
+    --------
+    The mesh frequency is z1 n1 / 60; the static state has the mesh
+    deflection under the mean mesh force and no velocities:
+
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> setup = uqgear.build_model(design, pinion_speed=2000.0, drive_torque=7000.0, adhesion_torque=33e3)
+    >>> round(float(setup.mesh_frequency), 6), design.z1 * 2000.0 / 60.0
+    (700.0, 700.0)
+    >>> state = setup.static_state()
+    >>> print(f"static DTE {state[2] * 1e6:.1f} um, velocities {state[3:].tolist()}")
+    static DTE 175.5 um, velocities [0.0, 0.0, 0.0]
+    >>> round(setup.derived["static_mesh_force"])
+    77450
     """
     pinion_speed = _check_operating("pinion_speed", pinion_speed, 0.0, "rpm")
     drive_torque = _check_operating("drive_torque", drive_torque, 0.0, "N m", strict=False)
@@ -392,6 +443,22 @@ def dimensionless(ds: xr.Dataset, characteristic_length: float | None = None) ->
         ``X``, ``Y1``, ``Y2`` and their tau-derivatives on coordinate ``tau``;
         attrs ``characteristic_length`` (b_c), ``omega_n`` and ``Omega``
         (mesh frequency / natural frequency).
+
+    Examples
+    --------
+    >>> import math
+    >>> import numpy as np
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> run = uqgear.simulate(design, 2000.0, 7000.0, 33e3, n_periods=60, keep_periods=20)
+    >>> scaled = uqgear.dimensionless(run)
+    >>> scaled.attrs["characteristic_length"] == design.backlash / 2, scaled.attrs["dimensionless_backlash"]
+    (True, 1.0)
+    >>> bool(np.allclose(scaled["X"] * design.backlash / 2, run["x"], rtol=1e-12, atol=0))
+    True
+    >>> omega = scaled.attrs["Omega"]
+    >>> round(omega, 3), math.isclose(omega, 2 * math.pi * 700.0 / scaled.attrs["omega_n"])
+    (0.879, True)
     """
     b_c = characteristic_length if characteristic_length is not None else ds.attrs["half_backlash"]
     if not b_c or b_c <= 0:

@@ -121,6 +121,22 @@ def iso6336_stiffness(design, geometry: PairGeometry | None = None) -> dict[str,
     dict
         ``c_prime`` and ``c_gamma`` in N/(mm um), and ``mesh_stiffness``
         = c_gamma x face width in N/m.
+
+    Examples
+    --------
+    c_gamma follows from c' and the contact ratio (ISO 6336-1 eq. for
+    spur gears), the mesh stiffness from c_gamma and the face width:
+
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> iso = uqgear.iso6336_stiffness(design)
+    >>> round(iso["c_prime"], 2), round(iso["c_gamma"], 2)
+    (13.99, 20.82)
+    >>> epsilon = uqgear.mesh_stiffness(design).attrs["contact_ratio"]
+    >>> round(iso["c_prime"] * (0.75 * epsilon + 0.25), 2)
+    20.82
+    >>> print(f"{iso['mesh_stiffness']:.3e} N/m = {iso['c_gamma'] * design.face_width * 1e9:.3e} N/m")
+    2.603e+09 N/m = 2.603e+09 N/m
     """
     geometry = geometry or pair_geometry(design)
     c = _ISO_Q_COEFFICIENTS
@@ -208,6 +224,23 @@ def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15, shear
         ``k_max`` (N/m), ``contact_ratio``, ``double_contact_fraction``,
         ISO 6336 ``iso_c_prime``, ``iso_c_gamma`` (N/(mm um)),
         ``iso_mesh_stiffness`` (N/m), ``shear_factor``, ``thickness``.
+
+    Examples
+    --------
+    One or two tooth pairs carry the load; the share of the period with two
+    is the contact ratio's fractional part:
+
+    >>> import uqgear
+    >>> stiffness = uqgear.mesh_stiffness(uqgear.load_design("locomotive"))
+    >>> sorted(set(stiffness["pairs_in_contact"].values.tolist()))
+    [1, 2]
+    >>> round(stiffness.attrs["contact_ratio"], 3), round(stiffness.attrs["double_contact_fraction"], 3)
+    (1.651, 0.651)
+    >>> print(f"k_mean {stiffness.attrs['k_mean']:.3g} N/m, ISO 6336 {stiffness.attrs['iso_mesh_stiffness']:.3g} N/m")
+    k_mean 3.03e+09 N/m, ISO 6336 2.6e+09 N/m
+    >>> k = stiffness["mesh_stiffness"]
+    >>> bool(k.min() >= stiffness.attrs["k_min"] * (1 - 1e-12)), round(float(k.mean()) / stiffness.attrs["k_mean"], 3)
+    (True, 1.0)
     """
     geometry = pair_geometry(design)
     eps = geometry.contact_ratio

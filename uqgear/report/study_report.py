@@ -278,7 +278,39 @@ def load_results(directory: str | Path) -> list[xr.Dataset]:
 
 
 def write_report(directory: str | Path, *, dpi: int = 110) -> Path:
-    """Build ``<directory>/report.html`` from the result files in the folder (written atomically)."""
+    """Build ``<directory>/report.html`` from the result files in the folder (written atomically).
+
+    Parameters
+    ----------
+    directory : str or Path
+        A folder of result files (``uqgear run`` or :func:`uqgear.run_study`).
+    dpi : int
+        The figures' resolution.
+
+    Returns
+    -------
+    pathlib.Path
+        The report written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import uqgear
+    >>> study = uqgear.parse_study('''
+    ... name: one_run
+    ... design: {name: locomotive}
+    ... operating_points: {pinion_speed: 2000, drive_torque: 7000, adhesion_torque: 33000}
+    ... simulation: {n_periods: 60, keep_periods: 20}
+    ... analyses:
+    ...   - {type: simulate, name: run, samples_per_period: 16}
+    ... ''')
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     _ = uqgear.run_study(study, folder, show_progress=False)
+    ...     report = uqgear.write_report(folder, dpi=60)
+    ...     html = report.read_text()
+    >>> report.name, html.startswith("<!DOCTYPE html>"), "<title>uqgear report: one_run</title>" in html
+    ('report.html', True, True)
+    """
     folder = Path(directory)
     text = build_report(load_results(folder), dpi=dpi)
     target = folder / REPORT_NAME

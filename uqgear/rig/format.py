@@ -258,6 +258,25 @@ def read_rig(path: str | os.PathLike[str], *, design: Design | None = None) -> x
     RigDataError
         The file is missing, unreadable or does not follow the format; the
         message names the file and the variable or attribute.
+
+    Examples
+    --------
+    The labelled healthy campaign shipped with the package: eight steady runs
+    of 1 s at 20480 Hz:
+
+    >>> import uqgear
+    >>> rig = uqgear.read_rig(uqgear.example_rig_file("healthy"))
+    >>> rig.attrs["conventions"], dict(rig.sizes)
+    ('uqgear-rig/1', {'op': 8, 'time': 20480})
+    >>> rig["pinion_speed"].values.tolist()
+    [600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0]
+    >>> rig["te"].attrs["units"], float(1 / (rig["time"][1] - rig["time"][0]))
+    ('m', 20480.0)
+    >>> try:
+    ...     uqgear.read_rig("missing/campaign.nc")
+    ... except uqgear.RigDataError as error:
+    ...     print(error)
+    missing/campaign.nc: rig data file not found
     """
     path = Path(path)
     if not path.is_file():
@@ -417,6 +436,33 @@ def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
     ------
     RigDataError
         The Dataset does not follow the format, or the folder does not exist.
+
+    Examples
+    --------
+    A short virtual campaign written and read back: the channels come back
+    as the float32 values stored:
+
+    >>> import pathlib, tempfile
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> campaign = uqgear.simulate_campaign(design, {"pinion_speed": [1500.0], "drive_torque": [7000.0]},
+    ...                                     duration=0.1, run_in=0.05, seed=7)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = uqgear.write_rig(pathlib.Path(folder) / "campaign.nc", campaign)
+    ...     back = uqgear.read_rig(path)
+    >>> back["te"].dtype.name, bool((back["te"] == campaign["te"].astype("float32")).all())
+    ('float32', True)
+
+    A Dataset that breaks the format is refused before anything is written:
+
+    >>> wrong = campaign.copy()
+    >>> wrong["te"] = wrong["te"].assign_attrs(units="mm")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     try:
+    ...         uqgear.write_rig(pathlib.Path(folder) / "wrong.nc", wrong)
+    ...     except uqgear.RigDataError as error:
+    ...         print(str(error).split(": ", 1)[1], list(pathlib.Path(folder).iterdir()))
+    te: expected units 'm'; got 'mm' []
     """
     path = Path(path)
     validate_rig(ds, where=str(path))

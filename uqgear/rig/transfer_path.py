@@ -98,7 +98,7 @@ def transfer_path_coefficients(
 def transfer_path_gain(
     frequencies: np.ndarray, frequency: float, damping: float, fs: float | None = None, gain: float | None = None
 ) -> np.ndarray:
-    """Gain |H| of the resonance at ``frequencies`` (Hz), analogue or (with ``fs``) the digital filter's.
+    """Gain ``|H|`` of the resonance at ``frequencies`` (Hz), analogue or (with ``fs``) the digital filter's.
 
     The digital filter's gain at f is the analogue one (resonance prewarped)
     at the warped frequency ``(fs / pi) tan(pi f / fs)``.

@@ -248,6 +248,35 @@ def run_study(
     InternalError
         An analysis failed after the study was accepted; its ``kept`` names
         the work folder, which ``resume=True`` continues from.
+
+    Examples
+    --------
+    The band of the DTE RMS over the adhesion torque interval at two speeds,
+    with short runs:
+
+    >>> import tempfile
+    >>> import uqgear
+    >>> study = uqgear.parse_study('''
+    ... name: t2_band
+    ... seed: 1
+    ... design: {name: locomotive}
+    ... operating_points: {pinion_speed: [1000, 2000], drive_torque: 7000}
+    ... uncertain:
+    ...   adhesion_torque: {adhesion_coefficient: [0.15, 0.33], axle_load: 23000, wheel_radius: 0.625}
+    ... simulation: {n_periods: 60, keep_periods: 20}
+    ... analyses:
+    ...   - {type: interval, name: band, parameters: [adhesion_torque], method: vertex}
+    ... ''')
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     files = uqgear.run_study(study, folder, show_progress=False)
+    ...     band = uqgear.load_result(files[0])
+    >>> [path.name for path in files]
+    ['band.nc']
+    >>> (band["dte_rms"] * 1e6).round(1).values       # um, (speed, lower/upper)
+    array([[ 4.8,  9.6],
+           [ 6.2, 13.1]])
+    >>> band.attrs["seed"], band.attrs["study"] == study.text
+    ('1', True)
     """
     out = Path(out_dir)
     with OutputFolder(out, existing=existing, resumable=True, resume=resume) as work:

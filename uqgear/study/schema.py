@@ -280,10 +280,45 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
 def parse_study(text: str, *, path: str = "", base_dir: str | Path | None = None) -> Study:
     """Parse and validate study YAML text.
 
+    Parameters
+    ----------
+    text : str
+        The study, as in a study file (docs/study-reference.md).
+    path : str
+        Where the text comes from, for messages and provenance.
+    base_dir : str or Path, optional
+        Folder that relative design and rig paths start from.
+
+    Returns
+    -------
+    Study
+
     Raises
     ------
     StudyError
         Not valid YAML, or the first schema violation (with its key path).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> study = uqgear.parse_study('''
+    ... name: t2_band
+    ... design: {name: locomotive}
+    ... operating_points: {pinion_speed: [1000, 2000], drive_torque: 7000}
+    ... uncertain:
+    ...   adhesion_torque: {adhesion_coefficient: [0.15, 0.33], axle_load: 23000, wheel_radius: 0.625}
+    ... analyses:
+    ...   - {type: interval, name: band, parameters: [adhesion_torque], method: vertex}
+    ... ''')
+    >>> study.name, [(analysis.type, analysis.name) for analysis in study.analyses]
+    ('t2_band', [('interval', 'band')])
+    >>> study.operating_points["pinion_speed"].values
+    (1000.0, 2000.0)
+    >>> try:
+    ...     uqgear.parse_study("{name: t, analyses: [{type: interval, method: guess}]}")
+    ... except uqgear.StudyError as error:
+    ...     print(error)
+    analyses[0].method: expected one of scan, vertex, chebyshev, optimize; got 'guess'
     """
     try:
         raw = load_yaml(text)
@@ -316,6 +351,27 @@ def load_study(path: str | Path) -> Study:
     StudyError
         The file is missing or unreadable, not valid YAML, or breaks the
         schema; the message starts with the file name and the key path.
+
+    Examples
+    --------
+    A bundled study by name, and a study file of one's own:
+
+    >>> import pathlib, tempfile
+    >>> import uqgear
+    >>> smoke = uqgear.load_study("smoke")
+    >>> smoke.name, smoke.seed, len(smoke.analyses)
+    ('smoke', 20240601, 9)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = pathlib.Path(folder) / "short.yaml"
+    ...     _ = path.write_text(smoke.text.replace("n_periods: 100", "n_periods: 60"))
+    ...     short = uqgear.load_study(path)
+    >>> short.simulation.n_periods, smoke.simulation.n_periods
+    (60, 100)
+    >>> try:
+    ...     uqgear.load_study("no_such_study.yaml")
+    ... except uqgear.StudyError as error:
+    ...     print(str(error).split(" (")[0])
+    no_such_study.yaml: study file not found
     """
     source = Path(path)
     # a name is only ever typed text: a path object never names a bundled study

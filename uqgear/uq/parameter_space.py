@@ -41,6 +41,29 @@ class ParameterSpace:
     ------
     ParameterSpaceError
         Naming the parameter whose specification is wrong.
+
+    Examples
+    --------
+    The specifications of a study file, from the rail adhesion to a fixed
+    torque; the adhesion torque interval is mu Q g R_w at both bounds of mu:
+
+    >>> import uqgear
+    >>> space = uqgear.ParameterSpace({
+    ...     "adhesion_torque": {"adhesion_coefficient": [0.15, 0.33], "axle_load": 23000, "wheel_radius": 0.625},
+    ...     "mesh_stiffness_scale": [0.9, 1.1],
+    ...     "ste_amplitude": {"distribution": "uniform", "lower": 10e-6, "upper": 20e-6},
+    ...     "drive_torque": 7000.0})
+    >>> space.interval_names, space.random_names, space.fixed_names
+    (('adhesion_torque', 'mesh_stiffness_scale'), ('ste_amplitude',), ('drive_torque',))
+    >>> space.describe()["adhesion_torque"]
+    'interval [21145.6, 46520.3] N m'
+    >>> space.nominal("mesh_stiffness_scale")        # an interval's midpoint
+    1.0
+    >>> try:
+    ...     uqgear.ParameterSpace({"mesh_stiffness_scale": [1.1, 0.9]})
+    ... except uqgear.ParameterSpaceError as error:
+    ...     print(error)
+    mesh_stiffness_scale: interval: inverted interval, expected lower < upper; got lower=1.1 > upper=0.9
     """
 
     def __init__(self, parameters: Mapping[str, Parameter | Any]) -> None:

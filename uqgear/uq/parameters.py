@@ -46,6 +46,22 @@ class Interval:
     ------
     ParameterSpaceError
         If a bound is not a finite number or the interval is inverted or empty.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> stiffness = uqgear.Interval(0.9, 1.1)
+    >>> round(stiffness.width, 12), stiffness.midpoint
+    (0.2, 1.0)
+
+    The adhesion torque T2 = mu Q g R_w for an adhesion coefficient in
+    [0.15, 0.33], an axle load of 23 t and a wheel radius of 0.625 m:
+
+    >>> adhesion = uqgear.Interval.from_adhesion(0.15, 0.33, 23000.0, 0.625)
+    >>> adhesion.describe()
+    'interval [21145.6, 46520.3] N m'
+    >>> round(adhesion.upper / adhesion.lower, 6), round(0.33 / 0.15, 6)
+    (2.2, 2.2)
     """
 
     lower: float
@@ -128,7 +144,30 @@ def _check_interval_bounds(lower: Any, upper: Any, where: str) -> tuple[float, f
 
 @dataclass(frozen=True)
 class Fixed:
-    """A parameter with a known value, passed to the model unchanged."""
+    """A parameter with a known value, passed to the model unchanged.
+
+    Parameters
+    ----------
+    value : float
+        The value (finite).
+    units : str
+        Units of the parameter.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> torque = uqgear.Fixed(7000.0, units="N m")
+    >>> torque.describe(), torque.to_dict()
+    ('fixed 7000 N m', {'fixed': 7000.0, 'units': 'N m'})
+    >>> space = uqgear.ParameterSpace({"drive_torque": torque, "adhesion_torque": uqgear.Interval(21e3, 46e3)})
+    >>> space.fixed_names, space.uncertain_names
+    (('drive_torque',), ('adhesion_torque',))
+    >>> try:
+    ...     uqgear.Fixed(float("nan"))
+    ... except uqgear.ParameterSpaceError as error:
+    ...     print(type(error).__name__)
+    ParameterSpaceError
+    """
 
     value: float
     units: str = ""
@@ -299,6 +338,23 @@ class Distribution:
     ParameterSpaceError
         For an unknown name (the message lists the known ones), a missing or
         unknown parameter, or an invalid value (sigma <= 0, lower >= upper, ...).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> scale = uqgear.Distribution("normal", mu=1.0, sigma=0.05)
+    >>> scale, scale.median()
+    (Distribution('normal', mu=1.0, sigma=0.05), 1.0)
+
+    It maps onto chaospy; the 97.5 % quantile of a normal is mu + 1.96 sigma:
+
+    >>> round(float(scale.to_chaospy().inv(0.975)), 4), round(1.0 + 1.959964 * 0.05, 4)
+    (1.098, 1.098)
+    >>> try:
+    ...     uqgear.Distribution("normal", mu=1.0, sigma=-0.05)
+    ... except uqgear.ParameterSpaceError as error:
+    ...     print(error)
+    distribution normal(mu, sigma): sigma must be > 0; got -0.05
     """
 
     __slots__ = ("_name", "_params", "_units")

@@ -89,6 +89,28 @@ class PolynomialChaos:
         many terms for the samples) and ``q_order`` (chosen order).
     samples_, outputs_ : xarray.Dataset
         The training samples and model outputs.
+
+    Examples
+    --------
+    y = x1^2 + x2 with x1 normal(1, 0.1) and x2 uniform on [0, 1] is a
+    polynomial of degree 2: the expansion recovers it exactly, with mean
+    1 + 0.1^2 + 0.5 = 1.51 and variance (4 0.1^2 + 2 0.1^4) + 1/12:
+
+    >>> import xarray as xr
+    >>> import uqgear
+    >>> def quadratic(samples):
+    ...     return xr.Dataset({"y": ("sample", (samples["x1"] ** 2 + samples["x2"]).values)})
+    >>> space = uqgear.ParameterSpace({"x1": uqgear.Distribution("normal", mu=1.0, sigma=0.1),
+    ...                                "x2": uqgear.Distribution("uniform", lower=0.0, upper=1.0)})
+    >>> pce = uqgear.PolynomialChaos(max_order=3, surrogate_samples=2000, seed=2).fit(quadratic, space)
+    >>> int(pce.result_["y_order"])
+    2
+    >>> pce.result_["y"].sel(statistic=["mean", "variance"]).round(5).values
+    array([1.51   , 0.12353])
+    >>> round(1 + 0.1**2 + 0.5, 5), round(4 * 0.1**2 + 2 * 0.1**4 + 1 / 12, 5)
+    (1.51, 0.12353)
+    >>> pce.result_["y_sobol"].sel(index="S1").round(3).values     # (1/12) / 0.12353 for x2
+    array([0.325, 0.675])
     """
 
     def __init__(

@@ -421,6 +421,24 @@ def save_result(
     UqgearError
         If the folder does not exist, an attribute cannot be stored or a
         provenance argument has the wrong type.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import xarray as xr
+    >>> import uqgear
+    >>> result = xr.Dataset({"dte_rms": ("bound", [6.25e-6, 13.07e-6], {"units": "m"})},
+    ...                     coords={"bound": ["lower", "upper"]}, attrs={"method": "vertex"})
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = uqgear.save_result(result, pathlib.Path(folder) / "band.nc", seed=1,
+    ...                               design=uqgear.load_design("locomotive"))
+    ...     saved = uqgear.load_result(path)
+    >>> path.name, bool((saved["dte_rms"] == result["dte_rms"]).all()), saved["dte_rms"].attrs["units"]
+    ('band.nc', True, 'm')
+    >>> saved.attrs["method"], saved.attrs["seed"], "uqgear_version" in saved.attrs, "created" in saved.attrs
+    ('vertex', '1', True, True)
+    >>> "seed" in result.attrs                  # the Dataset saved is not changed
+    False
     """
     if not isinstance(ds, xr.Dataset):
         raise UqgearError(f"{path}: expected an xarray Dataset to save; got {type(ds).__name__}")
@@ -442,6 +460,28 @@ def load_result(path: str | os.PathLike[str]) -> xr.Dataset:
     ------
     UqgearError
         If the file does not exist or is not a readable netCDF file.
+
+    Examples
+    --------
+    Attributes that netCDF cannot hold (a dict, a list of strings) come back
+    as they were saved:
+
+    >>> import pathlib, tempfile
+    >>> import xarray as xr
+    >>> import uqgear
+    >>> result = xr.Dataset({"y": ("bound", [0.0, 0.49])},
+    ...                     attrs={"units": {"y": "m"}, "parameters": ["a", "b"], "runs": 9})
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     loaded = uqgear.load_result(uqgear.save_result(result, pathlib.Path(folder) / "result.nc"))
+    >>> loaded.attrs["units"], loaded.attrs["parameters"], int(loaded.attrs["runs"])
+    ({'y': 'm'}, ['a', 'b'], 9)
+    >>> loaded["y"].values.tolist()
+    [0.0, 0.49]
+    >>> try:
+    ...     uqgear.load_result("missing/result.nc")
+    ... except uqgear.UqgearError as error:
+    ...     print(type(error).__name__)
+    UqgearError
     """
     return read_dataset(path)
 

@@ -73,6 +73,26 @@ class SobolAnalysis:
     ----------
     result_, samples_, outputs_ : xarray.Dataset
         Set by :meth:`fit`.
+
+    Examples
+    --------
+    For y = x1 + 2 x2 with x1, x2 uniform on [0, 1] (intervals are taken as
+    uniform), the variances are 1/12 and 4/12: S1 = 0.2 and 0.8, and with no
+    interaction the total indices equal them:
+
+    >>> import xarray as xr
+    >>> import uqgear
+    >>> def linear(samples):
+    ...     return xr.Dataset({"y": ("sample", (samples["x1"] + 2 * samples["x2"]).values)})
+    >>> space = uqgear.ParameterSpace({"x1": uqgear.Interval(0.0, 1.0), "x2": uqgear.Interval(0.0, 1.0)})
+    >>> sobol = uqgear.SobolAnalysis(n_base=256, seed=1).fit(linear, space)
+    >>> sobol.result_["y"].round(2).to_pandas()
+    index   S1   ST
+    param
+    x1     0.2  0.2
+    x2     0.8  0.8
+    >>> int(sobol.result_.attrs["runs"]) == 256 * (2 + 2)
+    True
     """
 
     def __init__(

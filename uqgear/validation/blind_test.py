@@ -233,6 +233,30 @@ def blindtest(
         The content of ``blindtest.json``; ``effect_sets`` scores the named
         sets against the true ones (per-effect precision and recall,
         exactly right sets, two-effect campaigns).
+
+    Examples
+    --------
+    The options are checked before any campaign is simulated, and a mistake
+    leaves no folder:
+
+    >>> import pathlib, tempfile
+    >>> import uqgear
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "blindtest"
+    ...     try:
+    ...         uqgear.blindtest(out, n_ops=2)
+    ...     except uqgear.UqgearError as error:
+    ...         print(type(error).__name__, "-", error, "-", out.exists())
+    DiagnosisError - n_ops: expected an integer >= 3; got 2 - False
+
+    The smallest blind test, one eccentricity campaign of three short runs
+    diagnosed with the default settings (about a minute):
+
+    >>> with tempfile.TemporaryDirectory() as folder:  # doctest: +SKIP
+    ...     content = uqgear.blindtest(pathlib.Path(folder) / "blindtest", n_per_effect=1, effects=["eccentricity"],
+    ...                                n_healthy=0, n_ops=3, duration=0.25, designs=("reference",), report=False)
+    >>> content["n_campaigns"], content["accuracy"], content["false_alarms"]  # doctest: +SKIP
+    (1, 1.0, 0)
     """
     started = time.perf_counter()
     seed_sequence = as_seed(seed)
