@@ -24,12 +24,12 @@ from .regimes import (
     classify_response,
     count_distinct_points,
     detect_period,
-    zero_one_test,
 )
 from .response import contact_fractions, phase_plane, poincare_section, response_qois
 from .shooting import PeriodicOrbit, PoincareMap, Shooting, ShootingError, ShootingSettings, setup_at
 from .spectra import amplitude_spectrum, spectrum_dataset
 from .sweeps import bifurcation, sweep_grid
+from .zero_one import zero_one_test
 
 __all__ = [
     "detect_period",
