@@ -10,7 +10,7 @@ check with the real model) and prints
   ``data/rig/README.md``;
 * the convergence diagnostics and the posterior predictive check.
 
-Target (issue 5.6): <= 3 min per calibration on 2 cores.
+Target: <= 3 min per calibration on 2 cores.
 
 With ``--nuisances`` it builds healthy virtual-rig campaigns with speed wander,
 mains pickup, sensor noise and the pitch errors of ISO 1328-1 class 7 gears

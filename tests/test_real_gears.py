@@ -1,4 +1,4 @@
-"""Gear pairs other than the bundled one: undercut pinions, small modules, low contact ratios (issue 13, item 1).
+"""Gear pairs other than the bundled one: undercut pinions, small modules, low contact ratios.
 
 Geometry is checked against involute geometry written out here independently of
 ``uqgear.physics`` (tip, root, base radii; the standard contact-ratio formula; the
@@ -444,7 +444,7 @@ def test_study_report_lists_the_undercut_as_a_caveat():
 
 
 def test_17_tooth_unshifted_pinion_end_to_end(tmp_path):
-    """Virtual-rig campaign of the 17:38 design -> uqgear calibrate -> uqgear diagnose (issue 13 acceptance).
+    """Virtual-rig campaign of the 17:38 design -> uqgear calibrate -> uqgear diagnose.
 
     About 15 s on 2 cores: two short runs, one calibrated parameter, one candidate effect, one worker.
     """

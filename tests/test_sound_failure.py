@@ -1,4 +1,4 @@
-"""Sound failure (issue 13, item 2): bad campaigns refused up front, internal failures said to be ours.
+"""Sound failure: bad campaigns refused up front, internal failures said to be ours.
 
 * A campaign with no usable signal (all NaN, all zero, shorter than one
   pinion revolution, no or a single operating point) is refused by
@@ -79,7 +79,7 @@ def _with_channels(ds: xr.Dataset, make) -> xr.Dataset:
 
 
 def _faults(ds: xr.Dataset) -> dict[str, tuple[xr.Dataset, str]]:
-    """The fault list of issue 13 item 2 (and two more): campaign, and what the one line must name."""
+    """Faulty campaigns, and what the one line must name."""
     one_usable = ds.copy(deep=True)
     for name in CHANNELS:
         values = one_usable[name].values.copy()
@@ -156,7 +156,7 @@ def test_calibrate_refuses_a_campaign_without_usable_signal_with_one_line(fault,
 
 
 def test_the_real_command_refuses_all_nan_data_in_a_fresh_interpreter(bad_campaigns, tmp_path):
-    """The issue's report: all-NaN data gave verdict 'none' with exit 0."""
+    """All-NaN data must not give the verdict 'none' with exit 0."""
     completed = subprocess.run([sys.executable, "-m", "uqgear", "diagnose", str(bad_campaigns["all_nan"][0]),
                                 "--out", str(tmp_path / "out")], env=ENVIRONMENT, capture_output=True, text=True,
                                timeout=300)
@@ -238,7 +238,7 @@ def test_internal_step_names_the_step_and_passes_the_users_and_the_systems_error
 
 def test_internal_failure_in_the_diagnosis_exits_1_names_the_step_and_keeps_what_was_done(tmp_path, capsys,
                                                                                            monkeypatch):
-    """The issue's report: a proposal past its bound ended as 'uqgear: error:' blaming the input, all lost."""
+    """A proposal past its bound must not end as 'uqgear: error:' blaming the input, with all work lost."""
     def past_its_bound(*args, **kwargs):
         raise EffectError("friction.coefficient: expected a value in [0, 0.3] 1; got 0.30000000000000004")
 
@@ -313,7 +313,7 @@ def test_internal_failure_in_a_study_run_keeps_the_work_for_resume(tmp_path, cap
 
 
 def test_the_reported_rounding_past_a_bound_is_clipped():
-    """0.03 exp(log(0.3 / 0.03)) is 0.30000000000000004: the value the issue's run died on."""
+    """0.03 exp(log(0.3 / 0.03)) is 0.30000000000000004: a value just past the bound."""
     friction = candidates_for("friction", uqgear.load_design("locomotive"))[0]
     spec = friction.fitted[0]
     upper = spec.bounds()[1]

@@ -13,7 +13,7 @@ from uqgear.physics.stiffness import iso6336_stiffness, mesh_stiffness, tooth_co
 
 @pytest.fixture(scope="module")
 def second_design(design):
-    # issue 2: z1=17, z2=88, module 10 mm, x1=+0.3, x2=-0.3, face width 130 mm
+    # a second design: z1=17, z2=88, module 10 mm, x1=+0.3, x2=-0.3, face width 130 mm
     return design.replace(z1=17, z2=88, module=0.010, x1=0.3, x2=-0.3, face_width=0.130)
 
 

@@ -321,7 +321,7 @@ def geometry_notes(design, geometry: PairGeometry | None = None) -> list[str]:
     """What the model does with a design's undercut teeth, one line per undercut tooth.
 
     The text of the :class:`~uqgear.common.errors.UndercutWarning` that
-    :func:`check_geometry` issues, for reports and JSON summaries (empty for a
+    :func:`check_geometry` emits, for reports and JSON summaries (empty for a
     design without undercut, such as the bundled one).
 
     Parameters
