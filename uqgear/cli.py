@@ -428,6 +428,8 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         workers=args.workers,
         reference=reference,
         pitch_classes=classes,
+        reference_route=args.reference_route,
+        reference_gears=args.reference_gears,
     )
     gap = result.get("gap", {})
     if gap.get("baseline") is None:
@@ -665,9 +667,22 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument(
         "--reference",
         metavar="HEALTHY.nc",
-        help="a campaign of the same rig and test plan with a known good gearbox: what it "
-        "shows against the fitted model (transfer paths, the rig's own structure) is learned "
-        "and carried over, so the diagnosis names what changed",
+        help="a campaign of the same rig with a known good gearbox: the diagnosis says what "
+        "changed since it, where, and which effect explains what share of the change",
+    )
+    diagnose.add_argument(
+        "--reference-gears",
+        choices=("same", "replaced"),
+        default="same",
+        help="with --reference: the test runs the reference's gears (default) or a replaced set "
+        "of the same quality, whose manufacturing spread is then allowed for",
+    )
+    diagnose.add_argument(
+        "--reference-route",
+        choices=("change", "transfer"),
+        default="change",
+        help="with --reference: judge the change on condition-monitoring features and score the "
+        "effects on it (default), or learn the reference's transfer correction of the model",
     )
     diagnose.add_argument(
         "--pitch-classes",

@@ -21,8 +21,9 @@ import xarray as xr
 from ..common.steps import StepLog
 from ..physics.design import Design
 from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
-from .allowances.reference import attach_reference, learn_reference
+from .allowances.reference import ReferenceCorrection, attach_reference, learn_reference
 from .case import RigCase, prepare_case
+from .change.detection import GEAR_STATES
 from .dataset import held_spectra, inconclusive_dataset, result_dataset
 from .decision import Decision
 from .effect_set import SelectedEffect
@@ -192,6 +193,14 @@ class Diagnosis:
         or its folder): the nominal fit starts from its posterior medians.
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
+    reference_route : {"change", "transfer"}
+        With a reference: judge what changed since it on condition-monitoring
+        features and score the effects on the change they predict
+        (``change``, docs/model.md section 6.1), or learn its transfer
+        correction and diagnose the test campaign through it (``transfer``).
+    reference_gears : {"same", "replaced"}
+        Whether the test campaign runs the reference's gears or a replaced
+        set of the same quality (whose spread is then allowed for).
 
     Attributes
     ----------
@@ -239,6 +248,8 @@ class Diagnosis:
         design: Design | str | os.PathLike[str] | None = None,
         calibration: str | os.PathLike[str] | xr.Dataset | None = None,
         pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+        reference_route: str = "change",
+        reference_gears: str = "same",
     ) -> None:
         self.effects = check_effects(effects)
         if settings is not None and not isinstance(settings, DiagnosisSettings):
@@ -254,6 +265,11 @@ class Diagnosis:
         # a design given replaces the file's before the file is read: its copy is then not validated
         self.design = None if design is None else resolve_design(design, None)
         self.calibration = calibration
+        if reference_route not in ("change", "transfer"):
+            raise DiagnosisError(f"reference_route: expected change or transfer; got {reference_route!r}")
+        if reference_gears not in GEAR_STATES:
+            raise DiagnosisError(f"reference_gears: expected one of {', '.join(GEAR_STATES)}; got {reference_gears!r}")
+        self.reference_route, self.reference_gears = reference_route, reference_gears
 
     def fit(self, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None = None) -> Diagnosis:
         """Diagnose a rig campaign (optionally against a healthy reference campaign of the same rig).
@@ -283,8 +299,24 @@ class Diagnosis:
             A step failed after the input was accepted (``steps_`` holds the finished ones).
         """
         started, cpu_started = time.perf_counter(), _cpu_seconds()
-        inputs = read_inputs(rig, reference, design=self.design, calibration=self.calibration, settings=self.settings)
+        differential = (
+            reference is not None
+            and self.reference_route == "change"
+            and not isinstance(reference, ReferenceCorrection)
+        )
+        inputs = read_inputs(
+            rig,
+            reference,
+            design=self.design,
+            calibration=self.calibration,
+            settings=self.settings,
+            match_points=not differential,
+        )
         self.design_, self.steps_ = inputs.design, StepLog()
+        if differential:
+            from .change.conclude import conclude_change
+
+            return conclude_change(self, inputs, started, cpu_started)
         # 1. features: the records reduced as the model's will be (with the allowances that act on them)
         case, reference_summary = _features(
             inputs, settings=self.settings, seeds=self.seeds, workers=self.workers, steps=self.steps_

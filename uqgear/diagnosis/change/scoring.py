@@ -1,0 +1,288 @@
+"""Step 4 with a healthy reference: which library effect predicts the change, and what share of it.
+
+The model cannot reproduce a foreign rig, but the change from a healthy
+campaign of that rig to a test campaign of it is another matter: the
+reference's data anchor the prediction (the model's discrepancy from the
+reference, feature by feature and run by run, is taken to hold for the test
+campaign), and the model is asked only for the *change* an effect makes.
+For each screening variant of each effect family (its shaft, gear or
+bearing), the model is simulated at the test runs with and without the
+effect over a ladder of the effect's strength (with its other parameters at
+their start values); the change it predicts for every condition-monitoring
+feature (:mod:`.features`, the noiseless model records read with the rig's
+noise) is compared with the observed change in units of that feature's
+change threshold, widened by ``change_model_error`` of the predicted change.
+The share of the change an effect explains is one less the ratio of the
+soft-L1 losses of the residual and of the change itself; the strength with
+the largest share is refined by a golden-section search in log strength.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ...physics.design import Design
+from ..candidates import Candidate
+from ..effects import effect_family
+from ..settings import DiagnosisSettings
+from ..simulation import CampaignSimulator
+from .detection import CampaignFeatures, ChangeTest, level_floor
+from .features import FEATURES, campaign_features
+
+# Strengths scanned per variant before the refinement, and golden-section steps of the refinement.
+_LADDER_POINTS = 6
+# Parameters also tried in proportion to the strength along the ladder: a run-out modulates the mesh stiffness
+# with it (the public eccentricity campaign: kappa 0.03 at 12 um).
+_PROPORTIONAL = {"eccentricity": {"kappa": 2500.0}}
+_REFINE_STEPS = 3
+
+
+@dataclass(frozen=True)
+class ChangeScore:
+    """How well one effect variant predicts the change: its share, its parameters, what it leaves."""
+
+    effect: str
+    label: str
+    values: dict[str, Any]
+    share: float
+    loss: float
+    loss_without: float
+    predicted: np.ndarray  # (n_op, n_channel, n_feature) ln units
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "effect": self.effect,
+            "variant": self.label,
+            "parameters": {key: value for key, value in self.values.items()},
+            "share": self.share,
+            "loss": self.loss,
+            "loss_without": self.loss_without,
+        }
+
+
+def soft_l1(z: np.ndarray) -> float:
+    """Sum of 2 (sqrt(1 + z^2) - 1): quadratic within a threshold, linear beyond."""
+    return float(np.sum(2.0 * (np.sqrt(1.0 + z * z) - 1.0)))
+
+
+class ChangeModel:
+    """The model's features at the test runs, with and without an effect, read as the rig's are."""
+
+    def __init__(self, design: Design, rig: xr.Dataset, test: CampaignFeatures, judged: np.ndarray, share: float):
+        self.design = design
+        self.ops = np.flatnonzero(judged)
+        self.test = test
+        self.share = share
+        self.simulator = CampaignSimulator(
+            design, test.speeds[self.ops], test.torques[self.ops], test.fs, test.size, test.channels
+        )
+        lower = np.asarray(rig["adhesion_torque_lower"].values, dtype=float)[self.ops]
+        upper = np.asarray(rig["adhesion_torque_upper"].values, dtype=float)[self.ops]
+        # the resisting torque of each run: the middle of its stated interval
+        self.adhesion = 0.5 * (lower + upper)
+        self.baseline = self.features([], "mesh")
+        self.simulations = 0
+
+    def gains(self, anchor: np.ndarray) -> np.ndarray:
+        """The transfer gains from the model to the rig (:func:`transfer_gains`)."""
+        return transfer_gains(self.test.channels, anchor, self.baseline)
+
+    def features(self, effects: Sequence[Any], periodicity: str) -> np.ndarray:
+        """Floored ln features (n_judged, n_channel, n_feature) of the model with ``effects``."""
+        per_channel: dict[str, list[np.ndarray]] = {channel: [] for channel in self.test.channels}
+        for index in range(self.ops.size):
+            run = self.simulator.run(index, self.design, 1.0, float(self.adhesion[index]), effects, periodicity)
+            for channel in self.test.channels:
+                per_channel[channel].append(run.records[channel])
+        self.simulations = getattr(self, "simulations", 0) + self.ops.size
+        pinion_hz = self.test.speeds[self.ops] / 60.0
+        values = np.stack(
+            [
+                campaign_features(
+                    per_channel[channel], self.test.fs, pinion_hz, self.design.z1, self.design.z2,
+                    noise=self.test.noise[self.ops, c],
+                )
+                for c, channel in enumerate(self.test.channels)
+            ],
+            axis=1,
+        )
+        # the level floor follows the model's own level (its RMS), as the rig's follows the rig's
+        return np.log(np.exp(values) + level_floor(values[..., 0], self.share))
+
+
+_INDEX = {name.label: index for index, name in enumerate(FEATURES)}
+#: Each kurtosis feature and the RMS feature of the same signal (its second moment).
+_KURTOSIS_PAIRS = tuple(
+    (_INDEX[name.label], _INDEX[name.label.replace("kurtosis", "rms")])
+    for name in FEATURES
+    if name.family in ("kurtosis", "tsa_residual_kurtosis")
+)
+_POWER = np.array([name.family not in ("kurtosis", "tsa_residual_kurtosis") for name in FEATURES])
+
+
+def transfer_gains(channels: Sequence[str], anchor: np.ndarray, baseline: np.ndarray) -> np.ndarray:
+    """Power gain from the model's to the rig's signal per (run, channel): the RMS power ratio of the reference
+    to the model without the effect, 1 for the transmission error (the same quantity on both sides)."""
+    gains = np.exp(anchor[..., 0] - baseline[..., 0])
+    for c, channel in enumerate(channels):
+        if channel == "te":
+            gains[:, c] = 1.0
+    return gains
+
+
+def anchored_change(anchor: np.ndarray, baseline: np.ndarray, with_effect: np.ndarray, gains: np.ndarray) -> np.ndarray:
+    """The change an effect predicts on the rig: what it adds to the model, added to the reference's data.
+
+    Powers add: the reference's power plus the model's added power times
+    the transfer gain. A kurtosis follows from the fourth moment, which adds
+    likewise (times the squared gain), over the new second moment. Returns
+    ln(predicted / reference) per feature.
+    """
+    g = gains[..., None]
+    power = np.exp(anchor) + g * (np.exp(with_effect) - np.exp(baseline))
+    power = np.maximum(power, 1e-3 * np.exp(anchor))
+    predicted = np.where(_POWER, np.log(power), anchor)
+    for kurt, rms in _KURTOSIS_PAIRS:
+        m2 = np.exp(anchor[..., rms])
+        fourth = np.exp(anchor[..., kurt]) * m2**2 + gains**2 * (
+            np.exp(with_effect[..., kurt] + 2 * with_effect[..., rms]) - np.exp(baseline[..., kurt] + 2 * baseline[..., rms])
+        )
+        m2_new = np.exp(predicted[..., rms])
+        predicted[..., kurt] = np.log(np.maximum(fourth / m2_new**2, 1.0))
+    return predicted - anchor
+
+
+def _variant_values(candidate: Candidate, start: Mapping[str, Any], strength: str, value: float) -> dict[str, Any]:
+    """The effect's values for one point of the ladder: the variant's choices, a start's other parameters."""
+    values: dict[str, Any] = dict(candidate.choices)
+    prefix = f"{candidate.effect}."
+    values.update({key.removeprefix(prefix): float(v) for key, v in start.items() if v != "proportional"})
+    values[strength] = float(value)
+    for key, factor in _PROPORTIONAL.get(candidate.effect, {}).items():
+        if start.get(f"{prefix}{key}") == "proportional":
+            bounds = effect_family(candidate.effect).physics.PARAMETERS[key]
+            values[key] = float(min(factor * value, bounds.upper))
+    return values
+
+
+def _spread(scale: np.ndarray, predicted: np.ndarray, observed: np.ndarray, settings: DiagnosisSettings) -> np.ndarray:
+    """The spread a predicted change is judged with: the change threshold and the model form's error, which grows
+    with the change (the geometric mean of the predicted and the observed one: an over-prediction is not made
+    cheap by its own size, a missed change costs in full)."""
+    return np.sqrt(scale**2 + settings.change_model_error**2 * np.abs(predicted * observed))
+
+
+def _golden(loss: Callable[[float], float], low: float, high: float, steps: int) -> tuple[float, float]:
+    """Minimum of ``loss`` on [low, high] (log strength) by golden-section search: (argument, value)."""
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = low, high
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = loss(c), loss(d)
+    for _ in range(steps):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = loss(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = loss(d)
+    return (c, fc) if fc < fd else (d, fd)
+
+
+def score_variant(
+    model: ChangeModel,
+    candidate: Candidate,
+    observed: np.ndarray,
+    scale: np.ndarray,
+    anchor: np.ndarray,
+    settings: DiagnosisSettings,
+) -> ChangeScore:
+    """The best strength of one variant, its share of the change and its predicted change."""
+    family = effect_family(candidate.effect)
+    strength = family.strength
+    bounds = family.physics.PARAMETERS[strength]
+    ladder = np.geomspace(
+        max(family.ladder[0] / 3.0, bounds.lower, 1e-12), min(family.ladder[2] * 10.0, bounds.upper), _LADDER_POINTS
+    )
+    # phases change no amplitude feature: one start per combination of the other parameters
+    starts = list({tuple(sorted((k, v) for k, v in s.items() if not k.endswith((f".{strength}", ".phase")))): s
+                   for s in candidate.starts}.values()) or [{}]
+    for key in _PROPORTIONAL.get(candidate.effect, {}):
+        starts.append({**starts[0], f"{candidate.effect}.{key}": "proportional"})
+    without = soft_l1(observed / scale)
+    cache: dict[tuple[int, float], tuple[float, np.ndarray]] = {}
+
+    def evaluate(start_index: int, log_value: float) -> float:
+        key = (start_index, round(log_value, 9))
+        if key not in cache:
+            values = _variant_values(candidate, starts[start_index], strength, math.exp(log_value))
+            effect = family.make(values)
+            predicted = anchored_change(
+                anchor, model.baseline, model.features([effect], candidate.periodicity), model.gains(anchor)
+            )
+            spread = _spread(scale, predicted, observed, settings)
+            cache[key] = (soft_l1((observed - predicted) / spread), predicted)
+        return cache[key][0]
+
+    best: tuple[float, int, float] = (math.inf, 0, 0.0)
+    for index in range(len(starts)):
+        logs = np.log(ladder)
+        losses = [evaluate(index, float(v)) for v in logs]
+        at = int(np.argmin(losses))
+        low, high = logs[max(at - 1, 0)], logs[min(at + 1, logs.size - 1)]
+        argument, value = _golden(lambda v, i=index: evaluate(i, v), float(low), float(high), _REFINE_STEPS)
+        if losses[at] <= value:
+            argument, value = float(logs[at]), losses[at]
+        if value < best[0]:
+            best = (value, index, argument)
+    loss, index, argument = best
+    predicted = cache[(index, round(argument, 9))][1]
+    values = _variant_values(candidate, starts[index], strength, math.exp(argument))
+    share = 1.0 - loss / without if without > 0 else 0.0
+    return ChangeScore(candidate.effect, candidate.label, values, float(share), float(loss), float(without), predicted)
+
+
+def score_change(
+    change: ChangeTest,
+    test: CampaignFeatures,
+    rig: xr.Dataset,
+    design: Design,
+    effects: Sequence[str],
+    *,
+    settings: DiagnosisSettings,
+) -> list[ChangeScore]:
+    """Every variant of every candidate effect scored on the change it predicts, best share first."""
+    judged = change.judged
+    share = settings.replaced_line_floor if change.gears == "replaced" else settings.same_line_floor
+    model = ChangeModel(design, rig, test, judged, share)
+    observed = change.change[judged]
+    scale = change.threshold[judged]
+    anchor = change.anchor[judged]
+    scores = []
+    for name in effects:
+        for candidate in effect_family(name).variants(design, {}):
+            scores.append(score_variant(model, candidate, observed, scale, anchor, settings))
+    return sorted(scores, key=lambda score: -score.share)
+
+
+def explained_where(change: ChangeTest, score: ChangeScore, settings: DiagnosisSettings) -> dict[str, float]:
+    """Share of the change explained per channel (soft-L1, as the whole share)."""
+    judged = change.judged
+    observed, scale = change.change[judged], change.threshold[judged]
+    spread = _spread(scale, score.predicted, observed, settings)
+    out = {}
+    for c, channel in enumerate(change.channels):
+        without = soft_l1(observed[:, c] / scale[:, c])
+        residual = soft_l1((observed[:, c] - score.predicted[:, c]) / spread[:, c])
+        out[channel] = 1.0 - residual / without if without > 0 else 0.0
+    return out
+
+
+__all__ = ["ChangeModel", "ChangeScore", "explained_where", "score_change", "score_variant", "soft_l1"]
