@@ -65,10 +65,6 @@ def conclude_change(diagnosis: Any, inputs: DiagnosisInputs, started: float, cpu
                 {"effect": named["effect"], "variant": named["variant"], "parameters": named["parameters"],
                  "share": named["share"]}
             ]
-        content["ranking"] = [
-            {"effect": entry["effect"], "variant": entry["variant"], "share": entry["share"]}
-            for entry in outcome.summary["ranking"]
-        ]
         content["reference"] = {"file": inputs.reference_source, "route": "change"}
         content = json_clean(content)
         maps = inconclusive_dataset(case, outcome.decision.reason, diagnosis.effects)

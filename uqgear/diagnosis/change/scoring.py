@@ -41,6 +41,7 @@ _LADDER_POINTS = 6
 # with it (the public eccentricity campaign: kappa 0.03 at 12 um).
 _PROPORTIONAL = {"eccentricity": {"kappa": 2500.0}}
 _REFINE_STEPS = 3
+_FREE_LADDER_POINTS = 4
 
 
 @dataclass(frozen=True)
@@ -163,7 +164,8 @@ def _variant_values(candidate: Candidate, start: Mapping[str, Any], strength: st
     values: dict[str, Any] = dict(candidate.choices)
     prefix = f"{candidate.effect}."
     values.update({key.removeprefix(prefix): float(v) for key, v in start.items() if v != "proportional"})
-    values[strength] = float(value)
+    bounds = effect_family(candidate.effect).physics.PARAMETERS[strength]
+    values[strength] = float(np.clip(value, bounds.lower, bounds.upper))
     for key, factor in _PROPORTIONAL.get(candidate.effect, {}).items():
         if start.get(f"{prefix}{key}") == "proportional":
             bounds = effect_family(candidate.effect).physics.PARAMETERS[key]
@@ -215,7 +217,14 @@ def score_variant(
     starts = list({tuple(sorted((k, v) for k, v in s.items() if not k.endswith((f".{strength}", ".phase")))): s
                    for s in candidate.starts}.values()) or [{}]
     for key in _PROPORTIONAL.get(candidate.effect, {}):
+        # absent or in proportion to the strength: a fixed value between adds nothing the two do not span
+        starts = [start for start in starts if start.get(f"{candidate.effect}.{key}", 0.0) < 1e-6] or starts[:1]
         starts.append({**starts[0], f"{candidate.effect}.{key}": "proportional"})
+    points, refine = _LADDER_POINTS, _REFINE_STEPS
+    if candidate.periodicity == "free":
+        # simulated over the whole record (several times the cost of a tiled one): one start, a coarser ladder
+        starts, points, refine = starts[:1], _FREE_LADDER_POINTS, 0
+        ladder = np.geomspace(ladder[0], ladder[-1], points)
     without = soft_l1(observed / scale)
     cache: dict[tuple[int, float], tuple[float, np.ndarray]] = {}
 
@@ -236,10 +245,12 @@ def score_variant(
         logs = np.log(ladder)
         losses = [evaluate(index, float(v)) for v in logs]
         at = int(np.argmin(losses))
-        low, high = logs[max(at - 1, 0)], logs[min(at + 1, logs.size - 1)]
-        argument, value = _golden(lambda v, i=index: evaluate(i, v), float(low), float(high), _REFINE_STEPS)
-        if losses[at] <= value:
-            argument, value = float(logs[at]), losses[at]
+        argument, value = float(logs[at]), losses[at]
+        if refine:
+            low, high = logs[max(at - 1, 0)], logs[min(at + 1, logs.size - 1)]
+            refined, refined_value = _golden(lambda v, i=index: evaluate(i, v), float(low), float(high), refine)
+            if refined_value < value:
+                argument, value = refined, refined_value
         if value < best[0]:
             best = (value, index, argument)
     loss, index, argument = best
