@@ -201,6 +201,15 @@ def load_reference(
         )
     check_design_match(test, dataset, where=source)
     if not match_points and learned is None:
+        from .change.detection import check_coverage
+
+        check_coverage(
+            test,
+            dataset,
+            where=source,
+            speed_tolerance=settings.speed_tolerance,
+            torque_tolerance=settings.torque_tolerance,
+        )
         return dataset, source, learned
     match_operating_points(
         test,

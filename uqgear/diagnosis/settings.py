@@ -111,6 +111,7 @@ class DiagnosisSettings:
     same_line_floor: float = 0.003
     replaced_line_floor: float = 0.05
     change_share: float = 0.5
+    load_allowance: float = 0.5
     change_model_error: float = 0.5
     # ---- the predictive distribution (step 2)
     model_error: Mapping[str, float] = field(default_factory=lambda: MappingProxyType(dict(_MODEL_ERROR)))
@@ -429,6 +430,13 @@ SETTINGS: dict[str, Setting] = {
         lower=0.0,
         upper=1.0,
         study=True,
+    ),
+    "load_allowance": Setting(
+        "1",
+        "share of the model's change of a feature from one end of a run's stated T2 interval to the other that a "
+        "healthy campaign may differ by (the true load of either campaign lies anywhere in it)",
+        _CHANGE,
+        lower=0.0,
     ),
     "change_model_error": Setting(
         "1",

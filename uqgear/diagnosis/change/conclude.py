@@ -69,8 +69,8 @@ def conclude_change(diagnosis: Any, inputs: DiagnosisInputs, started: float, cpu
         content = json_clean(content)
         maps = inconclusive_dataset(case, outcome.decision.reason, diagnosis.effects)
         extra = change_dataset(outcome)
-        maps = maps.assign_coords({key: value for key, value in extra["coords"].items()})
-        maps = maps.assign({key: value for key, value in extra["data"].items()})
+        maps = maps.assign_coords(dict(extra["coords"]))
+        maps = maps.assign(dict(extra["data"]))
         maps.attrs.update(verdict=outcome.decision.verdict, reason=outcome.decision.reason,
                           reference=str(inputs.reference_source))
     from ...physics.geometry import geometry_notes

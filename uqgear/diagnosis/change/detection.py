@@ -12,6 +12,8 @@ differ by (docs/model.md section 6.1):
   of that channel and feature), times ``change_z``;
 - the speed and load difference, as the spread of carrying the reference
   between its two nearest runs in speed (zero at a reference run);
+- a load difference inside the runs' stated T2 intervals: ``load_allowance``
+  of the change the model makes from one end of the interval to the other;
 - a run-to-run allowance per feature family (``change_allowance_db``), and,
   where the gear set was replaced since the reference, the spread of gears
   of the same quality (``replaced_allowance_db``, lines measured above a
@@ -109,6 +111,50 @@ class Carried:
     reasons: tuple[str, ...]  # why each outside run is outside ('' inside)
 
 
+def outside_reasons(
+    ref_speeds: np.ndarray, ref_torques: np.ndarray, speeds: np.ndarray, torques: np.ndarray, *,
+    speed_tolerance: float, torque_tolerance: float,
+) -> tuple[str, ...]:
+    """Why each test run lies outside the reference's range ('' for a run inside it).
+
+    Outside: a pinion speed beyond the reference's slowest and fastest runs
+    by more than ``speed_tolerance``, or a drive torque more than
+    ``torque_tolerance`` off the reference's interpolated at that speed.
+    """
+    order = np.argsort(ref_speeds)
+    ref_speeds, ref_torques = np.asarray(ref_speeds, dtype=float)[order], np.asarray(ref_torques, dtype=float)[order]
+    low, high = ref_speeds[0] * (1 - speed_tolerance), ref_speeds[-1] * (1 + speed_tolerance)
+    reasons = []
+    for speed, torque in zip(speeds, torques):
+        ref_torque = float(np.interp(speed, ref_speeds, ref_torques))
+        reason = ""
+        if not low <= speed <= high:
+            reason = f"{speed:g} rpm lies outside the reference's {ref_speeds[0]:g} to {ref_speeds[-1]:g} rpm"
+        elif abs(torque - ref_torque) > torque_tolerance * max(abs(ref_torque), 1.0):
+            reason = (f"{torque:g} N m is more than {torque_tolerance:.0%} off the reference's {ref_torque:g} N m "
+                      f"at {speed:g} rpm")
+        reasons.append(reason)
+    return tuple(reasons)
+
+
+def check_coverage(test: xr.Dataset, reference: xr.Dataset, *, where: str, speed_tolerance: float,
+                   torque_tolerance: float) -> None:
+    """Refuse a reference that covers none of the test runs (before any work; one line naming the first)."""
+    reasons = outside_reasons(
+        np.asarray(reference["pinion_speed"].values, dtype=float),
+        np.asarray(reference["drive_torque"].values, dtype=float),
+        np.asarray(test["pinion_speed"].values, dtype=float),
+        np.asarray(test["drive_torque"].values, dtype=float),
+        speed_tolerance=speed_tolerance,
+        torque_tolerance=torque_tolerance,
+    )
+    if all(reasons):
+        raise DiagnosisError(
+            f"reference {where}: no test operating point lies inside the reference's range (operating point 0: "
+            f"{reasons[0]}); expected a reference campaign covering the test plan"
+        )
+
+
 def carry_reference(
     reference: CampaignFeatures, speeds: np.ndarray, torques: np.ndarray, *, speed_tolerance: float,
     torque_tolerance: float,
@@ -124,15 +170,16 @@ def carry_reference(
     """
     order = np.argsort(reference.speeds)
     ref_speeds, ref_values = reference.speeds[order], reference.values[order]
-    ref_torques = reference.torques[order]
     n_op = speeds.size
     values = np.zeros((n_op, *reference.values.shape[1:]))
     spread = np.zeros_like(values)
     inside = np.ones(n_op, dtype=bool)
     nearest = np.zeros(n_op, dtype=int)
-    reasons = []
-    low, high = ref_speeds[0] * (1 - speed_tolerance), ref_speeds[-1] * (1 + speed_tolerance)
-    for op, (speed, torque) in enumerate(zip(speeds, torques)):
+    reasons = outside_reasons(
+        reference.speeds, reference.torques, speeds, torques, speed_tolerance=speed_tolerance,
+        torque_tolerance=torque_tolerance,
+    )
+    for op, speed in enumerate(speeds):
         nearest[op] = int(order[np.argmin(np.abs(ref_speeds - speed))])
         clipped = float(np.clip(speed, ref_speeds[0], ref_speeds[-1]))
         upper = int(np.clip(np.searchsorted(ref_speeds, clipped), 1, max(ref_speeds.size - 1, 1)))
@@ -141,16 +188,8 @@ def carry_reference(
         weight = 0.0 if span <= 0 else (clipped - ref_speeds[lower]) / span
         values[op] = (1 - weight) * ref_values[lower] + weight * ref_values[upper]
         spread[op] = 0.5 * np.abs(ref_values[upper] - ref_values[lower]) * 2.0 * min(weight, 1 - weight)
-        ref_torque = (1 - weight) * ref_torques[lower] + weight * ref_torques[upper]
-        reason = ""
-        if not low <= speed <= high:
-            reason = (f"{speed:g} rpm lies outside the reference's {ref_speeds[0]:g} to {ref_speeds[-1]:g} rpm")
-        elif abs(torque - ref_torque) > torque_tolerance * max(abs(ref_torque), 1.0):
-            reason = (f"{torque:g} N m is more than {torque_tolerance:.0%} off the reference's {ref_torque:g} N m "
-                      f"at {speed:g} rpm")
-        inside[op] = not reason
-        reasons.append(reason)
-    return Carried(values, spread, inside, nearest, tuple(reasons))
+        inside[op] = not reasons[op]
+    return Carried(values, spread, inside, nearest, reasons)
 
 
 def _floored(values: np.ndarray, floor: np.ndarray) -> np.ndarray:
@@ -189,8 +228,11 @@ class ChangeTest:
 
     @property
     def ratio(self) -> np.ndarray:
-        ratio = np.abs(self.change) / self.threshold
+        with np.errstate(invalid="ignore"):
+            ratio = np.abs(self.change) / self.threshold
         ratio[~self.judged] = 0.0
+        # a feature that could not be read (a shaft not turning once in the record) is not judged
+        ratio[~np.isfinite(ratio)] = 0.0
         return ratio
 
     @property
@@ -267,8 +309,11 @@ def _noise_spread(reference_halves: np.ndarray, test_halves: np.ndarray, carried
     """
     ref_var = (reference_halves[0] - reference_halves[1]) ** 2 / 4.0
     test_var = (test_halves[0] - test_halves[1]) ** 2 / 4.0
-    pooled = 0.5 * (ref_var.mean(axis=0) + test_var.mean(axis=0))
+    # a half too short to average a shaft's revolution gives no estimate (NaN): the pool stands in for it
+    pooled = np.nanmean(np.concatenate([ref_var, test_var]), axis=0)
+    pooled = np.where(np.isfinite(pooled), pooled, np.inf)
     local = 0.5 * (ref_var[carried_nearest] + test_var)
+    local = np.where(np.isfinite(local), local, pooled[None])
     return np.sqrt(2.0 * 0.5 * (local + pooled[None]))
 
 
@@ -282,7 +327,12 @@ def family_allowance(settings: DiagnosisSettings, gears: str) -> np.ndarray:
 
 
 def judge_change(
-    reference: CampaignFeatures, test: CampaignFeatures, *, settings: DiagnosisSettings, gears: str = "same"
+    reference: CampaignFeatures,
+    test: CampaignFeatures,
+    *,
+    settings: DiagnosisSettings,
+    gears: str = "same",
+    load_allowance: np.ndarray | None = None,
 ) -> ChangeTest:
     """Judge every feature of every test run against the reference carried to it (module docstring).
 
@@ -312,6 +362,9 @@ def judge_change(
     spread = _noise_spread(reference.halves, test.halves, carried.nearest)
     spread = np.sqrt(spread**2 + carried.spread**2)
     threshold = settings.change_z * spread + family_allowance(settings, gears)[None, None, :]
+    if load_allowance is not None:
+        # the load of each run may differ inside its stated T2 interval (judged runs only)
+        threshold[carried.inside] += load_allowance
     return ChangeTest(
         test.channels, change, threshold, spread, carried.inside, carried.reasons, gears, anchor, observed, floor,
         test.speeds,
@@ -325,6 +378,8 @@ __all__ = [
     "GEAR_STATES",
     "KIND",
     "carry_reference",
+    "check_coverage",
+    "outside_reasons",
     "family_allowance",
     "level_floor",
     "read_campaign",

@@ -95,6 +95,9 @@ def _shaft_features(
 ) -> list[float]:
     """One shaft's lines, sideband energy and TSA residual RMS and kurtosis (ln), and the mesh harmonics when asked."""
     tsa, revolutions = _shaft_average(record, fs, shaft_hz, teeth)
+    if revolutions < 1:
+        # not one revolution of this shaft in the record: nothing to average
+        return [math.nan] * ((len(MESH_HARMONICS) if mesh_lines else 0) + len(SHAFT_ORDERS) + 3)
     size = tsa.size
     spectrum = np.fft.rfft(tsa - tsa.mean())
     amplitude2 = (2.0 * np.abs(spectrum) / size) ** 2
@@ -151,11 +154,11 @@ def record_features(
 def campaign_features(
     records: Sequence[np.ndarray],
     fs: float,
-    pinion_hz: Sequence[float],
+    pinion_hz: Sequence[float] | np.ndarray,
     z1: int,
     z2: int,
     *,
-    noise: Sequence[float] | None = None,
+    noise: Sequence[float] | np.ndarray | None = None,
 ) -> np.ndarray:
     """Features of a channel's records over runs, (n_op, n_feature)."""
     return np.stack(

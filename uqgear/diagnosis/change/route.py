@@ -26,7 +26,7 @@ from ..decision import Decision
 from ..settings import DiagnosisSettings
 from .detection import ChangeTest, judge_change, read_campaign
 from .features import FEATURES
-from .scoring import ChangeScore, explained_where, score_change
+from .scoring import ChangeModel, ChangeScore, explained_where, score_change
 
 _DB = 10.0 / np.log(10.0)
 
@@ -105,13 +105,19 @@ def diagnose_change(
         test_features = read_campaign(rig, design, channels)
     with steps.step("judge the change since the reference") as found:
         test = judge_change(reference_features, test_features, settings=settings, gears=gears)
+        share = settings.replaced_line_floor if gears == "replaced" else settings.same_line_floor
+        model = ChangeModel(design, rig, test_features, test.judged, share)
+        allowance = model.load_allowance(settings.load_allowance)
+        test = judge_change(
+            reference_features, test_features, settings=settings, gears=gears, load_allowance=allowance
+        )
         found.update(changed=test.changed)
     timings["change_test"] = time.perf_counter() - started
     scores: list[ChangeScore] = []
     if test.changed and effects:
         started = time.perf_counter()
         with steps.step("score the candidate effects on the change they predict") as found:
-            scores = score_change(test, test_features, rig, design, effects, settings=settings)
+            scores = score_change(test, test_features, rig, design, effects, settings=settings, model=model)
             found.update(best=scores[0].label if scores else None)
         timings["change_scoring"] = time.perf_counter() - started
     decision = _decide(test, scores, settings)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -60,7 +61,7 @@ class ChangeScore:
         return {
             "effect": self.effect,
             "variant": self.label,
-            "parameters": {key: value for key, value in self.values.items()},
+            "parameters": dict(self.values),
             "share": self.share,
             "loss": self.loss,
             "loss_without": self.loss_without,
@@ -68,8 +69,8 @@ class ChangeScore:
 
 
 def soft_l1(z: np.ndarray) -> float:
-    """Sum of 2 (sqrt(1 + z^2) - 1): quadratic within a threshold, linear beyond."""
-    return float(np.sum(2.0 * (np.sqrt(1.0 + z * z) - 1.0)))
+    """Sum of 2 (sqrt(1 + z^2) - 1): quadratic within a threshold, linear beyond (NaN terms count nothing)."""
+    return float(np.nansum(2.0 * (np.sqrt(1.0 + z * z) - 1.0)))
 
 
 class ChangeModel:
@@ -87,6 +88,7 @@ class ChangeModel:
         upper = np.asarray(rig["adhesion_torque_upper"].values, dtype=float)[self.ops]
         # the resisting torque of each run: the middle of its stated interval
         self.adhesion = 0.5 * (lower + upper)
+        self.lower, self.upper = lower, upper
         self.baseline = self.features([], "mesh")
         self.simulations = 0
 
@@ -94,11 +96,26 @@ class ChangeModel:
         """The transfer gains from the model to the rig (:func:`transfer_gains`)."""
         return transfer_gains(self.test.channels, anchor, self.baseline)
 
-    def features(self, effects: Sequence[Any], periodicity: str) -> np.ndarray:
+    def load_allowance(self, share: float) -> np.ndarray:
+        """What a healthy campaign may differ by from a change of load inside the stated T2 intervals.
+
+        ``share`` of the model's change of each feature from the lower to
+        the upper end of each run's interval (n_judged, n_channel, n_feature), ln units.
+        """
+        if share <= 0.0:
+            return np.zeros_like(self.baseline)
+        low = self.features([], "mesh", adhesion=self.lower)
+        high = self.features([], "mesh", adhesion=self.upper)
+        return share * np.abs(high - low)
+
+    def features(
+        self, effects: Sequence[Any], periodicity: str, *, adhesion: np.ndarray | None = None
+    ) -> np.ndarray:
         """Floored ln features (n_judged, n_channel, n_feature) of the model with ``effects``."""
+        torques = self.adhesion if adhesion is None else adhesion
         per_channel: dict[str, list[np.ndarray]] = {channel: [] for channel in self.test.channels}
         for index in range(self.ops.size):
-            run = self.simulator.run(index, self.design, 1.0, float(self.adhesion[index]), effects, periodicity)
+            run = self.simulator.run(index, self.design, 1.0, float(torques[index]), effects, periodicity)
             for channel in self.test.channels:
                 per_channel[channel].append(run.records[channel])
         self.simulations = getattr(self, "simulations", 0) + self.ops.size
@@ -141,21 +158,26 @@ def anchored_change(anchor: np.ndarray, baseline: np.ndarray, with_effect: np.nd
     """The change an effect predicts on the rig: what it adds to the model, added to the reference's data.
 
     Powers add: the reference's power plus the model's added power times
-    the transfer gain. A kurtosis follows from the fourth moment, which adds
-    likewise (times the squared gain), over the new second moment. Returns
-    ln(predicted / reference) per feature.
+    the transfer gain. A kurtosis follows from the fourth moment of the
+    record with the effect's component added as an independent part
+    (m4 = m4_ref + 6 m2_ref m2_added + m4_added, the added moments read off
+    the model and carried by the gain). Returns ln(predicted / reference)
+    per feature.
     """
     g = gains[..., None]
     power = np.exp(anchor) + g * (np.exp(with_effect) - np.exp(baseline))
     power = np.maximum(power, 1e-3 * np.exp(anchor))
     predicted = np.where(_POWER, np.log(power), anchor)
     for kurt, rms in _KURTOSIS_PAIRS:
-        m2 = np.exp(anchor[..., rms])
-        fourth = np.exp(anchor[..., kurt]) * m2**2 + gains**2 * (
-            np.exp(with_effect[..., kurt] + 2 * with_effect[..., rms]) - np.exp(baseline[..., kurt] + 2 * baseline[..., rms])
-        )
+        m2_ref, m2_base, m2_eff = np.exp(anchor[..., rms]), np.exp(baseline[..., rms]), np.exp(with_effect[..., rms])
+        m4_ref = np.exp(anchor[..., kurt]) * m2_ref**2
+        m4_base = np.exp(baseline[..., kurt]) * m2_base**2
+        m4_eff = np.exp(with_effect[..., kurt]) * m2_eff**2
+        added2 = m2_eff - m2_base
+        added4 = m4_eff - m4_base - 6.0 * m2_base * added2
+        fourth = m4_ref + 6.0 * m2_ref * gains * added2 + gains**2 * added4
         m2_new = np.exp(predicted[..., rms])
-        predicted[..., kurt] = np.log(np.maximum(fourth / m2_new**2, 1.0))
+        predicted[..., kurt] = np.log(np.clip(fourth / m2_new**2, 1.0, None))
     return predicted - anchor
 
 
@@ -214,8 +236,12 @@ def score_variant(
         max(family.ladder[0] / 3.0, bounds.lower, 1e-12), min(family.ladder[2] * 10.0, bounds.upper), _LADDER_POINTS
     )
     # phases change no amplitude feature: one start per combination of the other parameters
-    starts = list({tuple(sorted((k, v) for k, v in s.items() if not k.endswith((f".{strength}", ".phase")))): s
-                   for s in candidate.starts}.values()) or [{}]
+    starts: list[dict[str, Any]] = list(
+        {
+            tuple(sorted((k, v) for k, v in s.items() if not k.endswith((f".{strength}", ".phase")))): dict(s)
+            for s in candidate.starts
+        }.values()
+    ) or [{}]
     for key in _PROPORTIONAL.get(candidate.effect, {}):
         # absent or in proportion to the strength: a fixed value between adds nothing the two do not span
         starts = [start for start in starts if start.get(f"{candidate.effect}.{key}", 0.0) < 1e-6] or starts[:1]
@@ -248,7 +274,7 @@ def score_variant(
         argument, value = float(logs[at]), losses[at]
         if refine:
             low, high = logs[max(at - 1, 0)], logs[min(at + 1, logs.size - 1)]
-            refined, refined_value = _golden(lambda v, i=index: evaluate(i, v), float(low), float(high), refine)
+            refined, refined_value = _golden(partial(evaluate, index), float(low), float(high), refine)
             if refined_value < value:
                 argument, value = refined, refined_value
         if value < best[0]:
@@ -260,6 +286,15 @@ def score_variant(
     return ChangeScore(candidate.effect, candidate.label, values, float(share), float(loss), float(without), predicted)
 
 
+def _valid(change: ChangeTest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The judged runs' change, threshold and anchor, with features that could not be read set to count nothing
+    (change 0, threshold infinite)."""
+    judged = change.judged
+    observed, scale, anchor = change.change[judged], change.threshold[judged], change.anchor[judged]
+    valid = np.isfinite(observed) & np.isfinite(scale) & np.isfinite(anchor)
+    return np.where(valid, observed, 0.0), np.where(valid, scale, np.inf), np.where(valid, anchor, 0.0)
+
+
 def score_change(
     change: ChangeTest,
     test: CampaignFeatures,
@@ -268,14 +303,14 @@ def score_change(
     effects: Sequence[str],
     *,
     settings: DiagnosisSettings,
+    model: ChangeModel | None = None,
 ) -> list[ChangeScore]:
     """Every variant of every candidate effect scored on the change it predicts, best share first."""
     judged = change.judged
-    share = settings.replaced_line_floor if change.gears == "replaced" else settings.same_line_floor
-    model = ChangeModel(design, rig, test, judged, share)
-    observed = change.change[judged]
-    scale = change.threshold[judged]
-    anchor = change.anchor[judged]
+    if model is None:
+        share = settings.replaced_line_floor if change.gears == "replaced" else settings.same_line_floor
+        model = ChangeModel(design, rig, test, judged, share)
+    observed, scale, anchor = _valid(change)
     scores = []
     for name in effects:
         for candidate in effect_family(name).variants(design, {}):
@@ -285,8 +320,7 @@ def score_change(
 
 def explained_where(change: ChangeTest, score: ChangeScore, settings: DiagnosisSettings) -> dict[str, float]:
     """Share of the change explained per channel (soft-L1, as the whole share)."""
-    judged = change.judged
-    observed, scale = change.change[judged], change.threshold[judged]
+    observed, scale, _ = _valid(change)
     spread = _spread(scale, score.predicted, observed, settings)
     out = {}
     for c, channel in enumerate(change.channels):
