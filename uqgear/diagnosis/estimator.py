@@ -21,9 +21,9 @@ import xarray as xr
 from ..common.steps import StepLog
 from ..physics.design import Design
 from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
-from .allowances.reference import ReferenceCorrection, attach_reference, learn_reference
+from .allowances.reference import attach_reference, learn_reference
 from .case import RigCase, prepare_case
-from .change.detection import GEAR_STATES
+from .change.options import check_reference_options, is_differential
 from .dataset import held_spectra, inconclusive_dataset, result_dataset
 from .decision import Decision
 from .effect_set import SelectedEffect
@@ -193,14 +193,9 @@ class Diagnosis:
         or its folder): the nominal fit starts from its posterior medians.
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
-    reference_route : {"change", "transfer"}
-        With a reference: judge what changed since it on condition-monitoring
-        features and score the effects on the change they predict
-        (``change``, docs/model.md section 6.1), or learn its transfer
-        correction and diagnose the test campaign through it (``transfer``).
-    reference_gears : {"same", "replaced"}
-        Whether the test campaign runs the reference's gears or a replaced
-        set of the same quality (whose spread is then allowed for).
+    reference_route, reference_gears : str
+        With a reference: what changed since it (``change``) or its transfer correction (``transfer``); the
+        reference's gears (``same``) or a replaced set of their quality (``replaced``); docs/model.md section 6.1.
 
     Attributes
     ----------
@@ -265,11 +260,7 @@ class Diagnosis:
         # a design given replaces the file's before the file is read: its copy is then not validated
         self.design = None if design is None else resolve_design(design, None)
         self.calibration = calibration
-        if reference_route not in ("change", "transfer"):
-            raise DiagnosisError(f"reference_route: expected change or transfer; got {reference_route!r}")
-        if reference_gears not in GEAR_STATES:
-            raise DiagnosisError(f"reference_gears: expected one of {', '.join(GEAR_STATES)}; got {reference_gears!r}")
-        self.reference_route, self.reference_gears = reference_route, reference_gears
+        self.reference_route, self.reference_gears = check_reference_options(reference_route, reference_gears)
 
     def fit(self, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None = None) -> Diagnosis:
         """Diagnose a rig campaign (optionally against a healthy reference campaign of the same rig).
@@ -299,24 +290,12 @@ class Diagnosis:
             A step failed after the input was accepted (``steps_`` holds the finished ones).
         """
         started, cpu_started = time.perf_counter(), _cpu_seconds()
-        differential = (
-            reference is not None
-            and self.reference_route == "change"
-            and not isinstance(reference, ReferenceCorrection)
-        )
-        inputs = read_inputs(
-            rig,
-            reference,
-            design=self.design,
-            calibration=self.calibration,
-            settings=self.settings,
-            match_points=not differential,
-        )
-        self.design_, self.steps_ = inputs.design, StepLog()
-        if differential:
-            from .change.conclude import conclude_change
+        if is_differential(self.reference_route, reference):
+            from .change.conclude import conclude_change  # what changed since a healthy reference
 
-            return conclude_change(self, inputs, started, cpu_started)
+            return conclude_change(self, rig, reference, started, cpu_started)
+        inputs = read_inputs(rig, reference, design=self.design, calibration=self.calibration, settings=self.settings)
+        self.design_, self.steps_ = inputs.design, StepLog()
         # 1. features: the records reduced as the model's will be (with the allowances that act on them)
         case, reference_summary = _features(
             inputs, settings=self.settings, seeds=self.seeds, workers=self.workers, steps=self.steps_

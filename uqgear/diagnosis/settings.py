@@ -110,7 +110,8 @@ class DiagnosisSettings:
     replaced_allowance_db: tuple[float, ...] = (3.0, 2.0, 8.0, 8.0, 6.0, 3.0, 3.0)
     same_line_floor: float = 0.003
     replaced_line_floor: float = 0.05
-    change_share: float = 0.5
+    change_share: float = 0.2
+    change_margin: float = 0.1
     load_allowance: float = 0.5
     change_model_error: float = 0.5
     # ---- the predictive distribution (step 2)
@@ -426,6 +427,15 @@ SETTINGS: dict[str, Setting] = {
     "change_share": Setting(
         "1",
         "an effect is named for a change when it explains at least this share of it (soft-L1 over the features)",
+        _CHANGE,
+        lower=0.0,
+        upper=1.0,
+        study=True,
+    ),
+    "change_margin": Setting(
+        "1",
+        "the named effect must explain this much more of the change than the next variant, else the change is "
+        "unexplained (the two cannot be told apart)",
         _CHANGE,
         lower=0.0,
         upper=1.0,

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
+import xarray as xr
+
 from ..case import prepare_case
 from ..dataset import inconclusive_dataset
-from ..inputs import DiagnosisInputs
+from ..inputs import ReferenceInput, read_inputs
 from ..outputs import inconclusive_summary, json_clean
 from .route import change_dataset, diagnose_change
 
@@ -20,13 +23,26 @@ def _cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
-def conclude_change(diagnosis: Any, inputs: DiagnosisInputs, started: float, cpu_started: float) -> Any:
+def conclude_change(
+    diagnosis: Any, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput, started: float,
+    cpu_started: float,
+) -> Any:
     """Run the differential route for a :class:`~uqgear.diagnosis.Diagnosis` and set its fitted attributes.
 
-    ``outcome_`` and ``nominal_`` are None (no model is fitted to either
-    campaign); ``change_`` holds the change test and the scores.
+    The inputs are read and checked first (the reference must cover at
+    least one test run; its runs need not match the test's). ``outcome_``
+    and ``nominal_`` are None (no model is fitted to either campaign);
+    ``change_`` holds the change test and the scores.
     """
-    steps, settings = diagnosis.steps_, diagnosis.settings
+    from ...common.steps import StepLog
+
+    settings = diagnosis.settings
+    inputs = read_inputs(
+        rig, reference, design=diagnosis.design, calibration=diagnosis.calibration, settings=settings,
+        match_points=False,
+    )
+    diagnosis.design_, diagnosis.steps_ = inputs.design, StepLog()
+    steps = diagnosis.steps_
     assert inputs.reference is not None  # internal invariant: the route runs only with a reference
     with steps.step("extract the rig features"):
         case = prepare_case(inputs.rig, inputs.design, seed=diagnosis.seeds.noise, settings=settings)

@@ -38,6 +38,7 @@ from ...physics.design import Design
 from ..errors import DiagnosisError
 from ..settings import DiagnosisSettings
 from .features import FAMILIES, FEATURES, campaign_features
+from .options import GEAR_STATES
 
 #: Families measured as powers of lines or of a part of the signal: a level floor applies to them.
 LEVEL_FAMILIES = ("mesh_harmonic", "shaft_line", "sideband_energy", "tsa_residual_rms")
@@ -51,7 +52,6 @@ KIND = {
     "tsa_residual_rms": "what the shaft's average holds besides the meshing",
     "tsa_residual_kurtosis": "a local impulse once per revolution (TSA residual kurtosis)",
 }
-GEAR_STATES = ("same", "replaced")
 _DB = 10.0 / math.log(10.0)
 
 

@@ -71,11 +71,17 @@ def _decide(test: ChangeTest, scores: list[ChangeScore], settings: DiagnosisSett
             "unexplained",
             f"changed since the reference ({where}); {share} of the change, below {settings.change_share:.0%}",
         )
+    runner_up = scores[1] if len(scores) > 1 else None
+    next_text = "" if runner_up is None else f" (next: {runner_up.label}, {runner_up.share:.0%})"
+    if runner_up is not None and best.share - runner_up.share < settings.change_margin:
+        return Decision(
+            "unexplained",
+            f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change, "
+            f"{runner_up.label} {runner_up.share:.0%}: less than {settings.change_margin:.0%} apart, neither is named",
+        )
     return Decision(
-        best.effect,
-        f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change "
-        f"(next: {scores[1].label}, {scores[1].share:.0%})" if len(scores) > 1 else
-        f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change",
+        best.effect, f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change"
+        + next_text,
     )
 
 
@@ -134,6 +140,7 @@ def diagnose_change(
             "change_allowance_db": settings.change_allowance_db,
             "replaced_allowance_db": list(settings.replaced_allowance_db) if gears == "replaced" else None,
             "change_share": settings.change_share,
+            "change_margin": settings.change_margin,
         },
         "timing_s": dict(timings),
     }

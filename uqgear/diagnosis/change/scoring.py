@@ -89,8 +89,16 @@ class ChangeModel:
         # the resisting torque of each run: the middle of its stated interval
         self.adhesion = 0.5 * (lower + upper)
         self.lower, self.upper = lower, upper
-        self.baseline = self.features([], "mesh")
+        self._baselines: dict[str, np.ndarray] = {}
+        self.baseline = self.baseline_for("mesh")
         self.simulations = 0
+
+    def baseline_for(self, periodicity: str) -> np.ndarray:
+        """The model without an effect simulated as the variant is (same window and tiling): the difference
+        between them is then the effect's alone."""
+        if periodicity not in self._baselines:
+            self._baselines[periodicity] = self.features([], periodicity)
+        return self._baselines[periodicity]
 
     def gains(self, anchor: np.ndarray) -> np.ndarray:
         """The transfer gains from the model to the rig (:func:`transfer_gains`)."""
@@ -158,7 +166,8 @@ def anchored_change(anchor: np.ndarray, baseline: np.ndarray, with_effect: np.nd
     """The change an effect predicts on the rig: what it adds to the model, added to the reference's data.
 
     Powers add: the reference's power plus the model's added power times
-    the transfer gain. A kurtosis follows from the fourth moment of the
+    the transfer gain (a power the effect lowers falls at most by the
+    model's own ratio). A kurtosis follows from the fourth moment of the
     record with the effect's component added as an independent part
     (m4 = m4_ref + 6 m2_ref m2_added + m4_added, the added moments read off
     the model and carried by the gain). Returns ln(predicted / reference)
@@ -166,8 +175,11 @@ def anchored_change(anchor: np.ndarray, baseline: np.ndarray, with_effect: np.nd
     """
     g = gains[..., None]
     power = np.exp(anchor) + g * (np.exp(with_effect) - np.exp(baseline))
-    power = np.maximum(power, 1e-3 * np.exp(anchor))
-    predicted = np.where(_POWER, np.log(power), anchor)
+    # a power the effect takes away is taken in proportion: the rig cannot lose more than the share the model
+    # loses (its own content there may be other than the model's)
+    ratio = with_effect - baseline
+    added = np.log(np.maximum(power, 1e-300)) - anchor
+    predicted = np.where(_POWER, anchor + np.where(ratio >= 0.0, added, np.maximum(added, ratio)), anchor)
     for kurt, rms in _KURTOSIS_PAIRS:
         m2_ref, m2_base, m2_eff = np.exp(anchor[..., rms]), np.exp(baseline[..., rms]), np.exp(with_effect[..., rms])
         m4_ref = np.exp(anchor[..., kurt]) * m2_ref**2
@@ -259,8 +271,9 @@ def score_variant(
         if key not in cache:
             values = _variant_values(candidate, starts[start_index], strength, math.exp(log_value))
             effect = family.make(values)
+            baseline = model.baseline_for(candidate.periodicity)
             predicted = anchored_change(
-                anchor, model.baseline, model.features([effect], candidate.periodicity), model.gains(anchor)
+                anchor, baseline, model.features([effect], candidate.periodicity), model.gains(anchor)
             )
             spread = _spread(scale, predicted, observed, settings)
             cache[key] = (soft_l1((observed - predicted) / spread), predicted)
