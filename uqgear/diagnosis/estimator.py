@@ -23,6 +23,7 @@ from ..physics.design import Design
 from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
 from .allowances.reference import attach_reference, learn_reference
 from .case import RigCase, prepare_case
+from .change.conclude import conclude_change
 from .change.options import check_reference_options, is_differential
 from .dataset import held_spectra, inconclusive_dataset, result_dataset
 from .decision import Decision
@@ -194,8 +195,7 @@ class Diagnosis:
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
     reference_route, reference_gears : str
-        With a reference: what changed since it (``change``) or its transfer correction (``transfer``); the
-        reference's gears (``same``) or a replaced set of their quality (``replaced``); docs/model.md section 6.1.
+        ``change``/``transfer``, ``same``/``replaced`` gears with a reference (docs/model.md 6.1).
 
     Attributes
     ----------
@@ -243,8 +243,7 @@ class Diagnosis:
         design: Design | str | os.PathLike[str] | None = None,
         calibration: str | os.PathLike[str] | xr.Dataset | None = None,
         pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
-        reference_route: str = "change",
-        reference_gears: str = "same",
+        reference_route: str = "change", reference_gears: str = "same",
     ) -> None:
         self.effects = check_effects(effects)
         if settings is not None and not isinstance(settings, DiagnosisSettings):
@@ -270,10 +269,8 @@ class Diagnosis:
         rig : path or xarray.Dataset
             A ``uqgear-rig/1`` file or Dataset.
         reference : path, xarray.Dataset or ReferenceCorrection, optional
-            A campaign of the same rig and test plan with a known good gearbox
-            (docs/model.md section 6.1): what it shows against the fitted
-            nominal model is learned and carried over, so the verdict names
-            what changed. A correction already learned is reused.
+            A campaign of the same rig with a known good gearbox: what changed since it (docs/model.md 6.1;
+            a correction already learned, or ``reference_route="transfer"``, corrects the model by it instead).
 
         Returns
         -------
@@ -290,9 +287,7 @@ class Diagnosis:
             A step failed after the input was accepted (``steps_`` holds the finished ones).
         """
         started, cpu_started = time.perf_counter(), _cpu_seconds()
-        if is_differential(self.reference_route, reference):
-            from .change.conclude import conclude_change  # what changed since a healthy reference
-
+        if is_differential(self.reference_route, reference):  # what changed since a healthy reference
             return conclude_change(self, rig, reference, started, cpu_started)
         inputs = read_inputs(rig, reference, design=self.design, calibration=self.calibration, settings=self.settings)
         self.design_, self.steps_ = inputs.design, StepLog()
@@ -406,13 +401,8 @@ class Diagnosis:
         with self.steps_.step("summarise the results"):
             content = json_clean(
                 inconclusive_summary(
-                    case,
-                    reason,
-                    source=inputs.source,
-                    effects=self.effects,
-                    seed_text=str(self.seed.entropy),
-                    timings=_timings({}, started, cpu_started, self.workers),
-                    settings=self.settings,
+                    case, reason, source=inputs.source, effects=self.effects, seed_text=str(self.seed.entropy),
+                    timings=_timings({}, started, cpu_started, self.workers), settings=self.settings,
                 )
             )
             maps = inconclusive_dataset(case, reason, self.effects)

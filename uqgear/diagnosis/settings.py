@@ -387,73 +387,26 @@ SETTINGS: dict[str, Setting] = {
         integer=True,
     ),
     # ---- what changed since a healthy reference (step 1 with a reference)
-    "change_z": Setting(
-        "noise spreads",
-        "a feature has changed since the reference when it moved by more than this many spreads of two healthy "
-        "records (from the halves of each record and the carrying in speed) plus its family's allowance",
-        _CHANGE,
-        lower=0.0,
-        study=True,
-    ),
-    "change_allowance_db": Setting(
-        "dB",
-        "run-to-run allowance added to every feature's change threshold (same gears as the reference)",
-        _CHANGE,
-        lower=0.0,
-        study=True,
-    ),
-    "replaced_allowance_db": Setting(
-        "dB",
-        "spread of a replaced gear set of the same quality added to the threshold, per feature family (rms, "
-        "kurtosis, mesh harmonics, shaft lines, sideband energy, TSA residual rms and kurtosis)",
-        _CHANGE,
-        lower=0.0,
-    ),
-    "same_line_floor": Setting(
-        "1",
-        "line and band powers are compared above a floor of this share of the channel's RMS amplitude (same gears)",
-        _CHANGE,
-        lower=0.0,
-        upper=1.0,
-    ),
-    "replaced_line_floor": Setting(
-        "1",
-        "line and band powers are compared above a floor of this share of the channel's RMS amplitude (replaced "
-        "gears: a new set's own lines lie below it)",
-        _CHANGE,
-        lower=0.0,
-        upper=1.0,
-    ),
-    "change_share": Setting(
-        "1",
-        "an effect is named for a change when it explains at least this share of it (soft-L1 over the features)",
-        _CHANGE,
-        lower=0.0,
-        upper=1.0,
-        study=True,
-    ),
-    "change_margin": Setting(
-        "1",
-        "the named effect must explain this much more of the change than the next variant, else the change is "
-        "unexplained (the two cannot be told apart)",
-        _CHANGE,
-        lower=0.0,
-        upper=1.0,
-        study=True,
-    ),
-    "load_allowance": Setting(
-        "1",
-        "share of the model's change of a feature from one end of a run's stated T2 interval to the other that a "
-        "healthy campaign may differ by (the true load of either campaign lies anywhere in it)",
-        _CHANGE,
-        lower=0.0,
-    ),
-    "change_model_error": Setting(
-        "1",
-        "relative error of the model's predicted change of a feature (the model form of a foreign rig)",
-        _CHANGE,
-        lower=0.0,
-    ),
+    "change_z": Setting("noise spreads", "a feature changed when it moved by more than this many spreads of two "
+                        "healthy records (halves of each record, carrying in speed) plus its allowances", _CHANGE,
+                        lower=0.0, study=True),
+    "change_allowance_db": Setting("dB", "run-to-run allowance added to every feature's change threshold", _CHANGE,
+                                   lower=0.0, study=True),
+    "replaced_allowance_db": Setting("dB", "a replaced gear set's spread added per family (rms, kurtosis, mesh "
+                                     "harmonics, shaft lines, sidebands, TSA residual rms and kurtosis)", _CHANGE,
+                                     lower=0.0),
+    "same_line_floor": Setting("1", "line and band powers compare above this share of the channel's RMS (same "
+                               "gears)", _CHANGE, lower=0.0, upper=1.0),
+    "replaced_line_floor": Setting("1", "line and band powers compare above this share of the channel's RMS "
+                                   "(replaced gears)", _CHANGE, lower=0.0, upper=1.0),
+    "change_share": Setting("1", "an effect is named when it explains at least this share of the change",
+                            _CHANGE, lower=0.0, upper=1.0, study=True),
+    "change_margin": Setting("1", "and at least this much more than the next variant", _CHANGE, lower=0.0,
+                             upper=1.0, study=True),
+    "load_allowance": Setting("1", "share of the model's change over a run's stated T2 interval a healthy "
+                              "campaign may differ by", _CHANGE, lower=0.0),
+    "change_model_error": Setting("1", "relative error of the model's predicted change of a feature", _CHANGE,
+                                  lower=0.0),
     # ---- the predictive distribution (step 2)
     "model_error": Setting(
         "1",
