@@ -24,7 +24,7 @@ def _cpu_seconds() -> float:
 
 
 def conclude_change(
-    diagnosis: Any, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput, started: float,
+    diagnosis: Any, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None, started: float,
     cpu_started: float,
 ) -> Any:
     """Run the differential route for a :class:`~uqgear.diagnosis.Diagnosis` and set its fitted attributes.
