@@ -123,7 +123,9 @@ def diagnose_change(
     if test.changed and effects:
         started = time.perf_counter()
         with steps.step("score the candidate effects on the change they predict") as found:
-            scores = score_change(test, test_features, rig, design, effects, settings=settings, model=model)
+            scores = score_change(
+                test, test_features, rig, design, effects, settings=settings, model=model, reference=reference
+            )
             found.update(best=scores[0].label if scores else None)
         timings["change_scoring"] = time.perf_counter() - started
     decision = _decide(test, scores, settings)

@@ -299,6 +299,30 @@ def score_variant(
     return ChangeScore(candidate.effect, candidate.label, values, float(share), float(loss), float(without), predicted)
 
 
+def fixed_line_hints(rig: xr.Dataset, reference: xr.Dataset, channels: Sequence[str]) -> dict[str, float]:
+    """The frequency (1 to 100 Hz) at which the test campaign's transmission error rose most over the
+    reference's, in the median over runs: a line at a fixed frequency rises there in every run, an
+    order-locked one moves with the speed (the stick-slip start of an adhesion oscillation)."""
+    if "te" not in channels:
+        return {}
+    from ...rig.features import sampling_rate
+
+    def spectra(campaign: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
+        records = np.asarray(campaign["te"].values, dtype=float)
+        fs = float(sampling_rate(campaign["time"].values))
+        window = np.hanning(records.shape[1])
+        amplitude = np.abs(np.fft.rfft((records - records.mean(axis=1, keepdims=True)) * window, axis=1))
+        return np.fft.rfftfreq(records.shape[1], 1.0 / fs), amplitude
+
+    frequency, test = spectra(rig)
+    ref_frequency, ref = spectra(reference)
+    band = (frequency >= 1.0) & (frequency <= 100.0)
+    if not band.any() or ref_frequency.size != frequency.size:
+        return {}
+    rise = np.median(np.log(test[:, band] + 1e-300) - np.log(ref.mean(axis=0)[band] + 1e-300), axis=0)
+    return {"adhesion_frequency": float(frequency[band][int(np.argmax(rise))])}
+
+
 def _valid(change: ChangeTest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The judged runs' change, threshold and anchor, with features that could not be read set to count nothing
     (change 0, threshold infinite)."""
@@ -317,6 +341,7 @@ def score_change(
     *,
     settings: DiagnosisSettings,
     model: ChangeModel | None = None,
+    reference: xr.Dataset | None = None,
 ) -> list[ChangeScore]:
     """Every variant of every candidate effect scored on the change it predicts, best share first."""
     judged = change.judged
@@ -324,9 +349,10 @@ def score_change(
         share = settings.replaced_line_floor if change.gears == "replaced" else settings.same_line_floor
         model = ChangeModel(design, rig, test, judged, share)
     observed, scale, anchor = _valid(change)
+    hints = fixed_line_hints(rig, reference, change.channels) if reference is not None else {}
     scores = []
     for name in effects:
-        for candidate in effect_family(name).variants(design, {}):
+        for candidate in effect_family(name).variants(design, hints):
             scores.append(score_variant(model, candidate, observed, scale, anchor, settings))
     return sorted(scores, key=lambda score: -score.share)
 
