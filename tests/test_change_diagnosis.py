@@ -216,3 +216,44 @@ def test_the_foreign_rig_records_a_valid_campaign_with_its_gears_and_effects():
     # the same seed gives the same campaign
     again = simulate_foreign_campaign(DESIGN, ops, gears=gears, effects=[run_out], seed=4, duration=0.2)
     np.testing.assert_array_equal(rig["te"].values, again["te"].values)
+
+
+# ---------------------------------------------------------------------------------------------- end to end
+
+
+def test_the_foreign_suite_finds_no_change_between_healthy_campaigns():
+    from uqgear.validation.foreign_suite import run_foreign_suite
+
+    result = run_foreign_suite(seed=1, effects=[], n_ops=4, duration=0.5)
+    assert [entry["campaign"] for entry in result["campaigns"]] == ["healthy_same", "healthy_replaced"]
+    assert result["healthy_none"] and result["exactly_right"] == 1.0
+    for entry in result["campaigns"]:
+        assert abs(entry["largest_change_db"]) < entry["largest_threshold_db"]
+
+
+@pytest.mark.slow
+def test_a_run_out_added_on_the_foreign_rig_is_named_with_its_share_on_the_reports_first_screen(tmp_path):
+    from uqgear.diagnosis import diagnose
+    from uqgear.physics.effects import make_effect
+    from uqgear.rig.foreign_rig import draw_gears, simulate_foreign_campaign
+    from uqgear.rig.virtual_rig import default_operating_points
+
+    ops = default_operating_points(DESIGN).isel(op=[0, 2, 4, 6])
+    gears = draw_gears(DESIGN, 6, 5)
+    reference = simulate_foreign_campaign(DESIGN, ops, gears=gears, seed=6)
+    run_out = make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 1.0, "kappa": 0.03})
+    test = simulate_foreign_campaign(DESIGN, ops, gears=gears, effects=[run_out], seed=7)
+    content = diagnose(test, tmp_path / "out", reference=reference, effects=["eccentricity", "tooth_damage"],
+                       seed=3, workers=1)
+    assert content["verdict"] == "eccentricity", content["reason"]
+    named = content["change"]["named"]
+    assert named["parameters"]["shaft"] == "pinion" and named["share"] >= 0.2
+    assert 4e-6 <= named["parameters"]["amplitude"] <= 4e-5     # the run-out's size, within the model form's error
+    where = content["change"]["test"]["where"]
+    assert any(entry["channel"] == "te" and entry["family"] == "shaft_line" and entry["shaft"] == "pinion"
+               for entry in where)
+    assert set(content["change"]["timing_s"]) == {"change_test", "change_scoring"}
+    page = (tmp_path / "out" / "report.html").read_text()
+    first = page[page.index("What changed since the healthy reference"):page.index('class="verdict"')]
+    assert "Changed since the reference: te shaft line of the pinion up" in first
+    assert "Verdict eccentricity: eccentricity[pinion]" in first and "of the change" in first

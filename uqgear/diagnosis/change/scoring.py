@@ -166,14 +166,17 @@ def anchored_change(anchor: np.ndarray, baseline: np.ndarray, with_effect: np.nd
     """The change an effect predicts on the rig: what it adds to the model, added to the reference's data.
 
     Powers add: the reference's power plus the model's added power times
-    the transfer gain (a power the effect lowers falls at most by the
+    a transfer gain, the lesser of the feature's own ratio of reference to
+    model and the channel's (a power the effect lowers falls at most by the
     model's own ratio). A kurtosis follows from the fourth moment of the
     record with the effect's component added as an independent part
     (m4 = m4_ref + 6 m2_ref m2_added + m4_added, the added moments read off
     the model and carried by the gain). Returns ln(predicted / reference)
     per feature.
     """
-    g = gains[..., None]
+    # a feature the model carries transfers as it does (its own ratio of rig to model); one the model lacks
+    # (at its floor) takes the channel's gain: the lesser of the two
+    g = np.minimum(gains[..., None], np.exp(anchor - baseline))
     power = np.exp(anchor) + g * (np.exp(with_effect) - np.exp(baseline))
     # a power the effect takes away is taken in proportion: the rig cannot lose more than the share the model
     # loses (its own content there may be other than the model's)
@@ -187,7 +190,8 @@ def anchored_change(anchor: np.ndarray, baseline: np.ndarray, with_effect: np.nd
         m4_eff = np.exp(with_effect[..., kurt]) * m2_eff**2
         added2 = m2_eff - m2_base
         added4 = m4_eff - m4_base - 6.0 * m2_base * added2
-        fourth = m4_ref + 6.0 * m2_ref * gains * added2 + gains**2 * added4
+        gain = g[..., rms]
+        fourth = m4_ref + 6.0 * m2_ref * gain * added2 + gain**2 * added4
         m2_new = np.exp(predicted[..., rms])
         predicted[..., kurt] = np.log(np.clip(fourth / m2_new**2, 1.0, None))
     return predicted - anchor
