@@ -13,6 +13,7 @@ from .features import (
     order_spectrum, line_amplitudes, extract_features)
 from .usability import check_usable_signal, record_states
 from .transfer_path import apply_transfer_path, transfer_path_gain
+from .foreign_rig import ForeignGears, draw_gears, simulate_foreign_campaign, simulate_foreign_run
 from .virtual_rig import (
     simulate_campaign, synth_rig, default_operating_points, adhesion_torque_bounds,
     true_parameters_of, bearing_check_operating_points)
@@ -24,4 +25,5 @@ __all__ = [
     'simulate_campaign', 'synth_rig', 'default_operating_points', 'adhesion_torque_bounds',
     'true_parameters_of', 'bearing_check_operating_points',
     'check_usable_signal', 'record_states', 'apply_transfer_path', 'transfer_path_gain',
+    'ForeignGears', 'draw_gears', 'simulate_foreign_campaign', 'simulate_foreign_run',
 ]
