@@ -107,7 +107,7 @@ class DiagnosisSettings:
     # ---- what changed since a healthy reference (step 1 with a reference)
     change_z: float = 5.0
     change_allowance_db: float = 1.0
-    replaced_allowance_db: tuple[float, ...] = (3.0, 2.0, 8.0, 8.0, 6.0, 3.0, 3.0)
+    replaced_allowance_db: tuple[float, ...] = (3.0, 2.0, 8.0, 8.0, 6.0, 8.0, 3.0)
     same_line_floor: float = 0.003
     replaced_line_floor: float = 0.05
     change_share: float = 0.2
