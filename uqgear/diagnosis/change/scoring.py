@@ -43,6 +43,8 @@ _LADDER_POINTS = 6
 _PROPORTIONAL = {"eccentricity": {"kappa": 2500.0}}
 _REFINE_STEPS = 3
 _FREE_LADDER_POINTS = 4
+# Parameters the amplitude features cannot see (kept at their start values, not reported).
+_UNSEEN = ("phase", "tooth")
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,8 @@ class ChangeScore:
         return {
             "effect": self.effect,
             "variant": self.label,
-            "parameters": dict(self.values),
+            # the features read amplitudes only: a phase or which tooth is not measured and not reported
+            "parameters": {key: value for key, value in self.values.items() if key not in _UNSEEN},
             "share": self.share,
             "loss": self.loss,
             "loss_without": self.loss_without,
