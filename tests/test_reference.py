@@ -183,7 +183,9 @@ def test_a_mismatched_reference_is_refused_with_one_line(tmp_path, name, change,
     import re
 
     reference = _variant(tmp_path, name, change)
-    completed = uqgear("diagnose", DATA / "eccentricity.nc", "--reference", reference, "--out", tmp_path / "out")
+    # the transfer route needs a reference run at every test run (the change route carries the reference in speed)
+    completed = uqgear("diagnose", DATA / "eccentricity.nc", "--reference", reference, "--reference-route", "transfer",
+                       "--out", tmp_path / "out")
     assert completed.returncode == 2, completed.stderr
     lines = completed.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("uqgear: error: "), completed.stderr
@@ -212,7 +214,9 @@ def test_a_reference_with_the_rigs_resonance_keeps_the_diagnosis_right(design, t
     (measured: a 12 um run-out named with a shrink of 28 % and a remaining
     gap of 3.0; a healthy campaign unexplained at 2.8). With a healthy
     reference of the same rig the run-out is named alone with a shrink of at
-    least half, and a healthy test campaign gets no effect named.
+    least half, and a healthy test campaign gets no effect named, on the
+    transfer route (which learns the path) and on the change route (which
+    judges what changed since the reference).
     """
     ops = blind_test.operating_points_of("service", design, 4)
 
@@ -223,8 +227,9 @@ def test_a_reference_with_the_rigs_resonance_keeps_the_diagnosis_right(design, t
     reference = campaign([], 11)
     candidates = ["eccentricity", "tooth_damage", "friction"]
     run_out = make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 0.7, "kappa": 0.03})
-    content = diagnose(campaign([run_out], 12), tmp_path / "run_out", effects=candidates, seed=2,
-                       reference=reference)
+    test = campaign([run_out], 12)
+    content = diagnose(test, tmp_path / "run_out", effects=candidates, seed=2, reference=reference,
+                       reference_route="transfer")
     assert content["verdict"] == "eccentricity", content["reason"]
     assert [entry["effect"] for entry in content["effects"]] == ["eccentricity"]
     assert content["gap"]["shrink_fraction"] >= 0.5
@@ -236,9 +241,18 @@ def test_a_reference_with_the_rigs_resonance_keeps_the_diagnosis_right(design, t
     page = (tmp_path / "run_out" / "report.html").read_text()
     assert "Reference: what the healthy campaign of this rig shows" in page
 
-    healthy = diagnose(campaign([], 13), tmp_path / "healthy", effects=candidates, seed=2, reference=reference,
-                       report=False)
+    healthy_test = campaign([], 13)
+    healthy = diagnose(healthy_test, tmp_path / "healthy", effects=candidates, seed=2, reference=reference,
+                       reference_route="transfer", report=False)
     assert healthy["effects"] == [] and healthy["verdict"] in ("none", "unexplained"), healthy["reason"]
+
+    # the default route judges the change since the reference: the run-out alone, and nothing on the healthy test
+    changed = diagnose(test, tmp_path / "changed", effects=candidates, seed=2, reference=reference, report=False)
+    assert changed["verdict"] == "eccentricity", changed["reason"]
+    assert [entry["effect"] for entry in changed["effects"]] == ["eccentricity"]
+    unchanged = diagnose(healthy_test, tmp_path / "unchanged", effects=candidates, seed=2, reference=reference,
+                         report=False)
+    assert unchanged["verdict"] == "none" and unchanged["effects"] == [], unchanged["reason"]
 
 
 # ---------------------------------------------------------------------------------------------- RMS through the path

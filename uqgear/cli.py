@@ -10,7 +10,7 @@
     uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
     uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...] [--reference HEALTHY.nc]
-    uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world]
+    uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world|foreign]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler, a rig file without usable signal) ends with exit status
@@ -428,6 +428,8 @@ def _command_diagnose(args: argparse.Namespace) -> int:
         workers=args.workers,
         reference=reference,
         pitch_classes=classes,
+        reference_route=args.reference_route,
+        reference_gears=args.reference_gears,
     )
     gap = result.get("gap", {})
     if gap.get("baseline") is None:
@@ -450,6 +452,8 @@ def _command_blindtest(args: argparse.Namespace) -> int:
     if args.n_per_effect < 1:
         return _fail(f"--n-per-effect: expected a positive integer; got {args.n_per_effect}")
     out = _new_output_folder(Path(args.out))
+    if args.suite == "foreign":
+        return _foreign_blindtest(args, out)
     result = blindtest(out, n_per_effect=args.n_per_effect, seed=args.seed, workers=args.workers, suite=args.suite)
     sets = result["effect_sets"]
     print(
@@ -458,6 +462,23 @@ def _command_blindtest(args: argparse.Namespace) -> int:
         f"effect sets exactly right {sets['set_exact']:.2f} ({sets['set_exact_identifiable']:.2f} against the "
         f"effects the data can tell), false alarms on healthy controls "
         f"{result['false_alarms']} of {result['healthy_controls']}; results in {out}"
+    )
+    return 0
+
+
+def _foreign_blindtest(args: argparse.Namespace, out: Path) -> int:
+    """The differential diagnosis's blind test on the foreign virtual rig (``blindtest.json`` in ``out``)."""
+    import json
+
+    from .common.fileio import write_text_atomic
+    from .validation.foreign_suite import run_foreign_suite
+
+    result = run_foreign_suite(seed=args.seed, n_per_effect=args.n_per_effect, workers=args.workers or 1)
+    write_text_atomic(out / "blindtest.json", json.dumps(result, indent=1, default=str))
+    print(
+        f"blind test (foreign): {len(result['campaigns'])} campaigns, exactly right {result['exactly_right']:.2f} "
+        f"(effects {result['effects_exactly_right']:.2f}), healthy tests none: {result['healthy_none']}; "
+        f"results in {out}"
     )
     return 0
 
@@ -665,9 +686,22 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument(
         "--reference",
         metavar="HEALTHY.nc",
-        help="a campaign of the same rig and test plan with a known good gearbox: what it "
-        "shows against the fitted model (transfer paths, the rig's own structure) is learned "
-        "and carried over, so the diagnosis names what changed",
+        help="a campaign of the same rig with a known good gearbox: the diagnosis says what "
+        "changed since it, where, and which effect explains what share of the change",
+    )
+    diagnose.add_argument(
+        "--reference-gears",
+        choices=("same", "replaced"),
+        default="same",
+        help="with --reference: the test runs the reference's gears (default) or a replaced set "
+        "of the same quality, whose manufacturing spread is then allowed for",
+    )
+    diagnose.add_argument(
+        "--reference-route",
+        choices=("change", "transfer"),
+        default="change",
+        help="with --reference: judge the change on condition-monitoring features and score the "
+        "effects on it (default), or learn the reference's transfer correction of the model",
     )
     diagnose.add_argument(
         "--pitch-classes",
@@ -694,11 +728,12 @@ def build_parser() -> argparse.ArgumentParser:
     blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     blind.add_argument(
         "--suite",
-        choices=("library", "real_world"),
+        choices=("library", "real_world", "foreign"),
         default="library",
         help="library: each effect alone on a clean rig (default); real_world: two effects at "
         "once, a transfer-path resonance with a healthy reference, speed wander, pitch errors and "
-        "healthy controls with those nuisances (--n-per-effect campaigns of each kind)",
+        "healthy controls with those nuisances (--n-per-effect campaigns of each kind); foreign: "
+        "what changed since a healthy reference on a rig whose physics is not the model's",
     )
     blind.add_argument(
         "--workers", type=int, metavar="N", help="worker processes of each diagnosis (default: one per CPU, at most 8)"

@@ -23,6 +23,8 @@ from ..physics.design import Design
 from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
 from .allowances.reference import attach_reference, learn_reference
 from .case import RigCase, prepare_case
+from .change.conclude import conclude_change
+from .change.options import check_reference_options, is_differential
 from .dataset import held_spectra, inconclusive_dataset, result_dataset
 from .decision import Decision
 from .effect_set import SelectedEffect
@@ -192,6 +194,8 @@ class Diagnosis:
         or its folder): the nominal fit starts from its posterior medians.
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
+    reference_route, reference_gears : str
+        ``change``/``transfer``, ``same``/``replaced`` gears with a reference (docs/model.md 6.1).
 
     Attributes
     ----------
@@ -239,6 +243,7 @@ class Diagnosis:
         design: Design | str | os.PathLike[str] | None = None,
         calibration: str | os.PathLike[str] | xr.Dataset | None = None,
         pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+        reference_route: str = "change", reference_gears: str = "same",
     ) -> None:
         self.effects = check_effects(effects)
         if settings is not None and not isinstance(settings, DiagnosisSettings):
@@ -254,6 +259,7 @@ class Diagnosis:
         # a design given replaces the file's before the file is read: its copy is then not validated
         self.design = None if design is None else resolve_design(design, None)
         self.calibration = calibration
+        self.reference_route, self.reference_gears = check_reference_options(reference_route, reference_gears)
 
     def fit(self, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None = None) -> Diagnosis:
         """Diagnose a rig campaign (optionally against a healthy reference campaign of the same rig).
@@ -263,10 +269,8 @@ class Diagnosis:
         rig : path or xarray.Dataset
             A ``uqgear-rig/1`` file or Dataset.
         reference : path, xarray.Dataset or ReferenceCorrection, optional
-            A campaign of the same rig and test plan with a known good gearbox
-            (docs/model.md section 6.1): what it shows against the fitted
-            nominal model is learned and carried over, so the verdict names
-            what changed. A correction already learned is reused.
+            A campaign of the same rig with a known good gearbox: what changed since it (docs/model.md 6.1;
+            a correction already learned, or ``reference_route="transfer"``, corrects the model by it instead).
 
         Returns
         -------
@@ -283,6 +287,8 @@ class Diagnosis:
             A step failed after the input was accepted (``steps_`` holds the finished ones).
         """
         started, cpu_started = time.perf_counter(), _cpu_seconds()
+        if is_differential(self.reference_route, reference):  # what changed since a healthy reference
+            return conclude_change(self, rig, reference, started, cpu_started)
         inputs = read_inputs(rig, reference, design=self.design, calibration=self.calibration, settings=self.settings)
         self.design_, self.steps_ = inputs.design, StepLog()
         # 1. features: the records reduced as the model's will be (with the allowances that act on them)
@@ -395,13 +401,8 @@ class Diagnosis:
         with self.steps_.step("summarise the results"):
             content = json_clean(
                 inconclusive_summary(
-                    case,
-                    reason,
-                    source=inputs.source,
-                    effects=self.effects,
-                    seed_text=str(self.seed.entropy),
-                    timings=_timings({}, started, cpu_started, self.workers),
-                    settings=self.settings,
+                    case, reason, source=inputs.source, effects=self.effects, seed_text=str(self.seed.entropy),
+                    timings=_timings({}, started, cpu_started, self.workers), settings=self.settings,
                 )
             )
             maps = inconclusive_dataset(case, reason, self.effects)

@@ -69,14 +69,20 @@ def read_inputs(
     design: Design | None,
     calibration: str | os.PathLike[str] | xr.Dataset | None,
     settings: DiagnosisSettings = DEFAULT_SETTINGS,
+    match_points: bool = True,
 ) -> DiagnosisInputs:
-    """Read and check every input of a diagnosis before any work (``design``: one given, replacing the file's)."""
+    """Read and check every input of a diagnosis before any work (``design``: one given, replacing the file's).
+
+    ``match_points=False`` leaves the reference's operating points unmatched (the differential route carries the
+    reference to the test's speeds itself)."""
     dataset, source = load_rig_input(rig, design=design)
     nominal_design = design if design is not None else resolve_design(None, dataset)
     posterior = load_calibration(calibration) if calibration is not None else None
     if reference is None:
         return DiagnosisInputs(dataset, source, nominal_design, posterior)
-    reference_data, reference_source, learned = load_reference(reference, dataset, design=design, settings=settings)
+    reference_data, reference_source, learned = load_reference(
+        reference, dataset, design=design, settings=settings, match_points=match_points
+    )
     return DiagnosisInputs(dataset, source, nominal_design, posterior, reference_data, reference_source, learned)
 
 
@@ -160,6 +166,7 @@ def load_reference(
     *,
     design: Design | None = None,
     settings: DiagnosisSettings = DEFAULT_SETTINGS,
+    match_points: bool = True,
 ) -> tuple[xr.Dataset, str, ReferenceCorrection | None]:
     """A healthy reference campaign, checked against the test campaign before any work.
 
@@ -193,6 +200,17 @@ def load_reference(
             f"reference: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(reference).__name__}"
         )
     check_design_match(test, dataset, where=source)
+    if not match_points and learned is None:
+        from .change.detection import check_coverage
+
+        check_coverage(
+            test,
+            dataset,
+            where=source,
+            speed_tolerance=settings.speed_tolerance,
+            torque_tolerance=settings.torque_tolerance,
+        )
+        return dataset, source, learned
     match_operating_points(
         test,
         dataset,

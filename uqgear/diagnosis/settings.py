@@ -38,6 +38,7 @@ _PHASES = "docs/model.md section 6.4 (sideband phases)"
 _REFERENCE = "docs/model.md section 6.1"
 _INTERFERENCE = "docs/model.md section 6.5"
 _FEATURES = "docs/model.md section 6, step 2"
+_CHANGE = "docs/model.md section 6.1 (what changed)"
 
 # Relative model error (standard deviation) by feature kind: with their true parameters and effect the model
 # reproduces the reference campaigns' lines to well under 1 % (a few per cent for lines near the noise floor);
@@ -118,6 +119,16 @@ class DiagnosisSettings:
     torque_tolerance: float = 0.05
     interference_threshold: float = 8.0
     interference_runs: int = 3
+    # ---- what changed since a healthy reference (step 1 with a reference)
+    change_z: float = 5.0
+    change_allowance_db: float = 1.0
+    replaced_allowance_db: tuple[float, ...] = (3.0, 2.0, 8.0, 8.0, 6.0, 8.0, 3.0)
+    same_line_floor: float = 0.003
+    replaced_line_floor: float = 0.05
+    change_share: float = 0.2
+    change_margin: float = 0.1
+    load_allowance: float = 0.5
+    change_model_error: float = 0.5
     # ---- the predictive distribution (step 2)
     model_error: Mapping[str, float] = field(default_factory=lambda: MappingProxyType(dict(_MODEL_ERROR)))
     # ---- where the gap lies (reported, not decided)
@@ -390,6 +401,27 @@ SETTINGS: dict[str, Setting] = {
         lower=1,
         integer=True,
     ),
+    # ---- what changed since a healthy reference (step 1 with a reference)
+    "change_z": Setting("noise spreads", "a feature changed when it moved by more than this many spreads of two "
+                        "healthy records (halves of each record, carrying in speed) plus its allowances", _CHANGE,
+                        lower=0.0, study=True),
+    "change_allowance_db": Setting("dB", "run-to-run allowance added to every feature's change threshold", _CHANGE,
+                                   lower=0.0, study=True),
+    "replaced_allowance_db": Setting("dB", "a replaced gear set's spread added per family (rms, kurtosis, mesh "
+                                     "harmonics, shaft lines, sidebands, TSA residual rms and kurtosis)", _CHANGE,
+                                     lower=0.0),
+    "same_line_floor": Setting("1", "line and band powers compare above this share of the channel's RMS (same "
+                               "gears)", _CHANGE, lower=0.0, upper=1.0),
+    "replaced_line_floor": Setting("1", "line and band powers compare above this share of the channel's RMS "
+                                   "(replaced gears)", _CHANGE, lower=0.0, upper=1.0),
+    "change_share": Setting("1", "an effect is named when it explains at least this share of the change",
+                            _CHANGE, lower=0.0, upper=1.0, study=True),
+    "change_margin": Setting("1", "and at least this much more than the next variant", _CHANGE, lower=0.0,
+                             upper=1.0, study=True),
+    "load_allowance": Setting("1", "share of the model's change over a run's stated T2 interval a healthy "
+                              "campaign may differ by", _CHANGE, lower=0.0),
+    "change_model_error": Setting("1", "relative error of the model's predicted change of a feature", _CHANGE,
+                                  lower=0.0),
     # ---- the predictive distribution (step 2)
     "model_error": Setting(
         "1",

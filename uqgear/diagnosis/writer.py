@@ -57,6 +57,8 @@ def diagnose(
     reference: ReferenceInput | None = None,
     pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
     settings: DiagnosisSettings | None = None,
+    reference_route: str = "change",
+    reference_gears: str = "same",
 ) -> dict[str, Any]:
     """Diagnose the sim-to-real gap of a rig campaign and write the results.
 
@@ -71,7 +73,7 @@ def diagnose(
         Output folder: ``diagnosis.json``, ``diagnosis.nc`` (gap maps,
         scores, spectra) and ``report.html``. They appear together once all
         are written, replacing the files of an earlier diagnosis there.
-    design, effects, seed, workers, calibration, pitch_classes, settings
+    design, effects, seed, workers, calibration, pitch_classes, settings, reference_route, reference_gears
         As :class:`~uqgear.diagnosis.Diagnosis`.
     report : bool
         Write ``report.html``.
@@ -140,6 +142,8 @@ def diagnose(
         design=design,
         calibration=calibration,
         pitch_classes=pitch_classes,
+        reference_route=reference_route,
+        reference_gears=reference_gears,
     )
     with OutputFolder(out_dir) as work:
         try:

@@ -21,6 +21,7 @@ from matplotlib.ticker import LogLocator, NullLocator
 from ..common.fileio import write_text_atomic
 from .finding import HEADLINE_STYLE, Finding, headline_html
 from .page import figure_png, figure_pngs, html_page, img_tag, new_figure
+from .change_section import change_findings, change_page_parts
 from .reference_section import reference_section_html
 
 _STYLE = """
@@ -177,6 +178,8 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
     """
     if not content:
         return []
+    if content.get("change"):
+        return change_findings(content)
     findings = []
     verdict = str(content.get("verdict", "?"))
     reason = str(content.get("reason", "")).rstrip(".")
@@ -387,6 +390,13 @@ def _pitch_error_notes(content: Mapping[str, Any]) -> list[str]:
 
 def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
     """HTML text of a diagnosis report from its JSON summary and Dataset."""
+    if content.get("change"):
+        # against a healthy reference: what changed, where, which effect explains what share of it
+        return html_page(f"uqgear diagnosis: {content['verdict']}", _STYLE + HEADLINE_STYLE, [
+            "<h1>What changed since the healthy reference</h1>",
+            headline_html(diagnosis_findings(content), "Details below."),
+            f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
+            f'<p>{html.escape(content["reason"])}.</p>', *change_page_parts(content)])
     gap = content["gap"]
     figures = _diagnosis_figures(content, ds)
     parts = ["<h1>Sim-to-real gap diagnosis</h1>",

@@ -15,6 +15,7 @@ from .features import (
     order_spectrum,
     sampling_rate,
 )
+from .foreign_rig import ForeignGears, draw_gears, simulate_foreign_campaign, simulate_foreign_run
 from .format import (
     CONVENTIONS,
     RIG_COORDINATES,
@@ -63,4 +64,8 @@ __all__ = [
     "record_states",
     "apply_transfer_path",
     "transfer_path_gain",
+    "ForeignGears",
+    "draw_gears",
+    "simulate_foreign_campaign",
+    "simulate_foreign_run",
 ]

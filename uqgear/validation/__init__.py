@@ -26,6 +26,7 @@ from .campaigns import (
     rig_campaign,
     second_design,
 )
+from .foreign_suite import run_foreign_suite
 from .oracle import effect_visibility, oracle_gap
 from .scores import blindtest_dataset, set_scores, summarise
 
@@ -47,4 +48,5 @@ __all__ = [
     "STRENGTHS",
     "PLANS",
     "SUITES",
+    "run_foreign_suite",
 ]

@@ -107,7 +107,10 @@ def diagnose_campaign(
             )
         )
     diagnosis = Diagnosis(
-        design=design, seed=DiagnosisSeeds(noise_seed, diagnosis_seed, learn_seed), workers=workers
+        design=design,
+        seed=DiagnosisSeeds(noise_seed, diagnosis_seed, learn_seed),
+        workers=workers,
+        reference_route="transfer",
     ).fit(_blind(rig), reference=reference)
     recorded_truth = json.loads(rig.attrs["true_parameters"])
     known = {**truth, "adhesion_torque": recorded_truth["adhesion_torque"]}

@@ -1,0 +1,167 @@
+"""The differential diagnosis against a healthy reference: what changed, where, and which effect explains it.
+
+Run by :class:`~uqgear.diagnosis.Diagnosis` when a reference campaign is
+given (``reference_route="change"``, the default): step 1 judges the change
+on condition-monitoring features (:mod:`.detection`); with no significant
+change the verdict is ``none`` and no model is simulated; otherwise every
+candidate effect is scored on the change it predicts (:mod:`.scoring`) and
+the best is named when it explains at least ``change_share`` of the change,
+else the change is ``unexplained`` with where it lies (docs/model.md
+section 6.1).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ...common.steps import StepLog
+from ...physics.design import Design
+from ..decision import Decision
+from ..settings import DiagnosisSettings
+from .detection import ChangeTest, judge_change, read_campaign
+from .features import FEATURES
+from .scoring import ChangeModel, ChangeScore, explained_where, score_change
+
+_DB = 10.0 / np.log(10.0)
+
+
+@dataclass
+class ChangeOutcome:
+    """What the differential diagnosis found: the change test, the scores, the decision and its record."""
+
+    test: ChangeTest
+    scores: list[ChangeScore]
+    decision: Decision
+    summary: dict[str, Any]
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _where_text(where: Sequence[dict[str, Any]], limit: int = 3) -> str:
+    parts = []
+    for entry in where[:limit]:
+        shaft = f" of the {entry['shaft']}" if entry["shaft"] else ""
+        parts.append(
+            f"{entry['channel']} {entry['family'].replace('_', ' ')}{shaft} {entry['direction']} "
+            f"{abs(entry['largest_db']):.1f} dB at {', '.join(f'{s:g}' for s in entry['speeds_rpm'])} rpm"
+        )
+    return "; ".join(parts)
+
+
+def _decide(test: ChangeTest, scores: list[ChangeScore], settings: DiagnosisSettings) -> Decision:
+    """The verdict of the differential diagnosis and its reason."""
+    largest = test.largest()
+    if not test.changed:
+        return Decision(
+            "none",
+            f"no feature changed beyond what two healthy campaigns of this rig differ by: the largest change "
+            f"({largest['channel']} {largest['feature']} at {largest['speed_rpm']:g} rpm) is "
+            f"{largest['change_db']:+.1f} dB against a threshold of {largest['threshold_db']:.1f} dB",
+        )
+    where = _where_text(test.where())
+    best = scores[0] if scores else None
+    if best is None or best.share < settings.change_share:
+        share = "no candidate" if best is None else f"the best candidate, {best.label}, explains {best.share:.0%}"
+        return Decision(
+            "unexplained",
+            f"changed since the reference ({where}); {share} of the change, below {settings.change_share:.0%}",
+        )
+    runner_up = scores[1] if len(scores) > 1 else None
+    next_text = "" if runner_up is None else f" (next: {runner_up.label}, {runner_up.share:.0%})"
+    if runner_up is not None and best.share - runner_up.share < settings.change_margin:
+        return Decision(
+            "unexplained",
+            f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change, "
+            f"{runner_up.label} {runner_up.share:.0%}: less than {settings.change_margin:.0%} apart, neither is named",
+        )
+    return Decision(
+        best.effect, f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change"
+        + next_text,
+    )
+
+
+def _score_entry(score: ChangeScore, test: ChangeTest, settings: DiagnosisSettings) -> dict[str, Any]:
+    entry = score.summary()
+    entry["share_by_channel"] = explained_where(test, score, settings)
+    return entry
+
+
+def diagnose_change(
+    rig: xr.Dataset,
+    reference: xr.Dataset,
+    design: Design,
+    effects: Sequence[str],
+    *,
+    settings: DiagnosisSettings,
+    gears: str,
+    reference_source: str,
+    steps: StepLog,
+) -> ChangeOutcome:
+    """Judge the change since the reference and, where there is one, score the effects on it."""
+    timings: dict[str, float] = {}
+    channels = tuple(name for name in ("te", "acc_pinion", "acc_gear") if name in rig.data_vars)
+    started = time.perf_counter()
+    with steps.step("read the condition-monitoring features of the reference and the test campaign"):
+        reference_features = read_campaign(reference, design, channels)
+        test_features = read_campaign(rig, design, channels)
+    with steps.step("judge the change since the reference") as found:
+        test = judge_change(reference_features, test_features, settings=settings, gears=gears)
+        share = settings.replaced_line_floor if gears == "replaced" else settings.same_line_floor
+        model = ChangeModel(design, rig, test_features, test.judged, share)
+        allowance = model.load_allowance(settings.load_allowance)
+        test = judge_change(
+            reference_features, test_features, settings=settings, gears=gears, load_allowance=allowance
+        )
+        found.update(changed=test.changed)
+    timings["change_test"] = time.perf_counter() - started
+    scores: list[ChangeScore] = []
+    if test.changed and effects:
+        started = time.perf_counter()
+        with steps.step("score the candidate effects on the change they predict") as found:
+            scores = score_change(
+                test, test_features, rig, design, effects, settings=settings, model=model, reference=reference
+            )
+            found.update(best=scores[0].label if scores else None)
+        timings["change_scoring"] = time.perf_counter() - started
+    decision = _decide(test, scores, settings)
+    best = scores[0] if scores and decision.verdict == scores[0].effect else None
+    summary = {
+        "route": "change",
+        "reference": reference_source,
+        "gears": gears,
+        "test": test.summary(),
+        "named": None if best is None else _score_entry(best, test, settings),
+        "ranking": [_score_entry(score, test, settings) for score in scores],
+        "thresholds": {
+            "change_z": settings.change_z,
+            "change_allowance_db": settings.change_allowance_db,
+            "replaced_allowance_db": list(settings.replaced_allowance_db) if gears == "replaced" else None,
+            "change_share": settings.change_share,
+            "change_margin": settings.change_margin,
+        },
+        "timing_s": dict(timings),
+    }
+    return ChangeOutcome(test, scores, decision, summary, timings)
+
+
+def change_dataset(outcome: ChangeOutcome) -> dict[str, Any]:
+    """Variables for ``diagnosis.nc``: the change, its threshold and (with a named effect) the predicted change."""
+    test = outcome.test
+    dims = ("op", "channel", "cm_feature")
+    data = {
+        "change": (dims, test.change * _DB, {"long_name": "change since the reference", "units": "dB"}),
+        "change_threshold": (dims, test.threshold * _DB, {"long_name": "change threshold", "units": "dB"}),
+    }
+    coords = {
+        "cm_feature": ("cm_feature", [name.label for name in FEATURES]),
+        "cm_family": ("cm_feature", [name.family for name in FEATURES]),
+    }
+    return {"data": data, "coords": coords}
+
+
+__all__ = ["ChangeOutcome", "change_dataset", "diagnose_change"]

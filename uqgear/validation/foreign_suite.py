@@ -1,0 +1,163 @@
+"""Blind tests of the differential diagnosis on the foreign virtual rig (:mod:`uqgear.rig.foreign_rig`).
+
+Every campaign pairs a healthy reference campaign of the foreign rig with a
+test campaign of it, each with its own noise and record starts:
+
+- ``healthy_same``: the reference's gears again (expected ``none``);
+- ``healthy_replaced``: another gear set of the same grade, diagnosed with
+  ``reference_gears="replaced"`` (expected ``none``);
+- one per library effect (``n_per_effect`` each): the reference's gears with
+  the effect at the strong level of its ladder, its choices (shaft, gear,
+  bearing) and phases drawn; bearing clearances on the light-load bearing
+  check plan, the others on the service plan (expected: the effect, with
+  its shaft, gear or bearing).
+
+A campaign is *exactly right* when the verdict is the expected one and a
+named effect's choice (shaft, gear or bearing) is the true one.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..diagnosis import Diagnosis
+from ..diagnosis.effects import effect_family, effect_names
+from ..physics.design import Design, load_design
+from ..rig.foreign_rig import draw_gears, simulate_foreign_campaign
+from ..rig.virtual_rig import adhesion_torque_bounds
+from ..uq.seeds import as_seed_sequence, child_seed
+from .campaigns import operating_points_of
+
+#: Quality grade (ISO 1328-1) of the foreign rig's gears.
+FOREIGN_GRADE = 6.0
+#: The choice of each family that must match for a campaign to be exactly right.
+_CHOICE = {"eccentricity": "shaft", "tooth_damage": "gear", "bearing_clearance": "bearing"}
+
+
+def _operating_points(plan: str, design: Design, n_ops: int) -> dict[str, np.ndarray]:
+    table = dict(operating_points_of(plan, design, n_ops))
+    if "adhesion_torque_lower" not in table:
+        lower, upper = adhesion_torque_bounds(design, table["drive_torque"])
+        table.update(adhesion_torque_lower=lower, adhesion_torque_upper=upper)
+    return table
+
+
+def _as_points(table: dict[str, np.ndarray]) -> Any:
+    import xarray as xr
+
+    return xr.Dataset({name: ("op", np.asarray(values, dtype=float)) for name, values in table.items()})
+
+
+def foreign_campaign_plan(effects: Sequence[str], n_per_effect: int) -> list[tuple[str, str | None]]:
+    """The suite's campaigns: (identifier, effect or None for a healthy test)."""
+    plan: list[tuple[str, str | None]] = [("healthy_same", None), ("healthy_replaced", None)]
+    for name in effects:
+        plan += [(f"{name}-{k}", name) for k in range(n_per_effect)]
+    return plan
+
+
+def run_foreign_suite(
+    *,
+    seed: int = 1,
+    n_per_effect: int = 1,
+    effects: Sequence[str] | None = None,
+    n_ops: int = 8,
+    duration: float = 1.0,
+    workers: int = 1,
+    design: Design | None = None,
+) -> dict[str, Any]:
+    """Run the foreign-rig suite; returns the JSON-ready record (campaigns, verdicts, shares, times, scores).
+
+    Examples
+    --------
+    >>> from uqgear.validation.foreign_suite import run_foreign_suite
+    >>> run_foreign_suite(seed=1, effects=[], n_ops=3, duration=0.2)["exactly_right"]  # doctest: +SKIP
+    1.0
+    """
+    names = list(effect_names()) if effects is None else list(effects)
+    nominal = design if design is not None else load_design("locomotive")
+    sequence = as_seed_sequence(seed)
+    gears_seed, replaced_seed, campaign_seed = (child_seed(sequence, index) for index in range(3))
+    gears = draw_gears(nominal, FOREIGN_GRADE, gears_seed)
+    replaced = draw_gears(nominal, FOREIGN_GRADE, replaced_seed)
+    references: dict[str, Any] = {}
+    entries = []
+    for index, (identifier, name) in enumerate(foreign_campaign_plan(names, n_per_effect)):
+        run_seed = child_seed(campaign_seed, index)
+        reference_seed, test_seed, effect_seed = (child_seed(run_seed, k) for k in range(3))
+        plan = "service" if name is None else effect_family(name).plan
+        table = _operating_points(plan, nominal, n_ops)
+        if plan not in references:
+            references[plan] = simulate_foreign_campaign(
+                nominal, _as_points(table), gears=gears, seed=child_seed(sequence, 10 + len(references)),
+                duration=duration, title=f"foreign rig healthy reference ({plan})",
+            )
+        effects_in = []
+        truth: dict[str, Any] = {}
+        if name is not None:
+            family = effect_family(name)
+            rng = np.random.default_rng(effect_seed)
+            truth = family.campaign_values(family.ladder[2], float(rng.uniform(0.0, 2.0 * math.pi)), rng)
+            effects_in = [family.make(truth)]
+        test_gears = replaced if identifier == "healthy_replaced" else gears
+        rig = simulate_foreign_campaign(
+            nominal, _as_points(table), gears=test_gears, effects=effects_in, seed=test_seed, duration=duration,
+            title=f"foreign rig campaign {identifier}",
+        )
+        started = time.perf_counter()
+        diagnosis = Diagnosis(
+            seed=reference_seed,
+            workers=workers,
+            reference_gears="replaced" if identifier == "healthy_replaced" else "same",
+        ).fit(rig, reference=references[plan])
+        seconds = time.perf_counter() - started
+        entries.append(_judged(identifier, name, truth, diagnosis.summary_, seconds))
+    right = [entry["exactly_right"] for entry in entries]
+    effect_entries = [entry for entry in entries if entry["truth"] is not None]
+    healthy = [entry for entry in entries if entry["truth"] is None]
+    return {
+        "suite": "foreign",
+        "seed": seed,
+        "n_ops": n_ops,
+        "duration_s": duration,
+        "campaigns": entries,
+        "exactly_right": float(np.mean(right)) if right else math.nan,
+        "effects_exactly_right": float(np.mean([e["exactly_right"] for e in effect_entries])) if effect_entries
+        else math.nan,
+        "healthy_none": all(entry["verdict"] == "none" for entry in healthy),
+        "false_effect_on_healthy": any(entry["verdict"] not in ("none", "unexplained") for entry in healthy),
+    }
+
+
+def _judged(
+    identifier: str, name: str | None, truth: dict[str, Any], content: dict[str, Any], seconds: float
+) -> dict[str, Any]:
+    """One campaign's record: what was true, what was said, whether exactly right."""
+    verdict = content["verdict"]
+    change = content.get("change") or {}
+    named = change.get("named")
+    expected = "none" if name is None else name
+    right = verdict == expected
+    if right and name in _CHOICE and named is not None:
+        right = named["parameters"].get(_CHOICE[name]) == truth.get(_CHOICE[name])
+    largest = (change.get("test") or {}).get("largest") or {}
+    return {
+        "campaign": identifier,
+        "truth": None if name is None else {"effect": name, **truth},
+        "verdict": verdict,
+        "named": named,
+        "best": (change.get("ranking") or [None])[0],
+        "largest_change_db": largest.get("change_db"),
+        "largest_threshold_db": largest.get("threshold_db"),
+        "exactly_right": bool(right),
+        "seconds": seconds,
+        "timing_s": content.get("timing_s"),
+    }
+
+
+__all__ = ["FOREIGN_GRADE", "foreign_campaign_plan", "run_foreign_suite"]
