@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from .case import RigCase
+from .consistency import ChannelCheck, check_channels, inconsistency_reason
 from .decision import Decision
 from .effects import effect_names
 from .gap_maps import family_character, where_gap
@@ -49,7 +50,12 @@ def run_out_check(
     if bound is None:
         return None
     modulated = score.modulation_gain is not None and score.modulation_gain >= settings.effect_gain_threshold
-    return RunOutCheck(float(values.get("amplitude", math.nan)), bound, modulated)  # type: ignore[arg-type]
+    amplitude = float(values.get("amplitude", math.nan))  # type: ignore[arg-type]
+    # the run-out as far as the data pin it: it enters the TE directly; without a TE channel it is read
+    # through the dynamics, where a gear's own first-order pitch error reads the same, so it is not measured
+    interval = score.parameter_intervals().get("amplitude") if "te" in score.channels else None
+    low = float(interval[0]) if interval is not None else 0.0
+    return RunOutCheck(amplitude, bound, modulated, low)
 
 
 def ranked(
@@ -102,6 +108,7 @@ def leads_a_set(
         and best.shrink_interval[0] > 0.0
         and not _within(best)
         and (not pitch_allowance or holds_against_pitch_errors(best, settings=settings))
+        and check_channels(best, settings=settings).consistent
     )
 
 
@@ -226,7 +233,9 @@ def decide(
     best = ranking[0] if ranking else None
     borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, settings)
     weak_near_noise = False
-    if best is not None:
+    # a gear effect shows on every channel that sees the mesh (docs/model.md section 6, step 5)
+    channels = check_channels(best, settings=settings) if best is not None else ChannelCheck(True)
+    if best is not None and channels.consistent:
         named, weak_near_noise = _named(best, nominal_gap, borderline, settings, pitch_allowance, density_evidence)
         if named is not None:
             return named
@@ -239,7 +248,7 @@ def decide(
             "compared with the model on held-out runs",
             borderline=borderline,
         )
-    return _unnamed(best, nominal_gap, borderline, settings, weak_near_noise)
+    return _unnamed(best, nominal_gap, borderline, settings, weak_near_noise, channels)
 
 
 def _named(
@@ -321,8 +330,11 @@ def _unnamed(
     borderline: tuple[dict[str, Any], ...],
     settings: DiagnosisSettings,
     weak_near_noise: bool,
+    channels: ChannelCheck,
 ) -> Decision:
     """``none`` or ``unexplained`` with the reason no candidate was named."""
+    if best is not None and not channels.consistent:
+        return _inconsistent(best, nominal_gap, borderline, settings, channels)
     run_out = best.run_out if best is not None and _within(best) else None
     beyond = (
         f"; {best.effect} fits a run-out of {1e6 * run_out.run_out:.1f} um, within what the gears' "
@@ -345,6 +357,18 @@ def _unnamed(
             f"(threshold {settings.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
             borderline=borderline,
         )
+    gap_figure = next((figure for figure in borderline if figure["figure"] == "nominal_gap"), None)
+    if gap_figure is not None:
+        # a gap whose own 90 % interval reaches into noise is no evidence of anything the model lacks:
+        # the verdict to act on is none, with the borderline stated (docs/model.md section 6, step 5)
+        low, high = gap_figure["interval"]
+        return Decision(
+            "none",
+            f"the nominal model's held-out gap {nominal_gap:.2f} is above the noise threshold "
+            f"{settings.noise_gap:g} but its 90 % interval ({low:.2f} to {high:.2f}) reaches into noise, and no "
+            f"candidate is clearly better: borderline, not evidence of a gap{held}{beyond}",
+            borderline=borderline,
+        )
     detail = ""
     if best is not None:
         detail = (
@@ -360,10 +384,44 @@ def _unnamed(
     )
 
 
+def _inconsistent(
+    best: CandidateScore,
+    nominal_gap: float,
+    borderline: tuple[dict[str, Any], ...],
+    settings: DiagnosisSettings,
+    channels: ChannelCheck,
+) -> Decision:
+    """``none`` or ``unexplained`` where the leading candidate fails the cross-channel rule."""
+    why = inconsistency_reason(best, channels, best.channels)
+    confined = channels.kind == "one_channel" and channels.channel is not None and channels.channel < len(best.channels)
+    if nominal_gap <= settings.noise_gap:
+        return Decision(
+            "none",
+            f"the nominal model's held-out gap {nominal_gap:.2f} is within noise (threshold {settings.noise_gap:g}); "
+            f"{why}",
+            borderline=borderline,
+        )
+    return Decision(
+        "unexplained",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.noise_gap:g}); {why}",
+        borderline=borderline,
+        one_channel=best.channels[channels.channel] if confined and channels.channel is not None else "",
+    )
+
+
 def decide_verdict(nominal_gap: float, ranking: Sequence[CandidateScore], **options: Any) -> tuple[str, str]:
     """``(verdict, reason)`` of :func:`decide` (same arguments)."""
     decision = decide(nominal_gap, ranking, **options)
     return decision.verdict, decision.reason
+
+
+def one_channel_character(channel: str, families: Sequence[Mapping[str, Any]]) -> str:
+    """What a gap confined to one channel is made of: its families above noise with their character."""
+    rows = [row for row in families if row["channel"] == channel and row["character"]]
+    if not rows:
+        return ""
+    parts = [f"{row['family']} ({', '.join(row['character'])}; gap {row['score']:.2f})" for row in rows]
+    return f"; on {channel} the gap lies in " + ", ".join(parts)
 
 
 @dataclass(frozen=True)
@@ -424,6 +482,8 @@ def decide_first(
         families = family_character(
             state.nominal_held.z, state.case, locked_lines, noise_gap=settings.noise_gap, where_z=settings.where_z
         )
+        if decision.one_channel:
+            decision = replace(decision, reason=decision.reason + one_channel_character(decision.one_channel, families))
         found.update(verdict=decision.verdict, reason=decision.reason)
     return FirstDecision(decision, scores, ranking, nominal_interval, where, families)
 
@@ -438,6 +498,7 @@ __all__ = [
     "run_out_check",
     "score_lower_bound",
     "holds_against_pitch_errors",
+    "one_channel_character",
     "leads_a_set",
     "decide",
     "decide_verdict",
