@@ -38,6 +38,9 @@ def test_evidence_on_one_channel_alone_is_that_sensors():
     decision = decide(2.1, [run_out])
     assert decision.verdict == "unexplained" and decision.one_channel == "te"
     assert "on te alone" in decision.reason and "eccentricity" in decision.reason
+    # the rig's gap on the TE alone: a nominal refit's few nats on the clean accelerometers are no evidence
+    refit = _score("eccentricity", [50.4, 3.0, 3.2], [2.87, 0.0, 0.0], [1.96, 0.0, 0.0])
+    assert check_channels(refit).kind == "one_channel"
     # the same effect with its mesh modulation seen by the accelerometers is a gear's
     modulated = _score("eccentricity", [140.0, 9.0, 7.0], [2.1, 0.6, 0.5], [0.3, 0.1, 0.1])
     assert check_channels(modulated).consistent
@@ -82,7 +85,7 @@ def test_a_run_out_read_without_the_te_is_not_beyond_the_pitch_error_bound():
 def test_encoder_run_out_puts_shaft_lines_in_the_te_alone():
     design = load_design("locomotive")
     ops = {"pinion_speed": np.array([900.0, 1500.0]), "drive_torque": np.array([6000.0, 7000.0])}
-    options = dict(seed=11, duration=0.5, run_in=0.05, relative_noise=0.0)
+    options = {"seed": 11, "duration": 0.5, "run_in": 0.05, "relative_noise": 0.0}
     clean = simulate_campaign(design, ops, **options)
     encoder = simulate_campaign(design, ops, encoder_run_out={"pinion": 6e-6, "gear": 9e-6}, **options)
     # both accelerometers exactly as without it; the TE differs by the two lines only

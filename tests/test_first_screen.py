@@ -10,7 +10,8 @@ SPEEDS = {"speed": [{"stated_rpm": rpm} for rpm in (600.0, 800.0, 1250.0, 1700.0
 
 def test_a_named_effect_says_what_to_inspect_and_where_the_evidence_is():
     content = {"verdict": "eccentricity", "borderline": [], "rig": SPEEDS,
-               "where": [{"channel": "te", "feature": "shaft_gear1", "family": "shaft_gear", "ops": [0, 3], "score": 4.0},
+               "where": [{"channel": "te", "feature": "shaft_gear1", "family": "shaft_gear", "ops": [0, 3],
+                          "score": 4.0},
                          {"channel": "acc_gear", "feature": "mesh1_sb_gear+1", "family": "sideband_gear",
                           "ops": [1], "score": 3.1}],
                "effects": [{"effect": "eccentricity", "parameters": {"shaft": "gear", "amplitude": 1.2e-5}}]}

@@ -12,7 +12,10 @@ evidence is read channel by channel (:class:`~.scoring.CandidateScore`
   most on gain less than ``cross_channel_gain`` nats of held-out density
   together, its fitted model explains a discrepancy the other channels do
   not share: it is not named, and the gap is ``unexplained`` on that
-  channel. An effect family whose signature may lie on one channel (its
+  channel. Where the base model's held-out gap is above noise on that
+  channel alone, the others must gain ``score_threshold`` (the evidence that
+  names an effect at all): refitting the nominal parameters with the
+  effect gains a few nats on a clean channel by itself. An effect family whose signature may lie on one channel (its
   :attr:`~.effects.EffectFamily.one_channel` reason, e.g. a low-frequency
   torque oscillation that moves the gears' relative angle far more than it
   accelerates the housings) is exempt.
@@ -95,7 +98,14 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
     finite = np.nan_to_num(gains, nan=0.0)
     strongest = int(np.argmax(finite))
     others = float(np.sum(np.maximum(np.delete(finite, strongest), 0.0)))
-    if others < settings.cross_channel_gain:
+    # where the rig shows a gap on that channel alone, the others must carry the evidence to name an effect
+    # by themselves: a refit of the nominal parameters alone gains a few nats on a clean channel
+    with np.errstate(invalid="ignore"):
+        alone = bool(before[strongest] > settings.noise_gap) and bool(
+            np.all(np.nan_to_num(np.delete(before, strongest), nan=0.0) <= settings.noise_gap)
+        )
+    needed = settings.score_threshold if alone else settings.cross_channel_gain
+    if others < needed:
         return ChannelCheck(False, strongest, "one_channel", float(finite[strongest]), others)
     return ChannelCheck(True)
 

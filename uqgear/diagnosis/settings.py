@@ -204,8 +204,9 @@ SETTINGS: dict[str, Setting] = {
     "cross_channel_gain": Setting(
         "nat",
         "an effect is named only where the channels other than the one it gains most on gain at least this much "
-        "held-out density together (a gear effect shows on every channel that sees the mesh; one channel alone "
-        "is that sensor's own), and not where it loses this much on a channel the model without it fits",
+        "held-out density together (score_threshold where the rig's gap is on that channel alone: a gear effect "
+        "shows on every channel that sees the mesh; one channel alone is that sensor's own), and not where it "
+        "loses this much on a channel the model without it fits",
         _CONSISTENCY,
         lower=0.0,
         study=True,
