@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from helpers import candidate_score
 
-from uqgear.diagnosis.consistency import check_channels
+from uqgear.diagnosis.consistency import check_channels, one_channel_character
 from uqgear.diagnosis.scoring import RunOutCheck
-from uqgear.diagnosis.verdict import decide, one_channel_character
+from uqgear.diagnosis.verdict import decide
 from uqgear.physics.design import load_design
 from uqgear.rig.features import extract_features
 from uqgear.rig.virtual_rig import simulate_campaign

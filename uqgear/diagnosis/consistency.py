@@ -30,10 +30,13 @@ rule; its evidence is in docs/validation/diagnosis.md.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from .decision import Decision
 from .effects import effect_family
 from .scoring import CandidateScore
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
@@ -127,4 +130,38 @@ def inconsistency_reason(score: CandidateScore, check: ChannelCheck, channels: t
     )
 
 
-__all__ = ["ChannelCheck", "check_channels", "inconsistency_reason"]
+def inconsistent_decision(
+    best: CandidateScore,
+    nominal_gap: float,
+    borderline: tuple[dict[str, Any], ...],
+    settings: DiagnosisSettings,
+    channels: ChannelCheck,
+) -> Decision:
+    """``none`` or ``unexplained`` where the leading candidate fails the cross-channel rule."""
+    why = inconsistency_reason(best, channels, best.channels)
+    confined = channels.kind == "one_channel" and channels.channel is not None and channels.channel < len(best.channels)
+    if nominal_gap <= settings.noise_gap:
+        return Decision(
+            "none",
+            f"the nominal model's held-out gap {nominal_gap:.2f} is within noise (threshold {settings.noise_gap:g}); "
+            f"{why}",
+            borderline=borderline,
+        )
+    return Decision(
+        "unexplained",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.noise_gap:g}); {why}",
+        borderline=borderline,
+        one_channel=best.channels[channels.channel] if confined and channels.channel is not None else "",
+    )
+
+
+def one_channel_character(channel: str, families: Sequence[Mapping[str, Any]]) -> str:
+    """What a gap confined to one channel is made of: its families above noise with their character."""
+    rows = [row for row in families if row["channel"] == channel and row["character"]]
+    if not rows:
+        return ""
+    parts = [f"{row['family']} ({', '.join(row['character'])}; gap {row['score']:.2f})" for row in rows]
+    return f"; on {channel} the gap lies in " + ", ".join(parts)
+
+
+__all__ = ["ChannelCheck", "check_channels", "inconsistency_reason", "inconsistent_decision", "one_channel_character"]

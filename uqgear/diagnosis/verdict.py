@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from .case import RigCase
-from .consistency import ChannelCheck, check_channels, inconsistency_reason
+from .consistency import ChannelCheck, check_channels, inconsistent_decision, one_channel_character
 from .decision import Decision
 from .effects import effect_names
 from .gap_maps import family_character, where_gap
@@ -334,7 +334,7 @@ def _unnamed(
 ) -> Decision:
     """``none`` or ``unexplained`` with the reason no candidate was named."""
     if best is not None and not channels.consistent:
-        return _inconsistent(best, nominal_gap, borderline, settings, channels)
+        return inconsistent_decision(best, nominal_gap, borderline, settings, channels)
     run_out = best.run_out if best is not None and _within(best) else None
     beyond = (
         f"; {best.effect} fits a run-out of {1e6 * run_out.run_out:.1f} um, within what the gears' "
@@ -384,44 +384,10 @@ def _unnamed(
     )
 
 
-def _inconsistent(
-    best: CandidateScore,
-    nominal_gap: float,
-    borderline: tuple[dict[str, Any], ...],
-    settings: DiagnosisSettings,
-    channels: ChannelCheck,
-) -> Decision:
-    """``none`` or ``unexplained`` where the leading candidate fails the cross-channel rule."""
-    why = inconsistency_reason(best, channels, best.channels)
-    confined = channels.kind == "one_channel" and channels.channel is not None and channels.channel < len(best.channels)
-    if nominal_gap <= settings.noise_gap:
-        return Decision(
-            "none",
-            f"the nominal model's held-out gap {nominal_gap:.2f} is within noise (threshold {settings.noise_gap:g}); "
-            f"{why}",
-            borderline=borderline,
-        )
-    return Decision(
-        "unexplained",
-        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.noise_gap:g}); {why}",
-        borderline=borderline,
-        one_channel=best.channels[channels.channel] if confined and channels.channel is not None else "",
-    )
-
-
 def decide_verdict(nominal_gap: float, ranking: Sequence[CandidateScore], **options: Any) -> tuple[str, str]:
     """``(verdict, reason)`` of :func:`decide` (same arguments)."""
     decision = decide(nominal_gap, ranking, **options)
     return decision.verdict, decision.reason
-
-
-def one_channel_character(channel: str, families: Sequence[Mapping[str, Any]]) -> str:
-    """What a gap confined to one channel is made of: its families above noise with their character."""
-    rows = [row for row in families if row["channel"] == channel and row["character"]]
-    if not rows:
-        return ""
-    parts = [f"{row['family']} ({', '.join(row['character'])}; gap {row['score']:.2f})" for row in rows]
-    return f"; on {channel} the gap lies in " + ", ".join(parts)
 
 
 @dataclass(frozen=True)
@@ -498,7 +464,6 @@ __all__ = [
     "run_out_check",
     "score_lower_bound",
     "holds_against_pitch_errors",
-    "one_channel_character",
     "leads_a_set",
     "decide",
     "decide_verdict",
