@@ -100,3 +100,21 @@ def test_encoder_run_out_puts_shaft_lines_in_the_te_alone():
                                    amplitude, rtol=0.02)
     assert float(np.max(np.abs(features["te"].sel(feature="mesh1").values))) < 1e-3 * 6e-6
     assert math.isclose(float(np.std(added)), math.sqrt(0.5 * (6e-6**2 + 9e-6**2)), rel_tol=0.15)
+
+
+@pytest.mark.slow
+def test_an_encoder_run_out_is_the_te_sensors_and_a_real_run_out_beside_it_is_still_named():
+    # small campaigns of the blind test's encoder kinds: 4 service runs of 0.5 s
+    from uqgear.diagnosis import Diagnosis
+    from uqgear.physics.effects import Eccentricity
+    from uqgear.validation import operating_points_of
+
+    design = load_design("locomotive")
+    ops = operating_points_of("service", design, 4)
+    options = {"duration": 0.5, "run_in": 0.3, "encoder_run_out": {"pinion": 8e-6, "gear": 8e-6}}
+    alone = Diagnosis(workers=2, seed=3).fit(simulate_campaign(design, ops, seed=21, **options))
+    assert alone.decision_.verdict == "unexplained" and alone.decision_.one_channel == "te"
+    assert alone.effects_ == []
+    run_out = Eccentricity({"shaft": "pinion", "amplitude": 12e-6, "phase": 1.0, "kappa": 0.03})
+    beside = Diagnosis(workers=2, seed=3).fit(simulate_campaign(design, ops, seed=22, effects=[run_out], **options))
+    assert [chosen.entry.effect for chosen in beside.effects_][:1] == ["eccentricity"]

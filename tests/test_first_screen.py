@@ -33,6 +33,6 @@ def test_unexplained_on_one_channel_points_at_the_sensor_and_a_borderline_gap_at
         {"figure": "nominal_gap", "value": 0.524, "threshold": 0.5, "interval": [0.0, 0.83]}]})
     assert "(borderline: nominal gap 0.52 against 0.5, 90 % interval 0 to 0.83)" in borderline.text
     assert borderline.facts["next"] == "record more runs before acting"
-    healthy = at_a_glance({"verdict": "none", "borderline": [], "where": []})
-    assert healthy.facts["next"].startswith("nothing to do")
+    healthy = at_a_glance({"verdict": "none", "borderline": [], "where": [{"channel": "te", "ops": [1]}]})
+    assert healthy.facts["next"].startswith("nothing to do") and "within noise" in healthy.text
     assert "record more runs" in at_a_glance({"verdict": "inconclusive"}).facts["next"]

@@ -109,7 +109,10 @@ def at_a_glance(content: Mapping[str, Any]) -> Finding:
     else:
         certainty = "sure: no deciding figure is near its threshold"
     channels, ops = _evidence(content)
-    if channels:
+    if verdict == "none" and not figures:
+        channels, ops = [], []
+        evidence = "the held-out gap is within noise"
+    elif channels:
         evidence = f"evidence on {', '.join(channels)}" + (f" at {_speeds(content, ops)}" if ops else "")
     elif verdict == "none":
         evidence = "no held-out feature beyond 3 sigma"
