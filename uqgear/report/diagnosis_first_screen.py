@@ -71,9 +71,10 @@ def _next_step(content: Mapping[str, Any], verdict: str, borderline: bool) -> st
     steps = []
     for entry in content.get("effects") or [{"effect": verdict}]:
         values = entry.get("parameters") or {}
-        where = values.get("shaft") or values.get("gear") or values.get("bearing") or "named"
+        where = values.get("shaft") or values.get("gear") or values.get("bearing") or ""
         template = _INSPECT.get(str(entry.get("effect")), "inspect for {effect}")
-        steps.append(template.format(where=where, effect=entry.get("effect")))
+        # without a fitted shaft or gear the sentence names none
+        steps.append(" ".join(template.format(where=where, effect=entry.get("effect")).split()))
     text = "; ".join(steps)
     if borderline:
         text = "record more runs to confirm, then " + text
