@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from .case import RigCase
-from .consistency import ChannelCheck, check_channels, inconsistent_decision, one_channel_character
+from .consistency import check_channels, inconsistent_decision, one_channel_character
 from .decision import Decision
 from .effects import effect_names
 from .gap_maps import family_character, where_gap
@@ -233,12 +233,14 @@ def decide(
     best = ranking[0] if ranking else None
     borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, settings)
     weak_near_noise = False
-    # a gear effect shows on every channel that sees the mesh (docs/model.md section 6, step 5)
-    channels = check_channels(best, settings=settings) if best is not None else ChannelCheck(True)
-    if best is not None and channels.consistent:
+    if best is not None:
         named, weak_near_noise = _named(best, nominal_gap, borderline, settings, pitch_allowance, density_evidence)
         if named is not None:
-            return named
+            # a gear effect shows on every channel that sees the mesh (docs/model.md section 6, step 5)
+            channels = check_channels(best, settings=settings)
+            if channels.consistent:
+                return named
+            return inconsistent_decision(best, nominal_gap, borderline, settings, channels)
     if not math.isfinite(nominal_gap):
         # no feature could be compared on a held-out run: the data cannot tell "within noise"
         # from "not measured", and no data must never read as a healthy gear
@@ -248,7 +250,7 @@ def decide(
             "compared with the model on held-out runs",
             borderline=borderline,
         )
-    return _unnamed(best, nominal_gap, borderline, settings, weak_near_noise, channels)
+    return _unnamed(best, nominal_gap, borderline, settings, weak_near_noise)
 
 
 def _named(
@@ -330,11 +332,8 @@ def _unnamed(
     borderline: tuple[dict[str, Any], ...],
     settings: DiagnosisSettings,
     weak_near_noise: bool,
-    channels: ChannelCheck,
 ) -> Decision:
     """``none`` or ``unexplained`` with the reason no candidate was named."""
-    if best is not None and not channels.consistent:
-        return inconsistent_decision(best, nominal_gap, borderline, settings, channels)
     run_out = best.run_out if best is not None and _within(best) else None
     beyond = (
         f"; {best.effect} fits a run-out of {1e6 * run_out.run_out:.1f} um, within what the gears' "
