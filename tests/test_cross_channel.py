@@ -118,3 +118,34 @@ def test_an_encoder_run_out_is_the_te_sensors_and_a_real_run_out_beside_it_is_st
     run_out = Eccentricity({"shaft": "pinion", "amplitude": 12e-6, "phase": 1.0, "kappa": 0.03})
     beside = Diagnosis(workers=2, seed=3).fit(simulate_campaign(design, ops, seed=22, effects=[run_out], **options))
     assert [chosen.entry.effect for chosen in beside.effects_][:1] == ["eccentricity"]
+
+
+def _gate_case(tracked, channels=("te", "acc_gear")):
+    from types import SimpleNamespace
+
+    names = ("shaft_gear1", "shaft_gear2", "shaft_gear3")
+    observed = np.zeros((4, len(channels), 3))
+    if "te" in channels:
+        observed[:, 0, :] = 10.0          # the gear's pitch errors: TE shaft lines 10 noise spreads high
+    return SimpleNamespace(
+        speed=[{"order_tracked": tracked}] * 4, design=SimpleNamespace(z1=21, z2=101), channels=channels,
+        layout=SimpleNamespace(names=names, columns=np.arange(3)), observed=observed,
+        mask=lambda: np.ones(observed.shape, dtype=bool), line_noise_sigma=lambda: np.ones(observed.shape))
+
+
+def test_the_pitch_error_gate_judges_a_tracked_gears_near_orders_on_its_te_shaft_lines():
+    from uqgear.diagnosis.allowances.pitch_orders import judged_counts
+
+    visible = {"sideband_pinion": {1: (40, 100), 2: (30, 100), 3: (25, 100)},
+               "sideband_gear": {1: (30, 100), 2: (9, 100), 3: (17, 100)}}
+    model = np.zeros((4, 2, 3))
+    # not resampled: every order on its sidebands, as before
+    assert judged_counts(_gate_case(False), visible, model, 3.0) == {
+        family: {str(order): counts for order, counts in orders.items()} for family, orders in visible.items()}
+    # resampled: z1/z2 = 0.21, so gear orders 1-3 lie within one pinion order of their carrier
+    gear = judged_counts(_gate_case(True), visible, model, 3.0)["sideband_gear"]
+    assert gear == {"1 (TE shaft line)": (4, 4), "2 (TE shaft line)": (4, 4), "3 (TE shaft line)": (4, 4)}
+    # without a TE: the near orders pooled
+    pooled = judged_counts(_gate_case(True, ("acc_gear",)), visible, np.zeros((4, 1, 3)), 3.0)
+    assert pooled["sideband_gear"] == {"1-3 together": (56, 300)}
+    assert pooled["sideband_pinion"]["2"] == (30, 100)
