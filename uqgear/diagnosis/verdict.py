@@ -263,7 +263,12 @@ def _named(
 ) -> tuple[Decision | None, bool]:
     """The decision naming ``best`` where the rules of :func:`decide` name it, and whether it was weak near noise."""
     remaining = float(best.gap_with_effect)
-    explains = best.shrink_fraction >= settings.shrink_threshold or remaining <= settings.noise_gap
+    # what remains is within noise speaks for the effect only where the gap it removed was clearly above
+    # noise: a nominal gap whose own interval reaches into noise may be noise itself (borderline: none)
+    gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
+    explains = best.shrink_fraction >= settings.shrink_threshold or (
+        remaining <= settings.noise_gap and not gap_borderline
+    )
     # a run-out the gears' own pitch errors make (the run-out check) is no eccentric shaft
     carried = float(best.effect_gain) >= settings.effect_gain_threshold and not _within(best)
     score_low = score_lower_bound(best, settings=settings)
