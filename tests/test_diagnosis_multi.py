@@ -357,16 +357,19 @@ def test_blind_test_counts_missed_effects_reported_as_not_told_apart():
 
 def test_real_world_plan_covers_every_kind():
     specs = blind_test.plan_real_world(2, np.random.default_rng(0))
-    assert len(specs) == 2 * 11
+    assert len(specs) == 2 * 16
     kinds = {spec.identifier.rsplit("-", 1)[0] for spec in specs}
-    assert len(kinds) == 11
+    assert len(kinds) == 16
     two = [spec for spec in specs if len(spec.truth_set()) == 2]
     assert len(two) == 6 and all(len(set(spec.truth_set())) == 2 for spec in two)
     assert all(spec.effect_values[effects.effect_family(spec.truth).strength]
                == effects.effect_family(spec.truth).ladder[2]
                for spec in specs if spec.truth != "none")      # the leading effect at the strong level
     controls = [spec for spec in specs if spec.truth == "none"]
-    assert len(controls) == 10 and all(spec.nuisances for spec in controls)
+    assert len(controls) == 18 and all(spec.nuisances for spec in controls)
+    # an encoder's run-out alone is a sensor's artefact: its right verdict is unexplained
+    assert [spec.right_verdict() for spec in controls if "encoder_run_out" in spec.nuisances] == ["unexplained"] * 2
+    assert {spec.plan for spec in specs} == {"service", "low_speed"}
     assert sum(1 for spec in specs if spec.nuisances.get("reference")) == 4
     assert {spec.design_name for spec in specs} == {"reference", "second"}
     # the same draw, the same plan

@@ -436,6 +436,9 @@ def test_diagnosis_headline_with_partial_and_borderline_flags():
     }
     texts = [finding.text for finding in diagnosis_findings(content)]
     assert texts == [
+        "At a glance: bearing_clearance (partial: part of the gap remains) (borderline: shrink fraction 0.45 "
+        "against 0.5, 90 % interval 0.3 to 0.6); evidence on acc_pinion at run 0 and run 3; next: record more "
+        "runs to confirm, then measure the clearance of the bearing.",
         "Verdict bearing_clearance: adding bearing_clearance to the model explains part of the gap between model "
         "and rig; bearing_clearance gains 182 nats.",
         "Held-out gap (RMS standardised discrepancy in excess of noise) of the nominal model 2.60 (90 % interval "
@@ -457,8 +460,10 @@ def test_a_study_with_calibration_and_diagnosis_results_gets_their_headline():
                                  "diagnosis": json.dumps(diagnosis)})]
     findings = headline_findings(results)
     assert [f.topic for f in findings] == ["convergence", "estimates", "identifiability", "predictive_check",
-                                           "verdict", "gap", "where", "borderline"]
-    assert findings[4].text == ("Verdict none: the nominal model reproduces the rig within noise, no effect is "
+                                           "at_a_glance", "verdict", "gap", "where", "borderline"]
+    assert findings[4].text == ("At a glance: none (sure: no deciding figure is near its threshold); the held-out "
+                                "gap is within noise; next: nothing to do: the gear behaves as modelled.")
+    assert findings[5].text == ("Verdict none: the nominal model reproduces the rig within noise, no effect is "
                                 "needed; within noise.")
 
 

@@ -24,6 +24,10 @@ class Decision:
         Deciding figures that lie within their own spread of their threshold
         (``figure``, ``value``, ``threshold``, ``interval``): a rerun on
         another campaign of the same rig could go the other way.
+    one_channel : str
+        An unexplained gap whose leading candidate's evidence lies on this one
+        channel alone (that sensor's own artefact as far as the data tell;
+        empty otherwise).
     """
 
     verdict: str
@@ -31,6 +35,7 @@ class Decision:
     partial: bool = False
     remaining_gap: float | None = None
     borderline: tuple[dict[str, Any], ...] = ()
+    one_channel: str = ""
 
 
 __all__ = ["Decision"]

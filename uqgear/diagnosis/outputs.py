@@ -39,6 +39,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "reason": result.reason,
         "borderline": [dict(entry) for entry in decision.borderline],
         "partial": decision.partial,
+        "one_channel_gap": decision.one_channel or None,
         "effects": [chosen.summary() for chosen in result.selected],
         "remaining_gap": _remaining_gap(result),
         "forward_selection": [selection.summary() for selection in result.rounds],

@@ -138,12 +138,17 @@ class RunOutCheck:
     ``within``: the run-out is no more than the classes' first-order
     run-out bound and the fit is not clearly worse without its mesh-stiffness
     modulation (which pitch errors do not make): no evidence of an eccentric
-    shaft. ``beyond``: the run-out exceeds the bound.
+    shaft. ``beyond``: the run-out exceeds the bound, at the lower end of its
+    90 % interval (``run_out_low``; the point value where none is given): a
+    run-out the data leave open (no TE recorded, where the run-out is read
+    through the dynamics only) is no evidence that the gears' errors could
+    not make it.
     """
 
     run_out: float
     bound: float
     modulated: bool
+    run_out_low: float | None = None
 
     @property
     def within(self) -> bool:
@@ -151,7 +156,8 @@ class RunOutCheck:
 
     @property
     def beyond(self) -> bool:
-        return self.run_out > self.bound
+        low = self.run_out if self.run_out_low is None else self.run_out_low
+        return low > self.bound
 
 
 @dataclass
@@ -183,6 +189,12 @@ class CandidateScore:
     gap_interval: tuple[float, float] | None = None
     # an eccentricity's run-out against the pitch-error classes' run-out, where an allowance applies
     run_out: RunOutCheck | None = None
+    # per channel (the case's order): the held-out log-density gain over the base, and the held-out gap
+    # of the base and of the model with the effect (the cross-channel consistency rule reads them)
+    channel_gains: tuple[float, ...] = ()
+    channel_gaps_before: tuple[float, ...] = ()
+    channel_gaps_after: tuple[float, ...] = ()
+    channels: tuple[str, ...] = ()
 
     def figures(self) -> dict[str, Any]:
         """The figures the ranking reports (``modulation_gain`` where it was measured)."""
@@ -250,6 +262,7 @@ def score_candidate(
     penalty = 0.5 * len(candidate.fitted) * math.log(max(n_features, 2))
     gap = gap_metric(held.z)
     shrink, low, high = bootstrap_shrink(nominal_held.z, held.z, rng, n_resamples)
+    n_channels = held.z.shape[1]
     return CandidateScore(
         effect=candidate.effect,
         label=candidate.label,
@@ -263,6 +276,10 @@ def score_candidate(
         gap_with_effect=gap,
         shrink_fraction=shrink,
         shrink_interval=(low, high),
+        channel_gains=tuple(float(np.nansum(difference[:, c])) for c in range(n_channels)),
+        channel_gaps_before=tuple(gap_metric(nominal_held.z[:, c]) for c in range(n_channels)),
+        channel_gaps_after=tuple(gap_metric(held.z[:, c]) for c in range(n_channels)),
+        channels=tuple(fit_result.problem.case.channels),
     )
 
 

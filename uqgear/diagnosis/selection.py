@@ -300,8 +300,12 @@ def name_effect_set(state: DiagnosisState, first: FirstDecision, *, allowance_ap
     (:func:`phase_named_run_out`).
     """
     settings, decision = state.settings, first.decision
+    # a gap above noise left unnamed (unexplained, or none where its interval reaches into noise)
+    unnamed_gap = decision.verdict == "unexplained" or (
+        decision.verdict == "none" and state.nominal_gap > settings.noise_gap
+    )
     if (
-        decision.verdict == "unexplained"
+        unnamed_gap
         and first.scores
         and leads_a_set(first.ranking[0], pitch_allowance=state.pitch_allowance, settings=settings)
     ):

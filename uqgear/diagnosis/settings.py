@@ -39,6 +39,7 @@ _REFERENCE = "docs/model.md section 6.1"
 _INTERFERENCE = "docs/model.md section 6.5"
 _FEATURES = "docs/model.md section 6, step 2"
 _CHANGE = "docs/model.md section 6.1 (what changed)"
+_CONSISTENCY = "docs/model.md section 6, step 5 (cross-channel consistency)"
 
 # Relative model error (standard deviation) by feature kind: with their true parameters and effect the model
 # reproduces the reference campaigns' lines to well under 1 % (a few per cent for lines near the noise floor);
@@ -91,6 +92,7 @@ class DiagnosisSettings:
     score_quantile: float = 1.645
     signal_snr: float = 5.0
     min_informative_runs: int = 2
+    cross_channel_gain: float = 5.0
     # ---- which candidates are fitted in full, and how many effects a set holds (steps 3 and 6)
     promoted: int = 2
     runner_up_share: float = 0.25
@@ -222,6 +224,16 @@ SETTINGS: dict[str, Setting] = {
         "a candidate's fit must be worse by at least this robust cost with its effect switched off, or its score "
         "belongs to the nominal parameters it refitted",
         _VERDICT,
+        lower=0.0,
+        study=True,
+    ),
+    "cross_channel_gain": Setting(
+        "nat",
+        "an effect is named only where the channels other than the one it gains most on gain at least this much "
+        "held-out density together (score_threshold where the rig's gap is on that channel alone: a gear effect "
+        "shows on every channel that sees the mesh; one channel alone is that sensor's own), and not where it "
+        "loses this much on a channel the model without it fits",
+        _CONSISTENCY,
         lower=0.0,
         study=True,
     ),

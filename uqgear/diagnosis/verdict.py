@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from .case import RigCase
+from .consistency import check_channels, inconsistent_decision, one_channel_character
 from .decision import Decision
 from .effects import effect_names
 from .gap_maps import family_character, where_gap
@@ -49,7 +50,12 @@ def run_out_check(
     if bound is None:
         return None
     modulated = score.modulation_gain is not None and score.modulation_gain >= settings.effect_gain_threshold
-    return RunOutCheck(float(values.get("amplitude", math.nan)), bound, modulated)  # type: ignore[arg-type]
+    amplitude = float(values.get("amplitude", math.nan))  # type: ignore[arg-type]
+    # the run-out as far as the data pin it: it enters the TE directly; without a TE channel it is read
+    # through the dynamics, where a gear's own first-order pitch error reads the same, so it is not measured
+    interval = score.parameter_intervals().get("amplitude") if "te" in score.channels else None
+    low = float(interval[0]) if interval is not None else 0.0
+    return RunOutCheck(amplitude, bound, modulated, low)
 
 
 def ranked(
@@ -102,6 +108,7 @@ def leads_a_set(
         and best.shrink_interval[0] > 0.0
         and not _within(best)
         and (not pitch_allowance or holds_against_pitch_errors(best, settings=settings))
+        and check_channels(best, settings=settings).consistent
     )
 
 
@@ -229,7 +236,11 @@ def decide(
     if best is not None:
         named, weak_near_noise = _named(best, nominal_gap, borderline, settings, pitch_allowance, density_evidence)
         if named is not None:
-            return named
+            # a gear effect shows on every channel that sees the mesh (docs/model.md section 6, step 5)
+            channels = check_channels(best, settings=settings)
+            if channels.consistent:
+                return named
+            return inconsistent_decision(best, nominal_gap, borderline, settings, channels)
     if not math.isfinite(nominal_gap):
         # no feature could be compared on a held-out run: the data cannot tell "within noise"
         # from "not measured", and no data must never read as a healthy gear
@@ -252,7 +263,12 @@ def _named(
 ) -> tuple[Decision | None, bool]:
     """The decision naming ``best`` where the rules of :func:`decide` name it, and whether it was weak near noise."""
     remaining = float(best.gap_with_effect)
-    explains = best.shrink_fraction >= settings.shrink_threshold or remaining <= settings.noise_gap
+    # what remains is within noise speaks for the effect only where the gap it removed was clearly above
+    # noise: a nominal gap whose own interval reaches into noise may be noise itself (borderline: none)
+    gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
+    explains = best.shrink_fraction >= settings.shrink_threshold or (
+        remaining <= settings.noise_gap and not gap_borderline
+    )
     # a run-out the gears' own pitch errors make (the run-out check) is no eccentric shaft
     carried = float(best.effect_gain) >= settings.effect_gain_threshold and not _within(best)
     score_low = score_lower_bound(best, settings=settings)
@@ -345,6 +361,18 @@ def _unnamed(
             f"(threshold {settings.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
             borderline=borderline,
         )
+    gap_figure = next((figure for figure in borderline if figure["figure"] == "nominal_gap"), None)
+    if gap_figure is not None:
+        # a gap whose own 90 % interval reaches into noise is no evidence of anything the model lacks:
+        # the verdict to act on is none, with the borderline stated (docs/model.md section 6, step 5)
+        low, high = gap_figure["interval"]
+        return Decision(
+            "none",
+            f"the nominal model's held-out gap {nominal_gap:.2f} is above the noise threshold "
+            f"{settings.noise_gap:g} but its 90 % interval ({low:.2f} to {high:.2f}) reaches into noise, and no "
+            f"candidate is clearly better: borderline, not evidence of a gap{held}{beyond}",
+            borderline=borderline,
+        )
     detail = ""
     if best is not None:
         detail = (
@@ -424,6 +452,8 @@ def decide_first(
         families = family_character(
             state.nominal_held.z, state.case, locked_lines, noise_gap=settings.noise_gap, where_z=settings.where_z
         )
+        if decision.one_channel:
+            decision = replace(decision, reason=decision.reason + one_channel_character(decision.one_channel, families))
         found.update(verdict=decision.verdict, reason=decision.reason)
     return FirstDecision(decision, scores, ranking, nominal_interval, where, families)
 

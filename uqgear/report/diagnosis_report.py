@@ -19,6 +19,7 @@ import xarray as xr
 from matplotlib.ticker import LogLocator, NullLocator
 
 from ..common.fileio import write_text_atomic
+from .diagnosis_first_screen import at_a_glance
 from .finding import HEADLINE_STYLE, Finding, headline_html
 from .page import figure_png, figure_pngs, html_page, img_tag, new_figure
 from .change_section import change_findings, change_page_parts
@@ -202,6 +203,8 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
                     + ("part of " if content.get("partial") else "") + "the gap between model and rig")
     findings.append(Finding(text + (f"; {reason}." if reason else "."),
                             {"verdict": verdict, "partial": bool(content.get("partial"))}, "verdict"))
+    # the line a fleet engineer reads first: verdict, certainty, evidence, next step
+    findings.insert(0, at_a_glance(content))
     gap = content.get("gap") or {}
     if gap and gap.get("baseline") is None:
         findings.append(Finding("Held-out gap not measured: no feature could be compared with the model on "

@@ -295,6 +295,8 @@ _INTERFERENCE_STREAM = 1001
 # The pitch errors are the gears', one draw per campaign: a child of the campaign's seed (whose
 # children 1, 2, ... are the runs', so this one is free for campaigns of up to 1001 runs).
 _PITCH_STREAM = 1002
+# Per-run phases of an encoder's mounting run-out (the record start is arbitrary, so its phase is too).
+_ENCODER_STREAM = 1003
 
 
 def _pitch_errors(design: Design, pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None,
@@ -356,6 +358,31 @@ def _check_interference(line_interference: Mapping[float, float] | None, fs: flo
     return lines
 
 
+def _check_encoder(encoder_run_out: Mapping[str, float] | None) -> dict[str, float]:
+    checked = {}
+    for shaft, amplitude in (encoder_run_out or {}).items():
+        if shaft not in ("pinion", "gear"):
+            raise OperatingPointError(f"encoder_run_out: expected the shafts 'pinion' and/or 'gear'; got {shaft!r}")
+        if isinstance(amplitude, bool) or not isinstance(amplitude, (int, float)) or not 0.0 <= amplitude < 1e-3:
+            raise OperatingPointError(f"encoder_run_out.{shaft}: expected an amplitude in [0, 1e-3) m; "
+                                      f"got {amplitude!r}")
+        checked[shaft] = float(amplitude)
+    return checked
+
+
+def _encoder_lines(encoder: Mapping[str, float], design: Design, speed: float, sample_time: np.ndarray,
+                   rng: np.random.Generator) -> np.ndarray:
+    """The TE an eccentric encoder mounting adds: once per revolution of its shaft, at the shaft's actual angle."""
+    pinion_angle = 2.0 * math.pi * speed / 60.0 * sample_time
+    lines = np.zeros(sample_time.size)
+    for shaft in ("pinion", "gear"):
+        phase = rng.uniform(0.0, 2.0 * math.pi)    # drawn for both shafts, so each keeps its draw
+        if shaft in encoder:
+            ratio = 1.0 if shaft == "pinion" else design.z1 / design.z2
+            lines += encoder[shaft] * np.sin(ratio * pinion_angle + phase)
+    return lines
+
+
 def _check_positive(name: str, value: object, lowest: float = 0.0) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
             or not math.isfinite(float(value)) or float(value) <= lowest:
@@ -376,7 +403,8 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                       oversampling: int = 4, steps_per_mode: int = 32,
                       speed_wander: Sequence[tuple[float, float]] = (),
                       line_interference: Mapping[float, float] | None = None,
-                      pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None = None) -> xr.Dataset:
+                      pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None = None,
+                      encoder_run_out: Mapping[str, float] | None = None) -> xr.Dataset:
     """Simulate a rig campaign and return it in the ``uqgear-rig/1`` format.
 
     Parameters
@@ -445,6 +473,14 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         :class:`~uqgear.physics.pitch_errors.PitchErrors` or a mapping
         ``{"pinion": z1 values, "gear": z2 values}`` in m. Recorded in the
         ``noise`` attribute (class, tolerances, offsets).
+    encoder_run_out : mapping, optional
+        Shaft (``pinion``, ``gear``) -> amplitude (m, in ``te`` units) of a
+        run-out of that shaft's encoder mounting: an eccentric encoder disc
+        reads its shaft's angle with a once-per-revolution error, so ``te``
+        gains a line at 1x that shaft's rotation, following the shaft's
+        actual angle (wander included), with a phase random per run. It is
+        the sensor's, not the gears': the mesh and both accelerometers are
+        untouched. Added after the sensor noise, whose level it leaves as it was.
 
     Returns
     -------
@@ -511,6 +547,7 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
 
     wander = _check_wander(speed_wander)
     interference = _check_interference(line_interference, fs)
+    encoder = _check_encoder(encoder_run_out)
     # largest time shift of the wandering shaft against the mean rotation
     wander_shift = sum(amplitude / (2.0 * math.pi * frequency) for amplitude, frequency in wander) * 2.0
     true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
@@ -579,6 +616,9 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                 for frequency, amplitude in interference.items():
                     noisy = noisy + amplitude * np.cos(2.0 * math.pi * frequency * record_time
                                                        + interference_rng.uniform(0.0, 2.0 * math.pi))
+            if name == "te" and encoder:
+                noisy = noisy + _encoder_lines(encoder, design, speed, sample_time,
+                                               np.random.default_rng(child_seed(run_seeds[op], _ENCODER_STREAM)))
             data[name][op] = noisy - noisy.mean() if name == "te" else noisy
 
     stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -588,6 +628,8 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     noise_record = {"relative_noise": relative_noise, "noise_std": noise_std,
                     "speed_wander": [list(component) for component in wander],
                     "line_interference": {f"{frequency:g}": amplitude for frequency, amplitude in interference.items()}}
+    if encoder:
+        noise_record["encoder_run_out"] = dict(encoder)
     if pitch_record is not None:
         noise_record["pitch_errors"] = pitch_record
     ds = make_rig_dataset(

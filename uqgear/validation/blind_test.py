@@ -122,6 +122,8 @@ def diagnose_campaign(
         effect_visibility(diagnosis.case_, spec, known),
     )
     entry["seconds"] = time.perf_counter() - clock
+    # the diagnosis's own stages (benchmarks/diagnosis.py --suite reads them)
+    entry["timing_s"] = dict(diagnosis.summary_.get("timing_s", {}))
     ranking = diagnosis.outcome_.ranking() if diagnosis.outcome_ is not None else []
     write_text_atomic(
         folder / "diagnosis.json", json.dumps(json_clean({**entry, "ranking": ranking}), indent=2, default=json_default)
@@ -159,8 +161,10 @@ def _judged(
         "reason": decision.reason,
         "partial": bool(decision.partial),
         "borderline": [figure["figure"] for figure in decision.borderline],
-        "correct": decision.verdict == spec.truth,
-        "correct_detectable": decision.verdict == spec.truth or (not detectable and decision.verdict == HEALTHY),
+        "expected_verdict": spec.right_verdict(),
+        "correct": decision.verdict == spec.right_verdict(),
+        "correct_detectable": decision.verdict == spec.right_verdict()
+        or (not detectable and decision.verdict == HEALTHY),
         "detectable": bool(detectable),
         "oracle_gap": visibility,
         "nominal_gap": outcome.nominal_gap if outcome is not None else float("nan"),

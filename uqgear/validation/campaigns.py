@@ -42,6 +42,11 @@ STRENGTHS: tuple[str, ...] = ("weak", "medium", "strong")
 #: run through the bearing modes (:func:`uqgear.rig.virtual_rig.bearing_check_operating_points`).
 PLANS: tuple[str, ...] = ("service", "bearing_check")
 
+#: A further plan of the real-world suite: 8 runs at 500-1400 rpm (service torques), where the gear's
+#: sidebands lie 0.2 pinion orders, 2-5 Hz, from their carrier and speed wander moves the lines most.
+LOW_SPEED_PLAN = "low_speed"
+LOW_SPEED_PINION_SPEEDS: tuple[float, ...] = (500.0, 600.0, 700.0, 800.0, 950.0, 1100.0, 1250.0, 1400.0)
+
 #: Blind-test suites: the library's effects one at a time on a clean rig, or real-world campaigns.
 SUITES: tuple[str, ...] = ("library", "real_world")
 
@@ -72,9 +77,16 @@ class CampaignSpec:
     # further effects acting at once, as (name, values) pairs (the real-world suite)
     extra_effects: tuple[tuple[str, dict[str, object]], ...] = ()
     # rig nuisances: options of simulate_campaign (speed_wander, line_interference, relative_noise,
-    # pitch_errors) and "transfer_path" (frequency, damping) on acc_pinion; "reference": the
-    # diagnosis gets a healthy campaign of the same rig (same nuisances, own seed)
+    # pitch_errors, channels, encoder_run_out) and "transfer_path" (frequency, damping) on acc_pinion;
+    # "reference": the diagnosis gets a healthy campaign of the same rig (same nuisances, own seed)
     nuisances: dict[str, object] = field(default_factory=dict)
+    # the verdict a right diagnosis gives where it is not the truth's: "unexplained" for a campaign whose only
+    # departure from the model is one sensor's own artefact (no gear effect acts, none may be named)
+    expected_verdict: str = ""
+
+    def right_verdict(self) -> str:
+        """The verdict a right diagnosis gives: ``expected_verdict`` where set, else the truth."""
+        return self.expected_verdict or self.truth
 
     def effects(self) -> list[Effect]:
         """The physics effects acting on the campaign, the leading one first."""
@@ -156,6 +168,9 @@ _WANDER: dict[str, object] = {"speed_wander": [(0.005, 1.3)]}
 _PITCH: dict[str, object] = {"pitch_errors": 7}
 _MAINS_NOISE: dict[str, object] = {"line_interference": {50.0: 0.5, 150.0: 0.2}, "relative_noise": 0.03}
 _ALL_NUISANCES: dict[str, object] = {**_WANDER, **_PITCH, **_MAINS_NOISE}
+_ACCELEROMETERS: dict[str, object] = {"channels": ("acc_pinion", "acc_gear")}
+# an eccentric encoder mounting on both shafts: TE lines at 1x pinion and 1x gear rotation, nothing else
+_ENCODER: dict[str, object] = {"encoder_run_out": {"pinion": 8e-6, "gear": 8e-6}}
 _REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = (
     # (kind, effects (leading first), nuisances)
     ("two_effects", ("eccentricity", "tooth_damage"), {}),
@@ -169,7 +184,21 @@ _REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = 
     ("control_mains_noise", (), _MAINS_NOISE),
     ("control_all_nuisances", (), _ALL_NUISANCES),
     ("control_resonance_reference", (), {**_RESONANCE, "reference": True}),
+    # healthy class-7 gears at low speeds under wander of several levels and rates, 3-5 % noise, with and
+    # without the TE: the gear's sidebands crowd their carrier where the order tracking follows the wander
+    ("control_wander_accelerometers", (), {**_WANDER, **_PITCH, "relative_noise": 0.03, **_ACCELEROMETERS}),
+    ("control_low_speed_wander", (), {"speed_wander": [(0.01, 0.7)], **_PITCH, "relative_noise": 0.03,
+                                      "plan": LOW_SPEED_PLAN}),
+    ("control_low_speed_wander_accelerometers", (), {"speed_wander": [(0.01, 2.0)], "pitch_errors": 8,
+                                                     "relative_noise": 0.05, **_ACCELEROMETERS,
+                                                     "plan": LOW_SPEED_PLAN}),
+    # one sensor's artefact: the encoder's mounting run-out alone (unexplained, on te), and beside a run-out
+    ("encoder_run_out", (), {**_ENCODER, "expected_verdict": "unexplained"}),
+    ("encoder_run_out", ("eccentricity",), _ENCODER),
 )
+
+# keys of a kind's nuisances that are not options of the virtual rig
+_PLAN_KEYS = ("plan", "expected_verdict")
 
 
 def effect_draw(name: str, strength: float, rng: np.random.Generator) -> dict[str, object]:
@@ -214,6 +243,9 @@ def plan_real_world(
         for k in range(n_per_kind):
             design_name = designs[k % len(designs)]
             truth = _scattered_truth(rng)
+            plan = str(nuisances.get("plan", "service"))
+            expected = str(nuisances.get("expected_verdict", ""))
+            rig_nuisances = {key: value for key, value in nuisances.items() if key not in _PLAN_KEYS}
             drawn = []
             for position, name in enumerate(effect_names):
                 # the leading effect strong; a second one strong or medium
@@ -231,15 +263,16 @@ def plan_real_world(
                         design_name,
                         leading[3],
                         truth,
-                        "service",
+                        plan,
                         tuple((name, values) for name, _, _, values in drawn[1:]),
-                        dict(nuisances),
+                        rig_nuisances,
+                        expected,
                     )
                 )
             else:
                 specs.append(
                     CampaignSpec(
-                        f"{kind}-{k}", HEALTHY, "-", 0.0, design_name, {}, truth, "service", (), dict(nuisances)
+                        f"{kind}-{k}", HEALTHY, "-", 0.0, design_name, {}, truth, plan, (), rig_nuisances, expected
                     )
                 )
     return specs
@@ -262,11 +295,13 @@ def operating_points_of(plan: str, design: Design, n_ops: int = 8) -> dict[str, 
     """The runs of a test plan (``n_ops`` of its 8, spread over them) for a design."""
     if plan == "service":
         table = {"pinion_speed": np.asarray(DEFAULT_PINION_SPEEDS), "drive_torque": np.asarray(DEFAULT_DRIVE_TORQUES)}
+    elif plan == LOW_SPEED_PLAN:
+        table = {"pinion_speed": np.asarray(LOW_SPEED_PINION_SPEEDS), "drive_torque": np.asarray(DEFAULT_DRIVE_TORQUES)}
     elif plan == "bearing_check":
         ops = bearing_check_operating_points(design)
         table = {str(name): ops[name].values for name in ops.data_vars}
     else:
-        raise DiagnosisError(f"plan: expected one of {', '.join(PLANS)}; got {plan!r}")
+        raise DiagnosisError(f"plan: expected one of {', '.join((*PLANS, LOW_SPEED_PLAN))}; got {plan!r}")
     size = table["pinion_speed"].size
     index = np.unique(np.round(np.linspace(0, size - 1, min(n_ops, size))).astype(int))
     return {name: np.asarray(values)[index] for name, values in table.items()}
@@ -314,6 +349,8 @@ __all__ = [
     "HEALTHY",
     "STRENGTHS",
     "PLANS",
+    "LOW_SPEED_PLAN",
+    "LOW_SPEED_PINION_SPEEDS",
     "SUITES",
     "DESIGNS",
     "LIBRARY_EFFECTS",

@@ -56,6 +56,11 @@ def _truth_set(campaign: Mapping[str, Any]) -> set[str]:
     return set() if campaign["truth"] == HEALTHY else {campaign["truth"]}
 
 
+def _control_verdict(campaign: Mapping[str, Any]) -> str:
+    """The verdict a campaign without a gear effect should get: ``none``, or ``unexplained`` for a sensor artefact."""
+    return str(campaign.get("expected_verdict") or HEALTHY)
+
+
 def _named_set(campaign: Mapping[str, Any]) -> set[str]:
     """The effects a diagnosis named (``effects_named``, else its verdict when that is an effect)."""
     if campaign.get("effects_named") is not None:
@@ -97,14 +102,17 @@ def set_scores(campaigns: Sequence[Mapping[str, Any]], effects: Sequence[str]) -
                 "shrink_share_median": float(np.median(shares)) if shares else None,
             }
         )
-    exact = [(_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == HEALTHY) for c in campaigns]
+    exact = [
+        (_named_set(c) == _truth_set(c)) and (bool(_truth_set(c)) or c["verdict"] == _control_verdict(c))
+        for c in campaigns
+    ]
     # against the effects the data can tell (effect_visibility) where the campaign records them
     identifiable = [
         set(c["identifiable_effects"]) if c.get("identifiable_effects") is not None else _truth_set(c)
         for c in campaigns
     ]
     exact_identifiable = [
-        _named_set(c) == wanted if _truth_set(c) else c["verdict"] == HEALTHY
+        _named_set(c) == wanted if _truth_set(c) else c["verdict"] == _control_verdict(c)
         for c, wanted in zip(campaigns, identifiable)
     ]
     multi = [ok for c, ok in zip(campaigns, exact) if len(_truth_set(c)) > 1]

@@ -53,7 +53,15 @@ from ..errors import DiagnosisError
 from ..fit_problem import FitProblem, robust_cost
 from ..fitting import FitResult, fit
 from ..settings import DEFAULT_SETTINGS, DiagnosisSettings
-from .pitch_orders import bounds_of, class_powers, drawn_amplitudes, factors_summary, scaled_to_rig, share_below
+from .pitch_orders import (
+    bounds_of,
+    class_powers,
+    drawn_amplitudes,
+    factors_summary,
+    judged_counts,
+    scaled_to_rig,
+    share_below,
+)
 
 _SIDEBAND_FAMILIES = ("sideband_pinion", "sideband_gear")
 # Draws of the tooth positions alone (no simulation) that give the run-out bounds.
@@ -203,7 +211,7 @@ def pitch_error_allowance(
         return not_applied("no pitch-error classes stated: the gears are taken as perfect")
     short = [
         f"{family.split('_')[1]} order {order}: {count} of {total}"
-        for family, orders in visible.items()
+        for family, orders in judged_counts(case, visible, nominal.model, settings.min_sideband_snr).items()
         for order, (count, total) in orders.items()
         if total == 0 or count < fraction * total
     ]

@@ -270,7 +270,42 @@ def factors_summary(
     return summary
 
 
+def judged_counts(
+    case: RigCase, visible: dict[str, dict[int, tuple[int, int]]], nominal_model: np.ndarray, min_snr: float
+) -> dict[str, dict[str, tuple[int, int]]]:
+    """The gate's counts per shaft order; in order-tracked campaigns a gear's orders near their carrier apart.
+
+    Resampling takes a share of the phase modulation of the gear's sidebands within one pinion order of
+    their carrier for speed wander, a share that varies with order and run (docs/validation/diagnosis.md,
+    "Healthy gears under speed wander"). Those orders are then judged on the TE's shaft lines of the gear
+    (the running sum of its pitch errors, which resampling leaves in place), run by run, where the TE is
+    recorded; else on their sidebands pooled.
+    """
+    tracked = any(bool(row.get("order_tracked")) for row in case.speed)
+    ratio = case.design.z1 / case.design.z2
+    model = nominal_model[..., case.layout.columns]
+    with np.errstate(invalid="ignore"):
+        clear = case.mask() & (case.observed - np.abs(model) >= min_snr * case.line_noise_sigma())
+    te = case.channels.index("te") if "te" in case.channels else None
+    judged: dict[str, dict[str, tuple[int, int]]] = {}
+    for family, orders in visible.items():
+        near = [order for order in orders if tracked and family == "sideband_gear" and order * ratio < 1.0]
+        entries = {str(order): counts for order, counts in orders.items() if order not in near}
+        for order in near if te is not None else ():
+            name = f"shaft_gear{order}"
+            if name in case.layout.names:
+                column = case.layout.names.index(name)
+                entries[f"{order} (TE shaft line)"] = (int(clear[:, te, column].sum()),
+                                                       int(case.mask()[:, te, column].sum()))
+        if near and te is None:
+            label = f"{min(near)}-{max(near)} together" if len(near) > 1 else str(near[0])
+            entries[label] = (sum(orders[o][0] for o in near), sum(orders[o][1] for o in near))
+        judged[family] = entries
+    return judged
+
+
 __all__ = [
+    "judged_counts",
     "ORDERS",
     "FACTOR_QUANTILES",
     "drawn_amplitudes",

@@ -27,6 +27,9 @@ class AdhesionOscillationFamily(EffectFamily):
     physics = AdhesionOscillation
     strength = "amplitude"
     ladder = (0.003, 0.01, 0.05)
+    # at 1-100 Hz, far below the bearing modes, a torque oscillation turns the gears against each other
+    # (the TE) while the housings barely accelerate: its evidence may lie on the TE alone
+    one_channel = "a torque oscillation far below the bearing modes moves the TE, not the housings"
 
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         fitted = (self.strength_parameter("amplitude", 0.01, upper=0.3), self.parameter("frequency", 2.0, 1.0, 100.0))

@@ -44,6 +44,9 @@ class EffectFamily:
         Weak (near detectability), medium and strong values of ``strength`` for virtual-rig campaigns.
     plan : str
         The test plan where it shows (``service``, or ``bearing_check`` where a bearing must unload).
+    one_channel : str
+        Why its signature may lie on one channel alone (empty: it shows on every channel that sees
+        the mesh, and evidence on one channel alone is that sensor's own; :mod:`uqgear.diagnosis.consistency`).
     """
 
     name: ClassVar[str]
@@ -51,6 +54,7 @@ class EffectFamily:
     strength: ClassVar[str]
     ladder: ClassVar[tuple[float, float, float]]
     plan: ClassVar[str] = "service"
+    one_channel: ClassVar[str] = ""
 
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         """The screening variants of this family for a design, their start grids from the signature ``hints``."""

@@ -1,0 +1,132 @@
+"""Diagnosis benchmark on what users run: the whole real-world blind suite, campaign by campaign.
+
+Runs ``uqgear blindtest --suite real_world --n-per-effect 1`` for each seed
+(default 1 and 2: 8 operating points of 1 s at 20.48 kHz per campaign) and
+prints per campaign its wall time (the virtual rig's generation, the
+diagnosis and the judging) with the diagnosis's stages (order tracking,
+nominal fit, pitch-error allowance, screening, full fits, forward
+selection, ...), then the median and the slowest campaign, the stages
+summed over the suite (where the time goes), the verdicts and the largest
+resident memory of this process and of the worker processes. Aims: median
+at most 15 s and every campaign at most 30 s on 2 cores, memory at most
+2 GB. The 50 kHz figure (6 runs, at most 60 s) is ``python
+benchmarks/diagnosis.py --fifty-khz``.
+
+Usage: ``python benchmarks/diagnosis_suite.py [--seeds 1 2] [--workers 2] [--out DIR]
+[--compare DIR]``; ``--out`` keeps the blind tests (``DIR/seed-S``), ``--compare`` compares
+every campaign's verdict, named set, gaps and scores field by field with an earlier ``--out``.
+Timings taken while other jobs load the machine are noisy: the load average is printed with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import resource
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from uqgear.validation import blindtest
+
+# the fields compared between two runs of the suite (a speed change must leave them as they were)
+COMPARED = ("verdict", "effects_named", "shrink_shares", "nominal_gap", "best_candidate", "best_score",
+            "shrink_fraction", "borderline", "cannot_tell")
+
+
+def _peak_memory_mb() -> tuple[float, float]:
+    """Largest resident set of this process and of any finished worker process, MB (Linux: ru_maxrss in kB)."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+    return own, children
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (math.isnan(a) and math.isnan(b))
+    return bool(a == b)
+
+
+def compare(campaigns: list[dict[str, Any]], earlier: Path) -> list[str]:
+    """Differences, field by field, between these campaigns and those of an earlier run's blindtest.json."""
+    before = {c["id"]: c for c in json.loads(earlier.read_text())["campaigns"]}
+    notes = []
+    for campaign in campaigns:
+        old = before.get(campaign["id"])
+        if old is None:
+            notes.append(f"{campaign['id']}: not in {earlier}")
+            continue
+        for field in COMPARED:
+            if not _same(campaign.get(field), old.get(field)):
+                notes.append(f"{campaign['id']}.{field}: {old.get(field)!r} -> {campaign.get(field)!r}")
+    return notes
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, help="keep the blind tests here (DIR/seed-S)")
+    parser.add_argument("--compare", type=Path, help="an earlier --out to compare the verdicts with")
+    args = parser.parse_args()
+    print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
+          f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+    scratch = tempfile.TemporaryDirectory()
+    root = args.out if args.out is not None else Path(scratch.name)
+    rows, stages, differences = [], {}, []
+    for seed in args.seeds:
+        started = time.perf_counter()
+        content = blindtest(root / f"seed-{seed}", suite="real_world", n_per_effect=1, seed=seed,
+                            workers=args.workers, report=False)
+        print(f"seed {seed}: {len(content['campaigns'])} campaigns in {time.perf_counter() - started:.0f} s; "
+              f"load average {', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+        for campaign in content["campaigns"]:
+            timing = campaign.get("timing_s", {})
+            rows.append((seed, campaign["id"], campaign["verdict"], campaign["expected_verdict"],
+                         campaign["effects_named"], campaign["seconds"], timing, campaign["truth_effects"]))
+            for stage, seconds in timing.items():
+                if stage not in ("total_cpu", "workers"):
+                    stages[stage] = stages.get(stage, 0.0) + float(seconds)
+        sets = content["effect_sets"]
+        print(f"  sets exact {sets['set_exact']:.2f}, two-effect campaigns exact {sets['set_exact_multi_effect']}, "
+              f"controls with an effect named {sets['controls_with_an_effect_named']} of {sets['n_controls']}",
+              flush=True)
+        if args.compare is not None:
+            differences += [f"seed {seed}: {note}" for note in
+                            compare(content["campaigns"], args.compare / f"seed-{seed}" / "blindtest.json")]
+    print()
+    print(f"{'seed':>4s} {'campaign':52s} {'verdict':14s} {'wall s':>7s} {'diag s':>7s} {'CPU s':>7s}  stages (s)")
+    for seed, ident, verdict, _expected, _named, seconds, timing, _ in rows:
+        shown = {k: v for k, v in timing.items() if k not in ("total_wall", "total_cpu", "workers") and v >= 0.5}
+        stage_text = ", ".join(f"{k} {v:.0f}" for k, v in sorted(shown.items(), key=lambda kv: -kv[1]))
+        print(f"{seed:4d} {ident:52s} {verdict:14s} {seconds:7.0f} {timing.get('total_wall', math.nan):7.0f} "
+              f"{timing.get('total_cpu', math.nan):7.0f}  {stage_text}")
+    walls = [row[5] for row in rows]
+    slowest = max(rows, key=lambda row: row[5])
+    print()
+    print(f"campaigns: {len(rows)}; wall time per campaign: median {statistics.median(walls):.0f} s, "
+          f"slowest {slowest[5]:.0f} s ({slowest[1]}, seed {slowest[0]}); total {sum(walls):.0f} s")
+    total = sum(v for k, v in stages.items() if k != "total_wall")
+    print("where the diagnosis's time goes (summed over the suite):")
+    for stage, seconds in sorted(stages.items(), key=lambda kv: -kv[1]):
+        if stage != "total_wall":
+            print(f"  {stage:28s} {seconds:7.0f} s  {100 * seconds / max(total, 1e-9):5.1f} %")
+    print(f"  {'(diagnosis wall, all)':28s} {stages.get('total_wall', math.nan):7.0f} s")
+    own, children = _peak_memory_mb()
+    print(f"largest resident memory: this process {own:.0f} MB, a worker process {children:.0f} MB")
+    # a set is right when it names exactly the true effects; without one, when the verdict is the expected one
+    wrong = [row for row in rows if set(row[4]) != set(row[7]) or (not row[7] and row[2] != row[3])]
+    print(f"named sets right: {len(rows) - len(wrong)} / {len(rows)}"
+          + "".join(f"\n  seed {r[0]} {r[1]}: {r[2]} {r[4]} (truth {r[7] or r[3]})" for r in wrong))
+    if args.compare is not None:
+        print(f"differences from {args.compare}: {len(differences)}" + "".join(f"\n  {d}" for d in differences))
+    print(f"load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
+    scratch.cleanup()
+
+
+if __name__ == "__main__":
+    main()
