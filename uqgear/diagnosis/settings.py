@@ -8,15 +8,6 @@ docs/validation/diagnosis.md), with its valid range
 the validation record was measured with. Settings marked ``study`` are the
 documented decision thresholds a study's ``diagnose`` analysis may set under
 ``settings:``; the others (budgets, numerical gates) are set from Python.
-
-Examples
---------
->>> from uqgear.diagnosis import DiagnosisSettings
->>> settings = DiagnosisSettings(score_threshold=15.0)
->>> settings.score_threshold, settings.shrink_threshold
-(15.0, 0.5)
->>> DiagnosisSettings.describe("score_threshold")["unit"]
-'nat'
 """
 
 from __future__ import annotations
