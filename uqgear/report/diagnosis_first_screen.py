@@ -61,11 +61,15 @@ def _next_step(content: Mapping[str, Any], verdict: str, borderline: bool) -> st
         return "record more runs with the gear under load (no line stands above the noise floor)"
     if content.get("one_channel_gap"):
         channel = content["one_channel_gap"]
-        return (f"check the {channel} sensor and its mounting (a gap on {channel} alone is that sensor's own as far "
-                "as the data tell), then record a healthy reference")
+        return (
+            f"check the {channel} sensor and its mounting (a gap on {channel} alone is that sensor's own as far "
+            "as the data tell), then record a healthy reference"
+        )
     if verdict == "unexplained":
-        return ("record a healthy reference campaign of the same rig and diagnose against it (uqgear diagnose "
-                "--reference), then record more runs if the gap stays")
+        return (
+            "record a healthy reference campaign of the same rig and diagnose against it (uqgear diagnose "
+            "--reference), then record more runs if the gap stays"
+        )
     if verdict == "none":
         return "record more runs before acting" if borderline else "nothing to do: the gear behaves as modelled"
     steps = []
@@ -103,8 +107,10 @@ def at_a_glance(content: Mapping[str, Any]) -> Finding:
     if figures:
         first = figures[0]
         low, high = first.get("interval", [None, None])
-        certainty = (f"borderline: {str(first['figure']).replace('_', ' ')} {first['value']:.2g} against "
-                     f"{float(first['threshold']):g}, 90 % interval {low:.2g} to {high:.2g}")
+        certainty = (
+            f"borderline: {str(first['figure']).replace('_', ' ')} {first['value']:.2g} against "
+            f"{float(first['threshold']):g}, 90 % interval {low:.2g} to {high:.2g}"
+        )
         if len(figures) > 1:
             certainty += f", and {len(figures) - 1} more figure{'s' if len(figures) > 2 else ''}"
     else:
@@ -120,8 +126,14 @@ def at_a_glance(content: Mapping[str, Any]) -> Finding:
     else:
         evidence = "no single feature beyond 3 sigma (the evidence is spread over many)"
     step = _next_step(content, verdict, bool(figures))
-    facts = {"verdict": verdict, "effects": effects, "borderline": [f.get("figure") for f in figures],
-             "channels": channels, "ops": ops, "next": step}
+    facts = {
+        "verdict": verdict,
+        "effects": effects,
+        "borderline": [f.get("figure") for f in figures],
+        "channels": channels,
+        "ops": ops,
+        "next": step,
+    }
     return Finding(f"At a glance: {named} ({certainty}); {evidence}; next: {step}.", facts, "at_a_glance")
 
 

@@ -19,10 +19,10 @@ import xarray as xr
 from matplotlib.ticker import LogLocator, NullLocator
 
 from ..common.fileio import write_text_atomic
+from .change_section import change_findings, change_page_parts
 from .diagnosis_first_screen import at_a_glance
 from .finding import HEADLINE_STYLE, Finding, headline_html
 from .page import figure_png, figure_pngs, html_page, img_tag, new_figure
-from .change_section import change_findings, change_page_parts
 from .reference_section import reference_section_html
 
 _STYLE = """

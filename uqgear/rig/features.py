@@ -65,15 +65,22 @@ import scipy.signal
 import xarray as xr
 from numpy.typing import ArrayLike
 
-from ..physics.design import Design
 from ..common.errors import DesignError, RigDataError, StudyError
+from ..physics.design import Design
 from .order_tracking import SPEED_ESTIMATE_VARIABLES, check_tracking_mode, track_orders
-from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, band_limit_of as _band_limit, sampling_rate
+from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, sampling_rate
+from .sampling import band_limit_of as _band_limit
 
 #: Feature families, for mapping sim-to-real gaps over op x channel x family.
 FEATURE_FAMILIES: tuple[str, ...] = (
-    "mesh_harmonic", "sideband_pinion", "sideband_gear", "shaft_pinion", "shaft_gear",
-    "motor_line", "low_frequency", "broadband",
+    "mesh_harmonic",
+    "sideband_pinion",
+    "sideband_gear",
+    "shaft_pinion",
+    "shaft_gear",
+    "motor_line",
+    "low_frequency",
+    "broadband",
 )
 
 # Bins on each side of a line that the noise-floor estimate leaves out: the
@@ -119,8 +126,9 @@ def _check_count(name: str, value: object, lowest: int) -> int:
     return int(value)
 
 
-def feature_definitions(design: Design, *, n_harmonics: int = 3, n_sidebands: int = 3,
-                        n_shaft_orders: int = 3, n_motor_lines: int = 2) -> tuple[FeatureDefinition, ...]:
+def feature_definitions(
+    design: Design, *, n_harmonics: int = 3, n_sidebands: int = 3, n_shaft_orders: int = 3, n_motor_lines: int = 2
+) -> tuple[FeatureDefinition, ...]:
     """The feature set for a design, in output order.
 
     Parameters
@@ -150,15 +158,18 @@ def feature_definitions(design: Design, *, n_harmonics: int = 3, n_sidebands: in
         A count is not an integer in range.
     """
     if not isinstance(design, Design):
-        raise DesignError(f"design: expected a uqgear Design (see uqgear.physics.design.load_design); "
-                          f"got {type(design).__name__}")
+        raise DesignError(
+            f"design: expected a uqgear Design (see uqgear.physics.design.load_design); got {type(design).__name__}"
+        )
     n_harmonics = _check_count("n_harmonics", n_harmonics, 1)
     n_sidebands = _check_count("n_sidebands", n_sidebands, 0)
     n_shaft_orders = _check_count("n_shaft_orders", n_shaft_orders, 0)
     n_motor_lines = _check_count("n_motor_lines", n_motor_lines, 0)
     if n_sidebands >= design.z1:
-        raise StudyError(f"n_sidebands: expected fewer than z1 = {design.z1} so that every sideband "
-                         f"order is positive; got {n_sidebands}")
+        raise StudyError(
+            f"n_sidebands: expected fewer than z1 = {design.z1} so that every sideband "
+            f"order is positive; got {n_sidebands}"
+        )
     gear_order = design.z1 / design.z2
     definitions: list[FeatureDefinition] = []
     for k in range(1, n_harmonics + 1):
@@ -167,15 +178,19 @@ def feature_definitions(design: Design, *, n_harmonics: int = 3, n_sidebands: in
         for shaft, spacing in (("pinion", 1.0), ("gear", gear_order)):
             for j in range(1, n_sidebands + 1):
                 for sign, symbol in ((+1, "+"), (-1, "-")):
-                    definitions.append(FeatureDefinition(f"mesh{k}_sb_{shaft}{symbol}{j}", f"sideband_{shaft}",
-                                                         mesh_order + sign * j * spacing))
+                    definitions.append(
+                        FeatureDefinition(
+                            f"mesh{k}_sb_{shaft}{symbol}{j}", f"sideband_{shaft}", mesh_order + sign * j * spacing
+                        )
+                    )
     for shaft, spacing in (("pinion", 1.0), ("gear", gear_order)):
         for j in range(1, n_shaft_orders + 1):
             definitions.append(FeatureDefinition(f"shaft_{shaft}{j}", f"shaft_{shaft}", j * spacing))
     if design.motor_pole_pairs is not None:
         for m in range(1, n_motor_lines + 1):
-            definitions.append(FeatureDefinition(f"motor_ripple{m}", "motor_line",
-                                                 float(6 * design.motor_pole_pairs * m)))
+            definitions.append(
+                FeatureDefinition(f"motor_ripple{m}", "motor_line", float(6 * design.motor_pole_pairs * m))
+            )
     definitions.append(FeatureDefinition("low_band_rms", "low_frequency"))
     definitions.append(FeatureDefinition("rms", "broadband"))
     definitions.append(FeatureDefinition("kurtosis", "broadband", dimensionless=True))
@@ -188,8 +203,7 @@ def analysis_window(name: str, size: int) -> np.ndarray:
     try:
         return scipy.signal.get_window(name, size, fftbins=True)
     except (ValueError, TypeError) as exc:
-        raise StudyError(f"window: expected a scipy.signal window name such as 'hann'; got {name!r} ({exc})") \
-            from None
+        raise StudyError(f"window: expected a scipy.signal window name such as 'hann'; got {name!r} ({exc})") from None
 
 
 def _check_speeds(speeds: np.ndarray, where: str) -> None:
@@ -197,12 +211,14 @@ def _check_speeds(speeds: np.ndarray, where: str) -> None:
         raise RigDataError(f"{where}pinion_speed: expected finite speeds > 0 rpm; got {speeds.ravel()[:8]}")
 
 
-def _prepare(signal: xr.DataArray, pinion_speed: float | xr.DataArray, where: str
-             ) -> tuple[xr.DataArray, np.ndarray, np.ndarray, float]:
+def _prepare(
+    signal: xr.DataArray, pinion_speed: float | xr.DataArray, where: str
+) -> tuple[xr.DataArray, np.ndarray, np.ndarray, float]:
     """Records as (R, N) in their own dtype with matching speeds (R,), and fs."""
     if not isinstance(signal, xr.DataArray) or "time" not in signal.dims:
-        raise RigDataError(f"{where}expected a DataArray with a 'time' dimension; "
-                           f"got {getattr(signal, 'dims', type(signal).__name__)}")
+        raise RigDataError(
+            f"{where}expected a DataArray with a 'time' dimension; got {getattr(signal, 'dims', type(signal).__name__)}"
+        )
     if "time" not in signal.coords:
         raise RigDataError(f"{where}time: missing coordinate (sample instants in s)")
     fs = sampling_rate(signal["time"].values, where=f"{where}time")
@@ -211,8 +227,9 @@ def _prepare(signal: xr.DataArray, pinion_speed: float | xr.DataArray, where: st
     speed = xr.DataArray(pinion_speed) if not isinstance(pinion_speed, xr.DataArray) else pinion_speed
     extra = set(speed.dims) - set(template.dims)
     if extra:
-        raise RigDataError(f"{where}pinion_speed: dimensions {sorted(extra)} are not dimensions of the signal "
-                           f"{template.dims}")
+        raise RigDataError(
+            f"{where}pinion_speed: dimensions {sorted(extra)} are not dimensions of the signal {template.dims}"
+        )
     speeds = np.asarray(speed.broadcast_like(template).transpose(*template.dims).values, dtype=float).ravel()
     _check_speeds(speeds, where)
     records = np.asarray(signal.values).reshape(-1, signal.sizes["time"])
@@ -221,8 +238,14 @@ def _prepare(signal: xr.DataArray, pinion_speed: float | xr.DataArray, where: st
     return template, records, speeds, fs
 
 
-def order_spectrum(signal: xr.DataArray, pinion_speed: float | xr.DataArray, *,
-                   orders: ArrayLike | None = None, window: str = "hann", padding: int = 4) -> xr.DataArray:
+def order_spectrum(
+    signal: xr.DataArray,
+    pinion_speed: float | xr.DataArray,
+    *,
+    orders: ArrayLike | None = None,
+    window: str = "hann",
+    padding: int = 4,
+) -> xr.DataArray:
     """Amplitude spectrum against order (multiples of the pinion rotation).
 
     Each record (mean removed) is windowed and Fourier transformed with
@@ -273,10 +296,10 @@ def order_spectrum(signal: xr.DataArray, pinion_speed: float | xr.DataArray, *,
         amplitude = np.abs(np.fft.rfft(centred * taper, n=size * padding, axis=1)) * (2.0 / taper.sum())
         amplitude[:, 0] *= 0.5
         for row, index in enumerate(np.flatnonzero(usable)):
-            spectra[index] = np.interp(grid, frequencies / shaft_frequency[index], amplitude[row],
-                                       right=np.nan)
-    result = xr.DataArray(spectra.reshape(template.shape + (grid.size,)), dims=template.dims + ("order",),
-                          coords=template.coords).assign_coords(order=grid)
+            spectra[index] = np.interp(grid, frequencies / shaft_frequency[index], amplitude[row], right=np.nan)
+    result = xr.DataArray(
+        spectra.reshape(template.shape + (grid.size,)), dims=template.dims + ("order",), coords=template.coords
+    ).assign_coords(order=grid)
     result["order"].attrs.update(units="1", long_name="order (multiples of the pinion rotation)")
     result.attrs.update(units=signal.attrs.get("units", ""), long_name="amplitude spectrum", window=window)
     return result
@@ -328,7 +351,7 @@ class LineFit:
         result = np.full((records.shape[0], self.size_out), np.nan)
         if self.n_centres:
             coefficients = self.coefficients(records)
-            amplitude = np.hypot(coefficients[1:1 + self.n_centres], coefficients[1 + self.n_centres:]).T
+            amplitude = np.hypot(coefficients[1 : 1 + self.n_centres], coefficients[1 + self.n_centres :]).T
             result[:, self.inside] = amplitude[:, self.groups]
         return result
 
@@ -337,7 +360,7 @@ class LineFit:
         result = np.full((records.shape[0], self.size_out), np.nan, dtype=complex)
         if self.n_centres:
             coefficients = self.coefficients(records)
-            phasor = (coefficients[1:1 + self.n_centres] - 1j * coefficients[1 + self.n_centres:]).T
+            phasor = (coefficients[1 : 1 + self.n_centres] - 1j * coefficients[1 + self.n_centres :]).T
             result[:, self.inside] = phasor[:, self.groups]
         return result
 
@@ -345,11 +368,17 @@ class LineFit:
 def _blocks(rows: np.ndarray, size: int) -> list[np.ndarray]:
     """Row indices in blocks that bound the float64 working copies."""
     records_per_block = max(1, _BLOCK_SAMPLES // size)
-    return [rows[start:start + records_per_block] for start in range(0, rows.size, records_per_block)]
+    return [rows[start : start + records_per_block] for start in range(0, rows.size, records_per_block)]
 
 
-def line_amplitudes(signal: xr.DataArray, pinion_speed: float | xr.DataArray, orders: ArrayLike, *,
-                    window: str = "hann", band_limit: float | None = None) -> xr.DataArray:
+def line_amplitudes(
+    signal: xr.DataArray,
+    pinion_speed: float | xr.DataArray,
+    orders: ArrayLike,
+    *,
+    window: str = "hann",
+    band_limit: float | None = None,
+) -> xr.DataArray:
     """Amplitudes of spectral lines at known orders.
 
     Parameters
@@ -377,14 +406,18 @@ def line_amplitudes(signal: xr.DataArray, pinion_speed: float | xr.DataArray, or
     limit = _band_limit(band_limit, fs)
     taper = analysis_window(window, records.shape[1])
     amplitudes = _lines_by_speed(records, speeds, order_values, fs, limit, taper)
-    result = xr.DataArray(amplitudes.reshape(template.shape + (order_values.size,)),
-                          dims=template.dims + ("order",), coords=template.coords).assign_coords(order=order_values)
+    result = xr.DataArray(
+        amplitudes.reshape(template.shape + (order_values.size,)),
+        dims=template.dims + ("order",),
+        coords=template.coords,
+    ).assign_coords(order=order_values)
     result.attrs.update(units=signal.attrs.get("units", ""), long_name="line amplitude", window=window)
     return result
 
 
-def _lines_by_speed(records: np.ndarray, speeds: np.ndarray, orders: np.ndarray, fs: float, limit: float,
-                    taper: np.ndarray) -> np.ndarray:
+def _lines_by_speed(
+    records: np.ndarray, speeds: np.ndarray, orders: np.ndarray, fs: float, limit: float, taper: np.ndarray
+) -> np.ndarray:
     """Line amplitudes (R, L); records sharing a speed share one fit; NaN rows where a sample is NaN."""
     amplitudes = np.full((records.shape[0], orders.size), np.nan)
     for speed in np.unique(speeds):
@@ -409,8 +442,16 @@ def _noise_std(periodogram: np.ndarray, fs: float, excluded: np.ndarray) -> floa
     return math.sqrt(density * 0.5 * fs)
 
 
-def excluded_bins(frequencies: np.ndarray, speed: float, design: Design, line_orders: np.ndarray,
-                   n_sidebands: int, low_band: tuple[float, float], limit: float, resolution: float) -> np.ndarray:
+def excluded_bins(
+    frequencies: np.ndarray,
+    speed: float,
+    design: Design,
+    line_orders: np.ndarray,
+    n_sidebands: int,
+    low_band: tuple[float, float],
+    limit: float,
+    resolution: float,
+) -> np.ndarray:
     """Periodogram bins that the noise floor must not use: lines, low band, beyond the band."""
     shaft_frequency = speed / 60.0
     gear_order = design.z1 / design.z2
@@ -434,17 +475,31 @@ def excluded_bins(frequencies: np.ndarray, speed: float, design: Design, line_or
 
 
 def _check_low_band(low_band: tuple[float, float], fs: float) -> tuple[float, float]:
-    if (not isinstance(low_band, (tuple, list)) or len(low_band) != 2
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in low_band)
-            or not 0 <= low_band[0] < low_band[1] <= 0.5 * fs):
-        raise StudyError(f"low_band: expected (lower, upper) in Hz with 0 <= lower < upper <= fs/2 = {0.5 * fs:g}; "
-                         f"got {low_band!r}")
+    if (
+        not isinstance(low_band, (tuple, list))
+        or len(low_band) != 2
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in low_band)
+        or not 0 <= low_band[0] < low_band[1] <= 0.5 * fs
+    ):
+        raise StudyError(
+            f"low_band: expected (lower, upper) in Hz with 0 <= lower < upper <= fs/2 = {0.5 * fs:g}; got {low_band!r}"
+        )
     return float(low_band[0]), float(low_band[1])
 
 
-def block_features(records: np.ndarray, fit: LineFit, excluded: np.ndarray, fs: float, taper: np.ndarray,
-                    low_band: tuple[float, float], columns: dict[str, int], line_columns: np.ndarray,
-                    n_features: int, *, lines: bool = True) -> np.ndarray:
+def block_features(
+    records: np.ndarray,
+    fit: LineFit,
+    excluded: np.ndarray,
+    fs: float,
+    taper: np.ndarray,
+    low_band: tuple[float, float],
+    columns: dict[str, int],
+    line_columns: np.ndarray,
+    n_features: int,
+    *,
+    lines: bool = True,
+) -> np.ndarray:
     """Feature values (R, F) of float64 records (R, N) without NaN, all at one speed.
 
     With ``lines`` False the line columns are left NaN (a caller that fits
@@ -454,8 +509,7 @@ def block_features(records: np.ndarray, fit: LineFit, excluded: np.ndarray, fs: 
     if lines:
         values[:, line_columns] = fit.amplitudes(records)
     centred = records - records.mean(axis=1, keepdims=True)
-    frequencies, density = scipy.signal.periodogram(centred, fs, window=taper, detrend=False,
-                                                    scaling="density", axis=1)
+    frequencies, density = scipy.signal.periodogram(centred, fs, window=taper, detrend=False, scaling="density", axis=1)
     resolution = fs / records.shape[1]
     in_low_band = (frequencies >= low_band[0]) & (frequencies <= low_band[1])
     values[:, columns["low_band_rms"]] = np.sqrt(density[:, in_low_band].sum(axis=1) * resolution)
@@ -467,16 +521,26 @@ def block_features(records: np.ndarray, fit: LineFit, excluded: np.ndarray, fs: 
         # a constant record has no defined shape: leave NaN rather than warn. The fourth power as a
         # square of squares: numpy's x**4 calls pow() per sample, 80 times slower (measured), and
         # this runs for every model run of a diagnosis
-        values[:, columns["kurtosis"]] = np.where(mean_square > 0, np.mean(square * square, axis=1) / mean_square**2,
-                                                  np.nan)
+        values[:, columns["kurtosis"]] = np.where(
+            mean_square > 0, np.mean(square * square, axis=1) / mean_square**2, np.nan
+        )
         values[:, columns["crest_factor"]] = np.where(rms > 0, np.max(np.abs(centred), axis=1) / rms, np.nan)
     values[:, columns["noise_std"]] = [_noise_std(row, fs, excluded) for row in density]
     return values
 
 
-def _record_features(channel_records: Sequence[np.ndarray], channel_speeds: Sequence[np.ndarray], fs: float,
-                     design: Design, definitions: Sequence[FeatureDefinition], *, n_sidebands: int,
-                     low_band: tuple[float, float], limit: float, window: str) -> list[np.ndarray]:
+def _record_features(
+    channel_records: Sequence[np.ndarray],
+    channel_speeds: Sequence[np.ndarray],
+    fs: float,
+    design: Design,
+    definitions: Sequence[FeatureDefinition],
+    *,
+    n_sidebands: int,
+    low_band: tuple[float, float],
+    limit: float,
+    window: str,
+) -> list[np.ndarray]:
     """Feature values (R_c, F) per channel of records (R_c, N) at pinion speeds (R_c,) in rpm.
 
     Work goes speed by speed, so that every channel and sample at one speed
@@ -492,23 +556,34 @@ def _record_features(channel_records: Sequence[np.ndarray], channel_speeds: Sequ
     outputs = [np.full((records.shape[0], len(definitions)), np.nan) for records in channel_records]
     for speed in np.unique(np.concatenate(channel_speeds)):
         fit = LineFit(line_orders * speed / 60.0, fs, size, limit, taper)
-        excluded = excluded_bins(frequencies, float(speed), design, line_orders, n_sidebands, low_band, limit,
-                                  fs / size)
+        excluded = excluded_bins(
+            frequencies, float(speed), design, line_orders, n_sidebands, low_band, limit, fs / size
+        )
         for records, speeds, output in zip(channel_records, channel_speeds, outputs):
             for block in _blocks(np.flatnonzero(speeds == speed), size):
                 chunk = records[block].astype(float)
                 usable = ~np.isnan(chunk).any(axis=1)
                 if usable.any():
-                    output[block[usable]] = block_features(chunk[usable], fit, excluded, fs, taper, low_band,
-                                                            columns, line_columns, len(definitions))
+                    output[block[usable]] = block_features(
+                        chunk[usable], fit, excluded, fs, taper, low_band, columns, line_columns, len(definitions)
+                    )
     return outputs
 
 
-def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[str] | None = None,
-                     n_harmonics: int = 3, n_sidebands: int = 3, n_shaft_orders: int = 3,
-                     n_motor_lines: int = 2, low_band: tuple[float, float] = (2.0, 80.0),
-                     band_limit: float | None = None, window: str = "hann",
-                     order_tracking: str = "auto") -> xr.Dataset:
+def extract_features(
+    signals: xr.Dataset,
+    design: Design,
+    *,
+    channels: Sequence[str] | None = None,
+    n_harmonics: int = 3,
+    n_sidebands: int = 3,
+    n_shaft_orders: int = 3,
+    n_motor_lines: int = 2,
+    low_band: tuple[float, float] = (2.0, 80.0),
+    band_limit: float | None = None,
+    window: str = "hann",
+    order_tracking: str = "auto",
+) -> xr.Dataset:
     """Features of every record and channel (see the module docstring for the list).
 
     Parameters
@@ -605,10 +680,16 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
         raise RigDataError(f"{where}pinion_speed: missing (mean pinion speed in rpm over the runs)")
     speed = signals["pinion_speed"]
     if "time" in speed.dims:
-        raise RigDataError(f"{where}pinion_speed: expected the mean speed per run, without a 'time' dimension; "
-                           f"got dims {speed.dims}")
-    definitions = feature_definitions(design, n_harmonics=n_harmonics, n_sidebands=n_sidebands,
-                                      n_shaft_orders=n_shaft_orders, n_motor_lines=n_motor_lines)
+        raise RigDataError(
+            f"{where}pinion_speed: expected the mean speed per run, without a 'time' dimension; got dims {speed.dims}"
+        )
+    definitions = feature_definitions(
+        design,
+        n_harmonics=n_harmonics,
+        n_sidebands=n_sidebands,
+        n_shaft_orders=n_shaft_orders,
+        n_motor_lines=n_motor_lines,
+    )
     analysis_window(window, 8)
 
     prepared = [_prepare(signals[name], speed, f"{where}{name}: ") for name in channels]
@@ -620,46 +701,85 @@ def extract_features(signals: xr.Dataset, design: Design, *, channels: Sequence[
     band = _check_low_band(low_band, fs)
     if order_tracking != "never" and "order_tracked" not in signals.variables:
         # after the checks above, so that a wrong input is named as the features name it
-        signals = track_orders(signals, design, mode=order_tracking, channels=channels, band_limit=limit,
-                               n_harmonics=n_harmonics)
+        signals = track_orders(
+            signals, design, mode=order_tracking, channels=channels, band_limit=limit, n_harmonics=n_harmonics
+        )
         speed = signals["pinion_speed"]
         if bool(np.any(signals["order_tracked"].values)):
             prepared = [_prepare(signals[name], speed, f"{where}{name}: ") for name in channels]
-    values = _record_features([records for _, records, _, _ in prepared], [speeds for _, _, speeds, _ in prepared],
-                              fs, design, definitions, n_sidebands=n_sidebands, low_band=band, limit=limit,
-                              window=window)
+    values = _record_features(
+        [records for _, records, _, _ in prepared],
+        [speeds for _, _, speeds, _ in prepared],
+        fs,
+        design,
+        definitions,
+        n_sidebands=n_sidebands,
+        low_band=band,
+        limit=limit,
+        window=window,
+    )
     outputs: dict[str, xr.DataArray] = {}
     for name, (template, _, _, _), block in zip(channels, prepared, values):
         units = signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("", ""))[0])
         outputs[name] = xr.DataArray(
-            block.reshape(template.shape + (len(definitions),)), dims=template.dims + ("feature",),
+            block.reshape(template.shape + (len(definitions),)),
+            dims=template.dims + ("feature",),
             coords=template.coords,
-            attrs={"units": units, "long_name": f"features of {name}",
-                   "note": "features with dimensionless=True are ratios without units"})
+            attrs={
+                "units": units,
+                "long_name": f"features of {name}",
+                "note": "features with dimensionless=True are ratios without units",
+            },
+        )
 
-    orders = xr.DataArray([definition.order for definition in definitions], dims="feature",
-                          attrs={"units": "1", "long_name": "line order (multiples of the pinion rotation)"})
+    orders = xr.DataArray(
+        [definition.order for definition in definitions],
+        dims="feature",
+        attrs={"units": "1", "long_name": "line order (multiples of the pinion rotation)"},
+    )
     features = xr.Dataset(outputs).assign_coords(
         feature=[definition.name for definition in definitions],
-        family=("feature", [definition.family for definition in definitions],
-                {"long_name": "feature family"}),
+        family=("feature", [definition.family for definition in definitions], {"long_name": "feature family"}),
         order=orders,
-        dimensionless=("feature", [definition.dimensionless for definition in definitions],
-                       {"long_name": "feature is a ratio without units"}),
+        dimensionless=(
+            "feature",
+            [definition.dimensionless for definition in definitions],
+            {"long_name": "feature is a ratio without units"},
+        ),
     )
-    features = features.assign_coords(frequency=(speed / 60.0 * orders).assign_attrs(
-        units="Hz", long_name="line frequency"))
+    features = features.assign_coords(
+        frequency=(speed / 60.0 * orders).assign_attrs(units="Hz", long_name="line frequency")
+    )
     if "order_tracked" in signals.variables:
         features = features.assign_coords({name: signals[name] for name in SPEED_ESTIMATE_VARIABLES})
     features.attrs.update(
-        window=window, low_band=list(band), band_limit=limit,
+        window=window,
+        low_band=list(band),
+        band_limit=limit,
         order_tracking=signals.attrs.get("order_tracking", "never"),
-        sampling_rate=fs, n_harmonics=n_harmonics, n_sidebands=n_sidebands, n_shaft_orders=n_shaft_orders,
-        n_motor_lines=n_motor_lines if design.motor_pole_pairs is not None else 0, z1=design.z1, z2=design.z2,
+        sampling_rate=fs,
+        n_harmonics=n_harmonics,
+        n_sidebands=n_sidebands,
+        n_shaft_orders=n_shaft_orders,
+        n_motor_lines=n_motor_lines if design.motor_pole_pairs is not None else 0,
+        z1=design.z1,
+        z2=design.z2,
     )
     return features
 
 
-__all__ = ["SIGNAL_CHANNELS", "FEATURE_FAMILIES", "DEFAULT_BAND_FRACTION", "FeatureDefinition",
-           "feature_definitions", "sampling_rate", "order_spectrum", "line_amplitudes", "extract_features",
-           "analysis_window", "LineFit", "excluded_bins", "block_features"]
+__all__ = [
+    "SIGNAL_CHANNELS",
+    "FEATURE_FAMILIES",
+    "DEFAULT_BAND_FRACTION",
+    "FeatureDefinition",
+    "feature_definitions",
+    "sampling_rate",
+    "order_spectrum",
+    "line_amplitudes",
+    "extract_features",
+    "analysis_window",
+    "LineFit",
+    "excluded_bins",
+    "block_features",
+]

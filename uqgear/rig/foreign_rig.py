@@ -144,8 +144,14 @@ def _pair_sum(t, y, p, pin_err, gear_err, eff):  # pragma: no cover - compiled
         if dmg_depth > 0.0 and ((dmg_gear == 0 and i == int(dmg_tooth)) or (dmg_gear == 1 and j == int(dmg_tooth))):
             k *= 1.0 - dmg_depth
         v = u - 0.5
-        err = (pin_err[i, 0] + pin_err[i, 1] * v + pin_err[i, 2] * (v * v - 1.0 / 12.0)
-               + gear_err[j, 0] + gear_err[j, 1] * v + gear_err[j, 2] * (v * v - 1.0 / 12.0))
+        err = (
+            pin_err[i, 0]
+            + pin_err[i, 1] * v
+            + pin_err[i, 2] * (v * v - 1.0 / 12.0)
+            + gear_err[j, 0]
+            + gear_err[j, 1] * v
+            + gear_err[j, 2] * (v * v - 1.0 / 12.0)
+        )
         delta = approach + err + run_out
         if delta <= 0.0:
             continue
@@ -239,8 +245,12 @@ def _effect_vector(effects: Sequence[Effect], design: Design) -> np.ndarray:
     for effect in effects:
         v = effect.values
         if effect.name == "eccentricity":
-            eff[0:4] = (0 if v.get("shaft", "pinion") == "pinion" else 1, v.get("amplitude", 10e-6),
-                        v.get("phase", 0.0), v.get("kappa", 0.0))
+            eff[0:4] = (
+                0 if v.get("shaft", "pinion") == "pinion" else 1,
+                v.get("amplitude", 10e-6),
+                v.get("phase", 0.0),
+                v.get("kappa", 0.0),
+            )
         elif effect.name == "tooth_damage":
             eff[4:7] = (0 if v.get("gear", "pinion") == "pinion" else 1, v.get("tooth", 0.0), v.get("depth", 0.3))
         elif effect.name == "friction":
@@ -285,15 +295,54 @@ def _parameters(design: Design, speed: float, drive_torque: float, load_torque: 
     w_c = 2 * math.pi * CONTROLLER_BANDWIDTH
     omega = 2 * math.pi * speed / 60.0
     f_mesh = design.z1 * speed / 60.0
-    p = np.array([
-        f_mesh, eps, kp, PAIR_ENTRY_SHARE, design.z1, design.z2, rb1, rb2, r1 * math.sin(alpha), r2 * math.sin(alpha),
-        eps * math.pi * design.module * math.cos(alpha), 2 * zeta / omega_mesh,
-        jm, j1, j2, jl, ma, mb, mh1, mh2, ks1, cs1, ks2, cs2, kb1, cb1, kb2, cb2, kh1, ch1, kh2, ch2,
-        j_total * w_c**2, 2 * 0.7 * j_total * w_c, drive_torque, load_torque, omega,
-    ])
+    p = np.array(
+        [
+            f_mesh,
+            eps,
+            kp,
+            PAIR_ENTRY_SHARE,
+            design.z1,
+            design.z2,
+            rb1,
+            rb2,
+            r1 * math.sin(alpha),
+            r2 * math.sin(alpha),
+            eps * math.pi * design.module * math.cos(alpha),
+            2 * zeta / omega_mesh,
+            jm,
+            j1,
+            j2,
+            jl,
+            ma,
+            mb,
+            mh1,
+            mh2,
+            ks1,
+            cs1,
+            ks2,
+            cs2,
+            kb1,
+            cb1,
+            kb2,
+            cb2,
+            kh1,
+            ch1,
+            kh2,
+            ch2,
+            j_total * w_c**2,
+            2 * 0.7 * j_total * w_c,
+            drive_torque,
+            load_torque,
+            omega,
+        ]
+    )
     fastest = max(
-        math.sqrt((k_mean + kb1) / ma), math.sqrt((k_mean + kb2) / mb), math.sqrt((kb1 + kh1) / mh1),
-        math.sqrt((kb2 + kh2) / mh2), omega_mesh, math.sqrt(ks1 / jm + ks1 / j1),
+        math.sqrt((k_mean + kb1) / ma),
+        math.sqrt((k_mean + kb2) / mb),
+        math.sqrt((kb1 + kh1) / mh1),
+        math.sqrt((kb2 + kh2) / mh2),
+        omega_mesh,
+        math.sqrt(ks1 / jm + ks1 / j1),
     ) / (2 * math.pi)
     return p, 1.5 * fastest
 
@@ -315,8 +364,16 @@ def _static_state(p: np.ndarray, design: Design) -> np.ndarray:
 
 
 def simulate_foreign_run(
-    design: Design, speed: float, drive_torque: float, load_torque: float, *, gears: ForeignGears,
-    effects: Sequence[Effect] = (), fs: float = 20480.0, duration: float = 0.5, start: float = 0.3,
+    design: Design,
+    speed: float,
+    drive_torque: float,
+    load_torque: float,
+    *,
+    gears: ForeignGears,
+    effects: Sequence[Effect] = (),
+    fs: float = 20480.0,
+    duration: float = 0.5,
+    start: float = 0.3,
 ) -> dict[str, np.ndarray]:
     """Clean records (te in m, housing accelerations in m s-2) of one run on the ``fs`` grid from ``start``."""
     p, fastest = _parameters(design, speed, drive_torque, load_torque)
@@ -326,8 +383,9 @@ def simulate_foreign_run(
     first = int(round((start - _GUARD) * rate))
     size = int(round((duration + 2 * _GUARD) * rate))
     n_out = first + size
-    out = _integrate(_static_state(p, design), p, gears.pinion, gears.gear, _effect_vector(effects, design), step,
-                     n_out, per_out)[first:]
+    out = _integrate(
+        _static_state(p, design), p, gears.pinion, gears.gear, _effect_vector(effects, design), step, n_out, per_out
+    )[first:]
     passband, stopband = fs / 2.56, fs / 2.0
     records = {}
     n_samples = int(round(duration * fs))
@@ -340,9 +398,17 @@ def simulate_foreign_run(
 
 
 def simulate_foreign_campaign(
-    design: Design, operating_points: xr.Dataset, *, gears: ForeignGears, effects: Sequence[Effect] = (),
-    seed: int | np.random.SeedSequence = 0, fs: float = 20480.0, duration: float = 0.5, run_in: float = 0.3,
-    relative_noise: float = 0.02, title: str = "",
+    design: Design,
+    operating_points: xr.Dataset,
+    *,
+    gears: ForeignGears,
+    effects: Sequence[Effect] = (),
+    seed: int | np.random.SeedSequence = 0,
+    fs: float = 20480.0,
+    duration: float = 0.5,
+    run_in: float = 0.3,
+    relative_noise: float = 0.02,
+    title: str = "",
 ) -> xr.Dataset:
     """A campaign of the foreign rig at each operating point (``uqgear-rig/1``, the nominal design stated).
 
@@ -373,18 +439,33 @@ def simulate_foreign_campaign(
         run_seed = child_seed(sequence, 1 + op)
         rng = np.random.default_rng(run_seed)
         start = run_in + rng.uniform(0.0, 60.0 / speed)
-        clean = simulate_foreign_run(design, speed, torques[op], 0.5 * (lower[op] + upper[op]), gears=gears,
-                                     effects=effects, fs=fs, duration=duration, start=start)
+        clean = simulate_foreign_run(
+            design,
+            speed,
+            torques[op],
+            0.5 * (lower[op] + upper[op]),
+            gears=gears,
+            effects=effects,
+            fs=fs,
+            duration=duration,
+            start=start,
+        )
         for name, record in clean.items():
             sigma = relative_noise * float(np.std(record))
             noisy = record + sigma * rng.standard_normal(n_samples)
             data[name][op] = noisy - noisy.mean()
     stamp = datetime.now(UTC).isoformat(timespec="seconds")
     ds = make_rig_dataset(
-        time=np.arange(n_samples) / fs, pinion_speed=speeds, drive_torque=torques, adhesion_torque_lower=lower,
-        adhesion_torque_upper=upper, channels=data, design=design, title=title or "uqgear foreign virtual rig",
+        time=np.arange(n_samples) / fs,
+        pinion_speed=speeds,
+        drive_torque=torques,
+        adhesion_torque_lower=lower,
+        adhesion_torque_upper=upper,
+        channels=data,
+        design=design,
+        title=title or "uqgear foreign virtual rig",
         source="uqgear foreign virtual rig: 8-DOF gearbox (motor, shafts, housing modes), half-sine pair stiffness, "
-               "per-tooth profile errors; not the diagnosis model",
+        "per-tooth profile errors; not the diagnosis model",
         history=f"{stamp}: simulated by uqgear.rig.foreign_rig.simulate_foreign_campaign",
     )
     ds.attrs.update(

@@ -72,8 +72,13 @@ from .sampling import SIGNAL_CHANNELS, band_limit_of, sampling_rate
 TRACKING_MODES: tuple[str, ...] = ("auto", "always", "never")
 
 #: Variables over the non-time dimensions that :func:`track_orders` adds.
-SPEED_ESTIMATE_VARIABLES: tuple[str, ...] = ("pinion_speed_stated", "speed_mean", "speed_min", "speed_max",
-                                             "order_tracked")
+SPEED_ESTIMATE_VARIABLES: tuple[str, ...] = (
+    "pinion_speed_stated",
+    "speed_mean",
+    "speed_min",
+    "speed_max",
+    "order_tracked",
+)
 
 #: Optional rig variable: instantaneous pinion speed (rpm) over (op, time).
 TACHOMETER_VARIABLE = "pinion_speed_signal"
@@ -146,8 +151,16 @@ def _noise_density(record: np.ndarray, fs: float) -> float:
     return float(np.median(density[1:])) / math.log(2.0)
 
 
-def estimate_pinion_angle(records: Sequence[np.ndarray], names: Sequence[str], fs: float, pinion_speed: float,
-                          z1: int, *, band_limit: float, n_harmonics: int = 3) -> AngleEstimate:
+def estimate_pinion_angle(
+    records: Sequence[np.ndarray],
+    names: Sequence[str],
+    fs: float,
+    pinion_speed: float,
+    z1: int,
+    *,
+    band_limit: float,
+    n_harmonics: int = 3,
+) -> AngleEstimate:
     """Pinion angle of one record from the phases of its mesh harmonics.
 
     Parameters
@@ -176,8 +189,12 @@ def estimate_pinion_angle(records: Sequence[np.ndarray], names: Sequence[str], f
     shaft_frequency = pinion_speed / 60.0
     half_band = _BAND_FRACTION * shaft_frequency
     angle = 2.0 * math.pi * shaft_frequency * time
-    candidates = [(channel, k) for channel in range(len(records)) for k in range(1, n_harmonics + 1)
-                  if k * z1 * shaft_frequency * 1.03 + half_band <= band_limit]
+    candidates = [
+        (channel, k)
+        for channel in range(len(records))
+        for k in range(1, n_harmonics + 1)
+        if k * z1 * shaft_frequency * 1.03 + half_band <= band_limit
+    ]
     if not candidates:
         return AngleEstimate(None, math.nan, (), "no mesh harmonic inside the usable band")
     centred = [np.asarray(record, dtype=float) - float(np.mean(record)) for record in records]
@@ -193,7 +210,7 @@ def estimate_pinion_angle(records: Sequence[np.ndarray], names: Sequence[str], f
         # density N0 gives N0 * half_band of complex power inside the band
         noise_power = np.array([densities[channel] * half_band for channel, _ in candidates])
         snr = typical**2 / np.maximum(noise_power, 1e-300)
-        steady = np.min(magnitude[:, size // 20: size - size // 20], axis=1) > 0.3 * typical
+        steady = np.min(magnitude[:, size // 20 : size - size // 20], axis=1) > 0.3 * typical
         usable = np.flatnonzero((snr >= _MIN_LINE_SNR) & steady)
         if usable.size == 0:
             return AngleEstimate(None, math.nan, (), "no mesh harmonic stands 30 dB over the noise in its band")
@@ -242,17 +259,26 @@ def resample_to_angle(records: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _RecordResult:
-    records: np.ndarray | None   # resampled (C, N) or None when left as it is
-    mean: float                  # rpm (NaN when no estimate)
+    records: np.ndarray | None  # resampled (C, N) or None when left as it is
+    mean: float  # rpm (NaN when no estimate)
     low: float
     high: float
     tracked: bool
     lines: str
 
 
-def _track_record(records: np.ndarray, names: Sequence[str], fs: float, stated: float, design: Design,
-                  mode: str, band_limit: float, n_harmonics: int, tachometer: np.ndarray | None,
-                  acceleration_rows: Sequence[int] = ()) -> _RecordResult:
+def _track_record(
+    records: np.ndarray,
+    names: Sequence[str],
+    fs: float,
+    stated: float,
+    design: Design,
+    mode: str,
+    band_limit: float,
+    n_harmonics: int,
+    tachometer: np.ndarray | None,
+    acceleration_rows: Sequence[int] = (),
+) -> _RecordResult:
     if np.isnan(records).any():
         return _RecordResult(None, math.nan, math.nan, math.nan, False, "unusable record (NaN samples)")
     if not (math.isfinite(stated) and stated > 0):
@@ -261,12 +287,14 @@ def _track_record(records: np.ndarray, names: Sequence[str], fs: float, stated: 
     if tachometer is not None:
         estimate = tachometer_angle(tachometer, fs)
     else:
-        estimate = estimate_pinion_angle(list(records), names, fs, stated, design.z1, band_limit=band_limit,
-                                         n_harmonics=n_harmonics)
+        estimate = estimate_pinion_angle(
+            list(records), names, fs, stated, design.z1, band_limit=band_limit, n_harmonics=n_harmonics
+        )
     if estimate.angle is None:
         if mode == "always":
-            raise RigDataError(f"order tracking: cannot estimate the pinion angle of a record at {stated:g} rpm: "
-                               f"{estimate.reason}")
+            raise RigDataError(
+                f"order tracking: cannot estimate the pinion angle of a record at {stated:g} rpm: {estimate.reason}"
+            )
         return _RecordResult(None, math.nan, math.nan, math.nan, False, estimate.reason)
     angle = estimate.angle
     size = angle.size
@@ -295,8 +323,15 @@ def _track_record(records: np.ndarray, names: Sequence[str], fs: float, stated: 
     return _RecordResult(resampled, mean, low, high, tracked, " ".join(estimate.lines))
 
 
-def track_orders(signals: xr.Dataset, design: Design, *, mode: str = "auto", channels: Sequence[str] | None = None,
-                 band_limit: float | None = None, n_harmonics: int = 3) -> xr.Dataset:
+def track_orders(
+    signals: xr.Dataset,
+    design: Design,
+    *,
+    mode: str = "auto",
+    channels: Sequence[str] | None = None,
+    band_limit: float | None = None,
+    n_harmonics: int = 3,
+) -> xr.Dataset:
     """Estimate each record's pinion speed and resample records to uniform pinion angle.
 
     Parameters
@@ -344,8 +379,9 @@ def track_orders(signals: xr.Dataset, design: Design, *, mode: str = "auto", cha
         channels = [name for name in SIGNAL_CHANNELS if name in signals.data_vars]
     channels = list(channels)
     if not channels:
-        raise RigDataError("order tracking: no channel variable; expected at least one of "
-                           f"{', '.join(SIGNAL_CHANNELS)}")
+        raise RigDataError(
+            f"order tracking: no channel variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}"
+        )
     if "pinion_speed" not in signals.variables:
         raise RigDataError("order tracking: pinion_speed: missing (stated mean pinion speed in rpm)")
     dims = signals[channels[0]].dims
@@ -353,34 +389,50 @@ def track_orders(signals: xr.Dataset, design: Design, *, mode: str = "auto", cha
         if name not in signals.data_vars:
             raise RigDataError(f"order tracking: {name}: no such channel variable")
         if signals[name].dims != dims:
-            raise RigDataError(f"order tracking: {name}: dimensions {signals[name].dims} differ from "
-                               f"{dims} of {channels[0]}")
+            raise RigDataError(
+                f"order tracking: {name}: dimensions {signals[name].dims} differ from {dims} of {channels[0]}"
+            )
     if "time" not in dims or dims[-1] != "time":
         raise RigDataError(f"order tracking: expected channel dimensions ending in 'time'; got {dims}")
     fs = sampling_rate(signals["time"].values, where="order tracking: time")
     limit = band_limit_of(band_limit, fs)
     template = signals[channels[0]].isel(time=0, drop=True)
-    stated = np.asarray(signals["pinion_speed"].broadcast_like(template).transpose(*template.dims).values,
-                        dtype=float).ravel()
+    stated = np.asarray(
+        signals["pinion_speed"].broadcast_like(template).transpose(*template.dims).values, dtype=float
+    ).ravel()
     size = signals.sizes["time"]
     stacked = np.stack([np.asarray(signals[name].values).reshape(-1, size) for name in channels], axis=1)
     tachometer = None
     if TACHOMETER_VARIABLE in signals.data_vars:
         if signals[TACHOMETER_VARIABLE].dims != dims:
-            raise RigDataError(f"order tracking: {TACHOMETER_VARIABLE}: expected dimensions {dims}; "
-                               f"got {signals[TACHOMETER_VARIABLE].dims}")
+            raise RigDataError(
+                f"order tracking: {TACHOMETER_VARIABLE}: expected dimensions {dims}; "
+                f"got {signals[TACHOMETER_VARIABLE].dims}"
+            )
         tachometer = np.asarray(signals[TACHOMETER_VARIABLE].values, dtype=float).reshape(-1, size)
     n_records = stacked.shape[0]
-    statistics = np.full((3, n_records), np.nan)    # mean, min, max speed (rpm)
+    statistics = np.full((3, n_records), np.nan)  # mean, min, max speed (rpm)
     tracked = np.zeros(n_records, dtype=bool)
     references: list[str] = []
-    outputs = {name: None for name in channels}
-    acceleration_rows = [index for index, name in enumerate(channels)
-                         if signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("",))[0]) == "m s-2"]
+    outputs = dict.fromkeys(channels)
+    acceleration_rows = [
+        index
+        for index, name in enumerate(channels)
+        if signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("",))[0]) == "m s-2"
+    ]
     for record in range(n_records):
-        result = _track_record(stacked[record].astype(float), channels, fs, float(stated[record]), design, mode,
-                               limit, n_harmonics, None if tachometer is None else tachometer[record],
-                               acceleration_rows)
+        result = _track_record(
+            stacked[record].astype(float),
+            channels,
+            fs,
+            float(stated[record]),
+            design,
+            mode,
+            limit,
+            n_harmonics,
+            None if tachometer is None else tachometer[record],
+            acceleration_rows,
+        )
         statistics[:, record] = (result.mean, result.low, result.high)
         tracked[record] = result.tracked
         references.append(result.lines)
@@ -401,13 +453,15 @@ def track_orders(signals: xr.Dataset, design: Design, *, mode: str = "auto", cha
     new_speed = np.where(tracked, statistics[0], stated)
     result_ds["pinion_speed_stated"] = over_records(stated, {"units": "rpm", "long_name": "stated mean pinion speed"})
     result_ds["pinion_speed"] = over_records(new_speed, dict(signals["pinion_speed"].attrs, units="rpm"))
-    result_ds["speed_mean"] = over_records(statistics[0], {"units": "rpm",
-                                                           "long_name": "mean pinion speed estimated from the signals"})
+    result_ds["speed_mean"] = over_records(
+        statistics[0], {"units": "rpm", "long_name": "mean pinion speed estimated from the signals"}
+    )
     result_ds["speed_min"] = over_records(statistics[1], {"units": "rpm", "long_name": "lowest instantaneous speed"})
     result_ds["speed_max"] = over_records(statistics[2], {"units": "rpm", "long_name": "highest instantaneous speed"})
     result_ds["order_tracked"] = over_records(tracked, {"long_name": "record resampled to uniform pinion angle"})
-    result_ds["speed_reference"] = over_records(np.array(references, dtype=object),
-                                                {"long_name": "lines (or tachometer) the speed estimate rests on"})
+    result_ds["speed_reference"] = over_records(
+        np.array(references, dtype=object), {"long_name": "lines (or tachometer) the speed estimate rests on"}
+    )
     result_ds.attrs["order_tracking"] = mode
     return result_ds
 
@@ -418,19 +472,37 @@ def speed_summary(tracked: xr.Dataset) -> list[dict[str, object]]:
     for op in range(tracked.sizes.get("op", 1)):
         pick = tracked.isel(op=op) if "op" in tracked.dims else tracked
 
-        def number(name: str) -> float | None:
+        def number(name: str, pick: xr.Dataset = pick) -> float | None:
             value = float(np.asarray(pick[name].values).ravel()[0])
             return value if math.isfinite(value) else None
 
         mean = number("speed_mean")
         low, high = number("speed_min"), number("speed_max")
         wander = None if mean is None or low is None or high is None else 0.5 * (high - low) / mean
-        rows.append({"op": op, "stated_rpm": number("pinion_speed_stated"), "mean_rpm": mean,
-                     "min_rpm": low, "max_rpm": high, "wander": wander,
-                     "order_tracked": bool(np.asarray(pick["order_tracked"].values).ravel()[0]),
-                     "reference": str(np.asarray(pick["speed_reference"].values).ravel()[0])})
+        rows.append(
+            {
+                "op": op,
+                "stated_rpm": number("pinion_speed_stated"),
+                "mean_rpm": mean,
+                "min_rpm": low,
+                "max_rpm": high,
+                "wander": wander,
+                "order_tracked": bool(np.asarray(pick["order_tracked"].values).ravel()[0]),
+                "reference": str(np.asarray(pick["speed_reference"].values).ravel()[0]),
+            }
+        )
     return rows
 
 
-__all__ = ["TRACKING_MODES", "SPEED_ESTIMATE_VARIABLES", "TACHOMETER_VARIABLE", "AngleEstimate", "estimate_pinion_angle", "tachometer_angle",
-           "resample_to_angle", "track_orders", "check_tracking_mode", "speed_summary"]
+__all__ = [
+    "TRACKING_MODES",
+    "SPEED_ESTIMATE_VARIABLES",
+    "TACHOMETER_VARIABLE",
+    "AngleEstimate",
+    "estimate_pinion_angle",
+    "tachometer_angle",
+    "resample_to_angle",
+    "track_orders",
+    "check_tracking_mode",
+    "speed_summary",
+]

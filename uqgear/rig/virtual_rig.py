@@ -50,7 +50,7 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -58,15 +58,15 @@ import xarray as xr
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
+from ..common.errors import OperatingPointError, RigDataError
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..common.errors import OperatingPointError, RigDataError
-from .features import SIGNAL_CHANNELS
 from ..physics.integration import BATCH_DESIGN_KEYS, simulate
 from ..physics.model import natural_frequencies
 from ..physics.pitch_errors import PitchErrors, draw_pitch_errors, iso1328_single_pitch_tolerance
-from .format import make_rig_dataset, write_rig
 from ..uq.seeds import as_seed_sequence, child_seed
+from .features import SIGNAL_CHANNELS
+from .format import make_rig_dataset, write_rig
 
 #: Pinion speeds (rpm) and drive torques (N m) of the public campaigns.
 DEFAULT_PINION_SPEEDS: tuple[float, ...] = (600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0)
@@ -621,7 +621,7 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                                                np.random.default_rng(child_seed(run_seeds[op], _ENCODER_STREAM)))
             data[name][op] = noisy - noisy.mean() if name == "te" else noisy
 
-    stamp = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    stamp = datetime.now(UTC).isoformat(timespec="seconds")
     truth = {"mesh_stiffness_scale": stiffness_scale, **true_record,
              "adhesion_torque": [float(v) for v in table["adhesion_torque"]]}
     effect_record = [{"name": effect.name, "values": dict(effect.values)} for effect in effects]

@@ -187,11 +187,22 @@ _REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = 
     # healthy class-7 gears at low speeds under wander of several levels and rates, 3-5 % noise, with and
     # without the TE: the gear's sidebands crowd their carrier where the order tracking follows the wander
     ("control_wander_accelerometers", (), {**_WANDER, **_PITCH, "relative_noise": 0.03, **_ACCELEROMETERS}),
-    ("control_low_speed_wander", (), {"speed_wander": [(0.01, 0.7)], **_PITCH, "relative_noise": 0.03,
-                                      "plan": LOW_SPEED_PLAN}),
-    ("control_low_speed_wander_accelerometers", (), {"speed_wander": [(0.01, 2.0)], "pitch_errors": 8,
-                                                     "relative_noise": 0.05, **_ACCELEROMETERS,
-                                                     "plan": LOW_SPEED_PLAN}),
+    (
+        "control_low_speed_wander",
+        (),
+        {"speed_wander": [(0.01, 0.7)], **_PITCH, "relative_noise": 0.03, "plan": LOW_SPEED_PLAN},
+    ),
+    (
+        "control_low_speed_wander_accelerometers",
+        (),
+        {
+            "speed_wander": [(0.01, 2.0)],
+            "pitch_errors": 8,
+            "relative_noise": 0.05,
+            **_ACCELEROMETERS,
+            "plan": LOW_SPEED_PLAN,
+        },
+    ),
     # one sensor's artefact: the encoder's mounting run-out alone (unexplained, on te), and beside a run-out
     ("encoder_run_out", (), {**_ENCODER, "expected_verdict": "unexplained"}),
     ("encoder_run_out", ("eccentricity",), _ENCODER),

@@ -94,8 +94,12 @@ def run_foreign_suite(
         table = _operating_points(plan, nominal, n_ops)
         if plan not in references:
             references[plan] = simulate_foreign_campaign(
-                nominal, _as_points(table), gears=gears, seed=child_seed(sequence, 10 + len(references)),
-                duration=duration, title=f"foreign rig healthy reference ({plan})",
+                nominal,
+                _as_points(table),
+                gears=gears,
+                seed=child_seed(sequence, 10 + len(references)),
+                duration=duration,
+                title=f"foreign rig healthy reference ({plan})",
             )
         effects_in = []
         truth: dict[str, Any] = {}
@@ -106,7 +110,12 @@ def run_foreign_suite(
             effects_in = [family.make(truth)]
         test_gears = replaced if identifier == "healthy_replaced" else gears
         rig = simulate_foreign_campaign(
-            nominal, _as_points(table), gears=test_gears, effects=effects_in, seed=test_seed, duration=duration,
+            nominal,
+            _as_points(table),
+            gears=test_gears,
+            effects=effects_in,
+            seed=test_seed,
+            duration=duration,
             title=f"foreign rig campaign {identifier}",
         )
         started = time.perf_counter()
@@ -127,7 +136,8 @@ def run_foreign_suite(
         "duration_s": duration,
         "campaigns": entries,
         "exactly_right": float(np.mean(right)) if right else math.nan,
-        "effects_exactly_right": float(np.mean([e["exactly_right"] for e in effect_entries])) if effect_entries
+        "effects_exactly_right": float(np.mean([e["exactly_right"] for e in effect_entries]))
+        if effect_entries
         else math.nan,
         "healthy_none": all(entry["verdict"] == "none" for entry in healthy),
         "false_effect_on_healthy": any(entry["verdict"] not in ("none", "unexplained") for entry in healthy),

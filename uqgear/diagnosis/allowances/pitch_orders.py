@@ -295,8 +295,10 @@ def judged_counts(
             name = f"shaft_gear{order}"
             if name in case.layout.names:
                 column = case.layout.names.index(name)
-                entries[f"{order} (TE shaft line)"] = (int(clear[:, te, column].sum()),
-                                                       int(case.mask()[:, te, column].sum()))
+                entries[f"{order} (TE shaft line)"] = (
+                    int(clear[:, te, column].sum()),
+                    int(case.mask()[:, te, column].sum()),
+                )
         if near and te is None:
             label = f"{min(near)}-{max(near)} together" if len(near) > 1 else str(near[0])
             entries[label] = (sum(orders[o][0] for o in near), sum(orders[o][1] for o in near))

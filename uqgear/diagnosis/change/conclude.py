@@ -24,7 +24,10 @@ def _cpu_seconds() -> float:
 
 
 def conclude_change(
-    diagnosis: Any, rig: str | os.PathLike[str] | xr.Dataset, reference: ReferenceInput | None, started: float,
+    diagnosis: Any,
+    rig: str | os.PathLike[str] | xr.Dataset,
+    reference: ReferenceInput | None,
+    started: float,
     cpu_started: float,
 ) -> Any:
     """Run the differential route for a :class:`~uqgear.diagnosis.Diagnosis` and set its fitted attributes.
@@ -38,7 +41,11 @@ def conclude_change(
 
     settings = diagnosis.settings
     inputs = read_inputs(
-        rig, reference, design=diagnosis.design, calibration=diagnosis.calibration, settings=settings,
+        rig,
+        reference,
+        design=diagnosis.design,
+        calibration=diagnosis.calibration,
+        settings=settings,
         match_points=False,
     )
     diagnosis.design_, diagnosis.steps_ = inputs.design, StepLog()
@@ -78,8 +85,12 @@ def conclude_change(
         named = outcome.summary["named"]
         if named is not None:
             content["effects"] = [
-                {"effect": named["effect"], "variant": named["variant"], "parameters": named["parameters"],
-                 "share": named["share"]}
+                {
+                    "effect": named["effect"],
+                    "variant": named["variant"],
+                    "parameters": named["parameters"],
+                    "share": named["share"],
+                }
             ]
         content["reference"] = {"file": inputs.reference_source, "route": "change"}
         content = json_clean(content)
@@ -87,8 +98,9 @@ def conclude_change(
         extra = change_dataset(outcome)
         maps = maps.assign_coords(dict(extra["coords"]))
         maps = maps.assign(dict(extra["data"]))
-        maps.attrs.update(verdict=outcome.decision.verdict, reason=outcome.decision.reason,
-                          reference=str(inputs.reference_source))
+        maps.attrs.update(
+            verdict=outcome.decision.verdict, reason=outcome.decision.reason, reference=str(inputs.reference_source)
+        )
     from ...physics.geometry import geometry_notes
 
     content["design_notes"] = geometry_notes(inputs.design)

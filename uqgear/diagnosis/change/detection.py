@@ -82,8 +82,10 @@ def read_campaign(rig: xr.Dataset, design: Design, channels: Sequence[str]) -> C
         half = records.shape[1] // 2
         values.append(campaign_features(list(records), fs, pinion_hz, design.z1, design.z2))
         halves.append(
-            [campaign_features(list(records[:, part]), fs, pinion_hz, design.z1, design.z2)
-             for part in (slice(0, half), slice(half, 2 * half))]
+            [
+                campaign_features(list(records[:, part]), fs, pinion_hz, design.z1, design.z2)
+                for part in (slice(0, half), slice(half, 2 * half))
+            ]
         )
         from .features import noise_variance
 
@@ -112,8 +114,13 @@ class Carried:
 
 
 def outside_reasons(
-    ref_speeds: np.ndarray, ref_torques: np.ndarray, speeds: np.ndarray, torques: np.ndarray, *,
-    speed_tolerance: float, torque_tolerance: float,
+    ref_speeds: np.ndarray,
+    ref_torques: np.ndarray,
+    speeds: np.ndarray,
+    torques: np.ndarray,
+    *,
+    speed_tolerance: float,
+    torque_tolerance: float,
 ) -> tuple[str, ...]:
     """Why each test run lies outside the reference's range ('' for a run inside it).
 
@@ -131,14 +138,17 @@ def outside_reasons(
         if not low <= speed <= high:
             reason = f"{speed:g} rpm lies outside the reference's {ref_speeds[0]:g} to {ref_speeds[-1]:g} rpm"
         elif abs(torque - ref_torque) > torque_tolerance * max(abs(ref_torque), 1.0):
-            reason = (f"{torque:g} N m is more than {torque_tolerance:.0%} off the reference's {ref_torque:g} N m "
-                      f"at {speed:g} rpm")
+            reason = (
+                f"{torque:g} N m is more than {torque_tolerance:.0%} off the reference's {ref_torque:g} N m "
+                f"at {speed:g} rpm"
+            )
         reasons.append(reason)
     return tuple(reasons)
 
 
-def check_coverage(test: xr.Dataset, reference: xr.Dataset, *, where: str, speed_tolerance: float,
-                   torque_tolerance: float) -> None:
+def check_coverage(
+    test: xr.Dataset, reference: xr.Dataset, *, where: str, speed_tolerance: float, torque_tolerance: float
+) -> None:
     """Refuse a reference that covers none of the test runs (before any work; one line naming the first)."""
     reasons = outside_reasons(
         np.asarray(reference["pinion_speed"].values, dtype=float),
@@ -156,7 +166,11 @@ def check_coverage(test: xr.Dataset, reference: xr.Dataset, *, where: str, speed
 
 
 def carry_reference(
-    reference: CampaignFeatures, speeds: np.ndarray, torques: np.ndarray, *, speed_tolerance: float,
+    reference: CampaignFeatures,
+    speeds: np.ndarray,
+    torques: np.ndarray,
+    *,
+    speed_tolerance: float,
     torque_tolerance: float,
 ) -> Carried:
     """The reference's features interpolated in speed to each test run (linearly between its two nearest runs).
@@ -176,7 +190,11 @@ def carry_reference(
     inside = np.ones(n_op, dtype=bool)
     nearest = np.zeros(n_op, dtype=int)
     reasons = outside_reasons(
-        reference.speeds, reference.torques, speeds, torques, speed_tolerance=speed_tolerance,
+        reference.speeds,
+        reference.torques,
+        speeds,
+        torques,
+        speed_tolerance=speed_tolerance,
         torque_tolerance=torque_tolerance,
     )
     for op, speed in enumerate(speeds):
@@ -266,8 +284,16 @@ class ChangeTest:
             key = (self.channels[ch], name.family, name.shaft)
             entry = groups.setdefault(
                 key,
-                {"channel": key[0], "family": key[1], "shaft": key[2] or None, "kind": KIND[key[1]], "ops": set(),
-                 "largest_db": 0.0, "largest_ratio": 0.0, "features": set()},
+                {
+                    "channel": key[0],
+                    "family": key[1],
+                    "shaft": key[2] or None,
+                    "kind": KIND[key[1]],
+                    "ops": set(),
+                    "largest_db": 0.0,
+                    "largest_ratio": 0.0,
+                    "features": set(),
+                },
             )
             entry["ops"].add(int(op))
             entry["features"].add(name.label)
@@ -289,9 +315,7 @@ class ChangeTest:
             "changed": self.changed,
             "gears": self.gears,
             "judged_runs": judged,
-            "inconclusive_runs": [
-                {"op": op, "reason": reason} for op, reason in enumerate(self.reasons) if reason
-            ],
+            "inconclusive_runs": [{"op": op, "reason": reason} for op, reason in enumerate(self.reasons) if reason],
             "largest": self.largest() if judged else None,
             "where": self.where(),
             "features_compared": int(judged * self.change.shape[1] * self.change.shape[2]),
@@ -344,7 +368,10 @@ def judge_change(
     if gears not in GEAR_STATES:
         raise DiagnosisError(f"reference_gears: expected one of {', '.join(GEAR_STATES)}; got {gears!r}")
     carried = carry_reference(
-        reference, test.speeds, test.torques, speed_tolerance=settings.speed_tolerance,
+        reference,
+        test.speeds,
+        test.torques,
+        speed_tolerance=settings.speed_tolerance,
         torque_tolerance=settings.torque_tolerance,
     )
     if not carried.inside.any():
@@ -366,7 +393,16 @@ def judge_change(
         # the load of each run may differ inside its stated T2 interval (judged runs only)
         threshold[carried.inside] += load_allowance
     return ChangeTest(
-        test.channels, change, threshold, spread, carried.inside, carried.reasons, gears, anchor, observed, floor,
+        test.channels,
+        change,
+        threshold,
+        spread,
+        carried.inside,
+        carried.reasons,
+        gears,
+        anchor,
+        observed,
+        floor,
         test.speeds,
     )
 

@@ -80,8 +80,8 @@ def _decide(test: ChangeTest, scores: list[ChangeScore], settings: DiagnosisSett
             f"{runner_up.label} {runner_up.share:.0%}: less than {settings.change_margin:.0%} apart, neither is named",
         )
     return Decision(
-        best.effect, f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change"
-        + next_text,
+        best.effect,
+        f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change" + next_text,
     )
 
 
@@ -114,9 +114,7 @@ def diagnose_change(
         share = settings.replaced_line_floor if gears == "replaced" else settings.same_line_floor
         model = ChangeModel(design, rig, test_features, test.judged, share)
         allowance = model.load_allowance(settings.load_allowance)
-        test = judge_change(
-            reference_features, test_features, settings=settings, gears=gears, load_allowance=allowance
-        )
+        test = judge_change(reference_features, test_features, settings=settings, gears=gears, load_allowance=allowance)
         found.update(changed=test.changed)
     timings["change_test"] = time.perf_counter() - started
     scores: list[ChangeScore] = []

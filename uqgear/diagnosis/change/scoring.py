@@ -119,9 +119,7 @@ class ChangeModel:
         high = self.features([], "mesh", adhesion=self.upper)
         return share * np.abs(high - low)
 
-    def features(
-        self, effects: Sequence[Any], periodicity: str, *, adhesion: np.ndarray | None = None
-    ) -> np.ndarray:
+    def features(self, effects: Sequence[Any], periodicity: str, *, adhesion: np.ndarray | None = None) -> np.ndarray:
         """Floored ln features (n_judged, n_channel, n_feature) of the model with ``effects``."""
         torques = self.adhesion if adhesion is None else adhesion
         per_channel: dict[str, list[np.ndarray]] = {channel: [] for channel in self.test.channels}
@@ -134,7 +132,11 @@ class ChangeModel:
         values = np.stack(
             [
                 campaign_features(
-                    per_channel[channel], self.test.fs, pinion_hz, self.design.z1, self.design.z2,
+                    per_channel[channel],
+                    self.test.fs,
+                    pinion_hz,
+                    self.design.z1,
+                    self.design.z2,
                     noise=self.test.noise[self.ops, c],
                 )
                 for c, channel in enumerate(self.test.channels)
