@@ -3,12 +3,12 @@
 Runs :func:`uqgear.diagnosis.diagnose` on a labelled campaign of data/rig/
 (default ``tooth_damage.nc``) and prints the verdict, the wall time, the CPU
 time (this process and its workers) and where the time went (nominal fit,
-screening of the candidates, full fits). The acceptance figure of issue 6 is
-at most 5 minutes on 2 cores.
+screening of the candidates, full fits). The goal is at most 5 minutes a
+campaign on 2 cores.
 
 Usage: ``python benchmarks/diagnosis.py [FILE ...] [--workers N] [--fifty-khz]``; with several
 files (or ``all``) each is diagnosed in turn and a table is printed. ``--fifty-khz`` adds the second
-figure of issue 13 item 8 (at most 60 s): a 6-run campaign at 50 kHz of a 17:38 test-rig gearbox
+goal (at most 60 s): a 6-run campaign at 50 kHz of a 17:38 test-rig gearbox
 (module 3 mm, unshifted, so marginally undercut) with a 12 um pinion run-out, made by the virtual rig
 first (not timed). The first figure is the 8-run campaign at 20.48 kHz (default ``tooth_damage.nc``,
 at most 20 s).

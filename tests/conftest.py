@@ -30,7 +30,7 @@ RIG_DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
 @pytest.fixture(scope="module")
 def design():
-    """The bundled reference design (docs/model.md section 3)."""
+    """The bundled reference design (docs/model/geometry.md section 3)."""
     return load_design("locomotive")
 
 

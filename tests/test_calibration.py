@@ -296,7 +296,7 @@ def test_recovers_the_truth_under_speed_wander_mains_and_noise(design):
 
 @pytest.mark.slow
 def test_recovers_the_truth_of_gears_with_iso_class_7_pitch_errors(design):
-    """Every tooth with a random pitch error of ISO 1328-1 class 7 (docs/model.md section 2.6), which the
+    """Every tooth with a random pitch error of ISO 1328-1 class 7 (docs/model/equations.md section 2.6), which the
     calibrated model does not have: the pitch-error correction (stated classes 6 to 8, the default) keeps the
     truth inside the 90 % intervals. Without it mesh_stiffness_scale came out 1.4 % low (0.966, interval
     0.957-0.977, truth 0.98): the test was a strict expected failure until the correction."""

@@ -1,4 +1,4 @@
-"""Design loading, validation and involute geometry against the derived values of docs/model.md section 5."""
+"""Design loading, validation and involute geometry against the derived values of docs/model/reference-design.md section 5."""
 
 import math
 
@@ -23,7 +23,7 @@ def test_reference_design_keys_and_provenance(design):
 
 def test_derived_geometry_matches_model_md(design):
     g = pair_geometry(design)
-    # docs/model.md section 5: base 88.8 / 427.1, tip 105.75 / 461.25, root 85.5 / 441.0 mm, eps ~ 1.65
+    # docs/model/reference-design.md section 5: base 88.8 / 427.1, tip 105.75 / 461.25, root 85.5 / 441.0 mm, eps ~ 1.65
     assert g.pinion.base_radius * 1e3 == pytest.approx(88.8, abs=0.05)
     assert g.gear.base_radius * 1e3 == pytest.approx(427.1, abs=0.05)
     assert g.pinion.tip_radius * 1e3 == pytest.approx(105.75, abs=1e-9)

@@ -34,7 +34,7 @@ def test_every_setting_states_its_unit_rule_and_docs_section():
     table = DiagnosisSettings.describe()
     assert set(table) == {field.name for field in dataclasses.fields(DiagnosisSettings)}
     for name, entry in table.items():
-        assert entry["unit"] and entry["rule"].strip() and entry["docs"].startswith("docs/model.md section 6"), name
+        assert entry["unit"] and entry["rule"].strip() and entry["docs"].startswith("docs/model/unmodelled-effects.md section 6"), name
         value = getattr(DEFAULT_SETTINGS, name)
         assert entry["default"] == (list(value) if isinstance(value, tuple) else value), name
     # the documented decision thresholds a study may set
@@ -134,7 +134,7 @@ def test_the_study_reference_lists_the_thresholds_a_study_may_set():
     import re
 
     text = (Path(__file__).resolve().parent.parent / "docs" / "study-reference.md").read_text()
-    table = text[text.index("| setting | units | default | rule (docs/model.md) |"):]
+    table = text[text.index("| setting | units | default | rule (docs/model/index.md) |"):]
     table = table[:table.index("\n\n")]
     documented = re.findall(r"^\| `(\w+)` \|", table, flags=re.M)
     assert documented == list(DiagnosisSettings.study_keys())

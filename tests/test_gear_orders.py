@@ -46,7 +46,7 @@ def test_the_factor_range_brackets_one_and_two_classes_up_double_every_tolerance
         assert 0.002 < low < 0.05 and 2.5 < high < 9.0, (key, low, high)
         # tolerances grow by sqrt(2) a class: powers by 2, so two classes up is four times
         assert nine[key] == pytest.approx((4 * low, 4 * high), rel=1e-9)
-    # the draws' RMS first-order |E_1| is a run-out of micrometres on class-7 gears (docs/model.md 6.4)
+    # the draws' RMS first-order |E_1| is a run-out of micrometres on class-7 gears (docs/model/unmodelled-effects.md section 6.4)
     amplitudes = drawn_amplitudes(drawn)
     assert 3e-6 < amplitudes[("pinion", 1)] < 30e-6 and amplitudes[("gear", 1)] > amplitudes[("pinion", 1)]
 

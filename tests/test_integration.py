@@ -234,7 +234,7 @@ def test_bad_operating_input(design, call, message):
 def test_fast_and_scipy_classify_alike(design, speed, drive, adhesion, expected):
     from uqgear.dynamics.regimes import classify_dataset
 
-    # 200 kept periods: a period-n label needs 10 repeats (n <= 20), docs/model.md section 8
+    # 200 kept periods: a period-n label needs 10 repeats (n <= 20), docs/model/analysis-conventions.md section 8
     kw = dict(n_periods=600, keep_periods=200, samples_per_period=32)
     ref = uqgear.simulate(design, speed, drive, adhesion, method="scipy", **kw)
     fast = uqgear.simulate(design, speed, drive, adhesion, **kw)

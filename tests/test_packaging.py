@@ -133,5 +133,5 @@ def test_the_sdist_carries_what_the_test_suite_needs(tmp_path):
         names = {name.split("/", 1)[1] for name in archive.getnames() if "/" in name}
     assert {"pyproject.toml", "README.md", "CHANGELOG.md", "MANIFEST.in", "data/rig/healthy.nc",
             "data/rig/tooth_damage.nc", "data/rig/README.md", "studies/smoke.yaml", "uqgear/data/rig/healthy.nc",
-            ".ci/run", "docs/model.md"} <= names
+            ".ci/run", "docs/model/index.md"} <= names
     assert {f"tests/{path.name}" for path in (ROOT / "tests").glob("test_*.py")} <= names

@@ -1,4 +1,4 @@
-"""Pitch errors: per-tooth offsets in the pair loop (docs/model.md section 2.6) and the rig's ISO draw."""
+"""Pitch errors: per-tooth offsets in the pair loop (docs/model/equations.md section 2.6) and the rig's ISO draw."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Campaigns of the real-world blind test with pitch errors, rebuilt as ``uqgear blindtest`` builds them.
 
 Out-of-sample misses of the per-run allowance that the rig's own gears,
-order by order, fix (uqgear.diagnosis.allowances.pitch_orders, docs/model.md section
+order by order, fix (uqgear.diagnosis.allowances.pitch_orders, docs/model/unmodelled-effects.md section
 6.4): seed 3's healthy class-7 control is `none`, not `unexplained`, and
 seed 4's 12 um pinion run-out is named on its held-out density, not left
 `unexplained` behind a damaged tooth. Seed 2's friction and run-out under
@@ -51,7 +51,7 @@ def test_a_healthy_class_7_control_whose_gear_came_out_fine_at_one_order_is_none
     Its gear's own second-order errors came out at about a tenth of the
     classes' mean power: the allowance at the mean put its 168 second-order
     lines at a median z of -1.4 and left a held-out gap of 0.66,
-    `unexplained` (sessions 13-14). Scaled to the rig order by order, the
+    `unexplained`. Scaled to the rig order by order, the
     gap is within noise and nothing is named.
     """
     diagnosis, spec = _real_world_case(3, "control_pitch_errors")
@@ -77,7 +77,7 @@ def test_a_run_out_on_class_7_gears_is_named_not_left_unexplained_behind_a_damag
 
     With the allowance at the classes' mean the nominal gap was 0.78, a
     damaged gear tooth led at 38 nats with 16 % of it and the campaign was
-    `unexplained` (sessions 13-14). Scaled to the rig's own gears the gap
+    `unexplained`. Scaled to the rig's own gears the gap
     is within noise and the run-out is named on its held-out density.
     """
     diagnosis, spec = _real_world_case(4, "pitch_errors")
@@ -97,9 +97,9 @@ def test_friction_on_class_7_gears_is_named_first_and_no_wrong_effect_with_it():
     +-0.5 % speed wander, 50/150 Hz mains and 3 % noise. Friction acting
     with the pitch errors raises the TE's pinion sidebands below the first
     mesh harmonic; torque ripple's motor line (order 18) shares the third of
-    them on the 21-tooth pinion and was once named first (session 11). The
+    them on the 21-tooth pinion and can be named first. The
     run-out is named with friction only while the pinion's own first-order
-    errors are held at the classes' mean (sessions 13-14); scaled to the
+    errors are held at the classes' mean; scaled to the
     rig, they take it (a run-out within what the classes make is not
     evidence of an eccentric shaft): friction alone, nothing wrong.
     """
@@ -125,10 +125,10 @@ def test_a_run_out_within_the_pinions_own_errors_is_named_by_its_sideband_phases
 
     The pinion's first order reads as its own class-7 errors (below the 90 %
     share of cannot_tell), the amplitudes name nothing and the verdict was
-    `none` (sessions 15-16). The run-out's mesh-stiffness modulation sets
+    `none` on amplitudes alone. The run-out's mesh-stiffness modulation sets
     the phase sums of the pinion's first sidebands where pitch errors do
     not: 1013 nats in the blind test, far beyond the 200 that name it, with
-    the most favourable run left out (docs/model.md 6.4).
+    the most favourable run left out (docs/model/unmodelled-effects.md section 6.4).
     """
     from uqgear.diagnosis.allowances.sideband_phase import PHASE_EVIDENCE_THRESHOLD
 

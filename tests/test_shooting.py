@@ -35,7 +35,7 @@ def design():
 
 
 def _system_matrix(setup) -> np.ndarray:
-    """d(state)/dt = A state + forcing, in contact with constant mesh stiffness (docs/model.md section 2)."""
+    """d(state)/dt = A state + forcing, in contact with constant mesh stiffness (docs/model/equations.md section 2)."""
     p = setup.parameters
     k = setup.derived["k_mean"] * p[K.STIFFNESS_SCALE]
     m1, m2, me, c = p[K.M1], p[K.M2], p[K.ME], p[K.CM]

@@ -51,7 +51,7 @@ def test_bending_and_shear_terms_match_beam_integration(design, which):
 
 def test_iso6336_values_for_reference_design(design):
     iso = iso6336_stiffness(design)
-    # docs/model.md section 4.6: c' ~ 14.0 and c_gamma ~ 20.8 N/(mm um); c_gamma x b ~ 2.6e9 N/m
+    # docs/model/mesh-stiffness.md section 4.6: c' ~ 14.0 and c_gamma ~ 20.8 N/(mm um); c_gamma x b ~ 2.6e9 N/m
     assert iso["c_prime"] == pytest.approx(14.0, abs=0.05)
     assert iso["c_gamma"] == pytest.approx(20.8, abs=0.1)
     assert iso["mesh_stiffness"] == pytest.approx(2.6e9, rel=0.01)

@@ -55,7 +55,7 @@ def test_adhesion_interval_matches_closed_form_and_design():
     assert interval.lower == pytest.approx(0.15 * lever)
     assert interval.upper == pytest.approx(0.33 * lever)
     assert interval.units == "N m"
-    # model.md: T2 in about [21.2, 46.5] kN m; design.py computes the same
+    # docs/model/reference-design.md: T2 in about [21.2, 46.5] kN m; design.py computes the same
     assert (interval.lower, interval.upper) == pytest.approx(load_design().operation.adhesion_torque_bounds())
     assert interval.lower == pytest.approx(21.15e3, rel=2e-3)
 

@@ -21,7 +21,7 @@ the layers below it (``tests/test_layout.py`` checks the graph):
 
 The names below are what the README's examples use. They are loaded on first
 use, so ``import uqgear`` is quick and ``import uqgear.physics`` pulls in
-nothing above the physics. The model is described in docs/model.md.
+nothing above the physics. The model is described in docs/model/index.md.
 """
 
 from __future__ import annotations

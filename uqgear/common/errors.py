@@ -281,7 +281,7 @@ class DesignWarning(UqgearWarning):
 
 
 class UndercutWarning(DesignWarning):
-    """A tooth is undercut by its generating rack: modelled from its form circle (docs/model.md section 3).
+    """A tooth is undercut by its generating rack: modelled from its form circle (docs/model/geometry.md section 3).
 
     Raised as a warning, not an error: a marginal undercut (a 17-tooth
     pinion without profile shift) is everyday practice. The message names the

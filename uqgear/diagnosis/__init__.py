@@ -1,7 +1,7 @@
 """Sim-to-real gap diagnosis: where model and rig disagree, which unmodelled effect explains it.
 
 :class:`Diagnosis` is the estimator (settings in ``__init__``, the six
-steps of docs/model.md section 6 in ``fit``, results in ``*_``
+steps of docs/model/unmodelled-effects.md section 6 in ``fit``, results in ``*_``
 attributes); :func:`diagnose` fits one and writes its folder. The modules
 along its steps:
 

@@ -24,7 +24,7 @@ evidence is read channel by channel (:class:`~.scoring.CandidateScore`
   within noise, and loses at least ``cross_channel_gain`` nats of held-out
   density there, predicts a discrepancy the rig does not show: not named.
 
-docs/model.md section 6, step 5 ("Cross-channel consistency") states the
+docs/model/unmodelled-effects.md section 6, step 5 ("Cross-channel consistency") states the
 rule; its evidence is in docs/validation/diagnosis.md.
 """
 

@@ -1,6 +1,6 @@
 """The Diagnosis estimator: settings checked in ``__init__``, the work in ``fit``, results in ``*_`` attributes.
 
-``fit`` reads as the six steps of docs/model.md section 6; each step's code
+``fit`` reads as the six steps of docs/model/unmodelled-effects.md section 6; each step's code
 lives in its own module (features: :mod:`.case` and :mod:`.allowances`;
 predictive distribution: :mod:`.discrepancy`; fits: :mod:`.nominal`,
 :mod:`.screening`, :mod:`.fitting`; held-out scoring: :mod:`.heldout`,
@@ -195,7 +195,7 @@ class Diagnosis:
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
     reference_route, reference_gears : str
-        ``change``/``transfer``, ``same``/``replaced`` gears with a reference (docs/model.md 6.1).
+        ``change``/``transfer``, ``same``/``replaced`` gears with a reference (docs/model/unmodelled-effects.md section 6.1).
 
     Attributes
     ----------
@@ -269,7 +269,7 @@ class Diagnosis:
         rig : path or xarray.Dataset
             A ``uqgear-rig/1`` file or Dataset.
         reference : path, xarray.Dataset or ReferenceCorrection, optional
-            A campaign of the same rig with a known good gearbox: what changed since it (docs/model.md 6.1;
+            A campaign of the same rig with a known good gearbox: what changed since it (docs/model/unmodelled-effects.md section 6.1;
             a correction already learned, or ``reference_route="transfer"``, corrects the model by it instead).
 
         Returns

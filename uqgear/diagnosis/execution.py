@@ -114,7 +114,7 @@ def transferred_rms(features: np.ndarray, line_gain: np.ndarray, processor: RunP
     plus the rest; each line's power is scaled by its squared gain, the
     rest kept (a reference's direct RMS correction then scales the
     result). One ratio read at a reference run would not follow a test
-    campaign whose line mix differs (docs/model.md section 6.1, step 3).
+    campaign whose line mix differs (docs/model/unmodelled-effects.md section 6.1, step 3).
 
     Parameters
     ----------

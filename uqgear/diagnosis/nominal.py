@@ -1,6 +1,6 @@
 """The nominal model fitted to the campaign, the pitch-error allowance taken in, and its held-out refits.
 
-Step 3 of docs/model.md section 6 for the nominal model: the fit (from the
+Step 3 of docs/model/unmodelled-effects.md section 6 for the nominal model: the fit (from the
 design's values, or a calibration posterior's medians), the pitch-error
 allowance where the rig's sidebands show pitch errors (and the nominal refit
 it calls for), and the loop that scores the candidates against the nominal

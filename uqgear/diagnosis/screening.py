@@ -1,6 +1,6 @@
 """Every candidate screened against the nominal fit, the best fitted in full, each scored on held-out runs.
 
-Steps 3 and 4 of docs/model.md section 6 for the candidates: each variant of
+Steps 3 and 4 of docs/model/unmodelled-effects.md section 6 for the candidates: each variant of
 each effect family is screened with its own parameters only (the nominal
 parameters and T2 stay at the nominal fit); the best effect, and runners-up
 with evidence of their own, are fitted in full (all parameters), warm-started

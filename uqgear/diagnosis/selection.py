@@ -1,6 +1,6 @@
 """Several effects at once: forward selection after the first effect, and an eccentric shaft its phases name.
 
-Step 6 of docs/model.md section 6 (section 6.2): while the model with the
+Step 6 of docs/model/unmodelled-effects.md section 6 (section 6.2): while the model with the
 effects named so far leaves a significant held-out gap, it is the base of
 another round; the other effects are screened on top of it with their own
 parameters, the best is fitted in full with every effect present and scored
@@ -119,7 +119,7 @@ def next_effect(state: DiagnosisState, base: CandidateScore, named: Sequence[str
     chosen = ranked({full.effect: best[full.effect]}, state.case, settings=settings)[0]
     chosen = replace(chosen, gap_interval=bootstrap_gap(chosen.held.z, state.rng, settings.bootstrap_resamples))
     # no density evidence here: a further effect must shrink a gap that is there, or it only soaks up what
-    # the allowance already forgives (docs/model.md section 6.4)
+    # the allowance already forgives (docs/model/unmodelled-effects.md section 6.4)
     decision = decide(base.gap_with_effect, [chosen], settings=settings, pitch_allowance=state.pitch_allowance)
     added = chosen.effect if decision.verdict == chosen.effect else None
     assert chosen.gap_interval is not None

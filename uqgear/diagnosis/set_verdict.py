@@ -1,7 +1,7 @@
 """The verdict on a set of effects: the decisions forward selection and the sideband phase test make.
 
 The rules are :mod:`.verdict`'s applied to the set against the nominal
-model (docs/model.md section 6.2); every :class:`~.decision.Decision` of a
+model (docs/model/unmodelled-effects.md section 6.2); every :class:`~.decision.Decision` of a
 set is made here.
 """
 

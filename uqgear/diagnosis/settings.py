@@ -2,7 +2,7 @@
 
 :class:`DiagnosisSettings` holds the values; :data:`SETTINGS` states for
 each its unit, the rule it serves in one sentence and the section of
-docs/model.md that explains it (its evidence is in
+docs/model/ that explains it (its evidence is in
 docs/validation/diagnosis.md), with its valid range
 (:meth:`DiagnosisSettings.describe` reads both). The defaults are the values
 the validation record was measured with. Settings marked ``study`` are the
@@ -21,16 +21,16 @@ from typing import Any
 
 from .errors import DiagnosisError
 
-_VERDICT = "docs/model.md section 6, step 5"
-_SELECTION = "docs/model.md section 6.2"
-_COST = "docs/model.md section 6.2.1"
-_PITCH = "docs/model.md section 6.4"
-_PHASES = "docs/model.md section 6.4 (sideband phases)"
-_REFERENCE = "docs/model.md section 6.1"
-_INTERFERENCE = "docs/model.md section 6.5"
-_FEATURES = "docs/model.md section 6, step 2"
-_CHANGE = "docs/model.md section 6.1 (what changed)"
-_CONSISTENCY = "docs/model.md section 6, step 5 (cross-channel consistency)"
+_VERDICT = "docs/model/unmodelled-effects.md section 6, step 5"
+_SELECTION = "docs/model/unmodelled-effects.md section 6.2"
+_COST = "docs/model/unmodelled-effects.md section 6.2.1"
+_PITCH = "docs/model/unmodelled-effects.md section 6.4"
+_PHASES = "docs/model/unmodelled-effects.md section 6.4 (sideband phases)"
+_REFERENCE = "docs/model/unmodelled-effects.md section 6.1"
+_INTERFERENCE = "docs/model/unmodelled-effects.md section 6.5"
+_FEATURES = "docs/model/unmodelled-effects.md section 6, step 2"
+_CHANGE = "docs/model/unmodelled-effects.md section 6.1 (what changed)"
+_CONSISTENCY = "docs/model/unmodelled-effects.md section 6, step 5 (cross-channel consistency)"
 
 # Relative model error (standard deviation) by feature kind: with their true parameters and effect the model
 # reproduces the reference campaigns' lines to well under 1 % (a few per cent for lines near the noise floor);

@@ -4,7 +4,7 @@ Every :class:`Decision` is made here or, for a set of effects, in
 :mod:`.set_verdict`: the first effect's (:func:`decide`, :func:`decide_first`),
 the named set's, a set that an unexplained gap's strongest candidate leads
 and an eccentric shaft the sideband phases name. The thresholds come from
-:class:`~uqgear.diagnosis.DiagnosisSettings` (docs/model.md section 6, step
+:class:`~uqgear.diagnosis.DiagnosisSettings` (docs/model/unmodelled-effects.md section 6, step
 5, and sections 6.2 and 6.4).
 """
 
@@ -81,7 +81,7 @@ def holds_against_pitch_errors(score: CandidateScore, *, settings: DiagnosisSett
     An eccentricity whose fitted run-out is beyond what the gears' stated
     classes make as a first-order run-out needs only its point score:
     pitch errors of those classes seldom make such a run-out
-    (docs/model.md section 6.4).
+    (docs/model/unmodelled-effects.md section 6.4).
     """
     beyond = score.run_out is not None and score.run_out.beyond
     return score_lower_bound(score, settings=settings) >= settings.score_threshold or bool(
@@ -219,7 +219,7 @@ def decide(
         interval above zero; the run-out guard still applies. Just above the
         noise gap the same lower bound is needed of an effect named because
         what remains is within noise, so the rule does not jump at
-        ``noise_gap`` (docs/model.md section 6.4).
+        ``noise_gap`` (docs/model/unmodelled-effects.md section 6.4).
 
     Returns
     -------
@@ -236,7 +236,7 @@ def decide(
     if best is not None:
         named, weak_near_noise = _named(best, nominal_gap, borderline, settings, pitch_allowance, density_evidence)
         if named is not None:
-            # a gear effect shows on every channel that sees the mesh (docs/model.md section 6, step 5)
+            # a gear effect shows on every channel that sees the mesh (docs/model/unmodelled-effects.md section 6, step 5)
             channels = check_channels(best, settings=settings)
             if channels.consistent:
                 return named
@@ -364,7 +364,7 @@ def _unnamed(
     gap_figure = next((figure for figure in borderline if figure["figure"] == "nominal_gap"), None)
     if gap_figure is not None:
         # a gap whose own 90 % interval reaches into noise is no evidence of anything the model lacks:
-        # the verdict to act on is none, with the borderline stated (docs/model.md section 6, step 5)
+        # the verdict to act on is none, with the borderline stated (docs/model/unmodelled-effects.md section 6, step 5)
         low, high = gap_figure["interval"]
         return Decision(
             "none",

@@ -79,7 +79,7 @@ def diagnose(
         Write ``report.html``.
     reference : path, xarray.Dataset or ReferenceCorrection, optional
         A campaign of the same rig with a known good gearbox
-        (docs/model.md section 6.1; ``reference`` in ``diagnosis.json``).
+        (docs/model/unmodelled-effects.md section 6.1; ``reference`` in ``diagnosis.json``).
 
     Returns
     -------

@@ -1,7 +1,7 @@
 """Period and regime classification of simulated gear responses.
 
 Pure numerics on the Poincare sections of :func:`uqgear.physics.integration.simulate` and
-:func:`uqgear.physics.integration.simulate_batch` (docs/model.md section 8): periodicity
+:func:`uqgear.physics.integration.simulate_batch` (docs/model/analysis-conventions.md section 8): periodicity
 detection, distinct Poincare points, the Gottwald-Melbourne 0-1 test for chaos, and
 response classification (period-n, quasi-periodic, chaotic) with its evidence.
 

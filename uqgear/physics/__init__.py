@@ -4,7 +4,7 @@
 derived once per operating point) -> ``integration`` (the compiled RK4 fast
 path: right-hand side in ``_rhs``, one-sample kernels in ``_kernels`` and
 ``_pairs``, batches as SIMD lanes in ``_lanes``; and the scipy reference). ``effects`` holds the
-unmodelled effects of docs/model.md section 6 as slots of the same
+unmodelled effects of docs/model/unmodelled-effects.md section 6 as slots of the same
 right-hand side; ``pitch_errors`` the per-tooth pitch offsets every real gear
 has (section 2.6), an input of the model set-up, not an effect.
 

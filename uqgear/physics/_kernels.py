@@ -126,14 +126,14 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
 
 @nb.njit(**JIT_OPTIONS)
 def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
-    """Right-hand side of the 3-DOF model (docs/model.md section 2) plus effect slots.
+    """Right-hand side of the 3-DOF model (docs/model/equations.md section 2) plus effect slots.
 
     ``state`` = (y1, y2, x, y1', y2', x') as an array; writes the derivative
     into ``out`` and returns (mesh force F, mesh stiffness k, static
     transmission error e).
     """
     if p[PITCH_ERRORS] != 0.0:
-        # per-pair deflections (docs/model.md section 2.6); the branch leaves the classical path as it was
+        # per-pair deflections (docs/model/equations.md section 2.6); the branch leaves the classical path as it was
         terms = _pairs.forcing_pairs(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
         d, force = _pairs.derivative_pairs((state[0], state[1], state[2], state[3], state[4], state[5]), terms, p)
         for j in range(6):

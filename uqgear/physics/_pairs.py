@@ -1,4 +1,4 @@
-"""Compiled per-pair mesh force for pitch errors (docs/model.md section 2.6).
+"""Compiled per-pair mesh force for pitch errors (docs/model/equations.md section 2.6).
 
 With per-tooth pitch offsets each tooth pair in mesh has its own deflection
 ``x - e_i`` (``e_i = e_pinion[i] + e_gear[j]`` for the pair of pinion tooth i

@@ -1,7 +1,7 @@
 """The model's right-hand side and RK4 building blocks, compiled with numba: the base of every kernel.
 
 One right-hand side serves every integrator (the scipy reference calls it
-too), and every model extension of docs/model.md section 6 is a slot in the
+too), and every model extension of docs/model/unmodelled-effects.md section 6 is a slot in the
 parameter vector whose neutral value switches it off, so effects plug in
 without forking the integrator. The kernels that use these pieces live above
 this module: :mod:`uqgear.physics._pairs` (pitch errors),
@@ -81,7 +81,7 @@ import numpy as np
     PITCH_ERRORS,
 ) = range(43)
 #: Number of named slots. The parameter vector goes on with the per-tooth pitch offsets
-#: (m): z1 of the pinion from index ``N_PARAMS``, then z2 of the gear (docs/model.md
+#: (m): z1 of the pinion from index ``N_PARAMS``, then z2 of the gear (docs/model/equations.md
 #: section 2.6); ``PITCH_ERRORS`` is 1 when any of them is not zero.
 N_PARAMS = 43
 

@@ -1,4 +1,4 @@
-"""Unmodelled physical effects as model extensions (docs/model.md section 6).
+"""Unmodelled physical effects as model extensions (docs/model/unmodelled-effects.md section 6).
 
 Each effect is a small object with validated parameters (settings in
 ``__init__``) and an ``apply(setup)`` that writes its terms into the slots

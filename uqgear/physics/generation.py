@@ -1,6 +1,6 @@
 """Rack generation of a spur tooth: the undercut flank, and whether a mating tip clears it.
 
-docs/model.md section 3. A tooth is cut by its basic rack rolling on the
+docs/model/geometry.md section 3. A tooth is cut by its basic rack rolling on the
 reference circle r (the rack's datum lies ``x m`` outside it). The rack's
 straight flank ends ``h_a* m`` below the datum, that is ``u = (h_a* - x) m``
 inside the rolling line, in a corner; its tip fillet lies in the clearance
@@ -46,7 +46,7 @@ class RackCorner:
     depth : float
         u = (h_a* - x) m: depth of the corner inside the rolling line, m.
     half_angle_pitch : float
-        Half the angular tooth thickness at r, rad (docs/model.md section 3).
+        Half the angular tooth thickness at r, rad (docs/model/geometry.md section 3).
     """
 
     pitch_radius: float

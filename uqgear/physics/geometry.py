@@ -15,7 +15,7 @@ lower than the form circle of the pinion (gear).
 
 :func:`check_geometry` refuses only pairs that cannot mesh and warns
 (:class:`~uqgear.common.errors.UndercutWarning`) about undercut teeth, which
-are modelled (docs/model.md section 3, "Undercut" and "Rejected designs").
+are modelled (docs/model/geometry.md section 3, "Undercut" and "Rejected designs").
 """
 
 from __future__ import annotations
@@ -385,7 +385,7 @@ def _refuse_tip_cut(geometry: PairGeometry, design, where: str, side) -> None:
 def check_geometry(design, where: str = "") -> PairGeometry:
     """Compute the geometry, refuse pairs that cannot mesh, warn about undercut teeth.
 
-    What is refused and why is docs/model.md section 3 ("Rejected designs").
+    What is refused and why is docs/model/geometry.md section 3 ("Rejected designs").
     An undercut tooth is modelled from its form circle and reported with an
     :class:`~uqgear.common.errors.UndercutWarning` (text of
     :func:`geometry_notes`).

@@ -1,4 +1,4 @@
-"""The 3-DOF bending-torsional gear model (docs/model.md section 2).
+"""The 3-DOF bending-torsional gear model (docs/model/equations.md section 2).
 
 :func:`build_model` turns a design, an operating point and optional effects
 into a :class:`ModelSetup`: the parameter vector and stiffness tables the
@@ -184,7 +184,7 @@ class ModelSetup:
         Derived scalars for output attributes.
     pitch_errors : PitchErrors or None
         Per-tooth pitch offsets, also written to the tail of ``parameters``
-        (docs/model.md section 2.6).
+        (docs/model/equations.md section 2.6).
     """
 
     design: Design
@@ -306,7 +306,7 @@ def build_model(
         Per-tooth pitch offsets along the line of action (z1 pinion and z2
         gear values, m). All zero or none: the classical mesh force k f(x),
         bit for bit; otherwise each pair in mesh deflects by x - e_i
-        (docs/model.md section 2.6).
+        (docs/model/equations.md section 2.6).
 
     Returns
     -------

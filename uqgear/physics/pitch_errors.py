@@ -1,4 +1,4 @@
-"""Per-tooth pitch errors: the normal state of a manufactured gear (docs/model.md section 2.6).
+"""Per-tooth pitch errors: the normal state of a manufactured gear (docs/model/equations.md section 2.6).
 
 A :class:`PitchErrors` holds one displacement per tooth of the pinion and of
 the gear along the line of action; :func:`~uqgear.physics.model.build_model`

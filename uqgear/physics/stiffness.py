@@ -2,13 +2,13 @@
 
 Each tooth is a cantilever from the root circle: a rectangle of thickness S_F
 up to the effective root radius r_ff, then a trapezoid tapering to the tip
-thickness S_k at the tip circle (docs/model.md section 4). Thicknesses are chordal.
+thickness S_k at the tip circle (docs/model/mesh-stiffness.md section 4). Thicknesses are chordal.
 On an undercut tooth r_ff is the form radius (the involute's start), the
 rectangle takes the undercut flank's narrowest section S_u < S_F, and load
 points lie on the generated involute only (the path of contact starts at the
 form circle where it limits, :func:`~uqgear.physics.geometry.pair_geometry`).
 The shear term uses a shear factor ``shear_factor`` (1.0 by default: the
-plain ``integral of F/(G A)`` of docs/model.md; Timoshenko's 1.2 for rectangles is
+plain ``integral of F/(G A)`` of docs/model/mesh-stiffness.md; Timoshenko's 1.2 for rectangles is
 available). One pair's compliance is the sum of both teeth's bending, shear
 and foundation compliances plus the contact compliance.
 
@@ -50,7 +50,7 @@ def tooth_compliance(
     face_width, youngs_modulus, poisson_ratio : float
         B in m, E in Pa, nu.
     shear_factor : float
-        Factor on the shear compliance (1.0: docs/model.md form).
+        Factor on the shear compliance (1.0: the form of docs/model/mesh-stiffness.md).
 
     Returns
     -------
@@ -75,7 +75,7 @@ def tooth_compliance(
     bending_rectangle = 12.0 * cos2 / (e_b * s_r**3) * (h_x * h_r * (h_x - h_r) + h_r**3 / 3.0)
     bending_trapezoid = 6.0 * cos2 * length**3 / (e_b * s_f**3) * (rho * (4.0 - rho) - 2.0 * np.log(rho) - 3.0)
     if s_r == s_f:
-        # one thickness: the form of docs/model.md section 4.1, evaluated as it always was
+        # one thickness: the form of docs/model/mesh-stiffness.md section 4.1, evaluated as it always was
         shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / (e_b * s_f) * (h_r + length * np.log(1.0 / rho))
     else:
         shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / e_b * (h_r / s_r + length * np.log(1.0 / rho) / s_f)
@@ -211,7 +211,7 @@ def mesh_stiffness(design, *, n_points: int = 1024, n_harmonics: int = 15, shear
     n_harmonics : int
         Harmonics kept in the truncated Fourier series.
     shear_factor : float
-        Factor on the shear compliance (1.0 as in docs/model.md).
+        Factor on the shear compliance (1.0 as in docs/model/mesh-stiffness.md).
 
     Returns
     -------

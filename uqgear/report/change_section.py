@@ -164,7 +164,7 @@ def change_page_parts(content: Mapping[str, Any]) -> list[str]:
         thresholds = change["thresholds"]
         parts.append(
             f'<p class="note">An effect is named when it explains at least '
-            f"{thresholds['change_share']:.0%} of the change (docs/model.md section 6.1).</p>"
+            f"{thresholds['change_share']:.0%} of the change (docs/model/unmodelled-effects.md section 6.1).</p>"
         )
     timing = content.get("timing_s") or {}
     stages = ", ".join(

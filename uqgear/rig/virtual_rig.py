@@ -35,7 +35,7 @@ Pitch errors (``pitch_errors``): a manufactured gear pair has a pitch error on
 every tooth. Given an ISO 1328-1:2013 flank tolerance class, one random set
 is drawn per campaign (the same gears in every run,
 :func:`uqgear.physics.pitch_errors.draw_pitch_errors`) and acts in the model's
-pair loop (docs/model.md section 2.6); the set is kept in the ``noise``
+pair loop (docs/model/equations.md section 2.6); the set is kept in the ``noise``
 attribute with the other nuisances, which a blind diagnosis never sees.
 
 Adhesion torque: the file carries a-priori bounds of +-15 % around the

@@ -3,7 +3,7 @@
 One module per allowance, each an object with the common interface
 :class:`Allowance`: its ``key`` in ``diagnosis.json``, whether it was
 ``applied`` and its JSON-ready ``summary()``. They act at three points of
-the diagnosis (docs/model.md section 6):
+the diagnosis (docs/model/unmodelled-effects.md section 6):
 
 - on the records, as the features are extracted (step 1): line
   interference on the accelerometers, left out of the low band

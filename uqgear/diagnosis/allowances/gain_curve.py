@@ -5,7 +5,7 @@ in Hz), so each channel's log gain is modelled as a smooth function of log
 frequency: a Gaussian process with a constant mean, a squared-exponential
 kernel and a white scatter term, hyperparameters by maximum marginal
 likelihood, made robust (Student-t scatter, iteratively reweighted) so that
-lines the model cannot produce at all lose their pull (docs/model.md
+lines the model cannot produce at all lose their pull (docs/model/unmodelled-effects.md
 section 6.1, step 3). Used by :mod:`.reference`.
 """
 

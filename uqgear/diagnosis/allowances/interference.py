@@ -11,7 +11,7 @@ most sensitive channel at low frequencies, carries it too. So a line is
 taken as interference where it stands at the same frequency (not the same
 order) in most runs of an accelerometer channel and the TE shows no such
 line; its bins are then left out of the low band of every record, the
-rig's and the model's alike (docs/model.md section 6.5; the campaign that
+rig's and the model's alike (docs/model/unmodelled-effects.md section 6.5; the campaign that
 shows it is in docs/validation/diagnosis.md). Without a TE channel nothing
 is left out.
 """

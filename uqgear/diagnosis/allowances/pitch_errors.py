@@ -7,7 +7,7 @@ noise floor with their forest of lines: a perfect-gear nominal model reads
 them as a gap an effect could be named for. A gear's own draw is unknown and
 one offset per tooth is out of reach of the fits, so the diagnosis takes what
 such errors do to each feature as model error of the nominal model, from the
-model itself (docs/model.md section 6.4):
+model itself (docs/model/unmodelled-effects.md section 6.4):
 
 1. whether: at least ``min_visible_fraction`` of the rig's sidebands of
    *each* shaft order 1, 2 and 3 (around every harmonic, both sides) on
@@ -332,7 +332,7 @@ def allowance_for_fit(
     own combination with pitch errors makes, and an effect with a line there
     credited with them. The fit is simulated with the same draws (the same
     gears' errors the nominal allowance used), so the two models' held-out
-    densities are compared on equal terms (docs/model.md section 6.4, "Each
+    densities are compared on equal terms (docs/model/unmodelled-effects.md section 6.4, "Each
     model its own allowance").
     """
     absolute, _ = allowance_errors(case, result.problem, result.vector, allowance.drawn_errors)

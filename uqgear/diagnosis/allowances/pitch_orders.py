@@ -27,7 +27,7 @@ explains a group's lines is not charged for the nominal model's widening.
 The first order is scaled like the others: a gear's first-order pitch error
 is a run-out exactly as an eccentric shaft's, so a run-out within what the
 classes' gears make is not evidence of an eccentricity; only its
-mesh-stiffness modulation can be (docs/model.md section 6.4, "The rig's own
+mesh-stiffness modulation can be (docs/model/unmodelled-effects.md section 6.4, "The rig's own
 gears, order by order"; the campaigns behind this choice are in
 docs/validation/diagnosis.md).
 """

@@ -8,7 +8,7 @@ shows that structure against the fitted nominal model; a diagnosis of a
 later campaign with it (``uqgear diagnose TEST.nc --reference HEALTHY.nc``)
 then names what changed between the two instead of the rig's own structure.
 
-Method (docs/model.md section 6.1):
+Method (docs/model/unmodelled-effects.md section 6.1):
 
 1. **Compatibility** (:mod:`.compatibility`). Both campaigns must state the
    same design and channels and every test operating point needs a
@@ -179,7 +179,7 @@ def noise_colour(case: RigCase) -> np.ndarray:
     bins the noise estimate uses), or of the nearest free bins where too
     few lie near the line (a shaft line inside the low band, which the noise
     estimate leaves out and where a resonance's floor can be far above the
-    median; docs/model.md section 6.1, step 4); 1 for features that are not
+    median; docs/model/unmodelled-effects.md section 6.1, step 4); 1 for features that are not
     lines.
     """
     colour = np.ones(case.observed_all.shape)

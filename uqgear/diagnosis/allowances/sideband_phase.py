@@ -13,7 +13,7 @@ fixed phase relation to their mesh harmonic. The phase sum
 of the n-th mesh harmonic's first sidebands of that shaft (orders in the
 shaft's rotations) does not depend on where the record starts nor on the
 eccentricity's phase, and for pitch errors it hardly depends on the draw
-(docs/model.md section 6.4). Its distribution is simulated
+(docs/model/unmodelled-effects.md section 6.4). Its distribution is simulated
 under the final model with pitch errors of the allowance (H0) and with an
 eccentricity of the run-out the fit read (H1), each over the fitted
 model's parameter spread, and the rig's phase sums are scored under both
@@ -24,7 +24,7 @@ Only a shaft whose sidebands lie at least ``min_sideband_orders`` pinion
 orders from their carrier is tested (:class:`~uqgear.diagnosis.DiagnosisSettings`):
 nearer, as a gear's sidebands are on the reference design (0.21 pinion
 orders), they sit among the gear's other orders, which the line fit does not
-hold apart, and the sums mislead (docs/model.md section 6.4, "An eccentric
+hold apart, and the sums mislead (docs/model/unmodelled-effects.md section 6.4, "An eccentric
 shaft named by its sidebands' phases"; docs/validation/diagnosis.md).
 """
 

@@ -3,7 +3,7 @@
 Condition-monitoring features of both campaigns (:mod:`.features`), the
 change test (:mod:`.detection`), the effects scored on the change they
 predict (:mod:`.scoring`), the route and its records (:mod:`.route`,
-:mod:`.conclude`); docs/model.md section 6.1.
+:mod:`.conclude`); docs/model/unmodelled-effects.md section 6.1.
 """
 
 from __future__ import annotations

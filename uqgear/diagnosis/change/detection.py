@@ -5,7 +5,7 @@ Both campaigns are reduced to the condition-monitoring features of
 model's own). A feature's change is its test value less the reference's
 carried to the test run's speed, in natural-log units (a power ratio). It
 counts as a change where it exceeds what two healthy campaigns of one rig
-differ by (docs/model.md section 6.1):
+differ by (docs/model/unmodelled-effects.md section 6.1):
 
 - sensor noise and run-to-run variation, measured in both campaigns by the
   scatter between the two halves of each record (pooled with the other runs

@@ -6,7 +6,7 @@ on condition-monitoring features (:mod:`.detection`); with no significant
 change the verdict is ``none`` and no model is simulated; otherwise every
 candidate effect is scored on the change it predicts (:mod:`.scoring`) and
 the best is named when it explains at least ``change_share`` of the change,
-else the change is ``unexplained`` with where it lies (docs/model.md
+else the change is ``unexplained`` with where it lies (docs/model/unmodelled-effects.md
 section 6.1).
 """
 

@@ -14,7 +14,7 @@ from .base import EffectFamily
 
 
 class AdhesionOscillationFamily(EffectFamily):
-    """Stick-slip of the wheel on the rail (docs/model.md section 6).
+    """Stick-slip of the wheel on the rail (docs/model/unmodelled-effects.md section 6).
 
     One variant, its amplitude and frequency fitted; the frequency starts
     at the lowest frequency-locked line of the TE below 100 Hz where there

@@ -13,7 +13,7 @@ from .base import EffectFamily
 
 
 class BearingClearanceFamily(EffectFamily):
-    """Radial clearance in the pinion bearing, the gear bearing or both (docs/model.md section 6).
+    """Radial clearance in the pinion bearing, the gear bearing or both (docs/model/unmodelled-effects.md section 6).
 
     Variants: one per bearing choice, the half clearance fitted from a
     start grid over three decades. A clearance has no signature while the

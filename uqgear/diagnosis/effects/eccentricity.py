@@ -14,7 +14,7 @@ from .base import START_PHASES, EffectFamily
 
 
 class EccentricityFamily(EffectFamily):
-    """A run-out of the pinion or the gear shaft (docs/model.md section 6).
+    """A run-out of the pinion or the gear shaft (docs/model/unmodelled-effects.md section 6).
 
     Variants: one per shaft, its run-out, phase and mesh-stiffness
     modulation fitted. The run-out starts at the median first-order shaft

@@ -11,7 +11,7 @@ from .base import EffectFamily
 
 
 class FrictionFamily(EffectFamily):
-    """Sliding friction on the tooth flanks (docs/model.md section 6).
+    """Sliding friction on the tooth flanks (docs/model/unmodelled-effects.md section 6).
 
     One variant, its coefficient fitted from two starts; its response
     repeats every mesh period.

@@ -13,7 +13,7 @@ from .base import EffectFamily
 
 
 class ToothDamageFamily(EffectFamily):
-    """A damaged tooth of the pinion or the gear (docs/model.md section 6).
+    """A damaged tooth of the pinion or the gear (docs/model/unmodelled-effects.md section 6).
 
     Variants: one per gear, its depth fitted from a start grid spanning
     weak to strong damage. Which tooth does not change an amplitude

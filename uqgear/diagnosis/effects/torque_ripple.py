@@ -13,7 +13,7 @@ from .base import START_PHASES, EffectFamily
 
 
 class TorqueRippleFamily(EffectFamily):
-    """Torque ripple of the traction motor (docs/model.md section 6).
+    """Torque ripple of the traction motor (docs/model/unmodelled-effects.md section 6).
 
     One variant, its amplitude and phase fitted; none for a design without
     ``motor_pole_pairs`` (its frequency is unknown). Its response repeats
