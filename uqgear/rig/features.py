@@ -228,7 +228,7 @@ def _prepare(
     extra = set(speed.dims) - set(template.dims)
     if extra:
         raise RigDataError(
-            f"{where}pinion_speed: dimensions {sorted(extra)} are not dimensions of the signal {template.dims}"
+            f"{where}pinion_speed: dimensions {sorted(extra, key=str)} are not dimensions of the signal {template.dims}"
         )
     speeds = np.asarray(speed.broadcast_like(template).transpose(*template.dims).values, dtype=float).ravel()
     _check_speeds(speeds, where)

@@ -414,7 +414,7 @@ def track_orders(
     statistics = np.full((3, n_records), np.nan)  # mean, min, max speed (rpm)
     tracked = np.zeros(n_records, dtype=bool)
     references: list[str] = []
-    outputs = dict.fromkeys(channels)
+    outputs: dict[str, np.ndarray | None] = dict.fromkeys(channels)
     acceleration_rows = [
         index
         for index, name in enumerate(channels)
@@ -438,9 +438,10 @@ def track_orders(
         references.append(result.lines)
         if result.records is not None:
             for index, name in enumerate(channels):
-                if outputs[name] is None:
-                    outputs[name] = np.array(signals[name].values, copy=True).reshape(-1, size)
-                outputs[name][record] = result.records[index]
+                output = outputs[name]
+                if output is None:
+                    output = outputs[name] = np.array(signals[name].values, copy=True).reshape(-1, size)
+                output[record] = result.records[index]
     result_ds = signals.copy()
     for name, values in outputs.items():
         if values is not None:
@@ -468,7 +469,7 @@ def track_orders(
 
 def speed_summary(tracked: xr.Dataset) -> list[dict[str, object]]:
     """Per-operating-point speed estimate of :func:`track_orders` output, JSON-ready."""
-    rows = []
+    rows: list[dict[str, object]] = []
     for op in range(tracked.sizes.get("op", 1)):
         pick = tracked.isel(op=op) if "op" in tracked.dims else tracked
 

@@ -52,6 +52,7 @@ import os
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import SupportsFloat, cast
 
 import numpy as np
 import xarray as xr
@@ -261,7 +262,8 @@ def _true_model(design: Design, true_parameters: Mapping[str, object] | None) ->
         true_design = design.replace(**values) if values else design
     except ValueError as exc:
         raise OperatingPointError(f"true_parameters: {exc}") from None
-    return true_design, float(scale), {key: float(values[key]) for key in values}
+    # Design.from_mapping accepted them, so they are numbers
+    return true_design, float(scale), {key: float(cast(SupportsFloat, values[key])) for key in values}
 
 
 def frequency_filter(size: int, rate: float, passband: float, stopband: float,
@@ -304,6 +306,7 @@ def _pitch_errors(design: Design, pitch_errors: int | PitchErrors | Mapping[str,
     """The campaign's pitch errors and their JSON record (grade, tolerances, values in m)."""
     if pitch_errors is None:
         return None, None
+    record: dict[str, object]
     if isinstance(pitch_errors, (int, np.integer)) and not isinstance(pitch_errors, bool):
         grade = int(pitch_errors)
         errors = draw_pitch_errors(design, grade, np.random.default_rng(child_seed(seed_sequence, _PITCH_STREAM)))
@@ -319,7 +322,9 @@ def _pitch_errors(design: Design, pitch_errors: int | PitchErrors | Mapping[str,
         if unknown or len(pitch_errors) != 2:
             raise OperatingPointError(f"pitch_errors: expected the keys pinion and gear (per-tooth offsets in m); "
                                       f"got {sorted(pitch_errors)}")
-        errors, record = PitchErrors(pitch_errors["pinion"], pitch_errors["gear"]), {"iso1328_class": None}
+        # PitchErrors takes array_like and converts it; its fields are typed as the arrays they become
+        errors = PitchErrors(cast(np.ndarray, pitch_errors["pinion"]), cast(np.ndarray, pitch_errors["gear"]))
+        record = {"iso1328_class": None}
     else:
         raise OperatingPointError(f"pitch_errors: expected an ISO 1328-1 flank tolerance class (integer 1..11), "
                                   f"a PitchErrors or a mapping with pinion and gear offsets in m; "
@@ -553,7 +558,8 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
     pitch, pitch_record = _pitch_errors(design, pitch_errors, seed_sequence)
     top_rng = np.random.default_rng(child_seed(seed_sequence, 0))
-    adhesion_override = (true_parameters or {}).get("adhesion_torque")
+    # one value per run, checked by _operating_table
+    adhesion_override = cast("ArrayLike | None", (true_parameters or {}).get("adhesion_torque"))
     table = _operating_table(design, operating_points, adhesion_override, top_rng)
     n_op = table["pinion_speed"].size
     fastest = float(table["pinion_speed"].max())
