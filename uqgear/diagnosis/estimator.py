@@ -195,7 +195,7 @@ class Diagnosis:
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears (default 6 to 8; None: perfect gears).
     reference_route, reference_gears : str
-        ``change``/``transfer``, ``same``/``replaced`` gears with a reference (docs/model/unmodelled-effects.md section 6.1).
+        ``change``/``transfer``, ``same``/``replaced`` gears (docs/model/unmodelled-effects.md section 6.1).
 
     Attributes
     ----------
@@ -269,8 +269,8 @@ class Diagnosis:
         rig : path or xarray.Dataset
             A ``uqgear-rig/1`` file or Dataset.
         reference : path, xarray.Dataset or ReferenceCorrection, optional
-            A campaign of the same rig with a known good gearbox: what changed since it (docs/model/unmodelled-effects.md section 6.1;
-            a correction already learned, or ``reference_route="transfer"``, corrects the model by it instead).
+            A campaign of the same rig with a known good gearbox: what changed since it (a learned correction, or
+            ``reference_route="transfer"``, corrects the model instead; docs/model/unmodelled-effects.md section 6.1).
 
         Returns
         -------

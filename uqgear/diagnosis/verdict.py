@@ -236,7 +236,8 @@ def decide(
     if best is not None:
         named, weak_near_noise = _named(best, nominal_gap, borderline, settings, pitch_allowance, density_evidence)
         if named is not None:
-            # a gear effect shows on every channel that sees the mesh (docs/model/unmodelled-effects.md section 6, step 5)
+            # a gear effect shows on every channel that sees the mesh
+            # (docs/model/unmodelled-effects.md section 6, step 5)
             channels = check_channels(best, settings=settings)
             if channels.consistent:
                 return named
