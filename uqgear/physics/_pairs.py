@@ -177,25 +177,45 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
 
 
 @nb.njit(**INLINED)
-def _row_pair(i, n, table, sub, stage, n_pairs, ratio, p, fp, fg):
+def _tooth_terms(n, p, fp, fg):
+    """(offset, tooth factor) of the pairs brought into mesh by meshing numbers n, n - 1, n - 2 and n - 3.
+
+    They depend on the meshing number only: a step computes them once for
+    the three stages of each of its sub-steps (integer remainders are the
+    dearest operations of a pair's forcing).
+    """
+    z1 = int(p[Z1])
+    z2 = int(p[Z2])
+    f0 = f1 = f2 = f3 = 1.0
+    if p[TOOTH_FACTORS] != 0.0:
+        f0 = fp[n % z1] * fg[n % z2]
+        f1 = fp[(n - 1) % z1] * fg[(n - 1) % z2]
+        f2 = fp[(n - 2) % z1] * fg[(n - 2) % z2]
+        f3 = fp[(n - 3) % z1] * fg[(n - 3) % z2]
+    return (
+        (pair_offset(n, p), pair_offset(n - 1, p), pair_offset(n - 2, p), pair_offset(n - 3, p)),
+        (f0, f1, f2, f3),
+    )
+
+
+@nb.njit(**INLINED)
+def _row_pair(i, table, sub, stage, n_pairs, ratio, p, offset, factor):
     """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._rhs.build_schedule`."""
     if i >= n_pairs:
         return 0.0, 0.0, 0.0, 0.0
     kp = table[sub, stage, 4 + 3 * i] * ratio
     pinion = table[sub, stage, 5 + 3 * i] * ratio
     gear = table[sub, stage, 6 + 3 * i] * ratio
-    tooth = n - i
     if p[TOOTH_FACTORS] != 0.0:
-        factor = fp[tooth % int(p[Z1])] * fg[tooth % int(p[Z2])]
         kp *= factor
         pinion *= factor
         gear *= factor
-    return kp, pinion, gear, pair_offset(tooth, p)
+    return kp, pinion, gear, offset
 
 
 @nb.njit(**INLINED)
-def _forcing_row_pairs(t, n, table, sub, stage, n_pairs, p, fp, fg):
-    """:func:`forcing_pairs` at absolute time ``t`` in mesh period ``n`` from a tabulated stage."""
+def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
+    """:func:`forcing_pairs` at absolute time ``t`` from a tabulated stage (``teeth``: :func:`_tooth_terms`)."""
     ratio = 1.0
     if p[USE_PERIOD_TABLE] != 0.0:
         # the table holds the smooth curve in F_K and the Ishikawa pair stiffnesses per pair
@@ -207,12 +227,13 @@ def _forcing_row_pairs(t, n, table, sub, stage, n_pairs, p, fp, fg):
     if p[ECC_KAPPA] != 0.0:
         scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
     drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
+    offsets, factors = teeth
     return _pack(
         n_pairs,
-        _row_pair(0, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
-        _row_pair(1, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
-        _row_pair(2, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
-        _row_pair(3, n, table, sub, stage, n_pairs, ratio, p, fp, fg),
+        _row_pair(0, table, sub, stage, n_pairs, ratio, p, offsets[0], factors[0]),
+        _row_pair(1, table, sub, stage, n_pairs, ratio, p, offsets[1], factors[1]),
+        _row_pair(2, table, sub, stage, n_pairs, ratio, p, offsets[2], factors[2]),
+        _row_pair(3, table, sub, stage, n_pairs, ratio, p, offsets[3], factors[3]),
         scale,
         drive,
         ste,
@@ -321,11 +342,12 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
     force = 0.0
     a1 = 0.0
     a2 = 0.0
+    teeth = _tooth_terms(n, p, fp, fg)
     for sub in range(first_sub[j], first_sub[j + 1]):
         t = start + offsets[sub]
         h = widths[sub]
         n_pairs = pairs[sub]
-        terms = _forcing_row_pairs(t, n, table, sub, 0, n_pairs, p, fp, fg)
+        terms = _forcing_row_pairs(t, teeth, table, sub, 0, n_pairs, p)
         d1, f = derivative_pairs(s, terms, p)
         if sub == first_sub[j]:
             force = f
@@ -336,8 +358,8 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
             h,
             s,
             d1,
-            _forcing_row_pairs(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
-            _forcing_row_pairs(t + h, n, table, sub, 2, n_pairs, p, fp, fg),
+            _forcing_row_pairs(t + 0.5 * h, teeth, table, sub, 1, n_pairs, p),
+            _forcing_row_pairs(t + h, teeth, table, sub, 2, n_pairs, p),
             terms,
             start + refs[sub],
             p,
