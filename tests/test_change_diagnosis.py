@@ -231,6 +231,24 @@ def test_the_foreign_suite_finds_no_change_between_healthy_campaigns():
         assert abs(entry["largest_change_db"]) < entry["largest_threshold_db"]
 
 
+def test_bearing_clearances_bring_a_healthy_control_on_their_own_plan_and_the_cli_writes_a_new_folder(
+        tmp_path, monkeypatch):
+    from uqgear.cli import main
+    from uqgear.validation import foreign_suite
+
+    plan = foreign_suite.foreign_campaign_plan(["eccentricity", "bearing_clearance"], 1)
+    assert plan[-1] == ("healthy_bearing_check", None)
+    assert [name for _, name in plan] == [None, None, "eccentricity", "bearing_clearance", None]
+    assert ("healthy_bearing_check", None) not in foreign_suite.foreign_campaign_plan(["eccentricity"], 1)
+    # the suite's record lands in a folder that did not exist (its work replaced by a stand-in)
+    monkeypatch.setattr(foreign_suite, "run_foreign_suite", lambda **_: {
+        "campaigns": [], "exactly_right": 1.0, "effects_exactly_right": 1.0, "healthy_none": True})
+    out = tmp_path / "new" / "foreign"
+    assert main(["blindtest", "--suite", "foreign", "--out", str(out)]) == 0
+    assert json.loads((out / "blindtest.json").read_text())["healthy_none"] is True
+    assert sorted(path.name for path in out.parent.iterdir()) == ["foreign"]
+
+
 @pytest.mark.slow
 def test_a_run_out_added_on_the_foreign_rig_is_named_with_its_share_on_the_reports_first_screen(tmp_path):
     from uqgear.diagnosis import diagnose

@@ -474,7 +474,9 @@ def _foreign_blindtest(args: argparse.Namespace, out: Path) -> int:
     from .validation.foreign_suite import run_foreign_suite
 
     result = run_foreign_suite(seed=args.seed, n_per_effect=args.n_per_effect, workers=args.workers or 1)
-    write_text_atomic(out / "blindtest.json", json.dumps(result, indent=1, default=str))
+    # the folder appears with its file, as the other suites' do
+    with OutputFolder(out, where="--out", existing="refuse") as work:
+        write_text_atomic(work / "blindtest.json", json.dumps(result, indent=1, default=str))
     print(
         f"blind test (foreign): {len(result['campaigns'])} campaigns, exactly right {result['exactly_right']:.2f} "
         f"(effects {result['effects_exactly_right']:.2f}), healthy tests none: {result['healthy_none']}; "

@@ -15,6 +15,7 @@ from .features import (
     order_spectrum,
     sampling_rate,
 )
+from .foreign_modes import ForeignModes, bearing_check_plan, natural_modes
 from .foreign_rig import ForeignGears, draw_gears, simulate_foreign_campaign, simulate_foreign_run
 from .format import (
     CONVENTIONS,
@@ -68,4 +69,7 @@ __all__ = [
     "draw_gears",
     "simulate_foreign_campaign",
     "simulate_foreign_run",
+    "ForeignModes",
+    "natural_modes",
+    "bearing_check_plan",
 ]

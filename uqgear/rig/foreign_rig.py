@@ -207,14 +207,15 @@ def _derivative(t, y, p, pin_err, gear_err, eff, out):  # pragma: no cover - com
 
 @njit(cache=True)
 def _integrate(y0, p, pin_err, gear_err, eff, step, n_out, per_out):  # pragma: no cover - compiled
-    """RK4 from t = 0; returns (n_out, 4): encoder TE, housing accelerations at pinion and gear, time."""
+    """RK4 from t = 0; returns (n_out, 6): encoder TE, housing accelerations at pinion and gear, time, and the
+    bearing deflections (wheel centre less housing) at pinion and gear."""
     y = y0.copy()
     k1 = np.empty(_N_STATE)
     k2 = np.empty(_N_STATE)
     k3 = np.empty(_N_STATE)
     k4 = np.empty(_N_STATE)
     tmp = np.empty(_N_STATE)
-    out = np.empty((n_out, 4))
+    out = np.empty((n_out, 6))
     t = 0.0
     for index in range(n_out):
         for _ in range(per_out):
@@ -236,6 +237,8 @@ def _integrate(y0, p, pin_err, gear_err, eff, step, n_out, per_out):  # pragma: 
         out[index, 1] = k1[14]
         out[index, 2] = k1[15]
         out[index, 3] = t
+        out[index, 4] = y[4] - y[6]
+        out[index, 5] = y[5] - y[7]
     return out
 
 
@@ -347,6 +350,30 @@ def _parameters(design: Design, speed: float, drive_torque: float, load_torque: 
     return p, 1.5 * fastest
 
 
+#: Names of the entries 12-35 of the compiled parameter vector: inertias (kg m2), masses (kg), stiffnesses (N m/rad,
+#: N/m; the controller's as a torsional spring to the commanded angle) and dampings of the 8-DOF gearbox.
+PLANT_NAMES = (
+    *("jm", "j1", "j2", "jl", "ma", "mb", "mh1", "mh2", "ks1", "cs1", "ks2", "cs2"),
+    *("kb1", "cb1", "kb2", "cb2", "kh1", "ch1", "kh2", "ch2", "kc", "cc"),
+)
+
+
+def plant_parameters(design: Design) -> dict[str, float]:
+    """The foreign rig's physical constants for a design: :data:`PLANT_NAMES`, base radii and mean mesh stiffness.
+
+    Examples
+    --------
+    >>> from uqgear.physics.design import load_design
+    >>> plant = plant_parameters(load_design("locomotive"))
+    >>> round(plant["k_mean"] / 1e9, 2), plant["kb1"] == load_design("locomotive").k1
+    (2.42, True)
+    """
+    p, _ = _parameters(design, 1000.0, 1.0, 1.0)
+    plant = dict(zip(PLANT_NAMES, (float(v) for v in p[12:34])))
+    k_mean = p[2] * p[1] * (PAIR_ENTRY_SHARE + (1 - PAIR_ENTRY_SHARE) * 2 / math.pi)
+    return {**plant, "rb1": float(p[6]), "rb2": float(p[7]), "k_mean": float(k_mean)}
+
+
 def _static_state(p: np.ndarray, design: Design) -> np.ndarray:
     """Start near the loaded static state at nominal speed (the run-in settles the rest)."""
     rb1, rb2, kp, eps = p[6], p[7], p[2], p[1]
@@ -374,8 +401,14 @@ def simulate_foreign_run(
     fs: float = 20480.0,
     duration: float = 0.5,
     start: float = 0.3,
+    bearings: bool = False,
 ) -> dict[str, np.ndarray]:
-    """Clean records (te in m, housing accelerations in m s-2) of one run on the ``fs`` grid from ``start``."""
+    """Clean records (te in m, housing accelerations in m s-2) of one run on the ``fs`` grid from ``start``.
+
+    With ``bearings``, also each bearing's deflection (wheel centre less housing along the line of action, m;
+    unfiltered) as ``bearing_pinion`` and ``bearing_gear``: where a clearance c is set, the bearing carries no
+    force while its deflection is within +-c.
+    """
     p, fastest = _parameters(design, speed, drive_torque, load_torque)
     rate = 4.0 * fs
     per_out = max(1, int(math.ceil(40.0 * fastest / rate)))
@@ -394,6 +427,9 @@ def simulate_foreign_run(
         signal = out[:, column] - out[:, column].mean()
         filtered = np.fft.irfft(np.fft.rfft(signal) * frequency_filter(size, rate, passband, stopband, 0), n=size)
         records[name] = filtered[guard : guard + 4 * n_samples : 4]
+    if bearings:
+        records.update(bearing_pinion=out[guard : guard + 4 * n_samples : 4, 4].copy())
+        records["bearing_gear"] = out[guard : guard + 4 * n_samples : 4, 5].copy()
     return records
 
 
@@ -477,9 +513,11 @@ def simulate_foreign_campaign(
 
 
 __all__ = [
+    "PLANT_NAMES",
     "ForeignGears",
     "contact_ratio",
     "draw_gears",
+    "plant_parameters",
     "simulate_foreign_campaign",
     "simulate_foreign_run",
     "single_pitch_tolerance",

@@ -151,7 +151,8 @@ BEARING_CHECK_SPEED_FACTORS: tuple[tuple[float, ...], tuple[float, ...]] = ((0.9
 
 
 def bearing_check_operating_points(design: Design, drive_torque: float = BEARING_CHECK_DRIVE_TORQUE,
-                                   spread: float = ADHESION_SPREAD) -> xr.Dataset:
+                                   spread: float = ADHESION_SPREAD,
+                                   mode_frequencies: ArrayLike | None = None) -> xr.Dataset:
     """A light-load run through the bearing modes: the plan that can show a bearing clearance.
 
     At service loads both bearings stay loaded and a clearance (a dead zone
@@ -171,6 +172,11 @@ def bearing_check_operating_points(design: Design, drive_torque: float = BEARING
         T1 of every run, N m (> 0).
     spread : float
         Relative half-width of the T2 interval around the balancing torque.
+    mode_frequencies : array_like of 2 floats, optional
+        The two bearing-dominated natural frequencies of the rig under test, Hz
+        (from a run-up or a tap test, or a model of that rig); the nominal
+        design's by default. A rig's own modes, not the diagnosis model's,
+        decide where its bearings unload.
 
     Returns
     -------
@@ -181,7 +187,14 @@ def bearing_check_operating_points(design: Design, drive_torque: float = BEARING
     torque = _check_positive("drive_torque", drive_torque)
     if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not 0.0 <= spread < 1.0:
         raise OperatingPointError(f"spread: expected a relative half-width in [0, 1); got {spread!r}")
-    mode_speeds = natural_frequencies(design)[:2] * 60.0 / design.z1
+    if mode_frequencies is None:
+        modes = natural_frequencies(design)[:2]
+    else:
+        modes = np.asarray(mode_frequencies, dtype=float)
+        if modes.shape != (2,) or not np.all(np.isfinite(modes) & (modes > 0.0)):
+            raise OperatingPointError(f"mode_frequencies: expected two positive frequencies in Hz; "
+                                      f"got {mode_frequencies!r}")
+    mode_speeds = modes * 60.0 / design.z1
     speeds = np.concatenate([speed * np.asarray(factors)
                              for speed, factors in zip(mode_speeds, BEARING_CHECK_SPEED_FACTORS)])
     speeds = np.round(speeds / 10.0) * 10.0

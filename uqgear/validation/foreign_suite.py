@@ -8,9 +8,13 @@ test campaign of it, each with its own noise and record starts:
   ``reference_gears="replaced"`` (expected ``none``);
 - one per library effect (``n_per_effect`` each): the reference's gears with
   the effect at the strong level of its ladder, its choices (shaft, gear,
-  bearing) and phases drawn; bearing clearances on the light-load bearing
-  check plan, the others on the service plan (expected: the effect, with
-  its shaft, gear or bearing).
+  bearing) and phases drawn; bearing clearances on the foreign rig's own
+  light-load bearing check (:func:`uqgear.rig.foreign_modes.bearing_check_plan`:
+  its mesh fundamental through its own bearing-dominated modes), the others on
+  the service plan (expected: the effect, with its shaft, gear or bearing);
+- last, with bearing clearances, ``healthy_bearing_check``: the reference's
+  gears again on that plan (expected ``none``), each plan having its own
+  healthy reference campaign.
 
 A campaign is *exactly right* when the verdict is the expected one and a
 named effect's choice (shaft, gear or bearing) is the true one.
@@ -28,6 +32,7 @@ import numpy as np
 from ..diagnosis import Diagnosis
 from ..diagnosis.effects import effect_family, effect_names
 from ..physics.design import Design, load_design
+from ..rig.foreign_modes import bearing_check_plan
 from ..rig.foreign_rig import draw_gears, simulate_foreign_campaign
 from ..rig.virtual_rig import adhesion_torque_bounds
 from ..uq.seeds import as_seed_sequence, child_seed
@@ -40,6 +45,12 @@ _CHOICE = {"eccentricity": "shaft", "tooth_damage": "gear", "bearing_clearance":
 
 
 def _operating_points(plan: str, design: Design, n_ops: int) -> dict[str, np.ndarray]:
+    if plan == "bearing_check":
+        # the rig's own bearing modes place its bearing check, as a test engineer's run-up would
+        ops = bearing_check_plan(design)
+        size = ops.sizes["op"]
+        index = np.unique(np.round(np.linspace(0, size - 1, min(n_ops, size))).astype(int))
+        return {str(name): np.asarray(ops[name].values)[index] for name in ops.data_vars}
     table = dict(operating_points_of(plan, design, n_ops))
     if "adhesion_torque_lower" not in table:
         lower, upper = adhesion_torque_bounds(design, table["drive_torque"])
@@ -58,7 +69,15 @@ def foreign_campaign_plan(effects: Sequence[str], n_per_effect: int) -> list[tup
     plan: list[tuple[str, str | None]] = [("healthy_same", None), ("healthy_replaced", None)]
     for name in effects:
         plan += [(f"{name}-{k}", name) for k in range(n_per_effect)]
+    if any(effect_family(name).plan != "service" for name in effects):
+        plan.append(("healthy_bearing_check", None))
     return plan
+
+
+def _plan_of(identifier: str, name: str | None) -> str:
+    if identifier == "healthy_bearing_check":
+        return "bearing_check"
+    return "service" if name is None else effect_family(name).plan
 
 
 def run_foreign_suite(
@@ -90,7 +109,7 @@ def run_foreign_suite(
     for index, (identifier, name) in enumerate(foreign_campaign_plan(names, n_per_effect)):
         run_seed = child_seed(campaign_seed, index)
         reference_seed, test_seed, effect_seed = (child_seed(run_seed, k) for k in range(3))
-        plan = "service" if name is None else effect_family(name).plan
+        plan = _plan_of(identifier, name)
         table = _operating_points(plan, nominal, n_ops)
         if plan not in references:
             references[plan] = simulate_foreign_campaign(
