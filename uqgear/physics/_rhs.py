@@ -21,9 +21,9 @@ non-smoothness are located instead of stepped over:
   contact region, the crossing is located on the step's cubic Hermite
   interpolant and the step is redone in two parts.
 
-numba's cache checks the timestamp of a kernel's own file only, and these
-helpers are inlined into kernels in other files: after editing this module,
-clear the cache (``__pycache__/*.nbi``, ``*.nbc``) of the physics package.
+These helpers are inlined into kernels in other files: a cached kernel is
+keyed on the contents of every compiled module of the package
+(:mod:`uqgear.physics._cache`), so editing this one recompiles them all.
 """
 
 from __future__ import annotations
@@ -33,6 +33,11 @@ from typing import Any
 
 import numba as nb
 import numpy as np
+
+from uqgear.physics._cache import register_kernel_cache
+
+# before any kernel of the package is compiled or loaded from the cache
+register_kernel_cache()
 
 # ---------------------------------------------------------------- parameter slots
 (

@@ -1,0 +1,37 @@
+"""The differential route's effect scores are the same, bit for bit, on one process and on two workers."""
+
+import numpy as np
+
+from uqgear.diagnosis import Diagnosis
+from uqgear.diagnosis.change.parallel import map_in_order
+from uqgear.physics.design import load_design
+from uqgear.physics.effects import make_effect
+from uqgear.rig.foreign_rig import draw_gears, simulate_foreign_campaign
+from uqgear.rig.virtual_rig import default_operating_points
+
+DESIGN = load_design("locomotive")
+
+
+def test_pieces_come_back_in_order_with_the_dearest_sent_first():
+    squares = map_in_order(lambda index: index * index, 5, workers=2, dearest=[False, False, False, True, False])
+    assert squares == [0, 1, 4, 9, 16]
+    assert map_in_order(lambda index: -index, 3, workers=1) == [0, -1, -2]
+
+
+def test_variant_scores_do_not_depend_on_the_worker_count():
+    ops = default_operating_points(DESIGN).isel(op=[1, 5])
+    gears = draw_gears(DESIGN, 6, 5)
+    reference = simulate_foreign_campaign(DESIGN, ops, gears=gears, seed=6)
+    run_out = make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 1.0, "kappa": 0.03})
+    test = simulate_foreign_campaign(DESIGN, ops, gears=gears, effects=[run_out], seed=7)
+    fits = [
+        Diagnosis(effects=["eccentricity", "friction"], seed=3, workers=workers).fit(test, reference=reference)
+        for workers in (1, 2)
+    ]
+    one, two = (fit.change_ for fit in fits)
+    assert one.test.changed and len(one.scores) >= 3  # two eccentric shafts and friction were scored
+    assert [score.label for score in one.scores] == [score.label for score in two.scores]
+    for first, second in zip(one.scores, two.scores):
+        assert first.share == second.share and first.values == second.values
+        assert np.array_equal(first.predicted, second.predicted, equal_nan=True)
+    assert fits[0].decision_.verdict == fits[1].decision_.verdict
