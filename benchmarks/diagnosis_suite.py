@@ -12,9 +12,12 @@ at most 15 s and every campaign at most 30 s on 2 cores, memory at most
 2 GB. The 50 kHz figure (6 runs, at most 60 s) is ``python
 benchmarks/diagnosis.py --fifty-khz``.
 
-Usage: ``python benchmarks/diagnosis_suite.py [--seeds 1 2] [--workers 2] [--out DIR]
-[--compare DIR]``; ``--out`` keeps the blind tests (``DIR/seed-S``), ``--compare`` compares
+Usage: ``python benchmarks/diagnosis_suite.py [--suite real_world|foreign] [--seeds 1 2] [--workers 2]
+[--out DIR] [--compare DIR]``; ``--out`` keeps the blind tests (``DIR/seed-S``), ``--compare`` compares
 every campaign's verdict, named set, gaps and scores field by field with an earlier ``--out``.
+``--suite foreign`` times the differential route instead: each campaign of the foreign virtual rig
+diagnosed against a healthy reference campaign of it (``uqgear blindtest --suite foreign``), with
+the change test's and the scoring's times.
 Timings taken while other jobs load the machine are noisy: the load average is printed with them.
 """
 
@@ -31,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from uqgear.validation import blindtest
+from uqgear.validation import blindtest, run_foreign_suite
 
 # the fields compared between two runs of the suite (a speed change must leave them as they were)
 COMPARED = ("verdict", "effects_named", "shrink_shares", "nominal_gap", "best_candidate", "best_score",
@@ -72,7 +75,11 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, help="keep the blind tests here (DIR/seed-S)")
     parser.add_argument("--compare", type=Path, help="an earlier --out to compare the verdicts with")
+    parser.add_argument("--suite", choices=("real_world", "foreign"), default="real_world")
     args = parser.parse_args()
+    if args.suite == "foreign":
+        foreign(args)
+        return
     print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
           f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
     scratch = tempfile.TemporaryDirectory()
@@ -124,6 +131,47 @@ def main() -> None:
           + "".join(f"\n  seed {r[0]} {r[1]}: {r[2]} {r[4]} (truth {r[7] or r[3]})" for r in wrong))
     if args.compare is not None:
         print(f"differences from {args.compare}: {len(differences)}" + "".join(f"\n  {d}" for d in differences))
+    print(f"load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
+    scratch.cleanup()
+
+
+def foreign(args: argparse.Namespace) -> None:
+    """The differential route on the foreign-rig suite: per campaign its verdict, wall time and stages."""
+    print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
+          f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+    scratch = tempfile.TemporaryDirectory()
+    root = args.out if args.out is not None else Path(scratch.name)
+    rows = []
+    for seed in args.seeds:
+        started = time.perf_counter()
+        content = run_foreign_suite(seed=seed, n_per_effect=1, workers=args.workers)
+        (root / f"seed-{seed}").mkdir(parents=True, exist_ok=True)
+        (root / f"seed-{seed}" / "blindtest.json").write_text(json.dumps(content, indent=1, default=str))
+        print(f"seed {seed}: {len(content['campaigns'])} campaigns in {time.perf_counter() - started:.0f} s, "
+              f"exactly right {content['exactly_right']:.3f}; load average "
+              f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+        for campaign in content["campaigns"]:
+            truth = (campaign.get("truth") or {}).get("effect", "none")
+            rows.append((seed, campaign["campaign"], campaign["verdict"], truth, campaign["exactly_right"],
+                         campaign["seconds"], campaign.get("timing_s") or {}))
+    print()
+    print(f"{'seed':>4s} {'campaign':28s} {'truth':20s} {'verdict':20s} {'right':>5s} {'wall s':>7s} {'CPU s':>7s}"
+          "  stages (s)")
+    for seed, ident, verdict, truth, right, seconds, timing in rows:
+        shown = {k: v for k, v in timing.items() if k not in ("total_wall", "total_cpu", "workers") and v >= 0.1}
+        stage_text = ", ".join(f"{k} {v:.1f}" for k, v in sorted(shown.items(), key=lambda kv: -kv[1]))
+        print(f"{seed:4d} {ident:28s} {truth:20s} {verdict:20s} {'yes' if right else 'NO':>5s} {seconds:7.1f} "
+              f"{timing.get('total_cpu', math.nan):7.1f}  {stage_text}")
+    walls = [row[5] for row in rows]
+    changed = [row[5] for row in rows if row[2] != "none"]
+    slowest = max(rows, key=lambda row: row[5])
+    print()
+    print(f"campaigns: {len(rows)}; wall time per campaign: median {statistics.median(walls):.1f} s, "
+          f"slowest {slowest[5]:.1f} s ({slowest[1]}, seed {slowest[0]})"
+          + (f"; with a change named or unexplained: median {statistics.median(changed):.1f} s" if changed else ""))
+    own, children = _peak_memory_mb()
+    print(f"largest resident memory: this process {own:.0f} MB, a worker process {children:.0f} MB")
+    print(f"exactly right: {sum(row[4] for row in rows)} / {len(rows)}")
     print(f"load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
     scratch.cleanup()
 

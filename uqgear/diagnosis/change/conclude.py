@@ -62,6 +62,7 @@ def conclude_change(
         gears=diagnosis.reference_gears,
         reference_source=inputs.reference_source,
         steps=steps,
+        workers=diagnosis.workers,
     )
     with steps.step("summarise the results"):
         timings = dict(outcome.timings, order_tracking=case.tracking_s)

@@ -101,6 +101,7 @@ def diagnose_change(
     gears: str,
     reference_source: str,
     steps: StepLog,
+    workers: int = 1,
 ) -> ChangeOutcome:
     """Judge the change since the reference and, where there is one, score the effects on it."""
     timings: dict[str, float] = {}
@@ -122,7 +123,15 @@ def diagnose_change(
         started = time.perf_counter()
         with steps.step("score the candidate effects on the change they predict") as found:
             scores = score_change(
-                test, test_features, rig, design, effects, settings=settings, model=model, reference=reference
+                test,
+                test_features,
+                rig,
+                design,
+                effects,
+                settings=settings,
+                model=model,
+                reference=reference,
+                workers=workers,
             )
             found.update(best=scores[0].label if scores else None)
         timings["change_scoring"] = time.perf_counter() - started

@@ -35,6 +35,7 @@ from ..settings import DiagnosisSettings
 from ..simulation import CampaignSimulator
 from .detection import CampaignFeatures, ChangeTest, level_floor
 from .features import FEATURES, campaign_features
+from .parallel import map_in_order
 
 # Strengths scanned per variant before the refinement, and golden-section steps of the refinement.
 _LADDER_POINTS = 6
@@ -93,8 +94,8 @@ class ChangeModel:
         self.adhesion = 0.5 * (lower + upper)
         self.lower, self.upper = lower, upper
         self._baselines: dict[str, np.ndarray] = {}
-        self.baseline = self.baseline_for("mesh")
         self.simulations = 0
+        self.baseline = self.baseline_for("mesh")
 
     def baseline_for(self, periodicity: str) -> np.ndarray:
         """The model without an effect simulated as the variant is (same window and tiling): the difference
@@ -127,7 +128,7 @@ class ChangeModel:
             run = self.simulator.run(index, self.design, 1.0, float(torques[index]), effects, periodicity)
             for channel in self.test.channels:
                 per_channel[channel].append(run.records[channel])
-        self.simulations = getattr(self, "simulations", 0) + self.ops.size
+        self.simulations += self.ops.size
         pinion_hz = self.test.speeds[self.ops] / 60.0
         values = np.stack(
             [
@@ -351,19 +352,42 @@ def score_change(
     settings: DiagnosisSettings,
     model: ChangeModel | None = None,
     reference: xr.Dataset | None = None,
+    workers: int = 1,
 ) -> list[ChangeScore]:
-    """Every variant of every candidate effect scored on the change it predicts, best share first."""
+    """Every variant of every candidate effect scored on the change it predicts, best share first.
+
+    The variants are scored on up to ``workers`` processes (:func:`~.parallel.map_in_order`).
+    """
     judged = change.judged
     if model is None:
         share = settings.replaced_line_floor if change.gears == "replaced" else settings.same_line_floor
         model = ChangeModel(design, rig, test, judged, share)
     observed, scale, anchor = _valid(change)
     hints = fixed_line_hints(rig, reference, change.channels) if reference is not None else {}
-    scores = []
-    for name in effects:
-        for candidate in effect_family(name).variants(design, hints):
-            scores.append(score_variant(model, candidate, observed, scale, anchor, settings))
-    return sorted(scores, key=lambda score: -score.share)
+    candidates = [candidate for name in effects for candidate in effect_family(name).variants(design, hints)]
+    for periodicity in dict.fromkeys(candidate.periodicity for candidate in candidates):
+        # the baselines are shared by every variant of a periodicity: simulated once, before the workers fork
+        model.baseline_for(periodicity)
+    piece = partial(_scored, model, candidates, observed, scale, anchor, settings)
+    dearest = [candidate.periodicity == "free" for candidate in candidates]
+    scored = map_in_order(piece, len(candidates), workers, dearest)
+    model.simulations += sum(simulations for _, simulations in scored)
+    return sorted((score for score, _ in scored), key=lambda score: -score.share)
+
+
+def _scored(
+    model: ChangeModel,
+    candidates: Sequence[Candidate],
+    observed: np.ndarray,
+    scale: np.ndarray,
+    anchor: np.ndarray,
+    settings: DiagnosisSettings,
+    index: int,
+) -> tuple[ChangeScore, int]:
+    """Variant ``index`` scored, and the runs simulated for it."""
+    before = model.simulations
+    score = score_variant(model, candidates[index], observed, scale, anchor, settings)
+    return score, model.simulations - before
 
 
 def explained_where(change: ChangeTest, score: ChangeScore, settings: DiagnosisSettings) -> dict[str, float]:
