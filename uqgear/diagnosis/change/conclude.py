@@ -83,16 +83,8 @@ def conclude_change(
         content["verdict"] = outcome.decision.verdict
         content["reason"] = outcome.decision.reason
         content["change"] = outcome.summary
-        named = outcome.summary["named"]
-        if named is not None:
-            content["effects"] = [
-                {
-                    "effect": named["effect"],
-                    "variant": named["variant"],
-                    "parameters": named["parameters"],
-                    "share": named["share"],
-                }
-            ]
+        if outcome.summary["named"] is not None:
+            content["effects"] = [_named_effect(outcome.summary["named"])]
         content["reference"] = {"file": inputs.reference_source, "route": "change"}
         content = json_clean(content)
         maps = inconclusive_dataset(case, outcome.decision.reason, diagnosis.effects)
@@ -113,6 +105,11 @@ def conclude_change(
     diagnosis.remaining_gap_ = float("nan")
     diagnosis.summary_, diagnosis.result_ = content, maps
     return diagnosis
+
+
+def _named_effect(named: dict[str, Any]) -> dict[str, Any]:
+    """The named effect's entry of ``diagnosis.json``'s ``effects``: its variant, parameters and share of the change."""
+    return {key: named[key] for key in ("effect", "variant", "parameters", "share")}
 
 
 __all__ = ["conclude_change"]
