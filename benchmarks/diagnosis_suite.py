@@ -15,6 +15,8 @@ benchmarks/diagnosis.py --fifty-khz``.
 Usage: ``python benchmarks/diagnosis_suite.py [--suite real_world|foreign] [--seeds 1 2] [--workers 2]
 [--out DIR] [--compare DIR]``; ``--out`` keeps the blind tests (``DIR/seed-S``), ``--compare`` compares
 every campaign's verdict, named set, gaps and scores field by field with an earlier ``--out``.
+``--profile`` then diagnoses the slowest campaign again under cProfile on one process and prints
+the CPU shares of the integration, the FFTs, the feature line fits and the least-squares solver.
 ``--suite foreign`` times the differential route instead: each campaign of the foreign virtual rig
 diagnosed against a healthy reference campaign of it (``uqgear blindtest --suite foreign``), with
 the change test's and the scoring's times.
@@ -76,6 +78,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="keep the blind tests here (DIR/seed-S)")
     parser.add_argument("--compare", type=Path, help="an earlier --out to compare the verdicts with")
     parser.add_argument("--suite", choices=("real_world", "foreign"), default="real_world")
+    parser.add_argument("--profile", action="store_true",
+                        help="profile the slowest campaign's diagnosis again on one process: where its CPU goes")
     args = parser.parse_args()
     if args.suite == "foreign":
         foreign(args)
@@ -131,8 +135,42 @@ def main() -> None:
           + "".join(f"\n  seed {r[0]} {r[1]}: {r[2]} {r[4]} (truth {r[7] or r[3]})" for r in wrong))
     if args.compare is not None:
         print(f"differences from {args.compare}: {len(differences)}" + "".join(f"\n  {d}" for d in differences))
+    if args.profile:
+        # the slowest campaign diagnosed without a reference (the route a profile of rig.nc alone retraces)
+        plain = max((row for row in rows if "reference" not in row[1]), key=lambda row: row[5])
+        profile(root / f"seed-{plain[0]}" / "campaigns" / plain[1] / "rig.nc")
     print(f"load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
     scratch.cleanup()
+
+
+#: Where a diagnosis's CPU time goes, by the functions that spend it (module path fragment, function name).
+PROFILE_PARTS = {
+    "integration (compiled kernels)": ("uqgear/physics/_kernels.py", ""),
+    "FFT (band-limiting, resampling)": ("numpy/fft", ""),
+    "line fits of the features": ("uqgear/rig/features.py", ""),
+    "least-squares solver": ("scipy/optimize", ""),
+}
+
+
+def profile(rig: Path) -> None:
+    """Diagnose ``rig`` again under cProfile on one process and print the CPU shares of :data:`PROFILE_PARTS`."""
+    import cProfile
+    import pstats
+
+    from uqgear.diagnosis import Diagnosis
+
+    profiler = cProfile.Profile(time.process_time)  # CPU time: a loaded machine does not inflate it
+    started = time.process_time()
+    profiler.enable()
+    Diagnosis(workers=1).fit(rig)
+    profiler.disable()
+    total = time.process_time() - started
+    stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
+    print(f"\nprofile of {rig} on one process: {total:.1f} s CPU")
+    for label, (path, name) in PROFILE_PARTS.items():
+        own = sum(entry[2] for (file, _, function), entry in stats.items()
+                  if path in file.replace("\\", "/") and name in function)
+        print(f"  {label:34s} {own:6.1f} s  {100 * own / max(total, 1e-9):5.1f} %")
 
 
 def foreign(args: argparse.Namespace) -> None:
