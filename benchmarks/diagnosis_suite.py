@@ -58,6 +58,8 @@ def _same(a: Any, b: Any) -> bool:
 
 def compare(campaigns: list[dict[str, Any]], earlier: Path) -> list[str]:
     """Differences, field by field, between these campaigns and those of an earlier run's blindtest.json."""
+    if not earlier.exists():
+        return [f"no earlier run to compare with ({earlier})"]
     before = {c["id"]: c for c in json.loads(earlier.read_text())["campaigns"]}
     notes = []
     for campaign in campaigns:
