@@ -473,7 +473,7 @@ def _foreign_blindtest(args: argparse.Namespace, out: Path) -> int:
     from .common.fileio import write_text_atomic
     from .validation.foreign_suite import run_foreign_suite
 
-    result = run_foreign_suite(seed=args.seed, n_per_effect=args.n_per_effect, workers=args.workers or 1)
+    result = run_foreign_suite(seed=args.seed, n_per_effect=args.n_per_effect, workers=args.workers)
     # the folder appears with its file, as the other suites' do
     with OutputFolder(out, where="--out", existing="refuse") as work:
         write_text_atomic(work / "blindtest.json", json.dumps(result, indent=1, default=str))

@@ -87,7 +87,7 @@ def run_foreign_suite(
     effects: Sequence[str] | None = None,
     n_ops: int = 8,
     duration: float = 1.0,
-    workers: int = 1,
+    workers: int | None = None,
     design: Design | None = None,
 ) -> dict[str, Any]:
     """Run the foreign-rig suite; returns the JSON-ready record (campaigns, verdicts, shares, times, scores).
