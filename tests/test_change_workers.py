@@ -1,9 +1,10 @@
-"""The differential route's effect scores are the same, bit for bit, on one process and on two workers."""
+"""Pieces of work on forked processes; the differential route's effect scores are the same, bit for bit, on one
+process and on two workers."""
 
 import numpy as np
 
+from uqgear.common.forked import map_forked
 from uqgear.diagnosis import Diagnosis
-from uqgear.diagnosis.change.parallel import map_in_order
 from uqgear.physics.design import load_design
 from uqgear.physics.effects import make_effect
 from uqgear.rig.foreign_rig import draw_gears, simulate_foreign_campaign
@@ -13,9 +14,25 @@ DESIGN = load_design("locomotive")
 
 
 def test_pieces_come_back_in_order_with_the_dearest_sent_first():
-    squares = map_in_order(lambda index: index * index, 5, workers=2, dearest=[False, False, False, True, False])
+    squares = map_forked(lambda index: index * index, 5, processes=2, first=[False, False, False, True, False])
     assert squares == [0, 1, 4, 9, 16]
-    assert map_in_order(lambda index: -index, 3, workers=1) == [0, -1, -2]
+    assert map_forked(lambda index: -index, 3, processes=1) == [0, -1, -2]
+
+
+def _squares_in_a_daemon(queue):
+    queue.put(map_forked(lambda index: index * index, 3, processes=2))
+
+
+def test_a_daemonic_process_which_may_not_fork_computes_the_pieces_itself():
+    import multiprocessing
+
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_squares_in_a_daemon, args=(queue,), daemon=True)
+    child.start()
+    assert queue.get(timeout=60) == [0, 1, 4]
+    child.join(timeout=60)
+    assert child.exitcode == 0
 
 
 def test_variant_scores_do_not_depend_on_the_worker_count():

@@ -22,12 +22,14 @@ from .errors import (
     shown,
 )
 from .fileio import atomic_path, write_text_atomic
+from .forked import map_forked
 from .progress import PROGRESS_ENVIRONMENT_VARIABLE, progress, progress_enabled
 from .resources import ResourceError, bundled_file, bundled_names, example_rig_file
 from .steps import FAILURE_RECORD, StepLog, write_failure_record
 from .yamlio import YAMLError, load_yaml
 
 __all__ = [
+    "map_forked",
     "ResourceError",
     "bundled_file",
     "bundled_names",

@@ -10,12 +10,13 @@ from __future__ import annotations
 import base64
 import html
 import io
-import multiprocessing
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, Literal
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
+from ..common.forked import map_forked
 
 
 def new_figure(
@@ -35,15 +36,6 @@ def figure_png(figure: Figure, dpi: int, *, tight: bool = False) -> bytes:
     return buffer.getvalue()
 
 
-# The figure makers a forked child draws (set just before the pool forks): closures over Datasets
-# are inherited by fork rather than pickled.
-_PENDING: Sequence[Callable[[], Figure]] = ()
-
-
-def _draw_pending(index: int, dpi: int, tight: bool) -> bytes:
-    return figure_png(_PENDING[index](), dpi, tight=tight)
-
-
 def figure_pngs(
     makers: Sequence[Callable[[], Figure]], dpi: int, *, tight: bool = False, processes: int = 2
 ) -> list[bytes]:
@@ -51,27 +43,16 @@ def figure_pngs(
 
     Laying out and rasterising a figure is single-threaded Python in
     matplotlib: a diagnosis report's three figures took 3.7 s of its 5 s
-    one after the other. Each figure is drawn whole in one process, so the
-    bytes are those of drawing it here. Without the ``fork`` start method,
-    inside a daemonic process (which may not have children) or for a single
-    figure they are drawn here.
+    one after the other. Each figure is drawn whole in one process
+    (:func:`~uqgear.common.forked.map_forked`: closures over Datasets are
+    inherited by fork rather than pickled), so the bytes are those of
+    drawing it here. Without the ``fork`` start method, inside a daemonic
+    process (which may not have children) or for a single figure they are
+    drawn here.
     """
-    global _PENDING
     makers = list(makers)
-    if (
-        len(makers) < 2
-        or processes < 2
-        or "fork" not in multiprocessing.get_all_start_methods()
-        or multiprocessing.current_process().daemon
-    ):
-        return [figure_png(make(), dpi, tight=tight) for make in makers]
-    _PENDING = makers
-    try:
-        with multiprocessing.get_context("fork").Pool(min(processes, len(makers))) as pool:
-            # the dearest first is the caller's order to choose; one figure per task
-            return pool.starmap(_draw_pending, [(index, dpi, tight) for index in range(len(makers))], chunksize=1)
-    finally:
-        _PENDING = ()
+    # the dearest first is the caller's order to choose; one figure per task
+    return map_forked(lambda index: figure_png(makers[index](), dpi, tight=tight), len(makers), processes)
 
 
 def img_tag(png: bytes, alt: str) -> str:

@@ -27,7 +27,9 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
+from threadpoolctl import threadpool_limits
 
+from ...common.forked import map_forked
 from ...physics.design import Design
 from ..candidates import Candidate
 from ..effects import effect_family
@@ -35,7 +37,6 @@ from ..settings import DiagnosisSettings
 from ..simulation import CampaignSimulator
 from .detection import CampaignFeatures, ChangeTest, level_floor
 from .features import FEATURES, campaign_features
-from .parallel import map_in_order
 
 # Strengths scanned per variant before the refinement, and golden-section steps of the refinement.
 _LADDER_POINTS = 6
@@ -94,7 +95,6 @@ class ChangeModel:
         self.adhesion = 0.5 * (lower + upper)
         self.lower, self.upper = lower, upper
         self._baselines: dict[str, np.ndarray] = {}
-        self.simulations = 0
         self.baseline = self.baseline_for("mesh")
 
     def baseline_for(self, periodicity: str) -> np.ndarray:
@@ -128,7 +128,6 @@ class ChangeModel:
             run = self.simulator.run(index, self.design, 1.0, float(torques[index]), effects, periodicity)
             for channel in self.test.channels:
                 per_channel[channel].append(run.records[channel])
-        self.simulations += self.ops.size
         pinion_hz = self.test.speeds[self.ops] / 60.0
         values = np.stack(
             [
@@ -356,7 +355,9 @@ def score_change(
 ) -> list[ChangeScore]:
     """Every variant of every candidate effect scored on the change it predicts, best share first.
 
-    The variants are scored on up to ``workers`` processes (:func:`~.parallel.map_in_order`).
+    Each variant's score reads the model and the change alone: the variants are scored on up to
+    ``workers`` forked processes (:func:`~uqgear.common.forked.map_forked`; the baselines they
+    share are simulated first, here), those simulated over the whole record sent out first.
     """
     judged = change.judged
     if model is None:
@@ -369,10 +370,9 @@ def score_change(
         # the baselines are shared by every variant of a periodicity: simulated once, before the workers fork
         model.baseline_for(periodicity)
     piece = partial(_scored, model, candidates, observed, scale, anchor, settings)
-    dearest = [candidate.periodicity == "free" for candidate in candidates]
-    scored = map_in_order(piece, len(candidates), workers, dearest)
-    model.simulations += sum(simulations for _, simulations in scored)
-    return sorted((score for score, _ in scored), key=lambda score: -score.share)
+    whole_record = [candidate.periodicity == "free" for candidate in candidates]
+    scores = map_forked(piece, len(candidates), workers, first=whole_record)
+    return sorted(scores, key=lambda score: -score.share)
 
 
 def _scored(
@@ -383,11 +383,10 @@ def _scored(
     anchor: np.ndarray,
     settings: DiagnosisSettings,
     index: int,
-) -> tuple[ChangeScore, int]:
-    """Variant ``index`` scored, and the runs simulated for it."""
-    before = model.simulations
-    score = score_variant(model, candidates[index], observed, scale, anchor, settings)
-    return score, model.simulations - before
+) -> ChangeScore:
+    """Variant ``index`` scored with one BLAS thread, in a forked process as here (the same bits either way)."""
+    with threadpool_limits(1):
+        return score_variant(model, candidates[index], observed, scale, anchor, settings)
 
 
 def explained_where(change: ChangeTest, score: ChangeScore, settings: DiagnosisSettings) -> dict[str, float]:
