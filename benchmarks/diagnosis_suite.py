@@ -43,6 +43,11 @@ COMPARED = ("verdict", "effects_named", "shrink_shares", "nominal_gap", "best_ca
             "shrink_fraction", "borderline", "cannot_tell")
 
 
+def _load() -> str:
+    """The load averages over 1, 5 and 15 minutes, as printed beside every timing."""
+    return ", ".join(f"{v:.1f}" for v in os.getloadavg())
+
+
 def _peak_memory_mb() -> tuple[float, float]:
     """Largest resident set of this process and of any finished worker process, MB (Linux: ru_maxrss in kB)."""
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -87,7 +92,7 @@ def main() -> None:
         foreign(args)
         return
     print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
-          f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+          f"{_load()}", flush=True)
     scratch = tempfile.TemporaryDirectory()
     root = args.out if args.out is not None else Path(scratch.name)
     rows, stages, differences = [], {}, []
@@ -96,7 +101,7 @@ def main() -> None:
         content = blindtest(root / f"seed-{seed}", suite="real_world", n_per_effect=1, seed=seed,
                             workers=args.workers, report=False)
         print(f"seed {seed}: {len(content['campaigns'])} campaigns in {time.perf_counter() - started:.0f} s; "
-              f"load average {', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+              f"load average {_load()}", flush=True)
         for campaign in content["campaigns"]:
             timing = campaign.get("timing_s", {})
             rows.append((seed, campaign["id"], campaign["verdict"], campaign["expected_verdict"],
@@ -141,7 +146,7 @@ def main() -> None:
         # the slowest campaign diagnosed without a reference (the route a profile of rig.nc alone retraces)
         plain = max((row for row in rows if "reference" not in row[1]), key=lambda row: row[5])
         profile(root / f"seed-{plain[0]}" / "campaigns" / plain[1] / "rig.nc")
-    print(f"load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
+    print(f"load average at the end: {_load()}")
     scratch.cleanup()
 
 
@@ -178,7 +183,7 @@ def profile(rig: Path) -> None:
 def foreign(args: argparse.Namespace) -> None:
     """The differential route on the foreign-rig suite: per campaign its verdict, wall time and stages."""
     print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
-          f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+          f"{_load()}", flush=True)
     scratch = tempfile.TemporaryDirectory()
     root = args.out if args.out is not None else Path(scratch.name)
     rows = []
@@ -189,7 +194,7 @@ def foreign(args: argparse.Namespace) -> None:
         (root / f"seed-{seed}" / "blindtest.json").write_text(json.dumps(content, indent=1, default=str))
         print(f"seed {seed}: {len(content['campaigns'])} campaigns in {time.perf_counter() - started:.0f} s, "
               f"exactly right {content['exactly_right']:.3f}; load average "
-              f"{', '.join(f'{v:.1f}' for v in os.getloadavg())}", flush=True)
+              f"{_load()}", flush=True)
         for campaign in content["campaigns"]:
             truth = (campaign.get("truth") or {}).get("effect", "none")
             rows.append((seed, campaign["campaign"], campaign["verdict"], truth, campaign["exactly_right"],
@@ -212,7 +217,7 @@ def foreign(args: argparse.Namespace) -> None:
     own, children = _peak_memory_mb()
     print(f"largest resident memory: this process {own:.0f} MB, a worker process {children:.0f} MB")
     print(f"exactly right: {sum(row[4] for row in rows)} / {len(rows)}")
-    print(f"load average at the end: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
+    print(f"load average at the end: {_load()}")
     scratch.cleanup()
 
 
