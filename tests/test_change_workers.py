@@ -52,3 +52,28 @@ def test_variant_scores_do_not_depend_on_the_worker_count():
         assert first.share == second.share and first.values == second.values
         assert np.array_equal(first.predicted, second.predicted, equal_nan=True)
     assert fits[0].decision_.verdict == fits[1].decision_.verdict
+
+
+def test_bad_reference_options_and_worker_counts_are_refused_naming_them(tmp_path):
+    import subprocess
+    import sys
+
+    import pytest
+
+    from uqgear.diagnosis import DiagnosisError
+    from uqgear.validation.foreign_suite import run_foreign_suite
+
+    with pytest.raises(DiagnosisError, match="reference_route: expected one of change, transfer; got 'bogus'"):
+        Diagnosis(reference_route="bogus")
+    with pytest.raises(DiagnosisError, match="reference_gears: expected one of same, replaced; got 'new'"):
+        Diagnosis(reference_gears="new")
+    with pytest.raises(DiagnosisError, match="workers: expected an integer >= 1; got 0"):
+        run_foreign_suite(workers=0)  # refused at once, before any campaign is simulated
+    completed = subprocess.run(
+        [sys.executable, "-m", "uqgear", "diagnose", "rig.nc", "--reference", "healthy.nc",
+         "--reference-gears", "bogus", "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, cwd=tmp_path,
+    )
+    assert completed.returncode == 2
+    assert completed.stderr.count("\n") == 1 and "--reference-gears: invalid choice: 'bogus'" in completed.stderr
+    assert not (tmp_path / "out").exists()

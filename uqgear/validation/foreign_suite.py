@@ -31,6 +31,7 @@ import numpy as np
 
 from ..diagnosis import Diagnosis
 from ..diagnosis.effects import effect_family, effect_names
+from ..diagnosis.inputs import check_workers
 from ..physics.design import Design, load_design
 from ..rig.foreign_modes import bearing_check_plan
 from ..rig.foreign_rig import draw_gears, simulate_foreign_campaign
@@ -98,6 +99,8 @@ def run_foreign_suite(
     >>> run_foreign_suite(seed=1, effects=[], n_ops=3, duration=0.2)["exactly_right"]  # doctest: +SKIP
     1.0
     """
+    # a bad worker count is refused before any campaign is simulated, not after the first
+    workers = check_workers(workers)
     names = list(effect_names()) if effects is None else list(effects)
     nominal = design if design is not None else load_design("locomotive")
     sequence = as_seed_sequence(seed)
