@@ -257,6 +257,31 @@ def test_periodic_tiling_matches_full_simulation(design):
             assert a[k] == pytest.approx(b[k], rel=2e-3), (channel, feature)
 
 
+def _largest_prime_factor(number):
+    factor, largest = 2, 1
+    while factor * factor <= number:
+        while number % factor == 0:
+            largest, number = factor, number // factor
+        factor += 1
+    return max(largest, number)
+
+
+def test_whole_record_window_has_a_fast_fft_length_and_covers_record_and_guards(design):
+    """A whole-record run keeps a length with prime factors of at most 11 (fast FFTs), never shorter
+    than the record with its guards, out of the fewest whole mesh periods that hold it."""
+    speeds = [600.0, 1250.0, 2800.0, 3400.0]
+    simulator = sim.CampaignSimulator(design, speeds, [6000.0] * 4, 20480.0, 20480, ("te", "acc_gear"))
+    for op, speed in enumerate(speeds):
+        periods, samples = simulator.whole_window(op)
+        per_period = simulator.samples_per_period[op]
+        needed = (20480 / 20480.0 + 2 * sim._GUARD) * design.z1 * speed / 60.0 * per_period
+        assert _largest_prime_factor(samples) <= 11
+        assert needed <= samples <= needed + 0.02 * needed + per_period
+        assert (periods - 1) * per_period < samples <= periods * per_period
+    run = simulator.run(0, design, 1.0, 30000.0, (), "free")
+    assert {values.shape for values in run.records.values()} == {(20480,)}
+
+
 def test_runs_are_bit_identical_however_many_workers(healthy_case):
     """Runs are reduced in groups fixed by the task list alone, one BLAS thread everywhere: the worker
     count (and the dispatch order the executor picks from measured costs) never changes a bit."""

@@ -15,6 +15,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+import scipy.fft
 
 from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
@@ -247,6 +248,18 @@ class CampaignSimulator:
             return self.design.z2
         return int(math.ceil((self.duration + 2 * _GUARD) * self.mesh_frequency(op))) + 1
 
+    def whole_window(self, op: int) -> tuple[int, int]:
+        """Mesh periods simulated for a whole-record run, and the samples of them kept.
+
+        The record with its guards, lengthened to the next length whose FFT
+        is fast (:func:`scipy.fft.next_fast_len`): the band-limiting
+        transforms of a length with a large prime factor cost up to ten times
+        more (a few hundred samples more of the end guard cost nothing).
+        """
+        per_period = self.samples_per_period[op]
+        samples = scipy.fft.next_fast_len(self.window_periods("free", op) * per_period)
+        return -(-samples // per_period), samples
+
     def run(
         self,
         op: int,
@@ -276,8 +289,9 @@ class CampaignSimulator:
             result = self._tiled(op, *simulate(run_in + window + 1, window + 1), window, periodicity)
             if result is not None:
                 return result
-        whole = self.window_periods("free", op)
-        return self._whole(op, simulate(run_in + whole, whole)[0])
+        periods, samples = self.whole_window(op)
+        signals = simulate(run_in + periods, periods)[0]
+        return self._whole(op, {name: values[:samples] for name, values in signals.items()})
 
     def _simulate(
         self,
