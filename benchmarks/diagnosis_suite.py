@@ -14,7 +14,8 @@ benchmarks/diagnosis.py --fifty-khz``.
 
 Usage: ``python benchmarks/diagnosis_suite.py [--suite real_world|foreign] [--seeds 1 2] [--workers 2]
 [--out DIR] [--compare DIR]``; ``--out`` keeps the blind tests (``DIR/seed-S``), ``--compare`` compares
-every campaign's verdict, named set, gaps and scores field by field with an earlier ``--out``.
+every campaign with an earlier ``--out``: the decisions (verdict, named set, best candidate, borderline,
+cannot-tell) that differ, and how far the figures (gaps, shares, scores) moved.
 ``--profile`` then diagnoses the slowest campaign again under cProfile on one process and prints
 the CPU shares of the integration, the FFTs, the feature line fits and the least-squares solver.
 ``--suite foreign`` times the differential route instead: each campaign of the foreign virtual rig
@@ -38,9 +39,12 @@ from typing import Any
 
 from uqgear.validation import blindtest, run_foreign_suite
 
-# the fields compared between two runs of the suite (a speed change must leave them as they were)
-COMPARED = ("verdict", "effects_named", "shrink_shares", "nominal_gap", "best_candidate", "best_score",
-            "shrink_fraction", "borderline", "cannot_tell")
+# the fields compared between two runs of the suite (a speed change must leave the decisions as they
+# were; the figures may move by rounding, which the comparison measures)
+DECISIONS = ("verdict", "effects_named", "best_candidate", "borderline", "cannot_tell")
+FIGURES = ("shrink_shares", "nominal_gap", "best_score", "shrink_fraction")
+# a figure that moves by more than this relative change is listed one by one
+LISTED_CHANGE = 1e-3
 
 
 def _load() -> str:
@@ -61,21 +65,47 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
-def compare(campaigns: list[dict[str, Any]], earlier: Path) -> list[str]:
-    """Differences, field by field, between these campaigns and those of an earlier run's blindtest.json."""
+def _relative_change(a: Any, b: Any) -> float:
+    """Largest relative change between two figures (numbers or lists of numbers); inf where not comparable."""
+    if _same(a, b):
+        return 0.0
+    first, second = (a if isinstance(a, list) else [a]), (b if isinstance(b, list) else [b])
+    if len(first) != len(second):
+        return math.inf
+    change = 0.0
+    for x, y in zip(first, second):
+        if not isinstance(x, (int, float)) or not isinstance(y, (int, float)):
+            return math.inf
+        if not _same(float(x), float(y)):
+            change = max(change, abs(x - y) / max(abs(x), abs(y), 1e-300))
+    return change
+
+
+def compare(campaigns: list[dict[str, Any]], earlier: Path) -> tuple[list[str], list[tuple[str, float, str]]]:
+    """These campaigns against an earlier run's blindtest.json: decisions that differ, figures that moved.
+
+    Returns the decision differences (one line each) and, per figure that
+    moved, its name, relative change and a line saying from what to what.
+    """
     if not earlier.exists():
-        return [f"no earlier run to compare with ({earlier})"]
+        return [f"no earlier run to compare with ({earlier})"], []
     before = {c["id"]: c for c in json.loads(earlier.read_text())["campaigns"]}
-    notes = []
+    decisions: list[str] = []
+    figures: list[tuple[str, float, str]] = []
     for campaign in campaigns:
         old = before.get(campaign["id"])
         if old is None:
-            notes.append(f"{campaign['id']}: not in {earlier}")
+            decisions.append(f"{campaign['id']}: not in {earlier}")
             continue
-        for field in COMPARED:
+        for field in DECISIONS:
             if not _same(campaign.get(field), old.get(field)):
-                notes.append(f"{campaign['id']}.{field}: {old.get(field)!r} -> {campaign.get(field)!r}")
-    return notes
+                decisions.append(f"{campaign['id']}.{field}: {old.get(field)!r} -> {campaign.get(field)!r}")
+        for field in FIGURES:
+            change = _relative_change(old.get(field), campaign.get(field))
+            if change > 0.0:
+                name = f"{campaign['id']}.{field}"
+                figures.append((name, change, f"{name}: {old.get(field)!r} -> {campaign.get(field)!r}"))
+    return decisions, figures
 
 
 def main() -> None:
@@ -96,6 +126,7 @@ def main() -> None:
     scratch = tempfile.TemporaryDirectory()
     root = args.out if args.out is not None else Path(scratch.name)
     rows, stages, differences = [], {}, []
+    figures: list[tuple[str, float, str]] = []
     for seed in args.seeds:
         started = time.perf_counter()
         content = blindtest(root / f"seed-{seed}", suite="real_world", n_per_effect=1, seed=seed,
@@ -114,8 +145,9 @@ def main() -> None:
               f"controls with an effect named {sets['controls_with_an_effect_named']} of {sets['n_controls']}",
               flush=True)
         if args.compare is not None:
-            differences += [f"seed {seed}: {note}" for note in
-                            compare(content["campaigns"], args.compare / f"seed-{seed}" / "blindtest.json")]
+            decided, moved = compare(content["campaigns"], args.compare / f"seed-{seed}" / "blindtest.json")
+            differences += [f"seed {seed}: {note}" for note in decided]
+            figures += [(f"seed {seed}: {name}", change, f"seed {seed}: {line}") for name, change, line in moved]
     print()
     print(f"{'seed':>4s} {'campaign':52s} {'verdict':14s} {'wall s':>7s} {'diag s':>7s} {'CPU s':>7s}  stages (s)")
     for seed, ident, verdict, _expected, _named, seconds, timing, _ in rows:
@@ -141,7 +173,13 @@ def main() -> None:
     print(f"named sets right: {len(rows) - len(wrong)} / {len(rows)}"
           + "".join(f"\n  seed {r[0]} {r[1]}: {r[2]} {r[4]} (truth {r[7] or r[3]})" for r in wrong))
     if args.compare is not None:
-        print(f"differences from {args.compare}: {len(differences)}" + "".join(f"\n  {d}" for d in differences))
+        print(f"decisions that differ from {args.compare}: {len(differences)}"
+              + "".join(f"\n  {d}" for d in differences))
+        largest = max(figures, key=lambda entry: entry[1], default=("", 0.0, ""))
+        listed = [line for _, change, line in figures if change > LISTED_CHANGE]
+        print(f"figures that moved: {len(figures)} of {len(rows) * len(FIGURES)}, largest relative change "
+              f"{largest[1]:.1e} ({largest[0] or 'none'}); moved by more than {LISTED_CHANGE:g}: {len(listed)}"
+              + "".join(f"\n  {line}" for line in listed))
     if args.profile:
         # the slowest campaign diagnosed without a reference (the route a profile of rig.nc alone retraces)
         plain = max((row for row in rows if "reference" not in row[1]), key=lambda row: row[5])
