@@ -136,7 +136,7 @@ def main() -> None:
         return
     results = {name: run(name, arguments.threads, arguments.seed) for name in arguments.files}
     print("\nall criteria met (truth in 90 % CI, converged, predictive check, <= 180 s):",
-          {name: ok for name, ok in results.items()})
+          dict(results.items()))
 
 
 if __name__ == "__main__":

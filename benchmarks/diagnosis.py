@@ -25,10 +25,10 @@ import time
 import warnings
 from pathlib import Path
 
+from uqgear.common.errors import UndercutWarning
 from uqgear.diagnosis import diagnose
 from uqgear.physics.design import load_design
 from uqgear.physics.effects import Eccentricity
-from uqgear.common.errors import UndercutWarning
 from uqgear.rig.format import write_rig
 from uqgear.rig.virtual_rig import simulate_campaign
 
@@ -37,7 +37,10 @@ LABELS = {"healthy.nc": "none", "healthy_b.nc": "none", "eccentricity.nc": "ecce
           "tooth_damage.nc": "tooth_damage", "torque_ripple.nc": "torque_ripple",
           "adhesion_oscillation.nc": "adhesion_oscillation", "friction.nc": "friction"}
 def fifty_khz_campaign(folder: Path) -> Path:
-    """A 6-run, 50 kHz, 1 s campaign of the bundled 17:38 gearbox (``pair_17_38``), eccentric pinion (virtual rig, seed 5)."""
+    """A 6-run, 50 kHz, 1 s campaign of the bundled 17:38 gearbox (``pair_17_38``).
+
+    Its pinion is eccentric (virtual rig, seed 5).
+    """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UndercutWarning)       # the unshifted 17-tooth pinion, modelled
         design = load_design("pair_17_38")
@@ -81,7 +84,8 @@ def main() -> None:
         rows.append((path.name, label, content["verdict"], content["gap"]["baseline"],
                      content["gap"]["shrink_fraction"], wall, timing["total_cpu"], timing["nominal_fit"],
                      timing["screening"], timing["full_fits"]))
-        print(f"{path.name}: verdict {content['verdict']} (label {label}); wall {wall:.0f} s, CPU {timing['total_cpu']:.0f} s "
+        print(f"{path.name}: verdict {content['verdict']} (label {label}); wall {wall:.0f} s, "
+              f"CPU {timing['total_cpu']:.0f} s "
               f"(nominal fit {timing['nominal_fit']:.0f} s, screening {timing['screening']:.0f} s, "
               f"full fits {timing['full_fits']:.0f} s)", flush=True)
     print()

@@ -94,7 +94,8 @@ def batch(design, n_speeds: int, reference: Path | None) -> None:
     per_core = lanes_time * threads / steps * 1e9
     cpu_step = lanes_cpu / steps * 1e9
     print(f"  lanes      : {lanes_time:6.2f} s, CPU {lanes_cpu:6.2f} s  ({lanes_time / n * 1e3:.3f} ms/run, "
-          f"{steps / lanes_time / 1e6:.1f} M RK4 steps/s, {per_core:.1f} ns a step per core by wall time, {cpu_step:.1f} "
+          f"{steps / lanes_time / 1e6:.1f} M RK4 steps/s, {per_core:.1f} ns a step per core by wall time, "
+          f"{cpu_step:.1f} "
           f"by CPU time: {SCALAR_LIMIT_NS / cpu_step:.2f}x the ~{SCALAR_LIMIT_NS:.0f} ns scalar limit, "
           f"{SIMD_LIMIT_NS / cpu_step:.2f}x the ~{SIMD_LIMIT_NS:.0f} ns SIMD one)")
     one_time, one_cpu, one = _timed_batch(design, samples, lanes=False)
@@ -116,7 +117,8 @@ def batch(design, n_speeds: int, reference: Path | None) -> None:
         integration.K = saved
     change = max(float(np.nanmax(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
                  for a, b in zip(_floats(lanes).values(), _floats(ref).values()) if a.size)
-    print(f"  reference  : {ref_time:6.2f} s, CPU {ref_cpu:6.2f} s  ({steps / ref_time / 1e6:.1f} M RK4 steps/s; kernels of "
+    print(f"  reference  : {ref_time:6.2f} s, CPU {ref_cpu:6.2f} s  "
+          f"({steps / ref_time / 1e6:.1f} M RK4 steps/s; kernels of "
           f"{reference})   RATIO lanes vs reference = {ref_time / lanes_time:.2f}x (CPU {ref_cpu / lanes_cpu:.2f}x); "
           f"largest relative output change {change:.1e}")
 
@@ -129,7 +131,9 @@ def _reference_kernels(checkout: Path, serial: bool = False) -> types.SimpleName
     """
     path = checkout / "uqgear" / "_kernels.py"
     if not path.exists():
-        raise SystemExit(f"--reference: {path} not found; expected a checkout of 26ef8ac (git worktree add DIR 26ef8ac)")
+        raise SystemExit(
+            f"--reference: {path} not found; expected a checkout of 26ef8ac (git worktree add DIR 26ef8ac)"
+        )
     # compiled here without its cache: that checkout's cache entries name its own module
     module = types.ModuleType("_kernels_reference")
     source = path.read_text().replace("cache=True", "cache=False")
@@ -162,7 +166,8 @@ def speed_bands(design, reference: Path | None) -> None:
         kernels.append(("reference", _reference_kernels(reference), {"lanes": False}))
         kernels.append(("ref. serial", _reference_kernels(reference, serial=True), {"lanes": False}))
     print(f"speed bands: CPU time a step, one thread (8 T2 values a band: one lane group; {_load()})")
-    print(f"  {'rpm':>6s} {'steps/period':>12s} {'separation':>10s}  " + "  ".join(f"{k[0] + ' ns':>14s}" for k in kernels))
+    header = "  ".join(f"{k[0] + ' ns':>14s}" for k in kernels)
+    print(f"  {'rpm':>6s} {'steps/period':>12s} {'separation':>10s}  " + header)
     saved, saved_threads = integration.K, numba.get_num_threads()
     numba.set_num_threads(1)  # the reference kernel's prange too
     try:

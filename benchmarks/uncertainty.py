@@ -25,9 +25,9 @@ import xarray as xr
 import uqgear
 from uqgear.physics.integration import BatchEvaluator
 from uqgear.uq.interval import IntervalAnalysis
-from uqgear.uq.runner import Runner
 from uqgear.uq.parameter_space import ParameterSpace
 from uqgear.uq.parameters import Distribution, Interval
+from uqgear.uq.runner import Runner
 
 
 def interval_methods(design, speeds: np.ndarray, scan_points: int) -> None:
@@ -44,8 +44,8 @@ def interval_methods(design, speeds: np.ndarray, scan_points: int) -> None:
           f"({int(reference['runs'].sum())} runs, {scan_time:.1f} s)")
     print(f"  {'method':10s} {'runs':>6s} {'seconds':>8s} " + " ".join(f"{q + ' max err':>26s}" for q in qois)
           + f" {'flagged':>8s}")
-    settings = {"vertex": dict(), "chebyshev": dict(order=6, check_points=3, fallback="scan"),
-                "optimize": dict(n_starts=2)}
+    settings = {"vertex": {}, "chebyshev": {"order": 6, "check_points": 3, "fallback": "scan"},
+                "optimize": {"n_starts": 2}}
     for method, options in settings.items():
         start = time.perf_counter()
         result = IntervalAnalysis(method, qoi=qois, seed=1, **options).fit(model, space, sweep=sweep).result_
@@ -86,7 +86,8 @@ def monte_carlo(design, n_samples: int) -> None:
             client.run(lambda: uqgear.simulate_batch(uqgear.load_design(), uqgear.samples_from_mapping(
                 {"pinion_speed": [3000.0]}), n_periods=2, keep_periods=1))  # compile on the workers
             start = time.perf_counter()
-            results[f"dask workers={workers}"] = Runner(chunk_size=500, scheduler=client, progress=False).run(model, samples)
+            runner = Runner(chunk_size=500, scheduler=client, progress=False)
+            results[f"dask workers={workers}"] = runner.run(model, samples)
             timings[f"dask workers={workers}"] = time.perf_counter() - start
     for name, elapsed in timings.items():
         print(f"  {name:16s} {elapsed:7.1f} s  ({n_samples / elapsed:7.0f} runs/s)")

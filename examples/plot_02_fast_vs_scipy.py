@@ -16,13 +16,13 @@ import numpy as np
 import uqgear
 
 design = uqgear.load_design("locomotive")
-kwargs = dict(
-    pinion_speed=4000.0,
-    drive_torque=7000.0,
-    adhesion_torque=21.15e3,
-    n_periods=300,
-    keep_periods=20,
-)
+kwargs = {
+    "pinion_speed": 4000.0,
+    "drive_torque": 7000.0,
+    "adhesion_torque": 21.15e3,
+    "n_periods": 300,
+    "keep_periods": 20,
+}
 uqgear.simulate(design, **{**kwargs, "n_periods": 4, "keep_periods": 2})  # compile once
 
 start = time.perf_counter()

@@ -15,8 +15,8 @@ import pytest
 import xarray as xr
 
 from uqgear import validation as B
-from uqgear.physics.design import load_design
 from uqgear.diagnosis import EFFECT_NAMES, DiagnosisError
+from uqgear.physics.design import load_design
 
 
 def test_second_design_is_the_one_asked_for():

@@ -11,9 +11,20 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.calibration import (Calibration, CalibrationError, PolynomialEmulator, calibrate,
-                                effective_sample_size, write_calibration, integrated_autocorrelation_time, model_harmonics,
-                                observed_harmonics, prior_bounds, resolve_parameters, split_rhat)
+from uqgear.calibration import (
+    Calibration,
+    CalibrationError,
+    PolynomialEmulator,
+    calibrate,
+    effective_sample_size,
+    integrated_autocorrelation_time,
+    model_harmonics,
+    observed_harmonics,
+    prior_bounds,
+    resolve_parameters,
+    split_rhat,
+    write_calibration,
+)
 from uqgear.common.errors import RigDataError
 from uqgear.physics.integration import samples_from_mapping
 from uqgear.rig.format import make_rig_dataset, read_rig, write_rig
@@ -339,8 +350,8 @@ def _fit_parts(*, reasons=(), passed=True, median=1.0, model_error=0.05):
                              "relative_difference": (("op", "channel", "harmonic"), z / 20.0)},
                             coords={"channel": ["te", "acc_pinion", "acc_gear"], "harmonic": [1],
                                     "pinion_speed": ("op", [1000.0, 2000.0])})
-    return dict(diagnostics=diagnostics, summary=summary, predictive_check=check, predictive=predictive,
-                model_error_cap=0.5)
+    return {"diagnostics": diagnostics, "summary": summary, "predictive_check": check, "predictive": predictive,
+                "model_error_cap": 0.5}
 
 
 def test_failure_names_its_cause():

@@ -11,16 +11,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import xarray as xr
 
 import uqgear.common
-from uqgear.study import analyses, running
 from uqgear.cli import main
 from uqgear.common.errors import UqgearError
+from uqgear.study import analyses, running
+from uqgear.study.schema import load_study, parse_study
 from uqgear.uq.results import load_result
 from uqgear.uq.runner import Runner
-from uqgear.study.schema import load_study, parse_study
 
 ROOT = Path(__file__).resolve().parent.parent
 # the bundled studies, from the installed package (a wheel or sdist has no top-level studies/)

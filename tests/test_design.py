@@ -1,4 +1,7 @@
-"""Design loading, validation and involute geometry against the derived values of docs/model/reference-design.md section 5."""
+"""Design loading, validation and involute geometry.
+
+Checked against the derived values of docs/model/reference-design.md section 5.
+"""
 
 import math
 
@@ -6,10 +9,9 @@ import pytest
 
 import uqgear
 import uqgear.common
-from uqgear.physics.design import DESIGN_KEYS, load_design
 from uqgear.common.errors import DesignError
+from uqgear.physics.design import DESIGN_KEYS, load_design
 from uqgear.physics.geometry import pair_geometry
-
 
 
 def test_reference_design_keys_and_provenance(design):

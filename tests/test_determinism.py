@@ -21,7 +21,6 @@ import xarray as xr
 
 import uqgear
 
-
 # Run in a fresh interpreter: the batch kernel through separation and period-n regimes, the
 # calibration's harmonic kernel, and the smoke study through the real command line. One
 # interpreter does all three, so each cache state costs one compilation.

@@ -20,18 +20,32 @@ import numpy as np
 import pytest
 import scipy.stats
 import xarray as xr
+from helpers import candidate_score
 
-from uqgear.diagnosis import DiagnosisError, decide, decide_verdict, diagnose
-from uqgear.diagnosis import effects, fit_problem, fitting, inputs, scoring, screening, signatures
-from uqgear.diagnosis import case as rig_case, discrepancy as disc, execution as runs, processing, simulation as sim
+from uqgear.common.errors import RigDataError, UqgearError
+from uqgear.diagnosis import (
+    DiagnosisError,
+    decide,
+    decide_verdict,
+    diagnose,
+    effects,
+    fit_problem,
+    fitting,
+    inputs,
+    processing,
+    scoring,
+    screening,
+    signatures,
+)
+from uqgear.diagnosis import case as rig_case
+from uqgear.diagnosis import discrepancy as disc
+from uqgear.diagnosis import execution as runs
+from uqgear.diagnosis import simulation as sim
 from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.physics.design import load_design
-from uqgear.common.errors import RigDataError, UqgearError
 from uqgear.rig.features import extract_features
 from uqgear.rig.format import make_rig_dataset, read_rig
-
-from helpers import candidate_score
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
@@ -247,7 +261,8 @@ def test_periodic_tiling_matches_full_simulation(design):
     periodic = simulator.run(0, design, 1.0, 30000.0, (), "pinion")
     full = simulator.run(0, design, 1.0, 30000.0, (), "free")
     assert periodic.periodic and not full.periodic
-    processor = processing.RunProcessor(design, 1250.0, 20480.0, 4096, dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0))
+    options = dict(rig_case.FEATURE_OPTIONS, band_limit=8000.0)
+    processor = processing.RunProcessor(design, 1250.0, 20480.0, 4096, options)
     names = processor.names
     for channel in ("te", "acc_pinion"):
         a = processor.model_features(periodic.records[channel][None])[0]

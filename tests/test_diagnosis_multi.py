@@ -24,17 +24,28 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import xarray as xr
+from helpers import candidate_score
 
+from uqgear import validation as blind_test
 from uqgear.common.steps import StepLog
-from uqgear.diagnosis import Diagnosis, DiagnosisError, DiagnosisSettings, diagnose
-from uqgear.diagnosis import candidates, effects, fit_problem, fitting, scoring, selection, set_verdict, verdict
+from uqgear.diagnosis import (
+    Diagnosis,
+    DiagnosisError,
+    DiagnosisSettings,
+    candidates,
+    diagnose,
+    effects,
+    fit_problem,
+    fitting,
+    scoring,
+    selection,
+    set_verdict,
+    verdict,
+)
 from uqgear.diagnosis.effect_set import SelectedEffect, SelectionRound
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.diagnosis.state import DiagnosisState
 from uqgear.diagnosis.verdict import Decision
-from uqgear import validation as blind_test
-
-from helpers import candidate_score
 from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign
 

@@ -17,7 +17,6 @@ import uqgear.physics  # noqa: F401  (loaded before fake_integration stands in f
 from uqgear import dynamics
 from uqgear.common.errors import UqgearError
 
-
 # ----------------------------------------------------------------------------
 # reference systems
 # ----------------------------------------------------------------------------

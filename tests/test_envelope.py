@@ -5,9 +5,14 @@ import pytest
 import xarray as xr
 
 import uqgear
-from uqgear.uq.envelope import (bifurcation_envelope, qoi_envelope, regime_map, speed_adhesion_grid,
-                             time_response_envelope)
 from uqgear.common.errors import OperatingPointError
+from uqgear.uq.envelope import (
+    bifurcation_envelope,
+    qoi_envelope,
+    regime_map,
+    speed_adhesion_grid,
+    time_response_envelope,
+)
 from uqgear.uq.runner import Runner
 
 LIGHT = {"drive_torque": 1000.0}
@@ -85,7 +90,7 @@ def test_results_round_trip_through_netcdf(grid, tmp_path):
 
 
 def test_checkpointed_grid_resumes_identically(design, tmp_path):
-    kw = dict(fixed=LIGHT, n_periods=60, keep_periods=30, lyapunov=False)
+    kw = {"fixed": LIGHT, "n_periods": 60, "keep_periods": 30, "lyapunov": False}
     runner = Runner(chunk_size=2, checkpoint_dir=tmp_path / "ck", progress=False)
     first = speed_adhesion_grid(design, [1500.0, 3000.0], [5000.0, 20000.0], runner=runner, **kw)
     again = speed_adhesion_grid(design, [1500.0, 3000.0], [5000.0, 20000.0], runner=runner, resume=True, **kw)

@@ -9,8 +9,14 @@ import pytest
 import xarray as xr
 
 from uqgear.common.errors import DesignError, RigDataError, StudyError
-from uqgear.rig.features import (FEATURE_FAMILIES, extract_features, feature_definitions, line_amplitudes,
-                             order_spectrum, sampling_rate)
+from uqgear.rig.features import (
+    FEATURE_FAMILIES,
+    extract_features,
+    feature_definitions,
+    line_amplitudes,
+    order_spectrum,
+    sampling_rate,
+)
 from uqgear.rig.format import read_rig, rig_design
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"

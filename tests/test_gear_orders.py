@@ -16,12 +16,20 @@ import math
 import numpy as np
 import pytest
 
+from uqgear.diagnosis.allowances.pitch_errors import LARGE_RUN_OUT_SHARE, PitchErrorAllowance, run_outs_not_told_apart
+from uqgear.diagnosis.allowances.pitch_orders import (
+    ORDERS,
+    bounds_of,
+    class_powers,
+    drawn_amplitudes,
+    factor_bounds,
+    factors_summary,
+    fitted_factors,
+    line_groups,
+    scaled_line_errors,
+    share_below,
+)
 from uqgear.diagnosis.discrepancy import FeatureLayout
-from uqgear.diagnosis.allowances.pitch_errors import (LARGE_RUN_OUT_SHARE, PitchErrorAllowance,
-                                                      run_outs_not_told_apart)
-from uqgear.diagnosis.allowances.pitch_orders import (ORDERS, bounds_of, class_powers, drawn_amplitudes,
-                                                      factor_bounds, factors_summary, fitted_factors, line_groups,
-                                                      scaled_line_errors, share_below)
 from uqgear.physics.pitch_errors import draw_pitch_errors, order_powers
 
 
@@ -46,7 +54,8 @@ def test_the_factor_range_brackets_one_and_two_classes_up_double_every_tolerance
         assert 0.002 < low < 0.05 and 2.5 < high < 9.0, (key, low, high)
         # tolerances grow by sqrt(2) a class: powers by 2, so two classes up is four times
         assert nine[key] == pytest.approx((4 * low, 4 * high), rel=1e-9)
-    # the draws' RMS first-order |E_1| is a run-out of micrometres on class-7 gears (docs/model/unmodelled-effects.md section 6.4)
+    # the draws' RMS first-order |E_1| is a run-out of micrometres on class-7 gears
+    # (docs/model/unmodelled-effects.md section 6.4)
     amplitudes = drawn_amplitudes(drawn)
     assert 3e-6 < amplitudes[("pinion", 1)] < 30e-6 and amplitudes[("gear", 1)] > amplitudes[("pinion", 1)]
 
@@ -70,7 +79,7 @@ def test_the_share_of_class_gears_below_a_read_factor_is_the_exponential_distrib
 def _allowance(design, shares: dict, factors: dict) -> PitchErrorAllowance:
     drawn = tuple(draw_pitch_errors(design, 7, np.random.default_rng(seed)) for seed in range(12))
     return PitchErrorAllowance(True, "test", (6.0, 8.0), {}, len(drawn), {}, 0.0, 0.0, 0.0,
-                               {"pinion": 22e-6, "gear": 52e-6}, drawn, {key: (0.01, 5.0) for key in factors},
+                               {"pinion": 22e-6, "gear": 52e-6}, drawn, dict.fromkeys(factors, (0.01, 5.0)),
                                factors, shares)
 
 
@@ -132,7 +141,7 @@ def test_a_known_factor_comes_back_from_synthetic_lines(truth):
     observed = np.concatenate([np.abs(phasor), np.full((n_op, n_channel, 1), 5.0)], axis=-1)
     model = np.concatenate([model_lines, np.full((n_op, n_channel, 1), 5.0)], axis=-1)
     case = _case(observed, noise)
-    bounds = {key: (0.01, 5.0) for key in (("pinion", 1), ("pinion", 2), ("gear", 3))}
+    bounds = dict.fromkeys((("pinion", 1), ("pinion", 2), ("gear", 3)), (0.01, 5.0))
     factors = fitted_factors(case, model, allowance, {"line": 0.0}, bounds)
     # pinion order 2 pools 240 lines: within 25 %; the single-feature groups within a factor 1.6
     assert factors[("pinion", 2)] == pytest.approx(truth, rel=0.25)
@@ -140,7 +149,7 @@ def test_a_known_factor_comes_back_from_synthetic_lines(truth):
     assert truth / 1.6 < factors[("pinion", 1)] < truth * 1.6, factors
     scaled = scaled_line_errors(case, allowance, factors)
     assert scaled[..., 3] == pytest.approx(allowance[..., 3] * math.sqrt(factors[("gear", 3)]))
-    summary = factors_summary(factors, bounds, {key: 2e-6 for key in bounds})
+    summary = factors_summary(factors, bounds, dict.fromkeys(bounds, 2e-06))
     assert summary["pinion"]["2"]["factor"] == factors[("pinion", 2)] and summary["gear"]["3"]["high"] == 5.0
     # as |E_j|: the draws' RMS times the square root of the factor
     assert summary["pinion"]["2"]["amplitude_m"] == pytest.approx(2e-6 * math.sqrt(factors[("pinion", 2)]))
@@ -154,6 +163,6 @@ def test_a_factor_beyond_what_the_classes_give_is_held_at_the_range():
     observed = np.abs(spread * (rng.standard_normal(spread.shape) + 1j * rng.standard_normal(spread.shape)))
     observed = np.concatenate([observed, np.ones((30, 2, 1))], axis=-1)
     case = _case(observed, 1.0)
-    bounds = {key: (0.05, 4.0) for key in (("pinion", 1), ("pinion", 2), ("gear", 3))}
+    bounds = dict.fromkeys((("pinion", 1), ("pinion", 2), ("gear", 3)), (0.05, 4.0))
     factors = fitted_factors(case, np.zeros_like(observed), allowance, {"line": 0.0}, bounds)
     assert factors == {key: pytest.approx(4.0) for key in bounds}

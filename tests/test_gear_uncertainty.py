@@ -5,11 +5,10 @@ import pytest
 
 from uqgear.physics.integration import BatchEvaluator
 from uqgear.uq.interval import IntervalAnalysis
-from uqgear.uq.sensitivity import SobolAnalysis
 from uqgear.uq.parameter_space import ParameterSpace
 from uqgear.uq.parameters import Interval
 from uqgear.uq.polynomial_chaos import PolynomialChaos
-
+from uqgear.uq.sensitivity import SobolAnalysis
 
 
 @pytest.mark.slow

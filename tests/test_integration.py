@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 import uqgear
-from uqgear.physics.effects import make_effect
 from uqgear.common.errors import OperatingPointError
+from uqgear.physics.effects import make_effect
 from uqgear.physics.model import build_model
-
 
 
 def _linear_amplitude(setup, omega):
@@ -35,7 +34,7 @@ def test_linear_limit_matches_closed_form(design, method, speed):
     # constant stiffness and a load so large the teeth never separate: a linear system
     drive = 60e3
     adhesion = drive * design.z2 / design.z1
-    kw = dict(stiffness="constant", n_periods=300 if method == "fast" else 120, keep_periods=40)
+    kw = {"stiffness": "constant", "n_periods": 300 if method == "fast" else 120, "keep_periods": 40}
     ds = uqgear.simulate(design, speed, drive, adhesion, method=method, **kw)
     assert np.all(ds["contact"].values == 1)
     setup = build_model(design, speed, drive, adhesion, stiffness="constant")
@@ -66,7 +65,7 @@ def test_static_state_sits_beyond_bearing_clearance(design):
     has no start-up transient: the loaded bearings never enter the dead zone at this operating point
     and the response equals the healthy one shifted by the clearance."""
     clearance = [make_effect("bearing_clearance", {"clearance": 2e-4, "bearing": "pinion"})]
-    kw = dict(n_periods=60, keep_periods=60)
+    kw = {"n_periods": 60, "keep_periods": 60}
     plain = uqgear.simulate(design, 1500.0, 7000.0, 33000.0, **kw)
     loose = uqgear.simulate(design, 1500.0, 7000.0, 33000.0, effects=clearance, **kw)
     assert np.allclose(loose["y1"].values, plain["y1"].values - 2e-4, rtol=0, atol=1e-12)
@@ -85,7 +84,7 @@ def test_natural_frequencies_as_model_md(design):
     (4400.0, 7000.0, 33000.0),    # mesh resonance with tooth separation
 ])
 def test_fast_matches_scipy_reference(design, speed, drive, adhesion):
-    kw = dict(n_periods=150, keep_periods=30)
+    kw = {"n_periods": 150, "keep_periods": 30}
     ref = uqgear.simulate(design, speed, drive, adhesion, method="scipy", **kw)
     fast = uqgear.simulate(design, speed, drive, adhesion, method="fast", **kw)
     x_ref, x_fast = ref["x"].values, fast["x"].values
@@ -102,7 +101,7 @@ def test_fast_matches_scipy_with_each_effect(design, effect):
     values = {"eccentricity": {"amplitude": 12e-6}, "tooth_damage": {"depth": 0.3},
               "friction": {"coefficient": 0.1}, "torque_ripple": {"amplitude": 0.06},
               "adhesion_oscillation": {"amplitude": 0.05}, "bearing_clearance": {"clearance": 2e-4}}[effect]
-    kw = dict(n_periods=120, keep_periods=60, effects=[make_effect(effect, values)])
+    kw = {"n_periods": 120, "keep_periods": 60, "effects": [make_effect(effect, values)]}
     ref = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, method="scipy", **kw)
     fast = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, method="fast", **kw)
     healthy = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, n_periods=120, keep_periods=60)
@@ -181,7 +180,7 @@ def test_batch_threads_do_not_change_numbers(design):
 
 
 def test_effect_slots_change_the_response(design):
-    kw = dict(n_periods=200, keep_periods=100)
+    kw = {"n_periods": 200, "keep_periods": 100}
     base = uqgear.simulate(design, 1500.0, 7000.0, 33000.0, **kw)
     neutral = uqgear.simulate(design, 1500.0, 7000.0, 33000.0,
                               effects=[make_effect("torque_ripple", {"amplitude": 0.0})], **kw)
@@ -235,7 +234,7 @@ def test_fast_and_scipy_classify_alike(design, speed, drive, adhesion, expected)
     from uqgear.dynamics.regimes import classify_dataset
 
     # 200 kept periods: a period-n label needs 10 repeats (n <= 20), docs/model/analysis-conventions.md section 8
-    kw = dict(n_periods=600, keep_periods=200, samples_per_period=32)
+    kw = {"n_periods": 600, "keep_periods": 200, "samples_per_period": 32}
     ref = uqgear.simulate(design, speed, drive, adhesion, method="scipy", **kw)
     fast = uqgear.simulate(design, speed, drive, adhesion, **kw)
     assert classify_dataset(ref).label == classify_dataset(fast).label == expected

@@ -13,8 +13,13 @@ from scipy import stats
 from uqgear.common.errors import ExecutionError, ParameterSpaceError
 from uqgear.uq.chebyshev import chebyshev_coefficients, chebyshev_nodes
 from uqgear.uq.interval import IntervalAnalysis
-from uqgear.uq.interval_bounds import (FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR,
-                                       FLAG_VERTEX_EXCEEDED)
+from uqgear.uq.interval_bounds import (
+    FLAG_FALLBACK,
+    FLAG_NONFINITE,
+    FLAG_NONSMOOTH,
+    FLAG_SURROGATE_ERROR,
+    FLAG_VERTEX_EXCEEDED,
+)
 from uqgear.uq.parameter_space import ParameterSpace
 from uqgear.uq.parameters import Distribution, Fixed, Interval
 from uqgear.uq.pbox import pbox, response_envelope

@@ -27,7 +27,6 @@ from uqgear.study.analysis_schemas import QOIS
 from uqgear.study.schema import parse_study
 
 
-
 def base_radius_from_keys(design) -> float:
     """r_b1 = m z1 cos(alpha) / 2 straight from the design keys (pressure angle in degrees)."""
     return design.module * design.z1 * math.cos(math.radians(design.pressure_angle)) / 2.0

@@ -29,22 +29,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.stats
+from helpers import candidate_score
 
+from uqgear import validation as blind_test
 from uqgear.diagnosis import Diagnosis, DiagnosisError, DiagnosisSeeds, verdict
-from uqgear.diagnosis.allowances.pitch_errors import (allowance_errors, check_classes, pitch_error_allowance,
-                                                      visible_sidebands)
+from uqgear.diagnosis.allowances.pitch_errors import (
+    allowance_errors,
+    check_classes,
+    pitch_error_allowance,
+    visible_sidebands,
+)
 from uqgear.diagnosis.case import FeatureModelError, prepare_case
 from uqgear.diagnosis.discrepancy import FeatureLayout, NoiseModel, absolute_model_error, standardised_discrepancy
 from uqgear.diagnosis.fitting import fit_nominal
 from uqgear.diagnosis.heldout import leave_one_out
+from uqgear.diagnosis.processing import RunProcessor
 from uqgear.diagnosis.scoring import RunOutCheck, gap_metric
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
-from uqgear.diagnosis.processing import RunProcessor
-from uqgear import validation as blind_test
 from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign
-
-from helpers import candidate_score
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 DEFAULT_MODEL_ERROR = dict(DEFAULT_SETTINGS.model_error)

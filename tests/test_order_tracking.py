@@ -16,8 +16,13 @@ import xarray as xr
 import uqgear
 from uqgear.common.errors import StudyError
 from uqgear.rig.features import extract_features, line_amplitudes
-from uqgear.rig.order_tracking import (estimate_pinion_angle, resample_to_angle, speed_summary, tachometer_angle,
-                                       track_orders)
+from uqgear.rig.order_tracking import (
+    estimate_pinion_angle,
+    resample_to_angle,
+    speed_summary,
+    tachometer_angle,
+    track_orders,
+)
 from uqgear.rig.virtual_rig import simulate_campaign
 
 FS = 20480.0
@@ -135,7 +140,7 @@ def test_noise_alone_gives_no_estimate_and_no_resampling(design):
 def test_virtual_rig_wander_is_undone_by_tracking(design):
     """Same campaign with and without +-1 % wander at 1.3 Hz: tracked mesh lines agree to 1 % (or the noise)."""
     ops = {"pinion_speed": [1700.0, 3400.0], "drive_torque": [8000.0, 5500.0]}
-    options = dict(seed=11, duration=1.0, run_in=0.2, line_interference={50.0: 0.5, 150.0: 0.2})
+    options = {"seed": 11, "duration": 1.0, "run_in": 0.2, "line_interference": {50.0: 0.5, 150.0: 0.2}}
     steady = simulate_campaign(design, ops, **options)
     wandering = simulate_campaign(design, ops, speed_wander=[(0.01, 1.3)], **options)
     names = ["mesh1", "mesh2", "mesh3"]

@@ -11,8 +11,12 @@ import xarray as xr
 
 from uqgear.calibration.harmonics import HARMONIC_CHANNELS
 from uqgear.calibration.likelihood import observed_features
-from uqgear.calibration.pitch_correction import (PitchCorrection, _sideband_level, pitch_error_correction,
-                                                 sideband_amplitudes)
+from uqgear.calibration.pitch_correction import (
+    PitchCorrection,
+    _sideband_level,
+    pitch_error_correction,
+    sideband_amplitudes,
+)
 from uqgear.physics.design import load_design
 from uqgear.rig.format import read_rig
 

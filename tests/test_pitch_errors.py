@@ -18,7 +18,6 @@ from uqgear.rig.virtual_rig import simulate_campaign
 from uqgear.uq.seeds import as_seed_sequence, child_seed
 
 
-
 @pytest.fixture(scope="module")
 def grade7(design):
     return draw_pitch_errors(design, 7, np.random.default_rng(np.random.SeedSequence(7)))
@@ -34,13 +33,13 @@ def _relative(run, reference, name="x"):
 def test_zero_pitch_errors_give_the_results_without_any_bit_for_bit(design):
     zeros = PitchErrors.zeros(design)
     for method, periods in (("fast", 80), ("scipy", 30)):
-        kw = dict(method=method, n_periods=periods, keep_periods=10)
+        kw = {"method": method, "n_periods": periods, "keep_periods": 10}
         plain = uqgear.simulate(design, 2500.0, 7000.0, 33000.0, **kw)
         with_zeros = uqgear.simulate(design, 2500.0, 7000.0, 33000.0, pitch_errors=zeros, **kw)
         for name in plain.data_vars:
             assert plain[name].values.tobytes() == with_zeros[name].values.tobytes(), (method, name)
     samples = uqgear.samples_from_mapping({"pinion_speed": [1200.0, 4400.0], "adhesion_torque": [25e3, 33e3]})
-    kw = dict(n_periods=100, keep_periods=30, history_per_period=8, rig_channels=True, threads=1)
+    kw = {"n_periods": 100, "keep_periods": 30, "history_per_period": 8, "rig_channels": True, "threads": 1}
     plain = uqgear.simulate_batch(design, samples, **kw)
     with_zeros = uqgear.simulate_batch(design, samples, pitch_errors=zeros, **kw)
     for name in plain.data_vars:
@@ -50,7 +49,7 @@ def test_zero_pitch_errors_give_the_results_without_any_bit_for_bit(design):
 def test_the_pair_path_with_zero_offsets_reproduces_the_classical_path(design):
     """Forced onto the per-pair path, zero offsets give the classical result to rounding:
     sum_i k_i f(x) against (sum_i k_i) f(x)."""
-    kw = dict(effects=[make_effect("friction", {"coefficient": 0.1}), make_effect("tooth_damage", {"depth": 0.3})])
+    kw = {"effects": [make_effect("friction", {"coefficient": 0.1}), make_effect("tooth_damage", {"depth": 0.3})]}
     for speed, drive, adhesion in ((1700.0, 2000.0, 21146.0), (4400.0, 7000.0, 33000.0)):
         classical = build_model(design, speed, drive, adhesion, **kw)
         forced = build_model(design, speed, drive, adhesion, **kw)
@@ -76,7 +75,7 @@ def test_the_pair_path_with_zero_offsets_reproduces_the_classical_path(design):
     (4400.0, 7000.0, 33000.0),    # mesh resonance with tooth separation
 ])
 def test_fast_matches_scipy_with_pitch_errors(design, grade7, speed, drive, adhesion):
-    kw = dict(n_periods=150, keep_periods=30, pitch_errors=grade7)
+    kw = {"n_periods": 150, "keep_periods": 30, "pitch_errors": grade7}
     ref = uqgear.simulate(design, speed, drive, adhesion, method="scipy", **kw)
     fast = uqgear.simulate(design, speed, drive, adhesion, method="fast", **kw)
     plain = uqgear.simulate(design, speed, drive, adhesion, n_periods=150, keep_periods=30)
@@ -92,7 +91,7 @@ def test_fast_matches_scipy_with_pitch_errors(design, grade7, speed, drive, adhe
 def test_fast_matches_scipy_with_pitch_errors_and_effects(design, grade7):
     effects = [make_effect("friction", {"coefficient": 0.1}), make_effect("tooth_damage", {"depth": 0.3}),
                make_effect("eccentricity", {"amplitude": 12e-6, "kappa": 0.05})]
-    kw = dict(n_periods=120, keep_periods=60, pitch_errors=grade7, effects=effects)
+    kw = {"n_periods": 120, "keep_periods": 60, "pitch_errors": grade7, "effects": effects}
     ref = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, method="scipy", **kw)
     fast = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, method="fast", **kw)
     for name in ("x", "y1", "y2", "te"):
@@ -106,7 +105,7 @@ def test_a_common_offset_of_every_pinion_tooth_is_a_pure_shift_of_the_dte(design
     e = 4e-6
     common = PitchErrors(np.full(design.z1, e), np.zeros(design.z2))
     for method, periods in (("fast", 120), ("scipy", 40)):
-        kw = dict(method=method, n_periods=periods, keep_periods=20)
+        kw = {"method": method, "n_periods": periods, "keep_periods": 20}
         plain = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, **kw)
         shifted = uqgear.simulate(design, 1700.0, 2000.0, 21146.0, pitch_errors=common, **kw)
         scale = np.ptp(plain["x"].values)
@@ -128,7 +127,7 @@ def test_one_pinion_tooth_offset_gives_pinion_orders_of_the_quasi_static_amplitu
     single[0] = e0
     errors = PitchErrors(single, np.zeros(design.z2))
     per_period = 64
-    kw = dict(n_periods=3 * z1, keep_periods=2 * z1, samples_per_period=per_period)
+    kw = {"n_periods": 3 * z1, "keep_periods": 2 * z1, "samples_per_period": per_period}
     speed = 30.0   # mesh at 10.5 Hz, pinion orders near 0.5 Hz: far below the first mode (270 Hz)
     plain = uqgear.simulate(design, speed, 7000.0, 33000.0, **kw)
     with_errors = uqgear.simulate(design, speed, 7000.0, 33000.0, pitch_errors=errors, **kw)
@@ -194,7 +193,7 @@ def test_drawn_pitch_errors_have_the_iso_magnitudes(design):
 
 def test_rig_pitch_errors_are_drawn_from_their_own_stream_and_reproducible(design):
     ops = {"pinion_speed": [1250.0, 3400.0], "drive_torque": [6000.0, 5500.0]}
-    kw = dict(duration=0.1, run_in=0.05, seed=5)
+    kw = {"duration": 0.1, "run_in": 0.05, "seed": 5}
     first = simulate_campaign(design, ops, pitch_errors=7, **kw)
     again = simulate_campaign(design, ops, pitch_errors=7, **kw)
     plain = simulate_campaign(design, ops, **kw)

@@ -19,13 +19,7 @@ import pytest
 
 import uqgear
 from uqgear.physics import _kernels as K
-from uqgear.physics._quotient import (
-    LARGEST,
-    SMALLEST,
-    exact_divisor,
-    exact_divisors,
-    quotient,
-)
+from uqgear.physics._quotient import LARGEST, SMALLEST, exact_divisor, exact_divisors, quotient
 
 
 @nb.njit(cache=False)

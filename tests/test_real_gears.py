@@ -28,8 +28,8 @@ from scipy.optimize import brentq
 import uqgear
 from uqgear.common.errors import DesignError, RigDataError, UndercutWarning, UqgearWarning
 from uqgear.physics.design import Design, load_design
-from uqgear.physics.geometry import TIP_PENETRATION_TOLERANCE, geometry_notes, pair_geometry
 from uqgear.physics.generation import tip_penetration
+from uqgear.physics.geometry import TIP_PENETRATION_TOLERANCE, geometry_notes, pair_geometry
 from uqgear.physics.stiffness import mesh_stiffness, tooth_compliance
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -288,7 +288,7 @@ def test_undercut_tooth_compliance_matches_beam_integration():
     terms = tooth_compliance(tooth, radii, B, E, nu)
     for k, r_x in enumerate(radii):
         h_x, cos2 = r_x - tooth.root_radius, math.cos(float(tooth.load_angle(r_x))) ** 2
-        bending = quad(lambda y: 12 * (h_x - y) ** 2 / (E * B * thickness(y) ** 3), 0, h_x, points=[h_r])[0]
+        bending = quad(lambda y, h_x=h_x: 12 * (h_x - y) ** 2 / (E * B * thickness(y) ** 3), 0, h_x, points=[h_r])[0]
         shear = quad(lambda y: 2 * (1 + nu) / (E * B * thickness(y)), 0, h_x, points=[h_r])[0]
         assert terms["bending_rectangle"][k] + terms["bending_trapezoid"][k] == pytest.approx(bending * cos2, rel=1e-7)
         assert terms["shear"][k] == pytest.approx(shear * cos2, rel=1e-7)

@@ -22,12 +22,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from uqgear import validation as blind_test
 from uqgear.common.errors import RigDataError
 from uqgear.diagnosis import DiagnosisError, diagnose
-from uqgear.diagnosis.case import FeatureModelError
-from uqgear import validation as blind_test
-from uqgear.diagnosis.allowances.gain_curve import fit_gain_curve
 from uqgear.diagnosis.allowances.compatibility import match_operating_points
+from uqgear.diagnosis.allowances.gain_curve import fit_gain_curve
+from uqgear.diagnosis.case import FeatureModelError
 from uqgear.physics.effects import make_effect
 from uqgear.rig import apply_transfer_path, read_rig, transfer_path_gain, write_rig
 from uqgear.rig.virtual_rig import simulate_campaign
@@ -175,7 +175,8 @@ def _with_design(rig: xr.Dataset, **changes) -> xr.Dataset:
     ("other_design.nc", lambda rig: _with_design(rig, z1=23, module=0.008),
      r"reference .*other_design.nc: design differs from the test campaign's: module 0.008 \(test 0.009\), z1 23 "
      r"\(test 21\)"),
-    ("other_plan.nc", lambda rig: rig.assign_coords(pinion_speed=rig["pinion_speed"] * np.r_[1, 1, 1, 1.03, 1, 1, 1, 1]),
+    ("other_plan.nc",
+     lambda rig: rig.assign_coords(pinion_speed=rig["pinion_speed"] * np.r_[1, 1, 1, 1.03, 1, 1, 1, 1]),
      r"reference .*other_plan.nc: test operating point 3 \(1700 rpm, 8000 N m\) has no reference operating point "
      r"within 1% in pinion speed and 5% in drive torque"),
 ])

@@ -18,8 +18,13 @@ from uqgear.report.calibration_report import calibration_findings
 from uqgear.report.diagnosis_report import diagnosis_findings
 from uqgear.report.finding import headline_html
 from uqgear.report.findings import separation_findings as section_separation
-from uqgear.report.headline import (back_contact_findings, headline_findings, regime_findings_headline,
-                                    separation_findings, worst_load_findings)
+from uqgear.report.headline import (
+    back_contact_findings,
+    headline_findings,
+    regime_findings_headline,
+    separation_findings,
+    worst_load_findings,
+)
 from uqgear.report.study_report import build_report, load_results
 
 SPEED, T2 = "pinion_speed", "adhesion_torque"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -11,10 +11,16 @@ import pytest
 import scipy
 import xarray as xr
 
-from uqgear.physics.design import design_from_json, load_design
 from uqgear.common.errors import UqgearError
-from uqgear.uq.results import (ENCODED_ATTRS_MARKER, PROVENANCE_ATTRS, load_result, read_dataset,
-                            save_result, write_dataset)
+from uqgear.physics.design import design_from_json, load_design
+from uqgear.uq.results import (
+    ENCODED_ATTRS_MARKER,
+    PROVENANCE_ATTRS,
+    load_result,
+    read_dataset,
+    save_result,
+    write_dataset,
+)
 
 ATTRS_OF_ALL_KINDS = {
     "title": "interval analysis",
@@ -138,7 +144,7 @@ def test_provenance_attributes(result, tmp_path):
     assert attrs["study"] == study
     created = datetime.fromisoformat(attrs["created"])
     assert created.utcoffset() == timedelta(0)
-    assert abs(datetime.now(timezone.utc) - created) < timedelta(minutes=5)
+    assert abs(datetime.now(UTC) - created) < timedelta(minutes=5)
 
 
 def test_spawned_seed_records_its_spawn_key(result, tmp_path):

@@ -11,8 +11,7 @@ import pytest
 import xarray as xr
 
 from uqgear.common.errors import RigDataError, UqgearError
-from uqgear.rig.format import (CONVENTIONS, make_rig_dataset, read_rig, rig_design, usable_runs, validate_rig,
-                        write_rig)
+from uqgear.rig.format import CONVENTIONS, make_rig_dataset, read_rig, rig_design, usable_runs, validate_rig, write_rig
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 FS = 20480.0
@@ -223,9 +222,9 @@ def test_rig_design_rejects_bad_json(valid):
 
 
 def test_make_rig_dataset_rejects_inconsistent_parts(design):
-    parts = dict(time=np.arange(N_TIME) / FS, pinion_speed=[600.0, 1200.0], drive_torque=[7000.0, 5000.0],
-                 adhesion_torque_lower=[21000.0, 25000.0], adhesion_torque_upper=[30000.0, 33000.0],
-                 design=design, title="t", source="s", history="h")
+    parts = {"time": np.arange(N_TIME) / FS, "pinion_speed": [600.0, 1200.0], "drive_torque": [7000.0, 5000.0],
+                 "adhesion_torque_lower": [21000.0, 25000.0], "adhesion_torque_upper": [30000.0, 33000.0],
+                 "design": design, "title": "t", "source": "s", "history": "h"}
     good = np.zeros((2, N_TIME))
     with pytest.raises(RigDataError, match=r"te: expected shape \(op, time\) = \(2, 512\); got \(3, 512\)"):
         make_rig_dataset(channels={"te": np.zeros((3, N_TIME))}, **parts)

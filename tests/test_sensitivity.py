@@ -10,9 +10,9 @@ import pytest
 import xarray as xr
 
 from uqgear.common.errors import ParameterSpaceError
-from uqgear.uq.sensitivity import SobolAnalysis
 from uqgear.uq.parameter_space import ParameterSpace
 from uqgear.uq.parameters import Distribution, Interval
+from uqgear.uq.sensitivity import SobolAnalysis
 from uqgear.uq.sweeps import evaluate_on_sweep
 
 ISHIGAMI_S1 = np.array([0.3139, 0.4424, 0.0])

@@ -22,9 +22,16 @@ from scipy.linalg import expm
 
 import uqgear
 from uqgear.common.errors import OperatingPointError
-from uqgear.dynamics.floquet import (FOLD, NEIMARK_SACKER, PERIOD_DOUBLING, UnstableCounts, crossing_types,
-                                     floquet_multipliers, unstable_counts)
-from uqgear.dynamics.shooting import PoincareMap, Shooting, ShootingError, newton_orbit, ShootingSettings, setup_at
+from uqgear.dynamics.floquet import (
+    FOLD,
+    NEIMARK_SACKER,
+    PERIOD_DOUBLING,
+    UnstableCounts,
+    crossing_types,
+    floquet_multipliers,
+    unstable_counts,
+)
+from uqgear.dynamics.shooting import PoincareMap, Shooting, ShootingError, ShootingSettings, newton_orbit, setup_at
 from uqgear.physics import _kernels as K
 from uqgear.physics.integration import STATE_NAMES
 

@@ -14,8 +14,14 @@ import math
 import numpy as np
 import pytest
 
-from uqgear.diagnosis.allowances.sideband_phase import (MIN_SIDEBAND_ORDERS, ModulationEvidence, log_density,
-                                                        phase_sums, sideband_triples, shafts_tested)
+from uqgear.diagnosis.allowances.sideband_phase import (
+    MIN_SIDEBAND_ORDERS,
+    ModulationEvidence,
+    log_density,
+    phase_sums,
+    shafts_tested,
+    sideband_triples,
+)
 
 _NAMES = ["pinion1", "mesh1", "mesh1_sb_pinion+1", "mesh1_sb_pinion-1", "mesh2", "mesh2_sb_pinion+1",
           "mesh2_sb_pinion-1", "mesh1_sb_gear+1", "mesh1_sb_gear-1"]

@@ -31,17 +31,19 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import xarray as xr
+from helpers import candidate_score
+from test_cli import TINY  # the tiny in-process study of the CLI tests
 
 import uqgear
-from uqgear.calibration import CalibrationError, prior_bounds
-from uqgear.calibration import estimator, posterior_fit
+from uqgear.calibration import CalibrationError, estimator, posterior_fit, prior_bounds
 from uqgear.calibration.likelihood import StageLikelihood
 from uqgear.calibration.training import train_emulators
 from uqgear.cli import main
 from uqgear.common.errors import InternalError, RigDataError, UqgearError, internal_step
 from uqgear.common.steps import FAILURE_RECORD, StepLog
 from uqgear.diagnosis import VERDICTS, decide
-from uqgear.diagnosis import estimator as diagnosis_estimator, nominal as nominal_step
+from uqgear.diagnosis import estimator as diagnosis_estimator
+from uqgear.diagnosis import nominal as nominal_step
 from uqgear.diagnosis.candidates import ParameterSpec, nominal_parameters
 from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.effects import candidates_for, effect_names
@@ -53,9 +55,6 @@ from uqgear.physics.effects import EffectError
 from uqgear.rig.format import read_rig, rig_design
 from uqgear.rig.usability import check_usable_signal
 from uqgear.study import analyses
-
-from helpers import candidate_score
-from test_cli import TINY  # the tiny in-process study of the CLI tests
 
 ROOT = Path(__file__).resolve().parent.parent
 HEALTHY = ROOT / "data" / "rig" / "healthy.nc"

@@ -10,7 +10,6 @@ from uqgear.physics.geometry import pair_geometry
 from uqgear.physics.stiffness import iso6336_stiffness, mesh_stiffness, tooth_compliance
 
 
-
 @pytest.fixture(scope="module")
 def second_design(design):
     # a second design: z1=17, z2=88, module 10 mm, x1=+0.3, x2=-0.3, face width 130 mm

@@ -395,7 +395,8 @@ def test_diagnose_analysis_options_are_checked(tmp_path):
     with pytest.raises(StudyError, match=r"analyses\[0\].effects\[1\]: expected one of eccentricity"):
         parse_study(text + "    effects: [friction, wobble]\n", base_dir=tmp_path)
     assert study.analyses[0].options["pitch_classes"] == (6.0, 8.0)
-    assert parse_study(text + "    pitch_classes: none\n", base_dir=tmp_path).analyses[0].options["pitch_classes"] is None
+    no_classes = parse_study(text + "    pitch_classes: none\n", base_dir=tmp_path)
+    assert no_classes.analyses[0].options["pitch_classes"] is None
     for wrong in ("[8, 6]", "[7]", "seven", "[0, 12]"):
         with pytest.raises(StudyError, match=r"analyses\[0\].pitch_classes: expected \[lowest, highest\]"):
             parse_study(text + f"    pitch_classes: {wrong}\n", base_dir=tmp_path)

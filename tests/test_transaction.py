@@ -110,11 +110,11 @@ def test_the_python_api_leaves_nothing_for_a_mistake_in_its_input(tmp_path):
 
 def test_a_python_study_run_is_published_whole_and_kept_for_resume_on_failure(tmp_path, monkeypatch):
     """uqgear.run_study as the command's run: a failed analysis leaves no result folder, its work resumable."""
+    from test_cli import TINY
+
     from uqgear import parse_study, run_study
     from uqgear.common.errors import internal_step
     from uqgear.study import analyses
-
-    from test_cli import TINY
 
     study = parse_study(TINY)
     real = analyses.ANALYSES["monte_carlo"]

@@ -9,15 +9,20 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.rig import virtual_rig as V
-from uqgear.physics.effects import make_effect
 from uqgear.common.errors import OperatingPointError, RigDataError
-from uqgear.rig.features import extract_features, line_amplitudes
+from uqgear.physics.effects import make_effect
 from uqgear.physics.integration import simulate
 from uqgear.physics.model import natural_frequencies
+from uqgear.rig import virtual_rig as V
+from uqgear.rig.features import extract_features, line_amplitudes
 from uqgear.rig.format import read_rig, rig_design, validate_rig
-from uqgear.rig.virtual_rig import (adhesion_torque_bounds, default_operating_points, simulate_campaign, synth_rig,
-                                true_parameters_of)
+from uqgear.rig.virtual_rig import (
+    adhesion_torque_bounds,
+    default_operating_points,
+    simulate_campaign,
+    synth_rig,
+    true_parameters_of,
+)
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
