@@ -20,7 +20,9 @@ cannot-tell) that differ, and how far the figures (gaps, shares, scores) moved.
 the CPU shares of the integration, the FFTs, the feature line fits and the least-squares solver.
 ``--suite foreign`` times the differential route instead: each campaign of the foreign virtual rig
 diagnosed against a healthy reference campaign of it (``uqgear blindtest --suite foreign``), with
-the change test's and the scoring's times.
+the change test's and the scoring's times, and for each withheld effect how visible it is to the
+change test ("seen": its noise-free change over the change test's threshold, largest over runs,
+channels and features).
 Timings taken while other jobs load the machine are noisy: the load average is printed with them.
 """
 
@@ -236,15 +238,17 @@ def foreign(args: argparse.Namespace) -> None:
         for campaign in content["campaigns"]:
             truth = (campaign.get("truth") or {}).get("effect", "none")
             rows.append((seed, campaign["campaign"], campaign["verdict"], truth, campaign["exactly_right"],
-                         campaign["seconds"], campaign.get("timing_s") or {}))
+                         campaign["seconds"], campaign.get("timing_s") or {}, campaign.get("visibility"),
+                         campaign.get("right_where_visible", campaign["exactly_right"])))
     print()
-    print(f"{'seed':>4s} {'campaign':28s} {'truth':20s} {'verdict':20s} {'right':>5s} {'wall s':>7s} {'CPU s':>7s}"
-          "  stages (s)")
-    for seed, ident, verdict, truth, right, seconds, timing in rows:
+    print(f"{'seed':>4s} {'campaign':28s} {'truth':20s} {'verdict':20s} {'right':>5s} {'seen':>5s} {'wall s':>7s} "
+          f"{'CPU s':>7s}  stages (s)")
+    for seed, ident, verdict, truth, right, seconds, timing, visibility, _ in rows:
         shown = {k: v for k, v in timing.items() if k not in ("total_wall", "total_cpu", "workers") and v >= 0.1}
         stage_text = ", ".join(f"{k} {v:.1f}" for k, v in sorted(shown.items(), key=lambda kv: -kv[1]))
-        print(f"{seed:4d} {ident:28s} {truth:20s} {verdict:20s} {'yes' if right else 'NO':>5s} {seconds:7.1f} "
-              f"{timing.get('total_cpu', math.nan):7.1f}  {stage_text}")
+        seen = "" if visibility is None else f"{visibility:.2f}"
+        print(f"{seed:4d} {ident:28s} {truth:20s} {verdict:20s} {'yes' if right else 'NO':>5s} {seen:>5s} "
+              f"{seconds:7.1f} {timing.get('total_cpu', math.nan):7.1f}  {stage_text}")
     walls = [row[5] for row in rows]
     changed = [row[5] for row in rows if row[2] != "none"]
     slowest = max(rows, key=lambda row: row[5])
@@ -254,7 +258,9 @@ def foreign(args: argparse.Namespace) -> None:
           + (f"; with a change named or unexplained: median {statistics.median(changed):.1f} s" if changed else ""))
     own, children = _peak_memory_mb()
     print(f"largest resident memory: this process {own:.0f} MB, a worker process {children:.0f} MB")
-    print(f"exactly right: {sum(row[4] for row in rows)} / {len(rows)}")
+    print(f"exactly right: {sum(row[4] for row in rows)} / {len(rows)}; counting 'none' as right where an effect's "
+          f"noise-free change stays below the change test's thresholds ('seen' under 1): "
+          f"{sum(row[8] for row in rows)} / {len(rows)}")
     print(f"load average at the end: {_load()}")
     scratch.cleanup()
 

@@ -218,17 +218,57 @@ def test_the_foreign_rig_records_a_valid_campaign_with_its_gears_and_effects():
     np.testing.assert_array_equal(rig["te"].values, again["te"].values)
 
 
+def test_an_effects_visibility_grows_with_it_from_zero_and_crosses_the_threshold_between_tiny_and_strong():
+    """The visibility oracle: the noise-free change an effect makes, over the thresholds a change test drew
+    from two healthy campaigns; none for no effect, below 1 for a run-out far under the gears' own errors,
+    above 1 for one that dominates the pinion's order-1 line, growing with the run-out in between and, for a
+    small one, in proportion to it."""
+    from uqgear.physics.effects import make_effect
+    from uqgear.rig.foreign_rig import draw_gears, simulate_foreign_campaign
+    from uqgear.rig.virtual_rig import default_operating_points
+    from uqgear.validation.foreign_suite import effect_visibility
+
+    ops = default_operating_points(DESIGN).isel(op=[0, 5])
+    gears = draw_gears(DESIGN, 6, 3)
+    channels = ("te", "acc_pinion", "acc_gear")
+    reference = read_campaign(simulate_foreign_campaign(DESIGN, ops, gears=gears, seed=1, duration=0.5), DESIGN,
+                              channels)
+    healthy = read_campaign(simulate_foreign_campaign(DESIGN, ops, gears=gears, seed=2, duration=0.5), DESIGN,
+                            channels)
+    test = judge_change(reference, healthy, settings=DiagnosisSettings())
+
+    def seen(amplitude):
+        effects = [make_effect("eccentricity", {"shaft": "pinion", "amplitude": amplitude})] if amplitude else []
+        return effect_visibility(test, DESIGN, ops, gears=gears, effects=effects, seed=2, duration=0.5)
+
+    visibility = [seen(amplitude) for amplitude in (0.0, 0.02e-6, 0.2e-6, 2e-6, 20e-6)]
+    assert visibility[0] == 0.0
+    assert visibility[1] < 1.0 < visibility[4]
+    assert visibility[1] < visibility[2] < visibility[3] < visibility[4]
+    # a line much weaker than the gears' own order-1 line changes its ln power by 2 (a / A) cos(phase) to first
+    # order: ten times the run-out, ten times the change
+    assert visibility[2] / visibility[1] == pytest.approx(10.0, rel=0.05)
+
+
 # ---------------------------------------------------------------------------------------------- end to end
 
 
-def test_the_foreign_suite_finds_no_change_between_healthy_campaigns():
+def test_the_foreign_suite_finds_no_change_between_healthy_campaigns_nor_from_an_effect_below_its_thresholds():
     from uqgear.validation.foreign_suite import run_foreign_suite
 
-    result = run_foreign_suite(seed=1, effects=[], n_ops=4, duration=0.5)
-    assert [entry["campaign"] for entry in result["campaigns"]] == ["healthy_same", "healthy_replaced"]
-    assert result["healthy_none"] and result["exactly_right"] == 1.0
+    result = run_foreign_suite(seed=3, effects=["bearing_clearance"], n_ops=4, duration=0.5)
+    assert [entry["campaign"] for entry in result["campaigns"]] == [
+        "healthy_same", "healthy_replaced", "bearing_clearance-0", "healthy_bearing_check"]
+    assert result["healthy_none"] and not result["false_effect_on_healthy"]
     for entry in result["campaigns"]:
         assert abs(entry["largest_change_db"]) < entry["largest_threshold_db"]
+    # the clearance's own noise-free change stays below the change test's thresholds: `none` is all the data
+    # support, wrong against the truth, right where only visible effects count
+    clearance = result["campaigns"][2]
+    assert clearance["verdict"] == "none" and not clearance["exactly_right"]
+    assert 0.0 < clearance["visibility"] < 1.0 and clearance["visible"] is False and clearance["right_where_visible"]
+    assert result["exactly_right"] == 0.75 and result["exactly_right_visible"] == 1.0
+    assert result["effects_visible"] == 0
 
 
 def test_bearing_clearances_bring_a_healthy_control_on_their_own_plan_and_the_cli_writes_a_new_folder(
@@ -242,7 +282,8 @@ def test_bearing_clearances_bring_a_healthy_control_on_their_own_plan_and_the_cl
     assert ("healthy_bearing_check", None) not in foreign_suite.foreign_campaign_plan(["eccentricity"], 1)
     # the suite's record lands in a folder that did not exist (its work replaced by a stand-in)
     monkeypatch.setattr(foreign_suite, "run_foreign_suite", lambda **_: {
-        "campaigns": [], "exactly_right": 1.0, "effects_exactly_right": 1.0, "healthy_none": True})
+        "campaigns": [], "exactly_right": 1.0, "effects_exactly_right": 1.0, "exactly_right_visible": 1.0,
+        "effects_visible": 0, "healthy_none": True})
     out = tmp_path / "new" / "foreign"
     assert main(["blindtest", "--suite", "foreign", "--out", str(out)]) == 0
     assert json.loads((out / "blindtest.json").read_text())["healthy_none"] is True

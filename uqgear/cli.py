@@ -479,7 +479,9 @@ def _foreign_blindtest(args: argparse.Namespace, out: Path) -> int:
         write_text_atomic(work / "blindtest.json", json.dumps(result, indent=1, default=str))
     print(
         f"blind test (foreign): {len(result['campaigns'])} campaigns, exactly right {result['exactly_right']:.2f} "
-        f"(effects {result['effects_exactly_right']:.2f}), healthy tests none: {result['healthy_none']}; "
+        f"(effects {result['effects_exactly_right']:.2f}; {result['exactly_right_visible']:.2f} counting 'none' as "
+        f"right where an effect's noise-free change stays below the change test's thresholds, "
+        f"{result['effects_visible']} effects visible), healthy tests none: {result['healthy_none']}; "
         f"results in {out}"
     )
     return 0

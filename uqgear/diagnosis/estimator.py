@@ -25,6 +25,7 @@ from .allowances.reference import attach_reference, learn_reference
 from .case import RigCase, prepare_case
 from .change.conclude import conclude_change
 from .change.options import check_reference_options, is_differential
+from .change.route import ChangeOutcome
 from .dataset import held_spectra, inconclusive_dataset, result_dataset
 from .decision import Decision
 from .effect_set import SelectedEffect
@@ -215,6 +216,8 @@ class Diagnosis:
         The JSON-ready record (``diagnosis.json``); :meth:`to_dict` returns it.
     outcome_ : DiagnosisResult or None
         Everything found (None when the data cannot decide).
+    change_ : ChangeOutcome or None
+        Against a healthy reference: the change test and the effects' scores on it (else None).
     features_ : RigCase
         The campaign as compared after step 1 (features, line interference, a reference's correction).
     case_ : RigCase
@@ -232,6 +235,7 @@ class Diagnosis:
 
     outcome_: DiagnosisResult | None
     nominal_: FitResult | None
+    change_: ChangeOutcome | None = None
 
     def __init__(
         self,
@@ -313,12 +317,8 @@ class Diagnosis:
     def _diagnose(self, case: RigCase, posterior: xr.Dataset | None) -> DiagnosisResult:
         """Steps 3 to 6 on a prepared campaign whose simulations run on workers."""
         steps, settings = self.steps_, self.settings
-        timings: dict[str, float] = {
-            "order_tracking": case.tracking_s,
-            "nominal_fit": 0.0,
-            "screening": 0.0,
-            "full_fits": 0.0,
-        }
+        timings: dict[str, float] = {"order_tracking": case.tracking_s}
+        timings.update(dict.fromkeys(("nominal_fit", "screening", "full_fits"), 0.0))
         # 3. fit: the nominal model, the pitch-error allowance where the sidebands call for it
         case, nominal = fit_nominal_model(case, posterior, settings=settings, steps=steps, timings=timings)
         case, nominal, allowance = allow_pitch_errors(

@@ -18,6 +18,15 @@ test campaign of it, each with its own noise and record starts:
 
 A campaign is *exactly right* when the verdict is the expected one and a
 named effect's choice (shaft, gear or bearing) is the true one.
+
+A withheld effect is also judged for how *visible* it is to the change test
+(:func:`effect_visibility`): the test campaign is simulated again without
+noise, with and without the effect, and the change between the two is read
+against the thresholds the diagnosis drew from healthy variation. Below 1 the
+effect moves no feature beyond what two healthy campaigns of the rig differ
+by, and ``none`` is all the data can support; the suite's
+``exactly_right_visible`` counts ``none`` as right there, as the library
+suite's ``accuracy_detectable`` does for an effect the data cannot show.
 """
 
 from __future__ import annotations
@@ -30,9 +39,11 @@ from typing import Any
 import numpy as np
 
 from ..diagnosis import Diagnosis
+from ..diagnosis.change import ChangeTest, read_campaign
 from ..diagnosis.effects import effect_family, effect_names
 from ..diagnosis.inputs import check_workers
 from ..physics.design import Design, load_design
+from ..physics.effects import Effect
 from ..rig.foreign_modes import bearing_check_plan
 from ..rig.foreign_rig import draw_gears, simulate_foreign_campaign
 from ..rig.virtual_rig import adhesion_torque_bounds
@@ -147,8 +158,22 @@ def run_foreign_suite(
             reference_gears="replaced" if identifier == "healthy_replaced" else "same",
         ).fit(rig, reference=references[plan])
         seconds = time.perf_counter() - started
-        entries.append(_judged(identifier, name, truth, diagnosis.summary_, seconds))
+        visibility = None
+        if name is not None:
+            # an internal invariant: a diagnosis against a reference has its change test
+            assert diagnosis.change_ is not None
+            visibility = effect_visibility(
+                diagnosis.change_.test,
+                nominal,
+                _as_points(table),
+                gears=test_gears,
+                effects=effects_in,
+                seed=test_seed,
+                duration=duration,
+            )
+        entries.append(_judged(identifier, name, truth, diagnosis.summary_, seconds, visibility))
     right = [entry["exactly_right"] for entry in entries]
+    right_visible = [entry["right_where_visible"] for entry in entries]
     effect_entries = [entry for entry in entries if entry["truth"] is not None]
     healthy = [entry for entry in entries if entry["truth"] is None]
     return {
@@ -161,15 +186,75 @@ def run_foreign_suite(
         "effects_exactly_right": float(np.mean([e["exactly_right"] for e in effect_entries]))
         if effect_entries
         else math.nan,
+        "exactly_right_visible": float(np.mean(right_visible)) if right_visible else math.nan,
+        "effects_visible": int(sum(bool(entry["visible"]) for entry in effect_entries)),
         "healthy_none": all(entry["verdict"] == "none" for entry in healthy),
         "false_effect_on_healthy": any(entry["verdict"] not in ("none", "unexplained") for entry in healthy),
     }
 
 
+def effect_visibility(
+    test: ChangeTest,
+    design: Design,
+    points: Any,
+    *,
+    gears: Any,
+    effects: Sequence[Effect],
+    seed: Any,
+    duration: float,
+) -> float:
+    """How visible withheld effects are to a change test: their largest noise-free change over its threshold.
+
+    The test campaign is simulated again without noise (the same gears,
+    seed and record starts), without and with ``effects``; the change
+    between the two, floored as the test floors its own, is divided by the
+    thresholds ``test`` drew from healthy variation, on its judged runs.
+    Below 1 the effects move no feature beyond what two healthy campaigns
+    of the rig differ by.
+
+    Parameters
+    ----------
+    test : ChangeTest
+        The diagnosis's change test (``Diagnosis.change_.test``).
+    design : Design
+    points : xarray.Dataset
+        The test campaign's operating points.
+    gears : ForeignGears
+        The test campaign's gears.
+    effects : sequence of Effect
+        The withheld effects.
+    seed : int or SeedSequence
+        The test campaign's seed (its record starts).
+    duration : float
+        Record length, s.
+
+    Returns
+    -------
+    float
+        The largest ratio; 0 for no effect.
+    """
+    clean = [
+        read_campaign(
+            simulate_foreign_campaign(
+                design, points, gears=gears, effects=list(chosen), seed=seed, duration=duration, relative_noise=0.0
+            ),
+            design,
+            test.channels,
+        )
+        for chosen in ((), effects)
+    ]
+    return float(np.max(test.ratio_of(test.change_between(clean[0], clean[1]))))
+
+
 def _judged(
-    identifier: str, name: str | None, truth: dict[str, Any], content: dict[str, Any], seconds: float
+    identifier: str,
+    name: str | None,
+    truth: dict[str, Any],
+    content: dict[str, Any],
+    seconds: float,
+    visibility: float | None = None,
 ) -> dict[str, Any]:
-    """One campaign's record: what was true, what was said, whether exactly right."""
+    """One campaign's record: what was true, what was said, whether exactly right (and where visible)."""
     verdict = content["verdict"]
     change = content.get("change") or {}
     named = change.get("named")
@@ -178,6 +263,7 @@ def _judged(
     if right and name in _CHOICE and named is not None:
         right = named["parameters"].get(_CHOICE[name]) == truth.get(_CHOICE[name])
     largest = (change.get("test") or {}).get("largest") or {}
+    visible = None if visibility is None else bool(visibility >= 1.0)
     return {
         "campaign": identifier,
         "truth": None if name is None else {"effect": name, **truth},
@@ -187,9 +273,13 @@ def _judged(
         "largest_change_db": largest.get("change_db"),
         "largest_threshold_db": largest.get("threshold_db"),
         "exactly_right": bool(right),
+        "visibility": visibility,
+        "visible": visible,
+        # an effect no feature shows beyond healthy variation is right as `none`: nothing else is supported
+        "right_where_visible": bool(right or (visible is False and verdict == "none")),
         "seconds": seconds,
         "timing_s": content.get("timing_s"),
     }
 
 
-__all__ = ["FOREIGN_GRADE", "foreign_campaign_plan", "run_foreign_suite"]
+__all__ = ["FOREIGN_GRADE", "effect_visibility", "foreign_campaign_plan", "run_foreign_suite"]

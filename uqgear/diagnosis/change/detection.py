@@ -246,12 +246,29 @@ class ChangeTest:
 
     @property
     def ratio(self) -> np.ndarray:
+        return self.ratio_of(self.change)
+
+    def ratio_of(self, change: np.ndarray) -> np.ndarray:
+        """|change| / threshold for a change of the same runs and features (ln units); 0 where not judged.
+
+        ``change`` is this test's own or another one read alike, e.g. a
+        withheld effect's noise-free change (:meth:`change_between`) judged
+        against the thresholds this test drew from healthy variation.
+        """
         with np.errstate(invalid="ignore"):
-            ratio = np.abs(self.change) / self.threshold
+            ratio = np.abs(change) / self.threshold
         ratio[~self.judged] = 0.0
         # a feature that could not be read (a shaft not turning once in the record) is not judged
         ratio[~np.isfinite(ratio)] = 0.0
         return ratio
+
+    def change_between(self, before: CampaignFeatures, after: CampaignFeatures) -> np.ndarray:
+        """The change from ``before`` to ``after`` (campaigns at this test's runs) as this test reads one.
+
+        Both are floored at this test's line floor, as the reference and
+        the test are, so that a line below it changes nothing.
+        """
+        return _floored(after.values, self.floor) - _floored(before.values, self.floor)
 
     @property
     def significant(self) -> np.ndarray:
