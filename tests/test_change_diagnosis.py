@@ -226,7 +226,7 @@ def test_an_effects_visibility_grows_with_it_from_zero_and_crosses_the_threshold
     from uqgear.physics.effects import make_effect
     from uqgear.rig.foreign_rig import draw_gears, simulate_foreign_campaign
     from uqgear.rig.virtual_rig import default_operating_points
-    from uqgear.validation.foreign_suite import effect_visibility
+    from uqgear.validation.foreign_suite import change_visibility
 
     ops = default_operating_points(DESIGN).isel(op=[0, 5])
     gears = draw_gears(DESIGN, 6, 3)
@@ -239,7 +239,7 @@ def test_an_effects_visibility_grows_with_it_from_zero_and_crosses_the_threshold
 
     def seen(amplitude):
         effects = [make_effect("eccentricity", {"shaft": "pinion", "amplitude": amplitude})] if amplitude else []
-        return effect_visibility(test, DESIGN, ops, gears=gears, effects=effects, seed=2, duration=0.5)
+        return change_visibility(test, DESIGN, ops, gears=gears, effects=effects, seed=2, duration=0.5)
 
     visibility = [seen(amplitude) for amplitude in (0.0, 0.02e-6, 0.2e-6, 2e-6, 20e-6)]
     assert visibility[0] == 0.0

@@ -20,7 +20,7 @@ A campaign is *exactly right* when the verdict is the expected one and a
 named effect's choice (shaft, gear or bearing) is the true one.
 
 A withheld effect is also judged for how *visible* it is to the change test
-(:func:`effect_visibility`): the test campaign is simulated again without
+(:func:`change_visibility`): the test campaign is simulated again without
 noise, with and without the effect, and the change between the two is read
 against the thresholds the diagnosis drew from healthy variation. Below 1 the
 effect moves no feature beyond what two healthy campaigns of the rig differ
@@ -162,7 +162,7 @@ def run_foreign_suite(
         if name is not None:
             # an internal invariant: a diagnosis against a reference has its change test
             assert diagnosis.change_ is not None
-            visibility = effect_visibility(
+            visibility = change_visibility(
                 diagnosis.change_.test,
                 nominal,
                 _as_points(table),
@@ -193,7 +193,7 @@ def run_foreign_suite(
     }
 
 
-def effect_visibility(
+def change_visibility(
     test: ChangeTest,
     design: Design,
     points: Any,
@@ -282,4 +282,4 @@ def _judged(
     }
 
 
-__all__ = ["FOREIGN_GRADE", "effect_visibility", "foreign_campaign_plan", "run_foreign_suite"]
+__all__ = ["FOREIGN_GRADE", "change_visibility", "foreign_campaign_plan", "run_foreign_suite"]
