@@ -172,15 +172,16 @@ def run_foreign_suite(
                 duration=duration,
             )
         entries.append(_judged(identifier, name, truth, diagnosis.summary_, seconds, visibility))
+    return {"suite": "foreign", "seed": seed, "n_ops": n_ops, "duration_s": duration, **_scored(entries)}
+
+
+def _scored(entries: list[dict[str, Any]]) -> dict[str, Any]:
+    """The suite's campaigns and its scores over them (exactly right, where visible, healthy tests)."""
     right = [entry["exactly_right"] for entry in entries]
     right_visible = [entry["right_where_visible"] for entry in entries]
     effect_entries = [entry for entry in entries if entry["truth"] is not None]
     healthy = [entry for entry in entries if entry["truth"] is None]
     return {
-        "suite": "foreign",
-        "seed": seed,
-        "n_ops": n_ops,
-        "duration_s": duration,
         "campaigns": entries,
         "exactly_right": float(np.mean(right)) if right else math.nan,
         "effects_exactly_right": float(np.mean([e["exactly_right"] for e in effect_entries]))
