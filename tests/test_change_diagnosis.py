@@ -3,6 +3,7 @@ operating points carried or refused, the change scoring, and the foreign virtual
 
 import json
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -239,7 +240,8 @@ def test_an_effects_visibility_grows_with_it_from_zero_and_crosses_the_threshold
 
     def seen(amplitude):
         effects = [make_effect("eccentricity", {"shaft": "pinion", "amplitude": amplitude})] if amplitude else []
-        return change_visibility(test, DESIGN, ops, gears=gears, effects=effects, seed=2, duration=0.5)
+        campaign = partial(simulate_foreign_campaign, DESIGN, ops, gears=gears, seed=2, duration=0.5)
+        return change_visibility(test, DESIGN, campaign, effects)
 
     visibility = [seen(amplitude) for amplitude in (0.0, 0.02e-6, 0.2e-6, 2e-6, 20e-6)]
     assert visibility[0] == 0.0

@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -141,16 +142,16 @@ def run_foreign_suite(
             rng = np.random.default_rng(effect_seed)
             truth = family.campaign_values(family.ladder[2], float(rng.uniform(0.0, 2.0 * math.pi)), rng)
             effects_in = [family.make(truth)]
-        test_gears = replaced if identifier == "healthy_replaced" else gears
-        rig = simulate_foreign_campaign(
+        # the test campaign's set-up: the noisy campaign diagnosed and the clean ones of its visibility alike
+        campaign = partial(
+            simulate_foreign_campaign,
             nominal,
             _as_points(table),
-            gears=test_gears,
-            effects=effects_in,
+            gears=replaced if identifier == "healthy_replaced" else gears,
             seed=test_seed,
             duration=duration,
-            title=f"foreign rig campaign {identifier}",
         )
+        rig = campaign(effects=effects_in, title=f"foreign rig campaign {identifier}")
         started = time.perf_counter()
         diagnosis = Diagnosis(
             seed=reference_seed,
@@ -162,15 +163,7 @@ def run_foreign_suite(
         if name is not None:
             # an internal invariant: a diagnosis against a reference has its change test
             assert diagnosis.change_ is not None
-            visibility = change_visibility(
-                diagnosis.change_.test,
-                nominal,
-                _as_points(table),
-                gears=test_gears,
-                effects=effects_in,
-                seed=test_seed,
-                duration=duration,
-            )
+            visibility = change_visibility(diagnosis.change_.test, nominal, campaign, effects_in)
         entries.append(_judged(identifier, name, truth, diagnosis.summary_, seconds, visibility))
     return {"suite": "foreign", "seed": seed, "n_ops": n_ops, "duration_s": duration, **_scored(entries)}
 
@@ -195,19 +188,13 @@ def _scored(entries: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def change_visibility(
-    test: ChangeTest,
-    design: Design,
-    points: Any,
-    *,
-    gears: Any,
-    effects: Sequence[Effect],
-    seed: Any,
-    duration: float,
+    test: ChangeTest, design: Design, campaign: Callable[..., Any], effects: Sequence[Effect]
 ) -> float:
     """How visible withheld effects are to a change test: their largest noise-free change over its threshold.
 
-    The test campaign is simulated again without noise (the same gears,
-    seed and record starts), without and with ``effects``; the change
+    The test campaign is simulated again without noise (``campaign``: its
+    set-up, so the same gears, seed and record starts), without and with
+    ``effects``; the change
     between the two, floored as the test floors its own, is divided by the
     thresholds ``test`` drew from healthy variation, on its judged runs.
     Below 1 the effects move no feature beyond what two healthy campaigns
@@ -218,16 +205,12 @@ def change_visibility(
     test : ChangeTest
         The diagnosis's change test (``Diagnosis.change_.test``).
     design : Design
-    points : xarray.Dataset
-        The test campaign's operating points.
-    gears : ForeignGears
-        The test campaign's gears.
+        The design the features are read with.
+    campaign : callable
+        The test campaign's :func:`~uqgear.rig.foreign_rig.simulate_foreign_campaign`
+        with all but ``effects`` and ``relative_noise`` given (a :func:`functools.partial`).
     effects : sequence of Effect
         The withheld effects.
-    seed : int or SeedSequence
-        The test campaign's seed (its record starts).
-    duration : float
-        Record length, s.
 
     Returns
     -------
@@ -235,13 +218,7 @@ def change_visibility(
         The largest ratio; 0 for no effect.
     """
     clean = [
-        read_campaign(
-            simulate_foreign_campaign(
-                design, points, gears=gears, effects=list(chosen), seed=seed, duration=duration, relative_noise=0.0
-            ),
-            design,
-            test.channels,
-        )
+        read_campaign(campaign(effects=list(chosen), relative_noise=0.0), design, test.channels)
         for chosen in ((), effects)
     ]
     return float(np.max(test.ratio_of(test.change_between(clean[0], clean[1]))))
