@@ -107,6 +107,11 @@ def test_line_phasors_have_the_amplitudes_moduli_and_a_known_phase(design):
     assert np.angle(phasors[first]) == pytest.approx(0.4, abs=1e-6)
     # the noise floor is read too (the pitch errors' forest of lines raises it)
     assert np.isfinite(phasors[processor.columns["noise_std"]].real)
+    # the lines-only reduction of the phase tests: the same phasors, nothing else
+    alone = processor.model_line_phasors(record[None])[0]
+    assert np.array_equal(alone[lines], phasors[lines], equal_nan=True)
+    others = np.setdiff1d(np.arange(len(processor.names)), lines)
+    assert np.isnan(alone[others]).all()
 
 
 def test_the_classes_are_checked():

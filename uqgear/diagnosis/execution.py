@@ -38,6 +38,10 @@ class RunContext(Protocol):
     def line_gain(self) -> np.ndarray | None: ...
 
 
+#: What a run's records can be reduced to, and the :class:`~.processing.RunProcessor` method that does it.
+REDUCTIONS = {"features": "model_features", "phasors": "model_phasors", "line_phasors": "model_line_phasors"}
+
+
 @dataclass(frozen=True)
 class RunTask:
     """One run to simulate and reduce to features: all a worker process needs besides the case."""
@@ -50,8 +54,9 @@ class RunTask:
     periodicity: str
     # per-tooth pitch errors of the gears (allowances.pitch_errors); None: perfect gears
     pitch_errors: PitchErrors | None = None
-    # reduce to complex line phasors (lines) and the other features (real part) instead of features
-    phasors: bool = False
+    # what the records are reduced to (:data:`REDUCTIONS`): features, or complex line phasors with the
+    # other features (real part), or the line phasors alone
+    reduction: str = "features"
 
 
 def simulate_task(case: RunContext, task: RunTask) -> SimulatedRun:
@@ -86,12 +91,12 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
         # an internal invariant (run_groups makes the groups): the step log reports it as internal
         raise RuntimeError(f"execute_group: expected runs of one operating point; got runs {sorted(ops)}")
     op = ops.pop()
-    phasors = {task.phasors for task in tasks}
-    if len(phasors) != 1:
-        raise RuntimeError("execute_group: expected runs reduced alike (features or phasors); got both")
+    reductions = {task.reduction for task in tasks}
+    if len(reductions) != 1 or not reductions <= set(REDUCTIONS):
+        raise RuntimeError(f"execute_group: expected runs reduced alike, one of {REDUCTIONS}; got {reductions}")
     runs = [simulate_task(case, task) for task in tasks]
     stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
-    reduce = case.processors[op].model_phasors if phasors.pop() else case.processors[op].model_features
+    reduce = getattr(case.processors[op], REDUCTIONS[reductions.pop()])
     features = reduce(stacked).reshape(len(runs), len(case.channels), -1)
     if case.transfer is not None:
         # the rig sees the gear through its transfer paths: the model's features as the rig would record them
@@ -275,4 +280,5 @@ __all__ = [
     "run_groups",
     "transferred_rms",
     "GROUP_SIZE",
+    "REDUCTIONS",
 ]

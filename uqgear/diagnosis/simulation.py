@@ -105,13 +105,15 @@ class RigGrid:
         of the upsampled grid (periodic: wrapped).
         """
         size = centred.shape[1]
-        spectrum = np.fft.rfft(centred, axis=1) * self._filters(size, rate)
+        # scipy's real FFT takes half numpy's time on these lengths; numpy's inverse is the faster one
+        spectrum = scipy.fft.rfft(centred, axis=1) * self._filters(size, rate)
         fine = np.fft.irfft(spectrum, n=size * factor, axis=1) * factor
         index, following, weight = self._interpolation(
             (*key, size * factor), offset, steps_per_second, size * factor, periodic=periodic
         )
-        left = fine[:, index]
-        return left + weight * (fine[:, following] - left)
+        # np.take gathers the same samples as fancy indexing, several times faster
+        left = np.take(fine, index, axis=1)
+        return left + weight * (np.take(fine, following, axis=1) - left)
 
     def _filters(self, size: int, rate: float) -> np.ndarray:
         """The anti-alias filter (and derivative) of each channel, (n_channel, size // 2 + 1), built once per grid."""

@@ -287,7 +287,7 @@ def allowance_errors(
     forest_share : ndarray (n_op, n_channel)
         The share of each record's noise power that the draws' forest of lines alone reads as.
     """
-    clean = [replace(problem.run_task(vector, op), periodicity="free", phasors=True) for op in range(case.n_op)]
+    clean = [replace(problem.run_task(vector, op), periodicity="free", reduction="phasors") for op in range(case.n_op)]
     tasks = list(clean)
     for errors in drawn_errors:
         tasks += [replace(task, pitch_errors=errors) for task in clean]

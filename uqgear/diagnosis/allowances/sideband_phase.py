@@ -289,7 +289,7 @@ def modulation_evidence(
     for op in range(case.n_op):
         for index, channel in enumerate(case.channels):
             record = np.asarray(case.rig[channel].values[op], dtype=float)
-            rig_phasors[op, index] = case.processors[op].model_phasors(record[None])[0][line_columns]
+            rig_phasors[op, index] = case.processors[op].model_line_phasors(record[None])[0][line_columns]
     sigma = case.line_noise_sigma()[..., line]
     observed = phase_sums(rig_phasors, triples)
     # a phase's noise variance is (sigma / |P|)^2 per quadrature; the carrier's counts twice over
@@ -308,7 +308,10 @@ def modulation_evidence(
         (Eccentricity({"amplitude": run_out, "phase": 0.0, "kappa": float(kappa), "shaft": shaft}),) for kappa in kappas
     ]
     clean = [
-        [replace(base.problem.run_task(vector, op), periodicity="free", phasors=True) for op in range(case.n_op)]
+        [
+            replace(base.problem.run_task(vector, op), periodicity="free", reduction="line_phasors")
+            for op in range(case.n_op)
+        ]
         for vector in _spread_vectors(base)
     ]
     tasks = [
