@@ -1,0 +1,109 @@
+"""Where one model run of a diagnosis spends its time: integration, band-limiting and resampling, features.
+
+A diagnosis simulates 2000-4000 model runs a campaign; this benchmark times
+the three parts of one run at each operating point of a campaign, on one
+core, for the three kinds of run the diagnosis makes:
+
+- *tiled*: the nominal model, one mesh period's window tiled over the record
+  (most runs of the fits and of the screening);
+- *whole record*: the nominal model simulated over the whole record with its
+  guards, as a response that does not repeat is (an adhesion oscillation,
+  two effects on different shafts);
+- *pitch errors*: the whole record with per-tooth pitch errors of ISO 1328
+  class 7 (the pitch-error allowance and the sideband phase test), whose
+  tooth pairs each have their own contact.
+
+It prints the median and the largest of each part over the operating points,
+in ms for the three channels of a run, and each kind's share spent in
+integration.
+
+Usage: ``python benchmarks/diagnosis_runs.py [FILE] [--repeats N]`` (default
+``data/rig/tooth_damage.nc``, 5 repeats).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from uqgear.diagnosis.case import prepare_case
+from uqgear.diagnosis.inputs import load_rig_input, resolve_design
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.diagnosis.simulation import _RUN_IN
+from uqgear.physics.pitch_errors import draw_pitch_errors
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
+
+
+def _best_ms(work: Callable[[], object], repeats: int) -> tuple[float, object]:
+    """The fastest of ``repeats`` calls (after one warm-up), ms, and the last result."""
+    result = work()
+    best = math.inf
+    for _ in range(repeats):
+        started = time.perf_counter()
+        result = work()
+        best = min(best, time.perf_counter() - started)
+    return 1e3 * best, result
+
+
+def time_runs(path: Path, repeats: int) -> dict[str, np.ndarray]:
+    """Per kind of run: (n_op, 3) ms of integration, band-limiting and resampling, features."""
+    rig, _ = load_rig_input(path)
+    design = resolve_design(None, rig)
+    case = prepare_case(rig, design, seed=1, settings=DEFAULT_SETTINGS)
+    simulator = case.simulator
+    errors = draw_pitch_errors(design, 7, np.random.default_rng(1))
+    parts: dict[str, list[list[float]]] = {"tiled": [], "whole record": [], "pitch errors": []}
+    for op in range(case.n_op):
+        torque = float(rig["drive_torque"].values[op]) * design.z2 / design.z1
+        run_in = int(math.ceil(_RUN_IN * simulator.mesh_frequency(op)))
+        window = simulator.window_periods("mesh", op)
+        periods, samples = simulator.whole_window(op)
+        kinds = {
+            "tiled": (None, run_in + window + 1, window + 1),
+            "whole record": (None, run_in + periods, periods),
+            "pitch errors": (errors, run_in + periods, periods),
+        }
+        for kind, (pitch_errors, n_periods, keep) in kinds.items():
+            integrate_ms, (signals, poincare) = _best_ms(
+                partial(simulator._simulate, op, design, 1.0, torque, (), pitch_errors, n_periods, keep), repeats
+            )
+            if kind == "tiled":
+                resample_ms, run = _best_ms(partial(simulator._tiled, op, signals, poincare, window, "mesh"), repeats)
+                if run is None:
+                    # this speed's nominal response does not repeat: the diagnosis simulates it in full
+                    parts[kind].append([math.nan] * 3)
+                    continue
+            else:
+                kept = {name: values[:samples] for name, values in signals.items()}
+                resample_ms, run = _best_ms(partial(simulator._whole, op, kept), repeats)
+            records = np.stack([run.records[channel] for channel in case.channels])
+            features_ms, _ = _best_ms(partial(case.processors[op].model_features, records), repeats)
+            parts[kind].append([integrate_ms, resample_ms, features_ms])
+    return {kind: np.array(values) for kind, values in parts.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("file", nargs="?", default=str(DATA / "tooth_damage.nc"))
+    parser.add_argument("--repeats", type=int, default=5)
+    options = parser.parse_args()
+    parts = time_runs(Path(options.file), options.repeats)
+    print(f"one model run of {Path(options.file).name}, three channels, one core (ms; median / largest over speeds)")
+    print(f"{'run':14s} {'integration':>16s} {'resampling':>16s} {'features':>16s} {'integration share':>18s}")
+    for kind, values in parts.items():
+        cells = [f"{np.nanmedian(values[:, part]):7.1f} / {np.nanmax(values[:, part]):5.1f}" for part in range(3)]
+        share = np.nanmedian(values[:, 0] / values.sum(axis=1))
+        missing = int(np.isnan(values[:, 0]).sum())
+        note = f"  ({missing} speed(s) do not repeat)" if missing else ""
+        print(f"{kind:14s} {cells[0]:>16s} {cells[1]:>16s} {cells[2]:>16s} {share:17.0%}{note}")
+
+
+if __name__ == "__main__":
+    main()
