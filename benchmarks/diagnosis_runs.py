@@ -35,7 +35,6 @@ import numpy as np
 from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.inputs import load_rig_input, resolve_design
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
-from uqgear.diagnosis.simulation import _RUN_IN
 from uqgear.physics.pitch_errors import draw_pitch_errors
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
@@ -62,7 +61,7 @@ def time_runs(path: Path, repeats: int) -> dict[str, np.ndarray]:
     parts: dict[str, list[list[float]]] = {"tiled": [], "whole record": [], "pitch errors": []}
     for op in range(case.n_op):
         torque = float(rig["drive_torque"].values[op]) * design.z2 / design.z1
-        run_in = int(math.ceil(_RUN_IN * simulator.mesh_frequency(op)))
+        run_in = simulator.run_in_periods(op)
         window = simulator.window_periods("mesh", op)
         periods, samples = simulator.whole_window(op)
         kinds = {

@@ -240,6 +240,10 @@ class CampaignSimulator:
     def mesh_frequency(self, op: int) -> float:
         return self.design.z1 * self.speeds[op] / 60.0
 
+    def run_in_periods(self, op: int) -> int:
+        """Mesh periods simulated from static equilibrium before a run's kept window (the start-up transient)."""
+        return int(math.ceil(_RUN_IN * self.mesh_frequency(op)))
+
     def window_periods(self, periodicity: str, op: int) -> int:
         """Mesh periods in one period of the steady response."""
         if periodicity == "mesh":
@@ -284,8 +288,7 @@ class CampaignSimulator:
         simulate = partial(self._simulate, op, design, mesh_stiffness_scale, adhesion_torque, effects, pitch_errors)
         if pitch_errors is not None:
             periodicity = "free"
-        f_mesh = self.mesh_frequency(op)
-        run_in = int(math.ceil(_RUN_IN * f_mesh))
+        run_in = self.run_in_periods(op)
         if periodicity != "free":
             window = self.window_periods(periodicity, op)
             result = self._tiled(op, *simulate(run_in + window + 1, window + 1), window, periodicity)
