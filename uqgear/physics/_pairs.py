@@ -177,23 +177,43 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
 
 
 @nb.njit(**INLINED)
+def _earlier(remainder, back, count):
+    """``(m - back) % count`` given ``remainder = m % count`` (``back >= 0``), without a division."""
+    earlier = remainder - back
+    while earlier < 0:
+        earlier += count
+    return earlier
+
+
+@nb.njit(**INLINED)
 def _tooth_terms(n, p, fp, fg):
     """(offset, tooth factor) of the pairs brought into mesh by meshing numbers n, n - 1, n - 2 and n - 3.
 
     They depend on the meshing number only: a step computes them once for
-    the three stages of each of its sub-steps (integer remainders are the
-    dearest operations of a pair's forcing).
+    the three stages of each of its sub-steps, from one integer remainder
+    per gear (remainders are the dearest operations of a pair's forcing;
+    the teeth of the earlier pairs follow by subtraction).
     """
     z1 = int(p[Z1])
     z2 = int(p[Z2])
+    base_gear = N_PARAMS + z1
+    i0 = n % z1
+    j0 = n % z2
+    i1, i2, i3 = _earlier(i0, 1, z1), _earlier(i0, 2, z1), _earlier(i0, 3, z1)
+    j1, j2, j3 = _earlier(j0, 1, z2), _earlier(j0, 2, z2), _earlier(j0, 3, z2)
     f0 = f1 = f2 = f3 = 1.0
     if p[TOOTH_FACTORS] != 0.0:
-        f0 = fp[n % z1] * fg[n % z2]
-        f1 = fp[(n - 1) % z1] * fg[(n - 1) % z2]
-        f2 = fp[(n - 2) % z1] * fg[(n - 2) % z2]
-        f3 = fp[(n - 3) % z1] * fg[(n - 3) % z2]
+        f0 = fp[i0] * fg[j0]
+        f1 = fp[i1] * fg[j1]
+        f2 = fp[i2] * fg[j2]
+        f3 = fp[i3] * fg[j3]
     return (
-        (pair_offset(n, p), pair_offset(n - 1, p), pair_offset(n - 2, p), pair_offset(n - 3, p)),
+        (
+            p[N_PARAMS + i0] + p[base_gear + j0],
+            p[N_PARAMS + i1] + p[base_gear + j1],
+            p[N_PARAMS + i2] + p[base_gear + j2],
+            p[N_PARAMS + i3] + p[base_gear + j3],
+        ),
         (f0, f1, f2, f3),
     )
 
@@ -282,7 +302,7 @@ def _rk4_pairs(s, h, d1, mid, end, p):
     return rk4_combine(s, h, d1, d2, d3, d4)
 
 
-@nb.njit(**JIT_OPTIONS)
+@nb.njit(**INLINED)
 def _first_crossing(s, trial, h, terms, p):
     """Fraction of the step where the first pair changes its contact state (2.0 if none does)."""
     b = p[HALF_BACKLASH]
@@ -304,7 +324,7 @@ def _first_crossing(s, trial, h, terms, p):
     return first
 
 
-@nb.njit(**JIT_OPTIONS)
+@nb.njit(**INLINED)
 def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg):
     """One RK4 step over [t, t+h] (one pair set), redone in parts at each pair's contact change.
 
@@ -334,7 +354,7 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
     return trial
 
 
-@nb.njit(**JIT_OPTIONS)
+@nb.njit(**INLINED)
 def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
     """:func:`~uqgear.physics._rhs.classical_step` with per-pair deflections (same returns)."""
     first_sub, offsets, widths, refs, pairs, table = schedule
@@ -371,7 +391,7 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
     return s, force, a1, a2
 
 
-@nb.njit(**JIT_OPTIONS)
+@nb.njit(**INLINED)
 def pair_contact(x, n, n_pairs, p):
     """Contact state with pitch errors: 1 if some pair in mesh is in drive-side contact (x - e_i > b),
     else -1 if some pair touches on the back side (x - e_i < -b), else 0."""
