@@ -86,8 +86,13 @@ def pair_offset(tooth, p):
     Tooth numbers as for the tooth factors: meshing n pairs pinion tooth
     n mod z1 with gear tooth n mod z2, tooth 0 of each entering at t = 0.
     """
-    z1 = int(p[Z1])
-    return p[N_PARAMS + tooth % z1] + p[N_PARAMS + z1 + tooth % int(p[Z2])]
+    return _teeth_offset(tooth % int(p[Z1]), tooth % int(p[Z2]), p)
+
+
+@nb.njit(**INLINED)
+def _teeth_offset(pinion_tooth, gear_tooth, p):
+    """e_pinion + e_gear (m) of pinion tooth ``pinion_tooth`` meshing with gear tooth ``gear_tooth``."""
+    return p[N_PARAMS + pinion_tooth] + p[N_PARAMS + int(p[Z1]) + gear_tooth]
 
 
 @nb.njit(**INLINED)
@@ -196,7 +201,6 @@ def _tooth_terms(n, p, fp, fg):
     """
     z1 = int(p[Z1])
     z2 = int(p[Z2])
-    base_gear = N_PARAMS + z1
     i0 = n % z1
     j0 = n % z2
     i1, i2, i3 = _earlier(i0, 1, z1), _earlier(i0, 2, z1), _earlier(i0, 3, z1)
@@ -208,12 +212,7 @@ def _tooth_terms(n, p, fp, fg):
         f2 = fp[i2] * fg[j2]
         f3 = fp[i3] * fg[j3]
     return (
-        (
-            p[N_PARAMS + i0] + p[base_gear + j0],
-            p[N_PARAMS + i1] + p[base_gear + j1],
-            p[N_PARAMS + i2] + p[base_gear + j2],
-            p[N_PARAMS + i3] + p[base_gear + j3],
-        ),
+        (_teeth_offset(i0, j0, p), _teeth_offset(i1, j1, p), _teeth_offset(i2, j2, p), _teeth_offset(i3, j3, p)),
         (f0, f1, f2, f3),
     )
 
@@ -396,9 +395,13 @@ def pair_contact(x, n, n_pairs, p):
     """Contact state with pitch errors: 1 if some pair in mesh is in drive-side contact (x - e_i > b),
     else -1 if some pair touches on the back side (x - e_i < -b), else 0."""
     b = p[HALF_BACKLASH]
+    z1 = int(p[Z1])
+    z2 = int(p[Z2])
+    pinion = n % z1
+    gear = n % z2
     state = 0
     for i in range(n_pairs):
-        region = contact_region(x - pair_offset(n - i, p), b)
+        region = contact_region(x - _teeth_offset(_earlier(pinion, i, z1), _earlier(gear, i, z2), p), b)
         if region == 1:
             return 1
         if region == -1:
