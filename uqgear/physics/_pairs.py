@@ -355,7 +355,12 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
 
 @nb.njit(**INLINED)
 def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
-    """:func:`~uqgear.physics._rhs.classical_step` with per-pair deflections (same returns)."""
+    """:func:`~uqgear.physics._rhs.classical_step` with per-pair deflections (same returns).
+
+    Inlined into the kernels, with the parts of its step, as the classical
+    step is: a plain call on every grid step pays the reference counts of
+    the arrays it is passed (``INLINED`` in :mod:`uqgear.physics._rhs`).
+    """
     first_sub, offsets, widths, refs, pairs, table = schedule
     start = n * period
     force = 0.0
