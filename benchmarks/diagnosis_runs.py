@@ -17,6 +17,10 @@ It prints the median and the largest of each part over the operating points,
 in ms for the three channels of a run, and each kind's share spent in
 integration.
 
+It then times the line fit's projection of one run's three records and of a
+group's 24, blocked and against the whole least-squares basis (the
+reference path), at each speed.
+
 Usage: ``python benchmarks/diagnosis_runs.py [FILE] [--repeats N]`` (default
 ``data/rig/tooth_damage.nc``, 5 repeats).
 """
@@ -31,6 +35,7 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.inputs import load_rig_input, resolve_design
@@ -88,6 +93,30 @@ def time_runs(path: Path, repeats: int) -> dict[str, np.ndarray]:
     return {kind: np.array(values) for kind, values in parts.items()}
 
 
+def time_line_fit(path: Path, repeats: int) -> dict[str, np.ndarray]:
+    """Per speed: ms of the line fit's projection of 3 and 24 records, blocked and against the whole basis.
+
+    Three records are one run's channels (most groups of a diagnosis hold one run), 24 a full group
+    of eight; the whole basis is the reference path (``LineFit.weighted``), the blocked projection
+    what ``LineFit.coefficients`` uses below 24 records.
+    """
+    rig, _ = load_rig_input(path)
+    design = resolve_design(None, rig)
+    case = prepare_case(rig, design, seed=1, settings=DEFAULT_SETTINGS)
+    rng = np.random.default_rng(2)
+    out: dict[str, list[float]] = {"3 blocked": [], "3 basis": [], "24 blocked": [], "24 basis": []}
+    with threadpool_limits(1):
+        for processor in case.processors:
+            fit = processor.fit
+            for count in (3, 24):
+                records = rng.standard_normal((count, processor.size))
+                blocked_ms, _ = _best_ms(partial(fit._blocked.project, records), repeats)
+                basis_ms, _ = _best_ms(partial(np.matmul, fit.weighted.T, records.T), repeats)
+                out[f"{count} blocked"].append(blocked_ms)
+                out[f"{count} basis"].append(basis_ms)
+    return {key: np.array(values) for key, values in out.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("file", nargs="?", default=str(DATA / "tooth_damage.nc"))
@@ -102,6 +131,11 @@ def main() -> None:
         missing = int(np.isnan(values[:, 0]).sum())
         note = f"  ({missing} speed(s) do not repeat)" if missing else ""
         print(f"{kind:14s} {cells[0]:>16s} {cells[1]:>16s} {cells[2]:>16s} {share:17.0%}{note}")
+    line_fit = time_line_fit(Path(options.file), options.repeats)
+    print("line fit's projection, one core (ms; median over speeds): blocked / whole basis (ratio)")
+    for count in (3, 24):
+        blocked, basis = np.median(line_fit[f"{count} blocked"]), np.median(line_fit[f"{count} basis"])
+        print(f"  {count:2d} records: {blocked:6.2f} / {basis:6.2f} ({basis / blocked:4.1f}x)")
 
 
 if __name__ == "__main__":

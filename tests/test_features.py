@@ -169,6 +169,32 @@ def test_line_amplitudes_of_close_lines():
         line_amplitudes(signal, 60.0, [0.0, 10.0])
 
 
+
+@pytest.mark.parametrize("size", [N_TIME, 20000, 127])
+def test_blocked_projection_is_the_window_weighted_basis_projection(size):
+    # a few records go through the blocked projection, many through the basis: both are the same sums
+    from uqgear.rig.features import analysis_window
+    from uqgear.rig.line_fit import _BASIS_ROWS, LineFit
+
+    taper = analysis_window("hann", size)
+    frequencies = np.array([35.0, 700.0, 701.3, 1400.0, 2100.5, 7000.0])
+    fit = LineFit(frequencies, FS, size, FS / 2.56, taper)
+    time = np.arange(size) / FS
+    rng = np.random.default_rng(5)
+    records = rng.standard_normal((_BASIS_ROWS + 2, size)) + 2.0 * np.cos(2 * np.pi * 700.0 * time + 0.4)
+    # the basis by angle sums is the cosines and sines of the lines' phases (those lose up to 1e-11 to
+    # the rounding of arguments of up to 2 pi 7000 Hz x 1 s)
+    _, first = np.unique(fit.groups, return_index=True)
+    phase = 2.0 * np.pi * np.outer(np.arange(size) / FS, frequencies[fit.inside][first])
+    expected = np.concatenate([np.ones((size, 1)), np.cos(phase), np.sin(phase)], axis=1) * taper[:, None]
+    np.testing.assert_allclose(fit.weighted, expected, rtol=0, atol=1e-10)
+    direct = fit.weighted.T @ records.T
+    blocked = fit._blocked.project(records)
+    np.testing.assert_allclose(blocked, direct, rtol=0, atol=1e-12 * np.abs(direct).max())
+    # the coefficients of a few records and of many agree record by record
+    few, many = fit.coefficients(records[:3]), fit.coefficients(records)
+    np.testing.assert_allclose(few, many[:, :3], rtol=0, atol=1e-12 * np.abs(many).max())
+
 def test_sampling_rate():
     assert sampling_rate(TIME) == pytest.approx(FS, rel=1e-12)
     with pytest.raises(RigDataError, match=r"time: expected uniform spacing 1/fs; step 2 is"):

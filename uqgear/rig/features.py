@@ -60,13 +60,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 import scipy.signal
 import xarray as xr
 from numpy.typing import ArrayLike
 
 from ..common.errors import DesignError, RigDataError, StudyError
 from ..physics.design import Design
+from .line_fit import LineFit
 from .order_tracking import SPEED_ESTIMATE_VARIABLES, check_tracking_mode, track_orders
 from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, sampling_rate
 from .sampling import band_limit_of as _band_limit
@@ -303,66 +303,6 @@ def order_spectrum(
     result["order"].attrs.update(units="1", long_name="order (multiples of the pinion rotation)")
     result.attrs.update(units=signal.attrs.get("units", ""), long_name="amplitude spectrum", window=window)
     return result
-
-
-class LineFit:
-    """Window-weighted joint least-squares fit of lines at known frequencies.
-
-    Built once per pinion speed and applied to any number of records of that
-    speed. Lines outside the band (above ``limit`` or below one bin) read NaN;
-    a line within one bin of an earlier one is not fitted but reads that one's
-    amplitude.
-    """
-
-    def __init__(self, frequencies: np.ndarray, fs: float, size: int, limit: float, taper: np.ndarray) -> None:
-        self.size_out = frequencies.size
-        # Below one bin a line cannot be told from the record's mean.
-        self.inside = np.flatnonzero((frequencies <= limit) & (frequencies >= fs / size))
-        chosen = frequencies[self.inside]
-        # Lines closer than one bin cannot be separated: in the given order
-        # (mesh harmonics first), a line joins the first fitted line within a
-        # bin of it or becomes a fitted line itself.
-        groups = np.zeros(chosen.size, dtype=int)
-        centres: list[float] = []
-        for index, frequency in enumerate(chosen):
-            near = [number for number, centre in enumerate(centres) if abs(frequency - centre) < fs / size]
-            if near:
-                groups[index] = near[0]
-            else:
-                groups[index] = len(centres)
-                centres.append(float(frequency))
-        self.groups = groups
-        self.n_centres = len(centres)
-        if not centres:
-            return
-        phase = 2.0 * np.pi * np.outer(np.arange(size) / fs, centres)
-        # Columns: constant (the weighted mean), then cos and sin of each line.
-        basis = np.concatenate([np.ones((size, 1)), np.cos(phase), np.sin(phase)], axis=1)
-        self.weighted = basis * taper[:, None]
-        # Normal equations: one small Gram matrix per speed, shared by all records.
-        self.factor = scipy.linalg.cho_factor(self.weighted.T @ basis)
-
-    def coefficients(self, records: np.ndarray) -> np.ndarray:
-        """Least-squares coefficients (1 + 2 n_centres, R): the mean, then the cos and sin of each line."""
-        return scipy.linalg.cho_solve(self.factor, self.weighted.T @ records.T)
-
-    def amplitudes(self, records: np.ndarray) -> np.ndarray:
-        """Amplitudes (R, L) of the lines in float64 records (R, N) without NaN."""
-        result = np.full((records.shape[0], self.size_out), np.nan)
-        if self.n_centres:
-            coefficients = self.coefficients(records)
-            amplitude = np.hypot(coefficients[1 : 1 + self.n_centres], coefficients[1 + self.n_centres :]).T
-            result[:, self.inside] = amplitude[:, self.groups]
-        return result
-
-    def phasors(self, records: np.ndarray) -> np.ndarray:
-        """Complex amplitudes (R, L), cos - i sin coefficients, whose moduli are :meth:`amplitudes`."""
-        result = np.full((records.shape[0], self.size_out), np.nan, dtype=complex)
-        if self.n_centres:
-            coefficients = self.coefficients(records)
-            phasor = (coefficients[1 : 1 + self.n_centres] - 1j * coefficients[1 + self.n_centres :]).T
-            result[:, self.inside] = phasor[:, self.groups]
-        return result
 
 
 def _blocks(rows: np.ndarray, size: int) -> list[np.ndarray]:
