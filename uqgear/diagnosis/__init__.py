@@ -12,7 +12,8 @@ along its steps:
   (runs on worker processes);
 - step 2, predictive distribution: :mod:`.discrepancy`, :mod:`.gap_maps`;
 - step 3, fits: :mod:`.candidates` (parameters), :mod:`.fit_problem`,
-  :mod:`.fitting`, :mod:`.nominal`, :mod:`.screening`, :mod:`.signatures`;
+  :mod:`.fitting`, :mod:`.nominal`, :mod:`.screening`, :mod:`.signatures`,
+  :mod:`.side_by_side` (independent fits on threads, their runs together);
 - step 4, held-out scoring: :mod:`.heldout`, :mod:`.scoring`;
 - step 5, verdict: :mod:`.verdict`, :mod:`.decision`;
 - step 6, several effects: :mod:`.selection`, :mod:`.effect_set`;
