@@ -38,6 +38,7 @@ from uqgear.diagnosis import (
     fit_problem,
     fitting,
     scoring,
+    screening,
     selection,
     set_verdict,
     verdict,
@@ -184,8 +185,10 @@ class _StandIns:
         self.screened: list[str] = []
         self.full: list[str] = []
         self.bases: list[tuple[str, ...]] = []
-        monkeypatch.setattr(selection, "fit_candidate", self.fit_candidate)
-        monkeypatch.setattr(selection, "leave_one_out", lambda result: result.held)
+        # the screening fits on top of a base run through screening's, the full fit through selection's
+        for module in (selection, screening):
+            monkeypatch.setattr(module, "fit_candidate", self.fit_candidate)
+            monkeypatch.setattr(module, "leave_one_out", lambda result: result.held)
         monkeypatch.setattr(selection, "score_candidate", self.score_candidate)
         monkeypatch.setattr(selection, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
         # no pitch-error allowance on these stand-ins: a full fit is scored as fitted
@@ -212,7 +215,7 @@ class _StandIns:
 
 
 def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatch, design):
-    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={})
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
     run_out = _variant(design, "eccentricity[pinion]")
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 0.3, 0.75),
@@ -234,7 +237,7 @@ def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatc
 
 
 def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design):
-    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={})
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
     run_out = _variant(design, "eccentricity[pinion]")
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     # a fair score but no real shrink of what remains (soaking up noise): not added
@@ -243,8 +246,26 @@ def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design)
     assert round_.added is None and round_.scores[0].effect == "friction"
 
 
+def test_a_round_fits_in_full_only_a_best_screening_that_could_be_named(monkeypatch, design):
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
+    run_out = _variant(design, "eccentricity[pinion]")
+    base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
+    # the best screening on top: 7 nats, shrink interval -10 % to 10 %, a gap above noise: no full fit
+    stand_ins = _StandIns(monkeypatch, {"friction": (7.0, 1.15, 0.0)})
+    round_ = selection.next_effect(_state(case), base, ["eccentricity"])
+    assert stand_ins.full == [] and round_.added is None
+    assert round_.scores[0].effect == "friction" and stand_ins.screened
+    assert "not fitted in full" in round_.reason
+    # any one of evidence, a shrink interval reaching 20 % or a gap left within noise earns the full fit
+    settings = DEFAULT_SETTINGS
+    for figures in ((settings.score_threshold, 1.15, 0.0), (7.0, 1.15, 0.1), (7.0, settings.noise_gap, 0.0)):
+        stand_ins = _StandIns(monkeypatch, {"friction": figures})
+        selection.next_effect(_state(case), base, ["eccentricity"])
+        assert stand_ins.full == ["friction"], figures
+
+
 def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design):
-    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={})
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
     run_out = _variant(design, "eccentricity[pinion]")
     first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
     # within noise after the first effect: no round at all
@@ -254,7 +275,7 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     assert [s.entry.effect for s in selected] == ["eccentricity"] and rounds == [] and stand_ins.screened == []
     assert selected[0].shrink_share == 0.9
     # with the pitch-error allowance a gap within noise may still hide an effect: one round is run
-    allowed = SimpleNamespace(design=design, pitch_allowance=object(), run_out_allowance={})
+    allowed = SimpleNamespace(design=design, pitch_allowance=object(), run_out_allowance={}, executor=None)
     stand_ins = _StandIns(monkeypatch, {})
     selected, rounds = selection.forward_selection(_state(allowed), done, first_decision)
     assert [s.entry.effect for s in selected] == ["eccentricity"] and len(rounds) == 1
