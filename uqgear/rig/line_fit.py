@@ -11,7 +11,7 @@ import numpy as np
 import scipy.linalg
 
 # From this many records on, the window-weighted basis is read once for all of them and the projection is
-# one matrix product; below it the blocked projection is faster (docs/validation/performance.md).
+# one matrix product; below it the blocked projection is faster (docs/validation/diagnosis.md, Cost).
 _BASIS_ROWS = 24
 # Samples per block of the blocked projection: its phase table (block x 2 lines doubles) stays in cache.
 _PROJECTION_BLOCK = 128
