@@ -12,6 +12,7 @@ beyond it.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from uqgear.diagnosis.allowances.pitch_orders import (
     bounds_of,
     class_powers,
     drawn_amplitudes,
+    driving_order,
     factor_bounds,
     factors_summary,
     fitted_factors,
@@ -31,6 +33,7 @@ from uqgear.diagnosis.allowances.pitch_orders import (
 )
 from uqgear.diagnosis.discrepancy import FeatureLayout
 from uqgear.physics.pitch_errors import draw_pitch_errors, order_powers
+from uqgear.rig.features import FeatureDefinition, feature_definitions
 
 
 def test_order_powers_of_a_cosine_of_the_tooth_positions():
@@ -118,6 +121,9 @@ def _case(observed: np.ndarray, noise: float):
 
     case = Case()
     case.layout, case.observed = layout, observed
+    case.design = SimpleNamespace(z1=21, z2=101)
+    orders = (2.0, 23.0, 20.0, 21.0 + 3 * 21 / 101, math.nan)
+    case.processors = [SimpleNamespace(definitions=[FeatureDefinition(*pair) for pair in zip(names, families, orders)])]
     case.mask = lambda: np.isfinite(observed)
     case.line_noise_sigma = lambda: np.where(np.array(kinds) == "line", noise, np.nan) * np.ones(observed.shape)
     return case
@@ -127,6 +133,24 @@ def test_line_groups_gather_shaft_line_and_sidebands_of_one_gear_and_order():
     case = _case(np.ones((2, 1, 5)), 1.0)
     assert {key: list(value) for key, value in line_groups(case).items()} == {
         ("pinion", 2): [0, 1], ("pinion", 1): [2], ("gear", 3): [3]}
+
+
+def test_a_motor_line_on_a_gear_order_joins_that_group(design):
+    # the locomotive design: z1 = 21, 3 pole pairs, so the first motor line (18 pinion orders) is the
+    # pinion's third lower sideband of the first mesh harmonic, driven by the pinion's E_3; the second
+    # (36 = 42 - 6) is driven by E_6, an order the allowance does not scale; neither is a gear order
+    assert (design.z1, design.z2, design.motor_pole_pairs) == (21, 101, 3)
+    processor = SimpleNamespace(definitions=list(feature_definitions(design)))
+    layout = FeatureLayout.from_processor(processor)
+    case = SimpleNamespace(design=design, processors=[processor], layout=layout)
+    line_names = [name for name, kind in zip(layout.names, layout.kinds) if kind == "line"]
+    groups = {key: [line_names[position] for position in value] for key, value in line_groups(case).items()}
+    assert sorted(groups[("pinion", 3)]) == sorted(
+        ["shaft_pinion3", "motor_ripple1"] + [f"mesh{k}_sb_pinion{sign}3" for k in (1, 2, 3) for sign in "+-"]
+    )
+    assert all("motor_ripple2" not in names for names in groups.values())
+    assert all("motor_ripple1" not in names for key, names in groups.items() if key != ("pinion", 3))
+    assert driving_order(36.0, 21, 1.0) == 6 and driving_order(18.0, 101, 21 / 101) is None
 
 
 @pytest.mark.parametrize("truth", [0.2, 1.0, 3.0])

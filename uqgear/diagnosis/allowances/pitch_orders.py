@@ -135,8 +135,44 @@ def share_below(
     }
 
 
+def driving_order(order: float, teeth: int, orders_per_revolution: float) -> int | None:
+    """The order j of a gear's tooth-position coefficients E_j that drives a line at ``order`` pinion orders.
+
+    A gear's pitch errors repeat every revolution and are sampled once a
+    tooth, so the line at n z + j (z teeth, any n) is driven by E_j, and
+    E_(z - j) is the conjugate of E_j: the line's driving order is its order
+    in the gear's revolutions modulo z, folded to at most z / 2. None where
+    the line is not a whole order of that gear.
+
+    Examples
+    --------
+    The first motor line of the locomotive design (3 pole pairs: 18 pinion
+    orders) is the pinion's third lower sideband of the first mesh harmonic
+    (z1 = 21), and no whole order of the gear (z2 = 101):
+
+    >>> driving_order(18.0, 21, 1.0), driving_order(18.0, 101, 21 / 101)
+    (3, None)
+    """
+    in_revolutions = order / orders_per_revolution
+    whole = round(in_revolutions)
+    if abs(in_revolutions - whole) > 1e-9 * max(1.0, abs(in_revolutions)):
+        return None
+    remainder = whole % teeth
+    return min(remainder, teeth - remainder)
+
+
 def line_groups(case: RigCase) -> dict[tuple[str, int], np.ndarray]:
-    """Positions, among the layout's line features, of each (gear, order) group: shaft line j and sidebands +-j."""
+    """Positions, among the layout's line features, of each (gear, order) group: shaft line j and sidebands +-j.
+
+    A motor line (6 p m pinion orders) that falls on a gear's line of a
+    scaled order belongs to that group as well: it is the same spectral line
+    (on the locomotive design the first motor line is the pinion's third
+    lower sideband of the first mesh harmonic, :func:`driving_order`), and
+    the gear's errors drive it by the same factor.
+    """
+    design = case.design
+    revolution = {"pinion": (design.z1, 1.0), "gear": (design.z2, design.z1 / design.z2)}
+    orders = {definition.name: definition.order for definition in case.processors[0].definitions}
     lines = [
         (name, family)
         for name, family, kind in zip(case.layout.names, case.layout.families, case.layout.kinds)
@@ -145,6 +181,11 @@ def line_groups(case: RigCase) -> dict[tuple[str, int], np.ndarray]:
     groups: dict[tuple[str, int], list[int]] = {}
     for position, (name, family) in enumerate(lines):
         for gear in _GEARS:
+            if family == "motor_line":
+                order = driving_order(orders[name], *revolution[gear])
+                if order in ORDERS:
+                    groups.setdefault((gear, order), []).append(position)
+                continue
             if family == f"shaft_{gear}":
                 found = re.search(r"(\d+)$", name)
             elif family == f"sideband_{gear}":
@@ -315,6 +356,7 @@ __all__ = [
     "factor_bounds",
     "bounds_of",
     "share_below",
+    "driving_order",
     "line_groups",
     "fitted_factors",
     "scaled_line_errors",
