@@ -525,3 +525,19 @@ def test_bootstrap_gap_brackets_the_gap():
     z = rng.standard_normal((8, 3, 20)) * 2.0
     low, high = scoring.bootstrap_gap(z, rng)
     assert low <= scoring.gap_metric(z) <= high and high - low > 0
+
+
+def test_one_spectral_line_enters_the_comparison_once(healthy_case):
+    # on the locomotive design (z1 = 21, 3 pole pairs) the first motor line (18 pinion orders) is the
+    # pinion's third lower sideband of the first mesh harmonic: the line fit reads one amplitude for both
+    # names, and the comparison (every fit, gap and allowance) takes it once, under its first name
+    case = healthy_case
+    names = case.layout.names
+    motor, sideband = names.index("motor_ripple1"), names.index("mesh1_sb_pinion-3")
+    np.testing.assert_array_equal(case.observed[..., motor], case.observed[..., sideband])
+    compared = case.mask()
+    assert compared[..., sideband].all() and not compared[..., motor].any()
+    # every run compares as many lines as its line fit has distinct centres in the band
+    line = np.array(case.layout.kinds) == "line"
+    for op, processor in enumerate(case.processors):
+        assert compared[op][:, line].sum(axis=-1).tolist() == [processor.fit.n_centres] * len(case.channels)

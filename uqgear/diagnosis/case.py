@@ -159,8 +159,19 @@ class RigCase:
         return line_noise_sigma(self.noise_std, self.noise, self.layout)
 
     def mask(self) -> np.ndarray:
-        """Features that enter the comparison: usable runs and finite rig features."""
-        return np.isfinite(self.observed) & self.usable[..., None]
+        """Features that enter the comparison: usable runs and finite rig features, each spectral line once.
+
+        A line within one bin of an earlier one reads that line's amplitude
+        in rig and model alike (:class:`~uqgear.rig.line_fit.LineFit`); it is
+        left out, so that one spectral line counts once in every fit and gap
+        whatever the names it carries.
+        """
+        compared = np.isfinite(self.observed) & self.usable[..., None]
+        position = {int(column): f for f, column in enumerate(self.layout.columns)}
+        for op, processor in enumerate(self.processors):
+            merged = [position[int(c)] for c in processor.merged_columns if int(c) in position]
+            compared[op, :, merged] = False
+        return compared
 
     def observed_features(self) -> dict[str, np.ndarray]:
         """The compared rig features over runs by ``CHANNEL:FEATURE`` name (what effect families read hints off)."""

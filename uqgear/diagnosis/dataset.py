@@ -175,6 +175,15 @@ def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
     dims = ("op", "channel", "feature")
     data: dict[str, Any] = {
         "observed": (dims, case.observed, {"long_name": "rig features", "units": "channel units"}),
+        "compared": (
+            dims,
+            case.mask().astype(np.int8),
+            {
+                "long_name": "feature enters the comparison: a usable run, a finite rig value, each spectral line "
+                "once (1), else 0",
+                "units": "1",
+            },
+        ),
         "nominal_model": (
             dims,
             result.nominal.model[..., layout.columns],

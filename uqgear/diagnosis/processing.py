@@ -62,6 +62,8 @@ class RunProcessor:
         # line power count each line once
         _, first = np.unique(self.fit.groups, return_index=True)
         self.distinct_line_columns = self.line_columns[self.fit.inside[first]]
+        # the other lines of a group read the first one's amplitude: the same spectral line under another name
+        self.merged_columns = np.setdiff1d(self.line_columns[self.fit.inside], self.distinct_line_columns)
         frequencies = np.fft.rfftfreq(self.size, 1.0 / self.fs)
         self.excluded = feature_module.excluded_bins(
             frequencies,
