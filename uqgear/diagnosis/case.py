@@ -167,10 +167,8 @@ class RigCase:
         whatever the names it carries.
         """
         compared = np.isfinite(self.observed) & self.usable[..., None]
-        position = {int(column): f for f, column in enumerate(self.layout.columns)}
         for op, processor in enumerate(self.processors):
-            merged = [position[int(c)] for c in processor.merged_columns if int(c) in position]
-            compared[op, :, merged] = False
+            compared[op, :, np.isin(self.layout.columns, processor.merged_columns)] = False
         return compared
 
     def observed_features(self) -> dict[str, np.ndarray]:
