@@ -129,6 +129,54 @@ def test_band_power_discrepancy_adds_noise_power():
     assert abs(z.item()) < 1e-9
 
 
+def test_band_noise_replaces_the_floor_for_the_low_band_only():
+    layout = disc.FeatureLayout(("low_band_rms", "rms"), ("low_frequency", "broadband"), ("band", "rms"),
+                                np.array([0, 1]))
+    noise = disc.NoiseModel(line_scale=np.array([np.nan, np.nan]), band_power=np.array([0.01, 0.002]),
+                            total_power=np.array([1.0, 0.1]), kurtosis_spread=0.1)
+    floor, band_noise = 3.0, 1.0
+    model = np.array([0.4, 2.0]).reshape(1, 1, 2)
+    # the band holds the band's noise, the RMS the floor's
+    observed = np.array([math.sqrt(0.16 + 0.01 * band_noise ** 2), math.sqrt(4.0 + floor ** 2)]).reshape(1, 1, 2)
+    errors = {"line": 0.0, "band": 0.1, "rms": 0.1, "kurtosis": 0.0}
+    z, _ = disc.standardised_discrepancy(observed, model, np.full((1, 1), floor), [noise], layout, errors,
+                                         band_noise_std=np.full((1, 1), band_noise))
+    assert np.allclose(z, 0.0, atol=1e-9)
+    expected = disc.expected_rig_features(model, np.full((1, 1), floor), [noise], layout,
+                                          band_noise_std=np.full((1, 1), band_noise))
+    assert np.allclose(expected, observed, rtol=1e-12)
+    # without it the band expects the floor's noise: a rig band below the prediction
+    z_floor, _ = disc.standardised_discrepancy(observed, model, np.full((1, 1), floor), [noise], layout, errors)
+    assert z_floor[0, 0, 0] < -1.0 and z_floor[0, 0, 1] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_band_floor_reads_the_sensor_noise_under_a_forest_of_gear_lines(design):
+    # one-second records at 800 rpm: white noise of unit std, a line at every gear order from 150 Hz
+    # to 7 kHz rising with the square of frequency (as the accelerations of a manufactured gear pair
+    # do), and an oscillation of 25 Hz inside the low band
+    fs, size, speed = 20480.0, 20480, 800.0
+    options = dict(rig_case.FEATURE_OPTIONS, band_limit=fs / 2.56)
+    processor = processing.RunProcessor(design, speed, fs, size, options)
+    rng = np.random.default_rng(7)
+    time = np.arange(size) / fs
+    gear_order = speed / 60.0 * design.z1 / design.z2
+    forest = np.zeros(size)
+    for frequency in np.arange(math.ceil(150.0 / gear_order), 7000.0 / gear_order) * gear_order:
+        forest += 0.4 * (frequency / 1000.0) ** 2 * np.cos(2 * np.pi * frequency * time + rng.uniform(0, 2 * np.pi))
+    oscillation = 3.0 * np.cos(2 * np.pi * 25.0 * time)
+    noise = rng.standard_normal((6, size))
+    plain = processor.band_floor(noise)
+    noisy_floor = processor.features(noise + forest + oscillation)[:, processor.columns["noise_std"]]
+    under_forest = processor.band_floor(noise + forest + oscillation)
+    # 78 bins: the median reads the density to about 16 %, its square root to about 8 % (1 sigma)
+    assert np.all(np.abs(plain - 1.0) < 0.25) and abs(plain.mean() - 1.0) < 0.1
+    assert np.all(noisy_floor > 2.0)  # the floor between the lines reads the forest, not the sensor
+    assert np.all(np.abs(under_forest - 1.0) < 0.25) and abs(under_forest.mean() - 1.0) < 0.1
+    # too few bins to read a median: no estimate
+    short = processing.RunProcessor(design, speed, fs, 2048, options)
+    assert np.isnan(short.band_floor(noise[:1, :2048])).all()
+
+
 def test_robust_log_density_has_normal_core_and_flat_floor():
     core = disc.robust_log_density(np.array([0.0]), np.array([1.0]))
     assert core.item() == pytest.approx(math.log(0.99 / math.sqrt(2 * math.pi) + 0.01 / 200.0), rel=1e-12)
@@ -525,6 +573,13 @@ def test_bootstrap_gap_brackets_the_gap():
     z = rng.standard_normal((8, 3, 20)) * 2.0
     low, high = scoring.bootstrap_gap(z, rng)
     assert low <= scoring.gap_metric(z) <= high and high - low > 0
+
+
+def test_low_band_noise_never_exceeds_the_floor(healthy_case):
+    case = healthy_case
+    usable = case.usable
+    assert np.all(np.isfinite(case.band_noise_std[usable]))
+    assert np.all(case.band_noise_std[usable] <= case.noise_std[usable])
 
 
 def test_one_spectral_line_enters_the_comparison_once(healthy_case):

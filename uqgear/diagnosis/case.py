@@ -121,6 +121,8 @@ class RigCase:
     observed: np.ndarray  # (n_op, n_channel, F) compared features
     observed_all: np.ndarray  # (n_op, n_channel, all features)
     noise_std: np.ndarray  # (n_op, n_channel)
+    # (n_op, n_channel): the white noise the low band holds, read in the band, never above noise_std
+    band_noise_std: np.ndarray
     noise: list[NoiseModel]
     usable: np.ndarray  # (n_op, n_channel)
     simulator: CampaignSimulator
@@ -248,6 +250,25 @@ def _left_out_interference(
     return interference
 
 
+def _band_noise_std(
+    records: Mapping[str, np.ndarray], noise_std: np.ndarray, processors: list[RunProcessor], channels: tuple[str, ...]
+) -> np.ndarray:
+    """The white noise of each record's low band (n_op, n_channel): its own bins' floor, capped by ``noise_std``.
+
+    Both are read from bins that lines and other content can only raise, so
+    the lower is the nearer the sensor's noise
+    (:meth:`~uqgear.diagnosis.processing.RunProcessor.band_floor`); after
+    the interference notches, so that rig and model see the same bins.
+    """
+    floor = np.stack(
+        [
+            np.array([processors[op].band_floor(records[channel][op][None])[0] for channel in channels])
+            for op in range(noise_std.shape[0])
+        ]
+    )
+    return np.where(np.isfinite(floor), np.fmin(floor, noise_std), noise_std)
+
+
 def prepare_case(
     rig: xr.Dataset,
     design: Design,
@@ -296,6 +317,7 @@ def prepare_case(
     interference = _left_out_interference(
         records, noise_std, usable, speeds, fs, options, channels, processors, observed_all, settings
     )
+    band_noise_std = _band_noise_std(records, noise_std, processors, channels)
     rng = np.random.default_rng(seed)
     noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
     noise = [noise_by_speed[float(speed)] for speed in speeds]
@@ -315,6 +337,7 @@ def prepare_case(
         observed=observed_all[..., layout.columns],
         observed_all=observed_all,
         noise_std=noise_std,
+        band_noise_std=band_noise_std,
         noise=noise,
         usable=usable,
         simulator=simulator,

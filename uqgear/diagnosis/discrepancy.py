@@ -154,6 +154,8 @@ def standardised_discrepancy(
     noise: Sequence[NoiseModel],
     layout: FeatureLayout,
     model_error: Mapping[str, float],
+    *,
+    band_noise_std: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Standardised discrepancies and predictive scales of rig features against model features.
 
@@ -172,6 +174,10 @@ def standardised_discrepancy(
         Relative model error per feature kind (a
         :class:`~uqgear.diagnosis.case.FeatureModelError` may add absolute
         model error, :func:`absolute_model_error`).
+    band_noise_std : ndarray (n_op, n_channel), optional
+        The white noise of the low band, where it is read apart from
+        ``noise_std`` (:attr:`~uqgear.diagnosis.case.RigCase.band_noise_std`);
+        default ``noise_std``.
 
     Returns
     -------
@@ -186,6 +192,7 @@ def standardised_discrepancy(
     scale = np.full(observed.shape, np.nan)
     kinds = np.array(layout.kinds)
     sigma_noise = np.asarray(noise_std, dtype=float)[..., None]  # (n_op, n_channel, 1)
+    sigma_band = sigma_noise if band_noise_std is None else np.asarray(band_noise_std, dtype=float)[..., None]
     line_sigma = line_noise_sigma(noise_std, noise, layout)
     band = np.stack([n.band_power for n in noise])[:, None, :]  # (n_op, 1, 2)
     total = np.stack([n.total_power for n in noise])[:, None, :]
@@ -202,23 +209,23 @@ def standardised_discrepancy(
         sigma = np.maximum(sigma, 1e-300)
         z[..., line] = _line_discrepancy(observed[..., line], nu, sigma)
         scale[..., line] = sigma / np.maximum(line_sigma[..., line], 1e-300)
-    for kind, moments in (("band", band), ("rms", total)):
+    for kind, moments, sigma_kind in (("band", band, sigma_band), ("rms", total, sigma_noise)):
         chosen = kinds == kind
         if not chosen.any():
             continue
         model_power = model[..., chosen] ** 2
-        noise_power = sigma_noise**2 * moments[..., 0:1]
+        noise_power = sigma_kind**2 * moments[..., 0:1]
         # noise power scatter, model error, and the signal-noise cross term
         relative_scatter = moments[..., 1:2] / moments[..., 0:1]
         spread = np.sqrt(
-            (sigma_noise**2 * moments[..., 1:2]) ** 2
+            (sigma_kind**2 * moments[..., 1:2]) ** 2
             + (2.0 * model_error[kind] * model_power) ** 2
             + 2.0 * model_power * noise_power * relative_scatter**2
             + absolute_model_error(model_error, kind) ** 2
         )
         spread = np.maximum(spread, 1e-300)
         z[..., chosen] = (observed[..., chosen] ** 2 - model_power - noise_power) / spread
-        scale[..., chosen] = spread / np.maximum(sigma_noise**2 * moments[..., 1:2], 1e-300)
+        scale[..., chosen] = spread / np.maximum(sigma_kind**2 * moments[..., 1:2], 1e-300)
     chosen = kinds == "kurtosis"
     if chosen.any():
         index = layout.names.index("rms")
@@ -244,18 +251,25 @@ def line_noise_sigma(noise_std: np.ndarray, noise: Sequence[NoiseModel], layout:
 
 
 def expected_rig_features(
-    model: np.ndarray, noise_std: np.ndarray, noise: Sequence[NoiseModel], layout: FeatureLayout
+    model: np.ndarray,
+    noise_std: np.ndarray,
+    noise: Sequence[NoiseModel],
+    layout: FeatureLayout,
+    *,
+    band_noise_std: np.ndarray | None = None,
 ) -> np.ndarray:
     """What a rig records on average for noise-free model features (..., n_op, n_channel, F).
 
     Line amplitudes: the Rice mean about the model's amplitude; band and
-    broadband RMS: the noise power added; kurtosis: that of signal plus
-    Gaussian noise. Used to judge how visible a model difference is.
+    broadband RMS: the noise power added (the band's with ``band_noise_std``
+    where given, as in :func:`standardised_discrepancy`); kurtosis: that of
+    signal plus Gaussian noise. Used to judge how visible a model difference is.
     """
     model = np.asarray(model, dtype=float)
     out = np.full(model.shape, np.nan)
     kinds = np.array(layout.kinds)
     sigma_noise = np.asarray(noise_std, dtype=float)[..., None]
+    sigma_band = sigma_noise if band_noise_std is None else np.asarray(band_noise_std, dtype=float)[..., None]
     band = np.stack([n.band_power[0] for n in noise])[:, None, None]
     total = np.stack([n.total_power[0] for n in noise])[:, None, None]
     line = kinds == "line"
@@ -263,9 +277,9 @@ def expected_rig_features(
         np.maximum(line_noise_sigma(noise_std, noise, layout)[..., line], 1e-300), model[..., line].shape
     )
     out[..., line] = _rice_moments(np.abs(model[..., line]), sigma)[0]
-    for kind, power in (("band", band), ("rms", total)):
+    for kind, power, sigma_kind in (("band", band, sigma_band), ("rms", total, sigma_noise)):
         chosen = kinds == kind
-        out[..., chosen] = np.sqrt(model[..., chosen] ** 2 + sigma_noise**2 * power)
+        out[..., chosen] = np.sqrt(model[..., chosen] ** 2 + sigma_kind**2 * power)
     chosen = kinds == "kurtosis"
     if chosen.any():
         index = layout.names.index("rms")

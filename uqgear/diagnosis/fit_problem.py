@@ -193,6 +193,7 @@ class FitProblem:
             case.noise,
             case.layout,
             self.model_error if model_error is None else model_error,
+            band_noise_std=case.band_noise_std,
         )
 
     def residual_vector(self, z: np.ndarray, v: np.ndarray) -> np.ndarray:

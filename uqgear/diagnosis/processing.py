@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -12,6 +13,10 @@ import scipy.linalg
 from ..physics.design import Design
 from ..rig import features as feature_module
 from ..rig.features import feature_definitions
+
+#: Fewest low-band bins whose median :meth:`RunProcessor.band_floor` reads: the median of n
+#: white-noise bins scatters by about 1.44 / sqrt(n) of the density (36 % at 16 bins).
+MIN_FLOOR_BINS = 16
 
 
 class RunProcessor:
@@ -106,6 +111,27 @@ class RunProcessor:
         # one-sided periodogram density (scipy's 'density' scaling), summed over the band
         density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
         return np.sqrt(density.sum(axis=1) * self.fs / self.size)
+
+    def band_floor(self, records: np.ndarray) -> np.ndarray:
+        """Std (R,) of white noise whose density is the median periodogram bin of the low band (without notches).
+
+        The floor between the lines (``noise_std``) is read over the whole
+        band, where the gears' shaft-order lines (every gear order with
+        manufactured gears, accelerations rising with frequency) can fill most
+        bins and raise it several times over the sensor's noise. The low
+        band's own bins see that noise with few lines on them: a line or an
+        oscillation in the band takes a few of its bins and leaves their
+        median. NaN where the band has fewer than :data:`MIN_FLOOR_BINS` bins.
+        """
+        records = np.atleast_2d(np.asarray(records, dtype=float))
+        out = np.full(records.shape[0], np.nan)
+        if self._band_bins.size < MIN_FLOOR_BINS:
+            return out
+        centred = records - records.mean(axis=1, keepdims=True)
+        spectrum = scipy.fft.rfft(centred * self.taper, axis=1)
+        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
+        # a white-noise bin is exponentially distributed about the density, whose median is ln 2 times its mean
+        return np.sqrt(np.median(density, axis=1) / math.log(2.0) * 0.5 * self.fs)
 
     def features(self, records: np.ndarray, *, lines: bool = True) -> np.ndarray:
         """Feature values (R, F) of records (R, N); NaN rows where a sample is NaN, NaN lines without ``lines``."""

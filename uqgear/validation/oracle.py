@@ -46,7 +46,9 @@ def oracle_gap(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any]) -> f
         without.append(execute_run(case, RunTask(op, design, scale, float(adhesion[op]), (), "mesh"))[0])
     columns = case.layout.columns
     # the noise the rig's records carry, as the diagnosis estimates it
-    recorded = expected_rig_features(np.stack(with_effect)[..., columns], case.noise_std, case.noise, case.layout)
+    recorded = expected_rig_features(
+        np.stack(with_effect)[..., columns], case.noise_std, case.noise, case.layout, band_noise_std=case.band_noise_std
+    )
     return _capped_gap(case, recorded, np.stack(without)[..., columns])
 
 
@@ -60,7 +62,9 @@ def _true_model(case: RigCase, truth: Mapping[str, Any]) -> tuple[Design, float,
 
 def _capped_gap(case: RigCase, recorded: np.ndarray, plain: np.ndarray) -> float:
     """sqrt(mean(min(z^2, 10^2))) of the standardised shifts between what a rig records and a model."""
-    shift, _ = standardised_discrepancy(recorded, plain, case.noise_std, case.noise, case.layout, case.model_error)
+    shift, _ = standardised_discrepancy(
+        recorded, plain, case.noise_std, case.noise, case.layout, case.model_error, band_noise_std=case.band_noise_std
+    )
     squares = capped_squares(shift[case.mask()])
     squares = squares[np.isfinite(squares)]
     return float(math.sqrt(np.mean(squares))) if squares.size else 0.0
@@ -87,7 +91,7 @@ def effect_visibility(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any
         tasks = [RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free") for op in range(case.n_op)]
         return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
 
-    recorded = expected_rig_features(features(effects), case.noise_std, case.noise, case.layout)
+    recorded = expected_rig_features(features(effects), case.noise_std, case.noise, case.layout, band_noise_std=case.band_noise_std)
     return {
         name: _capped_gap(case, recorded, features(effects[:index] + effects[index + 1 :]))
         for index, name in enumerate(names)
