@@ -168,7 +168,7 @@ def test_band_floor_reads_the_sensor_noise_under_a_forest_of_gear_lines(design):
     plain = processor.band_floor(noise)
     noisy_floor = processor.features(noise + forest + oscillation)[:, processor.columns["noise_std"]]
     under_forest = processor.band_floor(noise + forest + oscillation)
-    # 78 bins: the median reads the density to about 16 %, its square root to about 8 % (1 sigma)
+    # 79 bins: the median reads the density to about 16 %, its square root to about 8 % (1 sigma)
     assert np.all(np.abs(plain - 1.0) < 0.25) and abs(plain.mean() - 1.0) < 0.1
     assert np.all(noisy_floor > 2.0)  # the floor between the lines reads the forest, not the sensor
     assert np.all(np.abs(under_forest - 1.0) < 0.25) and abs(under_forest.mean() - 1.0) < 0.1

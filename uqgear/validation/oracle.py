@@ -91,7 +91,9 @@ def effect_visibility(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any
         tasks = [RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free") for op in range(case.n_op)]
         return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
 
-    recorded = expected_rig_features(features(effects), case.noise_std, case.noise, case.layout, band_noise_std=case.band_noise_std)
+    recorded = expected_rig_features(
+        features(effects), case.noise_std, case.noise, case.layout, band_noise_std=case.band_noise_std
+    )
     return {
         name: _capped_gap(case, recorded, features(effects[:index] + effects[index + 1 :]))
         for index, name in enumerate(names)
