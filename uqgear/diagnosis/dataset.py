@@ -212,7 +212,12 @@ def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
         "noise_std": (
             ("op", "channel"),
             case.noise_std,
-            {"long_name": "white-noise level of the rig records", "units": "channel units"},
+            {"long_name": "white-noise level of the rig records (floor between the lines)", "units": "channel units"},
+        ),
+        "band_noise_std": (
+            ("op", "channel"),
+            case.band_noise_std,
+            {"long_name": "white-noise level of the rig records' low band (its own floor)", "units": "channel units"},
         ),
         "nominal_adhesion_torque": (
             ("op",),
@@ -316,7 +321,12 @@ def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> 
         "noise_std": (
             ("op", "channel"),
             case.noise_std,
-            {"long_name": "white-noise level of the rig records", "units": "channel units"},
+            {"long_name": "white-noise level of the rig records (floor between the lines)", "units": "channel units"},
+        ),
+        "band_noise_std": (
+            ("op", "channel"),
+            case.band_noise_std,
+            {"long_name": "white-noise level of the rig records' low band (its own floor)", "units": "channel units"},
         ),
     }
     coords = {
