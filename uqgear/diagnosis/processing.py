@@ -106,11 +106,13 @@ class RunProcessor:
         """RMS of the low band (without notched bins) of records (R, N): the one-sided periodogram density summed."""
         return self._centred_low_band_rms(records - records.mean(axis=1, keepdims=True))
 
-    def _centred_low_band_rms(self, centred: np.ndarray) -> np.ndarray:
+    def _band_density(self, centred: np.ndarray) -> np.ndarray:
+        """One-sided periodogram density (scipy's 'density' scaling) of centred records at the low band's bins."""
         spectrum = scipy.fft.rfft(centred * self.taper, axis=1)  # scipy's takes half numpy's time here
-        # one-sided periodogram density (scipy's 'density' scaling), summed over the band
-        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
-        return np.sqrt(density.sum(axis=1) * self.fs / self.size)
+        return np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
+
+    def _centred_low_band_rms(self, centred: np.ndarray) -> np.ndarray:
+        return np.sqrt(self._band_density(centred).sum(axis=1) * self.fs / self.size)
 
     def band_floor(self, records: np.ndarray) -> np.ndarray:
         """Std (R,) of white noise whose density is the median periodogram bin of the low band (without notches).
@@ -122,14 +124,22 @@ class RunProcessor:
         band's own bins see that noise with few lines on them: a line or an
         oscillation in the band takes a few of its bins and leaves their
         median. NaN where the band has fewer than :data:`MIN_FLOOR_BINS` bins.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from uqgear.physics.design import load_design
+        >>> from uqgear.diagnosis.case import FEATURE_OPTIONS
+        >>> options = dict(FEATURE_OPTIONS, band_limit=8000.0)
+        >>> processor = RunProcessor(load_design("locomotive"), 800.0, 20480.0, 20480, options)
+        >>> noise = np.random.default_rng(0).standard_normal((16, 20480))  # unit white noise
+        >>> round(float(processor.band_floor(noise).mean()), 1)
+        1.0
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
-        out = np.full(records.shape[0], np.nan)
         if self._band_bins.size < MIN_FLOOR_BINS:
-            return out
-        centred = records - records.mean(axis=1, keepdims=True)
-        spectrum = scipy.fft.rfft(centred * self.taper, axis=1)
-        density = np.abs(spectrum[:, self._band_bins]) ** 2 * (self._band_weights / (self.fs * self._window_power))
+            return np.full(records.shape[0], np.nan)
+        density = self._band_density(records - records.mean(axis=1, keepdims=True))
         # a white-noise bin is exponentially distributed about the density, whose median is ln 2 times its mean
         return np.sqrt(np.median(density, axis=1) / math.log(2.0) * 0.5 * self.fs)
 
