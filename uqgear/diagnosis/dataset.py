@@ -167,6 +167,22 @@ def _selection_variables(result: DiagnosisResult) -> dict[str, Any]:
     return data
 
 
+def _noise_variables(case: RigCase) -> dict[str, Any]:
+    """The white-noise levels the features are compared with: between the lines, and the low band's own."""
+    return {
+        "noise_std": (
+            ("op", "channel"),
+            case.noise_std,
+            {"long_name": "white-noise level of the rig records (floor between the lines)", "units": "channel units"},
+        ),
+        "band_noise_std": (
+            ("op", "channel"),
+            case.band_noise_std,
+            {"long_name": "white-noise level of the rig records' low band (its own floor)", "units": "channel units"},
+        ),
+    }
+
+
 def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
     """Features, discrepancies and gap maps of the nominal model (and of the best effect) per run and channel."""
     case = result.case
@@ -209,16 +225,7 @@ def _gap_variables(result: DiagnosisResult) -> dict[str, Any]:
                 "units": "1",
             },
         ),
-        "noise_std": (
-            ("op", "channel"),
-            case.noise_std,
-            {"long_name": "white-noise level of the rig records (floor between the lines)", "units": "channel units"},
-        ),
-        "band_noise_std": (
-            ("op", "channel"),
-            case.band_noise_std,
-            {"long_name": "white-noise level of the rig records' low band (its own floor)", "units": "channel units"},
-        ),
+        **_noise_variables(case),
         "nominal_adhesion_torque": (
             ("op",),
             result.nominal.adhesion_torques,
@@ -318,16 +325,7 @@ def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> 
             line_signal_to_noise(case),
             {"long_name": "line amplitude over its per-quadrature noise spread", "units": "1"},
         ),
-        "noise_std": (
-            ("op", "channel"),
-            case.noise_std,
-            {"long_name": "white-noise level of the rig records (floor between the lines)", "units": "channel units"},
-        ),
-        "band_noise_std": (
-            ("op", "channel"),
-            case.band_noise_std,
-            {"long_name": "white-noise level of the rig records' low band (its own floor)", "units": "channel units"},
-        ),
+        **_noise_variables(case),
     }
     coords = {
         "op": ("op", np.arange(case.n_op)),
