@@ -156,6 +156,14 @@ class RigCase:
         """
         return {} if self.pitch_allowance is None else dict(self.pitch_allowance.run_out_bound)
 
+    def noise_std_for(self, kind: str) -> np.ndarray:
+        """The white-noise level (n_op, n_channel) features of ``kind`` are compared with.
+
+        The low band's own floor for the band (``"band"``), the floor between
+        the lines for every other kind.
+        """
+        return self.band_noise_std if kind == "band" else self.noise_std
+
     def line_noise_sigma(self) -> np.ndarray:
         """Per-quadrature noise spread of each compared line (n_op, n_channel, F; NaN for features not lines)."""
         return line_noise_sigma(self.noise_std, self.noise, self.layout)
@@ -262,7 +270,7 @@ def _band_noise_std(
     """
     floor = np.stack(
         [
-            np.array([processors[op].band_floor(records[channel][op][None])[0] for channel in channels])
+            processors[op].band_floor(np.stack([records[channel][op] for channel in channels]))
             for op in range(noise_std.shape[0])
         ]
     )

@@ -311,8 +311,8 @@ def allowance_errors(
             change = np.abs(drawn[..., chosen]) ** 2 - np.abs(base[..., chosen]) ** 2
             # the rig's noise power is read from a floor the forest raises: up to that share of it may be
             # the lines', not noise, so the noise power these features expect is that uncertain too
-            noise_std = case.band_noise_std if kind == "band" else case.noise_std
-            noise_power = noise_std**2 * np.array([getattr(noise, moments)[0] for noise in case.noise])[:, None]
+            unit_power = np.array([getattr(noise, moments)[0] for noise in case.noise])[:, None]
+            noise_power = case.noise_std_for(kind) ** 2 * unit_power
             absolute[kind] = np.sqrt(np.mean(change**2, axis=0) + (forest_share * noise_power)[..., None] ** 2)
         chosen = kinds == "kurtosis"
         absolute["kurtosis"] = np.sqrt(np.mean((drawn[..., chosen].real - base[..., chosen].real) ** 2, axis=0))

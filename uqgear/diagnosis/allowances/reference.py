@@ -285,7 +285,6 @@ def _direct_corrections(case: RigCase, model_all: np.ndarray, line_gain: np.ndar
         for c in range(len(case.channels)):
             if not case.usable[op, c]:
                 continue
-            variance = {"band": case.band_noise_std[op, c] ** 2, "rms": case.noise_std[op, c] ** 2}
             through_path = {
                 "low_band_rms": model_all[op, c, names.index("low_band_rms")],
                 "rms": float(transferred_rms(model_all[op, c], line_gain[op, c], case.processors[op])),
@@ -293,16 +292,17 @@ def _direct_corrections(case: RigCase, model_all: np.ndarray, line_gain: np.ndar
             for kind, name, power in (("band", "low_band_rms", noise.band_power), ("rms", "rms", noise.total_power)):
                 observed = case.observed_all[op, c, names.index(name)]
                 model = through_path[name]
-                signal = observed**2 - variance[kind] * power[0]
+                sigma2 = case.noise_std_for(kind)[op, c] ** 2
+                signal = observed**2 - sigma2 * power[0]
                 # only where the signal stands clear of the noise power's own scatter
-                if np.isfinite(signal) and model > 0 and signal > MIN_LINE_SNR * variance[kind] * power[1]:
+                if np.isfinite(signal) and model > 0 and signal > MIN_LINE_SNR * sigma2 * power[1]:
                     out[kind][op, c] = 0.5 * math.log(signal / model**2)
             rms_model = through_path["rms"]
             kurtosis_model = model_all[op, c, names.index("kurtosis")]
             observed = case.observed_all[op, c, names.index("kurtosis")]
             if math.isfinite(out["rms"][op, c]) and kurtosis_model > 0 and np.isfinite(observed):
                 signal_power = (rms_model * math.exp(out["rms"][op, c])) ** 2
-                noise_power = variance["rms"] * noise.total_power[0]
+                noise_power = case.noise_std[op, c] ** 2 * noise.total_power[0]
                 # the noise-free kurtosis that, with this noise, gives what the rig recorded (the inverse
                 # of discrepancy._noisy_kurtosis)
                 kurtosis = (
