@@ -7,10 +7,10 @@ import multiprocessing
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController, threadpool_limits
 
 from ..physics.design import Design
 from ..physics.effects import Effect
@@ -59,6 +59,22 @@ class RunTask:
     reduction: str = "features"
 
 
+# The BLAS and OpenMP thread pools of this process, found on first use (finding them inspects every
+# loaded library, about 5 ms, the cost of a small periodic run); a forked worker inherits them.
+_THREAD_POOLS: ThreadpoolController | None = None
+
+
+def one_blas_thread() -> Any:
+    """A context in which the linear algebra of this process runs on one thread.
+
+    The thread pools are found once per process, not on every call.
+    """
+    global _THREAD_POOLS
+    if _THREAD_POOLS is None:
+        _THREAD_POOLS = ThreadpoolController()
+    return _THREAD_POOLS.limit(limits=1)
+
+
 def simulate_task(case: RunContext, task: RunTask) -> SimulatedRun:
     """The model records of a run on the rig's time grid."""
     return case.simulator.run(
@@ -75,7 +91,7 @@ def simulate_task(case: RunContext, task: RunTask) -> SimulatedRun:
 def execute_run(case: RunContext, task: RunTask) -> tuple[np.ndarray, bool]:
     """Simulate a run and reduce its records with the rig's processing: (n_channel, all features), periodic."""
     # one BLAS thread, as every grouped path (execute_runs, the workers) reduces its runs
-    with threadpool_limits(1):
+    with one_blas_thread():
         return execute_group(case, [task])[0]
 
 
@@ -178,7 +194,7 @@ def execute_runs(
     groups = run_groups(tasks)
     grouped = [[tasks[index] for index in group] for group in groups]
     if group_map is None:
-        with threadpool_limits(1):
+        with one_blas_thread():
             results = [execute_group(case, group) for group in grouped]
     else:
         results = group_map(grouped)
@@ -279,6 +295,7 @@ __all__ = [
     "execute_runs",
     "run_groups",
     "transferred_rms",
+    "one_blas_thread",
     "GROUP_SIZE",
     "REDUCTIONS",
 ]
