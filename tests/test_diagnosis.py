@@ -596,3 +596,23 @@ def test_one_spectral_line_enters_the_comparison_once(healthy_case):
     line = np.array(case.layout.kinds) == "line"
     for op, processor in enumerate(case.processors):
         assert compared[op][:, line].sum(axis=-1).tolist() == [processor.fit.n_centres] * len(case.channels)
+
+
+def test_model_runs_hold_the_linear_algebra_to_one_thread_and_find_its_pools_once(monkeypatch):
+    import threadpoolctl
+
+    made = []
+    original = threadpoolctl.ThreadpoolController
+
+    def counted():
+        made.append(1)
+        return original()
+
+    monkeypatch.setattr(runs, "_THREAD_POOLS", None)
+    monkeypatch.setattr(runs, "ThreadpoolController", counted)
+    before = [pool["num_threads"] for pool in threadpoolctl.threadpool_info()]
+    for _ in range(3):
+        with runs.one_blas_thread():
+            assert {pool["num_threads"] for pool in threadpoolctl.threadpool_info()} == {1}
+    assert made == [1]
+    assert [pool["num_threads"] for pool in threadpoolctl.threadpool_info()] == before
