@@ -6,6 +6,7 @@ import math
 import multiprocessing
 import time
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -60,11 +61,12 @@ class RunTask:
 
 
 # The BLAS and OpenMP thread pools of this process, found on first use (finding them inspects every
-# loaded library, about 5 ms, the cost of a small periodic run); a forked worker inherits them.
+# loaded library, about 5 ms, the cost of a small periodic run); a forked worker inherits them. By
+# the first model run numpy's and scipy's BLAS are loaded (they are at import of this package).
 _THREAD_POOLS: ThreadpoolController | None = None
 
 
-def one_blas_thread() -> Any:
+def one_blas_thread() -> AbstractContextManager[Any]:
     """A context in which the linear algebra of this process runs on one thread.
 
     The thread pools are found once per process, not on every call.

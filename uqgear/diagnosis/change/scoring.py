@@ -27,12 +27,12 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from threadpoolctl import threadpool_limits
 
 from ...common.forked import map_forked
 from ...physics.design import Design
 from ..candidates import Candidate
 from ..effects import effect_family
+from ..execution import one_blas_thread
 from ..settings import DiagnosisSettings
 from ..simulation import CampaignSimulator
 from .detection import CampaignFeatures, ChangeTest, level_floor
@@ -385,7 +385,7 @@ def _scored(
     index: int,
 ) -> ChangeScore:
     """Variant ``index`` scored with one BLAS thread, in a forked process as here (the same bits either way)."""
-    with threadpool_limits(1):
+    with one_blas_thread():
         return score_variant(model, candidates[index], observed, scale, anchor, settings)
 
 
