@@ -93,6 +93,12 @@ def test_missing_and_unknown_keys(tmp_path, design):
     values = {**design.to_dict(), "stiffnes": 1.0}
     with pytest.raises(DesignError, match=r"stiffnes: unknown design key"):
         load_design(_write(tmp_path, values))
+    # an empty YAML value (``k1:``) reads as None: missing, not a crash
+    path = tmp_path / "empty.yaml"
+    lines = [f"  {key}: {value}" for key, value in design.to_dict().items() if key != "k1"]
+    path.write_text("design:\n" + "\n".join(lines) + "\n  k1:\n")
+    with pytest.raises(DesignError, match=r"empty.yaml: k1: missing design key"):
+        load_design(path)
 
 
 def test_bad_files_and_names(tmp_path):
@@ -122,3 +128,55 @@ def test_overrides_are_validated(design):
     assert load_design("locomotive", overrides={"k1": 2e9}).k1 == 2e9
     with pytest.raises(DesignError, match="backlash"):
         load_design("locomotive", overrides={"backlash": 0.3})
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"k1": 2e9},
+        {"zeta_mesh": 0.07, "backlash": 3e-4, "ste_amplitude": 1e-5},
+        {"z1": 23, "x1": 0.3},
+        {"module": 0.008, "face_width": 0.1},
+        {"motor_pole_pairs": 3},
+        {"motor_pole_pairs": None},
+        {"z2": 99.0},
+    ],
+)
+def test_replace_is_the_whole_validation_of_the_changed_mapping(design, changes):
+    expected = uqgear.Design.from_mapping(
+        {**design.to_dict(), **changes}, name=design.name, operation=design.operation
+    )
+    changed = design.replace(**changes)
+    assert changed == expected
+    assert [type(getattr(changed, key)) for key in DESIGN_KEYS] == [type(getattr(expected, key)) for key in DESIGN_KEYS]
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"k1": -1.0}, r"^k1: expected a value in \[100000, 1e\+13\] N/m; got -1.0$"),
+        ({"k1": "stiff"}, r"^k1: expected a number"),
+        ({"k1": None}, r"^k1: missing design key"),
+        ({"z1": 21.5}, r"^z1: expected an integer"),
+        ({"dedendum_coefficient": 0.9}, r"^dedendum_coefficient: expected more than addendum_coefficient"),
+        ({"x1": -0.9}, r"^x1: .*interference"),
+        ({"stiffness": 1.0}, r"^stiffness: unknown design key"),
+    ],
+)
+def test_replace_refuses_what_from_mapping_refuses(design, changes, message):
+    with pytest.raises(DesignError, match=message):
+        uqgear.Design.from_mapping({**design.to_dict(), **changes})
+    with pytest.raises(DesignError, match=message):
+        design.replace(**changes)
+
+
+def test_replace_checks_the_geometry_only_when_a_geometry_key_changes(design, monkeypatch):
+    import uqgear.physics.geometry as geometry
+
+    calls = []
+    original = geometry.check_geometry
+    monkeypatch.setattr(geometry, "check_geometry", lambda d, where="": calls.append(d) or original(d, where))
+    design.replace(k1=2e9, zeta_mesh=0.06, backlash=3e-4)
+    assert calls == []
+    design.replace(x2=0.1)
+    assert len(calls) == 1

@@ -10,6 +10,7 @@ naming the key and the expected range.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -230,7 +231,8 @@ class Design:
                 f"{where}{unknown[0]}: unknown design key; expected one of "
                 f"{', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}"
             )
-        missing = [key for key in _DESIGN_KEYS if key not in values]
+        # an empty YAML value reads as None: as missing as an absent key
+        missing = [key for key in _DESIGN_KEYS if values.get(key) is None]
         if missing:
             raise DesignError(f"{where}{missing[0]}: missing design key (expected {_DESIGN_KEYS[missing[0]][2]})")
         checked: dict[str, Any] = {}
@@ -252,15 +254,38 @@ class Design:
         return design
 
     def replace(self, **changes: Any) -> Design:
-        """Return a validated copy with some design keys changed."""
-        values = self.to_dict()
-        unknown = sorted(set(changes) - set(values) - set(_OPTIONAL_DESIGN_KEYS))
+        """Return a validated copy with some design keys changed.
+
+        The changed keys are checked as :meth:`from_mapping` checks them, and
+        the pair's geometry again when one of its keys changed; the other
+        keys are this design's, validated when it was built. A fit builds a
+        copy for every model run (thousands a diagnosis), so the copy costs
+        the keys that change, not a whole validation.
+        """
+        table = {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}
+        unknown = sorted(set(changes) - set(table))
         if unknown:
             raise DesignError(
                 f"{unknown[0]}: unknown design key; expected one of {', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}"
             )
-        values.update(changes)
-        return Design.from_mapping(values, name=self.name, operation=self.operation)
+        checked: dict[str, Any] = {}
+        for key, value in changes.items():
+            if value is None and key in _DESIGN_KEYS:
+                raise DesignError(f"{key}: missing design key (expected {_DESIGN_KEYS[key][2]})")
+            lower, upper, unit, integer = table[key]
+            checked[key] = None if value is None else _check_number(key, value, lower, upper, unit, integer, "")
+        design = dataclasses.replace(self, **checked)
+        if design.dedendum_coefficient <= design.addendum_coefficient:
+            raise DesignError(
+                f"dedendum_coefficient: expected more than addendum_coefficient "
+                f"({design.addendum_coefficient:g}) to leave tip clearance; got {design.dedendum_coefficient:g}"
+            )
+        # importing here avoids a module cycle, as in from_mapping
+        from .geometry import PAIR_GEOMETRY_KEYS, check_geometry
+
+        if any(key in PAIR_GEOMETRY_KEYS for key in changes):
+            check_geometry(design)
+        return design
 
     def to_dict(self) -> dict[str, Any]:
         """The design keys (docs/rig-data-format.md), without name and operation."""
