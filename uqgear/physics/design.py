@@ -67,6 +67,7 @@ _OPERATION_KEYS: dict[str, tuple[float, float, str]] = {
 DESIGN_KEYS: tuple[str, ...] = tuple(_DESIGN_KEYS)
 #: Keys a design may have in addition.
 OPTIONAL_DESIGN_KEYS: tuple[str, ...] = tuple(_OPTIONAL_DESIGN_KEYS)
+_ALL_DESIGN_KEYS = {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}
 
 
 def design_key_bounds(key: str) -> tuple[float, float]:
@@ -80,11 +81,33 @@ def design_key_bounds(key: str) -> tuple[float, float]:
     DesignError
         ``key`` is not a design key.
     """
-    table = {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}
-    if key not in table:
-        raise DesignError(f"{key}: unknown design key; expected one of {', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}")
-    lower, upper, _, _ = table[key]
+    if key not in _ALL_DESIGN_KEYS:
+        raise _unknown_key(key, "")
+    lower, upper, _, _ = _ALL_DESIGN_KEYS[key]
     return float(lower), float(upper)
+
+
+def _unknown_key(key: str, where: str) -> DesignError:
+    expected = ", ".join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)
+    return DesignError(f"{where}{key}: unknown design key; expected one of {expected}")
+
+
+def _missing_key(key: str, where: str) -> DesignError:
+    return DesignError(f"{where}{key}: missing design key (expected {_DESIGN_KEYS[key][2]})")
+
+
+def _check_key(key: str, value: Any, where: str) -> float | int:
+    """A design key's value as :meth:`Design.from_mapping` takes it (the key known, the value not None)."""
+    lower, upper, unit, integer = _ALL_DESIGN_KEYS[key]
+    return _check_number(key, value, lower, upper, unit, integer, where)
+
+
+def _check_tip_clearance(addendum: float, dedendum: float, where: str) -> None:
+    if dedendum <= addendum:
+        raise DesignError(
+            f"{where}dedendum_coefficient: expected more than addendum_coefficient "
+            f"({addendum:g}) to leave tip clearance; got {dedendum:g}"
+        )
 
 
 def _check_number(
@@ -225,26 +248,17 @@ class Design:
         """
         if not isinstance(values, Mapping):
             raise DesignError(f"{where}design: expected a mapping of design keys; got {type(values).__name__}")
-        unknown = sorted(set(values) - set(_DESIGN_KEYS) - set(_OPTIONAL_DESIGN_KEYS))
+        unknown = sorted(set(values) - set(_ALL_DESIGN_KEYS))
         if unknown:
-            raise DesignError(
-                f"{where}{unknown[0]}: unknown design key; expected one of "
-                f"{', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}"
-            )
+            raise _unknown_key(unknown[0], where)
         # an empty YAML value reads as None: as missing as an absent key
         missing = [key for key in _DESIGN_KEYS if values.get(key) is None]
         if missing:
-            raise DesignError(f"{where}{missing[0]}: missing design key (expected {_DESIGN_KEYS[missing[0]][2]})")
-        checked: dict[str, Any] = {}
-        for key, (lower, upper, unit, integer) in {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}.items():
-            if key in values and values[key] is not None:
-                checked[key] = _check_number(key, values[key], lower, upper, unit, integer, where)
-        if checked["dedendum_coefficient"] <= checked["addendum_coefficient"]:
-            raise DesignError(
-                f"{where}dedendum_coefficient: expected more than addendum_coefficient "
-                f"({checked['addendum_coefficient']:g}) to leave tip clearance; "
-                f"got {checked['dedendum_coefficient']:g}"
-            )
+            raise _missing_key(missing[0], where)
+        checked: dict[str, Any] = {
+            key: _check_key(key, values[key], where) for key in _ALL_DESIGN_KEYS if values.get(key) is not None
+        }
+        _check_tip_clearance(checked["addendum_coefficient"], checked["dedendum_coefficient"], where)
         design = cls(**checked, name=name, operation=operation or Operation())
         # Geometry-level checks (interference, contact ratio; an undercut warns) need the
         # involute geometry; importing here avoids a module cycle.
@@ -262,24 +276,17 @@ class Design:
         copy for every model run (thousands a diagnosis), so the copy costs
         the keys that change, not a whole validation.
         """
-        table = {**_DESIGN_KEYS, **_OPTIONAL_DESIGN_KEYS}
-        unknown = sorted(set(changes) - set(table))
+        unknown = sorted(set(changes) - set(_ALL_DESIGN_KEYS))
         if unknown:
-            raise DesignError(
-                f"{unknown[0]}: unknown design key; expected one of {', '.join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)}"
-            )
-        checked: dict[str, Any] = {}
-        for key, value in changes.items():
-            if value is None and key in _DESIGN_KEYS:
-                raise DesignError(f"{key}: missing design key (expected {_DESIGN_KEYS[key][2]})")
-            lower, upper, unit, integer = table[key]
-            checked[key] = None if value is None else _check_number(key, value, lower, upper, unit, integer, "")
+            raise _unknown_key(unknown[0], "")
+        missing = [key for key, value in changes.items() if value is None and key in _DESIGN_KEYS]
+        if missing:
+            raise _missing_key(missing[0], "")
+        checked: dict[str, Any] = {
+            key: None if value is None else _check_key(key, value, "") for key, value in changes.items()
+        }
         design = dataclasses.replace(self, **checked)
-        if design.dedendum_coefficient <= design.addendum_coefficient:
-            raise DesignError(
-                f"dedendum_coefficient: expected more than addendum_coefficient "
-                f"({design.addendum_coefficient:g}) to leave tip clearance; got {design.dedendum_coefficient:g}"
-            )
+        _check_tip_clearance(design.addendum_coefficient, design.dedendum_coefficient, "")
         # importing here avoids a module cycle, as in from_mapping
         from .geometry import PAIR_GEOMETRY_KEYS, check_geometry
 
