@@ -468,6 +468,31 @@ def test_improved_nominal_escapes_a_stuck_nominal_fit(healthy_case):
     assert screening.improved_nominal(good, []) is None
 
 
+def test_full_fit_refines_an_earlier_full_fit_of_its_candidate(healthy_case):
+    """A full fit given its candidate's full fit against an earlier base starts there, Cauchy stage alone.
+
+    From that optimum it takes fewer evaluations and ends no higher; an
+    earlier fit worse than the usual starts leaves the fit as it was, bit for bit.
+    """
+    case = healthy_case
+    problem = fit_problem.FitProblem(case, None)
+    positions = (np.array(HEALTHY_T2) - case.adhesion_lower) / (case.adhesion_upper - case.adhesion_lower)
+    base = fitting.fit(problem, [problem.vector(HEALTHY_TRUTH, positions)], max_evaluations=2)
+    candidate = effects.candidates_for("friction", case.design)[0]
+    screened = fitting.fit_candidate(case, candidate, base, full=False, max_evaluations=2)
+    settings = {"full": True, "max_evaluations": 4, "start": screened}
+    plain = fitting.fit_candidate(case, candidate, base, **settings)
+    again = fitting.fit_candidate(case, candidate, base, **settings, earlier=plain)
+    assert again.cost <= plain.cost
+    assert again.evaluations < plain.evaluations
+    # the same fit far off (mesh damping 60 % high): the usual starts win, nothing changes
+    far = plain.vector.copy()
+    index = [spec.name for spec in plain.problem.specs].index("zeta_mesh")
+    far[index] = plain.problem.vector(dict(plain.values, zeta_mesh=1.6 * plain.values["zeta_mesh"]), 0.0)[index]
+    ignored = fitting.fit_candidate(case, candidate, base, **settings, earlier=replace(plain, vector=far))
+    assert np.array_equal(ignored.vector, plain.vector) and ignored.cost == plain.cost
+
+
 # ---------------------------------------------------------------------------------------------- bad input
 
 def test_unknown_effect_is_rejected(tmp_path):

@@ -99,6 +99,17 @@ class FitResult:
         return self
 
 
+def start_costs(problem: FitProblem, starts: Sequence[np.ndarray], *, rows: np.ndarray | None = None) -> np.ndarray:
+    """The robust (Cauchy) cost of each starting vector over ``rows`` (default all), simulated in one batch."""
+    model, _ = problem.model_features(list(starts))
+    selected = slice(None) if rows is None else np.asarray(rows, dtype=bool)
+    costs = []
+    for index, v in enumerate(starts):
+        z, _ = problem.discrepancy(model[index])
+        costs.append(robust_cost(problem.residual_vector(z, v)[selected]))
+    return np.asarray(costs)
+
+
 def fit(
     problem: FitProblem,
     starts: Sequence[np.ndarray],
@@ -134,13 +145,8 @@ def fit(
     started = time.perf_counter()
     first = problem.evaluations
     free = np.ones(problem.size, dtype=bool) if free is None else np.asarray(free, dtype=bool)
-    model, _ = problem.model_features(list(starts))
     selected = slice(None) if rows is None else np.asarray(rows, dtype=bool)
-    costs = []
-    for index, v in enumerate(starts):
-        z, _ = problem.discrepancy(model[index])
-        costs.append(robust_cost(problem.residual_vector(z, v)[selected]))
-    base = np.asarray(starts[int(np.argmin(costs))], dtype=float)
+    base = np.asarray(starts[int(np.argmin(start_costs(problem, starts, rows=rows)))], dtype=float)
 
     def expand(u: np.ndarray) -> np.ndarray:
         v = base.copy()
@@ -303,6 +309,7 @@ def fit_candidate(
     full: bool,
     max_evaluations: int = 20,
     start: FitResult | None = None,
+    earlier: FitResult | None = None,
 ) -> FitResult:
     """Fit a base model plus one more effect, warm-started from the base fit and the candidate's signature grid.
 
@@ -324,6 +331,11 @@ def fit_candidate(
         Cost evaluations allowed to the least-squares solver.
     start : FitResult, optional
         A screening fit of the same candidate to start from instead of the grid.
+    earlier : FitResult, optional
+        A full fit of the same candidate against another nominal fit (one in
+        a local optimum, since refitted): a start of the full fit too. Where
+        it is the best start, the fit refines it with the Cauchy loss alone:
+        its soft-L1 stage ran when it was fitted. Screenings ignore it.
     """
     # the base's own model error (its effects' pitch-error allowance) until the new fit gets its own
     problem = FitProblem(case, (*base.problem.candidates, candidate), model_error=base.problem.own_model_error)
@@ -345,6 +357,10 @@ def fit_candidate(
             for values in (effect_only, *({**effect_only, **point} for point in candidate.starts))
         ]
         starts = [profile_adhesion(problem, starts[0]), profile_adhesion(problem, centred[0]), *starts, *centred[1:]]
+        if earlier is not None:
+            again = problem.vector(earlier.values, earlier.vector[earlier.problem.n_global :])
+            if start_costs(problem, [again, *starts]).argmin() == 0:
+                return fit(problem, [again, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         first = fit(problem, starts, free=free, max_evaluations=max_evaluations, loss="soft_l1", tolerance=1e-3)
         second = fit(problem, [first.vector, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         return second.after(first)
@@ -400,6 +416,7 @@ def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, f
 __all__ = [
     "SecantJacobian",
     "FitResult",
+    "start_costs",
     "fit",
     "Z90",
     "parameter_intervals",

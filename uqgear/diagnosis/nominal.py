@@ -120,6 +120,7 @@ def score_against_nominal(
 
     Returns the state the later steps share, the best score per effect and every score.
     """
+    earlier: dict[str, FitResult] = {}
     for attempt in range(settings.nominal_refits + 1):
         clock = time.perf_counter()
         with steps.step("predict held-out runs with the nominal model") as found:
@@ -127,7 +128,19 @@ def score_against_nominal(
             gap = gap_metric(held.z)
             found.update(nominal_gap=gap)
         timings["nominal_fit"] += time.perf_counter() - clock
-        state = DiagnosisState(case, settings, effects, hints, rng, steps, timings, nominal, held, gap)
+        state = DiagnosisState(
+            case,
+            settings,
+            effects,
+            hints,
+            rng,
+            steps,
+            timings,
+            nominal,
+            held,
+            gap,
+            earlier_full_fits=dict(earlier),
+        )
         best, all_scores = score_candidates(state)
         if attempt == settings.nominal_refits:
             break
@@ -140,8 +153,10 @@ def score_against_nominal(
         timings["nominal_fit"] += time.perf_counter() - clock
         if better is None:
             break
-        # the candidates were scored against a nominal fit stuck in a local optimum: score them again
+        # the candidates were scored against a nominal fit stuck in a local optimum: score them again,
+        # their full fits starting from where they got to as well
         nominal = better
+        earlier.update((entry.label, entry.fit) for entry in all_scores if entry.stage == "full")
     return state, best, all_scores
 
 

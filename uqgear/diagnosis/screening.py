@@ -187,6 +187,7 @@ def full_fit(state: DiagnosisState, entry: CandidateScore) -> tuple[FitResult, H
             full=True,
             max_evaluations=settings.full_fit_evaluations,
             start=entry.fit,
+            earlier=state.earlier_full_fits.get(candidate.label),
         ),
         max_evaluations=settings.full_fit_evaluations,
     )

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -44,6 +44,9 @@ class DiagnosisState:
         Its held-out predictions.
     nominal_gap : float
         Its held-out gap.
+    earlier_full_fits : mapping
+        Full fits of candidates (by label) made against an earlier nominal
+        fit that stopped in a local optimum: starts of their full fits again.
     """
 
     case: RigCase
@@ -56,6 +59,7 @@ class DiagnosisState:
     nominal: FitResult
     nominal_held: HeldOut
     nominal_gap: float
+    earlier_full_fits: Mapping[str, FitResult] = field(default_factory=dict)
 
     @property
     def pitch_allowance(self) -> bool:
