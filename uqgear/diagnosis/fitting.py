@@ -360,7 +360,7 @@ def fit_candidate(
         if earlier is not None:
             again = problem.vector(earlier.values, earlier.vector[earlier.problem.n_global :])
             if start_costs(problem, [again, *starts]).argmin() == 0:
-                return fit(problem, [again, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
+                return fit(problem, [again], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         first = fit(problem, starts, free=free, max_evaluations=max_evaluations, loss="soft_l1", tolerance=1e-3)
         second = fit(problem, [first.vector, *starts], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         return second.after(first)

@@ -129,17 +129,7 @@ def score_against_nominal(
             found.update(nominal_gap=gap)
         timings["nominal_fit"] += time.perf_counter() - clock
         state = DiagnosisState(
-            case,
-            settings,
-            effects,
-            hints,
-            rng,
-            steps,
-            timings,
-            nominal,
-            held,
-            gap,
-            earlier_full_fits=dict(earlier),
+            case, settings, effects, hints, rng, steps, timings, nominal, held, gap, earlier_full_fits=dict(earlier)
         )
         best, all_scores = score_candidates(state)
         if attempt == settings.nominal_refits:
