@@ -89,6 +89,11 @@ class FitResult:
         return self.problem.values(self.vector)
 
     @property
+    def positions(self) -> np.ndarray:
+        """Each run's T2 as a position in its interval (0 lower end, 1 upper end): the vector after the globals."""
+        return self.vector[self.problem.n_global :]
+
+    @property
     def adhesion_torques(self) -> np.ndarray:
         return self.problem.adhesion_torques(self.vector)
 
@@ -339,9 +344,9 @@ def fit_candidate(
     """
     # the base's own model error (its effects' pitch-error allowance) until the new fit gets its own
     problem = FitProblem(case, (*base.problem.candidates, candidate), model_error=base.problem.own_model_error)
-    positions = base.vector[base.problem.n_global :]
+    positions = base.positions
     if start is not None:
-        starts = [problem.vector(start.values, start.vector[start.problem.n_global :])]
+        starts = [problem.vector(start.values, start.positions)]
     else:
         starts = [problem.vector({**base.values, **point}, positions) for point in candidate.starts]
     free = np.ones(problem.size, dtype=bool)
@@ -358,7 +363,7 @@ def fit_candidate(
         ]
         starts = [profile_adhesion(problem, starts[0]), profile_adhesion(problem, centred[0]), *starts, *centred[1:]]
         if earlier is not None:
-            again = problem.vector(earlier.values, earlier.vector[earlier.problem.n_global :])
+            again = problem.vector(earlier.values, earlier.positions)
             if start_costs(problem, [again, *starts]).argmin() == 0:
                 return fit(problem, [again], free=free, max_evaluations=max_evaluations, tolerance=1e-3)
         first = fit(problem, starts, free=free, max_evaluations=max_evaluations, loss="soft_l1", tolerance=1e-3)

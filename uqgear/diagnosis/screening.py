@@ -50,7 +50,7 @@ def effect_off_costs(
     starts = [
         problem.vector(
             {key: value for key, value in candidate.values.items() if key in names},
-            candidate.vector[candidate.problem.n_global :],
+            candidate.positions,
         )
         for candidate in fits
     ]

@@ -227,7 +227,7 @@ def log_density(observed: np.ndarray, drawn: np.ndarray, noise_variance: np.ndar
 def _spread_vectors(base: FitResult) -> list[np.ndarray]:
     """The fit's optimiser vector and, for each :data:`PARAMETER_SPREAD` parameter, one step up and one down."""
     problem, values = base.problem, base.values
-    positions = base.vector[problem.n_global :]
+    positions = base.positions
     vectors = [base.vector]
     for name, factor in PARAMETER_SPREAD.items():
         for scale in (factor, 1.0 / factor):
