@@ -17,9 +17,15 @@ It prints the median and the largest of each part over the operating points,
 in ms for the three channels of a run, and each kind's share spent in
 integration.
 
-It then times the line fit's projection of one run's three records and of a
-group's 24, blocked and against the whole least-squares basis (the
-reference path), at each speed.
+It then times the integration of a group of eight runs of one operating
+point (a fit's finite-difference neighbours: the mesh stiffness scale
+stepped) integrated together, in SIMD lanes
+(:func:`uqgear.physics.history_batch.integrate_histories`), against one at
+a time with the one-sample kernel (the reference path), over the whole
+record, for the nominal model and with each effect whose forcing changes
+from one mesh period to the next; and the line fit's projection of one
+run's three records and of a group's 24, blocked and against the whole
+least-squares basis (the reference path), at each speed.
 
 Usage: ``python benchmarks/diagnosis_runs.py [FILE] [--repeats N]`` (default
 ``data/rig/tooth_damage.nc``, 5 repeats).
@@ -38,8 +44,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from uqgear.diagnosis.case import prepare_case
+from uqgear.diagnosis.execution import RunTask
 from uqgear.diagnosis.inputs import load_rig_input, resolve_design
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.physics.effects import make_effect
+from uqgear.physics.history_batch import integrate_histories
+from uqgear.physics.integration import integrate_fast
 from uqgear.physics.pitch_errors import draw_pitch_errors
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
@@ -75,9 +85,9 @@ def time_runs(path: Path, repeats: int) -> dict[str, np.ndarray]:
             "pitch errors": (errors, run_in + periods, periods),
         }
         for kind, (pitch_errors, n_periods, keep) in kinds.items():
-            integrate_ms, (signals, poincare) = _best_ms(
-                partial(simulator._simulate, op, design, 1.0, torque, (), pitch_errors, n_periods, keep), repeats
-            )
+            setup = simulator._setup(op, RunTask(op, design, 1.0, torque, (), "free", pitch_errors))
+            integrate_ms, simulated = _best_ms(partial(simulator._integrate, op, [setup], n_periods, keep), repeats)
+            signals, poincare = simulated[0]
             if kind == "tiled":
                 resample_ms, run = _best_ms(partial(simulator._tiled, op, signals, poincare, window, "mesh"), repeats)
                 if run is None:
@@ -91,6 +101,49 @@ def time_runs(path: Path, repeats: int) -> dict[str, np.ndarray]:
             features_ms, _ = _best_ms(partial(case.processors[op].model_features, records), repeats)
             parts[kind].append([integrate_ms, resample_ms, features_ms])
     return {kind: np.array(values) for kind, values in parts.items()}
+
+
+#: Effects whose forcing changes from one mesh period to the next, as a group's runs carry them.
+GROUP_EFFECTS = {
+    "nominal": (),
+    "tooth damage": (make_effect("tooth_damage", {"depth": 0.2}),),
+    "eccentricity": (make_effect("eccentricity", {"amplitude": 2e-5, "kappa": 0.05}),),
+    "torque ripple": (make_effect("torque_ripple", {"amplitude": 0.05}),),
+    "eccentricity + tooth damage": (
+        make_effect("eccentricity", {"amplitude": 2e-5, "kappa": 0.05}),
+        make_effect("tooth_damage", {"depth": 0.2}),
+    ),
+}
+
+
+def _one_at_a_time(setups: list, n_periods: int, keep: int, per_period: int, steps_per_mode: int) -> list:
+    return [integrate_fast(s, n_periods, keep, per_period, steps_per_mode, s.static_state()) for s in setups]
+
+
+def time_groups(path: Path, repeats: int) -> dict[str, np.ndarray]:
+    """Per kind of group: (n_op, 2) ms to integrate eight runs over the whole record, together and one at a time."""
+    rig, _ = load_rig_input(path)
+    design = resolve_design(None, rig)
+    case = prepare_case(rig, design, seed=1, settings=DEFAULT_SETTINGS)
+    simulator = case.simulator
+    out: dict[str, list[list[float]]] = {kind: [] for kind in GROUP_EFFECTS}
+    for op in range(case.n_op):
+        torque = float(rig["drive_torque"].values[op]) * design.z2 / design.z1
+        periods, _ = simulator.whole_window(op)
+        n_periods, per_period = simulator.run_in_periods(op) + periods, simulator.samples_per_period[op]
+        for kind, effects in GROUP_EFFECTS.items():
+            setups = [
+                simulator._setup(op, RunTask(op, design, 1.0 + 0.002 * member, torque, effects, "free"))
+                for member in range(8)
+            ]
+            together_ms, _ = _best_ms(
+                partial(integrate_histories, setups, n_periods, periods, per_period, simulator.steps_per_mode), repeats
+            )
+            alone_ms, _ = _best_ms(
+                partial(_one_at_a_time, setups, n_periods, periods, per_period, simulator.steps_per_mode), repeats
+            )
+            out[kind].append([together_ms, alone_ms])
+    return {kind: np.array(values) for kind, values in out.items()}
 
 
 def time_line_fit(path: Path, repeats: int) -> dict[str, np.ndarray]:
@@ -131,6 +184,14 @@ def main() -> None:
         missing = int(np.isnan(values[:, 0]).sum())
         note = f"  ({missing} speed(s) do not repeat)" if missing else ""
         print(f"{kind:14s} {cells[0]:>16s} {cells[1]:>16s} {cells[2]:>16s} {share:17.0%}{note}")
+    groups = time_groups(Path(options.file), options.repeats)
+    print("eight runs of one speed over the whole record, one core (ms; median over speeds): together / one at a time")
+    for kind, values in groups.items():
+        ratio = values[:, 1] / values[:, 0]
+        print(
+            f"  {kind:28s} {np.median(values[:, 0]):7.1f} / {np.median(values[:, 1]):7.1f}"
+            f"  ({np.median(ratio):4.1f}x, least {ratio.min():4.1f}x)"
+        )
     line_fit = time_line_fit(Path(options.file), options.repeats)
     print("line fit's projection, one core (ms; median over speeds): blocked / whole basis (ratio)")
     for count in (3, 24):

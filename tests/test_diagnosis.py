@@ -320,6 +320,53 @@ def test_periodic_tiling_matches_full_simulation(design):
             assert a[k] == pytest.approx(b[k], rel=2e-3), (channel, feature)
 
 
+def test_runs_of_an_operating_point_together_are_each_the_run_alone(design, monkeypatch):
+    """Runs integrated together (SIMD lanes) give each run's records bit for bit as the one-sample
+    integrator does alone: tiled and whole-record runs, forcing that repeats every mesh period and
+    forcing that does not, a run found not to repeat over its window, one with pitch errors."""
+    from uqgear.physics.effects import make_effect
+    from uqgear.physics.history_batch import STATE_HISTORY_COLUMNS
+    from uqgear.physics.integration import integrate_fast
+    from uqgear.physics.model import HISTORY_COLUMNS
+    from uqgear.physics.pitch_errors import draw_pitch_errors
+
+    simulator = sim.CampaignSimulator(design, [1250.0], [6000.0], 20480.0, 4096, ("te", "acc_pinion", "acc_gear"))
+    tooth = (make_effect("tooth_damage", {"depth": 0.05, "tooth": 3.0}),)
+    # deeper, the damage leaves a slow transient: not yet repeating after the run-in, so simulated whole
+    deep = (make_effect("tooth_damage", {"depth": 0.3, "tooth": 3.0}),)
+    run_out = (make_effect("eccentricity", {"amplitude": 2e-5, "kappa": 0.05}),)
+    ripple = (make_effect("torque_ripple", {"amplitude": 0.05}),)
+    stiffer = design.replace(k1=design.k1 * 1.2)
+    requests = [
+        runs.RunTask(0, design, 1.0, 30000.0, (), "mesh"),
+        runs.RunTask(0, stiffer, 1.05, 31000.0, (), "mesh"),
+        runs.RunTask(0, design, 1.0, 30000.0, tooth, "gear"),
+        runs.RunTask(0, design, 0.98, 29000.0, tooth, "gear"),
+        runs.RunTask(0, design, 1.0, 30000.0, run_out, "pinion"),
+        # a ripple at 6 p times the rotation does not repeat every mesh period: simulated whole
+        runs.RunTask(0, design, 1.0, 30000.0, ripple, "mesh"),
+        runs.RunTask(0, design, 1.0, 30000.0, deep, "gear"),
+        runs.RunTask(0, design, 1.0, 30000.0, tooth, "free"),
+        runs.RunTask(0, design, 1.0, 30000.0, (), "free", draw_pitch_errors(design, 7, np.random.default_rng(3))),
+    ]
+    together = simulator.runs(0, requests)
+    windows = [run.window for run in together]
+    assert windows[:5] == ["mesh", "mesh", "gear", "gear", "pinion"] and windows[5:] == ["free"] * 4
+    columns = [HISTORY_COLUMNS.index(name) for name in STATE_HISTORY_COLUMNS]
+
+    def one_at_a_time(setups, n_periods, keep_periods, samples_per_period, steps_per_mode):
+        return [(history[:, columns], poincare) for history, poincare, _ in (
+            integrate_fast(setup, n_periods, keep_periods, samples_per_period, steps_per_mode, setup.static_state())
+            for setup in setups)]
+
+    monkeypatch.setattr(sim, "integrate_histories", one_at_a_time)
+    for task, run in zip(requests, together):
+        alone = simulator.run(0, task.design, task.mesh_stiffness_scale, task.adhesion_torque, task.effects,
+                              task.periodicity, pitch_errors=task.pitch_errors)
+        assert (alone.periodic, alone.window) == (run.periodic, run.window)
+        assert all(alone.records[name].tobytes() == run.records[name].tobytes() for name in simulator.channels)
+
+
 def _largest_prime_factor(number):
     factor, largest = 2, 1
     while factor * factor <= number:

@@ -19,6 +19,7 @@ import uqgear
 from uqgear.physics import effects as E
 from uqgear.physics import integration
 from uqgear.physics._lanes import LANES, lane_ready
+from uqgear.physics.pitch_errors import draw_pitch_errors
 
 
 @pytest.fixture(scope="module")
@@ -71,17 +72,32 @@ def test_lanes_match_the_one_sample_kernel(design, case):
     assert _differing(lanes, one) == []
 
 
-def test_a_batch_mixes_lanes_and_one_sample_runs(design):
-    # torque ripple breaks the mesh period where its amplitude is not zero: those runs go one at a time
+@pytest.mark.parametrize("name, values", [
+    ("torque_ripple", {"amplitude": 0.05}),
+    ("adhesion_oscillation", {"amplitude": 0.1, "frequency": 37.0}),
+    ("eccentricity", {"amplitude": 3e-5, "kappa": 0.1, "shaft": "gear"}),
+    ("tooth_damage", {"depth": 0.4, "tooth": 5.0}),
+])
+def test_forcing_that_does_not_repeat_every_mesh_period_stays_in_the_lanes(design, name, values):
+    # every third run without the effect: groups mix runs whose forcing table is filled once with runs
+    # whose table is filled every period; up to 5600 rpm the teeth separate, so lanes are split too
     samples = _speeds(20, seed=2)
-    amplitude = np.where(np.arange(20) % 3 == 0, 0.05, 0.0)
-    samples["torque_ripple.amplitude"] = ("sample", amplitude)
-    kw = {"n_periods": 60, "keep_periods": 20, "effects": [E.make_effect("torque_ripple")]}
+    effect = E.make_effect(name, values)
+    key = next(key for key in ("amplitude", "depth") if key in values)
+    samples[f"{name}.{key}"] = ("sample", np.where(np.arange(20) % 3 == 0, 0.0, values[key]))
+    kw = {"n_periods": 60, "keep_periods": 20, "effects": [effect], "history_per_period": 8, "rig_channels": True}
     setups = integration.build_batch(design, samples, effects=kw["effects"])
-    ready = lane_ready(np.stack([s.parameters for s in setups]))
-    assert 0 < ready.sum() < len(ready)
+    assert lane_ready(np.stack([s.parameters for s in setups])).all()
     lanes, one = _both(design, samples, **kw)
+    assert float(lanes["fraction_separation"].max()) > 0.05
     assert _differing(lanes, one) == []
+
+
+def test_pitch_errors_stay_out_of_the_lanes(design):
+    # the per-pair contact of pitch errors is the one-sample pair kernel's alone
+    setup = integration.build_model(design, 1500.0, 7000.0, 33e3,
+                                    pitch_errors=draw_pitch_errors(design, 7, np.random.default_rng(0)))
+    assert not lane_ready(setup.parameters[None, :])[0]
 
 
 def test_runs_a_group_cannot_hold_are_run_one_at_a_time(design, monkeypatch):

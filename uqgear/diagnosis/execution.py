@@ -112,7 +112,8 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
     reductions = {task.reduction for task in tasks}
     if len(reductions) != 1 or not reductions <= set(REDUCTIONS):
         raise RuntimeError(f"execute_group: expected runs reduced alike, one of {REDUCTIONS}; got {reductions}")
-    runs = [simulate_task(case, task) for task in tasks]
+    # integrated together: runs of one operating point share SIMD lanes (each run's numbers as alone)
+    runs = case.simulator.runs(op, tasks)
     stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
     reduce = getattr(case.processors[op], REDUCTIONS[reductions.pop()])
     features = reduce(stacked).reshape(len(runs), len(case.channels), -1)

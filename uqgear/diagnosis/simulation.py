@@ -11,16 +11,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from functools import partial
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.fft
 
 from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
-from ..physics.integration import HISTORY_COLUMNS, integrate_fast, steps_per_period
-from ..physics.model import build_model
+from ..physics.history_batch import STATE_HISTORY_COLUMNS, integrate_histories
+from ..physics.integration import steps_per_period
+from ..physics.model import ModelSetup, build_model
 from ..physics.pitch_errors import PitchErrors
 from ..rig.virtual_rig import frequency_filter
 from .errors import DiagnosisError
@@ -48,6 +48,40 @@ MAX_STIFFNESS_SCALE = 1.5
 #: How the steady response of a model with an effect repeats: over a mesh
 #: period, a pinion or a gear revolution, or not at all (simulated in full).
 PERIODICITIES = ("mesh", "pinion", "gear", "free")
+
+
+class ModelRun(Protocol):
+    """What a model run of an operating point is (:class:`~uqgear.diagnosis.execution.RunTask` is one)."""
+
+    @property
+    def design(self) -> Design: ...
+
+    @property
+    def mesh_stiffness_scale(self) -> float: ...
+
+    @property
+    def adhesion_torque(self) -> float: ...
+
+    @property
+    def effects(self) -> Sequence[Effect]: ...
+
+    @property
+    def periodicity(self) -> str: ...
+
+    @property
+    def pitch_errors(self) -> PitchErrors | None: ...
+
+
+@dataclass(frozen=True)
+class _Run:
+    """A :class:`ModelRun` given by its parts (:meth:`CampaignSimulator.run`)."""
+
+    design: Design
+    mesh_stiffness_scale: float
+    adhesion_torque: float
+    effects: Sequence[Effect]
+    periodicity: str
+    pitch_errors: PitchErrors | None = None
 
 
 @dataclass
@@ -283,61 +317,73 @@ class CampaignSimulator:
         found not to repeat over it is simulated in full (always, with
         ``pitch_errors``: their pattern repeats only after z1 z2 / gcd mesh periods).
         """
-        if periodicity not in PERIODICITIES:
-            raise DiagnosisError(f"periodicity: expected one of {', '.join(PERIODICITIES)}; got {periodicity!r}")
-        simulate = partial(self._simulate, op, design, mesh_stiffness_scale, adhesion_torque, effects, pitch_errors)
-        if pitch_errors is not None:
-            periodicity = "free"
-        run_in = self.run_in_periods(op)
-        if periodicity != "free":
-            window = self.window_periods(periodicity, op)
-            result = self._tiled(op, *simulate(run_in + window + 1, window + 1), window, periodicity)
-            if result is not None:
-                return result
-        periods, samples = self.whole_window(op)
-        signals = simulate(run_in + periods, periods)[0]
-        return self._whole(op, {name: values[:samples] for name, values in signals.items()})
+        run = _Run(design, mesh_stiffness_scale, adhesion_torque, tuple(effects), periodicity, pitch_errors)
+        return self.runs(op, [run])[0]
 
-    def _simulate(
-        self,
-        op: int,
-        design: Design,
-        scale: float,
-        adhesion_torque: float,
-        effects: Sequence[Effect],
-        pitch_errors: PitchErrors | None,
-        n_periods: int,
-        keep_periods: int,
-    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """Displacements and TE over the kept periods, and the state at each kept period start.
+    def runs(self, op: int, runs: Sequence[ModelRun]) -> list[SimulatedRun]:
+        """Model records of several runs of operating point ``op``, each as :meth:`run` makes it.
+
+        The runs are integrated together (:func:`~uqgear.physics.history_batch.integrate_histories`:
+        SIMD lanes, each run's numbers the same as alone): first every run that may repeat over its
+        periodicity's window, then, over the whole record, the rest and those found not to repeat.
+        """
+        for run in runs:
+            if run.periodicity not in PERIODICITIES:
+                raise DiagnosisError(
+                    f"periodicity: expected one of {', '.join(PERIODICITIES)}; got {run.periodicity!r}"
+                )
+        setups = [self._setup(op, run) for run in runs]
+        run_in = self.run_in_periods(op)
+        results: list[SimulatedRun | None] = [None] * len(runs)
+        windows: dict[int, list[int]] = {}
+        whole = []
+        for index, run in enumerate(runs):
+            if run.pitch_errors is not None or run.periodicity == "free":
+                whole.append(index)
+            else:
+                windows.setdefault(self.window_periods(run.periodicity, op), []).append(index)
+        for window, members in windows.items():
+            simulated = self._integrate(op, [setups[index] for index in members], run_in + window + 1, window + 1)
+            for index, (signals, poincare) in zip(members, simulated):
+                results[index] = self._tiled(op, signals, poincare, window, runs[index].periodicity)
+                if results[index] is None:
+                    whole.append(index)
+        periods, samples = self.whole_window(op)
+        whole.sort()
+        simulated = self._integrate(op, [setups[index] for index in whole], run_in + periods, periods)
+        for index, (signals, _) in zip(whole, simulated):
+            results[index] = self._whole(op, {name: values[:samples] for name, values in signals.items()})
+        return results  # type: ignore[return-value]
+
+    def _setup(self, op: int, run: ModelRun) -> ModelSetup:
+        return build_model(
+            run.design,
+            float(self.speeds[op]),
+            float(self.drive_torques[op]),
+            float(run.adhesion_torque),
+            mesh_stiffness_scale=float(run.mesh_stiffness_scale),
+            effects=run.effects,
+            pitch_errors=run.pitch_errors,
+        )
+
+    def _integrate(
+        self, op: int, setups: Sequence[ModelSetup], n_periods: int, keep_periods: int
+    ) -> list[tuple[dict[str, np.ndarray], np.ndarray]]:
+        """Displacements and TE over the kept periods of each run, and the state at each kept period start.
 
         Calls the fast integrator directly: the full :func:`uqgear.simulate`
         Dataset (a dozen histories with attributes) costs as much as the
         integration of a short periodic window.
         """
-        setup = build_model(
-            design,
-            float(self.speeds[op]),
-            float(self.drive_torques[op]),
-            float(adhesion_torque),
-            mesh_stiffness_scale=float(scale),
-            effects=effects,
-            pitch_errors=pitch_errors,
-        )
-        history, poincare, _ = integrate_fast(
-            setup, n_periods, keep_periods, self.samples_per_period[op], self.steps_per_mode, setup.static_state()
-        )
-        columns = {name: index for index, name in enumerate(HISTORY_COLUMNS)}
-        signals = {
-            "y1": history[:, columns["y1"]],
-            "y2": history[:, columns["y2"]],
-            "x": history[:, columns["x"]],
-            "te": history[:, columns["x"]]
-            - history[:, columns["y1"]]
-            + history[:, columns["y2"]]
-            + history[:, columns["ste"]],
-        }
-        return signals, poincare
+        columns = {name: index for index, name in enumerate(STATE_HISTORY_COLUMNS)}
+        simulated = []
+        for history, poincare in integrate_histories(
+            setups, n_periods, keep_periods, self.samples_per_period[op], self.steps_per_mode
+        ):
+            signals = {name: history[:, columns[name]] for name in ("y1", "y2", "x")}
+            signals["te"] = signals["x"] - signals["y1"] + signals["y2"] + history[:, columns["ste"]]
+            simulated.append((signals, poincare))
+        return simulated
 
     def _tiled(
         self, op: int, signals: Mapping[str, np.ndarray], poincare: np.ndarray, window: int, periodicity: str

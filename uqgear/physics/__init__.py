@@ -3,7 +3,8 @@
 ``design`` -> ``geometry`` -> ``stiffness`` -> ``model`` (a :class:`ModelSetup`
 derived once per operating point) -> ``integration`` (the compiled RK4 fast
 path: right-hand side in ``_rhs``, one-sample kernels in ``_kernels`` and
-``_pairs``, batches as SIMD lanes in ``_lanes``; and the scipy reference). ``effects`` holds the
+``_pairs``, batches as SIMD lanes in ``_lanes`` with their forcing tables in ``_lane_tables``;
+and the scipy reference; ``history_batch`` the histories of several runs at once). ``effects`` holds the
 unmodelled effects of docs/model/unmodelled-effects.md section 6 as slots of the same
 right-hand side; ``pitch_errors`` the per-tooth pitch offsets every real gear
 has (section 2.6), an input of the model set-up, not an effect.

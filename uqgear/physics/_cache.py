@@ -29,6 +29,7 @@ COMPILED_MODULES = (
     "physics/_pairs.py",
     "physics/_kernels.py",
     "physics/_lanes.py",
+    "physics/_lane_tables.py",
     "physics/_variational.py",
     "calibration/harmonics.py",
 )

@@ -26,12 +26,15 @@ differs between lanes is data: its own parameters, forcing table, times and
 contact state; a lane whose step changes its contact region is redone on
 its own by the one-sample code (:func:`~uqgear.physics._rhs._split_at_contact`).
 
-The lanes take the runs whose forcing repeats every mesh period: no pitch
-errors, tooth factors, run-out, torque ripple or adhesion oscillation
-(:func:`lane_ready`). Then the whole forcing of a sub-step (stiffness,
-friction term, drive, e'') is a table built once per run from the
-one-sample kernel's own :func:`~uqgear.physics._rhs._forcing_row`. With
-``lyapunov`` a group holds four runs and their four shadow runs.
+The lanes take every run without pitch errors (:func:`lane_ready`; a pitch-error
+run's per-pair contact is the pair kernel's). The whole forcing of a sub-step
+(stiffness, friction term, drive, e'') is a table, filled from the one-sample
+kernel's own :func:`~uqgear.physics._rhs._forcing_row` at the times it
+evaluates it (:mod:`uqgear.physics._lane_tables`): once per run where the
+forcing repeats every mesh period, and for every period where tooth factors,
+run-out, torque ripple or an adhesion oscillation make it change
+(:func:`periodic_forcing`). With ``lyapunov`` a group holds four runs and
+their four shadow runs.
 """
 
 from __future__ import annotations
@@ -43,6 +46,20 @@ import numba as nb
 import numpy as np
 from numba.core.compiler_lock import global_compiler_lock
 
+from uqgear.physics._lane_tables import (
+    LANES,
+    N_TABLE,
+    RIG_CHANNELS,
+    STATE_CHANNELS,
+    T_DRIVE,
+    T_STE,
+    T_WEIGHT,
+    T_WIDTH,
+    _copy_lane,
+    _fill_forcing,
+    _same_forcing,
+    _take_schedule,
+)
 from uqgear.physics._quotient import exact_divisors, quotient
 from uqgear.physics._rhs import (
     ADHESION_AMPLITUDE,
@@ -70,11 +87,8 @@ from uqgear.physics._rhs import (
     Q_X_SQ,
     Q_X_SUM,
     RIPPLE_AMPLITUDE,
-    T1,
-    T2,
     TOOTH_FACTORS,
     TWO_PI,
-    _forcing_row,
     _split_at_contact,
     build_schedule,
     coefficients,
@@ -86,8 +100,6 @@ from uqgear.physics._rhs import (
     static_transmission_error,
 )
 
-#: Runs advanced together: one vector of eight doubles (AVX-512), or two of four.
-LANES = 8
 #: Separation of a shadow run from its run (scaled state), as in the one-sample kernel.
 SEPARATION = 1e-7
 
@@ -98,7 +110,7 @@ N_COEFFICIENTS = 12
 # vector of the lanes and every offset a constant (the loop vectoriser then proves that the rows
 # do not overlap). The state, the sub-step's result, its first stage, the mesh force and the
 # bearing accelerations at its start, what is left to do for the lane (REDO_*), each lane's
-# coefficients, drive term and the inverses 1/m1, 1/m2, 1/m_e of its divisors.
+# coefficients and the inverses 1/m1, 1/m2, 1/m_e of its divisors.
 W_STATE = 0
 W_TRIAL = 6
 W_SLOPE = 12
@@ -107,8 +119,7 @@ W_A1 = 19
 W_A2 = 20
 W_REDO = 21
 W_COEFFICIENTS = 22
-W_DRIVE = W_COEFFICIENTS + N_COEFFICIENTS
-W_INVERSE = W_DRIVE + 1
+W_INVERSE = W_COEFFICIENTS + N_COEFFICIENTS
 N_ROWS = W_INVERSE + 3
 #: What a lane's sub-step leaves to the one-sample code: nothing; its split at a contact boundary
 #: (the step changes the contact region); the whole sub-step (a quotient outside the range where
@@ -116,12 +127,6 @@ N_ROWS = W_INVERSE + 3
 REDO_NONE = 0.0
 REDO_SPLIT = 1.0
 REDO_STEP = 2.0
-# Fields of a sub-step in a lane group's forcing table (sub-step s, field f, lane l at element
-# [s, f * LANES + l]): (k, friction term, e'') at the start, middle and end, the width
-# h and h / 6 (RK4's weight, divided once here rather than every step: the same number).
-T_WIDTH = 9
-T_WEIGHT = 10
-N_TABLE = 11
 
 
 def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> None:
@@ -159,18 +164,24 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
 
 
 def lane_ready(params: np.ndarray) -> np.ndarray:
-    """Which runs (rows of parameter vectors) the lanes take: those whose forcing repeats every mesh period."""
+    """Which runs (rows of parameter vectors) the lanes take: those without pitch errors (whose per-pair
+    contact the lanes do not follow) and with divisors the lanes' quotient is exact for."""
     p = np.atleast_2d(params)
-    periodic = (
-        (p[:, PITCH_ERRORS] == 0.0)
-        & (p[:, TOOTH_FACTORS] == 0.0)
-        & (p[:, ECC_AMPLITUDE] == 0.0)
-        & (p[:, ECC_KAPPA] == 0.0)
-        & (p[:, RIPPLE_AMPLITUDE] == 0.0)
-        & (p[:, ADHESION_AMPLITUDE] == 0.0)
-    )
     # the lanes divide by a multiplication and fused multiply-adds, exact for these divisors
-    return periodic & exact_divisors(p[:, M1]) & exact_divisors(p[:, M2]) & exact_divisors(p[:, ME])
+    return (p[:, PITCH_ERRORS] == 0.0) & exact_divisors(p[:, M1]) & exact_divisors(p[:, M2]) & exact_divisors(p[:, ME])
+
+
+@nb.njit(**INLINED)
+def periodic_forcing(p):
+    """Whether a run's forcing repeats every mesh period: no tooth factors, run-out, torque ripple or
+    adhesion oscillation. A lane group holding another run fills its forcing table every period."""
+    return (
+        p[TOOTH_FACTORS] == 0.0
+        and p[ECC_AMPLITUDE] == 0.0
+        and p[ECC_KAPPA] == 0.0
+        and p[RIPPLE_AMPLITUDE] == 0.0
+        and p[ADHESION_AMPLITUDE] == 0.0
+    )
 
 
 @nb.njit(**INLINED)
@@ -206,14 +217,13 @@ def _lane_step(W, table, sub, lane):
         _row(W, W_COEFFICIENTS + 11, lane),
     )
     inverse = (_row(W, W_INVERSE, lane), _row(W, W_INVERSE + 1, lane), _row(W, W_INVERSE + 2, lane))
-    drive = _row(W, W_DRIVE, lane)
     # the sub-step's row: its index is checked for wrap-around once, outside the loop over the lanes
     f = table[sub]
     d1, force, exact = state_derivative_by(
-        s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c, quotient, inverse
+        s, _row(f, 0, lane), _row(f, 1, lane), _row(f, T_DRIVE, lane), _row(f, 2, lane), c, quotient, inverse
     )
-    mid = (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane))
-    end = (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane))
+    mid = (_row(f, 3, lane), _row(f, 4, lane), _row(f, T_DRIVE + 1, lane), _row(f, 5, lane))
+    end = (_row(f, 6, lane), _row(f, 7, lane), _row(f, T_DRIVE + 2, lane), _row(f, 8, lane))
     new, exact_later = rk4_step_weighted(
         s, _row(f, T_WIDTH, lane), _row(f, T_WEIGHT, lane), d1, mid, end, c, quotient, inverse
     )
@@ -337,15 +347,14 @@ def _redo_lane(
     h = widths[sub, lane]
     if _row(W, W_REDO, lane) == REDO_STEP:
         c = coefficients(p)
-        drive = _row(W, W_DRIVE, lane)
         f = table[sub]
-        d1, force = state_derivative(s, _row(f, 0, lane), _row(f, 1, lane), drive, _row(f, 2, lane), c)
+        d1, force = state_derivative(s, _row(f, 0, lane), _row(f, 1, lane), _row(f, T_DRIVE, lane), _row(f, 2, lane), c)
         attempt = rk4_step(
             s,
             h,
             d1,
-            (_row(f, 3, lane), _row(f, 4, lane), drive, _row(f, 5, lane)),
-            (_row(f, 6, lane), _row(f, 7, lane), drive, _row(f, 8, lane)),
+            (_row(f, 3, lane), _row(f, 4, lane), _row(f, T_DRIVE + 1, lane), _row(f, 5, lane)),
+            (_row(f, 6, lane), _row(f, 7, lane), _row(f, T_DRIVE + 2, lane), _row(f, 8, lane)),
             c,
         )
         _put_state(W, W_SLOPE, lane, d1)
@@ -466,17 +475,16 @@ def _integrate_group(
     widths = np.empty((n_sub, LANES))
     offsets = np.empty((n_sub, LANES))
     refs = np.empty((n_sub, LANES))
+    # each lane's tabulated stages (its schedule's table), from which its forcing is filled
+    stages = np.empty((LANES, n_sub, 3, layout[5].shape[2]))
     W = np.zeros(N_ROWS * LANES)
     period = np.empty(LANES)
     filled = -1
     for lane in range(LANES):
         i = samples[lane]
         if filled >= 0 and _same_forcing(params, i, samples[filled], table_index, breakpoints):
-            # the same speed and design as the lane before, another torque: the same table, its own drive
-            _copy_lane(table, widths, offsets, refs, filled, lane)
-            W[W_DRIVE * LANES + lane] = _forcing_row(
-                0.0, 0, layout[5], 0, 0, pairs[0], params[i], factor_pinion[i], factor_gear[i]
-            )[2]
+            # the same speed and design as the lane before, another torque: the same schedule
+            _copy_lane(stages, widths, offsets, refs, filled, lane)
         else:
             t_i = table_index[i]
             schedule = (
@@ -497,9 +505,7 @@ def _integrate_group(
                 i = lead
                 samples[lane] = lead
                 schedule = layout
-            _fill_lane(
-                table, widths, offsets, refs, W, lane, schedule, n_sub, params[i], factor_pinion[i], factor_gear[i]
-            )
+            _take_schedule(stages, widths, offsets, refs, lane, schedule, n_sub)
             filled = lane
         p = params[i]
         c = coefficients(p)
@@ -509,6 +515,23 @@ def _integrate_group(
         W[(W_INVERSE + 1) * LANES + lane] = 1.0 / p[M2]
         W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
         period[lane] = TWO_PI / p[OMEGA_MESH]
+        _fill_forcing(
+            table,
+            lane,
+            0,
+            period[lane],
+            widths,
+            offsets,
+            stages[lane],
+            pairs,
+            n_sub,
+            p,
+            factor_pinion[i],
+            factor_gear[i],
+        )
+    moving = False
+    for lane in range(LANES):
+        moving = moving or not periodic_forcing(params[samples[lane]])
     _run_lanes(
         samples,
         written,
@@ -536,53 +559,9 @@ def _integrate_group(
         poincare,
         history,
         final_states,
+        stages if moving else stages[:0],
+        pairs,
     )
-
-
-@nb.njit(**JIT_OPTIONS)
-def _same_forcing(params, i, j, table_index, breakpoints):
-    """Whether runs ``i`` and ``j`` have the same forcing table: the same parameters but for the torques T1
-    and T2 (which enter the drive term alone), stiffness tables and breakpoints."""
-    if table_index[i] != table_index[j]:
-        return False
-    for k in range(params.shape[1]):
-        if k != T1 and k != T2 and params[i, k] != params[j, k]:
-            return False
-    for k in range(breakpoints.shape[1]):
-        a = breakpoints[i, k]
-        b = breakpoints[j, k]
-        if a != b and not (a != a and b != b):  # noqa: PLR0124  (both NaN: padding)
-            return False
-    return True
-
-
-@nb.njit(**JIT_OPTIONS)
-def _copy_lane(table, widths, offsets, refs, source, lane):
-    for sub in range(table.shape[0]):
-        for field in range(N_TABLE):
-            table[sub, field * LANES + lane] = table[sub, field * LANES + source]
-        widths[sub, lane] = widths[sub, source]
-        offsets[sub, lane] = offsets[sub, source]
-        refs[sub, lane] = refs[sub, source]
-
-
-@nb.njit(**JIT_OPTIONS)
-def _fill_lane(table, widths, offsets, refs, W, lane, schedule, n_sub, p, fp, fg):
-    """A lane's columns of the forcing table and its drive term, from its schedule and parameters."""
-    _, sub_offsets, sub_widths, sub_refs, sub_pairs, stages = schedule
-    for sub in range(n_sub):
-        widths[sub, lane] = sub_widths[sub]
-        offsets[sub, lane] = sub_offsets[sub]
-        refs[sub, lane] = sub_refs[sub]
-        for stage in range(3):
-            # t and the mesh period n do not enter the forcing of a lane-ready run
-            terms = _forcing_row(0.0, 0, stages, sub, stage, sub_pairs[sub], p, fp, fg)
-            table[sub, (3 * stage) * LANES + lane] = terms[0]
-            table[sub, (3 * stage + 1) * LANES + lane] = terms[1]
-            table[sub, (3 * stage + 2) * LANES + lane] = terms[4]
-            W[W_DRIVE * LANES + lane] = terms[2]
-        table[sub, T_WIDTH * LANES + lane] = sub_widths[sub]
-        table[sub, T_WEIGHT * LANES + lane] = sub_widths[sub] / 6.0
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -613,8 +592,14 @@ def _run_lanes(
     poincare,
     history,
     final_states,
+    stages,
+    pairs,
 ):
-    """The time loop of a lane group: the one-sample kernel's loop, lane by lane (see the module doc)."""
+    """The time loop of a lane group: the one-sample kernel's loop, lane by lane (see the module doc).
+
+    ``stages`` holds each lane's tabulated stages where the group's forcing does not repeat every
+    mesh period (none: it does): the forcing table is then filled again for every period.
+    """
     half = LANES // 2
     # LANES, but not a constant to LLVM (see _step_lanes)
     lanes = W.size // N_ROWS
@@ -632,14 +617,41 @@ def _run_lanes(
         acc[Q_X_MAX * LANES + lane] = -np.inf
         acc[Q_F_MAX * LANES + lane] = -np.inf
         acc[Q_F_MIN * LANES + lane] = np.inf
-    rig_channels = history.shape[1] >= 4
+    moving = stages.shape[0] > 0
+    whole_state = poincare.shape[2] >= 6
     first_kept = n_periods - keep_periods
     row = 0
     for n in range(n_periods):
+        if moving and n > 0:
+            for lane in range(LANES):
+                if not live[lane]:
+                    # an empty or refused lane's numbers are never read: its table may lag
+                    continue
+                i = samples[lane]
+                _fill_forcing(
+                    table,
+                    lane,
+                    n,
+                    period[lane],
+                    widths,
+                    offsets,
+                    stages[lane],
+                    pairs,
+                    table.shape[0],
+                    params[i],
+                    factor_pinion[i],
+                    factor_gear[i],
+                )
         kept = n >= first_kept
         if kept:
             for lane in range(LANES):
-                if written[lane]:
+                if not written[lane]:
+                    continue
+                if whole_state:
+                    # the whole state at the period start, as the one-sample history keeps it
+                    for c in range(6):
+                        poincare[samples[lane], n - first_kept, c] = _row(W, W_STATE + c, lane)
+                else:
                     poincare[samples[lane], n - first_kept, 0] = _row(W, W_STATE + 2, lane)
                     poincare[samples[lane], n - first_kept, 1] = _row(W, W_STATE + 5, lane)
         for j in range(steps):
@@ -669,7 +681,7 @@ def _run_lanes(
                 if sub == first_sub[j] and kept:
                     _accumulate(acc, W, lanes)
                     if stride > 0 and j % stride == 0:
-                        _record(history, row, rig_channels, W, samples, written, n, j, steps, period, params)
+                        _record(history, row, W, table[sub], samples, written, n, j, steps, period, params)
                         row += 1
                 _advance(W, lanes)
         if lyapunov:
@@ -722,15 +734,20 @@ def _accumulate(acc, W, lanes):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _record(history, row, rig_channels, W, samples, written, n, j, steps, period, params):
-    """The decimated histories of each written lane at grid step ``j`` of period ``n``."""
+def _record(history, row, W, forcing, samples, written, n, j, steps, period, params):
+    """The decimated histories of each written lane at grid step ``j`` of period ``n`` (``forcing``: the
+    forcing table's row of the step's first sub-step)."""
     for lane in range(LANES):
         if not written[lane]:
             continue
         i = samples[lane]
         x = _row(W, W_STATE + 2, lane)
         history[i, 0, row] = x
-        if rig_channels:
+        if history.shape[1] >= STATE_CHANNELS:
+            history[i, 4, row] = _row(W, W_STATE, lane)
+            history[i, 5, row] = _row(W, W_STATE + 1, lane)
+            history[i, 6, row] = _row(forcing, T_STE, lane)
+        if history.shape[1] >= RIG_CHANNELS:
             # the rig's channels: te = x - y1 + y2 + e, and the bearing accelerations
             t = n * period[lane] + j * (period[lane] / steps)
             history[i, 1, row] = (

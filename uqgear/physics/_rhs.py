@@ -689,18 +689,28 @@ def _forcing_row(t, n, table, sub, stage, n_pairs, p, factor_pinion, factor_gear
     arm_pinion = table[sub, stage, F_ARM_PINION]
     arm_gear = table[sub, stage, F_ARM_GEAR]
     if p[TOOTH_FACTORS] != 0.0:
-        z1 = int(p[Z1])
-        z2 = int(p[Z2])
         for i in range(n_pairs):
-            tooth = n - i
-            extra = factor_pinion[tooth % z1] * factor_gear[tooth % z2] - 1.0
+            extra = tooth_extra(n - i, p, factor_pinion, factor_gear)
             k += table[sub, stage, 4 + 3 * i] * extra
             arm_pinion += table[sub, stage, 5 + 3 * i] * extra
             arm_gear += table[sub, stage, 6 + 3 * i] * extra
+    return scaled_forcing(t, k, arm_pinion, arm_gear, table[sub, stage, F_SINE], p)
+
+
+@nb.njit(**INLINED)
+def tooth_extra(tooth, p, factor_pinion, factor_gear):
+    """The tooth factors' change of pair stiffness, f_pinion f_gear - 1, of the pair entering in period ``tooth``."""
+    return factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])] - 1.0
+
+
+@nb.njit(**INLINED)
+def scaled_forcing(t, k, arm_pinion, arm_gear, sine, p):
+    """:func:`forcing` at ``t`` from the pair sums ``k`` and friction arms (tooth factors applied) and
+    sin(omega t + STE phase): the stiffness scale, the run-out's modulation and the time terms."""
     scale = p[STIFFNESS_SCALE]
     if p[ECC_KAPPA] != 0.0:
         scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
-    drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
+    drive, ste, ste_acc = _time_terms(t, sine, p)
     return k * scale, _friction_term(arm_pinion * scale, arm_gear * scale, p), drive, ste, ste_acc
 
 

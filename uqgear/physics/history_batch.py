@@ -1,0 +1,120 @@
+"""Histories of several runs at once: :func:`~uqgear.physics.integration.integrate_fast`'s, with the runs in SIMD lanes.
+
+A run's history from the fast integrator is a chain of dependent RK4 steps
+that waits on latency; runs with the same sub-step layout advance together
+as the lanes of :mod:`uqgear.physics._lanes`, which compute each run's
+numbers bit for bit as the one-sample kernel does. Runs with pitch errors
+(their per-pair contact) and any run a lane group cannot hold are
+integrated one at a time, so every run's history is the one
+:func:`~uqgear.physics.integration.integrate_fast` returns, whatever company
+it is in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from . import _lanes
+from .batch_setup import breakpoint_table, lane_groups, shared_stiffness_tables
+from .integration import integrate_fast, steps_per_period
+from .model import HISTORY_COLUMNS, ModelSetup
+
+#: Columns of the histories :func:`integrate_histories` returns (those of
+#: :data:`~uqgear.physics.model.HISTORY_COLUMNS` of the same names): the bearing
+#: displacements, the DTE and the static transmission error, m.
+STATE_HISTORY_COLUMNS = ("y1", "y2", "x", "ste")
+# where the lanes record them (uqgear.physics._lanes: channels 4, 5, 0 and 6)
+_LANE_CHANNELS = [4, 5, 0, 6]
+_ONE_SAMPLE_COLUMNS = [HISTORY_COLUMNS.index(name) for name in STATE_HISTORY_COLUMNS]
+
+
+def integrate_histories(
+    setups: Sequence[ModelSetup], n_periods: int, keep_periods: int, samples_per_period: int, steps_per_mode: int
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Histories and Poincare states of several runs, each from static equilibrium.
+
+    Parameters
+    ----------
+    setups : sequence of ModelSetup
+        The runs (:func:`uqgear.physics.model.build_model`), of one gear pair.
+    n_periods, keep_periods : int
+        Mesh periods integrated, and kept at the end.
+    samples_per_period : int
+        History samples per mesh period.
+    steps_per_mode : int
+        RK4 steps per period of the highest natural frequency.
+
+    Returns
+    -------
+    list of (history, poincare)
+        Per run: its history over the kept periods, (keep_periods *
+        samples_per_period, 4) with the columns :data:`STATE_HISTORY_COLUMNS`,
+        and the state at each kept period start, (keep_periods, 6); the same
+        numbers as those columns of :func:`~uqgear.physics.integration.integrate_fast`'s.
+
+    Examples
+    --------
+    >>> import numpy as np, uqgear
+    >>> from uqgear.physics.model import build_model
+    >>> from uqgear.physics.effects import make_effect
+    >>> from uqgear.physics.integration import integrate_fast
+    >>> design = uqgear.load_design("locomotive")
+    >>> runs = [build_model(design, 1500.0, 7000.0, 33e3, effects=[make_effect("tooth_damage", {"depth": d})])
+    ...         for d in (0.1, 0.2, 0.3)]
+    >>> together = integrate_histories(runs, 40, 10, 16, 24)
+    >>> alone, poincare, _ = integrate_fast(runs[1], 40, 10, 16, 24, runs[1].static_state())
+    >>> bool(np.array_equal(together[1][0], alone[:, [0, 1, 2, 10]]) and np.array_equal(together[1][1], poincare))
+    True
+    """
+    n = len(setups)
+    if n == 0:
+        return []
+    steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=samples_per_period) for s in setups])
+    strides = (steps // samples_per_period).astype(np.int64)
+    params = np.stack([s.parameters for s in setups])
+    breakpoints = breakpoint_table(setups)
+    groups, rest = lane_groups(params, steps, breakpoints, strides, False)
+    results: list[tuple[np.ndarray, np.ndarray] | None] = [None] * n
+    if len(groups):
+        pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
+        history = np.empty((n, _lanes.STATE_CHANNELS, keep_periods * samples_per_period))
+        poincare = np.empty((n, keep_periods, 6))
+        arrays = (
+            np.stack([s.static_state() for s in setups]),
+            params,
+            np.stack(pair_tables),
+            np.stack(period_tables),
+            table_index,
+            np.stack([s.factor_pinion for s in setups]),
+            np.stack([s.factor_gear for s in setups]),
+            breakpoints,
+            steps,
+            int(n_periods),
+            int(keep_periods),
+            strides,
+            False,
+            np.ones((n, 6)),
+            np.zeros((n, _lanes.N_ACCUMULATORS)),
+            poincare,
+            history,
+            np.empty((n, 6)),
+        )
+        refused = np.zeros(n, dtype=np.bool_)
+        _lanes.compile_lanes(groups, arrays, refused)
+        _lanes.integrate_lanes(0, len(groups), groups, *arrays, refused)
+        for i in groups[groups >= 0]:
+            if not refused[i]:
+                results[i] = (history[i][_LANE_CHANNELS].T.copy(), poincare[i])
+        rest = np.concatenate([rest, np.nonzero(refused)[0]])
+    for i in rest:
+        setup = setups[i]
+        one, states, _ = integrate_fast(
+            setup, n_periods, keep_periods, samples_per_period, steps_per_mode, setup.static_state()
+        )
+        results[i] = (one[:, _ONE_SAMPLE_COLUMNS], states)
+    return results  # type: ignore[return-value]
+
+
+__all__ = ["integrate_histories", "STATE_HISTORY_COLUMNS"]
