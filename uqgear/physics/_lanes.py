@@ -129,6 +129,10 @@ REDO_SPLIT = 1.0
 REDO_STEP = 2.0
 
 
+# whether this process has compiled (or loaded) the lane kernel through compile_lanes
+_COMPILED = False
+
+
 def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> None:
     """Compile (or load from the cache) the lane kernel for :func:`integrate_lanes`'s arguments.
 
@@ -146,8 +150,14 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
     loop vectoriser refuses.
 
     The width is an LLVM command-line option, global to the process: it is set under numba's
-    compiler lock and reset before anything else compiles.
+    compiler lock and reset before anything else compiles. This is done once per process; later
+    calls return at once.
     """
+    global _COMPILED
+    if _COMPILED:
+        # compiled (or loaded) in this process already: every caller passes the same argument types,
+        # and taking the compiler lock and setting the options on every batch costs 0.1-0.2 ms
+        return
     with global_compiler_lock:
         # numba.config's options are module attributes it sets at import: no static type knows them
         saved = nb.config.SLP_VECTORIZE  # type: ignore[attr-defined]
@@ -159,6 +169,7 @@ def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> Non
             finally:
                 ll.set_option("", "-force-vector-width=0")
             integrate_lanes(0, 0, groups, *arrays, refused)
+            _COMPILED = True
         finally:
             nb.config.SLP_VECTORIZE = saved  # type: ignore[attr-defined]
 
