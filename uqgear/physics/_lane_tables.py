@@ -46,7 +46,7 @@ STATE_CHANNELS = 7
 
 
 @nb.njit(**JIT_OPTIONS)
-def _same_forcing(params, i, j, table_index, breakpoints):
+def _same_schedule(params, i, j, table_index, breakpoints):
     """Whether runs ``i`` and ``j`` have the same schedule: the same parameters but for the torques T1
     and T2 (which enter the drive term alone), stiffness tables and breakpoints."""
     if table_index[i] != table_index[j]:

@@ -57,7 +57,7 @@ from uqgear.physics._lane_tables import (
     T_WIDTH,
     _copy_lane,
     _fill_forcing,
-    _same_forcing,
+    _same_schedule,
     _take_schedule,
 )
 from uqgear.physics._quotient import exact_divisors, quotient
@@ -493,7 +493,7 @@ def _integrate_group(
     filled = -1
     for lane in range(LANES):
         i = samples[lane]
-        if filled >= 0 and _same_forcing(params, i, samples[filled], table_index, breakpoints):
+        if filled >= 0 and _same_schedule(params, i, samples[filled], table_index, breakpoints):
             # the same speed and design as the lane before, another torque: the same schedule
             _copy_lane(stages, widths, offsets, refs, filled, lane)
         else:
