@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import uqgear
+from uqgear.physics import batch_setup, integration
 from uqgear.physics import effects as E
-from uqgear.physics import integration
 from uqgear.physics._lanes import LANES, lane_ready
 from uqgear.physics.pitch_errors import draw_pitch_errors
 
@@ -112,14 +112,14 @@ def test_runs_a_group_cannot_hold_are_run_one_at_a_time(design, monkeypatch):
         return np.arange(len(params), dtype=np.int64)[None, :], np.empty(0, dtype=np.int64)
 
     refused = []
-    original = integration._lanes.integrate_lanes
+    original = batch_setup._lanes.integrate_lanes
 
     def spying(first, last, groups, *arrays):
         original(first, last, groups, *arrays)
         refused.append(arrays[-1].copy())
 
-    monkeypatch.setattr(integration, "lane_groups", one_group)
-    monkeypatch.setattr(integration._lanes, "integrate_lanes", spying)
+    monkeypatch.setattr(batch_setup, "lane_groups", one_group)
+    monkeypatch.setattr(batch_setup._lanes, "integrate_lanes", spying)
     lanes = uqgear.simulate_batch(design, samples, **kw)
     assert np.any(refused[-1]) and not refused[-1][0]
     assert _differing(lanes, one) == []
@@ -130,14 +130,14 @@ def test_lane_groups_share_one_layout_and_put_the_longest_first(design):
     setups = integration.build_batch(design, samples)
     params = np.stack([s.parameters for s in setups])
     steps = np.array([integration.steps_per_period(s) for s in setups])
-    groups, rest = integration.lane_groups(params, steps, integration.breakpoint_table(setups),
+    groups, rest = batch_setup.lane_groups(params, steps, batch_setup.breakpoint_table(setups),
                                            np.zeros(len(setups), dtype=np.int64), lyapunov=False)
     assert rest.size == 0
     members = [row[row >= 0] for row in groups]
     assert sorted(np.concatenate(members).tolist()) == list(range(len(setups)))
     assert all(len(set(steps[m])) == 1 for m in members)
     assert [steps[m[0]] for m in members] == sorted((steps[m[0]] for m in members), reverse=True)
-    with_shadows, _ = integration.lane_groups(params, steps, integration.breakpoint_table(setups),
+    with_shadows, _ = batch_setup.lane_groups(params, steps, batch_setup.breakpoint_table(setups),
                                               np.zeros(len(setups), dtype=np.int64), lyapunov=True)
     assert np.all(with_shadows[:, LANES // 2:] == -1)
 

@@ -27,9 +27,10 @@ import scipy.signal
 import xarray as xr
 
 from ..physics import _kernels as K
+from ..physics.batch_setup import build_batch, kernel_inputs
 from ..physics.design import Design
 from ..physics.effects import Effect
-from ..physics.integration import breakpoint_table, build_batch, shared_stiffness_tables, steps_per_period
+from ..physics.integration import steps_per_period
 from ..physics.threads import spread
 from ..rig.features import extract_features
 from .errors import CalibrationError
@@ -308,8 +309,6 @@ def model_harmonics(
     setups, steps = _batch_setups(design, samples, effects, steps_per_mode, samples_per_period)
     n = len(setups)
     stride = steps // samples_per_period
-    pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
-    breakpoints = breakpoint_table(setups)
     mesh_frequency = np.array([s.mesh_frequency for s in setups])
     periodic_model = all(effect.name in MESH_PERIODIC_EFFECTS for effect in effects)
     transient_periods = np.ceil(transient * mesh_frequency).astype(np.int64)
@@ -322,14 +321,7 @@ def model_harmonics(
     info = np.zeros((n, 2))
     if n:
         arrays = (
-            np.stack([s.static_state() for s in setups]),
-            np.stack([s.parameters for s in setups]),
-            np.stack(pair_tables),
-            np.stack(period_tables),
-            table_index,
-            np.stack([s.factor_pinion for s in setups]),
-            np.stack([s.factor_gear for s in setups]),
-            breakpoints,
+            *kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
             steps,
             stride,
             transient_periods,

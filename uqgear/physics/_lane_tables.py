@@ -83,7 +83,7 @@ def _take_schedule(stages, widths, offsets, refs, lane, schedule, n_sub):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _fill_forcing(table, lane, n, period, widths, offsets, stages, pairs, n_sub, p, fp, fg):
+def _fill_forcing(table, lane, n, period, widths, offsets, stages, pairs, p, fp, fg):
     """A lane's columns of the forcing table for mesh period ``n``: the one-sample kernel's
     :func:`~uqgear.physics._rhs._forcing_row` at the times :func:`~uqgear.physics._rhs.classical_step`
     evaluates it (the same operations in the same order, so the same numbers)."""
@@ -94,7 +94,7 @@ def _fill_forcing(table, lane, n, period, widths, offsets, stages, pairs, n_sub,
     if damaged:
         for i in range(MAX_PAIRS):
             extras[i] = tooth_extra(n - i, p, fp, fg)
-    for sub in range(n_sub):
+    for sub in range(table.shape[0]):
         t = start + offsets[sub, lane]
         h = widths[sub, lane]
         for stage in range(3):

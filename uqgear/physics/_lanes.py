@@ -527,18 +527,7 @@ def _integrate_group(
         W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
         period[lane] = TWO_PI / p[OMEGA_MESH]
         _fill_forcing(
-            table,
-            lane,
-            0,
-            period[lane],
-            widths,
-            offsets,
-            stages[lane],
-            pairs,
-            n_sub,
-            p,
-            factor_pinion[i],
-            factor_gear[i],
+            table, lane, 0, period[lane], widths, offsets, stages[lane], pairs, p, factor_pinion[i], factor_gear[i]
         )
     moving = False
     for lane in range(LANES):
@@ -648,7 +637,6 @@ def _run_lanes(
                     offsets,
                     stages[lane],
                     pairs,
-                    table.shape[0],
                     params[i],
                     factor_pinion[i],
                     factor_gear[i],

@@ -3,8 +3,10 @@
 :func:`build_batch` turns a Dataset of samples into :class:`~uqgear.physics.model.ModelSetup`
 objects (design keys and effect parameters may vary per sample);
 :func:`shared_stiffness_tables` and :func:`breakpoint_table` lay them out for
-the batch kernels, and :func:`lane_groups` groups the runs that share a
-sub-step layout into SIMD lanes (:mod:`uqgear.physics._lanes`).
+the batch kernels (:func:`kernel_inputs`: the arguments every batch kernel
+starts with), :func:`lane_groups` groups the runs that share a sub-step
+layout into SIMD lanes (:mod:`uqgear.physics._lanes`) and
+:func:`integrate_lane_groups` integrates those groups.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from .design import DESIGN_KEYS, Design
 from .effects import Effect
 from .model import ModelSetup, build_model
 from .pitch_errors import PitchErrors
+from .threads import spread
 
 #: Operating variables a batch sample may set.
 OPERATING_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
@@ -137,6 +140,44 @@ def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
     return breakpoints
 
 
+def kernel_inputs(setups: Sequence[ModelSetup], states: np.ndarray) -> tuple:
+    """The arguments every batch kernel starts with, for non-empty ``setups`` starting at ``states``.
+
+    (states, parameters, pair stiffness tables, period stiffness tables, each set-up's table
+    index, pinion and gear tooth factors, breakpoints): the layout of
+    :func:`uqgear.physics._kernels.integrate_batch`, the lanes and the harmonic balance.
+    """
+    pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
+    return (
+        states,
+        np.stack([s.parameters for s in setups]),
+        np.stack(pair_tables),
+        np.stack(period_tables),
+        table_index,
+        np.stack([s.factor_pinion for s in setups]),
+        np.stack([s.factor_gear for s in setups]),
+        breakpoint_table(setups),
+    )
+
+
+def integrate_lane_groups(arrays: tuple, threads: int | None) -> np.ndarray:
+    """Integrate a batch's lane-ready runs in lane groups; returns the runs left to a one-sample kernel.
+
+    ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the
+    range and the order. The runs left are those the lanes do not take (pitch errors) and those a
+    group refused (another sub-step layout), in index order.
+    """
+    params, breakpoints, steps, strides, lyapunov = arrays[1], arrays[7], arrays[8], arrays[11], arrays[12]
+    groups, rest = lane_groups(params, steps, breakpoints, strides, lyapunov)
+    if len(groups):
+        refused = np.zeros(len(params), dtype=np.bool_)
+        # compiles (or loads) the lane kernel here, before the threads call it
+        _lanes.compile_lanes(groups, arrays, refused)
+        spread(lambda first, last: _lanes.integrate_lanes(first, last, groups, *arrays, refused), len(groups), threads)
+        rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)
+    return rest
+
+
 def lane_groups(
     params: np.ndarray, steps: np.ndarray, breakpoints: np.ndarray, strides: np.ndarray, lyapunov: bool
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -172,4 +213,6 @@ __all__ = [
     "shared_stiffness_tables",
     "breakpoint_table",
     "lane_groups",
+    "kernel_inputs",
+    "integrate_lane_groups",
 ]

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import _lanes
-from .batch_setup import breakpoint_table, lane_groups, shared_stiffness_tables
+from .batch_setup import integrate_lane_groups, kernel_inputs
 from .integration import integrate_fast, steps_per_period
 from .model import HISTORY_COLUMNS, ModelSetup
 
@@ -72,42 +72,27 @@ def integrate_histories(
     if n == 0:
         return []
     steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=samples_per_period) for s in setups])
-    strides = (steps // samples_per_period).astype(np.int64)
-    params = np.stack([s.parameters for s in setups])
-    breakpoints = breakpoint_table(setups)
-    groups, rest = lane_groups(params, steps, breakpoints, strides, False)
-    results: list[tuple[np.ndarray, np.ndarray] | None] = [None] * n
-    if len(groups):
-        pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
-        history = np.empty((n, _lanes.STATE_CHANNELS, keep_periods * samples_per_period))
-        poincare = np.empty((n, keep_periods, 6))
-        arrays = (
-            np.stack([s.static_state() for s in setups]),
-            params,
-            np.stack(pair_tables),
-            np.stack(period_tables),
-            table_index,
-            np.stack([s.factor_pinion for s in setups]),
-            np.stack([s.factor_gear for s in setups]),
-            breakpoints,
-            steps,
-            int(n_periods),
-            int(keep_periods),
-            strides,
-            False,
-            np.ones((n, 6)),
-            np.zeros((n, _lanes.N_ACCUMULATORS)),
-            poincare,
-            history,
-            np.empty((n, 6)),
-        )
-        refused = np.zeros(n, dtype=np.bool_)
-        _lanes.compile_lanes(groups, arrays, refused)
-        _lanes.integrate_lanes(0, len(groups), groups, *arrays, refused)
-        for i in groups[groups >= 0]:
-            if not refused[i]:
-                results[i] = (history[i][_LANE_CHANNELS].T.copy(), poincare[i])
-        rest = np.concatenate([rest, np.nonzero(refused)[0]])
+    history = np.empty((n, _lanes.STATE_CHANNELS, keep_periods * samples_per_period))
+    poincare = np.empty((n, keep_periods, 6))
+    arrays = (
+        *kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
+        steps,
+        int(n_periods),
+        int(keep_periods),
+        (steps // samples_per_period).astype(np.int64),
+        False,
+        np.ones((n, 6)),
+        np.zeros((n, _lanes.N_ACCUMULATORS)),
+        poincare,
+        history,
+        np.empty((n, 6)),
+    )
+    # one thread: a diagnosis's worker processes are its parallelism
+    rest = integrate_lane_groups(arrays, threads=1)
+    left = set(rest.tolist())
+    results: list[tuple[np.ndarray, np.ndarray] | None] = [
+        None if i in left else (history[i][_LANE_CHANNELS].T.copy(), poincare[i]) for i in range(n)
+    ]
     for i in rest:
         setup = setups[i]
         one, states, _ = integrate_fast(

@@ -24,11 +24,10 @@ import xarray as xr
 
 from ..common.errors import OperatingPointError
 from . import _kernels as K
-from . import _lanes
 
 # BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
-from .batch_setup import breakpoint_table, build_batch, lane_groups, shared_stiffness_tables
+from .batch_setup import build_batch, integrate_lane_groups, kernel_inputs
 from .design import Design
 from .effects import Effect
 from .model import HISTORY_COLUMNS, ModelSetup, build_model, natural_frequencies
@@ -368,17 +367,8 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
     ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the range and the
     order; each run's numbers are the same, bit for bit, whichever kernel and thread compute it.
     """
-    params, steps, breakpoints, strides, lyapunov = arrays[1], arrays[8], arrays[7], arrays[11], arrays[12]
-    if lanes:
-        groups, rest = lane_groups(params, steps, breakpoints, strides, lyapunov)
-    else:
-        groups, rest = np.empty((0, _lanes.LANES), dtype=np.int64), np.arange(len(params), dtype=np.int64)
-    if len(groups):
-        refused = np.zeros(len(params), dtype=np.bool_)
-        # compiles (or loads) the lane kernel here, before the threads call it
-        _lanes.compile_lanes(groups, arrays, refused)
-        spread(lambda first, last: _lanes.integrate_lanes(first, last, groups, *arrays, refused), len(groups), threads)
-        rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)
+    params = arrays[1]
+    rest = integrate_lane_groups(arrays, threads) if lanes else np.arange(len(params), dtype=np.int64)
     if len(rest):
         # the pair path is compiled only for a batch with pitch errors
         pitch = params[rest, K.PITCH_ERRORS] != 0.0
@@ -488,9 +478,6 @@ def simulate_batch(
     n = len(setups)
     multiple = max(int(history_per_period), 1)
     steps = _batch_steps(setups, steps_per_mode, multiple)
-    params = np.stack([s.parameters for s in setups]) if n else np.empty((0, K.N_PARAMS))
-    pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
-    breakpoints = breakpoint_table(setups)
     if initial_states is None:
         states = np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
     else:
@@ -502,8 +489,6 @@ def simulate_batch(
             )
     final_states = np.empty((n, 6))
     scales = np.stack([s.state_scale() for s in setups]) if n else np.empty((0, 6))
-    factor_pinion = np.stack([s.factor_pinion for s in setups]) if n else np.empty((0, design.z1))
-    factor_gear = np.stack([s.factor_gear for s in setups]) if n else np.empty((0, design.z2))
     history_stride = (steps // history_per_period) if history_per_period > 0 else np.zeros(n, dtype=np.int64)
     accumulators = np.zeros((n, K.N_ACCUMULATORS))
     poincare = np.empty((n, keep_periods, 2))
@@ -511,14 +496,7 @@ def simulate_batch(
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
     if n:
         arrays = (
-            states,
-            params,
-            np.stack(pair_tables),
-            np.stack(period_tables),
-            table_index,
-            factor_pinion,
-            factor_gear,
-            breakpoints,
+            *kernel_inputs(setups, states),
             steps,
             n_periods,
             keep_periods,
