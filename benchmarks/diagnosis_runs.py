@@ -17,13 +17,15 @@ It prints the median and the largest of each part over the operating points,
 in ms for the three channels of a run, and each kind's share spent in
 integration.
 
-It then times the integration of a group of eight runs of one operating
-point (a fit's finite-difference neighbours: the mesh stiffness scale
-stepped) integrated together, in SIMD lanes
-(:func:`uqgear.physics.history_batch.integrate_histories`), against one at
-a time with the one-sample kernel (the reference path), over the whole
-record, for the nominal model and with each effect whose forcing changes
-from one mesh period to the next; and the line fit's projection of one
+It then times the integration of a group of one, two, four and eight runs
+of one operating point (a fit's finite-difference neighbours: the mesh
+stiffness scale stepped) integrated together, in SIMD lanes
+(:func:`uqgear.physics.history_batch.integrate_histories`, every group in
+the lanes), against one at a time with the one-sample kernel (the
+reference path), over the whole record, for the nominal model and with each
+effect whose forcing changes from one mesh period to the next: a group costs
+its whole vector width, which is where the package's rule comes from
+(:data:`uqgear.physics.batch_setup.MINIMUM_FILL`); and the line fit's projection of one
 run's three records and of a group's 24, blocked and against the whole
 least-squares basis (the reference path), at each speed.
 
@@ -47,6 +49,8 @@ from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.execution import RunTask
 from uqgear.diagnosis.inputs import load_rig_input, resolve_design
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.physics import batch_setup
+from uqgear.physics._lanes import LANES
 from uqgear.physics.effects import make_effect
 from uqgear.physics.history_batch import integrate_histories
 from uqgear.physics.integration import integrate_fast
@@ -120,29 +124,38 @@ def _one_at_a_time(setups: list, n_periods: int, keep: int, per_period: int, ste
     return [integrate_fast(s, n_periods, keep, per_period, steps_per_mode, s.static_state()) for s in setups]
 
 
+#: Runs in a timed group: one (a least-squares trial point), a screening's neighbours, half and all the lanes.
+GROUP_SIZES = (1, 2, 4, 8)
+
+
 def time_groups(path: Path, repeats: int) -> dict[str, np.ndarray]:
-    """Per kind of group: (n_op, 2) ms to integrate eight runs over the whole record, together and one at a time."""
+    """Per kind of group: (n_op, len(GROUP_SIZES), 2) ms to integrate a group's runs over the whole
+    record, together in lanes (whatever their number: the package's rule is lifted) and one at a time."""
     rig, _ = load_rig_input(path)
     design = resolve_design(None, rig)
     case = prepare_case(rig, design, seed=1, settings=DEFAULT_SETTINGS)
     simulator = case.simulator
-    out: dict[str, list[list[float]]] = {kind: [] for kind in GROUP_EFFECTS}
-    for op in range(case.n_op):
-        torque = float(rig["drive_torque"].values[op]) * design.z2 / design.z1
-        periods, _ = simulator.whole_window(op)
-        n_periods, per_period = simulator.run_in_periods(op) + periods, simulator.samples_per_period[op]
-        for kind, effects in GROUP_EFFECTS.items():
-            setups = [
-                simulator._setup(op, RunTask(op, design, 1.0 + 0.002 * member, torque, effects, "free"))
-                for member in range(8)
-            ]
-            together_ms, _ = _best_ms(
-                partial(integrate_histories, setups, n_periods, periods, per_period, simulator.steps_per_mode), repeats
-            )
-            alone_ms, _ = _best_ms(
-                partial(_one_at_a_time, setups, n_periods, periods, per_period, simulator.steps_per_mode), repeats
-            )
-            out[kind].append([together_ms, alone_ms])
+    out: dict[str, list[list[list[float]]]] = {kind: [] for kind in GROUP_EFFECTS}
+    rule, batch_setup.MINIMUM_FILL = batch_setup.MINIMUM_FILL, 0.0
+    try:
+        for op in range(case.n_op):
+            torque = float(rig["drive_torque"].values[op]) * design.z2 / design.z1
+            periods, _ = simulator.whole_window(op)
+            n_periods, per_period = simulator.run_in_periods(op) + periods, simulator.samples_per_period[op]
+            for kind, effects in GROUP_EFFECTS.items():
+                setups = [
+                    simulator._setup(op, RunTask(op, design, 1.0 + 0.002 * member, torque, effects, "free"))
+                    for member in range(max(GROUP_SIZES))
+                ]
+                row = []
+                for size in GROUP_SIZES:
+                    arguments = (setups[:size], n_periods, periods, per_period, simulator.steps_per_mode)
+                    together_ms, _ = _best_ms(partial(integrate_histories, *arguments), repeats)
+                    alone_ms, _ = _best_ms(partial(_one_at_a_time, *arguments), repeats)
+                    row.append([together_ms, alone_ms])
+                out[kind].append(row)
+    finally:
+        batch_setup.MINIMUM_FILL = rule
     return {kind: np.array(values) for kind, values in out.items()}
 
 
@@ -185,13 +198,14 @@ def main() -> None:
         note = f"  ({missing} speed(s) do not repeat)" if missing else ""
         print(f"{kind:14s} {cells[0]:>16s} {cells[1]:>16s} {cells[2]:>16s} {share:17.0%}{note}")
     groups = time_groups(Path(options.file), options.repeats)
-    print("eight runs of one speed over the whole record, one core (ms; median over speeds): together / one at a time")
+    smallest = math.ceil(batch_setup.MINIMUM_FILL * LANES)
+    print(f"runs of one speed over the whole record, one core: one at a time / together in lanes, by runs in the "
+          f"group (median over speeds; least in brackets); groups of {smallest} runs or more go to the lanes")
+    print(f"  {'':28s} " + "".join(f"{f'{size} run(s)':>16s}" for size in GROUP_SIZES))
     for kind, values in groups.items():
-        ratio = values[:, 1] / values[:, 0]
-        print(
-            f"  {kind:28s} {np.median(values[:, 0]):7.1f} / {np.median(values[:, 1]):7.1f}"
-            f"  ({np.median(ratio):4.1f}x, least {ratio.min():4.1f}x)"
-        )
+        ratio = values[:, :, 1] / values[:, :, 0]
+        cells = [f"{np.median(ratio[:, k]):5.2f}x ({ratio[:, k].min():4.2f})" for k in range(len(GROUP_SIZES))]
+        print(f"  {kind:28s} " + "".join(f"{cell:>16s}" for cell in cells))
     line_fit = time_line_fit(Path(options.file), options.repeats)
     print("line fit's projection, one core (ms; median over speeds): blocked / whole basis (ratio)")
     for count in (3, 24):

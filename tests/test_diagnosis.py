@@ -324,12 +324,15 @@ def test_runs_of_an_operating_point_together_are_each_the_run_alone(design, monk
     """Runs integrated together (SIMD lanes) give each run's records bit for bit as the one-sample
     integrator does alone: tiled and whole-record runs, forcing that repeats every mesh period and
     forcing that does not, a run found not to repeat over its window, one with pitch errors."""
+    from uqgear.physics import batch_setup
     from uqgear.physics.effects import make_effect
     from uqgear.physics.history_batch import STATE_HISTORY_COLUMNS
     from uqgear.physics.integration import integrate_fast
     from uqgear.physics.model import HISTORY_COLUMNS
     from uqgear.physics.pitch_errors import draw_pitch_errors
 
+    # every group in lanes, however few its runs, so that the lanes are what is compared
+    monkeypatch.setattr(batch_setup, "MINIMUM_FILL", 0.0)
     simulator = sim.CampaignSimulator(design, [1250.0], [6000.0], 20480.0, 4096, ("te", "acc_pinion", "acc_gear"))
     tooth = (make_effect("tooth_damage", {"depth": 0.05, "tooth": 3.0}),)
     # deeper, the damage leaves a slow transient: not yet repeating after the run-in, so simulated whole

@@ -21,10 +21,20 @@ from uqgear.physics import effects as E
 from uqgear.physics._lanes import LANES, lane_ready
 from uqgear.physics.pitch_errors import draw_pitch_errors
 
+# the rule that leaves groups of few runs to the one-sample kernel, as the package sets it
+MINIMUM_FILL = batch_setup.MINIMUM_FILL
+
 
 @pytest.fixture(scope="module")
 def design():
     return uqgear.load_design("locomotive")
+
+
+@pytest.fixture(autouse=True)
+def every_group_in_lanes(monkeypatch):
+    # the lanes hold every group here, however few its runs (random speeds make groups of one or
+    # two), so that what is compared with the one-sample kernel is the lanes
+    monkeypatch.setattr(batch_setup, "MINIMUM_FILL", 0.0)
 
 
 def _differing(first, second) -> list[str]:
@@ -142,6 +152,29 @@ def test_lane_groups_share_one_layout_and_put_the_longest_first(design):
     assert np.all(with_shadows[:, LANES // 2:] == -1)
 
 
+def test_groups_of_fewer_runs_than_half_the_lanes_go_to_the_one_sample_kernel(design, monkeypatch):
+    monkeypatch.setattr(batch_setup, "MINIMUM_FILL", MINIMUM_FILL)
+    speeds = np.repeat([300.0, 3000.0, 5000.0], [3, LANES + 1, LANES // 2])
+    samples = uqgear.samples_from_mapping({"pinion_speed": speeds})
+    setups = integration.build_batch(design, samples)
+    params = np.stack([s.parameters for s in setups])
+    steps = np.array([integration.steps_per_period(s) for s in setups])
+    no_history = np.zeros(len(setups), dtype=np.int64)
+    groups, rest = batch_setup.lane_groups(params, steps, batch_setup.breakpoint_table(setups), no_history,
+                                           lyapunov=False)
+    # 300 rpm: three runs; 3000 rpm: a full group and one run over; 5000 rpm: half a group, in lanes
+    assert rest.tolist() == [0, 1, 2, 3 + LANES]
+    assert sorted(len(row[row >= 0]) for row in groups) == [LANES // 2, LANES]
+    # with a run's shadow in a lane, half of four runs is enough
+    groups, rest = batch_setup.lane_groups(params[-2:], steps[-2:], batch_setup.breakpoint_table(setups[-2:]),
+                                           no_history[-2:], lyapunov=True)
+    assert rest.size == 0 and len(groups) == 1
+    # the runs left give the numbers the lanes would
+    mixed = uqgear.simulate_batch(design, samples, n_periods=30, keep_periods=10)
+    monkeypatch.setattr(batch_setup, "MINIMUM_FILL", 0.0)
+    assert _differing(mixed, uqgear.simulate_batch(design, samples, n_periods=30, keep_periods=10)) == []
+
+
 def test_a_job_compiles_only_the_kernel_family_it_uses(tmp_path):
     # a fresh interpreter: a plain batch loads (or compiles) the lanes alone, not the one-sample
     # kernels nor the pitch-error path
@@ -150,7 +183,7 @@ def test_a_job_compiles_only_the_kernel_family_it_uses(tmp_path):
         import uqgear
         from uqgear.physics import _kernels as K, _lanes as L
         design = uqgear.load_design("locomotive")
-        uqgear.simulate_batch(design, uqgear.samples_from_mapping({"pinion_speed": np.full(3, 1500.0)}),
+        uqgear.simulate_batch(design, uqgear.samples_from_mapping({"pinion_speed": np.full(4, 1500.0)}),
                               n_periods=4, keep_periods=2)
         print(len(L.integrate_lanes.signatures), len(K.integrate_batch.signatures),
               len(K.integrate_batch_pairs.signatures), len(K.integrate_history_pairs.signatures))

@@ -11,6 +11,7 @@ layout into SIMD lanes (:mod:`uqgear.physics._lanes`) and
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from typing import cast
 
@@ -164,8 +165,9 @@ def integrate_lane_groups(arrays: tuple, threads: int | None) -> np.ndarray:
     """Integrate a batch's lane-ready runs in lane groups; returns the runs left to a one-sample kernel.
 
     ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the
-    range and the order. The runs left are those the lanes do not take (pitch errors) and those a
-    group refused (another sub-step layout), in index order.
+    range and the order. The runs left are those the lanes do not take (pitch errors, groups too
+    small to pay: :func:`lane_groups`) and those a group refused (another sub-step layout), in
+    index order.
     """
     params, breakpoints, steps, strides, lyapunov = arrays[1], arrays[7], arrays[8], arrays[11], arrays[12]
     groups, rest = lane_groups(params, steps, breakpoints, strides, lyapunov)
@@ -178,6 +180,13 @@ def integrate_lane_groups(arrays: tuple, threads: int | None) -> np.ndarray:
     return rest
 
 
+#: Share of a lane group's places (eight runs; four with ``lyapunov``) it must fill to be integrated
+#: in lanes. A group's vector work is the same whatever it holds: on 256-bit vectors (the eight lanes
+#: two vectors) a group of one costs about two runs one at a time, and groups pay from about half the
+#: lanes filled (docs/validation/performance.md, "Few runs go one at a time").
+MINIMUM_FILL = 0.5
+
+
 def lane_groups(
     params: np.ndarray, steps: np.ndarray, breakpoints: np.ndarray, strides: np.ndarray, lyapunov: bool
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -186,24 +195,31 @@ def lane_groups(
     Runs with the same sub-step layout (steps per mesh period, stiffness
     breakpoints, history stride) share a group of
     :data:`~uqgear.physics._lanes.LANES` lanes (half as many runs with
-    ``lyapunov``: each run's shadow takes a lane); groups come most steps
-    first, so that the threads end on the short ones.
+    ``lyapunov``: each run's shadow takes a lane); a group with fewer runs
+    than :data:`MINIMUM_FILL` of that is left to the one-sample kernels
+    (the same numbers, at less cost). Groups come most steps first, so
+    that the threads end on the short ones; the runs left are in index order.
     """
     ready = np.nonzero(_lanes.lane_ready(params))[0]
-    rest = np.nonzero(~_lanes.lane_ready(params))[0]
+    rest = [int(i) for i in np.nonzero(~_lanes.lane_ready(params))[0]]
     width = _lanes.LANES // 2 if lyapunov else _lanes.LANES
+    minimum = math.ceil(MINIMUM_FILL * width)
     layouts: dict[tuple, list[int]] = {}
     for i in ready:
         layouts.setdefault((int(steps[i]), breakpoints[i].tobytes(), int(strides[i])), []).append(int(i))
     rows: list[tuple[int, list[int]]] = []
     for key, members in layouts.items():
         for start in range(0, len(members), width):
-            rows.append((key[0], members[start : start + width]))
+            group = members[start : start + width]
+            if len(group) >= minimum:
+                rows.append((key[0], group))
+            else:
+                rest += group
     rows.sort(key=lambda row: -row[0])
     groups = np.full((len(rows), _lanes.LANES), -1, dtype=np.int64)
     for g, (_, members) in enumerate(rows):
         groups[g, : len(members)] = members
-    return groups, rest.astype(np.int64)
+    return groups, np.array(sorted(rest), dtype=np.int64)
 
 
 __all__ = [
@@ -213,6 +229,7 @@ __all__ = [
     "shared_stiffness_tables",
     "breakpoint_table",
     "lane_groups",
+    "MINIMUM_FILL",
     "kernel_inputs",
     "integrate_lane_groups",
 ]

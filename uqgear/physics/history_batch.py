@@ -62,7 +62,7 @@ def integrate_histories(
     >>> from uqgear.physics.integration import integrate_fast
     >>> design = uqgear.load_design("locomotive")
     >>> runs = [build_model(design, 1500.0, 7000.0, 33e3, effects=[make_effect("tooth_damage", {"depth": d})])
-    ...         for d in (0.1, 0.2, 0.3)]
+    ...         for d in (0.1, 0.2, 0.3, 0.4)]
     >>> together = integrate_histories(runs, 40, 10, 16, 24)
     >>> alone, poincare, _ = integrate_fast(runs[1], 40, 10, 16, 24, runs[1].static_state())
     >>> bool(np.array_equal(together[1][0], alone[:, [0, 1, 2, 10]]) and np.array_equal(together[1][1], poincare))
