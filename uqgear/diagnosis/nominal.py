@@ -11,7 +11,8 @@ local optimum.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from functools import partial
 
 import numpy as np
 import xarray as xr
@@ -100,6 +101,23 @@ def allow_pitch_errors(
     return case, nominal, allowance
 
 
+def _checked_nominal(
+    nominal: FitResult,
+    fits: Sequence[FitResult],
+    *,
+    settings: DiagnosisSettings,
+    steps: StepLog,
+    timings: dict[str, float],
+) -> FitResult | None:
+    """:func:`~.screening.improved_nominal` of the full fits so far, a step of the log timed as the nominal fit."""
+    clock = time.perf_counter()
+    with steps.step("check the nominal fit against the candidate fits") as found:
+        better = improved_nominal(nominal, fits, settings=settings)
+        found.update(refitted=better is not None, full_fits=len(fits))
+    timings["nominal_fit"] += time.perf_counter() - clock
+    return better
+
+
 def score_against_nominal(
     case: RigCase,
     nominal: FitResult,
@@ -116,7 +134,10 @@ def score_against_nominal(
     Where a candidate's full fit shows that the nominal fit stopped in a
     local optimum (:func:`~.screening.improved_nominal`), the nominal model
     is refitted from there and the candidates are scored again against it,
-    at most ``nominal_refits`` times.
+    at most ``nominal_refits`` times. The check comes as soon as the
+    promoted candidates are fitted in full: once the nominal fit is known to
+    be stuck, the pass's further full fits against it are not made
+    (:func:`~.screening.score_candidates`).
 
     Returns the state the later steps share, the best score per effect and every score.
     """
@@ -131,16 +152,9 @@ def score_against_nominal(
         state = DiagnosisState(
             case, settings, effects, hints, rng, steps, timings, nominal, held, gap, earlier_full_fits=dict(earlier)
         )
-        best, all_scores = score_candidates(state)
-        if attempt == settings.nominal_refits:
-            break
-        clock = time.perf_counter()
-        with steps.step("check the nominal fit against the candidate fits") as found:
-            better = improved_nominal(
-                nominal, [entry.fit for entry in all_scores if entry.stage == "full"], settings=settings
-            )
-            found.update(refitted=better is not None)
-        timings["nominal_fit"] += time.perf_counter() - clock
+        last = attempt == settings.nominal_refits
+        escape = None if last else partial(_checked_nominal, nominal, settings=settings, steps=steps, timings=timings)
+        best, all_scores, better = score_candidates(state, escape=escape)
         if better is None:
             break
         # the candidates were scored against a nominal fit stuck in a local optimum: score them again,

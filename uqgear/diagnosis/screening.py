@@ -259,8 +259,18 @@ def extra_full_fits(
         taken_up(entry, scored_in_full(state, entry, ahead.pop(index)))
 
 
-def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], list[CandidateScore]]:
-    """Screen every candidate against the nominal fit, fit the best ones in full; best score per effect and all."""
+def score_candidates(
+    state: DiagnosisState, *, escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None
+) -> tuple[dict[str, CandidateScore], list[CandidateScore], FitResult | None]:
+    """Screen every candidate against the nominal fit, fit the best ones in full; best score per effect, all, escape.
+
+    ``escape`` checks the nominal fit against full fits (:func:`improved_nominal`: a better nominal
+    fit or None). It is asked once the promoted candidates are fitted in full and, where it finds
+    nothing, again after the extra full fits. Where it finds a better nominal fit, this pass ends
+    there: every candidate is then scored again against that fit, and a further full fit against
+    the nominal fit it replaces would only have been a start. Returns the best score per effect,
+    every score and the better nominal fit (None: none was found, or ``escape`` is None).
+    """
     settings = state.settings
     clock = time.perf_counter()
     screened = screen(state)
@@ -279,6 +289,11 @@ def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], 
 
     for entry, full in zip(chosen, fits_in_full(state, chosen)):
         taken_up(entry, full)
+    state.timings["full_fits"] += time.perf_counter() - clock
+    better = escape([entry.fit for entry in all_scores if entry.stage == "full"]) if escape is not None else None
+    if better is not None:
+        return best, all_scores, better
+    clock = time.perf_counter()
     # An effect that changes the response only in a few runs (a bearing clearance where a bearing
     # unloads) cannot be screened with the nominal parameters held where the nominal model put
     # them to absorb that change: before a gap is called unexplained the next candidate variants
@@ -295,7 +310,10 @@ def score_candidates(state: DiagnosisState) -> tuple[dict[str, CandidateScore], 
     for entry in screened:
         entry.effect_gain = state.nominal.cost - entry.fit.cost
     state.timings["full_fits"] += time.perf_counter() - clock
-    return best, all_scores
+    if escape is None or len(full_fits) == len(chosen):
+        # no full fit since the check above: it would find the same
+        return best, all_scores, None
+    return best, all_scores, escape([entry.fit for entry in full_fits])
 
 
 __all__ = [
