@@ -262,7 +262,7 @@ def extra_full_fits(
 def score_candidates(
     state: DiagnosisState, *, escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None
 ) -> tuple[dict[str, CandidateScore], list[CandidateScore], FitResult | None]:
-    """Screen every candidate against the nominal fit, fit the best ones in full; best score per effect, all, escape.
+    """Screen every candidate against the nominal fit, fit the best in full; best per effect, all, a better nominal.
 
     ``escape`` checks the nominal fit against full fits (:func:`improved_nominal`: a better nominal
     fit or None). It is asked once the promoted candidates are fitted in full and, where it finds
