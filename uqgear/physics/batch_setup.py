@@ -200,8 +200,9 @@ def lane_groups(
     (the same numbers, at less cost). Groups come most steps first, so
     that the threads end on the short ones; the runs left are in index order.
     """
-    ready = np.nonzero(_lanes.lane_ready(params))[0]
-    rest = [int(i) for i in np.nonzero(~_lanes.lane_ready(params))[0]]
+    taken = _lanes.lane_ready(params)
+    ready = np.nonzero(taken)[0]
+    rest = [int(i) for i in np.nonzero(~taken)[0]]
     width = _lanes.LANES // 2 if lyapunov else _lanes.LANES
     minimum = math.ceil(MINIMUM_FILL * width)
     layouts: dict[tuple, list[int]] = {}

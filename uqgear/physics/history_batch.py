@@ -4,8 +4,9 @@ A run's history from the fast integrator is a chain of dependent RK4 steps
 that waits on latency; runs with the same sub-step layout advance together
 as the lanes of :mod:`uqgear.physics._lanes`, which compute each run's
 numbers bit for bit as the one-sample kernel does. Runs with pitch errors
-(their per-pair contact) and any run a lane group cannot hold are
-integrated one at a time, so every run's history is the one
+(their per-pair contact), groups too small to pay for their lanes
+(:data:`~uqgear.physics.batch_setup.MINIMUM_FILL`) and any run a lane group
+cannot hold are integrated one at a time, so every run's history is the one
 :func:`~uqgear.physics.integration.integrate_fast` returns, whatever company
 it is in.
 """
