@@ -23,7 +23,8 @@ stiffness scale stepped) integrated together, in SIMD lanes
 (:func:`uqgear.physics.history_batch.integrate_histories`, every group in
 the lanes), against one at a time with the one-sample kernel (the
 reference path), over the whole record, for the nominal model and with each
-effect whose forcing changes from one mesh period to the next: a group costs
+effect whose forcing changes from one mesh period to the next, and with
+pitch errors (the pair lanes, :mod:`uqgear.physics._pair_lanes`): a group costs
 its whole vector width, which is where the package's rule comes from
 (:data:`uqgear.physics.batch_setup.MINIMUM_FILL`); and the line fit's projection of one
 run's three records and of a group's 24, blocked and against the whole
@@ -107,7 +108,8 @@ def time_runs(path: Path, repeats: int) -> dict[str, np.ndarray]:
     return {kind: np.array(values) for kind, values in parts.items()}
 
 
-#: Effects whose forcing changes from one mesh period to the next, as a group's runs carry them.
+#: Effects whose forcing changes from one mesh period to the next, as a group's runs carry them; the
+#: group "pitch errors" is the nominal model with ISO 1328 class 7 pitch errors (the pair lanes).
 GROUP_EFFECTS = {
     "nominal": (),
     "tooth damage": (make_effect("tooth_damage", {"depth": 0.2}),),
@@ -117,6 +119,7 @@ GROUP_EFFECTS = {
         make_effect("eccentricity", {"amplitude": 2e-5, "kappa": 0.05}),
         make_effect("tooth_damage", {"depth": 0.2}),
     ),
+    "pitch errors": (),
 }
 
 
@@ -136,6 +139,7 @@ def time_groups(path: Path, repeats: int) -> dict[str, np.ndarray]:
     case = prepare_case(rig, design, seed=1, settings=DEFAULT_SETTINGS)
     simulator = case.simulator
     out: dict[str, list[list[list[float]]]] = {kind: [] for kind in GROUP_EFFECTS}
+    errors = draw_pitch_errors(design, 7, np.random.default_rng(1))
     rule, batch_setup.MINIMUM_FILL = batch_setup.MINIMUM_FILL, 0.0
     try:
         for op in range(case.n_op):
@@ -143,8 +147,11 @@ def time_groups(path: Path, repeats: int) -> dict[str, np.ndarray]:
             periods, _ = simulator.whole_window(op)
             n_periods, per_period = simulator.run_in_periods(op) + periods, simulator.samples_per_period[op]
             for kind, effects in GROUP_EFFECTS.items():
+                pitch_errors = errors if kind == "pitch errors" else None
                 setups = [
-                    simulator._setup(op, RunTask(op, design, 1.0 + 0.002 * member, torque, effects, "free"))
+                    simulator._setup(
+                        op, RunTask(op, design, 1.0 + 0.002 * member, torque, effects, "free", pitch_errors)
+                    )
                     for member in range(max(GROUP_SIZES))
                 ]
                 row = []

@@ -103,11 +103,56 @@ def test_forcing_that_does_not_repeat_every_mesh_period_stays_in_the_lanes(desig
     assert _differing(lanes, one) == []
 
 
-def test_pitch_errors_stay_out_of_the_lanes(design):
-    # the per-pair contact of pitch errors is the one-sample pair kernel's alone
-    setup = integration.build_model(design, 1500.0, 7000.0, 33e3,
-                                    pitch_errors=draw_pitch_errors(design, 7, np.random.default_rng(0)))
-    assert not lane_ready(setup.parameters[None, :])[0]
+@pytest.mark.parametrize("case", ["impacts", "lyapunov", "rig_channels", "friction", "tooth_damage", "eccentricity"])
+def test_runs_with_pitch_errors_take_the_pair_lanes_bit_for_bit(design, case):
+    # per-pair dead zones: pairs change contact one by one, and a lane's step is redone where any does
+    pitch = draw_pitch_errors(design, 7, np.random.default_rng(0))
+    samples = _speeds(13, seed=3)
+    kw: dict = {"n_periods": 60, "keep_periods": 20, "pitch_errors": pitch}
+    if case == "impacts":
+        # light load and a fifth of the backlash: back-side impacts, counted from each pair's deflection
+        samples = uqgear.samples_from_mapping({"pinion_speed": np.linspace(2000.0, 5600.0, 13),
+                                               "drive_torque": np.full(13, 700.0),
+                                               "adhesion_torque": np.full(13, 700.0 * design.z2 / design.z1),
+                                               "backlash": np.full(13, design.backlash / 5)})
+        kw["final_state"] = True
+    elif case == "lyapunov":
+        kw["lyapunov"] = True
+    elif case == "rig_channels":
+        kw.update(history_per_period=16, rig_channels=True)
+    elif case == "friction":
+        kw.update(effects=[E.make_effect("friction", {"coefficient": 0.08})], damping_in_separation=False,
+                  stiffness="fourier")
+    elif case == "tooth_damage":
+        # the forcing table filled every period, in groups mixed with runs whose table is filled once
+        samples["tooth_damage.depth"] = ("sample", np.where(np.arange(13) % 3 == 0, 0.0, 0.4))
+        kw.update(effects=[E.make_effect("tooth_damage", {"depth": 0.4, "tooth": 5.0})], history_per_period=8,
+                  rig_channels=True)
+    else:
+        kw["effects"] = [E.make_effect("eccentricity", {"amplitude": 3e-5, "kappa": 0.1, "shaft": "gear"})]
+    setups = integration.build_batch(design, samples, pitch_errors=pitch, effects=kw.get("effects", ()))
+    assert lane_ready(np.stack([s.parameters for s in setups])).all()
+    lanes, one = _both(design, samples, **kw)
+    assert float(lanes["fraction_separation"].max()) > 0.05
+    if case == "impacts":
+        assert float(lanes["fraction_back_contact"].max()) > 0.0
+    assert _differing(lanes, one) == []
+    # and the pitch errors are in the numbers: without them the response differs
+    plain = uqgear.simulate_batch(design, samples, **{**kw, "pitch_errors": None})
+    assert "dte_rms" in _differing(lanes, plain)
+
+
+def test_runs_with_and_without_pitch_errors_never_share_a_lane_group(design):
+    samples = uqgear.samples_from_mapping({"pinion_speed": np.full(6, 2500.0)})
+    pitch = draw_pitch_errors(design, 7, np.random.default_rng(0))
+    setups = (integration.build_batch(design, samples)
+              + integration.build_batch(design, samples, pitch_errors=pitch))
+    params = np.stack([s.parameters for s in setups])
+    steps = np.array([integration.steps_per_period(s) for s in setups])
+    groups, rest = batch_setup.lane_groups(params, steps, batch_setup.breakpoint_table(setups),
+                                           np.zeros(len(setups), dtype=np.int64), lyapunov=False)
+    assert rest.size == 0
+    assert sorted(sorted(row[row >= 0].tolist()) for row in groups) == [[0, 1, 2, 3, 4, 5], [6, 7, 8, 9, 10, 11]]
 
 
 def test_runs_a_group_cannot_hold_are_run_one_at_a_time(design, monkeypatch):
@@ -181,15 +226,16 @@ def test_a_job_compiles_only_the_kernel_family_it_uses(tmp_path):
     script = textwrap.dedent("""
         import numpy as np
         import uqgear
-        from uqgear.physics import _kernels as K, _lanes as L
+        from uqgear.physics import _kernels as K, _lanes as L, _pair_lanes as P
         design = uqgear.load_design("locomotive")
         uqgear.simulate_batch(design, uqgear.samples_from_mapping({"pinion_speed": np.full(4, 1500.0)}),
                               n_periods=4, keep_periods=2)
         print(len(L.integrate_lanes.signatures), len(K.integrate_batch.signatures),
-              len(K.integrate_batch_pairs.signatures), len(K.integrate_history_pairs.signatures))
+              len(K.integrate_batch_pairs.signatures), len(K.integrate_history_pairs.signatures),
+              len(P.integrate_pair_lanes.signatures))
     """)
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["1", "0", "0", "0"]
+    assert out.stdout.split() == ["1", "0", "0", "0", "0"]
 
 
 def test_a_quotient_outside_the_proven_range_is_redone_with_ieee_division(design):

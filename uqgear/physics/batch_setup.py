@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 
 from ..common.errors import OperatingPointError
-from . import _lanes
+from . import _lanes, _pair_lanes
+from ._rhs import PITCH_ERRORS
 from .design import DESIGN_KEYS, Design
 from .effects import Effect
 from .model import ModelSetup, build_model
@@ -165,17 +166,28 @@ def integrate_lane_groups(arrays: tuple, threads: int | None) -> np.ndarray:
     """Integrate a batch's lane-ready runs in lane groups; returns the runs left to a one-sample kernel.
 
     ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the
-    range and the order. The runs left are those the lanes do not take (pitch errors, groups too
-    small to pay: :func:`lane_groups`) and those a group refused (another sub-step layout), in
-    index order.
+    range and the order. The runs left are those the lanes do not take (divisors the lanes'
+    quotient is not exact for, groups too small to pay: :func:`lane_groups`) and those a group
+    refused (another sub-step layout), in index order.
     """
     params, breakpoints, steps, strides, lyapunov = arrays[1], arrays[7], arrays[8], arrays[11], arrays[12]
     groups, rest = lane_groups(params, steps, breakpoints, strides, lyapunov)
     if len(groups):
         refused = np.zeros(len(params), dtype=np.bool_)
-        # compiles (or loads) the lane kernel here, before the threads call it
-        _lanes.compile_lanes(groups, arrays, refused)
-        spread(lambda first, last: _lanes.integrate_lanes(first, last, groups, *arrays, refused), len(groups), threads)
+        # a group holds runs with pitch errors or runs without (lane_groups): each family its own kernel,
+        # compiled (or loaded) only for a batch that has its runs
+        pitch = params[groups[:, 0], PITCH_ERRORS] != 0.0
+        families = ((_lanes.compile_lanes, _lanes.integrate_lanes, groups[~pitch]),
+                    (_pair_lanes.compile_pair_lanes, _pair_lanes.integrate_pair_lanes, groups[pitch]))
+        for compile_kernel, kernel, family in families:
+            if len(family):
+                # compiled here, before the threads call it
+                compile_kernel(family, arrays, refused)
+
+                def run_groups(first: int, last: int, kernel: Any = kernel, family: np.ndarray = family) -> None:
+                    kernel(first, last, family, *arrays, refused)
+
+                spread(run_groups, len(family), threads)
         rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)
     return rest
 
@@ -193,7 +205,8 @@ def lane_groups(
     """Lane groups of a batch's lane-ready runs, and the runs left to the one-sample kernels.
 
     Runs with the same sub-step layout (steps per mesh period, stiffness
-    breakpoints, history stride) share a group of
+    breakpoints, history stride) and the same step family (with or without
+    pitch errors) share a group of
     :data:`~uqgear.physics._lanes.LANES` lanes (half as many runs with
     ``lyapunov``: each run's shadow takes a lane); a group with fewer runs
     than :data:`MINIMUM_FILL` of that is left to the one-sample kernels
@@ -207,7 +220,9 @@ def lane_groups(
     minimum = math.ceil(MINIMUM_FILL * width)
     layouts: dict[tuple, list[int]] = {}
     for i in ready:
-        layouts.setdefault((int(steps[i]), breakpoints[i].tobytes(), int(strides[i])), []).append(int(i))
+        # runs with pitch errors take the pair lanes: they never share a group with runs without
+        key = (int(steps[i]), breakpoints[i].tobytes(), int(strides[i]), bool(params[i, PITCH_ERRORS] != 0.0))
+        layouts.setdefault(key, []).append(int(i))
     rows: list[tuple[int, list[int]]] = []
     for key, members in layouts.items():
         for start in range(0, len(members), width):

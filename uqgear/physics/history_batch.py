@@ -2,9 +2,9 @@
 
 A run's history from the fast integrator is a chain of dependent RK4 steps
 that waits on latency; runs with the same sub-step layout advance together
-as the lanes of :mod:`uqgear.physics._lanes`, which compute each run's
-numbers bit for bit as the one-sample kernel does. Runs with pitch errors
-(their per-pair contact), groups too small to pay for their lanes
+as the lanes of :mod:`uqgear.physics._lanes` (runs with pitch errors: of
+:mod:`uqgear.physics._pair_lanes`), which compute each run's numbers bit for
+bit as the one-sample kernel does. Groups too small to pay for their lanes
 (:data:`~uqgear.physics.batch_setup.MINIMUM_FILL`) and any run a lane group
 cannot hold are integrated one at a time, so every run's history is the one
 :func:`~uqgear.physics.integration.integrate_fast` returns, whatever company
@@ -17,7 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import _lanes
+from ._lane_tables import STATE_CHANNELS
+from ._rhs import N_ACCUMULATORS
 from .batch_setup import integrate_lane_groups, kernel_inputs
 from .integration import integrate_fast, steps_per_period
 from .model import HISTORY_COLUMNS, ModelSetup
@@ -26,7 +27,7 @@ from .model import HISTORY_COLUMNS, ModelSetup
 #: :data:`~uqgear.physics.model.HISTORY_COLUMNS` of the same names): the bearing
 #: displacements, the DTE and the static transmission error, m.
 STATE_HISTORY_COLUMNS = ("y1", "y2", "x", "ste")
-# where the lanes record them (uqgear.physics._lanes: channels 4, 5, 0 and 6)
+# where the lanes record them (uqgear.physics._lane_loop: channels 4, 5, 0 and 6)
 _LANE_CHANNELS = [4, 5, 0, 6]
 _ONE_SAMPLE_COLUMNS = [HISTORY_COLUMNS.index(name) for name in STATE_HISTORY_COLUMNS]
 
@@ -73,7 +74,7 @@ def integrate_histories(
     if n == 0:
         return []
     steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=samples_per_period) for s in setups])
-    history = np.empty((n, _lanes.STATE_CHANNELS, keep_periods * samples_per_period))
+    history = np.empty((n, STATE_CHANNELS, keep_periods * samples_per_period))
     poincare = np.empty((n, keep_periods, 6))
     arrays = (
         *kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
@@ -83,7 +84,7 @@ def integrate_histories(
         (steps // samples_per_period).astype(np.int64),
         False,
         np.ones((n, 6)),
-        np.zeros((n, _lanes.N_ACCUMULATORS)),
+        np.zeros((n, N_ACCUMULATORS)),
         poincare,
         history,
         np.empty((n, 6)),
