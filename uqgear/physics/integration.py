@@ -438,9 +438,10 @@ def simulate_batch(
         continues a mesh-periodic run exactly; effects and pitch errors with a
         longer period start their own phase again at t = 0.
     lanes : bool
-        Advance runs whose forcing repeats every mesh period eight at a time
-        as SIMD lanes (:mod:`uqgear.physics._lanes`); False runs every sample
-        on the one-sample kernel. The numbers are the same, bit for bit.
+        Advance runs of one sub-step layout eight at a time as SIMD lanes
+        (:mod:`uqgear.physics._lanes`; with pitch errors
+        :mod:`uqgear.physics._pair_lanes`); False runs every sample on the
+        one-sample kernel. The numbers are the same, bit for bit.
 
     Returns
     -------
