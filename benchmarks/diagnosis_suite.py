@@ -225,9 +225,14 @@ PROFILE_PARTS = {
 }
 
 
-def _uqgear_command() -> list[str]:
+def _diagnose(rig: Path, out: Path, workers: int) -> float:
+    """``uqgear diagnose RIG --out OUT --workers N`` in a fresh process, without progress bars; its wall time, s."""
     executable = shutil.which("uqgear")
-    return [executable] if executable else [sys.executable, "-m", "uqgear.cli"]
+    command = [executable] if executable else [sys.executable, "-m", "uqgear.cli"]
+    started = time.perf_counter()
+    subprocess.run([*command, "diagnose", str(rig), "--out", str(out), "--workers", str(workers)],
+                   check=True, capture_output=True, env={**os.environ, "UQGEAR_PROGRESS": "0"})
+    return time.perf_counter() - started
 
 
 def warm_up(workers: int) -> None:
@@ -235,12 +240,9 @@ def warm_up(workers: int) -> None:
     in numba's cache: the first diagnosis after an install or an edit of the kernels compiles them
     (tens of seconds), which is no campaign's cost."""
     rig = Path(__file__).resolve().parent.parent / "data" / "rig" / "tooth_damage.nc"
-    started = time.perf_counter()
     with tempfile.TemporaryDirectory() as folder:
-        subprocess.run([*_uqgear_command(), "diagnose", str(rig), "--out", str(Path(folder) / "diagnosis"),
-                        "--workers", str(workers)], check=True, capture_output=True,
-                       env={**os.environ, "UQGEAR_PROGRESS": "0"})
-    print(f"warm-up (untimed): 'uqgear diagnose {rig.name}' in {time.perf_counter() - started:.0f} s", flush=True)
+        seconds = _diagnose(rig, Path(folder) / "diagnosis", workers)
+    print(f"warm-up (untimed): 'uqgear diagnose {rig.name}' in {seconds:.0f} s", flush=True)
 
 
 def command_line(root: Path, rows: list[tuple[Any, ...]], workers: int) -> None:
@@ -252,7 +254,6 @@ def command_line(root: Path, rows: list[tuple[Any, ...]], workers: int) -> None:
     differ from the suite's where a decision is borderline: they are
     counted, not required to agree.
     """
-    command = _uqgear_command()
     timed: list[tuple[float, str, str]] = []
     agree = 0
     print(f"\n'uqgear diagnose' in a fresh process, {workers} workers, on each campaign file "
@@ -263,10 +264,7 @@ def command_line(root: Path, rows: list[tuple[Any, ...]], workers: int) -> None:
         rig = root / f"seed-{seed}" / "campaigns" / ident / "rig.nc"
         with tempfile.TemporaryDirectory() as folder:
             out = Path(folder) / "diagnosis"
-            started = time.perf_counter()
-            subprocess.run([*command, "diagnose", str(rig), "--out", str(out), "--workers", str(workers)],
-                           check=True, capture_output=True, env={**os.environ, "UQGEAR_PROGRESS": "0"})
-            seconds = time.perf_counter() - started
+            seconds = _diagnose(rig, out, workers)
             answer = json.loads((out / "diagnosis.json").read_text())["verdict"]
         agree += answer == verdict
         timed.append((seconds, f"seed {seed} {ident}", answer))

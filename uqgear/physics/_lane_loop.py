@@ -148,6 +148,13 @@ def put_step(W, lane, new, d1, force, redo):
 
 
 @nb.njit(**INLINED)
+def region_changed(before, after, b):
+    """Whether a deflection from ``before`` to ``after`` changes its contact region (``contact_region``'s test,
+    as choices between values, so that a loop over the lanes vectorises)."""
+    return ((before > b) != (after > b)) | ((before < -b) != (after < -b))
+
+
+@nb.njit(**INLINED)
 def lane_coefficients(W, lane):
     """(coefficients, inverses of the divisors) of one lane, as tuples (registers)."""
     c = (

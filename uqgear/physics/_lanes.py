@@ -67,6 +67,7 @@ from uqgear.physics._lane_loop import (
     periodic_forcing,
     put_state,
     put_step,
+    region_changed,
     row_of,
 )
 from uqgear.physics._lane_tables import LANES, N_TABLE, T_DRIVE, T_WEIGHT, T_WIDTH, _fill_forcing
@@ -168,9 +169,8 @@ def _lane_step(W, table, sub, lane):
     )
     b = c[0]
     x = s[2]
-    # the one-sample kernel's test (contact_region before and after differ), as choices between values
-    crossed = ((x > b) != (new[2] > b)) | ((x < -b) != (new[2] < -b))
-    redo = REDO_SPLIT if crossed else REDO_NONE
+    # the one-sample kernel's test (contact_region before and after differ)
+    redo = REDO_SPLIT if region_changed(x, new[2], b) else REDO_NONE
     redo = redo if exact & exact_later else REDO_STEP
     put_step(W, lane, new, d1, force, redo)
     return 0 if redo == REDO_NONE else 1

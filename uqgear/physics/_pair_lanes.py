@@ -47,11 +47,12 @@ from uqgear.physics._lane_loop import (
     lane_state,
     put_state,
     put_step,
+    region_changed,
     row_of,
 )
 from uqgear.physics._lane_tables import LANES, N_TABLE, T_DRIVE, T_STE, T_WEIGHT, T_WIDTH
 from uqgear.physics._lanes import compile_lane_kernel
-from uqgear.physics._pairs import PAIR_FRICTION, PAIR_K, _forcing_row_pairs, _step_pairs, _tooth_terms, derivative_pairs
+from uqgear.physics._pairs import PAIR_FRICTION, PAIR_K, _forcing_row_pairs, _tooth_terms, substep_pairs
 from uqgear.physics._quotient import quotient
 from uqgear.physics._rhs import (
     INLINED,
@@ -163,9 +164,7 @@ def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
 @nb.njit(**INLINED)
 def _crossed(x, new_x, offset, b, in_mesh):
     """Whether a pair slot in mesh changes its contact region over a step (selects, not branches)."""
-    before = x - offset
-    after = new_x - offset
-    return (((before > b) != (after > b)) | ((before < -b) != (after < -b))) & in_mesh
+    return region_changed(x - offset, new_x - offset, b) & in_mesh
 
 
 @nb.njit(**INLINED)
@@ -235,29 +234,21 @@ def _redo_pair_lane(
     stages,
     pairs,
 ):
-    """A pair lane's whole sub-step on the one-sample code (:func:`~uqgear.physics._pairs.scheduled_step_pairs`'s
-    body for one sub-step: its splits at each pair's contact change, IEEE divisions)."""
+    """A pair lane's whole sub-step on the one-sample code (:func:`~uqgear.physics._pairs.substep_pairs`: its
+    splits at each pair's contact change, IEEE divisions)."""
     p = params[i]
     table_i = table_index[i]
     fp = factor_pinion[i]
     fg = factor_gear[i]
     start = n * period[lane]
-    t = start + offsets[sub, lane]
-    h = widths[sub, lane]
-    n_pairs = pairs[sub]
-    teeth = _tooth_terms(n, p, fp, fg)
-    tabulated = stages[lane]
-    s = lane_state(W, W_STATE, lane)
-    terms = _forcing_row_pairs(t, teeth, tabulated, sub, 0, n_pairs, p)
-    d1, force = derivative_pairs(s, terms, p)
-    done = _step_pairs(
-        t,
-        h,
-        s,
-        d1,
-        _forcing_row_pairs(t + 0.5 * h, teeth, tabulated, sub, 1, n_pairs, p),
-        _forcing_row_pairs(t + h, teeth, tabulated, sub, 2, n_pairs, p),
-        terms,
+    done, d1, force = substep_pairs(
+        start + offsets[sub, lane],
+        widths[sub, lane],
+        lane_state(W, W_STATE, lane),
+        _tooth_terms(n, p, fp, fg),
+        stages[lane],
+        sub,
+        pairs[sub],
         start + refs[sub, lane],
         p,
         pair_tables[table_i],

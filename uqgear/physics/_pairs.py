@@ -368,31 +368,44 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
     a2 = 0.0
     teeth = _tooth_terms(n, p, fp, fg)
     for sub in range(first_sub[j], first_sub[j + 1]):
-        t = start + offsets[sub]
-        h = widths[sub]
-        n_pairs = pairs[sub]
-        terms = _forcing_row_pairs(t, teeth, table, sub, 0, n_pairs, p)
-        d1, f = derivative_pairs(s, terms, p)
+        new, d1, f = substep_pairs(
+            start + offsets[sub], widths[sub], s, teeth, table, sub, pairs[sub], start + refs[sub], p, pair_k,
+            period_k, fp, fg,
+        )
         if sub == first_sub[j]:
             force = f
             a1 = d1[3]
             a2 = d1[4]
-        s = _step_pairs(
-            t,
-            h,
-            s,
-            d1,
-            _forcing_row_pairs(t + 0.5 * h, teeth, table, sub, 1, n_pairs, p),
-            _forcing_row_pairs(t + h, teeth, table, sub, 2, n_pairs, p),
-            terms,
-            start + refs[sub],
-            p,
-            pair_k,
-            period_k,
-            fp,
-            fg,
-        )
+        s = new
     return s, force, a1, a2
+
+
+@nb.njit(**INLINED)
+def substep_pairs(t, h, s, teeth, table, sub, n_pairs, t_ref, p, pair_k, period_k, fp, fg):
+    """Sub-step ``sub`` of :func:`scheduled_step_pairs` over [t, t+h] from ``s`` (``teeth``: :func:`_tooth_terms`
+    of its mesh period, ``table``: its schedule's tabulated stages, ``t_ref``: its reference time).
+
+    Returns (new state, first RK4 stage, mesh force at the start). The one-sample pair step, also
+    what a pair lane's redone sub-step is (:mod:`uqgear.physics._pair_lanes`).
+    """
+    terms = _forcing_row_pairs(t, teeth, table, sub, 0, n_pairs, p)
+    d1, force = derivative_pairs(s, terms, p)
+    new = _step_pairs(
+        t,
+        h,
+        s,
+        d1,
+        _forcing_row_pairs(t + 0.5 * h, teeth, table, sub, 1, n_pairs, p),
+        _forcing_row_pairs(t + h, teeth, table, sub, 2, n_pairs, p),
+        terms,
+        t_ref,
+        p,
+        pair_k,
+        period_k,
+        fp,
+        fg,
+    )
+    return new, d1, force
 
 
 @nb.njit(**INLINED)
@@ -424,4 +437,12 @@ def pair_state(t_ref, p):
     return int(n_ref), count
 
 
-__all__ = ["forcing_pairs", "derivative_pairs", "scheduled_step_pairs", "pair_contact", "pair_offset", "pair_state"]
+__all__ = [
+    "forcing_pairs",
+    "derivative_pairs",
+    "scheduled_step_pairs",
+    "substep_pairs",
+    "pair_contact",
+    "pair_offset",
+    "pair_state",
+]
