@@ -48,6 +48,7 @@ from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.diagnosis.state import DiagnosisState
 from uqgear.diagnosis.verdict import Decision
 from uqgear.physics.effects import make_effect
+from uqgear.report.diagnosis_report import _effect_set_html
 from uqgear.rig.virtual_rig import simulate_campaign
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
@@ -298,6 +299,38 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap_with_effect
     assert [entry.entry.effect for entry in selected[1:]] == [entry.added for entry in rounds]
     assert decision.partial == (selected[-1].entry.gap_with_effect > DEFAULT_SETTINGS.noise_gap and sum(shares) < 0.5)
+
+
+def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_round_before(monkeypatch, design):
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
+    run_out = _variant(design, "eccentricity[pinion]")
+    first = _score("eccentricity", run_out.label, 300.0, 2.0, 1.0 / 3.0, low=0.25, candidate=run_out)
+    first_decision = Decision("eccentricity", "first", partial=True, remaining_gap=2.0)
+    # round 1 adds tooth damage; friction's screening reaches a 25 % shrink at its upper end, the rest show nothing
+    table = {"tooth_damage[gear]": (80.0, 1.0, 0.5), "friction": (7.0, 1.15, 0.15)}
+    stand_ins = _StandIns(monkeypatch, table)
+    selected, rounds = selection.forward_selection(_state(case), first, first_decision)
+    assert [s.entry.effect for s in selected] == ["eccentricity", "tooth_damage"] and len(rounds) == 2
+    others = [c.label for name in effects.effect_names() if name != "eccentricity"
+              for c in effects.candidates_for(name, design)]
+    # every other effect's variants screened on top of the first effect, then friction alone on top of both
+    assert stand_ins.screened == [*others, "friction"] and stand_ins.bases[-1] == (run_out.label, "tooth_damage[gear]")
+    assert [s.effect for s in rounds[1].scores] == ["friction"] and rounds[1].added is None
+    # nothing but the added effect showed anything: the next round screens nothing and says why
+    stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 1.0, 0.5)})
+    selected, rounds = selection.forward_selection(_state(case), first, first_decision)
+    assert len(selected) == 2 and len(rounds) == 2 and rounds[1].scores == [] and rounds[1].added is None
+    assert stand_ins.screened == others and stand_ins.full == ["tooth_damage[gear]"]
+    assert "so none was screened" in rounds[1].reason and "on top of eccentricity[pinion]" in rounds[1].reason
+    decision = set_verdict.set_decision(first_decision, selected, rounds, 3.0)
+    assert rounds[1].reason in decision.reason
+    # the report says why no third effect was tried
+    notes = "".join(_effect_set_html({"forward_selection": [r.summary() for r in rounds]}, {}))
+    assert "no further effect was tried: no other effect explained any of the gap" in notes
+    # the first round after the first effect always screens every other effect (no round before it)
+    assert selection.still_open(_state(case), ["eccentricity"], None) == [
+        name for name in effects.effect_names() if name != "eccentricity"
+    ]
 
 
 def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carries():

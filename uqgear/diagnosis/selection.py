@@ -47,16 +47,12 @@ def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]
     return shares
 
 
-def _screen_on_top(state: DiagnosisState, base: CandidateScore, named: Sequence[str]) -> list[CandidateScore]:
-    """The effects not yet named, each variant screened on top of the base (its own parameters only)."""
+def _screen_on_top(state: DiagnosisState, base: CandidateScore, effects: Sequence[str]) -> list[CandidateScore]:
+    """Each variant of ``effects`` screened on top of the base (its own parameters only)."""
     settings, base_fit = state.settings, base.fit
     labels = " + ".join(candidate.label for candidate in base_fit.problem.candidates)
-    # an effect is never named twice, nor as another variant: it would only soak up noise
     candidates = [
-        candidate
-        for name in state.effects
-        if name not in named
-        for candidate in candidates_for(name, state.case.design, hints=state.hints)
+        candidate for name in effects for candidate in candidates_for(name, state.case.design, hints=state.hints)
     ]
     screened: list[CandidateScore] = []
     for candidate, outcome in zip(candidates, screening_fits(state, base_fit, candidates)):
@@ -91,6 +87,38 @@ def worth_a_full_fit(entry: CandidateScore, settings: DiagnosisSettings) -> bool
     )
 
 
+def still_open(state: DiagnosisState, named: Sequence[str], tried: SelectionRound | None) -> list[str]:
+    """The effects a round screens on top of its base: those not named, less those the round before showed void.
+
+    An effect is never named twice, nor as another variant: it would only
+    soak up noise. After a round with screenings (``tried``), an effect
+    whose best fit on top of that round's base explained none of the gap
+    and had no evidence of its own (:func:`worth_a_full_fit` false) is not
+    screened again on top of the next base: that base adds the effect the
+    round named, which explains features of its own, and an effect that
+    explained nothing beside it gains nothing from it (on the real-world
+    blind suite, docs/validation/diagnosis.md, "Forward selection").
+    """
+    remaining = [name for name in state.effects if name not in named]
+    if tried is None or not tried.scores:
+        return remaining
+    shown = {entry.effect: worth_a_full_fit(entry, state.settings) for entry in tried.scores}
+    return [name for name in remaining if shown.get(name, False)]
+
+
+def _void_round(base: CandidateScore, tried: SelectionRound) -> SelectionRound:
+    """A round with nothing left to screen: every other effect showed nothing on top of the previous base."""
+    base_labels = tuple(candidate.label for candidate in base.fit.problem.candidates)
+    others = [entry for entry in tried.scores if entry.effect != tried.added]  # best first
+    best = ""
+    if others:
+        lead = others[0]
+        reach = round(100 * lead.shrink_interval[1])  # an int: never "-0"
+        best = f" (the best, {lead.effect}, scored {lead.score:.1f} nats, shrink at most {reach} %)"
+    reason = f"no other effect explained any of the gap on top of {' + '.join(tried.base)}{best}, so none was screened"
+    return SelectionRound(base_labels, base.gap_with_effect, [], None, reason)
+
+
 def _full_on_top(state: DiagnosisState, base: CandidateScore, leader: CandidateScore) -> CandidateScore:
     """The round's leader fitted in full with every effect present, scored against the base's held-out runs."""
     settings, base_fit = state.settings, base.fit
@@ -118,19 +146,25 @@ def _full_on_top(state: DiagnosisState, base: CandidateScore, leader: CandidateS
     return full
 
 
-def next_effect(state: DiagnosisState, base: CandidateScore, named: Sequence[str]) -> SelectionRound:
+def next_effect(
+    state: DiagnosisState, base: CandidateScore, named: Sequence[str], tried: SelectionRound | None = None
+) -> SelectionRound:
     """One forward-selection round: the other effects screened on top of the base, the best fitted in full.
 
     Only the new effect's parameters are screened (the base's fit, its
-    Jacobian and held-out predictions are reused); the best screened
-    variant is fitted in full with every effect present where its screening
-    could explain part of the remaining gap (:func:`worth_a_full_fit`), and
-    scored against the base's held-out predictions; :func:`~.verdict.decide`
-    on top of the base adds it or not.
+    Jacobian and held-out predictions are reused), for the effects
+    :func:`still_open` leaves after the round before (``tried``); the best
+    screened variant is fitted in full with every effect present where its
+    screening could explain part of the remaining gap
+    (:func:`worth_a_full_fit`), and scored against the base's held-out
+    predictions; :func:`~.verdict.decide` on top of the base adds it or not.
     """
     settings, base_fit = state.settings, base.fit
     base_labels = tuple(candidate.label for candidate in base_fit.problem.candidates)
-    screened = _screen_on_top(state, base, named)
+    effects = still_open(state, named, tried)
+    if tried is not None and tried.scores and not effects and any(name not in named for name in state.effects):
+        return _void_round(base, tried)
+    screened = _screen_on_top(state, base, effects)
     if not screened:
         return SelectionRound(base_labels, base.gap_with_effect, [], None, "no other candidate effect is left to try")
     best = best_per_effect(screened)
@@ -191,7 +225,7 @@ def forward_selection(
         entries[-1].gap_with_effect > settings.noise_gap
         or (state.pitch_allowance and entries[-1].gap_with_effect > 0.0)
     ):
-        selection = next_effect(state, entries[-1], [entry.effect for entry in entries])
+        selection = next_effect(state, entries[-1], [entry.effect for entry in entries], rounds[-1] if rounds else None)
         rounds.append(selection)
         if selection.added is None or selection.decision is None:
             break
@@ -363,6 +397,7 @@ def name_effect_set(state: DiagnosisState, first: FirstDecision, *, allowance_ap
 __all__ = [
     "shrink_shares",
     "worth_a_full_fit",
+    "still_open",
     "next_effect",
     "forward_selection",
     "phase_named_run_out",

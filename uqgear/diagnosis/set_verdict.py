@@ -59,6 +59,8 @@ def set_decision(
             f"{best.effect}, scores {best.score:.1f} nats on top and shrinks it by "
             f"{100 * best.shrink_fraction:.0f} %)"
         )
+    elif last.added is None:
+        reason += f"; {last.reason}"
     explains = shrink_fraction(nominal_gap, final_gap) >= settings.shrink_threshold or final_gap <= settings.noise_gap
     if not explains:
         reason += f"; a gap of {final_gap:.2f} (above {settings.noise_gap:g}) remains unexplained"

@@ -312,6 +312,9 @@ def _effect_set_html(content: Mapping[str, Any], figures: Mapping[str, str]) -> 
                          f'was added: the best, {html.escape(best["variant"])}, scores {_number(best["score"])} nats '
                          f'and shrinks the remaining gap of {_number(selection["gap_before"])} by '
                          f'{_percent(best["shrink_fraction"])}.</p>')
+        elif selection.get("added") is None and selection.get("reason"):
+            parts.append(f'<p class="note">On top of {html.escape(" + ".join(selection["base"]))} no further effect '
+                         f'was tried: {html.escape(selection["reason"])}.</p>')
     if remaining and effects:
         parts.append(f'<h2>What remains: held-out gap {_number(remaining["value"])} with '
                      f'{html.escape(" + ".join(e["effect"] for e in effects))}</h2>')
