@@ -134,6 +134,15 @@ def put_state(W, first, lane, s):
 
 
 @nb.njit(**INLINED)
+def put_start(W, lane, d1, force):
+    """A lane's force and bearing accelerations at its sub-step's start (what the QoI sums read), from its
+    first stage ``d1``."""
+    W[W_FORCE * LANES + lane] = force
+    W[W_A1 * LANES + lane] = d1[3]
+    W[W_A2 * LANES + lane] = d1[4]
+
+
+@nb.njit(**INLINED)
 def put_step(W, lane, new, d1, force, redo):
     """A lane's sub-step result, first stage, start force and bearing accelerations, and what is left (``REDO_*``).
 
@@ -141,9 +150,7 @@ def put_step(W, lane, new, d1, force, redo):
     """
     put_state(W, W_TRIAL, lane, new)
     put_state(W, W_SLOPE, lane, d1)
-    W[W_FORCE * LANES + lane] = force
-    W[W_A1 * LANES + lane] = d1[3]
-    W[W_A2 * LANES + lane] = d1[4]
+    put_start(W, lane, d1, force)
     W[W_REDO * LANES + lane] = redo
 
 

@@ -53,10 +53,7 @@ from uqgear.physics._lane_loop import (
     REDO_NONE,
     REDO_SPLIT,
     REDO_STEP,
-    W_A1,
-    W_A2,
     W_COEFFICIENTS,
-    W_FORCE,
     W_REDO,
     W_SLOPE,
     W_STATE,
@@ -65,6 +62,7 @@ from uqgear.physics._lane_loop import (
     lane_coefficients,
     lane_state,
     periodic_forcing,
+    put_start,
     put_state,
     put_step,
     region_changed,
@@ -239,9 +237,7 @@ def _redo_lane(
             c,
         )
         put_state(W, W_SLOPE, lane, d1)
-        W[W_FORCE * LANES + lane] = force
-        W[W_A1 * LANES + lane] = d1[3]
-        W[W_A2 * LANES + lane] = d1[4]
+        put_start(W, lane, d1, force)
         if contact_region(s[2], c[0]) == contact_region(attempt[2], c[0]):
             put_state(W, W_TRIAL, lane, attempt)
             return

@@ -36,15 +36,13 @@ from uqgear.physics._lane_loop import (
     N_ROWS,
     REDO_NONE,
     REDO_STEP,
-    W_A1,
-    W_A2,
     W_COEFFICIENTS,
-    W_FORCE,
     W_STATE,
     W_TRIAL,
     integrate_group,
     lane_coefficients,
     lane_state,
+    put_start,
     put_state,
     put_step,
     region_changed,
@@ -256,9 +254,7 @@ def _redo_pair_lane(
         fp,
         fg,
     )
-    W[W_FORCE * LANES + lane] = force
-    W[W_A1 * LANES + lane] = d1[3]
-    W[W_A2 * LANES + lane] = d1[4]
+    put_start(W, lane, d1, force)
     put_state(W, W_TRIAL, lane, done)
 
 
