@@ -106,17 +106,15 @@ def still_open(state: DiagnosisState, named: Sequence[str], tried: SelectionRoun
     return [name for name in remaining if shown.get(name, False)]
 
 
-def _void_round(base: CandidateScore, tried: SelectionRound) -> SelectionRound:
-    """A round with nothing left to screen: every other effect showed nothing on top of the previous base."""
-    base_labels = tuple(candidate.label for candidate in base.fit.problem.candidates)
+def _void_reason(tried: SelectionRound) -> str:
+    """Why a round screens nothing: every other effect showed nothing on top of the round before's base."""
     others = [entry for entry in tried.scores if entry.effect != tried.added]  # best first
     best = ""
     if others:
         lead = others[0]
         reach = round(100 * lead.shrink_interval[1])  # an int: never "-0"
         best = f" (the best, {lead.effect}, scored {lead.score:.1f} nats, shrink at most {reach} %)"
-    reason = f"no other effect explained any of the gap on top of {' + '.join(tried.base)}{best}, so none was screened"
-    return SelectionRound(base_labels, base.gap_with_effect, [], None, reason)
+    return f"no other effect explained any of the gap on top of {' + '.join(tried.base)}{best}, so none was screened"
 
 
 def _full_on_top(state: DiagnosisState, base: CandidateScore, leader: CandidateScore) -> CandidateScore:
@@ -162,8 +160,9 @@ def next_effect(
     settings, base_fit = state.settings, base.fit
     base_labels = tuple(candidate.label for candidate in base_fit.problem.candidates)
     effects = still_open(state, named, tried)
-    if tried is not None and tried.scores and not effects and any(name not in named for name in state.effects):
-        return _void_round(base, tried)
+    if tried is not None and not effects and any(name not in named for name in state.effects):
+        # only a round before can leave nothing of the effects not yet named
+        return SelectionRound(base_labels, base.gap_with_effect, [], None, _void_reason(tried))
     screened = _screen_on_top(state, base, effects)
     if not screened:
         return SelectionRound(base_labels, base.gap_with_effect, [], None, "no other candidate effect is left to try")
