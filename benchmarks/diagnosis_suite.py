@@ -51,10 +51,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from uqgear.physics.design import load_design
-from uqgear.validation import blindtest, diagnose_campaign, plan_real_world, run_foreign_suite, second_design
+from uqgear.validation import blindtest, diagnose_campaign, planned_campaigns, run_foreign_suite
 
 # the fields compared between two runs of the suite (a speed change must leave the decisions as they
 # were; the figures may move by rounding, which the comparison measures)
@@ -249,14 +246,9 @@ def warm_up(workers: int) -> None:
     with tempfile.TemporaryDirectory() as folder:
         seconds = _diagnose(rig, Path(folder) / "diagnosis", workers)
         started = time.perf_counter()
-        plan_seed, campaigns_seed = np.random.SeedSequence(0).spawn(2)
-        specs = plan_real_world(1, np.random.default_rng(plan_seed))
-        index = next(k for k, spec in enumerate(specs) if spec.identifier == "control_pitch_errors-0")
-        reference = load_design("locomotive")
-        spec = specs[index]
-        design = reference if spec.design_name == "reference" else second_design(reference)
-        diagnose_campaign(spec, design, campaigns_seed.spawn(len(specs))[index], Path(folder) / "pitch",
-                          n_ops=8, duration=1.0, workers=workers)
+        spec, design, seed = next(planned for planned in planned_campaigns(0, suite="real_world", n_per_effect=1)
+                                  if planned[0].identifier == "control_pitch_errors-0")
+        diagnose_campaign(spec, design, seed, Path(folder) / "pitch", n_ops=8, duration=1.0, workers=workers)
     print(f"warm-up (untimed): 'uqgear diagnose {rig.name}' in {seconds:.0f} s, a campaign with pitch errors "
           f"in {time.perf_counter() - started:.0f} s", flush=True)
 

@@ -13,7 +13,7 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
 
 from __future__ import annotations
 
-from .blind_test import blindtest, diagnose_campaign
+from .blind_test import blindtest, diagnose_campaign, planned_campaigns
 from .campaigns import (
     HEALTHY,
     PLANS,
@@ -33,6 +33,7 @@ from .scores import blindtest_dataset, set_scores, summarise
 __all__ = [
     "blindtest",
     "diagnose_campaign",
+    "planned_campaigns",
     "plan_campaigns",
     "plan_real_world",
     "rig_campaign",

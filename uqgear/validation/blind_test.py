@@ -184,6 +184,39 @@ def _judged(
     }
 
 
+def planned_campaigns(
+    seed: int | np.random.SeedSequence,
+    *,
+    suite: str = "library",
+    n_per_effect: int = 3,
+    effects: Sequence[str] = LIBRARY_EFFECTS,
+    designs: Sequence[str] = ("reference", "second"),
+    n_healthy: int | None = None,
+) -> list[tuple[CampaignSpec, Design, np.random.SeedSequence]]:
+    """The campaigns of a blind test (:func:`blindtest`'s arguments), in order, each with its design and seed.
+
+    Examples
+    --------
+    >>> from uqgear.validation import planned_campaigns
+    >>> spec, design, seed = planned_campaigns(1, suite="real_world", n_per_effect=1)[0]
+    >>> spec.identifier, design.name
+    ('two_effects-eccentricity+tooth_damage-0', 'locomotive')
+    """
+    plan_seed, campaigns_seed = as_seed(seed).spawn(2)
+    if suite not in SUITES:
+        raise DiagnosisError(f"suite: expected one of {', '.join(SUITES)}; got {suite!r}")
+    if suite == "library":
+        specs = plan_campaigns(
+            n_per_effect, np.random.default_rng(plan_seed), effects=effects, designs=designs, n_healthy=n_healthy
+        )
+    else:
+        specs = plan_real_world(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
+    reference = load_design("locomotive")
+    designs_by_name = {"reference": reference, "second": second_design(reference)}
+    campaign_seeds = campaigns_seed.spawn(len(specs))
+    return [(spec, designs_by_name[spec.design_name], one) for spec, one in zip(specs, campaign_seeds)]
+
+
 def blindtest(
     out_dir: str | os.PathLike[str],
     *,
@@ -272,32 +305,26 @@ def blindtest(
     if n_ops > len(DEFAULT_PINION_SPEEDS):
         raise DiagnosisError(f"n_ops: expected at most {len(DEFAULT_PINION_SPEEDS)}; got {n_ops}")
     workers = check_workers(workers)
-    plan_seed, campaigns_seed = seed_sequence.spawn(2)
-    if suite not in SUITES:
-        raise DiagnosisError(f"suite: expected one of {', '.join(SUITES)}; got {suite!r}")
-    if suite == "library":
-        specs = plan_campaigns(
-            n_per_effect, np.random.default_rng(plan_seed), effects=effect_names, designs=designs, n_healthy=n_healthy
-        )
-    else:
-        specs = plan_real_world(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
+    planned = planned_campaigns(
+        seed_sequence, suite=suite, n_per_effect=n_per_effect, effects=effect_names, designs=designs,
+        n_healthy=n_healthy,
+    )
+    specs = [spec for spec, _, _ in planned]
+    if suite != "library":
         effect_names = tuple(dict.fromkeys(name for spec in specs for name in spec.truth_set()))
-    campaign_seeds = campaigns_seed.spawn(len(specs))
-    reference = load_design("locomotive")
-    designs_by_name = {"reference": reference, "second": second_design(reference)}
     # nothing appears in out_dir until the whole blind test is written
     with OutputFolder(out_dir) as out:
         campaigns = [
             diagnose_campaign(
                 spec,
-                designs_by_name[spec.design_name],
+                design,
                 campaign_seed,
                 out / "campaigns" / spec.identifier,
                 n_ops=n_ops,
                 duration=duration,
                 workers=workers,
             )
-            for spec, campaign_seed in zip(specs, campaign_seeds)
+            for spec, design, campaign_seed in planned
         ]
         content = summarise(
             campaigns, effect_names, seconds=time.perf_counter() - started, seed_text=str(seed_sequence.entropy)
