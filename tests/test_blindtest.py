@@ -57,6 +57,25 @@ def test_plan_rejects_bad_requests():
         B.blindtest("unused", n_ops=2)
     with pytest.raises(DiagnosisError, match="plan: expected one of service, bearing_check"):
         B.operating_points_of("overspeed", load_design("locomotive"))
+    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world; got 'fleet'"):
+        B.planned_campaigns(0, suite="fleet")
+
+
+def test_planned_campaigns_are_the_blind_tests_own(tmp_path):
+    # the real-world suite's campaigns in order, each design the one its spec names, a seed each
+    planned = B.planned_campaigns(1, suite="real_world", n_per_effect=2)
+    specs = B.plan_real_world(2, np.random.default_rng(np.random.SeedSequence(1).spawn(2)[0]))
+    assert [spec.identifier for spec, _, _ in planned] == [spec.identifier for spec in specs]
+    reference = load_design("locomotive")
+    designs = {"reference": reference, "second": B.second_design(reference)}
+    assert designs["second"] != reference
+    assert all(design == designs[spec.design_name] for spec, design, _ in planned)
+    assert {spec.design_name for spec, _, _ in planned} == {"reference", "second"}
+    assert len({seed.spawn_key for _, _, seed in planned}) == len(planned)
+    # a wrong suite fails blindtest before anything is written
+    with pytest.raises(DiagnosisError, match="suite: expected one of"):
+        B.blindtest(tmp_path / "out", suite="fleet")
+    assert not (tmp_path / "out").exists()
 
 
 def test_plans_pick_their_runs():
