@@ -35,6 +35,7 @@ from uqgear.diagnosis import (
     candidates,
     diagnose,
     effects,
+    first_effect,
     fit_problem,
     fitting,
     scoring,
@@ -333,6 +334,68 @@ def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_rou
     ]
 
 
+class _ExtraFits:
+    """Stand-ins for the first pass's fits: screenings and full fits set by hand, every extra full fit recorded."""
+
+    def __init__(self, monkeypatch, design, table):
+        self.extra: list[str] = []
+        self.screened = [replace(_score(label.split("[")[0], label, score, 3.3, shrink, low=low,
+                                         candidate=_variant(design, label)), stage="screening")
+                         for label, (score, shrink, low) in table.items()]
+        monkeypatch.setattr(screening, "screen", lambda state: list(self.screened))
+        monkeypatch.setattr(screening, "fits_in_full",
+                            lambda state, entries: [replace(entry, stage="full") for entry in entries])
+        monkeypatch.setattr(screening, "side_by_side", lambda case, jobs: [job() for job in jobs])
+        monkeypatch.setattr(screening, "full_fit", lambda state, entry: entry)
+        monkeypatch.setattr(screening, "scored_in_full", self.scored_in_full)
+        # switching a full fit's effect off costs 50 more than its fit (cost 0)
+        monkeypatch.setattr(screening, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
+
+    def scored_in_full(self, state, entry, outcome):
+        self.extra.append(entry.label)
+        return replace(entry, stage="full")
+
+
+def test_the_extra_full_fits_wait_on_the_set_the_gaps_strongest_candidate_leads(monkeypatch, design):
+    case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
+    state = replace(_state(case, base_gap=4.4), nominal=SimpleNamespace(cost=100.0),
+                    nominal_held=SimpleNamespace(z=np.ones((8, 3, 4))), timings={"screening": 0.0, "full_fits": 0.0})
+    # two effects of about equal size, each alone far from explaining the gap (seed 2's run-out with a cracked tooth)
+    table = {"tooth_damage[pinion]": (1300.0, 0.23, 0.13), "eccentricity[gear]": (900.0, 0.31, 0.2),
+             "eccentricity[pinion]": (380.0, 0.07, 0.0), "torque_ripple": (12.0, 0.002, -0.1),
+             "bearing_clearance[pinion]": (-3.5, 0.0, -0.1), "friction": (-4.0, 0.0, -0.1)}
+    stand_ins = _ExtraFits(monkeypatch, design, table)
+    drawn = state.rng.bit_generator.state
+    scored = screening.score_candidates(state)
+    # the leader leads a set: the next three variants wait on it, none fitted yet
+    assert [entry.label for entry in scored.waiting] == ["eccentricity[pinion]", "torque_ripple",
+                                                        "bearing_clearance[pinion]"]
+    assert stand_ins.extra == [] and scored.better is None
+    # the set was judged on copies and a copy of the stream: the stream is where it was, and the verdict
+    # step 5 then draws from it starts that very set
+    assert state.rng.bit_generator.state == drawn
+    decision, _, ranking, _ = first_effect.first_decision(state, scored.best, state.rng)
+    assert decision.verdict == "unexplained" and first_effect.starts_a_set(state, decision, ranking)
+    assert ranking[0].label == "tooth_damage[pinion]"
+    # the fits made so far carry their effect gains (full fits: switched off; screenings: against the nominal)
+    gains = {(entry.label, entry.stage): entry.effect_gain for entry in scored.all_scores}
+    assert gains[("tooth_damage[pinion]", "full")] == 50.0 and gains[("friction", "screening")] == 100.0
+    # where the set explains nothing together they are made, in order, while the gap stays unexplained
+    done = screening.fit_waiting(state, scored)
+    assert stand_ins.extra == ["eccentricity[pinion]", "torque_ripple", "bearing_clearance[pinion]"]
+    assert done.waiting == [] and sum(entry.stage == "full" for entry in done.all_scores) == 5
+    # a leader that cannot lead a set (its shrink interval reaches below zero): the extra fits come at once
+    table["tooth_damage[pinion]"] = (1300.0, 0.23, -0.05)
+    stand_ins = _ExtraFits(monkeypatch, design, table)
+    scored = screening.score_candidates(state)
+    assert scored.waiting == [] and stand_ins.extra == ["eccentricity[pinion]", "torque_ripple",
+                                                         "bearing_clearance[pinion]"]
+    # and never where the caller asks for them at once (the set was tried already)
+    table["tooth_damage[pinion]"] = (1300.0, 0.23, 0.13)
+    stand_ins = _ExtraFits(monkeypatch, design, table)
+    assert screening.score_candidates(state, set_first=False).waiting == [] and len(stand_ins.extra) == 3
+
+
 def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carries():
     strong = candidate_score("tooth_damage", 1428.0, 0.22, effect_gain=2053.0, shrink_interval=(0.17, 0.28))
     assert verdict.leads_a_set(strong)
@@ -490,6 +553,65 @@ def test_run_out_and_tooth_damage_together_are_both_named(design, tmp_path):
     maps.close()
     page = (tmp_path / "report.html").read_text()
     assert "The named effects (forward selection)" in page and "What remains" in page
+
+
+@pytest.fixture(scope="module")
+def equal_pair(design):
+    """A 20 um pinion run-out with a 15 % crack of a gear tooth: each alone explains less than half of the gap."""
+    truth = {"eccentricity": {"shaft": "pinion", "amplitude": 20e-6, "phase": 0.7, "kappa": 0.03},
+             "tooth_damage": {"gear": "gear", "tooth": 5.0, "depth": 0.15}}
+    return _campaign(design, [make_effect(name, values) for name, values in truth.items()], seed=7)
+
+
+_WAIT_STEP = "decide whether the extra full fits wait for a set"
+
+
+def _fitted_after_the_check(diagnosis):
+    """The labels fitted in full (forward selection's left out) after the check whether they wait on a set."""
+    steps = [record["step"] for record in diagnosis.steps_.finished]
+    after = steps[steps.index(_WAIT_STEP) + 1:]
+    return [step[len("fit "):-len(" in full")] for step in after
+            if step.startswith("fit ") and step.endswith(" in full")]
+
+
+def _waits(diagnosis):
+    """Whether the diagnosis's extra full fits waited on a set (its step's finding)."""
+    return next(r for r in diagnosis.steps_.finished if r["step"] == _WAIT_STEP)["extra_fits_wait_for_a_set"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("named", [["tooth_damage", "eccentricity"], []], ids=["set_named", "set_fails"])
+def test_the_extra_full_fits_are_made_only_where_the_set_the_leader_leads_fails(equal_pair, monkeypatch, named):
+    """Against the same diagnosis with the extra full fits made first: the same verdict and set.
+
+    With the run-out among the candidates the set tooth damage leads names both and the three
+    extra full fits are never made; without it the set explains nothing together, the extra fits
+    are made after it and the gap is ``unexplained``, as when they are made first.
+    """
+    candidates = ["tooth_damage", "friction", "torque_ripple", "bearing_clearance"]
+    if named:
+        candidates.append("eccentricity")
+    waited = Diagnosis(effects=candidates, seed=2, workers=2).fit(equal_pair)
+    monkeypatch.setattr(screening, "set_comes_first", lambda state, best: False)
+    first = Diagnosis(effects=candidates, seed=2, workers=2).fit(equal_pair)
+    steps = [record["step"] for record in waited.steps_.finished]
+    assert [_waits(waited), _waits(first)] == [True, False]
+    for diagnosis in (waited, first):
+        assert [chosen.entry.effect for chosen in diagnosis.effects_] == named, diagnosis.decision_.reason
+        assert diagnosis.decision_.verdict == (named[0] if named else "unexplained")
+    extra = _fitted_after_the_check(first)
+    assert len(extra) == 3
+    if named:
+        # the set explained the gap: none of the extra fits was made, the same shares as with them
+        assert _fitted_after_the_check(waited) == []
+        assert [c.shrink_share for c in waited.effects_] == [c.shrink_share for c in first.effects_]
+    else:
+        # the set was tried first, then the same extra fits, then the verdict again with them
+        assert _fitted_after_the_check(waited) == extra
+        tried = steps.index("decide whether a set of effects explains the gap")
+        assert all(steps.index(f"fit {label} in full") > tried for label in extra)
+        assert steps.count("decide the verdict") == 2
+        assert "found no set that explains it together" in waited.decision_.reason
 
 
 @pytest.mark.slow

@@ -15,7 +15,7 @@ along its steps:
   :mod:`.fitting`, :mod:`.nominal`, :mod:`.screening`, :mod:`.signatures`,
   :mod:`.side_by_side` (independent fits on threads, their runs together);
 - step 4, held-out scoring: :mod:`.heldout`, :mod:`.scoring`;
-- step 5, verdict: :mod:`.verdict`, :mod:`.decision`;
+- step 5, verdict: :mod:`.verdict` (the rules), :mod:`.first_effect`, :mod:`.decision`;
 - step 6, several effects: :mod:`.selection`, :mod:`.effect_set`;
 - the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`;
 - the effect families as plug-ins: :mod:`.effects`;

@@ -32,18 +32,18 @@ from .effect_set import SelectedEffect
 from .effects import check_effects
 from .errors import DiagnosisError
 from .execution import RunExecutor
+from .first_effect import FirstDecision, decide_first
 from .fitting import FitResult
 from .gap_maps import family_character, uninformative_reason, where_gap
 from .inputs import DiagnosisInputs, DiagnosisSeeds, ReferenceInput, as_seed, check_workers, read_inputs, resolve_design
-from .nominal import allow_pitch_errors, fit_nominal_model, score_against_nominal
+from .nominal import NominalPasses, allow_pitch_errors, fit_nominal_model, fit_waiting, score_against_nominal
 from .outputs import inconclusive_summary, json_clean, summary
 from .result import DiagnosisResult
 from .scoring import CandidateScore, capped_squares
-from .selection import NamedSet, name_effect_set
+from .selection import NamedSet, effect_set, with_phase_named_shaft
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 from .signatures import frequency_locked_lines, signature_hints
 from .state import DiagnosisState
-from .verdict import FirstDecision, decide_first
 
 
 def _cpu_seconds() -> float:
@@ -164,6 +164,26 @@ def _features(
             speed_tolerance=settings.speed_tolerance,
             torque_tolerance=settings.torque_tolerance,
         )
+
+
+def _decide(
+    passes: NominalPasses, locked: list[dict[str, Any]], *, allowance_applied: bool
+) -> tuple[NominalPasses, FirstDecision, NamedSet]:
+    """Steps 5 and 6: the first effect's verdict, the set of effects, an eccentric shaft its phases name.
+
+    Where the extra full fits waited on the set the gap's strongest candidate
+    leads and that set explains nothing together, they are made and both
+    steps decide again with them (:func:`~.nominal.fit_waiting`).
+    """
+    # 5. verdict: the first effect, or none, unexplained, inconclusive
+    first = decide_first(passes.state, passes.best, locked)
+    # 6. several effects: forward selection, an eccentric shaft its sideband phases name
+    named = effect_set(passes.state, first)
+    if passes.scored.waiting and not named.led:
+        passes = fit_waiting(passes)
+        first = decide_first(passes.state, passes.best, locked)
+        named = effect_set(passes.state, first)
+    return passes, first, with_phase_named_shaft(passes.state, named, allowance_applied=allowance_applied)
 
 
 def _cannot_decide(case: RigCase, settings: DiagnosisSettings, steps: StepLog) -> str | None:
@@ -335,7 +355,7 @@ class Diagnosis:
             hints = signature_hints(case, locked)
             found.update(hints=dict(hints))
         # 3-4. every candidate fitted and scored on held-out runs against the nominal model
-        state, best, all_scores = score_against_nominal(
+        passes = score_against_nominal(
             case,
             nominal,
             effects=self.effects,
@@ -345,17 +365,15 @@ class Diagnosis:
             steps=steps,
             timings=timings,
         )
-        # 5. verdict: the first effect, or none, unexplained, inconclusive
-        first = decide_first(state, best, locked)
-        # 6. several effects: forward selection, an eccentric shaft its sideband phases name
-        named = name_effect_set(state, first, allowance_applied=allowance.applied)
+        # 5-6. the verdict, and the set of effects named together
+        passes, first, named = _decide(passes, locked, allowance_applied=allowance.applied)
         return _outcome(
-            state,
+            passes.state,
             first,
             named,
             locked=locked,
             hints=hints,
-            all_scores=all_scores,
+            all_scores=passes.all_scores,
             allowance=allowance,
             effects=self.effects,
             timings=timings,

@@ -11,7 +11,8 @@ local optimum.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -22,9 +23,10 @@ from ..uq.seeds import child_seed
 from .allowances.pitch_errors import PitchErrorAllowance, pitch_error_allowance
 from .case import RigCase
 from .fitting import FitResult, calibration_start, fit, fit_nominal
-from .heldout import leave_one_out
+from .heldout import HeldOut, leave_one_out
 from .scoring import CandidateScore, gap_metric
-from .screening import improved_nominal, score_candidates
+from .screening import ScoredCandidates, improved_nominal, score_candidates
+from .screening import fit_waiting as waiting_fits
 from .settings import DiagnosisSettings
 from .state import DiagnosisState
 
@@ -118,6 +120,64 @@ def _checked_nominal(
     return better
 
 
+@dataclass(frozen=True)
+class NominalPasses:
+    """The candidates scored against the last nominal fit, with what a later pass needs.
+
+    ``state`` is the state of the last pass (its nominal fit), ``scored``
+    its scores (:class:`~.screening.ScoredCandidates`; ``waiting`` the
+    extra full fits that wait on a set), ``attempt`` the pass's number and
+    ``earlier`` the full fits against earlier nominal fits, by label.
+    """
+
+    state: DiagnosisState
+    scored: ScoredCandidates
+    attempt: int
+    earlier: Mapping[str, FitResult]
+
+    @property
+    def best(self) -> dict[str, CandidateScore]:
+        return self.scored.best
+
+    @property
+    def all_scores(self) -> list[CandidateScore]:
+        return self.scored.all_scores
+
+
+def _held_out(nominal: FitResult, steps: StepLog, timings: dict[str, float]) -> tuple[HeldOut, float]:
+    """The nominal fit's held-out predictions and gap, a step of the log timed as the nominal fit."""
+    clock = time.perf_counter()
+    with steps.step("predict held-out runs with the nominal model") as found:
+        held = leave_one_out(nominal)
+        gap = gap_metric(held.z)
+        found.update(nominal_gap=gap)
+    timings["nominal_fit"] += time.perf_counter() - clock
+    return held, gap
+
+
+def _escape(state: DiagnosisState, attempt: int) -> Callable[[Sequence[FitResult]], FitResult | None] | None:
+    """The check of a pass's nominal fit against its full fits; none in the last pass allowed."""
+    if attempt == state.settings.nominal_refits:
+        return None
+    return partial(_checked_nominal, state.nominal, settings=state.settings, steps=state.steps, timings=state.timings)
+
+
+def _passes(
+    state: DiagnosisState, scored: ScoredCandidates, attempt: int, earlier: dict[str, FitResult], *, set_first: bool
+) -> NominalPasses:
+    """Further passes while a pass's full fits find a better nominal fit (``scored.better``)."""
+    while scored.better is not None:
+        # the candidates were scored against a nominal fit stuck in a local optimum: score them again,
+        # their full fits starting from where they got to as well
+        earlier.update((entry.label, entry.fit) for entry in scored.all_scores if entry.stage == "full")
+        attempt += 1
+        nominal = scored.better
+        held, gap = _held_out(nominal, state.steps, state.timings)
+        state = replace(state.with_nominal(nominal, held, gap), earlier_full_fits=dict(earlier))
+        scored = score_candidates(state, escape=_escape(state, attempt), set_first=set_first)
+    return NominalPasses(state, scored, attempt, earlier)
+
+
 def score_against_nominal(
     case: RigCase,
     nominal: FitResult,
@@ -128,7 +188,7 @@ def score_against_nominal(
     settings: DiagnosisSettings,
     steps: StepLog,
     timings: dict[str, float],
-) -> tuple[DiagnosisState, dict[str, CandidateScore], list[CandidateScore]]:
+) -> NominalPasses:
     """Every candidate scored against the nominal fit's held-out predictions (:func:`~.screening.score_candidates`).
 
     Where a candidate's full fit shows that the nominal fit stopped in a
@@ -137,31 +197,34 @@ def score_against_nominal(
     at most ``nominal_refits`` times. The check comes as soon as the
     promoted candidates are fitted in full: once the nominal fit is known to
     be stuck, the pass's further full fits against it are not made
-    (:func:`~.screening.score_candidates`).
+    (:func:`~.screening.score_candidates`). The last pass's extra full fits
+    may wait on a set (``waiting``; :func:`fit_waiting`).
 
-    Returns the state the later steps share, the best score per effect and every score.
+    Returns the state the later steps share with the best score per effect and every score.
     """
-    earlier: dict[str, FitResult] = {}
-    for attempt in range(settings.nominal_refits + 1):
-        clock = time.perf_counter()
-        with steps.step("predict held-out runs with the nominal model") as found:
-            held = leave_one_out(nominal)
-            gap = gap_metric(held.z)
-            found.update(nominal_gap=gap)
-        timings["nominal_fit"] += time.perf_counter() - clock
-        state = DiagnosisState(
-            case, settings, effects, hints, rng, steps, timings, nominal, held, gap, earlier_full_fits=dict(earlier)
-        )
-        last = attempt == settings.nominal_refits
-        escape = None if last else partial(_checked_nominal, nominal, settings=settings, steps=steps, timings=timings)
-        best, all_scores, better = score_candidates(state, escape=escape)
-        if better is None:
-            break
-        # the candidates were scored against a nominal fit stuck in a local optimum: score them again,
-        # their full fits starting from where they got to as well
-        nominal = better
-        earlier.update((entry.label, entry.fit) for entry in all_scores if entry.stage == "full")
-    return state, best, all_scores
+    held, gap = _held_out(nominal, steps, timings)
+    state = DiagnosisState(case, settings, effects, hints, rng, steps, timings, nominal, held, gap)
+    scored = score_candidates(state, escape=_escape(state, 0))
+    return _passes(state, scored, 0, {}, set_first=True)
 
 
-__all__ = ["PITCH_ERROR_STREAM", "fit_nominal_model", "allow_pitch_errors", "score_against_nominal"]
+def fit_waiting(passes: NominalPasses) -> NominalPasses:
+    """The extra full fits that waited on a set that explains nothing together (:func:`~.screening.fit_waiting`).
+
+    Where they show the nominal fit stuck, the passes go on from the better
+    fit as in :func:`score_against_nominal`, their extra fits no longer
+    waiting on a set: the set was tried.
+    """
+    state = passes.state
+    scored = waiting_fits(state, passes.scored, escape=_escape(state, passes.attempt))
+    return _passes(state, scored, passes.attempt, dict(passes.earlier), set_first=False)
+
+
+__all__ = [
+    "PITCH_ERROR_STREAM",
+    "fit_nominal_model",
+    "allow_pitch_errors",
+    "NominalPasses",
+    "score_against_nominal",
+    "fit_waiting",
+]

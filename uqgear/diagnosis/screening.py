@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
@@ -23,6 +24,7 @@ from .allowances.pitch_errors import modulation_gain, with_own_allowance
 from .candidates import Candidate
 from .case import RigCase
 from .effects import candidates_for
+from .first_effect import set_comes_first
 from .fit_problem import robust_cost
 from .fitting import FitResult, fit, fit_candidate
 from .heldout import HeldOut, leave_one_out
@@ -244,13 +246,9 @@ def extra_full_fits(
     last, and a fit that is not needed is discarded unread, so the numbers are those of one fit
     after the other. ``taken_up`` records each scored fit (it updates ``best``).
     """
-    settings = state.settings
     ahead: dict[int, Outcome[tuple[FitResult, HeldOut]]] = {}
     for index, entry in enumerate(entries):
-        if (
-            decide_verdict(state.nominal_gap, ranked(best, state.case, settings=settings), settings=settings)[0]
-            != "unexplained"
-        ):
+        if not _unexplained(state, best):
             break
         if index not in ahead:
             pair = entries[index : index + 2]
@@ -259,17 +257,99 @@ def extra_full_fits(
         taken_up(entry, scored_in_full(state, entry, ahead.pop(index)))
 
 
+def _effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> dict[int, float]:
+    """What switching each fit's effect off costs, by ``id`` of its entry (:func:`effect_off_costs`).
+
+    A full fit's is taken under its own error model; a screening's, which
+    shares the nominal parameters, is the nominal fit's cost minus its own.
+    """
+    full_fits = [entry for entry in all_scores if entry.stage == "full"]
+    costs = effect_off_costs(state.nominal, [entry.fit for entry in full_fits], own_error=True)[1]
+    gains = {id(entry): cost - entry.fit.cost for entry, cost in zip(full_fits, costs)}
+    gains.update((id(entry), state.nominal.cost - entry.fit.cost) for entry in all_scores if entry.stage == "screening")
+    return gains
+
+
+def _set_effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> None:
+    """Each entry's ``effect_gain`` (:func:`_effect_gains`), a step of the log."""
+    with state.steps.step("switch the effects of the full fits off"):
+        gains = _effect_gains(state, all_scores)
+    for entry in all_scores:
+        entry.effect_gain = gains[id(entry)]
+
+
+def _unexplained(state: DiagnosisState, best: dict[str, CandidateScore]) -> bool:
+    """Whether the best fits so far leave the gap unexplained (:func:`~.verdict.decide` on them as they are)."""
+    settings = state.settings
+    ranking = ranked(best, state.case, settings=settings)
+    return decide_verdict(state.nominal_gap, ranking, settings=settings)[0] == "unexplained"
+
+
+@dataclass
+class ScoredCandidates:
+    """The candidates scored against one nominal fit: the best per effect, every score, and what comes next.
+
+    ``better`` is a better nominal fit their full fits found (None: none);
+    ``waiting`` the variants whose extra full fits wait on the set the gap's
+    strongest candidate leads (:func:`score_candidates`), fitted by
+    :func:`fit_waiting` only where that set explains nothing together.
+    """
+
+    best: dict[str, CandidateScore]
+    all_scores: list[CandidateScore]
+    better: FitResult | None = None
+    waiting: list[CandidateScore] = field(default_factory=list)
+
+
+def _extra_fits_and_gains(
+    state: DiagnosisState,
+    scored: ScoredCandidates,
+    extra: Sequence[CandidateScore],
+    full_before: int,
+    escape: Callable[[Sequence[FitResult]], FitResult | None] | None,
+) -> ScoredCandidates:
+    """The extra full fits of ``extra`` while the gap stays unexplained, every fit's effect gain, the nominal check.
+
+    ``full_before``: how many full fits the nominal fit was checked against
+    already; ``escape`` checks it again where the extra fits added any.
+    """
+    clock = time.perf_counter()
+    best, all_scores = scored.best, scored.all_scores
+
+    def taken_up(entry: CandidateScore, full: CandidateScore) -> None:
+        all_scores.append(full)
+        if supersedes(full, best[entry.effect]):
+            best[entry.effect] = full
+
+    extra_full_fits(state, extra, best, taken_up)
+    full_fits = [entry for entry in all_scores if entry.stage == "full"]
+    _set_effect_gains(state, all_scores)
+    state.timings["full_fits"] += time.perf_counter() - clock
+    if escape is None or len(full_fits) == full_before:
+        # no full fit since the check before: it would find the same
+        return ScoredCandidates(best, all_scores)
+    return ScoredCandidates(best, all_scores, escape([entry.fit for entry in full_fits]))
+
+
 def score_candidates(
-    state: DiagnosisState, *, escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None
-) -> tuple[dict[str, CandidateScore], list[CandidateScore], FitResult | None]:
+    state: DiagnosisState,
+    *,
+    escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None,
+    set_first: bool = True,
+) -> ScoredCandidates:
     """Screen every candidate against the nominal fit, fit the best in full; best per effect, all, a better nominal.
 
     ``escape`` checks the nominal fit against full fits (:func:`improved_nominal`: a better nominal
     fit or None). It is asked once the promoted candidates are fitted in full and, where it finds
     nothing, again after the extra full fits. Where it finds a better nominal fit, this pass ends
     there: every candidate is then scored again against that fit, and a further full fit against
-    the nominal fit it replaces would only have been a start. Returns the best score per effect,
-    every score and the better nominal fit (None: none was found, or ``escape`` is None).
+    the nominal fit it replaces would only have been a start.
+
+    The extra full fits are there so that a gap is not called unexplained while a variant the
+    screening cannot judge could explain it. Where the gap is unexplained and its strongest
+    candidate leads a set (``set_first``; :func:`~.first_effect.set_comes_first`), that set is tried
+    first (step 6): the extra fits wait (``waiting``), and are made (:func:`fit_waiting`) only
+    where the set explains nothing together, since a named set leaves no gap unexplained.
     """
     settings = state.settings
     clock = time.perf_counter()
@@ -281,39 +361,50 @@ def score_candidates(
     all_scores = list(screened)
     promoted = _also_promoted(state, order[0]) if order else (lambda entry: False)
     chosen = [entry for rank, entry in enumerate(order[: settings.promoted]) if rank == 0 or promoted(entry)]
-
-    def taken_up(entry: CandidateScore, full: CandidateScore) -> None:
+    for entry, full in zip(chosen, fits_in_full(state, chosen)):
         all_scores.append(full)
         if supersedes(full, best[entry.effect]):
             best[entry.effect] = full
-
-    for entry, full in zip(chosen, fits_in_full(state, chosen)):
-        taken_up(entry, full)
     state.timings["full_fits"] += time.perf_counter() - clock
     better = escape([entry.fit for entry in all_scores if entry.stage == "full"]) if escape is not None else None
     if better is not None:
-        return best, all_scores, better
-    clock = time.perf_counter()
+        return ScoredCandidates(best, all_scores, better)
     # An effect that changes the response only in a few runs (a bearing clearance where a bearing
     # unloads) cannot be screened with the nominal parameters held where the nominal model put
     # them to absorb that change: before a gap is called unexplained the next candidate variants
     # get a full fit, best screened first, until one explains it.
     remaining = sorted(
         (entry for entry in screened if not any(entry is done for done in chosen)), key=lambda entry: -entry.score
-    )
-    extra_full_fits(state, remaining[: settings.extra_full_fits], best, taken_up)
-    full_fits = [entry for entry in all_scores if entry.stage == "full"]
-    with state.steps.step("switch the effects of the full fits off"):
-        costs = effect_off_costs(state.nominal, [entry.fit for entry in full_fits], own_error=True)[1]
-    for entry, cost in zip(full_fits, costs):
-        entry.effect_gain = cost - entry.fit.cost
-    for entry in screened:
-        entry.effect_gain = state.nominal.cost - entry.fit.cost
-    state.timings["full_fits"] += time.perf_counter() - clock
-    if escape is None or len(full_fits) == len(chosen):
-        # no full fit since the check above: it would find the same
-        return best, all_scores, None
-    return best, all_scores, escape([entry.fit for entry in full_fits])
+    )[: settings.extra_full_fits]
+    if remaining and set_first and _unexplained(state, best):
+        clock = time.perf_counter()
+        with state.steps.step("decide whether the extra full fits wait for a set") as found:
+            gains = _effect_gains(state, all_scores)
+            # judged on copies with their gains, on a copy of the random stream: nothing is changed here
+            waits = set_comes_first(
+                state, {name: replace(entry, effect_gain=gains[id(entry)]) for name, entry in best.items()}
+            )
+            found.update(extra_fits_wait_for_a_set=waits)
+        state.timings["full_fits"] += time.perf_counter() - clock
+        if waits:
+            for entry in all_scores:
+                entry.effect_gain = gains[id(entry)]
+            return ScoredCandidates(best, all_scores, waiting=remaining)
+    return _extra_fits_and_gains(state, ScoredCandidates(best, all_scores), remaining, len(chosen), escape)
+
+
+def fit_waiting(
+    state: DiagnosisState,
+    scored: ScoredCandidates,
+    *,
+    escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None,
+) -> ScoredCandidates:
+    """The extra full fits that waited on a set (:func:`score_candidates`), while the gap stays unexplained.
+
+    Then every fit's effect gain, and ``escape``'s check of the nominal fit against the full fits.
+    """
+    full_before = sum(entry.stage == "full" for entry in scored.all_scores)
+    return _extra_fits_and_gains(state, scored, scored.waiting, full_before, escape)
 
 
 __all__ = [
@@ -328,5 +419,7 @@ __all__ = [
     "scored_in_full",
     "fits_in_full",
     "extra_full_fits",
+    "ScoredCandidates",
     "score_candidates",
+    "fit_waiting",
 ]

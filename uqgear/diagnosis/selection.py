@@ -22,6 +22,7 @@ from .allowances.sideband_phase import ModulationEvidence, fit_modulated_run_out
 from .decision import Decision
 from .effect_set import SelectedEffect, SelectionRound
 from .effects import candidates_for
+from .first_effect import FirstDecision, starts_a_set
 from .fitting import fit_candidate
 from .heldout import leave_one_out
 from .scoring import CandidateScore, bootstrap_gap, score_candidate
@@ -29,7 +30,7 @@ from .screening import best_per_effect, effect_off_costs, found, measure_modulat
 from .set_verdict import lead_decision, phase_named_decision, set_decision, unled_decision
 from .settings import DiagnosisSettings
 from .state import DiagnosisState
-from .verdict import FirstDecision, decide, leads_a_set, ranked
+from .verdict import decide, ranked
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
@@ -307,6 +308,8 @@ class NamedSet:
     rounds: list[SelectionRound] = field(default_factory=list)
     decision: Decision | None = None
     modulation: list[ModulationEvidence] = field(default_factory=list)
+    # whether the set is one an unexplained gap's strongest candidate led (a set that explains it together)
+    led: bool = False
 
 
 def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
@@ -321,7 +324,8 @@ def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
     lead = first.scores[0]
     provisional = lead_decision(lead)
     trial, trial_rounds = forward_selection(state, lead, provisional, first_gap_interval=first.leader_gap_interval)
-    state.timings["forward_selection"] = time.perf_counter() - clock
+    # added up: a set tried before the extra full fits may be tried again after them
+    state.timings["forward_selection"] = state.timings.get("forward_selection", 0.0) + time.perf_counter() - clock
     with state.steps.step("decide whether a set of effects explains the gap") as finding:
         joint = (
             set_decision(provisional, trial, trial_rounds, state.nominal_gap, settings=state.settings)
@@ -329,7 +333,7 @@ def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
             else None
         )
         if joint is not None and not joint.partial:
-            named = NamedSet(trial, trial_rounds, joint)
+            named = NamedSet(trial, trial_rounds, joint, led=True)
         else:
             named = NamedSet(decision=unled_decision(first.decision, lead, trial))
         verdict = named.decision.verdict if named.decision is not None else first.decision.verdict
@@ -344,38 +348,37 @@ def _grown_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
         state, first.scores[0], first.decision, first_gap_interval=first.leader_gap_interval
     )
     if rounds:
-        state.timings["forward_selection"] = time.perf_counter() - clock
+        # added up: a set tried before the extra full fits may be tried again after them
+        state.timings["forward_selection"] = state.timings.get("forward_selection", 0.0) + time.perf_counter() - clock
     with state.steps.step("decide the effect set") as finding:
         decision = set_decision(first.decision, selected, rounds, state.nominal_gap, settings=state.settings)
         finding.update(effects=[chosen.entry.effect for chosen in selected], partial=decision.partial)
     return NamedSet(selected, rounds, decision)
 
 
-def name_effect_set(state: DiagnosisState, first: FirstDecision, *, allowance_applied: bool) -> NamedSet:
-    """Step 6: the set of effects named together, and an eccentric shaft its sideband phases name.
+def effect_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
+    """Step 6's set of effects named together, before the sideband phase test.
 
     A forward selection runs from the named first effect, or from an
     unexplained gap's strongest candidate where it meets the evidence rules
-    (:func:`~.verdict.leads_a_set`). Where the pitch-error allowance applies,
-    eccentricity is a candidate, the verdict is not ``unexplained`` and the
-    set has room for it, the sideband phase test may add an eccentric shaft
-    (:func:`phase_named_run_out`).
+    (:func:`~.first_effect.starts_a_set`).
     """
-    settings, decision = state.settings, first.decision
-    # a gap above noise left unnamed (unexplained, or none where its interval reaches into noise)
-    unnamed_gap = decision.verdict == "unexplained" or (
-        decision.verdict == "none" and state.nominal_gap > settings.noise_gap
-    )
-    if (
-        unnamed_gap
-        and first.scores
-        and leads_a_set(first.ranking[0], pitch_allowance=state.pitch_allowance, settings=settings)
-    ):
-        named = _led_set(state, first)
-    elif decision.verdict in state.effects:
-        named = _grown_set(state, first)
-    else:
-        named = NamedSet(decision=decision)
+    decision = first.decision
+    if first.scores and starts_a_set(state, decision, first.ranking):
+        return _led_set(state, first)
+    if decision.verdict in state.effects:
+        return _grown_set(state, first)
+    return NamedSet(decision=decision)
+
+
+def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_applied: bool) -> NamedSet:
+    """The set with an eccentric shaft its sideband phases name (:func:`phase_named_run_out`), where the test applies.
+
+    It applies where the pitch-error allowance was applied, eccentricity is
+    a candidate not in the set, the verdict is not ``unexplained`` and the
+    set has room for it. ``named`` is updated in place and returned.
+    """
+    settings = state.settings
     assert named.decision is not None
     in_set = [chosen.entry.effect for chosen in named.selected]
     if (
@@ -401,5 +404,6 @@ __all__ = [
     "forward_selection",
     "phase_named_run_out",
     "NamedSet",
-    "name_effect_set",
+    "effect_set",
+    "with_phase_named_shaft",
 ]

@@ -275,7 +275,8 @@ SETTINGS: dict[str, Setting] = {
     ),
     "extra_full_fits": Setting(
         "fits",
-        "while the gap stays unexplained, up to this many further variants are fitted in full, best screened first",
+        "while the gap stays unexplained, up to this many further variants are fitted in full, best screened first "
+        "(after the set the gap's strongest candidate leads, where it leads one, has failed)",
         _SELECTION,
         lower=0,
         integer=True,

@@ -1,8 +1,8 @@
-"""The verdict: the decision rules on the candidates' held-out scores, and the first effect's decision (step 5).
+"""The verdict: the decision rules on the candidates' held-out scores (step 5).
 
-Every :class:`Decision` is made here or, for a set of effects, in
-:mod:`.set_verdict`: the first effect's (:func:`decide`, :func:`decide_first`),
-the named set's, a set that an unexplained gap's strongest candidate leads
+Every :class:`Decision` is made by these rules or, for a set of effects, in
+:mod:`.set_verdict`: the first effect's (:func:`decide`, applied by
+:func:`~.first_effect.decide_first`), the named set's, a set that an unexplained gap's strongest candidate leads
 and an eccentric shaft the sideband phases name. The thresholds come from
 :class:`~uqgear.diagnosis.DiagnosisSettings` (docs/model/unmodelled-effects.md section 6, step
 5, and sections 6.2 and 6.4).
@@ -12,17 +12,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 from .case import RigCase
-from .consistency import check_channels, inconsistent_decision, one_channel_character
+from .consistency import check_channels, inconsistent_decision
 from .decision import Decision
 from .effects import effect_names
-from .gap_maps import family_character, where_gap
-from .scoring import CandidateScore, RunOutCheck, bootstrap_gap
+from .scoring import CandidateScore, RunOutCheck
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
-from .state import DiagnosisState
 
 #: Effects of the library that the diagnosis can name.
 EFFECT_NAMES: tuple[str, ...] = effect_names()
@@ -395,76 +393,10 @@ def decide_verdict(nominal_gap: float, ranking: Sequence[CandidateScore], **opti
     return decision.verdict, decision.reason
 
 
-@dataclass(frozen=True)
-class FirstDecision:
-    """Step 5's outcome: the first effect's decision and the figures it was made on.
-
-    Attributes
-    ----------
-    decision : Decision
-    scores : list of CandidateScore
-        The best variant of each effect, best first.
-    ranking : list of CandidateScore
-        The same with their run-out checks, the leader with the bootstrap interval of its gap.
-    nominal_gap_interval : (float, float)
-        Bootstrap 5 % and 95 % quantiles of the nominal model's held-out gap.
-    where, families : list of dict
-        Where the nominal model's held-out gap lies (:func:`~.gap_maps.where_gap`,
-        :func:`~.gap_maps.family_character`).
-    """
-
-    decision: Decision
-    scores: list[CandidateScore]
-    ranking: list[CandidateScore]
-    nominal_gap_interval: tuple[float, float]
-    where: list[dict[str, Any]]
-    families: list[dict[str, Any]]
-
-    @property
-    def leader_gap_interval(self) -> tuple[float, float]:
-        """The leader's gap interval (NaN without a candidate)."""
-        interval = self.ranking[0].gap_interval if self.ranking else None
-        return interval if interval is not None else (math.nan, math.nan)
-
-
-def decide_first(
-    state: DiagnosisState, best: Mapping[str, CandidateScore], locked_lines: Sequence[Mapping[str, Any]]
-) -> FirstDecision:
-    """The verdict on the candidates' held-out scores against the nominal model (step 5), and where the gap lies."""
-    settings = state.settings
-    with state.steps.step("decide the verdict") as found:
-        scores = sorted(best.values(), key=lambda entry: -entry.score)
-        ranking = ranked(best, state.case, settings=settings)
-        # drawn after the shrink bootstraps, so their numbers do not depend on this
-        nominal_interval = bootstrap_gap(state.nominal_held.z, state.rng, settings.bootstrap_resamples)
-        if scores:
-            ranking[0] = replace(
-                ranking[0], gap_interval=bootstrap_gap(scores[0].held.z, state.rng, settings.bootstrap_resamples)
-            )
-        decision = decide(
-            state.nominal_gap,
-            ranking,
-            nominal_gap_interval=nominal_interval,
-            settings=settings,
-            pitch_allowance=state.pitch_allowance,
-            density_evidence=state.pitch_allowance,
-        )
-        where = where_gap(state.nominal_held.z, state.case, where_z=settings.where_z)
-        families = family_character(
-            state.nominal_held.z, state.case, locked_lines, noise_gap=settings.noise_gap, where_z=settings.where_z
-        )
-        if decision.one_channel:
-            decision = replace(decision, reason=decision.reason + one_channel_character(decision.one_channel, families))
-        found.update(verdict=decision.verdict, reason=decision.reason)
-    return FirstDecision(decision, scores, ranking, nominal_interval, where, families)
-
-
 __all__ = [
     "EFFECT_NAMES",
     "VERDICTS",
     "Decision",
-    "FirstDecision",
-    "decide_first",
     "ranked",
     "run_out_check",
     "score_lower_bound",
