@@ -6,7 +6,8 @@ and bifurcation and sweep grids over the physics' batch integrator; coexisting
 responses from several starts (``attractors``); periodic orbits by shooting
 with their Floquet multipliers (``shooting``, ``floquet``) and their
 continuation in a parameter with located bifurcations (``continuation``,
-``bifurcations``, ``branches``).
+``bifurcations``, ``branches``) and the speed windows where responses can
+coexist (``windows``).
 
 May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 """
@@ -29,6 +30,7 @@ from .response import contact_fractions, phase_plane, poincare_section, response
 from .shooting import PeriodicOrbit, PoincareMap, Shooting, ShootingError, ShootingSettings, setup_at
 from .spectra import amplitude_spectrum, spectrum_dataset
 from .sweeps import bifurcation, sweep_grid
+from .windows import CoexistenceWindows, find_windows
 from .zero_one import zero_one_test
 
 __all__ = [
@@ -64,4 +66,6 @@ __all__ = [
     "Continuation",
     "ContinuationSettings",
     "bifurcation_table",
+    "CoexistenceWindows",
+    "find_windows",
 ]

@@ -44,7 +44,7 @@ from scipy.spatial.distance import directed_hausdorff
 from ..common.errors import UqgearError
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_batch
-from .regimes import classify_batch
+from .regimes import classify_batch, period_labels
 
 #: Sample variables of a start state, and of the final state a started run returns.
 INITIAL_VARIABLES = tuple(f"initial_{name}" for name in STATE_NAMES)
@@ -86,6 +86,14 @@ class MultiStart:
         The sample variable the sweeps run along.
     tolerance, poincare_tolerance : float
         Grouping tolerances (module docstring).
+    guided : bool
+        Spend the extra starts only inside the speed windows where the periodic branches fold, double,
+        lose stability or graze (:mod:`uqgear.dynamics.windows`), with the stable orbits found there as
+        starts of their own; every other point runs from rest alone. False: every point gets every start.
+    nodes : int
+        Guided: continuations per interval of the node input (the adhesion torque), both ends included.
+    margin : float
+        Guided: rpm added on both sides of every window (at least the speed step of the grid run).
     """
 
     sweeps: bool = True
@@ -94,6 +102,9 @@ class MultiStart:
     sweep_variable: str = "pinion_speed"
     tolerance: float = 0.02
     poincare_tolerance: float = 0.05
+    guided: bool = False
+    nodes: int = 5
+    margin: float = 50.0
 
     def start_labels(self) -> list[str]:
         """The starts, in grouping order."""
@@ -118,8 +129,14 @@ class MultiStart:
             value = getattr(settings, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 10:
                 raise UqgearError(f"{where}.{name}: expected a number in (0, 10]; got {value!r}")
-        if not isinstance(settings.sweeps, bool):
-            raise UqgearError(f"{where}.sweeps: expected true or false; got {settings.sweeps!r}")
+        for name in ("sweeps", "guided"):
+            if not isinstance(getattr(settings, name), bool):
+                raise UqgearError(f"{where}.{name}: expected true or false; got {getattr(settings, name)!r}")
+        if isinstance(settings.nodes, bool) or not isinstance(settings.nodes, int) or not 1 <= settings.nodes <= 64:
+            raise UqgearError(f"{where}.nodes: expected an integer in [1, 64]; got {settings.nodes!r}")
+        margin = settings.margin
+        if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 <= margin <= 2000:
+            raise UqgearError(f"{where}.margin: expected a number of rpm in [0, 2000]; got {margin!r}")
         return settings
 
 
@@ -137,12 +154,18 @@ class StartedEvaluator:
         Keyword arguments of :func:`simulate_batch` (``n_periods``, ``keep_periods``, ...).
     classify_seed : int or SeedSequence
         Seed of the 0-1 test frequencies.
+    full_regime : bool
+        Classify each run in full (:func:`classify_batch`); False labels it by period detection alone
+        (:func:`~uqgear.dynamics.regimes.period_labels`: ``period-n`` or ``aperiodic``), all the grouping needs.
     """
 
-    def __init__(self, design: Design, options: Mapping[str, Any] | None = None, classify_seed: Any = 0) -> None:
+    def __init__(
+        self, design: Design, options: Mapping[str, Any] | None = None, classify_seed: Any = 0, full_regime: bool = True
+    ) -> None:
         self.design = design
         self.options = dict(options or {})
         self.classify_seed = classify_seed
+        self.full_regime = full_regime
 
     def __call__(self, samples: xr.Dataset) -> xr.Dataset:
         inputs = samples.drop_vars([name for name in INITIAL_VARIABLES if name in samples.variables])
@@ -163,7 +186,7 @@ class StartedEvaluator:
         result = result.drop_vars(["final_state", "state"])
         for index, name in enumerate(FINAL_VARIABLES):
             result[name] = ("sample", final[:, index])
-        classes = classify_batch(result, seed=self.classify_seed)
+        classes = classify_batch(result, seed=self.classify_seed) if self.full_regime else period_labels(result)
         return result.merge(classes[["regime", "response_period"]], compat="override")
 
 
@@ -329,23 +352,57 @@ class MultiStartSearch:
         self.seed = seed
 
     def fit(
-        self, evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, design: Design | None = None
+        self,
+        evaluate: Callable[[xr.Dataset], xr.Dataset],
+        samples: xr.Dataset,
+        design: Design | None = None,
+        extra_states: Mapping[str, np.ndarray] | None = None,
+        rest: xr.Dataset | None = None,
     ) -> MultiStartSearch:
         """Run the starts and group the responses (``design`` only for the box's scales; default the
-        evaluator's ``design``)."""
+        evaluator's ``design``).
+
+        ``extra_states`` adds starts of its own: label -> states of shape (n_samples, 6), a row of NaN
+        where a sample has no such start (its entry is left out of the grouping). They come after
+        the sweeps and before the random starts in the grouping order (states on known orbits,
+        :meth:`uqgear.dynamics.windows.CoexistenceWindows.orbit_states`).
+
+        ``rest`` gives the rest runs already made (outputs of the same model with ``regime``, in the order
+        of ``samples``); they are not run again, and without final states only the sweeps' first points
+        are."""
         if "sample" not in samples.dims or "pinion_speed" not in samples:
             raise UqgearError("samples: expected a Dataset with dimension 'sample' and variable 'pinion_speed'")
         design = design if design is not None else getattr(evaluate, "design", None)
         settings = self.settings
         n = samples.sizes["sample"]
-        nan_states = np.full((n, 6), np.nan)
-        rest = evaluate(_with_starts(samples, np.arange(n), nan_states))
+        runs = 0
+        if rest is None:
+            rest = evaluate(_with_starts(samples, np.arange(n), np.full((n, 6), np.nan)))
+            runs += n
         stages: dict[str, xr.Dataset] = {"rest": rest}
-        runs = n
         if settings.sweeps:
             groups = sweep_order(samples, settings.sweep_variable)
-            stages.update(_sweep_runs(evaluate, samples, rest, groups))
+            if all(name in rest for name in FINAL_VARIABLES):
+                stages.update(_sweep_runs(evaluate, samples, rest, groups))
+            elif any(len(members) > 1 for members in groups):
+                # the sweeps start from the rest runs' final states at each group's ends
+                ends = np.unique(np.concatenate([[m[0], m[-1]] for m in groups if len(m) > 1])).astype(int)
+                edges = evaluate(_with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
+                runs += ends.size
+                several = [members for members in groups if len(members) > 1]
+                swept_rows = np.sort(np.concatenate(several)).astype(int)
+                for direction, part in _sweep_runs(evaluate, samples, edges, several, ends).items():
+                    # a point alone in its group has no sweep neighbour: its sweep starts are its rest run
+                    stages[direction] = _put_rows(rest, swept_rows, part)
+            else:
+                stages.update({"up": rest, "down": rest})
             runs += 2 * n - 2 * len(groups)
+        for label, states in (extra_states or {}).items():
+            states = np.asarray(states, dtype=float)
+            if states.shape != (n, 6):
+                raise UqgearError(f"extra_states[{label!r}]: expected shape ({n}, 6); got {states.shape}")
+            stages[label] = _partial_stage(evaluate, samples, states, rest)
+            runs += int(np.all(np.isfinite(states), axis=1).sum())
         if settings.seeded:
             if design is None:
                 raise UqgearError("design: needed for the random starts' box (pass design=)")
@@ -356,6 +413,12 @@ class MultiStartSearch:
                 stages[f"seeded-{k + 1}"] = seeded.isel(sample=slice(k * n, (k + 1) * n))
             runs += n * settings.seeded
         labels = settings.start_labels()
+        if extra_states:
+            at = labels.index("down") + 1 if "down" in labels else 1
+            labels = labels[:at] + list(extra_states) + labels[at:]
+        # stages from other models (given rest runs) may carry variables of their own
+        shared = set.intersection(*(set(stage.data_vars) for stage in stages.values()))
+        stages = {label: stage[[name for name in stage.data_vars if name in shared]] for label, stage in stages.items()}
         stacked = xr.concat(
             [
                 stages[label]
@@ -384,12 +447,59 @@ class MultiStartSearch:
         half_backlash = 0.5 * (
             np.asarray(samples["backlash"].values, float) if "backlash" in samples else np.full(n, design.backlash)
         )
-        velocity = np.maximum(_velocity_scale(samples, design)[:, None], np.abs(_final_states(rest)[:, 3:]))
+        if all(name in rest for name in FINAL_VARIABLES):
+            steady = np.abs(_final_states(rest)[:, 3:])
+        else:
+            # rest runs without final states: the DTE velocity's largest value on the Poincare section
+            steady = np.zeros((n, 3))
+            steady[:, 2] = np.nanmax(np.abs(rest["poincare_x_velocity"].transpose("sample", "period").values), axis=1)
+        velocity = np.maximum(_velocity_scale(samples, design)[:, None], steady)
         widths = settings.box * np.concatenate([np.repeat(half_backlash[:, None], 3, axis=1), velocity], axis=1)
         seed = self.seed if isinstance(self.seed, np.random.SeedSequence) else np.random.SeedSequence(self.seed)
         rng = np.random.default_rng(seed)
         draws = rng.uniform(-1.0, 1.0, size=(settings.seeded, n, 6))
         return (static[None] + draws * widths[None]).reshape(settings.seeded * n, 6)
+
+
+def _put_rows(target: xr.Dataset, rows: np.ndarray, part: xr.Dataset) -> xr.Dataset:
+    """A copy of ``target`` with its samples ``rows`` replaced by the samples of ``part`` (in that order)."""
+    out = target.copy()
+    for name in list(out.data_vars):
+        if name in part and "sample" in out[name].dims:
+            dims = ("sample", *(dim for dim in out[name].dims if dim != "sample"))
+            values = out[name].transpose(*dims).values.copy()
+            column = part[name].transpose(*dims).values
+            if values.dtype.kind in "US" and column.dtype.itemsize > values.dtype.itemsize:
+                values = values.astype(column.dtype)
+            values[rows] = column
+            out[name] = (dims, values, out[name].attrs)
+    return out
+
+
+def _partial_stage(
+    evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, states: np.ndarray, template: xr.Dataset
+) -> xr.Dataset:
+    """Runs from ``states`` where a row is finite; rows of NaN give NaN outputs and no Poincare points (no run)."""
+    rows = np.nonzero(np.all(np.isfinite(states), axis=1))[0]
+    out = template.copy(deep=True)
+    for name, variable in out.data_vars.items():
+        if variable.dtype.kind == "f":
+            out[name] = variable.where(False)
+        elif variable.dtype.kind in "US":
+            out[name] = variable.copy(data=np.full(variable.shape, "", dtype=variable.dtype))
+    if rows.size == 0:
+        return out
+    result = evaluate(_with_starts(samples, rows, states[rows]))
+    for name in list(out.data_vars):
+        if name in result and "sample" in out[name].dims:
+            dims = ("sample", *(dim for dim in out[name].dims if dim != "sample"))
+            values = out[name].transpose(*dims).values.copy()
+            column = result[name].transpose(*dims).values
+            if values.dtype.kind in "US" and column.dtype.itemsize > values.dtype.itemsize:
+                values = values.astype(column.dtype)
+            values[rows] = column
+            out[name] = (dims, values, out[name].attrs)
+    return out
 
 
 def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
@@ -416,23 +526,23 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
     speed = speed if speed.ndim == 1 else speed[0]
     z1 = design.z1 if design is not None else int(runs.attrs.get("design_z1", 1))
     members: list[list[list[int]]] = []
-    representatives: list[list[dict[str, Any]]] = []
     membership = np.zeros((n, len(labels)), dtype=np.int64)
+    # plain arrays once: per-entry xarray indexing costs more than the comparisons
+    compared = {
+        name: runs[name].transpose("sample", "start").values.astype(float)
+        for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)
+    }
+    regimes = runs["regime"].transpose("sample", "start").values.astype(str)
+    poincare_x = runs["poincare_x"].transpose("sample", "start", "period").values
+    poincare_v = runs["poincare_x_velocity"].transpose("sample", "start", "period").values
     for i in range(n):
         omega_b = 2.0 * math.pi * z1 * float(np.ravel(speed)[i]) / 60.0 * half_backlash
         found: list[dict[str, Any]] = []
         groups: list[list[int]] = []
         for j in range(len(labels)):
-            run = runs.isel(sample=i, start=j)
-            points = np.stack(
-                [
-                    np.asarray(run["poincare_x"].values) / half_backlash,
-                    np.asarray(run["poincare_x_velocity"].values) / omega_b,
-                ],
-                axis=1,
-            )
-            entry: dict[str, Any] = {name: float(run[name].values) for name in (*COMPARED_QOIS, *COMPARED_FRACTIONS)}
-            entry.update(regime=str(run["regime"].values), points=points[np.all(np.isfinite(points), axis=1)])
+            points = np.stack([poincare_x[i, j] / half_backlash, poincare_v[i, j] / omega_b], axis=1)
+            entry: dict[str, Any] = {name: float(values[i, j]) for name, values in compared.items()}
+            entry.update(regime=regimes[i, j], points=points[np.all(np.isfinite(points), axis=1)])
             if entry["points"].size == 0:
                 membership[i, j] = -1
                 continue
@@ -445,16 +555,16 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
                 groups[match].append(j)
                 membership[i, j] = match
         members.append(groups)
-        representatives.append(found)
     width = max((len(groups) for groups in members), default=0)
     data: dict[str, Any] = {}
     for name in ATTRACTOR_QOIS:
         if name not in runs:
             continue
+        table = runs[name].transpose("sample", "start").values
         values = np.full((n, width), np.nan)
         for i, groups in enumerate(members):
             for k, group in enumerate(groups):
-                values[i, k] = float(runs[name].isel(sample=i, start=group[0]).values)
+                values[i, k] = float(table[i, group[0]])
         data[name] = (("sample", "attractor"), values, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
     regime = np.full((n, width), "", dtype=object)
     first = np.full((n, width), "", dtype=object)
@@ -463,7 +573,7 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
     for i, groups in enumerate(members):
         total = sum(len(group) for group in groups)
         for k, group in enumerate(groups):
-            regime[i, k] = str(runs["regime"].isel(sample=i, start=group[0]).values)
+            regime[i, k] = regimes[i, group[0]]
             first[i, k] = labels[group[0]]
             which[i, k] = ",".join(labels[j] for j in group)
             share[i, k] = len(group) / total

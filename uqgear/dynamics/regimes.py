@@ -581,6 +581,59 @@ def _classify_runs(
     }
 
 
+def period_labels(ds: xr.Dataset, *, max_period: int | None = None, rtol: float = 1e-3) -> xr.Dataset:
+    """Period detection alone for every run of a batch result: ``regime`` ``period-n`` where the Poincare points
+    repeat with period n, ``aperiodic`` where they do not (``undetermined`` for non-finite points), and
+    ``response_period``. The same scales and period test as :func:`classify_batch`, without the 0-1 test
+    and the distinct-point count that tell the non-periodic regimes apart (several times the cost of a
+    run): for grouping steady responses, where only periodic against not matters.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> samples = uqgear.samples_from_mapping({"pinion_speed": [2000.0, 4000.0], "drive_torque": [7000.0, 500.0],
+    ...                                         "adhesion_torque": [33e3, 500.0 * 101 / 21]})
+    >>> batch = uqgear.simulate_batch(design, samples, n_periods=300, keep_periods=100)
+    >>> period_labels(batch)["regime"].values.tolist()
+    ['period-1', 'aperiodic']
+    """
+    _require(ds, ["poincare_x"], "period_labels")
+    poincare_x = ds["poincare_x"].transpose("sample", "period")
+    n = poincare_x.sizes["sample"]
+    max_period = _resolve_max_period(max_period, poincare_x.sizes["period"])
+    has_velocity = "poincare_x_velocity" in ds.variables
+    x = poincare_x.values
+    velocity = ds["poincare_x_velocity"].transpose("sample", "period").values if has_velocity else None
+    x_scale = np.asarray(ds["dte_peak_to_peak"].values, float) if "dte_peak_to_peak" in ds.variables else None
+    mesh_angular = _mesh_angular_frequency(ds)
+    angular = (
+        np.broadcast_to(np.asarray(getattr(mesh_angular, "values", mesh_angular), float), (n,))
+        if mesh_angular is not None
+        else None
+    )
+    labels = np.empty(n, dtype=object)
+    periods = np.zeros(n, dtype=np.int64)
+    for run in range(n):
+        array = x[run][:, None] if velocity is None else np.column_stack([x[run], velocity[run]])
+        if not np.all(np.isfinite(array)):
+            labels[run] = UNDETERMINED
+            continue
+        scale = _scale_array(
+            None if x_scale is None else x_scale[run], None if angular is None else angular[run], has_velocity
+        )
+        if scale is not None and not np.all(np.isfinite(scale)):
+            scale = None
+        periods[run] = detect_period(array, max_period, rtol, _component_scale(array, scale))
+        labels[run] = f"period-{periods[run]}" if periods[run] > 0 else "aperiodic"
+    return xr.Dataset(
+        {
+            "regime": ("sample", labels.astype(str), {"long_name": "period-n, aperiodic or undetermined"}),
+            "response_period": ("sample", periods, {"units": "1", "long_name": "period n, 0 if not periodic"}),
+        }
+    )
+
+
 def classify_batch(
     ds: xr.Dataset,
     *,

@@ -142,12 +142,19 @@ def _starts_text(ds: xr.Dataset) -> str:
         settings = json.loads(str(ds.attrs.get("starts", "{}")))
     except ValueError:
         settings = {}
-    parts = ["rest"]
+    parts = []
     if settings.get("sweeps", True):
         parts.append("its up- and down-sweep neighbours' final states")
+    if settings.get("guided"):
+        parts.append("the stable orbits the continuation found there")
     if settings.get("seeded"):
         parts.append(f"{settings['seeded']} random states")
-    return ", ".join(parts)
+    if settings.get("guided"):
+        return (
+            f"rest; the {ds.attrs.get('window_points', 'few')} points inside the speed windows where the continued "
+            "branches fold, double, lose stability or graze also from " + ", ".join(parts)
+        )
+    return ", ".join(["rest", *parts])
 
 
 def coexistence_headline(results: Sequence[xr.Dataset]) -> list[Finding]:

@@ -20,6 +20,7 @@ and children of that per stage. Same seed, same numbers.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -43,6 +44,7 @@ from ..uq.seeds import child_seed
 from ..uq.sweeps import evaluate_on_sweep
 from .analysis_specs import AnalysisSpec
 from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
+from .guided_starts import GuidedStartModel, guided_start_model, widen_over_attractors
 from .model_runs import RunnerModel
 from .point_run import simulate_point
 from .schema import Study
@@ -179,18 +181,30 @@ class AnalysisContext:
 
     def model(
         self, *, classify: bool = False, lyapunov: bool | None = None, poincare: bool = True
-    ) -> RunnerModel | MultiStartModel:
+    ) -> RunnerModel | MultiStartModel | GuidedStartModel:
         """The gear model for this analysis, evaluated through the runner.
 
         ``poincare=False`` drops the Poincare points from the outputs (scalar
         QoIs only). With ``simulation.starts`` every point is run from several
-        starts (:class:`~uqgear.study.coexistence.MultiStartModel`).
+        starts (:class:`~uqgear.study.coexistence.MultiStartModel`); with guided
+        starts (the default) only the points inside the coexistence windows
+        (:class:`~uqgear.study.guided_starts.GuidedStartModel`).
         """
         simulation = self.spec.simulation
         if lyapunov is not None and lyapunov != simulation.lyapunov:
-            simulation = SimulationSettings(**{**simulation.to_dict(), "lyapunov": lyapunov})
-        if simulation.starts is not None:
+            simulation = dataclasses.replace(simulation, lyapunov=lyapunov)
+        if simulation.starts is not None and not simulation.starts.guided:
             return multi_start_model(self, simulation, poincare)
+        if simulation.starts is not None:
+            # the rest runs keep their Poincare points: the window points' rest runs are grouped from them
+            rest = self.rest_model(dataclasses.replace(simulation, starts=None), classify=classify, poincare=True)
+            return guided_start_model(self, simulation, rest, poincare)
+        return self.rest_model(simulation, classify=classify, poincare=poincare)
+
+    def rest_model(
+        self, simulation: SimulationSettings, *, classify: bool = False, poincare: bool = True
+    ) -> RunnerModel:
+        """The model with every point run from rest (what a study without starts runs)."""
         function = functools.partial(
             evaluate_batch,
             design=self.design,
@@ -549,11 +563,12 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
     names = list(options["parameters"])
     qois = list(options["qois"])
     fixed = context.fixed_values(exclude=names)
-    if context.spec.simulation.starts is not None:
+    starts = context.spec.simulation.starts
+    if starts is not None and not starts.guided:
         return interval_over_attractors(context, names, qois, fixed)
     space = context.parameter_space(names, fixed)
     regime_variables = [name for name in ("fraction_separation", "fraction_back_contact") if name not in qois]
-    model = context.model(poincare=False)
+    model = context.rest_model(dataclasses.replace(context.spec.simulation, starts=None), poincare=False)
     analysis = IntervalAnalysis(
         options["method"],
         order=options["order"],
@@ -573,6 +588,8 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
             units=QOI_INFO[name][0], long_name=f"{name} at the interval midpoints"
         )
     result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
+    if starts is not None:
+        result = widen_over_attractors(context, result, names, qois, fixed)
     return result
 
 

@@ -40,7 +40,7 @@ from .analysis_specs import AnalysisSpec, _analysis
 from .checkers import _fail, _type_name, boolean, check_mapping, identifier, number, string
 from .limits import DPI
 from .parameters import UncertainParameter, ValueSpec, _check_parameter_range, _operating_points, _uncertain_parameter
-from .settings import SimulationSettings, _simulation
+from .settings import GUIDED_STARTS, SimulationSettings, _simulation
 from .variables import OPERATING_VARIABLES, VARIABLES
 
 
@@ -223,7 +223,7 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
         parameter = _uncertain_parameter(key, entry, f"uncertain.{key}", design)
         _check_parameter_range(parameter, f"uncertain.{key}")
         uncertain[key] = parameter
-    simulation = _simulation(raw.get("simulation"), "simulation", SimulationSettings())
+    simulation = _simulation(raw.get("simulation"), "simulation", SimulationSettings(starts=GUIDED_STARTS))
     outputs_raw = check_mapping(raw.get("outputs") or {}, "outputs", {"report": boolean(), "dpi": DPI})
     outputs = Outputs(**outputs_raw)
     execution = check_mapping(

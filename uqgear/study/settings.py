@@ -55,15 +55,22 @@ class SimulationSettings:
         return values
 
 
+#: The starts of a study that does not say: extra starts only inside the coexistence windows.
+GUIDED_STARTS = MultiStart(guided=True, seeded=1, nodes=9)
+
+
 def _starts(value: Any, path: str) -> MultiStart | None:
-    """``true`` (the default starts), ``false``/none (rest only) or a mapping of :class:`MultiStart` keys."""
+    """``guided`` (the default: extra starts inside the coexistence windows only), ``true`` (every start at every
+    point), ``false``/none (rest only) or a mapping of :class:`MultiStart` keys."""
     if value is None or value is False or value == "none":
         return None
     if value is True:
         return MultiStart()
+    if value == "guided":
+        return GUIDED_STARTS
     if not isinstance(value, Mapping):
         raise StudyError(
-            f"{path}: expected true, false or a mapping with keys "
+            f"{path}: expected guided, true, false or a mapping with keys "
             f"{', '.join(MultiStart.__dataclass_fields__)}; got {value!r}"
         )
     try:

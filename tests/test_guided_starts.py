@@ -1,0 +1,160 @@
+"""Guided starts: windows from continuation, extra starts only inside them, from-rest numbers outside.
+
+Checked against independent references: the continuation's own fold locations and orbits, the
+batch integrator run from rest (bit for bit outside the windows), and brute-force up- and
+down-sweeps that carry the final state from point to point (the envelope must hold every response
+they reach).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+import uqgear
+from uqgear.dynamics import Continuation
+from uqgear.dynamics.attractors import MultiStart, StartedEvaluator, up_down_sweeps
+from uqgear.dynamics.windows import find_windows
+from uqgear.physics.integration import BatchEvaluator, samples_from_mapping
+from uqgear.study.guided_starts import GuidedStartModel
+
+WET = 21145.589  # N m: T2 on wet rail (mu = 0.15) for the bundled design
+RATED = {"drive_torque": 7000.0}
+OPTIONS = {"n_periods": 600, "keep_periods": 200}
+
+
+@pytest.fixture(scope="module")
+def design() -> uqgear.Design:
+    return uqgear.load_design("locomotive")
+
+
+@pytest.fixture(scope="module")
+def wet_windows(design: uqgear.Design):
+    return find_windows(design, (3000.0, 4500.0), {**RATED, "adhesion_torque": WET}, margin=50.0)
+
+
+def test_windows_hold_every_bifurcation_of_the_branch_and_both_orbits_of_the_hysteresis(design, wet_windows):
+    # the continuation on its own (default settings, 1e-5 of the range): every fold and torus point it
+    # locates lies in a window, and a speed far from every bifurcation does not
+    reference = Continuation("pinion_speed", 3000.0, 4500.0).fit(design, {**RATED, "adhesion_torque": WET})
+    located = [b.parameter for b in reference.bifurcations_]
+    assert len(located) >= 4
+    assert wet_windows.contains(located).all()
+    assert not wet_windows.contains([3100.0, 3300.0, 4450.0]).any()
+    # between the folds two stable period-1 orbits: started on each, the runs stay on two responses
+    states = wet_windows.orbit_states(3650.0)
+    assert len(states) == 2
+    samples = samples_from_mapping(
+        {"pinion_speed": [3650.0] * 2, "adhesion_torque": [WET] * 2, **{"drive_torque": [7000.0] * 2}}
+    )
+    runs = uqgear.simulate_batch(design, samples, initial_states=np.array(states), **OPTIONS)
+    low, high = sorted(runs["peak_mesh_force"].values)
+    assert high > 1.3 * low
+
+
+def test_a_window_between_two_nodes_is_covered_where_it_drifts_across_the_speed_axis(design):
+    # the fold pair moves from about 3930 rpm (33.8 kN m) to 4010 rpm (37 kN m): between the nodes the
+    # windows join the nearest windows of both nodes, so the fold pair at 35.4 kN m lies inside
+    found = find_windows(
+        design, (3500.0, 4500.0), RATED, node_parameter="adhesion_torque", node_values=[33835.0, 37000.0], margin=10.0
+    )
+    middle = Continuation("pinion_speed", 3500.0, 4500.0).fit(design, {**RATED, "adhesion_torque": 35400.0})
+    folds = [b.parameter for b in middle.bifurcations_ if b.kind == "fold"]
+    assert len(folds) == 2
+    assert found.contains(folds, [35400.0, 35400.0]).all()
+
+
+def test_outside_the_windows_the_guided_model_gives_the_from_rest_numbers_bit_for_bit(design, wet_windows):
+    speeds = [2000.0, 3100.0, 3600.0, 3650.0, 3700.0, 4450.0]
+    samples = samples_from_mapping(
+        {"pinion_speed": speeds, "adhesion_torque": [WET] * len(speeds), "drive_torque": [7000.0] * len(speeds)}
+    )
+    rest = BatchEvaluator(design, **OPTIONS)
+    started = StartedEvaluator(design, OPTIONS, full_regime=False)
+
+    class Counted:
+        def __init__(self, model):
+            self.model, self.runs, self.design = model, 0, design
+
+        def __call__(self, batch):
+            self.runs += batch.sizes["sample"]
+            return self.model(batch)
+
+    model = GuidedStartModel(Counted(rest), Counted(started), design, MultiStart(guided=True, seeded=1), wet_windows, 5)
+    out = model(samples)
+    alone = rest(samples)
+    inside = wet_windows.contains(speeds)
+    assert inside.tolist() == [False, False, True, True, True, False]
+    for name in ("peak_mesh_force", "dte_rms", "fraction_separation"):
+        assert np.array_equal(out[name].values[~inside], alone[name].values[~inside])
+        assert np.array_equal(out[f"{name}_rest"].values, alone[name].values)
+        # the worst response is never below the one from rest
+        assert np.all(out[name].values >= alone[name].values - 1e-9 * np.abs(alone[name].values))
+    assert out["attractor_count"].values[~inside].tolist() == [1, 1, 1]
+    # 3600 and 3650 rpm hold the low and the high period-1 response (the continuation's two orbits)
+    assert out["attractor_count"].values[2:4].tolist() == [2, 2]
+    forces = np.sort(out["attractor_peak_mesh_force"].values[3])
+    assert forces[1] > 1.3 * forces[0]
+    assert out["peak_mesh_force_max_start"].values[3] != "rest"
+    assert model.window_points == 3
+    assert model.started.runs > 0
+
+
+def test_guided_starts_are_the_default_of_a_study_and_can_be_switched_off():
+    from uqgear.study.schema import study_from_mapping
+
+    raw = yaml.safe_load((Path(uqgear.__file__).parent / "data" / "studies" / "smoke.yaml").read_text())
+    raw.get("simulation", {}).pop("starts", None)
+    starts = study_from_mapping(raw).simulation.starts
+    assert starts is not None and starts.guided
+    raw.setdefault("simulation", {})["starts"] = False
+    assert study_from_mapping(raw).simulation.starts is None
+    raw["simulation"]["starts"] = True
+    assert not study_from_mapping(raw).simulation.starts.guided
+    raw["simulation"]["starts"] = "guided"
+    assert study_from_mapping(raw).simulation.starts.guided
+
+
+@pytest.mark.slow
+def test_the_main_study_envelope_holds_every_response_the_sweeps_reach(tmp_path, design):
+    """The bifurcation envelope of the main study (guided default) at both ends of the T2 interval against
+    up- and down-sweeps every 25 rpm from 3000 to 4800 rpm that carry the final state from point to point."""
+    studies = Path(uqgear.__file__).parent / "data" / "studies"
+    raw = yaml.safe_load((studies / "t2_envelope.yaml").read_text())
+    raw["analyses"] = [a for a in raw["analyses"] if a["name"] == "bifurcation_envelope"]
+    raw["analyses"][0]["operating_points"]["pinion_speed"] = {"start": 3000, "stop": 4800, "num": 73}
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    uqgear.run_study(uqgear.load_study(path), tmp_path / "out")
+    result = xr.open_dataset(tmp_path / "out" / "bifurcation_envelope.nc")
+    speeds = result["pinion_speed"].values
+    ends = result["adhesion_torque"].values[[0, -1]]
+    # the other uncertain parameters at the midpoints the analysis held them at
+    fixed = {k: v for k, v in json.loads(result.attrs["fixed_inputs"]).items() if k != "drive_torque"}
+    samples = samples_from_mapping(
+        {
+            "pinion_speed": np.tile(speeds, 2),
+            "adhesion_torque": np.repeat(ends, speeds.size),
+            "drive_torque": np.full(2 * speeds.size, 7000.0),
+            **{name: np.full(2 * speeds.size, value) for name, value in fixed.items()},
+        }
+    )
+    sweeps = up_down_sweeps(StartedEvaluator(design, OPTIONS), samples)
+    rest = BatchEvaluator(design, **OPTIONS)(samples)
+    reached = np.maximum.reduce(
+        [
+            rest["peak_mesh_force"].values,
+            sweeps["up"]["peak_mesh_force"].values,
+            sweeps["down"]["peak_mesh_force"].values,
+        ]
+    ).reshape(2, speeds.size)
+    envelope = result["peak_mesh_force"].transpose("adhesion_torque", "pinion_speed").values[[0, -1]]
+    # a torus or a chaotic response sampled over 200 periods shows a peak that varies by a per cent or two
+    short = envelope < 0.97 * reached
+    assert not short.any(), [(float(speeds[j]), float(ends[i])) for i, j in zip(*np.nonzero(short))]
+    assert int((result["attractor_count"] > 1).sum()) >= 3

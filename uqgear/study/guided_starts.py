@@ -1,0 +1,433 @@
+"""The gear model of a study with extra starts only where responses can coexist (``starts: guided``).
+
+Running every point from several starts (``starts: true``) finds every response a point holds but
+multiplies the cost of a study by the number of starts, although the responses coexist only in a
+few per cent of the speed x T2 plane. The guided model first follows the periodic branches in pinion
+speed by continuation at ``nodes`` values of the adhesion torque across its interval
+(:func:`uqgear.dynamics.windows.find_windows`; at the analysis's own T2 where T2 is fixed) and takes
+the speed windows where a branch folds, doubles, loses stability or grazes. Then, for every batch:
+
+* every point runs from rest, through the same model as a study without starts: a point outside
+  every window gives today's from-rest numbers, bit for bit;
+* the points inside a window (their speed, scaled to the windows' inputs where the sample changes
+  the mesh-mode frequency, :func:`~uqgear.dynamics.windows.equivalent_speeds`, within a window at
+  their T2) run again from rest, from their up- and down-sweep neighbours' final states (among the
+  window points), from every stable orbit the continuation holds at their speed (``orbit-1``,
+  ``orbit-2``, ...) and from ``seeded`` random states; their steady responses are grouped into
+  attractors (:class:`~uqgear.dynamics.attractors.MultiStartSearch`).
+
+The output has the layout of :class:`~uqgear.study.coexistence.MultiStartModel` for every point
+(``<qoi>`` of the worst attractor, ``<qoi>_max`` / ``_min`` / ``_rest``, ``attractor_count``,
+``attractor_*``); outside the windows it is the rest run's, one attractor. The windows found and the
+points and runs spent are in the attributes ``windows``, ``window_points`` and ``model_runs``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, cast
+
+import numpy as np
+import xarray as xr
+
+from ..dynamics.attractors import ATTRACTOR_QOIS, MultiStart, MultiStartSearch, StartedEvaluator
+from ..dynamics.regimes import period_labels
+from ..dynamics.windows import CoexistenceWindows, equivalent_speeds, follow_nodes, windows_from
+from ..physics.design import Design
+from ..physics.integration import QOI_INFO
+from .coexistence import PER_ATTRACTOR, summarise
+from .settings import SimulationSettings
+
+#: The node input of the windows: the uncertain adhesion torque.
+NODE_PARAMETER = "adhesion_torque"
+#: Continuations already made in this process, by their inputs (they hold for every analysis of a study
+#: that runs the same design over the same speeds): the windows are found once per study run.
+_FITS: dict[str, tuple[list[Any], float]] = {}
+_FITS_MAX = 16
+
+
+def _fits(
+    design: Design,
+    speed_range: tuple[float, float],
+    fixed: Mapping[str, float],
+    nodes: Sequence[float],
+    simulation: SimulationSettings,
+) -> tuple[list[Any], float]:
+    key = json.dumps(
+        {
+            "design": design.to_dict(),
+            "range": list(speed_range),
+            "fixed": dict(fixed),
+            "nodes": list(nodes),
+            "damping_in_separation": simulation.damping_in_separation,
+            "stiffness": simulation.stiffness,
+        },
+        sort_keys=True,
+        default=str,
+    )
+    if key not in _FITS:
+        began = time.perf_counter()
+        fits = follow_nodes(
+            design,
+            speed_range,
+            fixed,
+            node_parameter=NODE_PARAMETER if len(nodes) else None,
+            node_values=nodes,
+            damping_in_separation=simulation.damping_in_separation,
+            stiffness=simulation.stiffness,
+        )
+        if len(_FITS) >= _FITS_MAX:
+            _FITS.pop(next(iter(_FITS)))
+        _FITS[key] = (fits, time.perf_counter() - began)
+    return _FITS[key]
+
+
+def analysis_windows(context: Any, simulation: SimulationSettings) -> CoexistenceWindows:
+    """The windows of an analysis (an :class:`~uqgear.study.analyses.AnalysisContext`): continuations over the
+    hull of the study's and the analysis's speeds, at ``nodes`` T2 values across its interval where T2 is
+    uncertain and not fixed by the analysis, else at its fixed value; every other input at the analysis's
+    fixed values (uncertain parameters at their nominal values)."""
+    starts = cast(MultiStart, simulation.starts)
+    speeds = _speeds(context)
+    step = float(np.min(np.diff(np.unique(speeds)))) if np.unique(speeds).size > 1 else 0.0
+    margin = max(float(starts.margin), step)
+    low, high = float(speeds.min()) - margin, float(speeds.max()) + margin
+    low = max(low, 1.0)
+    fixed = {
+        name: float(value)
+        for name, value in context.fixed_values(exclude=["pinion_speed", NODE_PARAMETER]).items()
+        if name != "pinion_speed"
+    }
+    nodes: list[float] = []
+    uncertain = context.study.uncertain.get(NODE_PARAMETER)
+    given = context.spec.fixed.get(NODE_PARAMETER)
+    if given is not None or uncertain is None:
+        fixed[NODE_PARAMETER] = float(given if given is not None else context.fixed_values()[NODE_PARAMETER])
+    else:
+        nodes = np.linspace(float(uncertain.lower), float(uncertain.upper), int(starts.nodes)).tolist()
+    fits, seconds = _fits(context.design, (low, high), fixed, nodes, simulation)
+    return windows_from(fits, margin, node_parameter=NODE_PARAMETER if nodes else None, fixed=fixed, seconds=seconds)
+
+
+def _speeds(context: Any) -> np.ndarray:
+    """Every pinion speed the study and the analysis name."""
+    found: list[float] = []
+    for spec in (context.spec, *getattr(context.study, "analyses", ())):
+        sweeps = getattr(spec, "sweeps", {})
+        if "pinion_speed" in sweeps:
+            found += [float(v) for v in np.asarray(sweeps["pinion_speed"].values, dtype=float)]
+        fixed = getattr(spec, "fixed", {})
+        if "pinion_speed" in fixed:
+            found.append(float(fixed["pinion_speed"]))
+    own = context.spec.sweeps.get("pinion_speed")
+    if own is not None:
+        # the grid step that sets the margin is the analysis's own
+        return np.unique(np.concatenate([np.asarray(own.values, dtype=float), found]))
+    return np.unique(np.asarray(found or [context.fixed_values()["pinion_speed"]], dtype=float))
+
+
+class GuidedStartModel:
+    """The model ``samples -> results`` with extra starts only inside the coexistence windows (module docstring).
+
+    Parameters
+    ----------
+    rest : callable
+        The from-rest model of the analysis (the model of a study without starts).
+    started : callable
+        The started batch model (:func:`~uqgear.study.coexistence.started_model`).
+    design : Design
+    settings : MultiStart
+    windows : CoexistenceWindows
+    seed : SeedSequence
+        Seed of the random starts (the same for every call).
+    poincare : bool
+        Keep Poincare points.
+    """
+
+    def __init__(
+        self,
+        rest: Any,
+        started: Any,
+        design: Design,
+        settings: MultiStart,
+        windows: CoexistenceWindows,
+        seed: Any,
+        poincare: bool = True,
+    ) -> None:
+        self.rest = rest
+        self.started = started
+        self.design = design
+        self.settings = settings
+        self.windows = windows
+        self.seed = seed
+        self.poincare = poincare
+        #: Points that lay in a window, over every call.
+        self.window_points = 0
+        self.points = 0
+
+    @property
+    def runs(self) -> int:
+        """Model runs made so far (rest runs and extra starts)."""
+        return int(self.rest.runs) + int(self.started.runs)
+
+    def inside(self, samples: xr.Dataset) -> np.ndarray:
+        """Which samples lie in a window."""
+        speeds = equivalent_speeds(samples, self.design, self.windows)
+        values = (
+            np.asarray(samples[NODE_PARAMETER].values, dtype=float)
+            if NODE_PARAMETER in samples and self.windows.node_parameter is not None
+            else None
+        )
+        return self.windows.contains(speeds, values)
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        base = self.rest(samples)
+        inside = self.inside(samples)
+        self.points += int(inside.size)
+        self.window_points += int(inside.sum())
+        rows = np.nonzero(inside)[0]
+        found = None
+        if rows.size:
+            subset = samples.isel(sample=rows)
+            rest = base.isel(sample=rows)
+            rest = rest.merge(period_labels(rest)[["regime", "response_period"]], compat="override")
+            search = MultiStartSearch(self.settings, self.seed).fit(
+                self.started, subset, self.design, extra_states=self._orbit_starts(subset), rest=rest
+            )
+            found = summarise(search, subset, poincare=self.poincare)
+        out = combine(base, found, rows, poincare=self.poincare)
+        if not self.poincare:
+            out = out.drop_dims("period", errors="ignore")
+        out.attrs.update(
+            starts=json.dumps(self.settings.to_dict()),
+            window_points=int(rows.size),
+            windows=json.dumps(self.windows.to_records()),
+        )
+        return out
+
+    def _orbit_starts(self, subset: xr.Dataset) -> dict[str, np.ndarray]:
+        speeds = equivalent_speeds(subset, self.design, self.windows)
+        values = (
+            np.asarray(subset[NODE_PARAMETER].values, dtype=float)
+            if NODE_PARAMETER in subset
+            else np.full(speeds.size, math.nan)
+        )
+        states = [self.windows.orbit_states(float(s), float(v)) for s, v in zip(speeds, values)]
+        width = max((len(found) for found in states), default=0)
+        out = {}
+        for k in range(width):
+            column = np.full((speeds.size, 6), np.nan)
+            for row, found in enumerate(states):
+                if k < len(found):
+                    column[row] = found[k]
+            out[f"orbit-{k + 1}"] = column
+        return out
+
+
+def _rest_layout(base: xr.Dataset, poincare: bool) -> xr.Dataset:
+    """The multi-start layout of runs from rest alone: one attractor, the rest start's."""
+    n = base.sizes["sample"]
+    out = base.copy()
+    for name in [*QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
+        if name in base:
+            out[f"{name}_rest"] = base[name].assign_attrs(long_name=f"{name} from rest")
+    for name in ATTRACTOR_QOIS:
+        if name not in base:
+            continue
+        for bound in ("max", "min"):
+            out[f"{name}_{bound}"] = base[name].assign_attrs(
+                units=QOI_INFO[name][0], long_name=f"{bound} over attractors of {name}"
+            )
+            out[f"{name}_{bound}_attractor"] = ("sample", np.zeros(n, dtype=np.int64))
+            out[f"{name}_{bound}_start"] = ("sample", np.full(n, "rest"))
+    out["attractor_count"] = (
+        "sample",
+        np.ones(n, dtype=np.int64),
+        {"units": "1", "long_name": "distinct steady responses found"},
+    )
+    for name in PER_ATTRACTOR:
+        if name in base:
+            out[f"attractor_{name}"] = (("sample", "attractor"), base[name].values[:, None], dict(base[name].attrs))
+    regime = np.asarray(base["regime"].values).astype(str) if "regime" in base else np.full(n, "")
+    for name, values in (
+        ("regime", regime),
+        ("share", np.ones(n)),
+        ("starts", np.full(n, "rest")),
+        ("first_start", np.full(n, "rest")),
+    ):
+        out[f"attractor_{name}"] = (("sample", "attractor"), values[:, None])
+    out["worst_attractor_start"] = ("sample", np.full(n, "rest"))
+    if poincare and "poincare_x" in base:
+        out["poincare_x_rest"] = base["poincare_x"]
+        for start in ("up", "down"):
+            out[f"poincare_x_{start}"] = base["poincare_x"].where(False)
+    return out.assign_coords(attractor=("attractor", [0]))
+
+
+def combine(base: xr.Dataset, found: xr.Dataset | None, rows: np.ndarray, poincare: bool = True) -> xr.Dataset:
+    """The from-rest runs of every point (``base``) with the multi-start outputs ``found`` of the points ``rows``
+    written over them."""
+    out = _rest_layout(base, poincare)
+    if found is None:
+        return out
+    width = max(found.sizes.get("attractor", 1), 1)
+    if width > 1:
+        out = out.reindex(attractor=np.arange(width))
+        for name in cast(Iterable[str], out.data_vars):
+            if "attractor" in out[name].dims and out[name].dtype.kind not in "fc":
+                values = out[name].values
+                filled = np.where(np.arange(width)[None, :] == 0, values, "" if values.dtype.kind in "USO" else 0)
+                out[name] = (out[name].dims, filled.astype(str) if values.dtype.kind in "USO" else filled)
+    for name in cast(Iterable[str], found.data_vars):
+        if name not in out or "sample" not in found[name].dims:
+            continue
+        dims = ("sample", *(dim for dim in out[name].dims if dim != "sample"))
+        values = out[name].transpose(*dims).values.copy()
+        column = found[name].transpose(*dims).values
+        if values.dtype.kind in "USO" or column.dtype.kind in "USO":
+            values = values.astype(str).astype(object)
+            column = column.astype(str)
+        if column.ndim == 2 and column.shape[1] < values.shape[1]:
+            pad = np.full(
+                (column.shape[0], values.shape[1] - column.shape[1]), np.nan if column.dtype.kind == "f" else ""
+            )
+            column = np.concatenate([column, pad.astype(column.dtype)], axis=1)
+        values[rows] = column
+        if values.dtype == object:
+            values = values.astype(str)
+        out[name] = (dims, values, out[name].attrs)
+    if "regime" in out and "attractor_regime" in found:
+        worst = np.asarray(found["worst_attractor_start"].values).astype(str)
+        first = np.asarray(found["attractor_first_start"].values).astype(str)
+        regimes = np.asarray(found["attractor_regime"].values).astype(str)
+        picked = [regimes[i][list(first[i]).index(worst[i])] for i in range(rows.size)]
+        values = np.asarray(out["regime"].values).astype(object)
+        values[rows] = picked
+        out["regime"] = ("sample", values.astype(str), out["regime"].attrs)
+    return out
+
+
+class _CountedRuns:
+    """A batch model that counts the runs it makes."""
+
+    def __init__(self, evaluate: Any) -> None:
+        self.evaluate = evaluate
+        self.design = evaluate.design
+        self.runs = 0
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        self.runs += samples.sizes["sample"]
+        return self.evaluate(samples)
+
+
+def guided_start_model(context: Any, simulation: SimulationSettings, rest: Any, poincare: bool) -> GuidedStartModel:
+    """The guided model of an analysis: ``rest`` is its from-rest model (``simulation.starts`` guided).
+
+    The extra starts run in this process, without checkpoints: they are a few per cent of the runs,
+    in small batches (a sweep is one batch per step), for which a checkpoint file costs more than the
+    runs. Their runs are labelled by period detection alone (all the grouping needs); the analyses
+    classify the response they report in full."""
+    starts = cast(MultiStart, simulation.starts)
+    windows = analysis_windows(context, simulation)
+    options = {
+        "n_periods": simulation.n_periods,
+        "keep_periods": simulation.keep_periods,
+        "lyapunov": simulation.lyapunov,
+        "damping_in_separation": simulation.damping_in_separation,
+        "stiffness": simulation.stiffness,
+        "steps_per_mode": simulation.steps_per_mode,
+        "threads": context.threads,
+    }
+    started = _CountedRuns(StartedEvaluator(context.design, options, context.stage_seed(99), full_regime=False))
+    return GuidedStartModel(rest, started, context.design, starts, windows, context.stage_seed(98), poincare)
+
+
+def widen_over_attractors(
+    context: Any, result: xr.Dataset, names: Sequence[str], qois: Sequence[str], fixed: Mapping[str, float]
+) -> xr.Dataset:
+    """Interval bounds from rest (``result``) widened over the attractors at the sweep points whose box reaches a
+    coexistence window: there the nodes of a grid of ``points`` per interval parameter that lie in a window run with
+    the guided model, and each bound is the outer of the from-rest bound and the extremes over their attractors.
+    Elsewhere the from-rest bounds stand, bit for bit."""
+    from ..uq.sweeps import batch_samples, make_sweep
+
+    model = context.model(poincare=False)
+    assert isinstance(model, GuidedStartModel)  # the caller's condition: guided starts
+    space = context.parameter_space(names, fixed)
+    sweep = context.sweep()
+    points = int(context.options["points"] or 9)
+    spec = make_sweep(sweep, space)
+    intervals = [space[name] for name in space.interval_names]
+    axes = [np.linspace(float(p.lower), float(p.upper), points) for p in intervals]
+    grid = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    flat: dict[str, np.ndarray] = {}
+    sweep_values = spec.point_values()
+    n_points = spec.size
+    for column, name in enumerate(space.interval_names):
+        flat[name] = np.tile(grid[:, column], n_points)
+    for name in space.names:
+        if name not in space.interval_names and name not in flat:
+            flat[name] = np.full(grid.shape[0] * n_points, float(space[name].value))
+    for name, values in sweep_values.items():
+        flat[name] = np.repeat(values, grid.shape[0])
+    samples = batch_samples(flat, {})
+    in_window = model.inside(samples)
+    inside = in_window.reshape(n_points, grid.shape[0]).any(axis=1)
+    out = result.copy()
+    dims = tuple(spec.names)
+    count = np.ones(n_points, dtype=np.int64)
+    for qoi in qois:
+        out[f"{qoi}_start"] = (
+            (*dims, "bound"),
+            np.full((*spec.shape, 2), "rest"),
+            {"long_name": f"start whose attractor gives each bound of {qoi}"},
+        )
+    if in_window.any():
+        # only the grid nodes inside a window: elsewhere the from-rest bounds already hold every response
+        rows = np.nonzero(in_window)[0]
+        found = model(samples.isel(sample=rows))
+        point_of = rows // grid.shape[0]
+        for qoi in qois:
+            bounds = out[qoi].transpose(*dims, "bound").values.reshape(n_points, 2).copy()
+            starts = out[f"{qoi}_start"].transpose(*dims, "bound").values.reshape(n_points, 2).astype(object)
+            for column, (bound, better) in enumerate((("min", np.less), ("max", np.greater))):
+                values = np.asarray(found[f"{qoi}_{bound}"].values, dtype=float)
+                labels = np.asarray(found[f"{qoi}_{bound}_start"].values).astype(str)
+                for row, point in enumerate(point_of):
+                    if np.isfinite(values[row]) and better(values[row], bounds[point, column]):
+                        bounds[point, column] = values[row]
+                        starts[point, column] = labels[row]
+            out[qoi] = ((*dims, "bound"), bounds.reshape(*spec.shape, 2), out[qoi].attrs)
+            labelled = starts.astype(str).reshape(*spec.shape, 2)
+            out[f"{qoi}_start"] = ((*dims, "bound"), labelled, out[f"{qoi}_start"].attrs)
+        np.maximum.at(count, point_of, np.asarray(found["attractor_count"].values, dtype=np.int64))
+    count = count.reshape(spec.shape)
+    inside = inside.reshape(spec.shape)
+    out["attractor_count"] = (dims, count, {"units": "1", "long_name": "most attractors at any point of the box"})
+    out["coexisting"] = (dims, count > 1, {"long_name": "responses coexist somewhere in the box"})
+    out["in_window"] = (
+        dims,
+        inside,
+        {"long_name": "the box reaches a coexistence window (bounds also scanned over attractors)"},
+    )
+    out.attrs.update(
+        model_runs=int(out.attrs.get("model_runs", 0)) + int(model.runs),
+        starts=json.dumps(model.settings.to_dict()),
+        windows=json.dumps(model.windows.to_records()),
+        window_points=int(model.window_points),
+        window_seconds=float(model.windows.seconds),
+    )
+    return out
+
+
+__all__ = [
+    "GuidedStartModel",
+    "guided_start_model",
+    "analysis_windows",
+    "combine",
+    "widen_over_attractors",
+    "NODE_PARAMETER",
+]
