@@ -93,9 +93,12 @@ def analysis_windows(context: Any, simulation: SimulationSettings) -> Coexistenc
     starts = cast(MultiStart, simulation.starts)
     speeds = _speeds(context)
     step = float(np.min(np.diff(np.unique(speeds)))) if np.unique(speeds).size > 1 else 0.0
-    margin = max(float(starts.margin), step)
+    # the grid's own step joins a window's sweep neighbours to it; a coarse grid's step would make the
+    # windows span most of the range, so it counts up to five times the set margin
+    margin = max(float(starts.margin), min(step, 5.0 * float(starts.margin)))
     low, high = float(speeds.min()) - margin, float(speeds.max()) + margin
-    low = max(low, 1.0)
+    # the branches are followed from a positive speed: half the lowest speed at most below it
+    low = max(low, 0.5 * float(speeds.min()))
     fixed = {
         name: float(value)
         for name, value in context.fixed_values(exclude=["pinion_speed", NODE_PARAMETER]).items()
