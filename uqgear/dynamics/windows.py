@@ -24,7 +24,7 @@ highest natural frequency as the sample's does (:func:`equivalent_speeds`): the 
 the mesh resonances.
 
 The windows are a guide for where extra starts are worth their cost
-(:class:`uqgear.study.coexistence.GuidedStartModel`), not a proof that nothing coexists elsewhere:
+(:class:`uqgear.study.guided_starts.GuidedStartModel`), not a proof that nothing coexists elsewhere:
 a window born and gone between two nodes, and responses coexisting away from every bifurcation of
 the period-1 branch family (an isolated branch), are not seen.
 """
