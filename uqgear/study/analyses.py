@@ -115,16 +115,7 @@ def evaluate_batch(
         The :func:`~uqgear.physics.integration.simulate_batch` outputs (dims
         ``sample``, ``period``), input variables as coordinates.
     """
-    model = BatchEvaluator(
-        design,
-        n_periods=simulation.n_periods,
-        keep_periods=simulation.keep_periods,
-        lyapunov=simulation.lyapunov,
-        damping_in_separation=simulation.damping_in_separation,
-        stiffness=simulation.stiffness,
-        steps_per_mode=simulation.steps_per_mode,
-        threads=threads,
-    )
+    model = BatchEvaluator(design, **simulation.batch_options(threads))
     result = model(samples)
     if classify:
         seed = classify_seed if classify_seed is not None else 0

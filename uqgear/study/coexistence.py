@@ -49,16 +49,7 @@ def evaluate_started(
 ) -> xr.Dataset:
     """One batch with start states (``initial_<state>``), as :class:`StartedEvaluator`; module-level so that a
     dask worker can run it."""
-    options = {
-        "n_periods": simulation.n_periods,
-        "keep_periods": simulation.keep_periods,
-        "lyapunov": simulation.lyapunov,
-        "damping_in_separation": simulation.damping_in_separation,
-        "stiffness": simulation.stiffness,
-        "steps_per_mode": simulation.steps_per_mode,
-        "threads": threads,
-    }
-    return StartedEvaluator(design, options, classify_seed)(samples)
+    return StartedEvaluator(design, simulation.batch_options(threads), classify_seed)(samples)
 
 
 class MultiStartModel:

@@ -335,15 +335,7 @@ def guided_start_model(context: Any, simulation: SimulationSettings, rest: Any, 
     classify the response they report in full."""
     starts = cast(MultiStart, simulation.starts)
     windows = analysis_windows(context, simulation)
-    options = {
-        "n_periods": simulation.n_periods,
-        "keep_periods": simulation.keep_periods,
-        "lyapunov": simulation.lyapunov,
-        "damping_in_separation": simulation.damping_in_separation,
-        "stiffness": simulation.stiffness,
-        "steps_per_mode": simulation.steps_per_mode,
-        "threads": context.threads,
-    }
+    options = simulation.batch_options(context.threads)
     started = _CountedRuns(StartedEvaluator(context.design, options, context.stage_seed(99), full_regime=False))
     return GuidedStartModel(rest, started, context.design, starts, windows, context.stage_seed(98), poincare)
 

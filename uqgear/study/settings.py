@@ -46,6 +46,25 @@ class SimulationSettings:
         if isinstance(self.starts, Mapping):
             object.__setattr__(self, "starts", MultiStart.from_mapping(self.starts))
 
+    def batch_options(self, threads: int | None = None) -> dict[str, Any]:
+        """Keyword arguments of :func:`~uqgear.physics.integration.simulate_batch` (and
+        :class:`~uqgear.physics.integration.BatchEvaluator`) for these settings.
+
+        Examples
+        --------
+        >>> SimulationSettings(n_periods=600).batch_options(threads=2)["n_periods"]
+        600
+        """
+        return {
+            "n_periods": self.n_periods,
+            "keep_periods": self.keep_periods,
+            "lyapunov": self.lyapunov,
+            "damping_in_separation": self.damping_in_separation,
+            "stiffness": self.stiffness,
+            "steps_per_mode": self.steps_per_mode,
+            "threads": threads,
+        }
+
     def to_dict(self) -> dict[str, Any]:
         """The settings as plain values; ``starts`` only when set, so the keys of results run from rest
         only (checkpoints, resumed studies) stay what they were."""
