@@ -93,7 +93,8 @@ class MultiStart:
     nodes : int
         Guided: continuations per interval of the node input (the adhesion torque), both ends included.
     margin : float
-        Guided: rpm added on both sides of every window (at least the speed step of the grid run).
+        Guided: rpm added on both sides of every window (at least the study's finest speed step, up to five
+        margins).
     """
 
     sweeps: bool = True
@@ -489,17 +490,7 @@ def _partial_stage(
             out[name] = variable.copy(data=np.full(variable.shape, "", dtype=variable.dtype))
     if rows.size == 0:
         return out
-    result = evaluate(_with_starts(samples, rows, states[rows]))
-    for name in list(out.data_vars):
-        if name in result and "sample" in out[name].dims:
-            dims = ("sample", *(dim for dim in out[name].dims if dim != "sample"))
-            values = out[name].transpose(*dims).values.copy()
-            column = result[name].transpose(*dims).values
-            if values.dtype.kind in "US" and column.dtype.itemsize > values.dtype.itemsize:
-                values = values.astype(column.dtype)
-            values[rows] = column
-            out[name] = (dims, values, out[name].attrs)
-    return out
+    return _put_rows(out, rows, evaluate(_with_starts(samples, rows, states[rows])))
 
 
 def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:

@@ -93,8 +93,9 @@ def analysis_windows(context: Any, simulation: SimulationSettings) -> Coexistenc
     starts = cast(MultiStart, simulation.starts)
     speeds = _speeds(context)
     step = float(np.min(np.diff(np.unique(speeds)))) if np.unique(speeds).size > 1 else 0.0
-    # the grid's own step joins a window's sweep neighbours to it; a coarse grid's step would make the
-    # windows span most of the range, so it counts up to five times the set margin
+    # the study's finest speed step joins a window's sweep neighbours to it (all analyses share the
+    # continuations); a coarse grid's step would make the windows span most of the range, so it counts up
+    # to five times the set margin
     margin = max(float(starts.margin), min(step, 5.0 * float(starts.margin)))
     low, high = float(speeds.min()) - margin, float(speeds.max()) + margin
     # the branches are followed from a positive speed: half the lowest speed at most below it
@@ -116,19 +117,13 @@ def analysis_windows(context: Any, simulation: SimulationSettings) -> Coexistenc
 
 
 def _speeds(context: Any) -> np.ndarray:
-    """Every pinion speed the study and the analysis name."""
+    """Every pinion speed the study's analyses name (the analysis's own among them), sorted and unique."""
     found: list[float] = []
-    for spec in (context.spec, *getattr(context.study, "analyses", ())):
-        sweeps = getattr(spec, "sweeps", {})
-        if "pinion_speed" in sweeps:
-            found += [float(v) for v in np.asarray(sweeps["pinion_speed"].values, dtype=float)]
-        fixed = getattr(spec, "fixed", {})
-        if "pinion_speed" in fixed:
-            found.append(float(fixed["pinion_speed"]))
-    own = context.spec.sweeps.get("pinion_speed")
-    if own is not None:
-        # the grid step that sets the margin is the analysis's own
-        return np.unique(np.concatenate([np.asarray(own.values, dtype=float), found]))
+    for spec in context.study.analyses:
+        if "pinion_speed" in spec.sweeps:
+            found += [float(v) for v in np.asarray(spec.sweeps["pinion_speed"].values, dtype=float)]
+        if "pinion_speed" in spec.fixed:
+            found.append(float(spec.fixed["pinion_speed"]))
     return np.unique(np.asarray(found or [context.fixed_values()["pinion_speed"]], dtype=float))
 
 
@@ -169,27 +164,27 @@ class GuidedStartModel:
         self.poincare = poincare
         #: Points that lay in a window, over every call.
         self.window_points = 0
-        self.points = 0
 
     @property
     def runs(self) -> int:
         """Model runs made so far (rest runs and extra starts)."""
         return int(self.rest.runs) + int(self.started.runs)
 
+    def _where(self, samples: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
+        """Each sample's equivalent speed and node value (NaN without one)."""
+        speeds = equivalent_speeds(samples, self.design, self.windows)
+        if NODE_PARAMETER in samples and self.windows.node_parameter is not None:
+            return speeds, np.asarray(samples[NODE_PARAMETER].values, dtype=float)
+        return speeds, np.full(speeds.size, math.nan)
+
     def inside(self, samples: xr.Dataset) -> np.ndarray:
         """Which samples lie in a window."""
-        speeds = equivalent_speeds(samples, self.design, self.windows)
-        values = (
-            np.asarray(samples[NODE_PARAMETER].values, dtype=float)
-            if NODE_PARAMETER in samples and self.windows.node_parameter is not None
-            else None
-        )
-        return self.windows.contains(speeds, values)
+        return self.windows.contains(*self._where(samples))
 
     def __call__(self, samples: xr.Dataset) -> xr.Dataset:
         base = self.rest(samples)
-        inside = self.inside(samples)
-        self.points += int(inside.size)
+        speeds, values = self._where(samples)
+        inside = self.windows.contains(speeds, values)
         self.window_points += int(inside.sum())
         rows = np.nonzero(inside)[0]
         found = None
@@ -197,8 +192,9 @@ class GuidedStartModel:
             subset = samples.isel(sample=rows)
             rest = base.isel(sample=rows)
             rest = rest.merge(period_labels(rest)[["regime", "response_period"]], compat="override")
+            starts = self._orbit_starts(speeds[rows], values[rows])
             search = MultiStartSearch(self.settings, self.seed).fit(
-                self.started, subset, self.design, extra_states=self._orbit_starts(subset), rest=rest
+                self.started, subset, self.design, extra_states=starts, rest=rest
             )
             found = summarise(search, subset, poincare=self.poincare)
         out = combine(base, found, rows, poincare=self.poincare)
@@ -211,13 +207,8 @@ class GuidedStartModel:
         )
         return out
 
-    def _orbit_starts(self, subset: xr.Dataset) -> dict[str, np.ndarray]:
-        speeds = equivalent_speeds(subset, self.design, self.windows)
-        values = (
-            np.asarray(subset[NODE_PARAMETER].values, dtype=float)
-            if NODE_PARAMETER in subset
-            else np.full(speeds.size, math.nan)
-        )
+    def _orbit_starts(self, speeds: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray]:
+        """The stable orbits at each (equivalent speed, node value) as start states ``orbit-1``, ``orbit-2``, ..."""
         states = [self.windows.orbit_states(float(s), float(v)) for s, v in zip(speeds, values)]
         width = max((len(found) for found in states), default=0)
         out = {}
