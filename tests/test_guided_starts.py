@@ -120,6 +120,47 @@ def test_guided_starts_are_the_default_of_a_study_and_can_be_switched_off():
     assert study_from_mapping(raw).simulation.starts.guided
 
 
+@pytest.mark.parametrize(
+    ("starts", "message"),
+    [
+        ("guidd", r"simulation\.starts: expected guided, true, false or a mapping"),
+        ("{guided: yes please}", r"simulation\.starts\.guided: expected true or false"),
+        ("{guided: true, nodes: 0}", r"simulation\.starts\.nodes: expected an integer in \[1, 64\]"),
+        ("{guided: true, nodes: 2.5}", r"simulation\.starts\.nodes: expected an integer"),
+        ("{guided: true, margin: -5}", r"simulation\.starts\.margin: expected a number of rpm in \[0, 2000\]"),
+    ],
+)
+def test_wrong_guided_settings_are_refused_naming_the_key(starts, message):
+    from uqgear.common.errors import StudyError
+    from uqgear.study.schema import parse_study
+
+    text = (Path(uqgear.__file__).parent / "data" / "studies" / "smoke.yaml").read_text()
+    raw = yaml.safe_load(text)
+    raw["simulation"] = {**raw.get("simulation", {}), "starts": "STARTS"}
+    with pytest.raises(StudyError, match=message):
+        parse_study(yaml.safe_dump(raw).replace("STARTS", starts))
+
+
+def test_a_stable_stretch_that_turns_is_split_into_pieces_one_valued_in_speed():
+    from uqgear.dynamics.windows import _monotone_pieces
+
+    class Point:
+        def __init__(self, speed: float) -> None:
+            self.state = np.full(6, speed)
+
+    class Branch:
+        period = 1
+        points = [Point(v) for v in (1.0, 2.0, 3.0, 2.5, 2.0, 4.0)]
+
+    parameters = np.array([p.state[0] for p in Branch.points])
+    pieces = _monotone_pieces(Branch, parameters, 0, 5)
+    assert [piece.speeds.tolist() for piece in pieces] == [[1.0, 2.0, 3.0], [2.0, 2.5, 3.0], [2.0, 4.0]]
+    # each piece interpolates the state of its own stretch (here the state is the speed)
+    assert [float(piece.state_at(2.75)[0]) for piece in pieces[:2]] == [2.75, 2.75]
+    assert pieces[2].state_at(2.75)[0] == pytest.approx(2.75)
+    assert pieces[0].state_at(3.5) is None
+
+
 @pytest.mark.slow
 def test_the_main_study_envelope_holds_every_response_the_sweeps_reach(tmp_path, design):
     """The bifurcation envelope of the main study (guided default) at both ends of the T2 interval against

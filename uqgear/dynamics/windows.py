@@ -216,6 +216,19 @@ def _stretches(branch: Any) -> list[tuple[int, int, bool]]:
     return runs
 
 
+def _monotone_pieces(branch: Any, parameters: np.ndarray, first: int, last: int) -> list[StableStretch]:
+    """The stable points ``first`` to ``last`` of a branch as stretches one-valued in speed: a stretch that turns
+    (on a kink of the discrete map) is split where it does, each piece sorted by speed."""
+    turns = np.nonzero(np.diff(np.sign(np.diff(parameters[first : last + 1]))))[0] + 1
+    pieces = []
+    for start, stop in zip([first, *(first + turns)], [*(first + turns), last]):
+        if stop > start:
+            order = np.argsort(parameters[start : stop + 1], kind="stable")
+            states = np.array([branch.points[i].state for i in range(start, stop + 1)])[order]
+            pieces.append(StableStretch(branch.period, parameters[start : stop + 1][order], states))
+    return pieces
+
+
 def _node_windows(fit: Continuation, value: float, margin: float) -> NodeWindows:
     """Windows and stable stretches of one continuation (module docstring)."""
     spans: list[Window] = []
@@ -226,13 +239,7 @@ def _node_windows(fit: Continuation, value: float, margin: float) -> NodeWindows
             spans.append(Window(float(parameters.min()), float(parameters.max()), ("doubled",)))
         for first, last, stable in _stretches(branch):
             if stable:
-                order = np.argsort(parameters[first : last + 1], kind="stable")
-                states = np.array([branch.points[i].state for i in range(first, last + 1)])[order]
-                speeds = parameters[first : last + 1][order]
-                # a stretch that turns (after a fold) is not one-valued in speed: split it where it does
-                breaks = np.nonzero(np.diff(np.sign(np.diff(parameters[first : last + 1]))))[0]
-                if breaks.size == 0 and speeds.size > 1:
-                    stretches.append(StableStretch(branch.period, speeds, states))
+                stretches += _monotone_pieces(branch, parameters, first, last)
                 continue
             low, high = max(first - 1, 0), min(last + 1, len(branch.points) - 1)
             spans.append(
