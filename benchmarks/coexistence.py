@@ -56,7 +56,7 @@ def main() -> None:
                 variant = dict(raw, simulation={**(raw.get("simulation") or {}), "starts": value})
                 paths[mode] = root / f"{name}-{mode}.yaml"
                 paths[mode].write_text(yaml.safe_dump(variant))
-            run(paths["guided"], root / "warm-up")
+            run(paths["guided"], root / f"{name}-warm-up")
             times = {mode: run(path, root / f"{name}-{mode}") for mode, path in paths.items()}
             windows = {mode: found(root / f"{name}-{mode}") for mode in MODES}
             report[name] = {"seconds": times, "found": windows}
