@@ -55,6 +55,8 @@ _PUBLIC: dict[str, str] = {
     "spectrum_dataset": "dynamics",
     # uncertainty
     "ParameterSpace": "uq",
+    "PosteriorDraws": "uq",
+    "PosteriorError": "uq",
     "Interval": "uq",
     "Distribution": "uq",
     "Fixed": "uq",

@@ -17,7 +17,8 @@ along its steps:
 - step 4, held-out scoring: :mod:`.heldout`, :mod:`.scoring`;
 - step 5, verdict: :mod:`.verdict` (the rules), :mod:`.first_effect`, :mod:`.decision`;
 - step 6, several effects: :mod:`.selection`, :mod:`.effect_set`;
-- the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`;
+- the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`; the named
+  effects read back as model inputs: :mod:`.named_effects`;
 - the effect families as plug-ins: :mod:`.effects`;
 - what a campaign holds that is no effect (line interference, a healthy
   reference, the gears' pitch errors, the sideband phase test): :mod:`.allowances`.
@@ -33,6 +34,7 @@ from .effects import EffectFamily, effect_family, effect_names, register_effect,
 from .errors import DiagnosisError
 from .estimator import Diagnosis
 from .inputs import DiagnosisSeeds
+from .named_effects import named_effects
 from .result import DiagnosisResult
 from .scoring import CandidateScore
 from .settings import DiagnosisSettings
@@ -43,6 +45,7 @@ __all__ = [
     "Diagnosis",
     "DiagnosisSettings",
     "DiagnosisSeeds",
+    "named_effects",
     "diagnose",
     "write_diagnosis",
     "decide",

@@ -6,6 +6,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from ..physics.effect_draws import UncertainEffect
+from ..physics.effects import Effect
 from .decision import Decision
 from .scoring import CandidateScore
 
@@ -36,6 +38,16 @@ class SelectedEffect:
     shrink_share: float
     decision: Decision
     gap_interval: tuple[float, float] = (math.nan, math.nan)
+
+    def to_uncertain(self) -> UncertainEffect:
+        """The effect with its fitted parameters and their 90 % intervals (what a prediction samples)."""
+        entry = self.entry
+        intervals = {name: (low, high) for name, (low, high) in entry.parameter_intervals().items()}
+        return UncertainEffect(entry.effect, entry.parameters(), intervals)
+
+    def to_effect(self) -> Effect:
+        """The effect at its fitted parameters (``BatchEvaluator(..., effects=diagnosis.effects_)``)."""
+        return self.to_uncertain().central()
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready: effect, variant, fitted parameters with their 90 % intervals, shrink share, scores."""

@@ -29,6 +29,7 @@ from . import _kernels as K
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
 from .batch_setup import build_batch, integrate_lane_groups, kernel_inputs
 from .design import Design
+from .effect_draws import as_effect
 from .effects import Effect
 from .model import HISTORY_COLUMNS, ModelSetup, build_model, natural_frequencies
 from .pitch_errors import PitchErrors
@@ -693,7 +694,7 @@ class BatchEvaluator:
         history_per_period: int = 0,
         rig_channels: bool = False,
         lyapunov: bool = False,
-        effects: Sequence[Effect] = (),
+        effects: Sequence[Any] = (),
         damping_in_separation: bool = True,
         stiffness: str = "ishikawa",
         steps_per_mode: int = 24,
@@ -708,7 +709,8 @@ class BatchEvaluator:
         self.history_per_period = history_per_period
         self.rig_channels = rig_channels
         self.lyapunov = lyapunov
-        self.effects = tuple(effects)
+        # a diagnosis' effects_ (or UncertainEffects) enter at their fitted values
+        self.effects = tuple(as_effect(effect) for effect in effects)
         self.damping_in_separation = damping_in_separation
         self.stiffness = stiffness
         self.steps_per_mode = steps_per_mode

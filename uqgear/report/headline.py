@@ -23,6 +23,7 @@ from .continuation_sections import continuation_findings
 from .diagnosis_report import diagnosis_findings
 from .finding import Finding
 from .findings import SPEED, T2, Grid, _condition_text, _runs, grid, grids
+from .prediction_sections import prediction_findings
 from .presentation import display, format_value, short_name
 from .sections import _json_attr
 
@@ -435,6 +436,7 @@ def rig_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
 def headline_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     """Every headline statement of a study's results, in the order the report shows them."""
     return [
+        *prediction_findings(results),
         *worst_load_findings(results),
         *separation_findings(results),
         *back_contact_findings(results),

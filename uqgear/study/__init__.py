@@ -8,7 +8,10 @@ report, calibration, diagnosis, validation); only the command line sits above.
 from __future__ import annotations
 
 # registers the continuation analysis in ANALYSES
-from . import continuation_analysis  # noqa: F401
+from . import (
+    continuation_analysis,  # noqa: F401
+    prediction,  # noqa: F401
+)
 from .analyses import ANALYSES, register
 from .analysis_schemas import ANALYSIS_SCHEMAS
 from .analysis_specs import AnalysisSpec

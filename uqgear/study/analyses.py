@@ -34,11 +34,13 @@ import uqgear.dynamics as dynamics
 
 from ..common.progress import progress
 from ..physics.design import Design
+from ..physics.effect_draws import UncertainEffect
 from ..physics.integration import QOI_INFO, BatchEvaluator
 from ..uq.monte_carlo import monte_carlo_statistics
 from ..uq.parameter_space import ParameterSpace
 from ..uq.parameters import Fixed
 from ..uq.polynomial_chaos import PolynomialChaos
+from ..uq.posterior import PosteriorDraws
 from ..uq.runner import Runner
 from ..uq.seeds import child_seed
 from ..uq.sweeps import evaluate_on_sweep
@@ -148,6 +150,13 @@ class AnalysisContext:
         Threads for in-process batch integration.
     notes : list of str
         Remarks an analysis wants in its result (attribute ``notes``).
+    posterior : PosteriorDraws, optional
+        The study's calibrated posterior (``uncertain.calibrated``), thinned to
+        its ``draws``; analyses that do not propagate it take its medians.
+    effects : tuple of UncertainEffect
+        The study's diagnosed effects (``model.effects``) with their
+        uncertainty; every run carries them at their fitted values
+        (``spec.simulation.effects``), a prediction samples them.
     """
 
     study: Study
@@ -157,6 +166,8 @@ class AnalysisContext:
     resume: bool = False
     threads: int | None = None
     notes: list[str] = field(default_factory=list)
+    posterior: PosteriorDraws | None = None
+    effects: tuple[UncertainEffect, ...] = ()
 
     @property
     def design(self) -> Design:
@@ -224,7 +235,8 @@ class AnalysisContext:
         """Values of every input not varied by the analysis.
 
         Fixed operating points, then uncertain parameters not in ``exclude``
-        at their nominal value (interval midpoint, distribution median), then
+        at their nominal value (interval midpoint, distribution median; a
+        calibrated parameter at its posterior median), then
         the drive torque (the design's rated torque) and the adhesion torque
         (the value balancing the drive torque, T1 z2 / z1) if still unset.
         """
@@ -232,6 +244,10 @@ class AnalysisContext:
         for name, parameter in self.study.uncertain.items():
             if name not in exclude and name not in values and name not in self.spec.sweeps:
                 values[name] = parameter.nominal
+        if self.posterior is not None:
+            for name in self.posterior.names:
+                if name not in exclude and name not in values and name not in self.spec.sweeps:
+                    values[name] = self.posterior.median(name)
         for name in exclude:
             values.pop(name, None)
         if "drive_torque" not in values and "drive_torque" not in exclude and "drive_torque" not in self.spec.sweeps:

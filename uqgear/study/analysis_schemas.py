@@ -150,6 +150,14 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         # the documented decision thresholds of uqgear.diagnosis.DiagnosisSettings
         "settings": diagnosis_settings,
     },
+    "prediction": {
+        "parameters": _variable_list(),
+        "method": choice("scan", "vertex"),
+        "points": number("(nodes per interval parameter)", 2, 101, integer=True),
+        "draws": number("(draws of the study's distributions without a posterior)", 1, 100_000, integer=True),
+        "quantiles": list_of(number("", 0.0, 1.0), unique=True, what="a list of probabilities"),
+        "qois": _qoi_list(),
+    },
     "continuation": {
         "parameter": choice(*VARIABLES),
         "envelope": _variable_list(),
@@ -195,6 +203,13 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
         "pitch_classes": (6.0, 8.0),
     },
     "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
+    "prediction": {
+        "method": "scan",
+        "points": 7,
+        "draws": 64,
+        "quantiles": (0.05, 0.5, 0.95),
+        "qois": ("peak_mesh_force", "dynamic_load_factor", "dte_rms"),
+    },
 }
 _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
     "bifurcation": ("parameter",),
@@ -206,6 +221,8 @@ _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
 #: Analysis types that read a rig data file (key ``rig``, relative to the study file).
 RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")
 #: Analysis types that propagate uncertain parameters (``parameters`` key).
-PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol")
+PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol", "prediction")
+#: Analysis types that bound over interval parameters (their ``parameters`` are intervals).
+INTERVAL_TYPES: tuple[str, ...] = ("interval", "prediction")
 #: Cap on single simulate() runs in one ``simulate`` analysis (they keep full histories).
 MAX_SIMULATE_RUNS = 64

@@ -17,6 +17,7 @@ from .analysis_schemas import (
     _REQUIRED_KEYS,
     ANALYSIS_DEFAULTS,
     ANALYSIS_SCHEMAS,
+    INTERVAL_TYPES,
     MAX_SIMULATE_RUNS,
     PROPAGATING_TYPES,
 )
@@ -138,11 +139,12 @@ def _check_propagation(spec: AnalysisSpec, uncertain: Mapping[str, UncertainPara
             )
         if name in spec.operating_points:
             raise StudyError(f"{path}.parameters: {name} is also given in operating_points; give it in one place")
-    if spec.type == "interval":
+    if spec.type in INTERVAL_TYPES:
         bad = [name for name in parameters if not uncertain[name].is_interval]
         if bad:
             raise StudyError(
-                f"{path}.parameters: {bad[0]} has a distribution; an interval analysis expects interval parameters"
+                f"{path}.parameters: {bad[0]} has a distribution; an {spec.type} analysis bounds over "
+                "interval parameters, expected those"
             )
     if spec.type == "sobol":
         samples = options["samples"]
@@ -222,7 +224,7 @@ def _analysis(
         options["parameters"] = tuple(
             name
             for name, parameter in uncertain.items()
-            if name not in overridden and (parameter.is_interval or kind != "interval")
+            if name not in overridden and (parameter.is_interval or kind not in INTERVAL_TYPES)
         )
         if not options["parameters"]:
             raise StudyError(f"{path}.parameters: no uncertain parameters to propagate; define some under 'uncertain'")

@@ -15,11 +15,13 @@ with provenance; an analysis whose file is already there with the same inputs
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
 import shutil
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +31,14 @@ import xarray as xr
 from ..common.errors import StudyError, UqgearError
 from ..common.progress import progress
 from ..common.transaction import Existing, OutputFolder
+from ..physics.effect_draws import UncertainEffect
+from ..uq.posterior import PosteriorDraws
 from ..uq.results import load_result, save_result
 from ..uq.runner import Runner
 from .analyses import ANALYSES, ANALYSIS_KEY_ATTR, AnalysisContext
+from .analysis_schemas import RIG_TYPES
 from .analysis_specs import AnalysisSpec
+from .model_inputs import resolve_effects, resolve_posterior
 from .schema import Study
 
 #: Folder of chunk checkpoints inside the work folder.
@@ -50,6 +56,11 @@ def analysis_key(study: Study, spec: AnalysisSpec) -> str:
         "uncertain": {name: p.to_dict() for name, p in study.uncertain.items()},
         "simulation": spec.simulation.to_dict(),
     }
+    # only when given: the keys of studies without them stay what they were
+    if study.calibrated is not None:
+        payload["calibrated"] = study.calibrated.to_dict()
+    if study.effects is not None:
+        payload["effects"] = study.effects.to_dict()
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -85,6 +96,7 @@ def run_analysis(
     resume: bool = False,
     threads: int | None = None,
     seed: np.random.SeedSequence | None = None,
+    results: Mapping[str, xr.Dataset] | None = None,
 ) -> xr.Dataset:
     """Run one analysis of a study and return its Dataset (not saved).
 
@@ -101,19 +113,53 @@ def run_analysis(
         Threads for in-process batch integration.
     seed : SeedSequence, optional
         The analysis's seed; default its child of the study seed.
+    results : mapping of str to Dataset, optional
+        Results of the analyses run before it, by name (a posterior or a
+        diagnosis that ``uncertain.calibrated`` or ``model.effects`` names).
     """
     if spec.type not in ANALYSES:
         raise StudyError(
             f"analyses[{spec.index}].type: {spec.type!r} has no implementation; expected one of {', '.join(ANALYSES)}"
         )
     seed = seed if seed is not None else study.seed_sequences()[spec.index]
-    context = AnalysisContext(study=study, spec=spec, seed=seed, runner=runner, resume=resume, threads=threads)
+    key = analysis_key(study, spec)
+    posterior, effects = (None, ()) if spec.type in RIG_TYPES else model_inputs(study, results or {})
+    if effects:
+        simulation = dataclasses.replace(spec.simulation, effects=tuple(effect.central() for effect in effects))
+        spec = dataclasses.replace(spec, simulation=simulation)
+    context = AnalysisContext(
+        study=study,
+        spec=spec,
+        seed=seed,
+        runner=runner,
+        resume=resume,
+        threads=threads,
+        posterior=posterior,
+        effects=effects,
+    )
     started = time.perf_counter()
     result = ANALYSES[spec.type](context)
-    result.attrs.update(_analysis_attrs(study, spec, analysis_key(study, spec), time.perf_counter() - started))
+    result.attrs.update(_analysis_attrs(study, spec, key, time.perf_counter() - started))
     if context.notes:
         result.attrs["notes"] = json.dumps(context.notes)
     return result
+
+
+def model_inputs(
+    study: Study, results: Mapping[str, xr.Dataset]
+) -> tuple[PosteriorDraws | None, tuple[UncertainEffect, ...]]:
+    """The study's calibrated posterior (thinned, seeded) and diagnosed effects, resolved from files or results.
+
+    The thinning has a seed of its own, the study seed's child after those of
+    the analyses, so that every analysis of a study sees the same draws.
+    """
+    posterior = None
+    if study.calibrated is not None:
+        full = resolve_posterior(study.calibrated, study.design, results)
+        thinning = np.random.SeedSequence(study.seed, spawn_key=(len(study.analyses),))
+        posterior = full.thin(study.calibrated.draws, thinning)
+    effects = resolve_effects(study.effects, results) if study.effects is not None else ()
+    return posterior, effects
 
 
 def _reusable(path: Path, key: str) -> bool:
@@ -172,6 +218,8 @@ def run_analyses(
     threads = workers if scheduler is None else None
     seeds = study.seed_sequences()
     written = []
+    finished: dict[str, Path] = {}
+    sources = {source.analysis for source in (study.calibrated, study.effects) if source is not None}
     bar = progress(study.analyses, desc="analyses", unit="analysis", enabled=show_progress)
     for spec in bar:
         bar.set_postfix_str(spec.name)
@@ -179,10 +227,15 @@ def run_analyses(
         key = analysis_key(study, spec)
         if resume and _reusable(path, key):
             written.append(path)
+            finished[spec.name] = path
             continue
-        result = run_analysis(study, spec, runner=runner, resume=resume, threads=threads, seed=seeds[spec.index])
+        needed = {name: load_result(file) for name, file in finished.items() if name in sources}
+        result = run_analysis(
+            study, spec, runner=runner, resume=resume, threads=threads, seed=seeds[spec.index], results=needed
+        )
         save_result(result, path, seed=seeds[spec.index], design=study.design, study_text=study.text)
         written.append(path)
+        finished[spec.name] = path
     return written
 
 

@@ -23,6 +23,7 @@ study is fast.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +40,7 @@ from .analysis_schemas import RIG_TYPES
 from .analysis_specs import AnalysisSpec, _analysis
 from .checkers import _fail, _type_name, boolean, check_mapping, identifier, number, string
 from .limits import DPI
+from .model_inputs import CalibratedInput, EffectsInput, check_order, parse_calibrated, parse_effects
 from .parameters import UncertainParameter, ValueSpec, _check_parameter_range, _operating_points, _uncertain_parameter
 from .settings import GUIDED_STARTS, SimulationSettings, _simulation
 from .variables import OPERATING_VARIABLES, VARIABLES
@@ -78,6 +80,8 @@ class Study:
     chunk_size: int
     text: str
     path: str = ""
+    calibrated: CalibratedInput | None = None
+    effects: EffectsInput | None = None
 
     def __post_init__(self) -> None:
         for name in ("design_overrides", "operating_points", "uncertain"):
@@ -136,6 +140,7 @@ _TOP_LEVEL_KEYS = (
     "analyses",
     "outputs",
     "execution",
+    "model",
 )
 
 
@@ -175,6 +180,32 @@ def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any
     return design, str(source), dict(overrides)
 
 
+def _model(raw: Any, base_dir: Path | None) -> EffectsInput | None:
+    """The study's ``model`` section: the effects added to every run."""
+    if raw is None:
+        return None
+    entry = check_mapping(raw, "model", {"effects": lambda value, path: value})
+    return parse_effects(entry["effects"], "model.effects", base_dir) if "effects" in entry else None
+
+
+def _calibrated_names(
+    calibrated: CalibratedInput | None, analyses: tuple[AnalysisSpec, ...], uncertain: Mapping[str, Any]
+) -> CalibratedInput | None:
+    """Fill in the names a ``calibrate`` analysis calibrates, and refuse a parameter given both ways."""
+    if calibrated is None:
+        return None
+    if calibrated.analysis is not None:
+        source = next((spec for spec in analyses if spec.name == calibrated.analysis), None)
+        if source is not None:
+            calibrated = dataclasses.replace(calibrated, names=tuple(source.options.get("parameters", ())))
+    both = [name for name in calibrated.names if name in uncertain]
+    if both:
+        raise StudyError(
+            f"uncertain.{both[0]}: also calibrated (uncertain.calibrated); expected each parameter in one place"
+        )
+    return calibrated
+
+
 def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: str | Path | None = None) -> Study:
     """Validate a parsed study mapping and build a :class:`Study`.
 
@@ -210,7 +241,15 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
     if not isinstance(uncertain_raw, Mapping):
         raise _fail("uncertain", "a mapping of parameter name to its interval or distribution", uncertain_raw)
     uncertain = {}
+    base = Path(base_dir) if base_dir else None
+    calibrated = (
+        parse_calibrated(uncertain_raw["calibrated"], "uncertain.calibrated", base, design)
+        if "calibrated" in uncertain_raw
+        else None
+    )
     for key, entry in uncertain_raw.items():
+        if key == "calibrated":
+            continue
         if key not in VARIABLES:
             raise StudyError(
                 f"uncertain.{key}: unknown parameter; expected one of {', '.join(OPERATING_VARIABLES)} or a design key"
@@ -240,6 +279,9 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
                 f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
                 "expected unique names (give each a 'name')"
             )
+    effects = _model(raw.get("model"), base)
+    calibrated = _calibrated_names(calibrated, analyses, uncertain)
+    check_order(analyses, calibrated, effects)
     for spec in analyses:
         if spec.type in RIG_TYPES:
             rig = _resolve_rig(spec.options["rig"], Path(base_dir) if base_dir else None)
@@ -274,6 +316,8 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
         chunk_size=execution.get("chunk_size", 64),
         text=text,
         path=path,
+        calibrated=calibrated,
+        effects=effects,
     )
 
 

@@ -32,6 +32,9 @@ class SimulationSettings:
     starts : MultiStart, optional
         Start every point from several states and report every steady response found
         (:mod:`uqgear.dynamics.attractors`); None (default): from rest only, as always.
+    effects : tuple of Effect
+        Effects added to the model in every run (a study's ``model.effects``: the
+        effects a diagnosis named, at their fitted values).
     """
 
     n_periods: int = 400
@@ -41,6 +44,7 @@ class SimulationSettings:
     damping_in_separation: bool = True
     stiffness: str = "ishikawa"
     starts: MultiStart | None = None
+    effects: tuple[Any, ...] = ()
 
     def __post_init__(self) -> None:
         if isinstance(self.starts, Mapping):
@@ -63,14 +67,17 @@ class SimulationSettings:
             "stiffness": self.stiffness,
             "steps_per_mode": self.steps_per_mode,
             "threads": threads,
+            "effects": self.effects,
         }
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as plain values; ``starts`` only when set, so the keys of results run from rest
         only (checkpoints, resumed studies) stay what they were."""
-        values = {key: getattr(self, key) for key in self.__dataclass_fields__ if key != "starts"}
+        values = {key: getattr(self, key) for key in self.__dataclass_fields__ if key not in ("starts", "effects")}
         if self.starts is not None:
             values["starts"] = self.starts.to_dict()
+        if self.effects:
+            values["effects"] = [repr(effect) for effect in self.effects]
         return values
 
 

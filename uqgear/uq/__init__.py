@@ -14,6 +14,7 @@ from .parameter_space import ParameterSpace
 from .parameters import Distribution, Fixed, Interval
 from .pbox import pbox, response_envelope
 from .polynomial_chaos import PolynomialChaos
+from .posterior import DEFAULT_DRAWS, PosteriorDraws, PosteriorError
 from .results import (
     PROVENANCE_ATTRS,
     load_result,
@@ -36,6 +37,9 @@ __all__ = [
     "Fixed",
     "Distribution",
     "ParameterSpace",
+    "PosteriorDraws",
+    "PosteriorError",
+    "DEFAULT_DRAWS",
     "PolynomialChaos",
     "Sweep",
     "make_sweep",

@@ -18,6 +18,7 @@ import xarray as xr
 
 from ..common.errors import ParameterSpaceError
 from .parameters import Distribution, Fixed, Interval, Parameter, parse_parameter
+from .posterior import DEFAULT_DRAWS, PosteriorDraws, PosteriorError
 from .sampling import UNIT_EPSILON, sample_space
 from .seeds import SeedLike
 
@@ -66,8 +67,8 @@ class ParameterSpace:
     mesh_stiffness_scale: interval: inverted interval, expected lower < upper; got lower=1.1 > upper=0.9
     """
 
-    def __init__(self, parameters: Mapping[str, Parameter | Any]) -> None:
-        if not isinstance(parameters, Mapping) or not parameters:
+    def __init__(self, parameters: Mapping[str, Parameter | Any], *, posterior: PosteriorDraws | None = None) -> None:
+        if not isinstance(parameters, Mapping) or not (parameters or posterior is not None):
             raise ParameterSpaceError(
                 f"parameter space: expected a non-empty mapping of parameter names to "
                 f"Interval/Distribution/Fixed; got {parameters!r}"
@@ -77,7 +78,88 @@ class ParameterSpace:
             if not isinstance(name, str) or not name.isidentifier():
                 raise ParameterSpaceError(f"parameter name {name!r}: expected an identifier such as 'adhesion_torque'")
             parsed[name] = parse_parameter(name, spec)
+        if posterior is not None:
+            if not isinstance(posterior, PosteriorDraws):
+                raise ParameterSpaceError(f"posterior: expected PosteriorDraws; got {type(posterior).__name__}")
+            both = [name for name in posterior.names if name in parsed]
+            if both:
+                raise ParameterSpaceError(
+                    f"{both[0]}: given both by the posterior ({posterior.source or 'its draws'}) and as a "
+                    "parameter; expected it in one place"
+                )
         self._parameters = MappingProxyType(parsed)
+        self._posterior = posterior
+
+    @classmethod
+    def from_posterior(
+        cls,
+        calibration: Any,
+        parameters: Mapping[str, Parameter | Any] | None = None,
+        *,
+        draws: int | None = DEFAULT_DRAWS,
+        seed: SeedLike = 0,
+        allow_unconverged: bool = False,
+    ) -> ParameterSpace:
+        """A space whose calibrated parameters are a posterior's joint draws, beside other parameters.
+
+        Parameters
+        ----------
+        calibration : Calibration, xarray.Dataset or PosteriorDraws
+            A fitted :class:`~uqgear.calibration.Calibration`, its posterior
+            Dataset (``posterior.nc``) or draws already read.
+        parameters : mapping, optional
+            Further parameters as for :class:`ParameterSpace` (the adhesion
+            torque interval, ...); none may be a calibrated one.
+        draws : int or None
+            Draws kept (thinned without replacement, seeded); None keeps all.
+        seed : SeedSequence or int
+            Seed of the thinning.
+        allow_unconverged : bool
+            Accept a posterior whose convergence checks failed.
+
+        Raises
+        ------
+        PosteriorError
+            Not converged (unless allowed), or unreadable.
+        ParameterSpaceError
+            A parameter given both ways.
+
+        Examples
+        --------
+        >>> import numpy as np, xarray as xr
+        >>> import uqgear
+        >>> rows = np.random.default_rng(0).normal([1.0, 0.05], [0.01, 0.002], size=(4, 100, 2))
+        >>> posterior = xr.Dataset({"mesh_stiffness_scale": (("chain", "draw"), rows[..., 0]),
+        ...                         "zeta_mesh": (("chain", "draw"), rows[..., 1])}, attrs={"converged": 1})
+        >>> space = uqgear.ParameterSpace.from_posterior(
+        ...     posterior, {"adhesion_torque": [21e3, 46e3]}, draws=32, seed=3)
+        >>> space.interval_names, space.posterior_names, space.posterior.size
+        (('adhesion_torque',), ('mesh_stiffness_scale', 'zeta_mesh'), 32)
+        >>> samples = space.sample(4, seed=1, interval_treatment="uniform")
+        >>> sorted(samples.data_vars)
+        ['adhesion_torque', 'mesh_stiffness_scale', 'zeta_mesh']
+        """
+        posterior = (
+            calibration if isinstance(calibration, PosteriorDraws) else PosteriorDraws.from_calibration(calibration)
+        )
+        if not posterior.converged and not allow_unconverged:
+            raise PosteriorError(
+                f"{posterior.source or 'posterior'}: the posterior has not converged; expected a converged "
+                "calibration (or allow_unconverged=True, stated with every result)"
+            )
+        if draws is not None:
+            posterior = posterior.thin(draws, seed)
+        return cls(dict(parameters or {}), posterior=posterior)
+
+    @property
+    def posterior(self) -> PosteriorDraws | None:
+        """The joint draws of the calibrated parameters, or None."""
+        return self._posterior
+
+    @property
+    def posterior_names(self) -> tuple[str, ...]:
+        """Names of the calibrated parameters (columns of :attr:`posterior`)."""
+        return () if self._posterior is None else self._posterior.names
 
     # -- inspection -----------------------------------------------------------------
 
@@ -130,12 +212,18 @@ class ParameterSpace:
         return f"ParameterSpace({{{inner}}})"
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (ParameterSpace, (dict(self._parameters),))
+        return (_rebuild, (dict(self._parameters), self._posterior))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, ParameterSpace):
             return NotImplemented
-        return dict(self._parameters) == dict(other._parameters)
+        same_posterior = (self._posterior is None and other._posterior is None) or (
+            self._posterior is not None
+            and other._posterior is not None
+            and self._posterior.names == other._posterior.names
+            and np.array_equal(self._posterior.values, other._posterior.values)
+        )
+        return dict(self._parameters) == dict(other._parameters) and same_posterior
 
     def units(self, name: str) -> str:
         """Units of parameter ``name``."""
@@ -174,7 +262,7 @@ class ParameterSpace:
         parameters = dict(self._parameters)
         for name, value in values.items():
             parameters[name] = Fixed(value, units=self[name].units)
-        return ParameterSpace(parameters)
+        return ParameterSpace(parameters, posterior=self._posterior)
 
     def with_nominal(self, keep: Iterable[str]) -> ParameterSpace:
         """Copy where every uncertain parameter not in ``keep`` is fixed at its nominal value."""
@@ -271,3 +359,8 @@ class ParameterSpace:
             For a bad ``n``, ``method``, ``seed`` or ``interval_treatment``.
         """
         return sample_space(self, n, method, seed=seed, interval_treatment=interval_treatment)
+
+
+def _rebuild(parameters: dict[str, Parameter], posterior: PosteriorDraws | None) -> ParameterSpace:
+    """Unpickle a space (keyword-only ``posterior``)."""
+    return ParameterSpace(parameters, posterior=posterior)

@@ -19,7 +19,7 @@ from scipy.stats import qmc
 from ..common.errors import ParameterSpaceError
 from .checks import check_count
 from .parameters import Distribution, Fixed, Interval
-from .seeds import SeedLike, as_seed_sequence, seed_attributes
+from .seeds import SeedLike, as_seed_sequence, child_seed, seed_attributes
 
 #: Sampling methods understood by :meth:`ParameterSpace.sample`.
 SAMPLING_METHODS: tuple[str, ...] = ("monte_carlo", "latin_hypercube", "sobol", "halton", "grid")
@@ -140,6 +140,19 @@ def sample_space(
             values,
             {"units": parameter.units, "kind": kind, "description": parameter.describe()},
         )
+    posterior = getattr(space, "posterior", None)
+    if posterior is not None:
+        # whole rows of the joint draws: the calibrated parameters keep their dependence
+        if seed_sequence is None:
+            rows = np.arange(size) % posterior.size
+        else:
+            rows = np.random.default_rng(child_seed(seed_sequence, 1)).integers(posterior.size, size=size)
+        for name in posterior.names:
+            data_vars[name] = (
+                "sample",
+                posterior.column(name)[rows],
+                {"units": posterior.units.get(name, ""), "kind": "posterior", "description": posterior.source},
+            )
     if not intervals:
         treatment = "none (no interval parameters)"
     elif interval_treatment == "uniform":

@@ -1,0 +1,265 @@
+"""Calibrate -> diagnose -> predict: the posterior and the diagnosed effects as inputs, and the prediction analysis.
+
+Checked against independent references: a posterior of known mean and covariance (sample moments
+within their standard errors), effects built by hand with ``make_effect`` (the same runs, bit for
+bit), the split normal's quantiles (the diagnosis' interval ends), and the batch model run directly
+at fixed parameters (the prediction's bounds over T2 with a posterior of one point).
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import uqgear
+from uqgear.diagnosis.named_effects import named_effects
+from uqgear.physics.effect_draws import UncertainEffect, draw_effect_sets
+
+MEAN = np.array([1.02, 0.05])
+COV = np.array([[1e-4, 1.5e-6], [1.5e-6, 4e-5]])
+
+
+def _posterior(rows: np.ndarray, *, converged: int = 1, design=None, speeds=(1500.0, 2500.0, 3500.0)) -> xr.Dataset:
+    design = design or uqgear.load_design("locomotive")
+    return xr.Dataset(
+        {
+            "mesh_stiffness_scale": (("chain", "draw"), rows[..., 0]),
+            "zeta_mesh": (("chain", "draw"), rows[..., 1]),
+        },
+        coords={
+            "pinion_speed": ("op", list(speeds)),
+            "drive_torque": ("op", [7000.0] * len(speeds)),
+            "adhesion_torque_lower": ("op", [25e3] * len(speeds)),
+            "adhesion_torque_upper": ("op", [40e3] * len(speeds)),
+        },
+        attrs={
+            "converged": converged,
+            "parameters": json.dumps(["mesh_stiffness_scale", "zeta_mesh"]),
+            "design": design.to_json(),
+        },
+    )
+
+
+@pytest.fixture(scope="module")
+def known_posterior() -> xr.Dataset:
+    rows = np.random.default_rng(7).multivariate_normal(MEAN, COV, size=(16, 250))
+    return _posterior(rows)
+
+
+# ---------------------------------------------------------------------------- posterior as input
+
+
+def test_joint_draws_keep_mean_and_covariance(known_posterior):
+    space = uqgear.ParameterSpace.from_posterior(
+        known_posterior, {"adhesion_torque": [21e3, 46e3]}, draws=None, seed=0
+    )
+    samples = space.sample(20000, seed=3, interval_treatment="uniform")
+    values = np.stack([samples["mesh_stiffness_scale"].values, samples["zeta_mesh"].values], axis=1)
+    n = values.shape[0]
+    standard_error = np.sqrt(np.diag(COV) / n)
+    # the true mean, within 4 standard errors of the draws and of the resampling
+    assert np.all(np.abs(values.mean(axis=0) - MEAN) < 4 * np.sqrt(2) * standard_error)
+    covariance = np.cov(values, rowvar=False)
+    # variances within 4 standard errors (var of s^2 ~ 2 sigma^4 / n), the correlation kept
+    assert np.all(np.abs(np.diag(covariance) - np.diag(COV)) < 4 * np.sqrt(2 / n) * np.diag(COV) * np.sqrt(2))
+    correlation = covariance[0, 1] / np.sqrt(covariance[0, 0] * covariance[1, 1])
+    truth = COV[0, 1] / np.sqrt(COV[0, 0] * COV[1, 1])
+    assert abs(correlation - truth) < 4 * (1 - truth**2) / np.sqrt(n) * np.sqrt(2)
+    # the interval parameter stays uniform on its bounds and independent of the draws
+    assert samples["adhesion_torque"].min() >= 21e3 and samples["adhesion_torque"].max() <= 46e3
+
+
+def test_thinning_takes_whole_rows_and_is_seeded(known_posterior):
+    draws = uqgear.PosteriorDraws.from_dataset(known_posterior)
+    thinned = draws.thin(64, seed=5)
+    again = draws.thin(64, seed=5)
+    assert thinned.size == 64 and np.array_equal(thinned.values, again.values)
+    rows = {tuple(row) for row in draws.values}
+    assert all(tuple(row) in rows for row in thinned.values)
+    assert not np.array_equal(thinned.values, draws.thin(64, seed=6).values)
+    assert draws.campaign["pinion_speed"] == (1500.0, 3500.0)
+
+
+def test_posterior_space_refusals_and_pickling(known_posterior):
+    unconverged = known_posterior.assign_attrs(converged=0)
+    with pytest.raises(uqgear.PosteriorError, match="has not converged"):
+        uqgear.ParameterSpace.from_posterior(unconverged)
+    space = uqgear.ParameterSpace.from_posterior(unconverged, allow_unconverged=True, draws=8)
+    assert space.posterior.size == 8 and not space.posterior.converged
+    with pytest.raises(uqgear.ParameterSpaceError, match="zeta_mesh: given both"):
+        uqgear.ParameterSpace.from_posterior(known_posterior, {"zeta_mesh": [0.03, 0.08]})
+    assert pickle.loads(pickle.dumps(space)) == space
+
+
+# ---------------------------------------------------------------------------- effects as input
+
+
+def test_effect_passed_in_gives_the_runs_of_make_effect_by_hand(design):
+    record = {
+        "verdict": "eccentricity",
+        "effects": [
+            {
+                "effect": "eccentricity",
+                "parameters": {"shaft": "pinion", "amplitude": 12e-6, "phase": 1.75, "kappa": 0.03},
+                "parameter_intervals": {"amplitude": [11.5e-6, 12.5e-6]},
+            }
+        ],
+    }
+    (effect,) = named_effects(record)
+    by_hand = uqgear.make_effect("eccentricity", {"shaft": "pinion", "amplitude": 12e-6, "phase": 1.75, "kappa": 0.03})
+    samples = uqgear.samples_from_mapping({"pinion_speed": [1500.0, 3000.0], "adhesion_torque": [30e3, 40e3]})
+    options = {"fixed": {"drive_torque": 7000.0}, "n_periods": 80, "keep_periods": 42}
+    passed = uqgear.BatchEvaluator(design, effects=[effect], **options)(samples)
+    manual = uqgear.BatchEvaluator(design, effects=[by_hand], **options)(samples)
+    healthy = uqgear.BatchEvaluator(design, **options)(samples)
+    assert np.array_equal(passed["dte_rms"].values, manual["dte_rms"].values)
+    assert np.array_equal(passed["peak_mesh_force"].values, manual["peak_mesh_force"].values)
+    assert not np.array_equal(passed["dte_rms"].values, healthy["dte_rms"].values)
+
+
+def test_effect_draws_follow_the_reported_interval():
+    effect = UncertainEffect("tooth_damage", {"gear": "pinion", "tooth": 7.0, "depth": 0.35}, {"depth": (0.30, 0.42)})
+    depths = np.array([effects[0].values["depth"] for effects in draw_effect_sets([effect], 20000, seed=1)])
+    low, median, high = np.quantile(depths, [0.05, 0.5, 0.95])
+    # a split normal: median at the fit, 5 % and 95 % quantiles at the interval's (lopsided) ends
+    assert abs(median - 0.35) < 0.003 and abs(low - 0.30) < 0.003 and abs(high - 0.42) < 0.003
+
+
+def test_diagnosis_without_a_named_effect_is_refused():
+    with pytest.raises(uqgear.UqgearError, match="names no effect \\(verdict: inconclusive\\)"):
+        named_effects({"verdict": "inconclusive", "effects": []})
+
+
+# ---------------------------------------------------------------------------- the study
+
+
+STUDY = """
+name: predicted
+seed: 4
+design: locomotive
+operating_points:
+  pinion_speed: [1000, 2500, 4500]
+  drive_torque: 7000
+uncertain:
+  adhesion_torque: {{adhesion_coefficient: [0.15, 0.33], axle_load: 23000, wheel_radius: 0.625}}
+  calibrated: {{posterior: {posterior}, draws: {draws}{extra}}}
+{model}simulation: {{n_periods: 80, keep_periods: 30, starts: false}}
+analyses:
+  - {{type: prediction, name: prediction, points: 3, qois: [peak_mesh_force, dte_rms]}}
+"""
+
+
+def _study_text(posterior: Path, draws: int = 6, extra: str = "", model: str = "") -> str:
+    return STUDY.format(posterior=posterior, draws=draws, extra=extra, model=model)
+
+
+def test_prediction_of_a_one_point_posterior_is_the_model_run_there(tmp_path, design):
+    # every draw at the same parameters: each quantile is the bound over the T2 nodes of that one model
+    rows = np.broadcast_to(np.array([1.05, 0.06]), (2, 10, 2)).copy()
+    _posterior(rows).to_netcdf(tmp_path / "posterior.nc")
+    study = uqgear.parse_study(_study_text(tmp_path / "posterior.nc"), base_dir=tmp_path)
+    (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    t2 = study.uncertain["adhesion_torque"]
+    nodes = np.linspace(t2.lower, t2.upper, 3)
+    speeds = np.array([1000.0, 2500.0, 4500.0])
+    grid = uqgear.samples_from_mapping(
+        {
+            "pinion_speed": np.tile(speeds, 3),
+            "adhesion_torque": np.repeat(nodes, 3),
+            "mesh_stiffness_scale": np.full(9, 1.05),
+            "zeta_mesh": np.full(9, 0.06),
+        }
+    )
+    settings = {"n_periods": 80, "keep_periods": 30, "steps_per_mode": study.simulation.steps_per_mode}
+    direct = uqgear.BatchEvaluator(design, fixed={"drive_torque": 7000.0}, **settings)(grid)
+    force = direct["peak_mesh_force"].values.reshape(3, 3)
+    for q in result["quantile"].values:
+        at = result["peak_mesh_force"].sel(quantile=q)
+        np.testing.assert_array_equal(at.sel(bound="upper").values, force.max(axis=0))
+        np.testing.assert_array_equal(at.sel(bound="lower").values, force.min(axis=0))
+    # the prior spreads where the posterior does not; the speeds outside 1500-3500 rpm are flagged
+    prior = result["peak_mesh_force_prior"].sel(bound="upper")
+    assert float((prior.isel(quantile=-1) - prior.isel(quantile=0)).max()) > 0
+    assert result["extrapolated"].values.tolist() == [True, False, True]
+    assert json.loads(result.attrs["narrowing"])["mesh_stiffness_scale"] == 0.0
+
+
+def test_prediction_samples_the_diagnosed_effect_per_draw(tmp_path):
+    rows = np.random.default_rng(2).multivariate_normal(MEAN, COV, size=(4, 50))
+    _posterior(rows).to_netcdf(tmp_path / "posterior.nc")
+    model = (
+        "model:\n  effects:\n    eccentricity: {shaft: pinion, amplitude: 12.0e-6, kappa: 0.03, "
+        "intervals: {amplitude: [10.0e-6, 14.0e-6]}}\n"
+    )
+    study = uqgear.parse_study(_study_text(tmp_path / "posterior.nc", draws=4, model=model), base_dir=tmp_path)
+    (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    assert int(result.attrs["effects_sampled"]) == 1
+    assert json.loads(result.attrs["effects"])[0]["effect"] == "eccentricity"
+    assert result["peak_mesh_force_draws"].sizes["draw"] == 4
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"converged": 0}, "uncertain.calibrated.posterior: the posterior has not converged"),
+        ({"design": {"module": 0.01}}, "calibrated on another design (module"),
+        ({"twice": True}, "uncertain.zeta_mesh: also calibrated"),
+        ({"missing": True}, "posterior file not found"),
+        ({"effects": "nothing"}, "model.effects: the diagnosis names no effect"),
+    ],
+)
+def test_bad_inputs_are_refused_in_one_line_exit_2_nothing_written(tmp_path, change, message):
+    design = uqgear.load_design("locomotive")
+    if "design" in change:
+        design = design.replace(**change["design"])
+    rows = np.random.default_rng(2).multivariate_normal(MEAN, COV, size=(2, 20))
+    _posterior(rows, converged=change.get("converged", 1), design=design).to_netcdf(tmp_path / "posterior.nc")
+    posterior = tmp_path / ("absent.nc" if change.get("missing") else "posterior.nc")
+    text = _study_text(posterior)
+    if change.get("twice"):
+        text = text.replace("  calibrated:", "  zeta_mesh: {interval: [0.03, 0.08]}\n  calibrated:")
+    if change.get("effects"):
+        (tmp_path / "diagnosis.json").write_text(json.dumps({"verdict": "unexplained", "effects": []}))
+        text = text.replace("simulation:", "model: {effects: diagnosis.json}\nsimulation:")
+    (tmp_path / "study.yaml").write_text(text)
+    out = tmp_path / "out"
+    run = subprocess.run(
+        [sys.executable, "-m", "uqgear", "run", str(tmp_path / "study.yaml"), "--out", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 2, run.stderr
+    assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_inputs_from_analyses_must_come_first():
+    text = """
+name: loop
+analyses:
+  - {type: prediction, name: prediction}
+  - {type: calibrate, name: calibration, rig: healthy}
+uncertain:
+  adhesion_torque: {interval: [21.0e+3, 46.0e+3]}
+  calibrated: {analysis: calibration}
+"""
+    with pytest.raises(uqgear.StudyError, match="analysis 'prediction' runs before 'calibration'"):
+        uqgear.parse_study(text)
+    with pytest.raises(uqgear.StudyError, match="'nope' is not a calibrate analysis"):
+        uqgear.parse_study(text.replace("{analysis: calibration}", "{analysis: nope}"))
+
+
+def test_bundled_loop_study_validates():
+    study = uqgear.load_study("calibrated_prediction")
+    assert [spec.type for spec in study.analyses] == ["calibrate", "diagnose", "prediction"]
+    assert study.calibrated.analysis == "calibration" and study.effects.analysis == "diagnosis"
+    assert set(study.calibrated.names) == {"mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"}
