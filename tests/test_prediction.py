@@ -190,6 +190,18 @@ def test_prediction_of_a_one_point_posterior_is_the_model_run_there(tmp_path, de
     assert float((prior.isel(quantile=-1) - prior.isel(quantile=0)).max()) > 0
     assert result["extrapolated"].values.tolist() == [True, False, True]
     assert json.loads(result.attrs["narrowing"])["mesh_stiffness_scale"] == 0.0
+    # the first screen's numbers are the result's: the worst case's band before and after, and where
+    from uqgear.report.prediction_sections import prediction_findings
+
+    first, extrapolation = prediction_findings([result])
+    upper = result["peak_mesh_force"].sel(bound="upper")
+    at = int(upper.sel(quantile=0.5).argmax())
+    assert first.facts["at"] == {"pinion_speed": at}
+    band = upper.isel(pinion_speed=at).values
+    assert first.facts["posterior"] == [float(band[0]), float(band[-1])]
+    assert "from the design's tolerances" in first.text and "after calibration on posterior.nc" in first.text
+    assert "extrapolates beyond the rig campaign" in extrapolation.text
+    assert "1000 rpm and 4500 rpm" in extrapolation.text
 
 
 def test_prediction_samples_the_diagnosed_effect_per_draw(tmp_path):
@@ -199,7 +211,9 @@ def test_prediction_samples_the_diagnosed_effect_per_draw(tmp_path):
         "model:\n  effects:\n    eccentricity: {shaft: pinion, amplitude: 12.0e-6, kappa: 0.03, "
         "intervals: {amplitude: [10.0e-6, 14.0e-6]}}\n"
     )
-    study = uqgear.parse_study(_study_text(tmp_path / "posterior.nc", draws=4, model=model), base_dir=tmp_path)
+    # with guided starts: the extra starts carry each draw's effect parameters too
+    text = _study_text(tmp_path / "posterior.nc", draws=4, model=model).replace(", starts: false", "")
+    study = uqgear.parse_study(text.replace("[1000, 2500, 4500]", "[3600, 3700]"), base_dir=tmp_path)
     (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
     result = uqgear.load_result(path)
     assert int(result.attrs["effects_sampled"]) == 1
@@ -263,3 +277,38 @@ def test_bundled_loop_study_validates():
     assert [spec.type for spec in study.analyses] == ["calibrate", "diagnose", "prediction"]
     assert study.calibrated.analysis == "calibration" and study.effects.analysis == "diagnosis"
     assert set(study.calibrated.names) == {"mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"}
+
+
+def test_other_analyses_hold_calibrated_parameters_at_their_posterior_median(tmp_path, known_posterior):
+    known_posterior.to_netcdf(tmp_path / "posterior.nc")
+    text = _study_text(tmp_path / "posterior.nc", draws=50).replace(
+        "analyses:\n", "analyses:\n  - {type: interval, name: band, parameters: [adhesion_torque], method: vertex}\n"
+    )
+    study = uqgear.parse_study(text, base_dir=tmp_path)
+    band, _ = uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    fixed = json.loads(uqgear.load_result(band).attrs["fixed_inputs"])
+    thinned = uqgear.PosteriorDraws.from_dataset(known_posterior).thin(
+        50, np.random.SeedSequence(4, spawn_key=(2,))
+    )
+    assert fixed["mesh_stiffness_scale"] == thinned.median("mesh_stiffness_scale")
+    assert fixed["zeta_mesh"] == thinned.median("zeta_mesh")
+
+
+def test_prediction_without_a_posterior_draws_the_study_distributions(tmp_path):
+    text = """
+name: unconditioned
+seed: 2
+operating_points: {pinion_speed: [1500, 3000], drive_torque: 7000}
+uncertain:
+  adhesion_torque: {interval: [25.0e+3, 40.0e+3]}
+  zeta_mesh: {distribution: uniform, lower: 0.03, upper: 0.08}
+simulation: {n_periods: 80, keep_periods: 30, starts: false}
+analyses:
+  - {type: prediction, name: prediction, points: 2, draws: 12, qois: [dte_rms]}
+"""
+    (path,) = uqgear.run_study(uqgear.parse_study(text), tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    assert result.attrs["draws_from"] == "study" and int(result.attrs["draws"]) == 12
+    assert "dte_rms_prior" not in result and not bool(result["extrapolated"].any())
+    upper = result["dte_rms"].sel(bound="upper")
+    assert bool((upper.isel(quantile=-1) > upper.isel(quantile=0)).all())  # the damping's spread shows

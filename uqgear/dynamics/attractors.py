@@ -178,6 +178,7 @@ class StartedEvaluator:
                 setups = build_batch(
                     self.design,
                     inputs.isel(sample=np.nonzero(rest)[0]),
+                    effects=self.options.get("effects", ()),
                     damping_in_separation=self.options.get("damping_in_separation", True),
                     stiffness=self.options.get("stiffness", "ishikawa"),
                 )
@@ -443,7 +444,10 @@ class MultiStartSearch:
     def _seeded_states(self, samples: xr.Dataset, rest: xr.Dataset, design: Design) -> np.ndarray:
         n = samples.sizes["sample"]
         settings = self.settings
-        inputs = samples.drop_vars([v for v in INITIAL_VARIABLES if v in samples.variables])
+        # effect parameters (``family.parameter``) left out: the random box is centred on the plain model's
+        # static state, which the effects shift by far less than the box's width
+        dropped = [v for v in samples.data_vars if v in INITIAL_VARIABLES or "." in str(v)]
+        inputs = samples.drop_vars(dropped)
         static = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
         half_backlash = 0.5 * (
             np.asarray(samples["backlash"].values, float) if "backlash" in samples else np.full(n, design.backlash)

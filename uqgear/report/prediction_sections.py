@@ -78,12 +78,15 @@ def _narrowed_text(ds: xr.Dataset) -> str:
     return "; the rig data narrowed " + ", ".join(parts[:3]) + " of their prior range" + more
 
 
-def _worst_point(ds: xr.Dataset, name: str) -> dict[str, Any]:
-    """Index of the operating point where the median draw's upper bound is highest."""
+def _worst_point(ds: xr.Dataset, name: str, *, inside: bool = False) -> dict[str, Any]:
+    """Index of the operating point where the median draw's upper bound is highest (``inside``: within the
+    rig campaign's range only)."""
     upper = ds[name].sel(bound="upper")
     quantiles = np.asarray(ds["quantile"].values, dtype=float)
     median = upper.isel(quantile=int(np.argmin(np.abs(quantiles - 0.5))))
     values = np.asarray(median.values, dtype=float)
+    if inside and "extrapolated" in ds:
+        values = np.where(np.asarray(ds["extrapolated"].transpose(*median.dims).values, dtype=bool), np.nan, values)
     if values.ndim == 0 or not np.isfinite(values).any():
         return {}
     flat = int(np.nanargmax(values))
@@ -132,6 +135,50 @@ def _extrapolation_text(ds: xr.Dataset) -> str | None:
     )
 
 
+def _statement(ds: xr.Dataset, name: str, index: dict[str, Any], short: bool = False) -> tuple[str, dict[str, Any]]:
+    """'Peak mesh force at S rpm, wet rail: A-B kN from the design's tolerances, C-D kN after calibration on F'
+    (``short``: 'at S rpm, wet rail: A-B kN before, C-D kN after')."""
+    label, unit, factor = display(name)
+    low, median, high = _band(ds, name, index)
+    worst_t2 = ds[f"{name}_worst_{T2}"].isel(index).item() if f"{name}_worst_{T2}" in ds else np.nan
+    where = f"{'' if short else label + ' '}at {_where(ds, index)}{_rail(ds, float(worst_t2))}"
+    if "extrapolated" in ds and bool(ds["extrapolated"].isel(index).item()):
+        where += " (beyond the rig campaign)"
+    facts: dict[str, Any] = {"qoi": name, "posterior": [low, high], "median": median, "at": index}
+    if f"{name}_prior" not in ds:
+        return f"{where}: worst case over {short_name(T2)} {low * factor:.4g}-{high * factor:.4g} {unit}", facts
+    prior_low, _, prior_high = _band(ds, f"{name}_prior", index)
+    facts["prior"] = [prior_low, prior_high]
+    source = str(ds.attrs.get("posterior_source", "")).rsplit("/", 1)[-1].split(" (")[0] or "the rig data"
+    if short:
+        before, after = f"{prior_low * factor:.4g}-{prior_high * factor:.4g}", f"{low * factor:.4g}-{high * factor:.4g}"
+        return f"{where}: {before} {unit} before, {after} {unit} after", facts
+    text = (
+        f"{where}: {prior_low * factor:.4g}-{prior_high * factor:.4g} {unit} from the design's tolerances, "
+        f"{low * factor:.4g}-{high * factor:.4g} {unit} after calibration on {source}"
+    )
+    return text, facts
+
+
+def _first_statement(ds: xr.Dataset, name: str, index: dict[str, Any]) -> Finding:
+    quantiles = np.asarray(ds["quantile"].values, dtype=float)
+    level = f"{(quantiles[-1] - quantiles[0]) * 100:.0f} %"
+    text, facts = _statement(ds, name, index)
+    text = text[:1].upper() + text[1:]
+    if "prior" in facts:
+        text += f" ({level} bands of the worst case over {short_name(T2)})"
+    else:
+        text += f" ({level} band over {int(ds.attrs.get('draws', 0))} draws of the study's distributions)"
+    inside = _worst_point(ds, name, inside=True)
+    if inside and inside != index:
+        within, facts["within_campaign"] = _statement(ds, name, inside, short=True)
+        text += f"; within the campaign's range the worst is {within}"
+    text += _narrowed_text(ds) + "."
+    if not int(ds.attrs.get("posterior_converged", 1)):
+        text += " The posterior had not converged (accepted by allow_unconverged): read the band as indicative."
+    return Finding(text, facts, topic="prediction")
+
+
 def prediction_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     """First-screen statements of every ``prediction`` result."""
     findings = []
@@ -142,30 +189,7 @@ def prediction_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
         index = _worst_point(ds, name) if name else {}
         if name is None or not index:
             continue
-        label, unit, factor = display(name)
-        low, median, high = _band(ds, name, index)
-        worst_t2 = ds[f"{name}_worst_{T2}"].isel(index).item() if f"{name}_worst_{T2}" in ds else np.nan
-        quantiles = np.asarray(ds["quantile"].values, dtype=float)
-        level = f"{(quantiles[-1] - quantiles[0]) * 100:.0f} %"
-        where = f"{label[:1].upper()}{label[1:]} at {_where(ds, index)}{_rail(ds, float(worst_t2))}"
-        facts: dict[str, Any] = {"qoi": name, "posterior": [low, high], "median": median, "at": index}
-        if f"{name}_prior" in ds:
-            prior_low, _, prior_high = _band(ds, f"{name}_prior", index)
-            source = str(ds.attrs.get("posterior_source", "")).rsplit("/", 1)[-1] or "the rig data"
-            text = (
-                f"{where}: {prior_low * factor:.4g}-{prior_high * factor:.4g} {unit} from the design's tolerances, "
-                f"{low * factor:.4g}-{high * factor:.4g} {unit} after calibration on {source} "
-                f"({level} bands of the worst case over {short_name(T2)}){_narrowed_text(ds)}."
-            )
-            facts["prior"] = [prior_low, prior_high]
-        else:
-            text = (
-                f"{where}: worst case over {short_name(T2)} {low * factor:.4g}-{high * factor:.4g} {unit} "
-                f"({level} band over {int(ds.attrs.get('draws', 0))} draws of the study's distributions)."
-            )
-        if not int(ds.attrs.get("posterior_converged", 1)):
-            text += " The posterior had not converged (accepted by allow_unconverged): read the band as indicative."
-        findings.append(Finding(text, facts, topic="prediction"))
+        findings.append(_first_statement(ds, name, index))
         effects = _json_attr(ds, "effects", [])
         if effects:
             names = ", ".join(entry["effect"].replace("_", " ") for entry in effects)
