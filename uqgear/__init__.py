@@ -57,6 +57,7 @@ _PUBLIC: dict[str, str] = {
     "ParameterSpace": "uq",
     "PosteriorDraws": "uq",
     "PosteriorError": "uq",
+    "PosteriorPrediction": "uq",
     "Interval": "uq",
     "Distribution": "uq",
     "Fixed": "uq",

@@ -15,6 +15,7 @@ from .parameters import Distribution, Fixed, Interval
 from .pbox import pbox, response_envelope
 from .polynomial_chaos import PolynomialChaos
 from .posterior import DEFAULT_DRAWS, PosteriorDraws, PosteriorError
+from .prediction import PosteriorPrediction
 from .results import (
     PROVENANCE_ATTRS,
     load_result,
@@ -39,6 +40,7 @@ __all__ = [
     "ParameterSpace",
     "PosteriorDraws",
     "PosteriorError",
+    "PosteriorPrediction",
     "DEFAULT_DRAWS",
     "PolynomialChaos",
     "Sweep",
