@@ -199,3 +199,31 @@ def test_the_main_study_envelope_holds_every_response_the_sweeps_reach(tmp_path,
     short = envelope < 0.97 * reached
     assert not short.any(), [(float(speeds[j]), float(ends[i])) for i, j in zip(*np.nonzero(short))]
     assert int((result["attractor_count"] > 1).sum()) >= 3
+
+
+def test_starts_beyond_the_sweeps_go_only_where_a_branch_folds_doubles_or_loses_stability():
+    from uqgear.dynamics.windows import CoexistenceWindows, NodeWindows, Window
+
+    # node 1: a fold window and a grazing window at the end of the speeds followed; node 2: the fold window
+    # moved on and a torus window with no counterpart at node 1
+    nodes = (
+        NodeWindows(1.0, (Window(3000.0, 3200.0, ("fold",)), Window(5900.0, 6000.0, ("grazing_separation",))), (), ()),
+        NodeWindows(2.0, (Window(3100.0, 3300.0, ("fold",)), Window(3600.0, 3900.0, ("neimark_sacker",))), (), ()),
+    )
+    windows = CoexistenceWindows("adhesion_torque", nodes, 50.0, (2000.0, 6000.0))
+    speeds, values = [3250.0, 5000.0, 5950.0, 3750.0], [1.5] * 4
+    # every window joined with the nearest of the other node: the grazing window's hull spans 3600-6000 rpm
+    assert windows.contains(speeds, values).tolist() == [True, True, True, True]
+    # joined with counterparts only, and grazing alone does not count
+    assert windows.branching(speeds, values).tolist() == [True, False, False, True]
+
+
+def test_the_compiled_hausdorff_distance_is_scipys_bit_for_bit():
+    from scipy.spatial.distance import directed_hausdorff
+
+    from uqgear.dynamics.attractors import hausdorff
+
+    rng = np.random.default_rng(3)
+    for size in ((1, 5), (40, 40), (200, 7)):
+        a, b = rng.normal(size=(size[0], 2)), rng.normal(size=(size[1], 2)) + 0.3
+        assert hausdorff(a, b) == max(directed_hausdorff(a, b)[0], directed_hausdorff(b, a)[0])

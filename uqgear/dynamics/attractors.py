@@ -37,9 +37,9 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numba as nb
 import numpy as np
 import xarray as xr
-from scipy.spatial.distance import directed_hausdorff
 
 from ..common.errors import UqgearError
 from ..physics.design import Design
@@ -185,9 +185,9 @@ class StartedEvaluator:
                 states[rest] = np.stack([setup.static_state() for setup in setups])
         result = simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
         final = result["final_state"].values
-        result = result.drop_vars(["final_state", "state"])
-        for index, name in enumerate(FINAL_VARIABLES):
-            result[name] = ("sample", final[:, index])
+        result = result.drop_vars(["final_state", "state"]).assign(
+            {name: ("sample", final[:, index]) for index, name in enumerate(FINAL_VARIABLES)}
+        )
         classes = classify_batch(result, seed=self.classify_seed) if self.full_regime else period_labels(result)
         return result.merge(classes[["regime", "response_period"]], compat="override")
 
@@ -220,11 +220,12 @@ def sweep_order(samples: xr.Dataset, variable: str) -> list[np.ndarray]:
     return [np.array(sorted(members, key=lambda i: values[i])) for members in groups.values()]
 
 
-def _with_starts(samples: xr.Dataset, index: np.ndarray, states: np.ndarray) -> xr.Dataset:
-    batch = samples.isel(sample=index)
-    for column, name in enumerate(INITIAL_VARIABLES):
-        batch[name] = ("sample", states[:, column])
-    return batch
+def with_starts(samples: xr.Dataset, index: np.ndarray, states: np.ndarray) -> xr.Dataset:
+    """The samples ``index`` with the start states ``states`` (one row each; NaN: from rest) as ``initial_<state>``."""
+    # one assignment: a merge per variable costs more than a small batch's runs
+    return samples.isel(sample=index).assign(
+        {name: ("sample", states[:, column]) for column, name in enumerate(INITIAL_VARIABLES)}
+    )
 
 
 def _final_states(result: xr.Dataset) -> np.ndarray:
@@ -237,11 +238,13 @@ def _sweep_runs(
     rest: xr.Dataset,
     groups: Sequence[np.ndarray],
     rest_index: np.ndarray | None = None,
+    starts: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, xr.Dataset]:
     """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions.
 
     ``rest`` holds the rest runs of the samples ``rest_index`` (default: all), which must include
-    each group's first and last member: the sweeps start there.
+    each group's first and last member: the sweeps start there. ``starts`` (``up`` and ``down``, arrays of
+    shape (n_samples, 6)) receive the state each run started from.
     """
     rows_of = {
         int(sample): row
@@ -265,7 +268,10 @@ def _sweep_runs(
                 index.append(int(ordered[step]))
                 states.append(carried[direction][int(ordered[step - 1])])
                 directions.append(direction)
-        result = evaluate(_with_starts(samples, np.array(index), np.array(states)))
+        result = evaluate(with_starts(samples, np.array(index), np.array(states)))
+        if starts is not None:
+            for sample, direction, state in zip(index, directions, states):
+                starts[direction][sample] = state
         ends = _final_states(result)
         for row, (sample, direction) in enumerate(zip(index, directions)):
             carried[direction][sample] = ends[row]
@@ -313,7 +319,7 @@ def up_down_sweeps(
     """
     groups = sweep_order(samples, variable)
     ends = np.unique(np.concatenate([[members[0], members[-1]] for members in groups])).astype(int)
-    rest = evaluate(_with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
+    rest = evaluate(with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
     return _sweep_runs(evaluate, samples, rest, groups, ends)
 
 
@@ -336,6 +342,9 @@ class MultiStartSearch:
         ``starts`` (comma-separated labels), ``attractor_count`` per sample; padded with NaN / ''.
     model_runs_ : int
         Model runs made.
+    start_states_ : dict of ndarray
+        Per start label, the state each sample's run started from (shape (n_samples, 6)): NaN where
+        it started at rest (the static equilibrium) or made no run of its own.
 
     Examples
     --------
@@ -360,6 +369,7 @@ class MultiStartSearch:
         design: Design | None = None,
         extra_states: Mapping[str, np.ndarray] | None = None,
         rest: xr.Dataset | None = None,
+        seeded_rows: np.ndarray | None = None,
     ) -> MultiStartSearch:
         """Run the starts and group the responses (``design`` only for the box's scales; default the
         evaluator's ``design``).
@@ -371,7 +381,9 @@ class MultiStartSearch:
 
         ``rest`` gives the rest runs already made (outputs of the same model with ``regime``, in the order
         of ``samples``); they are not run again, and without final states only the sweeps' first points
-        are."""
+        are. ``seeded_rows`` (booleans, one per sample; default all) says which samples get the random
+        starts; the others' random entries are left out of the grouping, and the chosen ones start from the
+        same states as with every sample chosen."""
         if "sample" not in samples.dims or "pinion_speed" not in samples:
             raise UqgearError("samples: expected a Dataset with dimension 'sample' and variable 'pinion_speed'")
         design = design if design is not None else getattr(evaluate, "design", None)
@@ -379,67 +391,67 @@ class MultiStartSearch:
         n = samples.sizes["sample"]
         runs = 0
         if rest is None:
-            rest = evaluate(_with_starts(samples, np.arange(n), np.full((n, 6), np.nan)))
+            rest = evaluate(with_starts(samples, np.arange(n), np.full((n, 6), np.nan)))
             runs += n
         stages: dict[str, xr.Dataset] = {"rest": rest}
+        self.start_states_ = {"rest": np.full((n, 6), np.nan)}
         if settings.sweeps:
-            groups = sweep_order(samples, settings.sweep_variable)
-            if all(name in rest for name in FINAL_VARIABLES):
-                stages.update(_sweep_runs(evaluate, samples, rest, groups))
-            elif any(len(members) > 1 for members in groups):
-                # the sweeps start from the rest runs' final states at each group's ends
-                ends = np.unique(np.concatenate([[m[0], m[-1]] for m in groups if len(m) > 1])).astype(int)
-                edges = evaluate(_with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
-                runs += ends.size
-                several = [members for members in groups if len(members) > 1]
-                swept_rows = np.sort(np.concatenate(several)).astype(int)
-                for direction, part in _sweep_runs(evaluate, samples, edges, several, ends).items():
-                    # a point alone in its group has no sweep neighbour: its sweep starts are its rest run
-                    stages[direction] = _put_rows(rest, swept_rows, part)
-            else:
-                stages.update({"up": rest, "down": rest})
-            runs += 2 * n - 2 * len(groups)
+            runs += self._sweep_stages(evaluate, samples, rest, stages)
         for label, states in (extra_states or {}).items():
             states = np.asarray(states, dtype=float)
             if states.shape != (n, 6):
                 raise UqgearError(f"extra_states[{label!r}]: expected shape ({n}, 6); got {states.shape}")
             stages[label] = _partial_stage(evaluate, samples, states, rest)
+            self.start_states_[label] = states
             runs += int(np.all(np.isfinite(states), axis=1).sum())
         if settings.seeded:
             if design is None:
                 raise UqgearError("design: needed for the random starts' box (pass design=)")
             starts = self._seeded_states(samples, rest, design)
-            tiled = samples.isel(sample=np.tile(np.arange(n), settings.seeded))
-            seeded = evaluate(_with_starts(tiled, np.arange(n * settings.seeded), starts))
+            tiled = np.tile(np.arange(n), settings.seeded)
+            if seeded_rows is None:
+                seeded = evaluate(with_starts(samples.isel(sample=tiled), np.arange(tiled.size), starts))
+            else:
+                starts[~np.tile(np.asarray(seeded_rows, dtype=bool), settings.seeded)] = np.nan
+                seeded = _partial_stage(evaluate, samples.isel(sample=tiled), starts, rest.isel(sample=tiled))
             for k in range(settings.seeded):
                 stages[f"seeded-{k + 1}"] = seeded.isel(sample=slice(k * n, (k + 1) * n))
-            runs += n * settings.seeded
+                self.start_states_[f"seeded-{k + 1}"] = starts[k * n : (k + 1) * n]
+            runs += int(np.all(np.isfinite(starts), axis=1).sum())
         labels = settings.start_labels()
         if extra_states:
             at = labels.index("down") + 1 if "down" in labels else 1
             labels = labels[:at] + list(extra_states) + labels[at:]
-        # stages from other models (given rest runs) may carry variables of their own
-        shared = set.intersection(*(set(stage.data_vars) for stage in stages.values()))
-        stages = {label: stage[[name for name in stage.data_vars if name in shared]] for label, stage in stages.items()}
-        stacked = xr.concat(
-            [
-                stages[label]
-                .drop_vars([v for v in INITIAL_VARIABLES if v in stages[label].variables])
-                .assign_coords(sample=np.arange(n))
-                for label in labels
-            ],
-            dim="start",
-            coords="minimal",
-            compat="override",
-            join="override",
-            combine_attrs="drop_conflicts",
-        )
-        stacked = stacked.assign_coords(start=("start", labels))
-        self.runs_ = stacked
-        self.attractors_ = group_attractors(stacked, design, settings)
+        self.runs_ = _stacked(stages, labels, n)
+        self.attractors_ = group_attractors(self.runs_, design, settings)
         self.runs_["attractor"] = (("sample", "start"), self.attractors_.attrs.pop("_membership"))
         self.model_runs_ = int(runs)
         return self
+
+    def _sweep_stages(
+        self, evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, rest: xr.Dataset, stages: dict
+    ) -> int:
+        """Add the ``up`` and ``down`` stages (and their start states) of :meth:`fit`; returns the runs made."""
+        n = samples.sizes["sample"]
+        groups = sweep_order(samples, self.settings.sweep_variable)
+        starts = {direction: np.full((n, 6), np.nan) for direction in ("up", "down")}
+        runs = 2 * n - 2 * len(groups)
+        if all(name in rest for name in FINAL_VARIABLES):
+            stages.update(_sweep_runs(evaluate, samples, rest, groups, starts=starts))
+        elif any(len(members) > 1 for members in groups):
+            # the sweeps start from the rest runs' final states at each group's ends
+            ends = np.unique(np.concatenate([[m[0], m[-1]] for m in groups if len(m) > 1])).astype(int)
+            edges = evaluate(with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
+            runs += ends.size
+            several = [members for members in groups if len(members) > 1]
+            swept_rows = np.sort(np.concatenate(several)).astype(int)
+            for direction, part in _sweep_runs(evaluate, samples, edges, several, ends, starts).items():
+                # a point alone in its group has no sweep neighbour: its sweep starts are its rest run
+                stages[direction] = _put_rows(rest, swept_rows, part)
+        else:
+            stages.update({"up": rest, "down": rest})
+        self.start_states_.update(starts)
+        return runs
 
     def _seeded_states(self, samples: xr.Dataset, rest: xr.Dataset, design: Design) -> np.ndarray:
         n = samples.sizes["sample"]
@@ -464,6 +476,26 @@ class MultiStartSearch:
         rng = np.random.default_rng(seed)
         draws = rng.uniform(-1.0, 1.0, size=(settings.seeded, n, 6))
         return (static[None] + draws * widths[None]).reshape(settings.seeded * n, 6)
+
+
+def _stacked(stages: Mapping[str, xr.Dataset], labels: Sequence[str], n: int) -> xr.Dataset:
+    """The runs of every start on dim ``start`` (in the order of ``labels``), the variables all stages share."""
+    # stages from other models (given rest runs) may carry variables of their own
+    shared = set.intersection(*(set(stage.data_vars) for stage in stages.values()))
+    stacked = xr.concat(
+        [
+            stages[label][[name for name in stages[label].data_vars if name in shared]]
+            .drop_vars([v for v in INITIAL_VARIABLES if v in stages[label].variables])
+            .assign_coords(sample=np.arange(n))
+            for label in labels
+        ],
+        dim="start",
+        coords="minimal",
+        compat="override",
+        join="override",
+        combine_attrs="drop_conflicts",
+    )
+    return stacked.assign_coords(start=("start", list(labels)))
 
 
 def _put_rows(target: xr.Dataset, rows: np.ndarray, part: xr.Dataset) -> xr.Dataset:
@@ -494,7 +526,7 @@ def _partial_stage(
             out[name] = variable.copy(data=np.full(variable.shape, "", dtype=variable.dtype))
     if rows.size == 0:
         return out
-    return _put_rows(out, rows, evaluate(_with_starts(samples, rows, states[rows])))
+    return _put_rows(out, rows, evaluate(with_starts(samples, rows, states[rows])))
 
 
 def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
@@ -508,9 +540,46 @@ def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
     for name in COMPARED_FRACTIONS:
         if not abs(a[name] - b[name]) <= widen * settings.tolerance:
             return False
-    limit = widen * settings.poincare_tolerance
-    distance = max(directed_hausdorff(a["points"], b["points"])[0], directed_hausdorff(b["points"], a["points"])[0])
-    return bool(distance <= limit)
+    return bool(hausdorff(a["points"], b["points"]) <= widen * settings.poincare_tolerance)
+
+
+@nb.njit(cache=True, nogil=True)
+def _directed_squared(first: np.ndarray, second: np.ndarray) -> float:
+    """The largest squared distance from a point of ``first`` to its nearest point of ``second`` (rows are points).
+
+    A point's search stops at the first point of ``second`` nearer than the largest so far: it cannot raise it.
+    """
+    largest = 0.0
+    for i in range(first.shape[0]):
+        nearest = np.inf
+        for j in range(second.shape[0]):
+            d = 0.0
+            for k in range(first.shape[1]):
+                d += (first[i, k] - second[j, k]) ** 2
+            if d < largest:
+                nearest = -1.0
+                break
+            nearest = min(nearest, d)
+        if nearest != np.inf and nearest > largest:
+            largest = nearest
+    return largest
+
+
+def hausdorff(first: np.ndarray, second: np.ndarray) -> float:
+    """The Hausdorff distance between two sets of points (rows): the larger of the two directed distances.
+
+    The same number as the larger of :func:`scipy.spatial.distance.directed_hausdorff` both ways, bit for bit
+    (the same sums of squares, one square root), compiled: the grouping compares thousands of pairs of
+    Poincare sets, where scipy's per-call cost outweighs the distances.
+
+    Examples
+    --------
+    >>> hausdorff(np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([[0.0, 0.0]]))
+    1.0
+    """
+    a = np.ascontiguousarray(first, dtype=float)
+    b = np.ascontiguousarray(second, dtype=float)
+    return math.sqrt(max(_directed_squared(a, b), _directed_squared(b, a)))
 
 
 def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiStart) -> xr.Dataset:
@@ -629,6 +698,8 @@ __all__ = [
     "extremes_over_attractors",
     "sweep_order",
     "up_down_sweeps",
+    "with_starts",
+    "hausdorff",
     "INITIAL_VARIABLES",
     "FINAL_VARIABLES",
     "ATTRACTOR_QOIS",

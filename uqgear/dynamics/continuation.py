@@ -36,6 +36,7 @@ import numpy as np
 
 from ..common.errors import UqgearError
 from ..physics.design import Design
+from ..physics.integration import BATCH_DESIGN_KEYS
 from .bifurcations import Bifurcation, BranchPoint, detect, locate
 from .branches import Branch, branches_dataset
 from .floquet import BRANCH_POINT, FOLD, PERIOD_DOUBLING, floquet_multipliers
@@ -110,7 +111,11 @@ class _Tracer:
         settings: ContinuationSettings,
         model: Mapping[str, Any],
     ) -> None:
-        self.design, self.parameter, self.fixed = design, parameter, dict(fixed)
+        # the fixed design keys are applied once: a set-up per corrector step would replace them every time
+        keys = {name: float(value) for name, value in fixed.items() if name in BATCH_DESIGN_KEYS and name != parameter}
+        self.design = design.replace(**keys) if keys else design
+        self.parameter = parameter
+        self.fixed = {name: value for name, value in fixed.items() if name not in keys}
         self.low, self.high = min(bounds), max(bounds)
         self.span = self.high - self.low
         self.settings, self.model = settings, dict(model)

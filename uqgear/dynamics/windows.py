@@ -16,7 +16,11 @@ records at each node
 
 Between two nodes a window moves continuously with the node input, so the windows at a value
 between two nodes are each node's windows joined with the nearest window of the other node (their
-hull): a window drifting across the speed axis between the nodes stays covered. Inputs other than
+hull): a window drifting across the speed axis between the nodes stays covered. Where a branch
+folds, doubles or loses stability (:meth:`CoexistenceWindows.branching`) a window is joined only with
+its counterpart, the nearest window where the two overlap or are each other's nearest: one without a
+counterpart at the other node (born or gone between them, or moved out of the speeds followed) is not
+joined with a window far away, whose hull would span the speeds between them. Inputs other than
 the speed and the node input are held at the values the windows were found at; a sample that
 changes the mesh-mode frequency (mesh stiffness scale, bearing stiffnesses, masses) is tested at
 its *equivalent speed*, the speed at which its mesh frequency stands in the same ratio to its
@@ -33,7 +37,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,12 +49,16 @@ from ..common.errors import UqgearError
 from ..physics.design import Design
 from ..physics.model import natural_frequencies
 from ..physics.stiffness import stiffness_tables
+from ..physics.threads import default_threads
 from .continuation import Continuation, ContinuationSettings
 
 #: Windows are looked for in this sweep variable.
 SWEEP_VARIABLE = "pinion_speed"
 #: Sample variables that move the natural frequencies (tested at the equivalent speed).
 MODAL_VARIABLES = ("mesh_stiffness_scale", "k1", "k2", "m1", "m2", "I1", "I2")
+#: Window kinds of a contact boundary crossed by a stable orbit: where a window has no other kind, the branch
+#: stays stable and one-valued through it.
+GRAZING_KINDS = ("grazing_separation", "grazing_back_side")
 #: Location tolerance of the continuation as a fraction of the speed range: a window is widened by
 #: a margin of tens of rpm, so locating its edges to 1e-3 of the range (5 rpm on 1000-6000 rpm)
 #: is enough and cheaper than the continuation's default 1e-5.
@@ -147,9 +156,10 @@ class CoexistenceWindows:
     seconds: float = 0.0
     orbit_passes: int = 0
 
-    def spans_at(self, value: float) -> list[Window]:
-        """The windows at a value of the node input: between two nodes each node's windows joined with the
-        nearest window of the other node; beyond the outer nodes, the outer node's windows."""
+    def spans_at(self, value: float, counterparts: bool = False) -> list[Window]:
+        """The windows at a value of the node input: between two nodes each node's windows joined with the nearest
+        window of the other node (with ``counterparts``, only with their counterpart: module docstring); beyond
+        the outer nodes, the outer node's windows."""
         values = np.array([node.value for node in self.nodes])
         if len(self.nodes) == 1 or not np.isfinite(value):
             return list(self.nodes[0].windows)
@@ -162,7 +172,10 @@ class CoexistenceWindows:
         spans = []
         for own, other in ((below.windows, above.windows), (above.windows, below.windows)):
             for window in own:
-                nearest = min(other, key=window.distance, default=None)
+                if counterparts:
+                    nearest = _counterpart(window, own, other)
+                else:
+                    nearest = min(other, key=window.distance, default=None)
                 spans.append(window if nearest is None else window.hull(nearest))
         return spans
 
@@ -170,6 +183,25 @@ class CoexistenceWindows:
         self, speeds: Sequence[float] | np.ndarray, values: Sequence[float] | np.ndarray | None = None
     ) -> np.ndarray:
         """Which (speed, node value) pairs lie in a window."""
+        return self._inside(speeds, values, lambda window: True, counterparts=False)
+
+    def branching(
+        self, speeds: Sequence[float] | np.ndarray, values: Sequence[float] | np.ndarray | None = None
+    ) -> np.ndarray:
+        """Which (speed, node value) pairs lie in a window that more than a grazing point made: where a branch
+        folds, doubles or loses stability (:data:`GRAZING_KINDS`), joined across the nodes with counterparts only."""
+        return self._inside(
+            speeds, values, lambda window: not set(window.kinds) <= set(GRAZING_KINDS), counterparts=True
+        )
+
+    def _inside(
+        self,
+        speeds: Sequence[float] | np.ndarray,
+        values: Sequence[float] | np.ndarray | None,
+        counts: Callable[[Window], bool],
+        counterparts: bool,
+    ) -> np.ndarray:
+        """Which (speed, node value) pairs lie in a window that ``counts`` (:meth:`spans_at`)."""
         speed_array = np.asarray(speeds, dtype=float)
         value_array = np.full(speed_array.shape, math.nan) if values is None else np.asarray(values, dtype=float)
         cache: dict[float, list[Window]] = {}
@@ -178,7 +210,7 @@ class CoexistenceWindows:
             key = float(value)
             spans = cache.get(key)
             if spans is None:
-                spans = cache[key] = self.spans_at(key)
+                spans = cache[key] = [window for window in self.spans_at(key, counterparts) if counts(window)]
             inside.flat[index] = any(window.low <= speed <= window.high for window in spans)
         return inside
 
@@ -202,6 +234,16 @@ class CoexistenceWindows:
             }
             for node in self.nodes
         ]
+
+
+def _counterpart(window: Window, own: Sequence[Window], other: Sequence[Window]) -> Window | None:
+    """The window of the neighbouring node that ``window`` (one of ``own``) moves into: the nearest one where they
+    overlap or are each other's nearest; None where it has none there (it is born or gone between the nodes, or
+    has left the speed range followed), so that it is not joined across the windows in between."""
+    nearest = min(other, key=window.distance, default=None)
+    if nearest is None or window.distance(nearest) == 0.0:
+        return nearest
+    return nearest if min(own, key=nearest.distance) == window else None
 
 
 def _stretches(branch: Any) -> list[tuple[int, int, bool]]:
@@ -266,17 +308,20 @@ def follow_nodes(
     node_values: Sequence[float] = (),
     damping_in_separation: bool = True,
     stiffness: str = "ishikawa",
+    threads: int | None = None,
 ) -> list[tuple[float, Continuation]]:
     """The continuation in pinion speed at each node: ``[(node value, fitted Continuation), ...]`` sorted by value
-    (one node of value NaN without ``node_parameter``). Parameters as :func:`find_windows`."""
+    (one node of value NaN without ``node_parameter``). Parameters as :func:`find_windows`; the nodes are
+    followed side by side on ``threads`` threads (default: as many as a batch uses), each on its own, so the
+    fits are the same for any number of threads."""
     low, high = sorted(float(value) for value in speed_range)
     if not (math.isfinite(low) and math.isfinite(high)) or high <= low:
         raise UqgearError(f"speed_range: expected two different finite speeds; got {speed_range!r}")
     values = [float(v) for v in node_values] if node_parameter is not None and len(node_values) else [math.nan]
     settings = ContinuationSettings(tolerance=LOCATION_TOLERANCE * (high - low), max_period=2)
     base = {key: float(value) for key, value in fixed.items() if key != SWEEP_VARIABLE}
-    fits = []
-    for value in sorted(values):
+
+    def follow(value: float) -> tuple[float, Continuation]:
         inputs = dict(base) if node_parameter is None or not math.isfinite(value) else {**base, node_parameter: value}
         continuation = Continuation(
             SWEEP_VARIABLE,
@@ -286,8 +331,15 @@ def follow_nodes(
             damping_in_separation=damping_in_separation,
             stiffness=stiffness,
         )
-        fits.append((value, continuation.fit(design, inputs)))
-    return fits
+        return value, continuation.fit(design, inputs)
+
+    ordered = sorted(values)
+    count = min(default_threads() if threads is None else max(1, int(threads)), len(ordered))
+    if count <= 1:
+        return [follow(value) for value in ordered]
+    # the orbit passes release the GIL: the nodes' continuations overlap there
+    with ThreadPoolExecutor(max_workers=count, thread_name_prefix="uqgear-nodes") as pool:
+        return list(pool.map(follow, ordered))
 
 
 def windows_from(
@@ -325,6 +377,7 @@ def find_windows(
     margin: float = 50.0,
     damping_in_separation: bool = True,
     stiffness: str = "ishikawa",
+    threads: int | None = None,
 ) -> CoexistenceWindows:
     """Follow the periodic branches in pinion speed at each node and collect the windows (module docstring).
 
@@ -343,6 +396,8 @@ def find_windows(
         rpm added on both sides of every window (at least the speed step of the grid the windows
         guide, so that a window point's sweep neighbours lie in it too).
     damping_in_separation, stiffness : as in :func:`uqgear.simulate`
+    threads : int, optional
+        Threads the nodes are followed on (the windows are the same for any number).
 
     Returns
     -------
@@ -372,6 +427,7 @@ def find_windows(
         node_values=node_values,
         damping_in_separation=damping_in_separation,
         stiffness=stiffness,
+        threads=threads,
     )
     return windows_from(fits, margin, node_parameter=node_parameter, fixed=fixed, seconds=time.perf_counter() - began)
 
@@ -417,4 +473,5 @@ __all__ = [
     "follow_nodes",
     "windows_from",
     "MODAL_VARIABLES",
+    "GRAZING_KINDS",
 ]

@@ -506,7 +506,7 @@ def _substep(s, t, h, t_ref, p, pair_k, period_k, fp, fg, with_matrix, discrete,
     return new
 
 
-@nb.njit(**JIT_OPTIONS)
+@nb.njit(**JIT_OPTIONS, nogil=True)
 def orbit_pass(
     state0, n_periods, p, pair_k, period_k, fp, fg, breakpoints, steps_per_period, with_matrix, discrete, phi, measures
 ):

@@ -101,36 +101,38 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
             if samples[name].dims == ("sample",) and not name.startswith("initial_")
         }
     )
+    # every variable is gathered first and merged once: a merge per variable costs more than the rest of the call
+    data: dict[str, Any] = {}
     for name in [*QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
         if name not in runs:
             continue
         values = runs[name].transpose("sample", "start").values
-        out[name] = ("sample", values[rows, first], dict(runs[name].attrs))
-        out[f"{name}_rest"] = ("sample", values[:, 0], {**runs[name].attrs, "long_name": f"{name} from rest"})
+        data[name] = ("sample", values[rows, first], dict(runs[name].attrs))
+        data[f"{name}_rest"] = ("sample", values[:, 0], {**runs[name].attrs, "long_name": f"{name} from rest"})
     for name in ATTRACTOR_QOIS:
         if name not in attractors:
             continue
         values = np.where(np.isfinite(attractors[name].values), attractors[name].values, np.nan)
         for bound, pick in (("max", np.nanargmax), ("min", np.nanargmin)):
             index = np.array([pick(row) for row in values], dtype=np.int64)
-            out[f"{name}_{bound}"] = (
+            data[f"{name}_{bound}"] = (
                 "sample",
                 values[rows, index],
                 {"units": QOI_INFO[name][0], "long_name": f"{bound} over attractors of {name}"},
             )
-            out[f"{name}_{bound}_attractor"] = ("sample", index, {"long_name": f"attractor giving {name}_{bound}"})
-            out[f"{name}_{bound}_start"] = (
+            data[f"{name}_{bound}_attractor"] = ("sample", index, {"long_name": f"attractor giving {name}_{bound}"})
+            data[f"{name}_{bound}_start"] = (
                 "sample",
                 attractors["first_start"].values[rows, index].astype(str),
                 {"long_name": f"first start that reached the attractor of {name}_{bound}"},
             )
-    out["attractor_count"] = attractors["attractor_count"]
+    data["attractor_count"] = attractors["attractor_count"]
     for name in PER_ATTRACTOR:
         if name in attractors:
-            out[f"attractor_{name}"] = attractors[name]
+            data[f"attractor_{name}"] = attractors[name]
     for name in ("regime", "share", "starts", "first_start"):
-        out[f"attractor_{name}"] = attractors[name]
-    out["worst_attractor_start"] = (
+        data[f"attractor_{name}"] = attractors[name]
+    data["worst_attractor_start"] = (
         "sample",
         np.array([labels[j] for j in first], dtype=str),
         {"long_name": "first start of the attractor with the largest peak mesh force"},
@@ -138,14 +140,16 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
     if poincare:
         for name in ("poincare_x", "poincare_x_velocity"):
             values = runs[name].transpose("sample", "start", "period").values
-            out[name] = (("sample", "period"), values[rows, first], dict(runs[name].attrs))
+            data[name] = (("sample", "period"), values[rows, first], dict(runs[name].attrs))
         for start in ("rest", "up", "down"):
             if start in labels:
-                out[f"poincare_x_{start}"] = (
+                data[f"poincare_x_{start}"] = (
                     ("sample", "period"),
                     runs["poincare_x"].sel(start=start).transpose("sample", "period").values,
                     {"units": "m", "long_name": f"Poincare points of the DTE, {start} start"},
                 )
+    out = out.assign(data)
+    if poincare:
         out = out.assign_coords(period=runs["period"].values)
     out.attrs.update(starts=json.dumps(search.settings.to_dict()), model_runs_per_point=search.model_runs_ / max(n, 1))
     return out

@@ -33,7 +33,7 @@ from typing import Any, cast
 import numpy as np
 import xarray as xr
 
-from ..dynamics.attractors import ATTRACTOR_QOIS, MultiStart, MultiStartSearch, StartedEvaluator
+from ..dynamics.attractors import ATTRACTOR_QOIS, MultiStart, MultiStartSearch, StartedEvaluator, with_starts
 from ..dynamics.regimes import period_labels
 from ..dynamics.windows import CoexistenceWindows, equivalent_speeds, follow_nodes, windows_from
 from ..physics.design import Design
@@ -55,6 +55,7 @@ def _fits(
     fixed: Mapping[str, float],
     nodes: Sequence[float],
     simulation: SimulationSettings,
+    threads: int | None = None,
 ) -> tuple[list[Any], float]:
     key = json.dumps(
         {
@@ -78,6 +79,7 @@ def _fits(
             node_values=nodes,
             damping_in_separation=simulation.damping_in_separation,
             stiffness=simulation.stiffness,
+            threads=threads,
         )
         if len(_FITS) >= _FITS_MAX:
             _FITS.pop(next(iter(_FITS)))
@@ -112,7 +114,7 @@ def analysis_windows(context: Any, simulation: SimulationSettings) -> Coexistenc
         fixed[NODE_PARAMETER] = float(given if given is not None else context.fixed_values()[NODE_PARAMETER])
     else:
         nodes = np.linspace(float(uncertain.lower), float(uncertain.upper), int(starts.nodes)).tolist()
-    fits, seconds = _fits(context.design, (low, high), fixed, nodes, simulation)
+    fits, seconds = _fits(context.design, (low, high), fixed, nodes, simulation, context.threads)
     return windows_from(fits, margin, node_parameter=NODE_PARAMETER if nodes else None, fixed=fixed, seconds=seconds)
 
 
@@ -143,6 +145,12 @@ class GuidedStartModel:
         Seed of the random starts (the same for every call).
     poincare : bool
         Keep Poincare points.
+    exponents : callable, optional
+        The started batch model with the largest Lyapunov exponent, where ``rest`` gives it and
+        ``started`` does not: a window point whose worst response no rest run reached runs again from
+        that response's start with it (the same trajectory, bit for bit), so that ``largest_lyapunov``
+        is the worst response's, while the other extra starts skip the exponent's cost (the grouping
+        does not read it).
     """
 
     def __init__(
@@ -154,6 +162,7 @@ class GuidedStartModel:
         windows: CoexistenceWindows,
         seed: Any,
         poincare: bool = True,
+        exponents: Any = None,
     ) -> None:
         self.rest = rest
         self.started = started
@@ -162,13 +171,15 @@ class GuidedStartModel:
         self.windows = windows
         self.seed = seed
         self.poincare = poincare
+        self.exponents = exponents
         #: Points that lay in a window, over every call.
         self.window_points = 0
 
     @property
     def runs(self) -> int:
         """Model runs made so far (rest runs and extra starts)."""
-        return int(self.rest.runs) + int(self.started.runs)
+        again = int(self.exponents.runs) if self.exponents is not None else 0
+        return int(self.rest.runs) + int(self.started.runs) + again
 
     def _where(self, samples: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
         """Each sample's equivalent speed and node value (NaN without one)."""
@@ -192,11 +203,19 @@ class GuidedStartModel:
             subset = samples.isel(sample=rows)
             rest = base.isel(sample=rows)
             rest = rest.merge(period_labels(rest)[["regime", "response_period"]], compat="override")
+            # where only a grazing point made the window, the branch is stable and one-valued through it: its one
+            # orbit is the rest run's, and a jump shows in the sweeps; the orbit and random starts are spent where
+            # a branch folds, doubles or loses stability
+            branching = self.windows.branching(speeds[rows], values[rows])
             starts = self._orbit_starts(speeds[rows], values[rows])
+            for column in starts.values():
+                column[~branching] = np.nan
             search = MultiStartSearch(self.settings, self.seed).fit(
-                self.started, subset, self.design, extra_states=starts, rest=rest
+                self.started, subset, self.design, extra_states=starts, rest=rest, seeded_rows=branching
             )
             found = summarise(search, subset, poincare=self.poincare)
+            if self.exponents is not None and "largest_lyapunov" in rest:
+                found = self._worst_exponents(found, search, subset, rest)
         out = combine(base, found, rows, poincare=self.poincare)
         if not self.poincare:
             out = out.drop_dims("period", errors="ignore")
@@ -206,6 +225,19 @@ class GuidedStartModel:
             windows=json.dumps(self.windows.to_records()),
         )
         return out
+
+    def _worst_exponents(
+        self, found: xr.Dataset, search: MultiStartSearch, samples: xr.Dataset, rest: xr.Dataset
+    ) -> xr.Dataset:
+        """``found`` with ``largest_lyapunov`` of each point's worst response: the rest run's where the rest start
+        reached it, else a run again from the start that first reached it, with the exponent."""
+        worst = np.asarray(found["worst_attractor_start"].values).astype(str)
+        values = np.asarray(rest["largest_lyapunov"].values, dtype=float).copy()
+        again = np.nonzero(worst != "rest")[0]
+        if again.size:
+            states = np.stack([search.start_states_[worst[row]][row] for row in again])
+            values[again] = self.exponents(with_starts(samples, again, states))["largest_lyapunov"].values
+        return found.assign(largest_lyapunov=("sample", values, dict(rest["largest_lyapunov"].attrs)))
 
     def _orbit_starts(self, speeds: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray]:
         """The stable orbits at each (equivalent speed, node value) as start states ``orbit-1``, ``orbit-2``, ..."""
@@ -224,27 +256,28 @@ class GuidedStartModel:
 def _rest_layout(base: xr.Dataset, poincare: bool) -> xr.Dataset:
     """The multi-start layout of runs from rest alone: one attractor, the rest start's."""
     n = base.sizes["sample"]
-    out = base.copy()
+    # every variable is gathered first and merged once: a merge per variable costs more than the rest of the call
+    added: dict[str, Any] = {}
     for name in [*QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
         if name in base:
-            out[f"{name}_rest"] = base[name].assign_attrs(long_name=f"{name} from rest")
+            added[f"{name}_rest"] = base[name].assign_attrs(long_name=f"{name} from rest")
     for name in ATTRACTOR_QOIS:
         if name not in base:
             continue
         for bound in ("max", "min"):
-            out[f"{name}_{bound}"] = base[name].assign_attrs(
+            added[f"{name}_{bound}"] = base[name].assign_attrs(
                 units=QOI_INFO[name][0], long_name=f"{bound} over attractors of {name}"
             )
-            out[f"{name}_{bound}_attractor"] = ("sample", np.zeros(n, dtype=np.int64))
-            out[f"{name}_{bound}_start"] = ("sample", np.full(n, "rest"))
-    out["attractor_count"] = (
+            added[f"{name}_{bound}_attractor"] = ("sample", np.zeros(n, dtype=np.int64))
+            added[f"{name}_{bound}_start"] = ("sample", np.full(n, "rest"))
+    added["attractor_count"] = (
         "sample",
         np.ones(n, dtype=np.int64),
         {"units": "1", "long_name": "distinct steady responses found"},
     )
     for name in PER_ATTRACTOR:
         if name in base:
-            out[f"attractor_{name}"] = (("sample", "attractor"), base[name].values[:, None], dict(base[name].attrs))
+            added[f"attractor_{name}"] = (("sample", "attractor"), base[name].values[:, None], dict(base[name].attrs))
     regime = np.asarray(base["regime"].values).astype(str) if "regime" in base else np.full(n, "")
     for name, values in (
         ("regime", regime),
@@ -252,13 +285,29 @@ def _rest_layout(base: xr.Dataset, poincare: bool) -> xr.Dataset:
         ("starts", np.full(n, "rest")),
         ("first_start", np.full(n, "rest")),
     ):
-        out[f"attractor_{name}"] = (("sample", "attractor"), values[:, None])
-    out["worst_attractor_start"] = ("sample", np.full(n, "rest"))
+        added[f"attractor_{name}"] = (("sample", "attractor"), values[:, None])
+    added["worst_attractor_start"] = ("sample", np.full(n, "rest"))
     if poincare and "poincare_x" in base:
-        out["poincare_x_rest"] = base["poincare_x"]
+        added["poincare_x_rest"] = base["poincare_x"]
         for start in ("up", "down"):
-            out[f"poincare_x_{start}"] = base["poincare_x"].where(False)
+            added[f"poincare_x_{start}"] = base["poincare_x"].where(False)
+    out = base.copy()
+    out.update(added)
     return out.assign_coords(attractor=("attractor", [0]))
+
+
+def _widened(out: xr.Dataset, width: int) -> xr.Dataset:
+    """``out`` on ``width`` attractors: the new entries of non-float variables empty (``""`` or 0), not NaN."""
+    out = out.reindex(attractor=np.arange(width))
+    filled: dict[str, Any] = {}
+    for name in cast(Iterable[str], out.data_vars):
+        if "attractor" in out[name].dims and out[name].dtype.kind not in "fc":
+            values = out[name].values
+            text = values.dtype.kind in "USO"
+            column = np.where(np.arange(width)[None, :] == 0, values, "" if text else 0)
+            filled[name] = (out[name].dims, column.astype(str) if text else column)
+    out.update(filled)
+    return out
 
 
 def combine(base: xr.Dataset, found: xr.Dataset | None, rows: np.ndarray, poincare: bool = True) -> xr.Dataset:
@@ -269,18 +318,16 @@ def combine(base: xr.Dataset, found: xr.Dataset | None, rows: np.ndarray, poinca
         return out
     width = max(found.sizes.get("attractor", 1), 1)
     if width > 1:
-        out = out.reindex(attractor=np.arange(width))
-        for name in cast(Iterable[str], out.data_vars):
-            if "attractor" in out[name].dims and out[name].dtype.kind not in "fc":
-                values = out[name].values
-                filled = np.where(np.arange(width)[None, :] == 0, values, "" if values.dtype.kind in "USO" else 0)
-                out[name] = (out[name].dims, filled.astype(str) if values.dtype.kind in "USO" else filled)
+        out = _widened(out, width)
+    written: dict[str, Any] = {}
     for name in cast(Iterable[str], found.data_vars):
-        if name not in out or "sample" not in found[name].dims:
+        if name not in out.data_vars or "sample" not in found[name].dims:
             continue
-        dims = ("sample", *(dim for dim in out[name].dims if dim != "sample"))
-        values = out[name].transpose(*dims).values.copy()
-        column = found[name].transpose(*dims).values
+        # plain variables: a DataArray would carry (and copy) every sample coordinate along
+        target = out.variables[name]
+        dims = ("sample", *(dim for dim in target.dims if dim != "sample"))
+        values = target.transpose(*dims).values.copy()
+        column = found.variables[name].transpose(*dims).values
         if values.dtype.kind in "USO" or column.dtype.kind in "USO":
             values = values.astype(str).astype(object)
             column = column.astype(str)
@@ -292,7 +339,8 @@ def combine(base: xr.Dataset, found: xr.Dataset | None, rows: np.ndarray, poinca
         values[rows] = column
         if values.dtype == object:
             values = values.astype(str)
-        out[name] = (dims, values, out[name].attrs)
+        written[name] = (dims, values, target.attrs)
+    out.update(written)
     if "regime" in out and "attractor_regime" in found:
         worst = np.asarray(found["worst_attractor_start"].values).astype(str)
         first = np.asarray(found["attractor_first_start"].values).astype(str)
@@ -322,13 +370,20 @@ def guided_start_model(context: Any, simulation: SimulationSettings, rest: Any, 
 
     The extra starts run in this process, without checkpoints: they are a few per cent of the runs,
     in small batches (a sweep is one batch per step), for which a checkpoint file costs more than the
-    runs. Their runs are labelled by period detection alone (all the grouping needs); the analyses
-    classify the response they report in full."""
+    runs. Their runs are labelled by period detection alone and skip the Lyapunov exponent (the
+    grouping needs neither); the analyses classify the response they report in full, with the exponent
+    of the worst response (:class:`GuidedStartModel`, ``exponents``)."""
     starts = cast(MultiStart, simulation.starts)
     windows = analysis_windows(context, simulation)
     options = simulation.batch_options(context.threads)
-    started = _CountedRuns(StartedEvaluator(context.design, options, context.stage_seed(99), full_regime=False))
-    return GuidedStartModel(rest, started, context.design, starts, windows, context.stage_seed(98), poincare)
+    seed = context.stage_seed(99)
+    started = _CountedRuns(StartedEvaluator(context.design, {**options, "lyapunov": False}, seed, full_regime=False))
+    exponents = None
+    if simulation.lyapunov:
+        exponents = _CountedRuns(StartedEvaluator(context.design, options, seed, full_regime=False))
+    return GuidedStartModel(
+        rest, started, context.design, starts, windows, context.stage_seed(98), poincare, exponents=exponents
+    )
 
 
 def widen_over_attractors(
