@@ -143,8 +143,8 @@ def _check_propagation(spec: AnalysisSpec, uncertain: Mapping[str, UncertainPara
         bad = [name for name in parameters if not uncertain[name].is_interval]
         if bad:
             raise StudyError(
-                f"{path}.parameters: {bad[0]} has a distribution; an {spec.type} analysis bounds over "
-                "interval parameters, expected those"
+                f"{path}.parameters: {bad[0]} has a distribution; {'an' if spec.type == 'interval' else 'a'} "
+                f"{spec.type} analysis expects interval parameters"
             )
     if spec.type == "sobol":
         samples = options["samples"]
