@@ -218,8 +218,8 @@ def _draw_qoi(ax: Any, ds: xr.Dataset, name: str, sweep: str) -> None:
         for bound in ("upper", "lower"):
             values = np.asarray(ds[f"{name}{suffix}"].sel(bound=bound).values, dtype=float) * factor
             ax.fill_between(
-                x, values[0], values[-1], color=colours[suffix], alpha=0.45,
-                label=f"{labels[suffix]}: {bound} bound" if bound == "upper" else None,
+                x, values[0], values[-1], color=colours[suffix], alpha=0.5 if bound == "upper" else 0.25,
+                label=f"{labels[suffix]}: {bound} bound",
             )
             ax.plot(x, values[values.shape[0] // 2], color=colours[suffix], linewidth=1.0)
     if "extrapolated" in ds:

@@ -38,6 +38,22 @@ def _qois_of(ds: xr.Dataset) -> list[str]:
     return [name for name in options.get("qois", []) if name in ds]
 
 
+def _draw_branches(ax: Any, ds: xr.Dataset, name: str, x: np.ndarray, factor: float) -> None:
+    """Where responses coexist: the from-rest response and the other one reached from another start, apart."""
+    if f"{name}_from_rest" not in ds or "coexisting" not in ds or ds["coexisting"].ndim != 1:
+        return
+    both = np.asarray(ds["coexisting"].values, dtype=bool) & np.asarray(ds["in_window"].values, dtype=bool)
+    rest = ds[f"{name}_from_rest"].sel(bound="upper").values * factor
+    upper = ds[name].sel(bound="upper").values * factor
+    other = both & (np.abs(upper - rest) > 1e-9 * np.abs(rest))
+    if not other.any():
+        return
+    ax.plot(x[other], rest[other], linestyle="none", marker="o", markerfacecolor="white", markeredgecolor="black",
+            markersize=4, label="upper bound from rest")
+    ax.plot(x[other], upper[other], linestyle="none", marker="^", color="tab:red", markersize=5,
+            label="upper bound over every response (another start)")
+
+
 @renderer("interval")
 def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
@@ -65,6 +81,7 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
             ax.plot(x, upper, color="black", linewidth=1.0, linestyle="-")
             if nominal is not None:
                 ax.plot(x, nominal, color="black", linestyle="--", linewidth=1.0, label="nominal (midpoints)")
+            _draw_branches(ax, ds, name, x, factor)
             flagged = _flags(ds, name)
             if flagged is not None and flagged.any():
                 ax.plot(

@@ -421,6 +421,8 @@ def widen_over_attractors(
     dims = tuple(spec.names)
     count = np.ones(n_points, dtype=np.int64)
     for qoi in qois:
+        # the from-rest bounds beside the widened ones: where responses coexist the report draws both branches
+        out[f"{qoi}_from_rest"] = result[qoi].assign_attrs(long_name=f"bounds of {qoi} over the runs from rest")
         out[f"{qoi}_start"] = (
             (*dims, "bound"),
             np.full((*spec.shape, 2), "rest"),
