@@ -214,9 +214,30 @@ def _check_coexistence(finding, results):
     assert finding.facts["most"] == int(count.max())
 
 
+def _check_prediction(finding, results):
+    """The worst case's band recomputed: where the median draw's upper bound is highest, its lowest and highest
+    quantiles (and the prior's, or the note that the draws are the study's)."""
+    ds = next(ds for ds in results if ds.attrs.get("analysis_type") == "prediction")
+    facts = finding.facts
+    if "extrapolated" in facts or "effects" in facts:
+        return
+    upper = ds[facts["qoi"]].sel(bound="upper")
+    median = upper.isel(quantile=int(np.argmin(np.abs(ds["quantile"].values - 0.5))))
+    at = {dim: int(index) for dim, index in zip(median.dims, np.unravel_index(int(median.argmax()), median.shape))}
+    assert {dim: int(index) for dim, index in facts["at"].items()} == at
+    band = upper.isel(at).values
+    assert facts["posterior"] == pytest.approx([band[0], band[-1]])
+    assert f"{band[0] / 1e3:.4g}-{band[-1] / 1e3:.4g} kN" in finding.text
+    if f"{facts['qoi']}_prior" in ds:
+        prior = ds[f"{facts['qoi']}_prior"].sel(bound="upper").isel(at).values
+        assert facts["prior"] == pytest.approx([prior[0], prior[-1]])
+    else:
+        assert "draws of the study's distributions" in finding.text
+
+
 CHECKS = {"worst_load": _check_worst_load, "separation": _check_separation, "back_contact": _check_back_contact,
           "regimes": _check_regimes, "sobol": _check_sobol, "continuation": _check_continuation,
-          "coexistence": _check_coexistence}
+          "coexistence": _check_coexistence, "prediction": _check_prediction}
 
 
 def check_every_finding(results) -> list[str]:
@@ -273,9 +294,10 @@ def test_every_smoke_headline_finding_is_true_of_the_netcdf_data(smoke):
     results, _ = smoke
     topics = check_every_finding(results)
     # the smoke results have every kind of grid statement and a Sobol analysis of three QoIs
-    assert topics[:5] == ["worst_load", "separation", "separation", "back_contact", "regimes"]
+    # a prediction answers first (the band of the worst case), then the grid statements
+    assert topics[:6] == ["prediction", "worst_load", "separation", "separation", "back_contact", "regimes"]
     # guided starts (the default) add what they found about coexisting responses
-    assert topics[-3:] == ["sobol", "sobol", "sobol"] and set(topics[5:-3]) == {"coexistence", "continuation"}
+    assert topics[-3:] == ["sobol", "sobol", "sobol"] and set(topics[6:-3]) == {"coexistence", "continuation"}
 
 
 # ---------------------------------------------------------------------------- synthetic grids
