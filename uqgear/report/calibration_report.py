@@ -227,6 +227,15 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
                 "identifiability",
             )
         )
+    discrepancy = content.get("discrepancy")
+    if discrepancy:
+        shares = discrepancy["share"]
+        text = (
+            "Model discrepancy: share of the predictive variance carried by the discrepancy term, "
+            + ", ".join(f"{channel} {100 * share:.0f} %" for channel, share in shares.items())
+            + " (the rest: parameters, iid model error, sensor noise and emulator error)."
+        )
+        findings.append(Finding(text, {"share": dict(shares)}, "discrepancy"))
     check = content.get("predictive_check") or {}
     if "fraction_within_2_sigma" in check:
         share = float(check["fraction_within_2_sigma"])
@@ -531,6 +540,8 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
             ("group", "q05", "q50", "q95", "features"),
         )
     )
+    if "discrepancy" in summary:
+        parts.extend(_discrepancy_section(summary["discrepancy"]))
     parts.append("<h2>Emulator stages</h2>")
     parts.append(
         _table(
@@ -548,6 +559,26 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
         )
     )
     return html_page("uqgear calibration report", _STYLE + HEADLINE_STYLE, parts)
+
+
+def _discrepancy_section(discrepancy: Mapping[str, Any]) -> list[str]:
+    """The model discrepancy: each channel's shares of the predictive variance and tau per group."""
+    shares = discrepancy["variance_shares"]
+    sources = ("discrepancy", "parameters", "model_error", "noise", "emulator")
+    return [
+        "<h2>Model discrepancy (log amplitude)</h2>",
+        _table(
+            [(channel, *(f"{100 * entry[source]:.1f} %" for source in sources)) for channel, entry in shares.items()],
+            ("channel", "discrepancy", "parameters", "iid model error", "sensor noise", "emulator"),
+        ),
+        _table(
+            [
+                (group, entry["tau"]["q05"], entry["tau"]["q50"], entry["tau"]["q95"])
+                for group, entry in discrepancy["groups"].items()
+            ],
+            ("group", "tau q05", "tau q50", "tau q95"),
+        ),
+    ]
 
 
 def write_calibration_report(
