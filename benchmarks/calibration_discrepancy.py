@@ -61,6 +61,9 @@ def run(campaign: str, discrepancy: bool, seed: int, threads: int | None) -> dic
     }
     if discrepancy:
         record["share"] = calibration.summary_["discrepancy"]["share"]
+        record["rms_mean"] = calibration.summary_["discrepancy"]["rms_mean"]
+        record["tau_q50"] = {group: entry["tau"]["q50"]
+                             for group, entry in calibration.summary_["discrepancy"]["groups"].items()}
         record["predictive_check"] = calibration.predictive_check_
     return record
 

@@ -139,10 +139,22 @@ def test_a_known_smooth_discrepancy_is_recovered_within_its_stated_uncertainty()
     features_zero, likelihood_zero, draws_zero, _ = _synthetic(lambda s, t: np.zeros((s.size, 3, 3)))
     fit_zero = fit_discrepancy(draws_zero, likelihood_zero, features_zero, basis)
     assert fit_zero.tau_quantiles[0, 0, 1] < 0.05
-    summary = discrepancy_summary(fit, features, np.zeros(features.used.shape), {"pinion_speed": SPEEDS,
-                                                                                  "drive_torque": TORQUES})
-    assert summary["share"]["acc_gear"] > summary["share"]["acc_pinion"] > 0.5
+    operating = {"pinion_speed": SPEEDS, "drive_torque": TORQUES}
+    summary = discrepancy_summary(fit, features, np.zeros(features.used.shape), operating)
     assert summary["groups"]["te_mesh1"]["mean"] == pytest.approx(list(mean[:, 0, 0]))
+    # the share of the predictive variance, recomputed from its parts (acc_pinion: all three groups used)
+    parts = {
+        "discrepancy": sd[:, 1] ** 2,
+        "parameters": fit.parameter_variance[:, 1],
+        "model_error": np.broadcast_to(fit.sigma_median[1] ** 2, (SPEEDS.size, 3)),
+        "noise": features.noise_variance[:, 1],
+    }
+    share = parts["discrepancy"].sum() / sum(part.sum() for part in parts.values())
+    assert summary["share"]["acc_pinion"] == pytest.approx(share)
+    # the size of the shift its mean makes: that of the true discrepancy
+    for channel, c in (("te", 0), ("acc_pinion", 1)):
+        assert summary["rms_mean"][channel] == pytest.approx(np.sqrt(np.mean(truth[:, c] ** 2)), rel=0.05)
+    assert summary["share"]["te"] < 0.9 and summary["share"]["te"] > 0.0
 
 
 def test_discrepancy_draws_at_new_points_and_read_back_from_a_file(tmp_path):

@@ -111,7 +111,14 @@ def _log_mean_exp(values: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
 
 
 def tau_grid(discrepancy_range: tuple[float, float]) -> np.ndarray:
-    """The log-spaced grid of tau (equal weights: a log-uniform prior)."""
+    """The log-spaced grid of tau (equal weights: a log-uniform prior).
+
+    Examples
+    --------
+    >>> grid = tau_grid((0.005, 3.0))
+    >>> grid.size, float(grid[0]), float(grid[-1])
+    (20, 0.005, 3.0)
+    """
     return np.geomspace(discrepancy_range[0], discrepancy_range[1], TAU_POINTS)
 
 

@@ -185,17 +185,20 @@ def fit_discrepancy(
 def variance_components(
     fit: DiscrepancyFit, features: Features, loo_rms: np.ndarray, operating: Mapping[str, np.ndarray]
 ) -> dict[str, np.ndarray]:
-    """Each feature's predictive variance (op, channel, harmonic) by source, at the posterior medians of tau, sigma.
+    """Each feature's posterior-predictive variance (op, channel, harmonic) by source.
 
-    ``discrepancy`` is tau_g^2 |phi(run)|^2, the variance the discrepancy's
-    prior adds at the run (what it is allowed to carry); ``parameters`` the
-    spread of the emulated feature over posterior draws.
+    ``discrepancy`` is the posterior variance of delta at the run (beta's
+    posterior covariance, which carries tau's and the parameters'
+    uncertainty); ``parameters`` the spread of the emulated feature over
+    posterior draws; ``model_error`` the iid model error at its posterior
+    median; ``noise`` and ``emulator`` those of the likelihood. What the
+    discrepancy's mean shifts is not a variance: the summary gives it apart
+    (``rms_mean``).
     """
-    phi = fit.discrepancy.basis.matrix(operating["pinion_speed"], operating["drive_torque"])
-    tau = fit.tau_quantiles[..., 1]
+    sd = fit.discrepancy.sd_at(operating["pinion_speed"], operating["drive_torque"])
     return {
         "parameters": fit.parameter_variance,
-        "discrepancy": (phi**2).sum(axis=1)[:, None, None] * tau[None] ** 2,
+        "discrepancy": sd**2,
         "model_error": np.broadcast_to(fit.sigma_median[None] ** 2, features.used.shape),
         "noise": features.noise_variance,
         "emulator": loo_rms**2,
@@ -205,13 +208,19 @@ def variance_components(
 def discrepancy_summary(
     fit: DiscrepancyFit, features: Features, loo_rms: np.ndarray, operating: Mapping[str, np.ndarray]
 ) -> dict[str, Any]:
-    """The ``discrepancy`` entry of the summary: tau and delta per group, the variance shares per channel."""
+    """The ``discrepancy`` entry of the summary: tau and delta per group, the variance shares per channel.
+
+    ``share`` is the discrepancy's share of the posterior-predictive variance
+    of each channel's features (:func:`variance_components`), ``rms_mean``
+    the size of the shift its mean makes (log amplitude).
+    """
     used = features.used
     components = variance_components(fit, features, loo_rms, operating)
     mean = fit.discrepancy.mean_at(operating["pinion_speed"], operating["drive_torque"])
     sd = fit.discrepancy.sd_at(operating["pinion_speed"], operating["drive_torque"])
     groups: dict[str, Any] = {}
     channels: dict[str, Any] = {}
+    rms: dict[str, float] = {}  # root mean square of delta's posterior mean over the features used
     for c, channel in enumerate(HARMONIC_CHANNELS):
         for h in range(used.shape[2]):
             if used[:, c, h].any():
@@ -225,10 +234,12 @@ def discrepancy_summary(
             totals = {name: float(value[:, c][used[:, c]].sum()) for name, value in components.items()}
             whole = sum(totals.values())
             channels[channel] = {name: value / whole for name, value in totals.items()}
+            rms[channel] = float(np.sqrt(np.mean(mean[:, c][used[:, c]] ** 2)))
     return {
         "groups": groups,
         "share": {channel: entry["discrepancy"] for channel, entry in channels.items()},
         "variance_shares": channels,
+        "rms_mean": rms,
         "basis": list(BASIS_NAMES),
         "speed_range": list(fit.discrepancy.basis.speed_range),
         "torque_range": list(fit.discrepancy.basis.torque_range),

@@ -229,13 +229,16 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
         )
     discrepancy = content.get("discrepancy")
     if discrepancy:
-        shares = discrepancy["share"]
+        shares, rms = discrepancy["share"], discrepancy["rms_mean"]
         text = (
-            "Model discrepancy: share of the predictive variance carried by the discrepancy term, "
+            "Model discrepancy: its share of the posterior-predictive variance "
             + ", ".join(f"{channel} {100 * share:.0f} %" for channel, share in shares.items())
-            + " (the rest: parameters, iid model error, sensor noise and emulator error)."
+            + " (the rest: parameters, iid model error, sensor noise and emulator error); its mean shifts the "
+            "log amplitudes by (rms) "
+            + ", ".join(f"{channel} {value:.3g}" for channel, value in rms.items())
+            + "."
         )
-        findings.append(Finding(text, {"share": dict(shares)}, "discrepancy"))
+        findings.append(Finding(text, {"share": dict(shares), "rms_mean": dict(rms)}, "discrepancy"))
     check = content.get("predictive_check") or {}
     if "fraction_within_2_sigma" in check:
         share = float(check["fraction_within_2_sigma"])
@@ -562,14 +565,18 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
 
 
 def _discrepancy_section(discrepancy: Mapping[str, Any]) -> list[str]:
-    """The model discrepancy: each channel's shares of the predictive variance and tau per group."""
+    """The model discrepancy: each channel's shares of the posterior-predictive variance, the size of its
+    mean, and tau per group."""
     shares = discrepancy["variance_shares"]
     sources = ("discrepancy", "parameters", "model_error", "noise", "emulator")
     return [
         "<h2>Model discrepancy (log amplitude)</h2>",
         _table(
-            [(channel, *(f"{100 * entry[source]:.1f} %" for source in sources)) for channel, entry in shares.items()],
-            ("channel", "discrepancy", "parameters", "iid model error", "sensor noise", "emulator"),
+            [
+                (channel, *(f"{100 * entry[source]:.1f} %" for source in sources), discrepancy["rms_mean"][channel])
+                for channel, entry in shares.items()
+            ],
+            ("channel", "discrepancy", "parameters", "iid model error", "sensor noise", "emulator", "rms of its mean"),
         ),
         _table(
             [
