@@ -19,6 +19,7 @@ from uqgear.calibration.discrepancy_results import (
 from uqgear.calibration.emulator import PolynomialEmulator
 from uqgear.calibration.failure import failure_causes
 from uqgear.calibration.likelihood import Features, StageLikelihood
+from uqgear.common.errors import StudyError
 from uqgear.rig.virtual_rig import simulate_campaign
 
 SPEEDS = np.array([600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0])
@@ -250,3 +251,16 @@ def test_the_discrepancy_lifts_the_capped_model_error_cause_only_when_it_explain
     summary["discrepancy"]["groups"]["te_mesh1"]["tau"]["q50"] = 2.9
     capped = failure_causes(predictive_check={"passed": True}, discrepancy_cap=3.0, **parts)
     assert [c["kind"] for c in capped["causes"]] == ["discrepancy_at_cap"]
+
+
+def test_the_command_line_and_a_study_switch_it_on():
+    from uqgear.cli import build_parser
+    from uqgear.study.analysis_schemas import ANALYSIS_DEFAULTS, ANALYSIS_SCHEMAS
+
+    parser = build_parser()
+    assert parser.parse_args(["calibrate", "rig.nc", "--out", "cal", "--discrepancy"]).discrepancy is True
+    assert parser.parse_args(["calibrate", "rig.nc", "--out", "cal"]).discrepancy is False
+    assert ANALYSIS_DEFAULTS["calibrate"]["discrepancy"] is False
+    assert ANALYSIS_SCHEMAS["calibrate"]["discrepancy"](True, "analyses[0].discrepancy") is True
+    with pytest.raises(StudyError, match=r"analyses\[0\]\.discrepancy"):
+        ANALYSIS_SCHEMAS["calibrate"]["discrepancy"]("yes", "analyses[0].discrepancy")
