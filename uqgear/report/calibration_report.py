@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 
 from ..common.errors import UqgearError
 from ..common.fileio import write_text_atomic
+from .calibration_discrepancy import discrepancy_finding, discrepancy_section
 from .finding import HEADLINE_STYLE, Finding, headline_html
 from .page import figure_html, figure_png, html_page, new_figure
 
@@ -227,18 +228,8 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
                 "identifiability",
             )
         )
-    discrepancy = content.get("discrepancy")
-    if discrepancy:
-        shares, rms = discrepancy["share"], discrepancy["rms_mean"]
-        text = (
-            "Model discrepancy: its share of the posterior-predictive variance "
-            + ", ".join(f"{channel} {100 * share:.0f} %" for channel, share in shares.items())
-            + " (the rest: parameters, iid model error, sensor noise and emulator error); its mean shifts the "
-            "log amplitudes by (rms) "
-            + ", ".join(f"{channel} {value:.3g}" for channel, value in rms.items())
-            + "."
-        )
-        findings.append(Finding(text, {"share": dict(shares), "rms_mean": dict(rms)}, "discrepancy"))
+    if content.get("discrepancy"):
+        findings.append(discrepancy_finding(content["discrepancy"]))
     check = content.get("predictive_check") or {}
     if "fraction_within_2_sigma" in check:
         share = float(check["fraction_within_2_sigma"])
@@ -544,7 +535,7 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
         )
     )
     if "discrepancy" in summary:
-        parts.extend(_discrepancy_section(summary["discrepancy"]))
+        parts.extend(discrepancy_section(summary["discrepancy"], _table))
     parts.append("<h2>Emulator stages</h2>")
     parts.append(
         _table(
@@ -562,30 +553,6 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
         )
     )
     return html_page("uqgear calibration report", _STYLE + HEADLINE_STYLE, parts)
-
-
-def _discrepancy_section(discrepancy: Mapping[str, Any]) -> list[str]:
-    """The model discrepancy: each channel's shares of the posterior-predictive variance, the size of its
-    mean, and tau per group."""
-    shares = discrepancy["variance_shares"]
-    sources = ("discrepancy", "parameters", "model_error", "noise", "emulator")
-    return [
-        "<h2>Model discrepancy (log amplitude)</h2>",
-        _table(
-            [
-                (channel, *(f"{100 * entry[source]:.1f} %" for source in sources), discrepancy["rms_mean"][channel])
-                for channel, entry in shares.items()
-            ],
-            ("channel", "discrepancy", "parameters", "iid model error", "sensor noise", "emulator", "rms of its mean"),
-        ),
-        _table(
-            [
-                (group, entry["tau"]["q05"], entry["tau"]["q50"], entry["tau"]["q95"])
-                for group, entry in discrepancy["groups"].items()
-            ],
-            ("group", "tau q05", "tau q50", "tau q95"),
-        ),
-    ]
 
 
 def write_calibration_report(
