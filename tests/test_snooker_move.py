@@ -57,3 +57,13 @@ def test_it_samples_a_known_gaussian(moves):
     np.testing.assert_allclose(mean, [0.3, -1.0, 2.0], atol=0.06)
     # emcee 3.1.6's DESnookerMove gives 0.84-0.89 alone and 0.963-0.970 in the mix (seed 1, measured): both fail here
     np.testing.assert_allclose(spread, 1.0, atol=0.025)
+
+
+def test_a_walker_on_its_z_point_stays_where_it_is():
+    """Walkers collapsed onto one point (|x - z| = 0) propose their own position with ratio 1, not NaN."""
+    walkers = np.zeros((4, 3))
+    groups = [np.zeros((4, 3)), np.ones((4, 3)), -np.ones((4, 3))]
+    picks = _Picks(np.zeros((4, 3), int), np.tile(np.arange(3), (4, 1)))
+    proposal, factor = SnookerMove().get_proposal(walkers, groups, picks)
+    np.testing.assert_array_equal(proposal, walkers)
+    np.testing.assert_array_equal(factor, 0.0)

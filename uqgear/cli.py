@@ -394,6 +394,7 @@ def _command_calibrate(args: argparse.Namespace) -> int:
         seed=args.seed,
         threads=args.workers,
         pitch_classes=classes,
+        discrepancy=args.discrepancy,
     )
     summary = result.to_dict()
     state = "converged" if summary.get("converged") else "NOT converged (see calibration.json)"
@@ -663,6 +664,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="CLASS",
         help="ISO 1328-1 flank tolerance classes of the rig's gears, lowest and highest, for "
         "the pitch-error correction (default 6 8); 'none': read the level from the sidebands",
+    )
+    calibrate.add_argument(
+        "--discrepancy",
+        action="store_true",
+        help="add a model-discrepancy function of speed and torque per channel and harmonic "
+        "(for a rig whose physics the model does not have; docs/validation/calibration.md)",
     )
     calibrate.set_defaults(handler=_command_calibrate)
 

@@ -39,6 +39,19 @@ the sum of
   ``zeta_mesh``, ``k1`` and ``k2`` on ``healthy.nc`` were too narrow to hold
   the truth; with 0.5 % they held it narrowly, with 1 % comfortably.
 
+Model discrepancy (``discrepancy=True``)
+----------------------------------------
+For a rig whose physics the model does not have, each group also gets a
+smooth function of the operating point, delta_g = beta_g . (1, s, t, s^2)
+(s, t: speed and drive torque scaled over the campaign), with beta_g ~
+N(0, tau_g^2) integrated out analytically and tau_g (log-uniform, 0.5 % to
+300 % in log amplitude) on a grid jointly with sigma_g
+(:mod:`~uqgear.calibration.discrepancy`). The fitted discrepancy (tau, its
+mean at each run, its share of the predictive variance per channel) is
+reported, checked by the predictive check, stored in ``posterior.nc`` and
+read back by :func:`read_discrepancy`
+(:mod:`~uqgear.calibration.discrepancy_results`).
+
 Surrogate, sampler and checks
 -----------------------------
 Each run's log features get one total-degree polynomial emulator (Legendre
@@ -59,7 +72,9 @@ validated and order-tracked), ``priors`` (parameter names, units, priors),
 ``harmonics`` (model and observed mesh-harmonic features), ``emulator``
 (polynomial emulators), ``training`` (model runs and emulator training),
 ``likelihood`` (features, noise, emulated log likelihood), ``convergence``
-(R-hat, autocorrelation, ESS, verdict), ``sampling`` (emcee: box search and
+(R-hat, autocorrelation, ESS, verdict), ``discrepancy`` (the discrepancy
+term's basis and likelihood), ``discrepancy_results`` (its posterior, summary
+and file record), ``sampling`` (emcee: box search and
 final run), ``summaries`` (posterior Dataset, summary, JSON content),
 ``predictive`` (posterior predictive check), ``posterior_fit`` (one fit's
 work from the box search to the predictive check), ``settings`` (checks of
@@ -70,6 +85,7 @@ the settings), ``estimator`` (the Calibration class), ``outputs`` (files and
 from __future__ import annotations
 
 from .convergence import effective_sample_size, integrated_autocorrelation_time, split_rhat
+from .discrepancy_results import Discrepancy, read_discrepancy
 from .emulator import PolynomialEmulator
 from .errors import CalibrationError
 from .estimator import Calibration
@@ -80,6 +96,8 @@ from .priors import DEFAULT_PARAMETERS, PRIOR_RULES, prior_bounds, resolve_param
 __all__ = [
     "Calibration",
     "CalibrationError",
+    "Discrepancy",
+    "read_discrepancy",
     "calibrate",
     "write_calibration",
     "model_harmonics",

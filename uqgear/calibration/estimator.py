@@ -21,6 +21,7 @@ from ..physics.effects import Effect
 from ..physics.geometry import geometry_notes
 from ..uq.seeds import child_seed
 from .convergence import ConvergenceCriteria
+from .discrepancy import DEFAULT_DISCREPANCY_RANGE, DiscrepancyBasis, tau_grid
 from .errors import CalibrationError
 from .failure import failure_causes
 from .harmonics import HARMONIC_CHANNELS
@@ -104,6 +105,15 @@ class Calibration:
         ISO 1328-1 flank tolerance classes of the rig's gears (from their
         drawings; default 6 to 8, the usual traction-gear grades); None:
         the level read from the rig's sidebands instead.
+    discrepancy : bool
+        Add a model-discrepancy function of the operating point per
+        (channel, harmonic) group to the likelihood, integrated out
+        analytically (:mod:`~uqgear.calibration.discrepancy`): for campaigns
+        whose physics the model does not have. Off, every result is that of
+        the ordinary calibration.
+    discrepancy_range : (float, float)
+        Bounds of the log-uniform prior of the discrepancy's scale tau
+        (standard deviation of each basis coefficient, log-amplitude units).
 
     Attributes
     ----------
@@ -130,6 +140,11 @@ class Calibration:
         The steps of the fit as they finished (kept by a failure).
     pitch_errors_ : PitchCorrection or None
         The pitch-error correction (None when switched off).
+    discrepancy_ : Discrepancy or None
+        The fitted discrepancy (None without ``discrepancy``); the summary's
+        ``discrepancy`` entry has tau per group, delta at each run and each
+        channel's variance shares; :meth:`discrepancy_at` draws it at new
+        operating points.
 
     Examples
     --------
@@ -189,6 +204,8 @@ class Calibration:
         pitch_correction: bool = True,
         pitch_draws: int = 4,
         pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+        discrepancy: bool = False,
+        discrepancy_range: tuple[float, float] = DEFAULT_DISCREPANCY_RANGE,
     ) -> None:
         self.parameters = resolve_parameters(parameters)
         self.design = check_design(design)
@@ -216,6 +233,8 @@ class Calibration:
         self.pitch_correction = check_bool("pitch_correction", pitch_correction)
         self.pitch_draws = check_int("pitch_draws", pitch_draws, 2)
         self.pitch_classes = check_pitch_classes(pitch_classes)
+        self.discrepancy = check_bool("discrepancy", discrepancy)
+        self.discrepancy_range = check_model_error_range(discrepancy_range, "discrepancy_range")
 
     # ------------------------------------------------------------------ settings record
 
@@ -245,6 +264,8 @@ class Calibration:
             "pitch_correction": self.pitch_correction,
             "pitch_draws": self.pitch_draws,
             "pitch_classes": None if self.pitch_classes is None else list(self.pitch_classes),
+            "discrepancy": self.discrepancy,
+            "discrepancy_range": list(self.discrepancy_range),
             "seed_entropy": str(self.seed.entropy),
         }
 
@@ -320,6 +341,14 @@ class Calibration:
             stage_steps=self.stage_steps,
             max_stages=self.max_stages,
             error_floor=self.model_error_range[0],
+            discrepancy=(
+                (
+                    DiscrepancyBasis.of_campaign(self.operating_["pinion_speed"], self.operating_["drive_torque"]),
+                    tau_grid(self.discrepancy_range),
+                )
+                if self.discrepancy
+                else None
+            ),
         )
         self.emulator_ = {"stages": work.stages}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
@@ -350,6 +379,7 @@ class Calibration:
             )
             self.converged_ = bool(self.diagnostics_["converged"])
             found.update(converged=self.converged_)
+            self.discrepancy_ = None if work.discrepancy_fit is None else work.discrepancy_fit.discrepancy
         with steps.step("posterior predictive check"):
             self.predictive_, self.predictive_check_ = work.predictive_check(
                 self.posterior_, self.summary_, np.random.default_rng(seeds[4]), draws=self.predictive_draws
@@ -383,7 +413,51 @@ class Calibration:
             predictive_check=self.predictive_check_,
             predictive=self.predictive_,
             model_error_cap=self.model_error_range[1],
+            discrepancy_cap=self.discrepancy_range[1] if self.discrepancy else None,
         )
+
+    def discrepancy_at(
+        self,
+        pinion_speed: Sequence[float] | np.ndarray,
+        drive_torque: Sequence[float] | np.ndarray,
+        draws: int,
+        rng: np.random.Generator,
+    ) -> xr.DataArray:
+        """Posterior draws of the fitted discrepancy at operating points (:meth:`Discrepancy.at
+        <uqgear.calibration.discrepancy_results.Discrepancy.at>`), to add to predicted log amplitudes.
+
+        Parameters
+        ----------
+        pinion_speed, drive_torque : array-like (n,)
+            Operating points, rpm and N m.
+        draws : int
+            Number of draws.
+        rng : numpy.random.Generator
+            Source of the draws.
+
+        Returns
+        -------
+        xarray.DataArray
+            (draw, point, channel, harmonic), log-amplitude units.
+
+        Raises
+        ------
+        CalibrationError
+            Not fitted, or fitted without ``discrepancy``.
+
+        Examples
+        --------
+        >>> import numpy as np, uqgear
+        >>> try:
+        ...     uqgear.Calibration().discrepancy_at([2000.0], [6000.0], 10, np.random.default_rng(0))
+        ... except uqgear.UqgearError as error:
+        ...     print(error)
+        calibration: no fitted discrepancy; fit(rig) with discrepancy=True first
+        """
+        fitted = getattr(self, "discrepancy_", None)
+        if fitted is None:
+            raise CalibrationError("calibration: no fitted discrepancy; fit(rig) with discrepancy=True first")
+        return fitted.at(pinion_speed, drive_torque, draws, rng)
 
     def to_dict(self) -> dict[str, Any]:
         """The calibration result as a JSON-ready mapping (the content of ``calibration.json``)."""

@@ -6,6 +6,11 @@ data push parameters against their prior bounds, or the model-error terms
 climb to their cap to absorb a misfit. Each is read off the finished fit and
 named with its numbers; the chain statistics are named as the cause only
 when they are what failed and nothing else is.
+
+With the discrepancy term (:mod:`~uqgear.calibration.discrepancy`) an iid
+model error at its cap is not a cause when the discrepancy explains the
+misfit, that is when the predictive check with the discrepancy included
+passes; a discrepancy scale tau at the cap of its own grid is.
 """
 
 from __future__ import annotations
@@ -46,10 +51,11 @@ def model_errors_at_cap(model_error: Mapping[str, Mapping[str, float]], cap: flo
 
 
 def worst_misfits(predictive: xr.Dataset) -> list[dict[str, Any]]:
-    """The features farthest from the posterior-predictive median (in total sigma)."""
-    if "z_total" not in predictive:
+    """The features farthest from the posterior-predictive median (in total sigma, with the discrepancy if fitted)."""
+    name = "z_discrepancy" if "z_discrepancy" in predictive else "z_total"
+    if name not in predictive:
         return []
-    z = np.abs(predictive["z_total"].values)
+    z = np.abs(predictive[name].values)
     order = np.argsort(np.where(np.isfinite(z), z, -1.0), axis=None)[::-1][:_WORST_SHOWN]
     rows = []
     for flat in order:
@@ -61,7 +67,7 @@ def worst_misfits(predictive: xr.Dataset) -> list[dict[str, Any]]:
                 "op": int(op),
                 "pinion_speed": float(predictive["pinion_speed"].values[op]),
                 "feature": f"{predictive['channel'].values[channel]} mesh{predictive['harmonic'].values[harmonic]}",
-                "z": float(predictive["z_total"].values[op, channel, harmonic]),
+                "z": float(predictive[name].values[op, channel, harmonic]),
                 "relative_difference": float(predictive["relative_difference"].values[op, channel, harmonic]),
             }
         )
@@ -75,15 +81,21 @@ def failure_causes(
     predictive_check: Mapping[str, Any],
     predictive: xr.Dataset,
     model_error_cap: float,
+    discrepancy_cap: float | None = None,
 ) -> dict[str, Any]:
     """What is wrong with a fit, each cause with its numbers.
+
+    ``discrepancy_cap`` (the upper bound of tau) is given for a fit with the
+    discrepancy term: its ``summary`` has a ``discrepancy`` entry and its
+    predictive check includes the discrepancy (module docstring).
 
     Returns
     -------
     dict
         ``causes`` (list of {"kind", "text", ...}; kinds ``predictive_misfit``,
-        ``parameter_at_bound``, ``model_error_at_cap``, ``sampler``) and
-        ``message``: one sentence naming them, "" when nothing is wrong.
+        ``parameter_at_bound``, ``model_error_at_cap``, ``discrepancy_at_cap``,
+        ``sampler``) and ``message``: one sentence naming them, "" when nothing
+        is wrong.
     """
     causes: list[dict[str, Any]] = []
     if predictive_check.get("passed") is False:
@@ -120,6 +132,10 @@ def failure_causes(
             }
         )
     capped = model_errors_at_cap(summary.get("model_error", {}), model_error_cap)
+    if discrepancy_cap is not None:
+        if predictive_check.get("passed") is True:
+            capped = []  # the discrepancy explains what the iid error could not
+        causes.extend(_discrepancy_at_cap(summary.get("discrepancy", {}), discrepancy_cap))
     if capped:
         causes.append(
             {
@@ -150,6 +166,19 @@ def failure_causes(
     else:
         message = "the sampler did not converge, so the estimates are not a result: " + "; ".join(reasons)
     return {"causes": causes, "message": message}
+
+
+def _discrepancy_at_cap(discrepancy: Mapping[str, Any], cap: float) -> list[dict[str, Any]]:
+    """The cause ``discrepancy_at_cap`` (none or one): groups whose tau median reached the cap of its grid."""
+    groups = [
+        {"group": group, "median": entry["tau"]["q50"], "cap": cap}
+        for group, entry in discrepancy.get("groups", {}).items()
+        if entry["tau"]["q50"] >= _AT_CAP * cap
+    ]
+    if not groups:
+        return []
+    text = "the discrepancy terms reach their cap {:.2g}: {}".format(cap, ", ".join(g["group"] for g in groups))
+    return [{"kind": "discrepancy_at_cap", "groups": groups, "text": text}]
 
 
 __all__ = ["parameters_at_bounds", "model_errors_at_cap", "worst_misfits", "failure_causes"]

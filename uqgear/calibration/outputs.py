@@ -64,6 +64,7 @@ def calibrate(
     seed: np.random.SeedSequence | int | None = 0,
     threads: int | None = None,
     pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
+    discrepancy: bool = False,
 ) -> Calibration:
     """Calibrate the model on a rig file and write the results (``uqgear calibrate``).
 
@@ -87,6 +88,9 @@ def calibrate(
     pitch_classes : (float, float) or None
         ISO 1328-1 classes of the rig's gears for the pitch-error correction
         (:class:`Calibration`); None: read from the rig's sidebands.
+    discrepancy : bool
+        Add the model-discrepancy term (:mod:`~uqgear.calibration.discrepancy`):
+        for a rig whose physics the model does not have.
 
     Returns
     -------
@@ -132,6 +136,7 @@ def calibrate(
         seed=seed,
         threads=threads,
         pitch_classes=pitch_classes,
+        discrepancy=discrepancy,
     )
     # nothing appears in out_dir until everything is written (a mistake in the input leaves nothing)
     with OutputFolder(out_dir) as work:
@@ -153,6 +158,7 @@ def calibrate(
                     "rig": str(rig_path),
                     "params": list(calibration.parameters),
                     "seed": str(seed),
+                    "discrepancy": discrepancy,
                     "design": design if isinstance(design, (str, os.PathLike)) else None,
                 },
             )

@@ -18,6 +18,8 @@ import xarray as xr
 
 from ..common.steps import StepLog
 from .convergence import ConvergenceCriteria
+from .discrepancy import DiscrepancyBasis, DiscrepancyLikelihood
+from .discrepancy_results import DiscrepancyFit, discrepancy_dataset, discrepancy_summary, fit_discrepancy
 from .likelihood import Features, StageLikelihood
 from .pitch_correction import PitchCorrection, pitch_error_correction
 from .predictive import predictive_check
@@ -50,6 +52,8 @@ class PosteriorFit:
         Steps per box-finding stage, and most stages.
     error_floor : float
         Lower bound of the model error (:func:`~uqgear.calibration.sampling.search_box`).
+    discrepancy : (DiscrepancyBasis, numpy.ndarray) or None
+        The discrepancy's basis and tau grid (:mod:`~uqgear.calibration.discrepancy`); None: no discrepancy term.
 
     Attributes
     ----------
@@ -59,6 +63,8 @@ class PosteriorFit:
         The current stage's emulated likelihood (None before the first stage).
     stages : list of dict
         A record of each box stage, appended as the search goes on.
+    discrepancy_fit : DiscrepancyFit or None
+        The fitted discrepancy (set by :meth:`final_sampling` with a discrepancy term).
     """
 
     def __init__(
@@ -75,8 +81,11 @@ class PosteriorFit:
         stage_steps: int,
         max_stages: int,
         error_floor: float,
+        discrepancy: tuple[DiscrepancyBasis, np.ndarray] | None = None,
     ) -> None:
         self.features, self.model, self.bounds = features, model, bounds
+        self.discrepancy = discrepancy
+        self.discrepancy_fit: DiscrepancyFit | None = None
         self.prior_lower, self.prior_upper = prior_lower, prior_upper
         self.n_training, self.degree, self.walkers = n_training, degree, walkers
         self.stage_steps, self.max_stages, self.error_floor = stage_steps, max_stages, error_floor
@@ -108,7 +117,14 @@ class PosteriorFit:
             n_training=self.n_training,
             degree=self.degree,
         )
-        self.likelihood = StageLikelihood(box_lower, box_upper, emulators, loo, self.features, self.n_global)
+        if self.discrepancy is None:
+            self.likelihood = StageLikelihood(box_lower, box_upper, emulators, loo, self.features, self.n_global)
+        else:
+            basis, tau = self.discrepancy
+            phi = basis.matrix(self.model.operating["pinion_speed"], self.model.operating["drive_torque"])
+            self.likelihood = DiscrepancyLikelihood(
+                box_lower, box_upper, emulators, loo, self.features, self.n_global, phi=phi, tau=tau
+            )
         return self.likelihood
 
     def fitted_likelihood(self) -> StageLikelihood:
@@ -297,6 +313,15 @@ class PosteriorFit:
             likelihood=self.fitted_likelihood(),
             features=self.features,
         )
+        likelihood = self.fitted_likelihood()
+        if self.discrepancy is not None and isinstance(likelihood, DiscrepancyLikelihood):
+            unit = likelihood.to_unit(physical.reshape(-1, likelihood.n_dim))
+            self.discrepancy_fit = fit_discrepancy(unit, likelihood, self.features, self.discrepancy[0])
+            summary["discrepancy"] = discrepancy_summary(
+                self.discrepancy_fit, self.features, likelihood.loo_rms, operating
+            )
+            extra = discrepancy_dataset(self.discrepancy_fit, operating)
+            posterior = xr.merge([posterior, extra], combine_attrs="no_conflicts")
         return verdict, posterior, summary
 
     def predictive_check(
@@ -330,4 +355,13 @@ class PosteriorFit:
             model_error=summary["model_error"],
             pinion_speed=self.model.operating["pinion_speed"],
             run_model=self.model,
+            discrepancy=self._discrepancy_at_runs(),
         )
+
+    def _discrepancy_at_runs(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The fitted discrepancy's posterior mean and standard deviation at the runs (None without one)."""
+        if self.discrepancy_fit is None:
+            return None
+        fitted, operating = self.discrepancy_fit.discrepancy, self.model.operating
+        speed, torque = operating["pinion_speed"], operating["drive_torque"]
+        return fitted.mean_at(speed, torque), fitted.sd_at(speed, torque)

@@ -90,10 +90,15 @@ class SnookerMove(emcee.moves.RedBlueMove):
         z, z1, z2 = picks[:, 0], picks[:, 1], picks[:, 2]
         delta = s - z
         norm = np.linalg.norm(delta, axis=1)
-        u = delta / norm[:, None]
+        # a walker on top of z (walkers collapsed onto one point) has no line to move along: it stays
+        # (a proposal equal to the state, accepted with ratio 1) instead of dividing by zero
+        moving = norm > 0.0
+        safe = np.where(moving, norm, 1.0)
+        u = np.where(moving[:, None], delta / safe[:, None], 0.0)
         step = self.gammas * (np.einsum("ij,ij->i", u, z1) - np.einsum("ij,ij->i", u, z2))
         proposal = s + u * step[:, None]
-        metropolis = np.log(np.linalg.norm(proposal - z, axis=1)) - np.log(norm)
+        distance = np.where(moving, np.linalg.norm(proposal - z, axis=1), 1.0)
+        metropolis = np.where(moving, np.log(distance) - np.log(safe), 0.0)
         return proposal, (n_dim - 1.0) * metropolis
 
 

@@ -71,16 +71,16 @@ def check_channels(channels: Sequence[str]) -> tuple[str, ...]:
     return tuple(channels)
 
 
-def check_model_error_range(model_error_range: tuple[float, float]) -> tuple[float, float]:
-    """The bounds of the relative model error, if 0 < lower < upper."""
+def check_model_error_range(
+    model_error_range: tuple[float, float], name: str = "model_error_range"
+) -> tuple[float, float]:
+    """The bounds of a relative error's log-uniform prior (``name`` says which), if 0 < lower < upper."""
     try:
         low, high = (float(v) for v in model_error_range)
     except (TypeError, ValueError):
-        raise CalibrationError(
-            f"model_error_range: expected (lower, upper) relative errors; got {model_error_range!r}"
-        ) from None
+        raise CalibrationError(f"{name}: expected (lower, upper) relative errors; got {model_error_range!r}") from None
     if not 0 < low < high:
-        raise CalibrationError(f"model_error_range: expected 0 < lower < upper (relative); got {model_error_range!r}")
+        raise CalibrationError(f"{name}: expected 0 < lower < upper (relative); got {model_error_range!r}")
     return low, high
 
 

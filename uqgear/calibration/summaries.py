@@ -169,6 +169,8 @@ def result_content(
         "settings": settings,
         "speed": speed,
     }
+    if "discrepancy" in summary:
+        result["discrepancy"] = summary["discrepancy"]
     causes = failure["causes"]
     if converged:
         result.update(estimates)

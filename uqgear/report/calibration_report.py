@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 
 from ..common.errors import UqgearError
 from ..common.fileio import write_text_atomic
+from .calibration_discrepancy import discrepancy_finding, discrepancy_section
 from .finding import HEADLINE_STYLE, Finding, headline_html
 from .page import figure_html, figure_png, html_page, new_figure
 
@@ -227,6 +228,8 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
                 "identifiability",
             )
         )
+    if content.get("discrepancy"):
+        findings.append(discrepancy_finding(content["discrepancy"]))
     check = content.get("predictive_check") or {}
     if "fraction_within_2_sigma" in check:
         share = float(check["fraction_within_2_sigma"])
@@ -531,6 +534,8 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
             ("group", "q05", "q50", "q95", "features"),
         )
     )
+    if "discrepancy" in summary:
+        parts.extend(discrepancy_section(summary["discrepancy"], _table))
     parts.append("<h2>Emulator stages</h2>")
     parts.append(
         _table(

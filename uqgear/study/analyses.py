@@ -636,7 +636,8 @@ def calibrate_analysis(context: AnalysisContext) -> xr.Dataset:
     ``adhesion_torque`` adds ``op``) and, in attribute ``calibration``, the
     content of ``calibration.json`` (estimates, diagnostics, predictive check).
     A posterior that has not converged is stored with ``converged = 0`` and
-    no estimates.
+    no estimates. With ``discrepancy: true`` the fitted discrepancy's
+    variables (``discrepancy_*``) come with the draws.
     """
     from ..calibration import Calibration
     from .schema import rig_path
@@ -648,6 +649,7 @@ def calibrate_analysis(context: AnalysisContext) -> xr.Dataset:
         seed=context.stage_seed(0),
         threads=context.threads,
         pitch_classes=context.options["pitch_classes"],
+        discrepancy=context.options["discrepancy"],
     ).fit(rig_path(context.study, context.spec))
     result = calibration.posterior_.copy()
     summary = calibration.to_dict()

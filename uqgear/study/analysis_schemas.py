@@ -139,6 +139,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         ),
         # ISO 1328-1 classes of the rig's gears, for the pitch-error correction (none: read from the sidebands)
         "pitch_classes": class_range(1, 11),
+        # a model-discrepancy term per channel and harmonic (uqgear calibrate --discrepancy)
+        "discrepancy": boolean(),
     },
     "diagnose": {
         "rig": string(),
@@ -201,6 +203,7 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "calibrate": {
         "parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"),
         "pitch_classes": (6.0, 8.0),
+        "discrepancy": False,
     },
     "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
     "prediction": {
