@@ -312,3 +312,44 @@ analyses:
     assert "dte_rms_prior" not in result and not bool(result["extrapolated"].any())
     upper = result["dte_rms"].sel(bound="upper")
     assert bool((upper.isel(quantile=-1) > upper.isel(quantile=0)).all())  # the damping's spread shows
+
+
+def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
+    # a discrepancy known exactly: the rig's DTE mesh harmonic is twice the model's at every operating point
+    from uqgear.calibration.discrepancy import DiscrepancyBasis
+    from uqgear.calibration.discrepancy_results import Discrepancy, DiscrepancyFit, discrepancy_dataset
+
+    mean = np.zeros((3, 3, 4))
+    mean[0, 0, 0] = np.log(2.0)  # te, first mesh harmonic, the constant of the basis
+    fit = DiscrepancyFit(
+        Discrepancy(DiscrepancyBasis((1500.0, 3500.0), (6000.0, 8000.0)), mean, np.zeros((3, 3, 4, 4))),
+        np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 3, 3)), (0.005, 3.0),
+    )
+    rows = np.broadcast_to(np.array([1.05, 0.06]), (2, 10, 2)).copy()
+    posterior = _posterior(rows)
+    posterior = posterior.merge(discrepancy_dataset(fit, {"pinion_speed": posterior["pinion_speed"].values,
+                                                          "drive_torque": posterior["drive_torque"].values}))
+    posterior.attrs.update(discrepancy_dataset(fit, {"pinion_speed": np.array([2000.0]),
+                                                     "drive_torque": np.array([7000.0])}).attrs)
+    posterior.to_netcdf(tmp_path / "posterior.nc")
+    study = uqgear.parse_study(_study_text(tmp_path / "posterior.nc"), base_dir=tmp_path)
+    (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    assert int(result.attrs["discrepancy"]) == 1
+    t2 = study.uncertain["adhesion_torque"]
+    grid = uqgear.samples_from_mapping(
+        {
+            "pinion_speed": np.tile([1000.0, 2500.0, 4500.0], 3),
+            "adhesion_torque": np.repeat(np.linspace(t2.lower, t2.upper, 3), 3),
+            "mesh_stiffness_scale": np.full(9, 1.05),
+            "zeta_mesh": np.full(9, 0.06),
+        }
+    )
+    settings = {"n_periods": 80, "keep_periods": 30, "steps_per_mode": study.simulation.steps_per_mode}
+    direct = uqgear.BatchEvaluator(design, fixed={"drive_torque": 7000.0}, **settings)(grid)
+    static = direct["static_mesh_force"].values
+    scaled = (static + 2.0 * (direct["peak_mesh_force"].values - static)).reshape(3, 3)
+    np.testing.assert_allclose(result["peak_mesh_force"].sel(bound="upper", quantile=0.5), scaled.max(axis=0),
+                               rtol=1e-12)
+    # the prior's runs, the design's tolerances before the rig data, carry no discrepancy
+    assert result["peak_mesh_force_prior"].sel(bound="upper").min() < scaled.max(axis=0).min()

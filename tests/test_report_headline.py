@@ -219,7 +219,7 @@ def _check_prediction(finding, results):
     quantiles (and the prior's, or the note that the draws are the study's)."""
     ds = next(ds for ds in results if ds.attrs.get("analysis_type") == "prediction")
     facts = finding.facts
-    if "extrapolated" in facts or "effects" in facts:
+    if "extrapolated" in facts or "effects" in facts or "discrepancy" in facts:
         return
     upper = ds[facts["qoi"]].sel(bound="upper")
     median = upper.isel(quantile=int(np.argmin(np.abs(ds["quantile"].values - 0.5))))

@@ -201,6 +201,17 @@ def prediction_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
                     topic="prediction",
                 )
             )
+        if int(ds.attrs.get("discrepancy", 0)):
+            findings.append(
+                Finding(
+                    "The prediction carries the calibration's model discrepancy: where the rig's "
+                    f"{ds.attrs.get('discrepancy_feature', 'te mesh harmonic 1')} differs from the model's, each "
+                    "draw's dynamic part is scaled by a draw of that difference at the operating point (beyond the "
+                    "campaign the discrepancy's trend is extrapolated too).",
+                    {"discrepancy": True},
+                    topic="prediction",
+                )
+            )
         extrapolation = _extrapolation_text(ds)
         if extrapolation:
             findings.append(Finding(extrapolation, {"extrapolated": True}, topic="prediction"))

@@ -157,6 +157,9 @@ class AnalysisContext:
         The study's diagnosed effects (``model.effects``) with their
         uncertainty; every run carries them at their fitted values
         (``spec.simulation.effects``), a prediction samples them.
+    discrepancy : Discrepancy, optional
+        The model discrepancy the calibration learnt (a calibration with
+        ``discrepancy: true``); a prediction carries it.
     """
 
     study: Study
@@ -168,6 +171,7 @@ class AnalysisContext:
     notes: list[str] = field(default_factory=list)
     posterior: PosteriorDraws | None = None
     effects: tuple[UncertainEffect, ...] = ()
+    discrepancy: Any = None
 
     @property
     def design(self) -> Design:

@@ -20,6 +20,7 @@ from typing import Any
 
 import xarray as xr
 
+from ..calibration.discrepancy_results import Discrepancy, read_discrepancy
 from ..common.errors import StudyError, UqgearError, shown
 from ..diagnosis.named_effects import named_effects
 from ..physics.design import Design
@@ -191,6 +192,17 @@ def resolve_posterior(
     return posterior
 
 
+def resolve_discrepancy(calibrated: CalibratedInput, results: Mapping[str, xr.Dataset]) -> Discrepancy | None:
+    """The model discrepancy a calibration with ``discrepancy=True`` learnt (None for an ordinary calibration)."""
+    if calibrated.posterior is not None:
+        with xr.open_dataset(calibrated.posterior) as opened:
+            posterior = opened.load()
+    else:
+        assert calibrated.analysis is not None  # one of the two, checked when the study was read
+        posterior = results[calibrated.analysis]
+    return read_discrepancy(posterior) if "discrepancy_beta_mean" in posterior else None
+
+
 def resolve_effects(effects: EffectsInput, results: Mapping[str, xr.Dataset]) -> tuple[UncertainEffect, ...]:
     """The effects with their uncertainty from the diagnosis file, the study's ``diagnose`` result or the list."""
     if effects.listed:
@@ -212,5 +224,6 @@ __all__ = [
     "check_order",
     "check_posterior",
     "resolve_posterior",
+    "resolve_discrepancy",
     "resolve_effects",
 ]

@@ -13,6 +13,12 @@ same runs from the calibration's prior (its uniform box, the design's
 tolerances before the rig data) give ``<qoi>_prior``, so that the report says
 how far the rig data narrowed the worst case.
 
+A calibration with a model discrepancy (``discrepancy: true``) carries it: each posterior draw gets a draw
+of the discrepancy of the DTE's first mesh harmonic at each operating point, and the dynamic part of each
+response (the mesh force above its mean, the load factors above 1, the DTE about its mean) is scaled by
+exp(delta) (:data:`~uqgear.uq.prediction.DYNAMIC_PARTS`); the prior's runs, the design's tolerances before
+the rig data, carry none.
+
 Without a calibrated posterior the draws come from the study's distributions
 (the analysis's ``draws``) and there is no ``_prior``. Operating points
 outside the speeds and loads of the rig campaign are flagged
@@ -48,7 +54,34 @@ def _prior_draws(context: AnalysisContext) -> PosteriorDraws | None:
     return dataclasses.replace(posterior, values=values, source="the calibration's prior")
 
 
-def _run(context: AnalysisContext, names: Sequence[str], posterior: PosteriorDraws | None) -> PosteriorPrediction:
+#: The feature whose discrepancy a prediction carries: the first mesh harmonic of the transmission error, the
+#: channel that measures the DTE itself (the accelerometers see it through the housing's transfer path).
+DISCREPANCY_FEATURE = ("te", 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class DiscrepancyFactors:
+    """Per draw and operating point, exp(delta) of the calibration's discrepancy on the DTE's first mesh harmonic.
+
+    The discrepancy says by how much (in log amplitude) the rig's DTE at the mesh frequency differs from the
+    model's at an operating point; the prediction scales the dynamic part of each response by that factor (the
+    mesh force's part above its mean follows the DTE's dynamic part in a linear mesh).
+    """
+
+    discrepancy: Any
+    drive_torque: float
+
+    def __call__(self, points: Mapping[str, np.ndarray], draws: int, rng: np.random.Generator) -> np.ndarray:
+        speed = np.asarray(points["pinion_speed"], dtype=float)
+        torque = np.asarray(points.get("drive_torque", np.full(speed.size, self.drive_torque)), dtype=float)
+        delta = self.discrepancy.at(speed, torque, draws, rng).sel(channel=DISCREPANCY_FEATURE[0])
+        values = np.asarray(delta.sel(harmonic=DISCREPANCY_FEATURE[1]).values, dtype=float)  # (draw, point)
+        return np.exp(np.nan_to_num(values))
+
+
+def _run(
+    context: AnalysisContext, names: Sequence[str], posterior: PosteriorDraws | None, discrepancy: Any = None
+) -> PosteriorPrediction:
     """One prediction: the draws (posterior or prior) x interval nodes x operating points in one batch."""
     options = context.options
     random = [
@@ -69,6 +102,7 @@ def _run(context: AnalysisContext, names: Sequence[str], posterior: PosteriorDra
         # the same seed for posterior and prior: the same distribution and effect draws, so the two differ by
         # the calibrated parameters alone
         seed=context.stage_seed(2),
+        discrepancy=discrepancy,
     )
     return prediction.fit(context.model(poincare=False), space, context.sweep())
 
@@ -91,7 +125,10 @@ def _extrapolated(context: AnalysisContext, points: Mapping[str, np.ndarray], co
 def prediction_analysis(context: AnalysisContext) -> xr.Dataset:
     """Posterior-predictive quantiles of each QoI's bounds over the interval parameters (see the module)."""
     names = list(context.options["parameters"])
-    found = _run(context, names, context.posterior)
+    carried = None
+    if context.discrepancy is not None:
+        carried = DiscrepancyFactors(context.discrepancy, float(context.fixed_values().get("drive_torque", np.nan)))
+    found = _run(context, names, context.posterior, carried)
     result = found.result_.copy()
     prior = _prior_draws(context)
     before = _run(context, names, prior) if prior is not None else None
@@ -161,6 +198,8 @@ def _attributes(
         "campaign_range": json.dumps(campaign),
         "effects": json.dumps([effect.to_dict() for effect in context.effects], default=float),
         "effects_sampled": int(any("." in name for name in drawn)),
+        "discrepancy": int(found.factors_ is not None),
+        "discrepancy_feature": f"{DISCREPANCY_FEATURE[0]} mesh harmonic {DISCREPANCY_FEATURE[1]}",
         "fixed_inputs": json.dumps(context.fixed_values(exclude=[*names, *drawn])),
         "model_runs": int(runs),
     }

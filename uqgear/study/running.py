@@ -38,7 +38,7 @@ from ..uq.runner import Runner
 from .analyses import ANALYSES, ANALYSIS_KEY_ATTR, AnalysisContext
 from .analysis_schemas import RIG_TYPES
 from .analysis_specs import AnalysisSpec
-from .model_inputs import resolve_effects, resolve_posterior
+from .model_inputs import resolve_discrepancy, resolve_effects, resolve_posterior
 from .schema import Study
 
 #: Folder of chunk checkpoints inside the work folder.
@@ -123,7 +123,7 @@ def run_analysis(
         )
     seed = seed if seed is not None else study.seed_sequences()[spec.index]
     key = analysis_key(study, spec)
-    posterior, effects = (None, ()) if spec.type in RIG_TYPES else model_inputs(study, results or {})
+    posterior, effects, discrepancy = (None, (), None) if spec.type in RIG_TYPES else model_inputs(study, results or {})
     if effects:
         simulation = dataclasses.replace(spec.simulation, effects=tuple(effect.central() for effect in effects))
         spec = dataclasses.replace(spec, simulation=simulation)
@@ -136,6 +136,7 @@ def run_analysis(
         threads=threads,
         posterior=posterior,
         effects=effects,
+        discrepancy=discrepancy,
     )
     started = time.perf_counter()
     result = ANALYSES[spec.type](context)
@@ -147,19 +148,21 @@ def run_analysis(
 
 def model_inputs(
     study: Study, results: Mapping[str, xr.Dataset]
-) -> tuple[PosteriorDraws | None, tuple[UncertainEffect, ...]]:
-    """The study's calibrated posterior (thinned, seeded) and diagnosed effects, resolved from files or results.
+) -> tuple[PosteriorDraws | None, tuple[UncertainEffect, ...], Any]:
+    """The study's calibrated posterior (thinned, seeded), diagnosed effects and the calibration's model
+    discrepancy (None without one), resolved from files or results.
 
     The thinning has a seed of its own, the study seed's child after those of
     the analyses, so that every analysis of a study sees the same draws.
     """
-    posterior = None
+    posterior, discrepancy = None, None
     if study.calibrated is not None:
         full = resolve_posterior(study.calibrated, study.design, results)
         thinning = np.random.SeedSequence(study.seed, spawn_key=(len(study.analyses),))
         posterior = full.thin(study.calibrated.draws, thinning)
+        discrepancy = resolve_discrepancy(study.calibrated, results)
     effects = resolve_effects(study.effects, results) if study.effects is not None else ()
-    return posterior, effects
+    return posterior, effects, discrepancy
 
 
 def _reusable(path: Path, key: str) -> bool:

@@ -75,6 +75,11 @@ class PosteriorPrediction:
         Effects whose parameters are drawn per draw (the model carries them).
     seed : SeedSequence or int
         Source of the distribution and effect draws.
+    discrepancy : callable, optional
+        ``discrepancy(points, draws, rng) -> array (draw, sweep point)``: per draw and operating point
+        (``points``: name -> values per sweep point, fixed inputs included) the factor on the dynamic part
+        of the response that the calibration's model discrepancy gives (:data:`DYNAMIC_PARTS` says which
+        part of each QoI it scales; the other QoIs are left as the model gives them).
 
     Examples
     --------
@@ -108,6 +113,7 @@ class PosteriorPrediction:
         draws: int = 64,
         effects: Sequence[UncertainEffect] = (),
         seed: SeedLike = 0,
+        discrepancy: Any = None,
     ) -> None:
         unknown = [name for name in qoi if name not in QOI_INFO]
         if unknown or not qoi:
@@ -124,6 +130,7 @@ class PosteriorPrediction:
         self.draws = check_count(draws, "draws")
         self.effects = tuple(effects)
         self.seed = seed
+        self.discrepancy = discrepancy
 
     def _nodes(self, space: ParameterSpace) -> np.ndarray:
         count = 2 if self.method == "vertex" else self.points
@@ -153,6 +160,14 @@ class PosteriorPrediction:
         samples = self._samples(space, rows, size, nodes)
         outputs = evaluate_on_sweep(evaluate, samples, sweep_spec)
         self.rows_, self.nodes_, self.model_runs_ = rows, nodes, int(outputs.attrs["runs"])
+        self.factors_ = None
+        if self.discrepancy is not None:
+            points = dict(sweep_spec.point_values())
+            for name in space.fixed_names:
+                points.setdefault(name, np.full(sweep_spec.size, cast_fixed(space[name])))
+            rng = np.random.default_rng(child_seed(as_seed_sequence(self.seed), 2))
+            self.factors_ = np.asarray(self.discrepancy(points, size, rng), dtype=float)  # (draw, sweep point)
+            outputs = with_discrepancy(outputs, self.factors_, sweep_spec.shape, nodes.shape[0])
         self.result_ = self._result(outputs, sweep_spec, size, nodes, space.interval_names)
         return self
 
@@ -199,6 +214,44 @@ class PosteriorPrediction:
                     {"long_name": f"{name} giving the upper bound most often"},
                 )
         return result
+
+
+#: What the discrepancy's factor scales in each QoI: the part above the static response (the dynamic part of the
+#: mesh force over its mean, of the load factors over 1, of the DTE about its mean); the rest are left alone.
+DYNAMIC_PARTS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms", "dte_peak_to_peak")
+
+
+def _scaled(name: str, suffix: str, values: np.ndarray, outputs: xr.Dataset, factor: np.ndarray) -> np.ndarray:
+    """One QoI (``name`` + ``suffix``, e.g. ``_max``) with its dynamic part multiplied by ``factor``."""
+    if name == "peak_mesh_force":
+        static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
+        return static + (values - static) * factor
+    if name == "dynamic_load_factor":
+        return 1.0 + (values - 1.0) * factor
+    if name == "load_factor_rated":
+        # the peak's dynamic part scaled, over the same rated force: the ratio of the scaled peak to the peak
+        peak = np.asarray(outputs[f"peak_mesh_force{suffix}"].values, dtype=float)
+        static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
+        return values * (static + (peak - static) * factor) / peak
+    if name == "dte_rms":
+        mean = np.asarray(outputs["dte_mean"].values, dtype=float)
+        return np.sqrt(mean**2 + np.maximum(values**2 - mean**2, 0.0) * factor**2)
+    return values * factor
+
+
+def with_discrepancy(outputs: xr.Dataset, factors: np.ndarray, sweep_shape: tuple[int, ...], nodes: int) -> xr.Dataset:
+    """The model's outputs (*sweep, sample = draw x node) with each run's dynamic part scaled by its draw's factor."""
+    size = factors.shape[0]
+    # (draw, sweep point) -> (*sweep, draw x node), the layout of the outputs
+    factor = np.repeat(factors.T.reshape(*sweep_shape, size), nodes, axis=-1)
+    scaled = outputs.copy()
+    for name in map(str, outputs.data_vars):
+        base = name.removesuffix("_max").removesuffix("_min").removesuffix("_rest")
+        if base in DYNAMIC_PARTS and outputs[name].shape == factor.shape:
+            values = np.asarray(outputs[name].values, dtype=float)
+            changed = _scaled(base, name[len(base):], values, outputs, factor)
+            scaled[name] = (outputs[name].dims, changed, outputs[name].attrs)
+    return scaled
 
 
 def cast_fixed(parameter: Interval | Distribution | Fixed) -> float:
