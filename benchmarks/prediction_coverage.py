@@ -15,11 +15,15 @@ campaign's, other drive torques, T2 at the balance of T1) is compared with the t
 model at the true parameters with the true effects). On healthy campaigns the spread of the worst
 case over the T2 interval (upper bound's q95 - q05) after calibration is compared with the prior's.
 
+With ``--discrepancy`` the calibration learns a model-discrepancy term and the prediction carries it (the
+dynamic part of each response scaled by a draw of the DTE's first-mesh-harmonic discrepancy, as the study's
+``prediction`` analysis does).
+
 Prints coverage per kind and QoI. Minutes per campaign (a calibration, and a diagnosis on
 ``effect`` campaigns).
 
 Usage: ``python benchmarks/prediction_coverage.py [--per-kind 2] [--kinds healthy effect structural] [--seed 1]
-[--json out.json]``
+[--discrepancy] [--json out.json]``
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from uqgear.diagnosis import Diagnosis, effect_family, named_effects
 from uqgear.physics.effect_draws import draw_effect_sets
 from uqgear.rig.transfer_path import apply_transfer_path
 from uqgear.rig.virtual_rig import simulate_campaign
+from uqgear.uq.prediction import scale_dynamic_part
 from uqgear.validation.campaigns import _scattered_truth, effect_draw
 
 QOIS = ("peak_mesh_force", "dynamic_load_factor", "dte_rms")
@@ -89,8 +94,11 @@ def held_out_samples(values: dict[str, np.ndarray], design: uqgear.Design) -> An
     )
 
 
-def predict(draws: dict[str, np.ndarray], effect_sets: list | None, design: uqgear.Design) -> dict[str, np.ndarray]:
-    """QoIs (draw, held-out point) of every draw; the draws' effects one batch each."""
+def predict(
+    draws: dict[str, np.ndarray], effect_sets: list | None, design: uqgear.Design, factors: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
+    """QoIs (draw, held-out point) of every draw; the draws' effects one batch each; ``factors`` (draw, point):
+    the discrepancy's factor on each run's dynamic part."""
     n = len(HELD_OUT["pinion_speed"])
     size = len(next(iter(draws.values())))
     out = {qoi: np.empty((size, n)) for qoi in QOIS}
@@ -99,8 +107,12 @@ def predict(draws: dict[str, np.ndarray], effect_sets: list | None, design: uqge
         effects = effect_sets[rows[0]] if effect_sets else ()
         model = uqgear.BatchEvaluator(design, effects=effects, **SIMULATION)
         result = model(held_out_samples({k: v[rows] for k, v in draws.items()}, design))
+        factor = None if factors is None else factors[rows].reshape(-1)
         for qoi in QOIS:
-            out[qoi][rows] = result[qoi].values.reshape(len(rows), n)
+            values = result[qoi].values
+            if factor is not None:
+                values = scale_dynamic_part(qoi, "", values, result, factor)
+            out[qoi][rows] = values.reshape(len(rows), n)
     return out
 
 
@@ -120,10 +132,19 @@ def worst_spread(draws: dict[str, np.ndarray], design: uqgear.Design) -> float:
     return float(np.subtract(*np.quantile(worst, [0.95, 0.05])))
 
 
-def one_campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
+def discrepancy_factors(calibration: uqgear.Calibration, index: int) -> np.ndarray:
+    """exp(delta) of the DTE's first mesh harmonic, (draw, held-out point)."""
+    delta = calibration.discrepancy_at(HELD_OUT["pinion_speed"], HELD_OUT["drive_torque"], DRAWS,
+                                       np.random.default_rng(index))
+    return np.exp(np.nan_to_num(delta.sel(channel="te", harmonic=1).values))
+
+
+def one_campaign(
+    kind: str, index: int, rng: np.random.Generator, design: uqgear.Design, discrepancy: bool = False
+) -> dict[str, Any]:
     began = time.perf_counter()
     made = campaign(kind, index, rng, design)
-    calibration = uqgear.Calibration(design=design, seed=index).fit(made["rig"])
+    calibration = uqgear.Calibration(design=design, seed=index, discrepancy=discrepancy).fit(made["rig"])
     entry: dict[str, Any] = {"kind": kind, "converged": bool(calibration.converged_)}
     if not calibration.converged_:
         entry["seconds"] = time.perf_counter() - began
@@ -140,7 +161,7 @@ def one_campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear
             effect_sets = None
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}
     true_values = predict(truth_rows, [tuple(made["effects"])] if made["effects"] else None, design)
-    predicted = predict(draws, effect_sets, design)
+    predicted = predict(draws, effect_sets, design, discrepancy_factors(calibration, index) if discrepancy else None)
     entry["covered"] = {}
     for qoi in QOIS:
         low, high = np.quantile(predicted[qoi], [0.05, 0.95], axis=0)
@@ -159,6 +180,7 @@ def main() -> None:
     parser.add_argument("--per-kind", type=int, default=2)
     parser.add_argument("--kinds", nargs="+", default=["healthy", "effect", "structural"])
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--discrepancy", action="store_true")
     parser.add_argument("--json")
     args = parser.parse_args()
     design = uqgear.load_design("locomotive")
@@ -166,7 +188,7 @@ def main() -> None:
     entries = []
     for kind in args.kinds:
         for index in range(args.per_kind):
-            entry = one_campaign(kind, index, rng, design)
+            entry = one_campaign(kind, index, rng, design, args.discrepancy)
             entries.append(entry)
             print(json.dumps(entry), flush=True)
     for kind in args.kinds:

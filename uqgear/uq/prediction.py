@@ -221,7 +221,9 @@ class PosteriorPrediction:
 DYNAMIC_PARTS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms", "dte_peak_to_peak")
 
 
-def _scaled(name: str, suffix: str, values: np.ndarray, outputs: xr.Dataset, factor: np.ndarray) -> np.ndarray:
+def scale_dynamic_part(
+    name: str, suffix: str, values: np.ndarray, outputs: xr.Dataset, factor: np.ndarray
+) -> np.ndarray:
     """One QoI (``name`` + ``suffix``, e.g. ``_max``) with its dynamic part multiplied by ``factor``."""
     if name == "peak_mesh_force":
         static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
@@ -249,7 +251,7 @@ def with_discrepancy(outputs: xr.Dataset, factors: np.ndarray, sweep_shape: tupl
         base = name.removesuffix("_max").removesuffix("_min").removesuffix("_rest")
         if base in DYNAMIC_PARTS and outputs[name].shape == factor.shape:
             values = np.asarray(outputs[name].values, dtype=float)
-            changed = _scaled(base, name[len(base):], values, outputs, factor)
+            changed = scale_dynamic_part(base, name[len(base):], values, outputs, factor)
             scaled[name] = (outputs[name].dims, changed, outputs[name].attrs)
     return scaled
 
@@ -261,4 +263,4 @@ def cast_fixed(parameter: Interval | Distribution | Fixed) -> float:
     return float(parameter.value)
 
 
-__all__ = ["PosteriorPrediction", "DEFAULT_QOIS"]
+__all__ = ["PosteriorPrediction", "DEFAULT_QOIS", "DYNAMIC_PARTS", "scale_dynamic_part", "with_discrepancy"]
