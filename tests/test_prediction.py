@@ -351,5 +351,7 @@ def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
     scaled = (static + 2.0 * (direct["peak_mesh_force"].values - static)).reshape(3, 3)
     np.testing.assert_allclose(result["peak_mesh_force"].sel(bound="upper", quantile=0.5), scaled.max(axis=0),
                                rtol=1e-12)
+    dte = 2.0 * direct["dte_rms"].values.reshape(3, 3)  # the RMS about the mean is all dynamic
+    np.testing.assert_allclose(result["dte_rms"].sel(bound="upper", quantile=0.5), dte.max(axis=0), rtol=1e-12)
     # the prior's runs, the design's tolerances before the rig data, carry no discrepancy
     assert result["peak_mesh_force_prior"].sel(bound="upper").min() < scaled.max(axis=0).min()

@@ -216,8 +216,8 @@ class PosteriorPrediction:
         return result
 
 
-#: What the discrepancy's factor scales in each QoI: the part above the static response (the dynamic part of the
-#: mesh force over its mean, of the load factors over 1, of the DTE about its mean); the rest are left alone.
+#: What the discrepancy's factor scales in each QoI: the part above the static response (the mesh force above its
+#: mean, the load factors above 1; the DTE's RMS about its mean and its peak to peak whole); the rest are left alone.
 DYNAMIC_PARTS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms", "dte_peak_to_peak")
 
 
@@ -235,9 +235,7 @@ def scale_dynamic_part(
         peak = np.asarray(outputs[f"peak_mesh_force{suffix}"].values, dtype=float)
         static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
         return values * (static + (peak - static) * factor) / peak
-    if name == "dte_rms":
-        mean = np.asarray(outputs["dte_mean"].values, dtype=float)
-        return np.sqrt(mean**2 + np.maximum(values**2 - mean**2, 0.0) * factor**2)
+    # the RMS about the mean and the peak to peak of the DTE are its dynamic part already
     return values * factor
 
 
