@@ -195,7 +195,7 @@ def test_prediction_of_a_one_point_posterior_is_the_model_run_there(tmp_path, de
 
     first, extrapolation = prediction_findings([result])
     upper = result["peak_mesh_force"].sel(bound="upper")
-    at = int(upper.sel(quantile=0.5).argmax())
+    at = int(np.argmax(upper.sel(quantile=0.5).values))
     assert first.facts["at"] == {"pinion_speed": at}
     band = upper.isel(pinion_speed=at).values
     assert first.facts["posterior"] == [float(band[0]), float(band[-1])]

@@ -223,7 +223,8 @@ def _check_prediction(finding, results):
         return
     upper = ds[facts["qoi"]].sel(bound="upper")
     median = upper.isel(quantile=int(np.argmin(np.abs(ds["quantile"].values - 0.5))))
-    at = {dim: int(index) for dim, index in zip(median.dims, np.unravel_index(int(median.argmax()), median.shape))}
+    flat = int(np.argmax(median.values))
+    at = {dim: int(index) for dim, index in zip(median.dims, np.unravel_index(flat, median.shape))}
     assert {dim: int(index) for dim, index in facts["at"].items()} == at
     band = upper.isel(at).values
     assert facts["posterior"] == pytest.approx([band[0], band[-1]])
