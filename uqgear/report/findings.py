@@ -38,6 +38,26 @@ def _range_text(name: str, values: np.ndarray, start: int, stop: int) -> str:
     return f"between {low} and {high}"
 
 
+def _t2_interval(results: Sequence[xr.Dataset]) -> tuple[float, float, bool] | None:
+    """(lower, upper, from rail adhesion) of the T2 interval of the study, if T2 is an interval."""
+    for ds in results:
+        entry = _json_attr(ds, "uncertain_parameters", {}).get(T2)
+        if entry and entry.get("kind") == "interval":
+            source = str(entry.get("source", ""))
+            return float(entry["lower"]), float(entry["upper"]), ("mu in" in source or "adhesion" in source)
+    return None
+
+
+def _end(value: float, interval: tuple[float, float, bool] | None) -> str:
+    """'low' or 'high' where ``value`` is that end of the T2 interval, else ''."""
+    if interval is None or not np.isfinite(value):
+        return ""
+    for name, bound in (("low", interval[0]), ("high", interval[1])):
+        if abs(value - bound) <= 1e-6 * max(abs(bound), 1.0):
+            return name
+    return ""
+
+
 def _condition_text(name: str, values: np.ndarray, present: np.ndarray) -> str:
     """Where along a second axis a regime occurs: 'when T2 > x', 'for all T2', ..."""
     indices = np.nonzero(present)[0]

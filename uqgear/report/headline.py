@@ -22,7 +22,7 @@ from .coexistence_sections import coexistence_headline
 from .continuation_sections import continuation_findings
 from .diagnosis_report import diagnosis_findings
 from .finding import Finding
-from .findings import SPEED, T2, Grid, _condition_text, _runs, grid, grids
+from .findings import SPEED, T2, Grid, _condition_text, _end, _runs, _t2_interval, grid, grids
 from .prediction_sections import prediction_findings
 from .presentation import display, format_value, short_name
 from .sections import _json_attr
@@ -36,26 +36,6 @@ def _speed(value: float) -> str:
 
 def _t2(value: float) -> str:
     return format_value(T2, value)
-
-
-def _t2_interval(results: Sequence[xr.Dataset]) -> tuple[float, float, bool] | None:
-    """(lower, upper, from rail adhesion) of the T2 interval of the study, if T2 is an interval."""
-    for ds in results:
-        entry = _json_attr(ds, "uncertain_parameters", {}).get(T2)
-        if entry and entry.get("kind") == "interval":
-            source = str(entry.get("source", ""))
-            return float(entry["lower"]), float(entry["upper"]), ("mu in" in source or "adhesion" in source)
-    return None
-
-
-def _end(value: float, interval: tuple[float, float, bool] | None) -> str:
-    """'low' or 'high' where ``value`` is that end of the T2 interval, else ''."""
-    if interval is None or not np.isfinite(value):
-        return ""
-    for name, bound in (("low", interval[0]), ("high", interval[1])):
-        if abs(value - bound) <= 1e-6 * max(abs(bound), 1.0):
-            return name
-    return ""
 
 
 def _t2_lead(value: float, interval: tuple[float, float, bool] | None) -> str:

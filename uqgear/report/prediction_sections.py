@@ -18,12 +18,11 @@ import xarray as xr
 from matplotlib import colormaps
 
 from .finding import Finding
+from .findings import T2, _end, _t2_interval
 from .page import new_figure
 from .presentation import axis_label, display, format_value, short_name
 from .sections import Section, _add_figure, _json_attr, _list, _section, renderer
 
-T2 = "adhesion_torque"
-SPEED = "pinion_speed"
 #: QoIs in the order the first screen prefers them.
 _HEADLINE_QOIS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms")
 
@@ -55,13 +54,12 @@ def _band(ds: xr.Dataset, name: str, index: dict[str, Any]) -> tuple[float, floa
 
 def _rail(ds: xr.Dataset, value: float) -> str:
     """', wet rail' / ', dry rail' where the worst T2 is an end of a rail-adhesion interval, else ', T2 = ...'."""
-    entry = _json_attr(ds, "uncertain_parameters", {}).get(T2) or {}
-    if entry.get("kind") != "interval" or not np.isfinite(value):
+    interval = _t2_interval([ds])
+    if interval is None or not np.isfinite(value):
         return ""
-    adhesion = "mu in" in str(entry.get("source", "")) or "adhesion" in str(entry.get("source", ""))
-    for rail, bound in (("wet rail", entry["lower"]), ("dry rail", entry["upper"])):
-        if adhesion and abs(value - float(bound)) <= 1e-6 * max(abs(float(bound)), 1.0):
-            return f", {rail}"
+    end = _end(value, interval)
+    if end and interval[2]:
+        return f", {'wet' if end == 'low' else 'dry'} rail"
     return f", T2 = {format_value(T2, value)}"
 
 
