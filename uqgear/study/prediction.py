@@ -39,6 +39,7 @@ from ..calibration.priors import prior_bounds
 from ..uq.parameter_space import ParameterSpace
 from ..uq.posterior import PosteriorDraws
 from ..uq.prediction import PosteriorPrediction
+from ..uq.sweeps import make_sweep
 from .analyses import AnalysisContext, register
 from .variables import variable_units_short
 
@@ -140,8 +141,8 @@ def prediction_analysis(context: AnalysisContext) -> xr.Dataset:
             result[f"{name}_prior_draws"] = before.result_[f"{name}_draws"]
     for name in [name for name in result.data_vars if "_worst_" in str(name)]:
         result[name].attrs["units"] = variable_units_short(str(name).rsplit("_worst_", 1)[1])
-    points, shape = _sweep_points(context)
-    count = int(np.prod(shape)) if shape else 1
+    sweep = make_sweep(context.sweep())
+    points, shape, count = sweep.point_values(), sweep.shape, sweep.size
     flags, campaign = _extrapolated(context, points, count)
     sweep_dims = list(context.sweep())
     result["extrapolated"] = (tuple(sweep_dims), flags.reshape(shape), {"long_name": "outside the rig campaign"})
@@ -153,14 +154,6 @@ def prediction_analysis(context: AnalysisContext) -> xr.Dataset:
     runs = found.model_runs_ + (before.model_runs_ if before is not None else 0)
     result.attrs.update(_attributes(context, names, found, before, campaign, runs))
     return result
-
-
-def _sweep_points(context: AnalysisContext) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
-    sweeps = context.sweep()
-    if not sweeps:
-        return {}, ()
-    mesh = np.meshgrid(*(array.values for array in sweeps.values()), indexing="ij")
-    return {name: grid.ravel() for name, grid in zip(sweeps, mesh)}, mesh[0].shape
 
 
 def _narrowing(found: PosteriorPrediction, prior: PosteriorPrediction | None, names: Sequence[str]) -> dict[str, float]:
