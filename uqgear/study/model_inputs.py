@@ -26,7 +26,7 @@ from ..diagnosis.named_effects import named_effects
 from ..physics.design import Design
 from ..physics.effect_draws import UncertainEffect
 from ..physics.effects import EFFECTS
-from ..uq.posterior import DEFAULT_DRAWS, PosteriorDraws
+from ..uq.posterior import DEFAULT_DRAWS, PosteriorDraws, read_posterior
 from .checkers import boolean, check_mapping, number, string
 
 #: Analysis types that run no model of the study (they read rig data); the others use the inputs.
@@ -180,27 +180,23 @@ def check_order(
 
 def resolve_posterior(
     calibrated: CalibratedInput, design: Design, results: Mapping[str, xr.Dataset]
-) -> PosteriorDraws:
-    """The posterior's draws (all of them) from its file or from the study's ``calibrate`` result."""
+) -> tuple[PosteriorDraws, Discrepancy | None]:
+    """The posterior's draws (all of them) and the model discrepancy its calibration learnt (None for an
+    ordinary calibration), from its file, read once, or from the study's ``calibrate`` result."""
     if calibrated.posterior is not None:
-        return PosteriorDraws.load(calibrated.posterior)
-    assert calibrated.analysis is not None  # one of the two, checked when the study was read
-    calibrated_on = str(results[calibrated.analysis].attrs.get("rig", ""))
-    source = f"{Path(calibrated_on).name} (analysis {calibrated.analysis})" if calibrated_on else calibrated.analysis
-    posterior = PosteriorDraws.from_dataset(results[calibrated.analysis], source=source)
-    check_posterior(posterior, design, calibrated.allow_unconverged, "uncertain.calibrated.analysis")
-    return posterior
-
-
-def resolve_discrepancy(calibrated: CalibratedInput, results: Mapping[str, xr.Dataset]) -> Discrepancy | None:
-    """The model discrepancy a calibration with ``discrepancy=True`` learnt (None for an ordinary calibration)."""
-    if calibrated.posterior is not None:
-        with xr.open_dataset(calibrated.posterior) as opened:
-            posterior = opened.load()
+        dataset = read_posterior(calibrated.posterior)
+        posterior = PosteriorDraws.from_dataset(dataset, source=str(Path(calibrated.posterior)))
     else:
         assert calibrated.analysis is not None  # one of the two, checked when the study was read
-        posterior = results[calibrated.analysis]
-    return read_discrepancy(posterior) if "discrepancy_beta_mean" in posterior else None
+        dataset = results[calibrated.analysis]
+        calibrated_on = str(dataset.attrs.get("rig", ""))
+        source = calibrated.analysis
+        if calibrated_on:
+            source = f"{Path(calibrated_on).name} (analysis {calibrated.analysis})"
+        posterior = PosteriorDraws.from_dataset(dataset, source=source)
+        check_posterior(posterior, design, calibrated.allow_unconverged, "uncertain.calibrated.analysis")
+    discrepancy = read_discrepancy(dataset) if "discrepancy_beta_mean" in dataset else None
+    return posterior, discrepancy
 
 
 def resolve_effects(effects: EffectsInput, results: Mapping[str, xr.Dataset]) -> tuple[UncertainEffect, ...]:
@@ -224,6 +220,5 @@ __all__ = [
     "check_order",
     "check_posterior",
     "resolve_posterior",
-    "resolve_discrepancy",
     "resolve_effects",
 ]

@@ -38,7 +38,7 @@ from ..uq.runner import Runner
 from .analyses import ANALYSES, ANALYSIS_KEY_ATTR, AnalysisContext
 from .analysis_schemas import RIG_TYPES
 from .analysis_specs import AnalysisSpec
-from .model_inputs import resolve_discrepancy, resolve_effects, resolve_posterior
+from .model_inputs import resolve_effects, resolve_posterior
 from .schema import Study
 
 #: Folder of chunk checkpoints inside the work folder.
@@ -157,10 +157,9 @@ def model_inputs(
     """
     posterior, discrepancy = None, None
     if study.calibrated is not None:
-        full = resolve_posterior(study.calibrated, study.design, results)
+        full, discrepancy = resolve_posterior(study.calibrated, study.design, results)
         thinning = np.random.SeedSequence(study.seed, spawn_key=(len(study.analyses),))
         posterior = full.thin(study.calibrated.draws, thinning)
-        discrepancy = resolve_discrepancy(study.calibrated, results)
     effects = resolve_effects(study.effects, results) if study.effects is not None else ()
     return posterior, effects, discrepancy
 

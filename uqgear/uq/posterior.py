@@ -57,6 +57,24 @@ def _global_names(posterior: xr.Dataset, source: str) -> list[str]:
     return [str(name) for name in names]
 
 
+def read_posterior(path: str | os.PathLike[str]) -> xr.Dataset:
+    """The Dataset of a ``posterior.nc`` (``uqgear calibrate``, or a ``calibrate`` analysis's file), loaded.
+
+    Raises
+    ------
+    PosteriorError
+        The file is missing or unreadable.
+    """
+    location = Path(path)
+    if not location.is_file():
+        raise PosteriorError(f"{location}: posterior file not found; expected a posterior.nc of uqgear calibrate")
+    try:
+        with xr.open_dataset(location) as opened:
+            return opened.load()
+    except (OSError, ValueError) as exc:
+        raise PosteriorError(f"{location}: cannot read the posterior ({exc})") from None
+
+
 @dataclass(frozen=True)
 class PosteriorDraws:
     """Joint draws of calibrated parameters.
@@ -172,15 +190,8 @@ class PosteriorDraws:
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> PosteriorDraws:
         """Read ``posterior.nc`` written by ``uqgear calibrate`` (or a ``calibrate`` analysis's file)."""
-        location = Path(path)
-        if not location.is_file():
-            raise PosteriorError(f"{location}: posterior file not found; expected a posterior.nc of uqgear calibrate")
-        try:
-            with xr.open_dataset(location) as opened:
-                posterior = opened.load()
-        except (OSError, ValueError) as exc:
-            raise PosteriorError(f"{location}: cannot read the posterior ({exc})") from None
-        return cls.from_dataset(posterior, source=str(location))
+        posterior = read_posterior(path)
+        return cls.from_dataset(posterior, source=str(Path(path)))
 
     # -- use ------------------------------------------------------------------------
 
@@ -248,4 +259,4 @@ class PosteriorDraws:
         )
 
 
-__all__ = ["PosteriorDraws", "PosteriorError", "DEFAULT_DRAWS"]
+__all__ = ["PosteriorDraws", "PosteriorError", "DEFAULT_DRAWS", "read_posterior"]
