@@ -43,7 +43,7 @@ from uqgear.physics.effect_draws import draw_effect_sets
 from uqgear.rig.transfer_path import apply_transfer_path
 from uqgear.rig.virtual_rig import simulate_campaign
 from uqgear.uq.prediction import scale_dynamic_part
-from uqgear.validation.campaigns import _scattered_truth, effect_draw
+from uqgear.validation.campaigns import _scattered_truth, effect_draw, scattered_values
 
 QOIS = ("peak_mesh_force", "dynamic_load_factor", "dte_rms")
 #: Held-out operating points: speeds between the campaign's (600-3800 rpm), other drive torques.
@@ -52,19 +52,8 @@ SIMULATION = {"n_periods": 400, "keep_periods": 200, "steps_per_mode": 32}
 DRAWS = 64
 
 
-def true_parameters(truth: dict[str, float], design: uqgear.Design) -> dict[str, float]:
-    return {
-        "mesh_stiffness_scale": truth["mesh_stiffness_scale"],
-        "zeta_mesh": design.zeta_mesh * truth["zeta_mesh_factor"],
-        "ste_amplitude": design.ste_amplitude * truth["ste_amplitude_factor"],
-        "k1": design.k1 * truth["k1_factor"],
-        "k2": design.k2 * truth["k2_factor"],
-        "backlash": design.backlash * truth["backlash_factor"],
-    }
-
-
 def campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
-    truth = true_parameters(_scattered_truth(rng), design)
+    truth = scattered_values(_scattered_truth(rng), design)
     effects, options, transfer = [], {}, None
     if kind == "healthy":
         options["speed_wander"] = [(0.005, 1.3)]

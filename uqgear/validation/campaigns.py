@@ -291,7 +291,11 @@ def plan_real_world(
 
 def true_values(spec: CampaignSpec, design: Design) -> dict[str, float]:
     """The campaign's true nominal parameters in natural units (its scatter applied to the design's)."""
-    factors = spec.true_parameters
+    return scattered_values(spec.true_parameters, design)
+
+
+def scattered_values(factors: Mapping[str, float], design: Design) -> dict[str, float]:
+    """Parameters in natural units from a scatter (:func:`_scattered_truth`) applied to the design's values."""
     return {
         "mesh_stiffness_scale": factors["mesh_stiffness_scale"],
         "zeta_mesh": design.zeta_mesh * factors["zeta_mesh_factor"],
