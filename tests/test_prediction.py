@@ -355,3 +355,23 @@ def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
     np.testing.assert_allclose(result["dte_rms"].sel(bound="upper", quantile=0.5), dte.max(axis=0), rtol=1e-12)
     # the prior's runs, the design's tolerances before the rig data, carry no discrepancy
     assert result["peak_mesh_force_prior"].sel(bound="upper").min() < scaled.max(axis=0).min()
+
+
+@pytest.mark.parametrize(
+    ("section", "message"),
+    [
+        ("uncertain:\n  calibrated: {posterior: p.nc, analysis: cal}\n",
+         "uncertain.calibrated: expected exactly one of posterior (a file) and analysis (NAME)"),
+        ("model:\n  effects: {wobble: {amplitude: 1.0}}\n", "model.effects.wobble: unknown effect"),
+        ("model:\n  effects: {eccentricity: {amplitude: -1.0e-5}}\n", "model.effects.eccentricity.amplitude"),
+        ("model:\n  effects: [eccentricity]\n", "model.effects: expected a diagnosis.json path"),
+    ],
+)
+def test_wrong_model_inputs_are_refused_naming_the_key(section, message):
+    text = (
+        "name: wrong\noperating_points: {pinion_speed: [2000, 3000]}\n"
+        "analyses:\n  - {type: bifurcation, parameter: pinion_speed}\n" + section
+    )
+    with pytest.raises(uqgear.StudyError) as caught:
+        uqgear.parse_study(text)
+    assert message in str(caught.value) and "\n" not in str(caught.value)
