@@ -227,3 +227,31 @@ def test_the_compiled_hausdorff_distance_is_scipys_bit_for_bit():
     for size in ((1, 5), (40, 40), (200, 7)):
         a, b = rng.normal(size=(size[0], 2)), rng.normal(size=(size[1], 2)) + 0.3
         assert hausdorff(a, b) == max(directed_hausdorff(a, b)[0], directed_hausdorff(b, a)[0])
+
+
+def test_the_branches_are_the_responses_of_the_node_where_coexisting_forces_differ_most():
+    """A constructed table of two sweep points x three nodes: the branches come from the node with two responses
+    whose peak forces differ most, NaN where no node holds two; the report says both values and where."""
+    from uqgear.report.coexistence_sections import branch_sentences
+    from uqgear.study.guided_starts import _branches
+
+    grid = np.array([[20e3], [25e3], [30e3]])
+    rows = np.array([0, 1, 2, 4])  # point 0: every node; point 1: its middle node only
+    found = xr.Dataset(
+        {
+            "attractor_count": ("sample", [2, 2, 1, 1]),
+            "peak_mesh_force_max": ("sample", [150e3, 180e3, 170e3, 160e3]),
+            "peak_mesh_force_min": ("sample", [140e3, 110e3, 170e3, 160e3]),
+            "dte_rms_max": ("sample", [20e-6, 30e-6, 25e-6, 22e-6]),
+            "dte_rms_min": ("sample", [19e-6, 12e-6, 25e-6, 22e-6]),
+        }
+    )
+    out = xr.Dataset(coords={"pinion_speed": [3600.0, 3700.0]})
+    out.update(_branches(found, rows, grid, {"adhesion_torque": "N m"}, ["dte_rms"], (2,), ("pinion_speed",)))
+    pair = out["dte_rms_branches"].transpose("pinion_speed", "branch").values
+    np.testing.assert_array_equal(pair[0], [12e-6, 30e-6])  # node 1: 180 - 110 kN beats 150 - 140 kN
+    assert np.isnan(pair[1]).all()  # one response at its only in-window node
+    assert out["branch_adhesion_torque"].values[0] == 25e3 and np.isnan(out["branch_adhesion_torque"].values[1])
+    assert out["branch_adhesion_torque"].attrs["units"] == "N m"
+    (sentence,) = branch_sentences(out, "dte_rms", "pinion_speed")
+    assert "at 3600 rpm" in sentence and "T2 = 25 kN m" in sentence and "12 µm or 30 µm" in sentence

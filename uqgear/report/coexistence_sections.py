@@ -135,6 +135,34 @@ def attractor_bound_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> l
     ]
 
 
+def branch_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> list[str]:
+    """Where two responses coexist inside the bounds: the speeds, the interval parameter values and both values."""
+    if f"{name}_branches" not in ds or sweep is None or ds[f"{name}_branches"].ndim != 2:
+        return []
+    pair = np.asarray(ds[f"{name}_branches"].transpose(sweep, "branch").values, dtype=float)
+    shown = np.isfinite(pair).all(axis=1)
+    values = np.asarray(ds[sweep].values, dtype=float)
+    nodes = [str(n)[len("branch_") :] for n in ds.data_vars if str(n).startswith("branch_")]
+    sentences = []
+    for start, stop in _runs(shown):
+        span = (
+            f"at {format_value(sweep, values[start])}"
+            if start == stop
+            else f"between {format_value(sweep, values[start])} and {format_value(sweep, values[stop])}"
+        )
+        widest = start + int(np.argmax(pair[start : stop + 1, 1] - pair[start : stop + 1, 0]))
+        at = ", ".join(
+            f"{short_name(node)} = {format_value(node, float(ds[f'branch_{node}'].values[widest]))}" for node in nodes
+        )
+        sentences.append(
+            f"{short_name(name)}: two steady responses coexist {span}; at {format_value(sweep, values[widest])}"
+            + (f" ({at})" if at else "")
+            + f" {format_value(name, pair[widest, 0])} or {format_value(name, pair[widest, 1])}"
+            + " (both drawn in the envelope figure)"
+        )
+    return sentences
+
+
 def _starts_text(ds: xr.Dataset) -> str:
     import json
 

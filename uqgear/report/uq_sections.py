@@ -13,7 +13,7 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from ..uq.interval import FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR, FLAG_VERTEX_EXCEEDED
-from .coexistence_sections import attractor_bound_sentences
+from .coexistence_sections import attractor_bound_sentences, branch_sentences
 from .findings import _range_text, _runs_of_values
 from .page import new_figure
 from .presentation import _LINE_STYLES, _MARKERS, axis_label, display, format_value, short_name
@@ -54,6 +54,33 @@ def _draw_branches(ax: Any, ds: xr.Dataset, name: str, x: np.ndarray, factor: fl
             label="upper bound over every response (another start)")
 
 
+def _draw_coexisting(ax: Any, ds: xr.Dataset, name: str, x: np.ndarray, factor: float) -> None:
+    """Both branches where responses coexist, joined at each speed: the two responses lie inside the band when the
+    bound comes from another value of the interval parameter, and the band alone would hide the jump."""
+    if f"{name}_branches" not in ds or ds[f"{name}_branches"].ndim != 2:
+        return
+    pair = ds[f"{name}_branches"].transpose(..., "branch").values * factor
+    shown = np.asarray(np.isfinite(pair).all(axis=1), dtype=bool)
+    if not shown.any():
+        return
+    ax.vlines(x[shown], pair[shown, 0], pair[shown, 1], color="#D55E00", linewidth=0.8)
+    for column, (marker, which) in enumerate((("v", "lower"), ("^", "upper"))):
+        ax.plot(x[shown], pair[shown, column], linestyle="none", marker=marker, color="#D55E00", markersize=4,
+                label=f"{which} branch where two responses coexist" + _branch_where(ds, shown))
+
+
+def _branch_where(ds: xr.Dataset, shown: np.ndarray) -> str:
+    """' (T2 = a-b kN m)': the interval parameter values at which the branches were found."""
+    names = [str(name)[len("branch_"):] for name in ds.data_vars if str(name).startswith("branch_")]
+    parts = []
+    for name in names:
+        values = np.asarray(ds[f"branch_{name}"].values, dtype=float)[shown]
+        low, high = float(np.nanmin(values)), float(np.nanmax(values))
+        text = format_value(name, low) if low == high else f"{format_value(name, low)} to {format_value(name, high)}"
+        parts.append(f"{short_name(name)} = {text}")
+    return f" ({', '.join(parts)})" if parts else ""
+
+
 @renderer("interval")
 def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
@@ -82,6 +109,7 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
             if nominal is not None:
                 ax.plot(x, nominal, color="black", linestyle="--", linewidth=1.0, label="nominal (midpoints)")
             _draw_branches(ax, ds, name, x, factor)
+            _draw_coexisting(ax, ds, name, x, factor)
             flagged = _flags(ds, name)
             if flagged is not None and flagged.any():
                 ax.plot(
@@ -107,6 +135,7 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
         ax.set_ylabel(f"{display(name)[0]} [{unit}]")
         _interval_findings(section, ds, name, sweep, label)
         section.findings.extend(attractor_bound_sentences(ds, name, sweep))
+        section.findings.extend(branch_sentences(ds, name, sweep))
     axes[-1].set_xlabel(axis_label(sweep) if sweep else "")
     method = ds.attrs.get("method", options.get("method", "?"))
     _add_figure(

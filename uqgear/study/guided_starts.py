@@ -447,6 +447,8 @@ def widen_over_attractors(
             labelled = starts.astype(str).reshape(*spec.shape, 2)
             out[f"{qoi}_start"] = ((*dims, "bound"), labelled, out[f"{qoi}_start"].attrs)
         np.maximum.at(count, point_of, np.asarray(found["attractor_count"].values, dtype=np.int64))
+        units = {name: str(getattr(space[name], "units", "")) for name in space.interval_names}
+        out.update(_branches(found, rows, grid, units, qois, spec.shape, dims))
     count = count.reshape(spec.shape)
     inside = inside.reshape(spec.shape)
     out["attractor_count"] = (dims, count, {"units": "1", "long_name": "most attractors at any point of the box"})
@@ -463,6 +465,62 @@ def widen_over_attractors(
         window_points=int(model.window_points),
         window_seconds=float(model.windows.seconds),
     )
+    return out
+
+
+def _branches(
+    found: xr.Dataset,
+    rows: np.ndarray,
+    grid: np.ndarray,
+    units: Mapping[str, str],
+    qois: Sequence[str],
+    shape: tuple[int, ...],
+    dims: tuple[str, ...],
+) -> dict[str, Any]:
+    """Both branches where responses coexist: at each sweep point, the in-window node where the coexisting
+    responses' peak mesh forces differ most, each QoI's lowest and highest response there, and that node's
+    interval parameter values. NaN where no node holds two responses.
+
+    The bounds alone cannot show a second branch that lies inside the band (a wet-rail jump under the dry-rail
+    upper bound); these two values are what the envelope figure draws as the branches."""
+    n_points = int(np.prod(shape))
+    # ``found`` holds the in-window rows of the (sweep point, grid node) table
+    point_of, node = rows // grid.shape[0], rows % grid.shape[0]
+    several = np.asarray(found["attractor_count"].values, dtype=np.int64) > 1
+    high = np.asarray(found["peak_mesh_force_max"].values, dtype=float)
+    low = np.asarray(found["peak_mesh_force_min"].values, dtype=float)
+    spread = np.where(several & np.isfinite(high) & np.isfinite(low), high - low, -np.inf)
+    chosen = np.full(n_points, -1)
+    best = np.full(n_points, -np.inf)
+    for row in np.nonzero(np.isfinite(spread))[0]:
+        if spread[row] > best[point_of[row]]:
+            best[point_of[row]], chosen[point_of[row]] = spread[row], row
+    held = chosen >= 0
+    out: dict[str, Any] = {}
+    for qoi in qois:
+        if f"{qoi}_max" not in found:
+            continue
+        pair = np.full((n_points, 2), np.nan)
+        for column, bound in enumerate(("min", "max")):
+            pair[held, column] = np.asarray(found[f"{qoi}_{bound}"].values, dtype=float)[chosen[held]]
+        out[f"{qoi}_branches"] = (
+            (*dims, "branch"),
+            pair.reshape(*shape, 2),
+            {"units": QOI_INFO[qoi][0], "long_name": f"{qoi} of the lowest and highest coexisting response"},
+        )
+    if out:
+        out["branch"] = ("branch", ["lower", "upper"])
+        for column, name in enumerate(units):
+            where = np.full(n_points, np.nan)
+            where[held] = grid[node[chosen[held]], column]
+            out[f"branch_{name}"] = (
+                dims,
+                where.reshape(shape),
+                {
+                    "units": units[name],
+                    "long_name": f"{name} at which the coexisting responses of the branches were found",
+                },
+            )
     return out
 
 
