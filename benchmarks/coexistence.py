@@ -8,9 +8,16 @@ fresh process three times, after one untimed warm-up run that compiles the kerne
 * the default, guided starts: extra starts only inside the windows the continuation finds;
 
 and prints the wall times, the guided and the every-start time over the from-rest time, and where
-each found coexisting responses (the report's first-screen sentences).
+each found coexisting responses: the report's first-screen sentences, and the grid points (analysis, speed,
+other inputs) with more than one attractor.
 
-Usage: ``python benchmarks/coexistence.py [--studies t2_envelope paper_speed nonlinear_windows] [--json out.json]``
+The random starts of ``starts: true`` find some responses at some seeds only (a basin a few per cent of the
+box). ``--every-seeds K`` runs the every-start study K times with the seeds seed, seed + 1, ... (untimed
+after the first) and calls a point *robust* when every one of them finds coexisting responses there; the
+guided run is checked against the robust points.
+
+Usage: ``python benchmarks/coexistence.py [--studies t2_envelope paper_speed nonlinear_windows]
+[--every-seeds K] [--json out.json]``
 """
 
 from __future__ import annotations
@@ -41,9 +48,27 @@ def found(out: Path) -> list[str]:
     return sorted(set(re.findall(r"\d+ steady responses coexist [^<(]*", html)))
 
 
+def points(out: Path) -> set[str]:
+    """Every grid point of every result with more than one attractor, as 'analysis: input=value, ...'."""
+    import numpy as np
+    import xarray as xr
+
+    held = set()
+    for path in sorted(out.glob("*.nc")):
+        with xr.open_dataset(path) as ds:
+            if "attractor_count" not in ds or "pinion_speed" not in ds["attractor_count"].dims:
+                continue
+            count = ds["attractor_count"]
+            for index in zip(*np.nonzero(count.values > 1)):
+                where = ", ".join(f"{dim}={float(ds[dim].values[i]):.6g}" for dim, i in zip(count.dims, index))
+                held.add(f"{path.stem}: {where}")
+    return held
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--studies", nargs="+", default=["t2_envelope"])
+    parser.add_argument("--every-seeds", type=int, default=1)
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     report = {}
@@ -59,7 +84,20 @@ def main() -> None:
             run(paths["guided"], root / f"{name}-warm-up")
             times = {mode: run(path, root / f"{name}-{mode}") for mode, path in paths.items()}
             windows = {mode: found(root / f"{name}-{mode}") for mode in MODES}
-            report[name] = {"seconds": times, "found": windows}
+            held = {mode: points(root / f"{name}-{mode}") for mode in MODES}
+            robust = set(held["every"])
+            for k in range(1, args.every_seeds):
+                variant = dict(yaml.safe_load(paths["every"].read_text()), seed=int(raw.get("seed", 0)) + k)
+                again = root / f"{name}-every-{k}.yaml"
+                again.write_text(yaml.safe_dump(variant))
+                run(again, root / f"{name}-every-{k}")
+                robust &= points(root / f"{name}-every-{k}")
+            report[name] = {
+                "seconds": times,
+                "found": windows,
+                "points": {mode: sorted(values) for mode, values in held.items()},
+                "robust": sorted(robust),
+            }
             print(f"{name}: from rest {times['rest']:.1f} s, every start {times['every']:.1f} s "
                   f"({times['every'] / times['rest']:.2f}x), guided {times['guided']:.1f} s "
                   f"({times['guided'] / times['rest']:.2f}x; aim <= 1.35x)")
@@ -69,6 +107,12 @@ def main() -> None:
                     print(f"    {line.strip()}")
             missed = set(windows["every"]) - set(windows["guided"])
             print(f"  every-start statements the guided run does not make word for word: {len(missed)}")
+            print(f"  points with coexisting responses: every start {len(held['every'])}, guided {len(held['guided'])}"
+                  f", found by all {args.every_seeds} every-start seed(s) {len(robust)}")
+            for line in sorted(robust - held["guided"]):
+                print(f"    robust, missed by guided: {line}")
+            for line in sorted(held["every"] - held["guided"] - robust):
+                print(f"    every-start seed {raw.get('seed', 0)} only, missed by guided: {line}")
     if args.json:
         args.json.write_text(json.dumps(report, indent=2))
     sys.stdout.flush()

@@ -255,3 +255,34 @@ def test_the_branches_are_the_responses_of_the_node_where_coexisting_forces_diff
     assert out["branch_adhesion_torque"].attrs["units"] == "N m"
     (sentence,) = branch_sentences(out, "dte_rms", "pinion_speed")
     assert "at 3600 rpm" in sentence and "T2 = 25 kN m" in sentence and "12 µm or 30 µm" in sentence
+
+
+def test_a_sweep_entering_a_window_from_outside_follows_the_sweep_over_the_whole_grid(design):
+    """Sweeps over the window points alone, entered with the from-rest final states of the points just outside
+    (one response there), reach what up- and down-sweeps over the whole grid reach; entered from nothing, the
+    down-sweep starts from rest at the window's last point and stays on the lower branch."""
+    from uqgear.dynamics.attractors import FINAL_VARIABLES, MultiStartSearch, with_starts
+
+    speeds = np.array([3550.0, 3600.0, 3650.0, 3700.0])
+    grid = samples_from_mapping(
+        {"pinion_speed": speeds, "adhesion_torque": np.full(4, WET), "drive_torque": np.full(4, 7000.0)}
+    )
+    evaluate = StartedEvaluator(design, OPTIONS)
+    whole = up_down_sweeps(evaluate, grid)
+    window = grid.isel(sample=[1, 2])
+    outside = evaluate(with_starts(grid, np.array([0, 3]), np.full((2, 6), np.nan)))
+    finals = np.stack([outside[name].values for name in FINAL_VARIABLES], axis=1)
+    entry = {"up": np.full((2, 6), np.nan), "down": np.full((2, 6), np.nan)}
+    entry["up"][0], entry["down"][1] = finals[0], finals[1]
+    settings = MultiStart(seeded=0)
+    entered = MultiStartSearch(settings).fit(evaluate, window, design, sweep_entry=entry)
+    plain = MultiStartSearch(settings).fit(evaluate, window, design)
+    for direction in ("up", "down"):
+        reference = whole[direction]["peak_mesh_force"].values[1:3]
+        np.testing.assert_allclose(entered.runs_["peak_mesh_force"].sel(start=direction).values, reference, rtol=5e-3)
+    # the upper branch that the whole grid's down-sweep carries in from 3700 rpm, missed from rest at 3650 rpm
+    high = whole["down"]["peak_mesh_force"].values[1:3]
+    assert (high > 1.3 * plain.runs_["peak_mesh_force"].sel(start="down").values).all()
+    assert entered.attractors_["attractor_count"].values.tolist() == [2, 2]
+    assert plain.attractors_["attractor_count"].values.tolist() == [1, 1]
+    assert entered.model_runs_ == plain.model_runs_ + 2  # the entered ends run once more, from the entry

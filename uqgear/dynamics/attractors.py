@@ -239,35 +239,49 @@ def _sweep_runs(
     groups: Sequence[np.ndarray],
     rest_index: np.ndarray | None = None,
     starts: Mapping[str, np.ndarray] | None = None,
+    entry: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, xr.Dataset]:
     """Up- and down-sweep runs of every sample: one batch per step over all groups and both directions.
 
     ``rest`` holds the rest runs of the samples ``rest_index`` (default: all), which must include
-    each group's first and last member: the sweeps start there. ``starts`` (``up`` and ``down``, arrays of
-    shape (n_samples, 6)) receive the state each run started from.
+    each group's first and last member that ``entry`` does not give: the sweeps start there. ``entry``
+    (``up`` and ``down``, arrays of shape (n_samples, 6), NaN rows where none) gives the state a sweep
+    enters a sample with instead of its neighbour's in the group (the final state of a point outside the
+    samples). ``starts`` (``up`` and ``down``) receive the state each run started from.
     """
     rows_of = {
         int(sample): row
         for row, sample in enumerate(np.arange(samples.sizes["sample"]) if rest_index is None else rest_index)
     }
-    finals = _final_states(rest)
+    finals = _final_states(rest) if rows_of and all(name in rest for name in FINAL_VARIABLES) else None
+
+    def entering(direction: str, sample: int) -> np.ndarray | None:
+        state = None if entry is None or direction not in entry else np.asarray(entry[direction][sample], float)
+        return state if state is not None and np.all(np.isfinite(state)) else None
+
     carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}  # sample index -> the final state it passes on
-    for direction in ("up", "down"):
-        for members in groups:
-            first = members[0] if direction == "up" else members[-1]
-            carried[direction][int(first)] = finals[rows_of[int(first)]]
+    from_rest: dict[str, list[int]] = {"up": [], "down": []}  # first points whose sweep run is their rest run
     longest = max((len(members) for members in groups), default=0)
     pieces: dict[str, list[tuple[np.ndarray, xr.Dataset]]] = {"up": [], "down": []}
-    for step in range(1, longest):
+    for step in range(longest):
         index, states, directions = [], [], []
         for direction in ("up", "down"):
             for members in groups:
                 if step >= len(members):
                     continue
                 ordered = members if direction == "up" else members[::-1]
-                index.append(int(ordered[step]))
-                states.append(carried[direction][int(ordered[step - 1])])
+                sample = int(ordered[step])
+                state = entering(direction, sample)
+                if state is None and step == 0:
+                    assert finals is not None  # the caller's condition: rest runs with final states at the ends
+                    carried[direction][sample] = finals[rows_of[sample]]
+                    from_rest[direction].append(sample)
+                    continue
+                index.append(sample)
+                states.append(state if state is not None else carried[direction][int(ordered[step - 1])])
                 directions.append(direction)
+        if not index:
+            continue
         result = evaluate(with_starts(samples, np.array(index), np.array(states)))
         if starts is not None:
             for sample, direction, state in zip(index, directions, states):
@@ -281,9 +295,10 @@ def _sweep_runs(
                 pieces[direction].append((np.array(index)[rows], result.isel(sample=rows)))
     out = {}
     for direction in ("up", "down"):
-        # the first point of each sweep is its rest run
-        firsts = np.array([int(m[0] if direction == "up" else m[-1]) for m in groups], dtype=int)
-        parts = [(firsts, rest.isel(sample=[rows_of[int(i)] for i in firsts]))] + pieces[direction]
+        # the first point of a sweep that enters from nothing is its rest run
+        firsts = np.array(from_rest[direction], dtype=int)
+        parts = [(firsts, rest.isel(sample=[rows_of[int(i)] for i in firsts]))] if firsts.size else []
+        parts += pieces[direction]
         order = np.concatenate([indices for indices, _ in parts])
         stacked = xr.concat(
             [part for _, part in parts],
@@ -370,6 +385,7 @@ class MultiStartSearch:
         extra_states: Mapping[str, np.ndarray] | None = None,
         rest: xr.Dataset | None = None,
         seeded_rows: np.ndarray | None = None,
+        sweep_entry: Mapping[str, np.ndarray] | None = None,
     ) -> MultiStartSearch:
         """Run the starts and group the responses (``design`` only for the box's scales; default the
         evaluator's ``design``).
@@ -383,7 +399,10 @@ class MultiStartSearch:
         of ``samples``); they are not run again, and without final states only the sweeps' first points
         are. ``seeded_rows`` (booleans, one per sample; default all) says which samples get the random
         starts; the others' random entries are left out of the grouping, and the chosen ones start from the
-        same states as with every sample chosen."""
+        same states as with every sample chosen. ``sweep_entry`` (``up``, ``down``: states of shape (n_samples, 6),
+        NaN rows where none) gives the state a sweep enters a sample with from outside ``samples``: the final
+        state of the point before it (up) or after it (down) on a grid of which ``samples`` is a part, so that a
+        sweep through a window of the grid enters it as a sweep over the whole grid would."""
         if "sample" not in samples.dims or "pinion_speed" not in samples:
             raise UqgearError("samples: expected a Dataset with dimension 'sample' and variable 'pinion_speed'")
         design = design if design is not None else getattr(evaluate, "design", None)
@@ -396,7 +415,7 @@ class MultiStartSearch:
         stages: dict[str, xr.Dataset] = {"rest": rest}
         self.start_states_ = {"rest": np.full((n, 6), np.nan)}
         if settings.sweeps:
-            runs += self._sweep_stages(evaluate, samples, rest, stages)
+            runs += self._sweep_stages(evaluate, samples, rest, stages, sweep_entry)
         for label, states in (extra_states or {}).items():
             states = np.asarray(states, dtype=float)
             if states.shape != (n, 6):
@@ -429,24 +448,39 @@ class MultiStartSearch:
         return self
 
     def _sweep_stages(
-        self, evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, rest: xr.Dataset, stages: dict
+        self,
+        evaluate: Callable[[xr.Dataset], xr.Dataset],
+        samples: xr.Dataset,
+        rest: xr.Dataset,
+        stages: dict,
+        entry: Mapping[str, np.ndarray] | None = None,
     ) -> int:
         """Add the ``up`` and ``down`` stages (and their start states) of :meth:`fit`; returns the runs made."""
         n = samples.sizes["sample"]
         groups = sweep_order(samples, self.settings.sweep_variable)
         starts = {direction: np.full((n, 6), np.nan) for direction in ("up", "down")}
-        runs = 2 * n - 2 * len(groups)
+        entered = {
+            direction: np.all(np.isfinite(np.asarray(entry[direction], dtype=float)), axis=1)
+            if entry is not None and direction in entry
+            else np.zeros(n, dtype=bool)
+            for direction in ("up", "down")
+        }
+        # a sweep's first point is its rest run unless the sweep enters it with a state from outside
+        runs = 2 * n - sum(int(not entered["up"][m[0]]) + int(not entered["down"][m[-1]]) for m in groups)
         if all(name in rest for name in FINAL_VARIABLES):
-            stages.update(_sweep_runs(evaluate, samples, rest, groups, starts=starts))
-        elif any(len(members) > 1 for members in groups):
-            # the sweeps start from the rest runs' final states at each group's ends
-            ends = np.unique(np.concatenate([[m[0], m[-1]] for m in groups if len(m) > 1])).astype(int)
-            edges = evaluate(with_starts(samples, ends, np.full((ends.size, 6), np.nan)))
+            stages.update(_sweep_runs(evaluate, samples, rest, groups, starts=starts, entry=entry))
+        elif any(len(members) > 1 or entered["up"][members[0]] or entered["down"][members[-1]] for members in groups):
+            swept = [m for m in groups if len(m) > 1 or entered["up"][m[0]] or entered["down"][m[-1]]]
+            # the sweeps start from the rest runs' final states at each group's ends (where nothing enters them)
+            needed = [int(m[0]) for m in swept if not entered["up"][m[0]]]
+            needed += [int(m[-1]) for m in swept if not entered["down"][m[-1]]]
+            ends = np.unique(np.asarray(needed, dtype=int))
+            edges = evaluate(with_starts(samples, ends, np.full((ends.size, 6), np.nan))) if ends.size else rest
             runs += ends.size
-            several = [members for members in groups if len(members) > 1]
-            swept_rows = np.sort(np.concatenate(several)).astype(int)
-            for direction, part in _sweep_runs(evaluate, samples, edges, several, ends, starts).items():
-                # a point alone in its group has no sweep neighbour: its sweep starts are its rest run
+            swept_rows = np.sort(np.concatenate(swept)).astype(int)
+            for direction, part in _sweep_runs(evaluate, samples, edges, swept, ends, starts, entry).items():
+                # a point alone in its group, entered from nowhere, has no sweep neighbour: its sweep starts are
+                # its rest run
                 stages[direction] = _put_rows(rest, swept_rows, part)
         else:
             stages.update({"up": rest, "down": rest})

@@ -33,7 +33,15 @@ from typing import Any, cast
 import numpy as np
 import xarray as xr
 
-from ..dynamics.attractors import ATTRACTOR_QOIS, MultiStart, MultiStartSearch, StartedEvaluator, with_starts
+from ..dynamics.attractors import (
+    ATTRACTOR_QOIS,
+    FINAL_VARIABLES,
+    MultiStart,
+    MultiStartSearch,
+    StartedEvaluator,
+    sweep_order,
+    with_starts,
+)
 from ..dynamics.regimes import period_labels
 from ..dynamics.windows import CoexistenceWindows, equivalent_speeds, follow_nodes, windows_from
 from ..physics.design import Design
@@ -210,8 +218,15 @@ class GuidedStartModel:
             starts = self._orbit_starts(speeds[rows], values[rows])
             for column in starts.values():
                 column[~branching] = np.nan
+            entry = self._sweep_entry(samples, inside) if self.settings.sweeps else None
             search = MultiStartSearch(self.settings, self.seed).fit(
-                self.started, subset, self.design, extra_states=starts, rest=rest, seeded_rows=branching
+                self.started,
+                subset,
+                self.design,
+                extra_states=starts,
+                rest=rest,
+                seeded_rows=branching,
+                sweep_entry=entry,
             )
             found = summarise(search, subset, poincare=self.poincare)
             if self.exponents is not None and "largest_lyapunov" in rest:
@@ -225,6 +240,35 @@ class GuidedStartModel:
             windows=json.dumps(self.windows.to_records()),
         )
         return out
+
+    def _sweep_entry(self, samples: xr.Dataset, inside: np.ndarray) -> dict[str, np.ndarray] | None:
+        """The states the sweeps enter each stretch of window points with (rows of the in-window samples; NaN
+        where none): the final state of the point just outside it on the grid of ``samples``, run from rest.
+
+        Outside the windows the gear holds one response, so that state is the one a sweep over the whole grid
+        carries to the window's edge; a sweep that started from rest at the window's first point would enter the
+        window on another path and can miss the branch a run-up follows into it."""
+        rows = np.nonzero(inside)[0]
+        position = np.full(inside.size, -1)
+        position[rows] = np.arange(rows.size)
+        entry = {direction: np.full((rows.size, 6), np.nan) for direction in ("up", "down")}
+        neighbours: list[tuple[str, int, int]] = []  # (direction, in-window row, outside sample)
+        for members in sweep_order(samples, self.settings.sweep_variable):
+            inner = inside[members]
+            for k in np.nonzero(inner)[0]:
+                if k > 0 and not inner[k - 1]:
+                    neighbours.append(("up", int(position[members[k]]), int(members[k - 1])))
+                if k + 1 < members.size and not inner[k + 1]:
+                    neighbours.append(("down", int(position[members[k]]), int(members[k + 1])))
+        if not neighbours:
+            return None
+        outside = np.unique([sample for _, _, sample in neighbours])
+        finals = self.started(with_starts(samples, outside, np.full((outside.size, 6), np.nan)))
+        states = np.stack([np.asarray(finals[name].values, dtype=float) for name in FINAL_VARIABLES], axis=1)
+        at = {int(sample): row for row, sample in enumerate(outside)}
+        for direction, row, sample in neighbours:
+            entry[direction][row] = states[at[sample]]
+        return entry
 
     def _worst_exponents(
         self, found: xr.Dataset, search: MultiStartSearch, samples: xr.Dataset, rest: xr.Dataset
