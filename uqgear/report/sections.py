@@ -80,6 +80,9 @@ def _section(ds: xr.Dataset) -> Section:
     seconds = ds.attrs.get("run_time_s")
     if seconds is not None:
         section.facts.append(("run time", f"{float(seconds):.1f} s"))
+    treatment = ds.attrs.get("response_treatment")
+    if treatment:
+        section.facts.append(("multi-valued response", str(treatment)))
     settings = _json_attr(ds, "simulation_settings", {})
     if settings:
         section.facts.append(

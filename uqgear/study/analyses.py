@@ -447,6 +447,32 @@ def regime_map_analysis(context: AnalysisContext) -> xr.Dataset:
     return result
 
 
+#: What the statistics of a sample see where several steady responses coexist, by the ``response`` key.
+RESPONSE_TREATMENT = {
+    "worst": "the worst response at each sample (the attractor with the largest peak mesh force; a response that "
+    "jumps between attractors is a discontinuous function of the inputs, taken as it is)",
+    "rest": "the response reached from rest at each sample (as a start from standstill reaches it); every sample "
+    "runs from rest only",
+}
+
+
+def _statistics_model(context: AnalysisContext) -> RunnerModel | MultiStartModel | GuidedStartModel:
+    """The model of a statistics analysis (monte_carlo, pce, sobol) by its ``response`` key: the worst response
+    over the starts the study sets, or the response from rest alone."""
+    simulation = context.spec.simulation
+    if context.options["response"] == "rest" or simulation.starts is None:
+        return context.rest_model(dataclasses.replace(simulation, starts=None), poincare=False)
+    return context.model(poincare=False)
+
+
+def _response_attrs(context: AnalysisContext) -> dict[str, str]:
+    """The ``response`` attributes of a statistics analysis's result (said in the report's facts)."""
+    response = str(context.options["response"])
+    if context.spec.simulation.starts is None:
+        return {"response": "rest", "response_treatment": "every sample runs from rest (simulation.starts: false)"}
+    return {"response": response, "response_treatment": RESPONSE_TREATMENT[response]}
+
+
 @register("monte_carlo")
 def monte_carlo_analysis(context: AnalysisContext) -> xr.Dataset:
     """Monte Carlo statistics of the QoIs at every operating point.
@@ -462,7 +488,7 @@ def monte_carlo_analysis(context: AnalysisContext) -> xr.Dataset:
     names = list(options["parameters"])
     fixed = context.fixed_values(exclude=names)
     space = context.parameter_space(names, fixed)
-    model = context.model(poincare=False)
+    model = _statistics_model(context)
     if options["intervals"] == "pbox":
         from ..uq.interval import IntervalAnalysis
         from ..uq.pbox import pbox
@@ -479,6 +505,7 @@ def monte_carlo_analysis(context: AnalysisContext) -> xr.Dataset:
             analysis=IntervalAnalysis("scan", scan_points=options["points"]),
         )
         result.attrs.update(
+            **_response_attrs(context),
             model_runs=int(model.runs),
             parameters=json.dumps(names),
             fixed_inputs=json.dumps(fixed),
@@ -500,7 +527,12 @@ def monte_carlo_analysis(context: AnalysisContext) -> xr.Dataset:
             {"units": variable_units_short(name), "long_name": f"sampled {name}"},
         )
     statistics.attrs.update(samples.attrs)
-    statistics.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
+    statistics.attrs.update(
+        **_response_attrs(context),
+        model_runs=int(model.runs),
+        parameters=json.dumps(names),
+        fixed_inputs=json.dumps(fixed),
+    )
     return statistics
 
 
@@ -517,7 +549,7 @@ def pce_analysis(context: AnalysisContext) -> xr.Dataset:
     names = list(options["parameters"])
     fixed = context.fixed_values(exclude=names)
     space = context.parameter_space(names, fixed)
-    model = context.model(poincare=False)
+    model = _statistics_model(context)
     chaos = PolynomialChaos(
         max_order=options["order"],
         min_order=options["min_order"],
@@ -549,6 +581,7 @@ def pce_analysis(context: AnalysisContext) -> xr.Dataset:
             units=QOI_INFO[name][0], long_name=f"{name} from the surrogate at the check points"
         )
     result.attrs.update(
+        **_response_attrs(context),
         model_runs=int(model.runs),
         parameters=json.dumps(names),
         fixed_inputs=json.dumps(fixed),
@@ -617,7 +650,7 @@ def sobol_analysis(context: AnalysisContext) -> xr.Dataset:
     names = list(options["parameters"])
     fixed = context.fixed_values(exclude=names)
     space = context.parameter_space(names, fixed)
-    model = context.model(poincare=False)
+    model = _statistics_model(context)
     analysis = SobolAnalysis(
         options["samples"],
         second_order=options["second_order"],
@@ -628,7 +661,12 @@ def sobol_analysis(context: AnalysisContext) -> xr.Dataset:
         seed=context.stage_seed(0),
     )
     result = analysis.fit(model, space, context.sweep()).result_.copy()
-    result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
+    result.attrs.update(
+        **_response_attrs(context),
+        model_runs=int(model.runs),
+        parameters=json.dumps(names),
+        fixed_inputs=json.dumps(fixed),
+    )
     return result
 
 

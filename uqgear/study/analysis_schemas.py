@@ -32,6 +32,8 @@ DEFAULT_QOIS: tuple[str, ...] = ("dte_rms", "dynamic_load_factor", "fraction_sep
 INTERVAL_METHODS: tuple[str, ...] = ("scan", "vertex", "chebyshev", "optimize")
 INTERVAL_FALLBACKS: tuple[str, ...] = ("scan", "optimize", "none")
 SAMPLING_METHODS: tuple[str, ...] = ("monte_carlo", "latin_hypercube", "sobol", "halton")
+#: Which response the statistics of a sample see where several coexist (``response`` of monte_carlo, pce, sobol).
+RESPONSES: tuple[str, ...] = ("worst", "rest")
 
 
 def diagnosis_settings(value: Any, path: str) -> dict[str, Any]:
@@ -100,6 +102,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "sampling": choice(*SAMPLING_METHODS),
         "quantiles": list_of(number("", 0.0, 1.0), unique=True, what="a list of probabilities"),
         "qois": _qoi_list(),
+        "response": choice(*RESPONSES),
     },
     "pce": {
         "parameters": _variable_list(),
@@ -109,6 +112,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "validation_samples": number("check samples", 2, 1_000_000, integer=True),
         "sampling": choice(*SAMPLING_METHODS),
         "qois": _qoi_list(),
+        "response": choice(*RESPONSES),
     },
     "sobol": {
         "parameters": _variable_list(),
@@ -117,6 +121,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "confidence_level": number("", 0.5, 0.999),
         "bootstrap": number("resamples", 10, 100_000, integer=True),
         "qois": _qoi_list(),
+        "response": choice(*RESPONSES),
     },
     "calibrate": {
         "rig": string(),
@@ -190,6 +195,7 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
         "sampling": "latin_hypercube",
         "quantiles": (0.05, 0.5, 0.95),
         "qois": DEFAULT_QOIS,
+        "response": "worst",
     },
     "pce": {
         "order": 3,
@@ -198,8 +204,16 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
         "validation_samples": 32,
         "sampling": "halton",
         "qois": DEFAULT_QOIS,
+        "response": "worst",
     },
-    "sobol": {"samples": 64, "second_order": False, "confidence_level": 0.95, "bootstrap": 200, "qois": DEFAULT_QOIS},
+    "sobol": {
+        "samples": 64,
+        "second_order": False,
+        "confidence_level": 0.95,
+        "bootstrap": 200,
+        "qois": DEFAULT_QOIS,
+        "response": "worst",
+    },
     "calibrate": {
         "parameters": ("mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"),
         "pitch_classes": (6.0, 8.0),
