@@ -60,6 +60,8 @@ FOREIGN_QOI_INFO: dict[str, tuple[str, str]] = {
 }
 # the accumulators of _integrate_mesh
 _F_MAX, _F_SUM, _X_SUM, _X_SQ, _COUNT = range(5)
+# the output rate whose step simulate_foreign_run takes at its default sampling rate (4 x 20480 Hz)
+_RATE = 4.0 * 20480.0
 
 
 @njit(cache=True)
@@ -103,7 +105,7 @@ def _one_run(
 ) -> dict[str, float]:
     """The QoIs of one run (:data:`FOREIGN_QOI_INFO`)."""
     p, fastest = _parameters(design, speed, drive_torque, load_torque)
-    _, step = time_step(fastest, 4.0 * 20480.0)
+    _, step = time_step(fastest, _RATE)
     first = int(round(start / step))
     n_steps = first + int(round(duration / step))
     out = _integrate_mesh(_static_state(p, design), p, gears.pinion, gears.gear, eff, step, n_steps, first)
