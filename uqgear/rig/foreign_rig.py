@@ -536,4 +536,5 @@ __all__ = [
     "simulate_foreign_campaign",
     "simulate_foreign_run",
     "single_pitch_tolerance",
+    "time_step",
 ]
