@@ -11,10 +11,11 @@ intervals (against the truth where known) and the wall time.
 
 With ``--effective-priors`` the stiffness priors are widened to :data:`EFFECTIVE_PRIORS` (a bearing on a compliant
 housing: the foreign rig's pinion bearing in series with its housing mount is 0.59 of the bearing alone, below
-the default prior's 0.6).
+the default prior's 0.6); with ``--without-backlash`` backlash, which the foreign rig does not have, is not
+calibrated.
 
 Usage: ``python benchmarks/calibration_discrepancy.py [--campaign foreign|healthy] [--discrepancy]
-[--effective-priors] [--seed S] [--threads N] [--json PATH]``
+[--effective-priors] [--without-backlash] [--seed S] [--threads N] [--json PATH]``
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from pathlib import Path
 
 import uqgear
 from uqgear.calibration import Calibration
+from uqgear.calibration.priors import DEFAULT_PARAMETERS
 from uqgear.rig.foreign_rig import draw_gears, simulate_foreign_campaign
 from uqgear.rig.virtual_rig import default_operating_points
 
@@ -44,12 +46,15 @@ def foreign_campaign(seed: int):
                                      seed=seed, title="foreign rig healthy campaign")
 
 
-def run(campaign: str, discrepancy: bool, seed: int, threads: int | None, effective_priors: bool = False) -> dict:
+def run(campaign: str, discrepancy: bool, seed: int, threads: int | None, effective_priors: bool = False,
+        without_backlash: bool = False) -> dict:
     rig = foreign_campaign(seed) if campaign == "foreign" else uqgear.example_rig_file("healthy")
     truth = HEALTHY_TRUTH if campaign == "healthy" else {}
     options: dict = {"discrepancy": True} if discrepancy else {}
     if effective_priors:
         options["priors"] = EFFECTIVE_PRIORS
+    if without_backlash:
+        options["parameters"] = [name for name in DEFAULT_PARAMETERS if name != "backlash"]
     start = time.perf_counter()
     calibration = Calibration(seed=seed, threads=threads, **options).fit(rig)
     wall = time.perf_counter() - start
@@ -84,11 +89,12 @@ def main() -> None:
     parser.add_argument("--campaign", choices=("foreign", "healthy"), default="foreign")
     parser.add_argument("--discrepancy", action="store_true")
     parser.add_argument("--effective-priors", action="store_true", help="stiffness priors of EFFECTIVE_PRIORS")
+    parser.add_argument("--without-backlash", action="store_true", help="every default parameter but backlash")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=None)
     parser.add_argument("--json", type=Path, default=None, help="also write the record here")
     args = parser.parse_args()
-    record = run(args.campaign, args.discrepancy, args.seed, args.threads, args.effective_priors)
+    record = run(args.campaign, args.discrepancy, args.seed, args.threads, args.effective_priors, args.without_backlash)
     text = json.dumps(record, indent=2, default=float)
     print(text)
     if args.json is not None:
