@@ -69,6 +69,7 @@ def main() -> None:
         best = maximum(likelihood, rng, None)
         profiles = {name: [round(maximum(likelihood, rng, (index, node)), 2) for node in NODES]
                     for name, index in (("mesh_stiffness_scale", stiffness), ("k1", k1))}
+        best = max(best, *(value for values in profiles.values() for value in values))  # the best point found
         verdict, _, _ = final_sampling(likelihood, draws, np.random.default_rng(1), np.random.SeedSequence(2),
                                        walkers=56, chunk_steps=6000, max_steps=6000,
                                        criteria=ConvergenceCriteria(50.0, 1.01, 400.0), names=names, truncated=False)
