@@ -60,3 +60,41 @@ def test_it_samples_a_skewed_target_from_a_wrong_fit(weight, fitted_on):
     flat = sampler.get_chain(discard=1000, flat=True)
     np.testing.assert_allclose(flat.mean(axis=0), _TRUE_MEAN, atol=0.05 * _TRUE_STD.max())
     np.testing.assert_allclose(flat.std(axis=0) / _TRUE_STD, 1.0, atol=0.03)
+
+
+def test_restricted_to_the_box_it_proposes_inside_with_the_same_ratio():
+    rng = np.random.default_rng(4)
+    draws = rng.uniform(0.0, 1.0, (400, 6))  # a posterior that fills its box: most t draws leave it
+    free, boxed = IndependenceMove(draws), IndependenceMove(draws, in_box=True)
+    coords = rng.uniform(0.0, 1.0, (2000, 6))
+    proposal, factor = boxed.get_proposal(coords, np.random.RandomState(3))
+    assert np.all((proposal >= 0.0) & (proposal <= 1.0))
+    reference = scipy.stats.multivariate_t(loc=draws.mean(axis=0), shape=np.cov(draws, rowvar=False), df=5.0)
+    np.testing.assert_allclose(factor, reference.logpdf(coords) - reference.logpdf(proposal), rtol=1e-9, atol=1e-9)
+    unrestricted, _ = free.get_proposal(coords, np.random.RandomState(3))
+    assert np.mean(np.any((unrestricted < 0.0) | (unrestricted > 1.0), axis=1)) > 0.4
+
+
+def _log_boxed_target(points: np.ndarray) -> np.ndarray:
+    """x0 ~ N(0.3, 0.1^2) and four coordinates uniform, all on the unit box."""
+    inside = np.all((points >= 0.0) & (points <= 1.0), axis=1)
+    return np.where(inside, -0.5 * ((points[:, 0] - 0.3) / 0.1) ** 2, -np.inf)
+
+
+def test_restricted_to_the_box_it_samples_a_target_with_uninformed_coordinates_and_is_accepted_more():
+    """The calibration's mix on a target whose nuisance coordinates fill the box: the marginals are right
+    (a truncated normal and uniforms), and the restricted proposals are accepted more often."""
+    rng = np.random.default_rng(6)
+    draws = np.column_stack([rng.normal(0.3, 0.1, 400), rng.uniform(0.0, 1.0, (400, 4))])
+    acceptance = {}
+    for in_box in (False, True):
+        moves = [(emcee.moves.DEMove(), 0.4), (SnookerMove(), 0.1), (IndependenceMove(draws, in_box=in_box), 0.5)]
+        sampler = emcee.EnsembleSampler(32, 5, _log_boxed_target, vectorize=True, moves=moves)
+        sampler.random_state = np.random.RandomState(np.random.MT19937(np.random.SeedSequence(8))).get_state()
+        sampler.run_mcmc(np.clip(draws[:32], 0.01, 0.99), 4000)
+        flat = sampler.get_chain(discard=1000, flat=True)
+        acceptance[in_box] = float(np.mean(sampler.acceptance_fraction))
+        truncated = scipy.stats.truncnorm(-3.0, 7.0, loc=0.3, scale=0.1)
+        np.testing.assert_allclose(flat.mean(axis=0), [truncated.mean(), 0.5, 0.5, 0.5, 0.5], atol=0.02)
+        np.testing.assert_allclose(flat.std(axis=0), [truncated.std(), *[np.sqrt(1 / 12)] * 4], rtol=0.04)
+    assert acceptance[True] > 1.2 * acceptance[False]

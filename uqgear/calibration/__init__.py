@@ -50,7 +50,11 @@ N(0, tau_g^2) integrated out analytically and tau_g (log-uniform, 0.5 % to
 mean at each run, its share of the predictive variance per channel) is
 reported, checked by the predictive check, stored in ``posterior.nc`` and
 read back by :func:`read_discrepancy`
-(:mod:`~uqgear.calibration.discrepancy_results`).
+(:mod:`~uqgear.calibration.discrepancy_results`). The final run's
+independence proposals are then drawn inside the emulator box: on a machine
+that is not the model's the per-run T2 are hardly informed and fill their
+prior intervals, where unrestricted proposals mostly leave the box
+(:class:`~uqgear.calibration.sampling.IndependenceMove`).
 
 Surrogate, sampler and checks
 -----------------------------

@@ -109,8 +109,10 @@ class Calibration:
         Add a model-discrepancy function of the operating point per
         (channel, harmonic) group to the likelihood, integrated out
         analytically (:mod:`~uqgear.calibration.discrepancy`): for campaigns
-        whose physics the model does not have. Off, every result is that of
-        the ordinary calibration.
+        whose physics the model does not have; the final run's independence
+        proposals are then restricted to the box (the same posterior,
+        sampled with fewer rejections). Off, every result is that of the
+        ordinary calibration.
     discrepancy_range : (float, float)
         Bounds of the log-uniform prior of the discrepancy's scale tau
         (standard deviation of each basis coefficient, log-amplitude units).

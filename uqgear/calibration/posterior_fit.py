@@ -295,6 +295,9 @@ class PosteriorFit:
             criteria=criteria,
             names=names,
             truncated=truncated,
+            # with the discrepancy the per-run T2 carry little information and fill their prior intervals
+            # (docs/validation/calibration.md, "Model discrepancy")
+            in_box=self.discrepancy is not None,
         )
         parameters, operating = self.model.parameters, self.model.operating
         posterior = posterior_dataset(

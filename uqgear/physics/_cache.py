@@ -21,8 +21,7 @@ from typing import Any
 from numba.core import caching
 
 PACKAGE_ROOT = Path(__file__).resolve().parent.parent
-#: The package's modules whose compiled functions call into each other (relative to the package root);
-#: a self-contained one (the foreign rig's) keeps numba's own locators.
+#: The package's modules whose compiled functions call into each other (relative to the package root).
 COMPILED_MODULES = (
     "physics/_rhs.py",
     "physics/_quotient.py",
@@ -34,6 +33,8 @@ COMPILED_MODULES = (
     "physics/_lane_tables.py",
     "physics/_variational.py",
     "calibration/harmonics.py",
+    "rig/foreign_rig.py",
+    "rig/foreign_response.py",
 )
 
 

@@ -16,6 +16,7 @@ from .features import (
     sampling_rate,
 )
 from .foreign_modes import ForeignModes, bearing_check_plan, natural_modes
+from .foreign_response import foreign_qois
 from .foreign_rig import ForeignGears, draw_gears, simulate_foreign_campaign, simulate_foreign_run
 from .format import (
     CONVENTIONS,
@@ -69,6 +70,7 @@ __all__ = [
     "draw_gears",
     "simulate_foreign_campaign",
     "simulate_foreign_run",
+    "foreign_qois",
     "ForeignModes",
     "natural_modes",
     "bearing_check_plan",

@@ -206,31 +206,35 @@ def _derivative(t, y, p, pin_err, gear_err, eff, out):  # pragma: no cover - com
 
 
 @njit(cache=True)
+def _rk4_step(t, y, p, pin_err, gear_err, eff, step, work):  # pragma: no cover - compiled
+    """One fourth-order Runge-Kutta step of the state ``y`` (in place) from time t; ``work`` (5, state) is scratch."""
+    k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
+    _derivative(t, y, p, pin_err, gear_err, eff, k1)
+    for k in range(_N_STATE):
+        tmp[k] = y[k] + 0.5 * step * k1[k]
+    _derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, k2)
+    for k in range(_N_STATE):
+        tmp[k] = y[k] + 0.5 * step * k2[k]
+    _derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, k3)
+    for k in range(_N_STATE):
+        tmp[k] = y[k] + step * k3[k]
+    _derivative(t + step, tmp, p, pin_err, gear_err, eff, k4)
+    for k in range(_N_STATE):
+        y[k] += step / 6.0 * (k1[k] + 2.0 * k2[k] + 2.0 * k3[k] + k4[k])
+
+
+@njit(cache=True)
 def _integrate(y0, p, pin_err, gear_err, eff, step, n_out, per_out):  # pragma: no cover - compiled
     """RK4 from t = 0; returns (n_out, 6): encoder TE, housing accelerations at pinion and gear, time, and the
     bearing deflections (wheel centre less housing) at pinion and gear."""
     y = y0.copy()
-    k1 = np.empty(_N_STATE)
-    k2 = np.empty(_N_STATE)
-    k3 = np.empty(_N_STATE)
-    k4 = np.empty(_N_STATE)
-    tmp = np.empty(_N_STATE)
+    work = np.empty((5, _N_STATE))
+    k1 = work[0]
     out = np.empty((n_out, 6))
     t = 0.0
     for index in range(n_out):
         for _ in range(per_out):
-            _derivative(t, y, p, pin_err, gear_err, eff, k1)
-            for k in range(_N_STATE):
-                tmp[k] = y[k] + 0.5 * step * k1[k]
-            _derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, k2)
-            for k in range(_N_STATE):
-                tmp[k] = y[k] + 0.5 * step * k2[k]
-            _derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, k3)
-            for k in range(_N_STATE):
-                tmp[k] = y[k] + step * k3[k]
-            _derivative(t + step, tmp, p, pin_err, gear_err, eff, k4)
-            for k in range(_N_STATE):
-                y[k] += step / 6.0 * (k1[k] + 2.0 * k2[k] + 2.0 * k3[k] + k4[k])
+            _rk4_step(t, y, p, pin_err, gear_err, eff, step, work)
             t += step
         _derivative(t, y, p, pin_err, gear_err, eff, k1)
         out[index, 0] = p[6] * y[1] - p[7] * y[2]
@@ -374,6 +378,18 @@ def plant_parameters(design: Design) -> dict[str, float]:
     return {**plant, "rb1": float(p[6]), "rb2": float(p[7]), "k_mean": float(k_mean)}
 
 
+def time_step(fastest: float, rate: float) -> tuple[int, float]:
+    """Integration steps per output sample and the step, s: a fortieth of the fastest mode's period or finer.
+
+    Examples
+    --------
+    >>> time_step(4000.0, 81920.0)
+    (2, 6.103515625e-06)
+    """
+    per_out = max(1, int(math.ceil(40.0 * fastest / rate)))
+    return per_out, 1.0 / (rate * per_out)
+
+
 def _static_state(p: np.ndarray, design: Design) -> np.ndarray:
     """Start near the loaded static state at nominal speed (the run-in settles the rest)."""
     rb1, rb2, kp, eps = p[6], p[7], p[2], p[1]
@@ -411,8 +427,7 @@ def simulate_foreign_run(
     """
     p, fastest = _parameters(design, speed, drive_torque, load_torque)
     rate = 4.0 * fs
-    per_out = max(1, int(math.ceil(40.0 * fastest / rate)))
-    step = 1.0 / (rate * per_out)
+    per_out, step = time_step(fastest, rate)
     first = int(round((start - _GUARD) * rate))
     size = int(round((duration + 2 * _GUARD) * rate))
     n_out = first + size
@@ -521,4 +536,5 @@ __all__ = [
     "simulate_foreign_campaign",
     "simulate_foreign_run",
     "single_pitch_tolerance",
+    "time_step",
 ]
