@@ -35,10 +35,6 @@ from uqgear.physics._rhs import (
     CM,
     CONTACT_RATIO,
     DAMP_IN_SEPARATION,
-    ECC_KAPPA,
-    ECC_OMEGA,
-    ECC_PHASE,
-    F_K,
     F_SINE,
     FRICTION,
     HALF_BACKLASH,
@@ -53,10 +49,7 @@ from uqgear.physics._rhs import (
     N_PARAMS,
     OMEGA_MESH,
     STE_PHASE,
-    STIFFNESS_SCALE,
     TOOTH_FACTORS,
-    TWO_PI,
-    USE_PERIOD_TABLE,
     Z1,
     Z2,
     _crossing_fraction,
@@ -68,7 +61,9 @@ from uqgear.physics._rhs import (
     _time_terms,
     contact_region,
     dead_zone,
+    modulated_scale,
     rk4_combine,
+    smooth_share,
 )
 
 # positions in the forcing tuple of a pair path
@@ -146,26 +141,18 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
     """Pair-resolved forcing at any time ``t`` (pairs in mesh as at ``t_ref``); see the module doc.
 
     With a smooth period table (``fourier`` or ``constant`` stiffness) each
-    pair takes the share of the smooth curve in proportion to its Ishikawa
-    stiffness.
+    pair takes its share of the smooth curve
+    (:func:`~uqgear.physics._rhs.smooth_share`).
     """
     n_ref, u_ref, u = _mesh_position(t, t_ref, p)
     eps = p[CONTACT_RATIO]
     count = 0
-    healthy = 0.0
     while u_ref + count < eps:
         if count >= MAX_PAIRS:
             raise ValueError("more tooth pairs in contact than the pair path holds")
-        healthy += _interp_uniform(pair_k, u + count, eps)
         count += 1
-    ratio = 1.0
-    if p[USE_PERIOD_TABLE] != 0.0:
-        phase = p[OMEGA_MESH] * t / TWO_PI
-        phase -= math.floor(phase)
-        ratio = _interp_uniform(period_k, phase, 1.0) / healthy
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    ratio, _ = smooth_share(t, u_ref, u, p, pair_k, period_k)
+    scale = modulated_scale(t, p)
     drive, ste, ste_acc = _time_terms(t, math.sin(p[OMEGA_MESH] * t + p[STE_PHASE]), p)
     return _pack(
         count,
@@ -218,13 +205,13 @@ def _tooth_terms(n, p, fp, fg):
 
 
 @nb.njit(**INLINED)
-def _row_pair(i, table, sub, stage, n_pairs, ratio, p, offset, factor):
+def _row_pair(i, table, sub, stage, n_pairs, p, offset, factor):
     """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._rhs.build_schedule`."""
     if i >= n_pairs:
         return 0.0, 0.0, 0.0, 0.0
-    kp = table[sub, stage, 4 + 3 * i] * ratio
-    pinion = table[sub, stage, 5 + 3 * i] * ratio
-    gear = table[sub, stage, 6 + 3 * i] * ratio
+    kp = table[sub, stage, 4 + 3 * i]
+    pinion = table[sub, stage, 5 + 3 * i]
+    gear = table[sub, stage, 6 + 3 * i]
     if p[TOOTH_FACTORS] != 0.0:
         kp *= factor
         pinion *= factor
@@ -235,24 +222,16 @@ def _row_pair(i, table, sub, stage, n_pairs, ratio, p, offset, factor):
 @nb.njit(**INLINED)
 def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
     """:func:`forcing_pairs` at absolute time ``t`` from a tabulated stage (``teeth``: :func:`_tooth_terms`)."""
-    ratio = 1.0
-    if p[USE_PERIOD_TABLE] != 0.0:
-        # the table holds the smooth curve in F_K and the Ishikawa pair stiffnesses per pair
-        healthy = 0.0
-        for i in range(n_pairs):
-            healthy += table[sub, stage, 4 + 3 * i]
-        ratio = table[sub, stage, F_K] / healthy
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    # the table's pair fields are each pair's share of the mesh stiffness already (smooth_share)
+    scale = modulated_scale(t, p)
     drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
     offsets, factors = teeth
     return _pack(
         n_pairs,
-        _row_pair(0, table, sub, stage, n_pairs, ratio, p, offsets[0], factors[0]),
-        _row_pair(1, table, sub, stage, n_pairs, ratio, p, offsets[1], factors[1]),
-        _row_pair(2, table, sub, stage, n_pairs, ratio, p, offsets[2], factors[2]),
-        _row_pair(3, table, sub, stage, n_pairs, ratio, p, offsets[3], factors[3]),
+        _row_pair(0, table, sub, stage, n_pairs, p, offsets[0], factors[0]),
+        _row_pair(1, table, sub, stage, n_pairs, p, offsets[1], factors[1]),
+        _row_pair(2, table, sub, stage, n_pairs, p, offsets[2], factors[2]),
+        _row_pair(3, table, sub, stage, n_pairs, p, offsets[3], factors[3]),
         scale,
         drive,
         ste,

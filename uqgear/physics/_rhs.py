@@ -156,6 +156,8 @@ PARAMETER_SLOTS = (
 N_ACCUMULATORS = 13
 
 TWO_PI = 2.0 * math.pi
+#: Most tooth pairs in contact at once that a schedule holds (spur gears have at most 3).
+MAX_PAIRS = 4
 
 #: Compilation options of every kernel. No ``fastmath``: it licenses LLVM to
 #: reassociate sums and contract multiply-adds, and it did so differently for
@@ -237,13 +239,48 @@ def _friction_arms(kp, position, position_ref, p):
     return kp * sign * s, kp * sign * (p[LOA_LENGTH] - s)
 
 
+@nb.njit(**INLINED)
+def smooth_share(t, u_ref, u, p, pair_k, period_k):
+    """(r, sum_i k_p(u + i)): a smooth stiffness table's share factor, and the pairs' Ishikawa sum.
+
+    With a smooth period table (``fourier``, ``constant``) the table's k(t) is the mesh stiffness of
+    healthy teeth, shared among the pairs in mesh in proportion to their Ishikawa stiffness: pair i
+    carries r k_p(u + i), r = k(t) / sum_i k_p(u + i). Every path takes its pairs' stiffness from
+    this one rule, so a damaged tooth removes its own share and tooth friction loads each pair by
+    its share of the mesh force, whatever the table. Without a table: (1, 0), r not applied.
+    """
+    if p[USE_PERIOD_TABLE] == 0.0:
+        return 1.0, 0.0
+    eps = p[CONTACT_RATIO]
+    healthy = 0.0
+    i = 0
+    while u_ref + i < eps:
+        healthy += _interp_uniform(pair_k, u + i, eps)
+        i += 1
+    phase = p[OMEGA_MESH] * t / TWO_PI
+    phase -= math.floor(phase)
+    return _interp_uniform(period_k, phase, 1.0) / healthy, healthy
+
+
+@nb.njit(**INLINED)
+def modulated_scale(t, p):
+    """The factor on every mesh stiffness at ``t``: the stiffness scale and the run-out's modulation
+    1 + kappa cos(W_s t + phase) (docs/model/unmodelled-effects.md section 6)."""
+    scale = p[STIFFNESS_SCALE]
+    if p[ECC_KAPPA] != 0.0:
+        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    return scale
+
+
 @nb.njit(**JIT_OPTIONS)
 def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     """Mesh stiffness and friction moment-arm sums at time ``t``.
 
     The pairs in contact (and each pair's friction direction) are those at
     ``t_ref``, a time strictly inside the current sub-step, so a sub-step
-    ending on a breakpoint keeps one smooth stiffness branch.
+    ending on a breakpoint keeps one smooth stiffness branch. Each pair's
+    stiffness is its share of a smooth table (:func:`smooth_share`) times its
+    tooth factors.
 
     Returns
     -------
@@ -255,35 +292,34 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     eps = p[CONTACT_RATIO]
     friction = p[FRICTION]
     damaged = p[TOOTH_FACTORS] != 0.0
+    smooth = p[USE_PERIOD_TABLE] != 0.0
+    ratio, healthy = smooth_share(t, u_ref, u, p, pair_k, period_k)
     k = 0.0
     arm_pinion = 0.0
     arm_gear = 0.0
     i = 0
     while u_ref + i < eps:
         kp = _interp_uniform(pair_k, u + i, eps)
+        pair = kp * ratio if smooth else kp
         if damaged:
             tooth = int(n_ref) - i
-            kp *= factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
-        k += kp
+            factor = factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
+            if smooth:
+                # the tooth's loss of its share; the healthy sum is replaced by the table below
+                k += pair * (factor - 1.0)
+            pair *= factor
+        k += kp if smooth else pair
         if friction != 0.0:
-            pinion, gear = _friction_arms(kp, u + i, u_ref + i, p)
+            pinion, gear = _friction_arms(pair, u + i, u_ref + i, p)
             arm_pinion += pinion
             arm_gear += gear
         i += 1
-    if p[USE_PERIOD_TABLE] != 0.0:
-        # smooth Fourier-series (or constant) curve; tooth factors act through
-        # the pair sum above, so only its healthy part is replaced
-        healthy = 0.0
-        i = 0
-        while u_ref + i < eps:
-            healthy += _interp_uniform(pair_k, u + i, eps)
-            i += 1
+    if smooth:
+        # the pairs' healthy sum replaced by the smooth curve, which carries their healthy share
         phase = p[OMEGA_MESH] * t / TWO_PI
         phase -= math.floor(phase)
         k += _interp_uniform(period_k, phase, 1.0) - healthy
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    scale = modulated_scale(t, p)
     return k * scale, arm_pinion * scale, arm_gear * scale
 
 
@@ -583,10 +619,9 @@ def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
 
 
 # ---------------------------------------------------------------- one mesh period tabulated
-#: Most tooth pairs in contact at once that a schedule holds (spur gears have at most 3).
-MAX_PAIRS = 4
 # fields of a tabulated stage: healthy k, friction arm sums, sin(omega t + STE phase), then
-# per pair in contact its healthy stiffness and friction arms (for tooth factors)
+# per pair in contact its healthy stiffness and friction arms (for tooth factors); with a smooth
+# table, k is the table's and each pair's fields are its share of it (smooth_share)
 (F_K, F_ARM_PINION, F_ARM_GEAR, F_SINE) = range(4)
 N_FIELDS = 4 + 3 * MAX_PAIRS
 
@@ -613,9 +648,20 @@ def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
         arm_gear += gear
         i += 1
     if p[USE_PERIOD_TABLE] != 0.0:
+        # the smooth curve, each pair its share of it (smooth_share): what tooth factors and friction act on
         phase = p[OMEGA_MESH] * t / TWO_PI
         phase -= math.floor(phase)
-        k = _interp_uniform(period_k, phase, 1.0)
+        smooth = _interp_uniform(period_k, phase, 1.0)
+        ratio = smooth / k
+        k = smooth
+        arm_pinion = 0.0
+        arm_gear = 0.0
+        for j in range(i):
+            row[4 + 3 * j] *= ratio
+            row[5 + 3 * j] *= ratio
+            row[6 + 3 * j] *= ratio
+            arm_pinion += row[5 + 3 * j]
+            arm_gear += row[6 + 3 * j]
     row[F_K] = k
     row[F_ARM_PINION] = arm_pinion
     row[F_ARM_GEAR] = arm_gear
@@ -707,9 +753,7 @@ def tooth_extra(tooth, p, factor_pinion, factor_gear):
 def scaled_forcing(t, k, arm_pinion, arm_gear, sine, p):
     """:func:`forcing` at ``t`` from the pair sums ``k`` and friction arms (tooth factors applied) and
     sin(omega t + STE phase): the stiffness scale, the run-out's modulation and the time terms."""
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    scale = modulated_scale(t, p)
     drive, ste, ste_acc = _time_terms(t, sine, p)
     return k * scale, _friction_term(arm_pinion * scale, arm_gear * scale, p), drive, ste, ste_acc
 
