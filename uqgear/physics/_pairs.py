@@ -60,6 +60,7 @@ from uqgear.physics._rhs import (
     _shifted,
     _time_terms,
     contact_region,
+    crossed_boundary,
     dead_zone,
     modulated_scale,
     rk4_combine,
@@ -281,25 +282,31 @@ def _rk4_pairs(s, h, d1, mid, end, p):
 
 
 @nb.njit(**INLINED)
-def _first_crossing(s, trial, h, terms, p):
-    """Fraction of the step where the first pair changes its contact state (2.0 if none does)."""
+def _first_crossing(s, trial, h, terms, p, split_level):
+    """(fraction of the step, boundary level) where the first pair changes its contact state ((2.0, nan) if none).
+
+    A boundary a step was split at already (``split_level``) is not split at again: the first part ends
+    on the interpolated crossing, a little short of or beyond its own, and the classical path
+    (:func:`~uqgear.physics._rhs._split_at_contact`) splits a step once at the boundary it crosses. So
+    both paths take the same steps where the pairs' offsets coincide.
+    """
     b = p[HALF_BACKLASH]
     first = 2.0
+    first_level = math.nan
     for i in range(int(terms[PAIR_COUNT])):
         offset = terms[PAIR_OFFSET + i]
         before = contact_region(s[2] - offset, b)
         after = contact_region(trial[2] - offset, b)
         if before == after:
             continue
-        # the boundary next to the side the pair leaves, as in _rhs._split_at_contact
-        if before == 1 or (before == 0 and after == -1):
-            level = b if before == 1 else -b
-        else:
-            level = -b if before == -1 else b
+        level, _ = crossed_boundary(before, after, b)
+        if offset + level == split_level:
+            continue
         theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, offset + level)
         if theta < first:
             first = theta
-    return first
+            first_level = offset + level
+    return first, first_level
 
 
 @nb.njit(**INLINED)
@@ -308,11 +315,12 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
 
     The classical path splits once, at |x| = b; here several pairs may change
     state within a step, so the remainder is checked again (at most
-    ``2 MAX_PAIRS`` splits: each pair has two boundaries).
+    ``2 MAX_PAIRS`` splits: each pair has two boundaries), each boundary once.
     """
     trial = _rk4_pairs(s, h, d1, mid, end, p)
+    split_level = math.nan
     for _ in range(2 * MAX_PAIRS):
-        theta = _first_crossing(s, trial, h, terms, p)
+        theta, split_level = _first_crossing(s, trial, h, terms, p, split_level)
         if not 1e-9 < theta < 1.0 - 1e-9:
             return trial
         h_a = theta * h
