@@ -111,14 +111,21 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
     coefficients,
     contact_region,
     crossed_boundary,
+    crossing_fraction,
     dead_zone,
     derivative,
+    divided,
     forcing,
     mesh_contact,
+    mesh_damping,
     mesh_terms,
     rk4_combine,
+    rk4_combine_weighted,
+    rk4_stages,
     rk4_step,
+    rk4_with,
     side_derivative,
+    splits_step,
     state_derivative,
     static_transmission_error,
 )
@@ -530,7 +537,7 @@ def integrate_batch(
     Threads share a batch by calling this on disjoint ranges
     (:func:`uqgear.physics.threads.spread`); a run's numbers do not depend on
     which thread or range computes it. Not a ``prange``: numba's parallel
-    lowering tripled the kernel's cold compilation time.
+    lowering multiplies the kernel's cold compilation time (docs/validation/performance.md).
     """
     _batch(
         classical_step,

@@ -116,7 +116,7 @@ def compile_lane_kernel(
     name = kernel.__name__
     if name in _COMPILED:
         # compiled (or loaded) in this process already: every caller passes the same argument types,
-        # and taking the compiler lock and setting the options on every batch costs 0.1-0.2 ms
+        # and the compiler lock and the options would cost every batch (docs/validation/performance.md)
         return
     with global_compiler_lock:
         # numba.config's options are module attributes it sets at import: no static type knows them

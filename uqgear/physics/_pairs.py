@@ -28,43 +28,37 @@ import math
 import numba as nb
 
 from uqgear.physics._rhs import (
-    C1,
-    C2,
-    CLEARANCE1,
-    CLEARANCE2,
-    CM,
     CONTACT_RATIO,
-    DAMP_IN_SEPARATION,
     F_SINE,
     FRICTION,
     HALF_BACKLASH,
     INLINED,
     JIT_OPTIONS,
-    K1,
-    K2,
-    M1,
-    M2,
     MAX_PAIRS,
-    ME,
     N_PARAMS,
+    NO_INVERSE,
     OMEGA_MESH,
     STE_PHASE,
     TOOTH_FACTORS,
     Z1,
     Z2,
+    _accelerations,
     _crossing_fraction,
     _friction_arms,
     _friction_term,
     _interp_uniform,
     _mesh_position,
-    _shifted,
     _time_terms,
+    coefficients,
     contact_region,
     crossed_boundary,
     dead_zone,
+    divided,
+    mesh_damping,
     modulated_scale,
-    rk4_combine,
+    rk4_with,
     smooth_share,
+    splits_step,
 )
 
 # positions in the forcing tuple of a pair path
@@ -242,43 +236,83 @@ def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
 
 
 @nb.njit(**INLINED)
+def _slot(x, k, friction, offset, b, in_mesh):
+    """(k f(x - e), friction term f(x - e), 1.0 if the slot is in mesh and in contact else 0.0) of a pair slot."""
+    fx = dead_zone(x - offset, b)
+    touching = 1.0 if (fx != 0.0) & in_mesh else 0.0
+    return k * fx, friction * fx, touching
+
+
+@nb.njit(**INLINED)
+def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
+    """The per-pair right-hand side from a stage's terms (4-tuples of the pair slots' stiffness and friction
+    term, drive, e''), the slots' pitch offsets and the pairs in mesh, with a quotient function
+    (:func:`~uqgear.physics._rhs.state_derivative_by`): the one expression of both pair kernels.
+
+    The pair sums in slot order (a slot beyond those in mesh has zero stiffness and friction: adding
+    its zero product leaves a sum's bits as they are), then the model's accelerations
+    (:func:`~uqgear.physics._rhs._accelerations` with k = sum k_i f(x - e_i), f(x) = 1 and the
+    friction sum as the friction term: the products by 1.0 are exact). Returns (ds/dt, F, exact).
+    """
+    k, friction, drive, ste_acc = terms
+    x = s[2]
+    b = c[0]
+    k0, f0, t0 = _slot(x, k[0], friction[0], offsets[0], b, 0 < n_pairs)
+    k1, f1, t1 = _slot(x, k[1], friction[1], offsets[1], b, 1 < n_pairs)
+    k2, f2, t2 = _slot(x, k[2], friction[2], offsets[2], b, 2 < n_pairs)
+    k3, f3, t3 = _slot(x, k[3], friction[3], offsets[3], b, 3 < n_pairs)
+    elastic = 0.0 + k0
+    elastic += k1
+    elastic += k2
+    elastic += k3
+    sliding = 0.0 + f0
+    sliding += f1
+    sliding += f2
+    sliding += f3
+    damping = mesh_damping(c, t0 + t1 + t2 + t3 == 0.0)
+    return _accelerations(s, elastic, sliding, drive, ste_acc, c, 1.0, damping, divide, inverse)
+
+
+@nb.njit(**INLINED)
 def derivative_pairs(s, terms, p):
     """:func:`~uqgear.physics._rhs.derivative` with one dead zone per pair: F = sum k_i f(x - e_i) + c_m* x'.
 
     The mesh damper acts on x' (every pair deflects at that rate); with
     ``damping_in_separation`` off it stops when no pair is in contact.
+    ``terms``: the 18-tuple of :func:`forcing_pairs`.
     """
-    x = s[2]
-    vx = s[5]
-    b = p[HALF_BACKLASH]
-    elastic = 0.0
-    friction = 0.0
-    touching = False
-    for i in range(int(terms[PAIR_COUNT])):
-        fx = dead_zone(x - terms[PAIR_OFFSET + i], b)
-        if fx != 0.0:
-            touching = True
-        elastic += terms[PAIR_K + i] * fx
-        friction += terms[PAIR_FRICTION + i] * fx
-    damping = p[CM]
-    if p[DAMP_IN_SEPARATION] == 0.0 and not touching:
-        damping = 0.0
-    force = elastic + damping * vx
-    bearing1 = p[K1] * dead_zone(s[0], p[CLEARANCE1])
-    bearing2 = p[K2] * dead_zone(s[1], p[CLEARANCE2])
-    a1 = (-p[C1] * s[3] - bearing1 - force) / p[M1]
-    a2 = (-p[C2] * s[4] - bearing2 + force) / p[M2]
-    relative = terms[2] - force / p[ME] - friction
-    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - terms[4]), force
+    stage = (
+        (terms[PAIR_K], terms[PAIR_K + 1], terms[PAIR_K + 2], terms[PAIR_K + 3]),
+        (terms[PAIR_FRICTION], terms[PAIR_FRICTION + 1], terms[PAIR_FRICTION + 2], terms[PAIR_FRICTION + 3]),
+        terms[2],
+        terms[4],
+    )
+    offsets = (terms[PAIR_OFFSET], terms[PAIR_OFFSET + 1], terms[PAIR_OFFSET + 2], terms[PAIR_OFFSET + 3])
+    d, force, _ = pair_derivative_by(s, stage, offsets, int(terms[PAIR_COUNT]), coefficients(p), divided, NO_INVERSE)
+    return d, force
+
+
+@nb.njit(**INLINED)
+def _pairs_field(s, terms, p, divide):
+    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._rhs.rk4_with`."""
+    d, _ = derivative_pairs(s, terms, p)
+    return d, True
+
+
+@nb.njit(**INLINED)
+def pair_lane_field(s, terms, context, divide):
+    """:func:`pair_derivative_by` as a field of :func:`~uqgear.physics._rhs.rk4_with`: ``terms`` a stage's
+    pair terms, ``context`` (pitch offsets of the pair slots, pairs in mesh, coefficients, inverse masses)."""
+    offsets, n_pairs, c, inverse = context
+    d, _, exact = pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse)
+    return d, exact
 
 
 @nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
     """:func:`~uqgear.physics._rhs._rk4` with the pair-resolved derivative."""
-    d2, _ = derivative_pairs(_shifted(s, 0.5 * h, d1), mid, p)
-    d3, _ = derivative_pairs(_shifted(s, 0.5 * h, d2), mid, p)
-    d4, _ = derivative_pairs(_shifted(s, h, d3), end, p)
-    return rk4_combine(s, h, d1, d2, d3, d4)
+    new, _ = rk4_with(_pairs_field, divided, s, h, h / 6.0, d1, mid, end, p)
+    return new
 
 
 @nb.njit(**INLINED)
@@ -321,7 +355,7 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
     split_level = math.nan
     for _ in range(2 * MAX_PAIRS):
         theta, split_level = _first_crossing(s, trial, h, terms, p, split_level)
-        if not 1e-9 < theta < 1.0 - 1e-9:
+        if not splits_step(theta):
             return trial
         h_a = theta * h
         middle = forcing_pairs(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
@@ -427,6 +461,8 @@ def pair_state(t_ref, p):
 __all__ = [
     "forcing_pairs",
     "derivative_pairs",
+    "pair_derivative_by",
+    "pair_lane_field",
     "scheduled_step_pairs",
     "substep_pairs",
     "pair_contact",

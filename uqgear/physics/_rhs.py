@@ -167,12 +167,11 @@ MAX_PAIRS = 4
 #: ``benchmarks/integrator.py`` measures what fastmath would buy.
 JIT_OPTIONS: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 #: Options of the helpers the stepping code calls on every stage. They are inlined by LLVM
-#: (``forceinline``: the ``alwaysinline`` attribute), which gave the same numbers, bit for bit, as
-#: numba's own ``inline="always"`` and compiles far faster: numba copies and retypes a callee's
-#: IR at every call site, nested calls included (measured on 2 cores, empty cache: 290 s for the
-#: batch and harmonic kernels before, 91 s with LLVM inlining and serial batch kernels). A plain
-#: call is no option: passing the eleven arrays of a step costs their reference counts on every
-#: grid step (measured: twice the run time).
+#: (``forceinline``: the ``alwaysinline`` attribute), which gives the same numbers, bit for bit, as
+#: numba's own ``inline="always"`` and compiles faster: numba copies and retypes a callee's IR at
+#: every call site, nested calls included. A plain call is no option: passing the arrays of a step
+#: costs their reference counts on every grid step (docs/validation/performance.md, "Compile time
+#: and inlining").
 INLINED: dict[str, Any] = {**JIT_OPTIONS, "forceinline": True}
 
 
@@ -334,7 +333,7 @@ def static_transmission_error(t, p):
 
 # The stepping code below keeps the state, stage derivatives and forcing terms in tuples
 # (registers) rather than scratch arrays: slicing rows out of a work array costs reference
-# counting on every stage, which made an RK4 step about ten times slower.
+# counting on every stage (docs/validation/performance.md, "Compile time and inlining").
 
 
 @nb.njit(**INLINED)
@@ -412,6 +411,17 @@ NO_INVERSE = (1.0, 1.0, 1.0)
 
 
 @nb.njit(**INLINED)
+def mesh_damping(c, apart):
+    """The mesh damping coefficient from :func:`coefficients`: c_m, or 0 where no tooth pair touches
+    (``apart``) and the model has no damping in separation. Every path and the variational equations
+    take the damping switch from here."""
+    damping = c[1]
+    if (c[2] == 0.0) & apart:  # no short circuit: a select, not a branch
+        damping = 0.0
+    return damping
+
+
+@nb.njit(**INLINED)
 def _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse):
     """(ds/dt, mesh force F, whether each quotient is exact) from the forcing values, :func:`coefficients`,
     f(x), the mesh damping and a quotient function ``divide(x, y, 1 / y)`` (:func:`divided`, or
@@ -437,10 +447,7 @@ def state_derivative_by(s, k, friction_term, drive, ste_acc, c, divide, inverse)
     Returns (ds/dt, F, whether every quotient is exact).
     """
     fx = dead_zone(s[2], c[0])
-    damping = c[1]
-    if (c[2] == 0.0) & (fx == 0.0):  # no short circuit: a select, not a branch
-        damping = 0.0
-    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse)
+    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, mesh_damping(c, fx == 0.0), divide, inverse)
 
 
 @nb.njit(**INLINED)
@@ -468,9 +475,7 @@ def side_derivative(s, k, friction_term, drive, ste_acc, c, region):
     With damping in separation this is :func:`state_derivative`, bit for bit.
     """
     fx = dead_zone(s[2], c[0])
-    damping = c[1]
-    if (c[2] == 0.0) & (region == 0):
-        damping = 0.0
+    damping = mesh_damping(c, region == 0)
     d, force, _ = _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divided, NO_INVERSE)
     return d, force
 
@@ -510,22 +515,66 @@ def rk4_combine(s, h, d1, d2, d3, d4):
 
 
 @nb.njit(**INLINED)
+def rk4_stages(field, divide, s, h, d1, mid, end, context):
+    """The later stage derivatives d2, d3, d4 of the classical RK4 step from ``s`` over ``h`` given its first
+    stage ``d1``: the one stage sequence of every integrator of the package.
+
+    ``field(state, terms, context, divide)`` is the right-hand side, returning (ds/dt, whether its
+    quotients are exact); ``mid`` and ``end`` are its forcing terms at the step's midpoint and end;
+    ``divide`` the quotient function (:func:`state_derivative_by`). Each caller passes its own field
+    (classical, one side's damping, per pair, lanes, the variational pass), specialised and inlined at
+    compile time. Returns (d2, d3, d4, whether every quotient of these stages is exact).
+    """
+    d2, exact2 = field(_shifted(s, 0.5 * h, d1), mid, context, divide)
+    d3, exact3 = field(_shifted(s, 0.5 * h, d2), mid, context, divide)
+    d4, exact4 = field(_shifted(s, h, d3), end, context, divide)
+    return d2, d3, d4, exact2 & exact3 & exact4
+
+
+@nb.njit(**INLINED)
+def rk4_with(field, divide, s, h, w, d1, mid, end, context):
+    """The classical RK4 step from ``s`` over ``h`` (w = h / 6) given its first stage ``d1``
+    (:func:`rk4_stages`). Returns (new state, whether every quotient of the later stages is exact)."""
+    d2, d3, d4, exact = rk4_stages(field, divide, s, h, d1, mid, end, context)
+    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact
+
+
+@nb.njit(**INLINED)
+def _classical_field(s, terms, p, divide):
+    """:func:`derivative` as a field of :func:`rk4_with` (``terms`` from :func:`forcing`)."""
+    d, _ = derivative(s, terms, p)
+    return d, True
+
+
+@nb.njit(**INLINED)
+def _table_field(s, terms, context, divide):
+    """:func:`state_derivative_by` as a field of :func:`rk4_with`: ``terms`` a forcing 4-tuple (k, friction
+    term, drive, e''), ``context`` (:func:`coefficients`, the inverse masses ``divide`` reads)."""
+    c, inverse = context
+    d, _, exact = state_derivative_by(s, terms[0], terms[1], terms[2], terms[3], c, divide, inverse)
+    return d, exact
+
+
+@nb.njit(**INLINED)
+def _side_field(s, terms, context, divide):
+    """:func:`side_derivative` as a field of :func:`rk4_with`: ``context`` (:func:`coefficients`, region)."""
+    c, region = context
+    d, _ = side_derivative(s, terms[0], terms[1], terms[2], terms[4], c, region)
+    return d, True
+
+
+@nb.njit(**INLINED)
 def _rk4(s, h, d1, mid, end, p):
     """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
-    d2, _ = derivative(_shifted(s, 0.5 * h, d1), mid, p)
-    d3, _ = derivative(_shifted(s, 0.5 * h, d2), mid, p)
-    d4, _ = derivative(_shifted(s, h, d3), end, p)
-    return rk4_combine(s, h, d1, d2, d3, d4)
+    new, _ = rk4_with(_classical_field, divided, s, h, h / 6.0, d1, mid, end, p)
+    return new
 
 
 @nb.njit(**INLINED)
 def rk4_step_weighted(s, h, w, d1, mid, end, c, divide, inverse):
     """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients`, w = h / 6 and a
     quotient function (:func:`state_derivative_by`). Returns (new state, whether every quotient is exact)."""
-    d2, _, exact2 = state_derivative_by(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
-    d3, _, exact3 = state_derivative_by(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
-    d4, _, exact4 = state_derivative_by(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c, divide, inverse)
-    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact2 & exact3 & exact4
+    return rk4_with(_table_field, divide, s, h, w, d1, mid, end, (c, inverse))
 
 
 @nb.njit(**INLINED)
@@ -535,13 +584,31 @@ def rk4_step(s, h, d1, mid, end, c):
     return new
 
 
+#: A contact crossing closer than this fraction of a step to either end is not split at: the parts
+#: would be too short to gain anything over the unsplit step.
+SPLIT_MARGIN = 1e-9
+
+
+@nb.njit(**INLINED)
+def splits_step(theta):
+    """Whether a step is split at the crossing fraction ``theta`` (:data:`SPLIT_MARGIN`)."""
+    return SPLIT_MARGIN < theta < 1.0 - SPLIT_MARGIN
+
+
+#: Bisection steps of a contact crossing on a step's Hermite interpolant: 2^-40 of a step, far below
+#: the step's own error.
+BISECTIONS = 40
+
+
 @nb.njit(**JIT_OPTIONS)
-def _crossing_fraction(x0, v0, x1, v1, h, level):
-    """Fraction of a step where the cubic Hermite interpolant of x reaches ``level``."""
+def crossing_fraction(x0, v0, x1, v1, h, level, iterations):
+    """Fraction of a step where the cubic Hermite interpolant of x reaches ``level``, by ``iterations``
+    bisection steps: the one bisection of every split step (the fast path's, the per-pair path's and
+    the variational pass's)."""
     lo = 0.0
     hi = 1.0
     g_lo = x0 - level
-    for _ in range(40):
+    for _ in range(iterations):
         mid = 0.5 * (lo + hi)
         s = mid
         h00 = 2 * s**3 - 3 * s**2 + 1
@@ -558,13 +625,16 @@ def _crossing_fraction(x0, v0, x1, v1, h, level):
 
 
 @nb.njit(**INLINED)
+def _crossing_fraction(x0, v0, x1, v1, h, level):
+    """:func:`crossing_fraction` to :data:`BISECTIONS` steps: where the integrators split a step."""
+    return crossing_fraction(x0, v0, x1, v1, h, level, BISECTIONS)
+
+
+@nb.njit(**INLINED)
 def _rk4_side(s, h, d1, mid, end, p, region):
     """:func:`_rk4` with the later stages on the mesh damping of contact region ``region`` (:func:`side_derivative`)."""
-    c = coefficients(p)
-    d2, _ = side_derivative(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[4], c, region)
-    d3, _ = side_derivative(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[4], c, region)
-    d4, _ = side_derivative(_shifted(s, h, d3), end[0], end[1], end[2], end[4], c, region)
-    return rk4_combine(s, h, d1, d2, d3, d4)
+    new, _ = rk4_with(_side_field, divided, s, h, h / 6.0, d1, mid, end, (coefficients(p), region))
+    return new
 
 
 @nb.njit(**INLINED)
@@ -606,7 +676,7 @@ def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
     if p[DAMP_IN_SEPARATION] == 0.0:
         trial = _rk4_side(s, h, d1, forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg), end, p, before)
     theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, level)
-    if not 1e-9 < theta < 1.0 - 1e-9:
+    if not splits_step(theta):
         return trial
     h_a = theta * h
     h_b = h - h_a
