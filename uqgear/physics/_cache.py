@@ -25,6 +25,7 @@ PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 #: a self-contained one (the foreign rig's) keeps numba's own locators.
 COMPILED_MODULES = (
     "physics/_rhs.py",
+    "physics/_stepper.py",
     "physics/_quotient.py",
     "physics/_pairs.py",
     "physics/_kernels.py",

@@ -60,7 +60,8 @@ from uqgear.physics._pairs import (
     substep_pairs,
 )
 from uqgear.physics._quotient import quotient
-from uqgear.physics._rhs import INLINED, JIT_OPTIONS, MAX_PAIRS, rk4_with
+from uqgear.physics._rhs import INLINED, JIT_OPTIONS, MAX_PAIRS
+from uqgear.physics._stepper import rk4_with
 
 #: Rows of a pair lane group's work array: those of every lane group, then each pair slot's pitch offset.
 W_OFFSETS = N_ROWS

@@ -29,7 +29,9 @@ import numba as nb
 
 from uqgear.physics._rhs import (
     CONTACT_RATIO,
-    F_SINE,
+    ECC_KAPPA,
+    ECC_OMEGA,
+    ECC_PHASE,
     FRICTION,
     HALF_BACKLASH,
     INLINED,
@@ -39,11 +41,11 @@ from uqgear.physics._rhs import (
     NO_INVERSE,
     OMEGA_MESH,
     STE_PHASE,
+    STIFFNESS_SCALE,
     TOOTH_FACTORS,
     Z1,
     Z2,
     _accelerations,
-    _crossing_fraction,
     _friction_arms,
     _friction_term,
     _interp_uniform,
@@ -51,15 +53,13 @@ from uqgear.physics._rhs import (
     _time_terms,
     coefficients,
     contact_region,
-    crossed_boundary,
     dead_zone,
     divided,
     mesh_damping,
     modulated_scale,
-    rk4_with,
     smooth_share,
-    splits_step,
 )
+from uqgear.physics._stepper import F_SINE, _crossing_fraction, crossed_boundary, rk4_with, splits_step
 
 # positions in the forcing tuple of a pair path
 PAIR_COUNT = 5
@@ -201,7 +201,7 @@ def _tooth_terms(n, p, fp, fg):
 
 @nb.njit(**INLINED)
 def _row_pair(i, table, sub, stage, n_pairs, p, offset, factor):
-    """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._rhs.build_schedule`."""
+    """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._stepper.build_schedule`."""
     if i >= n_pairs:
         return 0.0, 0.0, 0.0, 0.0
     kp = table[sub, stage, 4 + 3 * i]
@@ -218,7 +218,11 @@ def _row_pair(i, table, sub, stage, n_pairs, p, offset, factor):
 def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
     """:func:`forcing_pairs` at absolute time ``t`` from a tabulated stage (``teeth``: :func:`_tooth_terms`)."""
     # the table's pair fields are each pair's share of the mesh stiffness already (smooth_share)
-    scale = modulated_scale(t, p)
+    # modulated_scale written out: on the tabulated stages (three a sub-step) the call made the
+    # one-sample kernels about a third slower (docs/validation/performance.md)
+    scale = p[STIFFNESS_SCALE]
+    if p[ECC_KAPPA] != 0.0:
+        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
     drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
     offsets, factors = teeth
     return _pack(
@@ -294,14 +298,14 @@ def derivative_pairs(s, terms, p):
 
 @nb.njit(**INLINED)
 def _pairs_field(s, terms, p, divide):
-    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._rhs.rk4_with`."""
+    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_with`."""
     d, _ = derivative_pairs(s, terms, p)
     return d, True
 
 
 @nb.njit(**INLINED)
 def pair_lane_field(s, terms, context, divide):
-    """:func:`pair_derivative_by` as a field of :func:`~uqgear.physics._rhs.rk4_with`: ``terms`` a stage's
+    """:func:`pair_derivative_by` as a field of :func:`~uqgear.physics._stepper.rk4_with`: ``terms`` a stage's
     pair terms, ``context`` (pitch offsets of the pair slots, pairs in mesh, coefficients, inverse masses)."""
     offsets, n_pairs, c, inverse = context
     d, _, exact = pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse)
@@ -310,7 +314,7 @@ def pair_lane_field(s, terms, context, divide):
 
 @nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
-    """:func:`~uqgear.physics._rhs._rk4` with the pair-resolved derivative."""
+    """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative."""
     new, _ = rk4_with(_pairs_field, divided, s, h, h / 6.0, d1, mid, end, p)
     return new
 
@@ -321,7 +325,7 @@ def _first_crossing(s, trial, h, terms, p, split_level):
 
     A boundary a step was split at already (``split_level``) is not split at again: the first part ends
     on the interpolated crossing, a little short of or beyond its own, and the classical path
-    (:func:`~uqgear.physics._rhs._split_at_contact`) splits a step once at the boundary it crosses. So
+    (:func:`~uqgear.physics._stepper._split_at_contact`) splits a step once at the boundary it crosses. So
     both paths take the same steps where the pairs' offsets coincide.
     """
     b = p[HALF_BACKLASH]
@@ -376,7 +380,7 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
 
 @nb.njit(**INLINED)
 def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
-    """:func:`~uqgear.physics._rhs.classical_step` with per-pair deflections (same returns).
+    """:func:`~uqgear.physics._stepper.classical_step` with per-pair deflections (same returns).
 
     Inlined into the kernels, with the parts of its step, as the classical
     step is: a plain call on every grid step pays the reference counts of

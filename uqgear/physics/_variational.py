@@ -3,7 +3,7 @@
 One compiled pass integrates the state with the fast path's RK4 scheme (the same sub-steps, split at
 the stiffness breakpoints of :func:`~uqgear.physics._kernels.build_schedule` and at the contact
 boundaries |x| = b, each part of a split step on its own side's mesh damping as in
-:func:`~uqgear.physics._rhs._split_at_contact`) and, alongside, the variational equation
+:func:`~uqgear.physics._stepper._split_at_contact`) and, alongside, the variational equation
 Phi' = J(t, s) Phi from Phi(0) = I.
 Each RK4 stage of Phi uses the Jacobian at that stage's state, so Phi is the derivative of the
 discrete RK4 map within every smooth piece. Across a switching surface the variational solution
@@ -183,7 +183,7 @@ def _jacobian_times(s, terms, p, phi, out, region, side):
 
 @nb.njit(**INLINED)
 def _stage_field(s, terms, context, divide):
-    """:func:`_stage` as a field of :func:`~uqgear.physics._rhs.rk4_stages`: ``context`` (parameters, side)."""
+    """:func:`_stage` as a field of :func:`~uqgear.physics._stepper.rk4_stages`: ``context`` (parameters, side)."""
     p, side = context
     d, _ = _stage(s, terms, p, side)
     return d, True
