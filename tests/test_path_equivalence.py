@@ -4,7 +4,7 @@ A run takes the per-pair path when it has pitch errors (docs/model/equations.md
 section 2.6), in one-sample kernels or in SIMD lanes, and the classical path
 otherwise; the scipy reference has both too. Pitch errors of 1e-15 m on every
 tooth are physically none, so with and without them every path must give the
-same DTE up to rounding: here to 1e-8 relative RMS, for each effect family and
+same DTE up to rounding: here to 1e-11 relative RMS, for each effect family and
 each stiffness table (``ishikawa``, ``fourier``, ``constant``), at an operating
 point in contact and at one where the teeth separate. A path with its own copy
 of a rule (how a damaged tooth or friction shares a smooth stiffness table,
@@ -22,8 +22,12 @@ from uqgear.physics.effects import make_effect
 from uqgear.physics.model import STIFFNESS_MODES
 from uqgear.physics.pitch_errors import PitchErrors
 
-#: Largest relative RMS difference of the DTE between two paths of one model.
-TOLERANCE = 1e-8
+#: Largest relative RMS difference of the DTE between two fast paths of one model: rounding (they
+#: agree to about 5e-14; a second rule for a damaged tooth or friction moved them by 2e-4 to 0.4, a
+#: second contact-split rule by 3e-8).
+TOLERANCE = 1e-11
+#: The same between the scipy reference's two right-hand sides at rtol 3e-14 (adaptive steps).
+SCIPY_TOLERANCE = 1e-8
 #: Each effect family of the library, at a setting that moves the response.
 FAMILIES = {
     "healthy": (),
@@ -98,4 +102,4 @@ def test_the_scipy_reference_gives_the_same_dte_on_both_paths(design, tiny, fami
     point = POINTS[1]
     classical = uqgear.simulate(design, *point, **kw)["x"].values
     pairs = uqgear.simulate(design, *point, pitch_errors=tiny, **kw)["x"].values - SHIFT
-    assert _relative(pairs, classical) <= TOLERANCE
+    assert _relative(pairs, classical) <= SCIPY_TOLERANCE
