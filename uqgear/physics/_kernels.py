@@ -107,13 +107,13 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
     static_transmission_error,
 )
 from uqgear.physics._stepper import (  # noqa: F401  (re-exported: the kernel family's one namespace)
+    BISECTIONS,
     F_ARM_GEAR,
     F_ARM_PINION,
     F_K,
     F_SINE,
     N_FIELDS,
     _add_substep,
-    _crossing_fraction,
     _forcing_row,
     _rk4,
     _shifted,
@@ -128,7 +128,6 @@ from uqgear.physics._stepper import (  # noqa: F401  (re-exported: the kernel fa
     rk4_combine_weighted,
     rk4_stages,
     rk4_step,
-    rk4_with,
     splits_step,
 )
 

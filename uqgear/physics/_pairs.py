@@ -59,7 +59,15 @@ from uqgear.physics._rhs import (
     modulated_scale,
     smooth_share,
 )
-from uqgear.physics._stepper import F_SINE, _crossing_fraction, crossed_boundary, rk4_with, splits_step
+from uqgear.physics._stepper import (
+    BISECTIONS,
+    F_SINE,
+    crossed_boundary,
+    crossing_fraction,
+    rk4_combine_weighted,
+    rk4_stages,
+    splits_step,
+)
 
 # positions in the forcing tuple of a pair path
 PAIR_COUNT = 5
@@ -298,14 +306,14 @@ def derivative_pairs(s, terms, p):
 
 @nb.njit(**INLINED)
 def _pairs_field(s, terms, p, divide):
-    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_with`."""
+    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_stages`."""
     d, _ = derivative_pairs(s, terms, p)
     return d, True
 
 
 @nb.njit(**INLINED)
 def pair_lane_field(s, terms, context, divide):
-    """:func:`pair_derivative_by` as a field of :func:`~uqgear.physics._stepper.rk4_with`: ``terms`` a stage's
+    """:func:`pair_derivative_by` as a field of :func:`~uqgear.physics._stepper.rk4_stages`: ``terms`` a stage's
     pair terms, ``context`` (pitch offsets of the pair slots, pairs in mesh, coefficients, inverse masses)."""
     offsets, n_pairs, c, inverse = context
     d, _, exact = pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse)
@@ -315,8 +323,8 @@ def pair_lane_field(s, terms, context, divide):
 @nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
     """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative."""
-    new, _ = rk4_with(_pairs_field, divided, s, h, h / 6.0, d1, mid, end, p)
-    return new
+    d2, d3, d4, _ = rk4_stages(_pairs_field, divided, s, h, d1, mid, end, p)
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
 
 
 @nb.njit(**INLINED)
@@ -340,7 +348,7 @@ def _first_crossing(s, trial, h, terms, p, split_level):
         level, _ = crossed_boundary(before, after, b)
         if offset + level == split_level:
             continue
-        theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, offset + level)
+        theta = crossing_fraction(s[2], s[5], trial[2], trial[5], h, offset + level, BISECTIONS)
         if theta < first:
             first = theta
             first_level = offset + level

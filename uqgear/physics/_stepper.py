@@ -104,23 +104,15 @@ def rk4_stages(field, divide, s, h, d1, mid, end, context):
 
 
 @nb.njit(**INLINED)
-def rk4_with(field, divide, s, h, w, d1, mid, end, context):
-    """The classical RK4 step from ``s`` over ``h`` (w = h / 6) given its first stage ``d1``
-    (:func:`rk4_stages`). Returns (new state, whether every quotient of the later stages is exact)."""
-    d2, d3, d4, exact = rk4_stages(field, divide, s, h, d1, mid, end, context)
-    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact
-
-
-@nb.njit(**INLINED)
 def _classical_field(s, terms, p, divide):
-    """:func:`derivative` as a field of :func:`rk4_with` (``terms`` from :func:`forcing`)."""
+    """:func:`derivative` as a field of :func:`rk4_stages` (``terms`` from :func:`forcing`)."""
     d, _ = derivative(s, terms, p)
     return d, True
 
 
 @nb.njit(**INLINED)
 def _table_field(s, terms, context, divide):
-    """:func:`state_derivative_by` as a field of :func:`rk4_with`: ``terms`` a forcing 4-tuple (k, friction
+    """:func:`state_derivative_by` as a field of :func:`rk4_stages`: ``terms`` a forcing 4-tuple (k, friction
     term, drive, e''), ``context`` (:func:`coefficients`, the inverse masses ``divide`` reads)."""
     c, inverse = context
     d, _, exact = state_derivative_by(s, terms[0], terms[1], terms[2], terms[3], c, divide, inverse)
@@ -129,7 +121,7 @@ def _table_field(s, terms, context, divide):
 
 @nb.njit(**INLINED)
 def _side_field(s, terms, context, divide):
-    """:func:`side_derivative` as a field of :func:`rk4_with`: ``context`` (:func:`coefficients`, region)."""
+    """:func:`side_derivative` as a field of :func:`rk4_stages`: ``context`` (:func:`coefficients`, region)."""
     c, region = context
     d, _ = side_derivative(s, terms[0], terms[1], terms[2], terms[4], c, region)
     return d, True
@@ -138,15 +130,16 @@ def _side_field(s, terms, context, divide):
 @nb.njit(**INLINED)
 def _rk4(s, h, d1, mid, end, p):
     """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
-    new, _ = rk4_with(_classical_field, divided, s, h, h / 6.0, d1, mid, end, p)
-    return new
+    d2, d3, d4, _ = rk4_stages(_classical_field, divided, s, h, d1, mid, end, p)
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
 
 
 @nb.njit(**INLINED)
 def rk4_step_weighted(s, h, w, d1, mid, end, c, divide, inverse):
     """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients`, w = h / 6 and a
     quotient function (:func:`state_derivative_by`). Returns (new state, whether every quotient is exact)."""
-    return rk4_with(_table_field, divide, s, h, w, d1, mid, end, (c, inverse))
+    d2, d3, d4, exact = rk4_stages(_table_field, divide, s, h, d1, mid, end, (c, inverse))
+    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact
 
 
 @nb.njit(**INLINED)
@@ -197,16 +190,10 @@ def crossing_fraction(x0, v0, x1, v1, h, level, iterations):
 
 
 @nb.njit(**INLINED)
-def _crossing_fraction(x0, v0, x1, v1, h, level):
-    """:func:`crossing_fraction` to :data:`BISECTIONS` steps: where the integrators split a step."""
-    return crossing_fraction(x0, v0, x1, v1, h, level, BISECTIONS)
-
-
-@nb.njit(**INLINED)
 def _rk4_side(s, h, d1, mid, end, p, region):
     """:func:`_rk4` with the later stages on the mesh damping of contact region ``region`` (:func:`side_derivative`)."""
-    new, _ = rk4_with(_side_field, divided, s, h, h / 6.0, d1, mid, end, (coefficients(p), region))
-    return new
+    d2, d3, d4, _ = rk4_stages(_side_field, divided, s, h, d1, mid, end, (coefficients(p), region))
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
 
 
 @nb.njit(**INLINED)
@@ -247,7 +234,7 @@ def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
     end = forcing(t + h, t_ref, p, pair_k, period_k, fp, fg)
     if p[DAMP_IN_SEPARATION] == 0.0:
         trial = _rk4_side(s, h, d1, forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg), end, p, before)
-    theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, level)
+    theta = crossing_fraction(s[2], s[5], trial[2], trial[5], h, level, BISECTIONS)
     if not splits_step(theta):
         return trial
     h_a = theta * h
