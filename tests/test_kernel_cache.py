@@ -6,7 +6,17 @@ import shutil
 import numba
 
 from uqgear.calibration import harmonics
-from uqgear.physics import _cache, _kernels, _lane_loop, _lane_tables, _lanes, _pair_lanes, _pairs, _variational
+from uqgear.physics import (
+    _cache,
+    _kernels,
+    _lane_loop,
+    _lane_tables,
+    _lanes,
+    _pair_lanes,
+    _pairs,
+    _stepper,
+    _variational,
+)
 from uqgear.rig import foreign_response, foreign_rig
 
 
@@ -15,8 +25,19 @@ def _dispatchers(module):
 
 
 def test_every_kernel_of_the_compiled_modules_is_located_with_the_package_stamp():
-    modules = (_kernels, _pairs, _lane_loop, _lanes, _pair_lanes, _lane_tables, _variational, harmonics, foreign_rig,
-               foreign_response)
+    modules = (
+        _kernels,
+        _stepper,
+        _pairs,
+        _lane_loop,
+        _lanes,
+        _pair_lanes,
+        _lane_tables,
+        _variational,
+        harmonics,
+        foreign_rig,
+        foreign_response,
+    )
     for module in modules:
         kernels = [kernel for kernel in _dispatchers(module) if kernel._cache._impl is not None]
         assert kernels, module.__name__

@@ -55,10 +55,10 @@ def test_the_pair_path_with_zero_offsets_reproduces_the_classical_path(design):
         forced = build_model(design, speed, drive, adhesion, **kw)
         forced.parameters[K.PITCH_ERRORS] = 1.0
         results = []
-        for setup in (classical, forced):
+        for setup, kernel in ((classical, K.integrate_history), (forced, K.integrate_history_pairs)):
             steps = 96
             history = np.empty((30 * steps, 12))
-            K.integrate_history(setup.static_state(), setup.parameters, setup.pair_stiffness,
+            kernel(setup.static_state(), setup.parameters, setup.pair_stiffness,
                                 setup.period_stiffness, setup.factor_pinion, setup.factor_gear, setup.breakpoints,
                                 steps, 120, 30, 1, history, np.empty((30, 6)))
             results.append(history)

@@ -24,6 +24,7 @@ PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 #: The package's modules whose compiled functions call into each other (relative to the package root).
 COMPILED_MODULES = (
     "physics/_rhs.py",
+    "physics/_stepper.py",
     "physics/_quotient.py",
     "physics/_pairs.py",
     "physics/_kernels.py",

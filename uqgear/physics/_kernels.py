@@ -41,10 +41,6 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
     ECC_KAPPA,
     ECC_OMEGA,
     ECC_PHASE,
-    F_ARM_GEAR,
-    F_ARM_PINION,
-    F_K,
-    F_SINE,
     FRICTION,
     HALF_BACKLASH,
     I1,
@@ -59,7 +55,6 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
     MAX_PAIRS,
     ME,
     N_ACCUMULATORS,
-    N_FIELDS,
     N_PARAMS,
     OMEGA_MESH,
     PARAMETER_SLOTS,
@@ -94,33 +89,46 @@ from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family
     USE_PERIOD_TABLE,
     Z1,
     Z2,
-    _add_substep,
-    _crossing_fraction,
-    _forcing_row,
     _friction_arms,
     _friction_term,
     _interp_uniform,
     _mesh_position,
+    _time_terms,
+    coefficients,
+    contact_region,
+    dead_zone,
+    derivative,
+    divided,
+    forcing,
+    mesh_damping,
+    mesh_terms,
+    side_derivative,
+    state_derivative,
+    static_transmission_error,
+)
+from uqgear.physics._stepper import (  # noqa: F401  (re-exported: the kernel family's one namespace)
+    BISECTIONS,
+    F_ARM_GEAR,
+    F_ARM_PINION,
+    F_K,
+    F_SINE,
+    N_FIELDS,
+    _add_substep,
+    _forcing_row,
     _rk4,
     _shifted,
     _split_at_contact,
     _tabulate_stage,
-    _time_terms,
     build_schedule,
     classical_step,
-    coefficients,
-    contact_region,
     crossed_boundary,
-    dead_zone,
-    derivative,
-    forcing,
+    crossing_fraction,
     mesh_contact,
-    mesh_terms,
     rk4_combine,
+    rk4_combine_weighted,
+    rk4_stages,
     rk4_step,
-    side_derivative,
-    state_derivative,
-    static_transmission_error,
+    splits_step,
 )
 
 
@@ -150,7 +158,7 @@ def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
 def scheduled_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
     """Advance the state tuple ``s`` over grid step ``j`` of mesh period ``n``, with or without pitch errors.
 
-    :func:`~uqgear.physics._rhs.classical_step` or
+    :func:`~uqgear.physics._stepper.classical_step` or
     :func:`~uqgear.physics._pairs.scheduled_step_pairs` as slot
     ``PITCH_ERRORS`` says (same returns). A kernel that knows which it needs
     calls that one: this one compiles both.
@@ -530,7 +538,7 @@ def integrate_batch(
     Threads share a batch by calling this on disjoint ranges
     (:func:`uqgear.physics.threads.spread`); a run's numbers do not depend on
     which thread or range computes it. Not a ``prange``: numba's parallel
-    lowering tripled the kernel's cold compilation time.
+    lowering multiplies the kernel's cold compilation time (docs/validation/performance.md).
     """
     _batch(
         classical_step,

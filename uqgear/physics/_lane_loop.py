@@ -57,10 +57,10 @@ from uqgear.physics._rhs import (
     RIPPLE_AMPLITUDE,
     TOOTH_FACTORS,
     TWO_PI,
-    build_schedule,
     coefficients,
     static_transmission_error,
 )
+from uqgear.physics._stepper import build_schedule
 
 #: Separation of a shadow run from its run (scaled state), as in the one-sample kernel.
 SEPARATION = 1e-7

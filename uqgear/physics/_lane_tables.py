@@ -4,8 +4,8 @@
 its run's forcing (stiffness, friction term, drive, e'' at the start, middle and end, the width,
 RK4's weight, e at the start) sits in one table, row per sub-step, a field's lanes adjacent. A
 run whose forcing repeats every mesh period fills its columns once; any other run fills them for
-every period, from the one-sample kernel's own :func:`~uqgear.physics._rhs._forcing_row` at the
-times :func:`~uqgear.physics._rhs.classical_step` evaluates it, so that the numbers are the same.
+every period, from the one-sample kernel's own :func:`~uqgear.physics._stepper._forcing_row` at the
+times :func:`~uqgear.physics._stepper.classical_step` evaluates it, so that the numbers are the same.
 """
 
 from __future__ import annotations
@@ -13,19 +13,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from uqgear.physics._rhs import (
-    F_ARM_GEAR,
-    F_ARM_PINION,
-    F_K,
-    F_SINE,
-    JIT_OPTIONS,
-    MAX_PAIRS,
-    T1,
-    T2,
-    TOOTH_FACTORS,
-    scaled_forcing,
-    tooth_extra,
-)
+from uqgear.physics._rhs import JIT_OPTIONS, MAX_PAIRS, T1, T2, TOOTH_FACTORS
+from uqgear.physics._stepper import F_ARM_GEAR, F_ARM_PINION, F_K, F_SINE, scaled_forcing, tooth_extra
 
 #: Runs advanced together: one vector of eight doubles (AVX-512), or two of four.
 LANES = 8
@@ -85,7 +74,7 @@ def _take_schedule(stages, widths, offsets, refs, lane, schedule, n_sub):
 @nb.njit(**JIT_OPTIONS)
 def _fill_forcing(table, lane, n, period, widths, offsets, stages, pairs, p, fp, fg):
     """A lane's columns of the forcing table for mesh period ``n``: the one-sample kernel's
-    :func:`~uqgear.physics._rhs._forcing_row` at the times :func:`~uqgear.physics._rhs.classical_step`
+    :func:`~uqgear.physics._stepper._forcing_row` at the times :func:`~uqgear.physics._stepper.classical_step`
     evaluates it (the same operations in the same order, so the same numbers)."""
     start = n * period
     # the tooth factors of the pairs in contact are those of the period: found once, not every stage

@@ -12,7 +12,7 @@ vector instructions, one per IEEE operation of the step for all eight runs
 (:func:`compile_lanes`).
 
 Each lane computes exactly the operations of the one-sample kernel
-(:func:`uqgear.physics._rhs.classical_step`, through the same
+(:func:`uqgear.physics._stepper.classical_step`, through the same
 :func:`~uqgear.physics._rhs.state_derivative_by`; no fast-math, so nothing
 is reassociated or contracted, and selects rather than branches for the dead
 zones and the damping switch), so its numbers are the same, bit for bit. Its
@@ -24,13 +24,13 @@ sub-step with IEEE divisions; a run whose divisors do not qualify is not a
 lane). What
 differs between lanes is data: its own parameters, forcing table, times and
 contact state; a lane whose step changes its contact region is redone on
-its own by the one-sample code (:func:`~uqgear.physics._rhs._split_at_contact`).
+its own by the one-sample code (:func:`~uqgear.physics._stepper._split_at_contact`).
 
 This module's kernel takes the runs without pitch errors; those with them take
 the per-pair step of :mod:`uqgear.physics._pair_lanes`, in the same time loop
 (:func:`uqgear.physics._lane_loop.integrate_group`). The whole forcing of a
 sub-step (stiffness, friction term, drive, e'') is a table, filled from the
-one-sample kernel's own :func:`~uqgear.physics._rhs._forcing_row` at the
+one-sample kernel's own :func:`~uqgear.physics._stepper._forcing_row` at the
 times it evaluates it (:mod:`uqgear.physics._lane_tables`): once per run
 where the forcing repeats every mesh period, and for every period where
 tooth factors, run-out, torque ripple or an adhesion oscillation make it
@@ -76,14 +76,12 @@ from uqgear.physics._rhs import (
     M1,
     M2,
     ME,
-    _split_at_contact,
     coefficients,
     contact_region,
-    rk4_step,
-    rk4_step_weighted,
     state_derivative,
     state_derivative_by,
 )
+from uqgear.physics._stepper import _split_at_contact, rk4_step, rk4_step_weighted
 
 # the lane kernels this process has compiled (or loaded) through compile_lane_kernel
 _COMPILED: set[str] = set()
@@ -116,7 +114,7 @@ def compile_lane_kernel(
     name = kernel.__name__
     if name in _COMPILED:
         # compiled (or loaded) in this process already: every caller passes the same argument types,
-        # and taking the compiler lock and setting the options on every batch costs 0.1-0.2 ms
+        # and the compiler lock and the options would cost every batch (docs/validation/performance.md)
         return
     with global_compiler_lock:
         # numba.config's options are module attributes it sets at import: no static type knows them
@@ -150,7 +148,7 @@ def lane_ready(params: np.ndarray) -> np.ndarray:
 
 @nb.njit(**INLINED)
 def _lane_step(W, table, sub, lane):
-    """Sub-step ``sub`` of one lane: the one-sample kernel's RK4 step (:func:`~uqgear.physics._rhs.classical_step`
+    """Sub-step ``sub`` of one lane: the one-sample kernel's RK4 step (:func:`~uqgear.physics._stepper.classical_step`
     between its splits), with its start's force and bearing accelerations, and what is left to the
     one-sample code (``REDO_*``), written to ``W``. Returns 1 if something is left, else 0."""
     s = lane_state(W, W_STATE, lane)
@@ -260,7 +258,7 @@ def _redo_lane(
 @nb.njit(**INLINED)
 def _mesh_contact_counts(W, lane, n_pairs):
     """(drive side, back side) of a lane's mesh at its state, 0.0 or 1.0: from x alone, as
-    :func:`~uqgear.physics._rhs.mesh_contact` says it (``n_pairs`` not read)."""
+    :func:`~uqgear.physics._stepper.mesh_contact` says it (``n_pairs`` not read)."""
     x = row_of(W, W_STATE + 2, lane)
     b = row_of(W, W_COEFFICIENTS, lane)
     drive_side = 1.0 if x > b else 0.0

@@ -50,17 +50,18 @@ from uqgear.physics._lane_loop import (
 )
 from uqgear.physics._lane_tables import LANES, N_TABLE, T_DRIVE, T_STE, T_WEIGHT, T_WIDTH
 from uqgear.physics._lanes import compile_lane_kernel
-from uqgear.physics._pairs import PAIR_FRICTION, PAIR_K, _forcing_row_pairs, _tooth_terms, substep_pairs
-from uqgear.physics._quotient import quotient
-from uqgear.physics._rhs import (
-    INLINED,
-    JIT_OPTIONS,
-    MAX_PAIRS,
-    _accelerations,
-    _shifted,
-    dead_zone,
-    rk4_combine_weighted,
+from uqgear.physics._pairs import (
+    PAIR_FRICTION,
+    PAIR_K,
+    _forcing_row_pairs,
+    _tooth_terms,
+    pair_derivative_by,
+    pair_lane_field,
+    substep_pairs,
 )
+from uqgear.physics._quotient import quotient
+from uqgear.physics._rhs import INLINED, JIT_OPTIONS, MAX_PAIRS
+from uqgear.physics._stepper import rk4_combine_weighted, rk4_stages
 
 #: Rows of a pair lane group's work array: those of every lane group, then each pair slot's pitch offset.
 W_OFFSETS = N_ROWS
@@ -122,44 +123,6 @@ def _stage_terms(f, stage, lane):
 
 
 @nb.njit(**INLINED)
-def _slot(x, k, friction, offset, b, in_mesh):
-    """(k f(x - e), friction term f(x - e), 1.0 if the slot is in mesh and in contact else 0.0) of a pair slot."""
-    fx = dead_zone(x - offset, b)
-    touching = 1.0 if (fx != 0.0) & in_mesh else 0.0
-    return k * fx, friction * fx, touching
-
-
-@nb.njit(**INLINED)
-def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
-    """:func:`~uqgear.physics._pairs.derivative_pairs` from a stage's :func:`_stage_terms` and the pair
-    offsets, with a quotient function (:func:`~uqgear.physics._rhs.state_derivative_by`).
-
-    The same operations: the pair sums in slot order, then the model's accelerations
-    (:func:`~uqgear.physics._rhs._accelerations` with k = sum k_i f(x - e_i), f(x) = 1 and the
-    friction sum as the friction term: the products by 1.0 are exact). Returns (ds/dt, F, exact).
-    """
-    k, friction, drive, ste_acc = terms
-    x = s[2]
-    b = c[0]
-    k0, f0, t0 = _slot(x, k[0], friction[0], offsets[0], b, 0 < n_pairs)
-    k1, f1, t1 = _slot(x, k[1], friction[1], offsets[1], b, 1 < n_pairs)
-    k2, f2, t2 = _slot(x, k[2], friction[2], offsets[2], b, 2 < n_pairs)
-    k3, f3, t3 = _slot(x, k[3], friction[3], offsets[3], b, 3 < n_pairs)
-    elastic = 0.0 + k0
-    elastic += k1
-    elastic += k2
-    elastic += k3
-    sliding = 0.0 + f0
-    sliding += f1
-    sliding += f2
-    sliding += f3
-    damping = c[1]
-    if (c[2] == 0.0) & (t0 + t1 + t2 + t3 == 0.0):  # no short circuit: a select, not a branch
-        damping = 0.0
-    return _accelerations(s, elastic, sliding, drive, ste_acc, c, 1.0, damping, divide, inverse)
-
-
-@nb.njit(**INLINED)
 def _crossed(x, new_x, offset, b, in_mesh):
     """Whether a pair slot in mesh changes its contact region over a step (selects, not branches)."""
     return region_changed(x - offset, new_x - offset, b) & in_mesh
@@ -182,10 +145,8 @@ def _pair_lane_step(W, table, sub, lane, n_pairs):
     h = row_of(f, T_WIDTH, lane)
     mid = _stage_terms(f, 1, lane)
     d1, force, exact1 = pair_derivative_by(s, _stage_terms(f, 0, lane), e, n_pairs, c, quotient, inverse)
-    d2, _, exact2 = pair_derivative_by(_shifted(s, 0.5 * h, d1), mid, e, n_pairs, c, quotient, inverse)
-    d3, _, exact3 = pair_derivative_by(_shifted(s, 0.5 * h, d2), mid, e, n_pairs, c, quotient, inverse)
-    d4, _, exact4 = pair_derivative_by(_shifted(s, h, d3), _stage_terms(f, 2, lane), e, n_pairs, c, quotient,
-                                       inverse)
+    d2, d3, d4, exact_later = rk4_stages(pair_lane_field, quotient, s, h, d1, mid, _stage_terms(f, 2, lane),
+                                         (e, n_pairs, c, inverse))
     new = rk4_combine_weighted(s, row_of(f, T_WEIGHT, lane), d1, d2, d3, d4)
     b = c[0]
     x = s[2]
@@ -196,7 +157,7 @@ def _pair_lane_step(W, table, sub, lane, n_pairs):
         | _crossed(x, new[2], e[3], b, 3 < n_pairs)
     )
     redo = REDO_STEP if crossed else REDO_NONE
-    redo = redo if exact1 & exact2 & exact3 & exact4 else REDO_STEP
+    redo = redo if exact1 & exact_later else REDO_STEP
     put_step(W, lane, new, d1, force, redo)
     return 0 if redo == REDO_NONE else 1
 
@@ -339,4 +300,4 @@ def compile_pair_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -
     compile_lane_kernel(_step_pair_lanes, N_PAIR_ROWS, N_PAIR_TABLE, integrate_pair_lanes, groups, arrays, refused)
 
 
-__all__ = ["integrate_pair_lanes", "compile_pair_lanes", "pair_derivative_by"]
+__all__ = ["integrate_pair_lanes", "compile_pair_lanes"]

@@ -28,47 +28,45 @@ import math
 import numba as nb
 
 from uqgear.physics._rhs import (
-    C1,
-    C2,
-    CLEARANCE1,
-    CLEARANCE2,
-    CM,
     CONTACT_RATIO,
-    DAMP_IN_SEPARATION,
     ECC_KAPPA,
     ECC_OMEGA,
     ECC_PHASE,
-    F_K,
-    F_SINE,
     FRICTION,
     HALF_BACKLASH,
     INLINED,
     JIT_OPTIONS,
-    K1,
-    K2,
-    M1,
-    M2,
     MAX_PAIRS,
-    ME,
     N_PARAMS,
+    NO_INVERSE,
     OMEGA_MESH,
     STE_PHASE,
     STIFFNESS_SCALE,
     TOOTH_FACTORS,
-    TWO_PI,
-    USE_PERIOD_TABLE,
     Z1,
     Z2,
-    _crossing_fraction,
+    _accelerations,
     _friction_arms,
     _friction_term,
     _interp_uniform,
     _mesh_position,
-    _shifted,
     _time_terms,
+    coefficients,
     contact_region,
     dead_zone,
-    rk4_combine,
+    divided,
+    mesh_damping,
+    modulated_scale,
+    smooth_share,
+)
+from uqgear.physics._stepper import (
+    BISECTIONS,
+    F_SINE,
+    crossed_boundary,
+    crossing_fraction,
+    rk4_combine_weighted,
+    rk4_stages,
+    splits_step,
 )
 
 # positions in the forcing tuple of a pair path
@@ -146,26 +144,18 @@ def forcing_pairs(t, t_ref, p, pair_k, period_k, fp, fg):
     """Pair-resolved forcing at any time ``t`` (pairs in mesh as at ``t_ref``); see the module doc.
 
     With a smooth period table (``fourier`` or ``constant`` stiffness) each
-    pair takes the share of the smooth curve in proportion to its Ishikawa
-    stiffness.
+    pair takes its share of the smooth curve
+    (:func:`~uqgear.physics._rhs.smooth_share`).
     """
     n_ref, u_ref, u = _mesh_position(t, t_ref, p)
     eps = p[CONTACT_RATIO]
     count = 0
-    healthy = 0.0
     while u_ref + count < eps:
         if count >= MAX_PAIRS:
             raise ValueError("more tooth pairs in contact than the pair path holds")
-        healthy += _interp_uniform(pair_k, u + count, eps)
         count += 1
-    ratio = 1.0
-    if p[USE_PERIOD_TABLE] != 0.0:
-        phase = p[OMEGA_MESH] * t / TWO_PI
-        phase -= math.floor(phase)
-        ratio = _interp_uniform(period_k, phase, 1.0) / healthy
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    ratio, _ = smooth_share(t, u_ref, u, p, pair_k, period_k)
+    scale = modulated_scale(t, p)
     drive, ste, ste_acc = _time_terms(t, math.sin(p[OMEGA_MESH] * t + p[STE_PHASE]), p)
     return _pack(
         count,
@@ -218,13 +208,13 @@ def _tooth_terms(n, p, fp, fg):
 
 
 @nb.njit(**INLINED)
-def _row_pair(i, table, sub, stage, n_pairs, ratio, p, offset, factor):
-    """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._rhs.build_schedule`."""
+def _row_pair(i, table, sub, stage, n_pairs, p, offset, factor):
+    """:func:`_pair` from a tabulated stage of :func:`~uqgear.physics._stepper.build_schedule`."""
     if i >= n_pairs:
         return 0.0, 0.0, 0.0, 0.0
-    kp = table[sub, stage, 4 + 3 * i] * ratio
-    pinion = table[sub, stage, 5 + 3 * i] * ratio
-    gear = table[sub, stage, 6 + 3 * i] * ratio
+    kp = table[sub, stage, 4 + 3 * i]
+    pinion = table[sub, stage, 5 + 3 * i]
+    gear = table[sub, stage, 6 + 3 * i]
     if p[TOOTH_FACTORS] != 0.0:
         kp *= factor
         pinion *= factor
@@ -235,13 +225,9 @@ def _row_pair(i, table, sub, stage, n_pairs, ratio, p, offset, factor):
 @nb.njit(**INLINED)
 def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
     """:func:`forcing_pairs` at absolute time ``t`` from a tabulated stage (``teeth``: :func:`_tooth_terms`)."""
-    ratio = 1.0
-    if p[USE_PERIOD_TABLE] != 0.0:
-        # the table holds the smooth curve in F_K and the Ishikawa pair stiffnesses per pair
-        healthy = 0.0
-        for i in range(n_pairs):
-            healthy += table[sub, stage, 4 + 3 * i]
-        ratio = table[sub, stage, F_K] / healthy
+    # the table's pair fields are each pair's share of the mesh stiffness already (smooth_share)
+    # modulated_scale written out: on the tabulated stages (three a sub-step) the call made the
+    # one-sample kernels about a third slower (docs/validation/performance.md)
     scale = p[STIFFNESS_SCALE]
     if p[ECC_KAPPA] != 0.0:
         scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
@@ -249,10 +235,10 @@ def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
     offsets, factors = teeth
     return _pack(
         n_pairs,
-        _row_pair(0, table, sub, stage, n_pairs, ratio, p, offsets[0], factors[0]),
-        _row_pair(1, table, sub, stage, n_pairs, ratio, p, offsets[1], factors[1]),
-        _row_pair(2, table, sub, stage, n_pairs, ratio, p, offsets[2], factors[2]),
-        _row_pair(3, table, sub, stage, n_pairs, ratio, p, offsets[3], factors[3]),
+        _row_pair(0, table, sub, stage, n_pairs, p, offsets[0], factors[0]),
+        _row_pair(1, table, sub, stage, n_pairs, p, offsets[1], factors[1]),
+        _row_pair(2, table, sub, stage, n_pairs, p, offsets[2], factors[2]),
+        _row_pair(3, table, sub, stage, n_pairs, p, offsets[3], factors[3]),
         scale,
         drive,
         ste,
@@ -262,65 +248,111 @@ def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
 
 
 @nb.njit(**INLINED)
+def _slot(x, k, friction, offset, b, in_mesh):
+    """(k f(x - e), friction term f(x - e), 1.0 if the slot is in mesh and in contact else 0.0) of a pair slot."""
+    fx = dead_zone(x - offset, b)
+    touching = 1.0 if (fx != 0.0) & in_mesh else 0.0
+    return k * fx, friction * fx, touching
+
+
+@nb.njit(**INLINED)
+def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
+    """The per-pair right-hand side from a stage's terms (4-tuples of the pair slots' stiffness and friction
+    term, drive, e''), the slots' pitch offsets and the pairs in mesh, with a quotient function
+    (:func:`~uqgear.physics._rhs.state_derivative_by`): the one expression of both pair kernels.
+
+    The pair sums in slot order (a slot beyond those in mesh has zero stiffness and friction: adding
+    its zero product leaves a sum's bits as they are), then the model's accelerations
+    (:func:`~uqgear.physics._rhs._accelerations` with k = sum k_i f(x - e_i), f(x) = 1 and the
+    friction sum as the friction term: the products by 1.0 are exact). Returns (ds/dt, F, exact).
+    """
+    k, friction, drive, ste_acc = terms
+    x = s[2]
+    b = c[0]
+    k0, f0, t0 = _slot(x, k[0], friction[0], offsets[0], b, 0 < n_pairs)
+    k1, f1, t1 = _slot(x, k[1], friction[1], offsets[1], b, 1 < n_pairs)
+    k2, f2, t2 = _slot(x, k[2], friction[2], offsets[2], b, 2 < n_pairs)
+    k3, f3, t3 = _slot(x, k[3], friction[3], offsets[3], b, 3 < n_pairs)
+    elastic = 0.0 + k0
+    elastic += k1
+    elastic += k2
+    elastic += k3
+    sliding = 0.0 + f0
+    sliding += f1
+    sliding += f2
+    sliding += f3
+    damping = mesh_damping(c, t0 + t1 + t2 + t3 == 0.0)
+    return _accelerations(s, elastic, sliding, drive, ste_acc, c, 1.0, damping, divide, inverse)
+
+
+@nb.njit(**INLINED)
 def derivative_pairs(s, terms, p):
     """:func:`~uqgear.physics._rhs.derivative` with one dead zone per pair: F = sum k_i f(x - e_i) + c_m* x'.
 
     The mesh damper acts on x' (every pair deflects at that rate); with
     ``damping_in_separation`` off it stops when no pair is in contact.
+    ``terms``: the 18-tuple of :func:`forcing_pairs`.
     """
-    x = s[2]
-    vx = s[5]
-    b = p[HALF_BACKLASH]
-    elastic = 0.0
-    friction = 0.0
-    touching = False
-    for i in range(int(terms[PAIR_COUNT])):
-        fx = dead_zone(x - terms[PAIR_OFFSET + i], b)
-        if fx != 0.0:
-            touching = True
-        elastic += terms[PAIR_K + i] * fx
-        friction += terms[PAIR_FRICTION + i] * fx
-    damping = p[CM]
-    if p[DAMP_IN_SEPARATION] == 0.0 and not touching:
-        damping = 0.0
-    force = elastic + damping * vx
-    bearing1 = p[K1] * dead_zone(s[0], p[CLEARANCE1])
-    bearing2 = p[K2] * dead_zone(s[1], p[CLEARANCE2])
-    a1 = (-p[C1] * s[3] - bearing1 - force) / p[M1]
-    a2 = (-p[C2] * s[4] - bearing2 + force) / p[M2]
-    relative = terms[2] - force / p[ME] - friction
-    return (s[3], s[4], vx, a1, a2, a1 - a2 + relative - terms[4]), force
+    stage = (
+        (terms[PAIR_K], terms[PAIR_K + 1], terms[PAIR_K + 2], terms[PAIR_K + 3]),
+        (terms[PAIR_FRICTION], terms[PAIR_FRICTION + 1], terms[PAIR_FRICTION + 2], terms[PAIR_FRICTION + 3]),
+        terms[2],
+        terms[4],
+    )
+    offsets = (terms[PAIR_OFFSET], terms[PAIR_OFFSET + 1], terms[PAIR_OFFSET + 2], terms[PAIR_OFFSET + 3])
+    d, force, _ = pair_derivative_by(s, stage, offsets, int(terms[PAIR_COUNT]), coefficients(p), divided, NO_INVERSE)
+    return d, force
+
+
+@nb.njit(**INLINED)
+def _pairs_field(s, terms, p, divide):
+    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_stages`."""
+    d, _ = derivative_pairs(s, terms, p)
+    return d, True
+
+
+@nb.njit(**INLINED)
+def pair_lane_field(s, terms, context, divide):
+    """:func:`pair_derivative_by` as a field of :func:`~uqgear.physics._stepper.rk4_stages`: ``terms`` a stage's
+    pair terms, ``context`` (pitch offsets of the pair slots, pairs in mesh, coefficients, inverse masses)."""
+    offsets, n_pairs, c, inverse = context
+    d, _, exact = pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse)
+    return d, exact
 
 
 @nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
-    """:func:`~uqgear.physics._rhs._rk4` with the pair-resolved derivative."""
-    d2, _ = derivative_pairs(_shifted(s, 0.5 * h, d1), mid, p)
-    d3, _ = derivative_pairs(_shifted(s, 0.5 * h, d2), mid, p)
-    d4, _ = derivative_pairs(_shifted(s, h, d3), end, p)
-    return rk4_combine(s, h, d1, d2, d3, d4)
+    """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative."""
+    d2, d3, d4, _ = rk4_stages(_pairs_field, divided, s, h, d1, mid, end, p)
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
 
 
 @nb.njit(**INLINED)
-def _first_crossing(s, trial, h, terms, p):
-    """Fraction of the step where the first pair changes its contact state (2.0 if none does)."""
+def _first_crossing(s, trial, h, terms, p, split_level):
+    """(fraction of the step, boundary level) where the first pair changes its contact state ((2.0, nan) if none).
+
+    A boundary a step was split at already (``split_level``) is not split at again: the first part ends
+    on the interpolated crossing, a little short of or beyond its own, and the classical path
+    (:func:`~uqgear.physics._stepper._split_at_contact`) splits a step once at the boundary it crosses. So
+    both paths take the same steps where the pairs' offsets coincide.
+    """
     b = p[HALF_BACKLASH]
     first = 2.0
+    first_level = math.nan
     for i in range(int(terms[PAIR_COUNT])):
         offset = terms[PAIR_OFFSET + i]
         before = contact_region(s[2] - offset, b)
         after = contact_region(trial[2] - offset, b)
         if before == after:
             continue
-        # the boundary next to the side the pair leaves, as in _rhs._split_at_contact
-        if before == 1 or (before == 0 and after == -1):
-            level = b if before == 1 else -b
-        else:
-            level = -b if before == -1 else b
-        theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, offset + level)
+        level, _ = crossed_boundary(before, after, b)
+        if offset + level == split_level:
+            continue
+        theta = crossing_fraction(s[2], s[5], trial[2], trial[5], h, offset + level, BISECTIONS)
         if theta < first:
             first = theta
-    return first
+            first_level = offset + level
+    return first, first_level
 
 
 @nb.njit(**INLINED)
@@ -329,12 +361,13 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
 
     The classical path splits once, at |x| = b; here several pairs may change
     state within a step, so the remainder is checked again (at most
-    ``2 MAX_PAIRS`` splits: each pair has two boundaries).
+    ``2 MAX_PAIRS`` splits: each pair has two boundaries), each boundary once.
     """
     trial = _rk4_pairs(s, h, d1, mid, end, p)
+    split_level = math.nan
     for _ in range(2 * MAX_PAIRS):
-        theta = _first_crossing(s, trial, h, terms, p)
-        if not 1e-9 < theta < 1.0 - 1e-9:
+        theta, split_level = _first_crossing(s, trial, h, terms, p, split_level)
+        if not splits_step(theta):
             return trial
         h_a = theta * h
         middle = forcing_pairs(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
@@ -355,7 +388,7 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
 
 @nb.njit(**INLINED)
 def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
-    """:func:`~uqgear.physics._rhs.classical_step` with per-pair deflections (same returns).
+    """:func:`~uqgear.physics._stepper.classical_step` with per-pair deflections (same returns).
 
     Inlined into the kernels, with the parts of its step, as the classical
     step is: a plain call on every grid step pays the reference counts of
@@ -440,6 +473,8 @@ def pair_state(t_ref, p):
 __all__ = [
     "forcing_pairs",
     "derivative_pairs",
+    "pair_derivative_by",
+    "pair_lane_field",
     "scheduled_step_pairs",
     "substep_pairs",
     "pair_contact",

@@ -1,25 +1,16 @@
-"""The model's right-hand side and RK4 building blocks, compiled with numba: the base of every kernel.
+"""The model's right-hand side, compiled with numba: the base of every kernel.
 
 One right-hand side serves every integrator (the scipy reference calls it
 too), and every model extension of docs/model/unmodelled-effects.md section 6 is a slot in the
 parameter vector whose neutral value switches it off, so effects plug in
-without forking the integrator. The kernels that use these pieces live above
-this module: :mod:`uqgear.physics._pairs` (pitch errors),
-:mod:`uqgear.physics._kernels` (one-sample kernels, which also re-exports
-every name here) and :mod:`uqgear.physics._lanes` (samples as SIMD lanes).
-
-Time stepping (fast path): classical RK4 on a uniform grid of ``N`` steps per
-mesh period, so Poincare samples fall on grid points. Two kinds of
-non-smoothness are located instead of stepped over:
-
-* mesh-stiffness jumps (a pair enters at mesh phase 0, leaves at frac(eps);
-  the friction force reverses at the pitch point) happen at known phases: a
-  step containing one is split there, and the set of pairs in contact is
-  taken from the sub-step's midpoint (``t_ref``), so each sub-step sees a
-  smooth stiffness;
-* contact boundaries |x| = b depend on the state: when a step changes the
-  contact region, the crossing is located on the step's cubic Hermite
-  interpolant and the step is redone in two parts.
+without forking the integrator. The accelerations are written once
+(:func:`_accelerations`), as are the mesh damping's switch in separation
+(:func:`mesh_damping`), each pair's share of the mesh stiffness
+(:func:`smooth_share`) and the stiffness modulation (:func:`modulated_scale`).
+The time stepping lives in :mod:`uqgear.physics._stepper`; the kernels above
+it: :mod:`uqgear.physics._pairs` (pitch errors), :mod:`uqgear.physics._kernels`
+(one-sample kernels, which also re-exports every name here) and
+:mod:`uqgear.physics._lanes` (samples as SIMD lanes).
 
 These helpers are inlined into kernels in other files: a cached kernel is
 keyed on the contents of every compiled module of the package
@@ -32,7 +23,6 @@ import math
 from typing import Any
 
 import numba as nb
-import numpy as np
 
 from uqgear.physics._cache import register_kernel_cache
 
@@ -156,6 +146,8 @@ PARAMETER_SLOTS = (
 N_ACCUMULATORS = 13
 
 TWO_PI = 2.0 * math.pi
+#: Most tooth pairs in contact at once that a schedule holds (spur gears have at most 3).
+MAX_PAIRS = 4
 
 #: Compilation options of every kernel. No ``fastmath``: it licenses LLVM to
 #: reassociate sums and contract multiply-adds, and it did so differently for
@@ -165,12 +157,11 @@ TWO_PI = 2.0 * math.pi
 #: ``benchmarks/integrator.py`` measures what fastmath would buy.
 JIT_OPTIONS: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 #: Options of the helpers the stepping code calls on every stage. They are inlined by LLVM
-#: (``forceinline``: the ``alwaysinline`` attribute), which gave the same numbers, bit for bit, as
-#: numba's own ``inline="always"`` and compiles far faster: numba copies and retypes a callee's
-#: IR at every call site, nested calls included (measured on 2 cores, empty cache: 290 s for the
-#: batch and harmonic kernels before, 91 s with LLVM inlining and serial batch kernels). A plain
-#: call is no option: passing the eleven arrays of a step costs their reference counts on every
-#: grid step (measured: twice the run time).
+#: (``forceinline``: the ``alwaysinline`` attribute), which gives the same numbers, bit for bit, as
+#: numba's own ``inline="always"`` and compiles faster: numba copies and retypes a callee's IR at
+#: every call site, nested calls included. A plain call is no option: passing the arrays of a step
+#: costs their reference counts on every grid step (docs/validation/performance.md, "Compile time
+#: and inlining").
 INLINED: dict[str, Any] = {**JIT_OPTIONS, "forceinline": True}
 
 
@@ -237,13 +228,48 @@ def _friction_arms(kp, position, position_ref, p):
     return kp * sign * s, kp * sign * (p[LOA_LENGTH] - s)
 
 
+@nb.njit(**INLINED)
+def smooth_share(t, u_ref, u, p, pair_k, period_k):
+    """(r, sum_i k_p(u + i)): a smooth stiffness table's share factor, and the pairs' Ishikawa sum.
+
+    With a smooth period table (``fourier``, ``constant``) the table's k(t) is the mesh stiffness of
+    healthy teeth, shared among the pairs in mesh in proportion to their Ishikawa stiffness: pair i
+    carries r k_p(u + i), r = k(t) / sum_i k_p(u + i). Every path takes its pairs' stiffness from
+    this one rule, so a damaged tooth removes its own share and tooth friction loads each pair by
+    its share of the mesh force, whatever the table. Without a table: (1, 0), r not applied.
+    """
+    if p[USE_PERIOD_TABLE] == 0.0:
+        return 1.0, 0.0
+    eps = p[CONTACT_RATIO]
+    healthy = 0.0
+    i = 0
+    while u_ref + i < eps:
+        healthy += _interp_uniform(pair_k, u + i, eps)
+        i += 1
+    phase = p[OMEGA_MESH] * t / TWO_PI
+    phase -= math.floor(phase)
+    return _interp_uniform(period_k, phase, 1.0) / healthy, healthy
+
+
+@nb.njit(**INLINED)
+def modulated_scale(t, p):
+    """The factor on every mesh stiffness at ``t``: the stiffness scale and the run-out's modulation
+    1 + kappa cos(W_s t + phase) (docs/model/unmodelled-effects.md section 6)."""
+    scale = p[STIFFNESS_SCALE]
+    if p[ECC_KAPPA] != 0.0:
+        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    return scale
+
+
 @nb.njit(**JIT_OPTIONS)
 def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     """Mesh stiffness and friction moment-arm sums at time ``t``.
 
     The pairs in contact (and each pair's friction direction) are those at
     ``t_ref``, a time strictly inside the current sub-step, so a sub-step
-    ending on a breakpoint keeps one smooth stiffness branch.
+    ending on a breakpoint keeps one smooth stiffness branch. Each pair's
+    stiffness is its share of a smooth table (:func:`smooth_share`) times its
+    tooth factors.
 
     Returns
     -------
@@ -255,35 +281,34 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
     eps = p[CONTACT_RATIO]
     friction = p[FRICTION]
     damaged = p[TOOTH_FACTORS] != 0.0
+    smooth = p[USE_PERIOD_TABLE] != 0.0
+    ratio, healthy = smooth_share(t, u_ref, u, p, pair_k, period_k)
     k = 0.0
     arm_pinion = 0.0
     arm_gear = 0.0
     i = 0
     while u_ref + i < eps:
         kp = _interp_uniform(pair_k, u + i, eps)
+        pair = kp * ratio if smooth else kp
         if damaged:
             tooth = int(n_ref) - i
-            kp *= factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
-        k += kp
+            factor = factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
+            if smooth:
+                # the tooth's loss of its share; the healthy sum is replaced by the table below
+                k += pair * (factor - 1.0)
+            pair *= factor
+        k += kp if smooth else pair
         if friction != 0.0:
-            pinion, gear = _friction_arms(kp, u + i, u_ref + i, p)
+            pinion, gear = _friction_arms(pair, u + i, u_ref + i, p)
             arm_pinion += pinion
             arm_gear += gear
         i += 1
-    if p[USE_PERIOD_TABLE] != 0.0:
-        # smooth Fourier-series (or constant) curve; tooth factors act through
-        # the pair sum above, so only its healthy part is replaced
-        healthy = 0.0
-        i = 0
-        while u_ref + i < eps:
-            healthy += _interp_uniform(pair_k, u + i, eps)
-            i += 1
+    if smooth:
+        # the pairs' healthy sum replaced by the smooth curve, which carries their healthy share
         phase = p[OMEGA_MESH] * t / TWO_PI
         phase -= math.floor(phase)
         k += _interp_uniform(period_k, phase, 1.0) - healthy
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    scale = modulated_scale(t, p)
     return k * scale, arm_pinion * scale, arm_gear * scale
 
 
@@ -298,7 +323,7 @@ def static_transmission_error(t, p):
 
 # The stepping code below keeps the state, stage derivatives and forcing terms in tuples
 # (registers) rather than scratch arrays: slicing rows out of a work array costs reference
-# counting on every stage, which made an RK4 step about ten times slower.
+# counting on every stage (docs/validation/performance.md, "Compile time and inlining").
 
 
 @nb.njit(**INLINED)
@@ -376,6 +401,17 @@ NO_INVERSE = (1.0, 1.0, 1.0)
 
 
 @nb.njit(**INLINED)
+def mesh_damping(c, apart):
+    """The mesh damping coefficient from :func:`coefficients`: c_m, or 0 where no tooth pair touches
+    (``apart``) and the model has no damping in separation. Every path and the variational equations
+    take the damping switch from here."""
+    damping = c[1]
+    if (c[2] == 0.0) & apart:  # no short circuit: a select, not a branch
+        damping = 0.0
+    return damping
+
+
+@nb.njit(**INLINED)
 def _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse):
     """(ds/dt, mesh force F, whether each quotient is exact) from the forcing values, :func:`coefficients`,
     f(x), the mesh damping and a quotient function ``divide(x, y, 1 / y)`` (:func:`divided`, or
@@ -401,10 +437,7 @@ def state_derivative_by(s, k, friction_term, drive, ste_acc, c, divide, inverse)
     Returns (ds/dt, F, whether every quotient is exact).
     """
     fx = dead_zone(s[2], c[0])
-    damping = c[1]
-    if (c[2] == 0.0) & (fx == 0.0):  # no short circuit: a select, not a branch
-        damping = 0.0
-    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divide, inverse)
+    return _accelerations(s, k, friction_term, drive, ste_acc, c, fx, mesh_damping(c, fx == 0.0), divide, inverse)
 
 
 @nb.njit(**INLINED)
@@ -432,9 +465,7 @@ def side_derivative(s, k, friction_term, drive, ste_acc, c, region):
     With damping in separation this is :func:`state_derivative`, bit for bit.
     """
     fx = dead_zone(s[2], c[0])
-    damping = c[1]
-    if (c[2] == 0.0) & (region == 0):
-        damping = 0.0
+    damping = mesh_damping(c, region == 0)
     d, force, _ = _accelerations(s, k, friction_term, drive, ste_acc, c, fx, damping, divided, NO_INVERSE)
     return d, force
 
@@ -447,322 +478,3 @@ def derivative(s, terms, p):
     Returns (ds/dt as a 6-tuple, mesh force F).
     """
     return state_derivative(s, terms[0], terms[1], terms[2], terms[4], coefficients(p))
-
-
-@nb.njit(**INLINED)
-def _shifted(s, h, d):
-    return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4], s[5] + h * d[5])
-
-
-@nb.njit(**INLINED)
-def rk4_combine_weighted(s, w, d1, d2, d3, d4):
-    """The classical RK4 update of ``s`` from its four stage derivatives, with the weight w = h / 6 given."""
-    return (
-        s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
-        s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
-        s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
-        s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
-        s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
-        s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]),
-    )
-
-
-@nb.njit(**INLINED)
-def rk4_combine(s, h, d1, d2, d3, d4):
-    """The classical RK4 update of ``s`` over ``h`` from its four stage derivatives."""
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
-
-
-@nb.njit(**INLINED)
-def _rk4(s, h, d1, mid, end, p):
-    """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
-    d2, _ = derivative(_shifted(s, 0.5 * h, d1), mid, p)
-    d3, _ = derivative(_shifted(s, 0.5 * h, d2), mid, p)
-    d4, _ = derivative(_shifted(s, h, d3), end, p)
-    return rk4_combine(s, h, d1, d2, d3, d4)
-
-
-@nb.njit(**INLINED)
-def rk4_step_weighted(s, h, w, d1, mid, end, c, divide, inverse):
-    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients`, w = h / 6 and a
-    quotient function (:func:`state_derivative_by`). Returns (new state, whether every quotient is exact)."""
-    d2, _, exact2 = state_derivative_by(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
-    d3, _, exact3 = state_derivative_by(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[3], c, divide, inverse)
-    d4, _, exact4 = state_derivative_by(_shifted(s, h, d3), end[0], end[1], end[2], end[3], c, divide, inverse)
-    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact2 & exact3 & exact4
-
-
-@nb.njit(**INLINED)
-def rk4_step(s, h, d1, mid, end, c):
-    """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e'') and :func:`coefficients`."""
-    new, _ = rk4_step_weighted(s, h, h / 6.0, d1, mid, end, c, divided, NO_INVERSE)
-    return new
-
-
-@nb.njit(**JIT_OPTIONS)
-def _crossing_fraction(x0, v0, x1, v1, h, level):
-    """Fraction of a step where the cubic Hermite interpolant of x reaches ``level``."""
-    lo = 0.0
-    hi = 1.0
-    g_lo = x0 - level
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        s = mid
-        h00 = 2 * s**3 - 3 * s**2 + 1
-        h10 = s**3 - 2 * s**2 + s
-        h01 = -2 * s**3 + 3 * s**2
-        h11 = s**3 - s**2
-        value = h00 * x0 + h10 * h * v0 + h01 * x1 + h11 * h * v1 - level
-        if (value > 0.0) == (g_lo > 0.0):
-            lo = mid
-            g_lo = value
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-@nb.njit(**INLINED)
-def _rk4_side(s, h, d1, mid, end, p, region):
-    """:func:`_rk4` with the later stages on the mesh damping of contact region ``region`` (:func:`side_derivative`)."""
-    c = coefficients(p)
-    d2, _ = side_derivative(_shifted(s, 0.5 * h, d1), mid[0], mid[1], mid[2], mid[4], c, region)
-    d3, _ = side_derivative(_shifted(s, 0.5 * h, d2), mid[0], mid[1], mid[2], mid[4], c, region)
-    d4, _ = side_derivative(_shifted(s, h, d3), end[0], end[1], end[2], end[4], c, region)
-    return rk4_combine(s, h, d1, d2, d3, d4)
-
-
-@nb.njit(**INLINED)
-def crossed_boundary(before, after, b):
-    """(boundary level, region entered) of a step from contact region ``before`` to ``after``.
-
-    The level is that of the boundary next to the side the step leaves; the region entered is the
-    one just beyond it (a step from one contact side to the other enters separation first).
-    """
-    if before == 1 or (before == 0 and after == -1):
-        level = b if before == 1 else -b
-    else:
-        level = -b if before == -1 else b
-    entered = 0 if before != 0 else (1 if level > 0.0 else -1)
-    return level, entered
-
-
-@nb.njit(**JIT_OPTIONS)
-def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
-    """``trial`` (the step from ``s`` over [t, t+h]), redone in two parts where it changes the
-    contact region, split where the cubic Hermite interpolant of x crosses the boundary.
-
-    Each part is integrated with the mesh damping of its own side of the boundary
-    (:func:`side_derivative`), the second from the derivative at the split point on the side the
-    step enters. Without damping in separation the damping force switches at the boundary, and a
-    stage evaluated with the other side's damping costs an error of the order of the step at
-    every crossing (first-order convergence); the crossing is then also located on the step taken
-    with the first side's damping throughout, not on ``trial``, whose later stages mix the two
-    sides. With damping in separation the vector field is continuous there and both sides'
-    damping is the same: the parts are the plain RK4 steps, bit for bit.
-    """
-    b = p[HALF_BACKLASH]
-    before = contact_region(s[2], b)
-    after = contact_region(trial[2], b)
-    if before == after:
-        return trial
-    level, entered = crossed_boundary(before, after, b)
-    end = forcing(t + h, t_ref, p, pair_k, period_k, fp, fg)
-    if p[DAMP_IN_SEPARATION] == 0.0:
-        trial = _rk4_side(s, h, d1, forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg), end, p, before)
-    theta = _crossing_fraction(s[2], s[5], trial[2], trial[5], h, level)
-    if not 1e-9 < theta < 1.0 - 1e-9:
-        return trial
-    h_a = theta * h
-    h_b = h - h_a
-    middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-    part = _rk4_side(s, h_a, d1, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p, before)
-    d_middle, _ = side_derivative(part, middle[0], middle[1], middle[2], middle[4], coefficients(p), entered)
-    return _rk4_side(
-        part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg), end, p, entered
-    )
-
-
-# ---------------------------------------------------------------- one mesh period tabulated
-#: Most tooth pairs in contact at once that a schedule holds (spur gears have at most 3).
-MAX_PAIRS = 4
-# fields of a tabulated stage: healthy k, friction arm sums, sin(omega t + STE phase), then
-# per pair in contact its healthy stiffness and friction arms (for tooth factors)
-(F_K, F_ARM_PINION, F_ARM_GEAR, F_SINE) = range(4)
-N_FIELDS = 4 + 3 * MAX_PAIRS
-
-
-@nb.njit(**JIT_OPTIONS)
-def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
-    """The mesh-periodic forcing at local time ``t`` (first mesh period) into ``row``; returns the pair count."""
-    _, u_ref, u = _mesh_position(t, t_ref, p)
-    eps = p[CONTACT_RATIO]
-    k = 0.0
-    arm_pinion = 0.0
-    arm_gear = 0.0
-    i = 0
-    while u_ref + i < eps:
-        if i >= MAX_PAIRS:
-            raise ValueError("more tooth pairs in contact than a schedule holds")
-        kp = _interp_uniform(pair_k, u + i, eps)
-        pinion, gear = _friction_arms(kp, u + i, u_ref + i, p)
-        row[4 + 3 * i] = kp
-        row[5 + 3 * i] = pinion
-        row[6 + 3 * i] = gear
-        k += kp
-        arm_pinion += pinion
-        arm_gear += gear
-        i += 1
-    if p[USE_PERIOD_TABLE] != 0.0:
-        phase = p[OMEGA_MESH] * t / TWO_PI
-        phase -= math.floor(phase)
-        k = _interp_uniform(period_k, phase, 1.0)
-    row[F_K] = k
-    row[F_ARM_PINION] = arm_pinion
-    row[F_ARM_GEAR] = arm_gear
-    row[F_SINE] = math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
-    return i
-
-
-@nb.njit(**JIT_OPTIONS)
-def build_schedule(p, pair_k, period_k, breakpoints, steps_per_period):
-    """Sub-steps of one mesh period and their forcing at RK4's three stage times.
-
-    Everything in the forcing that repeats every mesh period (pair
-    stiffnesses, friction arms, the STE phase) is evaluated here once per
-    run instead of three times per step; the effect slots that do not repeat
-    (run-out, tooth factors, torque ripple, adhesion oscillation) are applied
-    on top in :func:`_forcing_row`. Grid step ``j`` of any period is made of
-    sub-steps ``first_sub[j]`` to ``first_sub[j + 1] - 1`` (split at the
-    stiffness breakpoints exactly as the generic stepping would).
-
-    Returns
-    -------
-    first_sub, offsets, widths, refs, pairs, table
-        ``offsets``/``widths``/``refs``: sub-step start, length and reference
-        time (its midpoint) within the period; ``pairs``: pairs in contact;
-        ``table``: (sub-step, stage, field) forcing values.
-    """
-    period = TWO_PI / p[OMEGA_MESH]
-    h = period / steps_per_period
-    capacity = steps_per_period * (breakpoints.size + 1)
-    offsets = np.empty(capacity)
-    widths = np.empty(capacity)
-    refs = np.empty(capacity)
-    pairs = np.empty(capacity, dtype=np.int64)
-    table = np.zeros((capacity, 3, N_FIELDS))
-    first_sub = np.empty(steps_per_period + 1, dtype=np.int64)
-    du = p[OMEGA_MESH] * h / TWO_PI
-    count = 0
-    for j in range(steps_per_period):
-        first_sub[j] = count
-        t_now = j * h
-        end = (j + 1) * h
-        cycles0 = p[OMEGA_MESH] * t_now / TWO_PI
-        base = math.floor(cycles0 + 1e-9)
-        u0 = cycles0 - base
-        for bp in breakpoints:
-            if u0 + 1e-12 < bp < u0 + du - 1e-12:
-                t_break = (base + bp) * TWO_PI / p[OMEGA_MESH]
-                count = _add_substep(t_now, t_break, count, p, pair_k, period_k, offsets, widths, refs, pairs, table)
-                t_now = t_break
-        count = _add_substep(t_now, end, count, p, pair_k, period_k, offsets, widths, refs, pairs, table)
-    first_sub[steps_per_period] = count
-    return first_sub, offsets, widths, refs, pairs, table
-
-
-@nb.njit(**JIT_OPTIONS)
-def _add_substep(start, end, count, p, pair_k, period_k, offsets, widths, refs, pairs, table):
-    t_ref = 0.5 * (start + end)
-    offsets[count] = start
-    widths[count] = end - start
-    refs[count] = t_ref
-    pairs[count] = _tabulate_stage(start, t_ref, p, pair_k, period_k, table[count, 0])
-    _tabulate_stage(0.5 * (start + end), t_ref, p, pair_k, period_k, table[count, 1])
-    _tabulate_stage(end, t_ref, p, pair_k, period_k, table[count, 2])
-    return count + 1
-
-
-@nb.njit(**INLINED)
-def _forcing_row(t, n, table, sub, stage, n_pairs, p, factor_pinion, factor_gear):
-    """:func:`forcing` at absolute time ``t`` in mesh period ``n`` from a tabulated stage."""
-    k = table[sub, stage, F_K]
-    arm_pinion = table[sub, stage, F_ARM_PINION]
-    arm_gear = table[sub, stage, F_ARM_GEAR]
-    if p[TOOTH_FACTORS] != 0.0:
-        for i in range(n_pairs):
-            extra = tooth_extra(n - i, p, factor_pinion, factor_gear)
-            k += table[sub, stage, 4 + 3 * i] * extra
-            arm_pinion += table[sub, stage, 5 + 3 * i] * extra
-            arm_gear += table[sub, stage, 6 + 3 * i] * extra
-    return scaled_forcing(t, k, arm_pinion, arm_gear, table[sub, stage, F_SINE], p)
-
-
-@nb.njit(**INLINED)
-def tooth_extra(tooth, p, factor_pinion, factor_gear):
-    """The tooth factors' change of pair stiffness, f_pinion f_gear - 1, of the pair entering in period ``tooth``."""
-    return factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])] - 1.0
-
-
-@nb.njit(**INLINED)
-def scaled_forcing(t, k, arm_pinion, arm_gear, sine, p):
-    """:func:`forcing` at ``t`` from the pair sums ``k`` and friction arms (tooth factors applied) and
-    sin(omega t + STE phase): the stiffness scale, the run-out's modulation and the time terms."""
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
-    drive, ste, ste_acc = _time_terms(t, sine, p)
-    return k * scale, _friction_term(arm_pinion * scale, arm_gear * scale, p), drive, ste, ste_acc
-
-
-@nb.njit(**INLINED)
-def classical_step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule):
-    """Advance the state tuple ``s`` over grid step ``j`` of mesh period ``n`` (no pitch errors).
-
-    ``schedule`` comes from :func:`build_schedule`: the step is split at the
-    stiffness breakpoints, and each sub-step, which sees one smooth
-    stiffness branch, is split once more where it crosses a contact
-    boundary.
-
-    Returns
-    -------
-    state, force, a1, a2
-        The new state tuple, and the mesh force and accelerations of y1, y2
-        at the step's start (first RK4 stage).
-    """
-    first_sub, offsets, widths, refs, pairs, table = schedule
-    start = n * period
-    force = 0.0
-    a1 = 0.0
-    a2 = 0.0
-    for sub in range(first_sub[j], first_sub[j + 1]):
-        t = start + offsets[sub]
-        h = widths[sub]
-        n_pairs = pairs[sub]
-        d1, f = derivative(s, _forcing_row(t, n, table, sub, 0, n_pairs, p, fp, fg), p)
-        if sub == first_sub[j]:
-            force = f
-            a1 = d1[3]
-            a2 = d1[4]
-        trial = _rk4(
-            s,
-            h,
-            d1,
-            _forcing_row(t + 0.5 * h, n, table, sub, 1, n_pairs, p, fp, fg),
-            _forcing_row(t + h, n, table, sub, 2, n_pairs, p, fp, fg),
-            p,
-        )
-        if contact_region(s[2], p[HALF_BACKLASH]) == contact_region(trial[2], p[HALF_BACKLASH]):
-            s = trial
-        else:
-            s = _split_at_contact(t, h, s, d1, trial, start + refs[sub], p, pair_k, period_k, fp, fg)
-    return s, force, a1, a2
-
-
-@nb.njit(**INLINED)
-def mesh_contact(x, n, n_pairs, p):
-    """Contact state (1 drive, 0 apart, -1 back side) of the mesh as a whole: from x alone.
-
-    The signature of :func:`uqgear.physics._pairs.pair_contact`, so that a
-    kernel takes either as its contact function.
-    """
-    return contact_region(x, p[HALF_BACKLASH])

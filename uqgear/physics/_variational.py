@@ -3,7 +3,7 @@
 One compiled pass integrates the state with the fast path's RK4 scheme (the same sub-steps, split at
 the stiffness breakpoints of :func:`~uqgear.physics._kernels.build_schedule` and at the contact
 boundaries |x| = b, each part of a split step on its own side's mesh damping as in
-:func:`~uqgear.physics._rhs._split_at_contact`) and, alongside, the variational equation
+:func:`~uqgear.physics._stepper._split_at_contact`) and, alongside, the variational equation
 Phi' = J(t, s) Phi from Phi(0) = I.
 Each RK4 stage of Phi uses the Jacobian at that stage's state, so Phi is the derivative of the
 discrete RK4 map within every smooth piece. Across a switching surface the variational solution
@@ -43,7 +43,6 @@ from ._kernels import (
     C2,
     CLEARANCE1,
     CLEARANCE2,
-    CM,
     DAMP_IN_SEPARATION,
     HALF_BACKLASH,
     INLINED,
@@ -55,15 +54,25 @@ from ._kernels import (
     ME,
     OMEGA_MESH,
     TWO_PI,
+    _shifted,
     build_schedule,
     coefficients,
     contact_region,
     crossed_boundary,
+    crossing_fraction,
     dead_zone,
     derivative,
+    divided,
     forcing,
+    mesh_damping,
+    rk4_combine_weighted,
+    rk4_stages,
     side_derivative,
+    splits_step,
 )
+
+#: Bisection steps of a contact crossing in the variational pass (the fast path: ``BISECTIONS``, 40).
+CROSSING_BISECTIONS = 50
 
 # layout of the orbit measures a pass returns
 (
@@ -109,10 +118,8 @@ def _slope(value, half_width):
 
 @nb.njit(**INLINED)
 def _mesh_damping(x, p):
-    """The mesh damping coefficient acting at DTE ``x`` (zero in separation when so configured)."""
-    if p[DAMP_IN_SEPARATION] == 0.0 and dead_zone(x, p[HALF_BACKLASH]) == 0.0:
-        return 0.0
-    return p[CM]
+    """The mesh damping coefficient acting at DTE ``x`` (:func:`~uqgear.physics._rhs.mesh_damping`)."""
+    return mesh_damping(coefficients(p), dead_zone(x, p[HALF_BACKLASH]) == 0.0)
 
 
 @nb.njit(**INLINED)
@@ -140,7 +147,7 @@ def _jacobian_times(s, terms, p, phi, out, region, side):
     slope_x = _slope(x, p[HALF_BACKLASH])
     damping = _mesh_damping(x, p)
     if side != 2:
-        damping = 0.0 if (p[DAMP_IN_SEPARATION] == 0.0 and side == 0) else p[CM]
+        damping = mesh_damping(coefficients(p), side == 0)
     stiff = k * slope_x
     m1 = p[M1]
     m2 = p[M2]
@@ -175,8 +182,11 @@ def _jacobian_times(s, terms, p, phi, out, region, side):
 
 
 @nb.njit(**INLINED)
-def _shift(s, h, d):
-    return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4], s[5] + h * d[5])
+def _stage_field(s, terms, context, divide):
+    """:func:`_stage` as a field of :func:`~uqgear.physics._stepper.rk4_stages`: ``context`` (parameters, side)."""
+    p, side = context
+    d, _ = _stage(s, terms, p, side)
+    return d, True
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -187,22 +197,14 @@ def _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, region, s
     and ``side`` as in :func:`_jacobian_times` (``side`` also sets the stages' damping).
     """
     d1, _ = _stage(s, start, p, side)
-    s2 = _shift(s, 0.5 * h, d1)
-    d2, _ = _stage(s2, mid, p, side)
-    s3 = _shift(s, 0.5 * h, d2)
-    d3, _ = _stage(s3, mid, p, side)
-    s4 = _shift(s, h, d3)
-    d4, _ = _stage(s4, end, p, side)
+    d2, d3, d4, _ = rk4_stages(_stage_field, divided, s, h, d1, mid, end, (p, side))
     w = h / 6.0
-    new = (
-        s[0] + w * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0]),
-        s[1] + w * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1]),
-        s[2] + w * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2]),
-        s[3] + w * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3]),
-        s[4] + w * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4]),
-        s[5] + w * (d1[5] + 2.0 * d2[5] + 2.0 * d3[5] + d4[5]),
-    )
+    new = rk4_combine_weighted(s, w, d1, d2, d3, d4)
     if with_matrix:
+        # the stage states again, for the Jacobians at them (the same operations: the same numbers)
+        s2 = _shifted(s, 0.5 * h, d1)
+        s3 = _shifted(s, 0.5 * h, d2)
+        s4 = _shifted(s, h, d3)
         k1 = work[0]
         k2 = work[1]
         k3 = work[2]
@@ -225,31 +227,6 @@ def _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, region, s
             for c in range(6):
                 phi[r, c] += w * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
     return new
-
-
-@nb.njit(**JIT_OPTIONS)
-def _crossing(x0, v0, x1, v1, h, level):
-    """Fraction of a step where the cubic Hermite interpolant of x reaches ``level`` (bisection)."""
-    lo = 0.0
-    hi = 1.0
-    g_lo = x0 - level
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        m2 = mid * mid
-        m3 = m2 * mid
-        value = (
-            (2 * m3 - 3 * m2 + 1) * x0
-            + (m3 - 2 * m2 + mid) * h * v0
-            + (-2 * m3 + 3 * m2) * x1
-            + (m3 - m2) * h * v1
-            - level
-        )
-        if (value > 0.0) == (g_lo > 0.0):
-            lo = mid
-            g_lo = value
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -294,11 +271,8 @@ def _curve_minimum(x0, v0, x1, v1, h):
 @nb.njit(**INLINED)
 def _jump_in_damping(before, after, p):
     """Change of the mesh damping coefficient from region ``before`` to ``after`` (0 with it always on)."""
-    if p[DAMP_IN_SEPARATION] != 0.0:
-        return 0.0
-    c_before = p[CM] if before != 0 else 0.0
-    c_after = p[CM] if after != 0 else 0.0
-    return c_after - c_before
+    c = coefficients(p)
+    return mesh_damping(c, after == 0) - mesh_damping(c, before == 0)
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -452,9 +426,11 @@ def _substep(s, t, h, t_ref, p, pair_k, period_k, fp, fg, with_matrix, discrete,
                 for c in range(6):
                     phi[r, c] = backup[r, c]
         trial = _rk4_variational(s, h, start, mid, end, p, phi, with_matrix, work, 2, before)
-    theta = _crossing(s[2], s[5], trial[2], trial[5], h, level)
+    # located more finely than the fast path's split: the discrete map's derivative is taken at this
+    # fraction (_crossing_sensitivity) and moves with it
+    theta = crossing_fraction(s[2], s[5], trial[2], trial[5], h, level, CROSSING_BISECTIONS)
     measures[O_CROSSINGS] += 1.0
-    if not 1e-9 < theta < 1.0 - 1e-9:
+    if not splits_step(theta):
         measures[O_X_MIN_CURVE] = min(measures[O_X_MIN_CURVE], _curve_minimum(s[2], s[5], trial[2], trial[5], h))
         return trial
     # redo the step in two parts, the first ending on the boundary
