@@ -212,12 +212,16 @@ def sweep_order(samples: xr.Dataset, variable: str) -> list[np.ndarray]:
         for name in samples.data_vars
         if name != variable and name not in INITIAL_VARIABLES and samples[name].dims == ("sample",)
     ]
-    keys = [tuple(float(samples[name].values[i]) for name in others) for i in range(samples.sizes["sample"])]
-    groups: dict[tuple, list[int]] = {}
-    for index, key in enumerate(keys):
-        groups.setdefault(key, []).append(index)
+    n = samples.sizes["sample"]
+    # one array of the other inputs, compared row by row as bytes: per-entry xarray access costs seconds on a
+    # Sobol batch; + 0.0 makes -0.0 and 0.0 one key, as float comparison does
+    table = np.stack([np.asarray(samples[name].values, dtype=float) for name in others], axis=1) if others else None
+    rows = table + 0.0 if table is not None else np.zeros((n, 0))
+    groups: dict[bytes, list[int]] = {}
+    for index in range(n):
+        groups.setdefault(rows[index].tobytes(), []).append(index)
     values = np.asarray(samples[variable].values, dtype=float)
-    return [np.array(sorted(members, key=lambda i: values[i])) for members in groups.values()]
+    return [np.asarray(members)[np.argsort(values[members], kind="stable")] for members in groups.values()]
 
 
 def with_starts(samples: xr.Dataset, index: np.ndarray, states: np.ndarray) -> xr.Dataset:
@@ -535,15 +539,19 @@ def _stacked(stages: Mapping[str, xr.Dataset], labels: Sequence[str], n: int) ->
 def _put_rows(target: xr.Dataset, rows: np.ndarray, part: xr.Dataset) -> xr.Dataset:
     """A copy of ``target`` with its samples ``rows`` replaced by the samples of ``part`` (in that order)."""
     out = target.copy()
+    written: dict[Any, Any] = {}
     for name in list(out.data_vars):
-        if name in part and "sample" in out[name].dims:
-            dims = ("sample", *(dim for dim in out[name].dims if dim != "sample"))
-            values = out[name].transpose(*dims).values.copy()
-            column = part[name].transpose(*dims).values
+        # plain variables and one update: a DataArray per variable copies every sample coordinate along
+        if name in part.data_vars and "sample" in out.variables[name].dims:
+            variable = out.variables[name]
+            dims = ("sample", *(dim for dim in variable.dims if dim != "sample"))
+            values = variable.transpose(*dims).values.copy()
+            column = part.variables[name].transpose(*dims).values
             if values.dtype.kind in "US" and column.dtype.itemsize > values.dtype.itemsize:
                 values = values.astype(column.dtype)
             values[rows] = column
-            out[name] = (dims, values, out[name].attrs)
+            written[name] = (dims, values, variable.attrs)
+    out.update(written)
     return out
 
 

@@ -49,6 +49,9 @@ from ..physics.integration import QOI_INFO
 from .coexistence import PER_ATTRACTOR, summarise
 from .settings import SimulationSettings
 
+#: How far (in window margins) a grid point outside a window may lie from the window point whose sweeps it enters:
+#: the margin is at least the study's finest speed step, so twice it takes in the analyses' own grid steps.
+ENTRY_REACH = 2.0
 #: The node input of the windows: the uncertain adhesion torque.
 NODE_PARAMETER = "adhesion_torque"
 #: Continuations already made in this process, by their inputs (they hold for every analysis of a study
@@ -247,8 +250,12 @@ class GuidedStartModel:
 
         Outside the windows the gear holds one response, so that state is the one a sweep over the whole grid
         carries to the window's edge; a sweep that started from rest at the window's first point would enter the
-        window on another path and can miss the branch a run-up follows into it."""
+        window on another path and can miss the branch a run-up follows into it. Only a neighbour within
+        :data:`ENTRY_REACH` window margins enters: over a longer step (the listed speeds of a single-speed
+        analysis, 1000 rpm apart) the carried state follows no branch and is one more start at twice the cost."""
         rows = np.nonzero(inside)[0]
+        speeds = np.asarray(samples[self.settings.sweep_variable].values, dtype=float)
+        reach = ENTRY_REACH * float(self.windows.margin)
         position = np.full(inside.size, -1)
         position[rows] = np.arange(rows.size)
         entry = {direction: np.full((rows.size, 6), np.nan) for direction in ("up", "down")}
@@ -256,10 +263,9 @@ class GuidedStartModel:
         for members in sweep_order(samples, self.settings.sweep_variable):
             inner = inside[members]
             for k in np.nonzero(inner)[0]:
-                if k > 0 and not inner[k - 1]:
-                    neighbours.append(("up", int(position[members[k]]), int(members[k - 1])))
-                if k + 1 < members.size and not inner[k + 1]:
-                    neighbours.append(("down", int(position[members[k]]), int(members[k + 1])))
+                for direction, j in (("up", k - 1), ("down", k + 1)):
+                    if 0 <= j < members.size and not inner[j] and abs(speeds[members[j]] - speeds[members[k]]) <= reach:
+                        neighbours.append((direction, int(position[members[k]]), int(members[j])))
         if not neighbours:
             return None
         outside = np.unique([sample for _, _, sample in neighbours])
