@@ -135,6 +135,11 @@ def attractor_bound_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> l
     ]
 
 
+def branch_parameters(ds: xr.Dataset) -> list[str]:
+    """The interval parameters whose values at the branches' node a result records (``branch_<parameter>``)."""
+    return [str(name)[len("branch_") :] for name in ds.data_vars if str(name).startswith("branch_")]
+
+
 def branch_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> list[str]:
     """Where two responses coexist inside the bounds: the speeds, the interval parameter values and both values."""
     if f"{name}_branches" not in ds or sweep is None or ds[f"{name}_branches"].ndim != 2:
@@ -142,7 +147,7 @@ def branch_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> list[str]:
     pair = np.asarray(ds[f"{name}_branches"].transpose(sweep, "branch").values, dtype=float)
     shown = np.isfinite(pair).all(axis=1)
     values = np.asarray(ds[sweep].values, dtype=float)
-    nodes = [str(n)[len("branch_") :] for n in ds.data_vars if str(n).startswith("branch_")]
+    nodes = branch_parameters(ds)
     sentences = []
     for start, stop in _runs(shown):
         span = (

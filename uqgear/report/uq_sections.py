@@ -13,7 +13,7 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from ..uq.interval import FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR, FLAG_VERTEX_EXCEEDED
-from .coexistence_sections import attractor_bound_sentences, branch_sentences
+from .coexistence_sections import attractor_bound_sentences, branch_parameters, branch_sentences
 from .findings import _range_text, _runs_of_values
 from .page import new_figure
 from .presentation import _LINE_STYLES, _MARKERS, axis_label, display, format_value, short_name
@@ -71,9 +71,8 @@ def _draw_coexisting(ax: Any, ds: xr.Dataset, name: str, x: np.ndarray, factor: 
 
 def _branch_where(ds: xr.Dataset, shown: np.ndarray) -> str:
     """' (T2 = a-b kN m)': the interval parameter values at which the branches were found."""
-    names = [str(name)[len("branch_"):] for name in ds.data_vars if str(name).startswith("branch_")]
     parts = []
-    for name in names:
+    for name in branch_parameters(ds):
         values = np.asarray(ds[f"branch_{name}"].values, dtype=float)[shown]
         low, high = float(np.nanmin(values)), float(np.nanmax(values))
         text = format_value(name, low) if low == high else f"{format_value(name, low)} to {format_value(name, high)}"
