@@ -317,3 +317,15 @@ def test_statistics_see_the_worst_or_the_rest_response_as_the_study_chooses(tmp_
     np.testing.assert_array_equal(values["rest"], values["plain"])
     assert (values["worst"] >= values["rest"]).all()
     assert (values["worst"] > 1.3 * values["rest"]).any()
+
+
+def test_a_wrong_response_treatment_is_refused_naming_the_key(tmp_path):
+    from uqgear.common.errors import StudyError
+
+    text = (Path(uqgear.__file__).parent / "data" / "studies" / "t2_envelope.yaml").read_text()
+    assert "    samples: 128" in text
+    path = tmp_path / "study.yaml"
+    path.write_text(text.replace("    samples: 128", "    samples: 128\n    response: best", 1))
+    expected = r"study.yaml: analyses\[3\]\.response: expected one of worst, rest; got .best."
+    with pytest.raises(StudyError, match=expected):
+        uqgear.load_study(path)
