@@ -288,6 +288,32 @@ def test_a_sweep_entering_a_window_from_outside_follows_the_sweep_over_the_whole
     assert entered.model_runs_ == plain.model_runs_ + 2  # the entered ends run once more, from the entry
 
 
+def test_a_sweep_is_cut_where_two_neighbours_lie_farther_apart_than_its_reach(design):
+    """Two window stretches far apart along speed (3600-3650 rpm and 4800 rpm, as a single-speed analysis's
+    listed speeds give): with a reach the sweep starts afresh past the gap, so 4800 rpm's up-sweep run is its
+    rest run and 3650 rpm's down-sweep starts from rest there; without it both carry a state over 1150 rpm."""
+    from uqgear.dynamics.attractors import FINAL_VARIABLES, MultiStartSearch
+
+    speeds = np.array([3600.0, 3650.0, 4800.0])
+    batch = samples_from_mapping(
+        {"pinion_speed": speeds, "adhesion_torque": np.full(3, WET), "drive_torque": np.full(3, 7000.0)}
+    )
+    evaluate = StartedEvaluator(design, {"n_periods": 200, "keep_periods": 50})
+    settings = MultiStart(seeded=0)
+    cut = MultiStartSearch(settings).fit(evaluate, batch, design, sweep_reach=100.0)
+    whole = MultiStartSearch(settings).fit(evaluate, batch, design)
+    assert cut.model_runs_ == whole.model_runs_ - 2
+    # 3650 rpm carries its up-sweep state on to 4800 rpm only without the reach
+    final_3650 = np.array([cut.runs_[name].sel(start="up").values[1] for name in FINAL_VARIABLES])
+    np.testing.assert_array_equal(whole.start_states_["up"][2], final_3650)
+    assert np.isnan(cut.start_states_["up"][2]).all() and np.isnan(cut.start_states_["down"][1]).all()
+    np.testing.assert_array_equal(cut.start_states_["up"][1], whole.start_states_["up"][1])
+    for name in ("peak_mesh_force", "dte_rms"):
+        np.testing.assert_array_equal(
+            cut.runs_[name].sel(start="up").values[2], cut.runs_[name].sel(start="rest").values[2]
+        )
+
+
 def test_statistics_see_the_worst_or_the_rest_response_as_the_study_chooses(tmp_path):
     """Monte Carlo at 3650 rpm on wet rail, where two responses coexist: `response: worst` sees at every sample
     at least the response from rest and somewhere the upper branch; `response: rest` gives the from-rest study's

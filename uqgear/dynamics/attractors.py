@@ -203,8 +203,22 @@ def _velocity_scale(samples: xr.Dataset, design: Design) -> np.ndarray:
     return 2.0 * math.pi * design.z1 * speed / 60.0 * 0.5 * backlash
 
 
-def sweep_order(samples: xr.Dataset, variable: str) -> list[np.ndarray]:
-    """The samples grouped by every input but ``variable``, each group sorted by it (sample indices)."""
+def sweep_order(samples: xr.Dataset, variable: str, reach: float | None = None) -> list[np.ndarray]:
+    """The samples grouped by every input but ``variable``, each group sorted by it (sample indices).
+
+    ``reach``: a group is cut where two neighbours lie farther apart than this in ``variable``. A sweep
+    carries a state over a step as a run-up does only where the step is short; over a long one (two listed
+    speeds 1200 rpm apart) the carried state follows no branch and is one more start at twice the cost.
+
+    Examples
+    --------
+    >>> from uqgear.physics.integration import samples_from_mapping
+    >>> samples = samples_from_mapping({"pinion_speed": [3850.0, 3800.0, 5000.0], "adhesion_torque": [2e4] * 3})
+    >>> [g.tolist() for g in sweep_order(samples, "pinion_speed")]
+    [[1, 0, 2]]
+    >>> [g.tolist() for g in sweep_order(samples, "pinion_speed", reach=100.0)]
+    [[1, 0], [2]]
+    """
     if variable not in samples:
         return [np.array([i]) for i in range(samples.sizes["sample"])]
     others = [
@@ -221,7 +235,14 @@ def sweep_order(samples: xr.Dataset, variable: str) -> list[np.ndarray]:
     for index in range(n):
         groups.setdefault(rows[index].tobytes(), []).append(index)
     values = np.asarray(samples[variable].values, dtype=float)
-    return [np.asarray(members)[np.argsort(values[members], kind="stable")] for members in groups.values()]
+    ordered = [np.asarray(members)[np.argsort(values[members], kind="stable")] for members in groups.values()]
+    if reach is None:
+        return ordered
+    cut: list[np.ndarray] = []
+    for members in ordered:
+        gaps = np.nonzero(np.diff(values[members]) > reach)[0]
+        cut += np.split(members, gaps + 1) if gaps.size else [members]
+    return cut
 
 
 def with_starts(samples: xr.Dataset, index: np.ndarray, states: np.ndarray) -> xr.Dataset:
@@ -390,6 +411,7 @@ class MultiStartSearch:
         rest: xr.Dataset | None = None,
         seeded_rows: np.ndarray | None = None,
         sweep_entry: Mapping[str, np.ndarray] | None = None,
+        sweep_reach: float | None = None,
     ) -> MultiStartSearch:
         """Run the starts and group the responses (``design`` only for the box's scales; default the
         evaluator's ``design``).
@@ -419,7 +441,7 @@ class MultiStartSearch:
         stages: dict[str, xr.Dataset] = {"rest": rest}
         self.start_states_ = {"rest": np.full((n, 6), np.nan)}
         if settings.sweeps:
-            runs += self._sweep_stages(evaluate, samples, rest, stages, sweep_entry)
+            runs += self._sweep_stages(evaluate, samples, rest, stages, sweep_entry, sweep_reach)
         for label, states in (extra_states or {}).items():
             states = np.asarray(states, dtype=float)
             if states.shape != (n, 6):
@@ -458,10 +480,11 @@ class MultiStartSearch:
         rest: xr.Dataset,
         stages: dict,
         entry: Mapping[str, np.ndarray] | None = None,
+        reach: float | None = None,
     ) -> int:
         """Add the ``up`` and ``down`` stages (and their start states) of :meth:`fit`; returns the runs made."""
         n = samples.sizes["sample"]
-        groups = sweep_order(samples, self.settings.sweep_variable)
+        groups = sweep_order(samples, self.settings.sweep_variable, reach)
         starts = {direction: np.full((n, 6), np.nan) for direction in ("up", "down")}
         entered = {
             direction: np.all(np.isfinite(np.asarray(entry[direction], dtype=float)), axis=1)

@@ -49,8 +49,9 @@ from ..physics.integration import QOI_INFO
 from .coexistence import PER_ATTRACTOR, summarise
 from .settings import SimulationSettings
 
-#: How far (in window margins) a grid point outside a window may lie from the window point whose sweeps it enters:
-#: the margin is at least the study's finest speed step, so twice it takes in the analyses' own grid steps.
+#: How far (in window margins) a grid point may lie from the one whose final state a sweep carries into it (from
+#: outside a window, or between window points): the margin is at least the study's finest speed step, so twice it
+#: takes in the analyses' own grid steps, and a longer step (listed speeds of a single-speed analysis) is no sweep.
 ENTRY_REACH = 2.0
 #: The node input of the windows: the uncertain adhesion torque.
 NODE_PARAMETER = "adhesion_torque"
@@ -230,6 +231,7 @@ class GuidedStartModel:
                 rest=rest,
                 seeded_rows=branching,
                 sweep_entry=entry,
+                sweep_reach=ENTRY_REACH * float(self.windows.margin),
             )
             found = summarise(search, subset, poincare=self.poincare)
             if self.exponents is not None and "largest_lyapunov" in rest:
