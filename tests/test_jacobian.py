@@ -17,22 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from effect_families import FAMILIES
 
 import uqgear
 from uqgear.physics import _kernels as K
 from uqgear.physics import _variational as V
-from uqgear.physics.effects import make_effect
 from uqgear.physics.model import build_model
 
-FAMILIES = {
-    "healthy": (),
-    "eccentricity": (make_effect("eccentricity", {"amplitude": 12e-6, "kappa": 0.05}),),
-    "tooth_damage": (make_effect("tooth_damage", {"depth": 0.3}),),
-    "friction": (make_effect("friction", {"coefficient": 0.08}),),
-    "torque_ripple": (make_effect("torque_ripple", {"amplitude": 0.05, "pole_pairs": 3}),),
-    "adhesion_oscillation": (make_effect("adhesion_oscillation", {"amplitude": 0.05}),),
-    "bearing_clearance": (make_effect("bearing_clearance", {"clearance": 10e-6, "bearing": "both"}),),
-}
 #: DTE beyond the backlash (m) and bearing deflection (m) of the states the Jacobian is taken at
 DEPTH = 2e-5
 

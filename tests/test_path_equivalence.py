@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from effect_families import FAMILIES
 
 import uqgear
 from uqgear.physics import batch_setup
-from uqgear.physics.effects import make_effect
 from uqgear.physics.model import STIFFNESS_MODES
 from uqgear.physics.pitch_errors import PitchErrors
 
@@ -28,16 +28,6 @@ from uqgear.physics.pitch_errors import PitchErrors
 TOLERANCE = 1e-11
 #: The same between the scipy reference's two right-hand sides at rtol 3e-14 (adaptive steps).
 SCIPY_TOLERANCE = 1e-8
-#: Each effect family of the library, at a setting that moves the response.
-FAMILIES = {
-    "healthy": (),
-    "eccentricity": (make_effect("eccentricity", {"amplitude": 12e-6, "kappa": 0.05}),),
-    "tooth_damage": (make_effect("tooth_damage", {"depth": 0.3}),),
-    "friction": (make_effect("friction", {"coefficient": 0.08}),),
-    "torque_ripple": (make_effect("torque_ripple", {"amplitude": 0.05, "pole_pairs": 3}),),
-    "adhesion_oscillation": (make_effect("adhesion_oscillation", {"amplitude": 0.05}),),
-    "bearing_clearance": (make_effect("bearing_clearance", {"clearance": 10e-6}),),
-}
 #: (rpm, T1, T2): the locomotive in contact, and light on wet rail near the mesh resonance (teeth apart)
 POINTS = ((2000.0, 7000.0, 33.8e3), (4400.0, 2000.0, 21146.0))
 #: The pitch error of every tooth, m: an offset common to all teeth shifts x by the pair's sum, 2 OFFSET
@@ -103,3 +93,22 @@ def test_the_scipy_reference_gives_the_same_dte_on_both_paths(design, tiny, fami
     classical = uqgear.simulate(design, *point, **kw)["x"].values
     pairs = uqgear.simulate(design, *point, pitch_errors=tiny, **kw)["x"].values - SHIFT
     assert _relative(pairs, classical) <= SCIPY_TOLERANCE
+
+
+@pytest.mark.parametrize("family", list(FAMILIES))
+def test_with_mesh_damping_off_in_separation_every_fast_path_gives_the_same_dte(design, tiny, monkeypatch, family):
+    """The damping switch (docs/model/equations.md) is one rule on every path: with the mesh damping off while
+    the teeth are apart, the light wet-rail point (teeth separating) gives the same DTE on all of them, and not
+    the DTE with the damping on (the switch acts there)."""
+    kw = {"effects": FAMILIES[family], "damping_in_separation": False, **RUN}
+    point = POINTS[1]
+    classical = uqgear.simulate(design, *point, **kw)["x"].values
+    pairs = uqgear.simulate(design, *point, pitch_errors=tiny, **kw)["x"].values - SHIFT
+    assert _relative(pairs, classical) <= TOLERANCE
+    damped = uqgear.simulate(design, *point, **{**kw, "damping_in_separation": True})["x"].values
+    assert _relative(damped, classical) > 1e3 * TOLERANCE
+    runs = _batch(design, monkeypatch, tiny, **kw)
+    reference = runs.pop("one-sample")
+    for path, dte in runs.items():
+        assert _relative(dte[1], reference[1]) <= TOLERANCE, path
+        assert _relative(dte[1], classical) <= TOLERANCE, path
