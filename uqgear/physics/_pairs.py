@@ -29,6 +29,7 @@ import numba as nb
 
 from uqgear.physics._rhs import (
     CONTACT_RATIO,
+    DAMP_IN_SEPARATION,
     ECC_KAPPA,
     ECC_OMEGA,
     ECC_PHASE,
@@ -256,19 +257,10 @@ def _slot(x, k, friction, offset, b, in_mesh):
 
 
 @nb.njit(**INLINED)
-def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
-    """The per-pair right-hand side from a stage's terms (4-tuples of the pair slots' stiffness and friction
-    term, drive, e''), the slots' pitch offsets and the pairs in mesh, with a quotient function
-    (:func:`~uqgear.physics._rhs.state_derivative_by`): the one expression of both pair kernels.
-
-    The pair sums in slot order (a slot beyond those in mesh has zero stiffness and friction: adding
-    its zero product leaves a sum's bits as they are), then the model's accelerations
-    (:func:`~uqgear.physics._rhs._accelerations` with k = sum k_i f(x - e_i), f(x) = 1 and the
-    friction sum as the friction term: the products by 1.0 are exact). Returns (ds/dt, F, exact).
-    """
-    k, friction, drive, ste_acc = terms
-    x = s[2]
-    b = c[0]
+def _pair_sums(x, k, friction, offsets, n_pairs, b):
+    """(sum k_i f(x - e_i), sum of the friction terms f(x - e_i), number of pairs in mesh and in contact) over
+    the four pair slots in slot order (a slot beyond those in mesh has zero stiffness and friction: adding its
+    zero product leaves a sum's bits as they are)."""
     k0, f0, t0 = _slot(x, k[0], friction[0], offsets[0], b, 0 < n_pairs)
     k1, f1, t1 = _slot(x, k[1], friction[1], offsets[1], b, 1 < n_pairs)
     k2, f2, t2 = _slot(x, k[2], friction[2], offsets[2], b, 2 < n_pairs)
@@ -281,8 +273,37 @@ def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
     sliding += f1
     sliding += f2
     sliding += f3
-    damping = mesh_damping(c, t0 + t1 + t2 + t3 == 0.0)
+    return elastic, sliding, t0 + t1 + t2 + t3
+
+
+@nb.njit(**INLINED)
+def pair_derivative_by(s, terms, offsets, n_pairs, c, divide, inverse):
+    """The per-pair right-hand side from a stage's terms (4-tuples of the pair slots' stiffness and friction
+    term, drive, e''), the slots' pitch offsets and the pairs in mesh, with a quotient function
+    (:func:`~uqgear.physics._rhs.state_derivative_by`): the one expression of both pair kernels.
+
+    The model's accelerations (:func:`~uqgear.physics._rhs._accelerations` with k = sum k_i f(x - e_i),
+    f(x) = 1 and the friction sum as the friction term: the products by 1.0 are exact) over
+    :func:`_pair_sums`; the mesh damping off where no pair touches and the model has no damping in
+    separation. Returns (ds/dt, F, exact).
+    """
+    k, friction, drive, ste_acc = terms
+    elastic, sliding, touching = _pair_sums(s[2], k, friction, offsets, n_pairs, c[0])
+    damping = mesh_damping(c, touching == 0.0)
     return _accelerations(s, elastic, sliding, drive, ste_acc, c, 1.0, damping, divide, inverse)
+
+
+@nb.njit(**INLINED)
+def _stage_of(terms):
+    """A pair path's forcing 18-tuple as the stage terms and slot offsets of :func:`pair_derivative_by`."""
+    stage = (
+        (terms[PAIR_K], terms[PAIR_K + 1], terms[PAIR_K + 2], terms[PAIR_K + 3]),
+        (terms[PAIR_FRICTION], terms[PAIR_FRICTION + 1], terms[PAIR_FRICTION + 2], terms[PAIR_FRICTION + 3]),
+        terms[2],
+        terms[4],
+    )
+    offsets = (terms[PAIR_OFFSET], terms[PAIR_OFFSET + 1], terms[PAIR_OFFSET + 2], terms[PAIR_OFFSET + 3])
+    return stage, offsets
 
 
 @nb.njit(**INLINED)
@@ -293,21 +314,33 @@ def derivative_pairs(s, terms, p):
     ``damping_in_separation`` off it stops when no pair is in contact.
     ``terms``: the 18-tuple of :func:`forcing_pairs`.
     """
-    stage = (
-        (terms[PAIR_K], terms[PAIR_K + 1], terms[PAIR_K + 2], terms[PAIR_K + 3]),
-        (terms[PAIR_FRICTION], terms[PAIR_FRICTION + 1], terms[PAIR_FRICTION + 2], terms[PAIR_FRICTION + 3]),
-        terms[2],
-        terms[4],
-    )
-    offsets = (terms[PAIR_OFFSET], terms[PAIR_OFFSET + 1], terms[PAIR_OFFSET + 2], terms[PAIR_OFFSET + 3])
+    stage, offsets = _stage_of(terms)
     d, force, _ = pair_derivative_by(s, stage, offsets, int(terms[PAIR_COUNT]), coefficients(p), divided, NO_INVERSE)
     return d, force
 
 
 @nb.njit(**INLINED)
-def _pairs_field(s, terms, p, divide):
-    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_stages`."""
-    d, _ = derivative_pairs(s, terms, p)
+def side_derivative_pairs(s, terms, p, apart):
+    """:func:`derivative_pairs` with the mesh damping of one side of a contact boundary, whatever x is: off where
+    ``apart`` (no pair touching) and the model has no damping in separation, as
+    :func:`~uqgear.physics._rhs.side_derivative` for the classical path. With damping in separation this is
+    :func:`derivative_pairs`, bit for bit."""
+    stage, offsets = _stage_of(terms)
+    k, friction, drive, ste_acc = stage
+    c = coefficients(p)
+    elastic, sliding, _ = _pair_sums(s[2], k, friction, offsets, int(terms[PAIR_COUNT]), c[0])
+    d, force, _ = _accelerations(
+        s, elastic, sliding, drive, ste_acc, c, 1.0, mesh_damping(c, apart), divided, NO_INVERSE
+    )
+    return d, force
+
+
+@nb.njit(**INLINED)
+def _pairs_side_field(s, terms, context, divide):
+    """:func:`side_derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_stages`: ``context``
+    (parameters, apart)."""
+    p, apart = context
+    d, _ = side_derivative_pairs(s, terms, p, apart)
     return d, True
 
 
@@ -321,10 +354,44 @@ def pair_lane_field(s, terms, context, divide):
 
 
 @nb.njit(**INLINED)
+def _pairs_field(s, terms, p, divide):
+    """:func:`derivative_pairs` as a field of :func:`~uqgear.physics._stepper.rk4_stages`."""
+    d, _ = derivative_pairs(s, terms, p)
+    return d, True
+
+
+@nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
     """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative."""
     d2, d3, d4, _ = rk4_stages(_pairs_field, divided, s, h, d1, mid, end, p)
     return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+
+
+@nb.njit(**INLINED)
+def _rk4_pairs_side(s, h, d1, mid, end, p, apart):
+    """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative on one side's mesh damping
+    (:func:`side_derivative_pairs`)."""
+    d2, d3, d4, _ = rk4_stages(_pairs_side_field, divided, s, h, d1, mid, end, (p, apart))
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+
+
+@nb.njit(**INLINED)
+def _changes_contact(x, trial_x, terms, b):
+    """Whether some pair in mesh changes its contact region from deflection ``x`` to ``trial_x``."""
+    changed = False
+    for i in range(int(terms[PAIR_COUNT])):
+        offset = terms[PAIR_OFFSET + i]
+        changed |= contact_region(x - offset, b) != contact_region(trial_x - offset, b)
+    return changed
+
+
+@nb.njit(**INLINED)
+def _apart(x, terms, b):
+    """Whether no pair in mesh touches at deflection ``x`` (``terms``: a pair path's forcing 18-tuple)."""
+    touching = False
+    for i in range(int(terms[PAIR_COUNT])):
+        touching |= contact_region(x - terms[PAIR_OFFSET + i], b) != 0
+    return not touching
 
 
 @nb.njit(**INLINED)
@@ -356,14 +423,44 @@ def _first_crossing(s, trial, h, terms, p, split_level):
 
 
 @nb.njit(**INLINED)
+def _apart_after(x, before_x, trial_x, terms, b, level):
+    """Whether no pair touches on the side a step split at boundary ``level`` enters: a pair that crosses that
+    boundary over the step (from ``before_x`` to ``trial_x``) is in the region it enters, the others where ``x``
+    (the split point) puts them."""
+    touching = False
+    for i in range(int(terms[PAIR_COUNT])):
+        offset = terms[PAIR_OFFSET + i]
+        before = contact_region(before_x - offset, b)
+        after = contact_region(trial_x - offset, b)
+        region = contact_region(x - offset, b)
+        if before != after:
+            crossed, entered = crossed_boundary(before, after, b)
+            if offset + crossed == level:
+                region = entered
+        touching |= region != 0
+    return not touching
+
+
+@nb.njit(**INLINED)
 def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg):
     """One RK4 step over [t, t+h] (one pair set), redone in parts at each pair's contact change.
 
     The classical path splits once, at |x| = b; here several pairs may change
     state within a step, so the remainder is checked again (at most
     ``2 MAX_PAIRS`` splits: each pair has two boundaries), each boundary once.
+    Each part runs on the mesh damping of its own side (:func:`side_derivative_pairs`), as the classical
+    split does (:func:`~uqgear.physics._stepper._split_at_contact`): without damping in separation the
+    damping force switches where the last pair leaves contact, and a stage on the other side's damping
+    costs an error of the order of the step at every crossing. The crossing is then located on the step
+    taken on the first side's damping throughout. With damping in separation both sides' damping is the
+    same and the parts are the plain RK4 steps, bit for bit; a step that changes no pair's contact is the
+    plain RK4 step on either model, as in the pair lanes.
     """
     trial = _rk4_pairs(s, h, d1, mid, end, p)
+    b = p[HALF_BACKLASH]
+    apart = _apart(s[2], terms, b)
+    if (p[DAMP_IN_SEPARATION] == 0.0) and _changes_contact(s[2], trial[2], terms, b):
+        trial = _rk4_pairs_side(s, h, d1, mid, end, p, apart)
     split_level = math.nan
     for _ in range(2 * MAX_PAIRS):
         theta, split_level = _first_crossing(s, trial, h, terms, p, split_level)
@@ -371,17 +468,22 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
             return trial
         h_a = theta * h
         middle = forcing_pairs(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-        s = _rk4_pairs(s, h_a, d1, forcing_pairs(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p)
+        part = _rk4_pairs_side(
+            s, h_a, d1, forcing_pairs(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p, apart
+        )
+        apart = _apart_after(part[2], s[2], trial[2], terms, b, split_level)
+        s = part
         t += h_a
         h -= h_a
-        d1, _ = derivative_pairs(s, middle, p)
-        trial = _rk4_pairs(
+        d1, _ = side_derivative_pairs(s, middle, p, apart)
+        trial = _rk4_pairs_side(
             s,
             h,
             d1,
             forcing_pairs(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg),
             forcing_pairs(t + h, t_ref, p, pair_k, period_k, fp, fg),
             p,
+            apart,
         )
     return trial
 
@@ -402,8 +504,19 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
     teeth = _tooth_terms(n, p, fp, fg)
     for sub in range(first_sub[j], first_sub[j + 1]):
         new, d1, f = substep_pairs(
-            start + offsets[sub], widths[sub], s, teeth, table, sub, pairs[sub], start + refs[sub], p, pair_k,
-            period_k, fp, fg,
+            start + offsets[sub],
+            widths[sub],
+            s,
+            teeth,
+            table,
+            sub,
+            pairs[sub],
+            start + refs[sub],
+            p,
+            pair_k,
+            period_k,
+            fp,
+            fg,
         )
         if sub == first_sub[j]:
             force = f
