@@ -50,8 +50,9 @@ MAX_MODULE_LINES = 800
 STRICT = ("diagnosis", "validation", "common", "cli.py")
 SIZED = STRICT[:2]
 #: Their limits: lines of a module, lines of code of a function (without its docstring, comments and blank
-#: lines), lines of a class.
-STRICT_MODULE_LINES, STRICT_FUNCTION_CODE_LINES, STRICT_CLASS_LINES = 500, 80, 250
+#: lines), lines of a class. A module is cut along its concepts, not to a size: one that holds one concept
+#: may run to the package's longest module, while its functions stay short.
+STRICT_MODULE_LINES, STRICT_FUNCTION_CODE_LINES, STRICT_CLASS_LINES = 800, 80, 250
 
 
 def _module_name(path: Path) -> str:
@@ -227,7 +228,7 @@ def _code_lines(node: ast.AST, source: list[str]) -> int:
 
 
 def test_modules_functions_and_classes_keep_their_size():
-    """A module does one job: under 500 lines, functions under 80 lines of code, classes under 250 lines."""
+    """A module holds one concept: at most 800 lines, functions under 80 lines of code, classes under 250 lines."""
     too_long = []
     for path in _strict_files(SIZED):
         text = path.read_text()

@@ -29,14 +29,11 @@ import xarray as xr
 from ..physics import _kernels as K
 from ..physics.batch_setup import build_batch, kernel_inputs
 from ..physics.design import Design
-from ..physics.effects import Effect
+from ..physics.effects import MESH_PERIODIC_EFFECTS, Effect
 from ..physics.integration import steps_per_period
 from ..physics.threads import spread
 from ..rig.features import extract_features
 from .errors import CalibrationError
-
-#: Effects that keep the model periodic in the mesh period (Newton shooting applies).
-MESH_PERIODIC_EFFECTS = frozenset({"friction", "bearing_clearance"})
 
 #: Channels of :func:`model_harmonics`, in order.
 HARMONIC_CHANNELS: tuple[str, ...] = ("te", "acc_pinion", "acc_gear")

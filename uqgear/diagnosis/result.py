@@ -15,6 +15,7 @@ from .allowances.sideband_phase import ModulationEvidence
 from .case import RigCase
 from .decision import Decision
 from .effect_set import SelectedEffect, SelectionRound
+from .effects import hooks_of
 from .fitting import FitResult
 from .heldout import HeldOut
 from .scoring import CandidateScore
@@ -90,15 +91,13 @@ class DiagnosisResult:
 
     @property
     def named_shafts(self) -> list[str]:
-        """The shafts whose eccentricity the diagnosis named."""
-        return sorted(
-            {
-                str(dict(candidate.choices)["shaft"])
-                for chosen in self.selected
-                for candidate in chosen.entry.fit.problem.candidates
-                if candidate.effect == "eccentricity"
-            }
+        """The shafts whose run-out the diagnosis named (effects with a :attr:`~.effects.EffectFamily.run_out` hook)."""
+        shafts = (
+            hooks_of(candidate.effect).run_out_shaft(dict(candidate.choices))
+            for chosen in self.selected
+            for candidate in chosen.entry.fit.problem.candidates
         )
+        return sorted({shaft for shaft in shafts if shaft is not None})
 
     def cannot_tell(self) -> list[dict[str, Any]]:
         """Run-outs the lines cannot tell from the gears' own pitch errors.

@@ -23,7 +23,7 @@ import numpy as np
 from .allowances.pitch_errors import modulation_gain, with_own_allowance
 from .candidates import Candidate
 from .case import RigCase
-from .effects import candidates_for
+from .effects import candidates_for, hooks_of
 from .first_effect import set_comes_first
 from .fit_problem import robust_cost
 from .fitting import FitResult, fit, fit_candidate
@@ -115,13 +115,16 @@ def supersedes(full: CandidateScore, best: CandidateScore) -> bool:
 
 
 def measure_modulation(case: RigCase, full: CandidateScore) -> None:
-    """Set an eccentricity full fit's ``modulation_gain`` where pitch errors apply.
+    """Set a run-out's full fit's ``modulation_gain`` where pitch errors apply.
 
-    Only there does the run-out check (:func:`~.verdict.run_out_check`) need
-    it; elsewhere it stays None at no cost.
+    A run-out is an effect whose family has a
+    :attr:`~.effects.EffectFamily.run_out` hook (eccentricity in the library).
+    Only where pitch errors apply does the run-out check
+    (:func:`~.verdict.run_out_check`) need it; elsewhere it stays None at no cost.
     """
-    if full.effect == "eccentricity" and case.run_out_allowance:
-        full.modulation_gain = modulation_gain(full.fit)
+    family = hooks_of(full.effect)
+    if family.run_out is not None and case.run_out_allowance:
+        full.modulation_gain = modulation_gain(full.fit, family.parameter_name(family.run_out.modulation))
 
 
 def best_per_effect(entries: Sequence[CandidateScore]) -> dict[str, CandidateScore]:

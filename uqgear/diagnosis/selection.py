@@ -21,7 +21,7 @@ from .allowances.pitch_errors import first_order_reads, with_own_allowance
 from .allowances.sideband_phase import ModulationEvidence, fit_modulated_run_out, modulation_evidence, shafts_tested
 from .decision import Decision
 from .effect_set import SelectedEffect, SelectionRound
-from .effects import candidates_for
+from .effects import EffectFamily, candidates_for, run_out_family
 from .first_effect import FirstDecision, starts_a_set
 from .fitting import fit_candidate
 from .heldout import leave_one_out
@@ -243,14 +243,16 @@ def forward_selection(
 
 
 def phase_named_run_out(
-    state: DiagnosisState, selected: list[SelectedEffect], decision: Decision
+    state: DiagnosisState, family: EffectFamily, selected: list[SelectedEffect], decision: Decision
 ) -> tuple[list[ModulationEvidence], tuple[list[SelectedEffect], Decision] | None]:
-    """Test the shafts' sideband phase sums for an eccentricity the amplitudes cannot tell from pitch errors.
+    """Test the shafts' sideband phase sums for a run-out the amplitudes cannot tell from pitch errors.
 
-    Each shaft :func:`~.allowances.sideband_phase.shafts_tested` admits is
-    tested against the final model
+    ``family`` is the effect a shaft run-out is named as (its
+    :attr:`~.effects.EffectFamily.run_out` hook; eccentricity in the
+    library). Each shaft :func:`~.allowances.sideband_phase.shafts_tested`
+    admits is tested against the final model
     (:func:`~.allowances.sideband_phase.modulation_evidence`); the shaft with
-    the strongest decisive evidence gets its eccentricity fitted on top
+    the strongest decisive evidence gets its run-out fitted on top
     (:func:`~.allowances.sideband_phase.fit_modulated_run_out`) and added to
     the set, with its own share of the shrink (negative where it widens the
     held-out gap).
@@ -281,11 +283,12 @@ def phase_named_run_out(
         return found_evidence, None
     evidence = max(decisive, key=lambda item: item.log_ratio)
     with state.steps.step(f"fit the eccentric {evidence.shaft} shaft the sideband phases name") as finding:
-        entry = fit_modulated_run_out(case, base_fit, base_held, evidence, state.rng, settings=settings)
+        entry = fit_modulated_run_out(case, base_fit, base_held, evidence, state.rng, family=family, settings=settings)
         finding.update(found(entry))
     share = (base_gap - entry.gap_with_effect) / state.nominal_gap if state.nominal_gap > 0 else 0.0
-    run_out = float(entry.parameters()["amplitude"])  # type: ignore[arg-type]
-    low, high = entry.parameter_intervals().get("amplitude", (math.nan, math.nan))
+    amplitude = family.run_out.amplitude  # type: ignore[union-attr]
+    run_out = float(entry.parameters()[amplitude])  # type: ignore[arg-type]
+    low, high = entry.parameter_intervals().get(amplitude, (math.nan, math.nan))
     # the amplitudes cannot tell the run-out from the gear's own first-order errors: its interval says how much
     reason = (
         f"{evidence.reason()}; fitted on top, its run-out is left open by the line amplitudes, which "
@@ -293,7 +296,9 @@ def phase_named_run_out(
         f"interval {1e6 * low:.3g} to {1e6 * high:.3g} um), and it changes the held-out gap from "
         f"{base_gap:.2f} to {entry.gap_with_effect:.2f}"
     )
-    added, whole = phase_named_decision(decision, reason, entry.gap_with_effect, set_named=bool(selected))
+    added, whole = phase_named_decision(
+        decision, reason, entry.gap_with_effect, set_named=bool(selected), effect=family.name
+    )
     chosen = SelectedEffect(
         entry, base_gap, share, added, bootstrap_gap(entry.held.z, state.rng, settings.bootstrap_resamples)
     )
@@ -374,22 +379,24 @@ def effect_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
 def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_applied: bool) -> NamedSet:
     """The set with an eccentric shaft its sideband phases name (:func:`phase_named_run_out`), where the test applies.
 
-    It applies where the pitch-error allowance was applied, eccentricity is
-    a candidate not in the set, the verdict is not ``unexplained`` and the
+    It applies where the pitch-error allowance was applied, a family that
+    reads as a shaft run-out (:func:`~.effects.run_out_family`: eccentricity)
+    is a candidate not in the set, the verdict is not ``unexplained`` and the
     set has room for it. ``named`` is updated in place and returned.
     """
     settings = state.settings
     assert named.decision is not None
     in_set = [chosen.entry.effect for chosen in named.selected]
+    family = run_out_family(state.effects)
     if (
         allowance_applied
-        and "eccentricity" in state.effects
+        and family is not None
         and named.decision.verdict != "unexplained"
         and len(named.selected) < settings.max_effects
-        and "eccentricity" not in in_set
+        and family.name not in in_set
     ):
         clock = time.perf_counter()
-        named.modulation, added = phase_named_run_out(state, named.selected, named.decision)
+        named.modulation, added = phase_named_run_out(state, family, named.selected, named.decision)
         if added is not None:
             named.selected, named.decision = added
         state.timings["sideband_phases"] = time.perf_counter() - clock

@@ -102,15 +102,16 @@ def unled_decision(decision: Decision, first: CandidateScore, trial: Sequence[Se
 
 
 def phase_named_decision(
-    decision: Decision, reason: str, remaining_gap: float, *, set_named: bool
+    decision: Decision, reason: str, remaining_gap: float, *, set_named: bool, effect: str
 ) -> tuple[Decision, Decision]:
-    """The decision that adds an eccentric shaft the sideband phases name, and the set's decision with it.
+    """The decision that adds a shaft run-out the sideband phases name, and the set's decision with it.
 
-    Returns the eccentricity's own decision and the whole set's: the set's
-    decision with the reason appended when a set was named before, else the
-    eccentricity's own.
+    ``effect`` is the run-out's effect (the family with a
+    :attr:`~.effects.EffectFamily.run_out` hook: eccentricity). Returns its
+    own decision and the whole set's: the set's decision with the reason
+    appended when a set was named before, else the run-out's own.
     """
-    added = Decision("eccentricity", reason, remaining_gap=remaining_gap)
+    added = Decision(effect, reason, remaining_gap=remaining_gap)
     whole = (
         replace(decision, reason=f"{decision.reason}; {reason}", remaining_gap=remaining_gap) if set_named else added
     )

@@ -18,7 +18,7 @@ from typing import Any
 from .case import RigCase
 from .consistency import check_channels, inconsistent_decision
 from .decision import Decision
-from .effects import effect_names
+from .effects import effect_names, hooks_of
 from .scoring import CandidateScore, RunOutCheck
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
@@ -34,24 +34,27 @@ VERDICTS: tuple[str, ...] = EFFECT_NAMES + ("none", "unexplained", "inconclusive
 def run_out_check(
     score: CandidateScore, bounds: dict[str, float], *, settings: DiagnosisSettings = DEFAULT_SETTINGS
 ) -> RunOutCheck | None:
-    """An eccentricity's run-out against the pitch-error classes' first-order run-out on its shaft, or None.
+    """A run-out's fit against the pitch-error classes' first-order run-out on its shaft, or None.
 
+    It applies to an effect whose family reads as a shaft run-out (its
+    :attr:`~.effects.EffectFamily.run_out` hook: eccentricity in the library).
     ``bounds`` are the case's :attr:`~uqgear.diagnosis.case.RigCase.run_out_allowance`
     (empty without a pitch-error allowance). The fit counts as modulated when
     it is worse by at least the effect-gain threshold with its mesh-stiffness
     modulation off, which pitch errors do not make.
     """
-    if score.effect != "eccentricity" or not bounds:
+    family = hooks_of(score.effect)
+    if family.run_out is None or not bounds:
         return None
     values = score.parameters()
-    bound = bounds.get(str(values.get("shaft")))
+    bound = bounds.get(str(family.run_out_shaft(values)))
     if bound is None:
         return None
     modulated = score.modulation_gain is not None and score.modulation_gain >= settings.effect_gain_threshold
-    amplitude = float(values.get("amplitude", math.nan))  # type: ignore[arg-type]
+    amplitude = float(values.get(family.run_out.amplitude, math.nan))  # type: ignore[arg-type]
     # the run-out as far as the data pin it: it enters the TE directly; without a TE channel it is read
     # through the dynamics, where a gear's own first-order pitch error reads the same, so it is not measured
-    interval = score.parameter_intervals().get("amplitude") if "te" in score.channels else None
+    interval = score.parameter_intervals().get(family.run_out.amplitude) if "te" in score.channels else None
     low = float(interval[0]) if interval is not None else 0.0
     return RunOutCheck(amplitude, bound, modulated, low)
 

@@ -34,13 +34,11 @@ from ..common.errors import OperatingPointError, UqgearError
 from ..physics import _kernels as K
 from ..physics import _variational as V
 from ..physics.design import Design
+from ..physics.effects import MESH_PERIODIC_EFFECTS
 from ..physics.integration import BATCH_DESIGN_KEYS, steps_per_period
 from ..physics.model import ModelSetup, build_model
 from .floquet import floquet_multipliers, is_stable
 
-#: Effects under which the model still repeats every mesh period (friction reverses at the pitch
-#: point every mesh period; bearing clearance is a state nonlinearity).
-MESH_PERIODIC_EFFECTS = ("friction", "bearing_clearance")
 #: Operating variables an orbit's model can be set by (besides the design keys).
 ORBIT_VARIABLES = ("pinion_speed", "drive_torque", "adhesion_torque", "mesh_stiffness_scale")
 

@@ -27,6 +27,7 @@ from .design import (
 )
 from .effects import (
     EFFECTS,
+    MESH_PERIODIC_EFFECTS,
     AdhesionOscillation,
     BearingClearance,
     Eccentricity,
@@ -111,6 +112,7 @@ __all__ = [
     "EffectParameter",
     "EffectError",
     "EFFECTS",
+    "MESH_PERIODIC_EFFECTS",
     "make_effect",
     "parse_effect",
     "Eccentricity",

@@ -42,6 +42,9 @@ class Effect:
     name: ClassVar[str] = ""
     PARAMETERS: ClassVar[dict[str, EffectParameter]] = {}
     CHOICES: ClassVar[dict[str, tuple[str, ...]]] = {}
+    #: Whether the model under this effect still repeats every mesh period (Newton shooting and the
+    #: calibration's harmonic kernel apply); an effect with a slower or unrelated period does not.
+    mesh_periodic: ClassVar[bool] = False
 
     def __init__(self, values: Mapping[str, Any] | None = None) -> None:
         values = dict(values or {})
@@ -134,6 +137,8 @@ class Friction(Effect):
     entering the torsional equations only."""
 
     name = "friction"
+    # it reverses at the pitch point once every mesh period
+    mesh_periodic = True
     PARAMETERS = {"coefficient": EffectParameter(0.05, 0.0, 0.3, "1", "sliding friction coefficient mu_f")}
 
     def apply(self, setup) -> None:
@@ -182,6 +187,8 @@ class BearingClearance(Effect):
     """Radial bearing clearance: a dead zone of half-width c in the bearing force."""
 
     name = "bearing_clearance"
+    # a state nonlinearity: it brings no period of its own
+    mesh_periodic = True
     CHOICES = {"bearing": ("pinion", "gear", "both")}
     PARAMETERS = {"clearance": EffectParameter(10e-6, 0.0, 5e-4, "m", "half clearance c")}
 
@@ -196,6 +203,11 @@ class BearingClearance(Effect):
 EFFECTS: dict[str, type[Effect]] = {
     cls.name: cls for cls in (Eccentricity, ToothDamage, Friction, TorqueRipple, AdhesionOscillation, BearingClearance)
 }
+
+#: The library's effects under which the model still repeats every mesh period (their ``mesh_periodic``),
+#: in library order: friction reverses at the pitch point every mesh period; a bearing clearance is a state
+#: nonlinearity.
+MESH_PERIODIC_EFFECTS: tuple[str, ...] = tuple(name for name, cls in EFFECTS.items() if cls.mesh_periodic)
 
 
 def make_effect(name: str, values: Mapping[str, Any] | None = None) -> Effect:
@@ -261,6 +273,7 @@ __all__ = [
     "EffectParameter",
     "EffectError",
     "EFFECTS",
+    "MESH_PERIODIC_EFFECTS",
     "make_effect",
     "parse_effect",
     "Eccentricity",

@@ -17,7 +17,13 @@ from .features import (
 )
 from .foreign_modes import ForeignModes, bearing_check_plan, natural_modes
 from .foreign_response import foreign_qois
-from .foreign_rig import ForeignGears, draw_gears, simulate_foreign_campaign, simulate_foreign_run
+from .foreign_rig import (
+    ForeignGears,
+    draw_gears,
+    register_foreign_physics,
+    simulate_foreign_campaign,
+    simulate_foreign_run,
+)
 from .format import (
     CONVENTIONS,
     RIG_COORDINATES,
@@ -70,6 +76,7 @@ __all__ = [
     "draw_gears",
     "simulate_foreign_campaign",
     "simulate_foreign_run",
+    "register_foreign_physics",
     "foreign_qois",
     "ForeignModes",
     "natural_modes",

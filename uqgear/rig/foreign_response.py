@@ -42,11 +42,11 @@ from ..physics.effects import Effect
 from .foreign_rig import (
     _N_STATE,
     ForeignGears,
-    _effect_vector,
     _pair_sum,
     _parameters,
     _rk4_step,
     _static_state,
+    effect_vector,
     time_step,
 )
 
@@ -185,7 +185,7 @@ def foreign_qois(
             f"pinion_speed, drive_torque, adhesion_torque: expected equal lengths or scalars; got "
             f"{speed.size}, {torque.size}, {load.size}"
         ) from None
-    eff = _effect_vector(effects, design)
+    eff = effect_vector(effects, design)
     runs = [_one_run(design, *point, gears, eff, float(start), float(duration)) for point in zip(speed, torque, load)]
     data = {
         name: ("point", np.array([run[name] for run in runs]), {"units": units, "long_name": meaning})

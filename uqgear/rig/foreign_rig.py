@@ -36,9 +36,10 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -46,7 +47,15 @@ from numba import njit
 
 from ..common.errors import RigDataError
 from ..physics.design import Design
-from ..physics.effects import Effect
+from ..physics.effects import (
+    AdhesionOscillation,
+    BearingClearance,
+    Eccentricity,
+    Effect,
+    Friction,
+    ToothDamage,
+    TorqueRipple,
+)
 from ..uq.seeds import as_seed_sequence, child_seed
 from .format import make_rig_dataset
 from .virtual_rig import frequency_filter
@@ -246,31 +255,113 @@ def _integrate(y0, p, pin_err, gear_err, eff, step, n_out, per_out):  # pragma: 
     return out
 
 
-def _effect_vector(effects: Sequence[Effect], design: Design) -> np.ndarray:
-    """The effects' parameters in the compiled layout (zeros: absent)."""
+#: How an effect's values enter the compiled effect vector: ``encoder(values, design, eff)`` writes its slots.
+EffectEncoder = Callable[[Mapping[str, Any], Design, np.ndarray], None]
+
+# the foreign physics of each effect, by effect name (register_foreign_physics)
+_ENCODERS: dict[str, EffectEncoder] = {}
+
+
+def register_foreign_physics(effect: type[Effect]) -> Callable[[EffectEncoder], EffectEncoder]:
+    """Give an effect its physics on the foreign rig: a decorator for the function that writes its slots.
+
+    The compiled model has fixed slots (``eff``, 16 values: run-out 0-3,
+    damaged tooth 4-6, friction 7, drive torque ripple 8-10, load torque
+    oscillation 11-13, bearing clearance 14-15); the encoder writes the
+    effect's values into the slots of the physics it shares. An effect with
+    no encoder is refused by :func:`simulate_foreign_campaign`.
+
+    Parameters
+    ----------
+    effect : type of Effect
+        The physics effect (its ``name`` keys the registry).
+
+    Returns
+    -------
+    callable
+        The decorator; it registers the encoder and returns it unchanged.
+
+    Examples
+    --------
+    A drive-torque fluctuation at twice the pinion's rotation, on the drive torque ripple's slots:
+
+    >>> import math
+    >>> from uqgear.physics.effects import Effect, EffectParameter
+    >>> from uqgear.rig.foreign_rig import effect_vector, register_foreign_physics
+    >>> class Cardan(Effect):
+    ...     name = "cardan_example"
+    ...     PARAMETERS = {"amplitude": EffectParameter(0.02, 0.0, 0.5, "1", "relative fluctuation")}
+    >>> @register_foreign_physics(Cardan)
+    ... def _cardan(values, design, eff):
+    ...     eff[8:11] = (values["amplitude"], 2.0, 0.0)
+    >>> effect_vector([Cardan({"amplitude": 0.05})], None)[8:11].tolist()
+    [0.05, 2.0, 0.0]
+    """
+
+    def register(encoder: EffectEncoder) -> EffectEncoder:
+        _ENCODERS[effect.name] = encoder
+        return encoder
+
+    return register
+
+
+@register_foreign_physics(Eccentricity)
+def _eccentricity(v: Mapping[str, Any], design: Design, eff: np.ndarray) -> None:
+    eff[0:4] = (
+        0 if v.get("shaft", "pinion") == "pinion" else 1,
+        v.get("amplitude", 10e-6),
+        v.get("phase", 0.0),
+        v.get("kappa", 0.0),
+    )
+
+
+@register_foreign_physics(ToothDamage)
+def _tooth_damage(v: Mapping[str, Any], design: Design, eff: np.ndarray) -> None:
+    eff[4:7] = (0 if v.get("gear", "pinion") == "pinion" else 1, v.get("tooth", 0.0), v.get("depth", 0.3))
+
+
+@register_foreign_physics(Friction)
+def _friction(v: Mapping[str, Any], design: Design, eff: np.ndarray) -> None:
+    eff[7] = v.get("coefficient", 0.05)
+
+
+@register_foreign_physics(TorqueRipple)
+def _torque_ripple(v: Mapping[str, Any], design: Design, eff: np.ndarray) -> None:
+    pole_pairs = int(v.get("pole_pairs", 0)) or int(design.motor_pole_pairs or 3)
+    eff[8:11] = (v.get("amplitude", 0.05), 6.0 * pole_pairs, v.get("phase", 0.0))
+
+
+@register_foreign_physics(AdhesionOscillation)
+def _adhesion_oscillation(v: Mapping[str, Any], design: Design, eff: np.ndarray) -> None:
+    eff[11:14] = (v.get("amplitude", 0.05), v.get("frequency", 12.0), v.get("phase", 0.0))
+
+
+@register_foreign_physics(BearingClearance)
+def _bearing_clearance(v: Mapping[str, Any], design: Design, eff: np.ndarray) -> None:
+    eff[14:16] = ({"pinion": 0, "gear": 1, "both": 2}[v.get("bearing", "pinion")], v.get("clearance", 10e-6))
+
+
+def effect_vector(effects: Sequence[Effect], design: Design) -> np.ndarray:
+    """The effects' parameters in the compiled layout (zeros: absent), each written by its registered encoder.
+
+    Raises
+    ------
+    RigDataError
+        An effect with no physics on the foreign rig (:func:`register_foreign_physics`).
+
+    Examples
+    --------
+    >>> from uqgear.physics.effects import Friction
+    >>> from uqgear.rig.foreign_rig import effect_vector
+    >>> float(effect_vector([Friction({"coefficient": 0.08})], None)[7])
+    0.08
+    """
     eff = np.zeros(16)
     for effect in effects:
-        v = effect.values
-        if effect.name == "eccentricity":
-            eff[0:4] = (
-                0 if v.get("shaft", "pinion") == "pinion" else 1,
-                v.get("amplitude", 10e-6),
-                v.get("phase", 0.0),
-                v.get("kappa", 0.0),
-            )
-        elif effect.name == "tooth_damage":
-            eff[4:7] = (0 if v.get("gear", "pinion") == "pinion" else 1, v.get("tooth", 0.0), v.get("depth", 0.3))
-        elif effect.name == "friction":
-            eff[7] = v.get("coefficient", 0.05)
-        elif effect.name == "torque_ripple":
-            pole_pairs = int(v.get("pole_pairs", 0)) or int(design.motor_pole_pairs or 3)
-            eff[8:11] = (v.get("amplitude", 0.05), 6.0 * pole_pairs, v.get("phase", 0.0))
-        elif effect.name == "adhesion_oscillation":
-            eff[11:14] = (v.get("amplitude", 0.05), v.get("frequency", 12.0), v.get("phase", 0.0))
-        elif effect.name == "bearing_clearance":
-            eff[14:16] = ({"pinion": 0, "gear": 1, "both": 2}[v.get("bearing", "pinion")], v.get("clearance", 10e-6))
-        else:
+        encoder = _ENCODERS.get(effect.name)
+        if encoder is None:
             raise RigDataError(f"effects: the foreign rig has no physics for {effect.name!r}")
+        encoder(effect.values, design, eff)
     return eff
 
 
@@ -432,7 +523,7 @@ def simulate_foreign_run(
     size = int(round((duration + 2 * _GUARD) * rate))
     n_out = first + size
     out = _integrate(
-        _static_state(p, design), p, gears.pinion, gears.gear, _effect_vector(effects, design), step, n_out, per_out
+        _static_state(p, design), p, gears.pinion, gears.gear, effect_vector(effects, design), step, n_out, per_out
     )[first:]
     passband, stopband = fs / 2.56, fs / 2.0
     records = {}
@@ -531,8 +622,11 @@ __all__ = [
     "PLANT_NAMES",
     "ForeignGears",
     "contact_ratio",
+    "EffectEncoder",
     "draw_gears",
+    "effect_vector",
     "plant_parameters",
+    "register_foreign_physics",
     "simulate_foreign_campaign",
     "simulate_foreign_run",
     "single_pitch_tolerance",

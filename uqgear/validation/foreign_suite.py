@@ -53,8 +53,6 @@ from .campaigns import operating_points_of
 
 #: Quality grade (ISO 1328-1) of the foreign rig's gears.
 FOREIGN_GRADE = 6.0
-#: The choice of each family that must match for a campaign to be exactly right.
-_CHOICE = {"eccentricity": "shaft", "tooth_damage": "gear", "bearing_clearance": "bearing"}
 
 
 def _operating_points(plan: str, design: Design, n_ops: int) -> dict[str, np.ndarray]:
@@ -238,8 +236,9 @@ def _judged(
     named = change.get("named")
     expected = "none" if name is None else name
     right = verdict == expected
-    if right and name in _CHOICE and named is not None:
-        right = named["parameters"].get(_CHOICE[name]) == truth.get(_CHOICE[name])
+    if right and name is not None and named is not None:
+        # the effect's choices (a shaft, a gear, a bearing) must match for a campaign to be exactly right
+        right = all(named["parameters"].get(key) == truth.get(key) for key in effect_family(name).physics.CHOICES)
     largest = (change.get("test") or {}).get("largest") or {}
     visible = None if visibility is None else bool(visibility >= 1.0)
     return {

@@ -49,6 +49,7 @@ from ...physics.pitch_errors import DEFAULT_CLASSES, PitchErrors, draw_in_classe
 from ...physics.pitch_errors import check_classes as check_tolerance_classes
 from ...uq.seeds import child_seed
 from ..case import FeatureModelError, RigCase
+from ..effects import run_out_family
 from ..errors import DiagnosisError
 from ..fit_problem import FitProblem, robust_cost
 from ..fitting import FitResult, fit
@@ -367,22 +368,24 @@ def with_own_allowance(result: FitResult, *, max_evaluations: int = DEFAULT_SETT
     return refit.after(result)
 
 
-def modulation_gain(result: FitResult) -> float:
-    """How much worse an eccentricity fit is with its mesh-stiffness modulation off (robust cost).
+def modulation_gain(result: FitResult, parameter: str) -> float:
+    """How much worse a run-out's fit is with its mesh-stiffness modulation off (robust cost).
 
     Pitch errors make a first-order run-out (the cumulative pitch error) but
-    no modulation of the mesh stiffness: a fit that is clearly worse with
-    ``eccentricity.kappa`` at its lower bound ("absent") holds evidence of an
+    no modulation of the mesh stiffness: a fit that is clearly worse with its
+    modulation ``parameter`` (``FAMILY.PARAMETER``, the family's
+    :attr:`~uqgear.diagnosis.effects.RunOut.modulation`; ``eccentricity.kappa``
+    in the library) at its lower bound ("absent") holds evidence of an
     eccentric shaft that the gears' pitch errors cannot give, whatever its
     run-out. The cost is taken with the fit's own model error (its
-    pitch-error allowance), like the effect gain. NaN for a fit without an
-    eccentricity.
+    pitch-error allowance), like the effect gain. NaN for a fit without that
+    parameter.
     """
     problem = result.problem
     names = [spec.name for spec in problem.specs]
-    if "eccentricity.kappa" not in names:
+    if parameter not in names:
         return math.nan
-    index = names.index("eccentricity.kappa")
+    index = names.index(parameter)
     vector = np.array(result.vector, dtype=float)
     vector[index] = problem.lower[index]
     model, _ = problem.model_features([vector])
@@ -414,7 +417,11 @@ LARGE_RUN_OUT_SHARE = DEFAULT_SETTINGS.large_run_out_share
 
 
 def run_outs_not_told_apart(
-    allowance: PitchErrorAllowance | None, named_shafts: Sequence[str], *, share_threshold: float = LARGE_RUN_OUT_SHARE
+    allowance: PitchErrorAllowance | None,
+    named_shafts: Sequence[str],
+    *,
+    effect: str | None = None,
+    share_threshold: float = LARGE_RUN_OUT_SHARE,
 ) -> list[dict[str, Any]]:
     """Gears whose first-order errors read as a run-out large for their classes, with no eccentricity named there.
 
@@ -433,17 +440,25 @@ def run_outs_not_told_apart(
         The case's allowance (nothing is reported where none was applied).
     named_shafts : sequence of str
         Shafts ("pinion", "gear") whose eccentricity was named.
+    effect : str, optional
+        The effect a shaft run-out is named as (default: the first registered family with a
+        :attr:`~uqgear.diagnosis.effects.EffectFamily.run_out` hook, ``eccentricity``).
+    share_threshold : float
+        The share of the classes' gears above which a gear's first-order reading is reported.
 
     Returns
     -------
     list of dict
-        Per such gear: ``effect`` (eccentricity), ``shaft``, ``run_out_m``
+        Per such gear: ``effect``, ``shaft``, ``run_out_m``
         (the |E_1| the nominal fit read, along the line of action),
         ``share_of_class_gears_below``, ``classes``, ``run_out_95_m`` (the
         classes' 95 % first-order run-out) and ``reason``.
     """
     if allowance is None or allowance.classes is None:
         return []
+    if effect is None:
+        # the library's run-out family is always registered
+        effect = run_out_family().name  # type: ignore[union-attr]
     low, high = allowance.classes
     found = []
     for shaft, (run_out, share) in first_order_reads(allowance).items():
@@ -451,7 +466,7 @@ def run_outs_not_told_apart(
             continue
         found.append(
             {
-                "effect": "eccentricity",
+                "effect": effect,
                 "shaft": shaft,
                 "run_out_m": run_out,
                 "share_of_class_gears_below": share,

@@ -41,7 +41,8 @@ import scipy.special
 
 from ...physics.effects import Eccentricity
 from ..case import RigCase
-from ..effects import effect_family
+from ..effects import EffectFamily, run_out_family
+from ..errors import DiagnosisError
 from ..fitting import FitResult, fit_candidate
 from ..heldout import HeldOut, leave_one_out
 from ..scoring import CandidateScore, score_candidate
@@ -346,27 +347,39 @@ def fit_modulated_run_out(
     evidence: ModulationEvidence,
     rng: np.random.Generator,
     *,
+    family: EffectFamily | None = None,
     settings: DiagnosisSettings = DEFAULT_SETTINGS,
 ) -> CandidateScore:
-    """The eccentricity the phase sums name, fitted on top of the base and scored on held-out runs.
+    """The run-out the phase sums name, fitted on top of the base and scored on held-out runs.
 
-    Its modulation is held at the one the phase sums favour (the compared
-    amplitudes cannot see it: the fit would trade it for the run-out); its
-    run-out and phase are fitted from the run-out the lines read, only the
-    new effect's parameters free (a screening fit), and its held-out gap
-    against the base's gives its share of the shrink.
+    ``family`` is the effect the run-out is named as (its
+    :attr:`~uqgear.diagnosis.effects.EffectFamily.run_out` hook says which
+    parameters hold the run-out, its phase, shaft and modulation; default:
+    the first registered family with one, eccentricity). Its modulation is
+    held at the one the phase sums favour (the compared amplitudes cannot
+    see it: the fit would trade it for the run-out); its run-out and phase
+    are fitted from the run-out the lines read, only the new effect's
+    parameters free (a screening fit), and its held-out gap against the
+    base's gives its share of the shrink.
     """
+    family = family or run_out_family()
+    if family is None or family.run_out is None:
+        raise DiagnosisError("fit_modulated_run_out: no registered effect family reads as a shaft run-out")
+    spec = family.run_out
     library = next(
         candidate
-        for candidate in effect_family("eccentricity").variants(case.design, {})
-        if dict(candidate.choices)["shaft"] == evidence.shaft
+        for candidate in family.variants(case.design, {})
+        if family.run_out_shaft(dict(candidate.choices)) == evidence.shaft
     )
-    fitted = tuple(spec for spec in library.fitted if spec.name != "eccentricity.kappa")
+    modulation = family.parameter_name(spec.modulation)
+    fitted = tuple(parameter for parameter in library.fitted if parameter.name != modulation)
     starts = tuple(
-        {"eccentricity.amplitude": evidence.run_out, "eccentricity.phase": phase}
+        {family.parameter_name(spec.amplitude): evidence.run_out, family.parameter_name(spec.phase): phase}
         for phase in (0.5 * math.pi, 1.5 * math.pi)
     )
-    candidate = replace(library, choices=(*library.choices, ("kappa", evidence.kappa)), fitted=fitted, starts=starts)
+    candidate = replace(
+        library, choices=(*library.choices, (spec.modulation, evidence.kappa)), fitted=fitted, starts=starts
+    )
     result = fit_candidate(case, candidate, base, full=False, max_evaluations=settings.screening_evaluations)
     entry = score_candidate(
         result, leave_one_out(result), base_held, "screening", rng, n_resamples=settings.bootstrap_resamples

@@ -40,9 +40,6 @@ from .features import FEATURES, campaign_features
 
 # Strengths scanned per variant before the refinement, and golden-section steps of the refinement.
 _LADDER_POINTS = 6
-# Parameters also tried in proportion to the strength along the ladder: a run-out modulates the mesh stiffness
-# with it (the public eccentricity campaign: kappa 0.03 at 12 um).
-_PROPORTIONAL = {"eccentricity": {"kappa": 2500.0}}
 _REFINE_STEPS = 3
 _FREE_LADDER_POINTS = 4
 # Parameters the amplitude features cannot see (kept at their start values, not reported).
@@ -209,7 +206,8 @@ def _variant_values(candidate: Candidate, start: Mapping[str, Any], strength: st
     values.update({key.removeprefix(prefix): float(v) for key, v in start.items() if v != "proportional"})
     bounds = effect_family(candidate.effect).physics.PARAMETERS[strength]
     values[strength] = float(np.clip(value, bounds.lower, bounds.upper))
-    for key, factor in _PROPORTIONAL.get(candidate.effect, {}).items():
+    # parameters the family ties to its strength (its ``proportional`` hook: a run-out's mesh modulation)
+    for key, factor in effect_family(candidate.effect).proportional.items():
         if start.get(f"{prefix}{key}") == "proportional":
             bounds = effect_family(candidate.effect).physics.PARAMETERS[key]
             values[key] = float(min(factor * value, bounds.upper))
@@ -263,7 +261,7 @@ def score_variant(
             for s in candidate.starts
         }.values()
     ) or [{}]
-    for key in _PROPORTIONAL.get(candidate.effect, {}):
+    for key in family.proportional:
         # absent or in proportion to the strength: a fixed value between adds nothing the two do not span
         starts = [start for start in starts if start.get(f"{candidate.effect}.{key}", 0.0) < 1e-6] or starts[:1]
         starts.append({**starts[0], f"{candidate.effect}.{key}": "proportional"})

@@ -3,7 +3,10 @@
 Each family (:class:`~.base.EffectFamily`) holds what the diagnosis and the
 virtual rig need of it: its physics slot, its fitted parameters with their
 bounds, its start grid and the signature hints it reads, its screening
-variants and its strength ladder for virtual-rig campaigns. Adding an effect
+variants, its strength ladder for virtual-rig campaigns, and the hooks the
+rules ask instead of naming an effect (``run_out``: whether its fits read as
+a shaft run-out; ``proportional``: parameters a change scoring tries in
+proportion to its strength), whose defaults suit most families. Adding an effect
 takes a physics :class:`~uqgear.physics.effects.Effect` subclass, a family
 module and one line in :data:`~.registry.LIBRARY` (or :func:`register_effect`
 at run time).
@@ -20,7 +23,7 @@ Examples
 from __future__ import annotations
 
 from .adhesion_oscillation import AdhesionOscillationFamily
-from .base import START_PHASES, EffectFamily
+from .base import START_PHASES, EffectFamily, RunOut
 from .bearing_clearance import BearingClearanceFamily
 from .eccentricity import EccentricityFamily
 from .friction import FrictionFamily
@@ -30,7 +33,9 @@ from .registry import (
     check_effects,
     effect_family,
     effect_names,
+    hooks_of,
     register_effect,
+    run_out_family,
     signature_hints,
     unregister_effect,
 )
@@ -39,6 +44,7 @@ from .torque_ripple import TorqueRippleFamily
 
 __all__ = [
     "EffectFamily",
+    "RunOut",
     "LIBRARY",
     "START_PHASES",
     "register_effect",
@@ -48,6 +54,8 @@ __all__ = [
     "candidates_for",
     "signature_hints",
     "check_effects",
+    "run_out_family",
+    "hooks_of",
     "EccentricityFamily",
     "ToothDamageFamily",
     "FrictionFamily",

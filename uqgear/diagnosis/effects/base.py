@@ -5,14 +5,17 @@ An effect family (:class:`EffectFamily`) names its physics slot (the
 the model set-up), the screening variants a diagnosis fits (fixed choices,
 fitted parameters with their bounds, start grids read off the rig's
 signature, the period the response repeats over), the signature hints it
-reads and the strength ladder and random draws a virtual-rig campaign of
-it uses.
+reads, the strength ladder and random draws a virtual-rig campaign of it
+uses, and the hooks through which the rules ask about it: whether a fit
+of it reads as a shaft run-out (:class:`RunOut`) and which parameters a
+change scoring tries in proportion to its strength.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -24,6 +27,43 @@ from ..candidates import Candidate, ParameterSpec
 #: Starting phases of a phase the amplitude features cannot see but a fit must place (a quarter turn
 #: either side of zero: the cost is symmetric about the true phase, so two starts find its branch).
 START_PHASES: tuple[float, float] = (0.5 * math.pi, 1.5 * math.pi)
+
+
+@dataclass(frozen=True)
+class RunOut:
+    """How a family's fit reads as a shaft run-out, which the gears' own first-order pitch errors also make.
+
+    A family with one is held to the rules on run-outs: its fitted run-out is
+    checked against what the gears' stated classes make (the run-out check),
+    the fit is measured with its modulation off (what pitch errors do not
+    make), the mesh lines' sideband phases can name it on a shaft, and a gear
+    whose first-order errors read large is reported as not told apart from it
+    (docs/model/unmodelled-effects.md section 6.4).
+
+    Attributes
+    ----------
+    amplitude : str
+        The parameter holding the run-out, m.
+    phase : str
+        The parameter holding the run-out's phase, rad.
+    shaft : str
+        The choice naming the shaft (``pinion`` or ``gear``).
+    modulation : str
+        The parameter that pitch errors cannot make (a mesh-stiffness modulation); its lower bound is "absent".
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.effects import effect_family
+    >>> effect_family("eccentricity").run_out
+    RunOut(amplitude='amplitude', phase='phase', shaft='shaft', modulation='kappa')
+    >>> effect_family("friction").run_out is None
+    True
+    """
+
+    amplitude: str
+    phase: str
+    shaft: str
+    modulation: str
 
 
 class EffectFamily:
@@ -47,6 +87,12 @@ class EffectFamily:
     one_channel : str
         Why its signature may lie on one channel alone (empty: it shows on every channel that sees
         the mesh, and evidence on one channel alone is that sensor's own; :mod:`uqgear.diagnosis.consistency`).
+    run_out : RunOut or None
+        How a fit of it reads as a shaft run-out the gears' pitch errors also make (default None: it
+        does not, and the rules on run-outs leave it alone).
+    proportional : mapping of str to float
+        Parameters the change scoring also tries in proportion to the strength along its ladder, with
+        their factor per unit of strength (default none: each parameter at its start values only).
     """
 
     name: ClassVar[str]
@@ -55,6 +101,8 @@ class EffectFamily:
     ladder: ClassVar[tuple[float, float, float]]
     plan: ClassVar[str] = "service"
     one_channel: ClassVar[str] = ""
+    run_out: ClassVar[RunOut | None] = None
+    proportional: ClassVar[Mapping[str, float]] = {}
 
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         """The screening variants of this family for a design, their start grids from the signature ``hints``."""
@@ -79,6 +127,31 @@ class EffectFamily:
     def make(self, values: Mapping[str, Any] | None = None) -> Effect:
         """The physics effect with ``values`` (validated by it)."""
         return self.physics(values)
+
+    def run_out_shaft(self, values: Mapping[str, Any]) -> str | None:
+        """The shaft whose run-out a fit with ``values`` (its choices and parameters) reads, or None (no run-out).
+
+        Examples
+        --------
+        >>> from uqgear.diagnosis.effects import effect_family
+        >>> effect_family("eccentricity").run_out_shaft({"shaft": "gear", "amplitude": 5e-6})
+        'gear'
+        >>> effect_family("tooth_damage").run_out_shaft({"gear": "pinion"}) is None
+        True
+        """
+        return None if self.run_out is None else str(values.get(self.run_out.shaft))
+
+    def parameter_name(self, parameter: str) -> str:
+        """A parameter's name as fits and starts key it, ``FAMILY.PARAMETER``.
+
+        Examples
+        --------
+        >>> from uqgear.diagnosis.effects import effect_family
+        >>> family = effect_family("eccentricity")
+        >>> family.parameter_name(family.run_out.modulation)
+        'eccentricity.kappa'
+        """
+        return f"{self.name}.{parameter}"
 
     # ---- helpers for the variants
 
@@ -125,4 +198,4 @@ class EffectFamily:
         return tuple(points)
 
 
-__all__ = ["EffectFamily", "START_PHASES"]
+__all__ = ["EffectFamily", "RunOut", "START_PHASES"]

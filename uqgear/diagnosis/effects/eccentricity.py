@@ -10,7 +10,7 @@ import numpy as np
 from ...physics.design import Design
 from ...physics.effects import Eccentricity
 from ..candidates import Candidate
-from .base import START_PHASES, EffectFamily
+from .base import START_PHASES, EffectFamily, RunOut
 
 
 class EccentricityFamily(EffectFamily):
@@ -21,6 +21,11 @@ class EccentricityFamily(EffectFamily):
     line of the TE (the run-out enters the TE directly), the modulation at
     none and at what the public eccentricity campaign shows per metre of
     run-out (0.03 at 12 um). Its response repeats over its shaft's revolution.
+
+    Its fits read as a shaft run-out (:attr:`run_out`): the rules that tell a
+    run-out from the gears' own pitch errors apply to it, its modulation being
+    what pitch errors do not make. The change scoring tries the modulation in
+    proportion to the run-out (:attr:`proportional`).
     """
 
     name = "eccentricity"
@@ -28,6 +33,9 @@ class EccentricityFamily(EffectFamily):
     strength = "amplitude"
     # the weak level sits near the detection limit of the public campaigns' noise, the strong one at their own
     ladder = (3e-8, 3e-7, 12e-6)
+    run_out = RunOut(amplitude="amplitude", phase="phase", shaft="shaft", modulation="kappa")
+    # a run-out modulates the mesh stiffness with it (the public eccentricity campaign: kappa 0.03 at 12 um)
+    proportional = {"kappa": 2500.0}
 
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         fitted = (
@@ -39,7 +47,8 @@ class EccentricityFamily(EffectFamily):
         for shaft in ("pinion", "gear"):
             amplitude = float(np.clip(hints.get(f"eccentricity_{shaft}", 5e-6), 1e-9, 5e-5))
             # no modulation, or as much as the public campaign per metre of run-out (0.03 at 12 um)
-            starts = self.grid(amplitude=(amplitude,), phase=START_PHASES, kappa=(1e-9, min(2500.0 * amplitude, 0.1)))
+            kappa = min(self.proportional["kappa"] * amplitude, 0.1)
+            starts = self.grid(amplitude=(amplitude,), phase=START_PHASES, kappa=(1e-9, kappa))
             variants.append(self.candidate(f"eccentricity[{shaft}]", (("shaft", shaft),), fitted, starts, shaft))
         return variants
 

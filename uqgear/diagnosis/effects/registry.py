@@ -29,6 +29,8 @@ LIBRARY: tuple[EffectFamily, ...] = (
 )
 
 _REGISTRY: dict[str, EffectFamily] = {family.name: family for family in LIBRARY}
+# the hooks' answers for a name with no family
+_DEFAULTS = EffectFamily()
 
 
 def register_effect(family: EffectFamily) -> EffectFamily:
@@ -73,6 +75,46 @@ def effect_family(name: str) -> EffectFamily:
         raise DiagnosisError(
             f"effects: {name!r} is not a library effect; expected one of {', '.join(_REGISTRY)}"
         ) from None
+
+
+def run_out_family(effects: Sequence[str] | None = None) -> EffectFamily | None:
+    """The first registered family whose fits read as a shaft run-out (its ``run_out`` hook), or None.
+
+    Parameters
+    ----------
+    effects : sequence of str, optional
+        Only among these names (a diagnosis's candidates); default: every registered family.
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.effects import run_out_family
+    >>> run_out_family().name
+    'eccentricity'
+    >>> run_out_family(["friction", "tooth_damage"]) is None
+    True
+    """
+    for family in _REGISTRY.values():
+        if family.run_out is not None and (effects is None or family.name in effects):
+            return family
+    return None
+
+
+def hooks_of(name: str) -> EffectFamily:
+    """The family that answers the rules' questions about an effect: the registered one, or the defaults.
+
+    A name no family is registered under (a score built by hand, a family
+    unregistered since) gets the base :class:`~.base.EffectFamily`'s
+    answers: no run-out, nothing in proportion.
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.effects import hooks_of
+    >>> hooks_of("eccentricity").run_out.modulation
+    'kappa'
+    >>> hooks_of("no_such_effect").run_out is None
+    True
+    """
+    return _REGISTRY.get(name, _DEFAULTS)
 
 
 def candidates_for(effect: str, design: Design, *, hints: Mapping[str, float] | None = None) -> list[Candidate]:
@@ -127,4 +169,6 @@ __all__ = [
     "candidates_for",
     "signature_hints",
     "check_effects",
+    "run_out_family",
+    "hooks_of",
 ]
