@@ -662,7 +662,7 @@ class BatchEvaluator:
         Sample variables held constant (added to every sample unless the
         samples carry them).
     n_periods, keep_periods, history_per_period, rig_channels, lyapunov, effects,
-    damping_in_separation, stiffness, steps_per_mode, threads, pitch_errors
+    damping_in_separation, stiffness, steps_per_mode, threads, pitch_errors, final_state
         As in :func:`simulate_batch` (``threads`` does not change the
         results, so :meth:`key` leaves it out).
 
@@ -700,6 +700,7 @@ class BatchEvaluator:
         steps_per_mode: int = 24,
         threads: int | None = None,
         pitch_errors: PitchErrors | None = None,
+        final_state: bool = False,
     ) -> None:
         _check_counts(n_periods, keep_periods)
         self.design = design
@@ -716,6 +717,7 @@ class BatchEvaluator:
         self.steps_per_mode = steps_per_mode
         self.threads = threads
         self.pitch_errors = pitch_errors
+        self.final_state = final_state
 
     def __call__(self, samples: xr.Dataset) -> xr.Dataset:
         samples = samples.copy()
@@ -736,6 +738,7 @@ class BatchEvaluator:
             steps_per_mode=self.steps_per_mode,
             threads=self.threads,
             pitch_errors=self.pitch_errors,
+            final_state=self.final_state,
         )
 
     def key(self) -> str:
@@ -756,6 +759,8 @@ class BatchEvaluator:
         if self.pitch_errors is not None:
             # only then: the keys of existing checkpoints stay as they were
             settings += (self.pitch_errors.to_dict(),)
+        if self.final_state:
+            settings += ("final_state",)
         return repr(settings)
 
 

@@ -33,6 +33,7 @@ import xarray as xr
 import uqgear.dynamics as dynamics
 
 from ..common.progress import progress
+from ..dynamics.attractors import FINAL_VARIABLES
 from ..physics.design import Design
 from ..physics.effect_draws import UncertainEffect
 from ..physics.integration import QOI_INFO, BatchEvaluator
@@ -83,6 +84,7 @@ def evaluate_batch(
     classify: bool = False,
     classify_seed: np.random.SeedSequence | None = None,
     poincare: bool = True,
+    final_state: bool = False,
 ) -> xr.Dataset:
     """The gear model as a batch function: samples in, QoIs and Poincare points out.
 
@@ -110,6 +112,9 @@ def evaluate_batch(
     poincare : bool
         Keep the Poincare points (``period`` dim); analyses of scalar QoIs
         drop them, which keeps checkpoints small.
+    final_state : bool
+        Also return each run's final state as ``final_<state>`` (what a sweep carries on, the layout of
+        :class:`~uqgear.dynamics.attractors.StartedEvaluator`).
 
     Returns
     -------
@@ -117,8 +122,13 @@ def evaluate_batch(
         The :func:`~uqgear.physics.integration.simulate_batch` outputs (dims
         ``sample``, ``period``), input variables as coordinates.
     """
-    model = BatchEvaluator(design, **simulation.batch_options(threads))
+    model = BatchEvaluator(design, **simulation.batch_options(threads), final_state=final_state)
     result = model(samples)
+    if final_state:
+        final = result["final_state"].values
+        result = result.drop_vars(["final_state", "state"]).assign(
+            {name: ("sample", final[:, index]) for index, name in enumerate(FINAL_VARIABLES)}
+        )
     if classify:
         seed = classify_seed if classify_seed is not None else 0
         classes = dynamics.classify_batch(result, seed=seed)
@@ -203,14 +213,23 @@ class AnalysisContext:
             return multi_start_model(self, simulation, poincare)
         if simulation.starts is not None:
             # the rest runs keep their Poincare points: the window points' rest runs are grouped from them
-            rest = self.rest_model(dataclasses.replace(simulation, starts=None), classify=classify, poincare=True)
+            # and their final states: the sweeps start and enter the window stretches from them
+            rest = self.rest_model(
+                dataclasses.replace(simulation, starts=None), classify=classify, poincare=True, final_state=True
+            )
             return guided_start_model(self, simulation, rest, poincare)
         return self.rest_model(simulation, classify=classify, poincare=poincare)
 
     def rest_model(
-        self, simulation: SimulationSettings, *, classify: bool = False, poincare: bool = True
+        self,
+        simulation: SimulationSettings,
+        *,
+        classify: bool = False,
+        poincare: bool = True,
+        final_state: bool = False,
     ) -> RunnerModel:
-        """The model with every point run from rest (what a study without starts runs)."""
+        """The model with every point run from rest (what a study without starts runs); ``final_state`` adds each
+        run's final state (:func:`evaluate_batch`)."""
         function = functools.partial(
             evaluate_batch,
             design=self.design,
@@ -219,6 +238,7 @@ class AnalysisContext:
             classify=classify,
             classify_seed=self.stage_seed(99) if classify else None,
             poincare=poincare,
+            final_state=final_state,
         )
         # the runner's checkpoint hash covers the samples and the function name, not the
         # partial's arguments: the key carries them
@@ -230,6 +250,8 @@ class AnalysisContext:
                 "classify": classify,
                 "poincare": poincare,
                 "seed": [str(self.seed.entropy), list(self.seed.spawn_key)],
+                # only then: the keys of existing checkpoints stay as they were
+                **({"final_state": True} if final_state else {}),
             },
             sort_keys=True,
         )

@@ -222,7 +222,7 @@ class GuidedStartModel:
             starts = self._orbit_starts(speeds[rows], values[rows])
             for column in starts.values():
                 column[~branching] = np.nan
-            entry = self._sweep_entry(samples, inside) if self.settings.sweeps else None
+            entry = self._sweep_entry(samples, inside, base) if self.settings.sweeps else None
             search = MultiStartSearch(self.settings, self.seed).fit(
                 self.started,
                 subset,
@@ -236,6 +236,8 @@ class GuidedStartModel:
             found = summarise(search, subset, poincare=self.poincare)
             if self.exponents is not None and "largest_lyapunov" in rest:
                 found = self._worst_exponents(found, search, subset, rest)
+        # the rest runs' final states serve the sweeps only; the result has the layout of a study without them
+        base = base.drop_vars([name for name in FINAL_VARIABLES if name in base.variables])
         out = combine(base, found, rows, poincare=self.poincare)
         if not self.poincare:
             out = out.drop_dims("period", errors="ignore")
@@ -246,9 +248,10 @@ class GuidedStartModel:
         )
         return out
 
-    def _sweep_entry(self, samples: xr.Dataset, inside: np.ndarray) -> dict[str, np.ndarray] | None:
+    def _sweep_entry(self, samples: xr.Dataset, inside: np.ndarray, base: xr.Dataset) -> dict[str, np.ndarray] | None:
         """The states the sweeps enter each stretch of window points with (rows of the in-window samples; NaN
-        where none): the final state of the point just outside it on the grid of ``samples``, run from rest.
+        where none): the final state of the point just outside it on the grid of ``samples``, run from rest (the
+        rest runs ``base`` hold it where their model returns final states; else it is run again).
 
         Outside the windows the gear holds one response, so that state is the one a sweep over the whole grid
         carries to the window's edge; a sweep that started from rest at the window's first point would enter the
@@ -271,7 +274,10 @@ class GuidedStartModel:
         if not neighbours:
             return None
         outside = np.unique([sample for _, _, sample in neighbours])
-        finals = self.started(with_starts(samples, outside, np.full((outside.size, 6), np.nan)))
+        if all(name in base.variables for name in FINAL_VARIABLES):
+            finals = base.isel(sample=outside)
+        else:
+            finals = self.started(with_starts(samples, outside, np.full((outside.size, 6), np.nan)))
         states = np.stack([np.asarray(finals[name].values, dtype=float) for name in FINAL_VARIABLES], axis=1)
         at = {int(sample): row for row, sample in enumerate(outside)}
         for direction, row, sample in neighbours:
