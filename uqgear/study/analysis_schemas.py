@@ -133,18 +133,6 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
         "qois": _qoi_list(),
     },
-    "rating": {
-        "parameters": _variable_list(),
-        "method": choice(*INTERVAL_METHODS),
-        "order": number("(Chebyshev series order)", 1, 20, integer=True),
-        "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
-        "fallback": choice(*INTERVAL_FALLBACKS),
-        "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
-        # material data and the other ISO 6336 inputs (uqgear.physics.rating.RatingSettings keys)
-        "rating": rating_settings,
-        # the service the fatigue damage is summed over (illustrative default: see RATING_SERVICE)
-        "service": service_profile,
-    },
     "monte_carlo": {
         "parameters": _variable_list(),
         "intervals": choice("uniform", "pbox"),
@@ -222,6 +210,18 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "points": number("values across each interval", 2, 50, integer=True),
         "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
         "compare_sweeps": boolean(),
+    },
+    "rating": {
+        "parameters": _variable_list(),
+        "method": choice(*INTERVAL_METHODS),
+        "order": number("(Chebyshev series order)", 1, 20, integer=True),
+        "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
+        "fallback": choice(*INTERVAL_FALLBACKS),
+        "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
+        # material data and the other ISO 6336 inputs (uqgear.physics.rating.RatingSettings keys)
+        "rating": rating_settings,
+        # the service the fatigue damage is summed over (illustrative default: see RATING_SERVICE)
+        "service": service_profile,
     },
 }
 
