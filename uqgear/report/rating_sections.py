@@ -83,7 +83,11 @@ def _verdicts(ds: xr.Dataset) -> list[Finding]:
             text += f"; ISO's K_v gives {facts['safety_factor_iso']:.2f} there"
         if "damage" in ds and hours is not None:
             facts["damage"] = float(ds["damage"].sel(mode=mode).max())
-            text += f"; Miner damage over {hours:g} h up to {facts['damage']:.3g}"
+            text += (
+                f"; Miner damage over {hours:g} h up to {facts['damage']:.3g}"
+                if facts["damage"] > 0.0
+                else f"; no fatigue damage over {hours:g} h (every cycle below the long-life stress)"
+            )
         findings.append(Finding(text, facts, topic="rating"))
     return findings
 
