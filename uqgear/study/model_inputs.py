@@ -156,7 +156,9 @@ def parse_effects(raw: Any, path: str, base_dir: Path | None) -> EffectsInput:
     return EffectsInput(None, None, tuple(listed))
 
 
-def check_order(analyses: Sequence[Any], calibrated: CalibratedInput | None, effects: EffectsInput | None) -> None:
+def check_order(
+    analyses: Sequence[Any], calibrated: CalibratedInput | None, effects: EffectsInput | None
+) -> None:
     """An input taken from an analysis needs that analysis, of the right type, before every model analysis."""
     names = [spec.name for spec in analyses]
     for source, kind, key in (
