@@ -236,7 +236,22 @@ def _check_prediction(finding, results):
         assert "draws of the study's distributions" in finding.text
 
 
-CHECKS = {"worst_load": _check_worst_load, "separation": _check_separation, "back_contact": _check_back_contact,
+def _check_rating(finding, results):
+    facts = finding.facts
+    ds = next(ds for ds in results if ds.attrs.get("analysis_type") == "rating")
+    lower = ds[f"safety_factor_{facts['mode']}"].sel(bound="lower")
+    assert facts["safety_factor"] == pytest.approx(float(lower.min()))
+    at = lower.sel(gear=facts["gear"], pinion_speed=facts["pinion_speed"])
+    assert float(at) == pytest.approx(facts["safety_factor"])
+    assert facts["minimum"] == lower.attrs["minimum"]
+    assert f"{facts['safety_factor']:.2f} ({facts['gear']}, {facts['pinion_speed']:.0f} rpm)" in finding.text
+    iso = ds[f"safety_factor_{facts['mode']}_iso"].sel(gear=facts["gear"], pinion_speed=facts["pinion_speed"])
+    assert facts["safety_factor_iso"] == pytest.approx(float(iso))
+    assert facts["damage"] == pytest.approx(float(ds["damage"].sel(mode=facts["mode"]).max()))
+
+
+CHECKS = {"rating": _check_rating, "worst_load": _check_worst_load, "separation": _check_separation,
+          "back_contact": _check_back_contact,
           "regimes": _check_regimes, "sobol": _check_sobol, "continuation": _check_continuation,
           "coexistence": _check_coexistence, "prediction": _check_prediction}
 
@@ -295,10 +310,12 @@ def test_every_smoke_headline_finding_is_true_of_the_netcdf_data(smoke):
     results, _ = smoke
     topics = check_every_finding(results)
     # the smoke results have every kind of grid statement and a Sobol analysis of three QoIs
-    # a prediction answers first (the band of the worst case), then the grid statements
-    assert topics[:6] == ["prediction", "worst_load", "separation", "separation", "back_contact", "regimes"]
+    # the rating's verdict comes first (one line per failure mode), then a prediction (the band of the
+    # worst case), then the grid statements
+    assert topics[:8] == ["rating", "rating", "prediction", "worst_load", "separation", "separation",
+                          "back_contact", "regimes"]
     # guided starts (the default) add what they found about coexisting responses
-    assert topics[-3:] == ["sobol", "sobol", "sobol"] and set(topics[6:-3]) == {"coexistence", "continuation"}
+    assert topics[-3:] == ["sobol", "sobol", "sobol"] and set(topics[8:-3]) == {"coexistence", "continuation"}
 
 
 # ---------------------------------------------------------------------------- synthetic grids
@@ -508,7 +525,7 @@ def test_t2_envelope_headline_is_true_of_its_netcdf_files(tmp_path):
     results = [xr.open_dataset(path) for path in sorted(folder.glob("*.nc"))]
     try:
         topics = check_every_finding(results)
-        assert topics[:4] == ["worst_load", "separation", "separation", "back_contact"]
+        assert topics[:6] == ["rating", "rating", "worst_load", "separation", "separation", "back_contact"]
         assert "regimes" in topics and topics.count("sobol") == 2
         wet, dry = (finding for finding in headline_findings(results) if finding.topic == "separation")
         assert wet.text.startswith("Wet rail (T2 = 21.15 kN m") and dry.text.startswith("Dry rail (T2 = 46.52 kN m")

@@ -120,7 +120,8 @@ def test_t2_envelope_study_uses_rail_condition_interval():
     assert t2.lower == pytest.approx(0.15 * lever) and t2.upper == pytest.approx(0.33 * lever)
     assert t2.lower == pytest.approx(21145.6, abs=0.1) and t2.upper == pytest.approx(46520.3, abs=0.1)
     kinds = [spec.type for spec in study.analyses]
-    assert kinds == ["interval", "bifurcation", "regime_map", "sobol"]
+    assert kinds == ["interval", "bifurcation", "regime_map", "sobol", "rating"]
+    assert study.analyses[4].options["parameters"] == ("adhesion_torque",)
     assert study.analyses[0].options["method"] == "chebyshev"
     assert study.analyses[0].options["fallback"] == "scan"
     assert set(study.analyses[3].options["parameters"]) == {

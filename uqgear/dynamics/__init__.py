@@ -7,7 +7,8 @@ responses from several starts (``attractors``); periodic orbits by shooting
 with their Floquet multipliers (``shooting``, ``floquet``) and their
 continuation in a parameter with located bifurcations (``continuation``,
 ``bifurcations``, ``branches``) and the speed windows where responses can
-coexist (``windows``).
+coexist (``windows``); rainflow counting and Miner's damage of a stress
+history on an ISO 6336 S-N curve (``fatigue``).
 
 May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 from .attractors import MultiStart, MultiStartSearch, StartedEvaluator, extremes_over_attractors
 from .branches import bifurcation_table
 from .continuation import Continuation, ContinuationSettings
+from .fatigue import RainflowCount, damage_rate, miner_damage, rainflow_count
 from .floquet import floquet_exponents, floquet_multipliers, is_stable, unstable_counts
 from .regimes import (
     ResponseClass,
@@ -68,4 +70,8 @@ __all__ = [
     "bifurcation_table",
     "CoexistenceWindows",
     "find_windows",
+    "RainflowCount",
+    "rainflow_count",
+    "miner_damage",
+    "damage_rate",
 ]

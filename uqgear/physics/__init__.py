@@ -7,7 +7,8 @@ path: right-hand side in ``_rhs``, one-sample kernels in ``_kernels`` and
 and the scipy reference; ``history_batch`` the histories of several runs at once). ``effects`` holds the
 unmodelled effects of docs/model/unmodelled-effects.md section 6 as slots of the same
 right-hand side; ``pitch_errors`` the per-tooth pitch offsets every real gear
-has (section 2.6), an input of the model set-up, not an effect.
+has (section 2.6), an input of the model set-up, not an effect. ``rating`` rates a
+design by ISO 6336 method B (docs/model/rating.md section 10).
 
 May import :mod:`uqgear.common` only; never plotting or file output (a test
 checks it).

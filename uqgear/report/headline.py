@@ -7,6 +7,8 @@ bifurcation and regime-map analyses, the Sobol indices), never from a surrogate:
 load and where; where the teeth separate at each end of the T2 interval (wet and dry rail); whether
 back-side contact ever occurs; the speed windows, per T2, where the response is not period-1; the
 largest Sobol driver of each QoI per speed; and the statements of calibration and diagnosis results.
+A rating's verdict comes first: per failure mode, the smallest ISO 6336 safety factor over the
+interval, where, against the required minimum, and the fatigue damage over the stated service.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from .finding import Finding
 from .findings import SPEED, T2, Grid, _condition_text, _end, _runs, _t2_interval, grid, grids
 from .prediction_sections import prediction_findings
 from .presentation import display, format_value, short_name
+from .rating_sections import rating_findings
 from .sections import _json_attr
 
 # ---------------------------------------------------------------------------- wording
@@ -416,6 +419,7 @@ def rig_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
 def headline_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     """Every headline statement of a study's results, in the order the report shows them."""
     return [
+        *rating_findings(results),
         *prediction_findings(results),
         *worst_load_findings(results),
         *separation_findings(results),

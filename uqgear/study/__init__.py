@@ -11,6 +11,7 @@ from __future__ import annotations
 from . import (
     continuation_analysis,  # noqa: F401
     prediction,  # noqa: F401
+    rating_analysis,  # noqa: F401
 )
 from .analyses import ANALYSES, register
 from .analysis_schemas import ANALYSIS_SCHEMAS

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..physics.effects import EFFECTS
-from .checkers import Checker, boolean, choice, class_range, identifier, list_of, number, string
+from .checkers import Checker, boolean, check_mapping, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
 
 #: Scalar quantities of interest of a simulation run (see uqgear.physics.integration.QOI_INFO).
@@ -48,6 +48,45 @@ def diagnosis_settings(value: Any, path: str) -> dict[str, Any]:
     except DiagnosisError as exc:
         raise StudyError(str(exc)) from None
     return dict(value)
+
+
+def rating_settings(value: Any, path: str) -> dict[str, Any]:
+    """Checker of a ``rating`` analysis's ``rating``: material data and the ISO 6336 inputs, validated by key."""
+    from ..common.errors import StudyError
+    from ..physics.rating import RatingError, RatingSettings
+
+    try:
+        RatingSettings.from_mapping(value, where=f"{path}.")
+    except RatingError as exc:
+        raise StudyError(str(exc)) from None
+    # kept as written (JSON-able, part of the analysis key); the analysis builds the settings from it
+    return dict(value)
+
+
+def service_profile(value: Any, path: str) -> dict[str, Any]:
+    """Checker of a ``rating`` analysis's ``service``: hours, and the pinion speeds with their shares of the time."""
+    from ..common.errors import StudyError
+
+    checked = check_mapping(
+        value,
+        path,
+        {
+            "hours": number("h", 0.0, 1e7, lower_open=True),
+            "speeds": list_of(number("rpm", 0.0, 1e5, lower_open=True), what="a list of pinion speeds in rpm"),
+            "shares": list_of(number("", 0.0, 1.0), what="a list of time shares"),
+            "description": lambda raw, where: str(raw),
+        },
+        required=("hours", "speeds", "shares"),
+    )
+    speeds, shares = checked["speeds"], checked["shares"]
+    if len(speeds) != len(shares):
+        raise StudyError(f"{path}.shares: expected one share per speed ({len(speeds)}); got {len(shares)}")
+    if abs(sum(shares) - 1.0) > 1e-6:
+        raise StudyError(
+            f"{path}.shares: expected time shares that sum to 1 (the whole service of {checked['hours']:g} h); "
+            f"got a sum of {sum(shares):g}"
+        )
+    return checked
 
 
 def _qoi_list() -> Checker:
@@ -172,6 +211,18 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
         "compare_sweeps": boolean(),
     },
+    "rating": {
+        "parameters": _variable_list(),
+        "method": choice(*INTERVAL_METHODS),
+        "order": number("(Chebyshev series order)", 1, 20, integer=True),
+        "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
+        "fallback": choice(*INTERVAL_FALLBACKS),
+        "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
+        # material data and the other ISO 6336 inputs (uqgear.physics.rating.RatingSettings keys)
+        "rating": rating_settings,
+        # the service the fatigue damage is summed over (illustrative default: see RATING_SERVICE)
+        "service": service_profile,
+    },
 }
 
 #: Default option values per analysis type (applied after validation).
@@ -188,6 +239,7 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
         "tolerance": 0.02,
         "qois": DEFAULT_QOIS,
     },
+    "rating": {"method": "chebyshev", "order": 6, "points": None, "fallback": "scan", "tolerance": 0.02},
     "monte_carlo": {
         "intervals": "uniform",
         "points": 5,
@@ -238,8 +290,8 @@ _REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
 #: Analysis types that read a rig data file (key ``rig``, relative to the study file).
 RIG_TYPES: tuple[str, ...] = ("calibrate", "diagnose")
 #: Analysis types that propagate uncertain parameters (``parameters`` key).
-PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol", "prediction")
+PROPAGATING_TYPES: tuple[str, ...] = ("interval", "monte_carlo", "pce", "sobol", "prediction", "rating")
 #: Analysis types that bound over interval parameters (their ``parameters`` are intervals).
-INTERVAL_TYPES: tuple[str, ...] = ("interval", "prediction")
+INTERVAL_TYPES: tuple[str, ...] = ("interval", "prediction", "rating")
 #: Cap on single simulate() runs in one ``simulate`` analysis (they keep full histories).
 MAX_SIMULATE_RUNS = 64

@@ -174,6 +174,31 @@ def _check_propagation(spec: AnalysisSpec, uncertain: Mapping[str, UncertainPara
             )
 
 
+def _check_rating(spec: AnalysisSpec, path: str) -> None:
+    """A rating sweeps the pinion speed alone, at one drive torque; its service speeds lie inside the sweep."""
+    sweeps = spec.sweeps
+    if "pinion_speed" not in sweeps:
+        raise StudyError(
+            f"{path}.operating_points.pinion_speed: a rating bounds safety factors against speed; "
+            "expected a sweep (a list or {start, stop, num})"
+        )
+    others = [name for name in sweeps if name != "pinion_speed"]
+    if others:
+        raise StudyError(f"{path}.operating_points.{others[0]}: a rating sweeps only pinion_speed; expected one value")
+    if "drive_torque" in spec.options["parameters"]:
+        raise StudyError(f"{path}.parameters: drive_torque is the rating's load; expected it fixed, not bounded over")
+    service = spec.options.get("service")
+    if service:
+        values = sweeps["pinion_speed"].values
+        low, high = min(values), max(values)
+        outside = [speed for speed in service["speeds"] if not low <= speed <= high]
+        if outside:
+            raise StudyError(
+                f"{path}.service.speeds: {outside[0]:g} rpm is outside the study's speeds; "
+                f"expected speeds in [{low:g}, {high:g}] rpm"
+            )
+
+
 def _check_simulate(spec: AnalysisSpec, path: str) -> None:
     count = int(np.prod([len(s.values) for s in spec.sweeps.values()])) if spec.sweeps else 1
     if count > MAX_SIMULATE_RUNS:
@@ -198,6 +223,8 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
         _check_regime_map(spec, intervals, path)
     elif spec.type in PROPAGATING_TYPES:
         _check_propagation(spec, uncertain, path)
+        if spec.type == "rating":
+            _check_rating(spec, path)
     elif spec.type == "simulate":
         _check_simulate(spec, path)
 
