@@ -114,7 +114,7 @@ def test_a_run_out_within_the_pinions_own_errors_is_named_on_its_held_out_densit
     assert result.verdict == "eccentricity", result.reason
     assert [chosen.entry.effect for chosen in result.selected] == ["eccentricity"]
     assert result.named_shafts == ["pinion"], result.reason
-    assert "lower bound" in result.reason
+    assert "lower bound" in result.reason, result.reason
     entry = result.selected[0].entry
     # the amplitude reads the run-out with the pinion's own first order: within the classes' bound
     low, high = entry.parameter_intervals()["amplitude"]
