@@ -360,7 +360,7 @@ def test_the_extra_full_fits_wait_on_the_set_the_gaps_strongest_candidate_leads(
     case = SimpleNamespace(design=design, pitch_allowance=None, run_out_allowance={}, executor=None)
     state = replace(_state(case, base_gap=4.4), nominal=SimpleNamespace(cost=100.0),
                     nominal_held=SimpleNamespace(z=np.ones((8, 3, 4))), timings={"screening": 0.0, "full_fits": 0.0})
-    # two effects of about equal size, each alone far from explaining the gap (seed 2's run-out with a cracked tooth)
+    # two effects of about equal size, each alone far from explaining the gap (a run-out with a cracked tooth)
     table = {"tooth_damage[pinion]": (1300.0, 0.23, 0.13), "eccentricity[gear]": (900.0, 0.31, 0.2),
              "eccentricity[pinion]": (380.0, 0.07, 0.0), "torque_ripple": (12.0, 0.002, -0.1),
              "bearing_clearance[pinion]": (-3.5, 0.0, -0.1), "friction": (-4.0, 0.0, -0.1)}

@@ -13,7 +13,8 @@ effect with the allowance (and is, without it: the test can fail), and a
 40 um pinion run-out on such gears must lead the ranking, the gap not
 called noise, no other effect named (8 runs of 1 s, as the real-world blind
 test; on 4 runs of 0.5 s the allowance left a healthy gear a gap of 0.5-0.6).
-Campaigns of the real-world blind test rebuilt: tests/test_real_world_pitch_errors.py.
+Further constructed class-7 campaigns (a gear fine at one order, a run-out within the pinion's own
+errors, friction with a run-out): tests/test_pitch_error_campaigns.py.
 
 Line interference (uqgear.diagnosis.allowances.interference): a fixed-frequency line on
 an accelerometer alone is found, one that the TE carries too is not, and
@@ -282,11 +283,13 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
 def test_with_the_allowance_a_gap_just_above_noise_needs_the_density_to_hold_at_its_lower_bound():
     """An effect that leaves a gap within noise without halving it must hold its score at the 90 % lower bound.
 
-    The figures of a healthy class-7 control (out-of-sample blind seed 5):
-    nominal gap 0.51, a pinion run-out of 17 um with kappa 0.026 scoring
-    26.3 +- 15.5 nats and shrinking the gap by 14 % to 0.44. Without the
-    allowance the rules name it (the gap is within noise after it); with the
-    allowance, as on the density route just below the gap, they do not.
+    Figures as a healthy class-7 control's eccentricity fit can give (pitch
+    errors shift the pairs' load sharing tooth by tooth, which the fit reads
+    as stiffness modulation): nominal gap 0.51, a pinion run-out of 17 um
+    with kappa 0.026 scoring 26.3 +- 15.5 nats and shrinking the gap by 14 %
+    to 0.44. Without the allowance the rules name it (the gap is within noise
+    after it); with the allowance, as on the density route just below the
+    gap, they do not.
     """
     from uqgear.diagnosis.verdict import decide
 

@@ -3,8 +3,8 @@
 Checked against what the phase sum is built to be: blind to where a record
 starts and to the modulation's own phase, sure of a pure amplitude
 modulation's value, and scored by a density that prefers the hypothesis
-whose draws sit where the rig's sums are. The whole test on blind-test
-campaigns is in tests/test_real_world_pitch_errors.py (slow).
+whose draws sit where the rig's sums are. The whole test on constructed
+class-7 campaigns is in tests/test_pitch_error_campaigns.py (slow).
 """
 
 from __future__ import annotations

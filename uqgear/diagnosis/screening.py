@@ -244,10 +244,10 @@ def extra_full_fits(
 ) -> None:
     """Further screened variants fitted in full, in order, while the gap stays unexplained.
 
-    Each fit is computed beside the next one (:func:`~.side_by_side.side_by_side`): on the
-    real-world blind suite a gap that stays unexplained after the first extra fit stays so to the
-    last, and a fit that is not needed is discarded unread, so the numbers are those of one fit
-    after the other. ``taken_up`` records each scored fit (it updates ``best``).
+    Each fit is computed beside the next one (:func:`~.side_by_side.side_by_side`): while the gap
+    stays unexplained the next fit is made anyway, and one that is not needed is discarded
+    unread, so the numbers are those of one fit after the other.
+    ``taken_up`` records each scored fit (it updates ``best``).
     """
     ahead: dict[int, Outcome[tuple[FitResult, HeldOut]]] = {}
     for index, entry in enumerate(entries):

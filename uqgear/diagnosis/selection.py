@@ -76,10 +76,11 @@ def worth_a_full_fit(entry: CandidateScore, settings: DiagnosisSettings) -> bool
     no evidence either: the upper end of its shrink interval below
     ``partial_shrink``, what it leaves above ``noise_gap`` and its score
     below ``score_threshold``. A full fit starts from the screening's
-    optimum and refits parameters the base fit already fitted; on the
-    real-world blind suite no such screening became a candidate the rule of
-    :func:`~.verdict.decide` names (docs/validation/diagnosis.md, "Forward
-    selection").
+    optimum and refits parameters the base fit already fitted, so it moves
+    a screening only near where it already is: one that explains nothing
+    and has no evidence is not expected to become a candidate the rule of
+    :func:`~.verdict.decide` names (the rounds measured are in
+    docs/validation/diagnosis.md, "Forward selection").
     """
     return (
         entry.shrink_interval[1] >= settings.partial_shrink
@@ -97,8 +98,8 @@ def still_open(state: DiagnosisState, named: Sequence[str], tried: SelectionRoun
     and had no evidence of its own (:func:`worth_a_full_fit` false) is not
     screened again on top of the next base: that base adds the effect the
     round named, which explains features of its own, and an effect that
-    explained nothing beside it gains nothing from it (on the real-world
-    blind suite, docs/validation/diagnosis.md, "Forward selection").
+    explained nothing beside it gains nothing from it (the rounds measured
+    are in docs/validation/diagnosis.md, "Forward selection").
     """
     remaining = [name for name in state.effects if name not in named]
     if tried is None or not tried.scores:
