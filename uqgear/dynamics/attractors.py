@@ -287,7 +287,9 @@ def _sweep_runs(
     carried: dict[str, dict[int, np.ndarray]] = {"up": {}, "down": {}}  # sample index -> the final state it passes on
     from_rest: dict[str, list[int]] = {"up": [], "down": []}  # first points whose sweep run is their rest run
     longest = max((len(members) for members in groups), default=0)
-    pieces: dict[str, list[tuple[np.ndarray, xr.Dataset]]] = {"up": [], "down": []}
+    steps: list[xr.Dataset] = []
+    step_samples: list[int] = []  # the sample of each run of the steps, in order
+    step_directions: list[str] = []
     for step in range(longest):
         index, states, directions = [], [], []
         for direction in ("up", "down"):
@@ -314,27 +316,31 @@ def _sweep_runs(
         ends = _final_states(result)
         for row, (sample, direction) in enumerate(zip(index, directions)):
             carried[direction][sample] = ends[row]
-        for direction in ("up", "down"):
-            rows = np.array([row for row, d in enumerate(directions) if d == direction], dtype=int)
-            if rows.size:
-                pieces[direction].append((np.array(index)[rows], result.isel(sample=rows)))
+        steps.append(result)
+        step_samples += index
+        step_directions += directions
+    # the steps joined once, each direction's runs taken out once: an isel per step and direction costs more
+    # than the small batches' runs
+    joined = _joined(steps) if steps else None
     out = {}
     for direction in ("up", "down"):
         # the first point of a sweep that enters from nothing is its rest run
         firsts = np.array(from_rest[direction], dtype=int)
         parts = [(firsts, rest.isel(sample=[rows_of[int(i)] for i in firsts]))] if firsts.size else []
-        parts += pieces[direction]
+        mine = np.nonzero(np.asarray(step_directions) == direction)[0]
+        if mine.size:
+            assert joined is not None
+            parts.append((np.asarray(step_samples, dtype=int)[mine], joined.isel(sample=mine)))
         order = np.concatenate([indices for indices, _ in parts])
-        stacked = xr.concat(
-            [part for _, part in parts],
-            dim="sample",
-            coords="minimal",
-            compat="override",
-            join="override",
-            combine_attrs="drop_conflicts",
-        )
-        out[direction] = stacked.isel(sample=np.argsort(order, kind="stable"))
+        out[direction] = _joined([part for _, part in parts]).isel(sample=np.argsort(order, kind="stable"))
     return out
+
+
+def _joined(parts: Sequence[xr.Dataset]) -> xr.Dataset:
+    """Batches of runs of one model joined along ``sample``."""
+    return xr.concat(
+        parts, dim="sample", coords="minimal", compat="override", join="override", combine_attrs="drop_conflicts"
+    )
 
 
 def up_down_sweeps(
@@ -584,11 +590,15 @@ def _partial_stage(
     """Runs from ``states`` where a row is finite; rows of NaN give NaN outputs and no Poincare points (no run)."""
     rows = np.nonzero(np.all(np.isfinite(states), axis=1))[0]
     out = template.copy(deep=True)
-    for name, variable in out.data_vars.items():
+    blank: dict[Any, Any] = {}
+    for name in list(out.data_vars):
+        # plain arrays and one update: a DataArray per variable copies every sample coordinate along
+        variable = out.variables[name]
         if variable.dtype.kind == "f":
-            out[name] = variable.where(False)
+            blank[name] = (variable.dims, np.full(variable.shape, np.nan, dtype=variable.dtype), variable.attrs)
         elif variable.dtype.kind in "US":
-            out[name] = variable.copy(data=np.full(variable.shape, "", dtype=variable.dtype))
+            blank[name] = (variable.dims, np.full(variable.shape, "", dtype=variable.dtype), variable.attrs)
+    out.update(blank)
     if rows.size == 0:
         return out
     return _put_rows(out, rows, evaluate(with_starts(samples, rows, states[rows])))
