@@ -18,7 +18,7 @@ import pytest
 
 from uqgear import validation as blind_test
 from uqgear.diagnosis import Diagnosis, DiagnosisSeeds
-from uqgear.diagnosis.allowances.pitch_errors import LARGE_RUN_OUT_SHARE
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.validation.campaigns import true_values
 
 
@@ -114,7 +114,7 @@ def test_friction_on_class_7_gears_is_named_first_and_no_wrong_effect_with_it():
         # pinions have (about 95 % of them), so the report says a run-out may hide there
         reports = result.cannot_tell()
         assert [entry["shaft"] for entry in reports] == ["pinion"], reports
-        assert reports[0]["share_of_class_gears_below"] >= LARGE_RUN_OUT_SHARE
+        assert reports[0]["share_of_class_gears_below"] >= DEFAULT_SETTINGS.pitch.large_run_out_share
         assert result.pitch_errors.summary()["order_factors"]["pinion"]["1"]["share_of_class_gears_below"] == \
             reports[0]["share_of_class_gears_below"]
 
@@ -130,7 +130,6 @@ def test_a_run_out_within_the_pinions_own_errors_is_named_by_its_sideband_phases
     not: 1013 nats in the blind test, far beyond the 200 that name it, with
     the most favourable run left out (docs/model/unmodelled-effects.md section 6.4).
     """
-    from uqgear.diagnosis.allowances.sideband_phase import PHASE_EVIDENCE_THRESHOLD
 
     diagnosis, spec = _real_world_case(2, "pitch_errors")
     assert spec.truth_set() == ["eccentricity"] and spec.nuisances.get("pitch_errors") == 7
@@ -140,7 +139,8 @@ def test_a_run_out_within_the_pinions_own_errors_is_named_by_its_sideband_phases
     assert result.verdict == "eccentricity" and result.named_shafts == ["pinion"], result.reason
     evidence = result.modulation[0]
     assert evidence.shaft == "pinion" and evidence.decisive
-    assert evidence.log_ratio >= 2 * PHASE_EVIDENCE_THRESHOLD and evidence.total > evidence.log_ratio
+    threshold = DEFAULT_SETTINGS.phases.phase_evidence_threshold
+    assert evidence.log_ratio >= 2 * threshold and evidence.total > evidence.log_ratio
     assert "phase sums of the pinion's first sidebands" in result.reason
     chosen = result.selected[0]
     # the modulation the sums favour is held in the fit; the amplitudes leave the run-out open (the pinion's
