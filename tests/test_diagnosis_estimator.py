@@ -93,6 +93,12 @@ def test_a_study_sets_the_documented_thresholds_only(tmp_path):
         parse_study(text + "    settings:\n      noise_gap: -1\n", base_dir=tmp_path)
     with pytest.raises(StudyError, match=r"analyses\[0\].settings: expected a mapping"):
         parse_study(text + "    settings: 3\n", base_dir=tmp_path)
+    # the same thresholds under their groups
+    grouped = "    settings:\n      verdict: {score_threshold: 15}\n      selection: {max_effects: 2}\n"
+    nested = parse_study(text + grouped, base_dir=tmp_path).analyses[0].options["settings"]
+    assert DiagnosisSettings.from_mapping(nested) == DiagnosisSettings(score_threshold=15, max_effects=2)
+    with pytest.raises(StudyError, match=r"analyses\[0\].settings.verdict.bootstrap_resamples: unknown setting"):
+        parse_study(text + "    settings:\n      verdict: {bootstrap_resamples: 50}\n", base_dir=tmp_path)
     # without settings the analysis's options are as before (its result's key and attributes unchanged)
     assert "settings" not in parse_study(text, base_dir=tmp_path).analyses[0].options
 
