@@ -1,6 +1,11 @@
-"""Every decision threshold and budget of the diagnosis in one frozen settings object.
+"""Every decision threshold and budget of the diagnosis, grouped by the step each serves.
 
-:class:`DiagnosisSettings` holds the values; :data:`SETTINGS` states for
+:class:`DiagnosisSettings` holds the values, one frozen group per step of the
+diagnosis in the order it takes them (:data:`GROUPS`: ``reference``,
+``change``, ``interference``, ``features``, ``predictive``, ``nominal``,
+``screening``, ``pitch``, ``verdict``, ``selection``, ``phases``); a setting
+keeps its own name inside its group (``settings.verdict.score_threshold``)
+and may be given by that name alone. :data:`SETTINGS` states for
 each its unit, the rule it serves in one sentence and the section of
 docs/model/ that explains it (its evidence is in
 docs/validation/diagnosis.md), with its valid range
