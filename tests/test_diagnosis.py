@@ -510,9 +510,9 @@ def test_improved_nominal_escapes_a_stuck_nominal_fit(healthy_case):
                  ste_amplitude=1.6 * HEALTHY_TRUTH["ste_amplitude"])
     stuck = fitting.fit(problem, [problem.vector(wrong, positions)], max_evaluations=2)
     good = fitting.fit(problem, [problem.vector(HEALTHY_TRUTH, positions)], max_evaluations=2)
-    assert good.cost < stuck.cost - DEFAULT_SETTINGS.nominal_margin
+    assert good.cost < stuck.cost - DEFAULT_SETTINGS.nominal.nominal_margin
     better = screening.improved_nominal(stuck, [good])
-    assert better is not None and better.cost <= good.cost + DEFAULT_SETTINGS.nominal_margin
+    assert better is not None and better.cost <= good.cost + DEFAULT_SETTINGS.nominal.nominal_margin
     assert better.values["zeta_mesh"] == pytest.approx(HEALTHY_TRUTH["zeta_mesh"], rel=0.15)
     assert screening.improved_nominal(good, [stuck]) is None
     assert screening.improved_nominal(good, []) is None
@@ -608,7 +608,7 @@ def test_labelled_campaign_verdict(name, tmp_path):
     ranking = content["ranking"]
     assert [entry["score"] for entry in ranking] == sorted((entry["score"] for entry in ranking), reverse=True)
     if LABELLED[name] == "none":
-        assert content["gap"]["baseline"] <= DEFAULT_SETTINGS.noise_gap
+        assert content["gap"]["baseline"] <= DEFAULT_SETTINGS.verdict.noise_gap
     else:
         assert ranking[0]["effect"] == LABELLED[name]
         assert content["gap"]["shrink_fraction"] >= 0.7

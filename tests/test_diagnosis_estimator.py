@@ -24,7 +24,7 @@ from uqgear.common.errors import StudyError
 from uqgear.diagnosis import Diagnosis, DiagnosisError, DiagnosisSettings
 from uqgear.diagnosis.allowances.pitch_errors import PitchErrorAllowance
 from uqgear.diagnosis.case import FeatureModelError
-from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS, GROUPS, PhaseSettings, VerdictSettings
 from uqgear.rig.format import read_rig
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
@@ -32,11 +32,14 @@ DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 
 def test_every_setting_states_its_unit_rule_and_docs_section():
     table = DiagnosisSettings.describe()
-    assert set(table) == {field.name for field in dataclasses.fields(DiagnosisSettings)}
+    groups = [field.name for field in dataclasses.fields(DiagnosisSettings)]
+    assert groups == list(GROUPS)
+    fields = {field.name for group in groups for field in dataclasses.fields(getattr(DEFAULT_SETTINGS, group))}
+    assert set(table) == fields
     for name, entry in table.items():
         assert entry["unit"] and entry["rule"].strip(), name
         assert entry["docs"].startswith("docs/model/unmodelled-effects.md section 6"), name
-        value = getattr(DEFAULT_SETTINGS, name)
+        value = getattr(getattr(DEFAULT_SETTINGS, entry["group"]), name)
         assert entry["default"] == (list(value) if isinstance(value, tuple) else value), name
     # the documented decision thresholds a study may set
     assert {"score_threshold", "shrink_threshold", "noise_gap", "max_effects"} <= set(DiagnosisSettings.study_keys())
@@ -59,7 +62,18 @@ def test_a_setting_outside_its_range_is_named(changes, message):
 
 
 def test_settings_from_a_mapping_name_the_key_path():
-    assert DiagnosisSettings.from_mapping({"score_threshold": 12}).score_threshold == 12
+    assert DiagnosisSettings.from_mapping({"score_threshold": 12}).verdict.score_threshold == 12
+    # a setting by its own name goes to its group; the nested form means the same
+    kappas = (0.02,)
+    nested = DiagnosisSettings.from_mapping({"verdict": {"score_threshold": 12},
+                                             "phases": {"modulation_kappas": kappas}})
+    assert nested == DiagnosisSettings(score_threshold=12, modulation_kappas=kappas)
+    assert nested == DiagnosisSettings(verdict=VerdictSettings(score_threshold=12),
+                                       phases=PhaseSettings(modulation_kappas=kappas))
+    with pytest.raises(DiagnosisError, match=r"s.verdict.score_threshold: set twice"):
+        DiagnosisSettings.from_mapping({"score_threshold": 12, "verdict": {"score_threshold": 11}}, where="s")
+    with pytest.raises(DiagnosisError, match=r"s.verdict.max_effects: unknown setting; expected one of score_th"):
+        DiagnosisSettings.from_mapping({"verdict": {"max_effects": 2}}, where="s")
     with pytest.raises(DiagnosisError, match=r"analyses\[0\].settings.wobble: unknown setting"):
         DiagnosisSettings.from_mapping({"wobble": 1}, where="analyses[0].settings")
     with pytest.raises(DiagnosisError, match=r"s.noise_gap: expected a value in"):
@@ -79,6 +93,12 @@ def test_a_study_sets_the_documented_thresholds_only(tmp_path):
         parse_study(text + "    settings:\n      noise_gap: -1\n", base_dir=tmp_path)
     with pytest.raises(StudyError, match=r"analyses\[0\].settings: expected a mapping"):
         parse_study(text + "    settings: 3\n", base_dir=tmp_path)
+    # the same thresholds under their groups
+    grouped = "    settings:\n      verdict: {score_threshold: 15}\n      selection: {max_effects: 2}\n"
+    nested = parse_study(text + grouped, base_dir=tmp_path).analyses[0].options["settings"]
+    assert DiagnosisSettings.from_mapping(nested) == DiagnosisSettings(score_threshold=15, max_effects=2)
+    with pytest.raises(StudyError, match=r"analyses\[0\].settings.verdict.bootstrap_resamples: unknown setting"):
+        parse_study(text + "    settings:\n      verdict: {bootstrap_resamples: 50}\n", base_dir=tmp_path)
     # without settings the analysis's options are as before (its result's key and attributes unchanged)
     assert "settings" not in parse_study(text, base_dir=tmp_path).analyses[0].options
 
@@ -135,10 +155,11 @@ def test_the_study_reference_lists_the_thresholds_a_study_may_set():
     import re
 
     text = (Path(__file__).resolve().parent.parent / "docs" / "study-reference.md").read_text()
-    table = text[text.index("| setting | units | default | rule (docs/model/index.md) |"):]
+    table = text[text.index("| setting | group | units | default | rule (docs/model/index.md) |"):]
     table = table[:table.index("\n\n")]
     documented = re.findall(r"^\| `(\w+)` \|", table, flags=re.M)
     assert documented == list(DiagnosisSettings.study_keys())
     for name in documented:
         row = next(line for line in table.splitlines() if line.startswith(f"| `{name}` |"))
         assert f"| {DiagnosisSettings.describe(name)['default']:g} |" in row, row
+        assert row.startswith(f"| `{name}` | `{DiagnosisSettings.describe(name)['group']}` |"), row

@@ -260,7 +260,8 @@ def test_a_round_fits_in_full_only_a_best_screening_that_could_be_named(monkeypa
     assert "not fitted in full" in round_.reason
     # any one of evidence, a shrink interval reaching 20 % or a gap left within noise earns the full fit
     settings = DEFAULT_SETTINGS
-    for figures in ((settings.score_threshold, 1.15, 0.0), (7.0, 1.15, 0.1), (7.0, settings.noise_gap, 0.0)):
+    verdict = settings.verdict
+    for figures in ((verdict.score_threshold, 1.15, 0.0), (7.0, 1.15, 0.1), (7.0, verdict.noise_gap, 0.0)):
         stand_ins = _StandIns(monkeypatch, {"friction": figures})
         selection.next_effect(_state(case), base, ["eccentricity"])
         assert stand_ins.full == ["friction"], figures
@@ -299,7 +300,8 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     decision = set_verdict.set_decision(first_decision, selected, rounds, 3.0)
     assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap_with_effect
     assert [entry.entry.effect for entry in selected[1:]] == [entry.added for entry in rounds]
-    assert decision.partial == (selected[-1].entry.gap_with_effect > DEFAULT_SETTINGS.noise_gap and sum(shares) < 0.5)
+    noise_gap = DEFAULT_SETTINGS.verdict.noise_gap
+    assert decision.partial == (selected[-1].entry.gap_with_effect > noise_gap and sum(shares) < 0.5)
 
 
 def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_round_before(monkeypatch, design):

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from uqgear.diagnosis.allowances.pitch_errors import LARGE_RUN_OUT_SHARE, PitchErrorAllowance, run_outs_not_told_apart
+from uqgear.diagnosis.allowances.pitch_errors import PitchErrorAllowance, run_outs_not_told_apart
 from uqgear.diagnosis.allowances.pitch_orders import (
     ORDERS,
     bounds_of,
@@ -32,6 +32,7 @@ from uqgear.diagnosis.allowances.pitch_orders import (
     share_below,
 )
 from uqgear.diagnosis.discrepancy import FeatureLayout
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.physics.pitch_errors import draw_pitch_errors, order_powers
 from uqgear.rig.features import FeatureDefinition, feature_definitions
 
@@ -100,7 +101,8 @@ def test_a_first_order_error_large_for_the_classes_is_reported_as_a_run_out_that
     assert "pinion" in entry["reason"] and "93 %" in entry["reason"] and "cannot tell" in entry["reason"]
     # an eccentricity named on that shaft settles it; at the threshold it is reported, below it not
     assert run_outs_not_told_apart(allowance, ["pinion"]) == []
-    at = _allowance(design, {("pinion", 1): LARGE_RUN_OUT_SHARE, ("gear", 1): LARGE_RUN_OUT_SHARE - 1e-9},
+    share = DEFAULT_SETTINGS.pitch.large_run_out_share
+    at = _allowance(design, {("pinion", 1): share, ("gear", 1): share - 1e-9},
                     factors)
     assert [entry["shaft"] for entry in run_outs_not_told_apart(at, [])] == ["pinion"]
     # no allowance, nothing to report

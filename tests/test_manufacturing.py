@@ -51,7 +51,7 @@ from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
-DEFAULT_MODEL_ERROR = dict(DEFAULT_SETTINGS.model_error)
+DEFAULT_MODEL_ERROR = dict(DEFAULT_SETTINGS.predictive.model_error)
 
 
 def _one_line_layout() -> tuple[FeatureLayout, list[NoiseModel]]:
@@ -245,7 +245,7 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
                            (0.0, 0.0), effect_gain=29.0)
     check = run_out_check(score, bounds)
     assert check.run_out == 0.5e-6 and check.within
-    score.modulation_gain = DEFAULT_SETTINGS.effect_gain_threshold - 0.1
+    score.modulation_gain = DEFAULT_SETTINGS.verdict.effect_gain_threshold - 0.1
     assert run_out_check(score, bounds).within
     score.modulation_gain = 34.0
     entry = replace(score, run_out=run_out_check(score, bounds))

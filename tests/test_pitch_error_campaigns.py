@@ -33,7 +33,6 @@ import pytest
 
 from uqgear import validation as blind_test
 from uqgear.diagnosis import Diagnosis, DiagnosisSeeds
-from uqgear.diagnosis.allowances.pitch_errors import LARGE_RUN_OUT_SHARE
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.physics.effects import make_effect
 from uqgear.physics.pitch_errors import PitchErrors, draw_pitch_errors, order_powers
@@ -120,7 +119,7 @@ def test_a_run_out_within_the_pinions_own_errors_is_named_on_its_held_out_densit
     low, high = entry.parameter_intervals()["amplitude"]
     assert 0.0 < low <= high < diagnosis.case_.run_out_allowance["pinion"], (low, high)
     # named for the modulation pitch errors do not make: switching it off costs more than the effect-gain rule asks
-    assert entry.modulation_gain >= DEFAULT_SETTINGS.effect_gain_threshold
+    assert entry.modulation_gain >= DEFAULT_SETTINGS.verdict.effect_gain_threshold
     kappa_low, kappa_high = entry.parameter_intervals()["kappa"]
     assert kappa_low <= _RUN_OUT["kappa"] <= kappa_high, (kappa_low, kappa_high)
     assert result.cannot_tell() == []
@@ -140,7 +139,6 @@ def test_friction_on_class_7_gears_is_named_first_and_a_run_out_by_its_sideband_
     is named by them, its run-out left open by the amplitudes and its
     interval holding the truth.
     """
-    from uqgear.diagnosis.allowances.sideband_phase import PHASE_EVIDENCE_THRESHOLD
 
     effects = [make_effect("friction", {"coefficient": 0.12}), make_effect("eccentricity", _RUN_OUT)]
     ops = blind_test.operating_points_of("service", design, 8)
@@ -153,10 +151,11 @@ def test_friction_on_class_7_gears_is_named_first_and_a_run_out_by_its_sideband_
     assert result.named_shafts == ["pinion"], result.reason
     # the pinion's first order reads as errors many class 6-8 pinions have: the amplitudes cannot name it
     share = result.pitch_errors.summary()["order_factors"]["pinion"]["1"]["share_of_class_gears_below"]
-    assert share < LARGE_RUN_OUT_SHARE
+    assert share < DEFAULT_SETTINGS.pitch.large_run_out_share
     evidence = result.modulation[0]
     assert evidence.shaft == "pinion" and evidence.decisive
-    assert evidence.log_ratio >= PHASE_EVIDENCE_THRESHOLD and evidence.total > evidence.log_ratio
+    assert evidence.log_ratio >= DEFAULT_SETTINGS.phases.phase_evidence_threshold
+    assert evidence.total > evidence.log_ratio
     assert "phase sums of the pinion's first sidebands" in result.reason
     chosen = result.selected[1]
     assert chosen.entry.parameters()["kappa"] == evidence.kappa

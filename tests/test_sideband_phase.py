@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 from uqgear.diagnosis.allowances.sideband_phase import (
-    MIN_SIDEBAND_ORDERS,
     ModulationEvidence,
     log_density,
     phase_sums,
     shafts_tested,
     sideband_triples,
 )
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 
 _NAMES = ["pinion1", "mesh1", "mesh1_sb_pinion+1", "mesh1_sb_pinion-1", "mesh2", "mesh2_sb_pinion+1",
           "mesh2_sb_pinion-1", "mesh1_sb_gear+1", "mesh1_sb_gear-1"]
@@ -98,7 +98,7 @@ def test_only_shafts_whose_sidebands_stand_off_their_carrier_are_tested():
 
     assert shafts_tested(Case()) == ["pinion"]
     Design.z2 = 30
-    assert 21 / 30 >= MIN_SIDEBAND_ORDERS and shafts_tested(Case()) == ["pinion", "gear"]
+    assert 21 / 30 >= DEFAULT_SETTINGS.phases.min_sideband_orders and shafts_tested(Case()) == ["pinion", "gear"]
 
 
 def test_evidence_is_decisive_only_at_its_threshold_and_not_on_one_operating_point():

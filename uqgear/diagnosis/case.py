@@ -243,8 +243,8 @@ def _left_out_interference(
         fs,
         tuple(options["low_band"]),
         channels,
-        threshold=settings.interference_threshold,
-        minimum_runs=settings.interference_runs,
+        threshold=settings.interference.interference_threshold,
+        minimum_runs=settings.interference.interference_runs,
     )
     if interference.applied:
         for processor in {id(processor): processor for processor in processors}.values():
@@ -296,7 +296,7 @@ def prepare_case(
     settings' relative model errors per feature kind.
     """
     settings = DiagnosisSettings() if settings is None else settings
-    errors = _check_model_error(model_error, settings.model_error)
+    errors = _check_model_error(model_error, settings.predictive.model_error)
     channels = tuple(name for name in SIGNAL_CHANNELS if name in rig.data_vars)
     clock = time.perf_counter()
     rig = track_orders(rig, design)

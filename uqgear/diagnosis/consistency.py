@@ -91,7 +91,9 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
     after = np.asarray(score.channel_gaps_after, dtype=float)
     with np.errstate(invalid="ignore"):
         unseen = np.flatnonzero(
-            (before <= settings.noise_gap) & (after > settings.noise_gap) & (gains <= -settings.cross_channel_gain)
+            (before <= settings.verdict.noise_gap)
+            & (after > settings.verdict.noise_gap)
+            & (gains <= -settings.verdict.cross_channel_gain)
         )
     if unseen.size:
         channel = int(unseen[np.argmax(after[unseen])])
@@ -104,10 +106,10 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
     # where the rig shows a gap on that channel alone, the others must carry the evidence to name an effect
     # by themselves: a refit of the nominal parameters alone gains a few nats on a clean channel
     with np.errstate(invalid="ignore"):
-        alone = bool(before[strongest] > settings.noise_gap) and bool(
-            np.all(np.nan_to_num(np.delete(before, strongest), nan=0.0) <= settings.noise_gap)
+        alone = bool(before[strongest] > settings.verdict.noise_gap) and bool(
+            np.all(np.nan_to_num(np.delete(before, strongest), nan=0.0) <= settings.verdict.noise_gap)
         )
-    needed = settings.score_threshold if alone else settings.cross_channel_gain
+    needed = settings.verdict.score_threshold if alone else settings.verdict.cross_channel_gain
     if others < needed:
         return ChannelCheck(False, strongest, "one_channel", float(finite[strongest]), others)
     return ChannelCheck(True)
@@ -140,16 +142,17 @@ def inconsistent_decision(
     """``none`` or ``unexplained`` where the leading candidate fails the cross-channel rule."""
     why = inconsistency_reason(best, channels, best.channels)
     confined = channels.kind == "one_channel" and channels.channel is not None and channels.channel < len(best.channels)
-    if nominal_gap <= settings.noise_gap:
+    if nominal_gap <= settings.verdict.noise_gap:
         return Decision(
             "none",
-            f"the nominal model's held-out gap {nominal_gap:.2f} is within noise (threshold {settings.noise_gap:g}); "
+            f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
+            f"(threshold {settings.verdict.noise_gap:g}); "
             f"{why}",
             borderline=borderline,
         )
     return Decision(
         "unexplained",
-        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.noise_gap:g}); {why}",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.verdict.noise_gap:g}); {why}",
         borderline=borderline,
         one_channel=best.channels[channels.channel] if confined and channels.channel is not None else "",
     )

@@ -94,9 +94,9 @@ def _outcome(
     selected = named.selected
     final_held = selected[-1].entry.held if selected else state.nominal_held
     if selected:
-        remaining_where = where_gap(final_held.z, case, where_z=settings.where_z)
+        remaining_where = where_gap(final_held.z, case, where_z=settings.verdict.where_z)
         remaining_families = family_character(
-            final_held.z, case, locked, noise_gap=settings.noise_gap, where_z=settings.where_z
+            final_held.z, case, locked, noise_gap=settings.verdict.noise_gap, where_z=settings.verdict.where_z
         )
     else:
         # with no effect named the final model is the nominal one: its maps are already made
@@ -161,8 +161,8 @@ def _features(
             case,
             learned,
             inputs.rig,
-            speed_tolerance=settings.speed_tolerance,
-            torque_tolerance=settings.torque_tolerance,
+            speed_tolerance=settings.reference.speed_tolerance,
+            torque_tolerance=settings.reference.torque_tolerance,
         )
 
 
@@ -189,7 +189,8 @@ def _decide(
 def _cannot_decide(case: RigCase, settings: DiagnosisSettings, steps: StepLog) -> str | None:
     """Why the data cannot decide (no line above the noise floor in enough runs), or None."""
     with steps.step("check that the data can decide") as found:
-        reason = uninformative_reason(case, snr=settings.signal_snr, min_runs=settings.min_informative_runs)
+        features = settings.features
+        reason = uninformative_reason(case, snr=features.signal_snr, min_runs=features.min_informative_runs)
         found.update(informative=reason is None)
     return reason
 

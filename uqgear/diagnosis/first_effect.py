@@ -71,9 +71,9 @@ def first_decision(
     scores = sorted(best.values(), key=lambda entry: -entry.score)
     ranking = ranked(best, state.case, settings=settings)
     # drawn after the shrink bootstraps, so their numbers do not depend on this
-    nominal_interval = bootstrap_gap(state.nominal_held.z, rng, settings.bootstrap_resamples)
+    nominal_interval = bootstrap_gap(state.nominal_held.z, rng, settings.verdict.bootstrap_resamples)
     if scores:
-        leader_interval = bootstrap_gap(scores[0].held.z, rng, settings.bootstrap_resamples)
+        leader_interval = bootstrap_gap(scores[0].held.z, rng, settings.verdict.bootstrap_resamples)
         ranking[0] = replace(ranking[0], gap_interval=leader_interval)
     decision = decide(
         state.nominal_gap,
@@ -95,7 +95,7 @@ def starts_a_set(state: DiagnosisState, decision: Decision, ranking: Sequence[Ca
     """
     settings = state.settings
     unnamed_gap = decision.verdict == "unexplained" or (
-        decision.verdict == "none" and state.nominal_gap > settings.noise_gap
+        decision.verdict == "none" and state.nominal_gap > settings.verdict.noise_gap
     )
     return (
         unnamed_gap
@@ -122,9 +122,13 @@ def decide_first(
     settings = state.settings
     with state.steps.step("decide the verdict") as found:
         decision, scores, ranking, nominal_interval = first_decision(state, best, state.rng)
-        where = where_gap(state.nominal_held.z, state.case, where_z=settings.where_z)
+        where = where_gap(state.nominal_held.z, state.case, where_z=settings.verdict.where_z)
         families = family_character(
-            state.nominal_held.z, state.case, locked_lines, noise_gap=settings.noise_gap, where_z=settings.where_z
+            state.nominal_held.z,
+            state.case,
+            locked_lines,
+            noise_gap=settings.verdict.noise_gap,
+            where_z=settings.verdict.where_z,
         )
         if decision.one_channel:
             decision = replace(decision, reason=decision.reason + one_channel_character(decision.one_channel, families))

@@ -274,7 +274,7 @@ def profile_adhesion(problem: FitProblem, vector: np.ndarray, ops: Sequence[int]
 def fit_nominal(
     case: RigCase,
     *,
-    max_evaluations: int = DEFAULT_SETTINGS.nominal_evaluations,
+    max_evaluations: int = DEFAULT_SETTINGS.nominal.nominal_evaluations,
     start: Mapping[str, float] | None = None,
     positions: np.ndarray | None = None,
 ) -> FitResult:

@@ -30,7 +30,10 @@ def line_signal_to_noise(case: RigCase) -> np.ndarray:
 
 
 def uninformative_reason(
-    case: RigCase, *, snr: float = DEFAULT_SETTINGS.signal_snr, min_runs: int = DEFAULT_SETTINGS.min_informative_runs
+    case: RigCase,
+    *,
+    snr: float = DEFAULT_SETTINGS.features.signal_snr,
+    min_runs: int = DEFAULT_SETTINGS.features.min_informative_runs,
 ) -> str | None:
     """Why a valid campaign cannot be diagnosed, or None when it can.
 
@@ -63,7 +66,7 @@ def uninformative_reason(
 
 
 def where_gap(
-    z: np.ndarray, case: RigCase, *, limit: int = 12, where_z: float = DEFAULT_SETTINGS.where_z
+    z: np.ndarray, case: RigCase, *, limit: int = 12, where_z: float = DEFAULT_SETTINGS.verdict.where_z
 ) -> list[dict[str, Any]]:
     """The features carrying a held-out gap: RMS z over runs, runs beyond ``where_z`` sigma, strongest first."""
     entries: list[dict[str, Any]] = []
@@ -102,8 +105,8 @@ def family_character(
     case: RigCase,
     locked_lines: Sequence[Mapping[str, Any]],
     *,
-    noise_gap: float = DEFAULT_SETTINGS.noise_gap,
-    where_z: float = DEFAULT_SETTINGS.where_z,
+    noise_gap: float = DEFAULT_SETTINGS.verdict.noise_gap,
+    where_z: float = DEFAULT_SETTINGS.verdict.where_z,
 ) -> list[dict[str, Any]]:
     """Per channel and feature family: held-out gap and its character.
 

@@ -117,7 +117,7 @@ def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *, design: Design |
     check_usable_signal(
         dataset,
         where=where,
-        min_operating_points=DEFAULT_SETTINGS.min_informative_runs,
+        min_operating_points=DEFAULT_SETTINGS.features.min_informative_runs,
         purpose="the diagnosis",
         why="each operating point is predicted by the model fitted to the others",
     )
@@ -207,16 +207,16 @@ def load_reference(
             test,
             dataset,
             where=source,
-            speed_tolerance=settings.speed_tolerance,
-            torque_tolerance=settings.torque_tolerance,
+            speed_tolerance=settings.reference.speed_tolerance,
+            torque_tolerance=settings.reference.torque_tolerance,
         )
         return dataset, source, learned
     match_operating_points(
         test,
         dataset,
         where=source,
-        speed_tolerance=settings.speed_tolerance,
-        torque_tolerance=settings.torque_tolerance,
+        speed_tolerance=settings.reference.speed_tolerance,
+        torque_tolerance=settings.reference.torque_tolerance,
     )
     return dataset, source, learned
 

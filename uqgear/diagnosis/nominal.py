@@ -58,7 +58,7 @@ def fit_nominal_model(
             case = case.with_design(case.design.replace(backlash=start.pop("backlash")))
     clock = time.perf_counter()
     with steps.step("fit the nominal model") as found:
-        budget = settings.nominal_evaluations
+        budget = settings.nominal.nominal_evaluations
         nominal = (
             fit_nominal(case, max_evaluations=budget)
             if start is None
@@ -95,7 +95,7 @@ def allow_pitch_errors(
             nominal = fit(
                 nominal.problem.on_case(case),
                 [nominal.vector],
-                max_evaluations=settings.nominal_evaluations,
+                max_evaluations=settings.nominal.nominal_evaluations,
                 tolerance=1e-3,
             ).after(nominal)
             found.update(parameters=nominal.values, cost=nominal.cost)
@@ -157,7 +157,7 @@ def _held_out(nominal: FitResult, steps: StepLog, timings: dict[str, float]) -> 
 
 def _escape(state: DiagnosisState, attempt: int) -> Callable[[Sequence[FitResult]], FitResult | None] | None:
     """The check of a pass's nominal fit against its full fits; none in the last pass allowed."""
-    if attempt == state.settings.nominal_refits:
+    if attempt == state.settings.nominal.nominal_refits:
         return None
     return partial(_checked_nominal, state.nominal, settings=state.settings, steps=state.steps, timings=state.timings)
 

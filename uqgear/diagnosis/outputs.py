@@ -30,7 +30,7 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "shrink_fraction": chosen.shrink_fraction if chosen is not None else None,
         "shrink_interval": list(chosen.shrink_interval) if chosen is not None else None,
         "evaluated_on": _evaluated_on(case),
-        "noise_threshold": settings.noise_gap,
+        "noise_threshold": settings.verdict.noise_gap,
         "baseline_interval": [float(v) for v in result.nominal_gap_interval],
     }
     decision = result.decision
@@ -79,13 +79,13 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
 def _thresholds(settings: DiagnosisSettings, *, signal: bool = False) -> dict[str, float]:
     """The verdict's thresholds as ``diagnosis.json`` reports them."""
     thresholds = {
-        "score": settings.score_threshold,
-        "shrink_fraction": settings.shrink_threshold,
-        "nominal_gap": settings.noise_gap,
-        "partial_shrink": settings.partial_shrink,
+        "score": settings.verdict.score_threshold,
+        "shrink_fraction": settings.verdict.shrink_threshold,
+        "nominal_gap": settings.verdict.noise_gap,
+        "partial_shrink": settings.verdict.partial_shrink,
     }
     if signal:
-        thresholds["signal_snr"] = settings.signal_snr
+        thresholds["signal_snr"] = settings.features.signal_snr
     return thresholds
 
 
@@ -98,7 +98,7 @@ def _remaining_gap(result: DiagnosisResult) -> dict[str, Any]:
     per-run (operating point) values, both from the final model's held-out
     discrepancies.
     """
-    value, noise_gap = result.remaining_gap, result.settings.noise_gap
+    value, noise_gap = result.remaining_gap, result.settings.verdict.noise_gap
     return {
         "value": value,
         "interval": [float(v) for v in result.remaining_interval],
@@ -149,7 +149,7 @@ def inconclusive_summary(
         "shrink_fraction": None,
         "shrink_interval": None,
         "evaluated_on": _evaluated_on(case),
-        "noise_threshold": settings.noise_gap,
+        "noise_threshold": settings.verdict.noise_gap,
         "baseline_interval": None,
     }
     content = {
@@ -166,7 +166,7 @@ def inconclusive_summary(
         "frequency_locked_lines": [],
         "ranking": [],
         "nominal": None,
-        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": settings.signal_snr},
+        "signal": {"strongest_line_snr": _strongest_lines(case), "threshold": settings.features.signal_snr},
         "thresholds": _thresholds(settings, signal=True),
         "model_error": case.model_error,
         "pitch_errors": None,

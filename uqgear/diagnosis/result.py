@@ -106,7 +106,7 @@ class DiagnosisResult:
         (:func:`~uqgear.diagnosis.allowances.pitch_errors.run_outs_not_told_apart`).
         """
         return run_outs_not_told_apart(
-            self.pitch_errors, self.named_shafts, share_threshold=self.settings.large_run_out_share
+            self.pitch_errors, self.named_shafts, share_threshold=self.settings.pitch.large_run_out_share
         )
 
 

@@ -71,7 +71,7 @@ def bootstrap_shrink(
     z_before: np.ndarray,
     z_after: np.ndarray,
     rng: np.random.Generator,
-    n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples,
+    n_resamples: int = DEFAULT_SETTINGS.verdict.bootstrap_resamples,
 ) -> tuple[float, float, float]:
     """Shrink fraction and its 5 % and 95 % bootstrap quantiles, resampling runs.
 
@@ -111,7 +111,7 @@ def bootstrap_shrink(
 
 
 def bootstrap_gap(
-    z: np.ndarray, rng: np.random.Generator, n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples
+    z: np.ndarray, rng: np.random.Generator, n_resamples: int = DEFAULT_SETTINGS.verdict.bootstrap_resamples
 ) -> tuple[float, float]:
     """5 % and 95 % bootstrap quantiles of :func:`gap_metric`, resampling runs (axis 0)."""
     values = np.asarray(z, dtype=float)
@@ -241,7 +241,7 @@ def score_candidate(
     stage: str,
     rng: np.random.Generator,
     *,
-    n_resamples: int = DEFAULT_SETTINGS.bootstrap_resamples,
+    n_resamples: int = DEFAULT_SETTINGS.verdict.bootstrap_resamples,
 ) -> CandidateScore:
     """Held-out log-density gain over the base model, its standard error, penalty and gap shrink.
 

@@ -80,14 +80,14 @@ def improved_nominal(
     only the better optimum. The nominal model is then refitted from the
     best such point.
     """
-    margin = settings.nominal_margin
+    margin = settings.nominal.nominal_margin
     starts, costs = effect_off_costs(nominal, fits)
     if not starts:
         return None
     best = int(np.argmin(costs))
     if costs[best] >= nominal.cost - margin:
         return None
-    refit = fit(nominal.problem, [starts[best]], max_evaluations=settings.nominal_evaluations, tolerance=1e-3)
+    refit = fit(nominal.problem, [starts[best]], max_evaluations=settings.nominal.nominal_evaluations, tolerance=1e-3)
     refit.after(nominal)
     return refit if refit.cost < nominal.cost - margin else None
 
@@ -144,7 +144,7 @@ def screening_fits(
     The fits read the base and write nothing the others read: they run side
     by side (:func:`~.side_by_side.side_by_side`), the results in order.
     """
-    case, budget = state.case, state.settings.screening_evaluations
+    case, budget = state.case, state.settings.screening.screening_evaluations
 
     def job(candidate: Candidate) -> Callable[[], tuple[FitResult, HeldOut]]:
         def work() -> tuple[FitResult, HeldOut]:
@@ -168,7 +168,12 @@ def screen(state: DiagnosisState) -> list[CandidateScore]:
             result, held = outcome.get()
             screened.append(
                 score_candidate(
-                    result, held, state.nominal_held, "screening", state.rng, n_resamples=settings.bootstrap_resamples
+                    result,
+                    held,
+                    state.nominal_held,
+                    "screening",
+                    state.rng,
+                    n_resamples=settings.verdict.bootstrap_resamples,
                 )
             )
             finding.update(found(screened[-1]), fit_seconds=round(outcome.seconds, 3))
@@ -190,11 +195,11 @@ def full_fit(state: DiagnosisState, entry: CandidateScore) -> tuple[FitResult, H
             candidate,
             state.nominal,
             full=True,
-            max_evaluations=settings.full_fit_evaluations,
+            max_evaluations=settings.screening.full_fit_evaluations,
             start=entry.fit,
             earlier=state.earlier_full_fits.get(candidate.label),
         ),
-        max_evaluations=settings.full_fit_evaluations,
+        max_evaluations=settings.screening.full_fit_evaluations,
     )
     return result, leave_one_out(result)
 
@@ -208,7 +213,7 @@ def scored_in_full(
     with state.steps.step(f"fit {candidate.label} in full") as finding:
         result, held = outcome.get()
         full = score_candidate(
-            result, held, state.nominal_held, "full", state.rng, n_resamples=state.settings.bootstrap_resamples
+            result, held, state.nominal_held, "full", state.rng, n_resamples=state.settings.verdict.bootstrap_resamples
         )
         measure_modulation(state.case, full)
         finding.update(found(full), fit_seconds=round(outcome.seconds, 3))
@@ -232,8 +237,8 @@ def _also_promoted(state: DiagnosisState, leader: CandidateScore) -> Callable[[C
     """
     settings = state.settings
     if state.pitch_allowance:
-        return lambda entry: entry.score >= settings.score_threshold
-    return lambda entry: entry.score > 0 and entry.score >= settings.runner_up_share * leader.score
+        return lambda entry: entry.score >= settings.verdict.score_threshold
+    return lambda entry: entry.score > 0 and entry.score >= settings.screening.runner_up_share * leader.score
 
 
 def extra_full_fits(
@@ -363,7 +368,7 @@ def score_candidates(
     order = sorted(best.values(), key=lambda entry: -entry.score)
     all_scores = list(screened)
     promoted = _also_promoted(state, order[0]) if order else (lambda entry: False)
-    chosen = [entry for rank, entry in enumerate(order[: settings.promoted]) if rank == 0 or promoted(entry)]
+    chosen = [entry for rank, entry in enumerate(order[: settings.screening.promoted]) if rank == 0 or promoted(entry)]
     for entry, full in zip(chosen, fits_in_full(state, chosen)):
         all_scores.append(full)
         if supersedes(full, best[entry.effect]):
@@ -378,7 +383,7 @@ def score_candidates(
     # get a full fit, best screened first, until one explains it.
     remaining = sorted(
         (entry for entry in screened if not any(entry is done for done in chosen)), key=lambda entry: -entry.score
-    )[: settings.extra_full_fits]
+    )[: settings.screening.extra_full_fits]
     if remaining and set_first and _unexplained(state, best):
         clock = time.perf_counter()
         with state.steps.step("decide whether the extra full fits wait for a set") as found:

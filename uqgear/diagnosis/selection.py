@@ -61,7 +61,7 @@ def _screen_on_top(state: DiagnosisState, base: CandidateScore, effects: Sequenc
             result, held = outcome.get()
             screened.append(
                 score_candidate(
-                    result, held, base.held, "screening", state.rng, n_resamples=settings.bootstrap_resamples
+                    result, held, base.held, "screening", state.rng, n_resamples=settings.verdict.bootstrap_resamples
                 )
             )
             screened[-1].effect_gain = base_fit.cost - result.cost
@@ -83,9 +83,9 @@ def worth_a_full_fit(entry: CandidateScore, settings: DiagnosisSettings) -> bool
     docs/validation/diagnosis.md, "Forward selection").
     """
     return (
-        entry.shrink_interval[1] >= settings.partial_shrink
-        or entry.gap_with_effect <= settings.noise_gap
-        or entry.score >= settings.score_threshold
+        entry.shrink_interval[1] >= settings.verdict.partial_shrink
+        or entry.gap_with_effect <= settings.verdict.noise_gap
+        or entry.score >= settings.verdict.score_threshold
     )
 
 
@@ -132,13 +132,18 @@ def _full_on_top(state: DiagnosisState, base: CandidateScore, leader: CandidateS
                 candidate,
                 base_fit,
                 full=True,
-                max_evaluations=settings.full_fit_evaluations,
+                max_evaluations=settings.screening.full_fit_evaluations,
                 start=leader.fit,
             ),
-            max_evaluations=settings.full_fit_evaluations,
+            max_evaluations=settings.screening.full_fit_evaluations,
         )
         full = score_candidate(
-            result, leave_one_out(result), base.held, "full", state.rng, n_resamples=settings.bootstrap_resamples
+            result,
+            leave_one_out(result),
+            base.held,
+            "full",
+            state.rng,
+            n_resamples=settings.verdict.bootstrap_resamples,
         )
         full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
         measure_modulation(state.case, full)
@@ -177,7 +182,7 @@ def next_effect(
             best[full.effect] = full
     ranking = sorted(best.values(), key=lambda entry: -entry.score)
     chosen = ranked({leader.effect: best[leader.effect]}, state.case, settings=settings)[0]
-    chosen = replace(chosen, gap_interval=bootstrap_gap(chosen.held.z, state.rng, settings.bootstrap_resamples))
+    chosen = replace(chosen, gap_interval=bootstrap_gap(chosen.held.z, state.rng, settings.verdict.bootstrap_resamples))
     # no density evidence here: a further effect must shrink a gap that is there, or it only soaks up what
     # the allowance already forgives (docs/model/unmodelled-effects.md section 6.4)
     decision = decide(base.gap_with_effect, [chosen], settings=settings, pitch_allowance=state.pitch_allowance)
@@ -222,8 +227,8 @@ def forward_selection(
     entries, decisions = [first], [first_decision]
     intervals: list[tuple[float, float]] = [(float(first_gap_interval[0]), float(first_gap_interval[1]))]
     rounds: list[SelectionRound] = []
-    while len(entries) < settings.max_effects and (
-        entries[-1].gap_with_effect > settings.noise_gap
+    while len(entries) < settings.selection.max_effects and (
+        entries[-1].gap_with_effect > settings.verdict.noise_gap
         or (state.pitch_allowance and entries[-1].gap_with_effect > 0.0)
     ):
         selection = next_effect(state, entries[-1], [entry.effect for entry in entries], rounds[-1] if rounds else None)
@@ -264,7 +269,7 @@ def phase_named_run_out(
     base_gap = selected[-1].entry.gap_with_effect if selected else state.nominal_gap
     reads = first_order_reads(case.pitch_allowance)  # type: ignore[arg-type]
     found_evidence = []
-    for shaft in shafts_tested(case, min_orders=settings.min_sideband_orders):
+    for shaft in shafts_tested(case, min_orders=settings.phases.min_sideband_orders):
         if shaft not in reads:
             continue
         with state.steps.step(f"test the {shaft}'s sideband phases for an eccentric shaft") as finding:
@@ -273,9 +278,9 @@ def phase_named_run_out(
                 base_fit,
                 shaft,
                 reads[shaft][0],
-                kappas=settings.modulation_kappas,
-                threshold=settings.phase_evidence_threshold,
-                draws_per_point=settings.phase_draws_per_point,
+                kappas=settings.phases.modulation_kappas,
+                threshold=settings.phases.phase_evidence_threshold,
+                draws_per_point=settings.phases.phase_draws_per_point,
             )
             finding.update(evidence.summary())
         found_evidence.append(evidence)
@@ -301,7 +306,7 @@ def phase_named_run_out(
         decision, reason, entry.gap_with_effect, set_named=bool(selected), effect=family.name
     )
     chosen = SelectedEffect(
-        entry, base_gap, share, added, bootstrap_gap(entry.held.z, state.rng, settings.bootstrap_resamples)
+        entry, base_gap, share, added, bootstrap_gap(entry.held.z, state.rng, settings.verdict.bootstrap_resamples)
     )
     return found_evidence, ([*selected, chosen], whole)
 
@@ -393,7 +398,7 @@ def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_
         allowance_applied
         and family is not None
         and named.decision.verdict != "unexplained"
-        and len(named.selected) < settings.max_effects
+        and len(named.selected) < settings.selection.max_effects
         and family.name not in in_set
     ):
         clock = time.perf_counter()

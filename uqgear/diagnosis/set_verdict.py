@@ -61,9 +61,10 @@ def set_decision(
         )
     elif last.added is None:
         reason += f"; {last.reason}"
-    explains = shrink_fraction(nominal_gap, final_gap) >= settings.shrink_threshold or final_gap <= settings.noise_gap
+    verdict = settings.verdict
+    explains = shrink_fraction(nominal_gap, final_gap) >= verdict.shrink_threshold or final_gap <= verdict.noise_gap
     if not explains:
-        reason += f"; a gap of {final_gap:.2f} (above {settings.noise_gap:g}) remains unexplained"
+        reason += f"; a gap of {final_gap:.2f} (above {settings.verdict.noise_gap:g}) remains unexplained"
     return Decision(
         first_decision.verdict, reason, partial=not explains, remaining_gap=final_gap, borderline=tuple(borderline)
     )

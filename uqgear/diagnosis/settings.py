@@ -1,6 +1,11 @@
-"""Every decision threshold and budget of the diagnosis in one frozen settings object.
+"""Every decision threshold and budget of the diagnosis, grouped by the step each serves.
 
-:class:`DiagnosisSettings` holds the values; :data:`SETTINGS` states for
+:class:`DiagnosisSettings` holds the values, one frozen group per step of the
+diagnosis in the order it takes them (:data:`GROUPS`: ``reference``,
+``change``, ``interference``, ``features``, ``predictive``, ``nominal``,
+``screening``, ``pitch``, ``verdict``, ``selection``, ``phases``); a setting
+keeps its own name inside its group (``settings.verdict.score_threshold``)
+and may be given by that name alone. :data:`SETTINGS` states for
 each its unit, the rule it serves in one sentence and the section of
 docs/model/ that explains it (its evidence is in
 docs/validation/diagnosis.md), with its valid range
@@ -51,10 +56,250 @@ class Setting:
     study: bool = False
 
 
-@dataclass(frozen=True)
-class DiagnosisSettings:
-    """The thresholds and budgets of a diagnosis (each one's unit, rule and docs section: :data:`SETTINGS`).
+GROUPS: dict[str, tuple[str, ...]] = {
+    "reference": ("speed_tolerance", "torque_tolerance"),
+    "change": ("change_z", "change_allowance_db", "replaced_allowance_db", "same_line_floor", "replaced_line_floor",
+               "change_share", "change_margin", "load_allowance", "change_model_error"),
+    "interference": ("interference_threshold", "interference_runs"),
+    "features": ("signal_snr", "min_informative_runs"),
+    "predictive": ("model_error",),
+    "nominal": ("nominal_refits", "nominal_margin", "nominal_evaluations"),
+    "screening": ("promoted", "runner_up_share", "extra_full_fits", "screening_evaluations", "full_fit_evaluations"),
+    "pitch": ("pitch_draws", "min_sideband_snr", "min_visible_fraction", "run_out_quantile",
+              "order_factor_quantiles", "large_run_out_share"),
+    "verdict": ("score_threshold", "shrink_threshold", "noise_gap", "effect_gain_threshold", "partial_shrink",
+                "score_quantile", "cross_channel_gain", "bootstrap_resamples", "where_z"),
+    "selection": ("max_effects",),
+    "phases": ("phase_evidence_threshold", "min_sideband_orders", "modulation_kappas", "phase_draws_per_point"),
+}
+"""The settings of each step, in the order the diagnosis takes them (docs/model/unmodelled-effects.md section 6)."""
 
+
+class _Group:
+    """Checks a group's settings when made: a value outside its range raises naming it."""
+
+    def __post_init__(self) -> None:
+        for spec in dataclasses.fields(self):  # type: ignore[arg-type]
+            _check(spec.name, SETTINGS[spec.name], getattr(self, spec.name))
+
+
+@dataclass(frozen=True)
+class ReferenceSettings(_Group):
+    """How a test run is matched to a run of a healthy reference (section 6.1).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import ReferenceSettings
+    >>> ReferenceSettings().speed_tolerance
+    0.01
+    """
+
+    speed_tolerance: float = 0.01
+    torque_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
+class ChangeSettings(_Group):
+    """What changed since a healthy reference, and which effect explains it (section 6.1).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import ChangeSettings
+    >>> ChangeSettings(change_z=4.0).change_z
+    4.0
+    """
+
+    change_z: float = 5.0
+    change_allowance_db: float = 1.0
+    replaced_allowance_db: tuple[float, ...] = (3.0, 2.0, 8.0, 8.0, 6.0, 8.0, 3.0)
+    same_line_floor: float = 0.003
+    replaced_line_floor: float = 0.05
+    change_share: float = 0.2
+    change_margin: float = 0.1
+    load_allowance: float = 0.5
+    change_model_error: float = 0.5
+
+
+@dataclass(frozen=True)
+class InterferenceSettings(_Group):
+    """Fixed-frequency line interference on the accelerometers (step 1, section 6.5).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import InterferenceSettings
+    >>> InterferenceSettings().interference_runs
+    3
+    """
+
+    interference_threshold: float = 8.0
+    interference_runs: int = 3
+
+
+@dataclass(frozen=True)
+class FeatureSettings(_Group):
+    """When the rig's features can decide at all (step 1).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import FeatureSettings
+    >>> FeatureSettings().signal_snr
+    5.0
+    """
+
+    signal_snr: float = 5.0
+    min_informative_runs: int = 2
+
+
+@dataclass(frozen=True)
+class PredictiveSettings(_Group):
+    """The model error of the predictive distribution (step 2).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import PredictiveSettings
+    >>> PredictiveSettings().model_error["line"]
+    0.03
+    """
+
+    model_error: Mapping[str, float] = field(default_factory=lambda: MappingProxyType(dict(_MODEL_ERROR)))
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not isinstance(self.model_error, MappingProxyType):
+            object.__setattr__(self, "model_error", MappingProxyType(dict(self.model_error)))
+
+
+@dataclass(frozen=True)
+class NominalSettings(_Group):
+    """The nominal fit and its restarts from a candidate's fit (step 3).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import NominalSettings
+    >>> NominalSettings().nominal_refits
+    2
+    """
+
+    nominal_refits: int = 2
+    nominal_margin: float = 5.0
+    nominal_evaluations: int = 30
+
+
+@dataclass(frozen=True)
+class ScreeningSettings(_Group):
+    """The screening fits and which candidates are fitted in full (step 3, section 6.2).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import ScreeningSettings
+    >>> ScreeningSettings().promoted
+    2
+    """
+
+    promoted: int = 2
+    runner_up_share: float = 0.25
+    extra_full_fits: int = 3
+    screening_evaluations: int = 6
+    full_fit_evaluations: int = 12
+
+
+@dataclass(frozen=True)
+class PitchSettings(_Group):
+    """The pitch-error allowance (step 3, section 6.4).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import PitchSettings
+    >>> PitchSettings().pitch_draws
+    12
+    """
+
+    pitch_draws: int = 12
+    min_sideband_snr: float = 3.0
+    min_visible_fraction: float = 0.2
+    run_out_quantile: float = 0.95
+    order_factor_quantiles: tuple[float, ...] = (0.01, 0.99)
+    large_run_out_share: float = 0.9
+
+
+@dataclass(frozen=True)
+class VerdictSettings(_Group):
+    """The held-out scores' rules that name an effect, and where the gap lies (steps 4 and 5).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import VerdictSettings
+    >>> VerdictSettings(score_threshold=20.0).score_threshold
+    20.0
+    """
+
+    score_threshold: float = 10.0
+    shrink_threshold: float = 0.5
+    noise_gap: float = 0.5
+    effect_gain_threshold: float = 5.0
+    partial_shrink: float = 0.2
+    score_quantile: float = 1.645
+    cross_channel_gain: float = 5.0
+    bootstrap_resamples: int = 400
+    where_z: float = 3.0
+
+
+@dataclass(frozen=True)
+class SelectionSettings(_Group):
+    """How many effects forward selection names together (step 6, section 6.2).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import SelectionSettings
+    >>> SelectionSettings().max_effects
+    3
+    """
+
+    max_effects: int = 3
+
+
+@dataclass(frozen=True)
+class PhaseSettings(_Group):
+    """An eccentric shaft named by its sidebands' phases (step 6, section 6.4).
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.settings import PhaseSettings
+    >>> PhaseSettings().modulation_kappas
+    (0.01, 0.03)
+    """
+
+    phase_evidence_threshold: float = 200.0
+    min_sideband_orders: float = 0.5
+    modulation_kappas: tuple[float, ...] = (0.01, 0.03)
+    phase_draws_per_point: int = 4
+
+
+#: The class of each group of :data:`GROUPS`.
+GROUP_TYPES: dict[str, type[Any]] = {
+    "reference": ReferenceSettings,
+    "change": ChangeSettings,
+    "interference": InterferenceSettings,
+    "features": FeatureSettings,
+    "predictive": PredictiveSettings,
+    "nominal": NominalSettings,
+    "screening": ScreeningSettings,
+    "pitch": PitchSettings,
+    "verdict": VerdictSettings,
+    "selection": SelectionSettings,
+    "phases": PhaseSettings,
+}
+
+#: The group each setting belongs to.
+GROUP_OF: dict[str, str] = {name: group for group, names in GROUPS.items() for name in names}
+
+
+@dataclass(frozen=True, init=False)
+class DiagnosisSettings:
+    """The thresholds and budgets of a diagnosis, one group per step (units, rules, docs sections: :data:`SETTINGS`).
+
+    A group is given whole (``verdict=VerdictSettings(...)``) or a setting by
+    its own name (``score_threshold=20.0``), which goes to its group.
     Settings are checked when made: a value outside its range raises
     :class:`~uqgear.diagnosis.DiagnosisError` naming it.
 
@@ -63,7 +308,7 @@ class DiagnosisSettings:
     >>> import dataclasses
     >>> import uqgear
     >>> settings = uqgear.DiagnosisSettings(score_threshold=20.0)
-    >>> settings.score_threshold, settings.changed()
+    >>> settings.verdict.score_threshold, settings.changed()
     (20.0, {'score_threshold': 20.0})
     >>> uqgear.DiagnosisSettings.describe("score_threshold")["unit"]
     'nat'
@@ -74,75 +319,57 @@ class DiagnosisSettings:
     DiagnosisError - settings.max_effects: expected a value in [1, inf] (effects); got 0
     """
 
-    # ---- the verdict (step 5)
-    score_threshold: float = 10.0
-    shrink_threshold: float = 0.5
-    noise_gap: float = 0.5
-    effect_gain_threshold: float = 5.0
-    partial_shrink: float = 0.2
-    score_quantile: float = 1.645
-    signal_snr: float = 5.0
-    min_informative_runs: int = 2
-    cross_channel_gain: float = 5.0
-    # ---- which candidates are fitted in full, and how many effects a set holds (steps 3 and 6)
-    promoted: int = 2
-    runner_up_share: float = 0.25
-    extra_full_fits: int = 3
-    max_effects: int = 3
-    nominal_refits: int = 2
-    nominal_margin: float = 5.0
-    nominal_evaluations: int = 30
-    screening_evaluations: int = 6
-    full_fit_evaluations: int = 12
-    bootstrap_resamples: int = 400
-    # ---- the pitch-error allowance (step 3)
-    pitch_draws: int = 12
-    min_sideband_snr: float = 3.0
-    min_visible_fraction: float = 0.2
-    run_out_quantile: float = 0.95
-    order_factor_quantiles: tuple[float, ...] = (0.01, 0.99)
-    large_run_out_share: float = 0.9
-    # ---- an eccentric shaft named by its sidebands' phases (step 6)
-    phase_evidence_threshold: float = 200.0
-    min_sideband_orders: float = 0.5
-    modulation_kappas: tuple[float, ...] = (0.01, 0.03)
-    phase_draws_per_point: int = 4
-    # ---- a healthy reference and line interference (step 1)
-    speed_tolerance: float = 0.01
-    torque_tolerance: float = 0.05
-    interference_threshold: float = 8.0
-    interference_runs: int = 3
-    # ---- what changed since a healthy reference (step 1 with a reference)
-    change_z: float = 5.0
-    change_allowance_db: float = 1.0
-    replaced_allowance_db: tuple[float, ...] = (3.0, 2.0, 8.0, 8.0, 6.0, 8.0, 3.0)
-    same_line_floor: float = 0.003
-    replaced_line_floor: float = 0.05
-    change_share: float = 0.2
-    change_margin: float = 0.1
-    load_allowance: float = 0.5
-    change_model_error: float = 0.5
-    # ---- the predictive distribution (step 2)
-    model_error: Mapping[str, float] = field(default_factory=lambda: MappingProxyType(dict(_MODEL_ERROR)))
-    # ---- where the gap lies (reported, not decided)
-    where_z: float = 3.0
+    reference: ReferenceSettings
+    change: ChangeSettings
+    interference: InterferenceSettings
+    features: FeatureSettings
+    predictive: PredictiveSettings
+    nominal: NominalSettings
+    screening: ScreeningSettings
+    pitch: PitchSettings
+    verdict: VerdictSettings
+    selection: SelectionSettings
+    phases: PhaseSettings
 
-    def __post_init__(self) -> None:
-        for name, setting in SETTINGS.items():
-            _check(name, setting, getattr(self, name))
-        if not isinstance(self.model_error, MappingProxyType):
-            object.__setattr__(self, "model_error", MappingProxyType(dict(self.model_error)))
+    def __init__(self, **values: Any) -> None:
+        unknown = sorted(set(values) - set(GROUPS) - set(GROUP_OF))
+        if unknown:
+            raise DiagnosisError(f"settings.{unknown[0]}: unknown setting")
+        for group, kind in GROUP_TYPES.items():
+            given = values.get(group, None)
+            if given is not None and not isinstance(given, kind):
+                raise DiagnosisError(f"settings.{group}: expected a {kind.__name__}; got {type(given).__name__}")
+            flat = {name: values[name] for name in GROUPS[group] if name in values}
+            if given is None:
+                given = kind(**flat)
+            elif flat:
+                given = dataclasses.replace(given, **flat)
+            object.__setattr__(self, group, given)
+
+    def value(self, name: str) -> Any:
+        """One setting by its own name, from its group.
+
+        Examples
+        --------
+        >>> from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+        >>> DEFAULT_SETTINGS.value("max_effects")
+        3
+        """
+        if name not in GROUP_OF:
+            raise DiagnosisError(f"settings.{name}: unknown setting; expected one of {', '.join(SETTINGS)}")
+        return getattr(getattr(self, GROUP_OF[name]), name)
 
     @classmethod
     def describe(cls, name: str | None = None) -> Any:
-        """Unit, rule, docs section, default and whether a study may set it: of one setting, or of all by name."""
+        """Unit, rule, docs section, group, default and whether a study may set it: of one setting, or of all."""
         defaults = cls()
         table = {
             key: {
-                "default": _json_ready(getattr(defaults, key)),
+                "default": _json_ready(defaults.value(key)),
                 "unit": setting.unit,
                 "rule": setting.rule,
                 "docs": setting.docs,
+                "group": GROUP_OF[key],
                 "study": setting.study,
             }
             for key, setting in SETTINGS.items()
@@ -162,24 +389,50 @@ class DiagnosisSettings:
     def from_mapping(
         cls, values: Mapping[str, Any] | None, *, where: str = "settings", keys: tuple[str, ...] | None = None
     ) -> DiagnosisSettings:
-        """Settings from a mapping of setting names (``keys``: the names allowed, default all)."""
+        """Settings from a mapping of setting names, flat or by group (``keys``: the names allowed, default all).
+
+        A group's name holds a mapping of its settings (``verdict: {score_threshold: 12}``); a setting's own
+        name at the top level goes to its group.
+
+        Examples
+        --------
+        >>> from uqgear.diagnosis.settings import DiagnosisSettings
+        >>> flat = DiagnosisSettings.from_mapping({"score_threshold": 12.0})
+        >>> nested = DiagnosisSettings.from_mapping({"verdict": {"score_threshold": 12.0}})
+        >>> flat == nested, nested.verdict.score_threshold
+        (True, 12.0)
+        """
         allowed = tuple(SETTINGS) if keys is None else keys
-        values = dict(values or {})
-        unknown = sorted(set(values) - set(allowed))
-        if unknown:
-            raise DiagnosisError(f"{where}.{unknown[0]}: unknown setting; expected one of {', '.join(allowed)}")
+        flat: dict[str, Any] = {}
+        for key, value in dict(values or {}).items():
+            if key in GROUPS and key not in allowed:
+                if not isinstance(value, Mapping):
+                    raise DiagnosisError(f"{where}.{key}: expected a mapping of its settings; got {value!r}")
+                for name, item in value.items():
+                    if name not in GROUPS[key] or name not in allowed:
+                        expected = ", ".join(n for n in GROUPS[key] if n in allowed) or "none"
+                        raise DiagnosisError(f"{where}.{key}.{name}: unknown setting; expected one of {expected}")
+                    if name in flat:
+                        raise DiagnosisError(f"{where}.{key}.{name}: set twice (also as {name})")
+                    flat[name] = item
+                continue
+            if key not in allowed:
+                raise DiagnosisError(f"{where}.{key}: unknown setting; expected one of {', '.join(allowed)}")
+            if key in flat:
+                raise DiagnosisError(f"{where}.{key}: set twice (also under {GROUP_OF[key]})")
+            flat[key] = value
         try:
-            return cls(**values)
+            return cls(**flat)
         except DiagnosisError as exc:
             raise DiagnosisError(f"{where}.{str(exc).removeprefix('settings.')}") from None
 
     def changed(self) -> dict[str, Any]:
-        """The settings that differ from the defaults, JSON-ready."""
+        """The settings that differ from the defaults, JSON-ready, by their own names."""
         defaults = DiagnosisSettings()
         return {
-            name: _json_ready(getattr(self, name))
+            name: _json_ready(self.value(name))
             for name in SETTINGS
-            if getattr(self, name) != getattr(defaults, name)
+            if self.value(name) != defaults.value(name)
         }
 
 
@@ -451,8 +704,8 @@ def _json_ready(value: Any) -> Any:
 
 
 def _field_defaults() -> dict[str, Any]:
-    """The defaults as the class declares them (a tuple setting stays a tuple)."""
-    return {spec.name: spec.default for spec in dataclasses.fields(DiagnosisSettings)}
+    """The defaults as the groups declare them (a tuple setting stays a tuple)."""
+    return {spec.name: spec.default for kind in GROUP_TYPES.values() for spec in dataclasses.fields(kind)}
 
 
 def _check(name: str, setting: Setting, value: Any) -> None:
@@ -497,4 +750,8 @@ def _check_model_error(value: Any) -> None:
 DEFAULT_SETTINGS = DiagnosisSettings()
 
 
-__all__ = ["DiagnosisSettings", "Setting", "SETTINGS", "DEFAULT_SETTINGS"]
+__all__ = [
+    "DiagnosisSettings", "Setting", "SETTINGS", "DEFAULT_SETTINGS", "GROUPS", "GROUP_OF", "GROUP_TYPES",
+    "ReferenceSettings", "ChangeSettings", "InterferenceSettings", "FeatureSettings", "PredictiveSettings",
+    "NominalSettings", "ScreeningSettings", "PitchSettings", "VerdictSettings", "SelectionSettings", "PhaseSettings",
+]

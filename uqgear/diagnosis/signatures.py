@@ -33,8 +33,8 @@ def frequency_locked_lines(
         case.fs,
         case.processors[0].limit,
         usable=case.usable[:, index],
-        threshold=settings.interference_threshold,
-        minimum_runs=settings.interference_runs,
+        threshold=settings.interference.interference_threshold,
+        minimum_runs=settings.interference.interference_runs,
     )
 
 

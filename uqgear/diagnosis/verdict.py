@@ -50,7 +50,7 @@ def run_out_check(
     bound = bounds.get(str(family.run_out_shaft(values)))
     if bound is None:
         return None
-    modulated = score.modulation_gain is not None and score.modulation_gain >= settings.effect_gain_threshold
+    modulated = score.modulation_gain is not None and score.modulation_gain >= settings.verdict.effect_gain_threshold
     amplitude = float(values.get(family.run_out.amplitude, math.nan))  # type: ignore[arg-type]
     # the run-out as far as the data pin it: it enters the TE directly; without a TE channel it is read
     # through the dynamics, where a gear's own first-order pitch error reads the same, so it is not measured
@@ -73,7 +73,7 @@ def _within(score: CandidateScore) -> bool:
 
 def score_lower_bound(score: CandidateScore, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> float:
     """The lower end of a candidate's 90 % score interval (``score_quantile`` standard errors below it)."""
-    return score.score - settings.score_quantile * float(score.standard_error)
+    return score.score - settings.verdict.score_quantile * float(score.standard_error)
 
 
 def holds_against_pitch_errors(score: CandidateScore, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> bool:
@@ -85,8 +85,8 @@ def holds_against_pitch_errors(score: CandidateScore, *, settings: DiagnosisSett
     (docs/model/unmodelled-effects.md section 6.4).
     """
     beyond = score.run_out is not None and score.run_out.beyond
-    return score_lower_bound(score, settings=settings) >= settings.score_threshold or bool(
-        beyond and score.score >= settings.score_threshold
+    return score_lower_bound(score, settings=settings) >= settings.verdict.score_threshold or bool(
+        beyond and score.score >= settings.verdict.score_threshold
     )
 
 
@@ -104,8 +104,8 @@ def leads_a_set(
     would name it anyway.
     """
     return (
-        best.score >= settings.score_threshold
-        and float(best.effect_gain) >= settings.effect_gain_threshold
+        best.score >= settings.verdict.score_threshold
+        and float(best.effect_gain) >= settings.verdict.effect_gain_threshold
         and best.shrink_interval[0] > 0.0
         and not _within(best)
         and (not pitch_allowance or holds_against_pitch_errors(best, settings=settings))
@@ -125,7 +125,7 @@ def _borderline_figures(
     best: CandidateScore | None,
     settings: DiagnosisSettings,
 ) -> tuple[dict[str, Any], ...]:
-    noise_gap = settings.noise_gap
+    noise_gap = settings.verdict.noise_gap
     figures = []
     if nominal_gap_interval is not None and _straddles(nominal_gap_interval, noise_gap):
         figures.append(
@@ -139,22 +139,23 @@ def _borderline_figures(
     if best is not None:
         error = float(best.standard_error)
         if math.isfinite(error):
-            score_interval = [score_lower_bound(best, settings=settings), best.score + settings.score_quantile * error]
-            if _straddles(score_interval, settings.score_threshold):
+            upper = best.score + settings.verdict.score_quantile * error
+            score_interval = [score_lower_bound(best, settings=settings), upper]
+            if _straddles(score_interval, settings.verdict.score_threshold):
                 figures.append(
                     {
                         "figure": "score",
                         "value": float(best.score),
-                        "threshold": settings.score_threshold,
+                        "threshold": settings.verdict.score_threshold,
                         "interval": score_interval,
                     }
                 )
-        if _straddles(best.shrink_interval, settings.shrink_threshold):
+        if _straddles(best.shrink_interval, settings.verdict.shrink_threshold):
             figures.append(
                 {
                     "figure": "shrink_fraction",
                     "value": float(best.shrink_fraction),
-                    "threshold": settings.shrink_threshold,
+                    "threshold": settings.verdict.shrink_threshold,
                     "interval": [float(v) for v in best.shrink_interval],
                 }
             )
@@ -268,20 +269,24 @@ def _named(
     # what remains is within noise speaks for the effect only where the gap it removed was clearly above
     # noise: a nominal gap whose own interval reaches into noise may be noise itself (borderline: none)
     gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
-    explains = best.shrink_fraction >= settings.shrink_threshold or (
-        remaining <= settings.noise_gap and not gap_borderline
+    explains = best.shrink_fraction >= settings.verdict.shrink_threshold or (
+        remaining <= settings.verdict.noise_gap and not gap_borderline
     )
     # a run-out the gears' own pitch errors make (the run-out check) is no eccentric shaft
-    carried = float(best.effect_gain) >= settings.effect_gain_threshold and not _within(best)
+    carried = float(best.effect_gain) >= settings.verdict.effect_gain_threshold and not _within(best)
     score_low = score_lower_bound(best, settings=settings)
-    below_gap = pitch_allowance and nominal_gap <= settings.noise_gap
+    below_gap = pitch_allowance and nominal_gap <= settings.verdict.noise_gap
     if below_gap:
         # no gap to speak for it: the effect must carry the score threshold by itself
-        carried = carried and float(best.effect_gain) >= settings.score_threshold
-    evidence = best.score >= settings.score_threshold and carried
+        carried = carried and float(best.effect_gain) >= settings.verdict.score_threshold
+    evidence = best.score >= settings.verdict.score_threshold and carried
     holds = holds_against_pitch_errors(best, settings=settings)
     by_density = (
-        density_evidence and below_gap and remaining <= settings.noise_gap and best.shrink_interval[0] <= 0.0 and holds
+        density_evidence
+        and below_gap
+        and remaining <= settings.verdict.noise_gap
+        and best.shrink_interval[0] <= 0.0
+        and holds
     )
     if evidence and by_density:
         return Decision(
@@ -300,11 +305,12 @@ def _named(
     # noise (not for a shrink of half) must hold its density at the 90 % lower bound, as on the density
     # route just below the gap
     by_shrink = evidence and explains and best.shrink_interval[0] > 0.0
-    weak_near_noise = by_shrink and density_evidence and best.shrink_fraction < settings.shrink_threshold and not holds
+    below_shrink = best.shrink_fraction < settings.verdict.shrink_threshold
+    weak_near_noise = by_shrink and density_evidence and below_shrink and not holds
     if by_shrink and not weak_near_noise:
         within = (
             f"; what remains ({remaining:.2f}) is within noise"
-            if best.shrink_fraction < settings.shrink_threshold
+            if best.shrink_fraction < settings.verdict.shrink_threshold
             else ""
         )
         return Decision(
@@ -317,13 +323,14 @@ def _named(
             remaining_gap=remaining,
             borderline=borderline,
         ), False
-    if evidence and not explains and best.shrink_interval[0] >= settings.partial_shrink:
+    if evidence and not explains and best.shrink_interval[0] >= settings.verdict.partial_shrink:
         return Decision(
             best.effect,
             (
                 f"{best.effect} gains {best.score:.1f} nats of held-out predictive density and shrinks "
                 f"the held-out gap by {100 * best.shrink_fraction:.0f} % (90 % interval "
-                f"{_percent(best.shrink_interval)}), but a gap of {remaining:.2f} (above {settings.noise_gap:g}) "
+                f"{_percent(best.shrink_interval)}), but a gap of {remaining:.2f} "
+                f"(above {settings.verdict.noise_gap:g}) "
                 f"remains unexplained"
             ),
             partial=True,
@@ -352,15 +359,15 @@ def _unnamed(
     if weak_near_noise and best is not None:
         held = (
             f"; with the pitch-error allowance an effect that leaves a gap within noise without halving it "
-            f"must hold {settings.score_threshold:g} nats at its score's 90 % lower bound, and {best.effect}'s "
+            f"must hold {settings.verdict.score_threshold:g} nats at its score's 90 % lower bound, and {best.effect}'s "
             f"is {score_lower_bound(best, settings=settings):.1f}: pitch errors of the stated classes can give "
             f"as much"
         )
-    if nominal_gap <= settings.noise_gap:
+    if nominal_gap <= settings.verdict.noise_gap:
         return Decision(
             "none",
             f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-            f"(threshold {settings.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
+            f"(threshold {settings.verdict.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
             borderline=borderline,
         )
     gap_figure = next((figure for figure in borderline if figure["figure"] == "nominal_gap"), None)
@@ -371,7 +378,8 @@ def _unnamed(
         return Decision(
             "none",
             f"the nominal model's held-out gap {nominal_gap:.2f} is above the noise threshold "
-            f"{settings.noise_gap:g} but its 90 % interval ({low:.2f} to {high:.2f}) reaches into noise, and no "
+            f"{settings.verdict.noise_gap:g} but its 90 % interval ({low:.2f} to {high:.2f}) reaches into noise, "
+            "and no "
             f"candidate is clearly better: borderline, not evidence of a gap{held}{beyond}",
             borderline=borderline,
         )
@@ -379,13 +387,13 @@ def _unnamed(
     if best is not None:
         detail = (
             f"; the best candidate, {best.effect}, scores {best.score:.1f} nats and shrinks it by "
-            f"{100 * best.shrink_fraction:.0f} % (needed: {settings.score_threshold:g} nats, and a shrink of "
-            f"{100 * settings.shrink_threshold:.0f} % or a remaining gap within noise)"
+            f"{100 * best.shrink_fraction:.0f} % (needed: {settings.verdict.score_threshold:g} nats, and a shrink of "
+            f"{100 * settings.verdict.shrink_threshold:.0f} % or a remaining gap within noise)"
         )
         detail += held + beyond
     return Decision(
         "unexplained",
-        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.noise_gap:g}){detail}",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.verdict.noise_gap:g}){detail}",
         borderline=borderline,
     )
 

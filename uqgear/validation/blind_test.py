@@ -139,7 +139,7 @@ def _judged(
     per_effect: Mapping[str, float],
 ) -> dict[str, Any]:
     """A campaign's entry: its truth, what the diagnosis named, and whether that was right."""
-    noise_gap = DEFAULT_SETTINGS.noise_gap
+    noise_gap = DEFAULT_SETTINGS.verdict.noise_gap
     decision, outcome = diagnosis.decision_, diagnosis.outcome_
     best = diagnosis.ranking_[0] if diagnosis.ranking_ else None
     named = best if best is not None and best.effect == decision.verdict else None

@@ -143,7 +143,7 @@ def summarise(
     *,
     seconds: float = math.nan,
     seed_text: str = "",
-    noise_gap: float = DEFAULT_SETTINGS.noise_gap,
+    noise_gap: float = DEFAULT_SETTINGS.verdict.noise_gap,
 ) -> dict[str, Any]:
     """Confusion matrix, accuracies, false alarms, shrink statistics, thresholds and effect-set scores.
 

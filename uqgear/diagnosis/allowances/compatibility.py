@@ -19,11 +19,6 @@ import xarray as xr
 from ..errors import DiagnosisError
 from ..settings import DEFAULT_SETTINGS
 
-#: Relative tolerance on pinion speed for matching a test run to a reference run.
-SPEED_TOLERANCE = DEFAULT_SETTINGS.speed_tolerance
-#: Relative tolerance on drive torque for matching a test run to a reference run.
-TORQUE_TOLERANCE = DEFAULT_SETTINGS.torque_tolerance
-
 
 def _design_dict(rig: xr.Dataset, where: str) -> dict[str, Any]:
     try:
@@ -76,8 +71,8 @@ def match_operating_points(
     reference: xr.Dataset,
     *,
     where: str,
-    speed_tolerance: float = SPEED_TOLERANCE,
-    torque_tolerance: float = TORQUE_TOLERANCE,
+    speed_tolerance: float = DEFAULT_SETTINGS.reference.speed_tolerance,
+    torque_tolerance: float = DEFAULT_SETTINGS.reference.torque_tolerance,
 ) -> np.ndarray:
     """For each test operating point the reference one at the same speed and drive torque.
 
@@ -115,4 +110,4 @@ def match_operating_points(
 # ---------------------------------------------------------------------------------------------- the correction
 
 
-__all__ = ["SPEED_TOLERANCE", "TORQUE_TOLERANCE", "check_design_match", "match_operating_points"]
+__all__ = ["check_design_match", "match_operating_points"]

@@ -28,10 +28,6 @@ import scipy.signal
 
 from ..settings import DEFAULT_SETTINGS
 
-#: A peak counts this many per-quadrature noise spreads above zero (:class:`~uqgear.diagnosis.DiagnosisSettings`).
-PEAK_THRESHOLD = DEFAULT_SETTINGS.interference_threshold
-#: A fixed-frequency line must be met in at least this many runs (and half of them).
-MIN_RUNS = DEFAULT_SETTINGS.interference_runs
 #: Bins on each side of an interference line left out of the band (the Hann main lobe spans +-2).
 NOTCH_HALF_WIDTH = 2
 #: Channels that carry the gears' own motion (a line there is not interference).
@@ -79,8 +75,8 @@ def fixed_frequency_lines(
     limit: float,
     *,
     usable: np.ndarray | None = None,
-    threshold: float = PEAK_THRESHOLD,
-    minimum_runs: int = MIN_RUNS,
+    threshold: float = DEFAULT_SETTINGS.interference.interference_threshold,
+    minimum_runs: int = DEFAULT_SETTINGS.interference.interference_runs,
 ) -> list[dict[str, Any]]:
     """Spectral lines of one channel that keep their frequency, not their order, across runs.
 
@@ -155,8 +151,8 @@ def interference_lines(
     band: tuple[float, float],
     channels: Sequence[str],
     *,
-    threshold: float = PEAK_THRESHOLD,
-    minimum_runs: int = MIN_RUNS,
+    threshold: float = DEFAULT_SETTINGS.interference.interference_threshold,
+    minimum_runs: int = DEFAULT_SETTINGS.interference.interference_runs,
 ) -> LineInterference:
     """Fixed-frequency lines inside ``band`` on a channel other than the TE, absent from the TE (module docstring).
 
@@ -206,8 +202,6 @@ def interference_lines(
 
 __all__ = [
     "LineInterference",
-    "PEAK_THRESHOLD",
-    "MIN_RUNS",
     "NOTCH_HALF_WIDTH",
     "GEAR_CHANNEL",
     "amplitude_spectrum",

@@ -155,7 +155,7 @@ def _sideband_order(name: str) -> int:
 
 
 def visible_sidebands(
-    case: RigCase, nominal: FitResult, *, min_snr: float = DEFAULT_SETTINGS.min_sideband_snr
+    case: RigCase, nominal: FitResult, *, min_snr: float = DEFAULT_SETTINGS.pitch.min_sideband_snr
 ) -> dict[str, dict[int, tuple[int, int]]]:
     """Per shaft's sideband family and shaft order: how many of the rig's sidebands stand ``min_snr`` noise
     spreads clear of the nominal fit, of how many (usable runs and channels, both sides of every harmonic)."""
@@ -202,8 +202,8 @@ def pitch_error_allowance(
         (``pitch_draws``) and the run-out bound's quantile (``run_out_quantile``).
     """
     started = time.perf_counter()
-    draws, fraction = settings.pitch_draws, settings.min_visible_fraction
-    visible = visible_sidebands(case, nominal, min_snr=settings.min_sideband_snr)
+    draws, fraction = settings.pitch.pitch_draws, settings.pitch.min_visible_fraction
+    visible = visible_sidebands(case, nominal, min_snr=settings.pitch.min_sideband_snr)
 
     def not_applied(reason: str) -> PitchErrorAllowance:
         return PitchErrorAllowance(False, reason, classes, visible, 0, {}, 0.0, 0.0, time.perf_counter() - started)
@@ -212,14 +212,14 @@ def pitch_error_allowance(
         return not_applied("no pitch-error classes stated: the gears are taken as perfect")
     short = [
         f"{family.split('_')[1]} order {order}: {count} of {total}"
-        for family, orders in judged_counts(case, visible, nominal.model, settings.min_sideband_snr).items()
+        for family, orders in judged_counts(case, visible, nominal.model, settings.pitch.min_sideband_snr).items()
         for order, (count, total) in orders.items()
         if total == 0 or count < fraction * total
     ]
     if short or not all(visible.values()):
         return not_applied(
             f"the rig's first sidebands do not show pitch errors at every order on both shafts "
-            f"(clear of the nominal fit by {settings.min_sideband_snr:g} noise std: {', '.join(short)}; "
+            f"(clear of the nominal fit by {settings.pitch.min_sideband_snr:g} noise std: {', '.join(short)}; "
             f"at least {100 * fraction:.0f} % needed at each)"
         )
     rng = np.random.default_rng(seed)
@@ -227,7 +227,7 @@ def pitch_error_allowance(
         case.design,
         classes,
         np.random.default_rng(child_seed(seed, 0)),
-        quantile=settings.run_out_quantile,
+        quantile=settings.pitch.run_out_quantile,
         draws=_RUN_OUT_DRAWS,
     )
     positions = (np.arange(draws) + 0.5) / draws
@@ -235,7 +235,7 @@ def pitch_error_allowance(
     absolute, forest_share = allowance_errors(case, nominal.problem, nominal.vector, drawn_errors)
     # the rig's gears are one draw: each (gear, order) group's share scaled to what the rig shows
     spread = class_powers(case.design, classes, drawn_errors, np.random.default_rng(child_seed(seed, 1)))
-    ranges = bounds_of(spread, settings.order_factor_quantiles)
+    ranges = bounds_of(spread, settings.pitch.order_factor_quantiles)
     absolute["line"], factors = scaled_to_rig(case, nominal.model, absolute["line"], case.model_error, ranges)
     line = np.array(case.layout.kinds) == "line"
     ratio = absolute["line"] / np.maximum(case.line_noise_sigma()[..., line], 1e-300)
@@ -344,7 +344,9 @@ def allowance_for_fit(
     return FeatureModelError.combined(base_error, absolute)
 
 
-def with_own_allowance(result: FitResult, *, max_evaluations: int = DEFAULT_SETTINGS.full_fit_evaluations) -> FitResult:
+def with_own_allowance(
+    result: FitResult, *, max_evaluations: int = DEFAULT_SETTINGS.screening.full_fit_evaluations
+) -> FitResult:
     """A fit with effects refitted with its own model's pitch-error allowance (:func:`allowance_for_fit`).
 
     Unchanged when the case has no allowance applied or the fit has no
@@ -411,9 +413,6 @@ def first_order_reads(allowance: PitchErrorAllowance | None) -> dict[str, tuple[
     }
 
 
-#: A gear whose first-order errors read larger than this share of the stated classes' gears is reported
-#: (:func:`run_outs_not_told_apart`): by construction one gear in ten of those classes is, with no run-out.
-LARGE_RUN_OUT_SHARE = DEFAULT_SETTINGS.large_run_out_share
 
 
 def run_outs_not_told_apart(
@@ -421,7 +420,7 @@ def run_outs_not_told_apart(
     named_shafts: Sequence[str],
     *,
     effect: str | None = None,
-    share_threshold: float = LARGE_RUN_OUT_SHARE,
+    share_threshold: float = DEFAULT_SETTINGS.pitch.large_run_out_share,
 ) -> list[dict[str, Any]]:
     """Gears whose first-order errors read as a run-out large for their classes, with no eccentricity named there.
 
@@ -484,7 +483,6 @@ def run_outs_not_told_apart(
 
 __all__ = [
     "DEFAULT_CLASSES",
-    "LARGE_RUN_OUT_SHARE",
     "PitchErrorAllowance",
     "check_classes",
     "run_out_bounds",

@@ -50,8 +50,6 @@ from ..settings import DEFAULT_SETTINGS
 
 #: Shaft orders whose groups are scaled (the orders the features hold: shaft lines and sidebands 1..3).
 ORDERS: tuple[int, ...] = (1, 2, 3)
-#: Quantiles of a group's power over the stated classes' draws that bound its factor.
-FACTOR_QUANTILES: tuple[float, ...] = DEFAULT_SETTINGS.order_factor_quantiles
 # Draws of the tooth positions alone (no simulation) that give those quantiles.
 _BOUND_DRAWS = 4000
 # Candidate factors per decade between the bounds (a log grid; the likelihood is smooth in the factor).
@@ -101,7 +99,8 @@ def class_powers(
 
 
 def bounds_of(
-    spread: Mapping[tuple[str, int], tuple[np.ndarray, float]], quantiles: tuple[float, ...] = FACTOR_QUANTILES
+    spread: Mapping[tuple[str, int], tuple[np.ndarray, float]],
+    quantiles: tuple[float, ...] = DEFAULT_SETTINGS.pitch.order_factor_quantiles,
 ) -> dict[tuple[str, int], tuple[float, float]]:
     """Per group, ``quantiles`` of :func:`class_powers` over the allowance's mean: the range its factor is held to."""
     bounds = {}
@@ -117,7 +116,7 @@ def factor_bounds(
     drawn_errors: Sequence[PitchErrors],
     rng: np.random.Generator,
     *,
-    quantiles: tuple[float, ...] = FACTOR_QUANTILES,
+    quantiles: tuple[float, ...] = DEFAULT_SETTINGS.pitch.order_factor_quantiles,
     draws: int = _BOUND_DRAWS,
 ) -> dict[tuple[str, int], tuple[float, float]]:
     """Per (gear, order): the range of |E_j|^2 that gears of ``classes`` give, over the allowance draws' mean."""
@@ -350,7 +349,6 @@ def judged_counts(
 __all__ = [
     "judged_counts",
     "ORDERS",
-    "FACTOR_QUANTILES",
     "drawn_amplitudes",
     "class_powers",
     "factor_bounds",

@@ -50,7 +50,8 @@ from ...physics.design import Design
 from ..case import FeatureModelError, RigCase, prepare_case
 from ..execution import RunExecutor, transferred_rms
 from ..fitting import fit_nominal
-from .compatibility import SPEED_TOLERANCE, TORQUE_TOLERANCE, match_operating_points
+from ..settings import DEFAULT_SETTINGS
+from .compatibility import match_operating_points
 from .gain_curve import DIRECT_FLOOR, GainCurve, fit_gain_curve
 
 #: A line enters the learned correction when rig and model both stand this many per-quadrature noise spreads up.
@@ -404,8 +405,8 @@ def attach_reference(
     correction: ReferenceCorrection,
     test: xr.Dataset,
     *,
-    speed_tolerance: float = SPEED_TOLERANCE,
-    torque_tolerance: float = TORQUE_TOLERANCE,
+    speed_tolerance: float = DEFAULT_SETTINGS.reference.speed_tolerance,
+    torque_tolerance: float = DEFAULT_SETTINGS.reference.torque_tolerance,
 ) -> tuple[RigCase, dict[str, Any]]:
     """The test campaign corrected by a learned reference (its runs matched to the reference's), and the
     ``reference`` summary of ``diagnosis.json``."""

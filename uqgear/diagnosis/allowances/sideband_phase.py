@@ -48,14 +48,6 @@ from ..heldout import HeldOut, leave_one_out
 from ..scoring import CandidateScore, score_candidate
 from ..settings import DEFAULT_SETTINGS, DiagnosisSettings
 
-#: Mesh stiffness modulations the eccentric-shaft hypothesis is tried at (a profile over kappa).
-MODULATION_KAPPAS = DEFAULT_SETTINGS.modulation_kappas
-#: Log ratio (nats) of the rig's phase sums under an eccentricity over pitch errors alone that names it.
-PHASE_EVIDENCE_THRESHOLD = DEFAULT_SETTINGS.phase_evidence_threshold
-#: A shaft is tested only where its first sidebands lie this many pinion orders from their carrier.
-MIN_SIDEBAND_ORDERS = DEFAULT_SETTINGS.min_sideband_orders
-#: Pitch-error draws of the allowance simulated at each point of the parameter spread.
-DRAWS_PER_POINT = DEFAULT_SETTINGS.phase_draws_per_point
 #: The fitted model's parameter spread the phase sums are pooled over: each factor up and down.
 PARAMETER_SPREAD = {"mesh_stiffness_scale": 1.03, "zeta_mesh": 1.25}
 _HARMONICS = (1, 2, 3)
@@ -76,8 +68,8 @@ class ModulationEvidence:
     run_out : float
         Eccentricity amplitude of the hypothesis: the run-out the fit read off the shaft's first-order lines, m.
     per_sum : dict
-        Per kappa of :data:`MODULATION_KAPPAS`: (n_op, n_channel, n_harmonic) log density of each of the rig's
-        phase sums with the eccentricity minus without it, nats (0 where a sum is not usable).
+        Per kappa of ``settings.phases.modulation_kappas``: (n_op, n_channel, n_harmonic) log density of each of
+        the rig's phase sums with the eccentricity minus without it, nats (0 where a sum is not usable).
     n_sums : int
         Phase sums scored (harmonic x channel x operating point with all three lines finite).
     threshold : float
@@ -88,7 +80,7 @@ class ModulationEvidence:
     run_out: float
     per_sum: dict[float, np.ndarray] = field(repr=False)
     n_sums: int
-    threshold: float = PHASE_EVIDENCE_THRESHOLD
+    threshold: float = DEFAULT_SETTINGS.phases.phase_evidence_threshold
     seconds: float = 0.0
     #: Its entry in ``diagnosis.json`` (one per shaft tested).
     key: ClassVar[str] = "sideband_phases"
@@ -106,7 +98,7 @@ class ModulationEvidence:
         per_sum: dict[float, np.ndarray],
         n_sums: int,
         *,
-        threshold: float = PHASE_EVIDENCE_THRESHOLD,
+        threshold: float = DEFAULT_SETTINGS.phases.phase_evidence_threshold,
         seconds: float = 0.0,
     ) -> ModulationEvidence:
         return cls(
@@ -236,7 +228,7 @@ def _spread_vectors(base: FitResult) -> list[np.ndarray]:
     return vectors
 
 
-def shafts_tested(case: RigCase, *, min_orders: float = MIN_SIDEBAND_ORDERS) -> list[str]:
+def shafts_tested(case: RigCase, *, min_orders: float = DEFAULT_SETTINGS.phases.min_sideband_orders) -> list[str]:
     """The shafts whose first sidebands lie at least ``min_orders`` pinion orders from their carrier."""
     pinion_orders = {"pinion": 1.0, "gear": case.design.z1 / case.design.z2}
     return [shaft for shaft, orders in pinion_orders.items() if orders >= min_orders]
@@ -248,9 +240,9 @@ def modulation_evidence(
     shaft: str,
     run_out: float,
     *,
-    kappas: Sequence[float] = MODULATION_KAPPAS,
-    threshold: float = PHASE_EVIDENCE_THRESHOLD,
-    draws_per_point: int = DRAWS_PER_POINT,
+    kappas: Sequence[float] = DEFAULT_SETTINGS.phases.modulation_kappas,
+    threshold: float = DEFAULT_SETTINGS.phases.phase_evidence_threshold,
+    draws_per_point: int = DEFAULT_SETTINGS.phases.phase_draws_per_point,
 ) -> ModulationEvidence:
     """Score the rig's sideband phase sums of ``shaft`` with and without an eccentric shaft.
 
@@ -380,19 +372,15 @@ def fit_modulated_run_out(
     candidate = replace(
         library, choices=(*library.choices, (spec.modulation, evidence.kappa)), fitted=fitted, starts=starts
     )
-    result = fit_candidate(case, candidate, base, full=False, max_evaluations=settings.screening_evaluations)
+    result = fit_candidate(case, candidate, base, full=False, max_evaluations=settings.screening.screening_evaluations)
     entry = score_candidate(
-        result, leave_one_out(result), base_held, "screening", rng, n_resamples=settings.bootstrap_resamples
+        result, leave_one_out(result), base_held, "screening", rng, n_resamples=settings.verdict.bootstrap_resamples
     )
     entry.effect_gain = base.cost - result.cost
     return entry
 
 
 __all__ = [
-    "MODULATION_KAPPAS",
-    "PHASE_EVIDENCE_THRESHOLD",
-    "MIN_SIDEBAND_ORDERS",
-    "DRAWS_PER_POINT",
     "PARAMETER_SPREAD",
     "ModulationEvidence",
     "sideband_triples",

@@ -360,9 +360,9 @@ def _noise_spread(reference_halves: np.ndarray, test_halves: np.ndarray, carried
 
 def family_allowance(settings: DiagnosisSettings, gears: str) -> np.ndarray:
     """Per feature, the allowance of its family in ln units (run-to-run; plus the replaced gears' spread)."""
-    allowance = np.array([settings.change_allowance_db for _ in FEATURES]) / _DB
+    allowance = np.array([settings.change.change_allowance_db for _ in FEATURES]) / _DB
     if gears == "replaced":
-        replaced = dict(zip(FAMILIES, settings.replaced_allowance_db))
+        replaced = dict(zip(FAMILIES, settings.change.replaced_allowance_db))
         allowance = allowance + np.array([replaced[name.family] for name in FEATURES]) / _DB
     return allowance
 
@@ -388,8 +388,8 @@ def judge_change(
         reference,
         test.speeds,
         test.torques,
-        speed_tolerance=settings.speed_tolerance,
-        torque_tolerance=settings.torque_tolerance,
+        speed_tolerance=settings.reference.speed_tolerance,
+        torque_tolerance=settings.reference.torque_tolerance,
     )
     if not carried.inside.any():
         first = carried.reasons[0]
@@ -397,7 +397,7 @@ def judge_change(
             f"reference: no test operating point lies inside the reference's range (operating point 0: {first}); "
             "expected a reference campaign covering the test plan"
         )
-    share = settings.replaced_line_floor if gears == "replaced" else settings.same_line_floor
+    share = settings.change.replaced_line_floor if gears == "replaced" else settings.change.same_line_floor
     # the floor follows the reference's level at the test run (its RMS feature)
     floor = level_floor(carried.values[..., 0], share)
     anchor = _floored(carried.values, floor)
@@ -405,7 +405,7 @@ def judge_change(
     change = observed - anchor
     spread = _noise_spread(reference.halves, test.halves, carried.nearest)
     spread = np.sqrt(spread**2 + carried.spread**2)
-    threshold = settings.change_z * spread + family_allowance(settings, gears)[None, None, :]
+    threshold = settings.change.change_z * spread + family_allowance(settings, gears)[None, None, :]
     if load_allowance is not None:
         # the load of each run may differ inside its stated T2 interval (judged runs only)
         threshold[carried.inside] += load_allowance

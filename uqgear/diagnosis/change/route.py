@@ -65,19 +65,20 @@ def _decide(test: ChangeTest, scores: list[ChangeScore], settings: DiagnosisSett
         )
     where = _where_text(test.where())
     best = scores[0] if scores else None
-    if best is None or best.share < settings.change_share:
+    if best is None or best.share < settings.change.change_share:
         share = "no candidate" if best is None else f"the best candidate, {best.label}, explains {best.share:.0%}"
         return Decision(
             "unexplained",
-            f"changed since the reference ({where}); {share} of the change, below {settings.change_share:.0%}",
+            f"changed since the reference ({where}); {share} of the change, below {settings.change.change_share:.0%}",
         )
     runner_up = scores[1] if len(scores) > 1 else None
     next_text = "" if runner_up is None else f" (next: {runner_up.label}, {runner_up.share:.0%})"
-    if runner_up is not None and best.share - runner_up.share < settings.change_margin:
+    if runner_up is not None and best.share - runner_up.share < settings.change.change_margin:
         return Decision(
             "unexplained",
             f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change, "
-            f"{runner_up.label} {runner_up.share:.0%}: less than {settings.change_margin:.0%} apart, neither is named",
+            f"{runner_up.label} {runner_up.share:.0%}: less than {settings.change.change_margin:.0%} apart, "
+            "neither is named",
         )
     return Decision(
         best.effect,
@@ -112,9 +113,9 @@ def diagnose_change(
         test_features = read_campaign(rig, design, channels)
     with steps.step("judge the change since the reference") as found:
         test = judge_change(reference_features, test_features, settings=settings, gears=gears)
-        share = settings.replaced_line_floor if gears == "replaced" else settings.same_line_floor
+        share = settings.change.replaced_line_floor if gears == "replaced" else settings.change.same_line_floor
         model = ChangeModel(design, rig, test_features, test.judged, share)
-        allowance = model.load_allowance(settings.load_allowance)
+        allowance = model.load_allowance(settings.change.load_allowance)
         test = judge_change(reference_features, test_features, settings=settings, gears=gears, load_allowance=allowance)
         found.update(changed=test.changed)
     timings["change_test"] = time.perf_counter() - started
@@ -145,11 +146,11 @@ def diagnose_change(
         "named": None if best is None else _score_entry(best, test, settings),
         "ranking": [_score_entry(score, test, settings) for score in scores],
         "thresholds": {
-            "change_z": settings.change_z,
-            "change_allowance_db": settings.change_allowance_db,
-            "replaced_allowance_db": list(settings.replaced_allowance_db) if gears == "replaced" else None,
-            "change_share": settings.change_share,
-            "change_margin": settings.change_margin,
+            "change_z": settings.change.change_z,
+            "change_allowance_db": settings.change.change_allowance_db,
+            "replaced_allowance_db": list(settings.change.replaced_allowance_db) if gears == "replaced" else None,
+            "change_share": settings.change.change_share,
+            "change_margin": settings.change.change_margin,
         },
         "timing_s": dict(timings),
     }

@@ -218,7 +218,7 @@ def _spread(scale: np.ndarray, predicted: np.ndarray, observed: np.ndarray, sett
     """The spread a predicted change is judged with: the change threshold and the model form's error, which grows
     with the change (the geometric mean of the predicted and the observed one: an over-prediction is not made
     cheap by its own size, a missed change costs in full)."""
-    return np.sqrt(scale**2 + settings.change_model_error**2 * np.abs(predicted * observed))
+    return np.sqrt(scale**2 + settings.change.change_model_error**2 * np.abs(predicted * observed))
 
 
 def _golden(loss: Callable[[float], float], low: float, high: float, steps: int) -> tuple[float, float]:
@@ -359,7 +359,7 @@ def score_change(
     """
     judged = change.judged
     if model is None:
-        share = settings.replaced_line_floor if change.gears == "replaced" else settings.same_line_floor
+        share = settings.change.replaced_line_floor if change.gears == "replaced" else settings.change.same_line_floor
         model = ChangeModel(design, rig, test, judged, share)
     observed, scale, anchor = _valid(change)
     hints = fixed_line_hints(rig, reference, change.channels) if reference is not None else {}
