@@ -183,13 +183,31 @@ class StartedEvaluator:
                     stiffness=self.options.get("stiffness", "ishikawa"),
                 )
                 states[rest] = np.stack([setup.static_state() for setup in setups])
-        result = simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
-        final = result["final_state"].values
-        result = result.drop_vars(["final_state", "state"]).assign(
-            {name: ("sample", final[:, index]) for index, name in enumerate(FINAL_VARIABLES)}
+        result = final_variables(
+            simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
         )
         classes = classify_batch(result, seed=self.classify_seed) if self.full_regime else period_labels(result)
         return result.merge(classes[["regime", "response_period"]], compat="override")
+
+
+def final_variables(result: xr.Dataset) -> xr.Dataset:
+    """``result`` of :func:`simulate_batch` with ``final_state=True``, its final state as one variable per state
+    (``final_<state>``, :data:`FINAL_VARIABLES`): what a sweep carries on, sample by sample.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> from uqgear.physics.integration import samples_from_mapping
+    >>> design = uqgear.load_design("locomotive")
+    >>> samples = samples_from_mapping({"pinion_speed": [2000.0], "adhesion_torque": [33.8e3]})
+    >>> out = final_variables(uqgear.simulate_batch(design, samples, n_periods=60, keep_periods=20, final_state=True))
+    >>> all(name in out for name in FINAL_VARIABLES), "final_state" in out
+    (True, False)
+    """
+    final = result["final_state"].values
+    return result.drop_vars(["final_state", "state"]).assign(
+        {name: ("sample", final[:, index]) for index, name in enumerate(FINAL_VARIABLES)}
+    )
 
 
 def _velocity_scale(samples: xr.Dataset, design: Design) -> np.ndarray:
@@ -769,6 +787,7 @@ __all__ = [
     "MultiStart",
     "MultiStartSearch",
     "StartedEvaluator",
+    "final_variables",
     "group_attractors",
     "extremes_over_attractors",
     "sweep_order",

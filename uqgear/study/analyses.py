@@ -33,7 +33,7 @@ import xarray as xr
 import uqgear.dynamics as dynamics
 
 from ..common.progress import progress
-from ..dynamics.attractors import FINAL_VARIABLES
+from ..dynamics.attractors import final_variables
 from ..physics.design import Design
 from ..physics.effect_draws import UncertainEffect
 from ..physics.integration import QOI_INFO, BatchEvaluator
@@ -125,10 +125,7 @@ def evaluate_batch(
     model = BatchEvaluator(design, **simulation.batch_options(threads), final_state=final_state)
     result = model(samples)
     if final_state:
-        final = result["final_state"].values
-        result = result.drop_vars(["final_state", "state"]).assign(
-            {name: ("sample", final[:, index]) for index, name in enumerate(FINAL_VARIABLES)}
-        )
+        result = final_variables(result)
     if classify:
         seed = classify_seed if classify_seed is not None else 0
         classes = dynamics.classify_batch(result, seed=seed)

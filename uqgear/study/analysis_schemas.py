@@ -106,6 +106,16 @@ _COMMON_KEYS: dict[str, Checker] = {
     "simulation": lambda value, path: value,
 }
 
+#: The interval method's keys, shared by the analyses that bound over interval parameters with it.
+_INTERVAL_METHOD_KEYS: dict[str, Checker] = {
+    "parameters": _variable_list(),
+    "method": choice(*INTERVAL_METHODS),
+    "order": number("(Chebyshev series order)", 1, 20, integer=True),
+    "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
+    "fallback": choice(*INTERVAL_FALLBACKS),
+    "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
+}
+
 #: Keys (with checks) of each analysis type, besides ``type``, ``name``,
 #: ``description``, ``operating_points`` and ``simulation``.
 ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
@@ -125,12 +135,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "points": number("values across each interval", 2, 200, integer=True),
     },
     "interval": {
-        "parameters": _variable_list(),
-        "method": choice(*INTERVAL_METHODS),
-        "order": number("(Chebyshev series order)", 1, 20, integer=True),
-        "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
-        "fallback": choice(*INTERVAL_FALLBACKS),
-        "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
+        **_INTERVAL_METHOD_KEYS,
         "qois": _qoi_list(),
     },
     "monte_carlo": {
@@ -212,17 +217,21 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "compare_sweeps": boolean(),
     },
     "rating": {
-        "parameters": _variable_list(),
-        "method": choice(*INTERVAL_METHODS),
-        "order": number("(Chebyshev series order)", 1, 20, integer=True),
-        "points": number("(scan points per interval parameter)", 2, 1000, integer=True),
-        "fallback": choice(*INTERVAL_FALLBACKS),
-        "tolerance": number("(relative surrogate error accepted)", 0.0, 1.0, lower_open=True),
+        **_INTERVAL_METHOD_KEYS,
         # material data and the other ISO 6336 inputs (uqgear.physics.rating.RatingSettings keys)
         "rating": rating_settings,
         # the service the fatigue damage is summed over (illustrative default: see RATING_SERVICE)
         "service": service_profile,
     },
+}
+
+#: The interval method's defaults (:data:`_INTERVAL_METHOD_KEYS`).
+_INTERVAL_METHOD_DEFAULTS: dict[str, Any] = {
+    "method": "chebyshev",
+    "order": 6,
+    "points": None,
+    "fallback": "scan",
+    "tolerance": 0.02,
 }
 
 #: Default option values per analysis type (applied after validation).
@@ -231,15 +240,8 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "bifurcation": {"envelope": (), "points": 5},
     "continuation": {"envelope": (), "points": 2, "max_period": 8, "compare_sweeps": True},
     "regime_map": {"points": 9},
-    "interval": {
-        "method": "chebyshev",
-        "order": 6,
-        "points": None,
-        "fallback": "scan",
-        "tolerance": 0.02,
-        "qois": DEFAULT_QOIS,
-    },
-    "rating": {"method": "chebyshev", "order": 6, "points": None, "fallback": "scan", "tolerance": 0.02},
+    "interval": {**_INTERVAL_METHOD_DEFAULTS, "qois": DEFAULT_QOIS},
+    "rating": dict(_INTERVAL_METHOD_DEFAULTS),
     "monte_carlo": {
         "intervals": "uniform",
         "points": 5,
