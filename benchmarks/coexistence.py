@@ -16,8 +16,11 @@ box). ``--every-seeds K`` runs the every-start study K times with the seeds seed
 after the first) and calls a point *robust* when every one of them finds coexisting responses there; the
 guided run is checked against the robust points.
 
+``--repeat K`` (default 3) times K from-rest and guided runs, alternating, and prints the median and the
+worst of the K ratios: one pair's ratio moves by 0.1-0.3 with what else the machine does.
+
 Usage: ``python benchmarks/coexistence.py [--studies t2_envelope paper_speed nonlinear_windows]
-[--every-seeds K] [--json out.json]``
+[--every-seeds K] [--repeat K] [--json out.json]``
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -69,6 +73,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--studies", nargs="+", default=["t2_envelope"])
     parser.add_argument("--every-seeds", type=int, default=1)
+    parser.add_argument("--repeat", type=int, default=3, help="alternating from-rest and guided runs timed")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     report = {}
@@ -83,6 +88,11 @@ def main() -> None:
                 paths[mode].write_text(yaml.safe_dump(variant))
             run(paths["guided"], root / f"{name}-warm-up")
             times = {mode: run(path, root / f"{name}-{mode}") for mode, path in paths.items()}
+            # the from-rest and guided runs again, alternating: the ratio of each pair, then the median and worst
+            pairs = [times["guided"] / times["rest"]]
+            for k in range(1, args.repeat):
+                rest = run(paths["rest"], root / f"{name}-rest-{k}")
+                pairs.append(run(paths["guided"], root / f"{name}-guided-{k}") / rest)
             windows = {mode: found(root / f"{name}-{mode}") for mode in MODES}
             held = {mode: points(root / f"{name}-{mode}") for mode in MODES}
             robust = set(held["every"])
@@ -94,6 +104,7 @@ def main() -> None:
                 robust &= points(root / f"{name}-every-{k}")
             report[name] = {
                 "seconds": times,
+                "guided_over_rest": pairs,
                 "found": windows,
                 "points": {mode: sorted(values) for mode, values in held.items()},
                 "robust": sorted(robust),
@@ -101,6 +112,9 @@ def main() -> None:
             print(f"{name}: from rest {times['rest']:.1f} s, every start {times['every']:.1f} s "
                   f"({times['every'] / times['rest']:.2f}x), guided {times['guided']:.1f} s "
                   f"({times['guided'] / times['rest']:.2f}x; aim <= 1.35x)")
+            if len(pairs) > 1:
+                print(f"  guided / rest over {len(pairs)} alternating pairs: median {statistics.median(pairs):.2f}x, "
+                      f"worst {max(pairs):.2f}x ({', '.join(f'{r:.2f}' for r in pairs)})")
             for mode in ("every", "guided"):
                 print(f"  {mode}: {len(windows[mode])} coexistence statements")
                 for line in windows[mode]:

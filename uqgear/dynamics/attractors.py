@@ -466,27 +466,23 @@ class MultiStartSearch:
         self.start_states_ = {"rest": np.full((n, 6), np.nan)}
         if settings.sweeps:
             runs += self._sweep_stages(evaluate, samples, rest, stages, sweep_entry, sweep_reach)
+        requested: dict[str, np.ndarray] = {}
         for label, states in (extra_states or {}).items():
             states = np.asarray(states, dtype=float)
             if states.shape != (n, 6):
                 raise UqgearError(f"extra_states[{label!r}]: expected shape ({n}, 6); got {states.shape}")
-            stages[label] = _partial_stage(evaluate, samples, states, rest)
-            self.start_states_[label] = states
-            runs += int(np.all(np.isfinite(states), axis=1).sum())
+            requested[label] = states
         if settings.seeded:
             if design is None:
                 raise UqgearError("design: needed for the random starts' box (pass design=)")
             starts = self._seeded_states(samples, rest, design)
-            tiled = np.tile(np.arange(n), settings.seeded)
-            if seeded_rows is None:
-                seeded = evaluate(with_starts(samples.isel(sample=tiled), np.arange(tiled.size), starts))
-            else:
+            if seeded_rows is not None:
                 starts[~np.tile(np.asarray(seeded_rows, dtype=bool), settings.seeded)] = np.nan
-                seeded = _partial_stage(evaluate, samples.isel(sample=tiled), starts, rest.isel(sample=tiled))
             for k in range(settings.seeded):
-                stages[f"seeded-{k + 1}"] = seeded.isel(sample=slice(k * n, (k + 1) * n))
-                self.start_states_[f"seeded-{k + 1}"] = starts[k * n : (k + 1) * n]
-            runs += int(np.all(np.isfinite(starts), axis=1).sum())
+                requested[f"seeded-{k + 1}"] = starts[k * n : (k + 1) * n]
+        stages.update(_extra_stages(evaluate, samples, requested, rest))
+        self.start_states_.update(requested)
+        runs += sum(int(np.all(np.isfinite(states), axis=1).sum()) for states in requested.values())
         labels = settings.start_labels()
         if extra_states:
             at = labels.index("down") + 1 if "down" in labels else 1
@@ -602,24 +598,37 @@ def _put_rows(target: xr.Dataset, rows: np.ndarray, part: xr.Dataset) -> xr.Data
     return out
 
 
-def _partial_stage(
-    evaluate: Callable[[xr.Dataset], xr.Dataset], samples: xr.Dataset, states: np.ndarray, template: xr.Dataset
-) -> xr.Dataset:
-    """Runs from ``states`` where a row is finite; rows of NaN give NaN outputs and no Poincare points (no run)."""
-    rows = np.nonzero(np.all(np.isfinite(states), axis=1))[0]
-    out = template.copy(deep=True)
-    blank: dict[Any, Any] = {}
-    for name in list(out.data_vars):
+def _extra_stages(
+    evaluate: Callable[[xr.Dataset], xr.Dataset],
+    samples: xr.Dataset,
+    requested: Mapping[str, np.ndarray],
+    template: xr.Dataset,
+) -> dict[str, xr.Dataset]:
+    """The runs of every stage from its start states (label -> states of shape (n_samples, 6)), all in one batch:
+    each run is computed from its own inputs, so one batch gives the numbers of one batch per stage, at the cost
+    of one call. A row of NaN gives NaN outputs and no Poincare points (no run); ``template`` (runs of the same
+    model) gives the layout."""
+    blank = template.copy(deep=True)
+    cleared: dict[Any, Any] = {}
+    for name in list(blank.data_vars):
         # plain arrays and one update: a DataArray per variable copies every sample coordinate along
-        variable = out.variables[name]
+        variable = blank.variables[name]
         if variable.dtype.kind == "f":
-            blank[name] = (variable.dims, np.full(variable.shape, np.nan, dtype=variable.dtype), variable.attrs)
+            cleared[name] = (variable.dims, np.full(variable.shape, np.nan, dtype=variable.dtype), variable.attrs)
         elif variable.dtype.kind in "US":
-            blank[name] = (variable.dims, np.full(variable.shape, "", dtype=variable.dtype), variable.attrs)
-    out.update(blank)
-    if rows.size == 0:
-        return out
-    return _put_rows(out, rows, evaluate(with_starts(samples, rows, states[rows])))
+            cleared[name] = (variable.dims, np.full(variable.shape, "", dtype=variable.dtype), variable.attrs)
+    blank.update(cleared)
+    picked = {label: np.nonzero(np.all(np.isfinite(states), axis=1))[0] for label, states in requested.items()}
+    index = np.concatenate([np.zeros(0, dtype=np.int64), *picked.values()])
+    if index.size == 0:
+        return dict.fromkeys(requested, blank)
+    states = np.concatenate([requested[label][rows] for label, rows in picked.items()])
+    result = evaluate(with_starts(samples, index, states))
+    out, at = {}, 0
+    for label, rows in picked.items():
+        out[label] = _put_rows(blank, rows, result.isel(sample=slice(at, at + rows.size))) if rows.size else blank
+        at += rows.size
+    return out
 
 
 def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
@@ -692,17 +701,19 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
     regimes = runs["regime"].transpose("sample", "start").values.astype(str)
     poincare_x = runs["poincare_x"].transpose("sample", "start", "period").values
     poincare_v = runs["poincare_x_velocity"].transpose("sample", "start", "period").values
+    # a start that did not run (no finite Poincare point) is left out before its entry is built
+    ran = np.any(np.isfinite(poincare_x) & np.isfinite(poincare_v), axis=2)
     for i in range(n):
         omega_b = 2.0 * math.pi * z1 * float(np.ravel(speed)[i]) / 60.0 * half_backlash
         found: list[dict[str, Any]] = []
         groups: list[list[int]] = []
         for j in range(len(labels)):
+            if not ran[i, j]:
+                membership[i, j] = -1
+                continue
             points = np.stack([poincare_x[i, j] / half_backlash, poincare_v[i, j] / omega_b], axis=1)
             entry: dict[str, Any] = {name: float(values[i, j]) for name, values in compared.items()}
             entry.update(regime=regimes[i, j], points=points[np.all(np.isfinite(points), axis=1)])
-            if entry["points"].size == 0:
-                membership[i, j] = -1
-                continue
             match = next((k for k, other in enumerate(found) if _same(other, entry, settings)), None)
             if match is None:
                 found.append(entry)
@@ -766,7 +777,8 @@ def extremes_over_attractors(attractors: xr.Dataset, qois: Sequence[str]) -> xr.
         values = attractors[name].values
         finite = np.where(np.isfinite(values), values, np.nan)
         for bound, pick in (("max", np.nanargmax), ("min", np.nanargmin)):
-            index = np.array([pick(row) if np.isfinite(row).any() else 0 for row in finite], dtype=np.int64)
+            held = np.asarray(np.isfinite(finite).any(axis=1))  # a sample without any finite value gives attractor 0
+            index = np.where(held, pick(np.where(held[:, None], finite, 0.0), axis=1), 0).astype(np.int64)
             rows = np.arange(values.shape[0])
             units, long_name = QOI_INFO[name]
             out[f"{name}_{bound}"] = (

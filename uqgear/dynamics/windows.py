@@ -38,7 +38,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +45,7 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import UqgearError
+from ..common.forked import map_forked
 from ..physics.design import Design
 from ..physics.model import natural_frequencies
 from ..physics.stiffness import stiffness_tables
@@ -335,11 +335,9 @@ def follow_nodes(
 
     ordered = sorted(values)
     count = min(default_threads() if threads is None else max(1, int(threads)), len(ordered))
-    if count <= 1:
-        return [follow(value) for value in ordered]
-    # the orbit passes release the GIL: the nodes' continuations overlap there
-    with ThreadPoolExecutor(max_workers=count, thread_name_prefix="uqgear-nodes") as pool:
-        return list(pool.map(follow, ordered))
+    # one forked process per node at a time: a continuation is mostly Python between its compiled orbit passes,
+    # so threads would take turns at the GIL; each node's fit is computed whole in one process, as here
+    return map_forked(lambda index: follow(ordered[index]), len(ordered), count)
 
 
 def windows_from(

@@ -48,7 +48,7 @@ from ..uq.sweeps import evaluate_on_sweep
 from .analysis_specs import AnalysisSpec
 from .coexistence import MultiStartModel, interval_over_attractors, multi_start_model
 from .guided_starts import GuidedStartModel, guided_start_model, widen_over_attractors
-from .model_runs import RunnerModel
+from .model_runs import RememberedRuns, RunnerModel
 from .point_run import simulate_point
 from .schema import Study
 from .settings import SimulationSettings
@@ -631,7 +631,15 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
         return interval_over_attractors(context, names, qois, fixed)
     space = context.parameter_space(names, fixed)
     regime_variables = [name for name in ("fraction_separation", "fraction_back_contact") if name not in qois]
-    model = context.rest_model(dataclasses.replace(context.spec.simulation, starts=None), poincare=False)
+    guided = None
+    if starts is not None:
+        # the bounds from rest run through the guided model's rest runs, remembered: where its window points are
+        # scan nodes the widening below meets them again and runs only their extra starts
+        guided = cast(GuidedStartModel, context.model(poincare=False))
+        guided.rest = RememberedRuns(guided.rest)
+        model: Any = guided.rest
+    else:
+        model = context.rest_model(dataclasses.replace(context.spec.simulation, starts=None), poincare=False)
     analysis = IntervalAnalysis(
         options["method"],
         order=options["order"],
@@ -651,8 +659,8 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
             units=QOI_INFO[name][0], long_name=f"{name} at the interval midpoints"
         )
     result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
-    if starts is not None:
-        result = widen_over_attractors(context, result, names, qois, fixed)
+    if guided is not None:
+        result = widen_over_attractors(context, result, names, qois, fixed, model=guided)
     return result
 
 

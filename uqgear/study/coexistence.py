@@ -114,7 +114,8 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
             continue
         values = np.where(np.isfinite(attractors[name].values), attractors[name].values, np.nan)
         for bound, pick in (("max", np.nanargmax), ("min", np.nanargmin)):
-            index = np.array([pick(row) for row in values], dtype=np.int64)
+            # every sample holds at least its rest run's attractor: no row is all NaN
+            index = pick(values, axis=1).astype(np.int64)
             data[f"{name}_{bound}"] = (
                 "sample",
                 values[rows, index],

@@ -445,16 +445,22 @@ def guided_start_model(context: Any, simulation: SimulationSettings, rest: Any, 
 
 
 def widen_over_attractors(
-    context: Any, result: xr.Dataset, names: Sequence[str], qois: Sequence[str], fixed: Mapping[str, float]
+    context: Any,
+    result: xr.Dataset,
+    names: Sequence[str],
+    qois: Sequence[str],
+    fixed: Mapping[str, float],
+    model: GuidedStartModel | None = None,
 ) -> xr.Dataset:
     """Interval bounds from rest (``result``) widened over the attractors at the sweep points whose box reaches a
     coexistence window: there the nodes of a grid of ``points`` per interval parameter that lie in a window run with
     the guided model, and each bound is the outer of the from-rest bound and the extremes over their attractors.
-    Elsewhere the from-rest bounds stand, bit for bit."""
+    Elsewhere the from-rest bounds stand, bit for bit. ``model``: the analysis's guided model (default: a new one)."""
     from ..uq.sweeps import batch_samples, make_sweep
 
-    model = context.model(poincare=False)
+    model = model if model is not None else context.model(poincare=False)
     assert isinstance(model, GuidedStartModel)  # the caller's condition: guided starts
+    counted = int(model.runs)  # runs of a given model already in ``result``'s count
     space = context.parameter_space(names, fixed)
     sweep = context.sweep()
     points = int(context.options["points"] or 9)
@@ -517,7 +523,7 @@ def widen_over_attractors(
         {"long_name": "the box reaches a coexistence window (bounds also scanned over attractors)"},
     )
     out.attrs.update(
-        model_runs=int(out.attrs.get("model_runs", 0)) + int(model.runs),
+        model_runs=int(out.attrs.get("model_runs", 0)) + int(model.runs) - counted,
         starts=json.dumps(model.settings.to_dict()),
         windows=json.dumps(model.windows.to_records()),
         window_points=int(model.window_points),
