@@ -49,7 +49,7 @@ def rating_verdicts(ds: xr.Dataset) -> list[str]:
     ...     print(part)
     tooth root: S_F falls to 1.20 (pinion, 3000 rpm) against the required 1.4 (below it)
     ISO's K_v gives 1.60 there
-    Miner damage over 20000 h up to 0.3
+    Miner damage over 20000 h up to 0.3 (pinion, at least 0 over the rail condition)
     """
     return [finding.text for finding in _verdicts(ds)]
 
@@ -99,7 +99,7 @@ def _damage_detail(ds: xr.Dataset, mode: str, facts: dict[str, Any]) -> str:
     upper = ds["damage"].sel(mode=mode, bound="upper")
     gear = str(upper["gear"].values[int(np.argmax(upper.values))])
     text = (
-        f" ({gear}; at least {float(ds['damage'].sel(mode=mode, bound='lower', gear=gear)):.3g} over the rail condition"
+        f" ({gear}, at least {float(ds['damage'].sel(mode=mode, bound='lower', gear=gear)):.3g} over the rail condition"
     )
     if "life_hours" in ds:
         facts["life_hours"] = float(ds["life_hours"].sel(mode=mode, bound="upper", gear=gear))
@@ -108,7 +108,7 @@ def _damage_detail(ds: xr.Dataset, mode: str, facts: dict[str, Any]) -> str:
         share = ds["damage_share"].sel(mode=mode, gear=gear)
         k = int(np.argmax(share.values))
         facts["speed_most"] = float(share["service_speed"].values[k])
-        text += f"; most of it at {facts['speed_most']:.0f} rpm, {float(share.values[k]):.0%} of the damage"
+        text += f", most of it at {facts['speed_most']:.0f} rpm: {float(share.values[k]):.0%}"
     return text + ")"
 
 
