@@ -122,7 +122,7 @@ def test_damage_rate_is_the_rainflow_count_of_a_one_sample_run():
     static = static_rating(design, 7000.0, speed, weak, dynamic_factor=1.0)
     setup = uqgear.build_model(design, speed, 7000.0, t2)
     stresses = tooth_stresses(
-        setup, static, run["x"].values, first_period=40, samples_per_period=HISTORY_SAMPLES, settings=weak
+        setup, static, run["x"].values, first_period=40, samples_per_period=HISTORY_SAMPLES
     )
     for g, per_revolution in enumerate((1.0, design.z1 / design.z2)):
         for m, (name, curve) in enumerate((("root", static.root_curve[g]), ("contact", static.contact_curve[g]))):

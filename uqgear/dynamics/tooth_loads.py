@@ -49,7 +49,7 @@ import xarray as xr
 
 from ..physics import _kernels as K
 from ..physics.model import ModelSetup
-from ..physics.rating import RatingSettings, StaticRating
+from ..physics.rating import StaticRating
 
 #: The gears of a tooth-stress dataset, in order.
 GEARS = ("pinion", "gear")
@@ -203,14 +203,7 @@ def _flank_radii(setup: ModelSetup, position: np.ndarray) -> tuple[np.ndarray, n
 
 
 def tooth_stresses(
-    setup: ModelSetup,
-    rating: StaticRating,
-    x,
-    x_velocity=None,
-    *,
-    first_period: int,
-    samples_per_period: int,
-    settings: RatingSettings | None = None,
+    setup: ModelSetup, rating: StaticRating, x, x_velocity=None, *, first_period: int, samples_per_period: int
 ) -> xr.Dataset:
     """Tooth root and flank stress histories of every tooth engagement in a DTE history, with their peaks.
 
@@ -220,11 +213,10 @@ def tooth_stresses(
         The run's set-up.
     rating : StaticRating
         An ISO 6336 rating of the same design (:func:`~uqgear.physics.rating.static_rating`):
-        its root sections (Y_F, Y_S) and contact factors.
+        its nominal stresses per unit of tangential force (Y_F, Y_S), contact factors and load
+        factors (K_A, K_beta, K_alpha; its K_v is divided out).
     x, x_velocity, first_period, samples_per_period
         As for :func:`pair_loads`.
-    settings : RatingSettings, optional
-        The rating's load factors (K_A, K_Hbeta, K_Halpha); the defaults if not given.
 
     Returns
     -------
@@ -249,35 +241,26 @@ def tooth_stresses(
     >>> stresses.sizes["engagement"], stresses["root_stress_peak"].round(-5).values / 1e6
     (2, array([135.4, 142.8]))
     """
-    settings = settings or RatingSettings()
     loads = engagement_loads(
         pair_loads(setup, x, x_velocity, first_period=first_period, samples_per_period=samples_per_period)
     )
     load = loads["tooth_load"].values
     position = loads["position"].values
     design = setup.design
-    k_a = settings.application_factor
-    depth = (design.addendum_coefficient + design.dedendum_coefficient) * design.module
-    ratio = design.face_width / depth
-    k_fb = settings.face_load_factor ** (ratio**2 / (1.0 + ratio + ratio**2))
-    tangential = load * math.cos(math.radians(design.pressure_angle))
-    root = np.stack(
-        [tangential / (design.face_width * design.module) * s.form_factor * s.stress_correction for s in rating.root]
-    ) * (k_a * k_fb * settings.transverse_load_factor)
+    # the rating's stresses per unit of tangential force at the reference circle, its K_v divided out
+    tangential = load * math.cos(math.radians(design.pressure_angle)) / rating.tangential_force
+    root = np.stack([tangential * actual / rating.dynamic_factor for actual in rating.root_stress])
+    factors = rating.contact
+    # K_A K_Hbeta K_Halpha: sigma_H = Z_B sigma_H0 sqrt(K_A K_v K_Hbeta K_Halpha)
+    load_factor = (rating.contact_stress[0] / (factors.single_pair_pinion * rating.contact_stress_nominal)) ** 2
+    load_factor /= rating.dynamic_factor
     rho_1, rho_2 = _flank_radii(setup, position)
     in_mesh = position < loads.attrs["contact_ratio"]
     reduced = np.where(in_mesh, rho_1 * rho_2 / (rho_1 + rho_2), np.inf)
-    factors = rating.contact
     hertz = (
         factors.contact_ratio
         * factors.elasticity
-        * np.sqrt(
-            k_a
-            * settings.face_load_factor
-            * settings.transverse_load_factor
-            * np.maximum(load, 0.0)
-            / (design.face_width * reduced)
-        )
+        * np.sqrt(load_factor * np.maximum(load, 0.0) / (design.face_width * reduced))
     )
     pitch = setup.parameters[K.PITCH_POSITION]
     # each flank where the contact point is on its dedendum, the pitch point C included

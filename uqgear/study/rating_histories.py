@@ -96,12 +96,7 @@ def history_damage(
         i, j = np.unravel_index(index, shape)
         rating = static_rating(design, torque, float(speeds_a[j]), settings, dynamic_factor=1.0)
         stresses = tooth_stresses(
-            setup,
-            rating,
-            history[:, 2],
-            first_period=simulation.n_periods - keep,
-            samples_per_period=HISTORY_SAMPLES,
-            settings=settings,
+            setup, rating, history[:, 2], first_period=simulation.n_periods - keep, samples_per_period=HISTORY_SAMPLES
         )
         for g in range(2):
             per_hour = 60.0 * float(speeds_a[j]) / (u if g else 1.0)
