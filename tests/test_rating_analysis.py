@@ -4,7 +4,8 @@ A tiny study (two speeds, short runs, T2 bounded by a first-order Chebyshev
 inclusion) runs once; its ``rating.nc`` is checked against the static rating
 it is built from: the lower safety factor is the static one at the upper
 simulated dynamic factor, ISO's K_v curve is method B's, and the damage is
-Miner's sum of one pulsating cycle per tooth and revolution over the service.
+the service's hours times the damage rates of the rainflow-counted tooth
+stress histories, which are checked against a count of a one-sample run.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ analyses:
     order: 1
     points: 2
     rating: {material: {sigma_Flim: 1.5e+8, sigma_Hlim: 6.0e+8}}
-    service: {hours: 1000, speeds: [1500, 3000], shares: [0.25, 0.75]}
+    service: {hours: 1000, speeds: [1500, 4000], shares: [0.25, 0.75]}
 """
 SETTINGS = RatingSettings.from_mapping({"material": {"sigma_Flim": 1.5e8, "sigma_Hlim": 6.0e8}})
 
@@ -82,19 +83,66 @@ def test_safety_factors_are_the_static_rating_at_the_simulated_dynamic_factor(ra
     assert force.values == pytest.approx(7000.0 / uqgear.load_design("locomotive").z1 / 0.0045 / np.cos(np.radians(20)))
 
 
-def test_damage_is_miners_sum_over_the_service(rating):
-    design = uqgear.load_design("locomotive")
+def test_damage_is_the_service_hours_times_the_damage_rates(rating):
     service = json.loads(rating.attrs["service"])
-    speeds = rating["pinion_speed"].values
-    upper = rating["dynamic_factor"].sel(bound="upper").values
-    expected = 0.0
-    for speed, share in zip(service["speeds"], service["shares"]):
-        static = static_rating(design, 7000.0, speed, SETTINGS, dynamic_factor=float(np.interp(speed, speeds, upper)))
-        cycles = service["hours"] * share * 60.0 * speed
-        expected += cycles / static.root_curve[0].cycles_to_failure(static.root_stress[0])
-    assert expected > 0.0
-    assert float(rating["damage"].sel(gear="pinion", bound="upper", mode="root")) == pytest.approx(expected)
+    assert service["rail"] if "rail" in service else True
+    rate = rating["damage_rate"].sel(pinion_speed=service["speeds"])  # the service speeds are sweep speeds
+    expected = (rate * xr.DataArray(service["shares"], dims="pinion_speed")).sum("pinion_speed") * service["hours"]
+    np.testing.assert_allclose(rating["damage"].values, expected.transpose("gear", "bound", "mode").values, rtol=1e-12)
+    assert float(rating["damage"].sel(gear="pinion", bound="upper", mode="root")) > 0.0
     assert (rating["damage"].sel(bound="lower") <= rating["damage"].sel(bound="upper")).all()
+    np.testing.assert_allclose(rating["life_hours"], service["hours"] / rating["damage"], rtol=1e-12)
+    np.testing.assert_allclose(rating["damage_share"].sum("service_speed"), 1.0)
+    assert (rating["root_stress_peak"].sel(bound="upper") >= rating["root_stress_peak"].sel(bound="lower")).all()
+
+
+def test_damage_rate_is_the_rainflow_count_of_a_one_sample_run():
+    """The batch's damage rate at one (T2, speed) against an independent Miner sum over a one-sample run."""
+    import rainflow
+
+    from uqgear.dynamics.tooth_loads import tooth_stresses
+    from uqgear.study.rating_histories import HISTORY_SAMPLES, history_damage
+    from uqgear.study.settings import SimulationSettings
+
+    design = uqgear.load_design("locomotive")
+    simulation = SimulationSettings(n_periods=60, keep_periods=20)
+    speed, t2 = 3500.0, 38e3
+    weak = RatingSettings.from_mapping({"material": {"sigma_Flim": 1.0e8, "sigma_Hlim": 4.0e8}})
+    result = history_damage(design, simulation, {"drive_torque": 7000.0}, [speed], [t2], weak)
+    run = uqgear.simulate(
+        design,
+        speed,
+        7000.0,
+        t2,
+        n_periods=60,
+        keep_periods=20,
+        samples_per_period=HISTORY_SAMPLES,
+        steps_per_mode=simulation.steps_per_mode,
+    )
+    static = static_rating(design, 7000.0, speed, weak, dynamic_factor=1.0)
+    setup = uqgear.build_model(design, speed, 7000.0, t2)
+    stresses = tooth_stresses(
+        setup, static, run["x"].values, first_period=40, samples_per_period=HISTORY_SAMPLES
+    )
+    for g, per_revolution in enumerate((1.0, design.z1 / design.z2)):
+        for m, (name, curve) in enumerate((("root", static.root_curve[g]), ("contact", static.contact_curve[g]))):
+            table = stresses[f"{name}_stress"].values[g]
+            history = np.concatenate(([0.0], table.ravel(), [0.0]))
+            # Basquin between the knees of the curve (log-log straight), written out here
+            n_k, s_k = np.asarray(curve.cycles), np.asarray(curve.stress)
+            total = 0.0
+            for rng, mean, count, _, _ in rainflow.extract_cycles(history):
+                peak = mean + rng / 2.0
+                if peak <= s_k[-1]:
+                    continue
+                i = 0 if peak >= s_k[1] else 1
+                slope = np.log(n_k[i + 1] / n_k[i]) / np.log(s_k[i] / s_k[i + 1])
+                life = 1.0 if peak > s_k[0] else n_k[i] * (s_k[i] / peak) ** slope
+                total += count / life
+            expected = total / table.shape[0] * 60.0 * speed * per_revolution
+            assert result.rates[g, m, 0, 0] == pytest.approx(expected, rel=1e-9, abs=1e-30)
+    assert result.rates[0, 0, 0, 0] > 0.0 and result.rates[0, 1, 0, 0] > 0.0
+    assert result.root_peak[0, 0, 0] == pytest.approx(float(stresses["root_stress_peak"][0]), rel=1e-12)
 
 
 BAD = [
@@ -102,6 +150,18 @@ BAD = [
     ("service: {hours: 100, speeds: [1500, 3000], shares: [0.5, 0.4]}", "analyses[0].service.shares: expected time"),
     ("service: {hours: 100, speeds: [1500, 5000], shares: [0.5, 0.5]}", "analyses[0].service.speeds: 5000 rpm is"),
     ("rating: {K_A: 1.2}", "analyses[0].rating.K_A: unknown key"),
+    ("service: {hours: 100, speeds: [1500, 3000], shares: [1.2, -0.2]}", "analyses[0].service.shares[0]: expected"),
+    ("service: {hours: 100, speeds: [1500], shares: [1], colour: red}", "analyses[0].service.colour: unknown key"),
+    (
+        "service: {hours: 100, mission: [{pinion_speed: 1500, hours: 60}, {pinion_speed: 3000, hours: 60}]}",
+        "analyses[0].service.hours: the mission sums to 120 h; got 100",
+    ),
+    (
+        "service: {hours: 100, speeds: [1500], shares: [1], rail: {adhesion_coefficient: [0.1, 0.2]}}",
+        "analyses[0].service.rail.adhesion_coefficient: T2 = 14097.1 N m is outside",
+    ),
+    ("service: {kilometres: 1.0e+6, speeds: [1500], shares: [1]}", "analyses[0].service.wheel_radius: required"),
+    ("service: tram", "analyses[0].service: expected a service mapping or a bundled profile (locomotive)"),
 ]
 
 

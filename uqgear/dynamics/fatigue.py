@@ -52,6 +52,19 @@ class RainflowCount:
         return dict(sorted(table.items()))
 
 
+def _turning_points(values: np.ndarray) -> np.ndarray:
+    """The first and last values and every local extremum between, plateaus reduced to one value."""
+    if values.size < 3:
+        return values
+    kept = np.concatenate(([True], np.diff(values) != 0.0))
+    values = values[kept]
+    if values.size < 3:
+        return values
+    slope = np.sign(np.diff(values))
+    turning = np.concatenate(([True], slope[1:] != slope[:-1], [True]))
+    return values[turning]
+
+
 def rainflow_count(history) -> RainflowCount:
     """Count the cycles of a history by rainflow (ASTM E1049-85).
 
@@ -75,6 +88,8 @@ def rainflow_count(history) -> RainflowCount:
     values = np.asarray(history, dtype=float)
     if values.ndim != 1 or not np.all(np.isfinite(values)):
         raise ValueError(f"history: expected a 1-D sequence of finite values; got shape {values.shape}")
+    # counting depends on the turning points alone: hand the package those (its reversal search is a Python loop)
+    values = _turning_points(values)
     cycles = list(rainflow.extract_cycles(values)) if values.size >= 2 else []
     if not cycles:
         empty = np.zeros(0)
@@ -129,4 +144,40 @@ def damage_rate(history, duration: float, curve: StressLifeCurve) -> float:
     return miner_damage(history, curve) / duration
 
 
-__all__ = ["RainflowCount", "rainflow_count", "miner_damage", "damage_rate"]
+def engagement_damage(stress, curve: StressLifeCurve) -> float:
+    """Miner damage per load cycle of a tooth, from the stress of its engagements (one a row).
+
+    The rows, each a tooth's stress over one engagement (unloaded, zero, outside it), are
+    counted as one history that starts and ends unloaded, and the damage divided by the rows:
+    a tooth meets one engagement per revolution, so this is its damage per revolution.
+
+    Parameters
+    ----------
+    stress : array_like
+        (engagements, samples) stress, Pa.
+    curve : StressLifeCurve
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    Engagements loading the tooth from zero to sigma and back are ISO's pulsating cycles, 1 / N(sigma) each:
+
+    >>> import numpy as np
+    >>> from uqgear.dynamics.fatigue import engagement_damage
+    >>> from uqgear.physics.rating import StressLifeCurve
+    >>> curve = StressLifeCurve(cycles=(1e3, 3e6, 1e10), stress=(2.5e9, 1.0e9, 0.85e9))
+    >>> pulse = np.array([0.3, 1.0, 0.6, 0.0]) * 1.2e9
+    >>> round(engagement_damage(np.tile(pulse, (5, 1)), curve) * curve.cycles_to_failure(1.2e9), 12)
+    1.0
+    """
+    table = np.asarray(stress, dtype=float)
+    if table.ndim != 2 or table.shape[0] == 0:
+        raise ValueError(f"stress: expected (engagements, samples); got shape {table.shape}")
+    history = np.concatenate(([0.0], table.ravel(), [0.0]))
+    return miner_damage(history, curve) / table.shape[0]
+
+
+__all__ = ["RainflowCount", "rainflow_count", "miner_damage", "damage_rate", "engagement_damage"]

@@ -49,7 +49,7 @@ def rating_verdicts(ds: xr.Dataset) -> list[str]:
     ...     print(part)
     tooth root: S_F falls to 1.20 (pinion, 3000 rpm) against the required 1.4 (below it)
     ISO's K_v gives 1.60 there
-    Miner damage over 20000 h up to 0.3
+    Miner damage over 20000 h up to 0.3 (pinion, at least 0 over the rail condition)
     """
     return [finding.text for finding in _verdicts(ds)]
 
@@ -88,8 +88,28 @@ def _verdicts(ds: xr.Dataset) -> list[Finding]:
                 if facts["damage"] > 0.0
                 else f"; no fatigue damage over {hours:g} h (every cycle below the long-life stress)"
             )
+            if facts["damage"] > 0.0:
+                text += _damage_detail(ds, mode, facts)
         findings.append(Finding(text, facts, topic="rating"))
     return findings
+
+
+def _damage_detail(ds: xr.Dataset, mode: str, facts: dict[str, Any]) -> str:
+    """The damage's lower bound over the rail condition, the life and the service speed that contributes most."""
+    upper = ds["damage"].sel(mode=mode, bound="upper")
+    gear = str(upper["gear"].values[int(np.argmax(upper.values))])
+    text = (
+        f" ({gear}, at least {float(ds['damage'].sel(mode=mode, bound='lower', gear=gear)):.3g} over the rail condition"
+    )
+    if "life_hours" in ds:
+        facts["life_hours"] = float(ds["life_hours"].sel(mode=mode, bound="upper", gear=gear))
+        text += f", a life of {facts['life_hours']:.3g} h of this service"
+    if "damage_share" in ds:
+        share = ds["damage_share"].sel(mode=mode, gear=gear)
+        k = int(np.argmax(share.values))
+        facts["speed_most"] = float(share["service_speed"].values[k])
+        text += f", most of it at {facts['speed_most']:.0f} rpm: {float(share.values[k]):.0%}"
+    return text + ")"
 
 
 def rating_findings(results: Sequence[xr.Dataset]) -> list[Finding]:

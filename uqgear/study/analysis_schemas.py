@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..physics.effects import EFFECTS
-from .checkers import Checker, boolean, check_mapping, choice, class_range, identifier, list_of, number, string
+from .checkers import Checker, boolean, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
 
 #: Scalar quantities of interest of a simulation run (see uqgear.physics.integration.QOI_INFO).
@@ -64,29 +64,11 @@ def rating_settings(value: Any, path: str) -> dict[str, Any]:
 
 
 def service_profile(value: Any, path: str) -> dict[str, Any]:
-    """Checker of a ``rating`` analysis's ``service``: hours, and the pinion speeds with their shares of the time."""
-    from ..common.errors import StudyError
+    """Checker of a ``rating`` analysis's ``service``: a bundled profile or a speed distribution or mission, with
+    its duration and rail condition (:func:`uqgear.study.rating_service.check_service`)."""
+    from .rating_service import check_service
 
-    checked = check_mapping(
-        value,
-        path,
-        {
-            "hours": number("h", 0.0, 1e7, lower_open=True),
-            "speeds": list_of(number("rpm", 0.0, 1e5, lower_open=True), what="a list of pinion speeds in rpm"),
-            "shares": list_of(number("", 0.0, 1.0), what="a list of time shares"),
-            "description": lambda raw, where: str(raw),
-        },
-        required=("hours", "speeds", "shares"),
-    )
-    speeds, shares = checked["speeds"], checked["shares"]
-    if len(speeds) != len(shares):
-        raise StudyError(f"{path}.shares: expected one share per speed ({len(speeds)}); got {len(shares)}")
-    if abs(sum(shares) - 1.0) > 1e-6:
-        raise StudyError(
-            f"{path}.shares: expected time shares that sum to 1 (the whole service of {checked['hours']:g} h); "
-            f"got a sum of {sum(shares):g}"
-        )
-    return checked
+    return check_service(value, path)
 
 
 def _qoi_list() -> Checker:
@@ -134,10 +116,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "axes": list_of(choice(*VARIABLES), min_length=2, unique=True, what="a list of two variable names"),
         "points": number("values across each interval", 2, 200, integer=True),
     },
-    "interval": {
-        **_INTERVAL_METHOD_KEYS,
-        "qois": _qoi_list(),
-    },
+    "interval": {**_INTERVAL_METHOD_KEYS, "qois": _qoi_list()},
     "monte_carlo": {
         "parameters": _variable_list(),
         "intervals": choice("uniform", "pbox"),

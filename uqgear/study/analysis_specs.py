@@ -174,8 +174,9 @@ def _check_propagation(spec: AnalysisSpec, uncertain: Mapping[str, UncertainPara
             )
 
 
-def _check_rating(spec: AnalysisSpec, path: str) -> None:
-    """A rating sweeps the pinion speed alone, at one drive torque; its service speeds lie inside the sweep."""
+def _check_rating(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter], path: str) -> None:
+    """A rating sweeps the pinion speed alone, at one drive torque; its service speeds lie inside the sweep and
+    its rail condition inside the study's adhesion torque interval."""
     sweeps = spec.sweeps
     if "pinion_speed" not in sweeps:
         raise StudyError(
@@ -197,6 +198,26 @@ def _check_rating(spec: AnalysisSpec, path: str) -> None:
                 f"{path}.service.speeds: {outside[0]:g} rpm is outside the study's speeds; "
                 f"expected speeds in [{low:g}, {high:g}] rpm"
             )
+        _check_rail(spec, uncertain, service, path)
+
+
+def _check_rail(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter], service, path: str) -> None:
+    from .rating_service import rail_torques
+
+    rail = rail_torques(service)
+    if rail is None:
+        return
+    where = f"{path}.service.rail.adhesion_coefficient"
+    if "adhesion_torque" not in spec.options["parameters"]:
+        raise StudyError(f"{where}: a rail condition needs adhesion_torque among the rating's parameters")
+    t2 = uncertain["adhesion_torque"]
+    slack = 1e-9 * t2.upper
+    outside = [value for value in rail[1] if not t2.lower - slack <= value <= t2.upper + slack]
+    if outside:
+        raise StudyError(
+            f"{where}: T2 = {outside[0]:.6g} N m is outside the study's adhesion torque interval "
+            f"[{t2.lower:.6g}, {t2.upper:.6g}] N m (T2 = mu Q g R_w with the service's axle_load and wheel_radius)"
+        )
 
 
 def _check_simulate(spec: AnalysisSpec, path: str) -> None:
@@ -224,7 +245,7 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
     elif spec.type in PROPAGATING_TYPES:
         _check_propagation(spec, uncertain, path)
         if spec.type == "rating":
-            _check_rating(spec, path)
+            _check_rating(spec, uncertain, path)
     elif spec.type == "simulate":
         _check_simulate(spec, path)
 

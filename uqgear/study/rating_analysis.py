@@ -8,13 +8,16 @@ it takes the place of ISO's K_v in :func:`~uqgear.physics.rating.static_rating`,
 factors S_F and S_H per gear follow at each bound (the lower safety factor from the upper
 dynamic factor). ISO 6336-1 method B's K_v and its safety factors sit beside them.
 
-Fatigue damage over the ``service`` (hours, pinion speeds and their shares of the time):
-each tooth carries one pulsating load cycle per revolution, from zero to the peak stress
-at the dynamic factor of that speed (interpolated in the sweep), so its rainflow count is
-that one cycle per revolution; Miner's rule on the S-N curves of the life factors sums it
-(:func:`~uqgear.dynamics.fatigue.miner_damage`). Oscillations of the load within one tooth's
-mesh are not counted here. Without ``service`` the illustrative :data:`RATING_SERVICE`
-applies: 20,000 h spread evenly over the sweep's speeds inside the design's service range.
+Fatigue damage over the ``service`` (:mod:`uqgear.study.rating_service`: a speed
+distribution or a mission, hours or kilometres, the rail condition): the model runs at every
+speed of the sweep at the T2 interval's ends and midpoint, and each tooth's root and flank
+stress over the kept steady section is rainflow-counted and Miner-summed on the S-N curves of
+the life factors (:mod:`uqgear.study.rating_histories`), giving a damage rate per hour at each
+(T2, speed). The service's speeds take their rates from the sweep (linear between its speeds)
+and its rail condition from T2 (an interval: the least and greatest rate at each speed over it;
+a distribution: the time-weighted mean). Without ``service`` the illustrative
+:data:`RATING_SERVICE` applies: 20,000 h spread evenly over the sweep's speeds inside the
+design's service range, over the study's whole T2 interval.
 """
 
 from __future__ import annotations
@@ -26,10 +29,11 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from ..dynamics.fatigue import RainflowCount, miner_damage
 from ..physics.geometry import pair_geometry
 from ..physics.rating import RatingSettings, dynamic_factor_model, static_rating
 from .analyses import AnalysisContext, interval_analysis, register
+from .rating_histories import HISTORY_TORQUES, StressHistories, history_damage
+from .rating_service import check_service, service_damage
 
 #: Illustrative service when a rating states none: hours, spread evenly over the service speeds.
 RATING_SERVICE = {"hours": 20000.0, "description": "illustrative: 20,000 h, evenly over the service speeds"}
@@ -42,25 +46,18 @@ def _service(context: AnalysisContext, speeds: np.ndarray) -> dict[str, Any]:
         return dict(given)
     low, high = context.design.operation.pinion_speed_service
     inside = [float(speed) for speed in speeds if low <= speed <= high] or [float(speeds[0])]
-    return {**RATING_SERVICE, "speeds": inside, "shares": [1.0 / len(inside)] * len(inside)}
+    return check_service({**RATING_SERVICE, "speeds": inside, "shares": [1.0 / len(inside)] * len(inside)}, "service")
 
 
-def _damage(design, torque: float, settings: RatingSettings, service, factor_at) -> np.ndarray:
-    """Miner damage (gear, mode) over the service, one pulsating cycle per tooth and revolution."""
-    u = design.z2 / design.z1
-    damage = np.zeros((2, 2))
-    for speed, share in zip(service["speeds"], service["shares"]):
-        rating = static_rating(design, torque, speed, settings, dynamic_factor=float(factor_at(speed)))
-        pinion_cycles = service["hours"] * share * 60.0 * speed
-        for g, cycles in enumerate((pinion_cycles, pinion_cycles / u)):
-            for m, (stress, curve) in enumerate(
-                ((rating.root_stress[g], rating.root_curve[g]), (rating.contact_stress[g], rating.contact_curve[g]))
-            ):
-                count = RainflowCount(
-                    ranges=np.array([stress]), means=np.array([0.5 * stress]), counts=np.array([cycles])
-                )
-                damage[g, m] += miner_damage(count, curve)
-    return damage
+def _histories(context: AnalysisContext, settings: RatingSettings, speeds: np.ndarray) -> StressHistories:
+    """Damage rates at the T2 interval's ends and midpoint (the study's T2 alone where it is not bounded)."""
+    fixed = context.fixed_values(exclude=context.options["parameters"])
+    if "adhesion_torque" in context.options["parameters"]:
+        parameter = context.study.uncertain["adhesion_torque"]
+        torques = [parameter.lower + f * (parameter.upper - parameter.lower) for f in HISTORY_TORQUES]
+    else:
+        torques = [float(fixed["adhesion_torque"])]
+    return history_damage(context.design, context.spec.simulation, fixed, speeds, torques, settings)
 
 
 @register("rating")
@@ -89,14 +86,58 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
         safety_iso[0, :, j], safety_iso[1, :, j] = rating.safety_root, rating.safety_contact
     nominal = static_rating(design, torque, float(speeds[0]), settings, dynamic_factor=1.0)
     service = _service(context, speeds)
-    damage = np.stack(
-        [_damage(design, torque, settings, service, lambda n, row=row: np.interp(n, speeds, row)) for row in simulated],
-        axis=1,
-    )  # (gear, bound, mode)
-    return _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nominal, damage, settings, service)
+    histories = _histories(context, settings, speeds)
+    result = _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nominal, settings, service)
+    result = _with_damage(result, histories, service, speeds)
+    result.attrs["model_runs"] = int(result.attrs.get("model_runs", 0)) + histories.runs
+    return result
 
 
-def _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nominal, damage, settings, service):
+def _over_torques(values: np.ndarray) -> np.ndarray:
+    """(gear, torque, speed) -> (gear, bound, speed): least and greatest over the torques run."""
+    return np.stack([values.min(axis=1), values.max(axis=1)], axis=1)
+
+
+def _with_damage(result: xr.Dataset, histories: StressHistories, service, speeds: np.ndarray) -> xr.Dataset:
+    """The damage over the service, its rate, the speeds' shares, the life and the stress peaks."""
+    damage, parts = service_damage(service, speeds, histories.torques, histories.rates)  # (gear, mode, bound)
+    damage = damage.transpose(0, 2, 1)
+    hours = service["hours"]
+    total = parts.sum(axis=-1, keepdims=True)
+    share = np.divide(parts, total, out=np.zeros_like(parts), where=total > 0.0)
+    with np.errstate(divide="ignore"):
+        life = np.where(damage > 0.0, hours / np.where(damage > 0.0, damage, 1.0), np.inf)
+    rate_bounds = np.stack([histories.rates.min(axis=2), histories.rates.max(axis=2)], axis=2)  # (gear, mode, bound, n)
+    gbm = ("gear", "bound", "mode")
+    return result.assign(
+        damage=(gbm, damage, {"units": "1", "long_name": "Miner damage over the service"}),
+        damage_per_hour=(gbm, damage / hours, {"units": "h-1", "long_name": "Miner damage per hour of the service"}),
+        life_hours=(gbm, life, {"units": "h", "long_name": "hours of the service to a damage of 1"}),
+        damage_rate=(
+            ("gear", "mode", "bound", "pinion_speed"),
+            rate_bounds,
+            {"units": "h-1", "long_name": "Miner damage per hour at the speed, bounds over the T2 run"},
+        ),
+        damage_share=(
+            ("gear", "mode", "service_speed"),
+            share,
+            {"units": "1", "long_name": "each service speed's part of the upper damage"},
+        ),
+        root_stress_peak=(
+            ("gear", "bound", "pinion_speed"),
+            _over_torques(histories.root_peak),
+            {"units": "Pa", "long_name": "largest simulated tooth root stress, bounds over the T2 run"},
+        ),
+        contact_stress_peak=(
+            ("gear", "bound", "pinion_speed"),
+            _over_torques(histories.contact_peak),
+            {"units": "Pa", "long_name": "largest simulated flank contact stress, bounds over the T2 run"},
+        ),
+        history_adhesion_torque=(("history_torque",), histories.torques, {"units": "N m"}),
+    ).assign_coords(service_speed=("service_speed", np.asarray(service["speeds"]), {"units": "rpm"}))
+
+
+def _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nominal, settings, service):
     minimum = {"root": settings.minimum_safety_root, "contact": settings.minimum_safety_contact}
     data = {
         "dynamic_factor_iso": (("pinion_speed",), iso_factor, {"units": "1", "long_name": "ISO 6336-1 method B K_v"}),
@@ -108,7 +149,6 @@ def _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nom
         ),
         "root_stress_nominal": (("gear",), np.asarray(nominal.root_stress_nominal), {"units": "Pa"}),
         "contact_stress_nominal": (("gear",), np.full(2, nominal.contact_stress_nominal), {"units": "Pa"}),
-        "damage": (("gear", "bound", "mode"), damage, {"units": "1", "long_name": "Miner damage over the service"}),
     }
     for m, mode in enumerate(MODES):
         data[f"safety_factor_{mode}"] = (
