@@ -43,6 +43,18 @@ class RememberedRuns:
     ----------
     model : callable
         ``samples -> results`` (one result row per sample, along ``sample``); its ``runs`` counts the runs made.
+
+    Examples
+    --------
+    >>> class Squares:
+    ...     runs = 0
+    ...     def __call__(self, samples):
+    ...         self.runs += samples.sizes["sample"]
+    ...         return samples.assign(square=samples["x"] ** 2)
+    >>> model = RememberedRuns(Squares())
+    >>> _ = model(xr.Dataset({"x": ("sample", [1.0, 2.0])}))
+    >>> model(xr.Dataset({"x": ("sample", [2.0, 3.0])}))["square"].values, model.runs
+    (array([4., 9.]), 3)
     """
 
     def __init__(self, model: Any) -> None:
