@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
@@ -29,9 +30,10 @@ from . import _kernels as K
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
 from .batch_setup import build_batch, integrate_lane_groups, kernel_inputs
 from .design import Design
+from .design_parts import ModalDesign
 from .effect_draws import as_effect
 from .effects import Effect
-from .model import HISTORY_COLUMNS, ModelSetup, build_model, natural_frequencies
+from .model import HISTORY_COLUMNS, ModelSetup, _cached_tables, build_model, natural_frequencies
 from .pitch_errors import PitchErrors
 from .scipy_reference import integrate_scipy
 from .threads import spread
@@ -109,20 +111,15 @@ def _check_counts(n_periods: int, keep_periods: int) -> None:
         )
 
 
-_HIGHEST_MODES: dict[tuple, float] = {}
-
-
 def _highest_mode(design: Design, stiffness_scale: float) -> float:
-    """Highest natural frequency (Hz) at the peak mesh stiffness, cached on the values it depends on."""
-    from .model import _cached_tables, geometry_key
+    """Highest natural frequency (Hz) at the peak mesh stiffness, cached on the design's modal part."""
+    return _modal_highest(design.modal_design, float(stiffness_scale))
 
-    k_peak = float(np.max(_cached_tables(design, "ishikawa").period_stiffness)) * stiffness_scale
-    key = (geometry_key(design), design.m1, design.m2, design.I1, design.I2, design.k1, design.k2, k_peak)
-    if key not in _HIGHEST_MODES:
-        if len(_HIGHEST_MODES) >= 4096:
-            _HIGHEST_MODES.clear()
-        _HIGHEST_MODES[key] = float(natural_frequencies(design, k_peak)[-1])
-    return _HIGHEST_MODES[key]
+
+@functools.lru_cache(maxsize=4096)
+def _modal_highest(modal: ModalDesign, stiffness_scale: float) -> float:
+    k_peak = float(np.max(_cached_tables(modal, "ishikawa").period_stiffness)) * stiffness_scale
+    return float(natural_frequencies(modal, k_peak)[-1])
 
 
 #: Fewest grid steps a mesh period.
