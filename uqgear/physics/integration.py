@@ -25,6 +25,7 @@ import xarray as xr
 
 from ..common.errors import OperatingPointError
 from . import _kernels as K
+from ._batch_record import QoiBatch
 
 # BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
@@ -359,14 +360,13 @@ def simulate(
 # ---------------------------------------------------------------------------- batches
 
 
-def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
+def _run_batch(batch: QoiBatch, threads: int | None, lanes: bool = True) -> None:
     """Integrate a batch: lane-ready runs in lane groups, the others (and any the lanes refuse) one at a time.
 
-    ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the range and the
-    order; each run's numbers are the same, bit for bit, whichever kernel and thread compute it.
+    Each run's numbers are the same, bit for bit, whichever kernel and thread compute it.
     """
-    params = arrays[1]
-    rest = integrate_lane_groups(arrays, threads) if lanes else np.arange(len(params), dtype=np.int64)
+    params = batch.runs.params
+    rest = integrate_lane_groups(batch, threads) if lanes else np.arange(len(params), dtype=np.int64)
     if len(rest):
         # the pair path is compiled only for a batch with pitch errors
         pitch = params[rest, K.PITCH_ERRORS] != 0.0
@@ -374,7 +374,7 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
             if len(order):
 
                 def run_range(start: int, stop: int, kernel: Any = kernel, order: np.ndarray = order) -> None:
-                    kernel(start, stop, order, *arrays)
+                    kernel(start, stop, order, batch)
 
                 spread(run_range, len(order), threads)
 
@@ -494,8 +494,8 @@ def simulate_batch(
     channels = 4 if rig_channels and history_per_period > 0 else 1
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
     if n:
-        arrays = (
-            *kernel_inputs(setups, states),
+        batch = QoiBatch(
+            kernel_inputs(setups, states),
             steps,
             n_periods,
             keep_periods,
@@ -507,7 +507,7 @@ def simulate_batch(
             history,
             final_states,
         )
-        _run_batch(arrays, threads, lanes)
+        _run_batch(batch, threads, lanes)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
     mean_x = accumulators[:, K.Q_X_SUM] / count
     mean_force = np.array([s.derived["static_mesh_force"] for s in setups])
