@@ -20,7 +20,7 @@ from uqgear.physics import design_parts
 from uqgear.physics.design import Operation
 from uqgear.physics.geometry import pair_geometry
 from uqgear.physics.integration import _highest_mode
-from uqgear.physics.model import _cached_tables, build_model
+from uqgear.physics.model import build_model, cached_tables
 
 #: A valid change of every design field (the locomotive's geometry stays meshable).
 CHANGES = {
@@ -58,7 +58,7 @@ def _derived(part: type[design_parts.DesignPart], design: uqgear.Design) -> obje
     if part is design_parts.ToothPairDesign:
         return pair_geometry(design)
     if part is design_parts.MeshDesign:
-        return _cached_tables(design, "ishikawa")
+        return cached_tables(design, "ishikawa")
     return _highest_mode(design, 1.0)
 
 
@@ -115,6 +115,6 @@ def test_a_part_is_its_own_key():
     assert design_parts.MeshDesign.of(mesh) is mesh
     assert mesh.tooth_pair == design.tooth_pair
     # the tables derived from the part alone are those of the design
-    assert _cached_tables(mesh, "ishikawa") is _cached_tables(design, "ishikawa")
+    assert cached_tables(mesh, "ishikawa") is cached_tables(design, "ishikawa")
     with pytest.raises(AttributeError):
         design_parts.ModalDesign.of(mesh)

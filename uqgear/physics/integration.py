@@ -34,7 +34,7 @@ from .design import Design
 from .design_parts import ModalDesign
 from .effect_draws import as_effect
 from .effects import Effect
-from .model import HISTORY_COLUMNS, ModelSetup, _cached_tables, build_model, natural_frequencies
+from .model import HISTORY_COLUMNS, ModelSetup, build_model, cached_tables, natural_frequencies
 from .pitch_errors import PitchErrors
 from .scipy_reference import integrate_scipy
 from .threads import spread
@@ -119,7 +119,7 @@ def _highest_mode(design: Design, stiffness_scale: float) -> float:
 
 @functools.lru_cache(maxsize=4096)
 def _modal_highest(modal: ModalDesign, stiffness_scale: float) -> float:
-    k_peak = float(np.max(_cached_tables(modal, "ishikawa").period_stiffness)) * stiffness_scale
+    k_peak = float(np.max(cached_tables(modal, "ishikawa").period_stiffness)) * stiffness_scale
     return float(natural_frequencies(modal, k_peak)[-1])
 
 

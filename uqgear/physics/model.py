@@ -54,7 +54,7 @@ def _stiffness_tables(mesh: MeshDesign, mode: str) -> StiffnessTables:
     return stiffness_tables(mesh, mode=mode)
 
 
-def _cached_tables(design: Design | MeshDesign, mode: str) -> StiffnessTables:
+def cached_tables(design: Design | MeshDesign, mode: str) -> StiffnessTables:
     """Stiffness tables cached on the design's :class:`~uqgear.physics.design_parts.MeshDesign`.
 
     The tables are derived from that part alone, so they cannot read a field
@@ -134,7 +134,7 @@ def natural_frequencies(design: Design | ModalDesign, mesh_stiffness: float | No
     >>> [round(math.sqrt(k / m) / (2 * math.pi), 1) for k, m in ((design.k2, design.m2), (design.k1, design.m1))]
     [355.9, 649.7]
     """
-    k = mesh_stiffness if mesh_stiffness is not None else _cached_tables(design, "ishikawa").k_mean
+    k = mesh_stiffness if mesh_stiffness is not None else cached_tables(design, "ishikawa").k_mean
     me = equivalent_mass(design)
     # accelerations of (y1, y2, x) for F = k x
     a = np.array(
@@ -318,9 +318,9 @@ def build_model(
     if stiffness not in STIFFNESS_MODES:
         raise OperatingPointError(f"stiffness: expected one of {', '.join(STIFFNESS_MODES)}; got {stiffness!r}")
     geometry = pair_geometry(design)
-    tables = _cached_tables(design, "ishikawa")
+    tables = cached_tables(design, "ishikawa")
     if stiffness == "fourier":
-        period_table = _cached_tables(design, "fourier").period_stiffness
+        period_table = cached_tables(design, "fourier").period_stiffness
     elif stiffness == "constant":
         # linear-limit studies: k(t) = k_mean through the smooth-table path
         period_table = np.full_like(tables.period_stiffness, tables.k_mean)
