@@ -142,7 +142,8 @@ def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     transmission error e).
     """
     if p[PITCH_ERRORS] != 0.0:
-        # per-pair deflections (docs/model/equations.md section 2.6); the branch leaves the classical path as it was
+        # per-pair deflections (docs/model/equations.md section 2.6); runs without pitch errors take the classical
+        # path below, which the branch does not touch
         terms = _pairs.forcing_pairs(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
         d, force = _pairs.derivative_pairs((state[0], state[1], state[2], state[3], state[4], state[5]), terms, p)
         for j in range(6):
