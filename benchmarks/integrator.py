@@ -142,8 +142,9 @@ def _reference_kernels(checkout: Path, serial: bool = False) -> types.SimpleName
     exec(compile(source, str(path), "exec"), module.__dict__)  # noqa: S102  (our own older source)
     namespace = types.SimpleNamespace(**{name: getattr(K, name) for name in dir(K) if not name.startswith("__")})
 
-    def integrate_batch(start, stop, order, states, params, pair_tables, period_tables, table_index, fp, fg,
-                        breakpoints, steps, n_periods, keep, strides, lyapunov, scales, acc, poincare, history, final):
+    def integrate_batch(start, stop, order, batch):
+        states, params, pair_tables, period_tables, table_index, fp, fg, breakpoints = batch.runs
+        steps, n_periods, keep, strides, lyapunov, scales, acc, poincare, history, final = batch[1:]
         rows = order[start:stop]
         acc_rows, poincare_rows, history_rows = acc[rows], poincare[rows], history[rows]
         # its parameter vector is today's first slots (the pitch-error slots came later, appended)

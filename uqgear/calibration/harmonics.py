@@ -27,6 +27,7 @@ import scipy.signal
 import xarray as xr
 
 from ..physics import _kernels as K
+from ..physics._batch_record import run_arrays
 from ..physics.batch_setup import build_batch, kernel_inputs
 from ..physics.design import Design
 from ..physics.effects import MESH_PERIODIC_EFFECTS, Effect
@@ -193,40 +194,22 @@ def _steady_harmonics(
 
 @nb.njit(cache=True, nogil=True)
 def _harmonics_batch(
-    start,
-    stop,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps,
-    stride,
-    transient_periods,
-    min_periods,
-    max_periods,
-    tolerance,
-    scales,
-    n_harmonics,
-    shoot,
-    out,
-    info,
+    start, stop, runs, steps, stride, transient_periods, min_periods, max_periods, tolerance, scales, n_harmonics,
+    shoot, out, info,
 ):
-    """Samples ``start`` to ``stop - 1`` (GIL released; threads share a batch by ranges)."""
+    """Samples ``start`` to ``stop - 1`` of ``runs`` (a :class:`~uqgear.physics._batch_record.RunInputs`; GIL
+    released; threads share a batch by ranges)."""
     for i in range(start, stop):
-        state = states[i].copy()
-        table = table_index[i]
+        state = runs.states[i].copy()
+        p, pair_k, period_k, fp, fg, breakpoints = run_arrays(runs, i)
         _steady_harmonics(
             state,
-            params[i],
-            pair_tables[table],
-            period_tables[table],
-            factor_pinion[i],
-            factor_gear[i],
-            breakpoints[i],
+            p,
+            pair_k,
+            period_k,
+            fp,
+            fg,
+            breakpoints,
             steps[i],
             stride[i],
             transient_periods[i],
@@ -318,7 +301,7 @@ def model_harmonics(
     info = np.zeros((n, 2))
     if n:
         arrays = (
-            *kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
+            kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
             steps,
             stride,
             transient_periods,

@@ -26,6 +26,7 @@ COMPILED_MODULES = (
     "physics/_rhs.py",
     "physics/_stepper.py",
     "physics/_quotient.py",
+    "physics/_batch_record.py",
     "physics/_pairs.py",
     "physics/_kernels.py",
     "physics/_lane_loop.py",

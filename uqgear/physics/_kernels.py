@@ -25,6 +25,7 @@ import numba as nb
 import numpy as np
 
 from uqgear.physics import _pairs
+from uqgear.physics._batch_record import run_arrays
 from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family's one namespace)
     ADHESION_AMPLITUDE,
     ADHESION_OMEGA,
@@ -141,7 +142,8 @@ def rhs(t, state, t_ref, p, pair_k, period_k, factor_pinion, factor_gear, out):
     transmission error e).
     """
     if p[PITCH_ERRORS] != 0.0:
-        # per-pair deflections (docs/model/equations.md section 2.6); the branch leaves the classical path as it was
+        # per-pair deflections (docs/model/equations.md section 2.6); runs without pitch errors take the classical
+        # path below, which the branch does not touch
         terms = _pairs.forcing_pairs(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear)
         d, force = _pairs.derivative_pairs((state[0], state[1], state[2], state[3], state[4], state[5]), terms, p)
         for j in range(6):
@@ -454,166 +456,51 @@ def _integrate_qoi(
 
 
 @nb.njit(**JIT_OPTIONS, inline="always")
-def _batch(
-    step,
-    contact,
-    start,
-    stop,
-    order,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps_per_period,
-    n_periods,
-    keep_periods,
-    history_stride,
-    lyapunov,
-    scales,
-    accumulators,
-    poincare,
-    history,
-    final_states,
-):
+def _batch(step, contact, start, stop, order, batch):
+    runs = batch.runs
     for k in range(start, stop):
         i = order[k]
-        state = states[i].copy()
-        table = table_index[i]
+        state = runs.states[i].copy()
+        p, pair_k, period_k, fp, fg, breakpoints = run_arrays(runs, i)
         _integrate_qoi(
             step,
             contact,
             state,
-            params[i],
-            pair_tables[table],
-            period_tables[table],
-            factor_pinion[i],
-            factor_gear[i],
-            breakpoints[i],
-            steps_per_period[i],
-            n_periods,
-            keep_periods,
-            history_stride[i],
-            accumulators[i],
-            poincare[i],
-            history[i],
-            lyapunov,
-            scales[i],
+            p,
+            pair_k,
+            period_k,
+            fp,
+            fg,
+            breakpoints,
+            batch.steps_per_period[i],
+            batch.n_periods,
+            batch.keep_periods,
+            batch.history_stride[i],
+            batch.accumulators[i],
+            batch.poincare[i],
+            batch.history[i],
+            batch.lyapunov,
+            batch.scales[i],
         )
-        final_states[i, :] = state
+        batch.final_states[i, :] = state
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_batch(
-    start,
-    stop,
-    order,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps_per_period,
-    n_periods,
-    keep_periods,
-    history_stride,
-    lyapunov,
-    scales,
-    accumulators,
-    poincare,
-    history,
-    final_states,
-):
+def integrate_batch(start, stop, order, batch):
     """Integrate runs ``order[start:stop]`` of a batch without pitch errors, one at a time (GIL released).
 
-    ``states`` holds each run's state at t = 0 and is not changed; each run's state
-    at the end of its last period goes to ``final_states``.
+    ``batch`` is a :class:`~uqgear.physics._batch_record.QoiBatch`: its runs' states at t = 0 are
+    not changed; each run's state at the end of its last period goes to ``batch.final_states``.
 
     Threads share a batch by calling this on disjoint ranges
     (:func:`uqgear.physics.threads.spread`); a run's numbers do not depend on
     which thread or range computes it. Not a ``prange``: numba's parallel
     lowering multiplies the kernel's cold compilation time (docs/validation/performance.md).
     """
-    _batch(
-        classical_step,
-        mesh_contact,
-        start,
-        stop,
-        order,
-        states,
-        params,
-        pair_tables,
-        period_tables,
-        table_index,
-        factor_pinion,
-        factor_gear,
-        breakpoints,
-        steps_per_period,
-        n_periods,
-        keep_periods,
-        history_stride,
-        lyapunov,
-        scales,
-        accumulators,
-        poincare,
-        history,
-        final_states,
-    )
+    _batch(classical_step, mesh_contact, start, stop, order, batch)
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_batch_pairs(
-    start,
-    stop,
-    order,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps_per_period,
-    n_periods,
-    keep_periods,
-    history_stride,
-    lyapunov,
-    scales,
-    accumulators,
-    poincare,
-    history,
-    final_states,
-):
+def integrate_batch_pairs(start, stop, order, batch):
     """:func:`integrate_batch` for runs with pitch errors (the per-pair path)."""
-    _batch(
-        _pairs.scheduled_step_pairs,
-        _pairs.pair_contact,
-        start,
-        stop,
-        order,
-        states,
-        params,
-        pair_tables,
-        period_tables,
-        table_index,
-        factor_pinion,
-        factor_gear,
-        breakpoints,
-        steps_per_period,
-        n_periods,
-        keep_periods,
-        history_stride,
-        lyapunov,
-        scales,
-        accumulators,
-        poincare,
-        history,
-        final_states,
-    )
+    _batch(_pairs.scheduled_step_pairs, _pairs.pair_contact, start, stop, order, batch)

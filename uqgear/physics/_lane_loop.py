@@ -209,14 +209,17 @@ def _lane_samples(members, lyapunov):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _group_layout(members, lyapunov, rows, params, pair_tables, period_tables, table_index, breakpoints,
-                  steps_per_period, history_stride, refused):
+def _group_layout(members, batch, rows, refused):
     """Each lane's sample, sub-steps and tabulated stages, and its coefficients in a fresh work array.
 
     A run whose sub-step layout differs from the group's first run is refused (``refused``); its
     lane repeats the lead run and writes nothing.
     """
-    samples, written = _lane_samples(members, lyapunov)
+    runs = batch.runs
+    params, pair_tables, period_tables = runs.params, runs.pair_tables, runs.period_tables
+    table_index, breakpoints = runs.table_index, runs.breakpoints
+    steps_per_period, history_stride = batch.steps_per_period, batch.history_stride
+    samples, written = _lane_samples(members, batch.lyapunov)
     lead = samples[0]
     steps = steps_per_period[lead]
     stride = history_stride[lead]
@@ -280,40 +283,25 @@ def integrate_group(
     rows,
     table_width,
     members,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps_per_period,
-    n_periods,
-    keep_periods,
-    history_stride,
-    lyapunov,
-    scales,
-    accumulators,
-    poincare,
-    history,
-    final_states,
+    batch,
     refused,
 ):
     """Integrate one lane group (``members``: a row of ``groups``) with a step family's functions.
 
     ``step(W, table, sub, lanes, n_pairs)`` advances every lane over sub-step ``sub`` and returns how
-    many leave something to ``redo(lane, n, sub, W, table, widths, offsets, refs, period, i, params,
-    pair_tables, period_tables, table_index, fp, fg, stages, pairs)``; ``fill(table, lane, n, period,
+    many leave something to ``redo(lane, n, sub, W, table, widths, offsets, refs, period, i, runs, stages,
+    pairs)`` (``runs``: the batch's :class:`~uqgear.physics._batch_record.RunInputs`); ``fill(table, lane, n, period,
     widths, offsets, stages, pairs, p, fp, fg)`` writes a lane's forcing table for period ``n``;
     ``start_period(W, lane, n, p, fp, fg)`` sets what a lane's step reads of period ``n`` beyond the
     table; ``contact_counts(W, lane, n_pairs)`` says (drive side, back side) of a lane's contact as
     0.0 or 1.0. ``rows`` and ``table_width`` size the work array and the forcing table.
     """
     samples, written, W, widths, offsets, refs, stages, first_sub, pairs, steps, stride = _group_layout(
-        members, lyapunov, rows, params, pair_tables, period_tables, table_index, breakpoints,
-        steps_per_period, history_stride, refused,
+        members, batch, rows, refused
     )
+    runs = batch.runs
+    params, factor_pinion, factor_gear = runs.params, runs.factor_pinion, runs.factor_gear
+    n_periods, keep_periods, lyapunov, scales = batch.n_periods, batch.keep_periods, batch.lyapunov, batch.scales
     table = np.empty((widths.shape[0], table_width * LANES))
     period = np.empty(LANES)
     moving = False
@@ -329,9 +317,9 @@ def integrate_group(
     live = written.copy()
     if lyapunov:
         live[half:] = written[:half]
-    acc = _start_lanes(W, states, samples, lyapunov, scales)
+    acc = _start_lanes(W, runs.states, samples, lyapunov, scales)
     log_growth = np.zeros(LANES)
-    whole_state = poincare.shape[2] >= 6
+    whole_state = batch.poincare.shape[2] >= 6
     first_kept = n_periods - keep_periods
     row = 0
     for n in range(n_periods):
@@ -344,27 +332,28 @@ def integrate_group(
                      factor_pinion[i], factor_gear[i])
         kept = n >= first_kept
         if kept:
-            _keep_poincare(poincare, W, samples, written, n - first_kept, whole_state)
+            _keep_poincare(batch.poincare, W, samples, written, n - first_kept, whole_state)
         for j in range(steps):
             for sub in range(first_sub[j], first_sub[j + 1]):
                 if step(W, table, sub, lanes, pairs[sub]) != 0:
                     for lane in range(LANES):
                         # an empty lane's numbers are never read: it is not redone
                         if row_of(W, W_REDO, lane) != REDO_NONE and live[lane]:
-                            redo(lane, n, sub, W, table, widths, offsets, refs, period, samples[lane], params,
-                                 pair_tables, period_tables, table_index, factor_pinion, factor_gear, stages, pairs)
+                            redo(lane, n, sub, W, table, widths, offsets, refs, period, samples[lane], runs, stages,
+                                 pairs)
                 if sub == first_sub[j] and kept:
                     for lane in range(lanes):
                         drive_side, back_side = contact_counts(W, lane, pairs[sub])
                         _accumulate(acc, W, lane, drive_side, back_side)
                     if stride > 0 and j % stride == 0:
-                        _record(history, row, W, table[sub], samples, written, n, j, steps, period, params)
+                        _record(batch.history, row, W, table[sub], samples, written, n, j, steps, period, params)
                         row += 1
                 _advance(W, lanes)
         if lyapunov:
             for lane in range(half):
                 _renormalise(W, lane, lane + half, scales[samples[lane]], kept, log_growth)
-    _write_out(W, acc, log_growth, samples, written, lyapunov, keep_periods, period, accumulators, final_states)
+    _write_out(W, acc, log_growth, samples, written, lyapunov, keep_periods, period, batch.accumulators,
+               batch.final_states)
 
 
 @nb.njit(**JIT_OPTIONS)

@@ -48,6 +48,7 @@ import numba as nb
 import numpy as np
 from numba.core.compiler_lock import global_compiler_lock
 
+from uqgear.physics._batch_record import QoiBatch, run_arrays
 from uqgear.physics._lane_loop import (
     N_ROWS,
     REDO_NONE,
@@ -88,7 +89,7 @@ _COMPILED: set[str] = set()
 
 
 def compile_lane_kernel(
-    step: Any, rows: int, table_width: int, kernel: Callable[..., None], groups: np.ndarray, arrays: tuple,
+    step: Any, rows: int, table_width: int, kernel: Callable[..., None], groups: np.ndarray, batch: QoiBatch,
     refused: np.ndarray,
 ) -> None:
     """Compile (or load from the cache) a lane kernel, ``kernel``, whose sub-step over the lanes is ``step``.
@@ -126,15 +127,15 @@ def compile_lane_kernel(
                 step(np.zeros(rows * LANES), np.zeros((1, table_width * LANES)), 0, 0, 0)
             finally:
                 ll.set_option("", "-force-vector-width=0")
-            kernel(0, 0, groups, *arrays, refused)
+            kernel(0, 0, groups, batch, refused)
             _COMPILED.add(name)
         finally:
             nb.config.SLP_VECTORIZE = saved  # type: ignore[attr-defined]
 
 
-def compile_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> None:
+def compile_lanes(groups: np.ndarray, batch: QoiBatch, refused: np.ndarray) -> None:
     """Compile (or load from the cache) :func:`integrate_lanes` for its arguments (:func:`compile_lane_kernel`)."""
-    compile_lane_kernel(_step_lanes, N_ROWS, N_TABLE, integrate_lanes, groups, arrays, refused)
+    compile_lane_kernel(_step_lanes, N_ROWS, N_TABLE, integrate_lanes, groups, batch, refused)
 
 
 def lane_ready(params: np.ndarray) -> np.ndarray:
@@ -190,31 +191,11 @@ def _step_lanes(W, table, sub, lanes, n_pairs):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _redo_lane(
-    lane,
-    n,
-    sub,
-    W,
-    table,
-    widths,
-    offsets,
-    refs,
-    period,
-    i,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    stages,
-    pairs,
-):
+def _redo_lane(lane, n, sub, W, table, widths, offsets, refs, period, i, runs, stages, pairs):
     """Finish a lane's sub-step on the one-sample code: its split at a contact boundary, or (a quotient the
     lanes cannot vouch for) the whole sub-step, with IEEE divisions, as the one-sample kernel does.
     (``stages`` and ``pairs`` are not read: the signature of every lane redo.)"""
-    p = params[i]
-    table_i = table_index[i]
+    p, pair_k, period_k, fp, fg, _ = run_arrays(runs, i)
     start = n * period[lane]
     s = lane_state(W, W_STATE, lane)
     d1 = lane_state(W, W_SLOPE, lane)
@@ -247,10 +228,10 @@ def _redo_lane(
         attempt,
         start + refs[sub, lane],
         p,
-        pair_tables[table_i],
-        period_tables[table_i],
-        factor_pinion[i],
-        factor_gear[i],
+        pair_k,
+        period_k,
+        fp,
+        fg,
     )
     put_state(W, W_TRIAL, lane, done)
 
@@ -273,68 +254,21 @@ def _no_period_terms(W, lane, n, p, fp, fg):
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_lanes(
-    first,
-    last,
-    groups,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps_per_period,
-    n_periods,
-    keep_periods,
-    history_stride,
-    lyapunov,
-    scales,
-    accumulators,
-    poincare,
-    history,
-    final_states,
-    refused,
-):
+def integrate_lanes(first, last, groups, batch, refused):
     """Integrate lane groups ``first`` to ``last - 1`` of a batch of runs without pitch errors (GIL released).
 
     ``groups`` has one row of ``LANES`` sample indices per group (-1: an
     empty lane); with ``lyapunov`` only the first half of a row is used and
-    the second half runs the shadows. The arguments after ``groups`` are
-    those of :func:`uqgear.physics._kernels.integrate_batch`, filled alike.
+    the second half runs the shadows. ``batch`` is the
+    :class:`~uqgear.physics._batch_record.QoiBatch` of
+    :func:`uqgear.physics._kernels.integrate_batch`.
     A run whose sub-step layout differs from its group's first run is not
     integrated: ``refused`` says so, and the caller runs it one at a time.
     """
     for g in range(first, last):
         integrate_group(
-            _step_lanes,
-            _redo_lane,
-            _fill_forcing,
-            _no_period_terms,
-            _mesh_contact_counts,
-            N_ROWS,
-            N_TABLE,
-            groups[g],
-            states,
-            params,
-            pair_tables,
-            period_tables,
-            table_index,
-            factor_pinion,
-            factor_gear,
-            breakpoints,
-            steps_per_period,
-            n_periods,
-            keep_periods,
-            history_stride,
-            lyapunov,
-            scales,
-            accumulators,
-            poincare,
-            history,
-            final_states,
-            refused,
+            _step_lanes, _redo_lane, _fill_forcing, _no_period_terms, _mesh_contact_counts, N_ROWS, N_TABLE,
+            groups[g], batch, refused,
         )
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from uqgear.physics._batch_record import QoiBatch, run_arrays
 from uqgear.physics._lane_loop import (
     N_ROWS,
     REDO_NONE,
@@ -173,32 +174,10 @@ def _step_pair_lanes(W, table, sub, lanes, n_pairs):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _redo_pair_lane(
-    lane,
-    n,
-    sub,
-    W,
-    table,
-    widths,
-    offsets,
-    refs,
-    period,
-    i,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    stages,
-    pairs,
-):
+def _redo_pair_lane(lane, n, sub, W, table, widths, offsets, refs, period, i, runs, stages, pairs):
     """A pair lane's whole sub-step on the one-sample code (:func:`~uqgear.physics._pairs.substep_pairs`: its
     splits at each pair's contact change, IEEE divisions)."""
-    p = params[i]
-    table_i = table_index[i]
-    fp = factor_pinion[i]
-    fg = factor_gear[i]
+    p, pair_k, period_k, fp, fg, _ = run_arrays(runs, i)
     start = n * period[lane]
     done, d1, force = substep_pairs(
         start + offsets[sub, lane],
@@ -210,8 +189,8 @@ def _redo_pair_lane(
         pairs[sub],
         start + refs[sub, lane],
         p,
-        pair_tables[table_i],
-        period_tables[table_i],
+        pair_k,
+        period_k,
         fp,
         fg,
     )
@@ -237,67 +216,19 @@ def _pair_contact_counts(W, lane, n_pairs):
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_pair_lanes(
-    first,
-    last,
-    groups,
-    states,
-    params,
-    pair_tables,
-    period_tables,
-    table_index,
-    factor_pinion,
-    factor_gear,
-    breakpoints,
-    steps_per_period,
-    n_periods,
-    keep_periods,
-    history_stride,
-    lyapunov,
-    scales,
-    accumulators,
-    poincare,
-    history,
-    final_states,
-    refused,
-):
+def integrate_pair_lanes(first, last, groups, batch, refused):
     """:func:`uqgear.physics._lanes.integrate_lanes` for lane groups of runs with pitch errors (GIL released)."""
     for g in range(first, last):
         integrate_group(
-            _step_pair_lanes,
-            _redo_pair_lane,
-            _fill_pair_forcing,
-            _pair_offsets,
-            _pair_contact_counts,
-            N_PAIR_ROWS,
-            N_PAIR_TABLE,
-            groups[g],
-            states,
-            params,
-            pair_tables,
-            period_tables,
-            table_index,
-            factor_pinion,
-            factor_gear,
-            breakpoints,
-            steps_per_period,
-            n_periods,
-            keep_periods,
-            history_stride,
-            lyapunov,
-            scales,
-            accumulators,
-            poincare,
-            history,
-            final_states,
-            refused,
+            _step_pair_lanes, _redo_pair_lane, _fill_pair_forcing, _pair_offsets, _pair_contact_counts, N_PAIR_ROWS,
+            N_PAIR_TABLE, groups[g], batch, refused,
         )
 
 
-def compile_pair_lanes(groups: np.ndarray, arrays: tuple, refused: np.ndarray) -> None:
+def compile_pair_lanes(groups: np.ndarray, batch: QoiBatch, refused: np.ndarray) -> None:
     """Compile (or load from the cache) :func:`integrate_pair_lanes` for its arguments
     (:func:`~uqgear.physics._lanes.compile_lane_kernel`)."""
-    compile_lane_kernel(_step_pair_lanes, N_PAIR_ROWS, N_PAIR_TABLE, integrate_pair_lanes, groups, arrays, refused)
+    compile_lane_kernel(_step_pair_lanes, N_PAIR_ROWS, N_PAIR_TABLE, integrate_pair_lanes, groups, batch, refused)
 
 
 __all__ = ["integrate_pair_lanes", "compile_pair_lanes"]

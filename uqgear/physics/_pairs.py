@@ -58,7 +58,9 @@ from uqgear.physics._rhs import (
     divided,
     mesh_damping,
     modulated_scale,
+    run_out_modulation,
     smooth_share,
+    tooth_factor,
 )
 from uqgear.physics._stepper import (
     BISECTIONS,
@@ -102,7 +104,7 @@ def _pair(i, n_ref, u_ref, u, eps, ratio, p, pair_k, fp, fg):
     kp = _interp_uniform(pair_k, u + i, eps) * ratio
     tooth = int(n_ref) - i
     if p[TOOTH_FACTORS] != 0.0:
-        kp *= fp[tooth % int(p[Z1])] * fg[tooth % int(p[Z2])]
+        kp *= tooth_factor(tooth, p, fp, fg)
     pinion = 0.0
     gear = 0.0
     if p[FRICTION] != 0.0:
@@ -227,11 +229,8 @@ def _row_pair(i, table, sub, stage, n_pairs, p, offset, factor):
 def _forcing_row_pairs(t, teeth, table, sub, stage, n_pairs, p):
     """:func:`forcing_pairs` at absolute time ``t`` from a tabulated stage (``teeth``: :func:`_tooth_terms`)."""
     # the table's pair fields are each pair's share of the mesh stiffness already (smooth_share)
-    # modulated_scale written out: on the tabulated stages (three a sub-step) the call made the
-    # one-sample kernels about a third slower (docs/validation/performance.md)
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    # the slots read here: the modulation takes scalars (run_out_modulation says why)
+    scale = run_out_modulation(t, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
     drive, ste, ste_acc = _time_terms(t, table[sub, stage, F_SINE], p)
     offsets, factors = teeth
     return _pack(

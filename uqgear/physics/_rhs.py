@@ -252,13 +252,32 @@ def smooth_share(t, u_ref, u, p, pair_k, period_k):
 
 
 @nb.njit(**INLINED)
+def run_out_modulation(t, scale, kappa, omega, phase):
+    """``scale`` times the run-out's stiffness modulation 1 + kappa cos(omega t + phase)
+    (docs/model/unmodelled-effects.md section 6): the factor on every pair's stiffness at ``t``.
+
+    The one expression of the modulation; every kernel family takes it from here (through
+    :func:`modulated_scale` or with the slots read by the caller). Its arguments are scalars: a
+    helper that takes an array costs that array's reference count on every call, and the
+    tabulated stages call this three times a sub-step (docs/validation/performance.md).
+    """
+    if kappa != 0.0:
+        scale *= 1.0 + kappa * math.cos(omega * t + phase)
+    return scale
+
+
+@nb.njit(**INLINED)
 def modulated_scale(t, p):
     """The factor on every mesh stiffness at ``t``: the stiffness scale and the run-out's modulation
-    1 + kappa cos(W_s t + phase) (docs/model/unmodelled-effects.md section 6)."""
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
-    return scale
+    (:func:`run_out_modulation` with the slots of ``p``)."""
+    return run_out_modulation(t, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
+
+
+@nb.njit(**INLINED)
+def tooth_factor(tooth, p, factor_pinion, factor_gear):
+    """The stiffness factor f_pinion f_gear of the pair that entered the mesh in period ``tooth``
+    (pinion tooth ``tooth mod z1`` on gear tooth ``tooth mod z2``; 1 for healthy teeth)."""
+    return factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -291,8 +310,7 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
         kp = _interp_uniform(pair_k, u + i, eps)
         pair = kp * ratio if smooth else kp
         if damaged:
-            tooth = int(n_ref) - i
-            factor = factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
+            factor = tooth_factor(int(n_ref) - i, p, factor_pinion, factor_gear)
             if smooth:
                 # the tooth's loss of its share; the healthy sum is replaced by the table below
                 k += pair * (factor - 1.0)

@@ -45,8 +45,6 @@ from uqgear.physics._rhs import (
     TOOTH_FACTORS,
     TWO_PI,
     USE_PERIOD_TABLE,
-    Z1,
-    Z2,
     _friction_arms,
     _friction_term,
     _interp_uniform,
@@ -57,8 +55,10 @@ from uqgear.physics._rhs import (
     derivative,
     divided,
     forcing,
+    run_out_modulation,
     side_derivative,
     state_derivative_by,
+    tooth_factor,
 )
 
 
@@ -375,18 +375,15 @@ def _forcing_row(t, n, table, sub, stage, n_pairs, p, factor_pinion, factor_gear
 @nb.njit(**INLINED)
 def tooth_extra(tooth, p, factor_pinion, factor_gear):
     """The tooth factors' change of pair stiffness, f_pinion f_gear - 1, of the pair entering in period ``tooth``."""
-    return factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])] - 1.0
+    return tooth_factor(tooth, p, factor_pinion, factor_gear) - 1.0
 
 
 @nb.njit(**INLINED)
 def scaled_forcing(t, k, arm_pinion, arm_gear, sine, p):
     """:func:`forcing` at ``t`` from the pair sums ``k`` and friction arms (tooth factors applied) and
     sin(omega t + STE phase): the stiffness scale, the run-out's modulation and the time terms."""
-    # modulated_scale written out: on the tabulated stages (three a sub-step) the call made the
-    # one-sample kernels about a third slower (docs/validation/performance.md)
-    scale = p[STIFFNESS_SCALE]
-    if p[ECC_KAPPA] != 0.0:
-        scale *= 1.0 + p[ECC_KAPPA] * math.cos(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    # the slots read here: the modulation takes scalars (run_out_modulation says why)
+    scale = run_out_modulation(t, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
     drive, ste, ste_acc = _time_terms(t, sine, p)
     return k * scale, _friction_term(arm_pinion * scale, arm_gear * scale, p), drive, ste, ste_acc
 

@@ -3,8 +3,8 @@
 :func:`build_batch` turns a Dataset of samples into :class:`~uqgear.physics.model.ModelSetup`
 objects (design keys and effect parameters may vary per sample);
 :func:`shared_stiffness_tables` and :func:`breakpoint_table` lay them out for
-the batch kernels (:func:`kernel_inputs`: the arguments every batch kernel
-starts with), :func:`lane_groups` groups the runs that share a sub-step
+the batch kernels (:func:`kernel_inputs`: the inputs every batch kernel
+reads of each run), :func:`lane_groups` groups the runs that share a sub-step
 layout into SIMD lanes (:mod:`uqgear.physics._lanes`) and
 :func:`integrate_lane_groups` integrates those groups.
 """
@@ -20,6 +20,7 @@ import xarray as xr
 
 from ..common.errors import OperatingPointError
 from . import _lanes, _pair_lanes
+from ._batch_record import QoiBatch, RunInputs
 from ._rhs import PITCH_ERRORS
 from .design import DESIGN_KEYS, Design
 from .effects import Effect
@@ -142,15 +143,14 @@ def breakpoint_table(setups: Sequence[ModelSetup]) -> np.ndarray:
     return breakpoints
 
 
-def kernel_inputs(setups: Sequence[ModelSetup], states: np.ndarray) -> tuple:
-    """The arguments every batch kernel starts with, for non-empty ``setups`` starting at ``states``.
+def kernel_inputs(setups: Sequence[ModelSetup], states: np.ndarray) -> RunInputs:
+    """The inputs every batch kernel reads of each run, for non-empty ``setups`` starting at ``states``.
 
-    (states, parameters, pair stiffness tables, period stiffness tables, each set-up's table
-    index, pinion and gear tooth factors, breakpoints): the layout of
-    :func:`uqgear.physics._kernels.integrate_batch`, the lanes and the harmonic balance.
+    The one place a :class:`~uqgear.physics._batch_record.RunInputs` is filled: the one-sample batch
+    kernels, the lanes and the harmonic balance all read these.
     """
     pair_tables, period_tables, table_index = shared_stiffness_tables(setups)
-    return (
+    return RunInputs(
         states,
         np.stack([s.parameters for s in setups]),
         np.stack(pair_tables),
@@ -162,16 +162,16 @@ def kernel_inputs(setups: Sequence[ModelSetup], states: np.ndarray) -> tuple:
     )
 
 
-def integrate_lane_groups(arrays: tuple, threads: int | None) -> np.ndarray:
+def integrate_lane_groups(batch: QoiBatch, threads: int | None) -> np.ndarray:
     """Integrate a batch's lane-ready runs in lane groups; returns the runs left to a one-sample kernel.
 
-    ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the
-    range and the order. The runs left are those the lanes do not take (divisors the lanes'
-    quotient is not exact for, groups too small to pay: :func:`lane_groups`) and those a group
-    refused (another sub-step layout), in index order.
+    The runs left are those the lanes do not take (divisors the lanes' quotient is not exact for,
+    groups too small to pay: :func:`lane_groups`) and those a group refused (another sub-step
+    layout), in index order.
     """
-    params, breakpoints, steps, strides, lyapunov = arrays[1], arrays[7], arrays[8], arrays[11], arrays[12]
-    groups, rest = lane_groups(params, steps, breakpoints, strides, lyapunov)
+    params = batch.runs.params
+    groups, rest = lane_groups(params, batch.steps_per_period, batch.runs.breakpoints, batch.history_stride,
+                               batch.lyapunov)
     if len(groups):
         refused = np.zeros(len(params), dtype=np.bool_)
         # a group holds runs with pitch errors or runs without (lane_groups): each family its own kernel,
@@ -182,10 +182,10 @@ def integrate_lane_groups(arrays: tuple, threads: int | None) -> np.ndarray:
         for compile_kernel, kernel, family in families:
             if len(family):
                 # compiled here, before the threads call it
-                compile_kernel(family, arrays, refused)
+                compile_kernel(family, batch, refused)
 
                 def run_groups(first: int, last: int, kernel: Any = kernel, family: np.ndarray = family) -> None:
-                    kernel(first, last, family, *arrays, refused)
+                    kernel(first, last, family, batch, refused)
 
                 spread(run_groups, len(family), threads)
         rest = np.sort(np.concatenate([rest, np.nonzero(refused)[0]])).astype(np.int64)

@@ -22,6 +22,7 @@ from typing import Any
 from ..common.errors import DesignError, shown
 from ..common.resources import bundled_by_name, bundled_names
 from ..common.yamlio import YAMLError, load_yaml
+from .design_parts import DesignParts, ToothPairDesign
 
 #: Standard gravity used to turn an axle load in kg into a normal force.
 STANDARD_GRAVITY = 9.80665
@@ -169,11 +170,14 @@ class Operation:
 
 
 @dataclass(frozen=True)
-class Design:
+class Design(DesignParts):
     """Nominal design of a spur gear pair (keys and units of docs/rig-data-format.md).
 
     Use :func:`load_design` or :meth:`from_mapping` to build one with
     validation; :meth:`replace` returns a validated copy with some keys changed.
+    The parts the derived design reads (:attr:`tooth_pair`, :attr:`mesh_design`,
+    :attr:`modal_design`; :mod:`uqgear.physics.design_parts`) are the keys
+    its geometry, stiffness tables and modes are cached under.
 
     Examples
     --------
@@ -288,9 +292,9 @@ class Design:
         design = dataclasses.replace(self, **checked)
         _check_tip_clearance(design.addendum_coefficient, design.dedendum_coefficient, "")
         # importing here avoids a module cycle, as in from_mapping
-        from .geometry import PAIR_GEOMETRY_KEYS, check_geometry
+        from .geometry import check_geometry
 
-        if any(key in PAIR_GEOMETRY_KEYS for key in changes):
+        if any(key in ToothPairDesign.keys() for key in changes):
             check_geometry(design)
         return design
 

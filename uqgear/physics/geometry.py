@@ -24,12 +24,12 @@ import functools
 import math
 import warnings
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import brentq
 
 from ..common.errors import DesignError, UndercutWarning
+from .design_parts import ToothPairDesign
 from .generation import RackCorner, tip_penetration, undercut
 
 
@@ -209,49 +209,32 @@ def _tooth(teeth: int, shift: float, module: float, alpha: float, addendum: floa
     )
 
 
-#: Design keys the pair geometry depends on.
-PAIR_GEOMETRY_KEYS = (
-    "z1",
-    "z2",
-    "module",
-    "pressure_angle",
-    "x1",
-    "x2",
-    "addendum_coefficient",
-    "dedendum_coefficient",
-)
+#: Design keys the pair geometry depends on (the fields of :class:`~uqgear.physics.design_parts.ToothPairDesign`).
+PAIR_GEOMETRY_KEYS = ToothPairDesign.keys()
 
 
 def pair_geometry(design) -> PairGeometry:
     """Compute the involute geometry of a design's gear pair (no validation).
 
-    Cached on the keys it depends on (:data:`PAIR_GEOMETRY_KEYS`): a batch of
-    ten thousand runs of one design computes it once, not twice a run; the
-    result is frozen, so sharing it is safe.
+    Cached on the design's :class:`~uqgear.physics.design_parts.ToothPairDesign`,
+    the fields the geometry reads and nothing else: a batch of ten thousand
+    runs of one design computes it once, not twice a run; the result is
+    frozen, so sharing it is safe.
 
     Parameters
     ----------
-    design : Design
+    design : Design or ToothPairDesign
+        Any object with the tooth pair's fields.
 
     Returns
     -------
     PairGeometry
     """
-    return _pair_geometry(*(getattr(design, key) for key in PAIR_GEOMETRY_KEYS))
+    return _pair_geometry(ToothPairDesign.of(design))
 
 
 @functools.lru_cache(maxsize=256)
-def _pair_geometry(z1, z2, module, pressure_angle, x1, x2, addendum_coefficient, dedendum_coefficient) -> PairGeometry:
-    design = SimpleNamespace(
-        z1=z1,
-        z2=z2,
-        module=module,
-        pressure_angle=pressure_angle,
-        x1=x1,
-        x2=x2,
-        addendum_coefficient=addendum_coefficient,
-        dedendum_coefficient=dedendum_coefficient,
-    )
+def _pair_geometry(design: ToothPairDesign) -> PairGeometry:
     alpha = math.radians(design.pressure_angle)
     pinion = _tooth(
         design.z1, design.x1, design.module, alpha, design.addendum_coefficient, design.dedendum_coefficient

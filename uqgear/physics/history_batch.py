@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ._batch_record import QoiBatch
 from ._lane_tables import STATE_CHANNELS
 from ._rhs import N_ACCUMULATORS
 from .batch_setup import integrate_lane_groups, kernel_inputs
@@ -76,8 +77,8 @@ def integrate_histories(
     steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=samples_per_period) for s in setups])
     history = np.empty((n, STATE_CHANNELS, keep_periods * samples_per_period))
     poincare = np.empty((n, keep_periods, 6))
-    arrays = (
-        *kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
+    batch = QoiBatch(
+        kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
         steps,
         int(n_periods),
         int(keep_periods),
@@ -90,7 +91,7 @@ def integrate_histories(
         np.empty((n, 6)),
     )
     # one thread: a diagnosis's worker processes are its parallelism
-    rest = integrate_lane_groups(arrays, threads=1)
+    rest = integrate_lane_groups(batch, threads=1)
     left = set(rest.tolist())
     results: list[tuple[np.ndarray, np.ndarray] | None] = [
         None if i in left else (history[i][_LANE_CHANNELS].T.copy(), poincare[i]) for i in range(n)

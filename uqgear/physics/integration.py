@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
@@ -24,14 +25,16 @@ import xarray as xr
 
 from ..common.errors import OperatingPointError
 from . import _kernels as K
+from ._batch_record import QoiBatch
 
 # BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
 from .batch_setup import build_batch, integrate_lane_groups, kernel_inputs
 from .design import Design
+from .design_parts import ModalDesign
 from .effect_draws import as_effect
 from .effects import Effect
-from .model import HISTORY_COLUMNS, ModelSetup, build_model, natural_frequencies
+from .model import HISTORY_COLUMNS, ModelSetup, build_model, cached_tables, natural_frequencies
 from .pitch_errors import PitchErrors
 from .scipy_reference import integrate_scipy
 from .threads import spread
@@ -109,20 +112,15 @@ def _check_counts(n_periods: int, keep_periods: int) -> None:
         )
 
 
-_HIGHEST_MODES: dict[tuple, float] = {}
-
-
 def _highest_mode(design: Design, stiffness_scale: float) -> float:
-    """Highest natural frequency (Hz) at the peak mesh stiffness, cached on the values it depends on."""
-    from .model import _cached_tables, geometry_key
+    """Highest natural frequency (Hz) at the peak mesh stiffness, cached on the design's modal part."""
+    return _modal_highest(design.modal_design, float(stiffness_scale))
 
-    k_peak = float(np.max(_cached_tables(design, "ishikawa").period_stiffness)) * stiffness_scale
-    key = (geometry_key(design), design.m1, design.m2, design.I1, design.I2, design.k1, design.k2, k_peak)
-    if key not in _HIGHEST_MODES:
-        if len(_HIGHEST_MODES) >= 4096:
-            _HIGHEST_MODES.clear()
-        _HIGHEST_MODES[key] = float(natural_frequencies(design, k_peak)[-1])
-    return _HIGHEST_MODES[key]
+
+@functools.lru_cache(maxsize=4096)
+def _modal_highest(modal: ModalDesign, stiffness_scale: float) -> float:
+    k_peak = float(np.max(cached_tables(modal, "ishikawa").period_stiffness)) * stiffness_scale
+    return float(natural_frequencies(modal, k_peak)[-1])
 
 
 #: Fewest grid steps a mesh period.
@@ -362,14 +360,13 @@ def simulate(
 # ---------------------------------------------------------------------------- batches
 
 
-def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
+def _run_batch(batch: QoiBatch, threads: int | None, lanes: bool = True) -> None:
     """Integrate a batch: lane-ready runs in lane groups, the others (and any the lanes refuse) one at a time.
 
-    ``arrays`` are the arguments of :func:`uqgear.physics._kernels.integrate_batch` after the range and the
-    order; each run's numbers are the same, bit for bit, whichever kernel and thread compute it.
+    Each run's numbers are the same, bit for bit, whichever kernel and thread compute it.
     """
-    params = arrays[1]
-    rest = integrate_lane_groups(arrays, threads) if lanes else np.arange(len(params), dtype=np.int64)
+    params = batch.runs.params
+    rest = integrate_lane_groups(batch, threads) if lanes else np.arange(len(params), dtype=np.int64)
     if len(rest):
         # the pair path is compiled only for a batch with pitch errors
         pitch = params[rest, K.PITCH_ERRORS] != 0.0
@@ -377,7 +374,7 @@ def _run_batch(arrays: tuple, threads: int | None, lanes: bool = True) -> None:
             if len(order):
 
                 def run_range(start: int, stop: int, kernel: Any = kernel, order: np.ndarray = order) -> None:
-                    kernel(start, stop, order, *arrays)
+                    kernel(start, stop, order, batch)
 
                 spread(run_range, len(order), threads)
 
@@ -497,8 +494,8 @@ def simulate_batch(
     channels = 4 if rig_channels and history_per_period > 0 else 1
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
     if n:
-        arrays = (
-            *kernel_inputs(setups, states),
+        batch = QoiBatch(
+            kernel_inputs(setups, states),
             steps,
             n_periods,
             keep_periods,
@@ -510,7 +507,7 @@ def simulate_batch(
             history,
             final_states,
         )
-        _run_batch(arrays, threads, lanes)
+        _run_batch(batch, threads, lanes)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
     mean_x = accumulators[:, K.Q_X_SUM] / count
     mean_force = np.array([s.derived["static_mesh_force"] for s in setups])

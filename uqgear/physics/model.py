@@ -13,6 +13,7 @@ mesh damping off during separation.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ import xarray as xr
 from ..common.errors import OperatingPointError
 from . import _kernels as K
 from .design import Design
+from .design_parts import MeshDesign, ModalDesign
 from .geometry import pair_geometry
 from .pitch_errors import PitchErrors
 from .stiffness import StiffnessTables, stiffness_tables
@@ -47,42 +49,22 @@ HISTORY_COLUMNS = (
 )
 
 
-#: Design keys that determine the tooth geometry and hence the stiffness tables.
-GEOMETRY_KEYS = (
-    "z1",
-    "z2",
-    "module",
-    "pressure_angle",
-    "x1",
-    "x2",
-    "addendum_coefficient",
-    "dedendum_coefficient",
-    "face_width",
-    "youngs_modulus",
-    "poisson_ratio",
-)
+@functools.lru_cache(maxsize=64)
+def _stiffness_tables(mesh: MeshDesign, mode: str) -> StiffnessTables:
+    return stiffness_tables(mesh, mode=mode)
 
 
-def geometry_key(design: Design) -> tuple:
-    """The design keys the stiffness depends on (batches varying k1, zeta, ... share tables)."""
-    return tuple(getattr(design, key) for key in GEOMETRY_KEYS)
+def cached_tables(design: Design | MeshDesign, mode: str) -> StiffnessTables:
+    """Stiffness tables cached on the design's :class:`~uqgear.physics.design_parts.MeshDesign`.
+
+    The tables are derived from that part alone, so they cannot read a field
+    their key leaves out; a batch over k1, zeta, ... (fields outside it)
+    shares one set.
+    """
+    return _stiffness_tables(MeshDesign.of(design), mode)
 
 
-_TABLES: dict[tuple, StiffnessTables] = {}
-_TABLES_MAX = 64
-
-
-def _cached_tables(design: Design, mode: str) -> StiffnessTables:
-    """Stiffness tables cached on the geometry alone (a batch over k1, zeta, ... reuses them)."""
-    entry = (geometry_key(design), mode)
-    if entry not in _TABLES:
-        if len(_TABLES) >= _TABLES_MAX:
-            _TABLES.pop(next(iter(_TABLES)))
-        _TABLES[entry] = stiffness_tables(design, mode=mode)
-    return _TABLES[entry]
-
-
-def equivalent_mass(design: Design) -> float:
+def equivalent_mass(design: Design | ModalDesign) -> float:
     """m_e = I1 I2 / (I1 R2^2 + I2 R1^2) in kg.
 
     Examples
@@ -121,12 +103,13 @@ def rated_mesh_force(design: Design) -> float:
     return design.operation.drive_torque / pair_geometry(design).pinion.base_radius
 
 
-def natural_frequencies(design: Design, mesh_stiffness: float | None = None) -> np.ndarray:
+def natural_frequencies(design: Design | ModalDesign, mesh_stiffness: float | None = None) -> np.ndarray:
     """Undamped natural frequencies (Hz) of the linearised 3-DOF model in contact.
 
     Parameters
     ----------
-    design : Design
+    design : Design or ModalDesign
+        The fields read are those of :class:`~uqgear.physics.design_parts.ModalDesign`.
     mesh_stiffness : float, optional
         Mesh stiffness in N/m; the Ishikawa mean by default.
 
@@ -151,7 +134,7 @@ def natural_frequencies(design: Design, mesh_stiffness: float | None = None) -> 
     >>> [round(math.sqrt(k / m) / (2 * math.pi), 1) for k, m in ((design.k2, design.m2), (design.k1, design.m1))]
     [355.9, 649.7]
     """
-    k = mesh_stiffness if mesh_stiffness is not None else _cached_tables(design, "ishikawa").k_mean
+    k = mesh_stiffness if mesh_stiffness is not None else cached_tables(design, "ishikawa").k_mean
     me = equivalent_mass(design)
     # accelerations of (y1, y2, x) for F = k x
     a = np.array(
@@ -335,9 +318,9 @@ def build_model(
     if stiffness not in STIFFNESS_MODES:
         raise OperatingPointError(f"stiffness: expected one of {', '.join(STIFFNESS_MODES)}; got {stiffness!r}")
     geometry = pair_geometry(design)
-    tables = _cached_tables(design, "ishikawa")
+    tables = cached_tables(design, "ishikawa")
     if stiffness == "fourier":
-        period_table = _cached_tables(design, "fourier").period_stiffness
+        period_table = cached_tables(design, "fourier").period_stiffness
     elif stiffness == "constant":
         # linear-limit studies: k(t) = k_mean through the smooth-table path
         period_table = np.full_like(tables.period_stiffness, tables.k_mean)

@@ -75,7 +75,7 @@ def tooth_compliance(
     bending_rectangle = 12.0 * cos2 / (e_b * s_r**3) * (h_x * h_r * (h_x - h_r) + h_r**3 / 3.0)
     bending_trapezoid = 6.0 * cos2 * length**3 / (e_b * s_f**3) * (rho * (4.0 - rho) - 2.0 * np.log(rho) - 3.0)
     if s_r == s_f:
-        # one thickness: the form of docs/model/mesh-stiffness.md section 4.1, evaluated as it always was
+        # one thickness: the form of docs/model/mesh-stiffness.md section 4.1, evaluated as written there
         shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / (e_b * s_f) * (h_r + length * np.log(1.0 / rho))
     else:
         shear = shear_factor * 2.0 * (1.0 + poisson_ratio) * cos2 / e_b * (h_r / s_r + length * np.log(1.0 / rho) / s_f)
