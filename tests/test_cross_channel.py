@@ -47,6 +47,62 @@ def test_evidence_on_one_channel_alone_is_that_sensors():
     assert decide(2.1, [modulated]).verdict == "eccentricity"
 
 
+def test_an_effect_too_weak_for_the_other_channels_is_not_told_from_the_one_channels_artefact():
+    # a run-out that explains the TE's gap; as fitted it would gain under a nat on each accelerometer
+    weak = _score("eccentricity", [140.0, 0.4, -0.3], [2.1, 0.0, 0.0], [0.2, 0.0, 0.0],
+                  channel_reach=(150.0, 0.6, 0.3))
+    check = check_channels(weak)
+    assert (check.consistent, check.kind, check.unseen) == (False, "one_channel", True)
+    assert check.reach == pytest.approx(0.9) and check.needed == 10.0
+    decision = decide(2.1, [weak])
+    assert decision.verdict == "inconclusive" and decision.open_gap and decision.one_channel == "te"
+    ambiguity = decision.ambiguity
+    assert (ambiguity.effect, ambiguity.channel) == ("eccentricity", "te")
+    # both explanations named, and what would separate them: the family's, the sensor's and a reference
+    assert "encoder's mounting run-out" in ambiguity.artefact
+    assert "eccentricity" in decision.reason and "encoder's mounting run-out" in decision.reason
+    separate = " ".join(ambiguity.separated_by)
+    assert "higher speed" in separate and "second encoder" in separate and "healthy reference" in separate
+    record = ambiguity.summary()
+    assert [entry["kind"] for entry in record["candidates"]] == ["effect", "sensor_artefact"]
+    assert record["reach"] == {"acc_pinion": 0.6, "acc_gear": 0.3}
+
+
+def test_an_effect_the_other_channels_could_see_and_do_not_is_still_that_sensors():
+    # the same fit predicting 30 nats on the accelerometers, which gain nothing: the rig contradicts it
+    seen = _score("eccentricity", [140.0, 0.4, -0.3], [2.1, 0.0, 0.0], [0.2, 0.0, 0.0],
+                  channel_reach=(150.0, 18.0, 12.0))
+    assert not check_channels(seen).unseen
+    decision = decide(2.1, [seen])
+    assert decision.verdict == "unexplained" and decision.ambiguity is None and "on te alone" in decision.reason
+    # an effect that explains only part of the gap, or a gap within noise, is no ambiguity either
+    partial = candidate_score("tooth_damage", 60.0, 0.3, low=0.25, gap_with_effect=1.4, effect_gain=40.0,
+                              channel_gains=(140.0, 0.4, -0.3), channel_gaps_before=(2.1, 0.0, 0.0),
+                              channel_gaps_after=(1.4, 0.0, 0.0), channels=CHANNELS, channel_reach=(150.0, 0.6, 0.3))
+    assert decide(2.1, [partial]).verdict == "unexplained"
+    assert decide(0.4, [_score("eccentricity", [140.0, 0.4, -0.3], [0.4, 0.0, 0.0], [0.1, 0.0, 0.0],
+                               channel_reach=(150.0, 0.6, 0.3))]).verdict == "none"
+    # a family without a look-alike names the sensor's artefacts in general, and its own separating records
+    other = decide(2.1, [_score("tooth_damage", [0.4, -0.3, 140.0], [0.1, 0.0, 2.1], [0.0, 0.0, 0.2],
+                                channel_reach=(0.2, 0.1, 90.0))])
+    assert other.verdict == "inconclusive" and other.ambiguity.channel == "acc_gear"
+    assert "gear-side accelerometer's own artefact" in other.ambiguity.artefact
+    assert other.ambiguity.separated_by[0].startswith("records at a higher load and speed")
+
+
+def test_the_reach_is_half_the_squared_shift_the_fit_makes_per_channel():
+    from uqgear.diagnosis.scoring import channel_reach
+
+    rng = np.random.default_rng(4)
+    base = rng.normal(size=(5, 3, 7))
+    shift = np.zeros_like(base)
+    shift[:, 0, 2] = 3.0                     # the effect moves one TE feature by 3 noise spreads in every run
+    shift[:, 2, :] = 0.1                     # and every acc_gear feature by a tenth
+    with_effect = base - shift
+    with_effect[1, 1, 4] = np.nan            # a feature not compared in one run
+    np.testing.assert_allclose(channel_reach(with_effect, base), (0.5 * 5 * 9.0, 0.0, 0.5 * 35 * 0.01))
+
+
 def test_an_effect_must_not_predict_a_gap_the_rig_does_not_show():
     # good on the TE and acc_gear, but it leaves acc_pinion (within noise before) 1.4 off, 20 nats worse
     spoils = _score("tooth_damage", [300.0, -20.0, 80.0], [3.0, 0.2, 1.0], [0.4, 1.4, 0.2])
