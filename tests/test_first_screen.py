@@ -53,5 +53,8 @@ def test_an_ambiguous_verdict_names_both_explanations_and_what_separates_them_in
     assert finding.facts["next"] == ("tell the two apart with records at a higher speed; or a second encoder on "
                                      "the same shaft; or a healthy reference campaign")
     assert finding.text.count(". ") == 0 and finding.text.endswith(".")
+    # the report's verdict line names both too
+    verdict_line = diagnosis_findings({"verdict": "inconclusive", "ambiguity": ambiguity, "borderline": []})[1]
+    assert "eccentricity and an encoder's mounting run-out explain the gap on te alike" in verdict_line.text
     # without the record an inconclusive verdict still asks for more runs
     assert "record more runs" in at_a_glance({"verdict": "inconclusive"}).facts["next"]

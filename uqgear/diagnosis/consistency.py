@@ -138,14 +138,21 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
 
     Examples
     --------
-    A run-out read off the TE alone (both accelerometers gain nothing) is one channel's:
+    A run-out read off the TE alone (both accelerometers gain nothing, though
+    as fitted it would gain 55 nats there were it real) is one channel's:
 
     >>> from types import SimpleNamespace
     >>> score = SimpleNamespace(effect="eccentricity", channel_gains=(812.0, 0.4, -0.3),
-    ...                         channel_gaps_before=(3.1, 0.0, 0.0), channel_gaps_after=(0.2, 0.0, 0.0))
+    ...                         channel_gaps_before=(3.1, 0.0, 0.0), channel_gaps_after=(0.2, 0.0, 0.0),
+    ...                         channel_reach=(900.0, 30.0, 25.0))
     >>> check = check_channels(score)
-    >>> check.consistent, check.channel, check.kind
-    (False, 0, 'one_channel')
+    >>> check.consistent, check.channel, check.kind, check.unseen
+    (False, 0, 'one_channel', False)
+
+    One too weak for the accelerometers to see is not told from the encoder's artefact:
+
+    >>> check_channels(SimpleNamespace(**{**vars(score), "channel_reach": (900.0, 0.2, 0.1)})).unseen
+    True
     """
     gains = np.asarray(score.channel_gains, dtype=float)
     if gains.size < 2:
