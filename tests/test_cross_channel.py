@@ -2,7 +2,9 @@
 
 Synthetic held-out figures with a known answer for the rule
 (:mod:`uqgear.diagnosis.consistency`), the verdict it gives, and the virtual
-rig's encoder-mounting run-out checked against its closed form.
+rig's encoder-mounting run-out checked against its closed form; constructed campaigns
+with a known answer: a run-out and an encoder's run-out too small for the accelerometers (not told
+apart), and one they see (named).
 """
 
 from __future__ import annotations
@@ -45,6 +47,62 @@ def test_evidence_on_one_channel_alone_is_that_sensors():
     modulated = _score("eccentricity", [140.0, 9.0, 7.0], [2.1, 0.6, 0.5], [0.3, 0.1, 0.1])
     assert check_channels(modulated).consistent
     assert decide(2.1, [modulated]).verdict == "eccentricity"
+
+
+def test_an_effect_too_weak_for_the_other_channels_is_not_told_from_the_one_channels_artefact():
+    # a run-out that explains the TE's gap; as fitted it would gain under a nat on each accelerometer
+    weak = _score("eccentricity", [140.0, 0.4, -0.3], [2.1, 0.0, 0.0], [0.2, 0.0, 0.0],
+                  channel_reach=(150.0, 0.6, 0.3))
+    check = check_channels(weak)
+    assert (check.consistent, check.kind, check.unseen) == (False, "one_channel", True)
+    assert check.reach == pytest.approx(0.9) and check.needed == 10.0
+    decision = decide(2.1, [weak])
+    assert decision.verdict == "inconclusive" and decision.open_gap and decision.one_channel == "te"
+    ambiguity = decision.ambiguity
+    assert (ambiguity.effect, ambiguity.channel) == ("eccentricity", "te")
+    # both explanations named, and what would separate them: the family's, the sensor's and a reference
+    assert "encoder's mounting run-out" in ambiguity.artefact
+    assert "eccentricity" in decision.reason and "encoder's mounting run-out" in decision.reason
+    separate = " ".join(ambiguity.separated_by)
+    assert "higher speed" in separate and "second encoder" in separate and "healthy reference" in separate
+    record = ambiguity.summary()
+    assert [entry["kind"] for entry in record["candidates"]] == ["effect", "sensor_artefact"]
+    assert record["reach"] == {"acc_pinion": 0.6, "acc_gear": 0.3}
+
+
+def test_an_effect_the_other_channels_could_see_and_do_not_is_still_that_sensors():
+    # the same fit predicting 30 nats on the accelerometers, which gain nothing: the rig contradicts it
+    seen = _score("eccentricity", [140.0, 0.4, -0.3], [2.1, 0.0, 0.0], [0.2, 0.0, 0.0],
+                  channel_reach=(150.0, 18.0, 12.0))
+    assert not check_channels(seen).unseen
+    decision = decide(2.1, [seen])
+    assert decision.verdict == "unexplained" and decision.ambiguity is None and "on te alone" in decision.reason
+    # an effect that explains only part of the gap, or a gap within noise, is no ambiguity either
+    partial = candidate_score("tooth_damage", 60.0, 0.3, low=0.25, gap_with_effect=1.4, effect_gain=40.0,
+                              channel_gains=(140.0, 0.4, -0.3), channel_gaps_before=(2.1, 0.0, 0.0),
+                              channel_gaps_after=(1.4, 0.0, 0.0), channels=CHANNELS, channel_reach=(150.0, 0.6, 0.3))
+    assert decide(2.1, [partial]).verdict == "unexplained"
+    assert decide(0.4, [_score("eccentricity", [140.0, 0.4, -0.3], [0.4, 0.0, 0.0], [0.1, 0.0, 0.0],
+                               channel_reach=(150.0, 0.6, 0.3))]).verdict == "none"
+    # a family without a look-alike names the sensor's artefacts in general, and its own separating records
+    other = decide(2.1, [_score("tooth_damage", [0.4, -0.3, 140.0], [0.1, 0.0, 2.1], [0.0, 0.0, 0.2],
+                                channel_reach=(0.2, 0.1, 90.0))])
+    assert other.verdict == "inconclusive" and other.ambiguity.channel == "acc_gear"
+    assert "gear-side accelerometer's own artefact" in other.ambiguity.artefact
+    assert other.ambiguity.separated_by[0].startswith("records at a higher load and speed")
+
+
+def test_the_reach_is_half_the_squared_shift_the_fit_makes_per_channel():
+    from uqgear.diagnosis.scoring import channel_reach
+
+    rng = np.random.default_rng(4)
+    base = rng.normal(size=(5, 3, 7))
+    shift = np.zeros_like(base)
+    shift[:, 0, 2] = 3.0                     # the effect moves one TE feature by 3 noise spreads in every run
+    shift[:, 2, :] = 0.1                     # and every acc_gear feature by a tenth
+    with_effect = base - shift
+    with_effect[1, 1, 4] = np.nan            # a feature not compared in one run
+    np.testing.assert_allclose(channel_reach(with_effect, base), (0.5 * 5 * 9.0, 0.0, 0.5 * 35 * 0.01))
 
 
 def test_an_effect_must_not_predict_a_gap_the_rig_does_not_show():
@@ -149,3 +207,60 @@ def test_the_pitch_error_gate_judges_a_tracked_gears_near_orders_on_its_te_shaft
     pooled = judged_counts(_gate_case(True, ("acc_gear",)), visible, np.zeros((4, 1, 3)), 3.0)
     assert pooled["sideband_gear"] == {"1-3 together": (56, 300)}
     assert pooled["sideband_pinion"]["2"] == (30, 100)
+
+
+def _campaign(seed, **options):
+    # a healthy rig of 4 service runs of 0.5 s, all three channels, 2 % sensor noise; perfect gears
+    from uqgear.validation import operating_points_of
+
+    design = load_design("locomotive")
+    ops = operating_points_of("service", design, 4)
+    return simulate_campaign(design, ops, seed=seed, duration=0.5, run_in=0.3, **options)
+
+
+def _run_out(amplitude):
+    from uqgear.physics.effects import Eccentricity
+
+    # a pinion run-out without mesh-stiffness modulation
+    return [Eccentricity({"shaft": "pinion", "amplitude": amplitude, "phase": 1.0, "kappa": 0.0})]
+
+
+def _ambiguous_between_a_run_out_and_the_encoder(diagnosis):
+    decision = diagnosis.decision_
+    assert decision.verdict == "inconclusive", decision.reason
+    assert diagnosis.effects_ == []
+    ambiguity = decision.ambiguity
+    assert (ambiguity.effect, ambiguity.channel) == ("eccentricity", "te")
+    assert "encoder's mounting run-out" in ambiguity.artefact
+    # the accelerometers could not have seen the fit: its reach there is far below what the rule asks
+    assert sum(value for _, value in ambiguity.reach) < 0.2 * ambiguity.needed
+    record = diagnosis.to_dict()
+    assert record["verdict"] == "inconclusive" and record["ambiguity"]["channel"] == "te"
+    assert [entry["name"] for entry in record["ambiguity"]["candidates"]][0] == "eccentricity"
+    assert len(record["ambiguity"]["separated_by"]) == 3
+
+
+@pytest.mark.slow
+def test_a_run_out_too_small_for_the_accelerometers_is_not_told_from_an_encoders():
+    from uqgear.diagnosis import Diagnosis
+
+    rig = _campaign(31, effects=_run_out(30e-9))
+    _ambiguous_between_a_run_out_and_the_encoder(Diagnosis(workers=2, seed=3).fit(rig))
+
+
+@pytest.mark.slow
+def test_an_encoder_run_out_as_small_is_not_told_from_a_shafts():
+    from uqgear.diagnosis import Diagnosis
+
+    rig = _campaign(31, encoder_run_out={"pinion": 30e-9})
+    _ambiguous_between_a_run_out_and_the_encoder(Diagnosis(workers=2, seed=3).fit(rig))
+
+
+@pytest.mark.slow
+def test_a_run_out_the_accelerometers_see_is_named():
+    from uqgear.diagnosis import Diagnosis
+
+    # a hundred times larger, still without modulation: the housings respond above their noise
+    diagnosis = Diagnosis(workers=2, seed=3).fit(_campaign(31, effects=_run_out(3e-6)))
+    assert diagnosis.decision_.verdict == "eccentricity" and diagnosis.decision_.ambiguity is None
+    assert "ambiguity" not in diagnosis.to_dict()

@@ -36,3 +36,25 @@ def test_unexplained_on_one_channel_points_at_the_sensor_and_a_borderline_gap_at
     healthy = at_a_glance({"verdict": "none", "borderline": [], "where": [{"channel": "te", "ops": [1]}]})
     assert healthy.facts["next"].startswith("nothing to do") and "within noise" in healthy.text
     assert "record more runs" in at_a_glance({"verdict": "inconclusive"}).facts["next"]
+
+
+def test_an_ambiguous_verdict_names_both_explanations_and_what_separates_them_in_one_sentence():
+    ambiguity = {"candidates": [{"kind": "effect", "name": "eccentricity"},
+                                {"kind": "sensor_artefact", "name": "te sensor artefact",
+                                 "description": "an encoder's mounting run-out"}],
+                 "channel": "te", "reach": {"acc_pinion": 0.4, "acc_gear": 0.1}, "needed": 10.0,
+                 "separated_by": ["records at a higher speed: a run-out's response grows with speed",
+                                  "a second encoder on the same shaft: an encoder's own artefact moves with it",
+                                  "a healthy reference campaign: a sensor's artefact is in both"]}
+    finding = at_a_glance({"verdict": "inconclusive", "one_channel_gap": "te", "ambiguity": ambiguity,
+                           "borderline": [], "rig": SPEEDS, "where": [{"channel": "te", "ops": [1, 2]}]})
+    assert finding.text.startswith("At a glance: inconclusive between eccentricity and an encoder's mounting "
+                                   "run-out on te, which these data cannot tell apart")
+    assert finding.facts["next"] == ("tell the two apart with records at a higher speed; or a second encoder on "
+                                     "the same shaft; or a healthy reference campaign")
+    assert finding.text.count(". ") == 0 and finding.text.endswith(".")
+    # the report's verdict line names both too
+    verdict_line = diagnosis_findings({"verdict": "inconclusive", "ambiguity": ambiguity, "borderline": []})[1]
+    assert "eccentricity and an encoder's mounting run-out explain the gap on te alike" in verdict_line.text
+    # without the record an inconclusive verdict still asks for more runs
+    assert "record more runs" in at_a_glance({"verdict": "inconclusive"}).facts["next"]

@@ -23,6 +23,24 @@ evidence is read channel by channel (:class:`~.scoring.CandidateScore`
   held-out gap above ``noise_gap`` on a channel where the base model was
   within noise, and loses at least ``cross_channel_gain`` nats of held-out
   density there, predicts a discrepancy the rig does not show: not named.
+* **An effect the other channels cannot see.** The rule above reads the
+  other channels' silence as evidence against the effect only where they
+  could have seen it. Each candidate's reach on a channel
+  (:func:`~.scoring.channel_reach`) is what its fit would gain there on
+  held-out runs were it real: half the sum of squares of its prediction in
+  noise spreads. Where the reach on the other channels together is below
+  what the rule asks of them (``score_threshold`` or
+  ``cross_channel_gain`` nats, as above), their silence says nothing:
+  even if the effect acted as fitted they could not carry that evidence.
+  An effect that explains the gap there (named but for this rule, not
+  ``partial``) and the channel's own artefact then fit the data alike, and
+  the verdict is ``inconclusive`` naming both (:class:`~.decision.Ambiguity`),
+  with the measurements that would separate them: the effect family's
+  (:meth:`~.effects.EffectFamily.separated_by`), the sensor's (a second
+  sensor, or the sensor remounted) and a healthy reference. What reads as
+  the effect on that channel is the family's
+  (:meth:`~.effects.EffectFamily.look_alike`), else the sensor's artefacts
+  in general.
 
 docs/model/unmodelled-effects.md section 6, step 5 ("Cross-channel consistency") states the
 rule; its evidence is in docs/validation/diagnosis.md.
@@ -30,16 +48,50 @@ rule; its evidence is in docs/validation/diagnosis.md.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from .decision import Decision
-from .effects import effect_family
+from .decision import Ambiguity, Decision
+from .effects import effect_family, hooks_of
 from .scoring import CandidateScore
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+
+#: Per channel: its sensor's own artefacts (no effect of the gears makes them, no other channel shares them),
+#: and the measurement that tells them from an effect of the gears the other channels cannot see.
+SENSOR_ARTEFACTS: dict[str, tuple[str, str]] = {
+    "te": (
+        "an encoder's own artefact (its mounting run-out, its disc's eccentricity)",
+        "a second encoder on the same shaft, or this one remounted at another angle: an encoder's own artefact "
+        "moves with its mounting, an effect of the gears does not",
+    ),
+    "acc_pinion": (
+        "the pinion-side accelerometer's own artefact (a sensor resonance, a loose mounting)",
+        "a second accelerometer on the pinion-side housing, or this one remounted: a sensor's own artefact moves "
+        "with its mounting, an effect of the gears does not",
+    ),
+    "acc_gear": (
+        "the gear-side accelerometer's own artefact (a sensor resonance, a loose mounting)",
+        "a second accelerometer on the gear-side housing, or this one remounted: a sensor's own artefact moves "
+        "with its mounting, an effect of the gears does not",
+    ),
+}
+#: A channel the table does not hold.
+_ANY_SENSOR = (
+    "that sensor's own artefact",
+    "a second sensor beside this one, or this one remounted: a sensor's own artefact moves with its mounting, an "
+    "effect of the gears does not",
+)
+#: Where an ambiguous verdict's reason lists what would separate its two explanations.
+_SEPARATE = "What would separate them: "
+#: What separates the two on any channel.
+_REFERENCE = (
+    "a healthy reference campaign of this rig recorded with the same sensors, diagnosed against "
+    "(uqgear diagnose --reference): a sensor's artefact is in both, an effect of the gears that developed since is not"
+)
 
 
 @dataclass(frozen=True)
@@ -60,6 +112,11 @@ class ChannelCheck:
         the candidate's gap there for ``predicts_unseen``.
     others : float
         The gain on every other channel together (nats), for ``one_channel``.
+    needed : float
+        What the rule asked of the other channels together (nats), for ``one_channel``.
+    reach : float
+        For ``one_channel``: the candidate's reach on every other channel together
+        (:func:`~.scoring.channel_reach`, nats; NaN where it was not measured).
     """
 
     consistent: bool
@@ -67,6 +124,13 @@ class ChannelCheck:
     kind: str = ""
     share: float = 0.0
     others: float = 0.0
+    needed: float = 0.0
+    reach: float = math.nan
+
+    @property
+    def unseen(self) -> bool:
+        """Evidence on one channel alone where the others could not have seen the effect (its reach there is short)."""
+        return self.kind == "one_channel" and self.reach < self.needed
 
 
 def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> ChannelCheck:
@@ -74,14 +138,21 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
 
     Examples
     --------
-    A run-out read off the TE alone (both accelerometers gain nothing) is one channel's:
+    A run-out read off the TE alone (both accelerometers gain nothing, though
+    as fitted it would gain 55 nats there were it real) is one channel's:
 
     >>> from types import SimpleNamespace
     >>> score = SimpleNamespace(effect="eccentricity", channel_gains=(812.0, 0.4, -0.3),
-    ...                         channel_gaps_before=(3.1, 0.0, 0.0), channel_gaps_after=(0.2, 0.0, 0.0))
+    ...                         channel_gaps_before=(3.1, 0.0, 0.0), channel_gaps_after=(0.2, 0.0, 0.0),
+    ...                         channel_reach=(900.0, 30.0, 25.0))
     >>> check = check_channels(score)
-    >>> check.consistent, check.channel, check.kind
-    (False, 0, 'one_channel')
+    >>> check.consistent, check.channel, check.kind, check.unseen
+    (False, 0, 'one_channel', False)
+
+    One too weak for the accelerometers to see is not told from the encoder's artefact:
+
+    >>> check_channels(SimpleNamespace(**{**vars(score), "channel_reach": (900.0, 0.2, 0.1)})).unseen
+    True
     """
     gains = np.asarray(score.channel_gains, dtype=float)
     if gains.size < 2:
@@ -111,7 +182,10 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
         )
     needed = settings.verdict.score_threshold if alone else settings.verdict.cross_channel_gain
     if others < needed:
-        return ChannelCheck(False, strongest, "one_channel", float(finite[strongest]), others)
+        reach = np.asarray(score.channel_reach, dtype=float)
+        # the others' silence counts against the effect only where they could have seen it
+        reach_others = float(np.sum(np.delete(reach, strongest))) if reach.size == gains.size else math.nan
+        return ChannelCheck(False, strongest, "one_channel", float(finite[strongest]), others, needed, reach_others)
     return ChannelCheck(True)
 
 
@@ -132,16 +206,69 @@ def inconsistency_reason(score: CandidateScore, check: ChannelCheck, channels: t
     )
 
 
+def ambiguity_of(score: CandidateScore, check: ChannelCheck) -> Ambiguity:
+    """The two explanations of a gap on one channel whose other channels cannot see ``score``'s effect."""
+    index = check.channel if check.channel is not None else 0
+    channel = score.channels[index]
+    family = hooks_of(score.effect)
+    artefact, sensor = SENSOR_ARTEFACTS.get(channel, _ANY_SENSOR)
+    reach = tuple(
+        (name, float(value)) for position, (name, value) in enumerate(zip(score.channels, score.channel_reach))
+        if position != index
+    )
+    return Ambiguity(
+        effect=score.effect,
+        channel=channel,
+        artefact=family.look_alike(channel) or artefact,
+        reach=reach,
+        needed=check.needed,
+        separated_by=(*family.separated_by(), sensor, _REFERENCE),
+    )
+
+
+def ambiguous_reason(score: CandidateScore, ambiguity: Ambiguity) -> str:
+    """Why the verdict names neither of two explanations, in words: what each explains and what would separate them."""
+    others = ", ".join(name for name, _ in ambiguity.reach)
+    reach = sum(value for _, value in ambiguity.reach)
+    return (
+        f"{score.effect} explains the held-out gap on {ambiguity.channel} (it gains {score.score:.1f} nats of "
+        f"held-out predictive density after its parameter penalty and shrinks the gap by "
+        f"{100 * score.shrink_fraction:.0f} %), and {others} do not show it; but as fitted it would gain "
+        f"{reach:.1f} nats on {others} together were it real, below the {ambiguity.needed:g} the cross-channel "
+        f"rule asks of them, so they could not have seen it. {ambiguity.artefact[0].upper()}"
+        f"{ambiguity.artefact[1:]} explains the data as well: these data cannot tell the two apart. {_SEPARATE}"
+        + "; ".join(ambiguity.separated_by)
+    )
+
+
 def inconsistent_decision(
     best: CandidateScore,
     nominal_gap: float,
     borderline: tuple[dict[str, Any], ...],
     settings: DiagnosisSettings,
     channels: ChannelCheck,
+    *,
+    explains: bool = False,
 ) -> Decision:
-    """``none`` or ``unexplained`` where the leading candidate fails the cross-channel rule."""
+    """``none``, ``unexplained`` or ``inconclusive`` where the leading candidate fails the cross-channel rule.
+
+    ``explains``: the candidate would be named but for this rule, and not
+    ``partial``. Where it does and the other channels could not have seen it
+    (:attr:`ChannelCheck.unseen`), a gap above noise is ``inconclusive``
+    between the effect and the channel's own artefact.
+    """
     why = inconsistency_reason(best, channels, best.channels)
     confined = channels.kind == "one_channel" and channels.channel is not None and channels.channel < len(best.channels)
+    if confined and explains and channels.unseen and nominal_gap > settings.verdict.noise_gap:
+        ambiguity = ambiguity_of(best, channels)
+        return Decision(
+            "inconclusive",
+            f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.verdict.noise_gap:g}); "
+            f"{ambiguous_reason(best, ambiguity)}",
+            borderline=borderline,
+            one_channel=ambiguity.channel,
+            ambiguity=ambiguity,
+        )
     if nominal_gap <= settings.verdict.noise_gap:
         return Decision(
             "none",
@@ -158,6 +285,19 @@ def inconsistent_decision(
     )
 
 
+def with_character(decision: Decision, families: Sequence[Mapping[str, Any]]) -> Decision:
+    """A one-channel decision with its gap's character on that channel added to its reason.
+
+    In an ambiguous verdict it goes before the measurements that would
+    separate the two explanations, which end the reason.
+    """
+    text = one_channel_character(decision.one_channel, families)
+    head, separate, tail = decision.reason.partition(_SEPARATE)
+    if decision.ambiguity is None or not separate:
+        return replace(decision, reason=decision.reason + text)
+    return replace(decision, reason=f"{head.rstrip('. ')}{text}. {separate}{tail}")
+
+
 def one_channel_character(channel: str, families: Sequence[Mapping[str, Any]]) -> str:
     """What a gap confined to one channel is made of: its families above noise with their character."""
     rows = [row for row in families if row["channel"] == channel and row["character"]]
@@ -167,4 +307,14 @@ def one_channel_character(channel: str, families: Sequence[Mapping[str, Any]]) -
     return f"; on {channel} the gap lies in " + ", ".join(parts)
 
 
-__all__ = ["ChannelCheck", "check_channels", "inconsistency_reason", "inconsistent_decision", "one_channel_character"]
+__all__ = [
+    "SENSOR_ARTEFACTS",
+    "ChannelCheck",
+    "check_channels",
+    "inconsistency_reason",
+    "ambiguity_of",
+    "ambiguous_reason",
+    "inconsistent_decision",
+    "one_channel_character",
+    "with_character",
+]

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .consistency import one_channel_character
+from .consistency import with_character
 from .decision import Decision
 from .gap_maps import family_character, where_gap
 from .scoring import CandidateScore, bootstrap_gap
@@ -89,12 +89,13 @@ def first_decision(
 def starts_a_set(state: DiagnosisState, decision: Decision, ranking: Sequence[CandidateScore]) -> bool:
     """Whether step 6 starts a set from the gap's strongest candidate (section 6.2).
 
-    It does where a gap above noise is left unnamed (``unexplained``, or
-    ``none`` where the gap's interval reaches into noise) and the best
+    It does where a gap above noise is left unnamed (``unexplained``, an
+    effect not told apart from a sensor's artefact, or ``none`` where the
+    gap's interval reaches into noise) and the best
     candidate meets the evidence rules of :func:`leads_a_set`.
     """
     settings = state.settings
-    unnamed_gap = decision.verdict == "unexplained" or (
+    unnamed_gap = decision.open_gap or (
         decision.verdict == "none" and state.nominal_gap > settings.verdict.noise_gap
     )
     return (
@@ -131,7 +132,7 @@ def decide_first(
             where_z=settings.verdict.where_z,
         )
         if decision.one_channel:
-            decision = replace(decision, reason=decision.reason + one_channel_character(decision.one_channel, families))
+            decision = with_character(decision, families)
         found.update(verdict=decision.verdict, reason=decision.reason)
     return FirstDecision(decision, scores, ranking, nominal_interval, where, families)
 

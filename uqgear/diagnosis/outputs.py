@@ -16,7 +16,13 @@ from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 
 def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Mapping[str, float]) -> dict[str, Any]:
-    """The JSON summary of a diagnosis (``diagnosis.json``)."""
+    """The JSON summary of a diagnosis (``diagnosis.json``).
+
+    ``ambiguity`` is there only where the verdict is ``inconclusive`` between
+    an effect the other channels cannot see and one channel's own artefact:
+    both candidates, the channel, the effect's reach on the others and what
+    would separate the two (:meth:`~.decision.Ambiguity.summary`).
+    """
     case, settings = result.case, result.settings
     best = result.best
     named = best if best is not None and best.effect == result.verdict else None
@@ -71,6 +77,9 @@ def summary(result: DiagnosisResult, *, source: str, seed_text: str, timings: Ma
         "seed": seed_text,
         "timing_s": dict(timings),
     }
+    if decision.ambiguity is not None:
+        # only where the verdict is inconclusive between an effect and a sensor's artefact
+        content["ambiguity"] = decision.ambiguity.summary()
     if settings.changed():
         content["settings"] = settings.changed()
     return content

@@ -195,6 +195,10 @@ class CandidateScore:
     channel_gaps_before: tuple[float, ...] = ()
     channel_gaps_after: tuple[float, ...] = ()
     channels: tuple[str, ...] = ()
+    # per channel: what the effect's fit would gain there on held-out runs were it real, half the sum of squares
+    # of its change to the standardised discrepancies (its prediction in noise spreads); the channels that cannot
+    # see it by this measure cannot tell it from another channel's own artefact
+    channel_reach: tuple[float, ...] = ()
 
     def figures(self) -> dict[str, Any]:
         """The figures the ranking reports (``modulation_gain`` where it was measured)."""
@@ -280,7 +284,35 @@ def score_candidate(
         channel_gaps_before=tuple(gap_metric(nominal_held.z[:, c]) for c in range(n_channels)),
         channel_gaps_after=tuple(gap_metric(held.z[:, c]) for c in range(n_channels)),
         channels=tuple(fit_result.problem.case.channels),
+        channel_reach=channel_reach(held.z, nominal_held.z),
     )
+
+
+def channel_reach(z_with: np.ndarray, z_base: np.ndarray) -> tuple[float, ...]:
+    """Per channel: the held-out log-density a fitted effect would gain there were it real, nats.
+
+    The effect moves each feature's standardised discrepancy by its
+    prediction in noise spreads (``z_base - z_with``); were the effect real,
+    a channel would gain half the sum of their squares on average (the
+    information a Gaussian shift of that size carries). A channel where this
+    stays small cannot see the effect as fitted, whatever the rig holds.
+
+    Parameters
+    ----------
+    z_with, z_base : ndarray (n_op, n_channel, F)
+        Held-out standardised discrepancies with the effect and of its base.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> base = np.zeros((2, 2, 3))
+    >>> with_effect = base.copy()
+    >>> with_effect[:, 0, 0] = 4.0      # four noise spreads on one feature of channel 0, both runs
+    >>> channel_reach(with_effect, base)
+    (16.0, 0.0)
+    """
+    shift = np.asarray(z_base, dtype=float) - np.asarray(z_with, dtype=float)
+    return tuple(float(0.5 * np.nansum(shift[:, c] ** 2)) for c in range(shift.shape[1]))
 
 
 __all__ = [
@@ -295,4 +327,5 @@ __all__ = [
     "RunOutCheck",
     "CandidateScore",
     "score_candidate",
+    "channel_reach",
 ]

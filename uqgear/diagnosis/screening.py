@@ -32,7 +32,7 @@ from .scoring import CandidateScore, score_candidate
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 from .side_by_side import Outcome, side_by_side
 from .state import DiagnosisState
-from .verdict import decide_verdict, ranked
+from .verdict import decide, ranked
 
 
 def effect_off_costs(
@@ -287,10 +287,14 @@ def _set_effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore
 
 
 def _unexplained(state: DiagnosisState, best: dict[str, CandidateScore]) -> bool:
-    """Whether the best fits so far leave the gap unexplained (:func:`~.verdict.decide` on them as they are)."""
+    """Whether the best fits so far leave the gap open (:func:`~.verdict.decide` on them as they are).
+
+    Open is ``unexplained``, or an effect not told apart from one channel's
+    artefact: another candidate may yet explain it on every channel.
+    """
     settings = state.settings
     ranking = ranked(best, state.case, settings=settings)
-    return decide_verdict(state.nominal_gap, ranking, settings=settings)[0] == "unexplained"
+    return decide(state.nominal_gap, ranking, settings=settings).open_gap
 
 
 @dataclass

@@ -387,8 +387,9 @@ def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_
 
     It applies where the pitch-error allowance was applied, a family that
     reads as a shaft run-out (:func:`~.effects.run_out_family`: eccentricity)
-    is a candidate not in the set, the verdict is not ``unexplained`` and the
-    set has room for it. ``named`` is updated in place and returned.
+    is a candidate not in the set, the gap is not left open (``unexplained``,
+    or an effect not told apart from a sensor's artefact) and the set has
+    room for it. ``named`` is updated in place and returned.
     """
     settings = state.settings
     assert named.decision is not None
@@ -397,7 +398,7 @@ def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_
     if (
         allowance_applied
         and family is not None
-        and named.decision.verdict != "unexplained"
+        and not named.decision.open_gap
         and len(named.selected) < settings.selection.max_effects
         and family.name not in in_set
     ):

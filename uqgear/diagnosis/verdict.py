@@ -26,8 +26,9 @@ from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 EFFECT_NAMES: tuple[str, ...] = effect_names()
 #: Possible verdicts: an effect of the library; ``none`` (the nominal model is within noise on
 #: held-out runs); ``unexplained`` (a significant gap that no candidate removes); ``inconclusive``
-#: (valid data that cannot decide: no line above the noise floor in enough runs, or no feature
-#: that could be compared on held-out runs).
+#: (valid data that cannot decide: no line above the noise floor in enough runs, no feature
+#: that could be compared on held-out runs, or a gap on one channel that an effect too weak for
+#: the other channels to see and that channel's own artefact explain alike).
 VERDICTS: tuple[str, ...] = EFFECT_NAMES + ("none", "unexplained", "inconclusive")
 
 
@@ -197,6 +198,10 @@ def decide(
     the lower end of its shrink interval reaches ``partial_shrink``. The
     base model is within noise when its gap is at most ``noise_gap``; a gap
     that could not be measured (NaN) gives ``inconclusive``, never ``none``.
+    A candidate these rules name must pass the cross-channel rule too
+    (:mod:`.consistency`); one that explains a gap on one channel alone,
+    which the other channels could not have seen as fitted, gives
+    ``inconclusive`` between it and that channel's own artefact.
 
     Parameters
     ----------
@@ -243,7 +248,9 @@ def decide(
             channels = check_channels(best, settings=settings)
             if channels.consistent:
                 return named
-            return inconsistent_decision(best, nominal_gap, borderline, settings, channels)
+            return inconsistent_decision(
+                best, nominal_gap, borderline, settings, channels, explains=not named.partial
+            )
     if not math.isfinite(nominal_gap):
         # no feature could be compared on a held-out run: the data cannot tell "within noise"
         # from "not measured", and no data must never read as a healthy gear

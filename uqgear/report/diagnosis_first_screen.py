@@ -7,7 +7,9 @@ operating points (pinion speeds) that carry the evidence (the held-out
 features beyond 3 sigma, or the named effects' channels); and the next step:
 inspect the named part, record a healthy reference of the same rig (an
 unexplained gap, a gap on one channel alone), record more runs (borderline,
-inconclusive), or nothing (healthy).
+inconclusive), the measurements that would tell two explanations apart (an
+effect too weak for the other channels to see and one channel's own
+artefact: ``ambiguity``), or nothing (healthy).
 """
 
 from __future__ import annotations
@@ -56,7 +58,19 @@ def _evidence(content: Mapping[str, Any]) -> tuple[list[str], list[int]]:
     return channels, sorted(set(ops))
 
 
+def _ambiguous(ambiguity: Mapping[str, Any]) -> tuple[str, str]:
+    """The two explanations an ambiguous verdict names, and the measurements that would separate them."""
+    names = [str(entry.get("description") or entry.get("name")) for entry in ambiguity.get("candidates") or []]
+    between = " and ".join(names) + f" on {ambiguity.get('channel')}"
+    # each sentence says the measurement, then after a colon why it separates them: the first screen keeps the first
+    measurements = [str(sentence).split(": ")[0] for sentence in ambiguity.get("separated_by") or []]
+    joined = "; or ".join(measurements)
+    return between, f"tell the two apart with {joined}" if measurements else "record more runs"
+
+
 def _next_step(content: Mapping[str, Any], verdict: str, borderline: bool) -> str:
+    if verdict == "inconclusive" and content.get("ambiguity"):
+        return _ambiguous(content["ambiguity"])[1]
     if verdict == "inconclusive":
         return "record more runs with the gear under load (no line stands above the noise floor)"
     if content.get("one_channel_gap"):
@@ -103,6 +117,8 @@ def at_a_glance(content: Mapping[str, Any]) -> Finding:
     named = " + ".join(effects) if len(effects) > 1 else verdict
     if content.get("partial"):
         named += " (partial: part of the gap remains)"
+    if verdict == "inconclusive" and content.get("ambiguity"):
+        named += " between " + _ambiguous(content["ambiguity"])[0] + ", which these data cannot tell apart"
     figures = list(content.get("borderline") or [])
     if figures:
         first = figures[0]

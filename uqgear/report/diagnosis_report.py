@@ -188,6 +188,11 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         text = "Verdict none: the nominal model reproduces the rig within noise, no effect is needed"
     elif verdict == "unexplained":
         text = "Verdict unexplained: a significant gap remains that no candidate effect of the library removes"
+    elif verdict == "inconclusive" and content.get("ambiguity"):
+        ambiguity = content["ambiguity"]
+        names = [str(entry.get("description") or entry.get("name")) for entry in ambiguity.get("candidates") or []]
+        text = (f"Verdict inconclusive: {' and '.join(names)} explain the gap on {ambiguity.get('channel')} "
+                "alike, and these data cannot tell them apart, so neither is claimed")
     elif verdict == "inconclusive":
         # never read as "healthy": the data did not allow a comparison at all
         text = ("Verdict inconclusive: the data cannot decide whether the gear is healthy or carries an effect, "

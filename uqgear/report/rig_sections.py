@@ -87,6 +87,8 @@ def _render_diagnose(ds: xr.Dataset, dpi: int) -> Section:
         )
     if verdict == "unexplained":
         section.caveats.append("a significant gap remains that no candidate effect of the library removes")
+    elif verdict == "inconclusive" and content.get("ambiguity"):
+        section.caveats.append("an effect and one sensor's own artefact fit the data alike: no verdict on either")
     elif verdict == "inconclusive":
         section.caveats.append("the data cannot decide between a healthy gear and an effect: no verdict on either")
     return section

@@ -6,7 +6,9 @@ bounds, its start grid and the signature hints it reads, its screening
 variants, its strength ladder for virtual-rig campaigns, and the hooks the
 rules ask instead of naming an effect (``run_out``: whether its fits read as
 a shaft run-out; ``proportional``: parameters a change scoring tries in
-proportion to its strength), whose defaults suit most families. Adding an effect
+proportion to its strength; ``look_alike`` and ``separated_by``: the sensor
+artefact that reads as it on one channel alone and the measurements that
+would tell the two apart), whose defaults suit most families. Adding an effect
 takes a physics :class:`~uqgear.physics.effects.Effect` subclass, a family
 module and one line in :data:`~.registry.LIBRARY` (or :func:`register_effect`
 at run time).

@@ -7,8 +7,10 @@ fitted parameters with their bounds, start grids read off the rig's
 signature, the period the response repeats over), the signature hints it
 reads, the strength ladder and random draws a virtual-rig campaign of it
 uses, and the hooks through which the rules ask about it: whether a fit
-of it reads as a shaft run-out (:class:`RunOut`) and which parameters a
-change scoring tries in proportion to its strength.
+of it reads as a shaft run-out (:class:`RunOut`), which parameters a
+change scoring tries in proportion to its strength, which sensor artefact
+reads as it on one channel alone and what measurement would tell the two
+apart.
 """
 
 from __future__ import annotations
@@ -93,6 +95,9 @@ class EffectFamily:
     proportional : mapping of str to float
         Parameters the change scoring also tries in proportion to the strength along its ladder, with
         their factor per unit of strength (default none: each parameter at its start values only).
+    look_alike, separated_by : methods
+        The sensor artefact that reads as it on one channel alone, and the measurements that would tell
+        the two apart (defaults: none known; records at a higher load and speed).
     """
 
     name: ClassVar[str]
@@ -127,6 +132,29 @@ class EffectFamily:
     def make(self, values: Mapping[str, Any] | None = None) -> Effect:
         """The physics effect with ``values`` (validated by it)."""
         return self.physics(values)
+
+    def look_alike(self, channel: str) -> str:
+        """A sensor artefact that reads as this effect on ``channel`` alone, in words (default ``""``: none known).
+
+        The verdict names it beside the effect where the other channels
+        cannot see the effect as fitted (:mod:`uqgear.diagnosis.consistency`);
+        without one it names the channel's own artefacts in general.
+        """
+        return ""
+
+    def separated_by(self) -> tuple[str, ...]:
+        """Measurements that would show this effect on the channels that cannot see it yet, as sentences.
+
+        The verdict states them where the effect and one channel's own
+        artefact explain the data alike (:mod:`uqgear.diagnosis.consistency`).
+
+        Examples
+        --------
+        >>> from uqgear.diagnosis.effects import hooks_of
+        >>> hooks_of("friction").separated_by()
+        ('records at a higher load and speed, where a stronger friction would reach the other channels too',)
+        """
+        return (f"records at a higher load and speed, where a stronger {self.name} would reach the other channels too",)
 
     def run_out_shaft(self, values: Mapping[str, Any]) -> str | None:
         """The shaft whose run-out a fit with ``values`` (its choices and parameters) reads, or None (no run-out).

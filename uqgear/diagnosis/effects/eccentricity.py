@@ -37,6 +37,25 @@ class EccentricityFamily(EffectFamily):
     # a run-out modulates the mesh stiffness with it (the public eccentricity campaign: kappa 0.03 at 12 um)
     proportional = {"kappa": 2500.0}
 
+    def look_alike(self, channel: str) -> str:
+        """On the TE alone an encoder's mounting run-out reads as a shaft's: a line once per revolution of its shaft."""
+        if channel == "te":
+            return "an encoder's mounting run-out (once per revolution of its shaft, as a shaft's run-out)"
+        return ""
+
+    def separated_by(self) -> tuple[str, ...]:
+        """Records at a higher speed: the housings' response to a run-out grows steeply with the shaft speed.
+
+        The model's once-per-revolution acceleration of both housings grows
+        sixteen-fold per doubling of the speed and not with the load, while an
+        encoder's run-out stays in the TE.
+        """
+        return (
+            "records at a higher speed: the bearing housings' response to a shaft's run-out grows steeply with "
+            "the shaft speed (about sixteen-fold per doubling in the model) until the accelerometers see it, "
+            "while an encoder's run-out leaves them still",
+        )
+
     def variants(self, design: Design, hints: Mapping[str, float]) -> list[Candidate]:
         fitted = (
             self.strength_parameter("amplitude", 1e-6, upper=1e-4),
