@@ -312,8 +312,8 @@ def follow_nodes(
 ) -> list[tuple[float, Continuation]]:
     """The continuation in pinion speed at each node: ``[(node value, fitted Continuation), ...]`` sorted by value
     (one node of value NaN without ``node_parameter``). Parameters as :func:`find_windows`; the nodes are
-    followed side by side on ``threads`` threads (default: as many as a batch uses), each on its own, so the
-    fits are the same for any number of threads."""
+    followed side by side on up to ``threads`` forked processes (default: as many as a batch uses threads), each
+    whole in one process, so the fits are the same for any number."""
     low, high = sorted(float(value) for value in speed_range)
     if not (math.isfinite(low) and math.isfinite(high)) or high <= low:
         raise UqgearError(f"speed_range: expected two different finite speeds; got {speed_range!r}")
@@ -395,7 +395,7 @@ def find_windows(
         guide, so that a window point's sweep neighbours lie in it too).
     damping_in_separation, stiffness : as in :func:`uqgear.simulate`
     threads : int, optional
-        Threads the nodes are followed on (the windows are the same for any number).
+        Processes the nodes are followed on (the windows are the same for any number).
 
     Returns
     -------
