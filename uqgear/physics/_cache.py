@@ -34,6 +34,7 @@ COMPILED_MODULES = (
     "physics/_pair_lanes.py",
     "physics/_lane_tables.py",
     "physics/_variational.py",
+    "physics/_runup_kernels.py",
     "calibration/harmonics.py",
     "rig/foreign_rig.py",
     "rig/foreign_response.py",

@@ -1,0 +1,324 @@
+"""Compiled kernels of the speed-varying (run-up, coast-down) model: the forcing at the pinion angle.
+
+The mesh-periodic forcing is evaluated at the warped time
+tau(t) = z1 theta1(t) / Omega_ref (docs/model/run-up.md): the mesh phase, the
+pairs in contact, the Ishikawa stiffness, the STE, the run-out and the torque
+ripple follow the pinion angle, and the STE's acceleration takes the chain
+rule e'' = e_tautau tau'^2 + e_tau tau''. The adhesion oscillation keeps its
+own clock, physical time t.
+
+The fast path steps in tau, not in t: a uniform grid of ``steps_per_period``
+steps per mesh period puts the stiffness breakpoints on the same sub-steps as
+the constant-speed schedule (:func:`uqgear.physics._stepper.build_schedule`),
+and the state's derivative in tau is its time derivative over tau'. The
+physical time at a given tau comes from knots once per mesh period (t, tau',
+tau''), cubic Hermite in between. Outputs at uniform physical times are the
+step's cubic Hermite interpolant in tau, with the right-hand side evaluated
+there.
+
+These helpers inline the ones of :mod:`uqgear.physics._rhs` and
+:mod:`uqgear.physics._stepper`; the module is one of the compiled modules of
+:mod:`uqgear.physics._cache`, so a cached kernel follows their edits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+from uqgear.physics._rhs import (
+    ADHESION_AMPLITUDE,
+    ADHESION_OMEGA,
+    ADHESION_PHASE,
+    DAMP_IN_SEPARATION,
+    ECC_AMPLITUDE,
+    ECC_KAPPA,
+    ECC_OMEGA,
+    ECC_PHASE,
+    HALF_BACKLASH,
+    I1,
+    I2,
+    INLINED,
+    JIT_OPTIONS,
+    NO_INVERSE,
+    OMEGA_MESH,
+    R1,
+    R2,
+    RIPPLE_AMPLITUDE,
+    RIPPLE_OMEGA,
+    RIPPLE_PHASE,
+    STE_AMPLITUDE,
+    STE_PHASE,
+    STIFFNESS_SCALE,
+    T1,
+    T2,
+    TOOTH_FACTORS,
+    _accelerations,
+    _friction_term,
+    coefficients,
+    contact_region,
+    dead_zone,
+    divided,
+    mesh_damping,
+    mesh_terms,
+    run_out_modulation,
+)
+from uqgear.physics._stepper import (
+    BISECTIONS,
+    F_ARM_GEAR,
+    F_ARM_PINION,
+    F_K,
+    F_SINE,
+    crossed_boundary,
+    crossing_fraction,
+    rk4_combine_weighted,
+    rk4_stages,
+    splits_step,
+    tooth_extra,
+)
+
+#: Region code of :func:`warped_field` for "the mesh damping from x itself".
+FROM_X = 2
+
+
+@nb.njit(**INLINED)
+def warp(tau, n, period, knot_t, knot_rate, knot_accel):
+    """(t, tau', tau'') at warped time ``tau`` in mesh period ``n`` from the period's knots.
+
+    t(tau) is the cubic Hermite with the knots' dt/dtau = 1 / tau' (exact to
+    the ramp's fourth derivative over one mesh period); tau' its derivative's
+    inverse; tau'' linear between the knots.
+    """
+    u = (tau - n * period) / period
+    t0 = knot_t[n]
+    t1 = knot_t[n + 1]
+    m0 = period / knot_rate[n]
+    m1 = period / knot_rate[n + 1]
+    u2 = u * u
+    u3 = u2 * u
+    t = (2 * u3 - 3 * u2 + 1) * t0 + (u3 - 2 * u2 + u) * m0 + (-2 * u3 + 3 * u2) * t1 + (u3 - u2) * m1
+    slope = ((6 * u2 - 6 * u) * t0 + (3 * u2 - 4 * u + 1) * m0 + (-6 * u2 + 6 * u) * t1 + (3 * u2 - 2 * u) * m1) / period
+    accel = knot_accel[n] * (1.0 - u) + knot_accel[n + 1] * u
+    return t, 1.0 / slope, accel
+
+
+@nb.njit(**INLINED)
+def time_part(tau, t, rate, accel, sine, cosine, p):
+    """(relative drive acceleration, e, e'') of the angle-driven model.
+
+    ``sine``/``cosine`` of Omega_ref tau + STE phase. Torque ripple and run-out
+    follow the shaft angles (tau); the adhesion oscillation its own clock (t).
+    e'' = e_tautau tau'^2 + e_tau tau'' (chain rule).
+    """
+    drive = p[T1]
+    if p[RIPPLE_AMPLITUDE] != 0.0:
+        drive *= 1.0 + p[RIPPLE_AMPLITUDE] * math.cos(p[RIPPLE_OMEGA] * tau + p[RIPPLE_PHASE])
+    adhesion = p[T2]
+    if p[ADHESION_AMPLITUDE] != 0.0:
+        adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
+    ste = p[STE_AMPLITUDE] * sine
+    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
+    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    if p[ECC_AMPLITUDE] != 0.0:
+        angle = p[ECC_OMEGA] * tau + p[ECC_PHASE]
+        ecc = p[ECC_AMPLITUDE] * math.sin(angle)
+        ste += ecc
+        ste_tau += p[ECC_AMPLITUDE] * p[ECC_OMEGA] * math.cos(angle)
+        ste_tautau -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
+    ste_acc = ste_tautau * (rate * rate) + ste_tau * accel
+    return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
+
+
+@nb.njit(**INLINED)
+def _terms(tau, t, rate, accel, sine, cosine, k, arm_pinion, arm_gear, p):
+    """Forcing 6-tuple (k, friction term, drive, e'', 1 / tau', e) from scaled pair sums."""
+    drive, ste, ste_acc = time_part(tau, t, rate, accel, sine, cosine, p)
+    return (k, _friction_term(arm_pinion, arm_gear, p), drive, ste_acc, 1.0 / rate, ste)
+
+
+@nb.njit(**INLINED)
+def warped_forcing(tau, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg):
+    """Forcing 6-tuple at any warped time ``tau`` in mesh period ``n``, pairs those at ``tau_ref``."""
+    knot_t, knot_rate, knot_accel = warps
+    k, arm_pinion, arm_gear = mesh_terms(tau, tau_ref, p, pair_k, period_k, fp, fg)
+    t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
+    angle = p[OMEGA_MESH] * tau + p[STE_PHASE]
+    return _terms(tau, t, rate, accel, math.sin(angle), math.cos(angle), k, arm_pinion, arm_gear, p)
+
+
+@nb.njit(**INLINED)
+def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, fp, fg):
+    """:func:`warped_forcing` from a tabulated stage (``local``: tau within the period)."""
+    knot_t, knot_rate, knot_accel = warps
+    k = table[sub, stage, F_K]
+    arm_pinion = table[sub, stage, F_ARM_PINION]
+    arm_gear = table[sub, stage, F_ARM_GEAR]
+    if p[TOOTH_FACTORS] != 0.0:
+        for i in range(n_pairs):
+            extra = tooth_extra(n - i, p, fp, fg)
+            k += table[sub, stage, 4 + 3 * i] * extra
+            arm_pinion += table[sub, stage, 5 + 3 * i] * extra
+            arm_gear += table[sub, stage, 6 + 3 * i] * extra
+    scale = run_out_modulation(tau, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
+    t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
+    sine = table[sub, stage, F_SINE]
+    cosine = math.cos(p[OMEGA_MESH] * local + p[STE_PHASE])
+    return _terms(tau, t, rate, accel, sine, cosine, k * scale, arm_pinion * scale, arm_gear * scale, p)
+
+
+@nb.njit(**INLINED)
+def warped_field(s, terms, context, divide):
+    """ds/dtau = (ds/dt) / tau' as a field of :func:`rk4_stages`; ``context`` (coefficients, region):
+    region 1, 0, -1 takes that side's mesh damping, :data:`FROM_X` the damping x itself implies."""
+    c, region = context
+    fx = dead_zone(s[2], c[0])
+    apart = (fx == 0.0) if region == FROM_X else (region == 0)
+    d, _, exact = _accelerations(s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, apart), divide, NO_INVERSE)
+    w = terms[4]
+    return (d[0] * w, d[1] * w, d[2] * w, d[3] * w, d[4] * w, d[5] * w), exact
+
+
+@nb.njit(**INLINED)
+def _rk4(s, h, d1, mid, end, c, region):
+    d2, d3, d4, _ = rk4_stages(warped_field, divided, s, h, d1, mid, end, (c, region))
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+
+
+@nb.njit(**JIT_OPTIONS)
+def split_at_contact(tau, h, s, d1, trial, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg):
+    """``trial`` redone in two parts where it changes the contact region (as
+    :func:`uqgear.physics._stepper._split_at_contact`, in warped time)."""
+    b = p[HALF_BACKLASH]
+    c = coefficients(p)
+    before = contact_region(s[2], b)
+    after = contact_region(trial[2], b)
+    if before == after:
+        return trial
+    level, entered = crossed_boundary(before, after, b)
+    end = warped_forcing(tau + h, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
+    if p[DAMP_IN_SEPARATION] == 0.0:
+        mid = warped_forcing(tau + 0.5 * h, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
+        trial = _rk4(s, h, d1, mid, end, c, before)
+    theta = crossing_fraction(s[2], d1[2], trial[2], trial[5] * end[4], h, level, BISECTIONS)
+    if not splits_step(theta):
+        return trial
+    h_a = theta * h
+    h_b = h - h_a
+    middle = warped_forcing(tau + h_a, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
+    quarter = warped_forcing(tau + 0.5 * h_a, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
+    part = _rk4(s, h_a, d1, quarter, middle, c, before)
+    d_middle, _ = warped_field(part, middle, (c, entered), divided)
+    late = warped_forcing(tau + h_a + 0.5 * h_b, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
+    return _rk4(part, h_b, d_middle, late, end, c, entered)
+
+
+@nb.njit(**INLINED)
+def _hermite(s0, d0, s1, d1, h, u):
+    """Cubic Hermite of the state tuple over a step of length ``h`` at fraction ``u``."""
+    u2 = u * u
+    u3 = u2 * u
+    a = 2 * u3 - 3 * u2 + 1
+    bh = (u3 - 2 * u2 + u) * h
+    c = -2 * u3 + 3 * u2
+    dh = (u3 - u2) * h
+    return (
+        a * s0[0] + bh * d0[0] + c * s1[0] + dh * d1[0],
+        a * s0[1] + bh * d0[1] + c * s1[1] + dh * d1[1],
+        a * s0[2] + bh * d0[2] + c * s1[2] + dh * d1[2],
+        a * s0[3] + bh * d0[3] + c * s1[3] + dh * d1[3],
+        a * s0[4] + bh * d0[4] + c * s1[4] + dh * d1[4],
+        a * s0[5] + bh * d0[5] + c * s1[5] + dh * d1[5],
+    )
+
+
+@nb.njit(**INLINED)
+def record_row(s, terms, p, row):
+    """One history row (y1, y2, x, v1, v2, vx, a1, a2, F, k, e, contact) in physical time."""
+    c = coefficients(p)
+    fx = dead_zone(s[2], c[0])
+    d, force, _ = _accelerations(
+        s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, fx == 0.0), divided, NO_INVERSE
+    )
+    for j in range(6):
+        row[j] = s[j]
+    row[6] = d[3]
+    row[7] = d[4]
+    row[8] = force
+    row[9] = terms[0]
+    row[10] = terms[5]
+    row[11] = contact_region(s[2], p[HALF_BACKLASH])
+
+
+@nb.njit(**JIT_OPTIONS)
+def runup_rhs(tau, tau_ref, t, rate, accel, state, p, pair_k, period_k, fp, fg, row):
+    """The physical-time right-hand side at (t, tau(t)) given tau' and tau'' (the scipy reference's):
+    writes a history row into ``row`` (its derivative in row[3:6], row[6:8] the accelerations)."""
+    k, arm_pinion, arm_gear = mesh_terms(tau, tau_ref, p, pair_k, period_k, fp, fg)
+    angle = p[OMEGA_MESH] * tau + p[STE_PHASE]
+    terms = _terms(tau, t, rate, accel, math.sin(angle), math.cos(angle), k, arm_pinion, arm_gear, p)
+    s = (state[0], state[1], state[2], state[3], state[4], state[5])
+    record_row(s, terms, p, row)
+    c = coefficients(p)
+    fx = dead_zone(s[2], c[0])
+    d, _, _ = _accelerations(s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, fx == 0.0), divided, NO_INVERSE)
+    return d
+
+
+@nb.njit(**JIT_OPTIONS, nogil=True)
+def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_periods, warps, out_tau, history):
+    """Integrate a run in warped time over ``n_periods`` mesh periods, recording ``history`` rows at the
+    warped times ``out_tau`` (increasing, within the span). Returns the final state as a tuple.
+
+    ``schedule`` from :func:`uqgear.physics._stepper.build_schedule` at the reference speed;
+    ``warps`` = (knot t, knot tau', knot tau''), n_periods + 1 knots, one per mesh period start.
+    """
+    first_sub, offsets, widths, refs, pairs, table = schedule
+    s = (state0[0], state0[1], state0[2], state0[3], state0[4], state0[5])
+    c = coefficients(p)
+    b = p[HALF_BACKLASH]
+    steps = first_sub.size - 1
+    n_out = out_tau.size
+    o = 0
+    for n in range(n_periods):
+        start = n * period
+        for j in range(steps):
+            for sub in range(first_sub[j], first_sub[j + 1]):
+                local = offsets[sub]
+                h = widths[sub]
+                tau = start + local
+                count = pairs[sub]
+                f0 = table_forcing(tau, local, n, period, warps, table, sub, 0, count, p, fp, fg)
+                f1 = table_forcing(tau + 0.5 * h, local + 0.5 * h, n, period, warps, table, sub, 1, count, p, fp, fg)
+                f2 = table_forcing(tau + h, local + h, n, period, warps, table, sub, 2, count, p, fp, fg)
+                d1, _ = warped_field(s, f0, (c, FROM_X), divided)
+                new = _rk4(s, h, d1, f1, f2, c, FROM_X)
+                if contact_region(s[2], b) != contact_region(new[2], b):
+                    new = split_at_contact(tau, h, s, d1, new, start + refs[sub], n, period, warps, p, pair_k, period_k, fp, fg)
+                # an output on a sub-step's end (to round-off) goes to the next one, which holds the
+                # pairs in mesh just after it (as the constant-speed histories)
+                edge = tau + h - 1e-9 * period
+                if o < n_out and out_tau[o] < edge:
+                    d_end, _ = warped_field(new, f2, (c, FROM_X), divided)
+                    while o < n_out and out_tau[o] < edge:
+                        u = (out_tau[o] - tau) / h
+                        at = _hermite(s, d1, new, d_end, h, u)
+                        terms = warped_forcing(out_tau[o], start + refs[sub], n, period, warps, p, pair_k, period_k, fp, fg)
+                        record_row(at, terms, p, history[o])
+                        o += 1
+                s = new
+    return s
+
+
+__all__ = [
+    "FROM_X",
+    "warp",
+    "time_part",
+    "warped_forcing",
+    "table_forcing",
+    "warped_field",
+    "split_at_contact",
+    "record_row",
+    "runup_rhs",
+    "integrate_runup",
+]

@@ -1,0 +1,469 @@
+"""Speed-varying simulation: the gear pair driven through a prescribed pinion speed profile (run-up, coast-down).
+
+The model is that of :func:`uqgear.physics.integration.simulate` with the
+mesh-periodic forcing evaluated at the pinion angle instead of a fixed mesh
+frequency (docs/model/run-up.md): at the warped time
+tau(t) = z1 theta1(t) / Omega_ref, Omega_ref the mesh frequency at the
+profile's start speed. The mesh phase, the pairs in contact, the Ishikawa
+stiffness, the STE, the shaft run-out and the motor torque ripple follow the
+shaft angles; the STE's acceleration takes the chain rule
+e'' = e_tautau tau'^2 + e_tau tau''. Masses, stiffnesses, damping and the
+adhesion oscillation (its own clock) do not depend on the speed.
+
+``method="scipy"`` integrates in physical time with :func:`scipy.integrate.solve_ivp`
+(DOP853) between the stiffness breakpoints (their times from the profile's
+inverse angle) with events at the contact boundaries, the reference;
+``method="fast"`` steps RK4 in warped time (:mod:`uqgear.physics._runup_kernels`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Hashable, Sequence
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from scipy.integrate import solve_ivp
+
+from ..common.errors import OperatingPointError
+from . import _kernels as K
+from . import _runup_kernels as R
+from ._stepper import build_schedule
+from .batch_setup import build_batch
+from .design import Design
+from .effects import Effect
+from .integration import _LONG_NAMES, _UNITS, METHODS, _attrs, samples_from_mapping, simulate_batch, steps_per_period
+from .model import HISTORY_COLUMNS, ModelSetup, build_model
+from .speed_profile import RPM, SpeedProfile
+from .threads import spread
+
+#: Mesh periods of the constant-speed run-in at the start speed that gives the default initial state.
+RUN_IN_PERIODS = 200
+#: The variables on (sample, time) that :func:`simulate_runup_batch` returns by default.
+BATCH_VARIABLES = ("x", "te", "mesh_force", "y1_acceleration", "y2_acceleration", "contact")
+
+
+def check_speed_range(design: Design, profile: SpeedProfile) -> None:
+    """Refuse a profile outside the design's sweep range ``operation.pinion_speed_sweep`` (rpm).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> try:
+    ...     uqgear.check_speed_range(design, uqgear.SpeedProfile.linear(500.0, 7000.0, 1.0))
+    ... except uqgear.SpeedProfileError as error:
+    ...     print(error)
+    speed profile: expected speeds in the design's pinion_speed_sweep [200, 6000] rpm; got 500 to 7000 rpm
+    """
+    from .speed_profile import SpeedProfileError
+
+    if not isinstance(profile, SpeedProfile):
+        raise SpeedProfileError(f"profile: expected a SpeedProfile; got {type(profile).__name__}")
+    low, high = design.operation.pinion_speed_sweep
+    slowest, fastest = profile.speed_range()
+    if slowest < low or fastest > high:
+        raise SpeedProfileError(
+            f"speed profile: expected speeds in the design's pinion_speed_sweep [{low:g}, {high:g}] rpm; "
+            f"got {slowest:g} to {fastest:g} rpm"
+        )
+
+
+def _clock(profile: SpeedProfile, angle: np.ndarray, omega_ref: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, tau', tau'') at pinion angles ``angle``; past the profile's end the end speed is held."""
+    end_angle = float(profile.angle(profile.duration))
+    end_speed = float(profile.angular_speed(profile.duration))
+    inside = angle <= end_angle
+    t = np.empty_like(angle)
+    t[inside] = profile.time_at_angle(angle[inside])
+    t[~inside] = profile.duration + (angle[~inside] - end_angle) / end_speed
+    clipped = np.minimum(t, profile.duration)
+    rate = np.where(inside, profile.angular_speed(clipped), end_speed) / omega_ref
+    accel = np.where(inside, profile.acceleration(clipped), 0.0) / omega_ref
+    return t, rate, accel
+
+
+def _output_times(profile: SpeedProfile, sample_rate: float) -> np.ndarray:
+    if not math.isfinite(sample_rate) or sample_rate <= 0.0:
+        raise OperatingPointError(f"sample_rate: expected a finite rate > 0 Hz; got {sample_rate!r}")
+    return np.arange(int(math.floor(profile.duration * sample_rate + 1e-9)) + 1) / sample_rate
+
+
+def _run_in(
+    design: Design, profile: SpeedProfile, setups: Sequence[ModelSetup], samples: xr.Dataset, options: dict
+) -> np.ndarray:
+    """Each sample's state after ``run_in_periods`` mesh periods at the start speed (mesh phase 0)."""
+    batch = simulate_batch(
+        design,
+        samples,
+        n_periods=options["run_in_periods"],
+        keep_periods=1,
+        final_state=True,
+        effects=options["effects"],
+        damping_in_separation=options["damping_in_separation"],
+        stiffness=options["stiffness"],
+        steps_per_mode=options["steps_per_mode"],
+        threads=options["threads"],
+    )
+    return np.asarray(batch["final_state"].values, dtype=float)
+
+
+def _integrate_fast(
+    setup: ModelSetup, steps: int, profile: SpeedProfile, out_t: np.ndarray, state0: np.ndarray
+) -> np.ndarray:
+    """History rows at ``out_t`` by the compiled warped-time RK4 (see :mod:`uqgear.physics._runup_kernels`)."""
+    p = setup.parameters
+    omega_ref = setup.pinion_rotation
+    period = 2.0 * math.pi / p[K.OMEGA_MESH]
+    out_tau = profile.angle(out_t) / omega_ref
+    n_periods = int(math.ceil(out_tau[-1] / period * (1.0 + 1e-12))) + 1
+    angles = np.arange(n_periods + 1) * period * omega_ref
+    warps = _clock(profile, angles, omega_ref)
+    schedule = build_schedule(p, setup.pair_stiffness, setup.period_stiffness, setup.breakpoints, steps)
+    history = np.empty((out_t.size, len(HISTORY_COLUMNS)))
+    R.integrate_runup(
+        np.ascontiguousarray(state0, dtype=float),
+        p,
+        setup.pair_stiffness,
+        setup.period_stiffness,
+        setup.factor_pinion,
+        setup.factor_gear,
+        schedule,
+        period,
+        n_periods,
+        warps,
+        out_tau,
+        history,
+    )
+    return history
+
+
+def _integrate_scipy(
+    setup: ModelSetup, profile: SpeedProfile, out_t: np.ndarray, state0: np.ndarray, rtol: float, atol: float | None
+) -> np.ndarray:
+    """History rows at ``out_t`` by DOP853 in physical time between the stiffness breakpoints."""
+    p = setup.parameters
+    tables = (setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
+    omega_ref = setup.pinion_rotation
+    period = 2.0 * math.pi / p[K.OMEGA_MESH]
+    b = p[K.HALF_BACKLASH]
+    atol_vector = setup.state_scale() * (rtol if atol is None else atol)
+    n_periods = int(math.ceil(float(profile.angle(profile.duration)) / omega_ref / period)) + 1
+    phases = np.concatenate([[0.0], setup.breakpoints, [1.0]])
+    edges_tau = (np.arange(n_periods)[:, None] + phases[None, :]) * period
+    edges_t = _clock(profile, edges_tau.ravel() * omega_ref, omega_ref)[0].reshape(edges_tau.shape)
+    history = np.empty((out_t.size, len(HISTORY_COLUMNS)))
+    row = np.empty(len(HISTORY_COLUMNS))
+    state = np.asarray(state0, dtype=float).copy()
+    levels = np.array([-b, b])
+    above = state[2] > levels
+
+    def clock(t: float) -> tuple[float, float, float]:
+        tc = min(max(t, 0.0), profile.duration)
+        return float(profile.angle(tc)) / omega_ref, float(profile.angular_speed(tc)) / omega_ref, float(
+            profile.acceleration(tc)
+        ) / omega_ref
+
+    def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
+        def event(t: float, y: np.ndarray) -> float:
+            return y[2] - level
+
+        event.terminal = True  # type: ignore[attr-defined]
+        event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
+        return event
+
+    for n in range(n_periods):
+        for i in range(phases.size - 1):
+            t_a, t_b = edges_t[n, i], min(edges_t[n, i + 1], profile.duration)
+            if t_a >= profile.duration:
+                return history
+            tau_ref = 0.5 * (edges_tau[n, i] + edges_tau[n, i + 1])
+
+            def fun(t: float, y: np.ndarray, tau_ref: float = tau_ref) -> np.ndarray:
+                tau, rate, accel = clock(t)
+                d = R.runup_rhs(tau, tau_ref, t, rate, accel, y, p, *tables, row)
+                return np.array(d)
+
+            while t_a < t_b:
+                events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
+                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector, events=events, dense_output=True)
+                t_end = sol.t[-1]
+                last = t_end >= profile.duration
+                for k in np.nonzero((out_t >= t_a) & ((out_t < t_end) | last & (out_t <= t_end)))[0]:
+                    y = sol.sol(out_t[k]) if out_t[k] > t_a else state
+                    tau, rate, accel = clock(out_t[k])
+                    R.runup_rhs(tau, tau_ref, out_t[k], rate, accel, np.ascontiguousarray(y), p, *tables, history[k])
+                state = sol.y[:, -1].copy()
+                if sol.status == 1:
+                    fired = next(j for j, te in enumerate(sol.t_events) if te.size)
+                    above[fired] = not above[fired]
+                else:
+                    above = state[2] > levels
+                t_a = t_end
+    return history
+
+
+def _profile_variables(profile: SpeedProfile, out_t: np.ndarray, z1: int) -> dict[str, tuple[Any, ...]]:
+    angle = profile.angle(out_t)
+    return {
+        "pinion_speed": ("time", profile.speed(out_t), {"units": "rpm", "long_name": "pinion speed n1"}),
+        "pinion_angle": ("time", angle, {"units": "rad", "long_name": "pinion angle theta1 (unwrapped, 0 at t = 0)"}),
+        "mesh_phase": ("time", z1 * angle / (2.0 * math.pi), {"units": "1", "long_name": "mesh cycles z1 theta1 / 2 pi"}),
+    }
+
+
+def _history_variables(history: np.ndarray, dims: tuple[str, ...]) -> dict[str, tuple[Any, ...]]:
+    """The history columns (and te) as Dataset variables; ``history`` (..., time, column)."""
+    data: dict[str, tuple[Any, ...]] = {}
+    for column, name in enumerate(HISTORY_COLUMNS):
+        values = history[..., column].astype(np.int8) if name == "contact" else history[..., column]
+        data[name] = (dims, values, {"units": _UNITS[name], "long_name": _LONG_NAMES[name]})
+    te = history[..., 2] - history[..., 0] + history[..., 1] + history[..., 10]
+    data["te"] = (dims, te, {"units": "m", "long_name": _LONG_NAMES["te"]})
+    return data
+
+
+def _run_attrs(profile: SpeedProfile, sample_rate: float, steps: int, run_in: int | None) -> dict[str, Any]:
+    return {
+        "profile_kind": profile.kind,
+        "profile_direction": profile.direction,
+        "start_speed": profile.start_speed,
+        "stop_speed": profile.stop_speed,
+        "duration": profile.duration,
+        "reference_speed": profile.start_speed,
+        "sample_rate": float(sample_rate),
+        "steps_per_period": steps,
+        "run_in_periods": -1 if run_in is None else run_in,
+        "units_note": "SI units; speeds in rpm",
+    }
+
+
+def _runup_steps(setup: ModelSetup, design: Design, profile: SpeedProfile, steps_per_mode: int) -> int:
+    """Grid steps per mesh period: enough at the profile's lowest speed (longest mesh period in time)."""
+    slowest = build_model(
+        setup.design,
+        profile.speed_range()[0],
+        setup.slot("T1"),
+        setup.slot("T2"),
+        mesh_stiffness_scale=setup.slot("stiffness_scale"),
+    )
+    return steps_per_period(slowest, steps_per_mode)
+
+
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise OperatingPointError(f"method: expected one of {', '.join(METHODS)}; got {method!r}")
+
+
+def simulate_runup(
+    design: Design,
+    profile: SpeedProfile,
+    drive_torque: float,
+    adhesion_torque: float,
+    *,
+    method: str = "fast",
+    sample_rate: float = 20480.0,
+    mesh_stiffness_scale: float = 1.0,
+    effects: Sequence[Effect] = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    steps_per_mode: int = 24,
+    rtol: float = 1e-10,
+    atol: float | None = None,
+    initial_state: np.ndarray | None = None,
+    run_in_periods: int = RUN_IN_PERIODS,
+) -> xr.Dataset:
+    """Simulate the gear pair through a prescribed pinion speed profile (a run-up or a coast-down).
+
+    The forcing follows the pinion angle theta1(t) (module docstring and
+    docs/model/run-up.md). Unless ``initial_state`` is given the run starts
+    from the state reached after ``run_in_periods`` mesh periods at the
+    start speed from static equilibrium (a constant-speed run-in on the fast
+    path, :func:`uqgear.physics.integration.simulate_batch`, for either
+    method), at mesh phase 0.
+
+    Parameters
+    ----------
+    design : Design
+    profile : SpeedProfile
+        Pinion speed against time, within the design's ``operation.pinion_speed_sweep``.
+    drive_torque, adhesion_torque : float
+        T1 and T2 in N m (constant; effects may modulate them).
+    method : {"fast", "scipy"}
+        RK4 in warped time (compiled), or DOP853 in physical time (the reference).
+    sample_rate : float
+        Output samples per second, uniform in time from t = 0 to the profile's end.
+    mesh_stiffness_scale, effects, damping_in_separation, stiffness, rtol, atol
+        As in :func:`uqgear.simulate`.
+    steps_per_mode : int
+        Fast path: RK4 steps per period of the highest natural frequency at the
+        profile's lowest speed (the step is uniform in mesh phase, so shorter in
+        time at higher speeds).
+    initial_state : array of 6, optional
+        (y1, y2, x, y1', y2', x') at t = 0 (mesh phase 0).
+    run_in_periods : int
+        Length of the run-in.
+
+    Returns
+    -------
+    xarray.Dataset
+        On dim ``time`` (s): ``pinion_speed`` (rpm), ``pinion_angle`` (rad,
+        unwrapped), ``mesh_phase`` (mesh cycles), the state, ``y1_acceleration``,
+        ``y2_acceleration``, ``mesh_force``, ``mesh_stiffness``, ``ste``,
+        ``contact`` and ``te``, each with ``units``; the design and the run in attrs.
+
+    Examples
+    --------
+    A 0.05 s ramp 2000 -> 2200 rpm at 10.24 kHz (a short run-in): the mesh phase is z1 theta1 / 2 pi,
+    and the teeth stay in contact:
+
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> ramp = uqgear.SpeedProfile.linear(2000.0, 2200.0, 0.05)
+    >>> run = uqgear.simulate_runup(design, ramp, 7000.0, 33.8e3, sample_rate=10240.0, run_in_periods=40)
+    >>> run.sizes["time"], round(float(run["mesh_phase"][-1]), 3), int(run["contact"].min())
+    (513, 36.75, 1)
+    """
+    _check_method(method)
+    check_speed_range(design, profile)
+    samples = samples_from_mapping(
+        {
+            "pinion_speed": [profile.start_speed],
+            "drive_torque": [drive_torque],
+            "adhesion_torque": [adhesion_torque],
+            "mesh_stiffness_scale": [mesh_stiffness_scale],
+        }
+    )
+    options = dict(
+        effects=tuple(effects),
+        damping_in_separation=damping_in_separation,
+        stiffness=stiffness,
+        steps_per_mode=steps_per_mode,
+        run_in_periods=run_in_periods,
+        threads=1,
+    )
+    setup = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness)[0]
+    if initial_state is None:
+        state0 = _run_in(design, profile, [setup], samples, options)[0]
+    else:
+        state0 = np.asarray(initial_state, dtype=float)
+        if state0.shape != (6,) or not np.all(np.isfinite(state0)):
+            raise OperatingPointError(f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}")
+    out_t = _output_times(profile, float(sample_rate))
+    steps = _runup_steps(setup, design, profile, steps_per_mode)
+    if method == "fast":
+        history = _integrate_fast(setup, steps, profile, out_t, state0)
+    else:
+        history = _integrate_scipy(setup, profile, out_t, state0, rtol, atol)
+    data = _profile_variables(profile, out_t, design.z1)
+    data.update(_history_variables(history, ("time",)))
+    ds = xr.Dataset(data, coords={"time": ("time", out_t, {"units": "s", "long_name": "time"})})
+    ds.attrs.update(_attrs(setup, method, 0, 0, steps))
+    for key in ("pinion_speed", "n_periods", "keep_periods", "mesh_frequency", "mesh_period"):
+        ds.attrs.pop(key, None)
+    ds.attrs.update(_run_attrs(profile, float(sample_rate), steps, None if initial_state is not None else run_in_periods))
+    if method == "scipy":
+        ds.attrs.update(rtol=rtol, solver="DOP853")
+    return ds
+
+
+def simulate_runup_batch(
+    design: Design,
+    profile: SpeedProfile,
+    samples: xr.Dataset,
+    *,
+    sample_rate: float = 20480.0,
+    variables: Sequence[str] = BATCH_VARIABLES,
+    effects: Sequence[Effect] = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+    steps_per_mode: int = 24,
+    threads: int | None = None,
+    initial_states: np.ndarray | None = None,
+    run_in_periods: int = RUN_IN_PERIODS,
+) -> xr.Dataset:
+    """Many samples (adhesion torques, stiffness scales, design keys, effect parameters) through one profile.
+
+    Each sample runs on the compiled one-run kernel of :func:`simulate_runup`,
+    the samples spread over threads (:func:`uqgear.physics.threads.spread`);
+    the run-ins are one :func:`uqgear.simulate_batch`. A sample gives the same
+    numbers, bit for bit, as :func:`simulate_runup` with its values.
+
+    Parameters
+    ----------
+    samples : xarray.Dataset
+        Sample variables on dim ``sample`` as for :func:`uqgear.simulate_batch`,
+        except ``pinion_speed`` (the profile sets it).
+    variables : sequence of str
+        History variables returned on (sample, time).
+    threads, initial_states
+        As in :func:`uqgear.simulate_batch`.
+    sample_rate, effects, damping_in_separation, stiffness, steps_per_mode, run_in_periods
+        As in :func:`simulate_runup`.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``pinion_speed``, ``pinion_angle``, ``mesh_phase`` on ``time``, the
+        ``variables`` on (``sample``, ``time``), the sample variables as
+        coordinates on ``sample``.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> ramp = uqgear.SpeedProfile.linear(2000.0, 2200.0, 0.02)
+    >>> samples = uqgear.samples_from_mapping({"drive_torque": [7000.0] * 2, "adhesion_torque": [25e3, 40e3]})
+    >>> runs = uqgear.simulate_runup_batch(design, ramp, samples, sample_rate=10240.0, run_in_periods=40)
+    >>> dict(runs["te"].sizes), bool((runs["mesh_force"].mean("time").diff("sample") > 0).all())
+    ({'sample': 2, 'time': 205}, True)
+    """
+    check_speed_range(design, profile)
+    if "pinion_speed" in samples.data_vars:
+        raise OperatingPointError("samples: pinion_speed is set by the speed profile; expected no pinion_speed variable")
+    unknown = [name for name in variables if name not in HISTORY_COLUMNS and name != "te"]
+    if unknown:
+        raise OperatingPointError(f"variables: expected names of {', '.join(HISTORY_COLUMNS)} or te; got {unknown}")
+    n = samples.sizes.get("sample", 0)
+    full = samples.assign(pinion_speed=("sample", np.full(n, profile.start_speed)))
+    setups = build_batch(design, full, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness)
+    options = dict(
+        effects=tuple(effects),
+        damping_in_separation=damping_in_separation,
+        stiffness=stiffness,
+        steps_per_mode=steps_per_mode,
+        run_in_periods=run_in_periods,
+        threads=threads,
+    )
+    if initial_states is None:
+        states = _run_in(design, profile, setups, full, options)
+    else:
+        states = np.asarray(initial_states, dtype=float)
+        if states.shape != (n, 6) or not np.all(np.isfinite(states)):
+            raise OperatingPointError(f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}")
+    out_t = _output_times(profile, float(sample_rate))
+    steps = np.array([_runup_steps(setup, design, profile, steps_per_mode) for setup in setups], dtype=np.int64)
+    history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
+
+    def run_range(start: int, stop: int) -> None:
+        for i in range(start, stop):
+            history[i] = _integrate_fast(setups[i], int(steps[i]), profile, out_t, states[i])
+
+    spread(run_range, n, threads)
+    data = _profile_variables(profile, out_t, design.z1)
+    everything = _history_variables(history, ("sample", "time"))
+    data.update({name: everything[name] for name in variables})
+    data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "RK4 steps per mesh period"})
+    coords: dict[Hashable, tuple[Any, ...]] = {"time": ("time", out_t, {"units": "s", "long_name": "time"})}
+    for name in samples.data_vars:
+        coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update({f"design_{key}": value for key, value in design.to_dict().items()})
+    ds.attrs.update(design_name=design.name, method="fast", stiffness=stiffness, steps_per_mode=steps_per_mode)
+    ds.attrs.update(damping_in_separation=int(damping_in_separation), effects="; ".join(repr(e) for e in effects) or "none")
+    ds.attrs.update(_run_attrs(profile, float(sample_rate), int(steps.max()) if n else 0, None if initial_states is not None else run_in_periods))
+    return ds
+
+
+__all__ = ["simulate_runup", "simulate_runup_batch", "check_speed_range", "RUN_IN_PERIODS", "BATCH_VARIABLES"]
