@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
+from scipy.interpolate import PPoly
 
 from ..common.errors import OperatingPointError
 from . import _kernels as K
@@ -71,17 +72,22 @@ def check_speed_range(design: Design, profile: SpeedProfile) -> None:
 
 
 def _clock(profile: SpeedProfile, angle: np.ndarray, omega_ref: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, tau', tau'') at pinion angles ``angle``; past the profile's end the end speed is held."""
-    end_angle = float(profile.angle(profile.duration))
-    end_speed = float(profile.angular_speed(profile.duration))
-    inside = angle <= end_angle
-    t = np.empty_like(angle)
-    t[inside] = profile.time_at_angle(angle[inside])
-    t[~inside] = profile.duration + (angle[~inside] - end_angle) / end_speed
-    clipped = np.minimum(t, profile.duration)
-    rate = np.where(inside, profile.angular_speed(clipped), end_speed) / omega_ref
-    accel = np.where(inside, profile.acceleration(clipped), 0.0) / omega_ref
-    return t, rate, accel
+    """(t, tau', tau'') at pinion angles ``angle``.
+
+    Past the profile's end (the rest of the last mesh period of a fast run) its
+    last piece goes on, so the knots' Hermite stays smooth across the end.
+    """
+    speed = PPoly(profile.coefficients, profile.knots, extrapolate=True)
+    turned = speed.antiderivative()
+    t = np.interp(angle, profile.angle(profile.knots), profile.knots)
+    beyond = angle > float(profile.angle(profile.duration))
+    t[beyond] = profile.duration
+    for _ in range(60):
+        correction = (turned(t) * RPM - angle) / (speed(t) * RPM)
+        t = t - correction
+        if np.all(np.abs(correction) <= 1e-15 * max(profile.duration, 1.0)):
+            break
+    return t, speed(t) * RPM / omega_ref, speed(t, 1) * RPM / omega_ref
 
 
 def _output_times(profile: SpeedProfile, sample_rate: float) -> np.ndarray:
@@ -193,7 +199,9 @@ def _integrate_scipy(
                 for k in np.nonzero((out_t >= t_a) & ((out_t < t_end) | last & (out_t <= t_end)))[0]:
                     y = sol.sol(out_t[k]) if out_t[k] > t_a else state
                     tau, rate, accel = clock(out_t[k])
-                    R.runup_rhs(tau, tau_ref, out_t[k], rate, accel, np.ascontiguousarray(y), p, *tables, history[k])
+                    # the pairs just after the sample (one on a segment's end takes the next segment's)
+                    after = tau + 1e-9 * period
+                    R.runup_rhs(tau, after, out_t[k], rate, accel, np.ascontiguousarray(y), p, *tables, history[k])
                 state = sol.y[:, -1].copy()
                 if sol.status == 1:
                     fired = next(j for j, te in enumerate(sol.t_events) if te.size)
