@@ -15,6 +15,7 @@ from uqgear.dynamics.order_maps import (
     order_spectrum,
     resample_to_angle,
 )
+from uqgear.dynamics.ramp_envelopes import RampError, hysteresis_ranges, jump_speeds, ramp_envelope, up_down_envelopes
 
 SAMPLE_RATE = 20480.0
 START, STOP, DURATION = 500.0, 3000.0, 5.0
@@ -128,8 +129,9 @@ def test_coast_down_reads_the_same_components():
     coast = _ramp(STOP, START, seed=11)
     result = order_map(coast, "te", [21.0, 42.0], speed_bins=8)
     speed = result["mean_speed"].values
-    np.testing.assert_allclose(result["order_amplitude"].sel(signal="te", order=42.0).values,
-                               _amplitude(42.0, speed), rtol=0.015)
+    np.testing.assert_allclose(
+        result["order_amplitude"].sel(signal="te", order=42.0).values, _amplitude(42.0, speed), rtol=0.015
+    )
     np.testing.assert_allclose(result["order_amplitude"].sel(signal="te", order=21.0).values, 1.0, rtol=0.015)
 
 
@@ -148,8 +150,9 @@ def test_angle_helpers_against_closed_forms():
 def test_resampled_cosine_is_a_cosine_of_the_angle():
     time = np.arange(0.0, 2.0, 1.0 / 8192)
     angle = 2 * np.pi * (10.0 * time + 5.0 * time**2)
-    ds = xr.Dataset({"pinion_angle": ("time", angle), "te": ("time", np.cos(42 * angle) + np.cos(3 * angle))},
-                    coords={"time": time})
+    ds = xr.Dataset(
+        {"pinion_angle": ("time", angle), "te": ("time", np.cos(42 * angle) + np.cos(3 * angle))}, coords={"time": time}
+    )
     tracked = resample_to_angle(ds, "te")
     expected = np.cos(42 * tracked["angle"]) + np.cos(3 * tracked["angle"])
     assert float(abs(tracked["te"] - expected).max()) < 1e-4
@@ -167,9 +170,97 @@ def test_resampled_cosine_is_a_cosine_of_the_angle():
 def test_bad_input_names_the_variable(change, named):
     time = np.arange(0.0, 1.0, 1.0 / 4096)
     angle = 2 * np.pi * 20.0 * time
-    ds = xr.Dataset({"pinion_angle": ("time", angle), "pinion_speed": ("time", np.full(time.size, 1200.0)),
-                     "te": ("time", np.cos(angle))}, coords={"time": time})
+    ds = xr.Dataset(
+        {
+            "pinion_angle": ("time", angle),
+            "pinion_speed": ("time", np.full(time.size, 1200.0)),
+            "te": ("time", np.cos(angle)),
+        },
+        coords={"time": time},
+    )
     signals = "no_such_signal" if named == "no_such_signal" else "te"
     with pytest.raises(OrderTrackingError, match=named) as caught:
         order_map(change(ds), signals, [1.0], speed_bins=[1000.0, 1400.0])
     assert isinstance(caught.value, UqgearError) and isinstance(caught.value, ValueError)
+
+
+# ---------------------------------------------------------------------------- ramp envelopes and jumps
+
+JUMP_UP_RUN, JUMP_DOWN_RUN = 2200.0, 1800.0  # rpm: the run-up drops here, the coast-down rises here
+MEAN_FORCE, LARGE, SMALL = 30e3, 40e3, 8e3  # N: mean mesh force, mesh-order amplitude on each branch
+BIN_WIDTH = 100.0
+
+
+def _jumping_run(start: float, stop: float, jump: float, seed: int) -> xr.Dataset:
+    """A ramp on the large branch below ``jump`` rpm and the small one above; teeth apart where the force is < 0."""
+    time = np.arange(0.0, DURATION, 1.0 / SAMPLE_RATE)
+    speed = start + (stop - start) * time / DURATION
+    angle = 2.0 * np.pi / 60.0 * (start * time + 0.5 * (stop - start) / DURATION * time**2)
+    amplitude = np.where(speed < jump, LARGE, SMALL)
+    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    force = MEAN_FORCE + amplitude * np.cos(21.0 * angle) + 10.0 * rng.standard_normal(time.size)
+    contact = np.where(force > 0.0, 1, 0)
+    return xr.Dataset(
+        {
+            "pinion_speed": ("time", speed, {"units": "rpm"}),
+            "mesh_force": ("time", np.maximum(force, 0.0), {"units": "N"}),
+            "contact": ("time", contact),
+        },
+        coords={"time": time},
+    )
+
+
+@pytest.fixture(scope="module")
+def up_and_down() -> tuple[xr.Dataset, xr.Dataset]:
+    return _jumping_run(START, STOP, JUMP_UP_RUN, 3), _jumping_run(STOP, START, JUMP_DOWN_RUN, 4)
+
+
+def test_envelope_peaks_and_separation_against_closed_forms(up_and_down):
+    edges = np.arange(START, STOP + 1.0, BIN_WIDTH)
+    envelope = ramp_envelope(up_and_down[0], speed_bins=edges)
+    large = envelope["bin_upper"].values <= JUMP_UP_RUN
+    small = envelope["bin_lower"].values >= JUMP_UP_RUN
+    peak = envelope["peak_mesh_force"].values
+    np.testing.assert_allclose(peak[large], MEAN_FORCE + LARGE, rtol=2e-3)
+    np.testing.assert_allclose(peak[small], MEAN_FORCE + SMALL, rtol=2e-3)
+    # apart while cos(21 theta) < -MEAN_FORCE / LARGE: a fraction arccos(0.75) / pi of the time
+    separation = envelope["fraction_separation"].values
+    np.testing.assert_allclose(separation[large], np.arccos(MEAN_FORCE / LARGE) / np.pi, atol=0.01)
+    assert np.all(separation[small] == 0.0) and np.all(envelope["fraction_back_contact"].values == 0.0)
+    assert envelope.attrs["direction"] == "up" and envelope["peak_mesh_force"].attrs["units"] == "N"
+
+
+def test_jumps_found_within_a_bin_and_the_hysteresis_range(up_and_down):
+    up, down = up_and_down
+    both = up_down_envelopes(up, down, speed_bins=np.arange(START, STOP + 1.0, BIN_WIDTH))
+    assert both["peak_mesh_force"].dims == ("direction", "pinion_speed")
+    assert list(both["direction"].values) == ["up", "down"]
+    (up_jump,) = jump_speeds(both.sel(direction="up").assign_attrs(direction="up", signal="mesh_force"))
+    (down_jump,) = jump_speeds(ramp_envelope(down, speed_bins=np.arange(START, STOP + 1.0, BIN_WIDTH)))
+    assert abs(up_jump.speed - JUMP_UP_RUN) <= BIN_WIDTH and up_jump.direction == "drop"
+    assert abs(down_jump.speed - JUMP_DOWN_RUN) <= BIN_WIDTH and down_jump.direction == "rise"
+    np.testing.assert_allclose(up_jump.size, SMALL - LARGE, rtol=5e-3)
+    np.testing.assert_allclose(down_jump.relative_size, (LARGE - SMALL) / (MEAN_FORCE + SMALL), rtol=5e-3)
+    ((low, high),) = hysteresis_ranges(both)
+    assert JUMP_DOWN_RUN - BIN_WIDTH <= low <= JUMP_DOWN_RUN + BIN_WIDTH
+    assert JUMP_UP_RUN - BIN_WIDTH <= high <= JUMP_UP_RUN + BIN_WIDTH
+    assert both.attrs["hysteresis_ranges"] == [low, high]
+
+
+def test_smooth_envelope_has_no_jump():
+    envelope = xr.Dataset(
+        {"peak_mesh_force": ("pinion_speed", 1e4 * (1.0 + 0.05 * np.arange(20)))},
+        coords={"pinion_speed": 500.0 + 100.0 * np.arange(20)},
+        attrs={"signal": "mesh_force"},
+    )
+    assert jump_speeds(envelope) == ()
+
+
+def test_ramp_input_errors_name_the_variable(up_and_down):
+    up, down = up_and_down
+    with pytest.raises(RampError, match="te"):
+        ramp_envelope(up, signal="te")
+    with pytest.raises(RampError, match="down"):
+        up_down_envelopes(up, up)
+    with pytest.raises(RampError, match="pinion_speed"):
+        ramp_envelope(up.drop_vars("pinion_speed"))

@@ -92,7 +92,7 @@ class OrderTrackingError(UqgearError):
     ...     resample_to_angle(ds)
     ... except OrderTrackingError as error:
     ...     print(error)
-    resample_to_angle: the Dataset has neither 'pinion_angle' (rad) nor 'pinion_speed' (rpm); one is needed for the pinion angle
+    resample_to_angle: the Dataset has neither 'pinion_angle' (rad) nor 'pinion_speed' (rpm) over 'time'
     """
 
 
@@ -129,7 +129,8 @@ def angle_from_speed(speed_rpm: Any, time: Any) -> np.ndarray:
     instants = np.asarray(time, dtype=float)
     if speed.ndim != 1 or speed.shape != instants.shape or speed.size < 2:
         raise OrderTrackingError(
-            f"pinion_speed: expected a 1-D speed signal on the {instants.size} instants of time; got shape {speed.shape}"
+            f"pinion_speed: expected a 1-D speed signal on the {instants.size} instants of time; "
+            f"got shape {speed.shape}"
         )
     if not np.all(np.isfinite(speed)):
         raise OrderTrackingError("pinion_speed: expected finite values; got NaN or infinity")
@@ -190,7 +191,8 @@ def _pinion_angle(ds: xr.Dataset, what: str) -> np.ndarray:
         angle = np.asarray(ds["pinion_angle"].values, dtype=float)
         name = "pinion_angle"
         if angle.shape != time.shape:
-            raise OrderTrackingError(f"pinion_angle: expected values over 'time' only; got dims {ds['pinion_angle'].dims}")
+            dims = ds["pinion_angle"].dims
+            raise OrderTrackingError(f"pinion_angle: expected values over 'time' only; got dims {dims}")
         if not np.all(np.isfinite(angle)):
             raise OrderTrackingError("pinion_angle: expected finite values; got NaN or infinity")
     elif "pinion_speed" in ds.variables and "time" in ds["pinion_speed"].dims:
@@ -198,8 +200,7 @@ def _pinion_angle(ds: xr.Dataset, what: str) -> np.ndarray:
         name = "pinion_speed"
     else:
         raise OrderTrackingError(
-            f"{what}: the Dataset has neither 'pinion_angle' (rad) nor 'pinion_speed' (rpm); "
-            "one is needed for the pinion angle"
+            f"{what}: the Dataset has neither 'pinion_angle' (rad) nor 'pinion_speed' (rpm) over 'time'"
         )
     steps = np.diff(angle)
     if np.all(steps < 0.0):
@@ -290,7 +291,8 @@ def resample_to_angle(ds: xr.Dataset, signals: str | Sequence[str] | None = None
     if samples_per_revolution > _MAX_SAMPLES_PER_REVOLUTION:
         raise OrderTrackingError(
             f"pinion_speed: the lowest speed {60.0 * lowest:.4g} rpm needs {samples_per_revolution} samples per "
-            f"revolution at {sample_rate:g} Hz (at most {_MAX_SAMPLES_PER_REVOLUTION}); trim the record to higher speeds"
+            f"revolution at {sample_rate:g} Hz (at most {_MAX_SAMPLES_PER_REVOLUTION}); "
+            "trim the record to higher speeds"
         )
     # the angle grid: whole multiples of 2 pi / S inside the record less its edge transient
     increment = 2.0 * np.pi / samples_per_revolution
@@ -382,7 +384,7 @@ def speed_bin_edges(speeds: Any, speed_bins: int | Sequence[float]) -> np.ndarra
     return edges
 
 
-def bin_index(speeds: Any, edges: np.ndarray) -> np.ndarray:
+def _bin_index(speeds: Any, edges: np.ndarray) -> np.ndarray:
     """Bin of each speed (-1 outside the edges; the top edge belongs to the last bin)."""
     values = np.asarray(speeds, dtype=float)
     index = np.searchsorted(edges, values, side="right") - 1
@@ -391,13 +393,15 @@ def bin_index(speeds: Any, edges: np.ndarray) -> np.ndarray:
     return index
 
 
-def speed_coords(edges: np.ndarray) -> dict[str, xr.Variable]:
+def _speed_coords(edges: np.ndarray) -> dict[str, xr.Variable]:
     """``pinion_speed`` (bin centres) with ``bin_lower`` and ``bin_upper`` alongside, all rpm."""
+    centres = 0.5 * (edges[:-1] + edges[1:])
     return {
-        "pinion_speed": xr.Variable("pinion_speed", 0.5 * (edges[:-1] + edges[1:]), {"units": "rpm",
-                                                                                       "long_name": "pinion speed (bin centre)"}),
-        "bin_lower": xr.Variable("pinion_speed", edges[:-1], {"units": "rpm", "long_name": "lower edge of the speed bin"}),
-        "bin_upper": xr.Variable("pinion_speed", edges[1:], {"units": "rpm", "long_name": "upper edge of the speed bin"}),
+        "pinion_speed": xr.Variable(
+            "pinion_speed", centres, {"units": "rpm", "long_name": "pinion speed (bin centre)"}
+        ),
+        "bin_lower": xr.Variable("pinion_speed", edges[:-1], {"units": "rpm", "long_name": "lower edge of the bin"}),
+        "bin_upper": xr.Variable("pinion_speed", edges[1:], {"units": "rpm", "long_name": "upper edge of the bin"}),
     }
 
 
@@ -446,8 +450,9 @@ def _setup(ds: xr.Dataset, signals: Any, options: dict[str, Any], what: str) -> 
     try:
         taper = scipy.signal.get_window(options["window"], int(revolutions) * per_revolution, fftbins=True)
     except (ValueError, TypeError) as error:
-        raise OrderTrackingError(f"window: expected a window name of scipy.signal.get_window; got "
-                                 f"{options['window']!r} ({error})") from None
+        raise OrderTrackingError(
+            f"window: expected a window name of scipy.signal.get_window; got {options['window']!r} ({error})"
+        ) from None
     blocks = list(_blocks(tracked, int(revolutions), overlap, taper))
     if not blocks:
         raise OrderTrackingError(
@@ -455,7 +460,7 @@ def _setup(ds: xr.Dataset, signals: Any, options: dict[str, Any], what: str) -> 
             f"fewer than one block of {revolutions}"
         )
     edges = speed_bin_edges([block.mean_speed for block in blocks], options["speed_bins"])
-    bins = bin_index([block.mean_speed for block in blocks], edges)
+    bins = _bin_index([block.mean_speed for block in blocks], edges)
     nyquist_order = RESOLVABLE_FRACTION * 0.5 * float(tracked.attrs["sample_rate"])
     limits = np.full(edges.size - 1, np.inf)
     for block, index in zip(blocks, bins, strict=True):
@@ -475,7 +480,8 @@ def _block_values(setup: _Setup, block: _Block) -> np.ndarray:
 
 def _units(setup: _Setup) -> tuple[str, list[str]]:
     units = [str(setup.tracked[name].attrs.get("units", "")) for name in setup.names]
-    shared = units[0] if len(set(units)) == 1 else "; ".join(f"{n}: {u}" for n, u in zip(setup.names, units, strict=True))
+    pairs = zip(setup.names, units, strict=True)
+    shared = units[0] if len(set(units)) == 1 else "; ".join(f"{name}: {unit}" for name, unit in pairs)
     return shared, units
 
 
@@ -485,7 +491,7 @@ def _result_coords(setup: _Setup, orders: np.ndarray, unit: str) -> dict[str, An
     return {
         "signal": xr.Variable("signal", np.array(setup.names, dtype=object)),
         "signal_units": xr.Variable("signal", np.array(units, dtype=object)),
-        **speed_coords(setup.edges),
+        **_speed_coords(setup.edges),
         "order": xr.Variable("order", orders, {"units": "1", "long_name": long_name}),
     }
 
@@ -508,15 +514,21 @@ def _result_attrs(setup: _Setup, options: dict[str, Any]) -> dict[str, Any]:
 def _bin_summaries(setup: _Setup) -> dict[str, Any]:
     counts = np.bincount(setup.bins[setup.bins >= 0], minlength=setup.edges.size - 1)
     speeds = np.zeros(counts.size)
-    np.add.at(speeds, setup.bins[setup.bins >= 0], [b.mean_speed for b, i in zip(setup.blocks, setup.bins,
-                                                                                   strict=True) if i >= 0])
+    np.add.at(
+        speeds,
+        setup.bins[setup.bins >= 0],
+        [b.mean_speed for b, i in zip(setup.blocks, setup.bins, strict=True) if i >= 0],
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         mean_speed = np.where(counts > 0, speeds / np.maximum(counts, 1), np.nan)
     return {
         "block_count": ("pinion_speed", counts, {"units": "1", "long_name": "blocks in the speed bin"}),
         "mean_speed": ("pinion_speed", mean_speed, {"units": "rpm", "long_name": "mean speed of the bin's blocks"}),
-        "max_order": ("pinion_speed", setup.limits / setup.scale,
-                      {"units": "1", "long_name": "highest resolvable order in the bin"}),
+        "max_order": (
+            "pinion_speed",
+            setup.limits / setup.scale,
+            {"units": "1", "long_name": "highest resolvable order in the bin"},
+        ),
     }
 
 
@@ -587,8 +599,14 @@ def order_map(
     >>> result["order_phase"].sel(signal="te", order=1.0).round(4).values
     array([0.5, 0.5])
     """
-    options = dict(revolutions_per_block=revolutions_per_block, overlap=overlap, speed_bins=speed_bins,
-                   order_unit=order_unit, window=window, z1=z1)
+    options = {
+        "revolutions_per_block": revolutions_per_block,
+        "overlap": overlap,
+        "speed_bins": speed_bins,
+        "order_unit": order_unit,
+        "window": window,
+        "z1": z1,
+    }
     setup = _setup(ds, signals, options, "order_map")
     if orders is None:
         if setup.mesh_order is None:
@@ -678,8 +696,14 @@ def order_spectrum(
     >>> peak.values.tolist()
     [21.0, 21.0]
     """
-    options = dict(revolutions_per_block=revolutions_per_block, overlap=overlap, speed_bins=speed_bins,
-                   order_unit=order_unit, window=window, z1=z1)
+    options = {
+        "revolutions_per_block": revolutions_per_block,
+        "overlap": overlap,
+        "speed_bins": speed_bins,
+        "order_unit": order_unit,
+        "window": window,
+        "z1": z1,
+    }
     setup = _setup(ds, signals, options, "order_spectrum")
     # pinion orders, 1 / revolutions_per_block apart: a sample is 1 / S of a revolution
     orders = np.fft.rfftfreq(setup.taper.size, d=1.0 / int(setup.tracked.attrs["samples_per_revolution"]))
@@ -700,8 +724,11 @@ def order_spectrum(
     amplitude[:, ~(orders[kept][None, :] <= setup.limits[:, None])] = np.nan
     shared, _ = _units(setup)
     data = {
-        "order_spectrum": (("signal", "pinion_speed", "order"), amplitude,
-                           {"units": shared, "long_name": "single-sided order spectrum"}),
+        "order_spectrum": (
+            ("signal", "pinion_speed", "order"),
+            amplitude,
+            {"units": shared, "long_name": "single-sided order spectrum"},
+        ),
         **summaries,
     }
     coords = _result_coords(setup, orders[kept] / setup.scale, order_unit)
