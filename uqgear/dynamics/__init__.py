@@ -8,7 +8,9 @@ with their Floquet multipliers (``shooting``, ``floquet``) and their
 continuation in a parameter with located bifurcations (``continuation``,
 ``bifurcations``, ``branches``) and the speed windows where responses can
 coexist (``windows``); rainflow counting and Miner's damage of a stress
-history on an ISO 6336 S-N curve (``fatigue``).
+history on an ISO 6336 S-N curve (``fatigue``); computed order tracking and
+order maps of run-ups and coast-downs (``order_maps``), their binned
+envelopes, jumps and up/down hysteresis (``ramp_envelopes``).
 
 May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 """
@@ -20,6 +22,26 @@ from .branches import bifurcation_table
 from .continuation import Continuation, ContinuationSettings
 from .fatigue import RainflowCount, damage_rate, miner_damage, rainflow_count
 from .floquet import floquet_exponents, floquet_multipliers, is_stable, unstable_counts
+from .order_maps import (
+    RESOLVABLE_FRACTION,
+    RUNUP_SIGNALS,
+    OrderTrackingError,
+    angle_from_pulses,
+    angle_from_speed,
+    order_map,
+    order_spectrum,
+    resample_to_angle,
+    speed_bin_edges,
+)
+from .ramp_envelopes import (
+    RAMP_DIRECTIONS,
+    Jump,
+    RampError,
+    hysteresis_ranges,
+    jump_speeds,
+    ramp_envelope,
+    up_down_envelopes,
+)
 from .regimes import (
     ResponseClass,
     classify_batch,
@@ -74,4 +96,20 @@ __all__ = [
     "rainflow_count",
     "miner_damage",
     "damage_rate",
+    "OrderTrackingError",
+    "RESOLVABLE_FRACTION",
+    "RUNUP_SIGNALS",
+    "angle_from_speed",
+    "angle_from_pulses",
+    "resample_to_angle",
+    "order_map",
+    "order_spectrum",
+    "speed_bin_edges",
+    "RampError",
+    "RAMP_DIRECTIONS",
+    "Jump",
+    "ramp_envelope",
+    "jump_speeds",
+    "up_down_envelopes",
+    "hysteresis_ranges",
 ]
