@@ -264,3 +264,16 @@ def test_ramp_input_errors_name_the_variable(up_and_down):
         up_down_envelopes(up, up)
     with pytest.raises(RampError, match="pinion_speed"):
         ramp_envelope(up.drop_vars("pinion_speed"))
+
+
+def test_order_map_figure_draws_map_and_envelopes(runup, up_and_down):
+    from uqgear.report import order_map_figure
+
+    waterfall = order_spectrum(runup, "te", max_order=50.0, speed_bins=6)
+    both = up_down_envelopes(*up_and_down, speed_bins=np.arange(START, STOP + 1.0, 250.0))
+    figure = order_map_figure(waterfall, envelopes=both)
+    map_axes, envelope_axes = figure.axes[:2]
+    assert map_axes.get_ylabel() == "pinion order" and "peak mesh force" in envelope_axes.get_ylabel()
+    assert len(envelope_axes.get_lines()) == 2 and len(figure.axes) == 3  # the map's colour bar
+    with pytest.raises(UqgearError, match="signal"):
+        order_map_figure(waterfall, "mesh_force")
