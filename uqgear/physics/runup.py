@@ -167,9 +167,11 @@ def _integrate_scipy(
 
     def clock(t: float) -> tuple[float, float, float]:
         tc = min(max(t, 0.0), profile.duration)
-        return float(profile.angle(tc)) / omega_ref, float(profile.angular_speed(tc)) / omega_ref, float(
-            profile.acceleration(tc)
-        ) / omega_ref
+        return (
+            float(profile.angle(tc)) / omega_ref,
+            float(profile.angular_speed(tc)) / omega_ref,
+            float(profile.acceleration(tc)) / omega_ref,
+        )
 
     def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
         def event(t: float, y: np.ndarray) -> float:
@@ -193,7 +195,16 @@ def _integrate_scipy(
 
             while t_a < t_b:
                 events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
-                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector, events=events, dense_output=True)
+                sol = solve_ivp(
+                    fun,
+                    (t_a, t_b),
+                    state,
+                    method="DOP853",
+                    rtol=rtol,
+                    atol=atol_vector,
+                    events=events,
+                    dense_output=True,
+                )
                 t_end = sol.t[-1]
                 last = t_end >= profile.duration
                 for k in np.nonzero((out_t >= t_a) & ((out_t < t_end) | last & (out_t <= t_end)))[0]:
@@ -217,7 +228,11 @@ def _profile_variables(profile: SpeedProfile, out_t: np.ndarray, z1: int) -> dic
     return {
         "pinion_speed": ("time", profile.speed(out_t), {"units": "rpm", "long_name": "pinion speed n1"}),
         "pinion_angle": ("time", angle, {"units": "rad", "long_name": "pinion angle theta1 (unwrapped, 0 at t = 0)"}),
-        "mesh_phase": ("time", z1 * angle / (2.0 * math.pi), {"units": "1", "long_name": "mesh cycles z1 theta1 / 2 pi"}),
+        "mesh_phase": (
+            "time",
+            z1 * angle / (2.0 * math.pi),
+            {"units": "1", "long_name": "mesh cycles z1 theta1 / 2 pi"},
+        ),
     }
 
 
@@ -343,21 +358,25 @@ def simulate_runup(
             "mesh_stiffness_scale": [mesh_stiffness_scale],
         }
     )
-    options = dict(
-        effects=tuple(effects),
-        damping_in_separation=damping_in_separation,
-        stiffness=stiffness,
-        steps_per_mode=steps_per_mode,
-        run_in_periods=run_in_periods,
-        threads=1,
-    )
-    setup = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness)[0]
+    options = {
+        "effects": tuple(effects),
+        "damping_in_separation": damping_in_separation,
+        "stiffness": stiffness,
+        "steps_per_mode": steps_per_mode,
+        "run_in_periods": run_in_periods,
+        "threads": 1,
+    }
+    setup = build_batch(
+        design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
+    )[0]
     if initial_state is None:
         state0 = _run_in(design, profile, [setup], samples, options)[0]
     else:
         state0 = np.asarray(initial_state, dtype=float)
         if state0.shape != (6,) or not np.all(np.isfinite(state0)):
-            raise OperatingPointError(f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}")
+            raise OperatingPointError(
+                f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}"
+            )
     out_t = _output_times(profile, float(sample_rate))
     steps = _runup_steps(setup, design, profile, steps_per_mode)
     if method == "fast":
@@ -370,7 +389,9 @@ def simulate_runup(
     ds.attrs.update(_attrs(setup, method, 0, 0, steps))
     for key in ("pinion_speed", "n_periods", "keep_periods", "mesh_frequency", "mesh_period"):
         ds.attrs.pop(key, None)
-    ds.attrs.update(_run_attrs(profile, float(sample_rate), steps, None if initial_state is not None else run_in_periods))
+    ds.attrs.update(
+        _run_attrs(profile, float(sample_rate), steps, None if initial_state is not None else run_in_periods)
+    )
     if method == "scipy":
         ds.attrs.update(rtol=rtol, solver="DOP853")
     return ds
@@ -429,27 +450,33 @@ def simulate_runup_batch(
     """
     check_speed_range(design, profile)
     if "pinion_speed" in samples.data_vars:
-        raise OperatingPointError("samples: pinion_speed is set by the speed profile; expected no pinion_speed variable")
+        raise OperatingPointError(
+            "samples: pinion_speed is set by the speed profile; expected no pinion_speed variable"
+        )
     unknown = [name for name in variables if name not in HISTORY_COLUMNS and name != "te"]
     if unknown:
         raise OperatingPointError(f"variables: expected names of {', '.join(HISTORY_COLUMNS)} or te; got {unknown}")
     n = samples.sizes.get("sample", 0)
     full = samples.assign(pinion_speed=("sample", np.full(n, profile.start_speed)))
-    setups = build_batch(design, full, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness)
-    options = dict(
-        effects=tuple(effects),
-        damping_in_separation=damping_in_separation,
-        stiffness=stiffness,
-        steps_per_mode=steps_per_mode,
-        run_in_periods=run_in_periods,
-        threads=threads,
+    setups = build_batch(
+        design, full, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
     )
+    options = {
+        "effects": tuple(effects),
+        "damping_in_separation": damping_in_separation,
+        "stiffness": stiffness,
+        "steps_per_mode": steps_per_mode,
+        "run_in_periods": run_in_periods,
+        "threads": threads,
+    }
     if initial_states is None:
         states = _run_in(design, profile, setups, full, options)
     else:
         states = np.asarray(initial_states, dtype=float)
         if states.shape != (n, 6) or not np.all(np.isfinite(states)):
-            raise OperatingPointError(f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}")
+            raise OperatingPointError(
+                f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}"
+            )
     out_t = _output_times(profile, float(sample_rate))
     steps = np.array([_runup_steps(setup, design, profile, steps_per_mode) for setup in setups], dtype=np.int64)
     history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
@@ -469,8 +496,17 @@ def simulate_runup_batch(
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update({f"design_{key}": value for key, value in design.to_dict().items()})
     ds.attrs.update(design_name=design.name, method="fast", stiffness=stiffness, steps_per_mode=steps_per_mode)
-    ds.attrs.update(damping_in_separation=int(damping_in_separation), effects="; ".join(repr(e) for e in effects) or "none")
-    ds.attrs.update(_run_attrs(profile, float(sample_rate), int(steps.max()) if n else 0, None if initial_states is not None else run_in_periods))
+    ds.attrs.update(
+        damping_in_separation=int(damping_in_separation), effects="; ".join(repr(e) for e in effects) or "none"
+    )
+    ds.attrs.update(
+        _run_attrs(
+            profile,
+            float(sample_rate),
+            int(steps.max()) if n else 0,
+            None if initial_states is not None else run_in_periods,
+        )
+    )
     return ds
 
 
