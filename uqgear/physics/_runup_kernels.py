@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from uqgear.physics._rhs import (
     ADHESION_AMPLITUDE,
@@ -272,12 +273,13 @@ def runup_rhs(tau, tau_ref, t, rate, accel, state, p, pair_k, period_k, fp, fg, 
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_periods, warps, out_tau, history):
-    """Integrate a run in warped time over ``n_periods`` mesh periods, recording ``history`` rows at the
-    warped times ``out_tau`` (increasing, within the span). Returns the final state as a tuple.
+def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, first, stop, warps, out_tau, o, history):
+    """Integrate a run in warped time over mesh periods ``first`` to ``stop - 1`` from ``state0``, recording
+    ``history`` rows at the warped times ``out_tau`` from index ``o`` on (increasing, within the span).
 
-    ``schedule`` from :func:`uqgear.physics._stepper.build_schedule` at the reference speed;
-    ``warps`` = (knot t, knot tau', knot tau''), n_periods + 1 knots, one per mesh period start.
+    ``schedule`` from :func:`uqgear.physics._stepper.build_schedule` at the reference speed (its steps
+    per period hold for these periods); ``warps`` = (knot t, knot tau', knot tau''), one knot per mesh
+    period start. Returns (final state as an array, index of the next output).
     """
     first_sub, offsets, widths, refs, pairs, table = schedule
     s = (state0[0], state0[1], state0[2], state0[3], state0[4], state0[5])
@@ -285,8 +287,7 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_per
     b = p[HALF_BACKLASH]
     steps = first_sub.size - 1
     n_out = out_tau.size
-    o = 0
-    for n in range(n_periods):
+    for n in range(first, stop):
         start = n * period
         for j in range(steps):
             for sub in range(first_sub[j], first_sub[j + 1]):
@@ -317,7 +318,10 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_per
                         record_row(at, terms, p, history[o])
                         o += 1
                 s = new
-    return s
+    final = np.empty(6)
+    for j in range(6):
+        final[j] = s[j]
+    return final, o
 
 
 __all__ = [
