@@ -4,7 +4,8 @@
 derived once per operating point) -> ``integration`` (the compiled RK4 fast
 path: right-hand side in ``_rhs``, one-sample kernels in ``_kernels`` and
 ``_pairs``, batches as SIMD lanes in ``_lanes`` with their forcing tables in ``_lane_tables``;
-and the scipy reference; ``history_batch`` the histories of several runs at once). ``effects`` holds the
+and the scipy reference; ``history_batch`` the histories of several runs at once; ``runup`` the same model driven
+through a ``speed_profile``, with its compiled kernel in ``_runup_kernels``). ``effects`` holds the
 unmodelled effects of docs/model/unmodelled-effects.md section 6 as slots of the same
 right-hand side; ``pitch_errors`` the per-tooth pitch offsets every real gear
 has (section 2.6), an input of the model set-up, not an effect. ``rating`` rates a
@@ -64,6 +65,8 @@ from .model import (
     rated_mesh_force,
 )
 from .pitch_errors import PitchErrors, draw_pitch_errors, iso1328_single_pitch_tolerance
+from .runup import RUN_IN_PERIODS, check_speed_range, simulate_runup, simulate_runup_batch
+from .speed_profile import SpeedProfile, SpeedProfileError
 from .stiffness import (
     StiffnessTables,
     contact_compliance,
@@ -133,4 +136,10 @@ __all__ = [
     "PitchErrors",
     "iso1328_single_pitch_tolerance",
     "draw_pitch_errors",
+    "SpeedProfile",
+    "SpeedProfileError",
+    "simulate_runup",
+    "simulate_runup_batch",
+    "check_speed_range",
+    "RUN_IN_PERIODS",
 ]

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from uqgear.physics._rhs import (
     ADHESION_AMPLITUDE,
@@ -98,7 +99,9 @@ def warp(tau, n, period, knot_t, knot_rate, knot_accel):
     u2 = u * u
     u3 = u2 * u
     t = (2 * u3 - 3 * u2 + 1) * t0 + (u3 - 2 * u2 + u) * m0 + (-2 * u3 + 3 * u2) * t1 + (u3 - u2) * m1
-    slope = ((6 * u2 - 6 * u) * t0 + (3 * u2 - 4 * u + 1) * m0 + (-6 * u2 + 6 * u) * t1 + (3 * u2 - 2 * u) * m1) / period
+    slope = (
+        (6 * u2 - 6 * u) * t0 + (3 * u2 - 4 * u + 1) * m0 + (-6 * u2 + 6 * u) * t1 + (3 * u2 - 2 * u) * m1
+    ) / period
     accel = knot_accel[n] * (1.0 - u) + knot_accel[n + 1] * u
     return t, 1.0 / slope, accel
 
@@ -174,7 +177,9 @@ def warped_field(s, terms, context, divide):
     c, region = context
     fx = dead_zone(s[2], c[0])
     apart = (fx == 0.0) if region == FROM_X else (region == 0)
-    d, _, exact = _accelerations(s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, apart), divide, NO_INVERSE)
+    d, _, exact = _accelerations(
+        s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, apart), divide, NO_INVERSE
+    )
     w = terms[4]
     return (d[0] * w, d[1] * w, d[2] * w, d[3] * w, d[4] * w, d[5] * w), exact
 
@@ -261,17 +266,20 @@ def runup_rhs(tau, tau_ref, t, rate, accel, state, p, pair_k, period_k, fp, fg, 
     record_row(s, terms, p, row)
     c = coefficients(p)
     fx = dead_zone(s[2], c[0])
-    d, _, _ = _accelerations(s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, fx == 0.0), divided, NO_INVERSE)
+    d, _, _ = _accelerations(
+        s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, fx == 0.0), divided, NO_INVERSE
+    )
     return d
 
 
 @nb.njit(**JIT_OPTIONS, nogil=True)
-def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_periods, warps, out_tau, history):
-    """Integrate a run in warped time over ``n_periods`` mesh periods, recording ``history`` rows at the
-    warped times ``out_tau`` (increasing, within the span). Returns the final state as a tuple.
+def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, first, stop, warps, out_tau, o, history):
+    """Integrate a run in warped time over mesh periods ``first`` to ``stop - 1`` from ``state0``, recording
+    ``history`` rows at the warped times ``out_tau`` from index ``o`` on (increasing, within the span).
 
-    ``schedule`` from :func:`uqgear.physics._stepper.build_schedule` at the reference speed;
-    ``warps`` = (knot t, knot tau', knot tau''), n_periods + 1 knots, one per mesh period start.
+    ``schedule`` from :func:`uqgear.physics._stepper.build_schedule` at the reference speed (its steps
+    per period hold for these periods); ``warps`` = (knot t, knot tau', knot tau''), one knot per mesh
+    period start. Returns (final state as an array, index of the next output).
     """
     first_sub, offsets, widths, refs, pairs, table = schedule
     s = (state0[0], state0[1], state0[2], state0[3], state0[4], state0[5])
@@ -279,8 +287,7 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_per
     b = p[HALF_BACKLASH]
     steps = first_sub.size - 1
     n_out = out_tau.size
-    o = 0
-    for n in range(n_periods):
+    for n in range(first, stop):
         start = n * period
         for j in range(steps):
             for sub in range(first_sub[j], first_sub[j + 1]):
@@ -294,7 +301,9 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_per
                 d1, _ = warped_field(s, f0, (c, FROM_X), divided)
                 new = _rk4(s, h, d1, f1, f2, c, FROM_X)
                 if contact_region(s[2], b) != contact_region(new[2], b):
-                    new = split_at_contact(tau, h, s, d1, new, start + refs[sub], n, period, warps, p, pair_k, period_k, fp, fg)
+                    new = split_at_contact(
+                        tau, h, s, d1, new, start + refs[sub], n, period, warps, p, pair_k, period_k, fp, fg
+                    )
                 # an output on a sub-step's end (to round-off) goes to the next one, which holds the
                 # pairs in mesh just after it (as the constant-speed histories)
                 edge = tau + h - 1e-9 * period
@@ -303,11 +312,16 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, n_per
                     while o < n_out and out_tau[o] < edge:
                         u = (out_tau[o] - tau) / h
                         at = _hermite(s, d1, new, d_end, h, u)
-                        terms = warped_forcing(out_tau[o], start + refs[sub], n, period, warps, p, pair_k, period_k, fp, fg)
+                        terms = warped_forcing(
+                            out_tau[o], start + refs[sub], n, period, warps, p, pair_k, period_k, fp, fg
+                        )
                         record_row(at, terms, p, history[o])
                         o += 1
                 s = new
-    return s
+    final = np.empty(6)
+    for j in range(6):
+        final[j] = s[j]
+    return final, o
 
 
 __all__ = [

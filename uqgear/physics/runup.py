@@ -34,8 +34,18 @@ from ._stepper import build_schedule
 from .batch_setup import build_batch
 from .design import Design
 from .effects import Effect
-from .integration import _LONG_NAMES, _UNITS, METHODS, _attrs, samples_from_mapping, simulate_batch, steps_per_period
-from .model import HISTORY_COLUMNS, ModelSetup, build_model
+from .integration import (
+    _LONG_NAMES,
+    _UNITS,
+    METHODS,
+    MINIMUM_STEPS,
+    _attrs,
+    _highest_mode,
+    _steps_for,
+    samples_from_mapping,
+    simulate_batch,
+)
+from .model import HISTORY_COLUMNS, ModelSetup
 from .speed_profile import RPM, SpeedProfile
 from .threads import spread
 
@@ -115,10 +125,39 @@ def _run_in(
     return np.asarray(batch["final_state"].values, dtype=float)
 
 
+#: A run-up's band of mesh periods on one grid ends where its lowest speed needs this fraction of its steps.
+BAND_SHRINK = 0.8
+#: A coast-down's band takes this factor more steps than its first period needs (its speed falls on).
+BAND_GROWTH = 1.25
+
+
+def step_bands(setup: ModelSetup, rate: np.ndarray, steps_per_mode: int) -> list[tuple[int, int, int]]:
+    """(first period, stop period, steps per period) of the bands of mesh periods that share one grid.
+
+    Each mesh period needs :func:`uqgear.physics.integration.steps_per_period`'s steps at the lower
+    of its end speeds (``rate`` = tau' at the period starts, one more than there are periods). A band
+    keeps its grid while that is enough and not more than 1 / :data:`BAND_SHRINK` times what is needed;
+    a coast-down's new band takes :data:`BAND_GROWTH` times its first period's need.
+    """
+    f_high = _highest_mode(setup.design, float(setup.parameters[K.STIFFNESS_SCALE]))
+    lowest = setup.mesh_frequency * np.minimum(rate[:-1], rate[1:])
+    needed = [_steps_for(f_high, float(f), steps_per_mode, MINIMUM_STEPS, 1) for f in lowest]
+    bands = []
+    first, steps = 0, needed[0]
+    for n in range(1, len(needed)):
+        if needed[n] > steps or needed[n] < BAND_SHRINK * steps:
+            bands.append((first, n, steps))
+            first = n
+            steps = needed[n] if needed[n] < steps else int(math.ceil(BAND_GROWTH * needed[n]))
+    bands.append((first, len(needed), steps))
+    return bands
+
+
 def _integrate_fast(
-    setup: ModelSetup, steps: int, profile: SpeedProfile, out_t: np.ndarray, state0: np.ndarray
-) -> np.ndarray:
-    """History rows at ``out_t`` by the compiled warped-time RK4 (see :mod:`uqgear.physics._runup_kernels`)."""
+    setup: ModelSetup, steps_per_mode: int, profile: SpeedProfile, out_t: np.ndarray, state0: np.ndarray
+) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """History rows at ``out_t`` by the compiled warped-time RK4 (see :mod:`uqgear.physics._runup_kernels`),
+    and the bands of steps per period it took (:func:`step_bands`)."""
     p = setup.parameters
     omega_ref = setup.pinion_rotation
     period = 2.0 * math.pi / p[K.OMEGA_MESH]
@@ -126,23 +165,15 @@ def _integrate_fast(
     n_periods = int(math.ceil(out_tau[-1] / period * (1.0 + 1e-12))) + 1
     angles = np.arange(n_periods + 1) * period * omega_ref
     warps = _clock(profile, angles, omega_ref)
-    schedule = build_schedule(p, setup.pair_stiffness, setup.period_stiffness, setup.breakpoints, steps)
+    bands = step_bands(setup, warps[1], steps_per_mode)
     history = np.empty((out_t.size, len(HISTORY_COLUMNS)))
-    R.integrate_runup(
-        np.ascontiguousarray(state0, dtype=float),
-        p,
-        setup.pair_stiffness,
-        setup.period_stiffness,
-        setup.factor_pinion,
-        setup.factor_gear,
-        schedule,
-        period,
-        n_periods,
-        warps,
-        out_tau,
-        history,
-    )
-    return history
+    state = np.ascontiguousarray(state0, dtype=float)
+    tables = (setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
+    o = 0
+    for first, stop, steps in bands:
+        schedule = build_schedule(p, setup.pair_stiffness, setup.period_stiffness, setup.breakpoints, steps)
+        state, o = R.integrate_runup(state, p, *tables, schedule, period, first, stop, warps, out_tau, o, history)
+    return history, bands
 
 
 def _integrate_scipy(
@@ -167,9 +198,11 @@ def _integrate_scipy(
 
     def clock(t: float) -> tuple[float, float, float]:
         tc = min(max(t, 0.0), profile.duration)
-        return float(profile.angle(tc)) / omega_ref, float(profile.angular_speed(tc)) / omega_ref, float(
-            profile.acceleration(tc)
-        ) / omega_ref
+        return (
+            float(profile.angle(tc)) / omega_ref,
+            float(profile.angular_speed(tc)) / omega_ref,
+            float(profile.acceleration(tc)) / omega_ref,
+        )
 
     def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
         def event(t: float, y: np.ndarray) -> float:
@@ -193,7 +226,16 @@ def _integrate_scipy(
 
             while t_a < t_b:
                 events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
-                sol = solve_ivp(fun, (t_a, t_b), state, method="DOP853", rtol=rtol, atol=atol_vector, events=events, dense_output=True)
+                sol = solve_ivp(
+                    fun,
+                    (t_a, t_b),
+                    state,
+                    method="DOP853",
+                    rtol=rtol,
+                    atol=atol_vector,
+                    events=events,
+                    dense_output=True,
+                )
                 t_end = sol.t[-1]
                 last = t_end >= profile.duration
                 for k in np.nonzero((out_t >= t_a) & ((out_t < t_end) | last & (out_t <= t_end)))[0]:
@@ -217,7 +259,11 @@ def _profile_variables(profile: SpeedProfile, out_t: np.ndarray, z1: int) -> dic
     return {
         "pinion_speed": ("time", profile.speed(out_t), {"units": "rpm", "long_name": "pinion speed n1"}),
         "pinion_angle": ("time", angle, {"units": "rad", "long_name": "pinion angle theta1 (unwrapped, 0 at t = 0)"}),
-        "mesh_phase": ("time", z1 * angle / (2.0 * math.pi), {"units": "1", "long_name": "mesh cycles z1 theta1 / 2 pi"}),
+        "mesh_phase": (
+            "time",
+            z1 * angle / (2.0 * math.pi),
+            {"units": "1", "long_name": "mesh cycles z1 theta1 / 2 pi"},
+        ),
     }
 
 
@@ -245,18 +291,6 @@ def _run_attrs(profile: SpeedProfile, sample_rate: float, steps: int, run_in: in
         "run_in_periods": -1 if run_in is None else run_in,
         "units_note": "SI units; speeds in rpm",
     }
-
-
-def _runup_steps(setup: ModelSetup, design: Design, profile: SpeedProfile, steps_per_mode: int) -> int:
-    """Grid steps per mesh period: enough at the profile's lowest speed (longest mesh period in time)."""
-    slowest = build_model(
-        setup.design,
-        profile.speed_range()[0],
-        setup.slot("T1"),
-        setup.slot("T2"),
-        mesh_stiffness_scale=setup.slot("stiffness_scale"),
-    )
-    return steps_per_period(slowest, steps_per_mode)
 
 
 def _check_method(method: str) -> None:
@@ -305,9 +339,10 @@ def simulate_runup(
     mesh_stiffness_scale, effects, damping_in_separation, stiffness, rtol, atol
         As in :func:`uqgear.simulate`.
     steps_per_mode : int
-        Fast path: RK4 steps per period of the highest natural frequency at the
-        profile's lowest speed (the step is uniform in mesh phase, so shorter in
-        time at higher speeds).
+        Fast path: RK4 steps per period of the highest natural frequency. The
+        grid is uniform in mesh phase over bands of mesh periods, each with the
+        steps its lowest speed needs (:func:`step_bands`; attrs ``band_first_period``
+        and ``band_steps``); ``steps_per_period`` in attrs is the most of them.
     initial_state : array of 6, optional
         (y1, y2, x, y1', y2', x') at t = 0 (mesh phase 0).
     run_in_periods : int
@@ -343,36 +378,47 @@ def simulate_runup(
             "mesh_stiffness_scale": [mesh_stiffness_scale],
         }
     )
-    options = dict(
-        effects=tuple(effects),
-        damping_in_separation=damping_in_separation,
-        stiffness=stiffness,
-        steps_per_mode=steps_per_mode,
-        run_in_periods=run_in_periods,
-        threads=1,
-    )
-    setup = build_batch(design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness)[0]
+    options = {
+        "effects": tuple(effects),
+        "damping_in_separation": damping_in_separation,
+        "stiffness": stiffness,
+        "steps_per_mode": steps_per_mode,
+        "run_in_periods": run_in_periods,
+        "threads": 1,
+    }
+    setup = build_batch(
+        design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
+    )[0]
     if initial_state is None:
         state0 = _run_in(design, profile, [setup], samples, options)[0]
     else:
         state0 = np.asarray(initial_state, dtype=float)
         if state0.shape != (6,) or not np.all(np.isfinite(state0)):
-            raise OperatingPointError(f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}")
+            raise OperatingPointError(
+                f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}"
+            )
     out_t = _output_times(profile, float(sample_rate))
-    steps = _runup_steps(setup, design, profile, steps_per_mode)
+    bands: list[tuple[int, int, int]] = []
     if method == "fast":
-        history = _integrate_fast(setup, steps, profile, out_t, state0)
+        history, bands = _integrate_fast(setup, steps_per_mode, profile, out_t, state0)
     else:
         history = _integrate_scipy(setup, profile, out_t, state0, rtol, atol)
+    steps = max((band[2] for band in bands), default=0)
     data = _profile_variables(profile, out_t, design.z1)
     data.update(_history_variables(history, ("time",)))
     ds = xr.Dataset(data, coords={"time": ("time", out_t, {"units": "s", "long_name": "time"})})
     ds.attrs.update(_attrs(setup, method, 0, 0, steps))
     for key in ("pinion_speed", "n_periods", "keep_periods", "mesh_frequency", "mesh_period"):
         ds.attrs.pop(key, None)
-    ds.attrs.update(_run_attrs(profile, float(sample_rate), steps, None if initial_state is not None else run_in_periods))
+    ds.attrs.update(
+        _run_attrs(profile, float(sample_rate), steps, None if initial_state is not None else run_in_periods)
+    )
     if method == "scipy":
         ds.attrs.update(rtol=rtol, solver="DOP853")
+    else:
+        ds.attrs.update(
+            band_first_period=np.array([band[0] for band in bands]), band_steps=np.array([band[2] for band in bands])
+        )
     return ds
 
 
@@ -429,49 +475,74 @@ def simulate_runup_batch(
     """
     check_speed_range(design, profile)
     if "pinion_speed" in samples.data_vars:
-        raise OperatingPointError("samples: pinion_speed is set by the speed profile; expected no pinion_speed variable")
+        raise OperatingPointError(
+            "samples: pinion_speed is set by the speed profile; expected no pinion_speed variable"
+        )
     unknown = [name for name in variables if name not in HISTORY_COLUMNS and name != "te"]
     if unknown:
         raise OperatingPointError(f"variables: expected names of {', '.join(HISTORY_COLUMNS)} or te; got {unknown}")
     n = samples.sizes.get("sample", 0)
     full = samples.assign(pinion_speed=("sample", np.full(n, profile.start_speed)))
-    setups = build_batch(design, full, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness)
-    options = dict(
-        effects=tuple(effects),
-        damping_in_separation=damping_in_separation,
-        stiffness=stiffness,
-        steps_per_mode=steps_per_mode,
-        run_in_periods=run_in_periods,
-        threads=threads,
+    setups = build_batch(
+        design, full, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
     )
+    options = {
+        "effects": tuple(effects),
+        "damping_in_separation": damping_in_separation,
+        "stiffness": stiffness,
+        "steps_per_mode": steps_per_mode,
+        "run_in_periods": run_in_periods,
+        "threads": threads,
+    }
     if initial_states is None:
         states = _run_in(design, profile, setups, full, options)
     else:
         states = np.asarray(initial_states, dtype=float)
         if states.shape != (n, 6) or not np.all(np.isfinite(states)):
-            raise OperatingPointError(f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}")
+            raise OperatingPointError(
+                f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}"
+            )
     out_t = _output_times(profile, float(sample_rate))
-    steps = np.array([_runup_steps(setup, design, profile, steps_per_mode) for setup in setups], dtype=np.int64)
+    steps = np.zeros(n, dtype=np.int64)
     history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
 
     def run_range(start: int, stop: int) -> None:
         for i in range(start, stop):
-            history[i] = _integrate_fast(setups[i], int(steps[i]), profile, out_t, states[i])
+            history[i], bands = _integrate_fast(setups[i], steps_per_mode, profile, out_t, states[i])
+            steps[i] = max(band[2] for band in bands)
 
     spread(run_range, n, threads)
     data = _profile_variables(profile, out_t, design.z1)
     everything = _history_variables(history, ("sample", "time"))
     data.update({name: everything[name] for name in variables})
-    data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "RK4 steps per mesh period"})
+    data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "most RK4 steps per mesh period"})
     coords: dict[Hashable, tuple[Any, ...]] = {"time": ("time", out_t, {"units": "s", "long_name": "time"})}
     for name in samples.data_vars:
         coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update({f"design_{key}": value for key, value in design.to_dict().items()})
     ds.attrs.update(design_name=design.name, method="fast", stiffness=stiffness, steps_per_mode=steps_per_mode)
-    ds.attrs.update(damping_in_separation=int(damping_in_separation), effects="; ".join(repr(e) for e in effects) or "none")
-    ds.attrs.update(_run_attrs(profile, float(sample_rate), int(steps.max()) if n else 0, None if initial_states is not None else run_in_periods))
+    ds.attrs.update(
+        damping_in_separation=int(damping_in_separation), effects="; ".join(repr(e) for e in effects) or "none"
+    )
+    ds.attrs.update(
+        _run_attrs(
+            profile,
+            float(sample_rate),
+            int(steps.max()) if n else 0,
+            None if initial_states is not None else run_in_periods,
+        )
+    )
     return ds
 
 
-__all__ = ["simulate_runup", "simulate_runup_batch", "check_speed_range", "RUN_IN_PERIODS", "BATCH_VARIABLES"]
+__all__ = [
+    "simulate_runup",
+    "simulate_runup_batch",
+    "check_speed_range",
+    "step_bands",
+    "RUN_IN_PERIODS",
+    "BATCH_VARIABLES",
+    "BAND_SHRINK",
+    "BAND_GROWTH",
+]

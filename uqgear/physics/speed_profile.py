@@ -137,8 +137,8 @@ class SpeedProfile:
         Examples
         --------
         >>> import uqgear
-        >>> float(uqgear.SpeedProfile.constant(2000.0, 0.1).angle(0.1))  # 2000 rpm for 0.1 s: 20.94 rad
-        20.943951023931955
+        >>> round(float(uqgear.SpeedProfile.constant(2000.0, 0.1).angle(0.1)), 9)  # 2000 rpm for 0.1 s, rad
+        20.943951024
         """
         duration = _duration(duration_s)
         return cls(np.array([0.0, duration]), np.array([[float(rpm)]]), "constant")
@@ -231,7 +231,7 @@ class SpeedProfile:
 
     @property
     def direction(self) -> str:
-        """"up" (run-up), "down" (coast-down) or "constant"."""
+        """The profile's trend: "up" (run-up), "down" (coast-down) or "constant"."""
         start, stop = self.start_speed, self.stop_speed
         return "up" if stop > start else ("down" if stop < start else "constant")
 

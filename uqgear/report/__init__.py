@@ -22,6 +22,7 @@ from .dynamics_sections import simulation_figure_png
 from .finding import Finding, headline_html
 from .findings import regime_findings, separation_findings
 from .headline import headline_findings
+from .order_map_figures import order_map_figure, order_map_figure_png
 from .sections import RENDERERS, renderer
 from .study_report import REPORT_NAME, build_report, load_results, write_report
 
@@ -30,6 +31,8 @@ __all__ = [
     "write_report",
     "load_results",
     "simulation_figure_png",
+    "order_map_figure",
+    "order_map_figure_png",
     "renderer",
     "RENDERERS",
     "regime_findings",
