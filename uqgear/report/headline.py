@@ -28,6 +28,7 @@ from .findings import SPEED, T2, Grid, _condition_text, _end, _runs, _t2_interva
 from .prediction_sections import prediction_findings
 from .presentation import display, format_value, short_name
 from .rating_sections import rating_findings
+from .runup_sections import runup_findings
 from .sections import _json_attr
 
 # ---------------------------------------------------------------------------- wording
@@ -427,6 +428,7 @@ def headline_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
         *regime_findings_headline(results),
         *coexistence_headline(results),
         *continuation_findings(results),
+        *runup_findings(results),
         *sobol_findings(results),
         *rig_findings(results),
     ]

@@ -46,7 +46,7 @@ from ..common.fileio import write_text_atomic
 from ..uq.results import load_result
 
 # imported for their renderers, which register themselves in RENDERERS
-from . import continuation_sections, dynamics_sections, rating_sections, rig_sections, uq_sections  # noqa: F401
+from . import continuation_sections, dynamics_sections, rating_sections, rig_sections, runup_sections, uq_sections  # noqa: F401
 from .finding import HEADLINE_STYLE, headline_html
 from .headline import headline_findings, headline_note
 from .page import figure_html, html_page

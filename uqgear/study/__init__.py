@@ -7,11 +7,12 @@ report, calibration, diagnosis, validation); only the command line sits above.
 
 from __future__ import annotations
 
-# registers the continuation analysis in ANALYSES
+# registers the continuation, prediction, rating and run-up analyses in ANALYSES
 from . import (
     continuation_analysis,  # noqa: F401
     prediction,  # noqa: F401
     rating_analysis,  # noqa: F401
+    runup_analysis,  # noqa: F401
 )
 from .analyses import ANALYSES, register
 from .analysis_schemas import ANALYSIS_SCHEMAS

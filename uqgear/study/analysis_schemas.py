@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..common.errors import StudyError
 from ..physics.effects import EFFECTS
-from .checkers import Checker, boolean, choice, class_range, identifier, list_of, number, string
+from .checkers import Checker, boolean, check_mapping, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
 
 #: Scalar quantities of interest of a simulation run (see uqgear.physics.integration.QOI_INFO).
@@ -69,6 +70,15 @@ def service_profile(value: Any, path: str) -> dict[str, Any]:
     from .rating_service import check_service
 
     return check_service(value, path)
+
+
+def runup_speeds(value: Any, path: str) -> dict[str, float]:
+    """Checker of a ``runup`` analysis's ``pinion_speed``: ``{start, stop}`` in rpm, two different speeds."""
+    speed = number("rpm", 0.0, None, lower_open=True)
+    speeds = check_mapping(value, path, {"start": speed, "stop": speed}, required=("start", "stop"))
+    if speeds["start"] == speeds["stop"]:
+        raise StudyError(f"{path}: expected two different speeds for start and stop; got {speeds['start']:g} rpm twice")
+    return speeds
 
 
 def _qoi_list() -> Checker:
@@ -195,6 +205,21 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "max_period": number("(longest period followed at period doublings)", 1, 64, integer=True),
         "compare_sweeps": boolean(),
     },
+    "runup": {
+        "direction": choice("up", "down", "both"),
+        # {start, stop} in rpm: the span run up and coasted down
+        "pinion_speed": runup_speeds,
+        "rate": number("rpm/s", 0.0, None, lower_open=True),
+        "parameters": _variable_list(),
+        "points": number("(values across each interval parameter)", 2, 21, integer=True),
+        "speed_bins": number("(speed bins along the ramp)", 2, 2000, integer=True),
+        "sample_rate": number("Hz", 1000.0, 500_000.0),
+        "orders": list_of(number("(pinion orders)", 0.0, None, lower_open=True), unique=True, what="a list of orders"),
+        "jump_threshold": number("(relative step of the binned peak that is a jump)", 0.0, 10.0, lower_open=True),
+        "folds": boolean(),
+        "max_period": number("(longest period followed for the folds)", 1, 16, integer=True),
+        "compare_rates": list_of(number("rpm/s", 0.0, None, lower_open=True), unique=True, what="a list of rates"),
+    },
     "rating": {
         **_INTERVAL_METHOD_KEYS,
         # material data and the other ISO 6336 inputs (uqgear.physics.rating.RatingSettings keys)
@@ -253,6 +278,18 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
         "discrepancy": False,
     },
     "diagnose": {"effects": tuple(EFFECTS), "reference": None, "pitch_classes": (6.0, 8.0)},
+    "runup": {
+        "direction": "both",
+        "rate": 100.0,
+        "points": 3,
+        "speed_bins": 40,
+        "sample_rate": 20480.0,
+        "orders": (),
+        "jump_threshold": 0.25,
+        "folds": True,
+        "max_period": 1,
+        "compare_rates": (),
+    },
     "prediction": {
         "method": "scan",
         "points": 7,

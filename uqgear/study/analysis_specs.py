@@ -232,6 +232,28 @@ def _check_simulate(spec: AnalysisSpec, path: str) -> None:
         raise StudyError(f"{path}.labels: expected one label per run ({count}); got {len(labels)}")
 
 
+def _check_runup(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter], path: str) -> None:
+    """A run-up's span (given, or the span of the study's speed sweep), single values elsewhere, intervals."""
+    options = spec.options
+    sweeps = spec.sweeps
+    if "pinion_speed" not in options:
+        raise StudyError(f"{path}.pinion_speed: missing; expected {{start, stop}} in rpm (the span of the ramp)")
+    others = [name for name in sweeps if name != "pinion_speed"]
+    if others:
+        raise StudyError(
+            f"{path}.operating_points.{others[0]}: a run-up sweeps the pinion speed along its ramp; expected a "
+            "single value (or an interval under uncertain, bounded over with parameters)"
+        )
+    for name in options["parameters"]:
+        if name not in uncertain or not uncertain[name].is_interval:
+            raise StudyError(
+                f"{path}.parameters: {name} is not an interval parameter; expected one of "
+                f"{', '.join(n for n, p in uncertain.items() if p.is_interval) or '(no intervals under uncertain)'}"
+            )
+        if name == "pinion_speed":
+            raise StudyError(f"{path}.parameters: pinion_speed is the ramp's; expected it out of parameters")
+
+
 def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, UncertainParameter], path: str) -> None:
     """The analysis's options against the study's sweeps and uncertain parameters."""
     intervals = [name for name, parameter in uncertain.items() if parameter.is_interval]
@@ -248,6 +270,8 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
             _check_rating(spec, uncertain, path)
     elif spec.type == "simulate":
         _check_simulate(spec, path)
+    elif spec.type == "runup":
+        _check_runup(spec, uncertain, path)
 
 
 def _analysis(
@@ -276,9 +300,19 @@ def _analysis(
         )
         if not options["parameters"]:
             raise StudyError(f"{path}.parameters: no uncertain parameters to propagate; define some under 'uncertain'")
+    if kind == "runup" and "parameters" not in options:
+        overridden = _operating_points(raw.get("operating_points"), f"{path}.operating_points")
+        # every interval of the study, like the interval analyses; a run-up without intervals runs one case
+        options["parameters"] = tuple(
+            name for name, parameter in uncertain.items() if name not in overridden and parameter.is_interval
+        )
     points = dict(study_points)
     points.update(_operating_points(raw.get("operating_points"), f"{path}.operating_points"))
     simulation = _simulation(raw.get("simulation"), f"{path}.simulation", study_simulation)
+    if kind == "runup" and "pinion_speed" not in options and "pinion_speed" in points and points["pinion_speed"].sweep:
+        # without a span of its own, a run-up covers the study's speed sweep
+        swept = np.asarray(points["pinion_speed"].values, dtype=float)
+        options["pinion_speed"] = {"start": float(swept.min()), "stop": float(swept.max())}
     spec = AnalysisSpec(
         index=index,
         type=kind,

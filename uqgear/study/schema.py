@@ -283,6 +283,8 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
     calibrated = _calibrated_names(calibrated, analyses, uncertain)
     check_order(analyses, calibrated, effects)
     for spec in analyses:
+        if spec.type == "runup":
+            _check_runup_span(spec, design)
         if spec.type in RIG_TYPES:
             rig = _resolve_rig(spec.options["rig"], Path(base_dir) if base_dir else None)
             if not rig.is_file():
@@ -319,6 +321,18 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
         calibrated=calibrated,
         effects=effects,
     )
+
+
+def _check_runup_span(spec: AnalysisSpec, design: Design) -> None:
+    """A run-up's span inside the design's speed range (``operation.pinion_speed_sweep``)."""
+    low, high = design.operation.pinion_speed_sweep
+    span = spec.options["pinion_speed"]
+    for key in ("start", "stop"):
+        if not low <= float(span[key]) <= high:
+            raise StudyError(
+                f"analyses[{spec.index}].pinion_speed.{key}: expected a speed in the design's range "
+                f"[{low:g}, {high:g}] rpm (operation.pinion_speed_sweep); got {float(span[key]):g}"
+            )
 
 
 def parse_study(text: str, *, path: str = "", base_dir: str | Path | None = None) -> Study:
