@@ -121,6 +121,19 @@ def order_map_figure(
     -------
     matplotlib.figure.Figure
         On an Agg canvas, outside pyplot.
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> from uqgear.dynamics import order_map
+    >>> from uqgear.report import order_map_figure
+    >>> time = np.arange(0.0, 2.0, 1.0 / 8192)
+    >>> angle = 2 * np.pi * (1000.0 * time + 250.0 * time**2) / 60.0
+    >>> run = xr.Dataset({"pinion_angle": ("time", angle), "te": ("time", np.cos(21 * angle))},
+    ...                  coords={"time": time})
+    >>> figure = order_map_figure(order_map(run, "te", [1.0, 21.0], speed_bins=3))
+    >>> figure.axes[0].get_ylabel()
+    'pinion order'
     """
     _map_variable(result)
     shown = str(result["signal"].values[0]) if signal is None else signal
