@@ -7,14 +7,8 @@ import pytest
 import xarray as xr
 
 from uqgear.common.errors import UqgearError
-from uqgear.dynamics.order_maps import (
-    OrderTrackingError,
-    angle_from_pulses,
-    angle_from_speed,
-    order_map,
-    order_spectrum,
-    resample_to_angle,
-)
+from uqgear.dynamics.angle_resampling import OrderTrackingError, angle_from_pulses, angle_from_speed, resample_to_angle
+from uqgear.dynamics.order_maps import order_map, order_spectrum
 from uqgear.dynamics.ramp_envelopes import RampError, hysteresis_ranges, jump_speeds, ramp_envelope, up_down_envelopes
 
 SAMPLE_RATE = 20480.0
@@ -256,8 +250,9 @@ def test_jumps_found_within_a_bin_and_the_hysteresis_range(up_and_down):
     both = up_down_envelopes(up, down, speed_bins=np.arange(START, STOP + 1.0, BIN_WIDTH))
     assert both["peak_mesh_force"].dims == ("direction", "pinion_speed")
     assert list(both["direction"].values) == ["up", "down"]
-    (up_jump,) = jump_speeds(both.sel(direction="up").assign_attrs(direction="up", signal="mesh_force"))
-    (down_jump,) = jump_speeds(ramp_envelope(down, speed_bins=np.arange(START, STOP + 1.0, BIN_WIDTH)))
+    (up_jump,) = jump_speeds(both.sel(direction="up"))
+    (down_jump,) = jump_speeds(both.sel(direction="down"))
+    assert jump_speeds(ramp_envelope(down, speed_bins=np.arange(START, STOP + 1.0, BIN_WIDTH))) == (down_jump,)
     assert abs(up_jump.speed - JUMP_UP_RUN) <= BIN_WIDTH and up_jump.direction == "drop"
     assert abs(down_jump.speed - JUMP_DOWN_RUN) <= BIN_WIDTH and down_jump.direction == "rise"
     np.testing.assert_allclose(up_jump.size, SMALL - LARGE, rtol=5e-3)
@@ -298,3 +293,19 @@ def test_order_map_figure_draws_map_and_envelopes(runup, up_and_down):
     assert len(envelope_axes.get_lines()) == 2 and len(figure.axes) == 3  # the map's colour bar
     with pytest.raises(UqgearError, match="signal"):
         order_map_figure(waterfall, "mesh_force")
+
+
+def test_steady_simulation_reads_as_its_frequency_spectrum():
+    """At constant speed the order map of a simulated DTE equals the FFT spectrum at the mesh orders."""
+    import uqgear
+    from uqgear.dynamics import spectrum_dataset
+
+    run = uqgear.simulate(uqgear.load_design("locomotive"), 2000.0, 7000.0, 33e3, n_periods=400, keep_periods=320)
+    time = run["time"].values
+    run = run.assign(pinion_angle=("time", 2.0 * np.pi * 2000.0 / 60.0 * (time - time[0])))
+    lines = order_map(
+        run, "x", [1.0, 2.0], order_unit="mesh", revolutions_per_block=5, overlap=0.0, speed_bins=[1990.0, 2010.0]
+    )
+    assert lines.attrs["mesh_order"] == 21 and int(lines["block_count"][0]) == 3
+    spectrum = spectrum_dataset(run, "x", against="order")["x"].sel(order=[21.0, 42.0], method="nearest")
+    np.testing.assert_allclose(lines["order_amplitude"].sel(signal="x").values[0], spectrum.values, rtol=1e-4)

@@ -8,31 +8,30 @@ with their Floquet multipliers (``shooting``, ``floquet``) and their
 continuation in a parameter with located bifurcations (``continuation``,
 ``bifurcations``, ``branches``) and the speed windows where responses can
 coexist (``windows``); rainflow counting and Miner's damage of a stress
-history on an ISO 6336 S-N curve (``fatigue``); computed order tracking and
-order maps of run-ups and coast-downs (``order_maps``), their binned
-envelopes, jumps and up/down hysteresis (``ramp_envelopes``).
+history on an ISO 6336 S-N curve (``fatigue``); computed order tracking of
+run-ups and coast-downs (``angle_resampling``), their order maps
+(``order_maps``), and their binned envelopes, jumps and up/down hysteresis
+(``ramp_envelopes``).
 
 May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 """
 
 from __future__ import annotations
 
-from .attractors import MultiStart, MultiStartSearch, StartedEvaluator, extremes_over_attractors
-from .branches import bifurcation_table
-from .continuation import Continuation, ContinuationSettings
-from .fatigue import RainflowCount, damage_rate, miner_damage, rainflow_count
-from .floquet import floquet_exponents, floquet_multipliers, is_stable, unstable_counts
-from .order_maps import (
+from .angle_resampling import (
     RESOLVABLE_FRACTION,
     RUNUP_SIGNALS,
     OrderTrackingError,
     angle_from_pulses,
     angle_from_speed,
-    order_map,
-    order_spectrum,
     resample_to_angle,
-    speed_bin_edges,
 )
+from .attractors import MultiStart, MultiStartSearch, StartedEvaluator, extremes_over_attractors
+from .branches import bifurcation_table
+from .continuation import Continuation, ContinuationSettings
+from .fatigue import RainflowCount, damage_rate, miner_damage, rainflow_count
+from .floquet import floquet_exponents, floquet_multipliers, is_stable, unstable_counts
+from .order_maps import order_map, order_spectrum, speed_bin_edges
 from .ramp_envelopes import (
     RAMP_DIRECTIONS,
     Jump,

@@ -177,6 +177,13 @@ class Jump:
         ``"rise"`` or ``"drop"``, in the run's sense of travel: a run-up
         drops off the large branch (a jump-down), a coast-down rises onto it
         (a jump-up).
+
+    Examples
+    --------
+    >>> from uqgear.dynamics.ramp_envelopes import Jump
+    >>> jump = Jump(speed=2200.0, size=-32e3, relative_size=-0.84, direction="drop")
+    >>> jump.direction, jump.speed
+    ('drop', 2200.0)
     """
 
     speed: float
@@ -195,8 +202,8 @@ def jump_speeds(envelope: xr.Dataset, variable: str | None = None, *, threshold:
     Parameters
     ----------
     envelope : xarray.Dataset
-        A :func:`ramp_envelope` result (or one ``direction`` of
-        :func:`up_down_envelopes`).
+        A :func:`ramp_envelope` result, or one ``direction`` selected from
+        :func:`up_down_envelopes` (``both.sel(direction="down")``).
     variable : str, optional
         The envelope variable; by default ``peak_<signal>`` of the envelope.
     threshold : float
@@ -228,7 +235,11 @@ def jump_speeds(envelope: xr.Dataset, variable: str | None = None, *, threshold:
     values = np.asarray(envelope[name].values, dtype=float)
     filled = np.isfinite(values)
     speeds, values = speeds[filled], values[filled]
-    if envelope.attrs.get("direction") == "down":
+    # the run's sense of travel: the envelope's attr, or the direction selected from up_down_envelopes()
+    direction = envelope.attrs.get("direction")
+    if "direction" in envelope.coords and envelope["direction"].ndim == 0:
+        direction = str(envelope["direction"].values)
+    if direction == "down":
         speeds, values = speeds[::-1], values[::-1]
     steps: list[tuple[int, float, float]] = []  # (index of the step, size, relative size)
     for i in range(values.size - 1):

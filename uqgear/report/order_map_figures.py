@@ -43,16 +43,20 @@ def _draw_order_map(ax: Axes, figure: Figure, result: xr.Dataset, signal: str, r
     level = np.where(np.isfinite(amplitude), np.maximum(level, -range_db), np.nan)
     speed_edges = np.append(result["bin_lower"].values, result["bin_upper"].values[-1])
     orders = np.asarray(result["order"].values, dtype=float)
-    discrete = name == "order_amplitude"
+    # a few irregular orders get a row each; evenly spaced ones (a study's half orders) sit on an order axis
+    steps = np.diff(orders)
+    discrete = name == "order_amplitude" and orders.size > 1 and not np.allclose(steps, steps[0])
     rows = _edges(np.arange(orders.size, dtype=float)) if discrete else _edges(orders)
     mesh = ax.pcolormesh(speed_edges, rows, np.ma.masked_invalid(level.T), cmap="magma", vmin=-range_db, vmax=0.0)
     units = str(result[name].attrs.get("units", ""))
+    if "signal_units" in result.coords:
+        units = str(result["signal_units"].sel(signal=signal).values)
     figure.colorbar(mesh, ax=ax, label=f"amplitude [dB re peak {peak:.3g} {units}]")
     unit = str(result.attrs.get("order_unit", "pinion"))
     if discrete:
         ax.set_yticks(np.arange(orders.size), [f"{order:g}" for order in orders])
-    elif unit == "pinion" and "mesh_order" in result.attrs:
-        z1 = float(result.attrs["mesh_order"])
+    elif unit == "pinion" and ("mesh_order" in result.attrs or "design_z1" in result.attrs):
+        z1 = float(result.attrs.get("mesh_order", result.attrs.get("design_z1")))
         for harmonic in np.arange(z1, orders[-1] + 1e-9, z1):
             ax.axhline(harmonic, color="white", linestyle=":", linewidth=0.6)
     ax.set_xlabel(axis_label("pinion_speed"))
@@ -121,6 +125,19 @@ def order_map_figure(
     -------
     matplotlib.figure.Figure
         On an Agg canvas, outside pyplot.
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> from uqgear.dynamics import order_map
+    >>> from uqgear.report import order_map_figure
+    >>> time = np.arange(0.0, 2.0, 1.0 / 8192)
+    >>> angle = 2 * np.pi * (1000.0 * time + 250.0 * time**2) / 60.0
+    >>> run = xr.Dataset({"pinion_angle": ("time", angle), "te": ("time", np.cos(21 * angle))},
+    ...                  coords={"time": time})
+    >>> figure = order_map_figure(order_map(run, "te", [1.0, 21.0], speed_bins=3))
+    >>> figure.axes[0].get_ylabel()
+    'pinion order'
     """
     _map_variable(result)
     shown = str(result["signal"].values[0]) if signal is None else signal
