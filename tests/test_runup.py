@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.interpolate import PchipInterpolator
 
 import uqgear
 from uqgear.physics import _runup_kernels as R
@@ -174,3 +175,17 @@ def test_batch_samples_are_single_runs(design):
     for name in ("pinion_speed", "pinion_angle", "mesh_phase", "x", "mesh_force"):
         assert "units" in batch[name].attrs
     np.testing.assert_allclose(batch["mesh_phase"], design.z1 * batch["pinion_angle"] / (2 * math.pi))
+
+
+def test_torque_driven_profile_follows_the_reflected_inertia(design):
+    """omega1' = (T1(n1) - T_w / i) / J along the profile, J = I1 + (I2 + m R_w^2) / i^2."""
+    speeds, torques = [0.0, 2000.0, 6000.0], [9000.0, 9000.0, 3000.0]
+    profile = uqgear.torque_driven_profile(design, speeds, torques, 1000.0, 40.0, wheel_torque=20e3, mass=30e3)
+    ratio = design.z2 / design.z1
+    inertia = design.I1 + (design.I2 + 30e3 * design.operation.wheel_radius**2) / ratio**2
+    t = np.array([2.0, 20.0, 38.0])
+    curve = PchipInterpolator(speeds, torques)(profile.speed(t))
+    assert profile.speed(t)[0] < 2000.0 < profile.speed(t)[-1]  # both parts of the curve
+    np.testing.assert_allclose(profile.acceleration(t), (curve - 20e3 / ratio) / inertia, rtol=1e-5)
+    with pytest.raises(SpeedProfileError, match="leaves the curve"):
+        uqgear.torque_driven_profile(design, [500.0, 3000.0], [9000.0, 9000.0], 1000.0, 60.0)
