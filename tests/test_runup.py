@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.interpolate import PchipInterpolator
 
 import uqgear
 from uqgear.physics import _runup_kernels as R
@@ -134,7 +135,7 @@ def test_slow_ramp_reproduces_steady_responses(design):
 
     The mesh mode's free response decays in a few ms, in which the speed moves a few rpm, so each
     bin of the ramp is quasi-steady: its RMS DTE and peak mesh force lie between the lowest and the
-    highest of the steady values at the bin's edges and centre, widened by 2 % of the centre's value
+    highest of the steady values at the bin's edges and centre, widened by 1 % of the centre's value
     (peaks over finite records; the ramp's bin spans a whole range of speeds).
     """
     ramp = simulate_runup(design, SpeedProfile.linear(1500.0, 2500.0, 1.0), T1, T2)
@@ -149,7 +150,7 @@ def test_slow_ramp_reproduces_steady_responses(design):
         for i, centre in enumerate(centres):
             inside = np.abs(ramp["pinion_speed"].values - centre) <= 25.0
             value = ramp["x"].values[inside].std() if quantity == "rms" else ramp["mesh_force"].values[inside].max()
-            slack = 0.02 * values[1, i]
+            slack = 0.01 * values[1, i]
             assert values[:, i].min() - slack <= value <= values[:, i].max() + slack, (quantity, centre)
 
 
@@ -174,3 +175,17 @@ def test_batch_samples_are_single_runs(design):
     for name in ("pinion_speed", "pinion_angle", "mesh_phase", "x", "mesh_force"):
         assert "units" in batch[name].attrs
     np.testing.assert_allclose(batch["mesh_phase"], design.z1 * batch["pinion_angle"] / (2 * math.pi))
+
+
+def test_torque_driven_profile_follows_the_reflected_inertia(design):
+    """omega1' = (T1(n1) - T_w / i) / J along the profile, J = I1 + (I2 + m R_w^2) / i^2."""
+    speeds, torques = [0.0, 2000.0, 6000.0], [9000.0, 9000.0, 3000.0]
+    profile = uqgear.torque_driven_profile(design, speeds, torques, 1000.0, 40.0, wheel_torque=20e3, mass=30e3)
+    ratio = design.z2 / design.z1
+    inertia = design.I1 + (design.I2 + 30e3 * design.operation.wheel_radius**2) / ratio**2
+    t = np.array([2.0, 20.0, 38.0])
+    curve = PchipInterpolator(speeds, torques)(profile.speed(t))
+    assert profile.speed(t)[0] < 2000.0 < profile.speed(t)[-1]  # both parts of the curve
+    np.testing.assert_allclose(profile.acceleration(t), (curve - 20e3 / ratio) / inertia, rtol=1e-5)
+    with pytest.raises(SpeedProfileError, match="leaves the curve"):
+        uqgear.torque_driven_profile(design, [500.0, 3000.0], [9000.0, 9000.0], 1000.0, 60.0)

@@ -50,6 +50,7 @@ _PUBLIC: dict[str, str] = {
     "simulate_runup_batch": "physics",
     "SpeedProfile": "physics",
     "SpeedProfileError": "physics",
+    "torque_driven_profile": "physics",
     "check_speed_range": "physics",
     "samples_from_mapping": "physics",
     "make_effect": "physics",

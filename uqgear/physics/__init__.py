@@ -66,7 +66,7 @@ from .model import (
 )
 from .pitch_errors import PitchErrors, draw_pitch_errors, iso1328_single_pitch_tolerance
 from .runup import RUN_IN_PERIODS, check_speed_range, simulate_runup, simulate_runup_batch
-from .speed_profile import SpeedProfile, SpeedProfileError
+from .speed_profile import SpeedProfile, SpeedProfileError, torque_driven_profile
 from .stiffness import (
     StiffnessTables,
     contact_compliance,
@@ -138,6 +138,7 @@ __all__ = [
     "draw_pitch_errors",
     "SpeedProfile",
     "SpeedProfileError",
+    "torque_driven_profile",
     "simulate_runup",
     "simulate_runup_batch",
     "check_speed_range",

@@ -1,7 +1,7 @@
 """Compiled kernels of the speed-varying (run-up, coast-down) model: the forcing at the pinion angle.
 
 The mesh-periodic forcing is evaluated at the warped time
-tau(t) = z1 theta1(t) / Omega_ref (docs/model/run-up.md): the mesh phase, the
+tau(t) = z1 theta1(t) / Omega_ref (docs/model/run-up.md section 11.1): the mesh phase, the
 pairs in contact, the Ishikawa stiffness, the STE, the run-out and the torque
 ripple follow the pinion angle, and the STE's acceleration takes the chain
 rule e'' = e_tautau tau'^2 + e_tau tau''. The adhesion oscillation keeps its

@@ -2,7 +2,7 @@
 
 The model is that of :func:`uqgear.physics.integration.simulate` with the
 mesh-periodic forcing evaluated at the pinion angle instead of a fixed mesh
-frequency (docs/model/run-up.md): at the warped time
+frequency (docs/model/run-up.md section 11.1): at the warped time
 tau(t) = z1 theta1(t) / Omega_ref, Omega_ref the mesh frequency at the
 profile's start speed. The mesh phase, the pairs in contact, the Ishikawa
 stiffness, the STE, the shaft run-out and the motor torque ripple follow the

@@ -13,11 +13,16 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline, PchipInterpolator, PPoly
 
 from ..common.errors import OperatingPointError
+
+if TYPE_CHECKING:
+    from .design import Design
 
 #: rad/s per rpm.
 RPM = 2.0 * math.pi / 60.0
@@ -322,4 +327,79 @@ def check_profile(profile: SpeedProfile) -> None:
     _check_speeds(poly(fine), fine)
 
 
-__all__ = ["SpeedProfile", "SpeedProfileError", "check_profile", "RPM", "INTERPOLATIONS"]
+def torque_driven_profile(
+    design: Design,
+    speeds_rpm: object,
+    torques_nm: object,
+    start_rpm: float,
+    duration_s: float,
+    *,
+    wheel_torque: float = 0.0,
+    mass: float | None = None,
+    resolution_s: float = 1e-3,
+) -> SpeedProfile:
+    """The pinion speed that a drive torque-speed curve gives the train: J omega1' = T1(n1) - T_w / i.
+
+    The curve T1(n1) is the PCHIP through (``speeds_rpm``, ``torques_nm``); the
+    reflected inertia on the pinion is J = I1 + (I2 + m R_w^2) / i^2 (i = z2 / z1,
+    R_w the wheel radius, m the train mass per driven axle, the design's
+    ``axle_load`` by default); ``wheel_torque`` (N m at the wheel) resists. The
+    speed is integrated (DOP853) and held as the PCHIP of its values every
+    ``resolution_s`` seconds. The speed must stay within the curve and not reverse.
+
+    Examples
+    --------
+    A flat 7000 N m curve accelerates at the constant rate T1 / J:
+
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> profile = uqgear.torque_driven_profile(design, [0.0, 6000.0], [7000.0, 7000.0], 1500.0, 2.0)
+    >>> ratio = design.z2 / design.z1
+    >>> inertia = design.I1 + (design.I2 + 23000.0 * 0.625**2) / ratio**2
+    >>> rate = 7000.0 / inertia * 60 / (2 * 3.141592653589793)            # rpm per second
+    >>> round(float(profile.stop_speed), 3) == round(1500.0 + 2.0 * rate, 3), profile.direction
+    (True, 'up')
+    """
+    speeds = _finite_array("speeds_rpm", speeds_rpm)
+    torques = _finite_array("torques_nm", torques_nm)
+    if speeds.size != torques.size or speeds.size < 2 or np.any(np.diff(speeds) <= 0.0):
+        raise SpeedProfileError("speeds_rpm, torques_nm: expected equal lengths of at least 2, speeds increasing")
+    start = float(start_rpm)
+    if not speeds[0] <= start <= speeds[-1]:
+        raise SpeedProfileError(
+            f"start_rpm: expected a speed in the curve's [{speeds[0]:g}, {speeds[-1]:g}] rpm; got {start!r}"
+        )
+    duration = _duration(duration_s)
+    curve = PchipInterpolator(speeds, torques, extrapolate=False)
+    ratio = design.z2 / design.z1
+    carried = design.operation.axle_load if mass is None else float(mass)
+    inertia = design.I1 + (design.I2 + carried * design.operation.wheel_radius**2) / ratio**2
+    resisting = float(wheel_torque) / ratio
+
+    def accelerate(t: float, w: np.ndarray) -> np.ndarray:
+        return (curve(min(max(w[0] / RPM, speeds[0]), speeds[-1])) - resisting) / inertia * np.ones(1)
+
+    def leaves(t: float, w: np.ndarray) -> float:
+        return (w[0] / RPM - speeds[0]) * (speeds[-1] - w[0] / RPM)
+
+    leaves.terminal = True  # type: ignore[attr-defined]
+    count = max(int(math.ceil(duration / float(resolution_s))), 3) + 1
+    grid = np.linspace(0.0, duration, count)
+    solution = solve_ivp(
+        accelerate,
+        (0.0, duration),
+        [start * RPM],
+        method="DOP853",
+        t_eval=grid,
+        rtol=1e-10,
+        atol=1e-9,
+        events=leaves if speeds[0] < start < speeds[-1] else None,
+    )
+    if solution.status != 0:
+        raise SpeedProfileError(
+            f"torques_nm: the speed leaves the curve's [{speeds[0]:g}, {speeds[-1]:g}] rpm at t = {solution.t[-1]:g} s"
+        )
+    return SpeedProfile.samples(grid, solution.y[0] / RPM)
+
+
+__all__ = ["SpeedProfile", "torque_driven_profile", "SpeedProfileError", "check_profile", "RPM", "INTERPOLATIONS"]
