@@ -127,3 +127,32 @@ def test_span_defaults_to_the_speed_sweep():
     assert dict(spec.options["pinion_speed"]) == {"start": 1500.0, "stop": 2500.0}
     with pytest.raises(uqgear.StudyError, match=r"analyses\[0\].pinion_speed: missing"):
         uqgear.parse_study(STUDY.replace("    pinion_speed: {start: 2000, stop: 2300}\n", ""))
+
+
+def test_ramps_jump_near_the_folds_and_nearer_as_they_slow():
+    """On wet rail the locomotive gear holds two responses between two folds of its period-1 branch; a run-up
+    leaves the lower branch at the upper fold, a coast-down the upper branch at the lower fold, late by an
+    amount that shrinks with the ramp rate (the continuation's folds are the independent reference)."""
+    design = uqgear.load_design("locomotive")
+    inputs = {"drive_torque": 7000.0, "adhesion_torque": 21.1e3}
+    table = uqgear.dynamics.Continuation("pinion_speed", 3450.0, 3800.0).fit(design, inputs).result_
+    kinds = table["bifurcation_type"].values.astype(str)
+    sweeps = table["bifurcation_sweep"].values.astype(str)
+    where = table["bifurcation_parameter"].values
+    fold = {sense: float(where[(kinds == "fold") & (sweeps == sense)][0]) for sense in ("up", "down")}
+    assert fold["down"] < fold["up"]
+    edges = np.arange(3450.0, 3800.1, 5.0)
+    samples = uqgear.samples_from_mapping({name: [value] for name, value in inputs.items()})
+    late = {}
+    for rate in (1000.0, 60.0):
+        for sense, (first, last) in (("up", (3450.0, 3800.0)), ("down", (3800.0, 3450.0))):
+            profile = uqgear.SpeedProfile.linear(first, last, rate_rpm_per_s=rate if sense == "up" else -rate)
+            run = uqgear.simulate_runup_batch(design, profile, samples, sample_rate=10240.0).isel(sample=0)
+            jumps = uqgear.jump_speeds(ramp_envelope(run, speed_bins=edges), threshold=0.15)
+            assert len(jumps) == 1, (rate, sense, jumps)
+            # how far past the fold, in the sense of travel (a jump is located to a 5 rpm bin)
+            late[rate, sense] = (jumps[0].speed - fold[sense]) * (1.0 if sense == "up" else -1.0)
+    for sense in ("up", "down"):
+        assert -5.0 <= late[60.0, sense] <= 10.0, late
+        assert late[1000.0, sense] >= late[60.0, sense] - 5.0, late
+    assert max(late[1000.0, "up"], late[1000.0, "down"]) > max(late[60.0, "up"], late[60.0, "down"]), late

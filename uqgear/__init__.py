@@ -59,6 +59,11 @@ _PUBLIC: dict[str, str] = {
     "classify_dataset": "dynamics",
     "classify_batch": "dynamics",
     "spectrum_dataset": "dynamics",
+    "order_map": "dynamics",
+    "order_spectrum": "dynamics",
+    "ramp_envelope": "dynamics",
+    "jump_speeds": "dynamics",
+    "up_down_envelopes": "dynamics",
     # uncertainty
     "ParameterSpace": "uq",
     "PosteriorDraws": "uq",
