@@ -13,6 +13,10 @@ is continued over the same span (:class:`~uqgear.dynamics.continuation.Continuat
 stands beside the fold it falls from: a run-up leaves a branch at a fold whose sweep direction is ``up``,
 a coast-down at one whose direction is ``down``, later than the fold by a distance that shrinks with the
 rate. ``compare_rates`` repeats the ramps at other rates for the jump speeds alone.
+
+A calibrated posterior (``uncertain.calibrated``) enters at its medians (:meth:`AnalysisContext.fixed_values`)
+and the diagnosed effects of ``model.effects`` at their fitted values: a ramp is one run per case, not a
+posterior-predictive band (the ``prediction`` analysis gives that at steady speeds).
 """
 
 from __future__ import annotations
@@ -139,6 +143,8 @@ def _ramp(
         samples,
         sample_rate=float(options["sample_rate"]),
         variables=tuple(dict.fromkeys([*RUNUP_SIGNALS, "contact"])),
+        # the diagnosed effects of ``model.effects`` at their fitted values
+        effects=tuple(effect.central() for effect in context.effects),
         damping_in_separation=simulation.damping_in_separation,
         stiffness=simulation.stiffness,
         steps_per_mode=simulation.steps_per_mode,
