@@ -317,7 +317,8 @@ def runup_analysis(context: AnalysisContext) -> xr.Dataset:
         for direction in _senses(context)
     ]
     began = time.perf_counter()
-    folds = _folds(context, cases, fixed) if options["folds"] else None
+    # the continuation needs a model that repeats every mesh period: the diagnosed effects do not
+    folds = _folds(context, cases, fixed) if options["folds"] and not context.effects else None
     fold_seconds = time.perf_counter() - began
     per_case = xr.concat([ramp.envelopes for ramp in ramps], dim="direction")
     per_case = per_case.assign_coords(direction=[ramp.direction for ramp in ramps])
