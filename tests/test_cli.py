@@ -137,7 +137,7 @@ def test_console_script_is_installed():
     completed = subprocess.run([script, "validate", str(SMOKE)], capture_output=True, text=True, env=ENVIRONMENT,
                                timeout=120)
     assert completed.returncode == 0
-    assert "valid study 'smoke' with 11 analyses" in completed.stdout
+    assert "valid study 'smoke' with 12 analyses" in completed.stdout
 
 
 # ---------------------------------------------------------------------------- bad input, in-process
@@ -285,7 +285,7 @@ def test_simulate_command_data_and_mistakes(tmp_path, capsys):
 
 def test_validate_command(capsys):
     assert main(["validate", str(SMOKE)]) == 0
-    assert "valid study 'smoke' with 11 analyses" in capsys.readouterr().out
+    assert "valid study 'smoke' with 12 analyses" in capsys.readouterr().out
 
 
 def test_report_command_on_a_folder_without_results(tmp_path, capsys):
