@@ -128,7 +128,7 @@ def _run_in(
 #: A run-up's band of mesh periods on one grid ends where its lowest speed needs this fraction of its steps.
 BAND_SHRINK = 0.8
 #: A coast-down's band takes this factor more steps than its first period needs (its speed falls on).
-BAND_GROWTH = 1.25
+BAND_GROWTH = 1.2
 
 
 def step_bands(setup: ModelSetup, rate: np.ndarray, steps_per_mode: int) -> list[tuple[int, int, int]]:
