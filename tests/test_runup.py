@@ -204,3 +204,20 @@ def test_step_bands_give_every_period_the_steps_its_speed_needs(design, start, s
             slowest = uqgear.build_model(design, start * min(rate[n], rate[n + 1]), T1, T2)
             needed = uqgear.physics.steps_per_period(slowest)
             assert needed <= steps <= math.ceil(needed / BAND_SHRINK) + 1
+
+
+def test_fast_path_agrees_with_the_scipy_reference_with_every_effect(design):
+    """Run-out with stiffness modulation, torque ripple, adhesion oscillation, friction, a damaged tooth."""
+    effects = [
+        uqgear.make_effect("eccentricity", {"amplitude": 15e-6, "kappa": 0.05}),
+        uqgear.make_effect("torque_ripple", {"amplitude": 0.05}),
+        uqgear.make_effect("adhesion_oscillation", {"amplitude": 0.1, "frequency": 40.0}),
+        uqgear.make_effect("friction", {"coefficient": 0.06}),
+        uqgear.make_effect("tooth_damage", {"tooth": 3, "depth": 0.3}),
+    ]
+    ramp = SpeedProfile.linear(1800.0, 2400.0, 0.03)
+    fast = simulate_runup(design, ramp, T1, T2, run_in_periods=100, effects=effects)
+    start = np.array([fast[name].values[0] for name in STATE])
+    reference = simulate_runup(design, ramp, T1, T2, method="scipy", initial_state=start, rtol=1e-8, effects=effects)
+    assert relative_rms(fast["x"].values, reference["x"].values) < 1e-3
+    assert relative_rms(fast["mesh_force"].values, reference["mesh_force"].values) < 1e-3
