@@ -10,7 +10,7 @@ from scipy.interpolate import PchipInterpolator
 
 import uqgear
 from uqgear.physics import _runup_kernels as R
-from uqgear.physics.runup import simulate_runup, simulate_runup_batch
+from uqgear.physics.runup import BAND_SHRINK, simulate_runup, simulate_runup_batch, step_bands
 from uqgear.physics.speed_profile import RPM, SpeedProfile, SpeedProfileError
 
 T1 = 7000.0
@@ -119,12 +119,13 @@ def test_constant_profile_is_simulate(design):
     np.testing.assert_array_equal(run["contact"].values, steady["contact"].values[: run.sizes["time"]])
 
 
-def test_fast_path_agrees_with_the_scipy_reference_on_a_run_up(design):
-    """Relative RMS of the DTE difference (over the DTE's own RMS fluctuation) below 1e-3."""
-    ramp = SpeedProfile.linear(1500.0, 2500.0, 0.05)
+@pytest.mark.parametrize(("start", "stop"), [(1500.0, 2500.0), (2500.0, 1500.0)])
+def test_fast_path_agrees_with_the_scipy_reference_on_a_run_up(design, start, stop):
+    """Relative RMS of the DTE difference (over the DTE's own RMS fluctuation) below 1e-3, up and down."""
+    ramp = SpeedProfile.linear(start, stop, 0.05)
     fast = simulate_runup(design, ramp, T1, T2, run_in_periods=100)
     start = np.array([fast[name].values[0] for name in STATE])
-    reference = simulate_runup(design, ramp, T1, T2, method="scipy", initial_state=start, rtol=1e-9)
+    reference = simulate_runup(design, ramp, T1, T2, method="scipy", initial_state=start, rtol=1e-8)
     assert relative_rms(fast["x"].values, reference["x"].values) < 1e-3
     assert relative_rms(fast["mesh_force"].values, reference["mesh_force"].values) < 1e-3
     np.testing.assert_array_equal(fast["contact"].values, reference["contact"].values)
@@ -189,3 +190,34 @@ def test_torque_driven_profile_follows_the_reflected_inertia(design):
     np.testing.assert_allclose(profile.acceleration(t), (curve - 20e3 / ratio) / inertia, rtol=1e-5)
     with pytest.raises(SpeedProfileError, match="leaves the curve"):
         uqgear.torque_driven_profile(design, [500.0, 3000.0], [9000.0, 9000.0], 1000.0, 60.0)
+
+
+@pytest.mark.parametrize(("start", "stop"), [(500.0, 6000.0), (6000.0, 500.0)])
+def test_step_bands_give_every_period_the_steps_its_speed_needs(design, start, stop):
+    setup = uqgear.build_model(design, start, T1, T2)
+    rate = np.linspace(1.0, stop / start, 2001)  # tau' at the period starts of a ramp
+    bands = step_bands(setup, rate, 24)
+    assert bands[0][0] == 0 and bands[-1][1] == rate.size - 1
+    assert all(a[1] == b[0] for a, b in zip(bands[:-1], bands[1:]))
+    for first, stop_period, steps in bands:
+        for n in range(first, stop_period):
+            slowest = uqgear.build_model(design, start * min(rate[n], rate[n + 1]), T1, T2)
+            needed = uqgear.physics.steps_per_period(slowest)
+            assert needed <= steps <= math.ceil(needed / BAND_SHRINK) + 1
+
+
+def test_fast_path_agrees_with_the_scipy_reference_with_every_effect(design):
+    """Run-out with stiffness modulation, torque ripple, adhesion oscillation, friction, a damaged tooth."""
+    effects = [
+        uqgear.make_effect("eccentricity", {"amplitude": 15e-6, "kappa": 0.05}),
+        uqgear.make_effect("torque_ripple", {"amplitude": 0.05}),
+        uqgear.make_effect("adhesion_oscillation", {"amplitude": 0.1, "frequency": 40.0}),
+        uqgear.make_effect("friction", {"coefficient": 0.06}),
+        uqgear.make_effect("tooth_damage", {"tooth": 3, "depth": 0.3}),
+    ]
+    ramp = SpeedProfile.linear(1800.0, 2400.0, 0.03)
+    fast = simulate_runup(design, ramp, T1, T2, run_in_periods=100, effects=effects)
+    start = np.array([fast[name].values[0] for name in STATE])
+    reference = simulate_runup(design, ramp, T1, T2, method="scipy", initial_state=start, rtol=1e-8, effects=effects)
+    assert relative_rms(fast["x"].values, reference["x"].values) < 1e-3
+    assert relative_rms(fast["mesh_force"].values, reference["mesh_force"].values) < 1e-3

@@ -106,9 +106,7 @@ def _output_times(profile: SpeedProfile, sample_rate: float) -> np.ndarray:
     return np.arange(int(math.floor(profile.duration * sample_rate + 1e-9)) + 1) / sample_rate
 
 
-def _run_in(
-    design: Design, profile: SpeedProfile, setups: Sequence[ModelSetup], samples: xr.Dataset, options: dict
-) -> np.ndarray:
+def _run_in(design: Design, samples: xr.Dataset, options: dict) -> np.ndarray:
     """Each sample's state after ``run_in_periods`` mesh periods at the start speed (mesh phase 0)."""
     batch = simulate_batch(
         design,
@@ -128,7 +126,7 @@ def _run_in(
 #: A run-up's band of mesh periods on one grid ends where its lowest speed needs this fraction of its steps.
 BAND_SHRINK = 0.8
 #: A coast-down's band takes this factor more steps than its first period needs (its speed falls on).
-BAND_GROWTH = 1.25
+BAND_GROWTH = 1.2
 
 
 def step_bands(setup: ModelSetup, rate: np.ndarray, steps_per_mode: int) -> list[tuple[int, int, int]]:
@@ -390,7 +388,7 @@ def simulate_runup(
         design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
     )[0]
     if initial_state is None:
-        state0 = _run_in(design, profile, [setup], samples, options)[0]
+        state0 = _run_in(design, samples, options)[0]
     else:
         state0 = np.asarray(initial_state, dtype=float)
         if state0.shape != (6,) or not np.all(np.isfinite(state0)):
@@ -495,7 +493,7 @@ def simulate_runup_batch(
         "threads": threads,
     }
     if initial_states is None:
-        states = _run_in(design, profile, setups, full, options)
+        states = _run_in(design, full, options)
     else:
         states = np.asarray(initial_states, dtype=float)
         if states.shape != (n, 6) or not np.all(np.isfinite(states)):
