@@ -56,7 +56,7 @@ def _draw_order_map(ax: Axes, figure: Figure, result: xr.Dataset, signal: str, r
     if discrete:
         ax.set_yticks(np.arange(orders.size), [f"{order:g}" for order in orders])
     elif unit == "pinion" and ("mesh_order" in result.attrs or "design_z1" in result.attrs):
-        z1 = float(result.attrs.get("mesh_order", result.attrs.get("design_z1")))
+        z1 = float(result.attrs["mesh_order"] if "mesh_order" in result.attrs else result.attrs["design_z1"])
         for harmonic in np.arange(z1, orders[-1] + 1e-9, z1):
             ax.axhline(harmonic, color="white", linestyle=":", linewidth=0.6)
     ax.set_xlabel(axis_label("pinion_speed"))
