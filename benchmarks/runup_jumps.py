@@ -50,7 +50,7 @@ def main() -> None:
                 began = time.perf_counter()
                 profile = uqgear.SpeedProfile.linear(first, last, rate_rpm_per_s=rate if sense == "up" else -rate)
                 run = uqgear.simulate_runup_batch(design, profile, samples, sample_rate=10240.0).isel(sample=0)
-                jumps = jump_speeds(ramp_envelope(run, speed_bins=edges), threshold=0.15)
+                jumps = jump_speeds(ramp_envelope(run, speed_bins=edges), threshold=0.15, persistence=3)
                 seconds = time.perf_counter() - began
                 speeds = [jump.speed for jump in jumps]
                 past = [

@@ -309,3 +309,21 @@ def test_steady_simulation_reads_as_its_frequency_spectrum():
     assert lines.attrs["mesh_order"] == 21 and int(lines["block_count"][0]) == 3
     spectrum = spectrum_dataset(run, "x", against="order")["x"].sel(order=[21.0, 42.0], method="nearest")
     np.testing.assert_allclose(lines["order_amplitude"].sel(signal="x").values[0], spectrum.values, rtol=1e-4)
+
+
+def test_a_jump_must_hold_its_level_with_persistence():
+    # a scattered trace (every other bin 1.4x) against a real step from 1.0 to 2.0 at 1450 rpm
+    speeds = np.arange(1000.0, 2000.0, 50.0)
+    scattered = np.where(np.arange(speeds.size) % 2 == 0, 1.0, 1.4)
+    step = np.where(speeds < 1450.0, 1.0, 2.0) * (1.0 + 0.05 * (np.arange(speeds.size) % 2))
+    for values, expected in ((scattered, []), (step, [1425.0])):
+        envelope = xr.Dataset(
+            {"peak_mesh_force": ("pinion_speed", values)},
+            coords={"pinion_speed": speeds},
+            attrs={"direction": "up", "signal": "mesh_force"},
+        )
+        assert [jump.speed for jump in jump_speeds(envelope, threshold=0.25, persistence=3)] == expected
+    # without persistence every scattered step reads as a jump
+    assert len(jump_speeds(envelope.assign(peak_mesh_force=("pinion_speed", scattered)), threshold=0.25)) > 5
+    with pytest.raises(RampError, match="persistence: expected an integer >= 1"):
+        jump_speeds(envelope, persistence=0)

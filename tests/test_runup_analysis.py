@@ -148,7 +148,7 @@ def test_ramps_jump_near_the_folds_and_nearer_as_they_slow():
         for sense, (first, last) in (("up", (3450.0, 3800.0)), ("down", (3800.0, 3450.0))):
             profile = uqgear.SpeedProfile.linear(first, last, rate_rpm_per_s=rate if sense == "up" else -rate)
             run = uqgear.simulate_runup_batch(design, profile, samples, sample_rate=10240.0).isel(sample=0)
-            jumps = uqgear.jump_speeds(ramp_envelope(run, speed_bins=edges), threshold=0.15)
+            jumps = uqgear.jump_speeds(ramp_envelope(run, speed_bins=edges), threshold=0.15, persistence=3)
             assert len(jumps) == 1, (rate, sense, jumps)
             # how far past the fold, in the sense of travel (a jump is located to a 5 rpm bin)
             late[rate, sense] = (jumps[0].speed - fold[sense]) * (1.0 if sense == "up" else -1.0)

@@ -192,7 +192,21 @@ class Jump:
     direction: str
 
 
-def jump_speeds(envelope: xr.Dataset, variable: str | None = None, *, threshold: float = 0.25) -> tuple[Jump, ...]:
+def _holds(values: np.ndarray, before: int, after: int, width: int, threshold: float, sense: float) -> bool:
+    """Whether ``width`` bins up to ``before`` and from ``after`` lie apart, in the step's sense, with medians that
+    differ by the threshold."""
+    ahead = values[max(before - width + 1, 0) : before + 1]
+    behind = values[after : after + width]
+    low, high = float(np.median(ahead)), float(np.median(behind))
+    base = min(abs(low), abs(high))
+    change = high - low
+    apart = behind.min() > ahead.max() if sense > 0 else behind.max() < ahead.min()
+    return bool(apart and np.sign(change) == np.sign(sense) and (base == 0.0 or abs(change) / base > threshold))
+
+
+def jump_speeds(
+    envelope: xr.Dataset, variable: str | None = None, *, threshold: float = 0.25, persistence: int = 1
+) -> tuple[Jump, ...]:
     """Speeds where a binned envelope jumps: relative steps above ``threshold`` between neighbouring bins.
 
     Empty bins (NaN) are skipped: the step is then taken between the nearest
@@ -209,6 +223,13 @@ def jump_speeds(envelope: xr.Dataset, variable: str | None = None, *, threshold:
     threshold : float
         Smallest relative step ``|b - a| / min(|a|, |b|)`` that is a jump
         (0.25: the high side at least 1.25 times the low).
+    persistence : int
+        Bins on each side that must lie apart (every bin after the step
+        beyond every bin before it, in the step's sense) with medians that
+        differ by the threshold too: a jump leads to a level that holds,
+        where a scattered response (chaotic, or bins holding a few mesh
+        periods) steps back and forth. 1 takes the bins next to the step
+        alone.
 
     Returns
     -------
@@ -226,6 +247,8 @@ def jump_speeds(envelope: xr.Dataset, variable: str | None = None, *, threshold:
     (Jump(speed=1150.0, size=-38.0, relative_size=-0.7307692307692307, direction='drop'),)
     """
     threshold = _check_positive("threshold", threshold)
+    if isinstance(persistence, bool) or not isinstance(persistence, (int, np.integer)) or persistence < 1:
+        raise RampError(f"persistence: expected an integer >= 1 (bins); got {persistence!r}")
     name = variable if variable is not None else f"peak_{envelope.attrs.get('signal', 'mesh_force')}"
     if not isinstance(envelope, xr.Dataset) or name not in envelope.data_vars:
         raise RampError(f"variable: expected an envelope Dataset holding {name!r}")
@@ -253,6 +276,9 @@ def jump_speeds(envelope: xr.Dataset, variable: str | None = None, *, threshold:
     for step in [*steps, None]:
         if group and (step is None or step[0] != group[-1][0] + 1 or np.sign(step[1]) != np.sign(group[-1][1])):
             i, _, _ = max(group, key=lambda item: abs(item[1]))
+            if not _holds(values, group[0][0], group[-1][0] + 1, persistence, threshold, group[0][1]):
+                group = [] if step is None else [step]
+                continue
             size = float(values[group[-1][0] + 1] - values[group[0][0]])
             low = min(abs(values[group[0][0]]), abs(values[group[-1][0] + 1]))
             jumps.append(

@@ -95,7 +95,7 @@ def _peak_finding(ds: xr.Dataset) -> Finding:
 def _jump_finding(ds: xr.Dataset) -> Finding | None:
     if "jump_speed" not in ds:
         return None
-    width = float(np.nanmax(ds["bin_upper"].values - ds["bin_lower"].values))
+    width = float(ds.attrs.get("jump_bin", np.nanmax(ds["bin_upper"].values - ds["bin_lower"].values)))
     parts: list[str] = []
     facts: dict[str, Any] = {"bin_width": width}
     for direction in ds["direction"].values:
@@ -116,7 +116,7 @@ def _jump_finding(ds: xr.Dataset) -> Finding | None:
         text += f"; continuation's folds at {', '.join(folds) or 'none in the span'}"
         if np.isfinite(distance).any():
             facts["largest_distance"] = float(np.nanmax(distance))
-            text += f", the jumps within {facts['largest_distance']:.0f} rpm of them (bins {width:.0f} rpm wide)"
+            text += f", the jumps within {facts['largest_distance']:.0f} rpm of them (located to {width:.0f} rpm)"
     return Finding(text, facts, "runup")
 
 

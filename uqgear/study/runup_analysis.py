@@ -8,8 +8,9 @@ is binned along the ramp (:func:`~uqgear.dynamics.ramp_envelopes.ramp_envelope`)
 the contact fractions per speed bin, whose bounds over the interval nodes give ``peak_mesh_force`` on
 (``bound``, ``direction``, ``pinion_speed``); its order content by computed order tracking
 (:func:`~uqgear.dynamics.order_maps.order_map`); and the speeds where its envelope jumps
-(:func:`~uqgear.dynamics.ramp_envelopes.jump_speeds`). With ``folds`` the period-1 branch of each case
-is continued over the same span (:class:`~uqgear.dynamics.continuation.Continuation`), so that each jump
+(:func:`~uqgear.dynamics.ramp_envelopes.jump_speeds` on bins of ``jump_bin`` rpm, finer than the
+envelope's, the new level holding over three bins on each side). With ``folds`` the period-1 branch of
+each case is continued over the same span (:class:`~uqgear.dynamics.continuation.Continuation`), so that each jump
 stands beside the fold it falls from: a run-up leaves a branch at a fold whose sweep direction is ``up``,
 a coast-down at one whose direction is ``down``, later than the fold by a distance that shrinks with the
 rate. ``compare_rates`` repeats the ramps at other rates for the jump speeds alone.
@@ -97,6 +98,43 @@ def _orders(options: Mapping[str, Any], z1: int) -> np.ndarray:
     return np.arange(0.5, 3.0 * z1 + 0.25, 0.5)
 
 
+#: Mesh periods a jump bin holds at least, at the span's lowest speed: the peak over fewer scatters.
+JUMP_BIN_PERIODS = 20
+#: Bins on each side of a jump whose medians must differ by the threshold (the new level holds).
+JUMP_PERSISTENCE = 3
+
+
+def jump_bin(options: Mapping[str, Any], z1: int, rate: float) -> float:
+    """Width of the jump bins, rpm: ``jump_bin``, or at least :data:`JUMP_BIN_PERIODS` mesh periods at the lowest
+    speed and at least 5 rpm.
+
+    Examples
+    --------
+    >>> from uqgear.study.runup_analysis import jump_bin
+    >>> span = {"pinion_speed": {"start": 3500.0, "stop": 4300.0}, "jump_bin": None}
+    >>> round(jump_bin(span, 21, 2000.0), 1), jump_bin(span, 21, 100.0)
+    (32.7, 5.0)
+    """
+    if options.get("jump_bin") is not None:
+        return float(options["jump_bin"])
+    low = ramp_speeds(options, "up")[0]
+    return max(5.0, rate * JUMP_BIN_PERIODS / (z1 * low / 60.0))
+
+
+def jump_edges(edges: np.ndarray, width: float) -> np.ndarray:
+    """Bin edges about ``width`` rpm apart over the span of ``edges`` (never coarser than ``edges``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from uqgear.study.runup_analysis import jump_edges
+    >>> jump_edges(np.array([3400.0, 3500.0, 3600.0]), 40.0).tolist()
+    [3400.0, 3440.0, 3480.0, 3520.0, 3560.0, 3600.0]
+    """
+    count = max(int(np.ceil((edges[-1] - edges[0]) / width)), edges.size - 1)
+    return np.linspace(float(edges[0]), float(edges[-1]), count + 1)
+
+
 def block_revolutions(edges: np.ndarray, rate: float, longest: int = 8) -> int:
     """Pinion revolutions per order-tracking block: at most ``longest``, and short enough that a block at the
     lowest speed spans at most one speed bin (a longer block would leave bins without a block of their own).
@@ -156,7 +194,13 @@ def _ramp(
         run = runs.isel(sample=index)
         envelope = ramp_envelope(run, speed_bins=edges)
         envelopes.append(envelope[[name for name in ENVELOPE_VARIABLES if name in envelope]])
-        jumps.append(jump_speeds(envelope, "peak_mesh_force", threshold=float(options["jump_threshold"])))
+        # jumps on bins finer than the envelope's, a jump is located to one of them
+        fine = ramp_envelope(run, speed_bins=jump_edges(edges, jump_bin(options, context.design.z1, rate)))
+        jumps.append(
+            jump_speeds(
+                fine, "peak_mesh_force", threshold=float(options["jump_threshold"]), persistence=JUMP_PERSISTENCE
+            )
+        )
         if map_orders:
             blocks = block_revolutions(edges, rate)
             mapped = order_map(
@@ -349,6 +393,7 @@ def runup_analysis(context: AnalysisContext) -> xr.Dataset:
         speed_stop=high,
         sample_rate=float(options["sample_rate"]),
         jump_threshold=float(options["jump_threshold"]),
+        jump_bin=float(np.diff(jump_edges(edges, jump_bin(options, context.design.z1, float(options["rate"]))))[0]),
         runup_seconds=float(sum(ramp.seconds for ramp in ramps)),
         fold_seconds=float(fold_seconds),
         model_runs=len(cases) * len(ramps) * len({float(options["rate"]), *map(float, options["compare_rates"])}),
