@@ -187,17 +187,17 @@ class _StandIns:
         self.screened: list[str] = []
         self.full: list[str] = []
         self.bases: list[tuple[str, ...]] = []
-        # the screening fits on top of a base run through screening's, the full fit through selection's
+        # the fits on top of a base run through screening's, the full fit scored through selection's
+        monkeypatch.setattr(screening, "fit_candidate", self.fit_candidate)
+        monkeypatch.setattr(screening, "leave_one_out", lambda result: result.held)
         for module in (selection, screening):
-            monkeypatch.setattr(module, "fit_candidate", self.fit_candidate)
-            monkeypatch.setattr(module, "leave_one_out", lambda result: result.held)
-        monkeypatch.setattr(selection, "score_candidate", self.score_candidate)
+            monkeypatch.setattr(module, "score_candidate", self.score_candidate)
         monkeypatch.setattr(selection, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
         # no pitch-error allowance on these stand-ins: a full fit is scored as fitted
-        monkeypatch.setattr(selection, "with_own_allowance", lambda result, **_: result)
+        monkeypatch.setattr(screening, "with_own_allowance", lambda result, **_: result)
         monkeypatch.setattr(selection, "bootstrap_gap", lambda z, rng, *_: (0.0, 1.0))
 
-    def fit_candidate(self, case, candidate, base, *, full, max_evaluations, start=None):
+    def fit_candidate(self, case, candidate, base, *, full, max_evaluations, start=None, earlier=None):
         (self.full if full else self.screened).append(candidate.label)
         self.bases.append(tuple(c.label for c in base.problem.candidates))
         values = {spec.name: 1.0 for spec in candidate.fitted}
@@ -344,11 +344,11 @@ class _ExtraFits:
         self.screened = [replace(_score(label.split("[")[0], label, score, 3.3, shrink, low=low,
                                          candidate=_variant(design, label)), stage="screening")
                          for label, (score, shrink, low) in table.items()]
-        monkeypatch.setattr(screening, "screen", lambda state: list(self.screened))
+        monkeypatch.setattr(screening, "screen", lambda state, *base: list(self.screened))
         monkeypatch.setattr(screening, "fits_in_full",
                             lambda state, entries: [replace(entry, stage="full") for entry in entries])
         monkeypatch.setattr(screening, "side_by_side", lambda case, jobs: [job() for job in jobs])
-        monkeypatch.setattr(screening, "full_fit", lambda state, entry: entry)
+        monkeypatch.setattr(screening, "full_fit", lambda state, entry, *base: entry)
         monkeypatch.setattr(screening, "scored_in_full", self.scored_in_full)
         # switching a full fit's effect off costs 50 more than its fit (cost 0)
         monkeypatch.setattr(screening, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))

@@ -6,7 +6,8 @@ attributes); :func:`diagnose` fits one and writes its folder. The modules
 along its steps:
 
 - the estimator and its inputs: :mod:`.estimator`, :mod:`.inputs`,
-  :mod:`.settings` (every threshold and budget), :mod:`.writer`;
+  :mod:`.settings` (every threshold and budget), :mod:`.writer`; what a
+  fitted estimator holds, set in one place: :mod:`.fitted`;
 - step 1, features: :mod:`.case` (a prepared campaign), :mod:`.simulation`
   (model records and the rig's feature processing), :mod:`.execution`
   (runs on worker processes);
@@ -20,6 +21,8 @@ along its steps:
 - the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`; the named
   effects read back as model inputs: :mod:`.named_effects`;
 - the effect families as plug-ins: :mod:`.effects`;
+- against a healthy reference, what changed since it (:class:`ChangeDiagnosis`,
+  the differential route :class:`Diagnosis` takes by default): :mod:`.change`;
 - what a campaign holds that is no effect (line interference, a healthy
   reference, the gears' pitch errors, the sideband phase test): :mod:`.allowances`.
 
@@ -29,6 +32,7 @@ May import :mod:`uqgear.common`, :mod:`uqgear.physics`, :mod:`uqgear.uq`,
 
 from __future__ import annotations
 
+from .change import ChangeDiagnosis
 from .decision import Decision
 from .effects import EffectFamily, effect_family, effect_names, register_effect, unregister_effect
 from .errors import DiagnosisError
@@ -43,6 +47,7 @@ from .writer import diagnose, write_diagnosis
 
 __all__ = [
     "Diagnosis",
+    "ChangeDiagnosis",
     "DiagnosisSettings",
     "DiagnosisSeeds",
     "named_effects",

@@ -14,6 +14,7 @@ import xarray as xr
 from ..rig.features import FEATURE_FAMILIES
 from .allowances.interference import amplitude_spectrum
 from .case import RigCase
+from .decision import Decision
 from .execution import simulate_task
 from .gap_maps import line_signal_to_noise
 from .result import DiagnosisResult
@@ -314,8 +315,12 @@ def _coordinates(case: RigCase, scores: Sequence[CandidateScore]) -> dict[str, A
     }
 
 
-def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> xr.Dataset:
-    """The Dataset of ``diagnosis.nc`` for data that cannot decide: the rig's features and their signal-to-noise."""
+def unfitted_dataset(case: RigCase, decision: Decision, effects: Sequence[str]) -> xr.Dataset:
+    """The Dataset of ``diagnosis.nc`` where no model was fitted: the rig's features and their signal-to-noise.
+
+    Data that cannot decide, or a differential diagnosis (which adds its
+    change test); ``verdict`` and ``reason`` are the decision's.
+    """
     layout = case.layout
     dims = ("op", "channel", "feature")
     data = {
@@ -339,8 +344,8 @@ def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> 
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         title="uqgear sim-to-real gap diagnosis",
-        verdict="inconclusive",
-        reason=reason,
+        verdict=decision.verdict,
+        reason=decision.reason,
         gap_metric=GAP_METRIC,
         model_error=json.dumps(case.model_error),
         effects_considered=json.dumps(list(effects)),
@@ -348,4 +353,4 @@ def inconclusive_dataset(case: RigCase, reason: str, effects: Sequence[str]) -> 
     return ds
 
 
-__all__ = ["held_spectra", "result_dataset", "inconclusive_dataset"]
+__all__ = ["held_spectra", "result_dataset", "unfitted_dataset"]

@@ -10,7 +10,6 @@ predictive distribution: :mod:`.discrepancy`; fits: :mod:`.nominal`,
 from __future__ import annotations
 
 import os
-import resource
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -23,34 +22,33 @@ from ..physics.design import Design
 from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
 from .allowances.reference import attach_reference, learn_reference
 from .case import RigCase, prepare_case
-from .change.conclude import conclude_change
+from .change.estimator import ChangeDiagnosis
 from .change.options import check_reference_options, is_differential
-from .change.route import ChangeOutcome
-from .dataset import held_spectra, inconclusive_dataset, result_dataset
+from .dataset import held_spectra, result_dataset, unfitted_dataset
 from .decision import Decision
-from .effect_set import SelectedEffect
 from .effects import check_effects
-from .errors import DiagnosisError
 from .execution import RunExecutor
 from .first_effect import FirstDecision, decide_first
-from .fitting import FitResult
+from .fitted import DiagnosisFit, FittedState, cpu_seconds, total_timings
 from .gap_maps import family_character, uninformative_reason, where_gap
-from .inputs import DiagnosisInputs, DiagnosisSeeds, ReferenceInput, as_seed, check_workers, read_inputs, resolve_design
+from .inputs import (
+    DiagnosisInputs,
+    DiagnosisSeeds,
+    ReferenceInput,
+    check_settings,
+    check_workers,
+    read_inputs,
+    resolve_design,
+    split_seed,
+)
 from .nominal import NominalPasses, allow_pitch_errors, fit_nominal_model, fit_waiting, score_against_nominal
-from .outputs import inconclusive_summary, json_clean, summary
+from .outputs import completed, json_clean, summary
 from .result import DiagnosisResult
 from .scoring import CandidateScore, capped_squares
 from .selection import NamedSet, effect_set, with_phase_named_shaft
-from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+from .settings import DiagnosisSettings
 from .signatures import frequency_locked_lines, signature_hints
 from .state import DiagnosisState
-
-
-def _cpu_seconds() -> float:
-    """CPU time of this process and of its finished worker processes, s."""
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def _worst_runs(outcome: DiagnosisResult) -> list[int]:
@@ -58,22 +56,6 @@ def _worst_runs(outcome: DiagnosisResult) -> list[int]:
     z = outcome.nominal_held.z
     worst = np.argsort([-np.nansum(capped_squares(z[op])) for op in range(outcome.case.n_op)])
     return sorted(int(op) for op in worst[:2])
-
-
-def _completed(
-    content: dict[str, Any], maps: xr.Dataset, reference_summary: dict[str, Any] | None, design: Design
-) -> dict[str, Any]:
-    """The record with a reference's summary (and its fit's time) and what the model did with the design."""
-    from ..physics.geometry import geometry_notes
-
-    if reference_summary is not None:
-        content["reference"] = json_clean(reference_summary)
-        maps.attrs["reference"] = str(reference_summary["file"])
-        if isinstance(content.get("timing_s"), dict):
-            content["timing_s"]["reference_fit"] = reference_summary["seconds"]
-    # what the model did with the design's geometry (an undercut tooth)
-    content["design_notes"] = geometry_notes(design)
-    return content
 
 
 def _outcome(
@@ -125,16 +107,6 @@ def _outcome(
         pitch_errors=allowance,
         modulation=named.modulation,
         settings=settings,
-    )
-
-
-def _timings(timings: dict[str, float], started: float, cpu_started: float, workers: int) -> dict[str, float]:
-    """The stages' seconds with the whole diagnosis's wall and CPU time and the worker count."""
-    return dict(
-        timings,
-        total_wall=time.perf_counter() - started,
-        total_cpu=_cpu_seconds() - cpu_started,
-        workers=float(workers),
     )
 
 
@@ -195,7 +167,7 @@ def _cannot_decide(case: RigCase, settings: DiagnosisSettings, steps: StepLog) -
     return reason
 
 
-class Diagnosis:
+class Diagnosis(FittedState):
     """Sim-to-real gap diagnosis of a rig campaign: where model and rig disagree, which effect explains it.
 
     Parameters
@@ -245,6 +217,8 @@ class Diagnosis:
         The campaign the verdict was reached on (with the pitch-error allowance where it applies).
     design_, steps_ : Design, StepLog
         The nominal design; the finished steps with what they found (kept by a failure).
+    fitted_ : DiagnosisFit
+        Everything above in one frozen record (:mod:`.fitted`).
 
     Examples
     --------
@@ -253,10 +227,6 @@ class Diagnosis:
     >>> uqgear.Diagnosis(effects=["eccentricity"], workers=1).fit(rig).decision_.verdict
     'eccentricity'
     """
-
-    outcome_: DiagnosisResult | None
-    nominal_: FitResult | None
-    change_: ChangeOutcome | None = None
 
     def __init__(
         self,
@@ -271,15 +241,9 @@ class Diagnosis:
         reference_route: str = "change", reference_gears: str = "same",
     ) -> None:
         self.effects = check_effects(effects)
-        if settings is not None and not isinstance(settings, DiagnosisSettings):
-            raise DiagnosisError(f"settings: expected a DiagnosisSettings; got {type(settings).__name__}")
-        self.settings = DEFAULT_SETTINGS if settings is None else settings
+        self.settings = check_settings(settings)
         self.pitch_classes = check_classes(pitch_classes)
-        if isinstance(seed, DiagnosisSeeds):
-            self.seed, self.seeds = seed.run, seed
-        else:
-            self.seed = as_seed(seed)
-            self.seeds = DiagnosisSeeds.from_seed(self.seed)
+        self.seed, self.seeds = split_seed(seed)
         self.workers = check_workers(workers)
         # a design given replaces the file's before the file is read: its copy is then not validated
         self.design = None if design is None else resolve_design(design, None)
@@ -311,20 +275,22 @@ class Diagnosis:
         InternalError
             A step failed after the input was accepted (``steps_`` holds the finished ones).
         """
-        started, cpu_started = time.perf_counter(), _cpu_seconds()
-        if is_differential(self.reference_route, reference):  # what changed since a healthy reference
-            return conclude_change(self, rig, reference, started, cpu_started)
+        started, cpu_started = time.perf_counter(), cpu_seconds()
+        self.steps_ = StepLog()  # the finished steps, kept when a later one fails
+        if reference is not None and is_differential(self.reference_route, reference):
+            # what changed since a healthy reference: the differential estimator's record is this one's
+            return self._adopt(self._change_route().fit(rig, reference, steps=self.steps_).fitted_)
         inputs = read_inputs(rig, reference, design=self.design, calibration=self.calibration, settings=self.settings)
-        self.design_, self.steps_ = inputs.design, StepLog()
         # 1. features: the records reduced as the model's will be (with the allowances that act on them)
         case, reference_summary = _features(
             inputs, settings=self.settings, seeds=self.seeds, workers=self.workers, steps=self.steps_
         )
-        self.features_ = case
         # 2. predictive distribution: the case's noise models; valid data may still carry no signal
         reason = _cannot_decide(case, self.settings, self.steps_)
         if reason is not None:
-            return self._conclude_inconclusive(case, reason, inputs, reference_summary, started, cpu_started)
+            timings = total_timings({}, started, cpu_started, self.workers)
+            undecided = Decision("inconclusive", reason)
+            return self._adopt(self._undecided(case, undecided, inputs, reference_summary, timings))
         with self.steps_.step("start the worker processes"):
             executor = RunExecutor(case, self.workers)
         try:
@@ -333,7 +299,20 @@ class Diagnosis:
                 spectra = held_spectra(outcome, _worst_runs(outcome))
         finally:
             executor.close()
-        return self._conclude(outcome, spectra, inputs, reference_summary, started, cpu_started)
+        timings = total_timings(outcome.timings, started, cpu_started, self.workers)
+        return self._adopt(self._fitted(outcome, spectra, case, inputs, reference_summary, timings))
+
+    def _change_route(self) -> ChangeDiagnosis:
+        """The differential diagnosis with this diagnosis's settings."""
+        return ChangeDiagnosis(
+            effects=self.effects,
+            settings=self.settings,
+            seed=self.seeds,
+            workers=self.workers,
+            design=self.design,
+            calibration=self.calibration,
+            gears=self.reference_gears,
+        )
 
     def _diagnose(self, case: RigCase, posterior: xr.Dataset | None) -> DiagnosisResult:
         """Steps 3 to 6 on a prepared campaign whose simulations run on workers."""
@@ -380,67 +359,50 @@ class Diagnosis:
             timings=timings,
         )
 
-    def _conclude(
+    def _fitted(
         self,
         outcome: DiagnosisResult,
         spectra: xr.Dataset,
+        features: RigCase,
         inputs: DiagnosisInputs,
         reference_summary: dict[str, Any] | None,
-        started: float,
-        cpu_started: float,
-    ) -> Diagnosis:
-        """The fitted attributes of a diagnosis that ran its six steps."""
+        timings: dict[str, float],
+    ) -> DiagnosisFit:
+        """The record of a diagnosis that ran its six steps."""
         with self.steps_.step("summarise the results"):
-            timings = _timings(outcome.timings, started, cpu_started, self.workers)
             content = json_clean(
-                summary(outcome, source=inputs.source, seed_text=str(self.seed.entropy), timings=timings)
+                summary(
+                    outcome.case, outcome.decision, source=inputs.source, effects=outcome.effects,
+                    seed_text=str(self.seed.entropy), timings=timings, settings=outcome.settings, result=outcome,
+                )
             )
             start = "calibration posterior medians" if inputs.posterior is not None else "design values"
             content["nominal"]["start"] = start
             maps = result_dataset(outcome, spectra)
-            maps.attrs["verdict"] = content["verdict"]
-        self.outcome_, self.case_ = outcome, outcome.case
-        self.nominal_ = outcome.nominal
-        self.ranking_: list[CandidateScore] = list(outcome.scores)
-        self.effects_: list[SelectedEffect] = list(outcome.selected)
-        self.decision_: Decision = outcome.decision
-        self.remaining_gap_ = outcome.remaining_gap
-        return self._record(content, maps, reference_summary)
+        content = completed(content, maps, inputs.design, reference_summary)
+        return DiagnosisFit(
+            inputs.design, self.steps_, features, outcome.case, outcome.decision, content, maps, outcome=outcome
+        )
 
-    def _conclude_inconclusive(
+    def _undecided(
         self,
         case: RigCase,
-        reason: str,
+        decision: Decision,
         inputs: DiagnosisInputs,
         reference_summary: dict[str, Any] | None,
-        started: float,
-        cpu_started: float,
-    ) -> Diagnosis:
-        """The fitted attributes of valid data that cannot decide: said so at once, without fitting noise."""
+        timings: dict[str, float],
+    ) -> DiagnosisFit:
+        """The record of valid data that cannot decide: said so at once, without fitting noise."""
         with self.steps_.step("summarise the results"):
             content = json_clean(
-                inconclusive_summary(
-                    case, reason, source=inputs.source, effects=self.effects, seed_text=str(self.seed.entropy),
-                    timings=_timings({}, started, cpu_started, self.workers), settings=self.settings,
+                summary(
+                    case, decision, source=inputs.source, effects=self.effects, seed_text=str(self.seed.entropy),
+                    timings=timings, settings=self.settings,
                 )
             )
-            maps = inconclusive_dataset(case, reason, self.effects)
-        self.outcome_, self.case_, self.nominal_ = None, case, None
-        self.ranking_, self.effects_ = [], []
-        self.decision_ = Decision("inconclusive", reason)
-        self.remaining_gap_ = float("nan")
-        return self._record(content, maps, reference_summary)
-
-    def _record(self, content: dict[str, Any], maps: xr.Dataset, reference_summary: dict[str, Any] | None) -> Diagnosis:
-        """``summary_`` and ``result_``, with the reference's record and the design's notes."""
-        self.summary_, self.result_ = _completed(content, maps, reference_summary, self.design_), maps
-        return self
-
-    def to_dict(self) -> dict[str, Any]:
-        """The diagnosis as a JSON-ready mapping (the content of ``diagnosis.json``)."""
-        if not hasattr(self, "summary_"):
-            raise DiagnosisError("diagnosis: not fitted yet; call fit(rig) first")
-        return self.summary_
+            maps = unfitted_dataset(case, decision, self.effects)
+        content = completed(content, maps, inputs.design, reference_summary)
+        return DiagnosisFit(inputs.design, self.steps_, case, case, decision, content, maps)
 
 
 __all__ = ["Diagnosis"]

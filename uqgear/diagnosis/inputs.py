@@ -49,6 +49,33 @@ def as_seed(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
     return as_seed_sequence(seed, error=DiagnosisError)
 
 
+def split_seed(seed: int | np.random.SeedSequence | DiagnosisSeeds) -> tuple[np.random.SeedSequence, DiagnosisSeeds]:
+    """A diagnosis's seed (its entropy is the record's ``seed``) and its random streams.
+
+    An int or SeedSequence gives its streams as its children 0 to 2
+    (:meth:`DiagnosisSeeds.from_seed`); streams given are kept, the run's
+    stream standing for the seed.
+
+    Examples
+    --------
+    >>> from uqgear.diagnosis.inputs import split_seed
+    >>> seed, seeds = split_seed(7)
+    >>> seed.entropy, seeds.run.spawn_key
+    (7, (1,))
+    """
+    if isinstance(seed, DiagnosisSeeds):
+        return seed.run, seed
+    root = as_seed(seed)
+    return root, DiagnosisSeeds.from_seed(root)
+
+
+def check_settings(settings: DiagnosisSettings | None) -> DiagnosisSettings:
+    """The settings given, or the documented ones (DiagnosisError naming ``settings`` for another type)."""
+    if settings is not None and not isinstance(settings, DiagnosisSettings):
+        raise DiagnosisError(f"settings: expected a DiagnosisSettings; got {type(settings).__name__}")
+    return DEFAULT_SETTINGS if settings is None else settings
+
+
 @dataclass(frozen=True)
 class DiagnosisInputs:
     """The checked inputs of one diagnosis."""
@@ -250,6 +277,8 @@ __all__ = [
     "DiagnosisInputs",
     "ReferenceInput",
     "as_seed",
+    "check_settings",
+    "split_seed",
     "read_inputs",
     "load_rig_input",
     "resolve_design",

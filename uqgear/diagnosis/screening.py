@@ -7,13 +7,16 @@ with evidence of their own, are fitted in full (all parameters), warm-started
 from the screening fit; while the gap stays unexplained a few more variants
 get a full fit. Every fit is scored on held-out runs against the nominal
 model's held-out predictions. Fits that read nothing the others write run
-two side by side (:mod:`.side_by_side`) and are scored in order.
+two side by side (:mod:`.side_by_side`) and are scored in order. The
+screening and the full fit take their base: forward selection
+(:mod:`.selection`) runs them on top of the model with the effects named
+so far.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
@@ -156,33 +159,50 @@ def screening_fits(
     return side_by_side(case, [job(candidate) for candidate in candidates])
 
 
-def screen(state: DiagnosisState) -> list[CandidateScore]:
-    """Every variant of every candidate effect fitted on top of the nominal fit (its own parameters only)."""
-    case, settings = state.case, state.settings
+def screen(
+    state: DiagnosisState, base: FitResult, base_held: HeldOut, effects: Sequence[str], *, on_top: bool = False
+) -> list[CandidateScore]:
+    """Every variant of ``effects`` fitted on top of a base fit (its own parameters only), scored against the base.
+
+    The base is the nominal fit (step 3) or, ``on_top``, a forward-selection
+    round's model with the effects named so far (step 6): each step then
+    names the base, and each screening's ``effect_gain`` is the cost it
+    gains over the base (the nominal fit's screenings have theirs measured
+    with the effect switched off, :func:`effect_off_costs`). Each is scored
+    against the base's held-out predictions ``base_held``.
+    """
+    settings = state.settings
     candidates = [
-        candidate for name in state.effects for candidate in candidates_for(name, case.design, hints=state.hints)
+        candidate for name in effects for candidate in candidates_for(name, state.case.design, hints=state.hints)
     ]
+    labels = " + ".join(candidate.label for candidate in base.problem.candidates) if on_top else ""
     screened: list[CandidateScore] = []
-    for candidate, outcome in zip(candidates, screening_fits(state, state.nominal, candidates)):
-        with state.steps.step(f"screen {candidate.label}") as finding:
+    for candidate, outcome in zip(candidates, screening_fits(state, base, candidates)):
+        step = f"forward selection: screen {candidate.label} on top of {labels}" if on_top else ""
+        with state.steps.step(step or f"screen {candidate.label}") as finding:
             result, held = outcome.get()
             screened.append(
                 score_candidate(
-                    result,
-                    held,
-                    state.nominal_held,
-                    "screening",
-                    state.rng,
-                    n_resamples=settings.verdict.bootstrap_resamples,
+                    result, held, base_held, "screening", state.rng, n_resamples=settings.verdict.bootstrap_resamples
                 )
             )
+            if on_top:
+                screened[-1].effect_gain = base.cost - result.cost
             finding.update(found(screened[-1]), fit_seconds=round(outcome.seconds, 3))
     return screened
 
 
-def full_fit(state: DiagnosisState, entry: CandidateScore) -> tuple[FitResult, HeldOut]:
-    """A screened candidate fitted with all parameters free, with its own pitch-error allowance; its held-out runs.
+def full_fit(
+    state: DiagnosisState,
+    entry: CandidateScore,
+    base: FitResult,
+    earlier: Mapping[str, FitResult] | None = None,
+) -> tuple[FitResult, HeldOut]:
+    """A screened candidate fitted on top of a base fit with all parameters free, its own pitch-error allowance.
 
+    The base is the nominal fit or a forward-selection round's model;
+    ``earlier`` holds full fits of the candidates from a pass before, by
+    label, tried as starts too. Returns the fit and its held-out runs.
     Reads the state and the entry, writes nothing the other fits read
     (:func:`fits_in_full` runs several side by side).
     """
@@ -193,11 +213,11 @@ def full_fit(state: DiagnosisState, entry: CandidateScore) -> tuple[FitResult, H
         fit_candidate(
             state.case,
             candidate,
-            state.nominal,
+            base,
             full=True,
             max_evaluations=settings.screening.full_fit_evaluations,
             start=entry.fit,
-            earlier=state.earlier_full_fits.get(candidate.label),
+            earlier=earlier.get(candidate.label) if earlier is not None else None,
         ),
         max_evaluations=settings.screening.full_fit_evaluations,
     )
@@ -222,7 +242,10 @@ def scored_in_full(
 
 def fits_in_full(state: DiagnosisState, entries: Sequence[CandidateScore]) -> list[CandidateScore]:
     """Screened candidates fitted in full side by side (:func:`~.side_by_side.side_by_side`) and scored in order."""
-    outcomes = side_by_side(state.case, [partial(full_fit, state, entry) for entry in entries])
+    outcomes = side_by_side(
+        state.case,
+        [partial(full_fit, state, entry, state.nominal, state.earlier_full_fits) for entry in entries],
+    )
     return [scored_in_full(state, entry, outcome) for entry, outcome in zip(entries, outcomes)]
 
 
@@ -260,7 +283,8 @@ def extra_full_fits(
             break
         if index not in ahead:
             pair = entries[index : index + 2]
-            outcomes = side_by_side(state.case, [partial(full_fit, state, item) for item in pair])
+            jobs = [partial(full_fit, state, item, state.nominal, state.earlier_full_fits) for item in pair]
+            outcomes = side_by_side(state.case, jobs)
             ahead.update({index + offset: outcome for offset, outcome in enumerate(outcomes)})
         taken_up(entry, scored_in_full(state, entry, ahead.pop(index)))
 
@@ -365,7 +389,7 @@ def score_candidates(
     """
     settings = state.settings
     clock = time.perf_counter()
-    screened = screen(state)
+    screened = screen(state, state.nominal, state.nominal_held, state.effects)
     state.timings["screening"] += time.perf_counter() - clock
     clock = time.perf_counter()
     best = best_per_effect(screened)

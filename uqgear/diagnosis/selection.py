@@ -17,16 +17,14 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
-from .allowances.pitch_errors import first_order_reads, with_own_allowance
+from .allowances.pitch_errors import first_order_reads
 from .allowances.sideband_phase import ModulationEvidence, fit_modulated_run_out, modulation_evidence, shafts_tested
 from .decision import Decision
 from .effect_set import SelectedEffect, SelectionRound
-from .effects import EffectFamily, candidates_for, run_out_family
+from .effects import EffectFamily, run_out_family
 from .first_effect import FirstDecision, starts_a_set
-from .fitting import fit_candidate
-from .heldout import leave_one_out
 from .scoring import CandidateScore, bootstrap_gap, score_candidate
-from .screening import best_per_effect, effect_off_costs, found, measure_modulation, screening_fits, supersedes
+from .screening import best_per_effect, effect_off_costs, found, full_fit, measure_modulation, screen, supersedes
 from .set_verdict import lead_decision, phase_named_decision, set_decision, unled_decision
 from .settings import DiagnosisSettings
 from .state import DiagnosisState
@@ -46,27 +44,6 @@ def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]
     for before, after in zip(gaps[:-1], gaps[1:]):
         shares.append((before - after) / nominal_gap if nominal_gap > 0 else 0.0)
     return shares
-
-
-def _screen_on_top(state: DiagnosisState, base: CandidateScore, effects: Sequence[str]) -> list[CandidateScore]:
-    """Each variant of ``effects`` screened on top of the base (its own parameters only)."""
-    settings, base_fit = state.settings, base.fit
-    labels = " + ".join(candidate.label for candidate in base_fit.problem.candidates)
-    candidates = [
-        candidate for name in effects for candidate in candidates_for(name, state.case.design, hints=state.hints)
-    ]
-    screened: list[CandidateScore] = []
-    for candidate, outcome in zip(candidates, screening_fits(state, base_fit, candidates)):
-        with state.steps.step(f"forward selection: screen {candidate.label} on top of {labels}") as finding:
-            result, held = outcome.get()
-            screened.append(
-                score_candidate(
-                    result, held, base.held, "screening", state.rng, n_resamples=settings.verdict.bootstrap_resamples
-                )
-            )
-            screened[-1].effect_gain = base_fit.cost - result.cost
-            finding.update(found(screened[-1]), fit_seconds=round(outcome.seconds, 3))
-    return screened
 
 
 def worth_a_full_fit(entry: CandidateScore, settings: DiagnosisSettings) -> bool:
@@ -126,24 +103,9 @@ def _full_on_top(state: DiagnosisState, base: CandidateScore, leader: CandidateS
     assert candidate is not None  # internal invariant: a screened entry has its candidate
     base_labels = " + ".join(c.label for c in base_fit.problem.candidates)
     with state.steps.step(f"forward selection: fit {candidate.label} in full on top of {base_labels}") as finding:
-        result = with_own_allowance(
-            fit_candidate(
-                state.case,
-                candidate,
-                base_fit,
-                full=True,
-                max_evaluations=settings.screening.full_fit_evaluations,
-                start=leader.fit,
-            ),
-            max_evaluations=settings.screening.full_fit_evaluations,
-        )
+        result, held = full_fit(state, leader, base_fit)
         full = score_candidate(
-            result,
-            leave_one_out(result),
-            base.held,
-            "full",
-            state.rng,
-            n_resamples=settings.verdict.bootstrap_resamples,
+            result, held, base.held, "full", state.rng, n_resamples=settings.verdict.bootstrap_resamples
         )
         full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
         measure_modulation(state.case, full)
@@ -170,7 +132,7 @@ def next_effect(
     if tried is not None and not effects and any(name not in named for name in state.effects):
         # only a round before can leave nothing of the effects not yet named
         return SelectionRound(base_labels, base.gap_with_effect, [], None, _void_reason(tried))
-    screened = _screen_on_top(state, base, effects)
+    screened = screen(state, base.fit, base.held, effects, on_top=True)
     if not screened:
         return SelectionRound(base_labels, base.gap_with_effect, [], None, "no other candidate effect is left to try")
     best = best_per_effect(screened)

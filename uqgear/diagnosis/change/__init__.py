@@ -2,18 +2,21 @@
 
 Condition-monitoring features of both campaigns (:mod:`.features`), the
 change test (:mod:`.detection`), the effects scored on the change they
-predict (:mod:`.scoring`), the route and its records (:mod:`.route`,
-:mod:`.conclude`); docs/model/unmodelled-effects.md section 6.1.
+predict (:mod:`.scoring`), the route (:mod:`.route`) and the estimator that
+runs it and keeps its records (:class:`~.estimator.ChangeDiagnosis`,
+:mod:`.estimator`); docs/model/unmodelled-effects.md section 6.1.
 """
 
 from __future__ import annotations
 
 from .detection import CampaignFeatures, ChangeTest, carry_reference, judge_change, read_campaign
+from .estimator import ChangeDiagnosis
 from .features import FAMILIES, FEATURES, record_features
 from .scoring import ChangeScore, score_change
 
 __all__ = [
     "CampaignFeatures",
+    "ChangeDiagnosis",
     "ChangeScore",
     "ChangeTest",
     "FAMILIES",
