@@ -21,6 +21,10 @@ class EccentricityFamily(EffectFamily):
     line of the TE (the run-out enters the TE directly), the modulation at
     none and at what the public eccentricity campaign shows per metre of
     run-out (0.03 at 12 um). Its response repeats over its shaft's revolution.
+    Hint order: the TE alone, where the run-out enters directly; an
+    accelerometer's once-per-revolution line is a housing's acceleration,
+    which grows steeply with the speed and says nothing of the run-out by
+    itself, so a campaign without a TE starts at 5 um.
 
     Its fits read as a shaft run-out (:attr:`run_out`): the rules that tell a
     run-out from the gears' own pitch errors apply to it, its modulation being
