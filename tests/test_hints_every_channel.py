@@ -96,3 +96,23 @@ def test_lines_without_a_channel_are_the_te_s():
     family = effect_family("adhesion_oscillation")
     assert family.hints({}, [{"frequency": 30.0}, {"frequency": 12.0}]) == {"adhesion_frequency": 12.0}
     assert family.hints({}, [{"frequency": 0.5}, {"frequency": 150.0}]) == {}
+
+
+def test_the_run_out_start_reads_the_te_first_and_the_housings_sidebands_without_one():
+    family = effect_family("eccentricity")
+    runs = np.ones(4)
+    # a stiffness modulation kappa puts sidebands of kappa / 2 of the mesh line on either side (known truth)
+    kappa = 0.004
+    housings = {
+        "acc_pinion:mesh1": 2.0 * runs,
+        "acc_pinion:mesh1_sb_pinion+1": 2.0 * runs * kappa / 2,
+        "acc_pinion:mesh1_sb_pinion-1": 2.0 * runs * kappa / 2,
+        "acc_pinion:mesh1_sb_gear+1": 1e-6 * runs,
+        "acc_pinion:mesh1_sb_gear-1": 1e-6 * runs,
+    }
+    hints = family.hints(housings, [])
+    assert hints["eccentricity_pinion"] == pytest.approx(kappa / family.proportional["kappa"])
+    assert hints["eccentricity_gear"] == pytest.approx(1e-6 / family.proportional["kappa"])
+    # with a TE the TE's first-order lines alone, as before
+    with_te = {**housings, "te:shaft_pinion1": np.array([1e-6, 3e-6, np.nan]), "te:shaft_gear1": np.full(3, np.nan)}
+    assert family.hints(with_te, []) == {"eccentricity_pinion": pytest.approx(2e-6)}

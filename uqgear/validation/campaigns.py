@@ -305,6 +305,14 @@ def plan_encoderless(
     under +-0.5 % speed wander at 1.3 Hz. ``n_healthy`` healthy controls
     (alternating the plans, the second with the wander). True nominal
     parameters scatter as in :func:`plan_campaigns`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from uqgear.validation import plan_encoderless
+    >>> specs = plan_encoderless(1, np.random.default_rng(0))
+    >>> [spec.identifier for spec in specs][:2], specs[0].nuisances["channels"]
+    (['encoderless-eccentricity-0', 'encoderless-tooth_damage-0'], ('acc_pinion', 'acc_gear'))
     """
     n_per_effect = check_count("n_per_effect", n_per_effect, 1)
     n_healthy = check_count("n_healthy", n_healthy, 0)
