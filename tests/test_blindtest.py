@@ -15,7 +15,7 @@ import pytest
 import xarray as xr
 
 from uqgear import validation as B
-from uqgear.diagnosis import EFFECT_NAMES, DiagnosisError
+from uqgear.diagnosis import EFFECT_NAMES, DiagnosisError, effect_family
 from uqgear.physics.design import load_design
 
 
@@ -57,7 +57,7 @@ def test_plan_rejects_bad_requests():
         B.blindtest("unused", n_ops=2)
     with pytest.raises(DiagnosisError, match="plan: expected one of service, bearing_check"):
         B.operating_points_of("overspeed", load_design("locomotive"))
-    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world; got 'fleet'"):
+    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world, encoderless; got 'fleet'"):
         B.planned_campaigns(0, suite="fleet")
 
 
@@ -76,6 +76,29 @@ def test_planned_campaigns_are_the_blind_tests_own(tmp_path):
     with pytest.raises(DiagnosisError, match="suite: expected one of"):
         B.blindtest(tmp_path / "out", suite="fleet")
     assert not (tmp_path / "out").exists()
+
+
+def test_the_encoderless_suite_draws_every_family_without_a_te_from_its_own_stream():
+    planned = B.planned_campaigns(5, suite="encoderless", n_per_effect=4)
+    specs = [spec for spec, _, _ in planned]
+    # its own stream: the seed's third child, so the other suites' plans are the ones they were
+    third = np.random.SeedSequence(5).spawn(3)[2].spawn(2)[0]
+    assert [s.identifier for s in specs] == [s.identifier for s in B.plan_encoderless(4, np.random.default_rng(third))]
+    assert [s.identifier for s, _, _ in B.planned_campaigns(5, suite="real_world", n_per_effect=1)] == [
+        s.identifier for s in B.plan_real_world(1, np.random.default_rng(np.random.SeedSequence(5).spawn(2)[0]))
+    ]
+    assert len({seed.spawn_key for _, _, seed in planned}) == len(planned)
+    for name in EFFECT_NAMES:
+        family = effect_family(name)
+        drawn = [s for s in specs if s.truth == name]
+        assert len(drawn) == 4 and {s.plan for s in drawn} == {family.plan}
+        assert all(family.ladder[0] <= s.strength_value <= family.ladder[2] for s in drawn)
+        assert all(s.effect_values[family.strength] == s.strength_value for s in drawn)
+    assert [s.truth for s in specs].count(B.HEALTHY) == 2
+    assert all(s.nuisances["channels"] == ("acc_pinion", "acc_gear") for s in specs)
+    assert sum("speed_wander" in s.nuisances for s in specs) == len(specs) // 2
+    frequencies = [s.effect_values["frequency"] for s in specs if s.truth == "adhesion_oscillation"]
+    assert all(6.0 <= f <= 30.0 for f in frequencies) and len(set(frequencies)) == 4
 
 
 def test_plans_pick_their_runs():

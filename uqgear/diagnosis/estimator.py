@@ -47,7 +47,7 @@ from .result import DiagnosisResult
 from .scoring import CandidateScore, capped_squares
 from .selection import NamedSet, effect_set, with_phase_named_shaft
 from .settings import DiagnosisSettings
-from .signatures import frequency_locked_lines, signature_hints
+from .signatures import every_channel_locked_lines, frequency_locked_lines, signature_hints
 from .state import DiagnosisState
 
 
@@ -332,7 +332,8 @@ class Diagnosis(FittedState):
         )
         with steps.step("find frequency-locked lines and signature hints") as found:
             locked = frequency_locked_lines(case, settings=settings)
-            hints = signature_hints(case, locked)
+            # the hints read every channel's lines (a campaign without encoders has no TE lines)
+            hints = signature_hints(case, every_channel_locked_lines(case, settings=settings))
             found.update(hints=dict(hints))
         # 3-4. every candidate fitted and scored on held-out runs against the nominal model
         passes = score_against_nominal(

@@ -39,6 +39,7 @@ from .campaigns import (
     check_count,
     operating_points_of,
     plan_campaigns,
+    plan_encoderless,
     plan_real_world,
     rig_campaign,
     second_design,
@@ -202,15 +203,21 @@ def planned_campaigns(
     >>> spec.identifier, design.name
     ('two_effects-eccentricity+tooth_damage-0', 'locomotive')
     """
-    plan_seed, campaigns_seed = as_seed(seed).spawn(2)
     if suite not in SUITES:
         raise DiagnosisError(f"suite: expected one of {', '.join(SUITES)}; got {suite!r}")
-    if suite == "library":
-        specs = plan_campaigns(
-            n_per_effect, np.random.default_rng(plan_seed), effects=effects, designs=designs, n_healthy=n_healthy
-        )
+    if suite == "encoderless":
+        # the seed's third child: the first two, the other suites' streams, are not drawn from
+        plan_seed, campaigns_seed = as_seed(seed).spawn(3)[2].spawn(2)
+        healthy = {} if n_healthy is None else {"n_healthy": n_healthy}
+        specs = plan_encoderless(n_per_effect, np.random.default_rng(plan_seed), designs=designs, **healthy)
     else:
-        specs = plan_real_world(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
+        plan_seed, campaigns_seed = as_seed(seed).spawn(2)
+        if suite == "library":
+            specs = plan_campaigns(
+                n_per_effect, np.random.default_rng(plan_seed), effects=effects, designs=designs, n_healthy=n_healthy
+            )
+        else:
+            specs = plan_real_world(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
     reference = load_design("locomotive")
     designs_by_name = {"reference": reference, "second": second_design(reference)}
     campaign_seeds = campaigns_seed.spawn(len(specs))
@@ -259,13 +266,18 @@ def blindtest(
         Worker processes of each diagnosis.
     report : bool
         Write ``report.html``.
-    suite : {"library", "real_world"}
+    suite : {"library", "real_world", "encoderless"}
         ``library``: each library effect alone on a clean rig (above).
         ``real_world`` (:func:`plan_real_world`): ``n_per_effect`` campaigns
         of each real-world kind: two effects at once, a transfer-path
         resonance with a healthy reference, speed wander, pitch errors, and
         healthy controls carrying those nuisances; ``effects`` and
-        ``n_healthy`` do not apply.
+        ``n_healthy`` do not apply. ``encoderless``
+        (:func:`~.campaigns.plan_encoderless`): ``n_per_effect`` campaigns of
+        each library effect on a rig without encoders (accelerometers only),
+        its strength drawn across its ladder, half of them under speed
+        wander, and ``n_healthy`` (default 2) such healthy controls;
+        ``effects`` does not apply.
 
     Returns
     -------

@@ -47,8 +47,12 @@ PLANS: tuple[str, ...] = ("service", "bearing_check")
 LOW_SPEED_PLAN = "low_speed"
 LOW_SPEED_PINION_SPEEDS: tuple[float, ...] = (500.0, 600.0, 700.0, 800.0, 950.0, 1100.0, 1250.0, 1400.0)
 
-#: Blind-test suites: the library's effects one at a time on a clean rig, or real-world campaigns.
-SUITES: tuple[str, ...] = ("library", "real_world")
+#: Blind-test suites: the library's effects one at a time on a clean rig, real-world campaigns, or each
+#: effect on a rig without encoders (accelerometers only).
+SUITES: tuple[str, ...] = ("library", "real_world", "encoderless")
+
+#: The encoder-less suite's channels: the two bearing housings' accelerometers, no TE.
+ENCODERLESS_CHANNELS: tuple[str, ...] = ("acc_pinion", "acc_gear")
 
 #: The designs a blind test alternates.
 DESIGNS: tuple[str, ...] = ("reference", "second")
@@ -289,6 +293,53 @@ def plan_real_world(
     return specs
 
 
+def plan_encoderless(
+    n_per_effect: int, rng: np.random.Generator, *, designs: Sequence[str] = DESIGNS, n_healthy: int = 2
+) -> list[CampaignSpec]:
+    """The encoder-less suite: each library effect alone on a rig with accelerometers only, no TE.
+
+    Per effect ``n_per_effect`` campaigns (alternating the designs, its
+    family's plan), its strength drawn log-uniformly across its ladder's
+    range (weak to strong) and its other values by its family's draw (the
+    stick-slip frequency uniformly in 6-30 Hz); every second campaign runs
+    under +-0.5 % speed wander at 1.3 Hz. ``n_healthy`` healthy controls
+    (alternating the plans, the second with the wander). True nominal
+    parameters scatter as in :func:`plan_campaigns`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from uqgear.validation import plan_encoderless
+    >>> specs = plan_encoderless(1, np.random.default_rng(0))
+    >>> [spec.identifier for spec in specs][:2], specs[0].nuisances["channels"]
+    (['encoderless-eccentricity-0', 'encoderless-tooth_damage-0'], ('acc_pinion', 'acc_gear'))
+    """
+    n_per_effect = check_count("n_per_effect", n_per_effect, 1)
+    n_healthy = check_count("n_healthy", n_healthy, 0)
+    check_designs(designs)
+    specs: list[CampaignSpec] = []
+    for truth in LIBRARY_EFFECTS + (HEALTHY,):
+        for k in range(n_healthy if truth == HEALTHY else n_per_effect):
+            design_name = designs[k % len(designs)]
+            scatter = _scattered_truth(rng)
+            nuisances: dict[str, object] = {"channels": ENCODERLESS_CHANNELS, **(_WANDER if k % 2 else {})}
+            identifier = f"encoderless-{truth}-{k}"
+            if truth == HEALTHY:
+                plan = PLANS[k % len(PLANS)]
+                specs.append(CampaignSpec(identifier, truth, "-", 0.0, design_name, {}, scatter, plan, (), nuisances))
+                continue
+            family = effect_family(truth)
+            weak, _, strong = family.ladder
+            strength = float(math.exp(rng.uniform(math.log(weak), math.log(strong))))
+            values = effect_draw(truth, strength, rng)
+            specs.append(
+                CampaignSpec(
+                    identifier, truth, "drawn", strength, design_name, values, scatter, family.plan, (), nuisances
+                )
+            )
+    return specs
+
+
 def true_values(spec: CampaignSpec, design: Design) -> dict[str, float]:
     """The campaign's true nominal parameters in natural units (its scatter applied to the design's)."""
     return scattered_values(spec.true_parameters, design)
@@ -373,6 +424,8 @@ __all__ = [
     "second_design",
     "plan_campaigns",
     "plan_real_world",
+    "plan_encoderless",
+    "ENCODERLESS_CHANNELS",
     "effect_draw",
     "true_values",
     "operating_points_of",

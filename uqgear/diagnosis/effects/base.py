@@ -117,8 +117,14 @@ class EffectFamily:
         """Starting values read off the rig's signature (none by default).
 
         ``observed`` maps ``CHANNEL:FEATURE`` names to the rig's values over
-        runs (the compared features); ``locked_lines`` are the transmission
-        error's frequency-locked lines.
+        runs (the compared features) of every channel the campaign has;
+        ``locked_lines`` are the lines at a fixed frequency of every channel,
+        each naming its ``channel`` (a line naming none is the TE's): the
+        TE's frequency-locked lines first, then the accelerometers' steady
+        modulations of the mesh line, strongest first
+        (:func:`uqgear.diagnosis.signatures.every_channel_locked_lines`). A
+        family that reads hints states in its docstring which channel it
+        prefers; a campaign may lack the TE (no encoders).
         """
         return {}
 

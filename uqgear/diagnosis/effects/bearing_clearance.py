@@ -19,7 +19,8 @@ class BearingClearanceFamily(EffectFamily):
     start grid over three decades. A clearance has no signature while the
     bearings stay loaded (the dead zone is never entered), so its
     virtual-rig campaigns follow the light-load bearing check plan, where a
-    bearing unloads. Its response repeats every mesh period.
+    bearing unloads. Its response repeats every mesh period. Hints: none
+    on any channel.
     """
 
     name = "bearing_clearance"

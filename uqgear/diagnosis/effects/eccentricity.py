@@ -13,6 +13,28 @@ from ..candidates import Candidate
 from .base import START_PHASES, EffectFamily, RunOut
 
 
+def _sideband_modulation(observed: Mapping[str, np.ndarray], shaft: str) -> float | None:
+    """The mesh stiffness modulation at a shaft's order the accelerometers show, or None (no accelerometer).
+
+    A modulation of relative depth ``kappa`` puts two sidebands of about
+    ``kappa / 2`` of the mesh line each at the shaft's order: their sum over
+    the mesh line, median over runs and accelerometers.
+    """
+    ratios = []
+    for key, mesh in observed.items():
+        channel, _, feature = key.partition(":")
+        if feature != "mesh1" or channel == "te":
+            continue
+        upper = observed.get(f"{channel}:mesh1_sb_{shaft}+1")
+        lower = observed.get(f"{channel}:mesh1_sb_{shaft}-1")
+        if upper is None or lower is None:
+            continue
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = (upper + lower) / mesh
+        ratios.extend(ratio[np.isfinite(ratio) & (mesh > 0)].tolist())
+    return float(np.median(ratios)) if ratios else None
+
+
 class EccentricityFamily(EffectFamily):
     """A run-out of the pinion or the gear shaft (docs/model/unmodelled-effects.md section 6).
 
@@ -21,6 +43,13 @@ class EccentricityFamily(EffectFamily):
     line of the TE (the run-out enters the TE directly), the modulation at
     none and at what the public eccentricity campaign shows per metre of
     run-out (0.03 at 12 um). Its response repeats over its shaft's revolution.
+    Hint order: the TE first, where the run-out enters directly (its
+    median first-order shaft line); only a campaign without a TE reads the
+    accelerometers, whose once-per-revolution line is a housing's
+    acceleration that says nothing of the run-out by itself: there the
+    run-out starts at the stiffness modulation its shaft's sidebands of the
+    mesh line show (their sum over the mesh line, median over runs and
+    accelerometers) divided by the modulation per metre of run-out.
 
     Its fits read as a shaft run-out (:attr:`run_out`): the rules that tell a
     run-out from the gears' own pitch errors apply to it, its modulation being
@@ -72,14 +101,31 @@ class EccentricityFamily(EffectFamily):
         return variants
 
     def hints(self, observed: Mapping[str, np.ndarray], locked_lines: Sequence[Mapping[str, Any]]) -> dict[str, float]:
-        """The run-out of each shaft read as the median first-order shaft line of the TE, m."""
+        """The run-out of each shaft, m: the TE's median first-order shaft line, else the accelerometers' sidebands.
+
+        Examples
+        --------
+        >>> from uqgear.diagnosis.effects import effect_family
+        >>> family = effect_family("eccentricity")
+        >>> family.hints({"te:shaft_pinion1": np.array([2e-6, 3e-6, 4e-6])}, [])
+        {'eccentricity_pinion': 3e-06}
+        >>> housing = {"acc_gear:mesh1": np.array([10.0]), "acc_gear:mesh1_sb_gear+1": np.array([0.02]),
+        ...            "acc_gear:mesh1_sb_gear-1": np.array([0.03])}
+        >>> round(family.hints(housing, [])["eccentricity_gear"], 9)  # modulation 0.005 at 2500 per metre
+        2e-06
+        """
         hints = {}
+        te = any(key.startswith("te:") for key in observed)
         for shaft in ("pinion", "gear"):
             values = observed.get(f"te:shaft_{shaft}1")
             if values is not None:
                 values = values[np.isfinite(values)]
                 if values.size:
                     hints[f"eccentricity_{shaft}"] = float(np.median(values))
+            elif not te:
+                modulation = _sideband_modulation(observed, shaft)
+                if modulation is not None:
+                    hints[f"eccentricity_{shaft}"] = modulation / self.proportional["kappa"]
         return hints
 
     def campaign_values(self, strength: float, phase: float, rng: np.random.Generator) -> dict[str, object]:

@@ -14,7 +14,7 @@ class FrictionFamily(EffectFamily):
     """Sliding friction on the tooth flanks (docs/model/unmodelled-effects.md section 6).
 
     One variant, its coefficient fitted from two starts; its response
-    repeats every mesh period.
+    repeats every mesh period. Hints: none on any channel.
     """
 
     name = "friction"

@@ -128,7 +128,12 @@ def candidates_for(effect: str, design: Design, *, hints: Mapping[str, float] | 
 
 
 def signature_hints(observed: Mapping[str, np.ndarray], locked_lines: Sequence[Mapping[str, Any]]) -> dict[str, float]:
-    """Every registered family's starting values read off the rig's features, in registry order."""
+    """Every registered family's starting values read off the rig's features, in registry order.
+
+    ``observed`` holds every channel's features and ``locked_lines`` every
+    channel's lines at a fixed frequency, each naming its ``channel``
+    (:meth:`~.base.EffectFamily.hints`).
+    """
     hints: dict[str, float] = {}
     for family in _REGISTRY.values():
         hints.update(family.hints(observed, locked_lines))

@@ -18,7 +18,8 @@ class ToothDamageFamily(EffectFamily):
     Variants: one per gear, its depth fitted from a start grid spanning
     weak to strong damage. Which tooth does not change an amplitude
     spectrum, so tooth 0 stands for any. Its response repeats over its
-    gear's revolution.
+    gear's revolution. Hints: none on any channel (the start grid already
+    spans weak to strong damage).
     """
 
     name = "tooth_damage"

@@ -17,7 +17,9 @@ class TorqueRippleFamily(EffectFamily):
 
     One variant, its amplitude and phase fitted; none for a design without
     ``motor_pole_pairs`` (its frequency is unknown). Its response repeats
-    over a pinion revolution (the rotor turns with the pinion).
+    over a pinion revolution (the rotor turns with the pinion). Hints: none
+    on any channel (its frequency follows from the design, its amplitude
+    starts from a fixed grid).
     """
 
     name = "torque_ripple"
