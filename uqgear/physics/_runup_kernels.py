@@ -64,6 +64,7 @@ from uqgear.physics._rhs import (
     mesh_damping,
     mesh_terms,
     run_out_modulation,
+    state_derivative_by,
 )
 from uqgear.physics._stepper import (
     BISECTIONS,
@@ -154,6 +155,14 @@ def warped_forcing(tau, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg):
 def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, fp, fg):
     """:func:`warped_forcing` from a tabulated stage (``local``: tau within the period)."""
     knot_t, knot_rate, knot_accel = warps
+    t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
+    return table_terms(tau, local, n, t, rate, accel, table, sub, stage, n_pairs, p, fp, fg)
+
+
+@nb.njit(**INLINED)
+def table_terms(tau, local, n, t, rate, accel, table, sub, stage, n_pairs, p, fp, fg):
+    """:func:`table_forcing` given the clock (t, tau', tau'') at ``tau`` (:func:`warp`), which runs
+    sharing the profile share."""
     k = table[sub, stage, F_K]
     arm_pinion = table[sub, stage, F_ARM_PINION]
     arm_gear = table[sub, stage, F_ARM_GEAR]
@@ -164,7 +173,6 @@ def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, f
             arm_pinion += table[sub, stage, 5 + 3 * i] * extra
             arm_gear += table[sub, stage, 6 + 3 * i] * extra
     scale = run_out_modulation(tau, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
-    t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
     sine = table[sub, stage, F_SINE]
     cosine = math.cos(p[OMEGA_MESH] * local + p[STE_PHASE])
     return _terms(tau, t, rate, accel, sine, cosine, k * scale, arm_pinion * scale, arm_gear * scale, p)
@@ -180,6 +188,17 @@ def warped_field(s, terms, context, divide):
     d, _, exact = _accelerations(
         s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, apart), divide, NO_INVERSE
     )
+    w = terms[4]
+    return (d[0] * w, d[1] * w, d[2] * w, d[3] * w, d[4] * w, d[5] * w), exact
+
+
+@nb.njit(**INLINED)
+def lane_field(s, terms, context, divide):
+    """:func:`warped_field` with the mesh damping x implies, as a field of :func:`rk4_stages` for the
+    lanes: ``context`` (coefficients, the inverse masses ``divide`` reads), ``terms`` (k, friction
+    term, drive, e'', 1 / tau')."""
+    c, inverse = context
+    d, _, exact = state_derivative_by(s, terms[0], terms[1], terms[2], terms[3], c, divide, inverse)
     w = terms[4]
     return (d[0] * w, d[1] * w, d[2] * w, d[3] * w, d[4] * w, d[5] * w), exact
 
@@ -330,6 +349,8 @@ __all__ = [
     "time_part",
     "warped_forcing",
     "table_forcing",
+    "table_terms",
+    "lane_field",
     "warped_field",
     "split_at_contact",
     "record_row",
