@@ -199,7 +199,10 @@ def _lane_key(setup: ModelSetup, plan: _Plan) -> tuple[Any, ...]:
     """What runs stepping as lanes of one group share: the grid, its sub-steps and the stiffness tables."""
     arrays = [setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear, setup.breakpoints]
     for schedule in plan.schedules:
-        arrays.extend(schedule[:5])
+        # the arrays hold as many sub-steps as a period may have; those past the last are not set
+        n_sub = int(schedule[0][-1])
+        arrays.append(schedule[0])
+        arrays.extend(values[:n_sub] for values in schedule[1:5])
     return (plan.period, tuple(plan.bands), *(np.ascontiguousarray(a).tobytes() for a in arrays))
 
 
