@@ -108,6 +108,21 @@ def warp(tau, n, period, knot_t, knot_rate, knot_accel):
 
 
 @nb.njit(**INLINED)
+def mesh_ste(sine, cosine, p):
+    """(e, de/dtau, d2e/dtau2) of the mesh-periodic STE from sin and cos of Omega_ref tau + STE phase."""
+    ste = p[STE_AMPLITUDE] * sine
+    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
+    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    return ste, ste_tau, ste_tautau
+
+
+@nb.njit(**INLINED)
+def chain_rule(ste_tau, ste_tautau, rate, accel):
+    """e'' = e_tautau tau'^2 + e_tau tau'' (the one expression of the STE's acceleration)."""
+    return ste_tautau * (rate * rate) + ste_tau * accel
+
+
+@nb.njit(**INLINED)
 def time_part(tau, t, rate, accel, sine, cosine, p):
     """(relative drive acceleration, e, e'') of the angle-driven model.
 
@@ -121,16 +136,14 @@ def time_part(tau, t, rate, accel, sine, cosine, p):
     adhesion = p[T2]
     if p[ADHESION_AMPLITUDE] != 0.0:
         adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
-    ste = p[STE_AMPLITUDE] * sine
-    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
-    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    ste, ste_tau, ste_tautau = mesh_ste(sine, cosine, p)
     if p[ECC_AMPLITUDE] != 0.0:
         angle = p[ECC_OMEGA] * tau + p[ECC_PHASE]
         ecc = p[ECC_AMPLITUDE] * math.sin(angle)
         ste += ecc
         ste_tau += p[ECC_AMPLITUDE] * p[ECC_OMEGA] * math.cos(angle)
         ste_tautau -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
-    ste_acc = ste_tautau * (rate * rate) + ste_tau * accel
+    ste_acc = chain_rule(ste_tau, ste_tautau, rate, accel)
     return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
 
 
@@ -156,13 +169,14 @@ def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, f
     """:func:`warped_forcing` from a tabulated stage (``local``: tau within the period)."""
     knot_t, knot_rate, knot_accel = warps
     t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
-    return table_terms(tau, local, n, t, rate, accel, table, sub, stage, n_pairs, p, fp, fg)
+    cosine = math.cos(p[OMEGA_MESH] * local + p[STE_PHASE])
+    return table_terms(tau, n, t, rate, accel, cosine, table, sub, stage, n_pairs, p, fp, fg)
 
 
 @nb.njit(**INLINED)
-def table_terms(tau, local, n, t, rate, accel, table, sub, stage, n_pairs, p, fp, fg):
+def table_terms(tau, n, t, rate, accel, cosine, table, sub, stage, n_pairs, p, fp, fg):
     """:func:`table_forcing` given the clock (t, tau', tau'') at ``tau`` (:func:`warp`), which runs
-    sharing the profile share."""
+    sharing the profile share, and cos(Omega tau + STE phase) (the same every mesh period)."""
     k = table[sub, stage, F_K]
     arm_pinion = table[sub, stage, F_ARM_PINION]
     arm_gear = table[sub, stage, F_ARM_GEAR]
@@ -174,7 +188,6 @@ def table_terms(tau, local, n, t, rate, accel, table, sub, stage, n_pairs, p, fp
             arm_gear += table[sub, stage, 6 + 3 * i] * extra
     scale = run_out_modulation(tau, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
     sine = table[sub, stage, F_SINE]
-    cosine = math.cos(p[OMEGA_MESH] * local + p[STE_PHASE])
     return _terms(tau, t, rate, accel, sine, cosine, k * scale, arm_pinion * scale, arm_gear * scale, p)
 
 
@@ -346,6 +359,8 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, first
 __all__ = [
     "FROM_X",
     "warp",
+    "mesh_ste",
+    "chain_rule",
     "time_part",
     "warped_forcing",
     "table_forcing",

@@ -22,6 +22,8 @@ bit for bit.
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -40,6 +42,7 @@ from uqgear.physics._lane_loop import (
     _advance,
     lane_coefficients,
     lane_state,
+    periodic_forcing,
     put_state,
     put_step,
     region_changed,
@@ -48,20 +51,37 @@ from uqgear.physics._lane_loop import (
 from uqgear.physics._lane_tables import LANES
 from uqgear.physics._lanes import compile_lane_kernel
 from uqgear.physics._quotient import quotient
-from uqgear.physics._rhs import HALF_BACKLASH, INLINED, JIT_OPTIONS, M1, M2, ME, coefficients, contact_region, divided
+from uqgear.physics._rhs import (
+    HALF_BACKLASH,
+    INLINED,
+    JIT_OPTIONS,
+    M1,
+    M2,
+    ME,
+    OMEGA_MESH,
+    STE_PHASE,
+    T1,
+    T2,
+    coefficients,
+    contact_region,
+    divided,
+    mesh_terms,
+)
 from uqgear.physics._runup_kernels import (
     FROM_X,
     _hermite,
     _rk4,
+    _terms,
+    chain_rule,
     lane_field,
+    mesh_ste,
     record_row,
     split_at_contact,
     table_terms,
     warp,
     warped_field,
-    warped_forcing,
 )
-from uqgear.physics._stepper import rk4_combine_weighted, rk4_stages
+from uqgear.physics._stepper import F_SINE, rk4_combine_weighted, rk4_stages
 
 # Fields of a sub-step in the forcing table (field f, lane l at element f * LANES + l of its row):
 # (k, friction term, drive, e'', 1 / tau') at each of RK4's three stage times, then the width h
@@ -153,40 +173,150 @@ def lane_work(states, params):
 
 
 @nb.njit(**JIT_OPTIONS)
-def _fill(table, n, period, warps, schedule, stages, params, fp, fg):
+def _cosines(schedule, params):
+    """cos(Omega tau + STE phase) of each lane at each stage time (the same every mesh period: found once)."""
+    _, offsets, widths, _, _, _ = schedule
+    n_sub = schedule[0][schedule[0].size - 1]
+    cosines = np.empty((n_sub, 3, LANES))
+    for sub in range(n_sub):
+        for stage in range(3):
+            local = offsets[sub] if stage == 0 else (
+                offsets[sub] + 0.5 * widths[sub] if stage == 1 else offsets[sub] + widths[sub]
+            )
+            for lane in range(LANES):
+                cosines[sub, stage, lane] = math.cos(params[lane, OMEGA_MESH] * local + params[lane, STE_PHASE])
+    return cosines
+
+
+@nb.njit(**JIT_OPTIONS)
+def _fill(table, n, period, warps, schedule, stages, cosines, params, fp, fg):
     """Every lane's forcing for mesh period ``n``: the clock once per stage time, then each lane's
     :func:`~uqgear.physics._runup_kernels.table_terms` (the one-run kernel's numbers)."""
     _, offsets, widths, _, pairs, _ = schedule
     knot_t, knot_rate, knot_accel = warps
     start = n * period
-    for sub in range(table.shape[0]):
-        local = offsets[sub]
+    n_sub = table.shape[0]
+    clock = np.empty((n_sub, 3, 4))
+    for sub in range(n_sub):
+        tau = start + offsets[sub]
         h = widths[sub]
-        tau = start + local
         for stage in range(3):
             at = tau if stage == 0 else (tau + 0.5 * h if stage == 1 else tau + h)
-            at_local = local if stage == 0 else (local + 0.5 * h if stage == 1 else local + h)
             t, rate, accel = warp(at, n, period, knot_t, knot_rate, knot_accel)
-            for lane in range(LANES):
-                terms = table_terms(at, at_local, n, t, rate, accel, stages[lane], sub, stage, pairs[sub],
-                                    params[lane], fp, fg)
-                for k in range(R_STAGE):
-                    table[sub, (stage * R_STAGE + k) * LANES + lane] = terms[k]
-        for lane in range(LANES):
+            clock[sub, stage, 0] = at
+            clock[sub, stage, 1] = t
+            clock[sub, stage, 2] = rate
+            clock[sub, stage, 3] = accel
+    # lane by lane: a lane's rows of the arrays are taken once a period, not at every stage
+    for lane in range(LANES):
+        p = params[lane]
+        tabulated = stages[lane]
+        for sub in range(n_sub):
+            for stage in range(3):
+                terms = table_terms(
+                    clock[sub, stage, 0], n, clock[sub, stage, 1], clock[sub, stage, 2], clock[sub, stage, 3],
+                    cosines[sub, stage, lane], tabulated, sub, stage, pairs[sub], p, fp, fg,
+                )
+                first = stage * R_STAGE
+                table[sub, first * LANES + lane] = terms[0]
+                table[sub, (first + 1) * LANES + lane] = terms[1]
+                table[sub, (first + 2) * LANES + lane] = terms[2]
+                table[sub, (first + 3) * LANES + lane] = terms[3]
+                table[sub, (first + 4) * LANES + lane] = terms[4]
+            h = widths[sub]
             table[sub, R_WIDTH * LANES + lane] = h
             table[sub, R_WEIGHT * LANES + lane] = h / 6.0
 
 
 @nb.njit(**JIT_OPTIONS)
-def _outputs(W, f_end, live, tau, h, tau_ref, n, period, warps, params, pair_k, period_k, fp, fg, out_tau, o,
+def _steady(params, live):
+    """Whether every live lane's forcing but the clock's repeats every mesh period (no tooth factors,
+    run-out, torque ripple or adhesion oscillation): then a period changes e'' and 1 / tau' alone."""
+    for lane in range(LANES):
+        if live[lane] and not periodic_forcing(params[lane]):
+            return False
+    return True
+
+
+@nb.njit(**JIT_OPTIONS)
+def _ste_slopes(schedule, stages, cosines, params):
+    """Each lane's de/dtau and d2e/dtau2 of the mesh-periodic STE at each stage time (the same every mesh
+    period): row ``sub``, field 2 stage (de/dtau) and 2 stage + 1 (d2e/dtau2), lanes adjacent."""
+    n_sub = schedule[0][schedule[0].size - 1]
+    slopes = np.empty((n_sub, 6 * LANES))
+    for lane in range(LANES):
+        p = params[lane]
+        for sub in range(n_sub):
+            for stage in range(3):
+                _, ste_tau, ste_tautau = mesh_ste(stages[lane, sub, stage, F_SINE], cosines[sub, stage, lane], p)
+                slopes[sub, 2 * stage * LANES + lane] = ste_tau
+                slopes[sub, (2 * stage + 1) * LANES + lane] = ste_tautau
+    return slopes
+
+
+@nb.njit(**JIT_OPTIONS)
+def _refill_clock(table, n, period, warps, schedule, slopes):
+    """The parts of a steady group's forcing that change from period to period: e'' (the chain rule at
+    the period's clock) and 1 / tau', as :func:`~uqgear.physics._runup_kernels.time_part` finds them."""
+    _, offsets, widths, _, _, _ = schedule
+    knot_t, knot_rate, knot_accel = warps
+    start = n * period
+    for sub in range(table.shape[0]):
+        tau = start + offsets[sub]
+        h = widths[sub]
+        for stage in range(3):
+            at = tau if stage == 0 else (tau + 0.5 * h if stage == 1 else tau + h)
+            _, rate, accel = warp(at, n, period, knot_t, knot_rate, knot_accel)
+            w = 1.0 / rate
+            first = stage * R_STAGE
+            for lane in range(LANES):
+                table[sub, (first + 3) * LANES + lane] = chain_rule(
+                    slopes[sub, 2 * stage * LANES + lane], slopes[sub, (2 * stage + 1) * LANES + lane], rate, accel
+                )
+                table[sub, (first + 4) * LANES + lane] = w
+
+
+@nb.njit(**JIT_OPTIONS)
+def mesh_sharing(params):
+    """Each lane's earlier lane with the same parameters but for the torques T1 and T2 (whose mesh
+    stiffness, friction arms and STE phase are then the same numbers), or -1."""
+    share = np.full(LANES, -1, dtype=np.int64)
+    for lane in range(LANES):
+        for other in range(lane):
+            if share[other] < 0 and _same_mesh(params, lane, other):
+                share[lane] = other
+                break
+    return share
+
+
+@nb.njit(**JIT_OPTIONS)
+def _same_mesh(params, i, j):
+    for k in range(params.shape[1]):
+        if k != T1 and k != T2 and params[i, k] != params[j, k]:
+            return False
+    return True
+
+
+@nb.njit(**JIT_OPTIONS)
+def _outputs(W, f_end, live, share, tau, h, tau_ref, n, period, warps, params, pair_k, period_k, fp, fg, out_tau, o,
              history):
     """The one-run kernel's history rows of every live lane at the outputs in a sub-step; returns the
-    index of the next output."""
+    index of the next output. The clock is found once for all lanes, the mesh terms once for the lanes
+    that share them (:func:`mesh_sharing`)."""
     edge = tau + h - 1e-9 * period
     n_out = out_tau.size
     stop = o
     while stop < n_out and out_tau[stop] < edge:
         stop += 1
+    knot_t, knot_rate, knot_accel = warps
+    clock = np.empty((stop - o, 3))
+    for k in range(o, stop):
+        t, rate, accel = warp(out_tau[k], n, period, knot_t, knot_rate, knot_accel)
+        clock[k - o, 0] = t
+        clock[k - o, 1] = rate
+        clock[k - o, 2] = accel
+    # (k, pinion arms, gear arms, sin, cos) of each output and lane, as warped_forcing finds them
+    mesh = np.empty((stop - o, LANES, 5))
     for lane in range(LANES):
         if not live[lane]:
             continue
@@ -196,9 +326,20 @@ def _outputs(W, f_end, live, tau, h, tau_ref, n, period, warps, params, pair_k, 
         d1 = lane_state(W, W_SLOPE, lane)
         new = lane_state(W, W_TRIAL, lane)
         d_end, _ = warped_field(new, _terms_of(f_end, 2, lane), (c, FROM_X), divided)
+        source = share[lane]
         for k in range(o, stop):
             at = _hermite(s, d1, new, d_end, h, (out_tau[k] - tau) / h)
-            terms = warped_forcing(out_tau[k], tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
+            row = mesh[k - o, lane]
+            if source >= 0:
+                row[:] = mesh[k - o, source]
+            else:
+                row[0], row[1], row[2] = mesh_terms(out_tau[k], tau_ref, p, pair_k, period_k, fp, fg)
+                angle = p[OMEGA_MESH] * out_tau[k] + p[STE_PHASE]
+                row[3] = math.sin(angle)
+                row[4] = math.cos(angle)
+            terms = _terms(
+                out_tau[k], clock[k - o, 0], clock[k - o, 1], clock[k - o, 2], row[3], row[4], row[0], row[1], row[2], p
+            )
             record_row(at, terms, p, history[lane, k])
     return stop
 
@@ -217,10 +358,17 @@ def integrate_runup_lanes(first, stop, W, live, params, pair_k, period_k, fp, fg
     first_sub, offsets, widths, refs, pairs, _ = schedule
     n_sub = first_sub[first_sub.size - 1]
     table = np.empty((n_sub, N_RUNUP_TABLE * LANES))
+    cosines = _cosines(schedule, params)
+    steady = _steady(params, live)
+    slopes = _ste_slopes(schedule, stages, cosines, params)
+    share = mesh_sharing(params)
     # LANES, but not a constant to LLVM (see uqgear.physics._lanes._step_lanes)
     lanes = W.size // N_ROWS
     for n in range(first, stop):
-        _fill(table, n, period, warps, schedule, stages, params, fp, fg)
+        if steady and n > first:
+            _refill_clock(table, n, period, warps, schedule, slopes)
+        else:
+            _fill(table, n, period, warps, schedule, stages, cosines, params, fp, fg)
         start = n * period
         for sub in range(n_sub):
             tau = start + offsets[sub]
@@ -232,8 +380,8 @@ def integrate_runup_lanes(first, stop, W, live, params, pair_k, period_k, fp, fg
                         _redo_lane(lane, W, table[sub], tau, h, tau_ref, n, period, warps, params[lane], pair_k,
                                    period_k, fp, fg)
             if o < out_tau.size and out_tau[o] < tau + h - 1e-9 * period:
-                o = _outputs(W, table[sub], live, tau, h, tau_ref, n, period, warps, params, pair_k, period_k, fp,
-                             fg, out_tau, o, history)
+                o = _outputs(W, table[sub], live, share, tau, h, tau_ref, n, period, warps, params, pair_k,
+                             period_k, fp, fg, out_tau, o, history)
             _advance(W, lanes)
     return o
 

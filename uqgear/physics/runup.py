@@ -195,6 +195,24 @@ def _integrate_fast(
     return history, bands
 
 
+def _plans(
+    setups: Sequence[ModelSetup], steps_per_mode: int, profile: SpeedProfile, out_t: np.ndarray
+) -> list[_Plan]:
+    """Each run's :func:`_plan`, found once for runs that differ in their torques alone (which the grid
+    does not depend on)."""
+    found: dict[bytes, _Plan] = {}
+    plans = []
+    for setup in setups:
+        grid = setup.parameters.copy()
+        grid[[K.T1, K.T2]] = 0.0
+        arrays = (grid, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
+        key = b"".join(np.ascontiguousarray(a).tobytes() for a in (*arrays, setup.breakpoints))
+        if key not in found:
+            found[key] = _plan(setup, steps_per_mode, profile, out_t)
+        plans.append(found[key])
+    return plans
+
+
 def _lane_key(setup: ModelSetup, plan: _Plan) -> tuple[Any, ...]:
     """What runs stepping as lanes of one group share: the grid, its sub-steps and the stiffness tables."""
     arrays = [setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear, setup.breakpoints]
@@ -580,7 +598,7 @@ def simulate_runup_batch(
                 f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}"
             )
     out_t = _output_times(profile, float(sample_rate))
-    plans = [_plan(setup, steps_per_mode, profile, out_t) for setup in setups]
+    plans = _plans(setups, steps_per_mode, profile, out_t)
     steps = np.array([max(band[2] for band in plan.bands) for plan in plans], dtype=np.int64)
     history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
     groups = _lane_groups(setups, plans)
