@@ -531,13 +531,18 @@ def simulate_runup_batch(
     threads: int | None = None,
     initial_states: np.ndarray | None = None,
     run_in_periods: int = RUN_IN_PERIODS,
+    lanes: bool = True,
 ) -> xr.Dataset:
     """Many samples (adhesion torques, stiffness scales, design keys, effect parameters) through one profile.
 
-    Each sample runs on the compiled one-run kernel of :func:`simulate_runup`,
-    the samples spread over threads (:func:`uqgear.physics.threads.spread`);
-    the run-ins are one :func:`uqgear.simulate_batch`. A sample gives the same
-    numbers, bit for bit, as :func:`simulate_runup` with its values.
+    The samples share the profile, hence the warped-time grid: those that
+    also share its sub-steps in every band (the same stiffness scale and
+    design, any torques) step together, eight at a time, as SIMD lanes
+    (:mod:`uqgear.physics._runup_lanes`); any other runs alone on the
+    compiled one-run kernel of :func:`simulate_runup`. Lane groups and lone
+    runs are spread over threads (:func:`uqgear.physics.threads.spread`);
+    the run-ins are one :func:`uqgear.simulate_batch`. A sample gives the
+    same numbers, bit for bit, as :func:`simulate_runup` with its values.
 
     Parameters
     ----------
@@ -550,6 +555,9 @@ def simulate_runup_batch(
         As in :func:`uqgear.simulate_batch`.
     sample_rate, effects, damping_in_separation, stiffness, steps_per_mode, run_in_periods
         As in :func:`simulate_runup`.
+    lanes : bool
+        Step runs of one grid together as SIMD lanes; False runs every sample
+        on the one-run kernel. The numbers are the same, bit for bit.
 
     Returns
     -------
@@ -601,7 +609,7 @@ def simulate_runup_batch(
     plans = _plans(setups, steps_per_mode, profile, out_t)
     steps = np.array([max(band[2] for band in plan.bands) for plan in plans], dtype=np.int64)
     history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
-    groups = _lane_groups(setups, plans)
+    groups = _lane_groups(setups, plans) if lanes else [[i] for i in range(n)]
     lane_groups = [members for members in groups if len(members) > 1]
     if lane_groups:
         # compiled once, before the threads start (the lanes' vector width is a process-wide option)
