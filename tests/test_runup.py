@@ -190,9 +190,11 @@ def _lane_groups(design, profile, samples, effects=()):
     return RU._lane_groups(setups, RU._plans(setups, 24, profile, out_t))
 
 
-def _assert_batch_is_single_runs(design, profile, samples, **options):
+def _assert_batch_is_single_runs(design, profile, samples, threads=1, **options):
     names = (*HISTORY_COLUMNS, "te")
-    batch = simulate_runup_batch(design, profile, samples, run_in_periods=40, variables=names, threads=1, **options)
+    batch = simulate_runup_batch(
+        design, profile, samples, run_in_periods=40, variables=names, threads=threads, **options
+    )
     for i in range(samples.sizes["sample"]):
         alone = simulate_runup(
             design,
@@ -222,7 +224,7 @@ def test_lane_batch_is_the_one_run_kernel_for_every_sample(design):
     )
     groups = _lane_groups(design, ramp, samples)
     assert sorted(map(sorted, groups)) == [[0, 1, 2], [3, 4], [5]]
-    batch = _assert_batch_is_single_runs(design, ramp, samples)
+    batch = _assert_batch_is_single_runs(design, ramp, samples, threads=2)
     assert batch["contact"].values[2].min() == 0 and batch["contact"].values[4].min() == 0
 
 
