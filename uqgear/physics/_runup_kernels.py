@@ -175,8 +175,8 @@ def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, f
 
 @nb.njit(**INLINED)
 def table_terms(tau, n, t, rate, accel, cosine, table, sub, stage, n_pairs, p, fp, fg):
-    """:func:`table_forcing` given the clock (t, tau', tau'') at ``tau`` (:func:`warp`), which runs
-    sharing the profile share, and cos(Omega tau + STE phase) (the same every mesh period)."""
+    """:func:`table_forcing` given the clock (t, tau', tau'') at ``tau`` (:func:`warp`: the same for every
+    run through the profile) and cos(Omega_ref local + STE phase) (the same every mesh period)."""
     k = table[sub, stage, F_K]
     arm_pinion = table[sub, stage, F_ARM_PINION]
     arm_gear = table[sub, stage, F_ARM_GEAR]
