@@ -3,11 +3,12 @@
 Prints
 
 * the pace per simulated second of a run-up batch (8 adhesion torques 21-46 kN m,
-  ramp 1500 -> 2500 rpm in 1 s, histories at 20.48 kHz) against
-  :func:`uqgear.simulate_batch` of the same 8 samples at the ramp's mean speed
-  (2000 rpm) over the same simulated time, without histories and with the rig
-  channels at 32 samples a mesh period, and on the one-sample kernel (the
-  run-up runs each sample on its own one-run kernel), as ratios;
+  ramp 1500 -> 2500 rpm in 1 s) on the SIMD lanes, with histories at 20.48 kHz
+  and with next to none (10 Hz: the difference is the output's cost), and on
+  the one-run kernel (``lanes=False``), against :func:`uqgear.simulate_batch`
+  of the same 8 samples at the ramp's mean speed (2000 rpm) over the same
+  simulated time, on the lanes without histories and with the rig channels at
+  32 samples a mesh period, and on the one-sample kernel, as ratios;
 * a long run-up 500 -> 6000 rpm (``--duration`` s, 30 by default) at 20.48 kHz
   against a stepped sweep of 23 steady speeds 500-6000 rpm, once with the
   default 400 mesh periods each and once spending the same simulated time
@@ -21,6 +22,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -47,30 +49,42 @@ def pace(design: uqgear.Design) -> None:
     steady_samples = runup_samples.assign(pinion_speed=("sample", np.full(8, 2000.0)))
     periods = int(round(2000.0 / 60.0 * design.z1 * ramp.duration))
 
-    def runup() -> object:
-        return uqgear.simulate_runup_batch(design, ramp, runup_samples, threads=1, run_in_periods=1)
+    def runup(**kw: Any) -> Callable[[], object]:
+        return lambda: uqgear.simulate_runup_batch(design, ramp, runup_samples, threads=1, run_in_periods=1, **kw)
 
     def steady(**kw: object) -> Callable[[], object]:
         return lambda: uqgear.simulate_batch(
             design, steady_samples, n_periods=periods, keep_periods=periods, threads=1, **kw
         )
 
-    runup()
-    steady()()
+    for work in (runup(), runup(sample_rate=10.0), runup(lanes=False), steady(), steady(lanes=False)):
+        work()
     steady(history_per_period=32, rig_channels=True)()
-    t_runup = best_cpu(runup)
+    t_runup = best_cpu(runup())
+    t_quiet = best_cpu(runup(sample_rate=10.0))
+    t_alone = best_cpu(runup(lanes=False))
+    t_alone_quiet = best_cpu(runup(lanes=False, sample_rate=10.0))
     t_steady = best_cpu(steady())
     t_history = best_cpu(steady(history_per_period=32, rig_channels=True))
-    steady(lanes=False)()
     t_one = best_cpu(steady(lanes=False))
     simulated = 8 * ramp.duration
-    print(f"run-up batch: {t_runup / simulated:.4f} s CPU per simulated second (8 runs, 1 s each, 20.48 kHz out)")
+    print(f"run-up batch, lanes: {t_runup / simulated:.4f} s CPU per simulated second (8 runs of 1 s, 20.48 kHz out)")
+    print(f"run-up batch, lanes, 10 Hz out: {t_quiet / simulated:.4f} s CPU per simulated second")
+    print(
+        f"run-up batch, one-run kernel: {t_alone / simulated:.4f} (20.48 kHz out), "
+        f"{t_alone_quiet / simulated:.4f} (10 Hz out) s CPU per simulated second"
+    )
     print(f"steady batch, QoIs only: {t_steady / simulated:.4f} s CPU per simulated second ({periods} periods)")
     print(f"steady batch, rig channels 32 a period: {t_history / simulated:.4f} s CPU per simulated second")
     print(f"steady batch, one-sample kernel (no lanes), QoIs only: {t_one / simulated:.4f} s CPU per simulated second")
     print(
-        f"ratio run-up / steady: {t_runup / t_steady:.2f} (lanes, QoIs only), {t_runup / t_history:.2f} "
-        f"(lanes, histories), {t_runup / t_one:.2f} (one-sample kernel, QoIs only)"
+        f"ratio run-up lanes (20.48 kHz) / steady: {t_runup / t_steady:.2f} (lanes, QoIs only), "
+        f"{t_runup / t_history:.2f} (lanes, histories), {t_runup / t_one:.2f} (one-sample kernel, QoIs only)"
+    )
+    print(f"ratio run-up lanes (10 Hz) / steady lanes, QoIs only: {t_quiet / t_steady:.2f}")
+    print(
+        f"ratio run-up lanes / run-up one-run kernel: {t_runup / t_alone:.2f} (20.48 kHz), "
+        f"{t_quiet / t_alone_quiet:.2f} (10 Hz)"
     )
 
 

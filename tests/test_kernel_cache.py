@@ -14,6 +14,8 @@ from uqgear.physics import (
     _lanes,
     _pair_lanes,
     _pairs,
+    _runup_kernels,
+    _runup_lanes,
     _stepper,
     _variational,
 )
@@ -33,6 +35,8 @@ def test_every_kernel_of_the_compiled_modules_is_located_with_the_package_stamp(
         _lanes,
         _pair_lanes,
         _lane_tables,
+        _runup_kernels,
+        _runup_lanes,
         _variational,
         harmonics,
         foreign_rig,

@@ -10,6 +10,9 @@ from scipy.interpolate import PchipInterpolator
 
 import uqgear
 from uqgear.physics import _runup_kernels as R
+from uqgear.physics import runup as RU
+from uqgear.physics.batch_setup import build_batch
+from uqgear.physics.model import HISTORY_COLUMNS
 from uqgear.physics.runup import BAND_SHRINK, simulate_runup, simulate_runup_batch, step_bands
 from uqgear.physics.speed_profile import RPM, SpeedProfile, SpeedProfileError
 
@@ -176,6 +179,72 @@ def test_batch_samples_are_single_runs(design):
     for name in ("pinion_speed", "pinion_angle", "mesh_phase", "x", "mesh_force"):
         assert "units" in batch[name].attrs
     np.testing.assert_allclose(batch["mesh_phase"], design.z1 * batch["pinion_angle"] / (2 * math.pi))
+
+
+def _lane_groups(design, profile, samples, effects=()):
+    """The lane groups :func:`simulate_runup_batch` forms for ``samples`` (lists of sample indices)."""
+    n = samples.sizes["sample"]
+    full = samples.assign(pinion_speed=("sample", np.full(n, profile.start_speed)))
+    setups = build_batch(design, full, effects=effects)
+    out_t = RU._output_times(profile, 20480.0)
+    return RU._lane_groups(setups, RU._plans(setups, 24, profile, out_t))
+
+
+def _assert_batch_is_single_runs(design, profile, samples, threads=1, **options):
+    names = (*HISTORY_COLUMNS, "te")
+    batch = simulate_runup_batch(
+        design, profile, samples, run_in_periods=40, variables=names, threads=threads, **options
+    )
+    for i in range(samples.sizes["sample"]):
+        alone = simulate_runup(
+            design,
+            profile,
+            float(samples["drive_torque"][i]),
+            float(samples["adhesion_torque"][i]),
+            mesh_stiffness_scale=float(samples["mesh_stiffness_scale"][i]),
+            run_in_periods=40,
+            **options,
+        )
+        for name in names:
+            # the lanes do the one-run kernel's operations in its order: the same numbers, bit for bit
+            np.testing.assert_array_equal(batch[name].values[i], alone[name].values, err_msg=f"{name} of {i}")
+    return batch
+
+
+def test_lane_batch_is_the_one_run_kernel_for_every_sample(design):
+    """Runs of three stiffness scales and several torques: lane groups with padding lanes, a run alone,
+    two runs that lose contact (steps split at the contact boundary)."""
+    ramp = SpeedProfile.linear(1800.0, 2300.0, 0.03)
+    samples = uqgear.samples_from_mapping(
+        {
+            "drive_torque": [T1, T1, 300.0, T1, 500.0, T1],
+            "adhesion_torque": [25e3, 40e3, 2e3, 30e3, 1e3, T2],
+            "mesh_stiffness_scale": [1.0, 1.0, 1.0, 0.9, 0.9, 1.1],
+        }
+    )
+    groups = _lane_groups(design, ramp, samples)
+    assert sorted(map(sorted, groups)) == [[0, 1, 2], [3, 4], [5]]
+    batch = _assert_batch_is_single_runs(design, ramp, samples, threads=2)
+    assert batch["contact"].values[2].min() == 0 and batch["contact"].values[4].min() == 0
+
+
+def test_lane_batch_is_the_one_run_kernel_with_every_effect(design):
+    """Forcing that changes every mesh period (filled in full each period), friction, a damaged tooth, no
+    damping in separation, and contact loss."""
+    effects = [
+        uqgear.make_effect("eccentricity", {"amplitude": 15e-6, "kappa": 0.05}),
+        uqgear.make_effect("torque_ripple", {"amplitude": 0.05}),
+        uqgear.make_effect("adhesion_oscillation", {"amplitude": 0.1, "frequency": 40.0}),
+        uqgear.make_effect("friction", {"coefficient": 0.06}),
+        uqgear.make_effect("tooth_damage", {"tooth": 3, "depth": 0.3}),
+    ]
+    ramp = SpeedProfile.linear(2000.0, 2400.0, 0.03)
+    samples = uqgear.samples_from_mapping(
+        {"drive_torque": [300.0, T1, T1], "adhesion_torque": [1e3, 25e3, 40e3], "mesh_stiffness_scale": [1.0] * 3}
+    )
+    assert _lane_groups(design, ramp, samples, effects) == [[0, 1, 2]]
+    batch = _assert_batch_is_single_runs(design, ramp, samples, effects=effects, damping_in_separation=False)
+    assert batch["contact"].values[0].min() == 0
 
 
 def test_torque_driven_profile_follows_the_reflected_inertia(design):

@@ -35,6 +35,7 @@ COMPILED_MODULES = (
     "physics/_lane_tables.py",
     "physics/_variational.py",
     "physics/_runup_kernels.py",
+    "physics/_runup_lanes.py",
     "calibration/harmonics.py",
     "rig/foreign_rig.py",
     "rig/foreign_response.py",

@@ -88,11 +88,11 @@ from uqgear.physics._stepper import _split_at_contact, rk4_step, rk4_step_weight
 _COMPILED: set[str] = set()
 
 
-def compile_lane_kernel(
-    step: Any, rows: int, table_width: int, kernel: Callable[..., None], groups: np.ndarray, batch: QoiBatch,
-    refused: np.ndarray,
-) -> None:
+def compile_lane_kernel(step: Any, rows: int, table_width: int, kernel: Callable[..., Any], *arguments: Any) -> None:
     """Compile (or load from the cache) a lane kernel, ``kernel``, whose sub-step over the lanes is ``step``.
+
+    ``kernel(0, 0, *arguments)`` compiles it for the types of its calls and does no work (its first
+    two arguments bound the lane groups or periods it runs).
 
     A lane group's sub-step is one loop over the lanes (:func:`_step_lanes`, or the pair lanes'
     step); LLVM's loop vectoriser turns each of its IEEE operations into one vector instruction on
@@ -127,7 +127,7 @@ def compile_lane_kernel(
                 step(np.zeros(rows * LANES), np.zeros((1, table_width * LANES)), 0, 0, 0)
             finally:
                 ll.set_option("", "-force-vector-width=0")
-            kernel(0, 0, groups, batch, refused)
+            kernel(0, 0, *arguments)
             _COMPILED.add(name)
         finally:
             nb.config.SLP_VECTORIZE = saved  # type: ignore[attr-defined]

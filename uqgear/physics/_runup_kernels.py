@@ -64,6 +64,7 @@ from uqgear.physics._rhs import (
     mesh_damping,
     mesh_terms,
     run_out_modulation,
+    state_derivative_by,
 )
 from uqgear.physics._stepper import (
     BISECTIONS,
@@ -107,6 +108,21 @@ def warp(tau, n, period, knot_t, knot_rate, knot_accel):
 
 
 @nb.njit(**INLINED)
+def mesh_ste(sine, cosine, p):
+    """(e, de/dtau, d2e/dtau2) of the mesh-periodic STE from sin and cos of Omega_ref tau + STE phase."""
+    ste = p[STE_AMPLITUDE] * sine
+    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
+    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    return ste, ste_tau, ste_tautau
+
+
+@nb.njit(**INLINED)
+def chain_rule(ste_tau, ste_tautau, rate, accel):
+    """e'' = e_tautau tau'^2 + e_tau tau'' (the one expression of the STE's acceleration)."""
+    return ste_tautau * (rate * rate) + ste_tau * accel
+
+
+@nb.njit(**INLINED)
 def time_part(tau, t, rate, accel, sine, cosine, p):
     """(relative drive acceleration, e, e'') of the angle-driven model.
 
@@ -120,16 +136,14 @@ def time_part(tau, t, rate, accel, sine, cosine, p):
     adhesion = p[T2]
     if p[ADHESION_AMPLITUDE] != 0.0:
         adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
-    ste = p[STE_AMPLITUDE] * sine
-    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
-    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    ste, ste_tau, ste_tautau = mesh_ste(sine, cosine, p)
     if p[ECC_AMPLITUDE] != 0.0:
         angle = p[ECC_OMEGA] * tau + p[ECC_PHASE]
         ecc = p[ECC_AMPLITUDE] * math.sin(angle)
         ste += ecc
         ste_tau += p[ECC_AMPLITUDE] * p[ECC_OMEGA] * math.cos(angle)
         ste_tautau -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
-    ste_acc = ste_tautau * (rate * rate) + ste_tau * accel
+    ste_acc = chain_rule(ste_tau, ste_tautau, rate, accel)
     return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
 
 
@@ -154,6 +168,15 @@ def warped_forcing(tau, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg):
 def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, fp, fg):
     """:func:`warped_forcing` from a tabulated stage (``local``: tau within the period)."""
     knot_t, knot_rate, knot_accel = warps
+    t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
+    cosine = math.cos(p[OMEGA_MESH] * local + p[STE_PHASE])
+    return table_terms(tau, n, t, rate, accel, cosine, table, sub, stage, n_pairs, p, fp, fg)
+
+
+@nb.njit(**INLINED)
+def table_terms(tau, n, t, rate, accel, cosine, table, sub, stage, n_pairs, p, fp, fg):
+    """:func:`table_forcing` given the clock (t, tau', tau'') at ``tau`` (:func:`warp`: the same for every
+    run through the profile) and cos(Omega_ref local + STE phase) (the same every mesh period)."""
     k = table[sub, stage, F_K]
     arm_pinion = table[sub, stage, F_ARM_PINION]
     arm_gear = table[sub, stage, F_ARM_GEAR]
@@ -164,9 +187,7 @@ def table_forcing(tau, local, n, period, warps, table, sub, stage, n_pairs, p, f
             arm_pinion += table[sub, stage, 5 + 3 * i] * extra
             arm_gear += table[sub, stage, 6 + 3 * i] * extra
     scale = run_out_modulation(tau, p[STIFFNESS_SCALE], p[ECC_KAPPA], p[ECC_OMEGA], p[ECC_PHASE])
-    t, rate, accel = warp(tau, n, period, knot_t, knot_rate, knot_accel)
     sine = table[sub, stage, F_SINE]
-    cosine = math.cos(p[OMEGA_MESH] * local + p[STE_PHASE])
     return _terms(tau, t, rate, accel, sine, cosine, k * scale, arm_pinion * scale, arm_gear * scale, p)
 
 
@@ -180,6 +201,17 @@ def warped_field(s, terms, context, divide):
     d, _, exact = _accelerations(
         s, terms[0], terms[1], terms[2], terms[3], c, fx, mesh_damping(c, apart), divide, NO_INVERSE
     )
+    w = terms[4]
+    return (d[0] * w, d[1] * w, d[2] * w, d[3] * w, d[4] * w, d[5] * w), exact
+
+
+@nb.njit(**INLINED)
+def lane_field(s, terms, context, divide):
+    """:func:`warped_field` with the mesh damping x implies, as a field of :func:`rk4_stages` for the
+    lanes: ``context`` (coefficients, the inverse masses ``divide`` reads), ``terms`` (k, friction
+    term, drive, e'', 1 / tau')."""
+    c, inverse = context
+    d, _, exact = state_derivative_by(s, terms[0], terms[1], terms[2], terms[3], c, divide, inverse)
     w = terms[4]
     return (d[0] * w, d[1] * w, d[2] * w, d[3] * w, d[4] * w, d[5] * w), exact
 
@@ -327,9 +359,13 @@ def integrate_runup(state0, p, pair_k, period_k, fp, fg, schedule, period, first
 __all__ = [
     "FROM_X",
     "warp",
+    "mesh_ste",
+    "chain_rule",
     "time_part",
     "warped_forcing",
     "table_forcing",
+    "table_terms",
+    "lane_field",
     "warped_field",
     "split_at_contact",
     "record_row",

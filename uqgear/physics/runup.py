@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Hashable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -30,6 +30,8 @@ from scipy.interpolate import PPoly
 from ..common.errors import OperatingPointError
 from . import _kernels as K
 from . import _runup_kernels as R
+from . import _runup_lanes as RL
+from ._lanes import LANES, lane_ready
 from ._stepper import build_schedule
 from .batch_setup import build_batch
 from .design import Design
@@ -151,11 +153,17 @@ def step_bands(setup: ModelSetup, rate: np.ndarray, steps_per_mode: int) -> list
     return bands
 
 
-def _integrate_fast(
-    setup: ModelSetup, steps_per_mode: int, profile: SpeedProfile, out_t: np.ndarray, state0: np.ndarray
-) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
-    """History rows at ``out_t`` by the compiled warped-time RK4 (see :mod:`uqgear.physics._runup_kernels`),
-    and the bands of steps per period it took (:func:`step_bands`)."""
+class _Plan(NamedTuple):
+    """A run's warped-time grid: output tau, mesh period, clock knots, bands and their schedules."""
+
+    out_tau: np.ndarray
+    period: float
+    warps: tuple[np.ndarray, np.ndarray, np.ndarray]
+    bands: list[tuple[int, int, int]]
+    schedules: list[tuple[np.ndarray, ...]]
+
+
+def _plan(setup: ModelSetup, steps_per_mode: int, profile: SpeedProfile, out_t: np.ndarray) -> _Plan:
     p = setup.parameters
     omega_ref = setup.pinion_rotation
     period = 2.0 * math.pi / p[K.OMEGA_MESH]
@@ -164,14 +172,103 @@ def _integrate_fast(
     angles = np.arange(n_periods + 1) * period * omega_ref
     warps = _clock(profile, angles, omega_ref)
     bands = step_bands(setup, warps[1], steps_per_mode)
+    schedules = [
+        build_schedule(p, setup.pair_stiffness, setup.period_stiffness, setup.breakpoints, steps)
+        for _, _, steps in bands
+    ]
+    return _Plan(out_tau, period, warps, bands, schedules)
+
+
+def _integrate_fast(
+    setup: ModelSetup, steps_per_mode: int, profile: SpeedProfile, out_t: np.ndarray, state0: np.ndarray
+) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """History rows at ``out_t`` by the compiled warped-time RK4 (see :mod:`uqgear.physics._runup_kernels`),
+    and the bands of steps per period it took (:func:`step_bands`)."""
+    p = setup.parameters
+    out_tau, period, warps, bands, schedules = _plan(setup, steps_per_mode, profile, out_t)
     history = np.empty((out_t.size, len(HISTORY_COLUMNS)))
     state = np.ascontiguousarray(state0, dtype=float)
     tables = (setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
     o = 0
-    for first, stop, steps in bands:
-        schedule = build_schedule(p, setup.pair_stiffness, setup.period_stiffness, setup.breakpoints, steps)
+    for (first, stop, _), schedule in zip(bands, schedules):
         state, o = R.integrate_runup(state, p, *tables, schedule, period, first, stop, warps, out_tau, o, history)
     return history, bands
+
+
+def _plans(
+    setups: Sequence[ModelSetup], steps_per_mode: int, profile: SpeedProfile, out_t: np.ndarray
+) -> list[_Plan]:
+    """Each run's :func:`_plan`, found once for runs that differ in their torques alone (which the grid
+    does not depend on)."""
+    found: dict[bytes, _Plan] = {}
+    plans = []
+    for setup in setups:
+        grid = setup.parameters.copy()
+        grid[[K.T1, K.T2]] = 0.0
+        arrays = (grid, setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear)
+        key = b"".join(np.ascontiguousarray(a).tobytes() for a in (*arrays, setup.breakpoints))
+        if key not in found:
+            found[key] = _plan(setup, steps_per_mode, profile, out_t)
+        plans.append(found[key])
+    return plans
+
+
+def _lane_key(setup: ModelSetup, plan: _Plan) -> tuple[Any, ...]:
+    """What runs stepping as lanes of one group share: the grid, its sub-steps and the stiffness tables."""
+    arrays = [setup.pair_stiffness, setup.period_stiffness, setup.factor_pinion, setup.factor_gear, setup.breakpoints]
+    for schedule in plan.schedules:
+        # the arrays hold as many sub-steps as a period may have; those past the last are not set
+        n_sub = int(schedule[0][-1])
+        arrays.append(schedule[0])
+        arrays.extend(values[:n_sub] for values in schedule[1:5])
+    return (plan.period, tuple(plan.bands), *(np.ascontiguousarray(a).tobytes() for a in arrays))
+
+
+def _lane_groups(setups: Sequence[ModelSetup], plans: Sequence[_Plan]) -> list[list[int]]:
+    """The samples in lane groups of up to ``LANES`` (a run alone in its group: a group of one)."""
+    by_key: dict[tuple[Any, ...], list[int]] = {}
+    ready = lane_ready(np.array([setup.parameters for setup in setups]))
+    groups: list[list[int]] = []
+    for i, (setup, plan) in enumerate(zip(setups, plans)):
+        if ready[i]:
+            by_key.setdefault(_lane_key(setup, plan), []).append(i)
+        else:
+            groups.append([i])
+    for members in by_key.values():
+        groups.extend(members[j : j + LANES] for j in range(0, len(members), LANES))
+    return groups
+
+
+def _lane_arguments(
+    members: list[int], setups: Sequence[ModelSetup], plans: Sequence[_Plan], states: np.ndarray, n_out: int
+) -> tuple[Any, ...]:
+    """The arguments of :func:`uqgear.physics._runup_lanes.integrate_runup_lanes` for a group's first band
+    (padding lanes repeat the first run)."""
+    lanes = members + [members[0]] * (LANES - len(members))
+    lead = setups[members[0]]
+    params = np.array([setups[i].parameters for i in lanes])
+    live = np.arange(LANES) < len(members)
+    W = RL.lane_work(np.ascontiguousarray(states[lanes]), params)
+    tables = (lead.pair_stiffness, lead.period_stiffness, lead.factor_pinion, lead.factor_gear)
+    plan = plans[members[0]]
+    stages = np.array([plans[i].schedules[0][5] for i in lanes])
+    history = np.empty((LANES, n_out, len(HISTORY_COLUMNS)))
+    return (W, live, params, *tables, plan.schedules[0], stages, plan.period, plan.warps, plan.out_tau, 0, history)
+
+
+def _integrate_lanes(
+    members: list[int], setups: Sequence[ModelSetup], plans: Sequence[_Plan], states: np.ndarray, n_out: int
+) -> np.ndarray:
+    """History rows (member, time, column) of a lane group, band by band."""
+    arguments = list(_lane_arguments(members, setups, plans, states, n_out))
+    lanes = members + [members[0]] * (LANES - len(members))
+    o = 0
+    for b, (first, stop, _) in enumerate(plans[members[0]].bands):
+        arguments[7] = plans[members[0]].schedules[b]
+        arguments[8] = np.array([plans[i].schedules[b][5] for i in lanes])
+        arguments[12] = o
+        o = RL.integrate_runup_lanes(first, stop, *arguments)
+    return arguments[13][: len(members)]
 
 
 def _integrate_scipy(
@@ -434,13 +531,18 @@ def simulate_runup_batch(
     threads: int | None = None,
     initial_states: np.ndarray | None = None,
     run_in_periods: int = RUN_IN_PERIODS,
+    lanes: bool = True,
 ) -> xr.Dataset:
     """Many samples (adhesion torques, stiffness scales, design keys, effect parameters) through one profile.
 
-    Each sample runs on the compiled one-run kernel of :func:`simulate_runup`,
-    the samples spread over threads (:func:`uqgear.physics.threads.spread`);
-    the run-ins are one :func:`uqgear.simulate_batch`. A sample gives the same
-    numbers, bit for bit, as :func:`simulate_runup` with its values.
+    The samples share the profile, hence the warped-time grid: those that
+    also share its sub-steps in every band (the same stiffness scale and
+    design, any torques) step together, eight at a time, as SIMD lanes
+    (:mod:`uqgear.physics._runup_lanes`); any other runs alone on the
+    compiled one-run kernel of :func:`simulate_runup`. Lane groups and lone
+    runs are spread over threads (:func:`uqgear.physics.threads.spread`);
+    the run-ins are one :func:`uqgear.simulate_batch`. A sample gives the
+    same numbers, bit for bit, as :func:`simulate_runup` with its values.
 
     Parameters
     ----------
@@ -453,6 +555,9 @@ def simulate_runup_batch(
         As in :func:`uqgear.simulate_batch`.
     sample_rate, effects, damping_in_separation, stiffness, steps_per_mode, run_in_periods
         As in :func:`simulate_runup`.
+    lanes : bool
+        Step runs of one grid together as SIMD lanes; False runs every sample
+        on the one-run kernel. The numbers are the same, bit for bit.
 
     Returns
     -------
@@ -501,15 +606,24 @@ def simulate_runup_batch(
                 f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}"
             )
     out_t = _output_times(profile, float(sample_rate))
-    steps = np.zeros(n, dtype=np.int64)
+    plans = _plans(setups, steps_per_mode, profile, out_t)
+    steps = np.array([max(band[2] for band in plan.bands) for plan in plans], dtype=np.int64)
     history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
+    groups = _lane_groups(setups, plans) if lanes else [[i] for i in range(n)]
+    lane_groups = [members for members in groups if len(members) > 1]
+    if lane_groups:
+        # compiled once, before the threads start (the lanes' vector width is a process-wide option)
+        RL.compile_runup_lanes(*_lane_arguments(lane_groups[0], setups, plans, states, 0))
 
     def run_range(start: int, stop: int) -> None:
-        for i in range(start, stop):
-            history[i], bands = _integrate_fast(setups[i], steps_per_mode, profile, out_t, states[i])
-            steps[i] = max(band[2] for band in bands)
+        for members in groups[start:stop]:
+            if len(members) > 1:
+                history[members] = _integrate_lanes(members, setups, plans, states, out_t.size)
+            else:
+                history[members[0]] = _integrate_fast(setups[members[0]], steps_per_mode, profile, out_t,
+                                                      states[members[0]])[0]
 
-    spread(run_range, n, threads)
+    spread(run_range, len(groups), threads)
     data = _profile_variables(profile, out_t, design.z1)
     everything = _history_variables(history, ("sample", "time"))
     data.update({name: everything[name] for name in variables})
