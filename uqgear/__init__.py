@@ -87,6 +87,7 @@ _PUBLIC: dict[str, str] = {
     # rig data, calibration, diagnosis
     "read_rig": "rig",
     "write_rig": "rig",
+    "ramp_operating_points": "rig",
     "simulate_campaign": "rig",
     "extract_features": "rig",
     "Calibration": "calibration",

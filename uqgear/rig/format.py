@@ -503,7 +503,7 @@ def make_ramp_dataset(
     ...                           channels={"te": np.zeros((1, time.size))}, design=uqgear.load_design("locomotive"),
     ...                           title="ramp", source="example", history="")
     >>> dict(ramps.sizes), sorted(ramps.data_vars)
-    ({'ramp_time': 20480, 'ramp': 1}, ['ramp_pinion_speed_signal', 'ramp_te'])
+    ({'ramp': 1, 'ramp_time': 20480}, ['ramp_pinion_speed_signal', 'ramp_te'])
     """
     where = "new rig data"
     if not isinstance(design, Design):
