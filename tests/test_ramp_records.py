@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.common.errors import RigDataError
+from uqgear.calibration import Calibration
+from uqgear.calibration.outputs import write_calibration
+from uqgear.cli import main
+from uqgear.common.errors import OperatingPointError, RigDataError
 from uqgear.rig.features import extract_features
 from uqgear.rig.format import make_ramp_dataset, make_rig_dataset, read_rig, validate_rig, write_rig
 from uqgear.rig.ramp_format import reversal
 from uqgear.rig.ramp_records import MAX_SPEED_CHANGE, ramp_operating_points, steady_campaign
+from uqgear.rig.virtual_rig import simulate_campaign
+from uqgear.rig.virtual_runup import join_campaigns, simulate_runup_campaign
 
 FS = 20480.0
 #: Mesh-harmonic amplitudes of the synthetic transmission error, m (known truth).
@@ -189,3 +195,107 @@ def test_segment_rules_are_checked_where_the_length_is_given(run_up):
         ramp_operating_points(run_up, segment_duration=0.1)
     with pytest.raises(RigDataError, match=r"segments: expected a whole number"):
         ramp_operating_points(run_up, segments=0)
+
+
+# --------------------------------------------------------------------------- virtual rig run-ups
+
+
+def test_virtual_slow_run_up_gives_the_features_of_steady_runs_at_the_segment_speeds(design):
+    """100 rpm/s from 1000 to 2000 rpm: the segments' mesh harmonics within 3 % of steady runs (measured: 1.2 %)."""
+    truth = {"adhesion_torque": [33000.0]}
+    ramps = {"start_speed": [1000.0], "stop_speed": [2000.0], "rate": [100.0], "drive_torque": [7000.0]}
+    campaign = simulate_runup_campaign(design, ramps, true_parameters=truth, relative_noise=0.0, seed=1)
+    validate_rig(campaign)
+    ops = ramp_operating_points(campaign, segments=5)
+    speeds = ops["pinion_speed"].values
+    steady = simulate_campaign(
+        design,
+        {"pinion_speed": speeds, "drive_torque": np.full(5, 7000.0)},
+        true_parameters={"adhesion_torque": np.full(5, 33000.0)},
+        relative_noise=0.0,
+        duration=ops.sizes["time"] / FS,
+        run_in=0.5,
+        seed=2,
+    )
+    ramp_features, steady_features = extract_features(ops, design), extract_features(steady, design)
+    for channel in ("te", "acc_pinion", "acc_gear"):
+        for harmonic in (1, 2, 3):
+            np.testing.assert_allclose(
+                ramp_features[channel].sel(feature=f"mesh{harmonic}").values,
+                steady_features[channel].sel(feature=f"mesh{harmonic}").values,
+                rtol=0.03,
+                err_msg=f"{channel} mesh{harmonic}",
+            )
+    # the tachometer is the simulated speed: the ramp's, to the sample
+    tachometer = campaign["ramp_pinion_speed_signal"].values[0]
+    np.testing.assert_allclose(tachometer, 1000.0 + 100.0 * campaign["ramp_time"].values, rtol=1e-6)
+
+
+def test_virtual_run_up_is_seeded_and_refuses_what_the_speed_varying_model_does_not_take(design, tmp_path):
+    ramps = {
+        "start_speed": [1500.0, 1800.0],
+        "stop_speed": [1700.0, 1600.0],
+        "rate": [200.0, 200.0],
+        "drive_torque": [7000.0, 6000.0],
+    }
+    first = simulate_runup_campaign(
+        design, ramps, seed=5, channels=["te", "acc_gear"], encoder_run_out={"pinion": 1e-6}
+    )
+    again = simulate_runup_campaign(
+        design, ramps, seed=5, channels=["te", "acc_gear"], encoder_run_out={"pinion": 1e-6}
+    )
+    assert dict(first.sizes) == {"ramp": 2, "ramp_time": 20480}
+    np.testing.assert_array_equal(first["ramp_te"].values, again["ramp_te"].values)
+    assert np.all(np.diff(first["ramp_pinion_speed_signal"].values[1]) < 0)  # the second is a coast-down
+    truth = json.loads(first.attrs["true_parameters"])["ramp_adhesion_torque"]
+    assert np.all((first["ramp_adhesion_torque_lower"] <= truth) & (truth <= first["ramp_adhesion_torque_upper"]))
+    # read as operating points, the truth follows the segments
+    ops = steady_campaign(read_rig(write_rig(tmp_path / "ramps.nc", first)))
+    assert json.loads(ops.attrs["true_parameters"])["adhesion_torque"] == [truth[0]] * 8 + [truth[1]] * 8
+    with pytest.raises(OperatingPointError, match="pitch_errors: the speed-varying model"):
+        simulate_runup_campaign(design, ramps, pitch_errors=7)
+    with pytest.raises(OperatingPointError, match="speed_wander: the wandering ramp 1500 -> 1700 rpm is not monotone"):
+        simulate_runup_campaign(design, ramps, speed_wander=[(0.05, 5.0)])
+    with pytest.raises(OperatingPointError, match="ramps: expected one of rate"):
+        simulate_runup_campaign(design, {**ramps, "duration": [1.0, 1.0]})
+
+
+def test_synth_rig_writes_a_run_up_campaign(tmp_path):
+    out = tmp_path / "runup.nc"
+    assert main(["synth-rig", "--out", str(out), "--ramp", "1500:1600:400", "--ramp", "1700:1600:400:6000"]) == 0
+    campaign = read_rig(out)
+    assert campaign.sizes["ramp"] == 2 and campaign["ramp_drive_torque"].values.tolist() == [7000.0, 6000.0]
+    assert main(["synth-rig", "--out", str(tmp_path / "bad.nc"), "--ramp", "1500:1600"]) == 2
+
+
+def test_calibration_of_a_run_up_beside_steady_runs_holds_the_truth(design, tmp_path):
+    """One ramp 1200 -> 3600 rpm at 200 rpm/s with wander beside two steady runs: the truth inside the 90 %
+    intervals, widened by 1 % of the value (the segments' features differ from steady ones by up to ~1 %)."""
+    truth = {"mesh_stiffness_scale": 1.06, "zeta_mesh": 0.058, "ste_amplitude": 13.5e-6}
+    ramps = simulate_runup_campaign(
+        design,
+        {"start_speed": [1200.0], "stop_speed": [3600.0], "rate": [200.0], "drive_torque": [7000.0]},
+        true_parameters=truth,
+        seed=11,
+        speed_wander=[(0.002, 1.0)],
+    )
+    # the steady records' length sets the segments' (0.125 s: 5 % of 1200 rpm at 200 rpm/s is 0.3 s)
+    steady = simulate_campaign(
+        design,
+        {"pinion_speed": [1500.0, 3000.0], "drive_torque": [7000.0, 7000.0]},
+        true_parameters=truth,
+        seed=12,
+        duration=0.125,
+        run_in=0.3,
+    )
+    path = write_rig(tmp_path / "mixed.nc", join_campaigns(steady, ramps))
+    calibration = Calibration(
+        tuple(truth), n_training=64, stage_steps=400, chunk_steps=1000, max_steps=8000, predictive_draws=4, seed=3
+    ).fit(path)
+    assert calibration.converged_, calibration.diagnostics_["reasons"]
+    for name, value in truth.items():
+        entry = calibration.summary_["parameters"][name]
+        assert entry["q05"] - 0.01 * value <= value <= entry["q95"] + 0.01 * value, (name, entry)
+    assert [row["source"] for row in calibration.speed_] == ["steady"] * 2 + ["ramp 0"] * 8
+    paths = write_calibration(calibration, tmp_path / "out")
+    assert [row["source"] for row in json.loads(paths["json"].read_text())["speed"]][-1] == "ramp 0"

@@ -89,6 +89,7 @@ _PUBLIC: dict[str, str] = {
     "write_rig": "rig",
     "ramp_operating_points": "rig",
     "simulate_campaign": "rig",
+    "simulate_runup_campaign": "rig",
     "extract_features": "rig",
     "Calibration": "calibration",
     "calibrate": "calibration",

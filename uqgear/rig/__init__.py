@@ -46,6 +46,7 @@ from .virtual_rig import (
     synth_rig,
     true_parameters_of,
 )
+from .virtual_runup import join_campaigns, simulate_runup_campaign
 
 __all__ = [
     "CONVENTIONS",
@@ -68,6 +69,8 @@ __all__ = [
     "line_amplitudes",
     "extract_features",
     "simulate_campaign",
+    "simulate_runup_campaign",
+    "join_campaigns",
     "synth_rig",
     "default_operating_points",
     "adhesion_torque_bounds",

@@ -38,6 +38,7 @@ per-point speed. This module does no file I/O.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -134,6 +135,26 @@ def _longest_size(speeds: np.ndarray, segments: int, fs: float, max_speed_change
     return high if _violation(speeds, segments, high, fs, max_speed_change) is None else low
 
 
+def _truth_per_op(attrs: dict, ramps: np.ndarray) -> dict:
+    """The attributes with a virtual rig's per-ramp true adhesion torque carried to the operating points.
+
+    ``true_parameters`` (JSON) may hold ``ramp_adhesion_torque`` (one per
+    ramp) beside the steady runs' ``adhesion_torque``; the segments' values
+    follow the steady runs' in ``adhesion_torque``, as their operating points do.
+    """
+    attrs = dict(attrs)
+    text = attrs.get("true_parameters")
+    if not isinstance(text, str):
+        return attrs
+    truth = json.loads(text)
+    if not isinstance(truth, dict) or "ramp_adhesion_torque" not in truth:
+        return attrs
+    per_ramp = truth.pop("ramp_adhesion_torque")
+    truth["adhesion_torque"] = list(truth.get("adhesion_torque", [])) + [per_ramp[ramp] for ramp in ramps]
+    attrs["true_parameters"] = json.dumps(truth)
+    return attrs
+
+
 def _segment_dataset(ds: xr.Dataset, size: int, segments: int, fs: float, speeds: np.ndarray) -> xr.Dataset:
     """The ramps' segments as steady-format operating points (op x time)."""
     starts = np.concatenate([_starts(speed, segments, size) for speed in speeds])
@@ -163,7 +184,7 @@ def _segment_dataset(ds: xr.Dataset, size: int, segments: int, fs: float, speeds
     }
     for name in ("drive_torque", "adhesion_torque_lower", "adhesion_torque_upper"):
         coords[name] = ("op", np.asarray(ds[f"ramp_{name}"].values, dtype=float)[ramps])
-    out = xr.Dataset(data_vars, coords=coords, attrs=dict(ds.attrs))
+    out = xr.Dataset(data_vars, coords=coords, attrs=_truth_per_op(ds.attrs, ramps))
     for name, (_, units, long_name) in RIG_COORDINATES.items():
         out[name].attrs.update(units=units, long_name=long_name)
     out[OP_SOURCE].attrs["long_name"] = "record the operating point comes from: steady, or a ramp's segment"
@@ -314,6 +335,8 @@ def steady_campaign(
         join="exact",
         combine_attrs="override",
     )
+    # the segments' attributes carry the truth of both kinds of record (virtual rig), the rest as the file's
+    combined.attrs = ramps.attrs
     return combined
 
 
