@@ -13,6 +13,8 @@ from uqgear.calibration import Calibration
 from uqgear.calibration.outputs import write_calibration
 from uqgear.cli import main
 from uqgear.common.errors import OperatingPointError, RigDataError
+from uqgear.diagnosis import diagnose
+from uqgear.physics.effects import make_effect
 from uqgear.rig.features import extract_features
 from uqgear.rig.format import make_ramp_dataset, make_rig_dataset, read_rig, validate_rig, write_rig
 from uqgear.rig.ramp_format import reversal
@@ -299,3 +301,16 @@ def test_calibration_of_a_run_up_beside_steady_runs_holds_the_truth(design, tmp_
     assert [row["source"] for row in calibration.speed_] == ["steady"] * 2 + ["ramp 0"] * 8
     paths = write_calibration(calibration, tmp_path / "out")
     assert [row["source"] for row in json.loads(paths["json"].read_text())["speed"]][-1] == "ramp 0"
+
+
+def test_diagnosis_of_a_run_up_names_the_effect_of_steady_runs(design, tmp_path):
+    """Pinion eccentricity of 30 um on a 1500 -> 3000 rpm run-up: the diagnosis names it, as from steady runs."""
+    effects = [make_effect("eccentricity", {"amplitude": 30e-6})]
+    ramps = {"start_speed": [1500.0], "stop_speed": [3000.0], "rate": [300.0], "drive_torque": [7000.0]}
+    campaign = simulate_runup_campaign(design, ramps, effects=effects, seed=4)
+    content = diagnose(
+        write_rig(tmp_path / "runup.nc", campaign), tmp_path / "out", effects=["eccentricity"], workers=1, report=False
+    )
+    assert content["verdict"] == "eccentricity", content["reason"]
+    speed = json.loads((tmp_path / "out" / "diagnosis.json").read_text())["rig"]["speed"]
+    assert [row["source"] for row in speed] == ["ramp 0"] * 8

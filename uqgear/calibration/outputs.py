@@ -147,7 +147,7 @@ def calibrate(
             with steps.step("write the results"):
                 truth = None
                 # a virtual rig's truth per operating point, ramp records cut as the fit read them
-                rig = steady_campaign(read_rig(rig_path, design=nominal))
+                rig = steady_campaign(read_rig(rig_path, design=nominal), design=nominal)
                 if "true_parameters" in rig.attrs:
                     truth = json.loads(rig.attrs["true_parameters"])
                 write_calibration(calibration, work, truth=truth)

@@ -64,7 +64,7 @@ def accept_rig(rig: xr.Dataset | str | os.PathLike[str], design: Design | None) 
     else:
         raise RigDataError(f"rig: expected a uqgear-rig/1 Dataset or file path; got {type(rig).__name__}")
     # run-up and coast-down records become operating points (speed bins) beside the steady runs
-    rig = steady_campaign(rig, where=where)
+    rig = steady_campaign(rig, design=design, where=where)
     # one run is enough: the priors regularise what a single run cannot separate
     check_usable_signal(rig, where=where, min_operating_points=1, purpose="the calibration")
     design = design if design is not None else rig_design(rig)

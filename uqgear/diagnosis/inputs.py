@@ -115,7 +115,7 @@ def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *, design: Design |
         where = source
     else:
         raise RigDataError(f"rig: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(rig).__name__}")
-    dataset = steady_campaign(dataset, where=where)  # ramp records -> operating points (speed bins)
+    dataset = steady_campaign(dataset, design=design, where=where)  # ramp records -> operating points (speed bins)
     check_usable_signal(
         dataset,
         where=where,

@@ -45,10 +45,12 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import RigDataError
-from .format import RIG_COORDINATES
+from ..physics.design import Design
+from .features import feature_definitions
+from .format import RIG_COORDINATES, rig_design
 from .order_tracking import TACHOMETER_VARIABLE
 from .ramp_format import RAMP_CHANNELS, RAMP_COORDINATES, RAMP_TACHOMETER, RAMP_VARIABLES, has_ramps
-from .sampling import SIGNAL_CHANNELS, sampling_rate
+from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, sampling_rate
 
 #: Default number of segments per ramp.
 DEFAULT_SEGMENTS = 8
@@ -155,20 +157,66 @@ def _truth_per_op(attrs: dict, ramps: np.ndarray) -> dict:
     return attrs
 
 
-def _segment_dataset(ds: xr.Dataset, size: int, segments: int, fs: float, speeds: np.ndarray) -> xr.Dataset:
+def _line_orders(design: Design, fs: float, top_speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """Orders of the feature set's lines and of its mesh harmonics within the usable band at the top speed."""
+    definitions = [d for d in feature_definitions(design) if d.is_line]
+    limit = DEFAULT_BAND_FRACTION * fs * 60.0 / top_speed
+    lines = np.array(sorted({d.order for d in definitions if d.order < limit}))
+    carriers = np.array(sorted({d.order for d in definitions if d.family == "mesh_harmonic" and d.order < limit}))
+    return lines, carriers
+
+
+def _carrier_drift(
+    records: np.ndarray, tachometer: np.ndarray, fs: float, lines: np.ndarray, carriers: np.ndarray
+) -> np.ndarray:
+    """The part of each record (R, N) that is a linear-in-time amplitude change of the carrier lines.
+
+    Per record: one least-squares fit at the pinion angle integrated from the
+    tachometer of every line of the feature set (``lines``, orders, constant
+    amplitude) and of ``t cos``, ``t sin`` of the ``carriers`` (mesh
+    harmonics; t from the segment's centre); the latter part is returned.
+    """
+    drift = np.zeros_like(records)
+    size = records.shape[1]
+    centred = (np.arange(size) - 0.5 * (size - 1)) / size
+    for row, (record, speed) in enumerate(zip(records, tachometer)):
+        rate = 2.0 * math.pi * speed / 60.0
+        angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
+        phases = np.concatenate([lines, carriers])[None, :] * angle[:, None]
+        constant = np.concatenate([np.cos(phases[:, : lines.size]), np.sin(phases[:, : lines.size])], axis=1)
+        trend = centred[:, None] * np.concatenate([np.cos(phases[:, lines.size :]), np.sin(phases[:, lines.size :])], 1)
+        basis = np.concatenate([np.ones((size, 1)), centred[:, None], constant, trend], axis=1)
+        if not np.all(np.isfinite(record)):
+            continue
+        coefficients = np.linalg.lstsq(basis, record, rcond=None)[0]
+        drift[row] = trend @ coefficients[-trend.shape[1] :]
+    return drift
+
+
+def _segment_dataset(
+    ds: xr.Dataset, size: int, segments: int, fs: float, speeds: np.ndarray, design: Design
+) -> xr.Dataset:
     """The ramps' segments as steady-format operating points (op x time)."""
     starts = np.concatenate([_starts(speed, segments, size) for speed in speeds])
     ramps = np.repeat(np.arange(speeds.shape[0]), segments)
     index = starts[:, None] + np.arange(size)[None, :]
     tachometer = speeds[ramps[:, None], index]
     data_vars: dict[str, tuple] = {}
+    lines = _line_orders(design, fs, float(speeds.max()))
     for ramp_name, name in RAMP_CHANNELS.items():
         if ramp_name not in ds.data_vars:
             continue
         values = np.asarray(ds[ramp_name].values, dtype=float)[ramps[:, None], index]
+        # the order tracking divides accelerations by (speed / mean speed)^2 (a response that follows the angle):
+        # the drift is taken out of what it will see
+        scale = (tachometer / tachometer.mean(axis=1, keepdims=True)) ** 2 if name != "te" else 1.0
+        values = values - scale * _carrier_drift(values / scale, tachometer, fs, *lines)
         if name == "te":
-            # encoders have no absolute zero: each steady record is stored without its mean
-            values = values - values.mean(axis=1, keepdims=True)
+            # encoders have no absolute zero: each steady record is stored without its mean; a segment also
+            # without its straight-line trend, the quasi-static deflection changing with the speed it sweeps
+            time = np.arange(size) - 0.5 * (size - 1)
+            slope = values @ time / float(time @ time)
+            values = values - values.mean(axis=1, keepdims=True) - slope[:, None] * time[None, :]
         attrs = dict(ds[ramp_name].attrs)
         attrs["units"], attrs["long_name"] = SIGNAL_CHANNELS[name]
         data_vars[name] = (("op", "time"), values.astype(np.float32), attrs)
@@ -197,6 +245,7 @@ def ramp_operating_points(
     segments: int = DEFAULT_SEGMENTS,
     segment_duration: float | None = None,
     max_speed_change: float = MAX_SPEED_CHANGE,
+    design: Design | None = None,
     where: str = "rig data",
 ) -> xr.Dataset:
     """Cut a campaign's ramp records into segments, each a steady-format operating point.
@@ -214,6 +263,8 @@ def ramp_operating_points(
         docstring). Checked against them.
     max_speed_change : float
         Largest speed change within a segment, a fraction of its mean speed.
+    design : Design, optional
+        Gives the orders of the lines (default: the file's ``design``).
     where : str
         Names the file in error messages.
 
@@ -266,7 +317,7 @@ def ramp_operating_points(
         broken = _violation(speeds, int(segments), size, fs, max_speed_change)
         if broken is not None:
             raise RigDataError(f"{where}: {RAMP_TACHOMETER}: ramp {broken[0]}: {broken[1]}")
-    return _segment_dataset(ds, size, int(segments), fs, speeds)
+    return _segment_dataset(ds, size, int(segments), fs, speeds, design if design is not None else rig_design(ds))
 
 
 def steady_campaign(
@@ -274,6 +325,7 @@ def steady_campaign(
     *,
     segments: int = DEFAULT_SEGMENTS,
     max_speed_change: float = MAX_SPEED_CHANGE,
+    design: Design | None = None,
     where: str = "rig data",
 ) -> xr.Dataset:
     """A validated campaign with its ramp records cut into operating points beside its steady runs.
@@ -313,7 +365,7 @@ def steady_campaign(
             )
         duration = ds.sizes["time"] / fs
     ramps = ramp_operating_points(
-        ds, segments=segments, segment_duration=duration, max_speed_change=max_speed_change, where=where
+        ds, segments=segments, segment_duration=duration, max_speed_change=max_speed_change, design=design, where=where
     )
     if not steady:
         return ramps
