@@ -31,6 +31,14 @@ fast for that length is refused; with ramps alone the length is the longest
 that meets the three rules (or ``segment_duration`` where given, checked
 against them). Ramp and steady records must then share the sampling rate.
 
+Each segment is taken without two parts of the response that change with
+the speed it sweeps and that a steady run does not have: the straight-line
+trend of ``te`` (the quasi-static deflection follows the speed) and a
+linear-in-time change of each mesh harmonic's amplitude and phase, fitted at
+the tachometer's pinion angle jointly with every line of the feature set;
+left in, it leaks into the lines nearest the mesh harmonics (the gear-order
+sidebands of a segment of one or two gear revolutions).
+
 The operating points carry the coordinate ``op_source``: ``steady`` or
 ``ramp <index>``, reported by the calibration and the diagnosis with the
 per-point speed. This module does no file I/O.
