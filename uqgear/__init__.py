@@ -87,7 +87,9 @@ _PUBLIC: dict[str, str] = {
     # rig data, calibration, diagnosis
     "read_rig": "rig",
     "write_rig": "rig",
+    "ramp_operating_points": "rig",
     "simulate_campaign": "rig",
+    "simulate_runup_campaign": "rig",
     "extract_features": "rig",
     "Calibration": "calibration",
     "calibrate": "calibration",

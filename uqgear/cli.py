@@ -8,6 +8,7 @@
     uqgear simulate --speed RPM [--drive-torque NM] [--adhesion-torque NM] [--design NAME|FILE]
                     [--out FILE.png|FILE.nc]
     uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
+                     [--ramp START:STOP:RATE[:TORQUE] ...]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
     uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...] [--reference HEALTHY.nc]
     uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world|encoderless|foreign]
@@ -40,7 +41,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from .common.errors import InternalError, UqgearError, UqgearWarning
 from .common.transaction import OutputFolder, is_empty_folder, partial_folder
@@ -359,7 +360,18 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     _check_new_file(out, args.force)
     if args.noise < 0:
         return _fail(f"--noise: expected a relative noise level >= 0; got {args.noise:g}")
-    synth_rig(design, out, effects=effects, true_parameters=true_parameters, seed=args.seed, relative_noise=args.noise)
+    options: dict[str, Any] = {
+        "effects": effects,
+        "true_parameters": true_parameters,
+        "seed": args.seed,
+        "relative_noise": args.noise,
+    }
+    if args.ramp:
+        from .rig.virtual_runup import parse_ramps, synth_runup_rig
+
+        synth_runup_rig(design, out, parse_ramps(args.ramp, option="--ramp"), **options)
+    else:
+        synth_rig(design, out, **options)
     described = "; ".join(repr(effect) for effect in effects) or "no effect"
     print(f"virtual rig campaign written to {out} ({design.name}, {described}, seed {args.seed})")
     return 0
@@ -631,6 +643,14 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--seed", type=int, default=0, help="seed of noise and record starts (default 0)")
     synth.add_argument(
         "--noise", type=float, default=0.02, help="sensor noise as a fraction of each record's RMS (default 0.02)"
+    )
+    synth.add_argument(
+        "--ramp",
+        action="append",
+        default=[],
+        metavar="START:STOP:RATE[:TORQUE]",
+        help="a run-up (or coast-down) START to STOP rpm at RATE rpm/s, drive torque TORQUE N m (default 7000), "
+        "recorded instead of the steady runs (repeatable)",
     )
     synth.set_defaults(handler=_command_synth_rig)
 

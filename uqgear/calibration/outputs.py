@@ -16,6 +16,7 @@ from ..common.steps import StepLog, write_failure_record
 from ..common.transaction import OutputFolder
 from ..physics.design import Design, load_design
 from ..rig.format import read_rig
+from ..rig.ramp_records import steady_campaign
 from .estimator import Calibration
 from .pitch_correction import DEFAULT_CLASSES
 from .priors import DEFAULT_PARAMETERS
@@ -145,7 +146,8 @@ def calibrate(
             steps = getattr(calibration, "steps_", StepLog())
             with steps.step("write the results"):
                 truth = None
-                rig = read_rig(rig_path, design=nominal)
+                # a virtual rig's truth per operating point, ramp records cut as the fit read them
+                rig = steady_campaign(read_rig(rig_path, design=nominal), design=nominal)
                 if "true_parameters" in rig.attrs:
                     truth = json.loads(rig.attrs["true_parameters"])
                 write_calibration(calibration, work, truth=truth)

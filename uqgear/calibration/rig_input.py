@@ -12,6 +12,7 @@ from ..common.errors import RigDataError
 from ..physics.design import Design
 from ..rig.format import read_rig, rig_design, validate_rig
 from ..rig.order_tracking import speed_summary, track_orders
+from ..rig.ramp_records import steady_campaign
 from ..rig.usability import check_usable_signal
 
 
@@ -19,7 +20,7 @@ from ..rig.usability import check_usable_signal
 class AcceptedRig:
     """Rig data accepted for a calibration (:func:`accept_rig`)."""
 
-    #: The campaign, order-tracked: every record at a constant speed.
+    #: The campaign, order-tracked: every record at a constant speed; ramp records cut into operating points.
     rig: xr.Dataset
     #: Where the data came from: the file path, or the Dataset's title.
     source: str
@@ -62,6 +63,8 @@ def accept_rig(rig: xr.Dataset | str | os.PathLike[str], design: Design | None) 
         validate_rig(rig, where=where, design=design)
     else:
         raise RigDataError(f"rig: expected a uqgear-rig/1 Dataset or file path; got {type(rig).__name__}")
+    # run-up and coast-down records become operating points (speed bins) beside the steady runs
+    rig = steady_campaign(rig, design=design, where=where)
     # one run is enough: the priors regularise what a single run cannot separate
     check_usable_signal(rig, where=where, min_operating_points=1, purpose="the calibration")
     design = design if design is not None else rig_design(rig)

@@ -130,6 +130,7 @@ def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *, design: Design |
         Not a rig file or Dataset, not in the format, or no usable signal.
     """
     from ..rig.format import read_rig, validate_rig
+    from ..rig.ramp_records import steady_campaign
     from ..rig.usability import check_usable_signal
 
     if isinstance(rig, xr.Dataset):
@@ -141,6 +142,7 @@ def load_rig_input(rig: str | os.PathLike[str] | xr.Dataset, *, design: Design |
         where = source
     else:
         raise RigDataError(f"rig: expected a uqgear-rig/1 file path or an xarray Dataset; got {type(rig).__name__}")
+    dataset = steady_campaign(dataset, design=design, where=where)  # ramp records -> operating points (speed bins)
     check_usable_signal(
         dataset,
         where=where,

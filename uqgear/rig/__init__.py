@@ -27,6 +27,7 @@ from .foreign_rig import (
 from .format import (
     CONVENTIONS,
     RIG_COORDINATES,
+    make_ramp_dataset,
     make_rig_dataset,
     read_rig,
     rig_design,
@@ -34,6 +35,7 @@ from .format import (
     validate_rig,
     write_rig,
 )
+from .ramp_records import ramp_operating_points, steady_campaign
 from .transfer_path import apply_transfer_path, transfer_path_gain
 from .usability import check_usable_signal, record_states
 from .virtual_rig import (
@@ -44,6 +46,7 @@ from .virtual_rig import (
     synth_rig,
     true_parameters_of,
 )
+from .virtual_runup import join_campaigns, simulate_runup_campaign
 
 __all__ = [
     "CONVENTIONS",
@@ -53,6 +56,9 @@ __all__ = [
     "rig_design",
     "usable_runs",
     "make_rig_dataset",
+    "make_ramp_dataset",
+    "ramp_operating_points",
+    "steady_campaign",
     "write_rig",
     "SIGNAL_CHANNELS",
     "FEATURE_FAMILIES",
@@ -63,6 +69,8 @@ __all__ = [
     "line_amplitudes",
     "extract_features",
     "simulate_campaign",
+    "simulate_runup_campaign",
+    "join_campaigns",
     "synth_rig",
     "default_operating_points",
     "adhesion_torque_bounds",

@@ -31,6 +31,15 @@ from ..common.fileio import atomic_path
 from ..physics.design import Design, design_from_json
 from .features import SIGNAL_CHANNELS, sampling_rate
 from .order_tracking import TACHOMETER_VARIABLE
+from .ramp_format import (
+    RAMP_CHANNELS,
+    RAMP_COORDINATES,
+    RAMP_DIMS,
+    RAMP_TACHOMETER,
+    RAMP_VARIABLES,
+    has_ramps,
+    validate_ramps,
+)
 
 #: Value of the ``conventions`` global attribute.
 CONVENTIONS = "uqgear-rig/1"
@@ -107,14 +116,61 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
             raise RigDataError(f"{where}: {name}: missing global attribute (free text)")
         if not isinstance(ds.attrs[name], str):
             raise RigDataError(f"{where}: {name}: expected a text attribute; got {type(ds.attrs[name]).__name__}")
-    unknown_dims = sorted(set(map(str, ds.dims)) - {"op", "time"})
+    known = {"op", "time", *RAMP_DIMS}
+    unknown_dims = sorted(set(map(str, ds.dims)) - known)
     if unknown_dims:
-        raise RigDataError(f"{where}: {unknown_dims[0]}: unknown dimension; expected only op and time")
+        raise RigDataError(
+            f"{where}: {unknown_dims[0]}: unknown dimension; expected only op and time (and ramp, ramp_time)"
+        )
+    for name in map(str, ds.data_vars):
+        # a coordinate stored as a data variable is reported by the coordinate checks
+        known_names = (TACHOMETER_VARIABLE, *RAMP_VARIABLES, *RIG_COORDINATES, *RAMP_COORDINATES)
+        if name not in SIGNAL_CHANNELS and name not in known_names:
+            raise RigDataError(
+                f"{where}: {name}: unknown data variable; expected channels "
+                f"{', '.join(SIGNAL_CHANNELS)} (and optionally {TACHOMETER_VARIABLE}), or ramp records "
+                f"{', '.join(RAMP_VARIABLES)}"
+            )
+    ramps = has_ramps(ds)
+    # the steady part may be absent only where ramp records stand in for it
+    steady = (
+        not ramps
+        or "op" in ds.dims
+        or "time" in ds.dims
+        or any(name in ds.variables for name in (*RIG_COORDINATES, *SIGNAL_CHANNELS, TACHOMETER_VARIABLE))
+    )
+    # (sampling rate, top speed, the time variable it applies to) of each kind of record
+    rates: list[tuple[float, float, str]] = []
+    if steady:
+        rates.append((*_validate_steady(ds, where), "time"))
+    if ramps:
+        rates.append((*validate_ramps(ds, where, _check_units), "ramp_time"))
+
+    text = ds.attrs.get("design")
+    if text is None:
+        raise RigDataError(f"{where}: design: missing global attribute (JSON object of the design keys)")
+    if not isinstance(text, str):
+        raise RigDataError(f"{where}: design: expected JSON text; got {type(text).__name__}")
+    design = _nominal_design(text, where, design)
+
+    for fs, fastest, name in rates:
+        needed = 6.0 * design.z1 * fastest / 60.0
+        if not fs > needed:
+            raise RigDataError(
+                f"{where}: {name}: sampling rate {fs:g} Hz does not resolve the third mesh harmonic at "
+                f"{fastest:g} rpm; expected fs > 6 z1 n1_max/60 = {needed:g} Hz"
+            )
+    return design
+
+
+def _validate_steady(ds: xr.Dataset, where: str) -> tuple[float, float]:
+    """Check the steady runs (op x time) of a rig Dataset; return the sampling rate (Hz) and top speed (rpm)."""
     if ds.sizes.get("op", 0) < 1:
-        raise RigDataError(f"{where}: op: the file holds no operating point; expected at least one run")
+        raise RigDataError(
+            f"{where}: op: the file holds no operating point; expected at least one run (or ramp records)"
+        )
     if ds.sizes.get("time", 0) < 2:
         raise RigDataError(f"{where}: time: expected at least 2 samples per run; got {ds.sizes.get('time', 0)}")
-
     for name, (dims, units, _) in RIG_COORDINATES.items():
         if name not in ds.coords:
             where_found = " (found as a data variable)" if name in ds.data_vars else ""
@@ -140,8 +196,12 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
             f"{where}: adhesion_torque_lower: expected <= adhesion_torque_upper; op {index} has "
             f"lower {lower[index]:g} N m > upper {upper[index]:g} N m"
         )
+    _validate_steady_channels(ds, where)
+    return sampling_rate(ds["time"].values, where=f"{where}: time"), float(speed.max())
 
-    channels = [str(name) for name in ds.data_vars]
+
+def _validate_steady_channels(ds: xr.Dataset, where: str) -> None:
+    channels = [str(name) for name in ds.data_vars if name not in (*RAMP_VARIABLES, *RAMP_COORDINATES)]
     if not channels:
         raise RigDataError(f"{where}: no data variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}")
     if TACHOMETER_VARIABLE in channels:
@@ -157,11 +217,6 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
                 f"one of {', '.join(SIGNAL_CHANNELS)}"
             )
     for name in channels:
-        if name not in SIGNAL_CHANNELS:
-            raise RigDataError(
-                f"{where}: {name}: unknown data variable; expected channels "
-                f"{', '.join(SIGNAL_CHANNELS)} (and optionally {TACHOMETER_VARIABLE})"
-            )
         variable = ds[name]
         units = SIGNAL_CHANNELS[name][0]
         if variable.dims != ("op", "time"):
@@ -175,36 +230,21 @@ def validate_rig(ds: xr.Dataset, *, where: str = "rig data", design: Design | No
         if not isinstance(long_name, str) or not long_name.strip():
             raise RigDataError(f"{where}: {name}: missing 'long_name' attribute (text)")
         if "noise_std" in variable.attrs:
-            noise = variable.attrs["noise_std"]
-            if isinstance(noise, np.generic):
-                noise = noise.item()
-            if (
-                isinstance(noise, bool)
-                or not isinstance(noise, (int, float))
-                or not math.isfinite(float(noise))
-                or float(noise) < 0
-            ):
-                raise RigDataError(f"{where}: {name}: noise_std: expected a number >= 0 in {units}; got {noise!r}")
+            _check_noise_std(where, name, variable.attrs["noise_std"], units)
         if np.any(np.isinf(variable.values)):
             raise RigDataError(f"{where}: {name}: expected finite samples (NaN where missing); found inf")
 
-    fs = sampling_rate(ds["time"].values, where=f"{where}: time")
 
-    text = ds.attrs.get("design")
-    if text is None:
-        raise RigDataError(f"{where}: design: missing global attribute (JSON object of the design keys)")
-    if not isinstance(text, str):
-        raise RigDataError(f"{where}: design: expected JSON text; got {type(text).__name__}")
-    design = _nominal_design(text, where, design)
-
-    fastest = float(speed.max())
-    needed = 6.0 * design.z1 * fastest / 60.0
-    if not fs > needed:
-        raise RigDataError(
-            f"{where}: time: sampling rate {fs:g} Hz does not resolve the third mesh harmonic at "
-            f"{fastest:g} rpm; expected fs > 6 z1 n1_max/60 = {needed:g} Hz"
-        )
-    return design
+def _check_noise_std(where: str, name: str, noise: object, units: str) -> None:
+    if isinstance(noise, np.generic):
+        noise = noise.item()
+    if (
+        isinstance(noise, bool)
+        or not isinstance(noise, (int, float))
+        or not math.isfinite(float(noise))
+        or float(noise) < 0
+    ):
+        raise RigDataError(f"{where}: {name}: noise_std: expected a number >= 0 in {units}; got {noise!r}")
 
 
 def _nominal_design(text: str, where: str, replacement: Design | None) -> Design:
@@ -230,10 +270,14 @@ def _nominal_design(text: str, where: str, replacement: Design | None) -> Design
 
 def _canonical_units(ds: xr.Dataset) -> None:
     """Replace accepted unit spellings by the format's own, in place."""
-    for name, (_, units, _) in RIG_COORDINATES.items():
-        ds[name].attrs["units"] = units
-    for variable in ds.data_vars:
-        ds[variable].attrs["units"] = "rpm" if variable == TACHOMETER_VARIABLE else SIGNAL_CHANNELS[str(variable)][0]
+    for name, (_, units, _) in {**RIG_COORDINATES, **RAMP_COORDINATES}.items():
+        if name in ds.variables:
+            ds[name].attrs["units"] = units
+    for variable in map(str, ds.data_vars):
+        if variable in (TACHOMETER_VARIABLE, RAMP_TACHOMETER):
+            ds[variable].attrs["units"] = "rpm"
+        else:
+            ds[variable].attrs["units"] = SIGNAL_CHANNELS[RAMP_CHANNELS.get(variable, variable)][0]
 
 
 def read_rig(path: str | os.PathLike[str], *, design: Design | None = None) -> xr.Dataset:
@@ -309,7 +353,7 @@ def usable_runs(ds: xr.Dataset) -> xr.DataArray:
     xarray.DataArray
         Booleans over (channel, op), with the op coordinates of ``ds``.
     """
-    channels = [str(name) for name in ds.data_vars]
+    channels = [str(name) for name in ds.data_vars if name not in RAMP_VARIABLES]
     masks = [ds[name].notnull().all("time") for name in channels]
     usable = xr.concat(masks, dim="channel", coords="minimal").assign_coords(channel=channels)
     usable.attrs = {"long_name": "run has no missing (NaN) sample in the channel"}
@@ -414,6 +458,110 @@ def make_rig_dataset(
     return ds
 
 
+def make_ramp_dataset(
+    *,
+    time: ArrayLike,
+    pinion_speed_signal: ArrayLike,
+    drive_torque: ArrayLike,
+    adhesion_torque_lower: ArrayLike,
+    adhesion_torque_upper: ArrayLike,
+    channels: Mapping[str, ArrayLike],
+    design: Design,
+    title: str,
+    source: str,
+    history: str,
+    noise_std: Mapping[str, float] | None = None,
+) -> xr.Dataset:
+    """Build a validated rig Dataset of run-up or coast-down records (dims ``ramp`` x ``ramp_time``).
+
+    The arguments are those of :func:`make_rig_dataset` for ramps: ``time``
+    is the ramp records' sample instants (stored as ``ramp_time``),
+    ``pinion_speed_signal`` the tachometer (rpm, ramp x ramp_time), the
+    torques one value per ramp, ``channels`` keyed by the steady names (``te``,
+    ``acc_pinion``, ``acc_gear``; stored with the ``ramp_`` prefix). To hold
+    steady runs too, merge with a steady Dataset:
+    ``xarray.merge([steady, ramps], combine_attrs="override")``.
+
+    Returns
+    -------
+    xarray.Dataset
+
+    Raises
+    ------
+    RigDataError
+        A shape, channel name or speed record that the format rejects.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import uqgear
+    >>> from uqgear.rig.format import make_ramp_dataset
+    >>> time = np.arange(20480) / 20480.0
+    >>> speed = 1000.0 + 500.0 * time[None, :]
+    >>> ramps = make_ramp_dataset(time=time, pinion_speed_signal=speed, drive_torque=[5000.0],
+    ...                           adhesion_torque_lower=[0.0], adhesion_torque_upper=[5e4],
+    ...                           channels={"te": np.zeros((1, time.size))}, design=uqgear.load_design("locomotive"),
+    ...                           title="ramp", source="example", history="")
+    >>> dict(ramps.sizes), sorted(ramps.data_vars)
+    ({'ramp': 1, 'ramp_time': 20480}, ['ramp_pinion_speed_signal', 'ramp_te'])
+    """
+    where = "new rig data"
+    if not isinstance(design, Design):
+        raise RigDataError(f"{where}: design: expected a uqgear Design; got {type(design).__name__}")
+    time_values = np.asarray(time, dtype=float)
+    speed = np.asarray(pinion_speed_signal, dtype=float)
+    if time_values.ndim != 1 or speed.ndim != 2 or speed.shape[1] != time_values.size:
+        raise RigDataError(
+            f"{where}: {RAMP_TACHOMETER}: expected shape (ramp, ramp_time) with ramp_time = {time_values.size} "
+            f"samples; got {speed.shape}"
+        )
+    noise_std = dict(noise_std or {})
+    data_vars: dict[str, tuple] = {
+        RAMP_TACHOMETER: (RAMP_DIMS, speed, {"units": "rpm", "long_name": "pinion speed (tachometer)"})
+    }
+    for name, values in channels.items():
+        if name not in SIGNAL_CHANNELS:
+            raise RigDataError(f"{where}: {name}: unknown channel; expected {', '.join(SIGNAL_CHANNELS)}")
+        samples = np.asarray(values, dtype=np.float32)
+        if samples.shape != speed.shape:
+            raise RigDataError(
+                f"{where}: {name}: expected shape (ramp, ramp_time) = {speed.shape}; got {samples.shape}"
+            )
+        units, long_name = SIGNAL_CHANNELS[name]
+        attrs: dict[str, object] = {"units": units, "long_name": long_name}
+        if name in noise_std:
+            attrs["noise_std"] = noise_std[name]
+        data_vars[f"ramp_{name}"] = (RAMP_DIMS, samples, attrs)
+    per_ramp = {
+        "ramp_drive_torque": drive_torque,
+        "ramp_adhesion_torque_lower": adhesion_torque_lower,
+        "ramp_adhesion_torque_upper": adhesion_torque_upper,
+    }
+    coords: dict[str, tuple] = {"ramp_time": ("ramp_time", time_values)}
+    for name, values in per_ramp.items():
+        array = np.asarray(values, dtype=float)
+        if array.shape != (speed.shape[0],):
+            raise RigDataError(
+                f"{where}: {name}: expected one value per ramp ({speed.shape[0]}); got shape {array.shape}"
+            )
+        coords[name] = ("ramp", array)
+    ds = xr.Dataset(
+        data_vars,
+        coords=coords,
+        attrs={
+            "conventions": CONVENTIONS,
+            "design": design.to_json(),
+            "title": title,
+            "source": source,
+            "history": history,
+        },
+    )
+    for name, (_, units, long_name) in RAMP_COORDINATES.items():
+        ds[name].attrs.update(units=units, long_name=long_name)
+    validate_rig(ds, where=where)
+    return ds
+
+
 def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
     """Validate a rig Dataset and write it as a ``uqgear-rig/1`` file, atomically.
 
@@ -473,7 +621,13 @@ def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
     encoding: dict[str, dict[str, object]] = {
         str(name): {"dtype": "float32", "_FillValue": np.float32(np.nan)} for name in out.data_vars
     }
-    encoding.update({name: {"dtype": "float64", "_FillValue": None} for name in RIG_COORDINATES})
+    encoding.update(
+        {
+            name: {"dtype": "float64", "_FillValue": None}
+            for name in (*RIG_COORDINATES, *RAMP_COORDINATES)
+            if name in out.variables
+        }
+    )
     with atomic_path(path) as temporary:
         out.to_netcdf(temporary, format="NETCDF4", engine="netcdf4", encoding=encoding)
     return path
@@ -488,5 +642,6 @@ __all__ = [
     "rig_design",
     "usable_runs",
     "make_rig_dataset",
+    "make_ramp_dataset",
     "write_rig",
 ]

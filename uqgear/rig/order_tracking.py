@@ -284,7 +284,7 @@ def _track_record(
     if not (math.isfinite(stated) and stated > 0):
         # the readers of the records reject such a speed with the variable's name
         return _RecordResult(None, math.nan, math.nan, math.nan, False, "no positive stated speed")
-    if tachometer is not None:
+    if tachometer is not None and not np.isnan(tachometer).all():
         estimate = tachometer_angle(tachometer, fs)
     else:
         estimate = estimate_pinion_angle(
@@ -341,7 +341,8 @@ def track_orders(
         or model output), and ``pinion_speed`` (stated mean, rpm) over the
         other dimensions. An optional ``pinion_speed_signal`` variable
         (instantaneous speed in rpm, same dimensions as the channels) is used
-        instead of the signals' own mesh phase.
+        instead of the signals' own mesh phase; a record whose row is all NaN
+        has no tachometer and is read from its signals.
     design : Design
         Gives z1.
     mode : {"auto", "always", "never"}
@@ -492,6 +493,9 @@ def speed_summary(tracked: xr.Dataset) -> list[dict[str, object]]:
                 "reference": str(np.asarray(pick["speed_reference"].values).ravel()[0]),
             }
         )
+        if "op_source" in pick.coords:
+            # a campaign with ramp records: which record the operating point comes from
+            rows[-1]["source"] = str(np.asarray(pick["op_source"].values).ravel()[0])
     return rows
 
 

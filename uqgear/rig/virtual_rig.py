@@ -68,6 +68,7 @@ from ..physics.pitch_errors import PitchErrors, draw_pitch_errors, iso1328_singl
 from ..uq.seeds import as_seed_sequence, child_seed
 from .features import SIGNAL_CHANNELS
 from .format import make_rig_dataset, write_rig
+from .ramp_records import OP_SOURCE
 
 #: Pinion speeds (rpm) and drive torques (N m) of the public campaigns.
 DEFAULT_PINION_SPEEDS: tuple[float, ...] = (600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0)
@@ -215,8 +216,9 @@ def _operating_table(design: Design, operating_points: xr.Dataset | Mapping[str,
     if operating_points is None:
         operating_points = default_operating_points()
     if isinstance(operating_points, xr.Dataset):
+        # op_source labels where a campaign's operating point came from (ramp_records); not a quantity
         raw = {str(name): operating_points[name].values for name in operating_points.variables
-               if operating_points[name].dims == ("op",)}
+               if operating_points[name].dims == ("op",) and name != OP_SOURCE}
     elif isinstance(operating_points, Mapping):
         raw = {str(name): np.asarray(values, dtype=float) for name, values in operating_points.items()}
     else:
@@ -391,14 +393,27 @@ def _check_encoder(encoder_run_out: Mapping[str, float] | None) -> dict[str, flo
 def _encoder_lines(encoder: Mapping[str, float], design: Design, speed: float, sample_time: np.ndarray,
                    rng: np.random.Generator) -> np.ndarray:
     """The TE an eccentric encoder mounting adds: once per revolution of its shaft, at the shaft's actual angle."""
-    pinion_angle = 2.0 * math.pi * speed / 60.0 * sample_time
-    lines = np.zeros(sample_time.size)
+    return encoder_lines_at(encoder, design, 2.0 * math.pi * speed / 60.0 * sample_time, rng)
+
+
+def encoder_lines_at(encoder: Mapping[str, float], design: Design, pinion_angle: np.ndarray,
+                     rng: np.random.Generator) -> np.ndarray:
+    """The TE of eccentric encoder mountings at the pinion angles ``pinion_angle`` (rad); a phase per shaft."""
+    lines = np.zeros(pinion_angle.size)
     for shaft in ("pinion", "gear"):
         phase = rng.uniform(0.0, 2.0 * math.pi)    # drawn for both shafts, so each keeps its draw
         if shaft in encoder:
             ratio = 1.0 if shaft == "pinion" else design.z1 / design.z2
             lines += encoder[shaft] * np.sin(ratio * pinion_angle + phase)
     return lines
+
+
+def add_interference(signal: np.ndarray, interference: Mapping[float, float], record_time: np.ndarray,
+                     rng: np.random.Generator) -> np.ndarray:
+    """``signal`` plus fixed-frequency lines (Hz -> amplitude), each at a phase drawn from ``rng`` in turn."""
+    for frequency, amplitude in interference.items():
+        signal = signal + amplitude * np.cos(2.0 * math.pi * frequency * record_time + rng.uniform(0.0, 2.0 * math.pi))
+    return signal
 
 
 def _check_positive(name: str, value: object, lowest: float = 0.0) -> float:
@@ -632,9 +647,7 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
             sigma = math.hypot(noise_std.get(name, 0.0), relative_noise * rms)
             noisy = clean + sigma * np.random.default_rng(channel_seed).standard_normal(n_samples)
             if order == 2:
-                for frequency, amplitude in interference.items():
-                    noisy = noisy + amplitude * np.cos(2.0 * math.pi * frequency * record_time
-                                                       + interference_rng.uniform(0.0, 2.0 * math.pi))
+                noisy = add_interference(noisy, interference, record_time, interference_rng)
             if name == "te" and encoder:
                 noisy = noisy + _encoder_lines(encoder, design, speed, sample_time,
                                                np.random.default_rng(child_seed(run_seeds[op], _ENCODER_STREAM)))

@@ -1,0 +1,410 @@
+"""Run-up and coast-down records cut into steady-format operating points (speed bins).
+
+A ramp record (docs/rig-data-format.md, "Run-up and coast-down records") is
+cut into segments of one common length centred at evenly spaced speeds of its
+tachometer. Each segment becomes an operating point of the steady format: its
+channel samples on ``time``, the mean of its tachometer as ``pinion_speed``,
+the tachometer itself as ``pinion_speed_signal`` (so that
+:func:`~uqgear.rig.order_tracking.track_orders` resamples it to uniform angle
+at its mean speed, as it does for a wandering steady run), and the ramp's
+torques. Every analysis that reads steady runs then reads ramps unchanged.
+
+Segment length, one for all segments of a campaign:
+
+* at least :data:`MIN_REVOLUTIONS` pinion revolutions at each segment's speed:
+  shaft-order lines and sidebands need whole revolutions, and two leave the
+  order tracking an angle range to resample over;
+* short enough that the speed changes within a segment by at most
+  ``max_speed_change`` (default :data:`MAX_SPEED_CHANGE`, 5 %) of the
+  segment's mean speed: after resampling to uniform angle the mesh orders are
+  sharp lines, but their amplitude is the response averaged over the speeds
+  the segment swept, and the model predicts it at one speed; near a resonance
+  of damping ratio zeta the response changes by half over about 2 zeta of
+  speed (10-20 % for the gear mesh), so a 5 % sweep keeps the averaging well
+  inside that;
+* segments of one ramp do not overlap (each sample counts once, as in separate
+  steady runs).
+
+Where the campaign holds steady runs too, the segments take the steady
+records' length (so that all operating points share ``time``), and a ramp too
+fast for that length is refused; with ramps alone the length is the longest
+that meets the three rules (or ``segment_duration`` where given, checked
+against them). Ramp and steady records must then share the sampling rate.
+
+Each segment is taken without two parts of the response that change with
+the speed it sweeps and that a steady run does not have: the straight-line
+trend of ``te`` (the quasi-static deflection follows the speed) and a
+linear-in-time change of each mesh harmonic's amplitude and phase, fitted at
+the tachometer's pinion angle jointly with every line of the feature set;
+left in, it leaks into the lines nearest the mesh harmonics (the gear-order
+sidebands of a segment of one or two gear revolutions).
+
+The operating points carry the coordinate ``op_source``: ``steady`` or
+``ramp <index>``, reported by the calibration and the diagnosis with the
+per-point speed. This module does no file I/O.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import xarray as xr
+
+from ..common.errors import RigDataError
+from ..physics.design import Design
+from .features import feature_definitions
+from .format import RIG_COORDINATES, rig_design
+from .order_tracking import TACHOMETER_VARIABLE
+from .ramp_format import RAMP_CHANNELS, RAMP_COORDINATES, RAMP_TACHOMETER, RAMP_VARIABLES, has_ramps
+from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, sampling_rate
+
+#: Default number of segments per ramp.
+DEFAULT_SEGMENTS = 8
+
+#: Largest speed change within a segment, as a fraction of its mean speed.
+MAX_SPEED_CHANGE = 0.05
+
+#: Fewest pinion revolutions in a segment at its mean speed.
+MIN_REVOLUTIONS = 2.0
+
+#: Name of the operating points' coordinate telling where each came from.
+OP_SOURCE = "op_source"
+
+
+def _starts(speed: np.ndarray, segments: int, size: int) -> np.ndarray:
+    """First sample of each segment of ``size`` samples centred at evenly spaced speeds of a ramp."""
+    half = size // 2
+    last_centre = speed.size - size + half
+    # a monotone envelope of the tachometer places each target speed once, whatever the noise
+    rising = speed[-1] >= speed[0]
+    envelope = np.maximum.accumulate(speed) if rising else -np.minimum.accumulate(speed)
+    targets = np.linspace(envelope[half], envelope[last_centre], segments)
+    centres = np.clip(np.searchsorted(envelope, targets, side="left"), half, last_centre)
+    return np.asarray(centres - half, dtype=int)
+
+
+def _segment_speeds(speed: np.ndarray, starts: np.ndarray, size: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean speed (rpm) and speed change over the segment from a straight-line fit (rpm) of each segment."""
+    index = starts[:, None] + np.arange(size)[None, :]
+    pieces = speed[index]
+    time = (np.arange(size) - 0.5 * (size - 1)) / fs
+    slope = pieces @ time / float(time @ time)
+    return pieces.mean(axis=1), np.abs(slope) * size / fs
+
+
+def _violation(
+    speeds: np.ndarray, segments: int, size: int, fs: float, max_speed_change: float
+) -> tuple[int, str] | None:
+    """The first ramp and rule a segment length breaks, or None where it meets all three."""
+    if segments * size > speeds.shape[1]:
+        return 0, f"{segments} segments of {size} samples do not fit in a ramp of {speeds.shape[1]} samples"
+    for ramp, speed in enumerate(speeds):
+        starts = _starts(speed, segments, size)
+        if segments > 1 and np.any(np.diff(starts) < size):
+            return ramp, f"segments of {size / fs:g} s overlap (the ramp is too short or too fast for {segments})"
+        mean, change = _segment_speeds(speed, starts, size, fs)
+        worst = int(np.argmax(change / mean))
+        if change[worst] > max_speed_change * mean[worst]:
+            return ramp, (
+                f"a segment of {size / fs:g} s changes speed by {change[worst] / mean[worst]:.1%} at "
+                f"{mean[worst]:.0f} rpm; expected at most {max_speed_change:.0%}"
+            )
+        slowest = int(np.argmin(mean))
+        if size / fs < MIN_REVOLUTIONS * 60.0 / mean[slowest]:
+            return ramp, (
+                f"a segment of {size / fs:g} s holds fewer than {MIN_REVOLUTIONS:g} pinion revolutions at "
+                f"{mean[slowest]:.0f} rpm"
+            )
+    return None
+
+
+def _longest_size(speeds: np.ndarray, segments: int, fs: float, max_speed_change: float, where: str) -> int:
+    """The longest segment (samples) that meets the rules in every ramp, by bisection."""
+    low = max(4, int(math.ceil(MIN_REVOLUTIONS * 60.0 / float(speeds.min()) * fs)))
+    high = speeds.shape[1] // segments
+    if high < low:
+        raise RigDataError(
+            f"{where}: {RAMP_TACHOMETER}: the ramps of {speeds.shape[1]} samples are too short for {segments} "
+            f"segments of at least {MIN_REVOLUTIONS:g} pinion revolutions"
+        )
+    broken = _violation(speeds, segments, low, fs, max_speed_change)
+    if broken is not None:
+        raise RigDataError(
+            f"{where}: {RAMP_TACHOMETER}: ramp {broken[0]}: no segment length meets the rules for {segments} "
+            f"segments: {broken[1]}"
+        )
+    # a longer segment sweeps more speed and leaves less room between centres: feasibility is monotone
+    while high - low > 1:
+        middle = (low + high) // 2
+        if _violation(speeds, segments, middle, fs, max_speed_change) is None:
+            low = middle
+        else:
+            high = middle
+    return high if _violation(speeds, segments, high, fs, max_speed_change) is None else low
+
+
+def _truth_per_op(attrs: dict, ramps: np.ndarray) -> dict:
+    """The attributes with a virtual rig's per-ramp true adhesion torque carried to the operating points.
+
+    ``true_parameters`` (JSON) may hold ``ramp_adhesion_torque`` (one per
+    ramp) beside the steady runs' ``adhesion_torque``; the segments' values
+    follow the steady runs' in ``adhesion_torque``, as their operating points do.
+    """
+    attrs = dict(attrs)
+    text = attrs.get("true_parameters")
+    if not isinstance(text, str):
+        return attrs
+    truth = json.loads(text)
+    if not isinstance(truth, dict) or "ramp_adhesion_torque" not in truth:
+        return attrs
+    per_ramp = truth.pop("ramp_adhesion_torque")
+    truth["adhesion_torque"] = list(truth.get("adhesion_torque", [])) + [per_ramp[ramp] for ramp in ramps]
+    attrs["true_parameters"] = json.dumps(truth)
+    return attrs
+
+
+def _line_orders(design: Design, fs: float, top_speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """Orders of the feature set's lines and of its mesh harmonics within the usable band at the top speed."""
+    definitions = [d for d in feature_definitions(design) if d.is_line]
+    limit = DEFAULT_BAND_FRACTION * fs * 60.0 / top_speed
+    lines = np.array(sorted({d.order for d in definitions if d.order < limit}))
+    carriers = np.array(sorted({d.order for d in definitions if d.family == "mesh_harmonic" and d.order < limit}))
+    return lines, carriers
+
+
+def _carrier_drift(
+    records: np.ndarray, tachometer: np.ndarray, fs: float, lines: np.ndarray, carriers: np.ndarray
+) -> np.ndarray:
+    """The part of each record (R, N) that is a linear-in-time amplitude change of the carrier lines.
+
+    Per record: one least-squares fit at the pinion angle integrated from the
+    tachometer of every line of the feature set (``lines``, orders, constant
+    amplitude) and of ``t cos``, ``t sin`` of the ``carriers`` (mesh
+    harmonics; t from the segment's centre); the latter part is returned.
+    """
+    drift = np.zeros_like(records)
+    size = records.shape[1]
+    centred = (np.arange(size) - 0.5 * (size - 1)) / size
+    for row, (record, speed) in enumerate(zip(records, tachometer)):
+        rate = 2.0 * math.pi * speed / 60.0
+        angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
+        phases = np.concatenate([lines, carriers])[None, :] * angle[:, None]
+        constant = np.concatenate([np.cos(phases[:, : lines.size]), np.sin(phases[:, : lines.size])], axis=1)
+        trend = centred[:, None] * np.concatenate([np.cos(phases[:, lines.size :]), np.sin(phases[:, lines.size :])], 1)
+        basis = np.concatenate([np.ones((size, 1)), centred[:, None], constant, trend], axis=1)
+        if not np.all(np.isfinite(record)):
+            continue
+        coefficients = np.linalg.lstsq(basis, record, rcond=None)[0]
+        drift[row] = trend @ coefficients[-trend.shape[1] :]
+    return drift
+
+
+def _segment_dataset(
+    ds: xr.Dataset, size: int, segments: int, fs: float, speeds: np.ndarray, design: Design
+) -> xr.Dataset:
+    """The ramps' segments as steady-format operating points (op x time)."""
+    starts = np.concatenate([_starts(speed, segments, size) for speed in speeds])
+    ramps = np.repeat(np.arange(speeds.shape[0]), segments)
+    index = starts[:, None] + np.arange(size)[None, :]
+    tachometer = speeds[ramps[:, None], index]
+    data_vars: dict[str, tuple] = {}
+    lines = _line_orders(design, fs, float(speeds.max()))
+    for ramp_name, name in RAMP_CHANNELS.items():
+        if ramp_name not in ds.data_vars:
+            continue
+        values = np.asarray(ds[ramp_name].values, dtype=float)[ramps[:, None], index]
+        # the order tracking divides accelerations by (speed / mean speed)^2 (a response that follows the angle):
+        # the drift is taken out of what it will see
+        scale = (tachometer / tachometer.mean(axis=1, keepdims=True)) ** 2 if name != "te" else 1.0
+        values = values - scale * _carrier_drift(values / scale, tachometer, fs, *lines)
+        if name == "te":
+            # encoders have no absolute zero: each steady record is stored without its mean; a segment also
+            # without its straight-line trend, the quasi-static deflection changing with the speed it sweeps
+            time = np.arange(size) - 0.5 * (size - 1)
+            slope = values @ time / float(time @ time)
+            values = values - values.mean(axis=1, keepdims=True) - slope[:, None] * time[None, :]
+        attrs = dict(ds[ramp_name].attrs)
+        attrs["units"], attrs["long_name"] = SIGNAL_CHANNELS[name]
+        data_vars[name] = (("op", "time"), values.astype(np.float32), attrs)
+    data_vars[TACHOMETER_VARIABLE] = (
+        ("op", "time"),
+        tachometer.astype(np.float32),
+        {"units": "rpm", "long_name": "pinion speed (tachometer)"},
+    )
+    coords: dict[str, tuple] = {
+        "time": ("time", np.arange(size) / fs),
+        "pinion_speed": ("op", tachometer.mean(axis=1)),
+        OP_SOURCE: ("op", np.array([f"ramp {ramp}" for ramp in ramps], dtype=object)),
+    }
+    for name in ("drive_torque", "adhesion_torque_lower", "adhesion_torque_upper"):
+        coords[name] = ("op", np.asarray(ds[f"ramp_{name}"].values, dtype=float)[ramps])
+    out = xr.Dataset(data_vars, coords=coords, attrs=_truth_per_op(ds.attrs, ramps))
+    for name, (_, units, long_name) in RIG_COORDINATES.items():
+        out[name].attrs.update(units=units, long_name=long_name)
+    out[OP_SOURCE].attrs["long_name"] = "record the operating point comes from: steady, or a ramp's segment"
+    return out
+
+
+def ramp_operating_points(
+    ds: xr.Dataset,
+    *,
+    segments: int = DEFAULT_SEGMENTS,
+    segment_duration: float | None = None,
+    max_speed_change: float = MAX_SPEED_CHANGE,
+    design: Design | None = None,
+    where: str = "rig data",
+) -> xr.Dataset:
+    """Cut a campaign's ramp records into segments, each a steady-format operating point.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A validated ``uqgear-rig/1`` Dataset with ramp records
+        (:func:`~uqgear.rig.format.validate_rig`).
+    segments : int
+        Segments per ramp, centred at evenly spaced speeds of its tachometer
+        between the lowest and highest a whole segment fits around.
+    segment_duration : float, optional
+        Segment length in s; default the longest that meets the rules (module
+        docstring). Checked against them.
+    max_speed_change : float
+        Largest speed change within a segment, a fraction of its mean speed.
+    design : Design, optional
+        Gives the orders of the lines (default: the file's ``design``).
+    where : str
+        Names the file in error messages.
+
+    Returns
+    -------
+    xarray.Dataset
+        Operating points on ``op`` x ``time`` (``segments`` per ramp, ramp by
+        ramp, in the ramp's speed order) with the steady format's coordinates,
+        the channels, ``pinion_speed_signal`` and ``op_source`` (``ramp <index>``).
+
+    Raises
+    ------
+    RigDataError
+        No ramp records, or no segment length meeting the rules; the message
+        names the variable and the ramp.
+
+    Examples
+    --------
+    A 4 s run-up from 1000 to 2000 rpm in eight segments:
+
+    >>> import numpy as np
+    >>> import uqgear
+    >>> from uqgear.rig.format import make_ramp_dataset
+    >>> from uqgear.rig.ramp_records import ramp_operating_points
+    >>> time = np.arange(4 * 20480) / 20480.0
+    >>> ramps = make_ramp_dataset(time=time, pinion_speed_signal=1000.0 + 250.0 * time[None, :],
+    ...                           drive_torque=[5000.0], adhesion_torque_lower=[0.0], adhesion_torque_upper=[5e4],
+    ...                           channels={"te": np.sin(2 * np.pi * 50 * time)[None, :]},
+    ...                           design=uqgear.load_design("locomotive"), title="run-up", source="example", history="")
+    >>> ops = ramp_operating_points(ramps)
+    >>> ops.sizes["op"], round(ops.sizes["time"] / 20480, 3)
+    (8, 0.205)
+    >>> np.round(ops["pinion_speed"].values).tolist()
+    [1026.0, 1161.0, 1297.0, 1432.0, 1568.0, 1703.0, 1839.0, 1974.0]
+    """
+    if not has_ramps(ds) or RAMP_TACHOMETER not in ds.data_vars:
+        raise RigDataError(f"{where}: {RAMP_TACHOMETER}: no ramp records to cut into operating points")
+    if isinstance(segments, bool) or not isinstance(segments, (int, np.integer)) or segments < 1:
+        raise RigDataError(f"{where}: segments: expected a whole number >= 1 of segments per ramp; got {segments!r}")
+    if not (isinstance(max_speed_change, (int, float)) and 0 < max_speed_change < 1):
+        raise RigDataError(f"{where}: max_speed_change: expected a fraction in (0, 1); got {max_speed_change!r}")
+    fs = sampling_rate(ds["ramp_time"].values, where=f"{where}: ramp_time")
+    speeds = np.asarray(ds[RAMP_TACHOMETER].values, dtype=float)
+    if segment_duration is None:
+        size = _longest_size(speeds, int(segments), fs, max_speed_change, where)
+    else:
+        if not (isinstance(segment_duration, (int, float)) and segment_duration > 0):
+            raise RigDataError(f"{where}: segment_duration: expected a duration > 0 s; got {segment_duration!r}")
+        size = int(round(segment_duration * fs))
+        broken = _violation(speeds, int(segments), size, fs, max_speed_change)
+        if broken is not None:
+            raise RigDataError(f"{where}: {RAMP_TACHOMETER}: ramp {broken[0]}: {broken[1]}")
+    return _segment_dataset(ds, size, int(segments), fs, speeds, design if design is not None else rig_design(ds))
+
+
+def steady_campaign(
+    ds: xr.Dataset,
+    *,
+    segments: int = DEFAULT_SEGMENTS,
+    max_speed_change: float = MAX_SPEED_CHANGE,
+    design: Design | None = None,
+    where: str = "rig data",
+) -> xr.Dataset:
+    """A validated campaign with its ramp records cut into operating points beside its steady runs.
+
+    A campaign without ramp records is returned as it is. With ramps alone it
+    becomes :func:`ramp_operating_points` of them; with steady runs too, the
+    segments take the steady records' length and follow the steady runs on
+    ``op``, and ``op_source`` tells them apart (``steady`` or ``ramp <index>``).
+    A steady run without a tachometer gets a row of NaN in
+    ``pinion_speed_signal``: the order tracking then reads its angle from the
+    signals, as before.
+
+    Raises
+    ------
+    RigDataError
+        A ramp that cannot be cut by the rules (module docstring), or ramp and
+        steady records at different sampling rates.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> rig = uqgear.read_rig(uqgear.example_rig_file("healthy"))
+    >>> steady_campaign(rig) is rig
+    True
+    """
+    if not has_ramps(ds):
+        return ds
+    steady = "op" in ds.dims
+    duration = None
+    if steady:
+        fs = sampling_rate(ds["time"].values, where=f"{where}: time")
+        ramp_fs = sampling_rate(ds["ramp_time"].values, where=f"{where}: ramp_time")
+        if abs(fs - ramp_fs) > 1e-6 * fs:
+            raise RigDataError(
+                f"{where}: ramp_time: sampling rate {ramp_fs:g} Hz differs from the steady records' {fs:g} Hz; "
+                "expected one rate (or the ramps in a file of their own)"
+            )
+        duration = ds.sizes["time"] / fs
+    ramps = ramp_operating_points(
+        ds, segments=segments, segment_duration=duration, max_speed_change=max_speed_change, design=design, where=where
+    )
+    if not steady:
+        return ramps
+    drop = [name for name in (*RAMP_VARIABLES, *RAMP_COORDINATES) if name in ds.variables]
+    runs = ds.drop_vars(drop).assign_coords({OP_SOURCE: ("op", np.full(ds.sizes["op"], "steady", dtype=object))})
+    if TACHOMETER_VARIABLE not in runs.data_vars:
+        runs[TACHOMETER_VARIABLE] = (
+            ("op", "time"),
+            np.full((runs.sizes["op"], runs.sizes["time"]), np.nan, dtype=np.float32),
+            dict(ramps[TACHOMETER_VARIABLE].attrs),
+        )
+    ramps = ramps.assign_coords(time=runs["time"].values)
+    combined = xr.concat(
+        [runs, ramps],
+        dim="op",
+        data_vars="all",
+        coords="minimal",
+        compat="override",
+        join="exact",
+        combine_attrs="override",
+    )
+    # the segments' attributes carry the truth of both kinds of record (virtual rig), the rest as the file's
+    combined.attrs = ramps.attrs
+    return combined
+
+
+__all__ = [
+    "DEFAULT_SEGMENTS",
+    "MAX_SPEED_CHANGE",
+    "MIN_REVOLUTIONS",
+    "OP_SOURCE",
+    "ramp_operating_points",
+    "steady_campaign",
+]
