@@ -510,7 +510,7 @@ def test_real_world_plan_covers_every_kind():
 
 
 def test_an_unknown_blind_test_suite_is_refused(tmp_path):
-    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world; got 'lab'"):
+    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world, encoderless; got 'lab'"):
         blind_test.blindtest(tmp_path / "b", suite="lab")
 
 

@@ -96,7 +96,7 @@ def test_report_has_every_section(parsed):
 # figures per analysis of the smoke study: simulate one per run; bifurcation one; regime map:
 # regimes and contact loss; interval, Monte Carlo, PCE one each; Sobol: bars and lines per QoI
 EXPECTED_FIGURES = {"panels": 1, "bifurcation": 1, "regime_map": 2, "envelope": 1, "monte_carlo": 1, "pbox": 1,
-                    "pce": 1, "sobol": 6, "continuation": 2, "prediction": 1, "rating": 1}
+                    "pce": 1, "sobol": 6, "continuation": 2, "prediction": 1, "rating": 1, "runup": 2}
 
 
 def test_every_figure_is_an_embedded_png(parsed):

@@ -250,8 +250,38 @@ def _check_rating(finding, results):
     assert facts["damage"] == pytest.approx(float(ds["damage"].sel(mode=facts["mode"]).max()))
 
 
-CHECKS = {"rating": _check_rating, "worst_load": _check_worst_load, "separation": _check_separation,
-          "back_contact": _check_back_contact,
+def _check_runup(finding, results):
+    facts = finding.facts
+    ds = next(ds for ds in results if ds.attrs.get("analysis_type") == "runup")
+    peaks = ds["peak_mesh_force_case"]
+    if "peak_up" in facts or "peak_down" in facts:
+        for direction in peaks["direction"].values:
+            values = peaks.sel(direction=direction)
+            assert facts[f"peak_{direction}"] == pytest.approx(float(values.max()))
+            where = values.where(values == values.max(), drop=True)["pinion_speed"].values
+            assert facts[f"speed_{direction}"] in where
+            assert f"{facts[f'peak_{direction}'] / 1e3:.1f} kN at {facts[f'speed_{direction}']:.0f} rpm" in finding.text
+    elif "hysteresis" in facts:
+        up, down = (peaks.sel(direction=d).values for d in ("up", "down"))
+        differ = (np.abs(up - down) > 0.1 * np.maximum(np.abs(up), np.abs(down))).any(axis=0)
+        lower, upper = ds["bin_lower"].values, ds["bin_upper"].values
+        expected = [(float(lower[k]), float(upper[k])) for k in np.flatnonzero(differ)]
+        # consecutive bins merge into one range
+        merged = []
+        for low, high in expected:
+            if merged and merged[-1][1] == low:
+                merged[-1] = (merged[-1][0], high)
+            else:
+                merged.append((low, high))
+        assert [tuple(r) for r in facts["hysteresis"]] == merged
+    else:
+        for direction in ds["direction"].values:
+            speeds = ds["jump_speed"].sel(direction=direction).values
+            assert facts[f"jumps_{direction}"] == sorted(set(speeds[np.isfinite(speeds)].tolist()))
+
+
+CHECKS = {"rating": _check_rating, "runup": _check_runup, "worst_load": _check_worst_load,
+          "separation": _check_separation, "back_contact": _check_back_contact,
           "regimes": _check_regimes, "sobol": _check_sobol, "continuation": _check_continuation,
           "coexistence": _check_coexistence, "prediction": _check_prediction}
 
@@ -314,8 +344,10 @@ def test_every_smoke_headline_finding_is_true_of_the_netcdf_data(smoke):
     # worst case), then the grid statements
     assert topics[:8] == ["rating", "rating", "prediction", "worst_load", "separation", "separation",
                           "back_contact", "regimes"]
-    # guided starts (the default) add what they found about coexisting responses
-    assert topics[-3:] == ["sobol", "sobol", "sobol"] and set(topics[8:-3]) == {"coexistence", "continuation"}
+    # guided starts (the default) add what they found about coexisting responses, the continuation and the
+    # run-up theirs
+    assert topics[-3:] == ["sobol", "sobol", "sobol"]
+    assert set(topics[8:-3]) == {"coexistence", "continuation", "runup"}
 
 
 # ---------------------------------------------------------------------------- synthetic grids

@@ -101,15 +101,22 @@ def test_block_length_keeps_one_block_per_bin():
         ("rate: 3000", "rate: 3000\n    direction: sideways", "analyses[0].direction: expected one of"),
     ],
 )
-def test_bad_input_is_one_line_and_exit_2(tmp_path, old, new, message):
-    (tmp_path / "study.yaml").write_text(STUDY.replace(old, new))
+def test_bad_input_names_the_key(old, new, message):
+    with pytest.raises(uqgear.StudyError) as error:
+        uqgear.parse_study(STUDY.replace(old, new))
+    assert message in str(error.value) and "\n" not in str(error.value)
+
+
+def test_bad_input_on_the_command_line_is_one_line_and_exit_2(tmp_path):
+    (tmp_path / "study.yaml").write_text(STUDY.replace("stop: 2300", "stop: 9000"))
     run = subprocess.run(
         [sys.executable, "-m", "uqgear", "run", str(tmp_path / "study.yaml"), "--out", str(tmp_path / "out")],
         capture_output=True,
         text=True,
     )
     assert run.returncode == 2, run.stderr
-    assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1
+    assert "analyses[0].pinion_speed.stop: expected a speed in the design's range" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
 
 

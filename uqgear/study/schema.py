@@ -418,7 +418,7 @@ def load_study(path: str | Path) -> Study:
     >>> import uqgear
     >>> smoke = uqgear.load_study("smoke")
     >>> smoke.name, smoke.seed, len(smoke.analyses)
-    ('smoke', 20240601, 11)
+    ('smoke', 20240601, 12)
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     path = pathlib.Path(folder) / "short.yaml"
     ...     _ = path.write_text(smoke.text.replace("n_periods: 100", "n_periods: 60"))
