@@ -21,6 +21,7 @@ import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -360,6 +361,34 @@ def usable_runs(ds: xr.Dataset) -> xr.DataArray:
     return usable.rename("usable_runs")
 
 
+def _assembled(
+    data_vars: Mapping[str, Any],
+    coords: Mapping[str, Any],
+    coordinate_table: Mapping[str, tuple[Any, str, str]],
+    design: Design,
+    texts: tuple[str, str, str],
+    where: str,
+) -> xr.Dataset:
+    """A rig dataset from its variables: the global attributes (title, source, history), the units and long
+    names of ``coordinate_table``'s coordinates, validated."""
+    title, source, history = texts
+    ds = xr.Dataset(
+        data_vars,
+        coords=coords,
+        attrs={
+            "conventions": CONVENTIONS,
+            "design": design.to_json(),
+            "title": title,
+            "source": source,
+            "history": history,
+        },
+    )
+    for name, (_, units, long_name) in coordinate_table.items():
+        ds[name].attrs.update(units=units, long_name=long_name)
+    validate_rig(ds, where=where)
+    return ds
+
+
 def make_rig_dataset(
     *,
     time: ArrayLike,
@@ -441,21 +470,7 @@ def make_rig_dataset(
         data_vars[name] = (("op", "time"), samples, attrs)
     coords = {"time": ("time", time_values)}
     coords.update({name: ("op", values) for name, values in arrays.items()})
-    ds = xr.Dataset(
-        data_vars,
-        coords=coords,
-        attrs={
-            "conventions": CONVENTIONS,
-            "design": design.to_json(),
-            "title": title,
-            "source": source,
-            "history": history,
-        },
-    )
-    for name, (_, units, long_name) in RIG_COORDINATES.items():
-        ds[name].attrs.update(units=units, long_name=long_name)
-    validate_rig(ds, where=where)
-    return ds
+    return _assembled(data_vars, coords, RIG_COORDINATES, design, (title, source, history), where)
 
 
 def make_ramp_dataset(
@@ -545,21 +560,7 @@ def make_ramp_dataset(
                 f"{where}: {name}: expected one value per ramp ({speed.shape[0]}); got shape {array.shape}"
             )
         coords[name] = ("ramp", array)
-    ds = xr.Dataset(
-        data_vars,
-        coords=coords,
-        attrs={
-            "conventions": CONVENTIONS,
-            "design": design.to_json(),
-            "title": title,
-            "source": source,
-            "history": history,
-        },
-    )
-    for name, (_, units, long_name) in RAMP_COORDINATES.items():
-        ds[name].attrs.update(units=units, long_name=long_name)
-    validate_rig(ds, where=where)
-    return ds
+    return _assembled(data_vars, coords, RAMP_COORDINATES, design, (title, source, history), where)
 
 
 def write_rig(path: str | os.PathLike[str], ds: xr.Dataset) -> Path:
