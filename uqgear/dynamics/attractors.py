@@ -43,6 +43,7 @@ import xarray as xr
 from ..common.errors import UqgearError
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_batch
+from .filled_batches import FilledBatches
 from .hausdorff import hausdorff
 from .regimes import classify_batch, period_labels
 
@@ -464,8 +465,6 @@ class MultiStartSearch:
             runs += n
         stages: dict[str, xr.Dataset] = {"rest": rest}
         self.start_states_ = {"rest": np.full((n, 6), np.nan)}
-        if settings.sweeps:
-            runs += self._sweep_stages(evaluate, samples, rest, stages, sweep_entry, sweep_reach)
         requested: dict[str, np.ndarray] = {}
         for label, states in (extra_states or {}).items():
             states = np.asarray(states, dtype=float)
@@ -480,7 +479,13 @@ class MultiStartSearch:
                 starts[~np.tile(np.asarray(seeded_rows, dtype=bool), settings.seeded)] = np.nan
             for k in range(settings.seeded):
                 requested[f"seeded-{k + 1}"] = starts[k * n : (k + 1) * n]
-        stages.update(_extra_stages(evaluate, samples, requested, rest))
+        # the orbit and random starts wait for no other run: they ride in the sweeps' small step batches
+        riders = _rider_samples(samples, requested)
+        filled = FilledBatches(evaluate, riders) if settings.sweeps and riders is not None else None
+        if settings.sweeps:
+            runs += self._sweep_stages(filled or evaluate, samples, rest, stages, sweep_entry, sweep_reach)
+        ridden = evaluate if filled is None else (lambda _: filled.remaining())
+        stages.update(_extra_stages(ridden, samples, requested, rest))
         self.start_states_.update(requested)
         runs += sum(int(np.all(np.isfinite(states), axis=1).sum()) for states in requested.values())
         labels = settings.start_labels()
@@ -598,6 +603,20 @@ def _put_rows(target: xr.Dataset, rows: np.ndarray, part: xr.Dataset) -> xr.Data
     return out
 
 
+def _picked(requested: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per stage, the samples with a start state of their own (rows without NaN)."""
+    return {label: np.nonzero(np.all(np.isfinite(states), axis=1))[0] for label, states in requested.items()}
+
+
+def _rider_samples(samples: xr.Dataset, requested: Mapping[str, np.ndarray]) -> xr.Dataset | None:
+    """The runs of every stage from its start states as one batch, stage after stage (None: no run)."""
+    picked = _picked(requested)
+    index = np.concatenate([np.zeros(0, dtype=np.int64), *picked.values()])
+    if index.size == 0:
+        return None
+    return with_starts(samples, index, np.concatenate([requested[label][rows] for label, rows in picked.items()]))
+
+
 def _extra_stages(
     evaluate: Callable[[xr.Dataset], xr.Dataset],
     samples: xr.Dataset,
@@ -618,12 +637,11 @@ def _extra_stages(
         elif variable.dtype.kind in "US":
             cleared[name] = (variable.dims, np.full(variable.shape, "", dtype=variable.dtype), variable.attrs)
     blank.update(cleared)
-    picked = {label: np.nonzero(np.all(np.isfinite(states), axis=1))[0] for label, states in requested.items()}
-    index = np.concatenate([np.zeros(0, dtype=np.int64), *picked.values()])
-    if index.size == 0:
+    picked = _picked(requested)
+    riders = _rider_samples(samples, requested)
+    if riders is None:
         return dict.fromkeys(requested, blank)
-    states = np.concatenate([requested[label][rows] for label, rows in picked.items()])
-    result = evaluate(with_starts(samples, index, states))
+    result = evaluate(riders)
     out, at = {}, 0
     for label, rows in picked.items():
         out[label] = _put_rows(blank, rows, result.isel(sample=slice(at, at + rows.size))) if rows.size else blank
