@@ -46,15 +46,11 @@ from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_b
 from .filled_batches import FilledBatches
 from .hausdorff import hausdorff
 from .regimes import classify_batch, period_labels
+from .same_response import COMPARED_FRACTIONS, COMPARED_QOIS, copies_of_first, same_response, self_same
 
 #: Sample variables of a start state, and of the final state a started run returns.
 INITIAL_VARIABLES = tuple(f"initial_{name}" for name in STATE_NAMES)
 FINAL_VARIABLES = tuple(f"final_{name}" for name in STATE_NAMES)
-#: QoIs compared between runs (relative tolerance) and time fractions (absolute tolerance).
-COMPARED_QOIS = ("peak_mesh_force", "dte_rms", "dte_peak_to_peak")
-COMPARED_FRACTIONS = ("fraction_separation", "fraction_back_contact")
-#: Factor on both tolerances when either response is not periodic.
-NON_PERIODIC_FACTOR = 5.0
 #: QoIs every attractor keeps.
 ATTRACTOR_QOIS = (
     "peak_mesh_force",
@@ -649,20 +645,6 @@ def _extra_stages(
     return out
 
 
-def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
-    periodic = str(a["regime"]).startswith("period-") and str(b["regime"]).startswith("period-")
-    # a non-periodic response's extremes and point cloud are samples of the kept window: looser
-    widen = 1.0 if periodic else NON_PERIODIC_FACTOR
-    for name in COMPARED_QOIS:
-        scale = max(abs(a[name]), abs(b[name]), 1e-300)
-        if not abs(a[name] - b[name]) <= widen * settings.tolerance * scale:
-            return False
-    for name in COMPARED_FRACTIONS:
-        if not abs(a[name] - b[name]) <= widen * settings.tolerance:
-            return False
-    return bool(hausdorff(a["points"], b["points"]) <= widen * settings.poincare_tolerance)
-
-
 def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiStart) -> xr.Dataset:
     """Group the runs of every sample (dims ``sample``, ``start``) into attractors (see the module docstring)."""
     n, labels = runs.sizes["sample"], [str(v) for v in runs["start"].values]
@@ -682,6 +664,7 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
     poincare_v = runs["poincare_x_velocity"].transpose("sample", "start", "period").values
     # a start that did not run (no finite Poincare point) is left out before its entry is built
     ran = np.any(np.isfinite(poincare_x) & np.isfinite(poincare_v), axis=2)
+    copies = copies_of_first(compared, regimes, poincare_x, poincare_v)
     for i in range(n):
         omega_b = 2.0 * math.pi * z1 * float(np.ravel(speed)[i]) / 60.0 * half_backlash
         found: list[dict[str, Any]] = []
@@ -690,10 +673,15 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
             if not ran[i, j]:
                 membership[i, j] = -1
                 continue
+            if j and copies[i, j] and groups and groups[0][0] == 0 and self_same(found[0]):
+                membership[i, j] = 0
+                # the first start's run again, bit for bit (a sweep's end, a start alone in its sweep): its attractor
+                groups[0].append(j)
+                continue
             points = np.stack([poincare_x[i, j] / half_backlash, poincare_v[i, j] / omega_b], axis=1)
             entry: dict[str, Any] = {name: float(values[i, j]) for name, values in compared.items()}
             entry.update(regime=regimes[i, j], points=points[np.all(np.isfinite(points), axis=1)])
-            match = next((k for k, other in enumerate(found) if _same(other, entry, settings)), None)
+            match = next((k for k, other in enumerate(found) if same_response(other, entry, settings)), None)
             if match is None:
                 found.append(entry)
                 groups.append([j])
