@@ -470,7 +470,7 @@ class MultiStartSearch:
         if settings.seeded:
             if design is None:
                 raise UqgearError("design: needed for the random starts' box (pass design=)")
-            starts = self._seeded_states(samples, rest, design)
+            starts = self._seeded_states(samples, rest, design, seeded_rows)
             if seeded_rows is not None:
                 starts[~np.tile(np.asarray(seeded_rows, dtype=bool), settings.seeded)] = np.nan
             for k in range(settings.seeded):
@@ -515,10 +515,10 @@ class MultiStartSearch:
         }
         # a sweep's first point is its rest run unless the sweep enters it with a state from outside
         runs = 2 * n - sum(int(not entered["up"][m[0]]) + int(not entered["down"][m[-1]]) for m in groups)
-        if all(name in rest for name in FINAL_VARIABLES):
+        swept = [m for m in groups if len(m) > 1 or entered["up"][m[0]] or entered["down"][m[-1]]]
+        if swept and all(name in rest for name in FINAL_VARIABLES):
             stages.update(_sweep_runs(evaluate, samples, rest, groups, starts=starts, entry=entry))
-        elif any(len(members) > 1 or entered["up"][members[0]] or entered["down"][members[-1]] for members in groups):
-            swept = [m for m in groups if len(m) > 1 or entered["up"][m[0]] or entered["down"][m[-1]]]
+        elif swept:
             # the sweeps start from the rest runs' final states at each group's ends (where nothing enters them)
             needed = [int(m[0]) for m in swept if not entered["up"][m[0]]]
             needed += [int(m[-1]) for m in swept if not entered["down"][m[-1]]]
@@ -531,18 +531,26 @@ class MultiStartSearch:
                 # its rest run
                 stages[direction] = _put_rows(rest, swept_rows, part)
         else:
+            # every point alone in its sweep, entered from nowhere: its sweep starts are its rest run
             stages.update({"up": rest, "down": rest})
         self.start_states_.update(starts)
         return runs
 
-    def _seeded_states(self, samples: xr.Dataset, rest: xr.Dataset, design: Design) -> np.ndarray:
+    def _seeded_states(
+        self, samples: xr.Dataset, rest: xr.Dataset, design: Design, rows: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Every sample's random start states, shape (seeded * n, 6); only the samples ``rows`` (booleans, default
+        all) get their box's centre, the others NaN: the draws are the same whichever samples are chosen."""
         n = samples.sizes["sample"]
         settings = self.settings
         # effect parameters (``family.parameter``) left out: the random box is centred on the plain model's
         # static state, which the effects shift by far less than the box's width
         dropped = [v for v in samples.data_vars if v in INITIAL_VARIABLES or "." in str(v)]
-        inputs = samples.drop_vars(dropped)
-        static = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
+        chosen = np.arange(n) if rows is None else np.nonzero(np.asarray(rows, dtype=bool))[0]
+        static = np.full((n, 6), np.nan)
+        if chosen.size:
+            inputs = samples.drop_vars(dropped).isel(sample=chosen)
+            static[chosen] = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
         half_backlash = 0.5 * (
             np.asarray(samples["backlash"].values, float) if "backlash" in samples else np.full(n, design.backlash)
         )
