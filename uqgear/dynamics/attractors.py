@@ -43,17 +43,14 @@ import xarray as xr
 from ..common.errors import UqgearError
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_batch
+from .filled_batches import FilledBatches
 from .hausdorff import hausdorff
 from .regimes import classify_batch, period_labels
+from .same_response import COMPARED_FRACTIONS, COMPARED_QOIS, copies_of_first, same_response, self_same
 
 #: Sample variables of a start state, and of the final state a started run returns.
 INITIAL_VARIABLES = tuple(f"initial_{name}" for name in STATE_NAMES)
 FINAL_VARIABLES = tuple(f"final_{name}" for name in STATE_NAMES)
-#: QoIs compared between runs (relative tolerance) and time fractions (absolute tolerance).
-COMPARED_QOIS = ("peak_mesh_force", "dte_rms", "dte_peak_to_peak")
-COMPARED_FRACTIONS = ("fraction_separation", "fraction_back_contact")
-#: Factor on both tolerances when either response is not periodic.
-NON_PERIODIC_FACTOR = 5.0
 #: QoIs every attractor keeps.
 ATTRACTOR_QOIS = (
     "peak_mesh_force",
@@ -464,8 +461,6 @@ class MultiStartSearch:
             runs += n
         stages: dict[str, xr.Dataset] = {"rest": rest}
         self.start_states_ = {"rest": np.full((n, 6), np.nan)}
-        if settings.sweeps:
-            runs += self._sweep_stages(evaluate, samples, rest, stages, sweep_entry, sweep_reach)
         requested: dict[str, np.ndarray] = {}
         for label, states in (extra_states or {}).items():
             states = np.asarray(states, dtype=float)
@@ -475,12 +470,18 @@ class MultiStartSearch:
         if settings.seeded:
             if design is None:
                 raise UqgearError("design: needed for the random starts' box (pass design=)")
-            starts = self._seeded_states(samples, rest, design)
+            starts = self._seeded_states(samples, rest, design, seeded_rows)
             if seeded_rows is not None:
                 starts[~np.tile(np.asarray(seeded_rows, dtype=bool), settings.seeded)] = np.nan
             for k in range(settings.seeded):
                 requested[f"seeded-{k + 1}"] = starts[k * n : (k + 1) * n]
-        stages.update(_extra_stages(evaluate, samples, requested, rest))
+        # the orbit and random starts wait for no other run: they ride in the sweeps' small step batches
+        riders = _rider_samples(samples, requested)
+        filled = FilledBatches(evaluate, riders) if settings.sweeps and riders is not None else None
+        if settings.sweeps:
+            runs += self._sweep_stages(filled or evaluate, samples, rest, stages, sweep_entry, sweep_reach)
+        ridden = evaluate if filled is None else (lambda _: filled.remaining())
+        stages.update(_extra_stages(ridden, samples, requested, rest))
         self.start_states_.update(requested)
         runs += sum(int(np.all(np.isfinite(states), axis=1).sum()) for states in requested.values())
         labels = settings.start_labels()
@@ -514,10 +515,10 @@ class MultiStartSearch:
         }
         # a sweep's first point is its rest run unless the sweep enters it with a state from outside
         runs = 2 * n - sum(int(not entered["up"][m[0]]) + int(not entered["down"][m[-1]]) for m in groups)
-        if all(name in rest for name in FINAL_VARIABLES):
+        swept = [m for m in groups if len(m) > 1 or entered["up"][m[0]] or entered["down"][m[-1]]]
+        if swept and all(name in rest for name in FINAL_VARIABLES):
             stages.update(_sweep_runs(evaluate, samples, rest, groups, starts=starts, entry=entry))
-        elif any(len(members) > 1 or entered["up"][members[0]] or entered["down"][members[-1]] for members in groups):
-            swept = [m for m in groups if len(m) > 1 or entered["up"][m[0]] or entered["down"][m[-1]]]
+        elif swept:
             # the sweeps start from the rest runs' final states at each group's ends (where nothing enters them)
             needed = [int(m[0]) for m in swept if not entered["up"][m[0]]]
             needed += [int(m[-1]) for m in swept if not entered["down"][m[-1]]]
@@ -530,18 +531,26 @@ class MultiStartSearch:
                 # its rest run
                 stages[direction] = _put_rows(rest, swept_rows, part)
         else:
+            # every point alone in its sweep, entered from nowhere: its sweep starts are its rest run
             stages.update({"up": rest, "down": rest})
         self.start_states_.update(starts)
         return runs
 
-    def _seeded_states(self, samples: xr.Dataset, rest: xr.Dataset, design: Design) -> np.ndarray:
+    def _seeded_states(
+        self, samples: xr.Dataset, rest: xr.Dataset, design: Design, rows: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Every sample's random start states, shape (seeded * n, 6); only the samples ``rows`` (booleans, default
+        all) get their box's centre, the others NaN: the draws are the same whichever samples are chosen."""
         n = samples.sizes["sample"]
         settings = self.settings
         # effect parameters (``family.parameter``) left out: the random box is centred on the plain model's
         # static state, which the effects shift by far less than the box's width
         dropped = [v for v in samples.data_vars if v in INITIAL_VARIABLES or "." in str(v)]
-        inputs = samples.drop_vars(dropped)
-        static = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
+        chosen = np.arange(n) if rows is None else np.nonzero(np.asarray(rows, dtype=bool))[0]
+        static = np.full((n, 6), np.nan)
+        if chosen.size:
+            inputs = samples.drop_vars(dropped).isel(sample=chosen)
+            static[chosen] = np.stack([setup.static_state() for setup in build_batch(design, inputs)])
         half_backlash = 0.5 * (
             np.asarray(samples["backlash"].values, float) if "backlash" in samples else np.full(n, design.backlash)
         )
@@ -598,6 +607,20 @@ def _put_rows(target: xr.Dataset, rows: np.ndarray, part: xr.Dataset) -> xr.Data
     return out
 
 
+def _picked(requested: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per stage, the samples with a start state of their own (rows without NaN)."""
+    return {label: np.nonzero(np.all(np.isfinite(states), axis=1))[0] for label, states in requested.items()}
+
+
+def _rider_samples(samples: xr.Dataset, requested: Mapping[str, np.ndarray]) -> xr.Dataset | None:
+    """The runs of every stage from its start states as one batch, stage after stage (None: no run)."""
+    picked = _picked(requested)
+    index = np.concatenate([np.zeros(0, dtype=np.int64), *picked.values()])
+    if index.size == 0:
+        return None
+    return with_starts(samples, index, np.concatenate([requested[label][rows] for label, rows in picked.items()]))
+
+
 def _extra_stages(
     evaluate: Callable[[xr.Dataset], xr.Dataset],
     samples: xr.Dataset,
@@ -618,31 +641,16 @@ def _extra_stages(
         elif variable.dtype.kind in "US":
             cleared[name] = (variable.dims, np.full(variable.shape, "", dtype=variable.dtype), variable.attrs)
     blank.update(cleared)
-    picked = {label: np.nonzero(np.all(np.isfinite(states), axis=1))[0] for label, states in requested.items()}
-    index = np.concatenate([np.zeros(0, dtype=np.int64), *picked.values()])
-    if index.size == 0:
+    picked = _picked(requested)
+    riders = _rider_samples(samples, requested)
+    if riders is None:
         return dict.fromkeys(requested, blank)
-    states = np.concatenate([requested[label][rows] for label, rows in picked.items()])
-    result = evaluate(with_starts(samples, index, states))
+    result = evaluate(riders)
     out, at = {}, 0
     for label, rows in picked.items():
         out[label] = _put_rows(blank, rows, result.isel(sample=slice(at, at + rows.size))) if rows.size else blank
         at += rows.size
     return out
-
-
-def _same(a: dict[str, Any], b: dict[str, Any], settings: MultiStart) -> bool:
-    periodic = str(a["regime"]).startswith("period-") and str(b["regime"]).startswith("period-")
-    # a non-periodic response's extremes and point cloud are samples of the kept window: looser
-    widen = 1.0 if periodic else NON_PERIODIC_FACTOR
-    for name in COMPARED_QOIS:
-        scale = max(abs(a[name]), abs(b[name]), 1e-300)
-        if not abs(a[name] - b[name]) <= widen * settings.tolerance * scale:
-            return False
-    for name in COMPARED_FRACTIONS:
-        if not abs(a[name] - b[name]) <= widen * settings.tolerance:
-            return False
-    return bool(hausdorff(a["points"], b["points"]) <= widen * settings.poincare_tolerance)
 
 
 def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiStart) -> xr.Dataset:
@@ -664,6 +672,7 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
     poincare_v = runs["poincare_x_velocity"].transpose("sample", "start", "period").values
     # a start that did not run (no finite Poincare point) is left out before its entry is built
     ran = np.any(np.isfinite(poincare_x) & np.isfinite(poincare_v), axis=2)
+    copies = copies_of_first(compared, regimes, poincare_x, poincare_v)
     for i in range(n):
         omega_b = 2.0 * math.pi * z1 * float(np.ravel(speed)[i]) / 60.0 * half_backlash
         found: list[dict[str, Any]] = []
@@ -672,10 +681,15 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
             if not ran[i, j]:
                 membership[i, j] = -1
                 continue
+            if j and copies[i, j] and groups and groups[0][0] == 0 and self_same(found[0]):
+                membership[i, j] = 0
+                # the first start's run again, bit for bit (a sweep's end, a start alone in its sweep): its attractor
+                groups[0].append(j)
+                continue
             points = np.stack([poincare_x[i, j] / half_backlash, poincare_v[i, j] / omega_b], axis=1)
             entry: dict[str, Any] = {name: float(values[i, j]) for name, values in compared.items()}
             entry.update(regime=regimes[i, j], points=points[np.all(np.isfinite(points), axis=1)])
-            match = next((k for k, other in enumerate(found) if _same(other, entry, settings)), None)
+            match = next((k for k, other in enumerate(found) if same_response(other, entry, settings)), None)
             if match is None:
                 found.append(entry)
                 groups.append([j])

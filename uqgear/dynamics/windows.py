@@ -51,6 +51,7 @@ from ..physics.model import natural_frequencies
 from ..physics.stiffness import stiffness_tables
 from ..physics.threads import default_threads
 from .continuation import Continuation, ContinuationSettings
+from .shooting import PoincareMap, setup_at
 
 #: Windows are looked for in this sweep variable.
 SWEEP_VARIABLE = "pinion_speed"
@@ -335,9 +336,26 @@ def follow_nodes(
 
     ordered = sorted(values)
     count = min(default_threads() if threads is None else max(1, int(threads)), len(ordered))
+    if count > 1:
+        # any mesh-periodic point loads the same kernel: the lowest node's inputs at the lowest speed
+        first = dict(base) if node_parameter is None else {**base, node_parameter: ordered[0]}
+        _load_orbit_kernel(design, {**first, SWEEP_VARIABLE: low}, damping_in_separation, stiffness)
     # one forked process per node at a time: a continuation is mostly Python between its compiled orbit passes,
     # so threads would take turns at the GIL; each node's fit is computed whole in one process, as here
     return map_forked(lambda index: follow(ordered[index]), len(ordered), count)
+
+
+def _load_orbit_kernel(
+    design: Design, values: Mapping[str, float], damping_in_separation: bool, stiffness: str
+) -> None:
+    """One mesh period of the orbit map at ``values``, result unused: the compiled orbit kernel is loaded here, once,
+    before the processes fork, and each of them inherits it instead of loading it again (about as long as a node's
+    continuation). Inputs the map refuses are left to the continuation, which says what is wrong with them."""
+    try:
+        setup = setup_at(design, values, damping_in_separation=damping_in_separation, stiffness=stiffness)
+        PoincareMap(setup)(setup.static_state(), 1, with_matrix=True)
+    except UqgearError:
+        return
 
 
 def windows_from(
