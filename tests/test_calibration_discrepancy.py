@@ -40,12 +40,13 @@ def _features(log_observed, used, noise_variance, model_error_grid):
                     np.asarray(model_error_grid, float))
 
 
-def _likelihoods(features, n_op, tau, slope=0.0):
+def _likelihoods(features, n_op, tau, slope=0.0, no_discrepancy=0.0):
     box = (np.zeros(N_GLOBAL + n_op), np.ones(N_GLOBAL + n_op))
     emulators, loo = _emulators(n_op, slope), np.zeros((n_op, 9))
     phi = DiscrepancyBasis.of_campaign(SPEEDS[:n_op], TORQUES[:n_op]).matrix(SPEEDS[:n_op], TORQUES[:n_op])
     plain = StageLikelihood(*box, emulators, loo, features, N_GLOBAL)
-    return plain, DiscrepancyLikelihood(*box, emulators, loo, features, N_GLOBAL, phi=phi, tau=np.asarray(tau))
+    return plain, DiscrepancyLikelihood(*box, emulators, loo, features, N_GLOBAL, phi=phi, tau=np.asarray(tau),
+                                        no_discrepancy=no_discrepancy)
 
 
 # --------------------------------------------------------------------------- (a) the marginal likelihood
@@ -221,6 +222,17 @@ def test_a_fit_with_the_discrepancy_reports_and_carries_it(cheap_rig, tmp_path):
     assert "parameter_log_std" in fitted.predictive_ and "discrepancy_log_std" in fitted.predictive_
     draws = fitted.discrepancy_at([2000.0, 3000.0], [6000.0, 6500.0], 7, np.random.default_rng(0))
     assert draws.shape == (7, 2, 3, 3)
+    # one draw of the coefficients with each posterior draw, kept aligned through thinning
+    from uqgear.uq.posterior import PosteriorDraws
+
+    beta = fitted.posterior_["discrepancy_beta"]
+    assert beta.dims == ("chain", "draw", "channel", "harmonic", "basis")
+    posterior = PosteriorDraws.from_calibration(fitted)
+    assert posterior.discrepancy_beta.shape == (posterior.size, 3, 3, 4)
+    thinned = posterior.thin(5, seed=2)
+    for value, beta_row in zip(thinned.values[:, 0], thinned.discrepancy_beta):  # the chains repeat rows
+        same = posterior.values[:, 0] == value
+        assert any(np.array_equal(beta_row, other, equal_nan=True) for other in posterior.discrepancy_beta[same])
     paths = write_calibration(fitted, tmp_path / "out")
     read = read_discrepancy(xr.load_dataset(paths["posterior"]))
     np.testing.assert_allclose(read.beta_mean, fitted.discrepancy_.beta_mean)
