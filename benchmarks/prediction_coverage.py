@@ -23,7 +23,8 @@ Prints coverage per kind and QoI. Minutes per campaign (a calibration, and a dia
 ``effect`` campaigns).
 
 Usage: ``python benchmarks/prediction_coverage.py [--per-kind 2] [--kinds healthy effect structural] [--seed 1]
-[--discrepancy] [--first K] [--run-kinds KIND ...] [--json out.json]``; ``--first`` and ``--run-kinds`` calibrate a
+[--discrepancy] [--first K] [--skip J] [--run-kinds KIND ...] [--json out.json]``; ``--first``, ``--skip`` and
+``--run-kinds`` calibrate a
 part of the ``--per-kind`` x ``--kinds`` campaigns (the same campaigns as the whole run: the ones left out still take
 their random draws), so that the kinds can run side by side in separate processes.
 """
@@ -181,6 +182,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--discrepancy", action="store_true")
     parser.add_argument("--first", type=int, help="calibrate only the first FIRST campaigns of each kind")
+    parser.add_argument("--skip", type=int, default=0, help="and not the first SKIP of them")
     parser.add_argument("--run-kinds", nargs="+", help="calibrate only these kinds (the others' draws still taken)")
     parser.add_argument("--json")
     args = parser.parse_args()
@@ -192,7 +194,7 @@ def main() -> None:
     run_kinds = args.kinds if args.run_kinds is None else args.run_kinds
     for kind in args.kinds:
         for index in range(args.per_kind):
-            if index >= first or kind not in run_kinds:
+            if not args.skip <= index < first or kind not in run_kinds:
                 draw_campaign(kind, index, rng, design)
                 continue
             entry = one_campaign(kind, index, rng, design, args.discrepancy)
@@ -208,7 +210,7 @@ def main() -> None:
         if ratios:
             print(f"{kind:10s} worst-case spread, prior / posterior: {', '.join(f'{r:.1f}x' for r in ratios)}")
         refused = sum(1 for e in entries if e["kind"] == kind and not e["converged"])
-        print(f"{kind:10s} calibrations refused (not converged): {refused} of {first}")
+        print(f"{kind:10s} calibrations refused (not converged): {refused} of {first - args.skip}")
     if args.json:
         with open(args.json, "w") as handle:
             json.dump(entries, handle, indent=2)
