@@ -23,7 +23,10 @@ Prints coverage per kind and QoI. Minutes per campaign (a calibration, and a dia
 ``effect`` campaigns).
 
 Usage: ``python benchmarks/prediction_coverage.py [--per-kind 2] [--kinds healthy effect structural] [--seed 1]
-[--discrepancy] [--json out.json]``
+[--discrepancy] [--first K] [--skip J] [--run-kinds KIND ...] [--json out.json]``; ``--first``, ``--skip`` and
+``--run-kinds`` calibrate a
+part of the ``--per-kind`` x ``--kinds`` campaigns (the same campaigns as the whole run: the ones left out still take
+their random draws), so that the kinds can run side by side in separate processes.
 """
 
 from __future__ import annotations
@@ -52,7 +55,8 @@ SIMULATION = {"n_periods": 400, "keep_periods": 200, "steps_per_mode": 32}
 DRAWS = 64
 
 
-def campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
+def draw_campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
+    """What is random about a campaign (the truth, its effects, the simulation's seed): drawn from ``rng``."""
     truth = scattered_values(_scattered_truth(rng), design)
     effects, options, transfer = [], {}, None
     if kind == "healthy":
@@ -66,10 +70,16 @@ def campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Des
     else:
         options["encoder_run_out"] = {"pinion": 8e-6, "gear": 8e-6}
     seed = np.random.SeedSequence([int(rng.integers(2**31)), index])
-    rig = simulate_campaign(design, true_parameters=truth, effects=effects, seed=seed, run_in=0.3, **options)
-    if transfer is not None:
-        rig = apply_transfer_path(rig, "acc_pinion", *transfer)
-    return {"rig": rig, "truth": truth, "effects": effects}
+    return {"truth": truth, "effects": effects, "options": options, "transfer": transfer, "seed": seed}
+
+
+def campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
+    drawn = draw_campaign(kind, index, rng, design)
+    rig = simulate_campaign(design, true_parameters=drawn["truth"], effects=drawn["effects"], seed=drawn["seed"],
+                            run_in=0.3, **drawn["options"])
+    if drawn["transfer"] is not None:
+        rig = apply_transfer_path(rig, "acc_pinion", *drawn["transfer"])
+    return {"rig": rig, "truth": drawn["truth"], "effects": drawn["effects"]}
 
 
 def held_out_samples(values: dict[str, np.ndarray], design: uqgear.Design) -> Any:
@@ -121,10 +131,11 @@ def worst_spread(draws: dict[str, np.ndarray], design: uqgear.Design) -> float:
     return float(np.subtract(*np.quantile(worst, [0.95, 0.05])))
 
 
-def discrepancy_factors(calibration: uqgear.Calibration, index: int) -> np.ndarray:
-    """exp(delta) of the DTE's first mesh harmonic, (draw, held-out point)."""
-    delta = calibration.discrepancy_at(HELD_OUT["pinion_speed"], HELD_OUT["drive_torque"], DRAWS,
-                                       np.random.default_rng(index))
+def discrepancy_factors(calibration: uqgear.Calibration, space: uqgear.ParameterSpace) -> np.ndarray:
+    """exp(delta) of the DTE's first mesh harmonic, (draw, held-out point): each posterior draw's own discrepancy
+    coefficients (drawn with its parameters), as the study's ``prediction`` analysis carries them."""
+    delta = calibration.discrepancy_.at_draws(space.posterior.discrepancy_beta, HELD_OUT["pinion_speed"],
+                                              HELD_OUT["drive_torque"])
     return np.exp(np.nan_to_num(delta.sel(channel="te", harmonic=1).values))
 
 
@@ -150,7 +161,7 @@ def one_campaign(
             effect_sets = None
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}
     true_values = predict(truth_rows, [tuple(made["effects"])] if made["effects"] else None, design)
-    predicted = predict(draws, effect_sets, design, discrepancy_factors(calibration, index) if discrepancy else None)
+    predicted = predict(draws, effect_sets, design, discrepancy_factors(calibration, space) if discrepancy else None)
     entry["covered"] = {}
     for qoi in QOIS:
         low, high = np.quantile(predicted[qoi], [0.05, 0.95], axis=0)
@@ -170,17 +181,26 @@ def main() -> None:
     parser.add_argument("--kinds", nargs="+", default=["healthy", "effect", "structural"])
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--discrepancy", action="store_true")
+    parser.add_argument("--first", type=int, help="calibrate only the first FIRST campaigns of each kind")
+    parser.add_argument("--skip", type=int, default=0, help="and not the first SKIP of them")
+    parser.add_argument("--run-kinds", nargs="+", help="calibrate only these kinds (the others' draws still taken)")
     parser.add_argument("--json")
     args = parser.parse_args()
     design = uqgear.load_design("locomotive")
     rng = np.random.default_rng(args.seed)
     entries = []
+    # the campaigns are those of the whole --per-kind x --kinds layout: one that is skipped still takes its draws
+    first = args.per_kind if args.first is None else min(args.first, args.per_kind)
+    run_kinds = args.kinds if args.run_kinds is None else args.run_kinds
     for kind in args.kinds:
         for index in range(args.per_kind):
+            if not args.skip <= index < first or kind not in run_kinds:
+                draw_campaign(kind, index, rng, design)
+                continue
             entry = one_campaign(kind, index, rng, design, args.discrepancy)
             entries.append(entry)
             print(json.dumps(entry), flush=True)
-    for kind in args.kinds:
+    for kind in run_kinds:
         found = [e for e in entries if e["kind"] == kind and "covered" in e]
         for qoi in QOIS:
             flags = [flag for e in found for flag in e["covered"][qoi]]
@@ -190,7 +210,7 @@ def main() -> None:
         if ratios:
             print(f"{kind:10s} worst-case spread, prior / posterior: {', '.join(f'{r:.1f}x' for r in ratios)}")
         refused = sum(1 for e in entries if e["kind"] == kind and not e["converged"])
-        print(f"{kind:10s} calibrations refused (not converged): {refused} of {args.per_kind}")
+        print(f"{kind:10s} calibrations refused (not converged): {refused} of {first - args.skip}")
     if args.json:
         with open(args.json, "w") as handle:
             json.dump(entries, handle, indent=2)

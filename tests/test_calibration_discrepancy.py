@@ -14,6 +14,7 @@ from uqgear.calibration.discrepancy_results import (
     discrepancy_dataset,
     discrepancy_summary,
     fit_discrepancy,
+    joint_beta_draws,
     read_discrepancy,
 )
 from uqgear.calibration.emulator import PolynomialEmulator
@@ -40,12 +41,13 @@ def _features(log_observed, used, noise_variance, model_error_grid):
                     np.asarray(model_error_grid, float))
 
 
-def _likelihoods(features, n_op, tau, slope=0.0):
+def _likelihoods(features, n_op, tau, slope=0.0, no_discrepancy=0.0):
     box = (np.zeros(N_GLOBAL + n_op), np.ones(N_GLOBAL + n_op))
     emulators, loo = _emulators(n_op, slope), np.zeros((n_op, 9))
     phi = DiscrepancyBasis.of_campaign(SPEEDS[:n_op], TORQUES[:n_op]).matrix(SPEEDS[:n_op], TORQUES[:n_op])
     plain = StageLikelihood(*box, emulators, loo, features, N_GLOBAL)
-    return plain, DiscrepancyLikelihood(*box, emulators, loo, features, N_GLOBAL, phi=phi, tau=np.asarray(tau))
+    return plain, DiscrepancyLikelihood(*box, emulators, loo, features, N_GLOBAL, phi=phi, tau=np.asarray(tau),
+                                        no_discrepancy=no_discrepancy)
 
 
 # --------------------------------------------------------------------------- (a) the marginal likelihood
@@ -99,7 +101,7 @@ def test_marginal_likelihood_tends_to_the_ordinary_one_as_tau_tends_to_zero():
 # --------------------------------------------------------------------------- (b) a known discrepancy recovered
 
 
-def _synthetic(delta, theta=0.4, noise_sd=0.01, seed=3):
+def _synthetic(delta, theta=0.4, noise_sd=0.01, seed=3, no_discrepancy=0.0):
     """Log features = the emulators at theta + delta(speed, torque) per channel + noise (8 runs)."""
     n_op = SPEEDS.size
     rng = np.random.default_rng(seed)
@@ -110,7 +112,7 @@ def _synthetic(delta, theta=0.4, noise_sd=0.01, seed=3):
     truth = delta(SPEEDS, TORQUES)  # (op, channel, harmonic)
     log_observed = plain.emulate(point[None])[0] + truth + rng.normal(0.0, noise_sd, used.shape)
     features = _features(log_observed, used, noise_sd**2, np.geomspace(0.01, 0.5, 32))
-    _, likelihood = _likelihoods(features, n_op, tau_grid((0.005, 3.0)), slope=0.3)
+    _, likelihood = _likelihoods(features, n_op, tau_grid((0.005, 3.0)), slope=0.3, no_discrepancy=no_discrepancy)
     # posterior draws of the parameter: narrow around the truth (its own posterior is not the subject here)
     draws = np.tile(point, (200, 1))
     draws[:, 0] += rng.normal(0.0, 0.002, 200)
@@ -182,6 +184,74 @@ def test_discrepancy_draws_at_new_points_and_read_back_from_a_file(tmp_path):
         read_discrepancy(xr.Dataset())
 
 
+# --------------------------------------------------------------------------- (b2) the point at zero, joint draws
+
+
+def test_joint_draws_follow_the_posterior_of_beta_given_the_parameters():
+    """One (sigma, tau) pair: the draws' mean and covariance against the dense Gaussian conditional."""
+    n_op, tau, sigma = 8, 0.15, 0.05
+    rng = np.random.default_rng(6)
+    used = np.ones((n_op, 3, 3), bool)
+    log_observed = rng.normal(0.0, 0.2, used.shape)
+    noise = np.full(used.shape, 1e-4)
+    _, likelihood = _likelihoods(_features(log_observed, used, noise, [sigma]), n_op, [tau], slope=0.3)
+    point = np.full(N_GLOBAL + n_op, 0.5)
+    draws = joint_beta_draws(np.tile(point, (40_000, 1)), likelihood, np.random.default_rng(7))
+    r = (log_observed - likelihood.emulate(point[None])[0])[:, 0, 0]  # te mesh1 over the runs
+    phi = likelihood.phi
+    total = np.diag(noise[:, 0, 0] + sigma**2) + tau**2 * phi @ phi.T
+    gain = tau**2 * phi.T @ np.linalg.inv(total)
+    mean, covariance = gain @ r, tau**2 * np.eye(4) - gain @ phi * tau**2
+    sd = np.sqrt(np.diag(covariance))
+    assert np.all(np.abs(draws[:, 0].mean(axis=0) - mean) <= 4 * sd / np.sqrt(40_000))
+    np.testing.assert_allclose(np.cov(draws[:, 0].T), covariance, rtol=0.05, atol=0.05 * sd.max() ** 2)
+
+
+def test_with_no_discrepancy_in_the_data_the_point_at_zero_takes_the_weight():
+    """Data with no discrepancy: most draws carry none, so the band shrinks towards the ordinary one; a known
+    discrepancy: none of the draws is zero and they hold the truth."""
+    basis = DiscrepancyBasis.of_campaign(SPEEDS, TORQUES)
+    phi = basis.matrix(SPEEDS, TORQUES)
+    zero = lambda s, t: np.zeros((s.size, 3, 3))  # noqa: E731
+    spreads = {}
+    for weight in (0.0, 0.5):
+        _, likelihood, draws, _ = _synthetic(zero, no_discrepancy=weight)
+        beta = joint_beta_draws(draws, likelihood, np.random.default_rng(8))  # (M, G, p)
+        delta = np.einsum("np,mp->mn", phi, beta[:, 0])  # te mesh1 at the runs
+        spreads[weight] = np.subtract(*np.quantile(delta, [0.95, 0.05], axis=0))
+        if weight:
+            # the posterior weight of tau = 0 rises above its prior's one half
+            assert np.mean(np.all(beta[:, :8] == 0.0, axis=2)) > 0.7
+    # the 90 % band of the discrepancy at the runs narrows (about 0.6 times here)
+    assert np.mean(spreads[0.5] / spreads[0.0]) < 0.8
+    _, likelihood, draws, truth = _synthetic(_smooth_delta, no_discrepancy=0.5)
+    beta = joint_beta_draws(draws, likelihood, np.random.default_rng(9))
+    assert not np.any(np.all(beta[:, :8] == 0.0, axis=2))
+    assert np.isnan(beta[:, 8]).all()  # the group without data
+    delta = np.einsum("np,mgp->mng", phi, beta[:, :8])
+    low, high = np.quantile(delta, [0.005, 0.995], axis=0)
+    expected = truth.reshape(SPEEDS.size, -1)[:, :8]
+    assert np.all((low <= expected) & (expected <= high))
+
+
+def test_joint_draws_take_back_what_the_parameters_move():
+    """Parameter draws that move the emulated features: the discrepancy drawn with each draw takes the features
+    back towards the data, so that model plus discrepancy spreads less than the model alone; drawn apart from the
+    parameters (the summary Gaussian) it spreads more."""
+    features, likelihood, draws, _ = _synthetic(_smooth_delta)
+    spread = draws.copy()
+    # a wide parameter posterior, seen most by acc_gear mesh2 (the emulators' steepest group with data)
+    spread[:, 0] = np.clip(np.random.default_rng(10).normal(0.4, 0.15, draws.shape[0]), 0.01, 0.99)
+    emulated = likelihood.emulate(spread)[:, :, 2, 1]  # (M, op)
+    phi = likelihood.phi
+    joint = np.einsum("np,mp->mn", phi, joint_beta_draws(spread, likelihood, np.random.default_rng(11))[:, 7])
+    fit = fit_discrepancy(spread, likelihood, features, DiscrepancyBasis.of_campaign(SPEEDS, TORQUES))
+    apart = fit.discrepancy.at(SPEEDS, TORQUES, spread.shape[0], np.random.default_rng(12)).values[:, :, 2, 1]
+    model_sd = emulated.std(axis=0)
+    assert np.all((emulated + joint).std(axis=0) < 0.5 * model_sd)
+    assert np.all((emulated + apart).std(axis=0) > model_sd)
+
+
 # --------------------------------------------------------------------------- (c) the estimator, off and on
 
 
@@ -221,6 +291,17 @@ def test_a_fit_with_the_discrepancy_reports_and_carries_it(cheap_rig, tmp_path):
     assert "parameter_log_std" in fitted.predictive_ and "discrepancy_log_std" in fitted.predictive_
     draws = fitted.discrepancy_at([2000.0, 3000.0], [6000.0, 6500.0], 7, np.random.default_rng(0))
     assert draws.shape == (7, 2, 3, 3)
+    # one draw of the coefficients with each posterior draw, kept aligned through thinning
+    from uqgear.uq.posterior import PosteriorDraws
+
+    beta = fitted.posterior_["discrepancy_beta"]
+    assert beta.dims == ("chain", "draw", "channel", "harmonic", "basis")
+    posterior = PosteriorDraws.from_calibration(fitted)
+    assert posterior.discrepancy_beta.shape == (posterior.size, 3, 3, 4)
+    thinned = posterior.thin(5, seed=2)
+    for value, beta_row in zip(thinned.values[:, 0], thinned.discrepancy_beta):  # the chains repeat rows
+        same = posterior.values[:, 0] == value
+        assert any(np.array_equal(beta_row, other, equal_nan=True) for other in posterior.discrepancy_beta[same])
     paths = write_calibration(fitted, tmp_path / "out")
     read = read_discrepancy(xr.load_dataset(paths["posterior"]))
     np.testing.assert_allclose(read.beta_mean, fitted.discrepancy_.beta_mean)

@@ -375,3 +375,28 @@ def test_wrong_model_inputs_are_refused_naming_the_key(section, message):
     with pytest.raises(uqgear.StudyError) as caught:
         uqgear.parse_study(text)
     assert message in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_each_draw_carries_the_discrepancy_drawn_with_its_parameters():
+    # three draws of the coefficients, known: the factor of each draw is exp(phi . beta) of its own row
+    from uqgear.calibration.discrepancy import DiscrepancyBasis
+    from uqgear.calibration.discrepancy_results import Discrepancy
+    from uqgear.study.prediction import DiscrepancyFactors
+
+    basis = DiscrepancyBasis((1000.0, 3000.0), (6000.0, 8000.0))
+    fitted = Discrepancy(basis, np.zeros((3, 3, 4)), np.zeros((3, 3, 4, 4)))
+    beta = np.zeros((3, 3, 3, 4))
+    beta[1, 0, 0, 0] = np.log(2.0)  # the second draw: twice the DTE's mesh harmonic everywhere
+    beta[2, 0, 0, 1] = 0.1  # the third: a slope in speed
+    beta[2, 1, 0, 0] = 5.0  # another channel's discrepancy is not carried
+    factors = DiscrepancyFactors(fitted, 7000.0, beta)(
+        {"pinion_speed": np.array([1000.0, 3000.0])}, 3, np.random.default_rng(0)
+    )
+    np.testing.assert_allclose(factors, [[1.0, 1.0], [2.0, 2.0], [np.exp(-0.1), np.exp(0.1)]], rtol=1e-12)
+    # thinning keeps each row's coefficients with its parameters
+    posterior = uqgear.PosteriorDraws(("zeta_mesh",), np.array([[0.04], [0.05], [0.06]]), discrepancy_beta=beta)
+    thinned = posterior.thin(2, seed=0)
+    for value, row in zip(thinned.values[:, 0], thinned.discrepancy_beta):
+        np.testing.assert_array_equal(row, beta[int(round(value * 100)) - 4])
+    with pytest.raises(uqgear.PosteriorError, match="discrepancy_beta"):
+        uqgear.PosteriorDraws(("zeta_mesh",), np.array([[0.04], [0.05]]), discrepancy_beta=beta)

@@ -19,9 +19,21 @@ the runs is Gaussian,
     r_g ~ N(0, D_g + tau_g^2 Phi Phi^T),
 
 D_g the diagonal variances of the ordinary likelihood (sensor noise,
-emulator leave-one-out error and the iid model error sigma_g^2). tau_g has a
-log-uniform prior on ``discrepancy_range`` (0.5 % to 300 % in log-amplitude
-units by default) and is integrated out on a grid jointly with sigma_g.
+emulator leave-one-out error and the iid model error sigma_g^2). tau_g's
+prior is a mixture: tau_g = 0 (no discrepancy in the group: the ordinary
+likelihood) with probability :data:`NO_DISCREPANCY_PROBABILITY` (one half,
+indifference between the two models), otherwise log-uniform on
+``discrepancy_range`` (0.5 % to 300 % in log-amplitude units by default). It is
+integrated out on a grid jointly with sigma_g.
+
+Why the point at zero: a discrepancy a campaign cannot resolve (8 runs, 4
+coefficients, features with an iid model error of at least 1 %) keeps a
+log-uniform tau near the bottom of its range, about 0.5 %, and the
+prediction then carries a discrepancy of that size however well the model
+fits. With the point at zero the data weigh the two models: where the
+residuals show no smooth misfit, the marginal likelihood of the slab is
+spread over scales the data rule out and tau = 0 takes most of the weight
+(Bayesian model averaging); where they do, the slab takes it all.
 
 Why a grid and not emcee: each group has its own tau_g (nine with three
 channels and three harmonics, more with more harmonics), and sampling them
@@ -55,6 +67,8 @@ BASIS_NAMES = ("1", "s", "t", "s^2")
 DEFAULT_DISCREPANCY_RANGE = (0.005, 3.0)
 #: Points of the tau grid (log-spaced).
 TAU_POINTS = 20
+#: Prior probability that a group has no discrepancy (tau = 0); the log-uniform range shares the rest.
+NO_DISCREPANCY_PROBABILITY = 0.5
 
 
 @dataclass(frozen=True)
@@ -102,6 +116,23 @@ class DiscrepancyBasis:
         return np.stack([np.ones_like(s), s, t, s**2], axis=1)
 
 
+def tau_prior(tau: np.ndarray, no_discrepancy: float) -> tuple[np.ndarray, np.ndarray]:
+    """The grid of tau with the point tau = 0 in front (where ``no_discrepancy`` > 0), and its log prior weights.
+
+    Examples
+    --------
+    >>> grid, log_weights = tau_prior(np.array([0.01, 0.1]), 0.5)
+    >>> grid.tolist(), np.exp(log_weights).round(3).tolist()
+    ([0.0, 0.01, 0.1], [0.5, 0.25, 0.25])
+    """
+    tau = np.asarray(tau, dtype=float)
+    if no_discrepancy <= 0.0:
+        return tau, np.full(tau.size, -np.log(tau.size))
+    grid = np.concatenate([[0.0], tau])
+    weights = np.concatenate([[no_discrepancy], np.full(tau.size, (1.0 - no_discrepancy) / tau.size)])
+    return grid, np.log(weights)
+
+
 def _log_mean_exp(values: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
     """log mean exp over ``axes`` (a grid average with equal weights), stable for large terms."""
     # written out: scipy.special.logsumexp takes twice as long here, in the sampler's innermost loop
@@ -132,14 +163,17 @@ class DiscrepancyLikelihood(StageLikelihood):
     phi : array (op, 4)
         The basis at the campaign's runs (:meth:`DiscrepancyBasis.matrix`).
     tau : array (L,)
-        The tau grid (:func:`tau_grid`).
+        The tau grid of the log-uniform part of the prior (:func:`tau_grid`).
+    no_discrepancy : float
+        Prior probability of tau = 0 (:data:`NO_DISCREPANCY_PROBABILITY`); 0 leaves the log-uniform grid alone.
 
     Notes
     -----
     :meth:`group_terms` returns the terms with tau integrated out, so that
     everything written for the ordinary likelihood (the model-error summary,
     the sum over sigma) works unchanged; :meth:`joint_terms` keeps the tau
-    axis. With a single tau grid value of 0 the terms equal the ordinary
+    axis (``tau``: the grid with the point at zero, ``slab_tau`` the
+    log-uniform part alone). At tau = 0 the terms equal the ordinary
     likelihood's.
 
     Examples
@@ -156,7 +190,8 @@ class DiscrepancyLikelihood(StageLikelihood):
     >>> z = np.random.default_rng(0).uniform(-1, 1, (8, 2))  # one global parameter, then the run's T2
     >>> emulator = PolynomialEmulator(2, 1).fit(z, np.zeros((8, 3)))
     >>> likelihood = DiscrepancyLikelihood(np.zeros(2), np.ones(2), [emulator], np.zeros((1, 3)), features, 1,
-    ...                                    phi=np.array([[1.0, 0.0, 0.0, 0.0]]), tau=np.array([0.1]))
+    ...                                    phi=np.array([[1.0, 0.0, 0.0, 0.0]]), tau=np.array([0.1]),
+    ...                                    no_discrepancy=0.0)
     >>> variance = 1e-4 + 0.01**2 + 0.1**2
     >>> expected = -0.5 * (np.log(2 * np.pi * variance) + 0.1**2 / variance)
     >>> bool(np.isclose(likelihood.log_likelihood(np.array([[0.5, 0.5]]))[0], expected))
@@ -174,9 +209,12 @@ class DiscrepancyLikelihood(StageLikelihood):
         *,
         phi: np.ndarray,
         tau: np.ndarray,
+        no_discrepancy: float = NO_DISCREPANCY_PROBABILITY,
     ) -> None:
         super().__init__(box_lower, box_upper, emulators, loo, features, n_global)
-        self.phi, self.tau = np.asarray(phi, float), np.asarray(tau, float)
+        self.phi, self.slab_tau, self.no_discrepancy = np.asarray(phi, float), np.asarray(tau, float), no_discrepancy
+        #: The tau grid (with 0 in front where no_discrepancy > 0) and its log prior weights.
+        self.tau, self.log_tau_weights = tau_prior(self.slab_tau, no_discrepancy)
         self.used = features.used
         n_op, n_channels, n_harmonics = self.shape
         n_groups, n_basis = n_channels * n_harmonics, self.phi.shape[1]
@@ -188,12 +226,15 @@ class DiscrepancyLikelihood(StageLikelihood):
         #: D^-1 Phi per (group, op, sigma x basis): the projection of a residual on the basis.
         self.weighted_basis = weighted.reshape(n_groups, n_op, -1)
         information = np.einsum("gnp,gnkq->gkpq", phi_group, weighted)  # Phi^T D^-1 Phi
-        precision = information[:, :, None] + np.eye(n_basis) / self.tau[None, None, :, None, None] ** 2
+        squared = self.tau[None, None, :, None, None] ** 2
+        # M = I + tau^2 Phi^T D^-1 Phi, finite at tau = 0 (where C = tau^2 M^-1 = 0)
+        scaled = np.eye(n_basis) + squared * information[:, :, None]
+        #: M^-1 per (group, sigma, tau); C = tau^2 M^-1 (:func:`joint_beta_draws` takes its root).
+        self.unit_covariance = np.linalg.inv(scaled)
         #: C = (tau^-2 I + Phi^T D^-1 Phi)^-1 per (group, sigma, tau): the covariance of beta given r.
-        self.beta_covariance = np.linalg.inv(precision)  # (G, K, L, p, p)
-        _, log_det_precision = np.linalg.slogdet(precision)
+        self.beta_covariance = squared * self.unit_covariance  # (G, K, L, p, p)
         # log det(D + tau^2 Phi Phi^T) - log det D = log det(I + tau^2 Phi^T D^-1 Phi)
-        extra = log_det_precision + n_basis * np.log(self.tau[None, None, :] ** 2)  # (G, K, L)
+        _, extra = np.linalg.slogdet(scaled)  # (G, K, L)
         normaliser = self.log_normaliser.reshape(-1, n_groups).T  # (G, K)
         #: log normalising constant per (group, sigma, tau).
         self.joint_normaliser = normaliser[:, :, None] - 0.5 * extra
@@ -214,7 +255,8 @@ class DiscrepancyLikelihood(StageLikelihood):
             features,
             self._n_global,
             phi=self.phi,
-            tau=self.tau,
+            tau=self.slab_tau,
+            no_discrepancy=self.no_discrepancy,
         )
 
     def group_residuals(self, residual: np.ndarray) -> np.ndarray:
@@ -238,19 +280,33 @@ class DiscrepancyLikelihood(StageLikelihood):
         quadratic = squares.transpose(0, 2, 1)[..., None] - explained
         return self.joint_normaliser[:, :, None, :] - 0.5 * quadratic
 
+    def _weighted_terms(self, residual: np.ndarray) -> np.ndarray:
+        """Log likelihood plus tau's log prior weight per (group, sigma, point, tau), plus log L so that a mean over
+        tau is the prior-weighted sum."""
+        return self._terms(residual) + (self.log_tau_weights + np.log(self.tau.size))
+
     def joint_terms(self, residual: np.ndarray) -> np.ndarray:
-        """Log likelihood per (point, sigma, tau, group), summed over runs."""
-        return self._terms(residual).transpose(2, 1, 3, 0)
+        """Log likelihood plus tau's log prior weight (up to a constant) per (point, sigma, tau, group), summed over
+        runs: normalised over (sigma, tau), the grid posterior."""
+        return self._weighted_terms(residual).transpose(2, 1, 3, 0)
 
     def group_terms(self, residual: np.ndarray) -> np.ndarray:
-        """Log likelihood per (point, sigma, channel, harmonic), tau integrated out (log-uniform prior)."""
-        marginal = _log_mean_exp(self._terms(residual), (3,))  # (G, K, M)
+        """Log likelihood per (point, sigma, channel, harmonic), tau integrated out over its prior."""
+        marginal = _log_mean_exp(self._weighted_terms(residual), (3,))  # (G, K, M)
         return marginal.transpose(2, 1, 0).reshape(residual.shape[0], marginal.shape[1], *self.shape[1:])
 
     def group_log_likelihood(self, residual: np.ndarray) -> np.ndarray:
-        """Log likelihood per (point, channel, harmonic), sigma and tau integrated out (equal grid weights)."""
-        marginal = _log_mean_exp(self._terms(residual), (1, 3))  # (G, M)
+        """Log likelihood per (point, channel, harmonic), sigma (equal grid weights) and tau integrated out."""
+        marginal = _log_mean_exp(self._weighted_terms(residual), (1, 3))  # (G, M)
         return marginal.T.reshape(residual.shape[0], *self.shape[1:])
 
 
-__all__ = ["BASIS_NAMES", "DEFAULT_DISCREPANCY_RANGE", "DiscrepancyBasis", "DiscrepancyLikelihood", "tau_grid"]
+__all__ = [
+    "BASIS_NAMES",
+    "DEFAULT_DISCREPANCY_RANGE",
+    "NO_DISCREPANCY_PROBABILITY",
+    "DiscrepancyBasis",
+    "DiscrepancyLikelihood",
+    "tau_grid",
+    "tau_prior",
+]

@@ -76,6 +76,40 @@ class Discrepancy:
         variance = np.einsum("np,chpq,nq->nch", phi, self.beta_covariance, phi)
         return np.sqrt(np.maximum(variance, 0.0))
 
+    def at_draws(
+        self,
+        beta: np.ndarray,
+        pinion_speed: Sequence[float] | np.ndarray,
+        drive_torque: Sequence[float] | np.ndarray,
+    ) -> xr.DataArray:
+        """delta at operating points for given draws of beta (draw, channel, harmonic, basis).
+
+        With the draws of a posterior's ``discrepancy_beta`` (one per joint draw of the parameters) the
+        discrepancy goes with the parameters it was drawn with (:func:`joint_beta_draws`), which :meth:`at`
+        cannot do.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> fitted = Discrepancy(DiscrepancyBasis((1000.0, 3000.0), (5000.0, 7000.0)), np.zeros((3, 1, 4)),
+        ...                      np.zeros((3, 1, 4, 4)))
+        >>> beta = np.zeros((2, 3, 1, 4)); beta[1, :, :, 1] = 0.1  # the second draw: a slope in speed
+        >>> fitted.at_draws(beta, [1000.0, 3000.0], [6000.0, 6000.0]).sel(channel="te", harmonic=1).values.tolist()
+        [[0.0, 0.0], [-0.1, 0.1]]
+        """
+        phi = self.basis.matrix(pinion_speed, drive_torque)
+        return self._as_array(np.einsum("np,dchp->dnch", phi, np.asarray(beta, dtype=float)))
+
+    @staticmethod
+    def _as_array(delta: np.ndarray) -> xr.DataArray:
+        n_channels, n_harmonics = delta.shape[2:]
+        return xr.DataArray(
+            delta,
+            dims=("draw", "point", "channel", "harmonic"),
+            coords={"channel": list(HARMONIC_CHANNELS)[:n_channels], "harmonic": np.arange(1, n_harmonics + 1)},
+            attrs={"units": LOG_UNITS, "long_name": "model discrepancy of the log mesh-harmonic amplitude"},
+        )
+
     def at(
         self,
         pinion_speed: Sequence[float] | np.ndarray,
@@ -108,13 +142,7 @@ class Discrepancy:
         root = vectors * np.sqrt(np.maximum(values, 0.0))[..., None, :]
         normal = rng.standard_normal((draws, n_channels, n_harmonics, n_basis))
         beta = self.beta_mean[None] + np.einsum("chpq,dchq->dchp", root, normal)
-        delta = np.einsum("np,dchp->dnch", phi, beta)
-        return xr.DataArray(
-            delta,
-            dims=("draw", "point", "channel", "harmonic"),
-            coords={"channel": list(HARMONIC_CHANNELS)[:n_channels], "harmonic": np.arange(1, n_harmonics + 1)},
-            attrs={"units": LOG_UNITS, "long_name": "model discrepancy of the log mesh-harmonic amplitude"},
-        )
+        return self._as_array(np.einsum("np,dchp->dnch", phi, beta))
 
 
 @dataclass(frozen=True)
@@ -178,8 +206,50 @@ def fit_discrepancy(
         tau_quantiles=tau_q.reshape(*shape, 3),
         sigma_median=sigma_q.reshape(shape),
         parameter_variance=predicted.var(axis=0),
-        tau_range=(float(likelihood.tau[0]), float(likelihood.tau[-1])),
+        tau_range=(float(likelihood.slab_tau[0]), float(likelihood.slab_tau[-1])),
     )
+
+
+def joint_beta_draws(
+    unit: np.ndarray, likelihood: DiscrepancyLikelihood, rng: np.random.Generator, block: int = 256
+) -> np.ndarray:
+    """One draw of beta per posterior draw, from its posterior given that draw's parameters: (M, G, p).
+
+    For each unit-box draw (M, n_dim) and group, a (sigma, tau) grid pair is
+    drawn from its posterior given the draw's residuals, then beta from
+    N(C u, C) (C and u = Phi^T D^-1 r at that pair). Paired with the
+    parameters they were drawn with, the draws are the joint posterior of the
+    parameters and the discrepancy: a draw whose parameters put the emulated
+    features high gets a discrepancy that takes them back towards the data. The
+    summary Gaussian of :func:`fit_discrepancy` averages that dependence away;
+    drawn apart from the parameters it counts their spread twice.
+    """
+    covariance = likelihood.beta_covariance  # (G, K, L, p, p)
+    n_groups, n_sigma, n_tau, n_basis = covariance.shape[:3] + covariance.shape[-1:]
+    # C = tau^2 M^-1: its root tau chol(M^-1) is zero, not singular, at tau = 0
+    root = likelihood.tau[None, None, :, None, None] * np.linalg.cholesky(likelihood.unit_covariance)
+    out = np.empty((unit.shape[0], n_groups, n_basis))
+    groups = np.arange(n_groups)
+    for start in range(0, unit.shape[0], block):  # blocks bound the (points, sigma, tau, group) temporaries
+        chunk = unit[start : start + block]
+        residual = likelihood.log_observed[None] - likelihood.emulate(chunk)
+        joint = likelihood.joint_terms(residual).reshape(chunk.shape[0], n_sigma * n_tau, n_groups)
+        weights = np.exp(joint - joint.max(axis=1, keepdims=True))
+        cumulative = np.cumsum(weights, axis=1)
+        pick = rng.uniform(size=(chunk.shape[0], 1, n_groups)) * cumulative[:, -1:, :]
+        index = np.minimum((cumulative < pick).sum(axis=1), n_sigma * n_tau - 1)  # (m, G)
+        k, at_tau = np.divmod(index, n_tau)
+        _, projected = likelihood.projections(residual)  # (G, m, K, p)
+        rows = np.arange(chunk.shape[0])[:, None]
+        u = projected[groups[None], rows, k]  # (m, G, p)
+        chosen = covariance[groups[None], k, at_tau]  # (m, G, p, p)
+        normal = rng.standard_normal((chunk.shape[0], n_groups, n_basis))
+        out[start : start + block] = np.einsum("mgpq,mgq->mgp", chosen, u) + np.einsum(
+            "mgpq,mgq->mgp", root[groups[None], k, at_tau], normal
+        )
+    # a group without data has no discrepancy to carry
+    out[:, ~likelihood.used.any(axis=0).reshape(-1)] = np.nan
+    return out
 
 
 def variance_components(
@@ -320,6 +390,7 @@ __all__ = [
     "discrepancy_dataset",
     "discrepancy_summary",
     "fit_discrepancy",
+    "joint_beta_draws",
     "read_discrepancy",
     "variance_components",
 ]

@@ -114,8 +114,10 @@ class Calibration:
         sampled with fewer rejections). Off, every result is that of the
         ordinary calibration.
     discrepancy_range : (float, float)
-        Bounds of the log-uniform prior of the discrepancy's scale tau
-        (standard deviation of each basis coefficient, log-amplitude units).
+        Bounds of the log-uniform part of the prior of the discrepancy's
+        scale tau (standard deviation of each basis coefficient,
+        log-amplitude units); the other half of the prior is tau = 0, no
+        discrepancy in the group (:mod:`~uqgear.calibration.discrepancy`).
 
     Attributes
     ----------

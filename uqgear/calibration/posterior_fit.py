@@ -17,9 +17,17 @@ import numpy as np
 import xarray as xr
 
 from ..common.steps import StepLog
+from ..uq.seeds import child_seed
 from .convergence import ConvergenceCriteria
 from .discrepancy import DiscrepancyBasis, DiscrepancyLikelihood
-from .discrepancy_results import DiscrepancyFit, discrepancy_dataset, discrepancy_summary, fit_discrepancy
+from .discrepancy_results import (
+    LOG_UNITS,
+    DiscrepancyFit,
+    discrepancy_dataset,
+    discrepancy_summary,
+    fit_discrepancy,
+    joint_beta_draws,
+)
 from .likelihood import Features, StageLikelihood
 from .pitch_correction import PitchCorrection, pitch_error_correction
 from .predictive import predictive_check
@@ -324,6 +332,16 @@ class PosteriorFit:
                 self.discrepancy_fit, self.features, likelihood.loo_rms, operating
             )
             extra = discrepancy_dataset(self.discrepancy_fit, operating)
+            # one draw of beta with each posterior draw, so that a prediction carries the discrepancy that goes
+            # with the draw's parameters (joint_beta_draws)
+            beta = joint_beta_draws(unit, likelihood, np.random.default_rng(child_seed(seed, 1)))
+            n_channels, n_harmonics = likelihood.shape[1:]
+            beta = beta.reshape(*physical.shape[:2], n_channels, n_harmonics, -1).transpose(1, 0, 2, 3, 4)
+            extra["discrepancy_beta"] = (
+                ("chain", "draw", "channel", "harmonic", "basis"),
+                beta,
+                {"units": LOG_UNITS, "long_name": "discrepancy coefficients drawn with each posterior draw"},
+            )
             posterior = xr.merge([posterior, extra], combine_attrs="no_conflicts")
         return verdict, posterior, summary
 

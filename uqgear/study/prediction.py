@@ -52,7 +52,7 @@ def _prior_draws(context: AnalysisContext) -> PosteriorDraws | None:
     rng = np.random.default_rng(context.stage_seed(1))
     box = prior_bounds(context.design, posterior.names)
     values = np.stack([rng.uniform(*box[name], posterior.size) for name in posterior.names], axis=1)
-    return dataclasses.replace(posterior, values=values, source="the calibration's prior")
+    return dataclasses.replace(posterior, values=values, source="the calibration's prior", discrepancy_beta=None)
 
 
 #: The feature whose discrepancy a prediction carries: the first mesh harmonic of the transmission error, the
@@ -66,16 +66,24 @@ class DiscrepancyFactors:
 
     The discrepancy says by how much (in log amplitude) the rig's DTE at the mesh frequency differs from the
     model's at an operating point; the prediction scales the dynamic part of each response by that factor (the
-    mesh force's part above its mean follows the DTE's dynamic part in a linear mesh).
+    mesh force's part above its mean follows the DTE's dynamic part in a linear mesh). ``beta``: the posterior's
+    discrepancy coefficients drawn with each of its draws (``PosteriorDraws.discrepancy_beta``), so that each
+    draw carries the discrepancy that goes with its parameters; without them (a posterior written before they
+    were kept) delta is drawn apart from the parameters (:meth:`Discrepancy.at
+    <uqgear.calibration.discrepancy_results.Discrepancy.at>`).
     """
 
     discrepancy: Any
     drive_torque: float
+    beta: np.ndarray | None = None
 
     def __call__(self, points: Mapping[str, np.ndarray], draws: int, rng: np.random.Generator) -> np.ndarray:
         speed = np.asarray(points["pinion_speed"], dtype=float)
         torque = np.asarray(points.get("drive_torque", np.full(speed.size, self.drive_torque)), dtype=float)
-        delta = self.discrepancy.at(speed, torque, draws, rng).sel(channel=DISCREPANCY_FEATURE[0])
+        if self.beta is not None and self.beta.shape[0] == draws:
+            delta = self.discrepancy.at_draws(self.beta, speed, torque).sel(channel=DISCREPANCY_FEATURE[0])
+        else:
+            delta = self.discrepancy.at(speed, torque, draws, rng).sel(channel=DISCREPANCY_FEATURE[0])
         values = np.asarray(delta.sel(harmonic=DISCREPANCY_FEATURE[1]).values, dtype=float)  # (draw, point)
         return np.exp(np.nan_to_num(values))
 
@@ -128,7 +136,9 @@ def prediction_analysis(context: AnalysisContext) -> xr.Dataset:
     names = list(context.options["parameters"])
     carried = None
     if context.discrepancy is not None:
-        carried = DiscrepancyFactors(context.discrepancy, float(context.fixed_values().get("drive_torque", np.nan)))
+        beta = context.posterior.discrepancy_beta if context.posterior is not None else None
+        torque = float(context.fixed_values().get("drive_torque", np.nan))
+        carried = DiscrepancyFactors(context.discrepancy, torque, beta)
     found = _run(context, names, context.posterior, carried)
     result = found.result_.copy()
     prior = _prior_draws(context)

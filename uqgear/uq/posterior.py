@@ -98,6 +98,12 @@ class PosteriorDraws:
         The rig campaign's operating range the posterior was learnt on:
         ``pinion_speed``, ``drive_torque``, ``adhesion_torque`` -> (lowest,
         highest); a prediction flags what lies outside it.
+    discrepancy_beta : numpy.ndarray, optional
+        Shape ``(draws, channel, harmonic, basis)``: with each row, the draw of
+        the model discrepancy's coefficients drawn with it (a calibration with
+        ``discrepancy=True``; ``posterior.nc``'s ``discrepancy_beta``), so that
+        a prediction carries the discrepancy that goes with each row's
+        parameters. Thinning keeps it aligned.
 
     Examples
     --------
@@ -124,6 +130,7 @@ class PosteriorDraws:
     design: dict[str, Any] | None = None
     units: dict[str, str] = field(default_factory=dict)
     campaign: dict[str, tuple[float, float]] = field(default_factory=dict)
+    discrepancy_beta: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         values = np.array(self.values, dtype=float)
@@ -136,6 +143,15 @@ class PosteriorDraws:
         values.setflags(write=False)
         object.__setattr__(self, "names", tuple(self.names))
         object.__setattr__(self, "values", values)
+        if self.discrepancy_beta is not None:
+            beta = np.array(self.discrepancy_beta, dtype=float)
+            if beta.ndim != 4 or beta.shape[0] != values.shape[0]:
+                raise PosteriorError(
+                    f"{self.source or 'posterior'}: discrepancy_beta: expected shape (draws={values.shape[0]}, "
+                    f"channel, harmonic, basis); got {beta.shape}"
+                )
+            beta.setflags(write=False)
+            object.__setattr__(self, "discrepancy_beta", beta)
 
     # -- construction ---------------------------------------------------------------
 
@@ -159,6 +175,11 @@ class PosteriorDraws:
         ):
             if low in posterior.coords and high in posterior.coords:
                 campaign[name] = (float(posterior[low].min()), float(posterior[high].max()))
+        beta = None
+        if "discrepancy_beta" in posterior.data_vars:
+            # (chain, draw, ...) flattened in the order of the parameters' columns
+            stacked = posterior["discrepancy_beta"].transpose("chain", "draw", "channel", "harmonic", "basis").values
+            beta = stacked.reshape(-1, *stacked.shape[2:])
         return cls(
             names=tuple(names),
             values=np.stack(columns, axis=1),
@@ -167,6 +188,7 @@ class PosteriorDraws:
             design=json.loads(design) if isinstance(design, str) else None,
             units={name: str(posterior[name].attrs.get("units", "")) for name in names},
             campaign=campaign,
+            discrepancy_beta=beta,
         )
 
     @classmethod
@@ -226,8 +248,9 @@ class PosteriorDraws:
         if int(draws) < 1:
             raise PosteriorError(f"draws: expected at least 1; got {draws}")
         rng = np.random.default_rng(as_seed_sequence(seed))
-        rows = rng.permutation(self.size)[: min(int(draws), self.size)]
-        return dataclasses.replace(self, values=self.values[np.sort(rows)])
+        rows = np.sort(rng.permutation(self.size)[: min(int(draws), self.size)])
+        beta = None if self.discrepancy_beta is None else self.discrepancy_beta[rows]
+        return dataclasses.replace(self, values=self.values[rows], discrepancy_beta=beta)
 
     def check_design(self, design_values: dict[str, Any], *, where: str = "") -> None:
         """Refuse a posterior calibrated on another design (the keys both hold, compared to 1e-9)."""
