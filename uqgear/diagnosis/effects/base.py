@@ -88,7 +88,8 @@ class EffectFamily:
         The test plan where it shows (``service``, or ``bearing_check`` where a bearing must unload).
     one_channel : str
         Why its signature may lie on one channel alone (empty: it shows on every channel that sees
-        the mesh, and evidence on one channel alone is that sensor's own; :mod:`uqgear.diagnosis.verdict.cross_channel`).
+        the mesh, and evidence on one channel alone is that sensor's own;
+        :mod:`uqgear.diagnosis.verdict.cross_channel`).
     run_out : RunOut or None
         How a fit of it reads as a shaft run-out the gears' pitch errors also make (default None: it
         does not, and the rules on run-outs leave it alone).
