@@ -250,6 +250,65 @@ def decide(
     return _unnamed(best, nominal_gap, borderline, rules, weak_near_noise)
 
 
+def _below_gap(nominal_gap: float, rules: VerdictRules) -> bool:
+    """No gap to speak for an effect: the nominal gap is within noise under the pitch-error allowance."""
+    return rules.pitch_allowance and nominal_gap <= rules.thresholds.noise_gap
+
+
+def _carries_evidence(best: CandidateScore, nominal_gap: float, rules: VerdictRules) -> bool:
+    """The evidence rules: a score beyond the threshold and a fit clearly worse with the effect off.
+
+    A run-out the gears' own pitch errors make (the run-out check) is no
+    eccentric shaft; with no gap to speak for it (:func:`_below_gap`) the
+    effect gain must reach the score threshold by itself.
+    """
+    thresholds = rules.thresholds
+    gain = float(best.effect_gain)
+    carried = gain >= thresholds.effect_gain_threshold and not _within(best)
+    if _below_gap(nominal_gap, rules):
+        carried = carried and gain >= thresholds.score_threshold
+    return best.score >= thresholds.score_threshold and carried
+
+
+def _explains(best: CandidateScore, borderline: tuple[dict[str, Any], ...], rules: VerdictRules) -> bool:
+    """The effect explains the gap: it shrinks it by ``shrink_threshold`` or leaves what is within noise.
+
+    What remains within noise speaks for the effect only where the gap it
+    removed was clearly above noise: a nominal gap whose own interval reaches
+    into noise may be noise itself (borderline: none).
+    """
+    gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
+    return best.shrink_fraction >= rules.thresholds.shrink_threshold or (
+        float(best.gap_with_effect) <= rules.thresholds.noise_gap and not gap_borderline
+    )
+
+
+def _by_density(best: CandidateScore, nominal_gap: float, rules: VerdictRules) -> bool:
+    """The density route: below the gap, what remains within noise, no shrink, a score that holds at its lower bound."""
+    return (
+        rules.density_evidence
+        and _below_gap(nominal_gap, rules)
+        and float(best.gap_with_effect) <= rules.thresholds.noise_gap
+        and best.shrink_interval[0] <= 0.0
+        and holds_against_pitch_errors(best, rules)
+    )
+
+
+def _weak_near_noise(best: CandidateScore, rules: VerdictRules) -> bool:
+    """With the density route, an effect that leaves a gap within noise without halving it, its score not holding.
+
+    With the allowance a gap near noise speaks weakly: an effect named
+    because what remains is within noise (not for a shrink of half) must
+    hold its density at the 90 % lower bound, as on the density route just
+    below the gap.
+    """
+    return (
+        rules.density_evidence
+        and best.shrink_fraction < rules.thresholds.shrink_threshold
+        and not holds_against_pitch_errors(best, rules)
+    )
+
+
 def _named(
     best: CandidateScore,
     nominal_gap: float,
@@ -258,34 +317,14 @@ def _named(
 ) -> tuple[Decision | None, bool]:
     """The decision naming ``best`` where the rules of :func:`decide` name it, and whether it was weak near noise."""
     remaining = float(best.gap_with_effect)
-    # what remains is within noise speaks for the effect only where the gap it removed was clearly above
-    # noise: a nominal gap whose own interval reaches into noise may be noise itself (borderline: none)
-    gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
-    explains = best.shrink_fraction >= rules.thresholds.shrink_threshold or (
-        remaining <= rules.thresholds.noise_gap and not gap_borderline
-    )
-    # a run-out the gears' own pitch errors make (the run-out check) is no eccentric shaft
-    carried = float(best.effect_gain) >= rules.thresholds.effect_gain_threshold and not _within(best)
-    score_low = score_lower_bound(best, rules)
-    below_gap = rules.pitch_allowance and nominal_gap <= rules.thresholds.noise_gap
-    if below_gap:
-        # no gap to speak for it: the effect must carry the score threshold by itself
-        carried = carried and float(best.effect_gain) >= rules.thresholds.score_threshold
-    evidence = best.score >= rules.thresholds.score_threshold and carried
-    holds = holds_against_pitch_errors(best, rules)
-    by_density = (
-        rules.density_evidence
-        and below_gap
-        and remaining <= rules.thresholds.noise_gap
-        and best.shrink_interval[0] <= 0.0
-        and holds
-    )
-    if evidence and by_density:
+    evidence = _carries_evidence(best, nominal_gap, rules)
+    if evidence and _by_density(best, nominal_gap, rules):
         return Decision(
             best.effect,
             (
                 f"{best.effect} gains {best.score:.1f} nats of held-out predictive density (90 % lower "
-                f"bound {score_low:.1f}) over the model without it after its parameter penalty; the held-out "
+                f"bound {score_lower_bound(best, rules):.1f}) over the model without it after its parameter "
+                f"penalty; the held-out "
                 f"gap ({nominal_gap:.2f}) is within noise because the pitch-error allowance widens the error "
                 f"of every sideband, so the evidence is spread over many features: the density shows it, "
                 f"the gap cannot"
@@ -293,12 +332,9 @@ def _named(
             remaining_gap=remaining,
             borderline=borderline,
         ), False
-    # with the allowance a gap near noise speaks weakly: an effect named because what remains is within
-    # noise (not for a shrink of half) must hold its density at the 90 % lower bound, as on the density
-    # route just below the gap
+    explains = _explains(best, borderline, rules)
     by_shrink = evidence and explains and best.shrink_interval[0] > 0.0
-    below_shrink = best.shrink_fraction < rules.thresholds.shrink_threshold
-    weak_near_noise = by_shrink and rules.density_evidence and below_shrink and not holds
+    weak_near_noise = by_shrink and _weak_near_noise(best, rules)
     if by_shrink and not weak_near_noise:
         within = (
             f"; what remains ({remaining:.2f}) is within noise"
