@@ -1,7 +1,7 @@
 """Cross-channel consistency of a named effect, and the encoder run-out that tests it.
 
 Synthetic held-out figures with a known answer for the rule
-(:mod:`uqgear.diagnosis.consistency`), the verdict it gives, and the virtual
+(:mod:`uqgear.diagnosis.verdict.cross_channel`), the verdict it gives, and the virtual
 rig's encoder-mounting run-out checked against its closed form; constructed campaigns
 with a known answer: a run-out and an encoder's run-out too small for the accelerometers (not told
 apart), and one they see (named).
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from helpers import candidate_score
 
-from uqgear.diagnosis.consistency import check_channels, one_channel_character
 from uqgear.diagnosis.scoring import RunOutCheck
 from uqgear.diagnosis.verdict import decide
+from uqgear.diagnosis.verdict.cross_channel import check_channels, one_channel_character
 from uqgear.physics.design import load_design
 from uqgear.rig.features import extract_features
 from uqgear.rig.virtual_rig import simulate_campaign

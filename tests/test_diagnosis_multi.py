@@ -41,13 +41,13 @@ from uqgear.diagnosis import (
     scoring,
     screening,
     selection,
-    set_verdict,
     verdict,
 )
 from uqgear.diagnosis.effect_set import SelectedEffect, SelectionRound
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.diagnosis.state import DiagnosisState
-from uqgear.diagnosis.verdict import Decision
+from uqgear.diagnosis.verdict import Decision, verdict_rules
+from uqgear.diagnosis.verdict import sets as verdict_sets
 from uqgear.physics.effects import make_effect
 from uqgear.report.diagnosis_report import _effect_set_html
 from uqgear.rig.virtual_rig import simulate_campaign
@@ -175,8 +175,8 @@ def _score(effect, label, score, gap, shrink, *, low=None, gain=50.0, candidate=
 
 def _state(case, base_gap=3.0, settings=DEFAULT_SETTINGS):
     """The state a selection round reads: the stand-in case, every library effect, no hints."""
-    return DiagnosisState(case, settings, effects.effect_names(), {}, np.random.default_rng(0), StepLog(),
-                          {}, None, None, base_gap)
+    return DiagnosisState(case, settings, verdict_rules(settings, case), effects.effect_names(), {},
+                          np.random.default_rng(0), StepLog(), {}, None, None, base_gap)
 
 
 class _StandIns:
@@ -297,7 +297,7 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     shares = [s.shrink_share for s in selected]
     assert all(share > 0 for share in shares)
     assert sum(shares) == pytest.approx(1.0 - selected[-1].entry.gap_with_effect / 3.0)
-    decision = set_verdict.set_decision(first_decision, selected, rounds, 3.0)
+    decision = verdict_sets.set_decision(first_decision, selected, rounds, 3.0)
     assert decision.verdict == "eccentricity" and decision.remaining_gap == selected[-1].entry.gap_with_effect
     assert [entry.entry.effect for entry in selected[1:]] == [entry.added for entry in rounds]
     noise_gap = DEFAULT_SETTINGS.verdict.noise_gap
@@ -325,7 +325,7 @@ def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_rou
     assert len(selected) == 2 and len(rounds) == 2 and rounds[1].scores == [] and rounds[1].added is None
     assert stand_ins.screened == others and stand_ins.full == ["tooth_damage[gear]"]
     assert "so none was screened" in rounds[1].reason and "on top of eccentricity[pinion]" in rounds[1].reason
-    decision = set_verdict.set_decision(first_decision, selected, rounds, 3.0)
+    decision = verdict_sets.set_decision(first_decision, selected, rounds, 3.0)
     assert rounds[1].reason in decision.reason
     # the report says why no third effect was tried
     notes = "".join(_effect_set_html({"forward_selection": [r.summary() for r in rounds]}, {}))
@@ -406,8 +406,9 @@ def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carrie
     assert not verdict.leads_a_set(replace(strong, shrink_interval=(-0.01, 0.3)))
     # with the pitch-error allowance the score must hold at its 90 % lower bound (26.3 - 1.645 * 15.5 = 0.8)
     weak = replace(strong, score=26.3, standard_error=15.5)
-    assert verdict.leads_a_set(weak) and not verdict.leads_a_set(weak, pitch_allowance=True)
-    assert verdict.leads_a_set(replace(weak, standard_error=5.0), pitch_allowance=True)
+    pitch = verdict_rules(case="pitch_errors")
+    assert verdict.leads_a_set(weak) and not verdict.leads_a_set(weak, pitch)
+    assert verdict.leads_a_set(replace(weak, standard_error=5.0), pitch)
 
 
 def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():
@@ -418,14 +419,14 @@ def test_the_set_is_partial_only_while_it_leaves_a_significant_gap():
     explained = SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 90.0, 0.3, 0.85), 2.0,
                                         (2.0 - 0.3) / 3.0, added)
     rounds = [SelectionRound(("eccentricity[pinion]",), 2.0, [explained.entry], "tooth_damage", "", added)]
-    decision = set_verdict.set_decision(first_decision, [first, explained], rounds, 3.0)
+    decision = verdict_sets.set_decision(first_decision, [first, explained], rounds, 3.0)
     assert not decision.partial and decision.remaining_gap == 0.3
     still = SelectedEffect(_score("tooth_damage", "tooth_damage[gear]", 30.0, 1.6, 0.2, low=0.05), 2.0,
                                     0.4 / 3.0, added)
-    decision = set_verdict.set_decision(first_decision, [first, still], rounds, 3.0)
+    decision = verdict_sets.set_decision(first_decision, [first, still], rounds, 3.0)
     assert decision.partial and "remains unexplained" in decision.reason
     # one effect and no round: the first decision itself
-    assert set_verdict.set_decision(first_decision, [first], [], 3.0) is first_decision
+    assert verdict_sets.set_decision(first_decision, [first], [], 3.0) is first_decision
 
 
 def test_blind_test_scores_effect_sets():

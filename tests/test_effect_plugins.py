@@ -14,6 +14,7 @@ screens it, fits it in full and names it with the strength it was made with.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -34,7 +35,7 @@ from uqgear.diagnosis.effects import (
 )
 from uqgear.diagnosis.scoring import CandidateScore
 from uqgear.diagnosis.screening import measure_modulation
-from uqgear.diagnosis.verdict import run_out_check
+from uqgear.diagnosis.verdict import run_out_check, verdict_rules
 from uqgear.physics.effects import EFFECTS, Effect, EffectParameter
 from uqgear.rig.foreign_rig import effect_vector, register_foreign_physics
 from uqgear.rig.virtual_rig import simulate_campaign
@@ -134,7 +135,8 @@ def test_a_registered_toy_gets_the_hooks_defaults(design):
         assert hooks_of("cardan_ripple") is family
         assert run_out_family().name == "eccentricity"
         score = _toy_score(design)
-        assert run_out_check(score, {"pinion": 22e-6, "gear": 30e-6}) is None
+        bounds = (("pinion", 22e-6), ("gear", 30e-6))
+        assert run_out_check(score, replace(verdict_rules(case="pitch_errors"), run_out_bounds=bounds)) is None
         measure_modulation(SimpleNamespace(run_out_allowance={"pinion": 22e-6}), score)
         assert score.modulation_gain is None
     finally:

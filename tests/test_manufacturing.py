@@ -47,8 +47,12 @@ from uqgear.diagnosis.heldout import leave_one_out
 from uqgear.diagnosis.processing import RunProcessor
 from uqgear.diagnosis.scoring import RunOutCheck, gap_metric
 from uqgear.diagnosis.settings import DEFAULT_SETTINGS
+from uqgear.diagnosis.verdict import VerdictRules, verdict_rules
 from uqgear.physics.effects import make_effect
 from uqgear.rig.virtual_rig import simulate_campaign
+
+#: The first effect's verdict rules with the pitch-error allowance (its density route).
+PITCH = verdict_rules(case="pitch_errors")
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "rig"
 DEFAULT_MODEL_ERROR = dict(DEFAULT_SETTINGS.predictive.model_error)
@@ -224,7 +228,7 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
 
     An eccentricity fit whose run-out is within the classes' own is guarded
     unless switching its kappa off costs at least the effect-gain threshold;
-    with the pitch-error allowance (decide's pitch_allowance and density_evidence) a gap within
+    with the pitch-error allowance (the rules of the ``pitch_errors`` case, their density route) a gap within
     noise does not stop a candidate whose score's 90 % lower bound passes
     the score threshold, and without the allowance, or with a weaker score,
     the verdict stays `none`.
@@ -243,41 +247,39 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
     held = SimpleNamespace(z=np.zeros((2, 1, 1)))
     score = CandidateScore("eccentricity", variant.label, fit, held, "full", 70.2, 20.0, 5.0, 65.2, 0.0, 0.0,
                            (0.0, 0.0), effect_gain=29.0)
-    check = run_out_check(score, bounds)
+    bounded = replace(PITCH, run_out_bounds=tuple(bounds.items()))
+    check = run_out_check(score, bounded)
     assert check.run_out == 0.5e-6 and check.within
     score.modulation_gain = DEFAULT_SETTINGS.verdict.effect_gain_threshold - 0.1
-    assert run_out_check(score, bounds).within
+    assert run_out_check(score, bounded).within
     score.modulation_gain = 34.0
-    entry = replace(score, run_out=run_out_check(score, bounds))
+    entry = replace(score, run_out=run_out_check(score, bounded))
     assert not entry.run_out.within and entry.modulation_gain == 34.0
     # a nominal gap of 0 (nothing to shrink): named on the density only with the allowance
     assert decide(0.0, [entry]).verdict == "none"
-    decision = decide(0.0, [entry], pitch_allowance=True, density_evidence=True)
+    decision = decide(0.0, [entry], PITCH)
     assert decision.verdict == "eccentricity" and "lower bound 32.3" in decision.reason
     weak = replace(entry, standard_error=40.0)
-    assert decide(0.0, [weak], pitch_allowance=True, density_evidence=True).verdict == "none"
+    assert decide(0.0, [weak], PITCH).verdict == "none"
     plain = CandidateScore("eccentricity", variant.label, fit, held, "full", 70.2, 20.0, 5.0, 65.2, 0.0, 0.0,
                            (0.0, 0.0), effect_gain=29.0)
-    guarded = replace(plain, run_out=run_out_check(plain, bounds))
-    assert decide(0.0, [guarded], pitch_allowance=True, density_evidence=True).verdict == "none"
-    assert decide(0.0, [replace(entry, effect_gain=1.0)], pitch_allowance=True,
-                  density_evidence=True).verdict == "none"
+    guarded = replace(plain, run_out=run_out_check(plain, bounded))
+    assert decide(0.0, [guarded], PITCH).verdict == "none"
+    assert decide(0.0, [replace(entry, effect_gain=1.0)], PITCH).verdict == "none"
     # below the gap the effect must carry the score threshold by its own gain (a nuisance-only control's
     # torque ripple: 30 nats, gain 5.9), whether the shrink or the density speaks for it
-    assert decide(0.0, [replace(entry, effect_gain=6.0)], pitch_allowance=True,
-                  density_evidence=True).verdict == "none"
+    assert decide(0.0, [replace(entry, effect_gain=6.0)], PITCH).verdict == "none"
     shrinking = replace(entry, shrink_fraction=0.3, shrink_interval=(0.05, 0.6), gap_with_effect=0.2)
-    assert decide(0.4, [replace(shrinking, effect_gain=6.0)], pitch_allowance=True,
-                  density_evidence=True).verdict == "none"
+    assert decide(0.4, [replace(shrinking, effect_gain=6.0)], PITCH).verdict == "none"
     assert decide(0.4, [replace(shrinking, effect_gain=6.0)]).verdict == "eccentricity"
-    assert decide(0.4, [shrinking], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
+    assert decide(0.4, [shrinking], PITCH).verdict == "eccentricity"
     # a further effect (forward selection) gets the raised gain without the density route
-    assert decide(0.4, [replace(shrinking, effect_gain=6.0)], pitch_allowance=True).verdict == "none"
-    assert decide(0.0, [entry], pitch_allowance=True).verdict == "none"
-    with pytest.raises(ValueError, match="pitch_allowance"):
-        decide(0.0, [entry], density_evidence=True)
+    assert decide(0.4, [replace(shrinking, effect_gain=6.0)], PITCH.shrink_only()).verdict == "none"
+    assert decide(0.0, [entry], PITCH.shrink_only()).verdict == "none"
+    with pytest.raises(DiagnosisError, match="pitch_errors"):
+        VerdictRules("plain", DEFAULT_SETTINGS.verdict, DEFAULT_SETTINGS.change, density_evidence=True)
     # above noise the gap rules as before
-    assert decide(2.0, [entry], pitch_allowance=True, density_evidence=True).verdict == "unexplained"
+    assert decide(2.0, [entry], PITCH).verdict == "unexplained"
 
 
 def test_with_the_allowance_a_gap_just_above_noise_needs_the_density_to_hold_at_its_lower_bound():
@@ -296,17 +298,16 @@ def test_with_the_allowance_a_gap_just_above_noise_needs_the_density_to_hold_at_
     control = candidate_score("eccentricity", 26.3, 0.14, standard_error=15.5, shrink_interval=(0.03, 1.0),
                               gap_with_effect=0.44, effect_gain=49.0, modulation_gain=38.5)
     assert decide(0.51, [control]).verdict == "eccentricity"
-    decision = decide(0.51, [control], pitch_allowance=True, density_evidence=True)
+    decision = decide(0.51, [control], PITCH)
     assert decision.verdict == "unexplained" and "lower bound, and eccentricity's is 0.8" in decision.reason
     # as strong at its lower bound (26.3 - 1.645 * 5 = 18.1), or halving the gap, it is named
-    assert decide(0.51, [replace(control, standard_error=5.0)], pitch_allowance=True,
-                  density_evidence=True).verdict == "eccentricity"
+    assert decide(0.51, [replace(control, standard_error=5.0)], PITCH).verdict == "eccentricity"
     halving = replace(control, shrink_fraction=0.6, shrink_interval=(0.3, 1.0), gap_with_effect=0.2)
-    assert decide(0.51, [halving], pitch_allowance=True, density_evidence=True).verdict == "eccentricity"
-    # a further effect (no density_evidence) keeps the shrink rule of forward selection
-    assert decide(0.51, [control], pitch_allowance=True).verdict == "eccentricity"
+    assert decide(0.51, [halving], PITCH).verdict == "eccentricity"
+    # a further effect (the rules without the density route) keeps the shrink rule of forward selection
+    assert decide(0.51, [control], PITCH.shrink_only()).verdict == "eccentricity"
     # just below the gap the same: no jump at the noise gap
-    below = decide(0.49, [replace(control, gap_with_effect=0.42)], pitch_allowance=True, density_evidence=True)
+    below = decide(0.49, [replace(control, gap_with_effect=0.42)], PITCH)
     assert below.verdict == "none" and "eccentricity's is 0.8" in below.reason
 
 
@@ -325,12 +326,12 @@ def test_a_run_out_beyond_what_the_classes_make_needs_its_point_score_only():
                           gap_with_effect=0.0, effect_gain=31.0)
     beyond = replace(fit, run_out=RunOutCheck(40e-6, 22e-6, modulated=False))
     assert not holds_against_pitch_errors(fit) and holds_against_pitch_errors(beyond)
-    assert decide(0.0, [fit], pitch_allowance=True, density_evidence=True).verdict == "none"
-    decision = decide(0.0, [beyond], pitch_allowance=True, density_evidence=True)
+    assert decide(0.0, [fit], PITCH).verdict == "none"
+    decision = decide(0.0, [beyond], PITCH)
     assert decision.verdict == "eccentricity" and "lower bound 5.0" in decision.reason
-    assert decide(0.0, [replace(beyond, score=9.0)], pitch_allowance=True, density_evidence=True).verdict == "none"
-    assert verdict.leads_a_set(replace(beyond, shrink_interval=(0.1, 0.5)), pitch_allowance=True)
-    assert not verdict.leads_a_set(replace(fit, shrink_interval=(0.1, 0.5)), pitch_allowance=True)
+    assert decide(0.0, [replace(beyond, score=9.0)], PITCH).verdict == "none"
+    assert verdict.leads_a_set(replace(beyond, shrink_interval=(0.1, 0.5)), PITCH)
+    assert not verdict.leads_a_set(replace(fit, shrink_interval=(0.1, 0.5)), PITCH)
 
 
 def test_friction_acting_with_pitch_errors_widens_the_sidebands_the_nominal_allowance_leaves_narrow(design):

@@ -16,8 +16,9 @@ along its steps:
   :mod:`.fitting`, :mod:`.nominal`, :mod:`.screening`, :mod:`.signatures`,
   :mod:`.side_by_side` (independent fits on threads, their runs together);
 - step 4, held-out scoring: :mod:`.heldout`, :mod:`.scoring`;
-- step 5, verdict: :mod:`.verdict` (the rules), :mod:`.first_effect`, :mod:`.decision`;
-- step 6, several effects: :mod:`.selection`, :mod:`.effect_set`;
+- step 5, verdict: :mod:`.verdict` (the rules, one rules object per case), :mod:`.first_effect`,
+  :mod:`.decision`;
+- step 6, several effects: :mod:`.selection`, :mod:`.effect_set` (the set's rule in :mod:`.verdict`);
 - the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`; the named
   effects read back as model inputs: :mod:`.named_effects`;
 - the effect families as plug-ins: :mod:`.effects`;
@@ -42,7 +43,7 @@ from .named_effects import named_effects
 from .result import DiagnosisResult
 from .scoring import CandidateScore
 from .settings import DiagnosisSettings
-from .verdict import EFFECT_NAMES, VERDICTS, decide, decide_verdict
+from .verdict import EFFECT_NAMES, VERDICTS, VerdictRules, decide, decide_verdict, verdict_rules
 from .writer import diagnose, write_diagnosis
 
 __all__ = [
@@ -55,6 +56,8 @@ __all__ = [
     "write_diagnosis",
     "decide",
     "decide_verdict",
+    "VerdictRules",
+    "verdict_rules",
     "Decision",
     "DiagnosisError",
     "DiagnosisResult",

@@ -12,7 +12,7 @@ class Ambiguity:
 
     The effect explains the gap on ``channel``; its fit predicts too little
     on every other channel for them to see it, so the channel's own artefact
-    explains the data as well (:mod:`.consistency`).
+    explains the data as well (:mod:`~uqgear.diagnosis.verdict.cross_channel`).
 
     Attributes
     ----------

@@ -28,7 +28,7 @@ class SelectedEffect:
         model's gap: (gap_before - gap with it) / nominal gap. The shares of
         the set add up to 1 - final gap / nominal gap.
     decision : Decision
-        The rule that added it (:func:`~.verdict.decide` on top of its base).
+        The rule that added it (:func:`~.verdict.named.decide` on top of its base).
     gap_interval : pair of float
         Bootstrap 5 % and 95 % quantiles of the held-out gap with it.
     """

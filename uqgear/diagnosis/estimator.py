@@ -4,7 +4,8 @@
 lives in its own module (features: :mod:`.case` and :mod:`.allowances`;
 predictive distribution: :mod:`.discrepancy`; fits: :mod:`.nominal`,
 :mod:`.screening`, :mod:`.fitting`; held-out scoring: :mod:`.heldout`,
-:mod:`.scoring`; verdict: :mod:`.verdict`; several effects: :mod:`.selection`).
+:mod:`.scoring`; verdict: :mod:`.verdict`, its rules built once per case; several effects:
+:mod:`.selection`).
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from .selection import NamedSet, effect_set, with_phase_named_shaft
 from .settings import DiagnosisSettings
 from .signatures import every_channel_locked_lines, frequency_locked_lines, signature_hints
 from .state import DiagnosisState
+from .verdict.rules import verdict_rules
 
 
 def _worst_runs(outcome: DiagnosisResult) -> list[int]:
@@ -343,6 +345,8 @@ class Diagnosis(FittedState):
             hints=hints,
             rng=np.random.default_rng(self.seeds.run),
             settings=settings,
+            # the verdict's rules of this case: plain, or with the pitch-error allowance
+            rules=verdict_rules(settings, case),
             steps=steps,
             timings=timings,
         )

@@ -1,8 +1,8 @@
 """Step 5: the first effect's decision on the candidates' held-out scores, and whether a set comes first.
 
-:func:`decide_first` applies :func:`~.verdict.decide` to the best score of
-each effect against the nominal model, with the bootstrap intervals it
-draws and where the gap lies; :func:`starts_a_set` is the rule by which
+:func:`decide_first` applies :func:`~.verdict.named.decide` with the case's
+rules to the best score of each effect against the nominal model, with the
+bootstrap intervals it draws and where the gap lies; :func:`starts_a_set` is the rule by which
 step 6 starts a set from an unexplained gap's strongest candidate, and
 :func:`set_comes_first` asks it before step 5 is taken, without drawing
 from the diagnosis's random stream (docs/model/unmodelled-effects.md section
@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from .consistency import with_character
 from .decision import Decision
 from .gap_maps import family_character, where_gap
 from .scoring import CandidateScore, bootstrap_gap
 from .state import DiagnosisState
-from .verdict import decide, leads_a_set, ranked
+from .verdict.cross_channel import with_character
+from .verdict.named import decide, leads_a_set, ranked
 
 
 @dataclass(frozen=True)
@@ -69,20 +69,13 @@ def first_decision(
     """
     settings = state.settings
     scores = sorted(best.values(), key=lambda entry: -entry.score)
-    ranking = ranked(best, state.case, settings=settings)
+    ranking = ranked(best, state.rules)
     # drawn after the shrink bootstraps, so their numbers do not depend on this
     nominal_interval = bootstrap_gap(state.nominal_held.z, rng, settings.verdict.bootstrap_resamples)
     if scores:
         leader_interval = bootstrap_gap(scores[0].held.z, rng, settings.verdict.bootstrap_resamples)
         ranking[0] = replace(ranking[0], gap_interval=leader_interval)
-    decision = decide(
-        state.nominal_gap,
-        ranking,
-        nominal_gap_interval=nominal_interval,
-        settings=settings,
-        pitch_allowance=state.pitch_allowance,
-        density_evidence=state.pitch_allowance,
-    )
+    decision = decide(state.nominal_gap, ranking, state.rules, nominal_gap_interval=nominal_interval)
     return decision, scores, ranking, nominal_interval
 
 
@@ -101,7 +94,7 @@ def starts_a_set(state: DiagnosisState, decision: Decision, ranking: Sequence[Ca
     return (
         unnamed_gap
         and bool(ranking)
-        and leads_a_set(ranking[0], pitch_allowance=state.pitch_allowance, settings=settings)
+        and leads_a_set(ranking[0], state.rules)
     )
 
 

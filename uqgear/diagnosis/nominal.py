@@ -29,6 +29,7 @@ from .screening import ScoredCandidates, improved_nominal, score_candidates
 from .screening import fit_waiting as waiting_fits
 from .settings import DiagnosisSettings
 from .state import DiagnosisState
+from .verdict.rules import VerdictRules
 
 # Child of the diagnosis's run seed that draws the pitch errors (the bootstrap uses the seed itself).
 PITCH_ERROR_STREAM = 7
@@ -186,6 +187,7 @@ def score_against_nominal(
     hints: Mapping[str, float],
     rng: np.random.Generator,
     settings: DiagnosisSettings,
+    rules: VerdictRules,
     steps: StepLog,
     timings: dict[str, float],
 ) -> NominalPasses:
@@ -200,10 +202,11 @@ def score_against_nominal(
     (:func:`~.screening.score_candidates`). The last pass's extra full fits
     may wait on a set (``waiting``; :func:`fit_waiting`).
 
+    ``rules`` are the case's verdict rules (:func:`~.verdict.rules.verdict_rules`).
     Returns the state the later steps share with the best score per effect and every score.
     """
     held, gap = _held_out(nominal, steps, timings)
-    state = DiagnosisState(case, settings, effects, hints, rng, steps, timings, nominal, held, gap)
+    state = DiagnosisState(case, settings, rules, effects, hints, rng, steps, timings, nominal, held, gap)
     scored = score_candidates(state, escape=_escape(state, 0))
     return _passes(state, scored, 0, {}, set_first=True)
 

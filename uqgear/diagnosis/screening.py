@@ -35,7 +35,7 @@ from .scoring import CandidateScore, score_candidate
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 from .side_by_side import Outcome, side_by_side
 from .state import DiagnosisState
-from .verdict import decide, ranked
+from .verdict.named import decide, ranked
 
 
 def effect_off_costs(
@@ -123,7 +123,7 @@ def measure_modulation(case: RigCase, full: CandidateScore) -> None:
     A run-out is an effect whose family has a
     :attr:`~.effects.EffectFamily.run_out` hook (eccentricity in the library).
     Only where pitch errors apply does the run-out check
-    (:func:`~.verdict.run_out_check`) need it; elsewhere it stays None at no cost.
+    (:func:`~.verdict.named.run_out_check`) need it; elsewhere it stays None at no cost.
     """
     family = hooks_of(full.effect)
     if family.run_out is not None and case.run_out_allowance:
@@ -259,7 +259,7 @@ def _also_promoted(state: DiagnosisState, leader: CandidateScore) -> Callable[[C
     own is fitted (with its own allowance).
     """
     settings = state.settings
-    if state.pitch_allowance:
+    if state.rules.pitch_allowance:
         return lambda entry: entry.score >= settings.verdict.score_threshold
     return lambda entry: entry.score > 0 and entry.score >= settings.screening.runner_up_share * leader.score
 
@@ -311,14 +311,15 @@ def _set_effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore
 
 
 def _unexplained(state: DiagnosisState, best: dict[str, CandidateScore]) -> bool:
-    """Whether the best fits so far leave the gap open (:func:`~.verdict.decide` on them as they are).
+    """Whether the best fits so far leave the gap open (:func:`~.verdict.named.decide` on them as they are).
 
     Open is ``unexplained``, or an effect not told apart from one channel's
-    artefact: another candidate may yet explain it on every channel.
+    artefact: another candidate may yet explain it on every channel. It is
+    asked of the case's rules without the density route
+    (:meth:`~.verdict.rules.VerdictRules.shrink_only`): an open gap is one
+    above noise that no candidate shrinks enough.
     """
-    settings = state.settings
-    ranking = ranked(best, state.case, settings=settings)
-    return decide(state.nominal_gap, ranking, settings=settings).open_gap
+    return decide(state.nominal_gap, ranked(best, state.rules), state.rules.shrink_only()).open_gap
 
 
 @dataclass

@@ -4,7 +4,7 @@ Step 6 of docs/model/unmodelled-effects.md section 6 (section 6.2): while the mo
 effects named so far leaves a significant held-out gap, it is the base of
 another round; the other effects are screened on top of it with their own
 parameters, the best is fitted in full with every effect present and scored
-against the base's held-out predictions, and :func:`~.verdict.decide` on
+against the base's held-out predictions, and :func:`~.verdict.named.decide` on
 the gap that remains adds it or not. Where the pitch-error allowance
 applies, a shaft's sideband phases can then name an eccentricity the line
 amplitudes cannot tell from the gears' own errors (section 6.4).
@@ -25,10 +25,10 @@ from .effects import EffectFamily, run_out_family
 from .first_effect import FirstDecision, starts_a_set
 from .scoring import CandidateScore, bootstrap_gap, score_candidate
 from .screening import best_per_effect, effect_off_costs, found, full_fit, measure_modulation, screen, supersedes
-from .set_verdict import lead_decision, phase_named_decision, set_decision, unled_decision
 from .settings import DiagnosisSettings
 from .state import DiagnosisState
-from .verdict import decide, ranked
+from .verdict.named import decide, ranked
+from .verdict.sets import lead_decision, phase_named_decision, set_decision, unled_decision
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
@@ -56,7 +56,7 @@ def worth_a_full_fit(entry: CandidateScore, settings: DiagnosisSettings) -> bool
     optimum and refits parameters the base fit already fitted, so it moves
     a screening only near where it already is: one that explains nothing
     and has no evidence is not expected to become a candidate the rule of
-    :func:`~.verdict.decide` names (the rounds measured are in
+    :func:`~.verdict.named.decide` names (the rounds measured are in
     docs/validation/diagnosis.md, "Forward selection").
     """
     return (
@@ -124,7 +124,7 @@ def next_effect(
     screened variant is fitted in full with every effect present where its
     screening could explain part of the remaining gap
     (:func:`worth_a_full_fit`), and scored against the base's held-out
-    predictions; :func:`~.verdict.decide` on top of the base adds it or not.
+    predictions; :func:`~.verdict.named.decide` on top of the base adds it or not.
     """
     settings, base_fit = state.settings, base.fit
     base_labels = tuple(candidate.label for candidate in base_fit.problem.candidates)
@@ -143,11 +143,11 @@ def next_effect(
         if supersedes(full, best[full.effect]):
             best[full.effect] = full
     ranking = sorted(best.values(), key=lambda entry: -entry.score)
-    chosen = ranked({leader.effect: best[leader.effect]}, state.case, settings=settings)[0]
+    chosen = ranked({leader.effect: best[leader.effect]}, state.rules)[0]
     chosen = replace(chosen, gap_interval=bootstrap_gap(chosen.held.z, state.rng, settings.verdict.bootstrap_resamples))
     # no density evidence here: a further effect must shrink a gap that is there, or it only soaks up what
     # the allowance already forgives (docs/model/unmodelled-effects.md section 6.4)
-    decision = decide(base.gap_with_effect, [chosen], settings=settings, pitch_allowance=state.pitch_allowance)
+    decision = decide(base.gap_with_effect, [chosen], state.rules.shrink_only())
     added = chosen.effect if decision.verdict == chosen.effect else None
     reason = decision.reason
     if not fitted_in_full:
@@ -168,10 +168,10 @@ def forward_selection(
 ) -> tuple[list[SelectedEffect], list[SelectionRound]]:
     """Add effects one at a time after the first while a significant held-out gap remains.
 
-    The first effect's fit (``first``, named by :func:`~.verdict.decide`) is
+    The first effect's fit (``first``, named by :func:`~.verdict.named.decide`) is
     the base; each round (:func:`next_effect`) screens the effects not yet
     named on top of it, fits the best in full with all effects present and
-    adds it when :func:`~.verdict.decide`, applied to the gap that remains,
+    adds it when :func:`~.verdict.named.decide`, applied to the gap that remains,
     names it; the model with it is the next base. Rounds stop when the
     remaining gap is within ``noise_gap`` (where the pitch-error allowance
     applies, only at a gap of 0: its widened error can hold a further
@@ -191,7 +191,7 @@ def forward_selection(
     rounds: list[SelectionRound] = []
     while len(entries) < settings.selection.max_effects and (
         entries[-1].gap_with_effect > settings.verdict.noise_gap
-        or (state.pitch_allowance and entries[-1].gap_with_effect > 0.0)
+        or (state.rules.pitch_allowance and entries[-1].gap_with_effect > 0.0)
     ):
         selection = next_effect(state, entries[-1], [entry.effect for entry in entries], rounds[-1] if rounds else None)
         rounds.append(selection)
@@ -291,7 +291,7 @@ def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
     Two effects of about equal size each explain less than half of the gap
     alone: the strongest, clearly carried by its effect, is the base of a
     forward selection, and the set is named only if it explains the gap
-    together (:func:`~.verdict.set_decision`'s rule).
+    together (:func:`~.verdict.sets.set_decision`'s rule).
     """
     clock = time.perf_counter()
     lead = first.scores[0]
@@ -301,7 +301,7 @@ def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
     state.timings["forward_selection"] = state.timings.get("forward_selection", 0.0) + time.perf_counter() - clock
     with state.steps.step("decide whether a set of effects explains the gap") as finding:
         joint = (
-            set_decision(provisional, trial, trial_rounds, state.nominal_gap, settings=state.settings)
+            set_decision(provisional, trial, trial_rounds, state.nominal_gap, state.rules)
             if len(trial) > 1
             else None
         )
@@ -324,7 +324,7 @@ def _grown_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
         # added up: a set tried before the extra full fits may be tried again after them
         state.timings["forward_selection"] = state.timings.get("forward_selection", 0.0) + time.perf_counter() - clock
     with state.steps.step("decide the effect set") as finding:
-        decision = set_decision(first.decision, selected, rounds, state.nominal_gap, settings=state.settings)
+        decision = set_decision(first.decision, selected, rounds, state.nominal_gap, state.rules)
         finding.update(effects=[chosen.entry.effect for chosen in selected], partial=decision.partial)
     return NamedSet(selected, rounds, decision)
 

@@ -12,6 +12,7 @@ from .case import RigCase
 from .fitting import FitResult
 from .heldout import HeldOut
 from .settings import DiagnosisSettings
+from .verdict.rules import VerdictRules
 
 
 @dataclass(frozen=True)
@@ -28,6 +29,9 @@ class DiagnosisState:
     case : RigCase
         The campaign with every allowance taken in.
     settings : DiagnosisSettings
+    rules : VerdictRules
+        The verdict's rules of the case (:func:`~.verdict.rules.verdict_rules`), built once from
+        the settings and the case.
     effects : tuple of str
         The candidate effect families.
     hints : mapping
@@ -51,6 +55,7 @@ class DiagnosisState:
 
     case: RigCase
     settings: DiagnosisSettings
+    rules: VerdictRules
     effects: tuple[str, ...]
     hints: Mapping[str, float]
     rng: np.random.Generator
@@ -60,11 +65,6 @@ class DiagnosisState:
     nominal_held: HeldOut
     nominal_gap: float
     earlier_full_fits: Mapping[str, FitResult] = field(default_factory=dict)
-
-    @property
-    def pitch_allowance(self) -> bool:
-        """Whether the pitch-error allowance is in the model error."""
-        return self.case.pitch_allowance is not None
 
     def with_nominal(self, nominal: FitResult, held: HeldOut, gap: float) -> DiagnosisState:
         """This state with another nominal fit and its held-out predictions."""

@@ -5,9 +5,10 @@ given (``reference_route="change"``, the default): step 1 judges the change
 on condition-monitoring features (:mod:`.detection`); with no significant
 change the verdict is ``none`` and no model is simulated; otherwise every
 candidate effect is scored on the change it predicts (:mod:`.scoring`) and
-the best is named when it explains at least ``change_share`` of the change,
-else the change is ``unexplained`` with where it lies (docs/model/unmodelled-effects.md
-section 6.1).
+the rules of the ``reference`` case name the best when it explains at least
+``change_share`` of the change, else the change is ``unexplained`` with where
+it lies (:mod:`uqgear.diagnosis.verdict.reference`;
+docs/model/unmodelled-effects.md section 6.1).
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from ...common.steps import StepLog
 from ...physics.design import Design
 from ..decision import Decision
 from ..settings import DiagnosisSettings
+from ..verdict.reference import decide_change
+from ..verdict.rules import verdict_rules
 from .detection import ChangeTest, judge_change, read_campaign
 from .features import FEATURES
 from .scoring import ChangeModel, ChangeScore, explained_where, score_change
@@ -40,50 +43,6 @@ class ChangeOutcome:
     decision: Decision
     summary: dict[str, Any]
     timings: dict[str, float] = field(default_factory=dict)
-
-
-def _where_text(where: Sequence[dict[str, Any]], limit: int = 3) -> str:
-    parts = []
-    for entry in where[:limit]:
-        shaft = f" of the {entry['shaft']}" if entry["shaft"] else ""
-        parts.append(
-            f"{entry['channel']} {entry['family'].replace('_', ' ')}{shaft} {entry['direction']} "
-            f"{abs(entry['largest_db']):.1f} dB at {', '.join(f'{s:g}' for s in entry['speeds_rpm'])} rpm"
-        )
-    return "; ".join(parts)
-
-
-def _decide(test: ChangeTest, scores: list[ChangeScore], settings: DiagnosisSettings) -> Decision:
-    """The verdict of the differential diagnosis and its reason."""
-    largest = test.largest()
-    if not test.changed:
-        return Decision(
-            "none",
-            f"no feature changed beyond what two healthy campaigns of this rig differ by: the largest change "
-            f"({largest['channel']} {largest['feature']} at {largest['speed_rpm']:g} rpm) is "
-            f"{largest['change_db']:+.1f} dB against a threshold of {largest['threshold_db']:.1f} dB",
-        )
-    where = _where_text(test.where())
-    best = scores[0] if scores else None
-    if best is None or best.share < settings.change.change_share:
-        share = "no candidate" if best is None else f"the best candidate, {best.label}, explains {best.share:.0%}"
-        return Decision(
-            "unexplained",
-            f"changed since the reference ({where}); {share} of the change, below {settings.change.change_share:.0%}",
-        )
-    runner_up = scores[1] if len(scores) > 1 else None
-    next_text = "" if runner_up is None else f" (next: {runner_up.label}, {runner_up.share:.0%})"
-    if runner_up is not None and best.share - runner_up.share < settings.change.change_margin:
-        return Decision(
-            "unexplained",
-            f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change, "
-            f"{runner_up.label} {runner_up.share:.0%}: less than {settings.change.change_margin:.0%} apart, "
-            "neither is named",
-        )
-    return Decision(
-        best.effect,
-        f"changed since the reference ({where}); {best.label} explains {best.share:.0%} of the change" + next_text,
-    )
 
 
 def _score_entry(score: ChangeScore, test: ChangeTest, settings: DiagnosisSettings) -> dict[str, Any]:
@@ -136,7 +95,7 @@ def diagnose_change(
             )
             found.update(best=scores[0].label if scores else None)
         timings["change_scoring"] = time.perf_counter() - started
-    decision = _decide(test, scores, settings)
+    decision = decide_change(test, scores, verdict_rules(settings, "reference"))
     best = scores[0] if scores and decision.verdict == scores[0].effect else None
     summary = {
         "route": "change",

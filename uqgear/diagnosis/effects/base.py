@@ -88,7 +88,8 @@ class EffectFamily:
         The test plan where it shows (``service``, or ``bearing_check`` where a bearing must unload).
     one_channel : str
         Why its signature may lie on one channel alone (empty: it shows on every channel that sees
-        the mesh, and evidence on one channel alone is that sensor's own; :mod:`uqgear.diagnosis.consistency`).
+        the mesh, and evidence on one channel alone is that sensor's own;
+        :mod:`uqgear.diagnosis.verdict.cross_channel`).
     run_out : RunOut or None
         How a fit of it reads as a shaft run-out the gears' pitch errors also make (default None: it
         does not, and the rules on run-outs leave it alone).
@@ -143,7 +144,7 @@ class EffectFamily:
         """A sensor artefact that reads as this effect on ``channel`` alone, in words (default ``""``: none known).
 
         The verdict names it beside the effect where the other channels
-        cannot see the effect as fitted (:mod:`uqgear.diagnosis.consistency`);
+        cannot see the effect as fitted (:mod:`uqgear.diagnosis.verdict.cross_channel`);
         without one it names the channel's own artefacts in general.
         """
         return ""
@@ -152,7 +153,7 @@ class EffectFamily:
         """Measurements that would show this effect on the channels that cannot see it yet, as sentences.
 
         The verdict states them where the effect and one channel's own
-        artefact explain the data alike (:mod:`uqgear.diagnosis.consistency`).
+        artefact explain the data alike (:mod:`uqgear.diagnosis.verdict.cross_channel`).
 
         Examples
         --------

@@ -1,6 +1,6 @@
 """The verdict on a set of effects: the decisions forward selection and the sideband phase test make.
 
-The rules are :mod:`.verdict`'s applied to the set against the nominal
+The rules are :mod:`.named`'s applied to the set against the nominal
 model (docs/model/unmodelled-effects.md section 6.2); every :class:`~.decision.Decision` of a
 set is made here.
 """
@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 
-from .decision import Decision
-from .effect_set import SelectedEffect, SelectionRound
-from .scoring import CandidateScore, shrink_fraction
-from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+from ..decision import Decision
+from ..effect_set import SelectedEffect, SelectionRound
+from ..scoring import CandidateScore, shrink_fraction
+from .rules import DEFAULT_RULES, VerdictRules
 
 
 def _percent(interval: Sequence[float]) -> str:
@@ -25,8 +25,7 @@ def set_decision(
     selected: Sequence[SelectedEffect],
     rounds: Sequence[SelectionRound],
     nominal_gap: float,
-    *,
-    settings: DiagnosisSettings = DEFAULT_SETTINGS,
+    rules: VerdictRules = DEFAULT_RULES,
 ) -> Decision:
     """The decision for the named set: the first effect's verdict, ``partial`` and remaining gap of the whole set.
 
@@ -61,10 +60,12 @@ def set_decision(
         )
     elif last.added is None:
         reason += f"; {last.reason}"
-    verdict = settings.verdict
-    explains = shrink_fraction(nominal_gap, final_gap) >= verdict.shrink_threshold or final_gap <= verdict.noise_gap
+    thresholds = rules.thresholds
+    explains = (
+        shrink_fraction(nominal_gap, final_gap) >= thresholds.shrink_threshold or final_gap <= thresholds.noise_gap
+    )
     if not explains:
-        reason += f"; a gap of {final_gap:.2f} (above {settings.verdict.noise_gap:g}) remains unexplained"
+        reason += f"; a gap of {final_gap:.2f} (above {thresholds.noise_gap:g}) remains unexplained"
     return Decision(
         first_decision.verdict, reason, partial=not explains, remaining_gap=final_gap, borderline=tuple(borderline)
     )

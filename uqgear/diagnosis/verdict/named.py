@@ -1,10 +1,13 @@
-"""The verdict: the decision rules on the candidates' held-out scores (step 5).
+"""Whether a candidate is named: the decision rules on the candidates' held-out scores (step 5).
 
-Every :class:`Decision` is made by these rules or, for a set of effects, in
-:mod:`.set_verdict`: the first effect's (:func:`decide`, applied by
-:func:`~.first_effect.decide_first`), the named set's, a set that an unexplained gap's strongest candidate leads
-and an eccentric shaft the sideband phases name. The thresholds come from
-:class:`~uqgear.diagnosis.DiagnosisSettings` (docs/model/unmodelled-effects.md section 6, step
+Every :class:`~uqgear.diagnosis.decision.Decision` on the model's gap is
+made by these rules or, for a set of effects, in :mod:`.sets`: the first
+effect's (:func:`decide`, applied by
+:func:`~uqgear.diagnosis.first_effect.decide_first`), the named set's, a set
+that an unexplained gap's strongest candidate leads and an eccentric shaft
+the sideband phases name. Each rule reads the case's
+:class:`~.rules.VerdictRules`: its thresholds, and what the pitch-error
+allowance lets a gap say (docs/model/unmodelled-effects.md section 6, step
 5, and sections 6.2 and 6.4).
 """
 
@@ -15,12 +18,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
-from .case import RigCase
-from .consistency import check_channels, inconsistent_decision
-from .decision import Decision
-from .effects import effect_names, hooks_of
-from .scoring import CandidateScore, RunOutCheck
-from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+from ..decision import Decision
+from ..effects import effect_names, hooks_of
+from ..scoring import CandidateScore, RunOutCheck
+from .cross_channel import check_channels, inconsistent_decision
+from .rules import DEFAULT_RULES, VerdictRules
 
 #: Effects of the library that the diagnosis can name.
 EFFECT_NAMES: tuple[str, ...] = effect_names()
@@ -32,26 +34,25 @@ EFFECT_NAMES: tuple[str, ...] = effect_names()
 VERDICTS: tuple[str, ...] = EFFECT_NAMES + ("none", "unexplained", "inconclusive")
 
 
-def run_out_check(
-    score: CandidateScore, bounds: dict[str, float], *, settings: DiagnosisSettings = DEFAULT_SETTINGS
-) -> RunOutCheck | None:
+def run_out_check(score: CandidateScore, rules: VerdictRules = DEFAULT_RULES) -> RunOutCheck | None:
     """A run-out's fit against the pitch-error classes' first-order run-out on its shaft, or None.
 
     It applies to an effect whose family reads as a shaft run-out (its
     :attr:`~.effects.EffectFamily.run_out` hook: eccentricity in the library).
-    ``bounds`` are the case's :attr:`~uqgear.diagnosis.case.RigCase.run_out_allowance`
-    (empty without a pitch-error allowance). The fit counts as modulated when
+    The bounds are the rules' ``run_out_bounds`` (the case's
+    :attr:`~uqgear.diagnosis.case.RigCase.run_out_allowance`, empty without a
+    pitch-error allowance). The fit counts as modulated when
     it is worse by at least the effect-gain threshold with its mesh-stiffness
     modulation off, which pitch errors do not make.
     """
     family = hooks_of(score.effect)
-    if family.run_out is None or not bounds:
+    if family.run_out is None or not rules.run_out_bounds:
         return None
     values = score.parameters()
-    bound = bounds.get(str(family.run_out_shaft(values)))
+    bound = rules.run_out_bound(str(family.run_out_shaft(values)))
     if bound is None:
         return None
-    modulated = score.modulation_gain is not None and score.modulation_gain >= settings.verdict.effect_gain_threshold
+    modulated = score.modulation_gain is not None and score.modulation_gain >= rules.thresholds.effect_gain_threshold
     amplitude = float(values.get(family.run_out.amplitude, math.nan))  # type: ignore[arg-type]
     # the run-out as far as the data pin it: it enters the TE directly; without a TE channel it is read
     # through the dynamics, where a gear's own first-order pitch error reads the same, so it is not measured
@@ -60,24 +61,22 @@ def run_out_check(
     return RunOutCheck(amplitude, bound, modulated, low)
 
 
-def ranked(
-    best_per_effect: Mapping[str, CandidateScore], case: RigCase, *, settings: DiagnosisSettings = DEFAULT_SETTINGS
-) -> list[CandidateScore]:
+def ranked(best_per_effect: Mapping[str, CandidateScore], rules: VerdictRules = DEFAULT_RULES) -> list[CandidateScore]:
     """The best variant of each effect, best first, each with its run-out check (new objects)."""
     scores = sorted(best_per_effect.values(), key=lambda entry: -entry.score)
-    return [replace(s, run_out=run_out_check(s, case.run_out_allowance, settings=settings)) for s in scores]
+    return [replace(s, run_out=run_out_check(s, rules)) for s in scores]
 
 
 def _within(score: CandidateScore) -> bool:
     return score.run_out is not None and score.run_out.within
 
 
-def score_lower_bound(score: CandidateScore, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> float:
+def score_lower_bound(score: CandidateScore, rules: VerdictRules = DEFAULT_RULES) -> float:
     """The lower end of a candidate's 90 % score interval (``score_quantile`` standard errors below it)."""
-    return score.score - settings.verdict.score_quantile * float(score.standard_error)
+    return score.score - rules.thresholds.score_quantile * float(score.standard_error)
 
 
-def holds_against_pitch_errors(score: CandidateScore, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> bool:
+def holds_against_pitch_errors(score: CandidateScore, rules: VerdictRules = DEFAULT_RULES) -> bool:
     """Whether a candidate's score holds where pitch errors could give as much: at its 90 % lower bound.
 
     An eccentricity whose fitted run-out is beyond what the gears' stated
@@ -86,14 +85,12 @@ def holds_against_pitch_errors(score: CandidateScore, *, settings: DiagnosisSett
     (docs/model/unmodelled-effects.md section 6.4).
     """
     beyond = score.run_out is not None and score.run_out.beyond
-    return score_lower_bound(score, settings=settings) >= settings.verdict.score_threshold or bool(
-        beyond and score.score >= settings.verdict.score_threshold
+    return score_lower_bound(score, rules) >= rules.thresholds.score_threshold or bool(
+        beyond and score.score >= rules.thresholds.score_threshold
     )
 
 
-def leads_a_set(
-    best: CandidateScore, *, pitch_allowance: bool = False, settings: DiagnosisSettings = DEFAULT_SETTINGS
-) -> bool:
+def leads_a_set(best: CandidateScore, rules: VerdictRules = DEFAULT_RULES) -> bool:
     """Whether an unexplained gap's best candidate is strong enough to start a forward selection.
 
     The evidence rules of :func:`decide` without the one on how much of
@@ -105,12 +102,12 @@ def leads_a_set(
     would name it anyway.
     """
     return (
-        best.score >= settings.verdict.score_threshold
-        and float(best.effect_gain) >= settings.verdict.effect_gain_threshold
+        best.score >= rules.thresholds.score_threshold
+        and float(best.effect_gain) >= rules.thresholds.effect_gain_threshold
         and best.shrink_interval[0] > 0.0
         and not _within(best)
-        and (not pitch_allowance or holds_against_pitch_errors(best, settings=settings))
-        and check_channels(best, settings=settings).consistent
+        and (not rules.pitch_allowance or holds_against_pitch_errors(best, rules))
+        and check_channels(best, rules).consistent
     )
 
 
@@ -124,9 +121,9 @@ def _borderline_figures(
     nominal_gap: float,
     nominal_gap_interval: Sequence[float] | None,
     best: CandidateScore | None,
-    settings: DiagnosisSettings,
+    rules: VerdictRules,
 ) -> tuple[dict[str, Any], ...]:
-    noise_gap = settings.verdict.noise_gap
+    noise_gap = rules.thresholds.noise_gap
     figures = []
     if nominal_gap_interval is not None and _straddles(nominal_gap_interval, noise_gap):
         figures.append(
@@ -140,23 +137,23 @@ def _borderline_figures(
     if best is not None:
         error = float(best.standard_error)
         if math.isfinite(error):
-            upper = best.score + settings.verdict.score_quantile * error
-            score_interval = [score_lower_bound(best, settings=settings), upper]
-            if _straddles(score_interval, settings.verdict.score_threshold):
+            upper = best.score + rules.thresholds.score_quantile * error
+            score_interval = [score_lower_bound(best, rules), upper]
+            if _straddles(score_interval, rules.thresholds.score_threshold):
                 figures.append(
                     {
                         "figure": "score",
                         "value": float(best.score),
-                        "threshold": settings.verdict.score_threshold,
+                        "threshold": rules.thresholds.score_threshold,
                         "interval": score_interval,
                     }
                 )
-        if _straddles(best.shrink_interval, settings.verdict.shrink_threshold):
+        if _straddles(best.shrink_interval, rules.thresholds.shrink_threshold):
             figures.append(
                 {
                     "figure": "shrink_fraction",
                     "value": float(best.shrink_fraction),
-                    "threshold": settings.verdict.shrink_threshold,
+                    "threshold": rules.thresholds.shrink_threshold,
                     "interval": [float(v) for v in best.shrink_interval],
                 }
             )
@@ -179,11 +176,9 @@ def _percent(interval: Sequence[float]) -> str:
 def decide(
     nominal_gap: float,
     ranking: Sequence[CandidateScore],
+    rules: VerdictRules = DEFAULT_RULES,
     *,
     nominal_gap_interval: Sequence[float] | None = None,
-    settings: DiagnosisSettings = DEFAULT_SETTINGS,
-    pitch_allowance: bool = False,
-    density_evidence: bool = False,
 ) -> Decision:
     """The verdict from the held-out gap of the base model and the ranked candidates on top of it.
 
@@ -199,7 +194,7 @@ def decide(
     base model is within noise when its gap is at most ``noise_gap``; a gap
     that could not be measured (NaN) gives ``inconclusive``, never ``none``.
     A candidate these rules name must pass the cross-channel rule too
-    (:mod:`.consistency`); one that explains a gap on one channel alone,
+    (:mod:`.cross_channel`); one that explains a gap on one channel alone,
     which the other channels could not have seen as fitted, gives
     ``inconclusive`` between it and that channel's own artefact.
 
@@ -209,48 +204,40 @@ def decide(
         Held-out gap of the base model (:func:`~uqgear.diagnosis.scoring.gap_metric`).
     ranking : sequence of CandidateScore
         Candidates best first (their ``gap_interval`` and ``run_out`` where known).
+    rules : VerdictRules
+        The case's rules (:func:`~.rules.verdict_rules`): the thresholds and,
+        with the pitch-error allowance (``rules.pitch_allowance``), that the
+        allowance widens the error of every sideband, so while the nominal
+        gap is within ``noise_gap`` the gap speaks for no effect, and the
+        effect gain must reach ``score_threshold`` too (the effect carries
+        the evidence by itself). With ``rules.density_evidence`` (the first
+        effect's rules under the allowance) an effect's signature spread over
+        many features can leave each of them within noise while the held-out
+        density still sees it. Then a score whose 90 % lower bound reaches
+        ``score_threshold`` stands in for a shrink interval above zero; the
+        run-out guard still applies. Just above the noise gap the same lower
+        bound is needed of an effect named because what remains is within
+        noise, so the rule does not jump at ``noise_gap``
+        (docs/model/unmodelled-effects.md section 6.4).
     nominal_gap_interval : pair of float, optional
         Bootstrap interval of the nominal gap (:func:`~uqgear.diagnosis.scoring.bootstrap_gap`).
-    settings : DiagnosisSettings
-        The thresholds.
-    pitch_allowance : bool
-        The model error holds the pitch-error allowance: it widens the error
-        of every sideband, so while the nominal gap is within ``noise_gap``
-        the gap speaks for no effect, and the effect gain must reach
-        ``score_threshold`` too (the effect carries the evidence by itself).
-    density_evidence : bool
-        With ``pitch_allowance`` only, for the first effect only: an effect's
-        signature spread over many features can leave each of them within
-        noise while the held-out density still sees it. Then a score whose
-        90 % lower bound reaches ``score_threshold`` stands in for a shrink
-        interval above zero; the run-out guard still applies. Just above the
-        noise gap the same lower bound is needed of an effect named because
-        what remains is within noise, so the rule does not jump at
-        ``noise_gap`` (docs/model/unmodelled-effects.md section 6.4).
 
     Returns
     -------
     Decision
     """
-    if density_evidence and not pitch_allowance:
-        raise ValueError(
-            "decide: density_evidence stands in for a gap only under the pitch-error allowance; "
-            "expected pitch_allowance=True with it"
-        )
     best = ranking[0] if ranking else None
-    borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, settings)
+    borderline = _borderline_figures(nominal_gap, nominal_gap_interval, best, rules)
     weak_near_noise = False
     if best is not None:
-        named, weak_near_noise = _named(best, nominal_gap, borderline, settings, pitch_allowance, density_evidence)
+        named, weak_near_noise = _named(best, nominal_gap, borderline, rules)
         if named is not None:
             # a gear effect shows on every channel that sees the mesh
             # (docs/model/unmodelled-effects.md section 6, step 5)
-            channels = check_channels(best, settings=settings)
+            channels = check_channels(best, rules)
             if channels.consistent:
                 return named
-            return inconsistent_decision(
-                best, nominal_gap, borderline, settings, channels, explains=not named.partial
-            )
+            return inconsistent_decision(best, nominal_gap, borderline, rules, channels, explains=not named.partial)
     if not math.isfinite(nominal_gap):
         # no feature could be compared on a held-out run: the data cannot tell "within noise"
         # from "not measured", and no data must never read as a healthy gear
@@ -260,47 +247,84 @@ def decide(
             "compared with the model on held-out runs",
             borderline=borderline,
         )
-    return _unnamed(best, nominal_gap, borderline, settings, weak_near_noise)
+    return _unnamed(best, nominal_gap, borderline, rules, weak_near_noise)
+
+
+def _below_gap(nominal_gap: float, rules: VerdictRules) -> bool:
+    """No gap to speak for an effect: the nominal gap is within noise under the pitch-error allowance."""
+    return rules.pitch_allowance and nominal_gap <= rules.thresholds.noise_gap
+
+
+def _carries_evidence(best: CandidateScore, nominal_gap: float, rules: VerdictRules) -> bool:
+    """The evidence rules: a score beyond the threshold and a fit clearly worse with the effect off.
+
+    A run-out the gears' own pitch errors make (the run-out check) is no
+    eccentric shaft; with no gap to speak for it (:func:`_below_gap`) the
+    effect gain must reach the score threshold by itself.
+    """
+    thresholds = rules.thresholds
+    gain = float(best.effect_gain)
+    carried = gain >= thresholds.effect_gain_threshold and not _within(best)
+    if _below_gap(nominal_gap, rules):
+        carried = carried and gain >= thresholds.score_threshold
+    return best.score >= thresholds.score_threshold and carried
+
+
+def _explains(best: CandidateScore, borderline: tuple[dict[str, Any], ...], rules: VerdictRules) -> bool:
+    """The effect explains the gap: it shrinks it by ``shrink_threshold`` or leaves what is within noise.
+
+    What remains within noise speaks for the effect only where the gap it
+    removed was clearly above noise: a nominal gap whose own interval reaches
+    into noise may be noise itself (borderline: none).
+    """
+    gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
+    return best.shrink_fraction >= rules.thresholds.shrink_threshold or (
+        float(best.gap_with_effect) <= rules.thresholds.noise_gap and not gap_borderline
+    )
+
+
+def _by_density(best: CandidateScore, nominal_gap: float, rules: VerdictRules) -> bool:
+    """The density route: below the gap, what remains within noise, no shrink, a score that holds at its lower bound."""
+    return (
+        rules.density_evidence
+        and _below_gap(nominal_gap, rules)
+        and float(best.gap_with_effect) <= rules.thresholds.noise_gap
+        and best.shrink_interval[0] <= 0.0
+        and holds_against_pitch_errors(best, rules)
+    )
+
+
+def _weak_near_noise(best: CandidateScore, rules: VerdictRules) -> bool:
+    """With the density route, an effect that leaves a gap within noise without halving it, its score not holding.
+
+    With the allowance a gap near noise speaks weakly: an effect named
+    because what remains is within noise (not for a shrink of half) must
+    hold its density at the 90 % lower bound, as on the density route just
+    below the gap.
+    """
+    return (
+        rules.density_evidence
+        and best.shrink_fraction < rules.thresholds.shrink_threshold
+        and not holds_against_pitch_errors(best, rules)
+    )
 
 
 def _named(
     best: CandidateScore,
     nominal_gap: float,
     borderline: tuple[dict[str, Any], ...],
-    settings: DiagnosisSettings,
-    pitch_allowance: bool,
-    density_evidence: bool,
+    rules: VerdictRules,
 ) -> tuple[Decision | None, bool]:
     """The decision naming ``best`` where the rules of :func:`decide` name it, and whether it was weak near noise."""
     remaining = float(best.gap_with_effect)
-    # what remains is within noise speaks for the effect only where the gap it removed was clearly above
-    # noise: a nominal gap whose own interval reaches into noise may be noise itself (borderline: none)
-    gap_borderline = any(figure["figure"] == "nominal_gap" for figure in borderline)
-    explains = best.shrink_fraction >= settings.verdict.shrink_threshold or (
-        remaining <= settings.verdict.noise_gap and not gap_borderline
-    )
-    # a run-out the gears' own pitch errors make (the run-out check) is no eccentric shaft
-    carried = float(best.effect_gain) >= settings.verdict.effect_gain_threshold and not _within(best)
-    score_low = score_lower_bound(best, settings=settings)
-    below_gap = pitch_allowance and nominal_gap <= settings.verdict.noise_gap
-    if below_gap:
-        # no gap to speak for it: the effect must carry the score threshold by itself
-        carried = carried and float(best.effect_gain) >= settings.verdict.score_threshold
-    evidence = best.score >= settings.verdict.score_threshold and carried
-    holds = holds_against_pitch_errors(best, settings=settings)
-    by_density = (
-        density_evidence
-        and below_gap
-        and remaining <= settings.verdict.noise_gap
-        and best.shrink_interval[0] <= 0.0
-        and holds
-    )
-    if evidence and by_density:
+    evidence = _carries_evidence(best, nominal_gap, rules)
+    if evidence and _by_density(best, nominal_gap, rules):
         return Decision(
             best.effect,
             (
                 f"{best.effect} gains {best.score:.1f} nats of held-out predictive density (90 % lower "
-                f"bound {score_low:.1f}) over the model without it after its parameter penalty; the held-out "
+                f"bound {score_lower_bound(best, rules):.1f}) over the model without it after its parameter "
+                f"penalty; the held-out "
                 f"gap ({nominal_gap:.2f}) is within noise because the pitch-error allowance widens the error "
                 f"of every sideband, so the evidence is spread over many features: the density shows it, "
                 f"the gap cannot"
@@ -308,16 +332,13 @@ def _named(
             remaining_gap=remaining,
             borderline=borderline,
         ), False
-    # with the allowance a gap near noise speaks weakly: an effect named because what remains is within
-    # noise (not for a shrink of half) must hold its density at the 90 % lower bound, as on the density
-    # route just below the gap
+    explains = _explains(best, borderline, rules)
     by_shrink = evidence and explains and best.shrink_interval[0] > 0.0
-    below_shrink = best.shrink_fraction < settings.verdict.shrink_threshold
-    weak_near_noise = by_shrink and density_evidence and below_shrink and not holds
+    weak_near_noise = by_shrink and _weak_near_noise(best, rules)
     if by_shrink and not weak_near_noise:
         within = (
             f"; what remains ({remaining:.2f}) is within noise"
-            if best.shrink_fraction < settings.verdict.shrink_threshold
+            if best.shrink_fraction < rules.thresholds.shrink_threshold
             else ""
         )
         return Decision(
@@ -330,14 +351,14 @@ def _named(
             remaining_gap=remaining,
             borderline=borderline,
         ), False
-    if evidence and not explains and best.shrink_interval[0] >= settings.verdict.partial_shrink:
+    if evidence and not explains and best.shrink_interval[0] >= rules.thresholds.partial_shrink:
         return Decision(
             best.effect,
             (
                 f"{best.effect} gains {best.score:.1f} nats of held-out predictive density and shrinks "
                 f"the held-out gap by {100 * best.shrink_fraction:.0f} % (90 % interval "
                 f"{_percent(best.shrink_interval)}), but a gap of {remaining:.2f} "
-                f"(above {settings.verdict.noise_gap:g}) "
+                f"(above {rules.thresholds.noise_gap:g}) "
                 f"remains unexplained"
             ),
             partial=True,
@@ -351,7 +372,7 @@ def _unnamed(
     best: CandidateScore | None,
     nominal_gap: float,
     borderline: tuple[dict[str, Any], ...],
-    settings: DiagnosisSettings,
+    rules: VerdictRules,
     weak_near_noise: bool,
 ) -> Decision:
     """``none`` or ``unexplained`` with the reason no candidate was named."""
@@ -366,15 +387,15 @@ def _unnamed(
     if weak_near_noise and best is not None:
         held = (
             f"; with the pitch-error allowance an effect that leaves a gap within noise without halving it "
-            f"must hold {settings.verdict.score_threshold:g} nats at its score's 90 % lower bound, and {best.effect}'s "
-            f"is {score_lower_bound(best, settings=settings):.1f}: pitch errors of the stated classes can give "
+            f"must hold {rules.thresholds.score_threshold:g} nats at its score's 90 % lower bound, and {best.effect}'s "
+            f"is {score_lower_bound(best, rules):.1f}: pitch errors of the stated classes can give "
             f"as much"
         )
-    if nominal_gap <= settings.verdict.noise_gap:
+    if nominal_gap <= rules.thresholds.noise_gap:
         return Decision(
             "none",
             f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-            f"(threshold {settings.verdict.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
+            f"(threshold {rules.thresholds.noise_gap:g}) and no candidate is clearly better{held}{beyond}",
             borderline=borderline,
         )
     gap_figure = next((figure for figure in borderline if figure["figure"] == "nominal_gap"), None)
@@ -385,7 +406,7 @@ def _unnamed(
         return Decision(
             "none",
             f"the nominal model's held-out gap {nominal_gap:.2f} is above the noise threshold "
-            f"{settings.verdict.noise_gap:g} but its 90 % interval ({low:.2f} to {high:.2f}) reaches into noise, "
+            f"{rules.thresholds.noise_gap:g} but its 90 % interval ({low:.2f} to {high:.2f}) reaches into noise, "
             "and no "
             f"candidate is clearly better: borderline, not evidence of a gap{held}{beyond}",
             borderline=borderline,
@@ -394,27 +415,32 @@ def _unnamed(
     if best is not None:
         detail = (
             f"; the best candidate, {best.effect}, scores {best.score:.1f} nats and shrinks it by "
-            f"{100 * best.shrink_fraction:.0f} % (needed: {settings.verdict.score_threshold:g} nats, and a shrink of "
-            f"{100 * settings.verdict.shrink_threshold:.0f} % or a remaining gap within noise)"
+            f"{100 * best.shrink_fraction:.0f} % (needed: {rules.thresholds.score_threshold:g} nats, and a shrink of "
+            f"{100 * rules.thresholds.shrink_threshold:.0f} % or a remaining gap within noise)"
         )
         detail += held + beyond
     return Decision(
         "unexplained",
-        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.verdict.noise_gap:g}){detail}",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {rules.thresholds.noise_gap:g}){detail}",
         borderline=borderline,
     )
 
 
-def decide_verdict(nominal_gap: float, ranking: Sequence[CandidateScore], **options: Any) -> tuple[str, str]:
+def decide_verdict(
+    nominal_gap: float,
+    ranking: Sequence[CandidateScore],
+    rules: VerdictRules = DEFAULT_RULES,
+    *,
+    nominal_gap_interval: Sequence[float] | None = None,
+) -> tuple[str, str]:
     """``(verdict, reason)`` of :func:`decide` (same arguments)."""
-    decision = decide(nominal_gap, ranking, **options)
+    decision = decide(nominal_gap, ranking, rules, nominal_gap_interval=nominal_gap_interval)
     return decision.verdict, decision.reason
 
 
 __all__ = [
     "EFFECT_NAMES",
     "VERDICTS",
-    "Decision",
     "ranked",
     "run_out_check",
     "score_lower_bound",

@@ -55,10 +55,11 @@ from typing import Any
 
 import numpy as np
 
-from .decision import Ambiguity, Decision
-from .effects import effect_family, hooks_of
-from .scoring import CandidateScore
-from .settings import DEFAULT_SETTINGS, DiagnosisSettings
+from ..decision import Ambiguity, Decision
+from ..effects import effect_family, hooks_of
+from ..scoring import CandidateScore
+from ..settings import VerdictSettings
+from .rules import DEFAULT_RULES, VerdictRules
 
 #: Per channel: its sensor's own artefacts (no effect of the gears makes them, no other channel shares them),
 #: and the measurement that tells them from an effect of the gears the other channels cannot see.
@@ -133,8 +134,86 @@ class ChannelCheck:
         return self.kind == "one_channel" and self.reach < self.needed
 
 
-def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAULT_SETTINGS) -> ChannelCheck:
-    """The cross-channel rule (module docstring) for a scored candidate.
+@dataclass(frozen=True, eq=False)
+class ChannelEvidence:
+    """Per channel, what a candidate's fit predicts against what the rig shows (held-out runs, nats).
+
+    Attributes
+    ----------
+    shown : numpy.ndarray
+        What the rig shows that the model without the effect lacks: that
+        model's held-out gap on each channel (``channel_gaps_before``).
+    left : numpy.ndarray
+        The held-out gap the model with the effect leaves there (``channel_gaps_after``).
+    gain : numpy.ndarray
+        The held-out density the effect gains there (``channel_gains``; negative: it loses).
+    reach : numpy.ndarray
+        What the effect would gain there were it real (``channel_reach``,
+        :func:`~uqgear.diagnosis.scoring.channel_reach`).
+    """
+
+    shown: np.ndarray
+    left: np.ndarray
+    gain: np.ndarray
+    reach: np.ndarray
+
+    @classmethod
+    def of(cls, score: CandidateScore) -> ChannelEvidence:
+        """The per-channel figures of a scored candidate."""
+        return cls(
+            np.asarray(score.channel_gaps_before, dtype=float),
+            np.asarray(score.channel_gaps_after, dtype=float),
+            np.asarray(score.channel_gains, dtype=float),
+            np.asarray(score.channel_reach, dtype=float),
+        )
+
+
+def predicts_unseen(evidence: ChannelEvidence, thresholds: VerdictSettings) -> ChannelCheck | None:
+    """The channel where the fit predicts a discrepancy the rig does not show (the worst such), or None.
+
+    The rig shows none there (the model without the effect is within
+    ``noise_gap``), while the model with it leaves a gap above ``noise_gap``
+    and loses at least ``cross_channel_gain`` nats.
+    """
+    noise_gap = thresholds.noise_gap
+    with np.errstate(invalid="ignore"):
+        shows_none = evidence.shown <= noise_gap
+        predicts = (evidence.left > noise_gap) & (evidence.gain <= -thresholds.cross_channel_gain)
+        unseen = np.flatnonzero(shows_none & predicts)
+    if not unseen.size:
+        return None
+    channel = int(unseen[np.argmax(evidence.left[unseen])])
+    return ChannelCheck(False, channel, "predicts_unseen", float(evidence.left[channel]))
+
+
+def confined_to_one(evidence: ChannelEvidence, thresholds: VerdictSettings) -> ChannelCheck | None:
+    """The channel the fit's evidence is confined to, where the other channels gain too little together, or None.
+
+    The others must gain ``cross_channel_gain`` nats together, or
+    ``score_threshold`` where the rig shows a gap on the strongest channel
+    alone; the check records what the effect would gain on them were it
+    real (its reach), so that their silence counts against it only where
+    they could have seen it.
+    """
+    gain = np.nan_to_num(evidence.gain, nan=0.0)
+    strongest = int(np.argmax(gain))
+    others = float(np.sum(np.maximum(np.delete(gain, strongest), 0.0)))
+    # where the rig shows a gap on that channel alone, the others must carry the evidence to name an effect
+    # by themselves: a refit of the nominal parameters alone gains a few nats on a clean channel
+    with np.errstate(invalid="ignore"):
+        alone = bool(evidence.shown[strongest] > thresholds.noise_gap) and bool(
+            np.all(np.nan_to_num(np.delete(evidence.shown, strongest), nan=0.0) <= thresholds.noise_gap)
+        )
+    needed = thresholds.score_threshold if alone else thresholds.cross_channel_gain
+    if others >= needed:
+        return None
+    # the others' silence counts against the effect only where they could have seen it
+    reach = float(np.sum(np.delete(evidence.reach, strongest))) if evidence.reach.size == gain.size else math.nan
+    return ChannelCheck(False, strongest, "one_channel", float(gain[strongest]), others, needed, reach)
+
+
+def check_channels(score: CandidateScore, rules: VerdictRules = DEFAULT_RULES) -> ChannelCheck:
+    """The cross-channel rule (module docstring) for a scored candidate: what it predicts per channel against the rig.
 
     Examples
     --------
@@ -154,39 +233,17 @@ def check_channels(score: CandidateScore, *, settings: DiagnosisSettings = DEFAU
     >>> check_channels(SimpleNamespace(**{**vars(score), "channel_reach": (900.0, 0.2, 0.1)})).unseen
     True
     """
-    gains = np.asarray(score.channel_gains, dtype=float)
-    if gains.size < 2:
+    evidence = ChannelEvidence.of(score)
+    if evidence.gain.size < 2:
         # one channel recorded: nothing to compare it with
         return ChannelCheck(True)
-    before = np.asarray(score.channel_gaps_before, dtype=float)
-    after = np.asarray(score.channel_gaps_after, dtype=float)
-    with np.errstate(invalid="ignore"):
-        unseen = np.flatnonzero(
-            (before <= settings.verdict.noise_gap)
-            & (after > settings.verdict.noise_gap)
-            & (gains <= -settings.verdict.cross_channel_gain)
-        )
-    if unseen.size:
-        channel = int(unseen[np.argmax(after[unseen])])
-        return ChannelCheck(False, channel, "predicts_unseen", float(after[channel]))
+    unseen = predicts_unseen(evidence, rules.thresholds)
+    if unseen is not None:
+        return unseen
     if effect_family(score.effect).one_channel:
         return ChannelCheck(True)
-    finite = np.nan_to_num(gains, nan=0.0)
-    strongest = int(np.argmax(finite))
-    others = float(np.sum(np.maximum(np.delete(finite, strongest), 0.0)))
-    # where the rig shows a gap on that channel alone, the others must carry the evidence to name an effect
-    # by themselves: a refit of the nominal parameters alone gains a few nats on a clean channel
-    with np.errstate(invalid="ignore"):
-        alone = bool(before[strongest] > settings.verdict.noise_gap) and bool(
-            np.all(np.nan_to_num(np.delete(before, strongest), nan=0.0) <= settings.verdict.noise_gap)
-        )
-    needed = settings.verdict.score_threshold if alone else settings.verdict.cross_channel_gain
-    if others < needed:
-        reach = np.asarray(score.channel_reach, dtype=float)
-        # the others' silence counts against the effect only where they could have seen it
-        reach_others = float(np.sum(np.delete(reach, strongest))) if reach.size == gains.size else math.nan
-        return ChannelCheck(False, strongest, "one_channel", float(finite[strongest]), others, needed, reach_others)
-    return ChannelCheck(True)
+    confined = confined_to_one(evidence, rules.thresholds)
+    return ChannelCheck(True) if confined is None else confined
 
 
 def inconsistency_reason(score: CandidateScore, check: ChannelCheck, channels: tuple[str, ...] | list[str]) -> str:
@@ -245,7 +302,7 @@ def inconsistent_decision(
     best: CandidateScore,
     nominal_gap: float,
     borderline: tuple[dict[str, Any], ...],
-    settings: DiagnosisSettings,
+    rules: VerdictRules,
     channels: ChannelCheck,
     *,
     explains: bool = False,
@@ -259,27 +316,27 @@ def inconsistent_decision(
     """
     why = inconsistency_reason(best, channels, best.channels)
     confined = channels.kind == "one_channel" and channels.channel is not None and channels.channel < len(best.channels)
-    if confined and explains and channels.unseen and nominal_gap > settings.verdict.noise_gap:
+    if confined and explains and channels.unseen and nominal_gap > rules.thresholds.noise_gap:
         ambiguity = ambiguity_of(best, channels)
         return Decision(
             "inconclusive",
-            f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.verdict.noise_gap:g}); "
+            f"the nominal model's held-out gap is {nominal_gap:.2f} (above {rules.thresholds.noise_gap:g}); "
             f"{ambiguous_reason(best, ambiguity)}",
             borderline=borderline,
             one_channel=ambiguity.channel,
             ambiguity=ambiguity,
         )
-    if nominal_gap <= settings.verdict.noise_gap:
+    if nominal_gap <= rules.thresholds.noise_gap:
         return Decision(
             "none",
             f"the nominal model's held-out gap {nominal_gap:.2f} is within noise "
-            f"(threshold {settings.verdict.noise_gap:g}); "
+            f"(threshold {rules.thresholds.noise_gap:g}); "
             f"{why}",
             borderline=borderline,
         )
     return Decision(
         "unexplained",
-        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {settings.verdict.noise_gap:g}); {why}",
+        f"the nominal model's held-out gap is {nominal_gap:.2f} (above {rules.thresholds.noise_gap:g}); {why}",
         borderline=borderline,
         one_channel=best.channels[channels.channel] if confined and channels.channel is not None else "",
     )
@@ -310,6 +367,9 @@ def one_channel_character(channel: str, families: Sequence[Mapping[str, Any]]) -
 __all__ = [
     "SENSOR_ARTEFACTS",
     "ChannelCheck",
+    "ChannelEvidence",
+    "predicts_unseen",
+    "confined_to_one",
     "check_channels",
     "inconsistency_reason",
     "ambiguity_of",
