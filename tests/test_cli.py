@@ -52,14 +52,17 @@ def leftovers(out: Path) -> list[Path]:
 
 
 @pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory) -> Path:
-    """The bundled smoke study run once by name through the real command line, into a new nested folder."""
-    cwd = tmp_path_factory.mktemp("smoke")
-    out = Path("results") / "deeper" / "smoke"
-    completed = uqgear("run", "smoke", "--out", out, cwd=cwd)
+def smoke_run(smoke_study_run) -> Path:
+    """The bundled smoke study run by name through the real command line, into a new nested folder.
+
+    ``uqgear run smoke --out results/deeper/smoke`` from an empty folder (tests/conftest.py: one run
+    serves every test file that reads it).
+    """
+    completed, out = smoke_study_run
     assert completed.returncode == 0, completed.stderr
-    assert f"results written to {out}" in completed.stdout
-    return cwd / out
+    assert completed.args[1:] == ["run", "smoke", "--out", str(Path("results") / "deeper" / "smoke")]
+    assert f"results written to {Path('results') / 'deeper' / 'smoke'}" in completed.stdout
+    return out
 
 
 # ---------------------------------------------------------------------------- end to end

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.cli import main
 from uqgear.report.calibration_report import calibration_findings
 from uqgear.report.diagnosis_report import diagnosis_findings
 from uqgear.report.finding import headline_html
@@ -323,9 +322,10 @@ def check_page_order(text: str) -> None:
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("headline") / "smoke"
-    assert main(["run", "smoke", "--out", str(folder), "--quiet"]) == 0
+def smoke(smoke_study_run):
+    """The smoke study's results and report, from its run through the command line (tests/conftest.py)."""
+    completed, folder = smoke_study_run
+    assert completed.returncode == 0, completed.stderr
     return load_results(folder), (folder / "report.html").read_text()
 
 
