@@ -319,19 +319,11 @@ def test_same_seed_gives_the_same_numbers():
 # ---------------------------------------------------------------------------- rig data commands
 
 
-def _uqgear(*args, cwd=None):
-    import subprocess
-    import sys
-
-    return subprocess.run([sys.executable, "-m", "uqgear", *args], capture_output=True, text=True, cwd=cwd,
-                          env={**__import__("os").environ, "UQGEAR_PROGRESS": "0"})
-
-
 def _cli(capsys, *args) -> subprocess.CompletedProcess:
-    """The command line run in this process (bad input: what is refused, not the interpreter's start).
+    """The command line run in this process: what it does and refuses, not the interpreter's start.
 
-    Its exit status, standard output and error as a finished process, like :func:`_uqgear`'s;
-    test_user_mistake_exits_2_with_one_line_and_no_output checks the same through a real process.
+    Its exit status, standard output and error as a finished process, like :func:`uqgear`'s
+    (test_user_mistake_exits_2_with_one_line_and_no_output and the smoke run go through a real process).
     """
     capsys.readouterr()
     try:
@@ -386,14 +378,14 @@ def test_wrong_pitch_classes_are_rejected_before_any_work(tmp_path, capsys, word
 
 
 @pytest.mark.slow
-def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
+def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path, capsys):
     import json
 
     rig = tmp_path / "campaign.nc"
-    made = _uqgear("synth-rig", "--out", str(rig), "--true", "mesh_stiffness_scale=1.05", "--true", "k1=1.1e9",
+    made = _cli(capsys, "synth-rig", "--out", str(rig), "--true", "mesh_stiffness_scale=1.05", "--true", "k1=1.1e9",
                    "--true", "zeta_mesh=0.06", "--seed", "4")
     assert made.returncode == 0, made.stderr
-    done = _uqgear("calibrate", str(rig), "--out", str(tmp_path / "cal"), "--params", "mesh_stiffness_scale",
+    done = _cli(capsys, "calibrate", str(rig), "--out", str(tmp_path / "cal"), "--params", "mesh_stiffness_scale",
                    "zeta_mesh", "ste_amplitude", "k1", "k2")
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "cal" / "calibration.json").read_text())
