@@ -25,7 +25,7 @@ space = uqgear.ParameterSpace({"adhesion_torque": uqgear.Interval(lower, upper)}
 model = uqgear.BatchEvaluator(
     design, fixed={"drive_torque": 7000.0}, n_periods=400, keep_periods=150
 )
-speeds = {"pinion_speed": np.arange(1000.0, 6001.0, 250.0)}
+speeds = {"pinion_speed": np.arange(1000.0, 6001.0, 125.0)}
 analysis = uqgear.IntervalAnalysis(
     "chebyshev",
     order=4,
