@@ -383,10 +383,10 @@ def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path, capsys):
 
     rig = tmp_path / "campaign.nc"
     made = _cli(capsys, "synth-rig", "--out", str(rig), "--true", "mesh_stiffness_scale=1.05", "--true", "k1=1.1e9",
-                   "--true", "zeta_mesh=0.06", "--seed", "4")
+                "--true", "zeta_mesh=0.06", "--seed", "4")
     assert made.returncode == 0, made.stderr
     done = _cli(capsys, "calibrate", str(rig), "--out", str(tmp_path / "cal"), "--params", "mesh_stiffness_scale",
-                   "zeta_mesh", "ste_amplitude", "k1", "k2")
+                "zeta_mesh", "ste_amplitude", "k1", "k2")
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "cal" / "calibration.json").read_text())
     assert result["converged"]
