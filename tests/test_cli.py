@@ -52,12 +52,16 @@ def leftovers(out: Path) -> list[Path]:
 
 
 @pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory) -> Path:
-    """The smoke study run once through the real command line."""
-    out = tmp_path_factory.mktemp("smoke") / "results"
-    completed = uqgear("run", SMOKE, "--out", out)
+def smoke_run(smoke_study_run) -> Path:
+    """The bundled smoke study run by name through the real command line, into a new nested folder.
+
+    ``uqgear run smoke --out results/deeper/smoke`` from an empty folder (tests/conftest.py: one run
+    serves every test file that reads it).
+    """
+    completed, out = smoke_study_run
     assert completed.returncode == 0, completed.stderr
-    assert f"results written to {out}" in completed.stdout
+    assert completed.args[1:] == ["run", "smoke", "--out", str(Path("results") / "deeper" / "smoke")]
+    assert f"results written to {Path('results') / 'deeper' / 'smoke'}" in completed.stdout
     return out
 
 
@@ -315,12 +319,19 @@ def test_same_seed_gives_the_same_numbers():
 # ---------------------------------------------------------------------------- rig data commands
 
 
-def _uqgear(*args, cwd=None):
-    import subprocess
-    import sys
+def _cli(capsys, *args) -> subprocess.CompletedProcess:
+    """The command line run in this process: what it does and refuses, not the interpreter's start.
 
-    return subprocess.run([sys.executable, "-m", "uqgear", *args], capture_output=True, text=True, cwd=cwd,
-                          env={**__import__("os").environ, "UQGEAR_PROGRESS": "0"})
+    Its exit status, standard output and error as a finished process, like :func:`uqgear`'s
+    (test_user_mistake_exits_2_with_one_line_and_no_output and the smoke run go through a real process).
+    """
+    capsys.readouterr()
+    try:
+        status = main([str(argument) for argument in args])
+    except SystemExit as stop:   # argparse's refusals
+        status = stop.code
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(list(args), status, out, err)
 
 
 @pytest.mark.parametrize("args, message", [
@@ -332,19 +343,19 @@ def _uqgear(*args, cwd=None):
     (["synth-rig", "--out", "{tmp}/missing/x.nc"], "does not exist"),
     (["calibrate", "{tmp}/none.nc", "--out", "{tmp}/cal"], "rig data file not found"),
 ])
-def test_rig_commands_reject_bad_input(tmp_path, args, message):
-    completed = _uqgear(*[a.format(tmp=tmp_path) for a in args])
+def test_rig_commands_reject_bad_input(tmp_path, capsys, args, message):
+    completed = _cli(capsys, *[a.format(tmp=tmp_path) for a in args])
     assert completed.returncode == 2
     assert message.replace("\\", "") in completed.stderr or __import__("re").search(message, completed.stderr)
     assert len(completed.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x.nc").exists() and not (tmp_path / "cal").exists()
 
 
-def test_calibrate_rejects_a_file_that_is_not_rig_data(tmp_path):
+def test_calibrate_rejects_a_file_that_is_not_rig_data(tmp_path, capsys):
     import xarray as xr
 
     xr.Dataset({"a": ("t", [1.0])}).to_netcdf(tmp_path / "other.nc")
-    completed = _uqgear("calibrate", str(tmp_path / "other.nc"), "--out", str(tmp_path / "cal"))
+    completed = _cli(capsys, "calibrate", str(tmp_path / "other.nc"), "--out", str(tmp_path / "cal"))
     assert completed.returncode == 2
     assert "conventions" in completed.stderr
     assert not (tmp_path / "cal").exists()
@@ -357,9 +368,9 @@ def test_calibrate_rejects_a_file_that_is_not_rig_data(tmp_path):
     (["9", "6"], "uqgear: error: pitch_classes: expected 1 <= lowest <= highest <= 11; got (9, 6)"),
 ])
 @pytest.mark.parametrize("command", ["calibrate", "diagnose"])
-def test_wrong_pitch_classes_are_rejected_before_any_work(tmp_path, words, message, command):
+def test_wrong_pitch_classes_are_rejected_before_any_work(tmp_path, capsys, words, message, command):
     rig = Path(__file__).resolve().parent.parent / "data" / "rig" / "healthy.nc"
-    completed = _uqgear(command, str(rig), "--out", str(tmp_path / "out"), "--pitch-classes", *words)
+    completed = _cli(capsys, command, str(rig), "--out", str(tmp_path / "out"), "--pitch-classes", *words)
     assert completed.returncode == 2
     assert completed.stderr.strip() == message
     assert not (tmp_path / "out").exists()
@@ -367,15 +378,15 @@ def test_wrong_pitch_classes_are_rejected_before_any_work(tmp_path, words, messa
 
 
 @pytest.mark.slow
-def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
+def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path, capsys):
     import json
 
     rig = tmp_path / "campaign.nc"
-    made = _uqgear("synth-rig", "--out", str(rig), "--true", "mesh_stiffness_scale=1.05", "--true", "k1=1.1e9",
-                   "--true", "zeta_mesh=0.06", "--seed", "4")
+    made = _cli(capsys, "synth-rig", "--out", str(rig), "--true", "mesh_stiffness_scale=1.05", "--true", "k1=1.1e9",
+                "--true", "zeta_mesh=0.06", "--seed", "4")
     assert made.returncode == 0, made.stderr
-    done = _uqgear("calibrate", str(rig), "--out", str(tmp_path / "cal"), "--params", "mesh_stiffness_scale",
-                   "zeta_mesh", "ste_amplitude", "k1", "k2")
+    done = _cli(capsys, "calibrate", str(rig), "--out", str(tmp_path / "cal"), "--params", "mesh_stiffness_scale",
+                "zeta_mesh", "ste_amplitude", "k1", "k2")
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "cal" / "calibration.json").read_text())
     assert result["converged"]
@@ -395,9 +406,9 @@ def test_synth_rig_then_calibrate_recovers_the_truth(tmp_path):
      "workers: expected an integer >= 1; got 0"),
     (["blindtest", "--out", "{tmp}/d", "--workers", "0"], "workers: expected an integer >= 1; got 0"),
 ])
-def test_diagnosis_commands_reject_bad_input(tmp_path, args, message):
+def test_diagnosis_commands_reject_bad_input(tmp_path, capsys, args, message):
     root = Path(__file__).resolve().parent.parent
-    completed = _uqgear(*[a.format(tmp=tmp_path, root=root) for a in args])
+    completed = _cli(capsys, *[a.format(tmp=tmp_path, root=root) for a in args])
     assert completed.returncode == 2
     assert message in completed.stderr
     assert len(completed.stderr.strip().splitlines()) == 1
@@ -426,11 +437,12 @@ def test_examples_lists_and_copies_the_bundled_studies(tmp_path, capsys):
     assert (tmp_path / "smoke.yaml").is_file()
 
 
-def test_a_bundled_study_runs_by_name_into_a_new_nested_folder(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    out = Path("results") / "deeper" / "smoke"
-    assert main(["run", "smoke", "--out", str(out), "--quiet"]) == 0
-    assert (tmp_path / out / "report.html").is_file()
+@pytest.mark.slow
+def test_a_bundled_study_runs_by_name_into_a_new_nested_folder(smoke_run):
+    # the module's smoke run: "smoke" by name, into results/deeper/smoke relative to an empty folder
+    assert smoke_run.relative_to(smoke_run.parents[2]) == Path("results") / "deeper" / "smoke"
+    assert (smoke_run / "report.html").is_file()
+    assert sorted(path.name for path in smoke_run.parents[2].iterdir()) == ["results"]
 
 
 def test_no_output_folders_are_left_behind_by_an_invalid_study(tmp_path, capsys):

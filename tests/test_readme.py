@@ -1,5 +1,8 @@
 """The README as a new user follows it: its set-up command on a fresh clone, its examples as written.
 
+The main job's run also serves the check that its report's headline is true of its
+result files (the headline checks themselves are in tests/test_report_headline.py).
+
 Commands and code are read from README.md itself, so the README cannot drift
 from what is tested.
 """
@@ -15,6 +18,10 @@ from pathlib import Path
 
 import pytest
 import xarray as xr
+from test_report_headline import check_every_finding, check_page_order
+
+from uqgear.report.finding import headline_html
+from uqgear.report.headline import headline_findings
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
@@ -95,11 +102,14 @@ def _carry_kernel_cache(clone: Path) -> int:
     return carried
 
 
-def test_the_first_setup_command_works_on_a_fresh_clone(tmp_path):
+@pytest.fixture(scope="module")
+def main_job(tmp_path_factory) -> tuple[subprocess.CompletedProcess, Path]:
+    """The README's main job run once on a fresh clone: the process and its output folder."""
     command = _setup_command(1)
     install, _, main_job = command.partition(" && ")
     assert install.startswith("pip install"), command
     assert main_job.startswith("uqgear run "), command
+    tmp_path = tmp_path_factory.mktemp("readme")
     clone = _fresh_clone(tmp_path / "clone")
     assert not (clone / "results").exists()
     arguments = main_job.split()[1:]
@@ -108,14 +118,42 @@ def test_the_first_setup_command_works_on_a_fresh_clone(tmp_path):
         environment.pop("NUMBA_CACHE_DIR")
     completed = subprocess.run([sys.executable, "-m", "uqgear", *arguments], cwd=clone,
                                env=environment, capture_output=True, text=True, timeout=1200)
+    return completed, clone / arguments[arguments.index("--out") + 1]
+
+
+def test_the_first_setup_command_works_on_a_fresh_clone(main_job):
+    completed, out = main_job
     assert completed.returncode == 0, completed.stderr[-3000:]
-    out = clone / arguments[arguments.index("--out") + 1]
     report = (out / "report.html").read_text()
     assert "t2_envelope" in report and report.count("data:image/png;base64,") >= 3
     results = sorted(out.glob("*.nc"))
     assert len(results) >= 3
     with xr.open_dataset(results[0]) as ds:
         assert ds.attrs["numba_target_cpu"]
+
+
+def test_t2_envelope_headline_is_true_of_its_netcdf_files(main_job):
+    """The main job's headline, each statement recomputed from its result files (tests/test_report_headline.py)."""
+    completed, folder = main_job
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    text = (folder / "report.html").read_text()
+    check_page_order(text)
+    results = [xr.open_dataset(path) for path in sorted(folder.glob("*.nc"))]
+    try:
+        topics = check_every_finding(results)
+        assert topics[:6] == ["rating", "rating", "worst_load", "separation", "separation", "back_contact"]
+        assert "regimes" in topics and topics.count("sobol") == 2
+        wet, dry = (finding for finding in headline_findings(results) if finding.topic == "separation")
+        assert wet.text.startswith("Wet rail (T2 = 21.15 kN m") and dry.text.startswith("Dry rail (T2 = 46.52 kN m")
+        # on dry rail the teeth separate over a narrower band of speeds than on wet rail
+        (wet_low, wet_high), = wet.facts["ranges"]
+        (dry_low, dry_high), = dry.facts["ranges"]
+        assert wet_low < dry_low and dry_high < wet_high
+        for finding in headline_findings(results):
+            assert headline_html([finding]).split("<li>")[1].split("</li>")[0] in text
+    finally:
+        for ds in results:
+            ds.close()
 
 
 def test_the_python_examples_run_as_written(tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
+import shutil
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -16,7 +17,6 @@ from uqgear.common.errors import UqgearError
 from uqgear.report.findings import regime_findings
 from uqgear.report.presentation import axis_label
 from uqgear.report.study_report import REPORT_NAME, build_report, load_results, write_report
-from uqgear.study.running import run_analyses as run_study
 from uqgear.study.schema import load_study
 from uqgear.study.variables import VARIABLES
 from uqgear.uq.results import save_result
@@ -67,11 +67,13 @@ class ReportParser(HTMLParser):
 
 
 @pytest.fixture(scope="module")
-def smoke_report(tmp_path_factory) -> tuple[Path, str]:
-    """The smoke study run in-process, and its report."""
+def smoke_report(tmp_path_factory, smoke_study_run) -> tuple[Path, str]:
+    """The smoke study's results (one run serves every test file, tests/conftest.py), and their report."""
+    completed, results = smoke_study_run
+    assert completed.returncode == 0, completed.stderr
     folder = tmp_path_factory.mktemp("report")
-    study = load_study(STUDIES / "smoke.yaml")
-    run_study(study, folder, show_progress=False)
+    for path in results.glob("*.nc"):
+        shutil.copy2(path, folder)
     path = write_report(folder, dpi=60)
     return folder, path.read_text()
 

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from uqgear.cli import main
 from uqgear.report.calibration_report import calibration_findings
 from uqgear.report.diagnosis_report import diagnosis_findings
 from uqgear.report.finding import headline_html
@@ -323,9 +322,10 @@ def check_page_order(text: str) -> None:
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("headline") / "smoke"
-    assert main(["run", "smoke", "--out", str(folder), "--quiet"]) == 0
+def smoke(smoke_study_run):
+    """The smoke study's results and report, from its run through the command line (tests/conftest.py)."""
+    completed, folder = smoke_study_run
+    assert completed.returncode == 0, completed.stderr
     return load_results(folder), (folder / "report.html").read_text()
 
 
@@ -545,28 +545,4 @@ def test_a_study_with_calibration_and_diagnosis_results_gets_their_headline():
                                 "needed; within noise.")
 
 
-# ---------------------------------------------------------------------------- the main job
-
-
-@pytest.mark.slow
-def test_t2_envelope_headline_is_true_of_its_netcdf_files(tmp_path):
-    folder = tmp_path / "t2_envelope"
-    assert main(["run", "t2_envelope", "--out", str(folder), "--quiet"]) == 0
-    text = (folder / "report.html").read_text()
-    check_page_order(text)
-    results = [xr.open_dataset(path) for path in sorted(folder.glob("*.nc"))]
-    try:
-        topics = check_every_finding(results)
-        assert topics[:6] == ["rating", "rating", "worst_load", "separation", "separation", "back_contact"]
-        assert "regimes" in topics and topics.count("sobol") == 2
-        wet, dry = (finding for finding in headline_findings(results) if finding.topic == "separation")
-        assert wet.text.startswith("Wet rail (T2 = 21.15 kN m") and dry.text.startswith("Dry rail (T2 = 46.52 kN m")
-        # on dry rail the teeth separate over a narrower band of speeds than on wet rail
-        (wet_low, wet_high), = wet.facts["ranges"]
-        (dry_low, dry_high), = dry.facts["ranges"]
-        assert wet_low < dry_low and dry_high < wet_high
-        for finding in headline_findings(results):
-            assert headline_html([finding]).split("<li>")[1].split("</li>")[0] in text
-    finally:
-        for ds in results:
-            ds.close()
+# the main job's headline (the t2_envelope study) is checked on the README's run of it: tests/test_readme.py
