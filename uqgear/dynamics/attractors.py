@@ -43,7 +43,7 @@ import xarray as xr
 from ..common.errors import UqgearError
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_batch
-from .filled_batches import FilledBatches
+from .filled_batches import FilledBatches, join_samples
 from .hausdorff import hausdorff
 from .regimes import classify_batch, period_labels
 from .same_response import COMPARED_FRACTIONS, COMPARED_QOIS, copies_of_first, same_response, self_same
@@ -336,7 +336,7 @@ def _sweep_runs(
         step_directions += directions
     # the steps joined once, each direction's runs taken out once: an isel per step and direction costs more
     # than the small batches' runs
-    joined = _joined(steps) if steps else None
+    joined = join_samples(steps) if steps else None
     out = {}
     for direction in ("up", "down"):
         # the first point of a sweep that enters from nothing is its rest run
@@ -347,15 +347,8 @@ def _sweep_runs(
             assert joined is not None
             parts.append((np.asarray(step_samples, dtype=int)[mine], joined.isel(sample=mine)))
         order = np.concatenate([indices for indices, _ in parts])
-        out[direction] = _joined([part for _, part in parts]).isel(sample=np.argsort(order, kind="stable"))
+        out[direction] = join_samples([part for _, part in parts]).isel(sample=np.argsort(order, kind="stable"))
     return out
-
-
-def _joined(parts: Sequence[xr.Dataset]) -> xr.Dataset:
-    """Batches of runs of one model joined along ``sample``."""
-    return xr.concat(
-        parts, dim="sample", coords="minimal", compat="override", join="override", combine_attrs="drop_conflicts"
-    )
 
 
 def up_down_sweeps(

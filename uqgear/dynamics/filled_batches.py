@@ -12,7 +12,7 @@ those of running them apart.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import xarray as xr
 
@@ -20,7 +20,15 @@ from ..physics._lane_tables import LANES
 from ..physics.threads import default_threads
 
 
-def _joined(parts: list[xr.Dataset]) -> xr.Dataset:
+def join_samples(parts: Sequence[xr.Dataset]) -> xr.Dataset:
+    """Batches of runs of one model joined along ``sample`` (coordinates and attributes of the first where they
+    differ: the batches share them by construction).
+
+    Examples
+    --------
+    >>> join_samples([xr.Dataset({"x": ("sample", [1.0])}), xr.Dataset({"x": ("sample", [2.0, 3.0])})])["x"].values
+    array([1., 2., 3.])
+    """
     return xr.concat(
         parts, dim="sample", coords="minimal", compat="override", join="override", combine_attrs="drop_conflicts"
     )
@@ -71,7 +79,7 @@ class FilledBatches:
         if take <= 0:
             return self.evaluate(samples)
         chosen = self.riders.isel(sample=slice(self._taken, self._taken + take))
-        result = self.evaluate(_joined([samples, chosen]))
+        result = self.evaluate(join_samples([samples, chosen]))
         self._parts.append(result.isel(sample=slice(n, None)))
         self._taken += take
         return result.isel(sample=slice(0, n))
@@ -82,7 +90,7 @@ class FilledBatches:
         if left:
             self._parts.append(self.evaluate(self.riders.isel(sample=slice(self._taken, None))))
             self._taken += left
-        return self._parts[0] if len(self._parts) == 1 else _joined(self._parts)
+        return self._parts[0] if len(self._parts) == 1 else join_samples(self._parts)
 
 
-__all__ = ["FilledBatches"]
+__all__ = ["FilledBatches", "join_samples"]

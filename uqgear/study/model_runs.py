@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from ..dynamics.filled_batches import join_samples
 from ..uq.runner import Runner
 
 
@@ -89,18 +90,7 @@ class RememberedRuns:
         places = np.array([self._where[key] for key in keys], dtype=np.int64).reshape(len(keys), 2)
         used = np.unique(places[:, 0])
         pieces = [self._parts[part].isel(sample=places[places[:, 0] == part, 1]) for part in used]
-        joined = (
-            pieces[0]
-            if len(pieces) == 1
-            else xr.concat(
-                pieces,
-                dim="sample",
-                coords="minimal",
-                compat="override",
-                join="override",
-                combine_attrs="drop_conflicts",
-            )
-        )
+        joined = pieces[0] if len(pieces) == 1 else join_samples(pieces)
         order = np.concatenate([np.nonzero(places[:, 0] == part)[0] for part in used])
         out = joined.isel(sample=np.argsort(order, kind="stable"))
         # the sample labels of this call (the inputs are equal, bit for bit, by the key)
