@@ -80,10 +80,13 @@ class DiscrepancyFactors:
     def __call__(self, points: Mapping[str, np.ndarray], draws: int, rng: np.random.Generator) -> np.ndarray:
         speed = np.asarray(points["pinion_speed"], dtype=float)
         torque = np.asarray(points.get("drive_torque", np.full(speed.size, self.drive_torque)), dtype=float)
-        if self.beta is not None and self.beta.shape[0] == draws:
-            delta = self.discrepancy.at_draws(self.beta, speed, torque).sel(channel=DISCREPANCY_FEATURE[0])
-        else:
+        if self.beta is None:
             delta = self.discrepancy.at(speed, torque, draws, rng).sel(channel=DISCREPANCY_FEATURE[0])
+        elif self.beta.shape[0] != draws:
+            # the coefficients are rows of the posterior the draws come from: a mismatch is a bug, not a fallback
+            raise RuntimeError(f"internal: {self.beta.shape[0]} discrepancy draws for {draws} posterior draws")
+        else:
+            delta = self.discrepancy.at_draws(self.beta, speed, torque).sel(channel=DISCREPANCY_FEATURE[0])
         values = np.asarray(delta.sel(harmonic=DISCREPANCY_FEATURE[1]).values, dtype=float)  # (draw, point)
         return np.exp(np.nan_to_num(values))
 
