@@ -52,7 +52,6 @@ def healthy_case():
     return prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
 
 
-
 @contextlib.contextmanager
 def _exclusive(lock: Path):
     """Hold ``lock`` against the other test processes."""
