@@ -96,10 +96,20 @@ def test_damage_is_the_service_hours_times_the_damage_rates(rating):
     assert (rating["root_stress_peak"].sel(bound="upper") >= rating["root_stress_peak"].sel(bound="lower")).all()
 
 
+def test_damage_over_attractors_is_recorded_and_equals_the_runs_from_rest_where_one_response(rating):
+    assert rating.attrs["damage_over_attractors"] == "guided"
+    count = rating["history_attractor_count"]
+    assert count.dims == ("history_torque", "pinion_speed") and (count >= 1).all()
+    assert rating.attrs["history_coexisting_points"] == int((count > 1).sum())
+    assert rating["damage_rate_start"].dims == ("gear", "mode", "history_torque", "pinion_speed")
+    if int((count > 1).sum()) == 0:
+        np.testing.assert_array_equal(rating["damage"].values, rating["damage_from_rest"].values)
+        assert (rating["damage_rate_start"] == "rest").all()
+    assert (rating["damage"].sel(bound="upper") >= rating["damage_from_rest"].sel(bound="upper")).all()
+
+
 def test_damage_rate_is_the_rainflow_count_of_a_one_sample_run():
     """The batch's damage rate at one (T2, speed) against an independent Miner sum over a one-sample run."""
-    import rainflow
-
     from uqgear.dynamics.tooth_loads import tooth_stresses
     from uqgear.study.rating_histories import HISTORY_SAMPLES, history_damage
     from uqgear.study.settings import SimulationSettings
@@ -121,14 +131,23 @@ def test_damage_rate_is_the_rainflow_count_of_a_one_sample_run():
     )
     static = static_rating(design, 7000.0, speed, weak, dynamic_factor=1.0)
     setup = uqgear.build_model(design, speed, 7000.0, t2)
-    stresses = tooth_stresses(
-        setup, static, run["x"].values, first_period=40, samples_per_period=HISTORY_SAMPLES
-    )
+    stresses = tooth_stresses(setup, static, run["x"].values, first_period=40, samples_per_period=HISTORY_SAMPLES)
+    expected = _miner_rates(design, static, stresses, speed)
+    np.testing.assert_allclose(result.rates[:, :, 0, 0], expected, rtol=1e-9, atol=1e-30)
+    assert result.rates[0, 0, 0, 0] > 0.0 and result.rates[0, 1, 0, 0] > 0.0
+    assert result.peaks[0, 0, 1, 0, 0] == pytest.approx(float(stresses["root_stress_peak"][0]), rel=1e-12)
+
+
+def _miner_rates(design, static, stresses, speed):
+    """(gear, mode) damage per hour of one run's stress tables: rainflow (the ``rainflow`` package) and Basquin
+    between the S-N curve's knees, written out here."""
+    import rainflow
+
+    rates = np.zeros((2, 2))
     for g, per_revolution in enumerate((1.0, design.z1 / design.z2)):
         for m, (name, curve) in enumerate((("root", static.root_curve[g]), ("contact", static.contact_curve[g]))):
             table = stresses[f"{name}_stress"].values[g]
             history = np.concatenate(([0.0], table.ravel(), [0.0]))
-            # Basquin between the knees of the curve (log-log straight), written out here
             n_k, s_k = np.asarray(curve.cycles), np.asarray(curve.stress)
             total = 0.0
             for rng, mean, count, _, _ in rainflow.extract_cycles(history):
@@ -139,10 +158,65 @@ def test_damage_rate_is_the_rainflow_count_of_a_one_sample_run():
                 slope = np.log(n_k[i + 1] / n_k[i]) / np.log(s_k[i] / s_k[i + 1])
                 life = 1.0 if peak > s_k[0] else n_k[i] * (s_k[i] / peak) ** slope
                 total += count / life
-            expected = total / table.shape[0] * 60.0 * speed * per_revolution
-            assert result.rates[g, m, 0, 0] == pytest.approx(expected, rel=1e-9, abs=1e-30)
-    assert result.rates[0, 0, 0, 0] > 0.0 and result.rates[0, 1, 0, 0] > 0.0
-    assert result.root_peak[0, 0, 0] == pytest.approx(float(stresses["root_stress_peak"][0]), rel=1e-12)
+            rates[g, m] = total / table.shape[0] * 60.0 * speed * per_revolution
+    return rates
+
+
+def test_damage_over_two_coexisting_attractors_is_the_worst_ones_count():
+    """A point with two attractors (3600 rpm on wet rail): the upper damage rate is the greater of the two
+    attractors' rainflow counts, each over a history run in the test from that attractor's first start."""
+    from uqgear.dynamics.attractors import MultiStart, MultiStartSearch, StartedEvaluator
+    from uqgear.dynamics.tooth_loads import tooth_stresses
+    from uqgear.physics.integration import samples_from_mapping
+    from uqgear.study.rating_histories import HISTORY_SAMPLES, history_damage
+    from uqgear.study.settings import SimulationSettings
+
+    design = uqgear.load_design("locomotive")
+    speed, t2, n_periods, keep = 3600.0, 21150.0, 1500, 300
+    simulation = SimulationSettings(n_periods=n_periods, keep_periods=keep)
+    # the down-sweep from 3700 rpm carries the second branch to 3600 rpm
+    samples = samples_from_mapping(
+        {"pinion_speed": [speed, 3700.0], "adhesion_torque": [t2] * 2, "drive_torque": [7000.0] * 2}
+    )
+    search = MultiStartSearch(MultiStart(seeded=0)).fit(
+        StartedEvaluator(design, {"n_periods": n_periods, "keep_periods": keep}), samples
+    )
+    labels = [str(label) for label in search.attractors_["first_start"].values[0] if str(label)]
+    assert len(labels) == 2 and labels[0] == "rest"
+    starts = [(label, search.start_states_[label][0]) for label in labels]
+    weak = RatingSettings.from_mapping({"material": {"sigma_Flim": 1.0e8, "sigma_Hlim": 4.0e8}})
+    result = history_damage(
+        design, simulation, {"drive_torque": 7000.0}, [speed], [t2], weak, starts=lambda _: [starts]
+    )
+    assert int(result.attractor_count[0, 0]) == 2 and result.runs == 2
+    static = static_rating(design, 7000.0, speed, weak, dynamic_factor=1.0)
+    setup = uqgear.build_model(design, speed, 7000.0, t2)
+    independent = []
+    for label, state in starts:
+        run = uqgear.simulate(
+            design,
+            speed,
+            7000.0,
+            t2,
+            n_periods=n_periods,
+            keep_periods=keep,
+            samples_per_period=HISTORY_SAMPLES,
+            steps_per_mode=simulation.steps_per_mode,
+            initial_state=None if label == "rest" else state,
+        )
+        stresses = tooth_stresses(
+            setup, static, run["x"].values, first_period=n_periods - keep, samples_per_period=HISTORY_SAMPLES
+        )
+        independent.append(_miner_rates(design, static, stresses, speed))
+    independent = np.stack(independent)  # (attractor, gear, mode)
+    assert not np.allclose(independent[0], independent[1], rtol=1e-3)  # two responses, two damages
+    np.testing.assert_allclose(result.rates[:, :, 0, 0], independent[0], rtol=1e-9, atol=1e-30)
+    np.testing.assert_allclose(result.rate_bounds[:, :, 1, 0, 0], independent.max(axis=0), rtol=1e-9, atol=1e-30)
+    np.testing.assert_allclose(result.rate_bounds[:, :, 0, 0, 0], independent.min(axis=0), rtol=1e-9, atol=1e-30)
+    assert (result.rate_bounds[:, :, 1, 0, 0] >= result.rates[:, :, 0, 0]).all()
+    assert result.rate_bounds[0, 0, 1, 0, 0] > result.rates[0, 0, 0, 0]  # the pinion root: the second branch's
+    worst = np.asarray(labels)[independent.argmax(axis=0)]
+    assert (result.worst_start[:, :, 0, 0] == worst).all()
 
 
 BAD = [

@@ -34,9 +34,14 @@ _ONE_SAMPLE_COLUMNS = [HISTORY_COLUMNS.index(name) for name in STATE_HISTORY_COL
 
 
 def integrate_histories(
-    setups: Sequence[ModelSetup], n_periods: int, keep_periods: int, samples_per_period: int, steps_per_mode: int
+    setups: Sequence[ModelSetup],
+    n_periods: int,
+    keep_periods: int,
+    samples_per_period: int,
+    steps_per_mode: int,
+    states: np.ndarray | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Histories and Poincare states of several runs, each from static equilibrium.
+    """Histories and Poincare states of several runs, each from static equilibrium or a given state.
 
     Parameters
     ----------
@@ -48,6 +53,9 @@ def integrate_histories(
         History samples per mesh period.
     steps_per_mode : int
         RK4 steps per period of the highest natural frequency.
+    states : ndarray, optional
+        (runs, 6) start states (those of ``integrate_fast``'s ``state0``); a row of NaN, or none
+        given, starts that run at its static equilibrium.
 
     Returns
     -------
@@ -75,10 +83,14 @@ def integrate_histories(
     if n == 0:
         return []
     steps = np.array([steps_per_period(s, steps_per_mode, multiple_of=samples_per_period) for s in setups])
+    starts = np.stack([s.static_state() for s in setups])
+    if states is not None:
+        given = np.all(np.isfinite(states), axis=1)
+        starts[given] = np.asarray(states, dtype=float)[given]
     history = np.empty((n, STATE_CHANNELS, keep_periods * samples_per_period))
     poincare = np.empty((n, keep_periods, 6))
     batch = QoiBatch(
-        kernel_inputs(setups, np.stack([s.static_state() for s in setups])),
+        kernel_inputs(setups, starts),
         steps,
         int(n_periods),
         int(keep_periods),
@@ -98,10 +110,10 @@ def integrate_histories(
     ]
     for i in rest:
         setup = setups[i]
-        one, states, _ = integrate_fast(
-            setup, n_periods, keep_periods, samples_per_period, steps_per_mode, setup.static_state()
+        one, poincare_i, _ = integrate_fast(
+            setup, n_periods, keep_periods, samples_per_period, steps_per_mode, starts[i].copy()
         )
-        results[i] = (one[:, _ONE_SAMPLE_COLUMNS], states)
+        results[i] = (one[:, _ONE_SAMPLE_COLUMNS], poincare_i)
     return results  # type: ignore[return-value]
 
 

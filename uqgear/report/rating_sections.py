@@ -109,7 +109,22 @@ def _damage_detail(ds: xr.Dataset, mode: str, facts: dict[str, Any]) -> str:
         k = int(np.argmax(share.values))
         facts["speed_most"] = float(share["service_speed"].values[k])
         text += f", most of it at {facts['speed_most']:.0f} rpm: {float(share.values[k]):.0%}"
-    return text + ")"
+    return text + _attractor_detail(ds, mode, gear, float(upper.sel(gear=gear)), facts) + ")"
+
+
+def _attractor_detail(ds: xr.Dataset, mode: str, gear: str, upper: float, facts: dict[str, Any]) -> str:
+    """Where coexisting responses raise the upper damage: the runs from rest's damage, and which starts."""
+    if "damage_from_rest" not in ds or "damage_rate_start" not in ds:
+        return ""
+    rest = float(ds["damage_from_rest"].sel(mode=mode, bound="upper", gear=gear))
+    if not upper > rest * (1.0 + 1e-9):
+        return ""
+    starts = ds["damage_rate_start"].sel(mode=mode, gear=gear)
+    speeds = sorted({float(n) for n in starts["pinion_speed"].values[np.nonzero(starts.values != "rest")[-1]]})
+    facts["damage_from_rest"] = rest
+    facts["attractor_speeds"] = speeds
+    listed = ", ".join(f"{n:.0f}" for n in speeds)
+    return f"; {rest:.3g} from rest, the rest from coexisting responses at {listed} rpm"
 
 
 def rating_findings(results: Sequence[xr.Dataset]) -> list[Finding]:

@@ -620,6 +620,12 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
     flagged and recomputed by the fallback. Adds ``<qoi>_nominal``, the
     response at the interval midpoints, for reference.
     """
+    return interval_bounds(context)
+
+
+def interval_bounds(context: AnalysisContext, guided: GuidedStartModel | None = None) -> xr.Dataset:
+    """:func:`interval_analysis` with ``guided``, the guided model to run (default: a new one where the study's
+    starts are guided), for a caller that reads its attractors afterwards."""
     from ..uq.interval import IntervalAnalysis
 
     options = context.options
@@ -631,14 +637,14 @@ def interval_analysis(context: AnalysisContext) -> xr.Dataset:
         return interval_over_attractors(context, names, qois, fixed)
     space = context.parameter_space(names, fixed)
     regime_variables = [name for name in ("fraction_separation", "fraction_back_contact") if name not in qois]
-    guided = None
     if starts is not None:
         # the bounds from rest run through the guided model's rest runs, remembered: where its window points are
         # scan nodes the widening below meets them again and runs only their extra starts
-        guided = cast(GuidedStartModel, context.model(poincare=False))
+        guided = guided if guided is not None else cast(GuidedStartModel, context.model(poincare=False))
         guided.rest = RememberedRuns(guided.rest)
         model: Any = guided.rest
     else:
+        guided = None
         model = context.rest_model(dataclasses.replace(context.spec.simulation, starts=None), poincare=False)
     analysis = IntervalAnalysis(
         options["method"],

@@ -186,6 +186,8 @@ class GuidedStartModel:
         self.exponents = exponents
         #: Points that lay in a window, over every call.
         self.window_points = 0
+        #: Per call with window points: their sample values, each attractor's first start and its state.
+        self.found: list[tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]] = []
 
     @property
     def runs(self) -> int:
@@ -234,6 +236,7 @@ class GuidedStartModel:
                 sweep_reach=ENTRY_REACH * float(self.windows.margin),
             )
             found = summarise(search, subset, poincare=self.poincare)
+            self._remember(subset, search)
             if self.exponents is not None and "largest_lyapunov" in rest:
                 found = self._worst_exponents(found, search, subset, rest)
         # the rest runs' final states serve the sweeps only; the result has the layout of a study without them
@@ -246,6 +249,52 @@ class GuidedStartModel:
             window_points=int(rows.size),
             windows=json.dumps(self.windows.to_records()),
         )
+        return out
+
+    def _remember(self, samples: xr.Dataset, search: MultiStartSearch) -> None:
+        """Keep each window point's attractors as their first starts' labels and states (NaN: from rest)."""
+        first = np.asarray(search.attractors_["first_start"].values).astype(str)
+        states = np.full((*first.shape, 6), np.nan)
+        for row, column in zip(*np.nonzero(first != "")):
+            states[row, column] = search.start_states_[first[row, column]][row]
+        values = {name: np.asarray(samples[name].values, dtype=float) for name in _point_variables(samples)}
+        self.found.append((values, first, states))
+
+    def attractor_starts(self, samples: xr.Dataset) -> list[list[tuple[str, np.ndarray]]]:
+        """Each sample's attractors as (first start, its state; NaN: from rest): one, from rest, outside the
+        windows; inside, those a call found at the same point, else those of a call made now."""
+        out = self._recall(samples)
+        missing = [row for row, found in enumerate(out) if found is None]
+        if missing:
+            self(samples.isel(sample=missing))
+            again = self._recall(samples.isel(sample=missing))
+            for row, found in zip(missing, again):
+                out[row] = found
+        return [found if found is not None else [("rest", np.full(6, np.nan))] for found in out]
+
+    def _recall(self, samples: xr.Dataset) -> list[list[tuple[str, np.ndarray]] | None]:
+        """The attractors remembered at each sample's point; [] stands for none needed (outside the windows)."""
+        names = _point_variables(samples)
+        values = {name: np.asarray(samples[name].values, dtype=float) for name in names}
+        inside = self.inside(samples)
+        out: list[list[tuple[str, np.ndarray]] | None] = []
+        for row in range(samples.sizes["sample"]):
+            if not inside[row]:
+                out.append([("rest", np.full(6, np.nan))])
+                continue
+            found = None
+            for known, first, states in reversed(self.found):
+                if set(known) != set(names):
+                    continue
+                same = np.ones(first.shape[0], dtype=bool)
+                for name in names:
+                    same &= np.isclose(known[name], values[name][row], rtol=1e-9, atol=0.0)
+                hits = np.nonzero(same)[0]
+                if hits.size:
+                    k = int(hits[0])
+                    found = [(str(first[k, a]), states[k, a]) for a in np.nonzero(first[k] != "")[0]]
+                    break
+            out.append(found)
         return out
 
     def _sweep_entry(self, samples: xr.Dataset, inside: np.ndarray, base: xr.Dataset) -> dict[str, np.ndarray] | None:
@@ -309,6 +358,17 @@ class GuidedStartModel:
                     column[row] = found[k]
             out[f"orbit-{k + 1}"] = column
         return out
+
+
+def _point_variables(samples: xr.Dataset) -> list[str]:
+    """The sample variables that name a point (not its start state)."""
+    return sorted(
+        str(name)
+        for name in samples.data_vars
+        if samples[name].dims == ("sample",)
+        and not str(name).startswith("initial_")
+        and np.issubdtype(samples[name].dtype, np.number)
+    )
 
 
 def _rest_layout(base: xr.Dataset, poincare: bool) -> xr.Dataset:

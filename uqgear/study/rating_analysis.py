@@ -13,7 +13,12 @@ distribution or a mission, hours or kilometres, the rail condition): the model r
 speed of the sweep at the T2 interval's ends and midpoint, and each tooth's root and flank
 stress over the kept steady section is rainflow-counted and Miner-summed on the S-N curves of
 the life factors (:mod:`uqgear.study.rating_histories`), giving a damage rate per hour at each
-(T2, speed). The service's speeds take their rates from the sweep (linear between its speeds)
+(T2, speed). Which of several coexisting responses the gear holds is unknown, so where the
+study's guided starts find more than one attractor at such a point, a history runs from each
+attractor's first start as well, and the rates are bounded over the attractors: the upper
+damage is the worst attractor's (``damage_rate_start`` names its start), the lower the
+mildest's; ``damage_from_rest`` keeps the runs from rest's damage beside them. The service's
+speeds take their rates from the sweep (linear between its speeds)
 and its rail condition from T2 (an interval: the least and greatest rate at each speed over it;
 a distribution: the time-weighted mean). Without ``service`` the illustrative
 :data:`RATING_SERVICE` applies: 20,000 h spread evenly over the sweep's speeds inside the
@@ -24,14 +29,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import xarray as xr
 
 from ..physics.geometry import pair_geometry
 from ..physics.rating import RatingSettings, dynamic_factor_model, static_rating
-from .analyses import AnalysisContext, interval_analysis, register
+from .analyses import AnalysisContext, interval_bounds, register
+from .guided_starts import GuidedStartModel
 from .rating_histories import HISTORY_TORQUES, StressHistories, history_damage
 from .rating_service import check_service, service_damage
 
@@ -49,15 +55,19 @@ def _service(context: AnalysisContext, speeds: np.ndarray) -> dict[str, Any]:
     return check_service({**RATING_SERVICE, "speeds": inside, "shares": [1.0 / len(inside)] * len(inside)}, "service")
 
 
-def _histories(context: AnalysisContext, settings: RatingSettings, speeds: np.ndarray) -> StressHistories:
-    """Damage rates at the T2 interval's ends and midpoint (the study's T2 alone where it is not bounded)."""
+def _histories(
+    context: AnalysisContext, settings: RatingSettings, speeds: np.ndarray, guided: GuidedStartModel | None
+) -> StressHistories:
+    """Damage rates at the T2 interval's ends and midpoint (the study's T2 alone where it is not bounded), over
+    the attractors the guided model finds there (from rest alone without guided starts)."""
     fixed = context.fixed_values(exclude=context.options["parameters"])
     if "adhesion_torque" in context.options["parameters"]:
         parameter = context.study.uncertain["adhesion_torque"]
         torques = [parameter.lower + f * (parameter.upper - parameter.lower) for f in HISTORY_TORQUES]
     else:
         torques = [float(fixed["adhesion_torque"])]
-    return history_damage(context.design, context.spec.simulation, fixed, speeds, torques, settings)
+    starts = guided.attractor_starts if guided is not None else None
+    return history_damage(context.design, context.spec.simulation, fixed, speeds, torques, settings, starts)
 
 
 @register("rating")
@@ -66,7 +76,12 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
     settings = RatingSettings.from_mapping(context.options.get("rating"))
     options = {**context.options, "qois": ("peak_mesh_force",)}
     interval_context = dataclasses.replace(context, spec=dataclasses.replace(context.spec, options=options))
-    bounds = interval_analysis(interval_context)
+    starts = context.spec.simulation.starts
+    # guided starts: the interval's model, whose window points' attractors the histories then start from
+    guided = None
+    if starts is not None and starts.guided:
+        guided = cast(GuidedStartModel, interval_context.model(poincare=False))
+    bounds = interval_bounds(interval_context, guided=guided)
     design = context.design
     torque = float(context.fixed_values(exclude=options["parameters"])["drive_torque"])
     peak = bounds["peak_mesh_force"].transpose("bound", "pinion_speed")
@@ -86,37 +101,46 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
         safety_iso[0, :, j], safety_iso[1, :, j] = rating.safety_root, rating.safety_contact
     nominal = static_rating(design, torque, float(speeds[0]), settings, dynamic_factor=1.0)
     service = _service(context, speeds)
-    histories = _histories(context, settings, speeds)
+    runs_before = int(guided.runs) if guided is not None else 0
+    histories = _histories(context, settings, speeds, guided)
     result = _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nominal, settings, service)
     result = _with_damage(result, histories, service, speeds)
-    result.attrs["model_runs"] = int(result.attrs.get("model_runs", 0)) + histories.runs
+    extra = int(guided.runs) - runs_before if guided is not None else 0  # window points the interval did not run
+    result.attrs["model_runs"] = int(result.attrs.get("model_runs", 0)) + histories.runs + extra
+    result.attrs["history_coexisting_points"] = int((histories.attractor_count > 1).sum())
+    result.attrs["damage_over_attractors"] = (
+        "guided" if guided is not None else ("none: starts other than guided" if starts is not None else "none")
+    )
     return result
-
-
-def _over_torques(values: np.ndarray) -> np.ndarray:
-    """(gear, torque, speed) -> (gear, bound, speed): least and greatest over the torques run."""
-    return np.stack([values.min(axis=1), values.max(axis=1)], axis=1)
 
 
 def _with_damage(result: xr.Dataset, histories: StressHistories, service, speeds: np.ndarray) -> xr.Dataset:
     """The damage over the service, its rate, the speeds' shares, the life and the stress peaks."""
-    damage, parts = service_damage(service, speeds, histories.torques, histories.rates)  # (gear, mode, bound)
-    damage = damage.transpose(0, 2, 1)
+    # the lower damage from each point's least rate over its attractors, the upper from the greatest
+    low, _ = service_damage(service, speeds, histories.torques, histories.rate_bounds[:, :, 0])
+    high, parts = service_damage(service, speeds, histories.torques, histories.rate_bounds[:, :, 1])
+    damage = np.stack([low[..., 0], high[..., 1]], axis=-1).transpose(0, 2, 1)  # (gear, bound, mode)
+    rest, _ = service_damage(service, speeds, histories.torques, histories.rates)
+    rest = rest.transpose(0, 2, 1)
     hours = service["hours"]
     total = parts.sum(axis=-1, keepdims=True)
     share = np.divide(parts, total, out=np.zeros_like(parts), where=total > 0.0)
     with np.errstate(divide="ignore"):
         life = np.where(damage > 0.0, hours / np.where(damage > 0.0, damage, 1.0), np.inf)
-    rate_bounds = np.stack([histories.rates.min(axis=2), histories.rates.max(axis=2)], axis=2)  # (gear, mode, bound, n)
+    # (gear, mode, bound, n): over the T2 run and the attractors
+    rate_bounds = np.stack([histories.rate_bounds[:, :, 0].min(axis=2), histories.rate_bounds[:, :, 1].max(axis=2)], 2)
+    peaks = histories.peaks
+    peak_bounds = np.stack([peaks[:, :, 0].min(axis=2), peaks[:, :, 1].max(axis=2)], axis=2)  # (gear, mode, bound, n)
     gbm = ("gear", "bound", "mode")
     return result.assign(
         damage=(gbm, damage, {"units": "1", "long_name": "Miner damage over the service"}),
+        damage_from_rest=(gbm, rest, {"units": "1", "long_name": "Miner damage over the service, runs from rest"}),
         damage_per_hour=(gbm, damage / hours, {"units": "h-1", "long_name": "Miner damage per hour of the service"}),
         life_hours=(gbm, life, {"units": "h", "long_name": "hours of the service to a damage of 1"}),
         damage_rate=(
             ("gear", "mode", "bound", "pinion_speed"),
             rate_bounds,
-            {"units": "h-1", "long_name": "Miner damage per hour at the speed, bounds over the T2 run"},
+            {"units": "h-1", "long_name": "Miner damage per hour at the speed, bounds over the T2 run and attractors"},
         ),
         damage_share=(
             ("gear", "mode", "service_speed"),
@@ -125,15 +149,25 @@ def _with_damage(result: xr.Dataset, histories: StressHistories, service, speeds
         ),
         root_stress_peak=(
             ("gear", "bound", "pinion_speed"),
-            _over_torques(histories.root_peak),
-            {"units": "Pa", "long_name": "largest simulated tooth root stress, bounds over the T2 run"},
+            peak_bounds[:, 0],
+            {"units": "Pa", "long_name": "largest simulated tooth root stress, bounds over the T2 run and attractors"},
         ),
         contact_stress_peak=(
             ("gear", "bound", "pinion_speed"),
-            _over_torques(histories.contact_peak),
-            {"units": "Pa", "long_name": "largest simulated flank contact stress, bounds over the T2 run"},
+            peak_bounds[:, 1],
+            {"units": "Pa", "long_name": "largest simulated flank stress, bounds over the T2 run and attractors"},
         ),
         history_adhesion_torque=(("history_torque",), histories.torques, {"units": "N m"}),
+        history_attractor_count=(
+            ("history_torque", "pinion_speed"),
+            histories.attractor_count,
+            {"units": "1", "long_name": "attractors whose histories were run"},
+        ),
+        damage_rate_start=(
+            ("gear", "mode", "history_torque", "pinion_speed"),
+            histories.worst_start,
+            {"long_name": "first start of the attractor with the greatest damage rate (rest: the run from rest)"},
+        ),
     ).assign_coords(service_speed=("service_speed", np.asarray(service["speeds"]), {"units": "rpm"}))
 
 

@@ -9,11 +9,16 @@ rainflow-counted and Miner-summed on the rating's S-N curves
 (:func:`~uqgear.dynamics.fatigue.engagement_damage`). A tooth meets one
 engagement per revolution of its gear, so the damage per hour at pinion speed
 n is that per engagement times 60 n (pinion) or 60 n / u (gear).
+
+Where several steady responses coexist at a point, the caller's ``starts`` names each
+attractor's first start (the state the run that first reached it began from); a history runs
+from each of those states besides the run from rest, and the point's rates and stress peaks
+are bounded over its attractors.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,25 +39,40 @@ HISTORY_SAMPLES = 64
 
 @dataclass(frozen=True)
 class StressHistories:
-    """Damage rates and stress peaks of the history runs (gear, mode or not, torque, speed).
+    """Damage rates and stress peaks of the history runs (gear, mode, [bound,] torque, speed).
 
     Attributes
     ----------
     torques : ndarray
         Adhesion torques T2 run, N m, increasing.
     rates : ndarray
-        (gear, mode, torque, speed) Miner damage per hour (modes root, contact).
-    root_peak, contact_peak : ndarray
-        (gear, torque, speed) largest root and flank stress, Pa.
+        (gear, mode, torque, speed) Miner damage per hour of the runs from rest (modes root, contact).
+    rate_bounds : ndarray
+        (gear, mode, bound, torque, speed) least and greatest damage per hour over the attractors at
+        each point (equal to ``rates`` where the gear holds one response).
+    worst_start : ndarray
+        (gear, mode, torque, speed) the first start of the attractor with the greatest rate
+        (``rest``: the run from rest's).
+    attractor_count : ndarray
+        (torque, speed) attractors whose histories were run.
+    peaks : ndarray
+        (gear, mode, bound, torque, speed) least and greatest over the attractors of the largest
+        root (mode 0) and flank (mode 1) stress, Pa.
     runs : int
         Model runs.
     """
 
     torques: np.ndarray
     rates: np.ndarray
-    root_peak: np.ndarray
-    contact_peak: np.ndarray
+    rate_bounds: np.ndarray
+    worst_start: np.ndarray
+    attractor_count: np.ndarray
+    peaks: np.ndarray
     runs: int
+
+
+#: ``starts(samples)``: each sample's attractors as (first start label, start state; NaN: from rest).
+AttractorStarts = Callable[[xr.Dataset], Sequence[Sequence[tuple[str, np.ndarray]]]]
 
 
 def history_damage(
@@ -62,11 +82,14 @@ def history_damage(
     speeds: Sequence[float] | np.ndarray,
     torques: Sequence[float] | np.ndarray,
     settings: RatingSettings,
+    starts: AttractorStarts | None = None,
 ) -> StressHistories:
     """Run the histories at every (T2, speed) and count their damage; see the module text.
 
     ``fixed`` holds the other inputs of a run (drive torque, uncertain parameters at their nominal
-    values), named as batch sample variables.
+    values), named as batch sample variables. ``starts`` gives each point's attractors (the guided
+    model's :meth:`~uqgear.study.guided_starts.GuidedStartModel.attractor_starts`): a history runs
+    from each one's start besides the run from rest, and the rates and peaks are bounded over them.
     """
     speeds_a, torques_a = np.asarray(speeds, dtype=float), np.asarray(torques, dtype=float)
     grid_t, grid_n = (values.ravel() for values in np.meshgrid(torques_a, speeds_a, indexing="ij"))
@@ -78,35 +101,74 @@ def history_damage(
             **{name: ("sample", np.full(grid_n.size, float(value))) for name, value in others.items()},
         }
     )
+    found = starts(samples) if starts is not None else [[("rest", np.full(6, np.nan))]] * grid_n.size
+    # the run from rest at every point, then one from each other attractor's first start
+    point, labels, states = list(range(grid_n.size)), ["rest"] * grid_n.size, [np.full(6, np.nan)] * grid_n.size
+    for index, attractors in enumerate(found):
+        for label, state in attractors:
+            if label != "rest" and np.all(np.isfinite(state)):
+                point.append(index)
+                labels.append(label)
+                states.append(np.asarray(state, dtype=float))
     setups = build_batch(
         design,
-        samples,
+        samples.isel(sample=point),
         effects=simulation.effects,
         damping_in_separation=simulation.damping_in_separation,
         stiffness=simulation.stiffness,
     )
     keep = simulation.keep_periods
-    runs = integrate_histories(setups, simulation.n_periods, keep, HISTORY_SAMPLES, simulation.steps_per_mode)
+    runs = integrate_histories(
+        setups, simulation.n_periods, keep, HISTORY_SAMPLES, simulation.steps_per_mode, np.stack(states)
+    )
     torque = float(others.get("drive_torque", design.operation.drive_torque))
+    per_run = [
+        _run_damage(design, setup, history, torque, float(grid_n[p]), settings, simulation)
+        for p, setup, (history, _) in zip(point, setups, runs)
+    ]
+    return _bounded(torques_a, speeds_a.size, np.asarray(point), labels, per_run, len(setups))
+
+
+def _run_damage(design, setup, history, torque, speed, settings, simulation) -> tuple[np.ndarray, np.ndarray]:
+    """(gear, mode) damage per hour and stress peak of one history run."""
     u = design.z2 / design.z1
-    shape = (torques_a.size, speeds_a.size)
-    rates = np.zeros((2, 2, *shape))
-    peaks = np.zeros((2, 2, *shape))
-    for index, (setup, (history, _)) in enumerate(zip(setups, runs)):
-        i, j = np.unravel_index(index, shape)
-        rating = static_rating(design, torque, float(speeds_a[j]), settings, dynamic_factor=1.0)
-        stresses = tooth_stresses(
-            setup, rating, history[:, 2], first_period=simulation.n_periods - keep, samples_per_period=HISTORY_SAMPLES
-        )
-        for g in range(2):
-            per_hour = 60.0 * float(speeds_a[j]) / (u if g else 1.0)
-            for m, (name, curve) in enumerate((("root", rating.root_curve[g]), ("contact", rating.contact_curve[g]))):
-                stress = stresses[f"{name}_stress"].values[g]
-                rates[g, m, i, j] = engagement_damage(stress, curve) * per_hour
-                peaks[g, m, i, j] = float(stresses[f"{name}_stress_peak"].values[g])
+    rating = static_rating(design, torque, speed, settings, dynamic_factor=1.0)
+    first = simulation.n_periods - simulation.keep_periods
+    stresses = tooth_stresses(setup, rating, history[:, 2], first_period=first, samples_per_period=HISTORY_SAMPLES)
+    rates, peaks = np.zeros((2, 2)), np.zeros((2, 2))
+    for g in range(2):
+        per_hour = 60.0 * speed / (u if g else 1.0)
+        for m, (name, curve) in enumerate((("root", rating.root_curve[g]), ("contact", rating.contact_curve[g]))):
+            rates[g, m] = engagement_damage(stresses[f"{name}_stress"].values[g], curve) * per_hour
+            peaks[g, m] = float(stresses[f"{name}_stress_peak"].values[g])
+    return rates, peaks
+
+
+def _bounded(torques, n_speeds, point, labels, per_run, runs) -> StressHistories:
+    """Rates and peaks per point: the run from rest's, and their bounds over the point's attractors."""
+    shape = (torques.size, n_speeds)
+    n_points = torques.size * n_speeds
+    rates = np.stack([r for r, _ in per_run], axis=-1)  # (gear, mode, run)
+    peaks = np.stack([p for _, p in per_run], axis=-1)
+    rest = rates[..., :n_points]
+    bounds, peak_bounds = np.zeros((2, 2, 2, n_points)), np.zeros((2, 2, 2, n_points))
+    worst = np.full((2, 2, n_points), "rest", dtype=object)
+    count = np.bincount(point, minlength=n_points)
+    for index in range(n_points):
+        mine = np.nonzero(point == index)[0]
+        bounds[:, :, 0, index], bounds[:, :, 1, index] = rates[..., mine].min(-1), rates[..., mine].max(-1)
+        peak_bounds[:, :, 0, index], peak_bounds[:, :, 1, index] = peaks[..., mine].min(-1), peaks[..., mine].max(-1)
+        top = mine[np.argmax(rates[..., mine], axis=-1)]  # (gear, mode): the run with the greatest rate
+        worst[:, :, index] = np.asarray(labels, dtype=object)[top]
     return StressHistories(
-        torques=torques_a, rates=rates, root_peak=peaks[:, 0], contact_peak=peaks[:, 1], runs=len(setups)
+        torques=torques,
+        rates=rest.reshape(2, 2, *shape),
+        rate_bounds=bounds.reshape(2, 2, 2, *shape),
+        worst_start=worst.astype(str).reshape(2, 2, *shape),
+        attractor_count=count.reshape(shape),
+        peaks=peak_bounds.reshape(2, 2, 2, *shape),
+        runs=runs,
     )
 
 
-__all__ = ["HISTORY_TORQUES", "HISTORY_SAMPLES", "StressHistories", "history_damage"]
+__all__ = ["AttractorStarts", "HISTORY_TORQUES", "HISTORY_SAMPLES", "StressHistories", "history_damage"]
