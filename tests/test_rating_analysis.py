@@ -248,3 +248,29 @@ def test_bad_rating_input_exits_2_with_one_line(tmp_path, capsys, line, message)
     assert message in captured.err and captured.err.count("\n") == 1
     with pytest.raises(uqgear.StudyError, match="a rating sweeps only pinion_speed"):
         uqgear.parse_study(STUDY.replace("drive_torque: 7000", "drive_torque: [6000, 7000]"))
+
+
+def test_the_verdict_names_the_coexisting_responses_that_raise_the_damage():
+    from uqgear.report.rating_sections import rating_verdicts
+
+    gbm = ("gear", "bound", "mode")
+    damage = np.array([[[0.0, 0.0], [0.3, 0.0]], [[0.0, 0.0], [0.1, 0.0]]])
+    starts = np.full((2, 2, 3, 2), "rest", dtype=object)
+    starts[0, 0, 0, 1] = "down"
+    ds = xr.Dataset(
+        {
+            "safety_factor_root": (("gear", "bound", "pinion_speed"), np.full((2, 2, 2), 2.0), {"minimum": 1.4}),
+            "damage": (gbm, damage),
+            "damage_from_rest": (gbm, damage / 3.0),
+            "damage_rate_start": (("gear", "mode", "history_torque", "pinion_speed"), starts.astype(str)),
+        },
+        coords={"gear": ["pinion", "gear"], "bound": ["lower", "upper"], "mode": ["root", "contact"]}
+        | {"pinion_speed": [3000.0, 4200.0]},
+        attrs={"service": '{"hours": 20000}'},
+    )
+    line = rating_verdicts(ds)[0]
+    assert line.endswith(
+        "(pinion, at least 0 over the rail condition; 0.1 from rest, the rest from coexisting responses at 4200 rpm)"
+    ), line
+    ds["damage_from_rest"] = ds["damage"]
+    assert "coexisting" not in rating_verdicts(ds)[0]
