@@ -108,6 +108,34 @@ def test_damage_over_attractors_is_recorded_and_equals_the_runs_from_rest_where_
     assert (rating["damage"].sel(bound="upper") >= rating["damage_from_rest"].sel(bound="upper")).all()
 
 
+def test_history_points_and_a_rail_distributions_own_t2_values(tmp_path):
+    """``history_points: 5`` runs five T2 values across the interval and the rail distribution's values besides;
+    the distribution's damage is then its time-weighted mean of the rates at those values (no interpolation)."""
+    from uqgear.study.rating_service import service_damage
+
+    rail = "rail: {adhesion_coefficient: [0.2, 0.3], shares: [0.25, 0.75]}"
+    service = f"{{hours: 100, speeds: [1500, 4000], shares: [0.5, 0.5], {rail}}}"
+    study = STUDY.replace(
+        "    service: {hours: 1000, speeds: [1500, 4000], shares: [0.25, 0.75]}",
+        f"    service: {service}\n    history_points: 5",
+    )
+    (tmp_path / "study.yaml").write_text(study)
+    assert main(["run", str(tmp_path / "study.yaml"), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    with xr.open_dataset(tmp_path / "out" / "rating.nc") as ds:
+        torques = ds["history_adhesion_torque"].values
+    arm = 23000 * 9.80665 * 0.625
+    lower, upper = 0.15 * arm, 0.33 * arm
+    expected = np.sort(np.concatenate([np.linspace(lower, upper, 5), [0.2 * arm, 0.3 * arm]]))
+    np.testing.assert_allclose(torques, expected, rtol=1e-12)
+    rates = np.arange(14.0).reshape(7, 2)  # (torque, speed)
+    checked = {"hours": 100.0, "speeds": [1500.0, 4000.0], "shares": [0.5, 0.5]}
+    checked["rail"] = {"kind": "distribution", "adhesion_coefficient": [0.2, 0.3], "shares": [0.25, 0.75]}
+    damage, _ = service_damage(checked, np.array([1500.0, 4000.0]), expected, rates)
+    at = [int(np.argmin(abs(expected - t))) for t in (0.2 * arm, 0.3 * arm)]
+    mean = 0.25 * rates[at[0]] + 0.75 * rates[at[1]]
+    assert damage.tolist() == pytest.approx([100.0 * 0.5 * mean.sum()] * 2, rel=1e-12)
+
+
 def test_damage_rate_is_the_rainflow_count_of_a_one_sample_run():
     """The batch's damage rate at one (T2, speed) against an independent Miner sum over a one-sample run."""
     from uqgear.dynamics.tooth_loads import tooth_stresses

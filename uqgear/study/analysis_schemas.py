@@ -227,6 +227,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "rating": rating_settings,
         # the service the fatigue damage is summed over (illustrative default: see RATING_SERVICE)
         "service": service_profile,
+        # T2 values per speed the stress histories run at, evenly across the T2 interval, its ends included
+        "history_points": number("(T2 values per speed of the damage histories)", 2, 33, integer=True),
     },
 }
 
@@ -246,7 +248,7 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
     "continuation": {"envelope": (), "points": 2, "max_period": 8, "compare_sweeps": True},
     "regime_map": {"points": 9},
     "interval": {**_INTERVAL_METHOD_DEFAULTS, "qois": DEFAULT_QOIS},
-    "rating": dict(_INTERVAL_METHOD_DEFAULTS),
+    "rating": {**_INTERVAL_METHOD_DEFAULTS, "history_points": 3},
     "monte_carlo": {
         "intervals": "uniform",
         "points": 5,

@@ -39,7 +39,7 @@ from ..physics.rating import RatingSettings, dynamic_factor_model, static_rating
 from .analyses import AnalysisContext, interval_bounds, register
 from .guided_starts import GuidedStartModel
 from .rating_histories import HISTORY_TORQUES, StressHistories, history_damage
-from .rating_service import check_service, service_damage
+from .rating_service import check_service, rail_torques, service_damage
 
 #: Illustrative service when a rating states none: hours, spread evenly over the service speeds.
 RATING_SERVICE = {"hours": 20000.0, "description": "illustrative: 20,000 h, evenly over the service speeds"}
@@ -55,17 +55,44 @@ def _service(context: AnalysisContext, speeds: np.ndarray) -> dict[str, Any]:
     return check_service({**RATING_SERVICE, "speeds": inside, "shares": [1.0 / len(inside)] * len(inside)}, "service")
 
 
+def history_torques(lower: float, upper: float, points: int, service: dict[str, Any]) -> np.ndarray:
+    """T2 values of the damage histories: ``points`` evenly across [lower, upper], ends included, and a rail
+    distribution's own values (its time-weighted mean then needs no interpolation in T2).
+
+    Examples
+    --------
+    >>> from uqgear.study.rating_analysis import history_torques
+    >>> history_torques(20e3, 40e3, 3, {}).tolist()
+    [20000.0, 30000.0, 40000.0]
+    >>> rail = {"kind": "distribution", "adhesion_coefficient": [0.25, 0.35], "shares": [0.5, 0.5]}
+    >>> [round(t) for t in history_torques(20e3, 50e3, 3, {"rail": rail, "axle_load": 20000, "wheel_radius": 0.5})]
+    [20000, 24517, 34323, 35000, 50000]
+    """
+    torques = [lower + f * (upper - lower) for f in np.linspace(0.0, 1.0, int(points))]
+    rail = rail_torques(service)
+    if rail is not None and rail[0] == "distribution":
+        for value in rail[1]:
+            if not any(np.isclose(value, t, rtol=1e-9, atol=0.0) for t in torques):
+                torques.append(float(value))
+    return np.sort(np.asarray(torques, dtype=float))
+
+
 def _histories(
-    context: AnalysisContext, settings: RatingSettings, speeds: np.ndarray, guided: GuidedStartModel | None
+    context: AnalysisContext,
+    settings: RatingSettings,
+    speeds: np.ndarray,
+    guided: GuidedStartModel | None,
+    service: dict[str, Any],
 ) -> StressHistories:
-    """Damage rates at the T2 interval's ends and midpoint (the study's T2 alone where it is not bounded), over
-    the attractors the guided model finds there (from rest alone without guided starts)."""
+    """Damage rates at the T2 values of :func:`history_torques` (the study's T2 alone where it is not bounded),
+    over the attractors the guided model finds there (from rest alone without guided starts)."""
     fixed = context.fixed_values(exclude=context.options["parameters"])
     if "adhesion_torque" in context.options["parameters"]:
         parameter = context.study.uncertain["adhesion_torque"]
-        torques = [parameter.lower + f * (parameter.upper - parameter.lower) for f in HISTORY_TORQUES]
+        points = int(context.options.get("history_points") or len(HISTORY_TORQUES))
+        torques = history_torques(float(parameter.lower), float(parameter.upper), points, service)
     else:
-        torques = [float(fixed["adhesion_torque"])]
+        torques = np.asarray([float(fixed["adhesion_torque"])])
     starts = guided.attractor_starts if guided is not None else None
     return history_damage(context.design, context.spec.simulation, fixed, speeds, torques, settings, starts)
 
@@ -102,7 +129,7 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
     nominal = static_rating(design, torque, float(speeds[0]), settings, dynamic_factor=1.0)
     service = _service(context, speeds)
     runs_before = int(guided.runs) if guided is not None else 0
-    histories = _histories(context, settings, speeds, guided)
+    histories = _histories(context, settings, speeds, guided, service)
     result = _dataset(bounds, speeds, simulated, iso, iso_factor, safety, safety_iso, nominal, settings, service)
     result = _with_damage(result, histories, service, speeds)
     extra = int(guided.runs) - runs_before if guided is not None else 0  # window points the interval did not run

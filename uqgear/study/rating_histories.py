@@ -1,8 +1,9 @@
 """Tooth stress histories of a ``rating`` analysis and the fatigue damage rates they give.
 
 At every pinion speed of the rating's sweep the model runs from rest at a few
-adhesion torques (:data:`HISTORY_TORQUES` across the T2 interval: its ends and
-midpoint), all in one batch (:func:`~uqgear.physics.history_batch.integrate_histories`);
+adhesion torques (the rating's ``history_points`` evenly across the T2 interval,
+by default :data:`HISTORY_TORQUES`: its ends and midpoint; a rail distribution's
+own values besides), all in one batch (:func:`~uqgear.physics.history_batch.integrate_histories`);
 the kept steady section of each run gives every tooth engagement's root and
 flank stress (:func:`~uqgear.dynamics.tooth_loads.tooth_stresses`), which are
 rainflow-counted and Miner-summed on the rating's S-N curves
@@ -99,7 +100,9 @@ def history_damage(
             "pinion_speed": ("sample", grid_n),
             "adhesion_torque": ("sample", grid_t),
             **{name: ("sample", np.full(grid_n.size, float(value))) for name, value in others.items()},
-        }
+        },
+        # labelled as the interval machinery labels its samples: ``starts`` may join them with its own runs
+        coords={"sample": np.arange(grid_n.size)},
     )
     found = starts(samples) if starts is not None else [[("rest", np.full(6, np.nan))]] * grid_n.size
     # the run from rest at every point, then one from each other attractor's first start
