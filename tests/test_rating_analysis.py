@@ -108,6 +108,19 @@ def test_damage_over_attractors_is_recorded_and_equals_the_runs_from_rest_where_
     assert (rating["damage"].sel(bound="upper") >= rating["damage_from_rest"].sel(bound="upper")).all()
 
 
+def test_every_start_searches_the_history_points(tmp_path):
+    study = STUDY.replace(
+        "simulation: {n_periods: 60, keep_periods: 20}", "simulation: {n_periods: 60, keep_periods: 20, starts: true}"
+    )
+    (tmp_path / "study.yaml").write_text(study)
+    assert main(["run", str(tmp_path / "study.yaml"), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    with xr.open_dataset(tmp_path / "out" / "rating.nc") as ds:
+        assert ds.attrs["damage_over_attractors"] == "every start at every history point"
+        assert (ds["history_attractor_count"] >= 1).all()
+        assert (ds["damage"].sel(bound="upper") >= ds["damage_from_rest"].sel(bound="upper")).all()
+        assert (ds["damage"].sel(bound="lower") <= ds["damage_from_rest"].sel(bound="lower")).all()
+
+
 def test_history_points_and_a_rail_distributions_own_t2_values(tmp_path):
     """``history_points: 5`` runs five T2 values across the interval and the rail distribution's values besides;
     the distribution's damage is then its time-weighted mean of the rates at those values (no interpolation)."""

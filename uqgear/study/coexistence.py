@@ -84,6 +84,22 @@ class MultiStartModel:
         search = MultiStartSearch(self.settings, self.seed).fit(self.inner, samples, self.design)
         return summarise(search, samples, poincare=self.poincare)
 
+    def attractor_starts(self, samples: xr.Dataset) -> list[list[tuple[str, np.ndarray]]]:
+        """Each sample's attractors as (first start, its state; NaN: from rest), from a search run now."""
+        search = MultiStartSearch(self.settings, self.seed).fit(self.inner, samples, self.design)
+        first, states = first_start_states(search)
+        return [[(str(first[k, a]), states[k, a]) for a in np.nonzero(first[k] != "")[0]] for k in range(len(first))]
+
+
+def first_start_states(search: MultiStartSearch) -> tuple[np.ndarray, np.ndarray]:
+    """(sample, attractor) first start of each attractor ('' where padded) and the state it began from, (sample,
+    attractor, 6) (NaN: from rest)."""
+    first = np.asarray(search.attractors_["first_start"].values).astype(str)
+    states = np.full((*first.shape, 6), np.nan)
+    for row, column in zip(*np.nonzero(first != "")):
+        states[row, column] = search.start_states_[first[row, column]][row]
+    return first, states
+
 
 def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = True) -> xr.Dataset:
     """Per-sample outputs of a multi-start search (the layout of the module docstring)."""
@@ -209,6 +225,7 @@ def interval_over_attractors(
 
 
 __all__ = [
+    "first_start_states",
     "MultiStartModel",
     "multi_start_model",
     "started_model",

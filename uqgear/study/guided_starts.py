@@ -46,7 +46,7 @@ from ..dynamics.regimes import period_labels
 from ..dynamics.windows import CoexistenceWindows, equivalent_speeds, follow_nodes, windows_from
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO
-from .coexistence import PER_ATTRACTOR, summarise
+from .coexistence import PER_ATTRACTOR, first_start_states, summarise
 from .settings import SimulationSettings
 
 #: How far (in window margins) a grid point may lie from the one whose final state a sweep carries into it (from
@@ -253,10 +253,7 @@ class GuidedStartModel:
 
     def _remember(self, samples: xr.Dataset, search: MultiStartSearch) -> None:
         """Keep each window point's attractors as their first starts' labels and states (NaN: from rest)."""
-        first = np.asarray(search.attractors_["first_start"].values).astype(str)
-        states = np.full((*first.shape, 6), np.nan)
-        for row, column in zip(*np.nonzero(first != "")):
-            states[row, column] = search.start_states_[first[row, column]][row]
+        first, states = first_start_states(search)
         values = {name: np.asarray(samples[name].values, dtype=float) for name in _point_variables(samples)}
         self.found.append((values, first, states))
 

@@ -37,6 +37,7 @@ import xarray as xr
 from ..physics.geometry import pair_geometry
 from ..physics.rating import RatingSettings, dynamic_factor_model, static_rating
 from .analyses import AnalysisContext, interval_bounds, register
+from .coexistence import MultiStartModel
 from .guided_starts import GuidedStartModel
 from .rating_histories import HISTORY_TORQUES, StressHistories, history_damage
 from .rating_service import check_service, rail_torques, service_damage
@@ -81,7 +82,7 @@ def _histories(
     context: AnalysisContext,
     settings: RatingSettings,
     speeds: np.ndarray,
-    guided: GuidedStartModel | None,
+    guided: GuidedStartModel | MultiStartModel | None,
     service: dict[str, Any],
 ) -> StressHistories:
     """Damage rates at the T2 values of :func:`history_torques` (the study's T2 alone where it is not bounded),
@@ -104,11 +105,16 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
     options = {**context.options, "qois": ("peak_mesh_force",)}
     interval_context = dataclasses.replace(context, spec=dataclasses.replace(context.spec, options=options))
     starts = context.spec.simulation.starts
-    # guided starts: the interval's model, whose window points' attractors the histories then start from
-    guided = None
+    # guided starts: the interval's model, whose window points' attractors the histories then start from;
+    # every start everywhere: a multi-start model of the same settings searches the history points
+    guided: GuidedStartModel | MultiStartModel | None = None
     if starts is not None and starts.guided:
         guided = cast(GuidedStartModel, interval_context.model(poincare=False))
-    bounds = interval_bounds(interval_context, guided=guided)
+        bounds = interval_bounds(interval_context, guided=guided)
+    else:
+        bounds = interval_bounds(interval_context)
+        if starts is not None:
+            guided = cast(MultiStartModel, interval_context.model(poincare=False))
     design = context.design
     torque = float(context.fixed_values(exclude=options["parameters"])["drive_torque"])
     peak = bounds["peak_mesh_force"].transpose("bound", "pinion_speed")
@@ -136,7 +142,7 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
     result.attrs["model_runs"] = int(result.attrs.get("model_runs", 0)) + histories.runs + extra
     result.attrs["history_coexisting_points"] = int((histories.attractor_count > 1).sum())
     result.attrs["damage_over_attractors"] = (
-        "guided" if guided is not None else ("none: starts other than guided" if starts is not None else "none")
+        "none" if starts is None else ("guided" if starts.guided else "every start at every history point")
     )
     return result
 
