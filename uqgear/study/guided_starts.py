@@ -270,7 +270,8 @@ class GuidedStartModel:
         return [found if found is not None else [("rest", np.full(6, np.nan))] for found in out]
 
     def _recall(self, samples: xr.Dataset) -> list[list[tuple[str, np.ndarray]] | None]:
-        """The attractors remembered at each sample's point; [] stands for none needed (outside the windows)."""
+        """The attractors remembered at each sample's point (the rest run's alone outside the windows; None:
+        not found)."""
         names = _point_variables(samples)
         values = {name: np.asarray(samples[name].values, dtype=float) for name in names}
         inside = self.inside(samples)
