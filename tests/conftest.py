@@ -45,9 +45,13 @@ def design():
     return load_design("locomotive")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def healthy_case():
-    """The labelled healthy campaign prepared for diagnosis (features, noise, processing)."""
+    """The labelled healthy campaign prepared for diagnosis (features, noise, processing).
+
+    Prepared once per test process for every module that reads it: a prepared case is never changed
+    (tests/test_diagnosis_estimator.py checks that), and preparing it costs seconds.
+    """
     rig = read_rig(RIG_DATA / "healthy.nc")
     return prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
 
