@@ -26,7 +26,9 @@ from uqgear.rig.format import read_rig, rig_design
 #: process (pytest-xdist's --dist loadfile) a long file collected last would finish alone.
 LONGEST_FIRST = ("test_packaging.py", "test_study.py", "test_diagnosis.py", "test_dynamics.py",
                  "test_calibration.py", "test_cli.py", "test_blindtest.py", "test_diagnosis_multi.py",
-                 "test_reference.py", "test_readme.py", "test_prediction.py", "test_calibration_discrepancy.py")
+                 "test_change_diagnosis.py", "test_cross_channel.py", "test_pitch_error_campaigns.py",
+                 "test_reference.py", "test_readme.py", "test_prediction.py", "test_calibration_discrepancy.py",
+                 "test_manufacturing.py", "test_sound_failure.py")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -45,9 +47,13 @@ def design():
     return load_design("locomotive")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def healthy_case():
-    """The labelled healthy campaign prepared for diagnosis (features, noise, processing)."""
+    """The labelled healthy campaign prepared for diagnosis (features, noise, processing).
+
+    Prepared once per test process for every module that reads it: a prepared case is never changed
+    (tests/test_diagnosis_estimator.py checks that), and preparing it costs seconds.
+    """
     rig = read_rig(RIG_DATA / "healthy.nc")
     return prepare_case(rig, rig_design(rig), seed=np.random.SeedSequence(0))
 

@@ -193,9 +193,9 @@ def test_small_blind_test(tmp_path):
 
 @pytest.mark.slow
 def test_small_blind_test_on_the_bearing_check(tmp_path):
-    """A withheld clearance in both bearings, on the light-load bearing check plan, is named with its shrink."""
-    content = B.blindtest(tmp_path, n_per_effect=1, effects=["bearing_clearance"], n_healthy=0, duration=0.5,
-                          seed=3, report=False)
+    """A withheld clearance in both bearings, on 4 light-load bearing check runs, is named with its shrink."""
+    content = B.blindtest(tmp_path, n_per_effect=1, effects=["bearing_clearance"], n_healthy=0, n_ops=4,
+                          duration=0.5, seed=3, report=False)
     (campaign,) = content["campaigns"]
     assert campaign["plan"] == "bearing_check" and campaign["effect_values"]["bearing"] == "both"
     assert campaign["oracle_gap"] > 1.0

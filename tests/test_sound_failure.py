@@ -45,14 +45,13 @@ from uqgear.diagnosis import VERDICTS, decide
 from uqgear.diagnosis import estimator as diagnosis_estimator
 from uqgear.diagnosis import nominal as nominal_step
 from uqgear.diagnosis.candidates import ParameterSpec, nominal_parameters
-from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.effects import candidates_for, effect_names
 from uqgear.diagnosis.fit_problem import FitProblem
 from uqgear.diagnosis.fitting import fit
 from uqgear.diagnosis.heldout import leave_one_out
 from uqgear.physics.design import design_key_bounds
 from uqgear.physics.effects import EffectError
-from uqgear.rig.format import read_rig, rig_design
+from uqgear.rig.format import read_rig
 from uqgear.rig.usability import check_usable_signal
 from uqgear.study import analyses
 
@@ -353,11 +352,6 @@ def test_no_parameter_of_any_fit_can_leave_what_its_constructor_accepts(changes)
                         candidate.make({**{s.name: s.from_optimiser(0.0) for s in candidate.fitted},
                                         spec.name: value})
                 candidate.make(values)
-
-
-@pytest.fixture(scope="module")
-def healthy_case(healthy):
-    return prepare_case(healthy, rig_design(healthy), seed=np.random.SeedSequence(0))
 
 
 def _stub_model(case, favoured):
