@@ -41,12 +41,14 @@ from .effects import run_out_family
 from .first_effect import FirstDecision, nominal_gap_maps
 from .fitting import FitResult
 from .gap_maps import family_character, where_gap
+from .heldout import HeldOut
 from .nominal import allow_pitch_errors, check_nominal, fit_nominal_model, nominal_held_out
 from .result import DiagnosisResult
 from .scoring import CandidateScore, bootstrap_gap
 from .screening import ScoredCandidates, effect_gains, fits_ahead, scored_in_full, screen_and_promote, set_effect_gains
 from .selection import NamedSet, phase_named_run_out, round_fits, selected_effects
 from .settings import DiagnosisSettings
+from .side_by_side import Outcome
 from .signatures import every_channel_locked_lines, frequency_locked_lines, signature_hints
 from .state import DiagnosisState
 from .verdict.cross_channel import with_character
@@ -147,7 +149,7 @@ def extra_full_fits(
     """
     clock = time.perf_counter()
     full_before = len(scored.full_fits)
-    ahead: dict[int, Any] = {}
+    ahead: dict[int, Outcome[tuple[FitResult, HeldOut]]] = {}
     for index, entry in enumerate(extra):
         if not open_gap(state, scored.best):
             break
