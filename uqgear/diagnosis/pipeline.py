@@ -1,18 +1,21 @@
 """Steps 3 to 6 of a diagnosis in their order: every loop over the fits and every call to the verdict's rules.
 
-The order is that of docs/model/unmodelled-effects.md section 6:
+The order is that of docs/model/unmodelled-effects.md section 6 (:func:`diagnose_case`):
 
-1. the nominal fit, the pitch-error allowance, the frequency-locked lines and the signature hints;
-2. a pass against the nominal fit (:func:`candidate_pass`): every candidate screened and the best
-   fitted in full (:func:`~.screening.screen_and_promote`), the nominal fit checked against those
-   full fits (:func:`~.nominal.check_nominal`), then, while the gap stays unexplained, the extra
-   full fits (:func:`extra_full_fits`), unless they wait on the set the gap's strongest candidate
-   leads; while a pass finds a better nominal fit, another pass from it (:func:`nominal_passes`);
-3. step 5, the first effect's decision (:func:`decide_first`);
-4. step 6, the set of effects (:func:`effect_set`, forward selection round by round);
-5. where the extra full fits waited on a set that explains nothing together, those fits and the
+1. the nominal fit, the pitch-error allowance with its refit, the frequency-locked lines and the
+   signature hints, the nominal model's held-out predictions (:mod:`.nominal`);
+2. a pass against the nominal fit (:func:`candidate_pass`): every candidate screened and the
+   promoted ones fitted in full (:func:`~.screening.screen_and_promote`), the nominal fit checked
+   against those full fits (:func:`~.nominal.check_nominal`); where the gap is open and its
+   strongest candidate leads a set (:func:`set_comes_first`, on a copy of the random stream), the
+   extra full fits wait; otherwise they are made while the gap stays open (:func:`extra_full_fits`);
+3. while a pass finds a better nominal fit, another pass from it (:func:`nominal_passes`);
+4. step 5, the first effect's decision (:func:`decide_first`);
+5. step 6, the set of effects (:func:`effect_set`), forward selection round by round
+   (:func:`forward_selection`, :func:`next_effect`);
+6. where the extra full fits waited on a set that explains nothing together: those fits, the
    passes they call for, then steps 5 and 6 again (:func:`verdict_and_set`);
-6. an eccentric shaft its sideband phases name (:func:`with_phase_named_shaft`).
+7. an eccentric shaft its sideband phases name (:func:`with_phase_named_shaft`).
 
 Each step called here (:mod:`.nominal`, :mod:`.screening`, :mod:`.selection`) measures and returns
 what it measured; which step comes next, and every decision on a gap (:mod:`.verdict`), is made
