@@ -35,9 +35,9 @@ from uqgear.diagnosis import (
     candidates,
     diagnose,
     effects,
-    first_effect,
     fit_problem,
     fitting,
+    pipeline,
     scoring,
     screening,
     selection,
@@ -187,15 +187,14 @@ class _StandIns:
         self.screened: list[str] = []
         self.full: list[str] = []
         self.bases: list[tuple[str, ...]] = []
-        # the fits on top of a base run through screening's, the full fit scored through selection's
+        # the fits on top of a base, screenings and full fits, run and are scored through screening's
         monkeypatch.setattr(screening, "fit_candidate", self.fit_candidate)
         monkeypatch.setattr(screening, "leave_one_out", lambda result: result.held)
-        for module in (selection, screening):
-            monkeypatch.setattr(module, "score_candidate", self.score_candidate)
-        monkeypatch.setattr(selection, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
+        monkeypatch.setattr(screening, "score_candidate", self.score_candidate)
+        monkeypatch.setattr(screening, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
         # no pitch-error allowance on these stand-ins: a full fit is scored as fitted
         monkeypatch.setattr(screening, "with_own_allowance", lambda result, **_: result)
-        monkeypatch.setattr(selection, "bootstrap_gap", lambda z, rng, *_: (0.0, 1.0))
+        monkeypatch.setattr(pipeline, "bootstrap_gap", lambda z, rng, *_: (0.0, 1.0))
 
     def fit_candidate(self, case, candidate, base, *, full, max_evaluations, start=None, earlier=None):
         (self.full if full else self.screened).append(candidate.label)
@@ -223,7 +222,7 @@ def test_a_round_screens_only_other_effects_and_fits_the_best_in_full(monkeypatc
     stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 0.3, 0.75),
                                         ("tooth_damage[gear]", "full"): (95.0, 0.2, 0.83),
                                         "friction": (12.0, 1.0, 0.15)})
-    round_ = selection.next_effect(_state(case), base, ["eccentricity"])
+    round_ = pipeline.next_effect(_state(case), base, ["eccentricity"])
     # never eccentricity again, in either variant; every other library effect's variants screened
     assert not any(label.startswith("eccentricity") for label in stand_ins.screened)
     expected = [c.label for name in effects.effect_names() if name != "eccentricity"
@@ -244,7 +243,7 @@ def test_a_round_adds_nothing_that_does_not_clearly_improve(monkeypatch, design)
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     # a fair score but no real shrink of what remains (soaking up noise): not added
     _StandIns(monkeypatch, {"friction": (14.0, 1.15, 0.04)})
-    round_ = selection.next_effect(_state(case), base, ["eccentricity"])
+    round_ = pipeline.next_effect(_state(case), base, ["eccentricity"])
     assert round_.added is None and round_.scores[0].effect == "friction"
 
 
@@ -254,7 +253,7 @@ def test_a_round_fits_in_full_only_a_best_screening_that_could_be_named(monkeypa
     base = _score("eccentricity", run_out.label, 300.0, 1.2, 0.6, candidate=run_out)
     # the best screening on top: 7 nats, shrink interval -10 % to 10 %, a gap above noise: no full fit
     stand_ins = _StandIns(monkeypatch, {"friction": (7.0, 1.15, 0.0)})
-    round_ = selection.next_effect(_state(case), base, ["eccentricity"])
+    round_ = pipeline.next_effect(_state(case), base, ["eccentricity"])
     assert stand_ins.full == [] and round_.added is None
     assert round_.scores[0].effect == "friction" and stand_ins.screened
     assert "not fitted in full" in round_.reason
@@ -263,7 +262,7 @@ def test_a_round_fits_in_full_only_a_best_screening_that_could_be_named(monkeypa
     verdict = settings.verdict
     for figures in ((verdict.score_threshold, 1.15, 0.0), (7.0, 1.15, 0.1), (7.0, verdict.noise_gap, 0.0)):
         stand_ins = _StandIns(monkeypatch, {"friction": figures})
-        selection.next_effect(_state(case), base, ["eccentricity"])
+        pipeline.next_effect(_state(case), base, ["eccentricity"])
         assert stand_ins.full == ["friction"], figures
 
 
@@ -274,13 +273,13 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     # within noise after the first effect: no round at all
     stand_ins = _StandIns(monkeypatch, {})
     done = _score("eccentricity", run_out.label, 300.0, 0.3, 0.9, candidate=run_out)
-    selected, rounds = selection.forward_selection(_state(case), done, first_decision)
+    selected, rounds = pipeline.forward_selection(_state(case), done, first_decision)
     assert [s.entry.effect for s in selected] == ["eccentricity"] and rounds == [] and stand_ins.screened == []
     assert selected[0].shrink_share == 0.9
     # with the pitch-error allowance a gap within noise may still hide an effect: one round is run
     allowed = SimpleNamespace(design=design, pitch_allowance=object(), run_out_allowance={}, executor=None)
     stand_ins = _StandIns(monkeypatch, {})
-    selected, rounds = selection.forward_selection(_state(allowed), done, first_decision)
+    selected, rounds = pipeline.forward_selection(_state(allowed), done, first_decision)
     assert [s.entry.effect for s in selected] == ["eccentricity"] and len(rounds) == 1
     assert rounds[0].added is None and stand_ins.screened
     # every round adds an effect that halves the remaining gap: capped at three effects
@@ -288,7 +287,7 @@ def test_forward_selection_stops_within_noise_and_at_the_cap(monkeypatch, design
     table = {c.label: (60.0 + k, None, 0.5 + 0.01 * k)
              for k, c in enumerate(c for name in effects.effect_names() for c in effects.candidates_for(name, design))}
     stand_ins = _StandIns(monkeypatch, table)
-    selected, rounds = selection.forward_selection(_state(case, settings=DiagnosisSettings(max_effects=3)), first,
+    selected, rounds = pipeline.forward_selection(_state(case, settings=DiagnosisSettings(max_effects=3)), first,
                                                    first_decision)
     names = [s.entry.effect for s in selected]
     assert len(names) == 3 and len(set(names)) == 3 and len(rounds) == 2
@@ -312,7 +311,7 @@ def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_rou
     # round 1 adds tooth damage; friction's screening reaches a 25 % shrink at its upper end, the rest show nothing
     table = {"tooth_damage[gear]": (80.0, 1.0, 0.5), "friction": (7.0, 1.15, 0.15)}
     stand_ins = _StandIns(monkeypatch, table)
-    selected, rounds = selection.forward_selection(_state(case), first, first_decision)
+    selected, rounds = pipeline.forward_selection(_state(case), first, first_decision)
     assert [s.entry.effect for s in selected] == ["eccentricity", "tooth_damage"] and len(rounds) == 2
     others = [c.label for name in effects.effect_names() if name != "eccentricity"
               for c in effects.candidates_for(name, design)]
@@ -321,7 +320,7 @@ def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_rou
     assert [s.effect for s in rounds[1].scores] == ["friction"] and rounds[1].added is None
     # nothing but the added effect showed anything: the next round screens nothing and says why
     stand_ins = _StandIns(monkeypatch, {"tooth_damage[gear]": (80.0, 1.0, 0.5)})
-    selected, rounds = selection.forward_selection(_state(case), first, first_decision)
+    selected, rounds = pipeline.forward_selection(_state(case), first, first_decision)
     assert len(selected) == 2 and len(rounds) == 2 and rounds[1].scores == [] and rounds[1].added is None
     assert stand_ins.screened == others and stand_ins.full == ["tooth_damage[gear]"]
     assert "so none was screened" in rounds[1].reason and "on top of eccentricity[pinion]" in rounds[1].reason
@@ -334,6 +333,10 @@ def test_a_later_round_screens_only_the_effects_that_showed_something_in_the_rou
     assert selection.still_open(_state(case), ["eccentricity"], None) == [
         name for name in effects.effect_names() if name != "eccentricity"
     ]
+
+
+#: The last pass against a nominal fit: its full fits are not checked against it (no further pass is allowed).
+_LAST_PASS = DEFAULT_SETTINGS.nominal.nominal_refits
 
 
 class _ExtraFits:
@@ -349,7 +352,7 @@ class _ExtraFits:
                             lambda state, entries: [replace(entry, stage="full") for entry in entries])
         monkeypatch.setattr(screening, "side_by_side", lambda case, jobs: [job() for job in jobs])
         monkeypatch.setattr(screening, "full_fit", lambda state, entry, *base: entry)
-        monkeypatch.setattr(screening, "scored_in_full", self.scored_in_full)
+        monkeypatch.setattr(pipeline, "scored_in_full", self.scored_in_full)
         # switching a full fit's effect off costs 50 more than its fit (cost 0)
         monkeypatch.setattr(screening, "effect_off_costs", lambda base, fits, **_: ([], [50.0 for _ in fits]))
 
@@ -368,7 +371,7 @@ def test_the_extra_full_fits_wait_on_the_set_the_gaps_strongest_candidate_leads(
              "bearing_clearance[pinion]": (-3.5, 0.0, -0.1), "friction": (-4.0, 0.0, -0.1)}
     stand_ins = _ExtraFits(monkeypatch, design, table)
     drawn = state.rng.bit_generator.state
-    scored = screening.score_candidates(state)
+    scored = pipeline.candidate_pass(state, _LAST_PASS, set_first=True)
     # the leader leads a set: the next three variants wait on it, none fitted yet
     assert [entry.label for entry in scored.waiting] == ["eccentricity[pinion]", "torque_ripple",
                                                         "bearing_clearance[pinion]"]
@@ -376,26 +379,26 @@ def test_the_extra_full_fits_wait_on_the_set_the_gaps_strongest_candidate_leads(
     # the set was judged on copies and a copy of the stream: the stream is where it was, and the verdict
     # step 5 then draws from it starts that very set
     assert state.rng.bit_generator.state == drawn
-    decision, _, ranking, _ = first_effect.first_decision(state, scored.best, state.rng)
-    assert decision.verdict == "unexplained" and first_effect.starts_a_set(state, decision, ranking)
+    decision, _, ranking, _ = pipeline.first_decision(state, scored.best, state.rng)
+    assert decision.verdict == "unexplained" and pipeline.starts_a_set(state, decision, ranking)
     assert ranking[0].label == "tooth_damage[pinion]"
     # the fits made so far carry their effect gains (full fits: switched off; screenings: against the nominal)
     gains = {(entry.label, entry.stage): entry.effect_gain for entry in scored.all_scores}
     assert gains[("tooth_damage[pinion]", "full")] == 50.0 and gains[("friction", "screening")] == 100.0
     # where the set explains nothing together they are made, in order, while the gap stays unexplained
-    done = screening.fit_waiting(state, scored)
+    done = pipeline.extra_full_fits(state, scored, scored.waiting, check=False)
     assert stand_ins.extra == ["eccentricity[pinion]", "torque_ripple", "bearing_clearance[pinion]"]
-    assert done.waiting == [] and sum(entry.stage == "full" for entry in done.all_scores) == 5
+    assert done.waiting == () and sum(entry.stage == "full" for entry in done.all_scores) == 5
     # a leader that cannot lead a set (its shrink interval reaches below zero): the extra fits come at once
     table["tooth_damage[pinion]"] = (1300.0, 0.23, -0.05)
     stand_ins = _ExtraFits(monkeypatch, design, table)
-    scored = screening.score_candidates(state)
-    assert scored.waiting == [] and stand_ins.extra == ["eccentricity[pinion]", "torque_ripple",
+    scored = pipeline.candidate_pass(state, _LAST_PASS, set_first=True)
+    assert scored.waiting == () and stand_ins.extra == ["eccentricity[pinion]", "torque_ripple",
                                                          "bearing_clearance[pinion]"]
     # and never where the caller asks for them at once (the set was tried already)
     table["tooth_damage[pinion]"] = (1300.0, 0.23, 0.13)
     stand_ins = _ExtraFits(monkeypatch, design, table)
-    assert screening.score_candidates(state, set_first=False).waiting == [] and len(stand_ins.extra) == 3
+    assert pipeline.candidate_pass(state, _LAST_PASS, set_first=False).waiting == () and len(stand_ins.extra) == 3
 
 
 def test_an_unexplained_gap_starts_a_set_only_from_a_candidate_its_effect_carries():
@@ -595,7 +598,7 @@ def test_the_extra_full_fits_are_made_only_where_the_set_the_leader_leads_fails(
     if named:
         candidates.append("eccentricity")
     waited = Diagnosis(effects=candidates, seed=2, workers=2).fit(equal_pair)
-    monkeypatch.setattr(screening, "set_comes_first", lambda state, best: False)
+    monkeypatch.setattr(pipeline, "set_comes_first", lambda state, best: False)
     first = Diagnosis(effects=candidates, seed=2, workers=2).fit(equal_pair)
     steps = [record["step"] for record in waited.steps_.finished]
     assert [_waits(waited), _waits(first)] == [True, False]

@@ -8,6 +8,8 @@ along its steps:
 - the estimator and its inputs: :mod:`.estimator`, :mod:`.inputs`,
   :mod:`.settings` (every threshold and budget), :mod:`.writer`; what a
   fitted estimator holds, set in one place: :mod:`.fitted`;
+- steps 3 to 6 in their order, with every loop over the fits and every
+  call to the verdict's rules: :mod:`.pipeline`;
 - step 1, features: :mod:`.case` (a prepared campaign), :mod:`.simulation`
   (model records and the rig's feature processing), :mod:`.execution`
   (runs on worker processes);
@@ -16,8 +18,8 @@ along its steps:
   :mod:`.fitting`, :mod:`.nominal`, :mod:`.screening`, :mod:`.signatures`,
   :mod:`.side_by_side` (independent fits on threads, their runs together);
 - step 4, held-out scoring: :mod:`.heldout`, :mod:`.scoring`;
-- step 5, verdict: :mod:`.verdict` (the rules, one rules object per case), :mod:`.first_effect`,
-  :mod:`.decision`;
+- step 5, verdict: :mod:`.verdict` (the rules, one rules object per case), :mod:`.first_effect`
+  (its record), :mod:`.decision`;
 - step 6, several effects: :mod:`.selection`, :mod:`.effect_set` (the set's rule in :mod:`.verdict`);
 - the record: :mod:`.result`, :mod:`.outputs`, :mod:`.state`; the named
   effects read back as model inputs: :mod:`.named_effects`;

@@ -1,11 +1,12 @@
 """The Diagnosis estimator: settings checked in ``__init__``, the work in ``fit``, results in ``*_`` attributes.
 
-``fit`` reads as the six steps of docs/model/unmodelled-effects.md section 6; each step's code
-lives in its own module (features: :mod:`.case` and :mod:`.allowances`;
-predictive distribution: :mod:`.discrepancy`; fits: :mod:`.nominal`,
-:mod:`.screening`, :mod:`.fitting`; held-out scoring: :mod:`.heldout`,
-:mod:`.scoring`; verdict: :mod:`.verdict`, its rules built once per case; several effects:
-:mod:`.selection`).
+``fit`` reads as the six steps of docs/model/unmodelled-effects.md section 6: steps 1 and 2
+here (features: :mod:`.case` and :mod:`.allowances`; predictive distribution:
+:mod:`.discrepancy`), steps 3 to 6 in :mod:`.pipeline`, which calls each fit in turn (fits:
+:mod:`.nominal`, :mod:`.screening`, :mod:`.fitting`; held-out scoring: :mod:`.heldout`,
+:mod:`.scoring`; several effects: :mod:`.selection`) and decides by the rules of
+:mod:`.verdict`, built once per case. The fitted attributes are set in one place
+(:meth:`~.fitted.FittedState._adopt`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import xarray as xr
 
 from ..common.steps import StepLog
 from ..physics.design import Design
-from .allowances.pitch_errors import DEFAULT_CLASSES, PitchErrorAllowance, check_classes
+from .allowances.pitch_errors import DEFAULT_CLASSES, check_classes
 from .allowances.reference import attach_reference, learn_reference
 from .case import RigCase, prepare_case
 from .change.estimator import ChangeDiagnosis
@@ -29,9 +30,8 @@ from .dataset import held_spectra, result_dataset, unfitted_dataset
 from .decision import Decision
 from .effects import check_effects
 from .execution import RunExecutor
-from .first_effect import FirstDecision, decide_first
 from .fitted import DiagnosisFit, FittedState, cpu_seconds, total_timings
-from .gap_maps import family_character, uninformative_reason, where_gap
+from .gap_maps import uninformative_reason
 from .inputs import (
     DiagnosisInputs,
     DiagnosisSeeds,
@@ -42,15 +42,11 @@ from .inputs import (
     resolve_design,
     split_seed,
 )
-from .nominal import NominalPasses, allow_pitch_errors, fit_nominal_model, fit_waiting, score_against_nominal
 from .outputs import completed, json_clean, summary
+from .pipeline import diagnose_case
 from .result import DiagnosisResult
-from .scoring import CandidateScore, capped_squares
-from .selection import NamedSet, effect_set, with_phase_named_shaft
+from .scoring import capped_squares
 from .settings import DiagnosisSettings
-from .signatures import every_channel_locked_lines, frequency_locked_lines, signature_hints
-from .state import DiagnosisState
-from .verdict.rules import verdict_rules
 
 
 def _worst_runs(outcome: DiagnosisResult) -> list[int]:
@@ -58,58 +54,6 @@ def _worst_runs(outcome: DiagnosisResult) -> list[int]:
     z = outcome.nominal_held.z
     worst = np.argsort([-np.nansum(capped_squares(z[op])) for op in range(outcome.case.n_op)])
     return sorted(int(op) for op in worst[:2])
-
-
-def _outcome(
-    state: DiagnosisState,
-    first: FirstDecision,
-    named: NamedSet,
-    *,
-    locked: list[dict[str, Any]],
-    hints: dict[str, float],
-    all_scores: list[CandidateScore],
-    allowance: PitchErrorAllowance,
-    effects: tuple[str, ...],
-    timings: dict[str, float],
-) -> DiagnosisResult:
-    """Everything steps 3 to 6 found, with where the final model's held-out gap lies."""
-    settings, case = state.settings, state.case
-    assert named.decision is not None  # internal invariant: step 6 always ends with a decision
-    selected = named.selected
-    final_held = selected[-1].entry.held if selected else state.nominal_held
-    if selected:
-        remaining_where = where_gap(final_held.z, case, where_z=settings.verdict.where_z)
-        remaining_families = family_character(
-            final_held.z, case, locked, noise_gap=settings.verdict.noise_gap, where_z=settings.verdict.where_z
-        )
-    else:
-        # with no effect named the final model is the nominal one: its maps are already made
-        remaining_where, remaining_families = first.where, first.families
-    return DiagnosisResult(
-        case=case,
-        nominal=state.nominal,
-        nominal_held=state.nominal_held,
-        scores=first.scores,
-        all_scores=all_scores,
-        decision=named.decision,
-        nominal_gap=state.nominal_gap,
-        where=first.where,
-        families=first.families,
-        locked_lines=locked,
-        hints=hints,
-        effects=effects,
-        timings=timings,
-        nominal_gap_interval=first.nominal_gap_interval,
-        selected=selected,
-        rounds=named.rounds,
-        final_held=final_held,
-        remaining_where=remaining_where,
-        remaining_families=remaining_families,
-        remaining_interval=selected[-1].gap_interval if selected else first.nominal_gap_interval,
-        pitch_errors=allowance,
-        modulation=named.modulation,
-        settings=settings,
-    )
 
 
 def _features(
@@ -138,26 +82,6 @@ def _features(
             speed_tolerance=settings.reference.speed_tolerance,
             torque_tolerance=settings.reference.torque_tolerance,
         )
-
-
-def _decide(
-    passes: NominalPasses, locked: list[dict[str, Any]], *, allowance_applied: bool
-) -> tuple[NominalPasses, FirstDecision, NamedSet]:
-    """Steps 5 and 6: the first effect's verdict, the set of effects, an eccentric shaft its phases name.
-
-    Where the extra full fits waited on the set the gap's strongest candidate
-    leads and that set explains nothing together, they are made and both
-    steps decide again with them (:func:`~.nominal.fit_waiting`).
-    """
-    # 5. verdict: the first effect, or none, unexplained, inconclusive
-    first = decide_first(passes.state, passes.best, locked)
-    # 6. several effects: forward selection, an eccentric shaft its sideband phases name
-    named = effect_set(passes.state, first)
-    if passes.scored.waiting and not named.led:
-        passes = fit_waiting(passes)
-        first = decide_first(passes.state, passes.best, locked)
-        named = effect_set(passes.state, first)
-    return passes, first, with_phase_named_shaft(passes.state, named, allowance_applied=allowance_applied)
 
 
 def _cannot_decide(case: RigCase, settings: DiagnosisSettings, steps: StepLog) -> str | None:
@@ -296,7 +220,15 @@ class Diagnosis(FittedState):
         with self.steps_.step("start the worker processes"):
             executor = RunExecutor(case, self.workers)
         try:
-            outcome = self._diagnose(case.with_executor(executor), inputs.posterior)
+            outcome = diagnose_case(
+                case.with_executor(executor),
+                inputs.posterior,
+                effects=self.effects,
+                settings=self.settings,
+                pitch_classes=self.pitch_classes,
+                seed=self.seeds.run,
+                steps=self.steps_,
+            )
             with self.steps_.step("simulate the held-out spectra"):
                 spectra = held_spectra(outcome, _worst_runs(outcome))
         finally:
@@ -314,54 +246,6 @@ class Diagnosis(FittedState):
             design=self.design,
             calibration=self.calibration,
             gears=self.reference_gears,
-        )
-
-    def _diagnose(self, case: RigCase, posterior: xr.Dataset | None) -> DiagnosisResult:
-        """Steps 3 to 6 on a prepared campaign whose simulations run on workers."""
-        steps, settings = self.steps_, self.settings
-        timings: dict[str, float] = {"order_tracking": case.tracking_s}
-        timings.update(dict.fromkeys(("nominal_fit", "screening", "full_fits"), 0.0))
-        # 3. fit: the nominal model, the pitch-error allowance where the sidebands call for it
-        case, nominal = fit_nominal_model(case, posterior, settings=settings, steps=steps, timings=timings)
-        case, nominal, allowance = allow_pitch_errors(
-            case,
-            nominal,
-            classes=self.pitch_classes,
-            seed=self.seeds.run,
-            settings=settings,
-            steps=steps,
-            timings=timings,
-        )
-        with steps.step("find frequency-locked lines and signature hints") as found:
-            locked = frequency_locked_lines(case, settings=settings)
-            # the hints read every channel's lines (a campaign without encoders has no TE lines)
-            hints = signature_hints(case, every_channel_locked_lines(case, settings=settings))
-            found.update(hints=dict(hints))
-        # 3-4. every candidate fitted and scored on held-out runs against the nominal model
-        passes = score_against_nominal(
-            case,
-            nominal,
-            effects=self.effects,
-            hints=hints,
-            rng=np.random.default_rng(self.seeds.run),
-            settings=settings,
-            # the verdict's rules of this case: plain, or with the pitch-error allowance
-            rules=verdict_rules(settings, case),
-            steps=steps,
-            timings=timings,
-        )
-        # 5-6. the verdict, and the set of effects named together
-        passes, first, named = _decide(passes, locked, allowance_applied=allowance.applied)
-        return _outcome(
-            passes.state,
-            first,
-            named,
-            locked=locked,
-            hints=hints,
-            all_scores=passes.all_scores,
-            allowance=allowance,
-            effects=self.effects,
-            timings=timings,
         )
 
     def _fitted(

@@ -1,23 +1,23 @@
-"""Every candidate screened against the nominal fit, the best fitted in full, each scored on held-out runs.
+"""Every candidate screened against a base fit, the best fitted in full, each scored on held-out runs.
 
 Steps 3 and 4 of docs/model/unmodelled-effects.md section 6 for the candidates: each variant of
-each effect family is screened with its own parameters only (the nominal
-parameters and T2 stay at the nominal fit); the best effect, and runners-up
+each effect family is screened with its own parameters only (the base's
+parameters and T2 stay at the base fit); the best effect, and runners-up
 with evidence of their own, are fitted in full (all parameters), warm-started
-from the screening fit; while the gap stays unexplained a few more variants
-get a full fit. Every fit is scored on held-out runs against the nominal
-model's held-out predictions. Fits that read nothing the others write run
-two side by side (:mod:`.side_by_side`) and are scored in order. The
-screening and the full fit take their base: forward selection
-(:mod:`.selection`) runs them on top of the model with the effects named
-so far.
+from the screening fit (:func:`screen_and_promote`). Every fit is scored on
+held-out runs against the base's held-out predictions. The base is the
+nominal fit, or a forward-selection round's model with the effects named
+so far (:mod:`.selection`). Fits that read nothing the others write run
+two side by side (:mod:`.side_by_side`) and are scored in order. These
+functions measure and return what they measured; which fits are made next,
+and every decision on the scores, is the orchestrator's (:mod:`.pipeline`).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -27,7 +27,6 @@ from .allowances.pitch_errors import modulation_gain, with_own_allowance
 from .candidates import Candidate
 from .case import RigCase
 from .effects import candidates_for, hooks_of
-from .first_effect import set_comes_first
 from .fit_problem import robust_cost
 from .fitting import FitResult, fit, fit_candidate
 from .heldout import HeldOut, leave_one_out
@@ -35,7 +34,6 @@ from .scoring import CandidateScore, score_candidate
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 from .side_by_side import Outcome, side_by_side
 from .state import DiagnosisState
-from .verdict.named import decide, ranked
 
 
 def effect_off_costs(
@@ -225,28 +223,55 @@ def full_fit(
 
 
 def scored_in_full(
-    state: DiagnosisState, entry: CandidateScore, outcome: Outcome[tuple[FitResult, HeldOut]]
+    state: DiagnosisState,
+    entry: CandidateScore,
+    outcome: Outcome[tuple[FitResult, HeldOut]],
+    base: CandidateScore | None = None,
 ) -> CandidateScore:
-    """The full fit of a screened candidate scored against the nominal model (its step in the log)."""
+    """A screened candidate's full fit scored against its base's held-out predictions (its step in the log).
+
+    The base is the nominal model, or ``base``, a forward-selection round's
+    model with the effects named so far: its step names that base, and the
+    full fit's ``effect_gain`` is what switching the new effect off costs
+    (:func:`effect_off_costs`, under the fit's own error model). A fit made
+    beside another (:func:`fits_in_full`) states its own seconds.
+    """
     candidate = entry.fit.problem.candidate
     assert candidate is not None  # internal invariant: a screened entry has its candidate
-    with state.steps.step(f"fit {candidate.label} in full") as finding:
+    step = f"fit {candidate.label} in full"
+    if base is not None:
+        step = f"forward selection: {step} on top of {' + '.join(c.label for c in base.fit.problem.candidates)}"
+    with state.steps.step(step) as finding:
         result, held = outcome.get()
+        base_held = state.nominal_held if base is None else base.held
         full = score_candidate(
-            result, held, state.nominal_held, "full", state.rng, n_resamples=state.settings.verdict.bootstrap_resamples
+            result, held, base_held, "full", state.rng, n_resamples=state.settings.verdict.bootstrap_resamples
         )
+        if base is not None:
+            full.effect_gain = effect_off_costs(base.fit, [result], own_error=True)[1][0] - result.cost
         measure_modulation(state.case, full)
-        finding.update(found(full), fit_seconds=round(outcome.seconds, 3))
+        finding.update(found(full), **({} if base is not None else {"fit_seconds": round(outcome.seconds, 3)}))
     return full
 
 
 def fits_in_full(state: DiagnosisState, entries: Sequence[CandidateScore]) -> list[CandidateScore]:
     """Screened candidates fitted in full side by side (:func:`~.side_by_side.side_by_side`) and scored in order."""
-    outcomes = side_by_side(
-        state.case,
-        [partial(full_fit, state, entry, state.nominal, state.earlier_full_fits) for entry in entries],
-    )
-    return [scored_in_full(state, entry, outcome) for entry, outcome in zip(entries, outcomes)]
+    return [scored_in_full(state, entry, outcome) for entry, outcome in zip(entries, fits_ahead(state, entries))]
+
+
+def fits_ahead(
+    state: DiagnosisState, entries: Sequence[CandidateScore], base: FitResult | None = None
+) -> list[Outcome[tuple[FitResult, HeldOut]]]:
+    """Full fits of screened candidates, side by side, not yet scored (:func:`full_fit`).
+
+    On top of the nominal fit, with the full fits against an earlier nominal
+    fit as starts too, or on top of ``base``, a forward-selection round's
+    model. Scoring draws from the random stream: the caller scores each in
+    order (:func:`scored_in_full`), or discards one no longer needed unread,
+    so that the numbers are those of one fit after the other.
+    """
+    on = (state.nominal, state.earlier_full_fits) if base is None else (base, None)
+    return side_by_side(state.case, [partial(full_fit, state, entry, *on) for entry in entries])
 
 
 def _also_promoted(state: DiagnosisState, leader: CandidateScore) -> Callable[[CandidateScore], bool]:
@@ -264,32 +289,7 @@ def _also_promoted(state: DiagnosisState, leader: CandidateScore) -> Callable[[C
     return lambda entry: entry.score > 0 and entry.score >= settings.screening.runner_up_share * leader.score
 
 
-def extra_full_fits(
-    state: DiagnosisState,
-    entries: Sequence[CandidateScore],
-    best: dict[str, CandidateScore],
-    taken_up: Callable[[CandidateScore, CandidateScore], None],
-) -> None:
-    """Further screened variants fitted in full, in order, while the gap stays unexplained.
-
-    Each fit is computed beside the next one (:func:`~.side_by_side.side_by_side`): while the gap
-    stays unexplained the next fit is made anyway, and one that is not needed is discarded
-    unread, so the numbers are those of one fit after the other.
-    ``taken_up`` records each scored fit (it updates ``best``).
-    """
-    ahead: dict[int, Outcome[tuple[FitResult, HeldOut]]] = {}
-    for index, entry in enumerate(entries):
-        if not _unexplained(state, best):
-            break
-        if index not in ahead:
-            pair = entries[index : index + 2]
-            jobs = [partial(full_fit, state, item, state.nominal, state.earlier_full_fits) for item in pair]
-            outcomes = side_by_side(state.case, jobs)
-            ahead.update({index + offset: outcome for offset, outcome in enumerate(outcomes)})
-        taken_up(entry, scored_in_full(state, entry, ahead.pop(index)))
-
-
-def _effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> dict[int, float]:
+def effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> dict[int, float]:
     """What switching each fit's effect off costs, by ``id`` of its entry (:func:`effect_off_costs`).
 
     A full fit's is taken under its own error model; a screening's, which
@@ -302,91 +302,63 @@ def _effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -
     return gains
 
 
-def _set_effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> None:
-    """Each entry's ``effect_gain`` (:func:`_effect_gains`), a step of the log."""
+def set_effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> None:
+    """Each entry's ``effect_gain`` (:func:`effect_gains`), a step of the log."""
     with state.steps.step("switch the effects of the full fits off"):
-        gains = _effect_gains(state, all_scores)
+        gains = effect_gains(state, all_scores)
     for entry in all_scores:
         entry.effect_gain = gains[id(entry)]
 
 
-def _unexplained(state: DiagnosisState, best: dict[str, CandidateScore]) -> bool:
-    """Whether the best fits so far leave the gap open (:func:`~.verdict.named.decide` on them as they are).
-
-    Open is ``unexplained``, or an effect not told apart from one channel's
-    artefact: another candidate may yet explain it on every channel. It is
-    asked of the case's rules without the density route
-    (:meth:`~.verdict.rules.VerdictRules.shrink_only`): an open gap is one
-    above noise that no candidate shrinks enough.
-    """
-    return decide(state.nominal_gap, ranked(best, state.rules), state.rules.shrink_only()).open_gap
-
-
-@dataclass
+@dataclass(frozen=True)
 class ScoredCandidates:
     """The candidates scored against one nominal fit: the best per effect, every score, and what comes next.
 
-    ``better`` is a better nominal fit their full fits found (None: none);
-    ``waiting`` the variants whose extra full fits wait on the set the gap's
-    strongest candidate leads (:func:`score_candidates`), fitted by
-    :func:`fit_waiting` only where that set explains nothing together.
+    Attributes
+    ----------
+    best : dict
+        The best entry per effect so far (:func:`supersedes`).
+    all_scores : list of CandidateScore
+        Every screening and full fit, in the order made.
+    extra : tuple of CandidateScore
+        The screened variants not fitted in full, best screened first, at
+        most ``extra_full_fits``: the extra full fits made, in order, while
+        the gap stays unexplained.
+    better : FitResult or None
+        A better nominal fit the full fits found (None: none).
+    waiting : tuple of CandidateScore
+        The extra full fits that wait on the set the gap's strongest
+        candidate leads (empty: none wait).
     """
 
     best: dict[str, CandidateScore]
     all_scores: list[CandidateScore]
+    extra: tuple[CandidateScore, ...] = ()
     better: FitResult | None = None
-    waiting: list[CandidateScore] = field(default_factory=list)
+    waiting: tuple[CandidateScore, ...] = ()
 
+    @property
+    def full_fits(self) -> list[FitResult]:
+        """The fits of every full fit so far, in order."""
+        return [entry.fit for entry in self.all_scores if entry.stage == "full"]
 
-def _extra_fits_and_gains(
-    state: DiagnosisState,
-    scored: ScoredCandidates,
-    extra: Sequence[CandidateScore],
-    full_before: int,
-    escape: Callable[[Sequence[FitResult]], FitResult | None] | None,
-) -> ScoredCandidates:
-    """The extra full fits of ``extra`` while the gap stays unexplained, every fit's effect gain, the nominal check.
-
-    ``full_before``: how many full fits the nominal fit was checked against
-    already; ``escape`` checks it again where the extra fits added any.
-    """
-    clock = time.perf_counter()
-    best, all_scores = scored.best, scored.all_scores
-
-    def taken_up(entry: CandidateScore, full: CandidateScore) -> None:
-        all_scores.append(full)
+    def taken_up(self, entry: CandidateScore, full: CandidateScore) -> ScoredCandidates:
+        """These scores with ``full``, the full fit of the screened ``entry`` (it may become its effect's best)."""
+        best = dict(self.best)
         if supersedes(full, best[entry.effect]):
             best[entry.effect] = full
-
-    extra_full_fits(state, extra, best, taken_up)
-    full_fits = [entry for entry in all_scores if entry.stage == "full"]
-    _set_effect_gains(state, all_scores)
-    state.timings["full_fits"] += time.perf_counter() - clock
-    if escape is None or len(full_fits) == full_before:
-        # no full fit since the check before: it would find the same
-        return ScoredCandidates(best, all_scores)
-    return ScoredCandidates(best, all_scores, escape([entry.fit for entry in full_fits]))
+        return replace(self, best=best, all_scores=[*self.all_scores, full])
 
 
-def score_candidates(
-    state: DiagnosisState,
-    *,
-    escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None,
-    set_first: bool = True,
-) -> ScoredCandidates:
-    """Screen every candidate against the nominal fit, fit the best in full; best per effect, all, a better nominal.
+def screen_and_promote(state: DiagnosisState) -> ScoredCandidates:
+    """Every candidate screened against the nominal fit, the best fitted in full; the extra full fits' candidates.
 
-    ``escape`` checks the nominal fit against full fits (:func:`improved_nominal`: a better nominal
-    fit or None). It is asked once the promoted candidates are fitted in full and, where it finds
-    nothing, again after the extra full fits. Where it finds a better nominal fit, this pass ends
-    there: every candidate is then scored again against that fit, and a further full fit against
-    the nominal fit it replaces would only have been a start.
-
-    The extra full fits are there so that a gap is not called unexplained while a variant the
-    screening cannot judge could explain it. Where the gap is unexplained and its strongest
-    candidate leads a set (``set_first``; :func:`~.first_effect.set_comes_first`), that set is tried
-    first (step 6): the extra fits wait (``waiting``), and are made (:func:`fit_waiting`) only
-    where the set explains nothing together, since a named set leaves no gap unexplained.
+    The runners-up with evidence of their own are fitted in full beside the
+    best (:func:`_also_promoted`). An effect that changes the response only
+    in a few runs (a bearing clearance where a bearing unloads) cannot be
+    screened with the nominal parameters held where the nominal model put
+    them to absorb that change: the next screened variants, best first, are
+    the ``extra`` full fits made while the gap stays unexplained.
     """
     settings = state.settings
     clock = time.perf_counter()
@@ -395,58 +367,22 @@ def score_candidates(
     clock = time.perf_counter()
     best = best_per_effect(screened)
     order = sorted(best.values(), key=lambda entry: -entry.score)
-    all_scores = list(screened)
     promoted = _also_promoted(state, order[0]) if order else (lambda entry: False)
     chosen = [entry for rank, entry in enumerate(order[: settings.screening.promoted]) if rank == 0 or promoted(entry)]
+    scored = ScoredCandidates(best, list(screened))
     for entry, full in zip(chosen, fits_in_full(state, chosen)):
-        all_scores.append(full)
-        if supersedes(full, best[entry.effect]):
-            best[entry.effect] = full
+        scored = scored.taken_up(entry, full)
     state.timings["full_fits"] += time.perf_counter() - clock
-    better = escape([entry.fit for entry in all_scores if entry.stage == "full"]) if escape is not None else None
-    if better is not None:
-        return ScoredCandidates(best, all_scores, better)
-    # An effect that changes the response only in a few runs (a bearing clearance where a bearing
-    # unloads) cannot be screened with the nominal parameters held where the nominal model put
-    # them to absorb that change: before a gap is called unexplained the next candidate variants
-    # get a full fit, best screened first, until one explains it.
-    remaining = sorted(
+    extra = sorted(
         (entry for entry in screened if not any(entry is done for done in chosen)), key=lambda entry: -entry.score
     )[: settings.screening.extra_full_fits]
-    if remaining and set_first and _unexplained(state, best):
-        clock = time.perf_counter()
-        with state.steps.step("decide whether the extra full fits wait for a set") as found:
-            gains = _effect_gains(state, all_scores)
-            # judged on copies with their gains, on a copy of the random stream: nothing is changed here
-            waits = set_comes_first(
-                state, {name: replace(entry, effect_gain=gains[id(entry)]) for name, entry in best.items()}
-            )
-            found.update(extra_fits_wait_for_a_set=waits)
-        state.timings["full_fits"] += time.perf_counter() - clock
-        if waits:
-            for entry in all_scores:
-                entry.effect_gain = gains[id(entry)]
-            return ScoredCandidates(best, all_scores, waiting=remaining)
-    return _extra_fits_and_gains(state, ScoredCandidates(best, all_scores), remaining, len(chosen), escape)
-
-
-def fit_waiting(
-    state: DiagnosisState,
-    scored: ScoredCandidates,
-    *,
-    escape: Callable[[Sequence[FitResult]], FitResult | None] | None = None,
-) -> ScoredCandidates:
-    """The extra full fits that waited on a set (:func:`score_candidates`), while the gap stays unexplained.
-
-    Then every fit's effect gain, and ``escape``'s check of the nominal fit against the full fits.
-    """
-    full_before = sum(entry.stage == "full" for entry in scored.all_scores)
-    return _extra_fits_and_gains(state, scored, scored.waiting, full_before, escape)
+    return replace(scored, extra=tuple(extra))
 
 
 __all__ = [
     "effect_off_costs",
     "improved_nominal",
+    "found",
     "supersedes",
     "measure_modulation",
     "best_per_effect",
@@ -455,8 +391,9 @@ __all__ = [
     "full_fit",
     "scored_in_full",
     "fits_in_full",
-    "extra_full_fits",
+    "fits_ahead",
+    "effect_gains",
+    "set_effect_gains",
     "ScoredCandidates",
-    "score_candidates",
-    "fit_waiting",
+    "screen_and_promote",
 ]

@@ -1,34 +1,32 @@
-"""Several effects at once: forward selection after the first effect, and an eccentric shaft its phases name.
+"""Several effects at once: the fits of a forward-selection round, and of an eccentric shaft its phases name.
 
-Step 6 of docs/model/unmodelled-effects.md section 6 (section 6.2): while the model with the
-effects named so far leaves a significant held-out gap, it is the base of
-another round; the other effects are screened on top of it with their own
-parameters, the best is fitted in full with every effect present and scored
-against the base's held-out predictions, and :func:`~.verdict.named.decide` on
-the gap that remains adds it or not. Where the pitch-error allowance
-applies, a shaft's sideband phases can then name an eccentricity the line
-amplitudes cannot tell from the gears' own errors (section 6.4).
+Step 6 of docs/model/unmodelled-effects.md section 6 (section 6.2): a
+round takes the model with the effects named so far as its base, screens
+the other effects on top of it with their own parameters, and fits the
+best in full with every effect present, scored against the base's
+held-out predictions (:func:`round_fits`). Where the pitch-error allowance
+applies, a shaft's sideband phases can name an eccentricity the line
+amplitudes cannot tell from the gears' own errors (section 6.4,
+:func:`phase_named_run_out`). These functions measure; the rounds, and the
+decisions that add an effect or end the selection, are the orchestrator's
+(:mod:`.pipeline`).
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from .allowances.pitch_errors import first_order_reads
 from .allowances.sideband_phase import ModulationEvidence, fit_modulated_run_out, modulation_evidence, shafts_tested
 from .decision import Decision
 from .effect_set import SelectedEffect, SelectionRound
-from .effects import EffectFamily, run_out_family
-from .first_effect import FirstDecision, starts_a_set
-from .scoring import CandidateScore, bootstrap_gap, score_candidate
-from .screening import best_per_effect, effect_off_costs, found, full_fit, measure_modulation, screen, supersedes
+from .effects import EffectFamily
+from .scoring import CandidateScore
+from .screening import best_per_effect, fits_ahead, found, scored_in_full, screen, supersedes
 from .settings import DiagnosisSettings
 from .state import DiagnosisState
-from .verdict.named import decide, ranked
-from .verdict.sets import lead_decision, phase_named_decision, set_decision, unled_decision
 
 
 def shrink_shares(nominal_gap: float, first_shrink: float, gaps: Sequence[float]) -> list[float]:
@@ -96,27 +94,38 @@ def _void_reason(tried: SelectionRound) -> str:
     return f"no other effect explained any of the gap on top of {' + '.join(tried.base)}{best}, so none was screened"
 
 
-def _full_on_top(state: DiagnosisState, base: CandidateScore, leader: CandidateScore) -> CandidateScore:
-    """The round's leader fitted in full with every effect present, scored against the base's held-out runs."""
-    settings, base_fit = state.settings, base.fit
-    candidate = leader.fit.problem.candidate
-    assert candidate is not None  # internal invariant: a screened entry has its candidate
-    base_labels = " + ".join(c.label for c in base_fit.problem.candidates)
-    with state.steps.step(f"forward selection: fit {candidate.label} in full on top of {base_labels}") as finding:
-        result, held = full_fit(state, leader, base_fit)
-        full = score_candidate(
-            result, held, base.held, "full", state.rng, n_resamples=settings.verdict.bootstrap_resamples
-        )
-        full.effect_gain = effect_off_costs(base_fit, [result], own_error=True)[1][0] - result.cost
-        measure_modulation(state.case, full)
-        finding.update(found(full))
-    return full
+@dataclass(frozen=True)
+class RoundFits:
+    """What one forward-selection round measured on top of its base (:func:`round_fits`).
+
+    Attributes
+    ----------
+    base : tuple of str
+        The labels of the base's effects.
+    gap_before : float
+        The base's held-out gap.
+    ranking : list of CandidateScore
+        The best fit per effect screened, best first (empty: nothing was screened).
+    leader : CandidateScore or None
+        The best fit of the best screening's effect (its full fit where that scores higher).
+    void : str
+        Why nothing was screened (empty where something was).
+    note : str
+        Where the best screening was not fitted in full, why (a clause of the round's reason).
+    """
+
+    base: tuple[str, ...]
+    gap_before: float
+    ranking: list[CandidateScore] = field(default_factory=list)
+    leader: CandidateScore | None = None
+    void: str = ""
+    note: str = ""
 
 
-def next_effect(
+def round_fits(
     state: DiagnosisState, base: CandidateScore, named: Sequence[str], tried: SelectionRound | None = None
-) -> SelectionRound:
-    """One forward-selection round: the other effects screened on top of the base, the best fitted in full.
+) -> RoundFits:
+    """One forward-selection round's fits: the other effects screened on top of the base, the best fitted in full.
 
     Only the new effect's parameters are screened (the base's fit, its
     Jacobian and held-out predictions are reused), for the effects
@@ -124,95 +133,67 @@ def next_effect(
     screened variant is fitted in full with every effect present where its
     screening could explain part of the remaining gap
     (:func:`worth_a_full_fit`), and scored against the base's held-out
-    predictions; :func:`~.verdict.named.decide` on top of the base adds it or not.
+    predictions (:func:`~.screening.scored_in_full`).
     """
     settings, base_fit = state.settings, base.fit
     base_labels = tuple(candidate.label for candidate in base_fit.problem.candidates)
     effects = still_open(state, named, tried)
     if tried is not None and not effects and any(name not in named for name in state.effects):
         # only a round before can leave nothing of the effects not yet named
-        return SelectionRound(base_labels, base.gap_with_effect, [], None, _void_reason(tried))
+        return RoundFits(base_labels, base.gap_with_effect, void=_void_reason(tried))
     screened = screen(state, base.fit, base.held, effects, on_top=True)
     if not screened:
-        return SelectionRound(base_labels, base.gap_with_effect, [], None, "no other candidate effect is left to try")
+        return RoundFits(base_labels, base.gap_with_effect, void="no other candidate effect is left to try")
     best = best_per_effect(screened)
     leader = max(screened, key=lambda entry: entry.score)
-    fitted_in_full = worth_a_full_fit(leader, settings)
-    if fitted_in_full:
-        full = _full_on_top(state, base, leader)
+    note = ""
+    if worth_a_full_fit(leader, settings):
+        full = scored_in_full(state, leader, fits_ahead(state, [leader], base_fit)[0], base)
         if supersedes(full, best[full.effect]):
             best[full.effect] = full
-    ranking = sorted(best.values(), key=lambda entry: -entry.score)
-    chosen = ranked({leader.effect: best[leader.effect]}, state.rules)[0]
-    chosen = replace(chosen, gap_interval=bootstrap_gap(chosen.held.z, state.rng, settings.verdict.bootstrap_resamples))
-    # no density evidence here: a further effect must shrink a gap that is there, or it only soaks up what
-    # the allowance already forgives (docs/model/unmodelled-effects.md section 6.4)
-    decision = decide(base.gap_with_effect, [chosen], state.rules.shrink_only())
-    added = chosen.effect if decision.verdict == chosen.effect else None
-    reason = decision.reason
-    if not fitted_in_full:
-        reason += (
+    else:
+        note = (
             f"; its screening on top explains none of the gap (shrink at most {leader.shrink_interval[1]:.0%}) "
             "and has no evidence of its own, so it was not fitted in full"
         )
-    assert chosen.gap_interval is not None
-    return SelectionRound(base_labels, base.gap_with_effect, ranking, added, reason, decision, chosen.gap_interval)
+    ranking = sorted(best.values(), key=lambda entry: -entry.score)
+    return RoundFits(base_labels, base.gap_with_effect, ranking, best[leader.effect], note=note)
 
 
-def forward_selection(
+def selected_effects(
     state: DiagnosisState,
-    first: CandidateScore,
-    first_decision: Decision,
-    *,
-    first_gap_interval: Sequence[float] = (math.nan, math.nan),
-) -> tuple[list[SelectedEffect], list[SelectionRound]]:
-    """Add effects one at a time after the first while a significant held-out gap remains.
-
-    The first effect's fit (``first``, named by :func:`~.verdict.named.decide`) is
-    the base; each round (:func:`next_effect`) screens the effects not yet
-    named on top of it, fits the best in full with all effects present and
-    adds it when :func:`~.verdict.named.decide`, applied to the gap that remains,
-    names it; the model with it is the next base. Rounds stop when the
-    remaining gap is within ``noise_gap`` (where the pitch-error allowance
-    applies, only at a gap of 0: its widened error can hold a further
-    effect's evidence below the noise gap, and the effect is added when it
-    shrinks what is left), when a round adds nothing, or at ``max_effects``.
-
-    Returns
-    -------
-    selected : list of SelectedEffect
-        The named effects in order (the first one included), with their shrink shares.
-    rounds : list of SelectionRound
-        The rounds after the first, the last one possibly adding nothing.
-    """
-    settings = state.settings
-    entries, decisions = [first], [first_decision]
-    intervals: list[tuple[float, float]] = [(float(first_gap_interval[0]), float(first_gap_interval[1]))]
-    rounds: list[SelectionRound] = []
-    while len(entries) < settings.selection.max_effects and (
-        entries[-1].gap_with_effect > settings.verdict.noise_gap
-        or (state.rules.pitch_allowance and entries[-1].gap_with_effect > 0.0)
-    ):
-        selection = next_effect(state, entries[-1], [entry.effect for entry in entries], rounds[-1] if rounds else None)
-        rounds.append(selection)
-        if selection.added is None or selection.decision is None:
-            break
-        # the added effect's best fit leads its round's ranking (its full fit was started from the best screening)
-        entries.append(selection.scores[0])
-        decisions.append(selection.decision)
-        intervals.append(selection.gap_interval)
-    shares = shrink_shares(state.nominal_gap, first.shrink_fraction, [entry.gap_with_effect for entry in entries])
+    entries: Sequence[CandidateScore],
+    decisions: Sequence[Decision],
+    intervals: Sequence[tuple[float, float]],
+) -> list[SelectedEffect]:
+    """The named effects in order with their shrink shares (:func:`shrink_shares`), the decisions that named them."""
+    shares = shrink_shares(state.nominal_gap, entries[0].shrink_fraction, [entry.gap_with_effect for entry in entries])
     befores = [state.nominal_gap] + [entry.gap_with_effect for entry in entries[:-1]]
-    selected = [
+    return [
         SelectedEffect(entry, before, share, decision, interval)
         for entry, before, share, decision, interval in zip(entries, befores, shares, decisions, intervals)
     ]
-    return selected, rounds
+
+
+@dataclass(frozen=True)
+class PhaseNamedFit:
+    """The run-out a shaft's sideband phases name, fitted on top of the final model (:func:`phase_named_run_out`).
+
+    ``entry`` is its fit scored against the final model's held-out
+    predictions, ``gap_before`` the final model's gap, ``share`` its share of
+    the shrink (negative where it widens the gap), ``reason`` what the
+    phases and the fit say, in words.
+    """
+
+    entry: CandidateScore
+    gap_before: float
+    share: float
+    reason: str
 
 
 def phase_named_run_out(
-    state: DiagnosisState, family: EffectFamily, selected: list[SelectedEffect], decision: Decision
-) -> tuple[list[ModulationEvidence], tuple[list[SelectedEffect], Decision] | None]:
+    state: DiagnosisState, family: EffectFamily, selected: list[SelectedEffect]
+) -> tuple[list[ModulationEvidence], PhaseNamedFit | None]:
     """Test the shafts' sideband phase sums for a run-out the amplitudes cannot tell from pitch errors.
 
     ``family`` is the effect a shaft run-out is named as (its
@@ -221,9 +202,9 @@ def phase_named_run_out(
     admits is tested against the final model
     (:func:`~.allowances.sideband_phase.modulation_evidence`); the shaft with
     the strongest decisive evidence gets its run-out fitted on top
-    (:func:`~.allowances.sideband_phase.fit_modulated_run_out`) and added to
-    the set, with its own share of the shrink (negative where it widens the
-    held-out gap).
+    (:func:`~.allowances.sideband_phase.fit_modulated_run_out`). Returns
+    the evidence of every shaft tested and that fit (None: no shaft's
+    evidence is decisive).
     """
     settings, case = state.settings, state.case
     base_fit = selected[-1].entry.fit if selected else state.nominal
@@ -264,16 +245,10 @@ def phase_named_run_out(
         f"interval {1e6 * low:.3g} to {1e6 * high:.3g} um), and it changes the held-out gap from "
         f"{base_gap:.2f} to {entry.gap_with_effect:.2f}"
     )
-    added, whole = phase_named_decision(
-        decision, reason, entry.gap_with_effect, set_named=bool(selected), effect=family.name
-    )
-    chosen = SelectedEffect(
-        entry, base_gap, share, added, bootstrap_gap(entry.held.z, state.rng, settings.verdict.bootstrap_resamples)
-    )
-    return found_evidence, ([*selected, chosen], whole)
+    return found_evidence, PhaseNamedFit(entry, base_gap, share, reason)
 
 
-@dataclass
+@dataclass(frozen=True)
 class NamedSet:
     """Step 6's outcome: the named effects in order, the rounds after the first, the decision, the phase tests."""
 
@@ -285,101 +260,14 @@ class NamedSet:
     led: bool = False
 
 
-def _led_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
-    """An unexplained gap whose strongest candidate leads a forward selection: the set, if it explains the gap.
-
-    Two effects of about equal size each explain less than half of the gap
-    alone: the strongest, clearly carried by its effect, is the base of a
-    forward selection, and the set is named only if it explains the gap
-    together (:func:`~.verdict.sets.set_decision`'s rule).
-    """
-    clock = time.perf_counter()
-    lead = first.scores[0]
-    provisional = lead_decision(lead)
-    trial, trial_rounds = forward_selection(state, lead, provisional, first_gap_interval=first.leader_gap_interval)
-    # added up: a set tried before the extra full fits may be tried again after them
-    state.timings["forward_selection"] = state.timings.get("forward_selection", 0.0) + time.perf_counter() - clock
-    with state.steps.step("decide whether a set of effects explains the gap") as finding:
-        joint = (
-            set_decision(provisional, trial, trial_rounds, state.nominal_gap, state.rules)
-            if len(trial) > 1
-            else None
-        )
-        if joint is not None and not joint.partial:
-            named = NamedSet(trial, trial_rounds, joint, led=True)
-        else:
-            named = NamedSet(decision=unled_decision(first.decision, lead, trial))
-        verdict = named.decision.verdict if named.decision is not None else first.decision.verdict
-        finding.update(effects=[chosen.entry.effect for chosen in named.selected], verdict=verdict)
-    return named
-
-
-def _grown_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
-    """The first effect named: further effects while a significant gap remains (forward selection)."""
-    clock = time.perf_counter()
-    selected, rounds = forward_selection(
-        state, first.scores[0], first.decision, first_gap_interval=first.leader_gap_interval
-    )
-    if rounds:
-        # added up: a set tried before the extra full fits may be tried again after them
-        state.timings["forward_selection"] = state.timings.get("forward_selection", 0.0) + time.perf_counter() - clock
-    with state.steps.step("decide the effect set") as finding:
-        decision = set_decision(first.decision, selected, rounds, state.nominal_gap, state.rules)
-        finding.update(effects=[chosen.entry.effect for chosen in selected], partial=decision.partial)
-    return NamedSet(selected, rounds, decision)
-
-
-def effect_set(state: DiagnosisState, first: FirstDecision) -> NamedSet:
-    """Step 6's set of effects named together, before the sideband phase test.
-
-    A forward selection runs from the named first effect, or from an
-    unexplained gap's strongest candidate where it meets the evidence rules
-    (:func:`~.first_effect.starts_a_set`).
-    """
-    decision = first.decision
-    if first.scores and starts_a_set(state, decision, first.ranking):
-        return _led_set(state, first)
-    if decision.verdict in state.effects:
-        return _grown_set(state, first)
-    return NamedSet(decision=decision)
-
-
-def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_applied: bool) -> NamedSet:
-    """The set with an eccentric shaft its sideband phases name (:func:`phase_named_run_out`), where the test applies.
-
-    It applies where the pitch-error allowance was applied, a family that
-    reads as a shaft run-out (:func:`~.effects.run_out_family`: eccentricity)
-    is a candidate not in the set, the gap is not left open (``unexplained``,
-    or an effect not told apart from a sensor's artefact) and the set has
-    room for it. ``named`` is updated in place and returned.
-    """
-    settings = state.settings
-    assert named.decision is not None
-    in_set = [chosen.entry.effect for chosen in named.selected]
-    family = run_out_family(state.effects)
-    if (
-        allowance_applied
-        and family is not None
-        and not named.decision.open_gap
-        and len(named.selected) < settings.selection.max_effects
-        and family.name not in in_set
-    ):
-        clock = time.perf_counter()
-        named.modulation, added = phase_named_run_out(state, family, named.selected, named.decision)
-        if added is not None:
-            named.selected, named.decision = added
-        state.timings["sideband_phases"] = time.perf_counter() - clock
-    return named
-
-
 __all__ = [
     "shrink_shares",
     "worth_a_full_fit",
     "still_open",
-    "next_effect",
-    "forward_selection",
+    "RoundFits",
+    "round_fits",
+    "selected_effects",
+    "PhaseNamedFit",
     "phase_named_run_out",
     "NamedSet",
-    "effect_set",
-    "with_phase_named_shaft",
 ]

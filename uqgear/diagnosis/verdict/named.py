@@ -3,7 +3,7 @@
 Every :class:`~uqgear.diagnosis.decision.Decision` on the model's gap is
 made by these rules or, for a set of effects, in :mod:`.sets`: the first
 effect's (:func:`decide`, applied by
-:func:`~uqgear.diagnosis.first_effect.decide_first`), the named set's, a set
+:func:`~uqgear.diagnosis.pipeline.decide_first`), the named set's, a set
 that an unexplained gap's strongest candidate leads and an eccentric shaft
 the sideband phases name. Each rule reads the case's
 :class:`~.rules.VerdictRules`: its thresholds, and what the pitch-error
