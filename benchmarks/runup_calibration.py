@@ -3,14 +3,15 @@
 Builds two campaigns of one virtual rig (true mesh stiffness scale 0.98, mesh
 damping 0.044, the other parameters nominal; 2 % sensor noise and +-0.2 %
 speed wander at 1 Hz): a run-up 1000 -> 5000 rpm and a coast-down
-5000 -> 1000 rpm at 200 rpm/s (8 segments each, read as 16 operating points),
+5000 -> 1000 rpm at 200 rpm/s (read as 8 operating points by default, 4
+segments per ramp at 8 distinct speeds; ``--segments 8`` reads 8 per ramp),
 and the 8 steady runs of the public campaigns (1 s each). Each is written to
 a file and calibrated with the defaults (``uqgear.calibrate``), one after the
 other; the table gives, per campaign, convergence, the true values inside
 their 90 % credible intervals and the wall and CPU time of the calibration
 (CPU time of this process; numba and BLAS threads count in it).
 
-Usage: ``python benchmarks/runup_calibration.py [--out DIR] [--seed N]``
+Usage: ``python benchmarks/runup_calibration.py [--out DIR] [--seed N] [--segments N]``
 """
 
 from __future__ import annotations
@@ -28,12 +29,14 @@ RAMPS = {"start_speed": [1000.0, 5000.0], "stop_speed": [5000.0, 1000.0], "rate"
 
 def main() -> None:
     import uqgear
+    from uqgear.rig.ramp_records import steady_campaign
     from uqgear.rig.virtual_rig import simulate_campaign
     from uqgear.rig.virtual_runup import simulate_runup_campaign
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=None, help="folder for the campaigns and calibrations")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--segments", type=int, default=None, help="segments per ramp (default: the ramps share 8)")
     arguments = parser.parse_args()
     folder = arguments.out or Path(tempfile.mkdtemp(prefix="runup-calibration-"))
     folder.mkdir(parents=True, exist_ok=True)
@@ -44,7 +47,10 @@ def main() -> None:
     ramps = simulate_runup_campaign(design, RAMPS, true_parameters=TRUTH, seed=arguments.seed, **NUISANCES)
     print(f"run-up campaign simulated in {time.perf_counter() - start:.0f} s")
     steady = simulate_campaign(design, true_parameters=TRUTH, seed=arguments.seed, **NUISANCES)
-    files = {"run-up (2 ramps, 16 segments)": uqgear.write_rig(folder / "runup.nc", ramps),
+    if arguments.segments is not None:
+        # cut here at the given count, and calibrated as steady-format operating points
+        ramps = steady_campaign(ramps, segments=arguments.segments)
+    files = {"run-up and coast-down (2 ramps)": uqgear.write_rig(folder / "runup.nc", ramps),
              "steady (8 runs of 1 s)": uqgear.write_rig(folder / "steady.nc", steady)}
     print("| campaign | operating points | converged | inside 90 % | outside (q05/truth, q95/truth) | wall s | CPU s |")
     print("|---|---|---|---|---|---|---|")
