@@ -23,8 +23,12 @@ from pathlib import Path
 
 TRUTH = {"mesh_stiffness_scale": 0.98, "zeta_mesh": 0.044}
 NUISANCES = {"relative_noise": 0.02, "speed_wander": [(0.002, 1.0)]}
-RAMPS = {"start_speed": [1000.0, 5000.0], "stop_speed": [5000.0, 1000.0], "rate": [200.0, 200.0],
-         "drive_torque": [7000.0, 7000.0]}
+RAMPS = {
+    "start_speed": [1000.0, 5000.0],
+    "stop_speed": [5000.0, 1000.0],
+    "rate": [200.0, 200.0],
+    "drive_torque": [7000.0, 7000.0],
+}
 
 
 def main() -> None:
@@ -41,8 +45,14 @@ def main() -> None:
     folder = arguments.out or Path(tempfile.mkdtemp(prefix="runup-calibration-"))
     folder.mkdir(parents=True, exist_ok=True)
     design = uqgear.load_design("locomotive")
-    truth = {"mesh_stiffness_scale": 0.98, "zeta_mesh": 0.044, "backlash": design.backlash,
-             "ste_amplitude": design.ste_amplitude, "k1": design.k1, "k2": design.k2}
+    truth = {
+        "mesh_stiffness_scale": 0.98,
+        "zeta_mesh": 0.044,
+        "backlash": design.backlash,
+        "ste_amplitude": design.ste_amplitude,
+        "k1": design.k1,
+        "k2": design.k2,
+    }
     start = time.perf_counter()
     ramps = simulate_runup_campaign(design, RAMPS, true_parameters=TRUTH, seed=arguments.seed, **NUISANCES)
     print(f"run-up campaign simulated in {time.perf_counter() - start:.0f} s")
@@ -50,8 +60,10 @@ def main() -> None:
     if arguments.segments is not None:
         # cut here at the given count, and calibrated as steady-format operating points
         ramps = steady_campaign(ramps, segments=arguments.segments)
-    files = {"run-up and coast-down (2 ramps)": uqgear.write_rig(folder / "runup.nc", ramps),
-             "steady (8 runs of 1 s)": uqgear.write_rig(folder / "steady.nc", steady)}
+    files = {
+        "run-up and coast-down (2 ramps)": uqgear.write_rig(folder / "runup.nc", ramps),
+        "steady (8 runs of 1 s)": uqgear.write_rig(folder / "steady.nc", steady),
+    }
     print("| campaign | operating points | converged | inside 90 % | outside (q05/truth, q95/truth) | wall s | CPU s |")
     print("|---|---|---|---|---|---|---|")
     for label, path in files.items():
@@ -59,11 +71,17 @@ def main() -> None:
         calibration = uqgear.calibrate(path, folder / path.stem, seed=0)
         wall, cpu = time.perf_counter() - start, time.process_time() - cpu
         entries = calibration.summary_["parameters"]
-        outside = {name: (entries[name]["q05"] / value, entries[name]["q95"] / value)
-                   for name, value in truth.items() if not entries[name]["q05"] <= value <= entries[name]["q95"]}
+        outside = {
+            name: (entries[name]["q05"] / value, entries[name]["q95"] / value)
+            for name, value in truth.items()
+            if not entries[name]["q05"] <= value <= entries[name]["q95"]
+        }
         text = ", ".join(f"{name} ({low:.4f}, {high:.4f})" for name, (low, high) in outside.items()) or "-"
-        print(f"| {label} | {len(calibration.speed_)} | {calibration.converged_} | "
-              f"{len(truth) - len(outside)} of {len(truth)} | {text} | {wall:.0f} | {cpu:.0f} |", flush=True)
+        print(
+            f"| {label} | {len(calibration.speed_)} | {calibration.converged_} | "
+            f"{len(truth) - len(outside)} of {len(truth)} | {text} | {wall:.0f} | {cpu:.0f} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":
