@@ -192,6 +192,25 @@ def test_mixed_campaign_segments_take_the_steady_length_and_say_where_they_come_
         steady_campaign(xr.merge([long_steady, run_up], combine_attrs="override"))
 
 
+def test_ramps_over_one_span_share_eight_points_and_take_turns_along_the_speeds(design):
+    """A run-up and a coast-down over 1000 <-> 2000 rpm: 4 segments each at 8 distinct, evenly spaced speeds."""
+    time = np.arange(int(4 * FS)) / FS
+    ramps = _ramps(design, np.stack([1000.0 + 250.0 * time, 2000.0 - 250.0 * time]))
+    ops = ramp_operating_points(ramps)
+    assert list(ops["op_source"].values) == ["ramp 0"] * 4 + ["ramp 1"] * 4
+    up, down = ops["pinion_speed"].values[:4], ops["pinion_speed"].values[4:]
+    assert np.all(np.diff(up) > 0) and np.all(np.diff(down) < 0)
+    speeds = np.sort(ops["pinion_speed"].values)
+    # the run-up takes the 1st, 3rd, ... of the 8 speeds, the coast-down the 2nd, 4th, ...
+    np.testing.assert_allclose(speeds[0::2], np.sort(up), rtol=0, atol=0)
+    np.testing.assert_allclose(np.diff(speeds), np.diff(speeds).mean(), atol=2.0)
+    # as one ramp over the span is cut
+    one = ramp_operating_points(ramps.isel(ramp=[0]))["pinion_speed"].values
+    np.testing.assert_allclose(speeds, one, atol=2.0)
+    # segments given: each ramp over its own span
+    assert ramp_operating_points(ramps, segments=8).sizes["op"] == 16
+
+
 def test_segment_rules_are_checked_where_the_length_is_given(run_up):
     with pytest.raises(RigDataError, match=r"fewer than 2 pinion revolutions at 10\d\d rpm"):
         ramp_operating_points(run_up, segment_duration=0.1)
@@ -253,7 +272,8 @@ def test_virtual_run_up_is_seeded_and_refuses_what_the_speed_varying_model_does_
     assert np.all((first["ramp_adhesion_torque_lower"] <= truth) & (truth <= first["ramp_adhesion_torque_upper"]))
     # read as operating points, the truth follows the segments
     ops = steady_campaign(read_rig(write_rig(tmp_path / "ramps.nc", first)))
-    assert json.loads(ops.attrs["true_parameters"])["adhesion_torque"] == [truth[0]] * 8 + [truth[1]] * 8
+    # two ramps share the 8 points, 4 each
+    assert json.loads(ops.attrs["true_parameters"])["adhesion_torque"] == [truth[0]] * 4 + [truth[1]] * 4
     with pytest.raises(OperatingPointError, match="pitch_errors: the speed-varying model"):
         simulate_runup_campaign(design, ramps, pitch_errors=7)
     with pytest.raises(OperatingPointError, match="speed_wander: the wandering ramp 1500 -> 1700 rpm is not monotone"):

@@ -16,7 +16,7 @@ from ..common.steps import StepLog, write_failure_record
 from ..common.transaction import OutputFolder
 from ..physics.design import Design, load_design
 from ..rig.format import read_rig
-from ..rig.ramp_records import steady_campaign
+from ..rig.ramp_records import points_truth
 from .estimator import Calibration
 from .pitch_correction import DEFAULT_CLASSES
 from .priors import DEFAULT_PARAMETERS
@@ -145,11 +145,9 @@ def calibrate(
             calibration.fit(rig_path)
             steps = getattr(calibration, "steps_", StepLog())
             with steps.step("write the results"):
-                truth = None
-                # a virtual rig's truth per operating point, ramp records cut as the fit read them
-                rig = steady_campaign(read_rig(rig_path, design=nominal), design=nominal)
-                if "true_parameters" in rig.attrs:
-                    truth = json.loads(rig.attrs["true_parameters"])
+                # a virtual rig's truth per operating point, following the ramp segments the fit read
+                sources = [str(row.get("source", "steady")) for row in calibration.speed_]
+                truth = points_truth(read_rig(rig_path, design=nominal), sources)
                 write_calibration(calibration, work, truth=truth)
         except InternalError as exc:
             write_failure_record(

@@ -25,6 +25,19 @@ Segment length, one for all segments of a campaign:
 * segments of one ramp do not overlap (each sample counts once, as in separate
   steady runs).
 
+Segments per ramp: by default the ramps of a campaign share
+:data:`DEFAULT_SEGMENTS` (8) operating points, ``8 // ramps`` each (at least
+one), and take turns along the speeds they sweep: ramp ``r`` of ``R`` takes
+every ``R``-th of ``segments x R`` evenly spaced speeds, starting at the
+``r``-th, so that a run-up and a coast-down over one span give 8 distinct
+speeds, as one ramp or a steady 8-point campaign does. The reason is the
+calibration's cost: it samples one adhesion torque per operating point and
+evaluates every point's emulator at every step, so its time grows about as
+points x (parameters + points); a second ramp over the same speeds adds the
+same speed dependence again, and the 8 points already resolve the mesh
+resonance as a steady campaign does. ``segments`` given cuts each ramp into
+that many segments over its own span.
+
 Where the campaign holds steady runs too, the segments take the steady
 records' length (so that all operating points share ``time``), and a ramp too
 fast for that length is refused; with ramps alone the length is the longest
@@ -51,6 +64,7 @@ import math
 
 import numpy as np
 import xarray as xr
+from threadpoolctl import threadpool_limits
 
 from ..common.errors import RigDataError
 from ..physics.design import Design
@@ -60,7 +74,7 @@ from .order_tracking import TACHOMETER_VARIABLE
 from .ramp_format import RAMP_CHANNELS, RAMP_COORDINATES, RAMP_TACHOMETER, RAMP_VARIABLES, has_ramps
 from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, sampling_rate
 
-#: Default number of segments per ramp.
+#: Operating points the ramps of a campaign share by default (segments per ramp: this // ramps, at least 1).
 DEFAULT_SEGMENTS = 8
 
 #: Largest speed change within a segment, as a fraction of its mean speed.
@@ -73,14 +87,25 @@ MIN_REVOLUTIONS = 2.0
 OP_SOURCE = "op_source"
 
 
-def _starts(speed: np.ndarray, segments: int, size: int) -> np.ndarray:
-    """First sample of each segment of ``size`` samples centred at evenly spaced speeds of a ramp."""
+def _starts(speed: np.ndarray, segments: int, size: int, turn: tuple[int, int] = (0, 1)) -> np.ndarray:
+    """First sample of each segment of ``size`` samples centred at evenly spaced speeds of a ramp.
+
+    ``turn`` = (r, R): the ramp takes every R-th of ``segments x R`` evenly
+    spaced speeds, from the r-th in rising speed (ramps taking turns).
+    """
     half = size // 2
     last_centre = speed.size - size + half
     # a monotone envelope of the tachometer places each target speed once, whatever the noise
     rising = speed[-1] >= speed[0]
     envelope = np.maximum.accumulate(speed) if rising else -np.minimum.accumulate(speed)
-    targets = np.linspace(envelope[half], envelope[last_centre], segments)
+    offset, stride = turn
+    if stride == 1:
+        targets = np.linspace(envelope[half], envelope[last_centre], segments)
+    else:
+        # the turns are counted in rising speed, whichever way the ramp goes
+        ends = sorted((abs(envelope[half]), abs(envelope[last_centre])))
+        speeds = np.linspace(ends[0], ends[1], segments * stride)[offset::stride]
+        targets = speeds if rising else np.sort(-speeds)
     centres = np.clip(np.searchsorted(envelope, targets, side="left"), half, last_centre)
     return np.asarray(centres - half, dtype=int)
 
@@ -95,13 +120,13 @@ def _segment_speeds(speed: np.ndarray, starts: np.ndarray, size: int, fs: float)
 
 
 def _violation(
-    speeds: np.ndarray, segments: int, size: int, fs: float, max_speed_change: float
+    speeds: np.ndarray, segments: int, size: int, fs: float, max_speed_change: float, stride: int = 1
 ) -> tuple[int, str] | None:
     """The first ramp and rule a segment length breaks, or None where it meets all three."""
     if segments * size > speeds.shape[1]:
         return 0, f"{segments} segments of {size} samples do not fit in a ramp of {speeds.shape[1]} samples"
     for ramp, speed in enumerate(speeds):
-        starts = _starts(speed, segments, size)
+        starts = _starts(speed, segments, size, (ramp % stride, stride))
         if segments > 1 and np.any(np.diff(starts) < size):
             return ramp, f"segments of {size / fs:g} s overlap (the ramp is too short or too fast for {segments})"
         mean, change = _segment_speeds(speed, starts, size, fs)
@@ -120,7 +145,9 @@ def _violation(
     return None
 
 
-def _longest_size(speeds: np.ndarray, segments: int, fs: float, max_speed_change: float, where: str) -> int:
+def _longest_size(
+    speeds: np.ndarray, segments: int, fs: float, max_speed_change: float, where: str, stride: int = 1
+) -> int:
     """The longest segment (samples) that meets the rules in every ramp, by bisection."""
     low = max(4, int(math.ceil(MIN_REVOLUTIONS * 60.0 / float(speeds.min()) * fs)))
     high = speeds.shape[1] // segments
@@ -129,7 +156,7 @@ def _longest_size(speeds: np.ndarray, segments: int, fs: float, max_speed_change
             f"{where}: {RAMP_TACHOMETER}: the ramps of {speeds.shape[1]} samples are too short for {segments} "
             f"segments of at least {MIN_REVOLUTIONS:g} pinion revolutions"
         )
-    broken = _violation(speeds, segments, low, fs, max_speed_change)
+    broken = _violation(speeds, segments, low, fs, max_speed_change, stride)
     if broken is not None:
         raise RigDataError(
             f"{where}: {RAMP_TACHOMETER}: ramp {broken[0]}: no segment length meets the rules for {segments} "
@@ -138,11 +165,11 @@ def _longest_size(speeds: np.ndarray, segments: int, fs: float, max_speed_change
     # a longer segment sweeps more speed and leaves less room between centres: feasibility is monotone
     while high - low > 1:
         middle = (low + high) // 2
-        if _violation(speeds, segments, middle, fs, max_speed_change) is None:
+        if _violation(speeds, segments, middle, fs, max_speed_change, stride) is None:
             low = middle
         else:
             high = middle
-    return high if _violation(speeds, segments, high, fs, max_speed_change) is None else low
+    return high if _violation(speeds, segments, high, fs, max_speed_change, stride) is None else low
 
 
 def _truth_per_op(attrs: dict, ramps: np.ndarray) -> dict:
@@ -163,6 +190,35 @@ def _truth_per_op(attrs: dict, ramps: np.ndarray) -> dict:
     truth["adhesion_torque"] = list(truth.get("adhesion_torque", [])) + [per_ramp[ramp] for ramp in ramps]
     attrs["true_parameters"] = json.dumps(truth)
     return attrs
+
+
+def points_truth(ds: xr.Dataset, sources: list[str]) -> dict | None:
+    """A virtual rig's true parameters per operating point, without cutting the ramps again.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A validated campaign, as read (ramp records not cut).
+    sources : list of str
+        ``op_source`` of each operating point the campaign was read as
+        (``steady`` or ``ramp <index>``), in order.
+
+    Returns
+    -------
+    dict or None
+        The ``true_parameters`` attribute (JSON) as :func:`steady_campaign`
+        carries it to the operating points; None where the file has none.
+
+    Examples
+    --------
+    >>> import xarray as xr
+    >>> points_truth(xr.Dataset(attrs={"true_parameters": '{"zeta_mesh": 0.044}'}), ["steady"])
+    {'zeta_mesh': 0.044}
+    """
+    ramps = np.array([int(source.split()[1]) for source in sources if source.startswith("ramp")], dtype=int)
+    attrs = _truth_per_op(ds.attrs, ramps) if has_ramps(ds) else dict(ds.attrs)
+    text = attrs.get("true_parameters")
+    return json.loads(text) if isinstance(text, str) else None
 
 
 def _line_orders(design: Design, fs: float, top_speed: float) -> tuple[np.ndarray, np.ndarray]:
@@ -187,26 +243,37 @@ def _carrier_drift(
     drift = np.zeros_like(records)
     size = records.shape[1]
     centred = (np.arange(size) - 0.5 * (size - 1)) / size
-    for row, (record, speed) in enumerate(zip(records, tachometer)):
-        rate = 2.0 * math.pi * speed / 60.0
-        angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
-        phases = np.concatenate([lines, carriers])[None, :] * angle[:, None]
-        constant = np.concatenate([np.cos(phases[:, : lines.size]), np.sin(phases[:, : lines.size])], axis=1)
-        trend = centred[:, None] * np.concatenate([np.cos(phases[:, lines.size :]), np.sin(phases[:, lines.size :])], 1)
-        basis = np.concatenate([np.ones((size, 1)), centred[:, None], constant, trend], axis=1)
-        if not np.all(np.isfinite(record)):
-            continue
-        coefficients = np.linalg.lstsq(basis, record, rcond=None)[0]
-        drift[row] = trend @ coefficients[-trend.shape[1] :]
+    # one thread: a fit of a few thousand samples on ~100 columns gains nothing from BLAS threads, which spin on
+    # the cores another process works on (measured on 2 busy cores: 0.6 s a fit threaded, 0.04 s on one thread)
+    with threadpool_limits(1):
+        for row, (record, speed) in enumerate(zip(records, tachometer)):
+            if np.all(np.isfinite(record)):
+                drift[row] = _drift_fit(record, speed, fs, lines, carriers, centred)
     return drift
 
 
+def _drift_fit(
+    record: np.ndarray, speed: np.ndarray, fs: float, lines: np.ndarray, carriers: np.ndarray, centred: np.ndarray
+) -> np.ndarray:
+    """The linear-in-time carrier part of one record (:func:`_carrier_drift`)."""
+    size = record.size
+    rate = 2.0 * math.pi * speed / 60.0
+    angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
+    phases = np.concatenate([lines, carriers])[None, :] * angle[:, None]
+    constant = np.concatenate([np.cos(phases[:, : lines.size]), np.sin(phases[:, : lines.size])], axis=1)
+    trend = centred[:, None] * np.concatenate([np.cos(phases[:, lines.size :]), np.sin(phases[:, lines.size :])], 1)
+    basis = np.concatenate([np.ones((size, 1)), centred[:, None], constant, trend], axis=1)
+    coefficients = np.linalg.lstsq(basis, record, rcond=None)[0]
+    return trend @ coefficients[-trend.shape[1] :]
+
+
 def _segment_dataset(
-    ds: xr.Dataset, size: int, segments: int, fs: float, speeds: np.ndarray, design: Design
+    ds: xr.Dataset, size: int, segments: tuple[int, int], fs: float, speeds: np.ndarray, design: Design
 ) -> xr.Dataset:
-    """The ramps' segments as steady-format operating points (op x time)."""
-    starts = np.concatenate([_starts(speed, segments, size) for speed in speeds])
-    ramps = np.repeat(np.arange(speeds.shape[0]), segments)
+    """The ramps' segments (``segments`` = (per ramp, stride of the turns)) as steady-format operating points."""
+    count, stride = segments
+    starts = np.concatenate([_starts(speed, count, size, (ramp % stride, stride)) for ramp, speed in enumerate(speeds)])
+    ramps = np.repeat(np.arange(speeds.shape[0]), count)
     index = starts[:, None] + np.arange(size)[None, :]
     tachometer = speeds[ramps[:, None], index]
     data_vars: dict[str, tuple] = {}
@@ -250,7 +317,7 @@ def _segment_dataset(
 def ramp_operating_points(
     ds: xr.Dataset,
     *,
-    segments: int = DEFAULT_SEGMENTS,
+    segments: int | None = None,
     segment_duration: float | None = None,
     max_speed_change: float = MAX_SPEED_CHANGE,
     design: Design | None = None,
@@ -263,9 +330,11 @@ def ramp_operating_points(
     ds : xarray.Dataset
         A validated ``uqgear-rig/1`` Dataset with ramp records
         (:func:`~uqgear.rig.format.validate_rig`).
-    segments : int
+    segments : int, optional
         Segments per ramp, centred at evenly spaced speeds of its tachometer
-        between the lowest and highest a whole segment fits around.
+        between the lowest and highest a whole segment fits around. Default:
+        the ramps share :data:`DEFAULT_SEGMENTS` operating points and take
+        turns along the speeds (module docstring).
     segment_duration : float, optional
         Segment length in s; default the longest that meets the rules (module
         docstring). Checked against them.
@@ -279,7 +348,7 @@ def ramp_operating_points(
     Returns
     -------
     xarray.Dataset
-        Operating points on ``op`` x ``time`` (``segments`` per ramp, ramp by
+        Operating points on ``op`` x ``time`` (the segments of each ramp, ramp by
         ramp, in the ramp's speed order) with the steady format's coordinates,
         the channels, ``pinion_speed_signal`` and ``op_source`` (``ramp <index>``).
 
@@ -310,28 +379,33 @@ def ramp_operating_points(
     """
     if not has_ramps(ds) or RAMP_TACHOMETER not in ds.data_vars:
         raise RigDataError(f"{where}: {RAMP_TACHOMETER}: no ramp records to cut into operating points")
-    if isinstance(segments, bool) or not isinstance(segments, (int, np.integer)) or segments < 1:
+    if segments is not None and (
+        isinstance(segments, bool) or not isinstance(segments, (int, np.integer)) or segments < 1
+    ):
         raise RigDataError(f"{where}: segments: expected a whole number >= 1 of segments per ramp; got {segments!r}")
     if not (isinstance(max_speed_change, (int, float)) and 0 < max_speed_change < 1):
         raise RigDataError(f"{where}: max_speed_change: expected a fraction in (0, 1); got {max_speed_change!r}")
     fs = sampling_rate(ds["ramp_time"].values, where=f"{where}: ramp_time")
     speeds = np.asarray(ds[RAMP_TACHOMETER].values, dtype=float)
+    # by default the ramps share the points and take turns along the speeds; given, each ramp over its own span
+    stride = speeds.shape[0] if segments is None else 1
+    count = max(1, DEFAULT_SEGMENTS // stride) if segments is None else int(segments)
     if segment_duration is None:
-        size = _longest_size(speeds, int(segments), fs, max_speed_change, where)
+        size = _longest_size(speeds, count, fs, max_speed_change, where, stride)
     else:
         if not (isinstance(segment_duration, (int, float)) and segment_duration > 0):
             raise RigDataError(f"{where}: segment_duration: expected a duration > 0 s; got {segment_duration!r}")
         size = int(round(segment_duration * fs))
-        broken = _violation(speeds, int(segments), size, fs, max_speed_change)
+        broken = _violation(speeds, count, size, fs, max_speed_change, stride)
         if broken is not None:
             raise RigDataError(f"{where}: {RAMP_TACHOMETER}: ramp {broken[0]}: {broken[1]}")
-    return _segment_dataset(ds, size, int(segments), fs, speeds, design if design is not None else rig_design(ds))
+    return _segment_dataset(ds, size, (count, stride), fs, speeds, design if design is not None else rig_design(ds))
 
 
 def steady_campaign(
     ds: xr.Dataset,
     *,
-    segments: int = DEFAULT_SEGMENTS,
+    segments: int | None = None,
     max_speed_change: float = MAX_SPEED_CHANGE,
     design: Design | None = None,
     where: str = "rig data",
