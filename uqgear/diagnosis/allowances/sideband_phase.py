@@ -376,8 +376,7 @@ def fit_modulated_run_out(
     entry = score_candidate(
         result, leave_one_out(result), base_held, "screening", rng, n_resamples=settings.verdict.bootstrap_resamples
     )
-    entry.effect_gain = base.cost - result.cost
-    return entry
+    return replace(entry, effect_gain=base.cost - result.cost)
 
 
 __all__ = [
