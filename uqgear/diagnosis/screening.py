@@ -89,7 +89,7 @@ def improved_nominal(
     if costs[best] >= nominal.cost - margin:
         return None
     refit = fit(nominal.problem, [starts[best]], max_evaluations=settings.nominal.nominal_evaluations, tolerance=1e-3)
-    refit.after(nominal)
+    refit = refit.after(nominal)
     return refit if refit.cost < nominal.cost - margin else None
 
 
