@@ -53,7 +53,7 @@ PARAMETER_SPREAD = {"mesh_stiffness_scale": 1.03, "zeta_mesh": 1.25}
 _HARMONICS = (1, 2, 3)
 
 
-@dataclass
+@dataclass(frozen=True)
 class ModulationEvidence:
     """The phase-sum test of one shaft (:func:`modulation_evidence`).
 
