@@ -34,7 +34,7 @@ from uqgear.diagnosis.effects import (
     run_out_family,
 )
 from uqgear.diagnosis.scoring import CandidateScore
-from uqgear.diagnosis.screening import measure_modulation
+from uqgear.diagnosis.screening import with_modulation_gain
 from uqgear.diagnosis.verdict import run_out_check, verdict_rules
 from uqgear.physics.effects import EFFECTS, Effect, EffectParameter
 from uqgear.rig.foreign_rig import effect_vector, register_foreign_physics
@@ -137,7 +137,7 @@ def test_a_registered_toy_gets_the_hooks_defaults(design):
         score = _toy_score(design)
         bounds = (("pinion", 22e-6), ("gear", 30e-6))
         assert run_out_check(score, replace(verdict_rules(case="pitch_errors"), run_out_bounds=bounds)) is None
-        measure_modulation(SimpleNamespace(run_out_allowance={"pinion": 22e-6}), score)
+        assert with_modulation_gain(SimpleNamespace(run_out_allowance={"pinion": 22e-6}), score) is score
         assert score.modulation_gain is None
     finally:
         unregister_effect("cardan_ripple")

@@ -250,9 +250,9 @@ def test_a_stiffness_modulation_lifts_the_run_out_guard_and_the_density_names_be
     bounded = replace(PITCH, run_out_bounds=tuple(bounds.items()))
     check = run_out_check(score, bounded)
     assert check.run_out == 0.5e-6 and check.within
-    score.modulation_gain = DEFAULT_SETTINGS.verdict.effect_gain_threshold - 0.1
+    score = replace(score, modulation_gain=DEFAULT_SETTINGS.verdict.effect_gain_threshold - 0.1)
     assert run_out_check(score, bounded).within
-    score.modulation_gain = 34.0
+    score = replace(score, modulation_gain=34.0)
     entry = replace(score, run_out=run_out_check(score, bounded))
     assert not entry.run_out.within and entry.modulation_gain == 34.0
     # a nominal gap of 0 (nothing to shrink): named on the density only with the allowance

@@ -12,7 +12,7 @@ from .decision import Decision
 from .scoring import CandidateScore
 
 
-@dataclass
+@dataclass(frozen=True)
 class SelectedEffect:
     """One effect of the named set, in the order forward selection added it.
 
@@ -70,7 +70,7 @@ class SelectedEffect:
         }
 
 
-@dataclass
+@dataclass(frozen=True)
 class SelectionRound:
     """A forward-selection round after the first effect: what was tried on top of which base, and the outcome."""
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize
@@ -60,7 +60,7 @@ class SecantJacobian:
         return matrix
 
 
-@dataclass
+@dataclass(frozen=True)
 class FitResult:
     """A fitted model: optimum, residuals and Jacobian there, cost and bookkeeping.
 
@@ -99,9 +99,7 @@ class FitResult:
 
     def after(self, earlier: FitResult) -> FitResult:
         """This fit, counting the evaluations and time of the earlier fit it started from."""
-        self.evaluations += earlier.evaluations
-        self.seconds += earlier.seconds
-        return self
+        return replace(self, evaluations=self.evaluations + earlier.evaluations, seconds=self.seconds + earlier.seconds)
 
 
 def start_costs(problem: FitProblem, starts: Sequence[np.ndarray], *, rows: np.ndarray | None = None) -> np.ndarray:
@@ -378,13 +376,10 @@ def fit_candidate(
     # stand in for its parameters and T2 (exact for a small effect; a strong one is refitted in
     # full anyway).
     if base.jacobian.shape[1] == n_base + case.n_op and base.jacobian.shape[0] == result.jacobian.shape[0]:
-        result.jacobian = np.concatenate(
-            [base.jacobian[:, :n_base], result.jacobian, base.jacobian[:, n_base:]], axis=1
-        )
+        jacobian = np.concatenate([base.jacobian[:, :n_base], result.jacobian, base.jacobian[:, n_base:]], axis=1)
     else:
-        result.jacobian = problem.jacobian(result.vector, np.ones(problem.size, dtype=bool))
-    result.free = np.ones(problem.size, dtype=bool)
-    return result
+        jacobian = problem.jacobian(result.vector, np.ones(problem.size, dtype=bool))
+    return replace(result, jacobian=jacobian, free=np.ones(problem.size, dtype=bool))
 
 
 def calibration_start(posterior: xr.Dataset, case: RigCase) -> tuple[dict[str, float], np.ndarray | None]:

@@ -12,7 +12,7 @@ from .fit_problem import FitProblem, robust_weights
 from .fitting import FitResult, profile_adhesion
 
 
-@dataclass
+@dataclass(frozen=True)
 class HeldOut:
     """Leave-one-run-out predictions of a fitted model.
 

@@ -48,7 +48,7 @@ from .heldout import HeldOut
 from .nominal import allow_pitch_errors, check_nominal, fit_nominal_model, nominal_held_out
 from .result import DiagnosisResult
 from .scoring import CandidateScore, bootstrap_gap
-from .screening import ScoredCandidates, effect_gains, fits_ahead, scored_in_full, screen_and_promote, set_effect_gains
+from .screening import ScoredCandidates, effect_gains, fits_ahead, scored_in_full, screen_and_promote, with_effect_gains
 from .selection import NamedSet, phase_named_run_out, round_fits, selected_effects
 from .settings import DiagnosisSettings
 from .side_by_side import Outcome
@@ -120,11 +120,11 @@ def set_comes_first(state: DiagnosisState, best: Mapping[str, CandidateScore]) -
     return starts_a_set(state, decision, ranking)
 
 
-def _extra_fits_wait(state: DiagnosisState, scored: ScoredCandidates) -> bool:
-    """Whether a pass's extra full fits wait on a set (:func:`set_comes_first`), a step of the log.
+def _extra_fits_wait(state: DiagnosisState, scored: ScoredCandidates) -> ScoredCandidates | None:
+    """The scores with every fit's effect gain where a pass's extra full fits wait on a set, else None.
 
-    It is judged on copies of the best fits with their effect gains; where
-    the fits wait, every fit's effect gain is set, otherwise nothing is changed.
+    Whether they wait (:func:`set_comes_first`, a step of the log) is judged
+    on copies of the best fits with their effect gains.
     """
     clock = time.perf_counter()
     with state.steps.step("decide whether the extra full fits wait for a set") as found:
@@ -134,10 +134,7 @@ def _extra_fits_wait(state: DiagnosisState, scored: ScoredCandidates) -> bool:
         )
         found.update(extra_fits_wait_for_a_set=waits)
     state.timings["full_fits"] += time.perf_counter() - clock
-    if waits:
-        for entry in scored.all_scores:
-            entry.effect_gain = gains[id(entry)]
-    return waits
+    return scored.with_gains(gains) if waits else None
 
 
 def extra_full_fits(
@@ -159,7 +156,7 @@ def extra_full_fits(
         if index not in ahead:
             ahead.update(enumerate(fits_ahead(state, extra[index : index + 2]), start=index))
         scored = scored.taken_up(entry, scored_in_full(state, entry, ahead.pop(index)))
-    set_effect_gains(state, scored.all_scores)
+    scored = with_effect_gains(state, scored)
     state.timings["full_fits"] += time.perf_counter() - clock
     scored = replace(scored, waiting=())
     if not check or len(scored.full_fits) == full_before:
@@ -186,8 +183,10 @@ def candidate_pass(state: DiagnosisState, attempt: int, *, set_first: bool) -> S
         better = check_nominal(state, scored.full_fits)
         if better is not None:
             return replace(scored, better=better)
-    if scored.extra and set_first and open_gap(state, scored.best) and _extra_fits_wait(state, scored):
-        return replace(scored, waiting=scored.extra)
+    if scored.extra and set_first and open_gap(state, scored.best):
+        waiting = _extra_fits_wait(state, scored)
+        if waiting is not None:
+            return replace(waiting, waiting=waiting.extra)
     return extra_full_fits(state, scored, scored.extra, check=check)
 
 

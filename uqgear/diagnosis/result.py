@@ -22,7 +22,7 @@ from .scoring import CandidateScore
 from .settings import DEFAULT_SETTINGS, DiagnosisSettings
 
 
-@dataclass
+@dataclass(frozen=True)
 class DiagnosisResult:
     """Everything a diagnosis found (the record of :meth:`uqgear.diagnosis.Diagnosis.fit`)."""
 

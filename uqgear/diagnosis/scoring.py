@@ -160,7 +160,7 @@ class RunOutCheck:
         return low > self.bound
 
 
-@dataclass
+@dataclass(frozen=True)
 class CandidateScore:
     """Held-out scores of one candidate effect (its best variant): what the verdict reads and the ranking reports.
 

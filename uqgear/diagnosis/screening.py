@@ -89,7 +89,7 @@ def improved_nominal(
     if costs[best] >= nominal.cost - margin:
         return None
     refit = fit(nominal.problem, [starts[best]], max_evaluations=settings.nominal.nominal_evaluations, tolerance=1e-3)
-    refit.after(nominal)
+    refit = refit.after(nominal)
     return refit if refit.cost < nominal.cost - margin else None
 
 
@@ -115,8 +115,8 @@ def supersedes(full: CandidateScore, best: CandidateScore) -> bool:
     return full.score > best.score or (own and best.stage == "screening" and best.label == full.label)
 
 
-def measure_modulation(case: RigCase, full: CandidateScore) -> None:
-    """Set a run-out's full fit's ``modulation_gain`` where pitch errors apply.
+def with_modulation_gain(case: RigCase, full: CandidateScore) -> CandidateScore:
+    """A run-out's full fit with its ``modulation_gain`` where pitch errors apply; any other entry as it is.
 
     A run-out is an effect whose family has a
     :attr:`~.effects.EffectFamily.run_out` hook (eccentricity in the library).
@@ -124,8 +124,9 @@ def measure_modulation(case: RigCase, full: CandidateScore) -> None:
     (:func:`~.verdict.named.run_out_check`) need it; elsewhere it stays None at no cost.
     """
     family = hooks_of(full.effect)
-    if family.run_out is not None and case.run_out_allowance:
-        full.modulation_gain = modulation_gain(full.fit, family.parameter_name(family.run_out.modulation))
+    if family.run_out is None or not case.run_out_allowance:
+        return full
+    return replace(full, modulation_gain=modulation_gain(full.fit, family.parameter_name(family.run_out.modulation)))
 
 
 def best_per_effect(entries: Sequence[CandidateScore]) -> dict[str, CandidateScore]:
@@ -179,13 +180,10 @@ def screen(
         step = f"forward selection: screen {candidate.label} on top of {labels}" if on_top else ""
         with state.steps.step(step or f"screen {candidate.label}") as finding:
             result, held = outcome.get()
-            screened.append(
-                score_candidate(
-                    result, held, base_held, "screening", state.rng, n_resamples=settings.verdict.bootstrap_resamples
-                )
+            entry = score_candidate(
+                result, held, base_held, "screening", state.rng, n_resamples=settings.verdict.bootstrap_resamples
             )
-            if on_top:
-                screened[-1].effect_gain = base.cost - result.cost
+            screened.append(replace(entry, effect_gain=base.cost - result.cost) if on_top else entry)
             finding.update(found(screened[-1]), fit_seconds=round(outcome.seconds, 3))
     return screened
 
@@ -248,8 +246,8 @@ def scored_in_full(
             result, held, base_held, "full", state.rng, n_resamples=state.settings.verdict.bootstrap_resamples
         )
         if base is not None:
-            full.effect_gain = effect_off_costs(base.fit, [result], own_error=True)[1][0] - result.cost
-        measure_modulation(state.case, full)
+            full = replace(full, effect_gain=effect_off_costs(base.fit, [result], own_error=True)[1][0] - result.cost)
+        full = with_modulation_gain(state.case, full)
         finding.update(found(full), **({} if base is not None else {"fit_seconds": round(outcome.seconds, 3)}))
     return full
 
@@ -302,12 +300,11 @@ def effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) ->
     return gains
 
 
-def set_effect_gains(state: DiagnosisState, all_scores: Sequence[CandidateScore]) -> None:
-    """Each entry's ``effect_gain`` (:func:`effect_gains`), a step of the log."""
+def with_effect_gains(state: DiagnosisState, scored: ScoredCandidates) -> ScoredCandidates:
+    """These scores with every entry's ``effect_gain`` (:func:`effect_gains`), a step of the log."""
     with state.steps.step("switch the effects of the full fits off"):
-        gains = effect_gains(state, all_scores)
-    for entry in all_scores:
-        entry.effect_gain = gains[id(entry)]
+        gains = effect_gains(state, scored.all_scores)
+    return scored.with_gains(gains)
 
 
 @dataclass(frozen=True)
@@ -341,6 +338,25 @@ class ScoredCandidates:
     def full_fits(self) -> list[FitResult]:
         """The fits of every full fit so far, in order."""
         return [entry.fit for entry in self.all_scores if entry.stage == "full"]
+
+    def with_gains(self, gains: Mapping[int, float]) -> ScoredCandidates:
+        """These scores with each entry's ``effect_gain`` from ``gains``, by ``id`` of the entry (:func:`effect_gains`).
+
+        Every entry of ``all_scores`` is replaced by its copy with its gain, in
+        ``best``, ``extra`` and ``waiting`` too: each holder reads the same copy.
+        """
+        copies = {id(entry): replace(entry, effect_gain=gains[id(entry)]) for entry in self.all_scores}
+
+        def same(entry: CandidateScore) -> CandidateScore:
+            return copies.get(id(entry), entry)
+
+        return replace(
+            self,
+            best={effect: same(entry) for effect, entry in self.best.items()},
+            all_scores=[same(entry) for entry in self.all_scores],
+            extra=tuple(same(entry) for entry in self.extra),
+            waiting=tuple(same(entry) for entry in self.waiting),
+        )
 
     def taken_up(self, entry: CandidateScore, full: CandidateScore) -> ScoredCandidates:
         """These scores with ``full``, the full fit of the screened ``entry`` (it may become its effect's best)."""
@@ -384,7 +400,7 @@ __all__ = [
     "improved_nominal",
     "found",
     "supersedes",
-    "measure_modulation",
+    "with_modulation_gain",
     "best_per_effect",
     "screening_fits",
     "screen",
@@ -393,7 +409,7 @@ __all__ = [
     "fits_in_full",
     "fits_ahead",
     "effect_gains",
-    "set_effect_gains",
+    "with_effect_gains",
     "ScoredCandidates",
     "screen_and_promote",
 ]

@@ -84,7 +84,7 @@ class _Run:
     pitch_errors: PitchErrors | None = None
 
 
-@dataclass
+@dataclass(frozen=True)
 class SimulatedRun:
     """Model records of one run on the rig's time grid, and how they were obtained."""
 

@@ -71,7 +71,7 @@ _LOCAL_MIN_BINS = 20
 # ---------------------------------------------------------------------------------------------- compatibility
 
 
-@dataclass
+@dataclass(frozen=True)
 class ReferenceCorrection:
     """What a healthy reference campaign shows against the fitted nominal model (see the module docstring).
 

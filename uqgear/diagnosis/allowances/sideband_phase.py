@@ -53,7 +53,7 @@ PARAMETER_SPREAD = {"mesh_stiffness_scale": 1.03, "zeta_mesh": 1.25}
 _HARMONICS = (1, 2, 3)
 
 
-@dataclass
+@dataclass(frozen=True)
 class ModulationEvidence:
     """The phase-sum test of one shaft (:func:`modulation_evidence`).
 
@@ -376,8 +376,7 @@ def fit_modulated_run_out(
     entry = score_candidate(
         result, leave_one_out(result), base_held, "screening", rng, n_resamples=settings.verdict.bootstrap_resamples
     )
-    entry.effect_gain = base.cost - result.cost
-    return entry
+    return replace(entry, effect_gain=base.cost - result.cost)
 
 
 __all__ = [

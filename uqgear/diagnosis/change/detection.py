@@ -222,7 +222,7 @@ def level_floor(level_ln_power: np.ndarray, share: float) -> np.ndarray:
     return level * mask
 
 
-@dataclass
+@dataclass(frozen=True)
 class ChangeTest:
     """Whether and where the test campaign differs from the reference beyond healthy variation.
 

@@ -34,7 +34,7 @@ from .scoring import ChangeModel, ChangeScore, explained_where, score_change
 _DB = 10.0 / np.log(10.0)
 
 
-@dataclass
+@dataclass(frozen=True)
 class ChangeOutcome:
     """What the differential diagnosis found: the change test, the scores, the decision and its record."""
 
