@@ -44,6 +44,7 @@ from uqgear.common.steps import FAILURE_RECORD, StepLog
 from uqgear.diagnosis import VERDICTS, decide
 from uqgear.diagnosis import estimator as diagnosis_estimator
 from uqgear.diagnosis import nominal as nominal_step
+from uqgear.diagnosis import pipeline as diagnosis_pipeline
 from uqgear.diagnosis.candidates import ParameterSpec, nominal_parameters
 from uqgear.diagnosis.effects import candidates_for, effect_names
 from uqgear.diagnosis.fit_problem import FitProblem
@@ -183,7 +184,7 @@ def test_usable_signal_check_names_what_it_refuses(healthy):
 
 def test_noise_only_campaign_is_inconclusive_not_none(noise_only, tmp_path, capsys, monkeypatch):
     """Valid data at the noise floor: the verdict says it cannot decide, without fitting noise."""
-    monkeypatch.setattr(diagnosis_estimator, "fit_nominal_model", _no_work)
+    monkeypatch.setattr(diagnosis_pipeline, "fit_nominal_model", _no_work)
     out = tmp_path / "out"
     assert main(["diagnose", str(noise_only), "--out", str(out), "--workers", "1"]) == 0
     printed = capsys.readouterr().out
