@@ -86,19 +86,16 @@ class MultiStartModel:
 
     def attractor_starts(self, samples: xr.Dataset) -> list[list[tuple[str, np.ndarray]]]:
         """Each sample's attractors as (first start, its state; NaN: from rest), from a search run now."""
-        search = MultiStartSearch(self.settings, self.seed).fit(self.inner, samples, self.design)
-        first, states = first_start_states(search)
-        return [[(str(first[k, a]), states[k, a]) for a in np.nonzero(first[k] != "")[0]] for k in range(len(first))]
+        return attractor_starts(MultiStartSearch(self.settings, self.seed).fit(self.inner, samples, self.design))
 
 
-def first_start_states(search: MultiStartSearch) -> tuple[np.ndarray, np.ndarray]:
-    """(sample, attractor) first start of each attractor ('' where padded) and the state it began from, (sample,
-    attractor, 6) (NaN: from rest)."""
+def attractor_starts(search: MultiStartSearch) -> list[list[tuple[str, np.ndarray]]]:
+    """Each sample's attractors as (first start, the state it began from; NaN: from rest), in attractor order."""
     first = np.asarray(search.attractors_["first_start"].values).astype(str)
-    states = np.full((*first.shape, 6), np.nan)
-    for row, column in zip(*np.nonzero(first != "")):
-        states[row, column] = search.start_states_[first[row, column]][row]
-    return first, states
+    return [
+        [(label, np.array(search.start_states_[label][row], dtype=float)) for label in labels if label != ""]
+        for row, labels in enumerate(first)
+    ]
 
 
 def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = True) -> xr.Dataset:
@@ -225,7 +222,7 @@ def interval_over_attractors(
 
 
 __all__ = [
-    "first_start_states",
+    "attractor_starts",
     "MultiStartModel",
     "multi_start_model",
     "started_model",

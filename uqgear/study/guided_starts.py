@@ -46,7 +46,7 @@ from ..dynamics.regimes import period_labels
 from ..dynamics.windows import CoexistenceWindows, equivalent_speeds, follow_nodes, windows_from
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO
-from .coexistence import PER_ATTRACTOR, first_start_states, summarise
+from .coexistence import PER_ATTRACTOR, attractor_starts, summarise
 from .settings import SimulationSettings
 
 #: How far (in window margins) a grid point may lie from the one whose final state a sweep carries into it (from
@@ -186,8 +186,8 @@ class GuidedStartModel:
         self.exponents = exponents
         #: Points that lay in a window, over every call.
         self.window_points = 0
-        #: Per call with window points: their sample values, each attractor's first start and its state.
-        self.found: list[tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]] = []
+        #: Per call with window points: their sample values, and each one's attractors as (first start, its state).
+        self.found: list[tuple[dict[str, np.ndarray], list[list[tuple[str, np.ndarray]]]]] = []
 
     @property
     def runs(self) -> int:
@@ -253,9 +253,8 @@ class GuidedStartModel:
 
     def _remember(self, samples: xr.Dataset, search: MultiStartSearch) -> None:
         """Keep each window point's attractors as their first starts' labels and states (NaN: from rest)."""
-        first, states = first_start_states(search)
         values = {name: np.asarray(samples[name].values, dtype=float) for name in _point_variables(samples)}
-        self.found.append((values, first, states))
+        self.found.append((values, attractor_starts(search)))
 
     def attractor_starts(self, samples: xr.Dataset) -> list[list[tuple[str, np.ndarray]]]:
         """Each sample's attractors as (first start, its state; NaN: from rest): one, from rest, outside the
@@ -281,16 +280,15 @@ class GuidedStartModel:
                 out.append([("rest", np.full(6, np.nan))])
                 continue
             found = None
-            for known, first, states in reversed(self.found):
+            for known, attractors in reversed(self.found):
                 if set(known) != set(names):
                     continue
-                same = np.ones(first.shape[0], dtype=bool)
+                same = np.ones(len(attractors), dtype=bool)
                 for name in names:
                     same &= np.isclose(known[name], values[name][row], rtol=1e-9, atol=0.0)
                 hits = np.nonzero(same)[0]
                 if hits.size:
-                    k = int(hits[0])
-                    found = [(str(first[k, a]), states[k, a]) for a in np.nonzero(first[k] != "")[0]]
+                    found = attractors[int(hits[0])]
                     break
             out.append(found)
         return out
