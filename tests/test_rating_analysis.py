@@ -277,6 +277,8 @@ BAD = [
     ),
     ("service: {kilometres: 1.0e+6, speeds: [1500], shares: [1]}", "analyses[0].service.wheel_radius: required"),
     ("service: tram", "analyses[0].service: expected a service mapping or a bundled profile (locomotive)"),
+    ("history_points: 1", "analyses[0].history_points: expected an integer in [2, 33]"),
+    ("history_points: 2.5", "analyses[0].history_points: expected an integer in [2, 33]"),
 ]
 
 
