@@ -64,6 +64,8 @@ _PUBLIC: dict[str, str] = {
     "ramp_envelope": "dynamics",
     "jump_speeds": "dynamics",
     "up_down_envelopes": "dynamics",
+    "StressEvaluator": "dynamics",
+    "tooth_stress_qois": "dynamics",
     # uncertainty
     "ParameterSpace": "uq",
     "PosteriorDraws": "uq",

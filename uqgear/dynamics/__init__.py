@@ -11,7 +11,8 @@ coexist (``windows``); rainflow counting and Miner's damage of a stress
 history on an ISO 6336 S-N curve (``fatigue``); computed order tracking of
 run-ups and coast-downs (``angle_resampling``), their order maps
 (``order_maps``), and their binned envelopes, jumps and up/down hysteresis
-(``ramp_envelopes``).
+(``ramp_envelopes``); tooth root and flank stresses of a batch of runs as QoIs
+(``stress_qois``).
 
 May import :mod:`uqgear.common` and :mod:`uqgear.physics`.
 """
@@ -52,11 +53,17 @@ from .regimes import (
 from .response import contact_fractions, phase_plane, poincare_section, response_qois
 from .shooting import PeriodicOrbit, PoincareMap, Shooting, ShootingError, ShootingSettings, setup_at
 from .spectra import amplitude_spectrum, spectrum_dataset
+from .stress_qois import RUN_QOI_INFO, STRESS_QOI_INFO, STRESS_QOIS, StressEvaluator, tooth_stress_qois
 from .sweeps import bifurcation, sweep_grid
 from .windows import CoexistenceWindows, find_windows
 from .zero_one import zero_one_test
 
 __all__ = [
+    "RUN_QOI_INFO",
+    "STRESS_QOI_INFO",
+    "STRESS_QOIS",
+    "StressEvaluator",
+    "tooth_stress_qois",
     "detect_period",
     "count_distinct_points",
     "zero_one_test",

@@ -42,15 +42,13 @@ import xarray as xr
 
 from ..common.errors import UqgearError
 from ..physics.design import Design
-from ..physics.integration import QOI_INFO, STATE_NAMES, build_batch, simulate_batch
+from ..physics.integration import build_batch
 from .filled_batches import FilledBatches, join_samples
 from .hausdorff import hausdorff
-from .regimes import classify_batch, period_labels
 from .same_response import COMPARED_FRACTIONS, COMPARED_QOIS, copies_of_first, same_response, self_same
+from .started_runs import FINAL_VARIABLES, INITIAL_VARIABLES, StartedEvaluator, final_variables
+from .stress_qois import RUN_QOI_INFO, STRESS_QOIS
 
-#: Sample variables of a start state, and of the final state a started run returns.
-INITIAL_VARIABLES = tuple(f"initial_{name}" for name in STATE_NAMES)
-FINAL_VARIABLES = tuple(f"final_{name}" for name in STATE_NAMES)
 #: QoIs every attractor keeps.
 ATTRACTOR_QOIS = (
     "peak_mesh_force",
@@ -64,6 +62,8 @@ ATTRACTOR_QOIS = (
     "fraction_drive_contact",
     "fraction_separation",
     "fraction_back_contact",
+    # present where the runs computed them (StartedEvaluator's ``stresses``)
+    *STRESS_QOIS,
 )
 
 
@@ -136,75 +136,6 @@ class MultiStart:
         if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 <= margin <= 2000:
             raise UqgearError(f"{where}.margin: expected a number of rpm in [0, 2000]; got {margin!r}")
         return settings
-
-
-class StartedEvaluator:
-    """The batch model with start states: ``initial_<state>`` sample variables in, ``final_<state>`` out.
-
-    A sample whose ``initial_*`` values are NaN starts from its static equilibrium. Picklable (the
-    runner ships it to workers). The outputs are those of :func:`simulate_batch` (QoIs, Poincare
-    points) plus the final state and the regime of each run (:func:`classify_batch`).
-
-    Parameters
-    ----------
-    design : Design
-    options : mapping
-        Keyword arguments of :func:`simulate_batch` (``n_periods``, ``keep_periods``, ...).
-    classify_seed : int or SeedSequence
-        Seed of the 0-1 test frequencies.
-    full_regime : bool
-        Classify each run in full (:func:`classify_batch`); False labels it by period detection alone
-        (:func:`~uqgear.dynamics.regimes.period_labels`: ``period-n`` or ``aperiodic``), all the grouping needs.
-    """
-
-    def __init__(
-        self, design: Design, options: Mapping[str, Any] | None = None, classify_seed: Any = 0, full_regime: bool = True
-    ) -> None:
-        self.design = design
-        self.options = dict(options or {})
-        self.classify_seed = classify_seed
-        self.full_regime = full_regime
-
-    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
-        inputs = samples.drop_vars([name for name in INITIAL_VARIABLES if name in samples.variables])
-        states = None
-        if all(name in samples.variables for name in INITIAL_VARIABLES):
-            states = np.stack([np.asarray(samples[name].values, dtype=float) for name in INITIAL_VARIABLES], axis=1)
-            rest = ~np.all(np.isfinite(states), axis=1)
-            if rest.any():
-                setups = build_batch(
-                    self.design,
-                    inputs.isel(sample=np.nonzero(rest)[0]),
-                    effects=self.options.get("effects", ()),
-                    damping_in_separation=self.options.get("damping_in_separation", True),
-                    stiffness=self.options.get("stiffness", "ishikawa"),
-                )
-                states[rest] = np.stack([setup.static_state() for setup in setups])
-        result = final_variables(
-            simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
-        )
-        classes = classify_batch(result, seed=self.classify_seed) if self.full_regime else period_labels(result)
-        return result.merge(classes[["regime", "response_period"]], compat="override")
-
-
-def final_variables(result: xr.Dataset) -> xr.Dataset:
-    """``result`` of :func:`simulate_batch` with ``final_state=True``, its final state as one variable per state
-    (``final_<state>``, :data:`FINAL_VARIABLES`): what a sweep carries on, sample by sample.
-
-    Examples
-    --------
-    >>> import uqgear
-    >>> from uqgear.physics.integration import samples_from_mapping
-    >>> design = uqgear.load_design("locomotive")
-    >>> samples = samples_from_mapping({"pinion_speed": [2000.0], "adhesion_torque": [33.8e3]})
-    >>> out = final_variables(uqgear.simulate_batch(design, samples, n_periods=60, keep_periods=20, final_state=True))
-    >>> all(name in out for name in FINAL_VARIABLES), "final_state" in out
-    (True, False)
-    """
-    final = result["final_state"].values
-    return result.drop_vars(["final_state", "state"]).assign(
-        {name: ("sample", final[:, index]) for index, name in enumerate(FINAL_VARIABLES)}
-    )
 
 
 def _velocity_scale(samples: xr.Dataset, design: Design) -> np.ndarray:
@@ -701,7 +632,11 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
         for i, groups in enumerate(members):
             for k, group in enumerate(groups):
                 values[i, k] = float(table[i, group[0]])
-        data[name] = (("sample", "attractor"), values, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
+        data[name] = (
+            ("sample", "attractor"),
+            values,
+            {"units": RUN_QOI_INFO[name][0], "long_name": RUN_QOI_INFO[name][1]},
+        )
     regime = np.full((n, width), "", dtype=object)
     first = np.full((n, width), "", dtype=object)
     which = np.full((n, width), "", dtype=object)
@@ -748,7 +683,7 @@ def extremes_over_attractors(attractors: xr.Dataset, qois: Sequence[str]) -> xr.
             held = np.asarray(np.isfinite(finite).any(axis=1))  # a sample without any finite value gives attractor 0
             index = np.where(held, pick(np.where(held[:, None], finite, 0.0), axis=1), 0).astype(np.int64)
             rows = np.arange(values.shape[0])
-            units, long_name = QOI_INFO[name]
+            units, long_name = RUN_QOI_INFO[name]
             out[f"{name}_{bound}"] = (
                 "sample",
                 finite[rows, index],

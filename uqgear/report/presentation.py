@@ -35,6 +35,14 @@ _DISPLAY: dict[str, tuple[str, str, float]] = {
     "fraction_separation": ("time with teeth apart", "%", 100.0),
     "fraction_back_contact": ("time in back-side contact", "%", 100.0),
     "largest_lyapunov": ("largest Lyapunov exponent", "1/s", 1.0),
+    "root_stress_peak_pinion": ("pinion tooth root stress, peak", "MPa", 1e-6),
+    "root_stress_peak_gear": ("gear tooth root stress, peak", "MPa", 1e-6),
+    "root_stress_amplitude_pinion": ("pinion tooth root stress amplitude", "MPa", 1e-6),
+    "root_stress_amplitude_gear": ("gear tooth root stress amplitude", "MPa", 1e-6),
+    "contact_stress_peak_pinion": ("pinion flank contact stress, peak", "MPa", 1e-6),
+    "contact_stress_peak_gear": ("gear flank contact stress, peak", "MPa", 1e-6),
+    "contact_stress_amplitude_pinion": ("pinion flank contact stress amplitude", "MPa", 1e-6),
+    "contact_stress_amplitude_gear": ("gear flank contact stress amplitude", "MPa", 1e-6),
 }
 
 # ---------------------------------------------------------------------------- regimes

@@ -34,9 +34,10 @@ import uqgear.dynamics as dynamics
 
 from ..common.progress import progress
 from ..dynamics.attractors import final_variables
+from ..dynamics.stress_qois import RUN_QOI_INFO, StressEvaluator
 from ..physics.design import Design
 from ..physics.effect_draws import UncertainEffect
-from ..physics.integration import QOI_INFO, BatchEvaluator
+from ..physics.integration import BatchEvaluator
 from ..uq.monte_carlo import monte_carlo_statistics
 from ..uq.parameter_space import ParameterSpace
 from ..uq.parameters import Fixed
@@ -122,7 +123,12 @@ def evaluate_batch(
         The :func:`~uqgear.physics.integration.simulate_batch` outputs (dims
         ``sample``, ``period``), input variables as coordinates.
     """
-    model = BatchEvaluator(design, **simulation.batch_options(threads), final_state=final_state)
+    options = simulation.batch_options(threads)
+    model = (
+        BatchEvaluator(design, **options, final_state=final_state)
+        if simulation.stresses is None
+        else StressEvaluator(design, rating=simulation.stresses, **options, final_state=final_state)
+    )
     result = model(samples)
     if final_state:
         result = final_variables(result)
@@ -594,10 +600,10 @@ def pce_analysis(context: AnalysisContext) -> xr.Dataset:
             units="1", long_name=f"RMS surrogate error at independent check points / std of {name}"
         )
         result[f"{name}_validation_model"] = model_values.drop_vars("check", errors="ignore").assign_attrs(
-            units=QOI_INFO[name][0], long_name=f"{name} from the model at the check points"
+            units=RUN_QOI_INFO[name][0], long_name=f"{name} from the model at the check points"
         )
         result[f"{name}_validation_surrogate"] = surrogate_values.drop_vars("check", errors="ignore").assign_attrs(
-            units=QOI_INFO[name][0], long_name=f"{name} from the surrogate at the check points"
+            units=RUN_QOI_INFO[name][0], long_name=f"{name} from the surrogate at the check points"
         )
     result.attrs.update(
         **_response_attrs(context),
@@ -662,7 +668,7 @@ def interval_bounds(context: AnalysisContext, guided: GuidedStartModel | None = 
     nominal = evaluate_on_sweep(model, one, context.sweep(), qoi=qois).isel(sample=0, drop=True)
     for name in qois:
         result[f"{name}_nominal"] = nominal[name].assign_attrs(
-            units=QOI_INFO[name][0], long_name=f"{name} at the interval midpoints"
+            units=RUN_QOI_INFO[name][0], long_name=f"{name} at the interval midpoints"
         )
     result.attrs.update(model_runs=int(model.runs), parameters=json.dumps(names), fixed_inputs=json.dumps(fixed))
     if guided is not None:

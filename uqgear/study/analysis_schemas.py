@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..common.errors import StudyError
+from ..dynamics.stress_qois import STRESS_QOIS
 from ..physics.effects import EFFECTS
 from .checkers import Checker, boolean, check_mapping, choice, class_range, identifier, list_of, number, string
 from .variables import VARIABLES
@@ -29,6 +30,9 @@ QOIS: tuple[str, ...] = (
     "largest_lyapunov",
 )
 DEFAULT_QOIS: tuple[str, ...] = ("dte_rms", "dynamic_load_factor", "fraction_separation")
+#: QoIs of the analyses that bound or sample any QoI: :data:`QOIS` and the tooth stresses
+#: (uqgear.dynamics.stress_qois.STRESS_QOI_INFO), which take a ``rating`` block of ISO 6336 inputs.
+RUN_QOIS: tuple[str, ...] = QOIS + STRESS_QOIS
 
 INTERVAL_METHODS: tuple[str, ...] = ("scan", "vertex", "chebyshev", "optimize")
 INTERVAL_FALLBACKS: tuple[str, ...] = ("scan", "optimize", "none")
@@ -81,8 +85,12 @@ def runup_speeds(value: Any, path: str) -> dict[str, float]:
     return speeds
 
 
-def _qoi_list() -> Checker:
-    return list_of(choice(*QOIS), unique=True, what="a list of QoI names")
+def _qoi_list(names: tuple[str, ...] = QOIS) -> Checker:
+    return list_of(choice(*names), unique=True, what="a list of QoI names")
+
+
+#: The keys of an analysis that takes the tooth stress QoIs.
+_STRESS_KEYS: dict[str, Checker] = {"qois": _qoi_list(RUN_QOIS), "rating": rating_settings}
 
 
 def _variable_list() -> Checker:
@@ -126,7 +134,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "axes": list_of(choice(*VARIABLES), min_length=2, unique=True, what="a list of two variable names"),
         "points": number("values across each interval", 2, 200, integer=True),
     },
-    "interval": {**_INTERVAL_METHOD_KEYS, "qois": _qoi_list()},
+    "interval": {**_INTERVAL_METHOD_KEYS, **_STRESS_KEYS},
     "monte_carlo": {
         "parameters": _variable_list(),
         "intervals": choice("uniform", "pbox"),
@@ -134,7 +142,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "samples": number("samples", 2, 10_000_000, integer=True),
         "sampling": choice(*SAMPLING_METHODS),
         "quantiles": list_of(number("", 0.0, 1.0), unique=True, what="a list of probabilities"),
-        "qois": _qoi_list(),
+        **_STRESS_KEYS,
         "response": choice(*RESPONSES),
     },
     "pce": {
@@ -144,7 +152,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "samples": number("training samples", 2, 1_000_000, integer=True),
         "validation_samples": number("check samples", 2, 1_000_000, integer=True),
         "sampling": choice(*SAMPLING_METHODS),
-        "qois": _qoi_list(),
+        **_STRESS_KEYS,
         "response": choice(*RESPONSES),
     },
     "sobol": {
@@ -153,7 +161,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "second_order": boolean(),
         "confidence_level": number("", 0.5, 0.999),
         "bootstrap": number("resamples", 10, 100_000, integer=True),
-        "qois": _qoi_list(),
+        **_STRESS_KEYS,
         "response": choice(*RESPONSES),
     },
     "calibrate": {

@@ -3,6 +3,7 @@ the study's sweeps and uncertain parameters."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -12,6 +13,8 @@ from typing import Any
 import numpy as np
 
 from ..common.errors import StudyError
+from ..dynamics.stress_qois import STRESS_QOIS
+from ..physics.rating import RatingSettings
 from .analysis_schemas import (
     _COMMON_KEYS,
     _REQUIRED_KEYS,
@@ -274,6 +277,24 @@ def _check_analysis_variables(spec: AnalysisSpec, uncertain: Mapping[str, Uncert
         _check_runup(spec, uncertain, path)
 
 
+def _with_stresses(
+    kind: str, options: Mapping[str, Any], simulation: SimulationSettings, path: str
+) -> SimulationSettings:
+    """``simulation`` computing the tooth stresses where the analysis asks for a stress QoI (with its ``rating``
+    inputs); a ``rating`` block without one is refused, as it would change nothing."""
+    if kind == "rating":
+        return simulation
+    asked = [name for name in options.get("qois", ()) if name in STRESS_QOIS]
+    if not asked:
+        if "rating" in options:
+            raise StudyError(
+                f"{path}.rating: only the tooth stress QoIs ({', '.join(STRESS_QOIS[:2])}, ...) take ISO 6336 "
+                "inputs, and qois names none"
+            )
+        return simulation
+    return dataclasses.replace(simulation, stresses=RatingSettings.from_mapping(options.get("rating")))
+
+
 def _analysis(
     raw: Any,
     index: int,
@@ -308,7 +329,9 @@ def _analysis(
         )
     points = dict(study_points)
     points.update(_operating_points(raw.get("operating_points"), f"{path}.operating_points"))
-    simulation = _simulation(raw.get("simulation"), f"{path}.simulation", study_simulation)
+    simulation = _with_stresses(
+        kind, options, _simulation(raw.get("simulation"), f"{path}.simulation", study_simulation), path
+    )
     if kind == "runup" and "pinion_speed" not in options and "pinion_speed" in points and points["pinion_speed"].sweep:
         # without a span of its own, a run-up covers the study's speed sweep
         swept = np.asarray(points["pinion_speed"].values, dtype=float)

@@ -33,8 +33,8 @@ import numpy as np
 import xarray as xr
 
 from ..dynamics.attractors import ATTRACTOR_QOIS, MultiStart, MultiStartSearch, StartedEvaluator
+from ..dynamics.stress_qois import RUN_QOI_INFO
 from ..physics.design import Design
-from ..physics.integration import QOI_INFO
 from ..uq.attractor_bounds import scan_over_attractors
 from .model_runs import RunnerModel
 from .settings import SimulationSettings
@@ -49,7 +49,9 @@ def evaluate_started(
 ) -> xr.Dataset:
     """One batch with start states (``initial_<state>``), as :class:`StartedEvaluator`; module-level so that a
     dask worker can run it."""
-    return StartedEvaluator(design, simulation.batch_options(threads), classify_seed)(samples)
+    return StartedEvaluator(design, simulation.batch_options(threads), classify_seed, stresses=simulation.stresses)(
+        samples
+    )
 
 
 class MultiStartModel:
@@ -116,7 +118,7 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
     )
     # every variable is gathered first and merged once: a merge per variable costs more than the rest of the call
     data: dict[str, Any] = {}
-    for name in [*QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
+    for name in [*RUN_QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
         if name not in runs:
             continue
         values = runs[name].transpose("sample", "start").values
@@ -132,7 +134,7 @@ def summarise(search: MultiStartSearch, samples: xr.Dataset, poincare: bool = Tr
             data[f"{name}_{bound}"] = (
                 "sample",
                 values[rows, index],
-                {"units": QOI_INFO[name][0], "long_name": f"{bound} over attractors of {name}"},
+                {"units": RUN_QOI_INFO[name][0], "long_name": f"{bound} over attractors of {name}"},
             )
             data[f"{name}_{bound}_attractor"] = ("sample", index, {"long_name": f"attractor giving {name}_{bound}"})
             data[f"{name}_{bound}_start"] = (

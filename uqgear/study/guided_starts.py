@@ -43,9 +43,9 @@ from ..dynamics.attractors import (
     with_starts,
 )
 from ..dynamics.regimes import period_labels
+from ..dynamics.stress_qois import RUN_QOI_INFO
 from ..dynamics.windows import CoexistenceWindows, equivalent_speeds, follow_nodes, windows_from
 from ..physics.design import Design
-from ..physics.integration import QOI_INFO
 from .coexistence import PER_ATTRACTOR, attractor_starts, summarise
 from .settings import SimulationSettings
 
@@ -372,7 +372,7 @@ def _rest_layout(base: xr.Dataset, poincare: bool) -> xr.Dataset:
     n = base.sizes["sample"]
     # every variable is gathered first and merged once: a merge per variable costs more than the rest of the call
     added: dict[str, Any] = {}
-    for name in [*QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
+    for name in [*RUN_QOI_INFO, "static_mesh_force", "mesh_frequency", "steps_per_period"]:
         if name in base:
             added[f"{name}_rest"] = base[name].assign_attrs(long_name=f"{name} from rest")
     for name in ATTRACTOR_QOIS:
@@ -380,7 +380,7 @@ def _rest_layout(base: xr.Dataset, poincare: bool) -> xr.Dataset:
             continue
         for bound in ("max", "min"):
             added[f"{name}_{bound}"] = base[name].assign_attrs(
-                units=QOI_INFO[name][0], long_name=f"{bound} over attractors of {name}"
+                units=RUN_QOI_INFO[name][0], long_name=f"{bound} over attractors of {name}"
             )
             added[f"{name}_{bound}_attractor"] = ("sample", np.zeros(n, dtype=np.int64))
             added[f"{name}_{bound}_start"] = ("sample", np.full(n, "rest"))
@@ -491,10 +491,13 @@ def guided_start_model(context: Any, simulation: SimulationSettings, rest: Any, 
     windows = analysis_windows(context, simulation)
     options = simulation.batch_options(context.threads)
     seed = context.stage_seed(99)
-    started = _CountedRuns(StartedEvaluator(context.design, {**options, "lyapunov": False}, seed, full_regime=False))
+    stresses = simulation.stresses
+    started = _CountedRuns(
+        StartedEvaluator(context.design, {**options, "lyapunov": False}, seed, full_regime=False, stresses=stresses)
+    )
     exponents = None
     if simulation.lyapunov:
-        exponents = _CountedRuns(StartedEvaluator(context.design, options, seed, full_regime=False))
+        exponents = _CountedRuns(StartedEvaluator(context.design, options, seed, full_regime=False, stresses=stresses))
     return GuidedStartModel(
         rest, started, context.design, starts, windows, context.stage_seed(98), poincare, exponents=exponents
     )
@@ -626,7 +629,7 @@ def _branches(
         out[f"{qoi}_branches"] = (
             (*dims, "branch"),
             pair.reshape(*shape, 2),
-            {"units": QOI_INFO[qoi][0], "long_name": f"{qoi} of the lowest and highest coexisting response"},
+            {"units": RUN_QOI_INFO[qoi][0], "long_name": f"{qoi} of the lowest and highest coexisting response"},
         )
     if out:
         out["branch"] = ("branch", ["lower", "upper"])

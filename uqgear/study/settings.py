@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from ..common.errors import StudyError, UqgearError
 from ..dynamics.attractors import MultiStart
+from ..physics.rating import RatingMaterial, RatingSettings
 from .checkers import Checker, boolean, check_mapping, choice, number
 
 
@@ -35,6 +37,9 @@ class SimulationSettings:
     effects : tuple of Effect
         Effects added to the model in every run (a study's ``model.effects``: the
         effects a diagnosis named, at their fitted values).
+    stresses : RatingSettings, optional
+        Also compute the tooth stress QoIs of every run with these ISO 6336 inputs
+        (:mod:`uqgear.dynamics.stress_qois`); set where an analysis asks for a stress QoI.
     """
 
     n_periods: int = 400
@@ -45,10 +50,16 @@ class SimulationSettings:
     stiffness: str = "ishikawa"
     starts: MultiStart | None = None
     effects: tuple[Any, ...] = ()
+    stresses: RatingSettings | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.starts, Mapping):
             object.__setattr__(self, "starts", MultiStart.from_mapping(self.starts))
+        if isinstance(self.stresses, Mapping):
+            # the plain values of to_dict, field for field
+            values = dict(self.stresses)
+            values["material"] = RatingMaterial(**values["material"])
+            object.__setattr__(self, "stresses", RatingSettings(**values))
 
     def batch_options(self, threads: int | None = None) -> dict[str, Any]:
         """Keyword arguments of :func:`~uqgear.physics.integration.simulate_batch` (and
@@ -73,9 +84,12 @@ class SimulationSettings:
     def to_dict(self) -> dict[str, Any]:
         """The settings as plain values; ``starts`` only when set, so the keys of results run from rest
         only (checkpoints, resumed studies) stay what they were."""
-        values = {key: getattr(self, key) for key in self.__dataclass_fields__ if key not in ("starts", "effects")}
+        optional = ("starts", "effects", "stresses")
+        values = {key: getattr(self, key) for key in self.__dataclass_fields__ if key not in optional}
         if self.starts is not None:
             values["starts"] = self.starts.to_dict()
+        if self.stresses is not None:
+            values["stresses"] = dataclasses.asdict(self.stresses)
         if self.effects:
             values["effects"] = [repr(effect) for effect in self.effects]
         return values
