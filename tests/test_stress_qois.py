@@ -172,3 +172,29 @@ def test_bad_stress_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cap
     captured = capsys.readouterr()
     assert message in captured.err and captured.err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_a_simulate_analysis_runs_the_studys_effects_and_gives_the_stresses_along_the_path(tmp_path):
+    text = (
+        "name: stress_path\nseed: 2\ndesign: {name: locomotive}\n"
+        "model:\n  effects:\n    tooth_damage: {depth: 0.3}\n"
+        "operating_points: {pinion_speed: [2500], drive_torque: 7000, adhesion_torque: 33800}\n"
+        "simulation: {n_periods: 60, keep_periods: 20, steps_per_mode: 24}\n"
+        "analyses:\n  - type: simulate\n    rating: {face_load_factor: 1.25}\n"
+    )
+    (tmp_path / "study.yaml").write_text(text)
+    assert main(["run", str(tmp_path / "study.yaml"), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    with xr.open_dataset(tmp_path / "out" / "simulate.nc") as result:
+        run = result.isel(run=0).load()
+    effect = uqgear.make_effect("tooth_damage", {"depth": 0.3})
+    alone = uqgear.simulate(DESIGN, 2500.0, 7000.0, 33800.0, n_periods=60, keep_periods=20, effects=[effect])
+    assert np.array_equal(run["x"].values, alone["x"].values)
+    setup = uqgear.build_model(DESIGN, 2500.0, 7000.0, 33800.0, effects=[effect])
+    iso = static_rating(DESIGN, 7000.0, 2500.0, RatingSettings(face_load_factor=1.25), dynamic_factor=1.0)
+    stresses = tooth_stresses(
+        setup, iso, alone["x"].values, alone["x_velocity"].values, first_period=40, samples_per_period=64
+    )
+    upper = stresses["root_stress"].max("engagement").values
+    assert run["root_stress_path"].sel(bound="upper").values == pytest.approx(upper, rel=1e-12)
+    assert float(run["root_stress_peak_pinion"]) == pytest.approx(float(upper[0].max()), rel=1e-12)
+    assert run["contact_stress_path"].attrs["units"] == "Pa" and run.sizes["position"] == upper.shape[1]

@@ -187,6 +187,15 @@ def simulation_figure_png(run: xr.Dataset, *, dpi: int = 110, spectrum_axis: str
     return figure_png(figure, dpi)
 
 
+#: The stress peaks a simulated run's finding states.
+_STRESS_PEAKS = (
+    "root_stress_peak_pinion",
+    "root_stress_peak_gear",
+    "contact_stress_peak_pinion",
+    "contact_stress_peak_gear",
+)
+
+
 @renderer("simulate")
 def _render_simulate(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
@@ -220,6 +229,13 @@ def _render_simulate(ds: xr.Dataset, dpi: int) -> Section:
             f"{100 * float(run['fraction_separation'].values):.3g} % and in back-side contact "
             f"{100 * float(run['fraction_back_contact'].values):.3g} % of the time"
         )
+        if "root_stress_peak_pinion" in run:
+            peaks = {name: float(run[name].values) / 1e6 for name in _STRESS_PEAKS}
+            text += (
+                "; largest tooth root stress {root_stress_peak_pinion:.4g} MPa (pinion) and "
+                "{root_stress_peak_gear:.4g} MPa (gear), flank contact stress {contact_stress_peak_pinion:.4g} / "
+                "{contact_stress_peak_gear:.4g} MPa"
+            ).format(**peaks)
         section.findings.append(text)
         if label and not _label_matches(label, regime):
             section.caveats.append(

@@ -38,6 +38,7 @@ from ..dynamics.stress_qois import RUN_QOI_INFO, StressEvaluator
 from ..physics.design import Design
 from ..physics.effect_draws import UncertainEffect
 from ..physics.integration import BatchEvaluator
+from ..physics.rating import RatingSettings
 from ..uq.monte_carlo import monte_carlo_statistics
 from ..uq.parameter_space import ParameterSpace
 from ..uq.parameters import Fixed
@@ -419,6 +420,7 @@ def simulate_analysis(context: AnalysisContext) -> xr.Dataset:
             largest_lyapunov=float(exponent[index]),
             seed=context.stage_seed(0),
             label=labels[index],
+            rating=RatingSettings.from_mapping(options.get("rating")),
         )
         for index, point in enumerate(progress(points, desc=f"{spec.name}: simulate", unit="run"))
     ]

@@ -124,6 +124,8 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "method": choice("fast", "scipy"),
         "spectrum": choice("order", "frequency"),
         "labels": list_of(string(), what="a list of labels"),
+        # ISO 6336 inputs of the tooth stresses along the path of contact
+        "rating": rating_settings,
     },
     "bifurcation": {
         "parameter": choice(*VARIABLES),

@@ -282,7 +282,8 @@ def _with_stresses(
 ) -> SimulationSettings:
     """``simulation`` computing the tooth stresses where the analysis asks for a stress QoI (with its ``rating``
     inputs); a ``rating`` block without one is refused, as it would change nothing."""
-    if kind == "rating":
+    if kind in ("rating", "simulate"):
+        # their own rating inputs: the rating's verdict, the simulated runs' stresses along the path
         return simulation
     asked = [name for name in options.get("qois", ()) if name in STRESS_QOIS]
     if not asked:

@@ -14,8 +14,13 @@ import xarray as xr
 
 import uqgear.dynamics as dynamics
 
+from ..dynamics.stress_qois import STRESS_QOI_INFO
+from ..dynamics.tooth_loads import GEARS, tooth_stresses
 from ..physics.design import Design
+from ..physics.effect_draws import as_effect
 from ..physics.integration import QOI_INFO, simulate
+from ..physics.model import build_model
+from ..physics.rating import RatingSettings, static_rating
 from .settings import SimulationSettings
 from .variables import OPERATING_VARIABLES, VARIABLES, variable_units_short
 
@@ -38,6 +43,7 @@ def simulate_point(
     largest_lyapunov: float | None = None,
     seed: np.random.SeedSequence | int = 0,
     label: str = "",
+    rating: RatingSettings | None = None,
 ) -> xr.Dataset:
     """One full simulation with its Poincare points, DTE spectrum, QoIs and regime.
 
@@ -58,6 +64,8 @@ def simulate_point(
         Seed of the 0-1 test frequencies.
     label : str
         A label for reports (e.g. "period-1").
+    rating : RatingSettings, optional
+        ISO 6336 inputs of the tooth stresses (defaults where not given).
 
     Returns
     -------
@@ -65,23 +73,28 @@ def simulate_point(
         Histories on ``mesh_cycle`` (time in mesh periods), Poincare points
         on ``period``, the DTE amplitude spectrum on ``order``; scalars:
         the inputs, QoIs, ``regime``, ``response_period``, ``zero_one_k``,
-        ``regime_reason``.
+        ``regime_reason``; the tooth stresses along the path of contact (``root_stress_path``,
+        ``contact_stress_path``: dims ``gear``, ``bound``, ``position``) and their QoIs.
     """
     design_keys = {key: value for key, value in point.items() if key in DESIGN_VARIABLES}
     run_design = design.replace(**design_keys) if design_keys else design
+    # the study's diagnosed effects enter every run, these panels' too
+    model = {
+        "mesh_stiffness_scale": point.get("mesh_stiffness_scale", 1.0),
+        "effects": tuple(as_effect(effect) for effect in simulation.effects),
+        "damping_in_separation": simulation.damping_in_separation,
+        "stiffness": simulation.stiffness,
+    }
+    operating = (point["pinion_speed"], point["drive_torque"], point["adhesion_torque"])
     run = simulate(
         run_design,
-        point["pinion_speed"],
-        point["drive_torque"],
-        point["adhesion_torque"],
+        *operating,
         method=method,
         n_periods=simulation.n_periods,
         keep_periods=simulation.keep_periods,
         samples_per_period=samples_per_period,
-        mesh_stiffness_scale=point.get("mesh_stiffness_scale", 1.0),
-        damping_in_separation=simulation.damping_in_separation,
-        stiffness=simulation.stiffness,
         steps_per_mode=simulation.steps_per_mode,
+        **model,
     )
     if largest_lyapunov is not None:
         run["largest_lyapunov"] = ((), float(largest_lyapunov), qoi_attrs("largest_lyapunov"))
@@ -138,6 +151,8 @@ def simulate_point(
         data[name] = ((), float(value), {"units": variable_units_short(name)})
     for qoi in qois.data_vars:
         data[str(qoi)] = ((), float(qois[qoi].values), dict(qois[qoi].attrs))
+    setup = build_model(run_design, *operating, **model)
+    stresses = _path_stresses(setup, operating, run, simulation, samples_per_period, rating)
     coords = {
         "mesh_cycle": ("mesh_cycle", mesh_cycle, {"units": "1", "long_name": "time in mesh periods"}),
         "period": ("period", run["period"].values, {"units": "1", "long_name": "mesh period index"}),
@@ -156,7 +171,44 @@ def simulate_point(
         "samples_per_period": samples_per_period,
         "method": method,
     }
+    coords["position"] = (
+        "position",
+        stresses.pop("position"),
+        {"units": "base pitches", "long_name": "contact point on the path of contact from its start"},
+    )
+    coords["gear"] = ("gear", list(GEARS))
+    coords["bound"] = ("bound", ["lower", "upper"])
+    data.update(stresses)
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _path_stresses(
+    setup,
+    operating: tuple[float, float, float],
+    run: xr.Dataset,
+    simulation: SimulationSettings,
+    samples_per_period: int,
+    rating: RatingSettings | None,
+) -> dict[str, Any]:
+    """The tooth stresses of a run: over every engagement the highest and lowest at each contact point of the
+    path, per gear, and the stress QoIs (docs/model/rating.md section 10.6)."""
+    iso = static_rating(setup.design, operating[1], operating[0], rating, dynamic_factor=1.0)
+    first = simulation.n_periods - simulation.keep_periods
+    stresses = tooth_stresses(
+        setup, iso, run["x"].values, run["x_velocity"].values, first_period=first, samples_per_period=samples_per_period
+    )
+    data: dict[str, Any] = {"position": stresses["position"].values}
+    for name, text in (("root_stress", "tooth root stress"), ("contact_stress", "flank contact stress")):
+        values = stresses[name].values  # (gear, engagement, position)
+        data[f"{name}_path"] = (
+            ("gear", "bound", "position"),
+            np.stack([values.min(axis=1), values.max(axis=1)], axis=1),
+            {"units": "Pa", "long_name": f"{text} along the path of contact, lowest and highest over the engagements"},
+        )
+    for qoi, (units, text) in STRESS_QOI_INFO.items():
+        quantity, gear = qoi.rsplit("_", 1)
+        data[qoi] = ((), float(stresses[quantity].values[GEARS.index(gear)]), {"units": units, "long_name": text})
+    return data
 
 
 __all__ = ["simulate_point", "qoi_attrs", "DESIGN_VARIABLES"]
