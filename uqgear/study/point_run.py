@@ -79,7 +79,7 @@ def simulate_point(
     design_keys = {key: value for key, value in point.items() if key in DESIGN_VARIABLES}
     run_design = design.replace(**design_keys) if design_keys else design
     # the study's diagnosed effects enter every run, these panels' too
-    model = {
+    model: dict[str, Any] = {
         "mesh_stiffness_scale": point.get("mesh_stiffness_scale", 1.0),
         "effects": tuple(as_effect(effect) for effect in simulation.effects),
         "damping_in_separation": simulation.damping_in_separation,
@@ -176,8 +176,8 @@ def simulate_point(
         stresses.pop("position"),
         {"units": "base pitches", "long_name": "contact point on the path of contact from its start"},
     )
-    coords["gear"] = ("gear", list(GEARS))
-    coords["bound"] = ("bound", ["lower", "upper"])
+    coords["gear"] = ("gear", list(GEARS), {"long_name": "gear of the pair"})
+    coords["bound"] = ("bound", ["lower", "upper"], {"long_name": "lowest and highest over the engagements"})
     data.update(stresses)
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
