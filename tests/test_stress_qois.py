@@ -68,6 +68,8 @@ def test_the_batch_gives_each_run_the_stresses_of_its_one_sample_history():
     batch = tooth_stress_qois(DESIGN, samples, rating=rating, steps_per_mode=24, **RUN)
     alone = _one_at_a_time(samples, rating)
     assert np.stack([batch[name].values for name in STRESS_QOIS], axis=1) == pytest.approx(alone, rel=1e-12)
+    threaded = tooth_stress_qois(DESIGN, samples, rating=rating, steps_per_mode=24, threads=2, **RUN)
+    assert all(np.array_equal(batch[name].values, threaded[name].values) for name in STRESS_QOIS)
     for name in STRESS_QOIS:
         assert batch[name].attrs["units"] == "Pa"
 

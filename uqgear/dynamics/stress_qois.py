@@ -3,7 +3,8 @@
 The kernels of :func:`~uqgear.physics.integration.simulate_batch` reduce each
 run to scalar QoIs as they integrate; a tooth's stress needs the load of each
 tooth pair over the mesh cycle, which :func:`~uqgear.dynamics.tooth_loads.tooth_stresses`
-derives from the run's DTE history. :func:`tooth_stress_qois` runs the batch's
+derives from the run's DTE history (:func:`~uqgear.dynamics.tooth_loads.stress_peaks`, its scalar
+part). :func:`tooth_stress_qois` runs the batch's
 histories together (:func:`~uqgear.physics.history_batch.integrate_histories`,
 the same numbers as a run alone) and reduces each to the peak and amplitude of
 the root and flank stress of each gear (:data:`STRESS_QOI_INFO`);
@@ -34,7 +35,7 @@ from ..physics.integration import QOI_INFO, BatchEvaluator
 from ..physics.model import ModelSetup
 from ..physics.pitch_errors import PitchErrors
 from ..physics.rating import RatingSettings, StaticRating, static_rating
-from .tooth_loads import GEARS, tooth_stresses
+from .tooth_loads import GEARS, stress_peaks
 
 #: History samples per mesh period the stresses are read from (the peaks' resolution along the path
 #: of contact: 64 places a sample every 1/64 of a base pitch, as the rating analysis does).
@@ -70,11 +71,9 @@ def _operating(samples: xr.Dataset, design: Design, name: str, default: float) -
 
 
 def _run_qois(setup: ModelSetup, rating: StaticRating, x: np.ndarray, first_period: int, samples: int) -> list[float]:
-    stresses = tooth_stresses(setup, rating, x, first_period=first_period, samples_per_period=samples)
-    return [
-        float(stresses[quantity].values[GEARS.index(gear)])
-        for quantity, gear in (name.rsplit("_", 1) for name in STRESS_QOIS)
-    ]
+    peaks = stress_peaks(setup, rating, x, first_period=first_period, samples_per_period=samples)
+    names = (name.rsplit("_", 1) for name in STRESS_QOIS)
+    return [float(peaks[quantity][GEARS.index(gear)]) for quantity, gear in names]
 
 
 def tooth_stress_qois(
@@ -91,6 +90,7 @@ def tooth_stress_qois(
     rating: RatingSettings | None = None,
     initial_states: np.ndarray | None = None,
     samples_per_period: int = STRESS_SAMPLES_PER_PERIOD,
+    threads: int | None = 1,
 ) -> xr.Dataset:
     """The tooth stress QoIs of every sample: each run's DTE history turned into root and flank stresses.
 
@@ -108,6 +108,8 @@ def tooth_stress_qois(
         (samples, 6) start states; a row of NaN, or none given, starts that run at rest.
     samples_per_period : int
         History samples per mesh period.
+    threads : int, optional
+        Threads of the history integration (None: all cores); the numbers do not depend on it.
 
     Returns
     -------
@@ -138,7 +140,9 @@ def tooth_stress_qois(
         stiffness=stiffness,
         pitch_errors=pitch_errors,
     )
-    runs = integrate_histories(setups, n_periods, keep_periods, samples_per_period, steps_per_mode, initial_states)
+    runs = integrate_histories(
+        setups, n_periods, keep_periods, samples_per_period, steps_per_mode, initial_states, threads=threads
+    )
     torques = _operating(samples, design, "drive_torque", design.operation.drive_torque)
     speeds = np.asarray(samples["pinion_speed"].values, dtype=float)
     first = int(n_periods) - int(keep_periods)
@@ -166,7 +170,7 @@ def stress_options(options: Mapping[str, Any]) -> dict[str, Any]:
     Examples
     --------
     >>> stress_options({"n_periods": 60, "threads": 2, "lyapunov": True})
-    {'n_periods': 60}
+    {'n_periods': 60, 'threads': 2}
     """
     return {key: options[key] for key in _STRESS_OPTION_KEYS if key in options}
 
@@ -180,6 +184,7 @@ _STRESS_OPTION_KEYS = (
     "damping_in_separation",
     "stiffness",
     "pitch_errors",
+    "threads",
 )
 
 

@@ -61,6 +61,42 @@ def _rate(x: np.ndarray, samples_per_period: int, setup: ModelSetup) -> np.ndarr
     return np.gradient(x, dt) if x.size > 1 else np.zeros_like(x)
 
 
+def _pair_arrays(setup: ModelSetup, x: np.ndarray, rate: np.ndarray, first_period: int, samples_per_period: int):
+    """:func:`pair_loads`'s arrays: (load, stiffness, position, in mesh, meshing number, time, pair slots)."""
+    p = setup.parameters
+    eps, z1, z2 = float(p[K.CONTACT_RATIO]), int(p[K.Z1]), int(p[K.Z2])
+    rows = np.arange(x.size)
+    cycle = first_period + rows // samples_per_period
+    phase = (rows % samples_per_period) / samples_per_period
+    slots = np.arange(math.ceil(eps))
+    position = phase[:, None] + slots[None, :]
+    in_mesh = position < eps
+    grid = np.linspace(0.0, eps, setup.pair_stiffness.size)
+    stiffness = np.where(in_mesh, np.interp(position, grid, setup.pair_stiffness), 0.0)
+    if p[K.USE_PERIOD_TABLE] != 0.0:
+        # a smooth table's k(t) shared in proportion to the Ishikawa pair stiffness (_rhs.smooth_share)
+        smooth = np.interp(phase, np.linspace(0.0, 1.0, setup.period_stiffness.size), setup.period_stiffness)
+        stiffness *= (smooth / stiffness.sum(axis=1))[:, None]
+    number = cycle[:, None] - slots[None, :]
+    stiffness *= setup.factor_pinion[number % z1] * setup.factor_gear[number % z2]
+    time = (cycle + phase) / setup.mesh_frequency
+    scale = p[K.STIFFNESS_SCALE] * (1.0 + p[K.ECC_KAPPA] * np.cos(p[K.ECC_OMEGA] * time + p[K.ECC_PHASE]))
+    stiffness *= scale[:, None]
+    offset = np.zeros_like(position)
+    if p[K.PITCH_ERRORS] != 0.0:
+        offset = p[K.N_PARAMS + number % z1] + p[K.N_PARAMS + z1 + number % z2]
+    deflection = x[:, None] - offset
+    b = p[K.HALF_BACKLASH]
+    elastic = stiffness * np.where(deflection > b, deflection - b, np.where(deflection < -b, deflection + b, 0.0))
+    touching = in_mesh & (elastic != 0.0)
+    touching_k = np.where(touching, stiffness, 0.0).sum(axis=1)
+    damping = p[K.CM] * rate
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(touching, stiffness / touching_k[:, None], 0.0)
+    load = np.where(touching, elastic + share * damping[:, None], 0.0)
+    return load, stiffness, position, in_mesh, number, time, slots
+
+
 def pair_loads(setup: ModelSetup, x, x_velocity=None, *, first_period: int, samples_per_period: int) -> xr.Dataset:
     """The load each tooth pair in mesh carries at every sample of a DTE history.
 
@@ -97,41 +133,14 @@ def pair_loads(setup: ModelSetup, x, x_velocity=None, *, first_period: int, samp
     >>> loads.sizes["pair"], int((loads["pair_load"] > 0).sum("pair")[6])
     (2, 1)
     """
-    p = setup.parameters
     x = np.asarray(x, dtype=float)
     rate = _rate(x, samples_per_period, setup) if x_velocity is None else np.asarray(x_velocity, dtype=float)
     if x.ndim != 1 or rate.shape != x.shape:
         raise ValueError(f"x, x_velocity: expected two 1-D histories of one length; got {x.shape}, {rate.shape}")
-    eps, z1, z2 = float(p[K.CONTACT_RATIO]), int(p[K.Z1]), int(p[K.Z2])
-    rows = np.arange(x.size)
-    cycle = first_period + rows // samples_per_period
-    phase = (rows % samples_per_period) / samples_per_period
-    slots = np.arange(math.ceil(eps))
-    position = phase[:, None] + slots[None, :]
-    in_mesh = position < eps
-    grid = np.linspace(0.0, eps, setup.pair_stiffness.size)
-    stiffness = np.where(in_mesh, np.interp(position, grid, setup.pair_stiffness), 0.0)
-    if p[K.USE_PERIOD_TABLE] != 0.0:
-        # a smooth table's k(t) shared in proportion to the Ishikawa pair stiffness (_rhs.smooth_share)
-        smooth = np.interp(phase, np.linspace(0.0, 1.0, setup.period_stiffness.size), setup.period_stiffness)
-        stiffness *= (smooth / stiffness.sum(axis=1))[:, None]
-    number = cycle[:, None] - slots[None, :]
-    stiffness *= setup.factor_pinion[number % z1] * setup.factor_gear[number % z2]
-    time = (cycle + phase) / setup.mesh_frequency
-    scale = p[K.STIFFNESS_SCALE] * (1.0 + p[K.ECC_KAPPA] * np.cos(p[K.ECC_OMEGA] * time + p[K.ECC_PHASE]))
-    stiffness *= scale[:, None]
-    offset = np.zeros_like(position)
-    if p[K.PITCH_ERRORS] != 0.0:
-        offset = p[K.N_PARAMS + number % z1] + p[K.N_PARAMS + z1 + number % z2]
-    deflection = x[:, None] - offset
-    b = p[K.HALF_BACKLASH]
-    elastic = stiffness * np.where(deflection > b, deflection - b, np.where(deflection < -b, deflection + b, 0.0))
-    touching = in_mesh & (elastic != 0.0)
-    touching_k = np.where(touching, stiffness, 0.0).sum(axis=1)
-    damping = p[K.CM] * rate
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = np.where(touching, stiffness / touching_k[:, None], 0.0)
-    load = np.where(touching, elastic + share * damping[:, None], 0.0)
+    load, stiffness, position, in_mesh, number, time, slots = _pair_arrays(
+        setup, x, rate, first_period, samples_per_period
+    )
+    eps = float(setup.parameters[K.CONTACT_RATIO])
     return xr.Dataset(
         {
             "pair_load": (("time", "pair"), load, {"units": "N", "long_name": "load carried by the tooth pair"}),
@@ -147,6 +156,19 @@ def pair_loads(setup: ModelSetup, x, x_velocity=None, *, first_period: int, samp
         coords={"time": ("time", time, {"units": "s"}), "pair": ("pair", slots)},
         attrs={"contact_ratio": eps, "samples_per_period": samples_per_period},
     )
+
+
+def _engagement_arrays(pair_load: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`engagement_loads`'s arrays from the (time, pair) loads: (engagement x position loads, positions)."""
+    pairs = pair_load.shape[1]
+    cycles = pair_load.shape[0] // samples
+    count = cycles - pairs + 1
+    if count < 1:
+        raise ValueError(f"loads: a whole engagement needs {pairs} mesh periods; the history holds {cycles}")
+    table = pair_load[: cycles * samples].reshape(cycles, samples, pairs)
+    # engagement m is pair slot i in mesh cycle m + i
+    parts = [table[i : i + count, :, i] for i in range(pairs)]
+    return np.concatenate(parts, axis=1), np.arange(pairs * samples) / samples
 
 
 def engagement_loads(loads: xr.Dataset) -> xr.Dataset:
@@ -174,17 +196,9 @@ def engagement_loads(loads: xr.Dataset) -> xr.Dataset:
     Frozen({'engagement': 4, 'position': 16})
     """
     samples = int(loads.attrs["samples_per_period"])
-    pairs = loads.sizes["pair"]
-    cycles = loads.sizes["time"] // samples
-    count = cycles - pairs + 1
-    if count < 1:
-        raise ValueError(f"loads: a whole engagement needs {pairs} mesh periods; the history holds {cycles}")
-    table = loads["pair_load"].values[: cycles * samples].reshape(cycles, samples, pairs)
-    # engagement m is pair slot i in mesh cycle m + i
-    parts = [table[i : i + count, :, i] for i in range(pairs)]
-    load = np.concatenate(parts, axis=1)
+    load, position = _engagement_arrays(loads["pair_load"].values, samples)
+    count = load.shape[0]
     first = int(loads["meshing_number"].values[0, 0])
-    position = np.arange(pairs * samples) / samples
     return xr.Dataset(
         {"tooth_load": (("engagement", "position"), load, {"units": "N", "long_name": "load of the tooth pair"})},
         coords={
@@ -244,8 +258,46 @@ def tooth_stresses(
     loads = engagement_loads(
         pair_loads(setup, x, x_velocity, first_period=first_period, samples_per_period=samples_per_period)
     )
-    load = loads["tooth_load"].values
-    position = loads["position"].values
+    root, contact = _stress_arrays(setup, rating, loads["tooth_load"].values, loads["position"].values)
+    return _stress_dataset(loads, root, contact)
+
+
+def stress_peaks(
+    setup: ModelSetup, rating: StaticRating, x, x_velocity=None, *, first_period: int, samples_per_period: int
+) -> dict[str, np.ndarray]:
+    """:func:`tooth_stresses`'s scalar QoIs alone, the same numbers without its Datasets (a batch's reduction).
+
+    Returns
+    -------
+    dict
+        ``root_stress_peak``, ``root_stress_amplitude``, ``contact_stress_peak`` and
+        ``contact_stress_amplitude``, each per gear (pinion, gear), Pa.
+
+    Examples
+    --------
+    >>> import numpy as np, uqgear
+    >>> from uqgear.physics.rating import static_rating
+    >>> from uqgear.dynamics.tooth_loads import stress_peaks, tooth_stresses
+    >>> design = uqgear.load_design("locomotive")
+    >>> setup = uqgear.build_model(design, 50.0, 7000.0, 7000.0 * 101 / 21)
+    >>> rating = static_rating(design, 7000.0, 50.0, dynamic_factor=1.0)
+    >>> x = np.full(3 * 64, setup.static_state()[2])
+    >>> peaks = stress_peaks(setup, rating, x, np.zeros(x.size), first_period=0, samples_per_period=64)
+    >>> full = tooth_stresses(setup, rating, x, np.zeros(x.size), first_period=0, samples_per_period=64)
+    >>> all(np.array_equal(peaks[name], full[name].values) for name in peaks)
+    True
+    """
+    x = np.asarray(x, dtype=float)
+    rate = _rate(x, samples_per_period, setup) if x_velocity is None else np.asarray(x_velocity, dtype=float)
+    load = _pair_arrays(setup, x, rate, first_period, samples_per_period)[0]
+    engagement, position = _engagement_arrays(load, samples_per_period)
+    return _peaks(*_stress_arrays(setup, rating, engagement, position))
+
+
+def _stress_arrays(
+    setup: ModelSetup, rating: StaticRating, load: np.ndarray, position: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(root, contact) stresses (gear, engagement, position) of the engagements' loads; module text."""
     design = setup.design
     # the rating's stresses per unit of tangential force at the reference circle, its K_v divided out
     tangential = load * math.cos(math.radians(design.pressure_angle)) / rating.tangential_force
@@ -255,7 +307,7 @@ def tooth_stresses(
     load_factor = (rating.contact_stress[0] / (factors.single_pair_pinion * rating.contact_stress_nominal)) ** 2
     load_factor /= rating.dynamic_factor
     rho_1, rho_2 = _flank_radii(setup, position)
-    in_mesh = position < loads.attrs["contact_ratio"]
+    in_mesh = position < setup.parameters[K.CONTACT_RATIO]
     reduced = np.where(in_mesh, rho_1 * rho_2 / (rho_1 + rho_2), np.inf)
     hertz = (
         factors.contact_ratio
@@ -266,7 +318,18 @@ def tooth_stresses(
     # each flank where the contact point is on its dedendum, the pitch point C included
     on_dedendum = np.stack([position <= pitch + 1e-12, position >= pitch - 1e-12])
     contact = np.where(on_dedendum[:, None, :], hertz[None, :, :], 0.0)
-    return _stress_dataset(loads, root, contact)
+    return root, contact
+
+
+def _peaks(root: np.ndarray, contact: np.ndarray) -> dict[str, np.ndarray]:
+    """Per gear the peak and the amplitude (half the largest range; an unloaded tooth is at zero) of each stress."""
+    peaks: dict[str, np.ndarray] = {}
+    for name, values in (("root_stress", root), ("contact_stress", contact)):
+        high = np.maximum(values.max(axis=(1, 2)), 0.0)
+        low = np.minimum(values.min(axis=(1, 2)), 0.0)
+        peaks[f"{name}_peak"] = high
+        peaks[f"{name}_amplitude"] = 0.5 * (high - low)
+    return peaks
 
 
 def _stress_dataset(loads: xr.Dataset, root: np.ndarray, contact: np.ndarray) -> xr.Dataset:
@@ -275,16 +338,11 @@ def _stress_dataset(loads: xr.Dataset, root: np.ndarray, contact: np.ndarray) ->
         root_stress=(dims, root, {"units": "Pa", "long_name": "tooth root stress (ISO 6336-3 method B section)"}),
         contact_stress=(dims, contact, {"units": "Pa", "long_name": "flank contact stress on the dedendum"}),
     ).assign_coords(gear=("gear", list(GEARS)))
-    for name, values in (("root_stress", root), ("contact_stress", contact)):
-        high = np.maximum(values.max(axis=(1, 2)), 0.0)
-        low = np.minimum(values.min(axis=(1, 2)), 0.0)
-        result[f"{name}_peak"] = ("gear", high, {"units": "Pa", "long_name": f"largest {name.replace('_', ' ')}"})
-        result[f"{name}_amplitude"] = (
-            "gear",
-            0.5 * (high - low),
-            {"units": "Pa", "long_name": f"half the largest range of the {name.replace('_', ' ')}"},
-        )
+    for key, values in _peaks(root, contact).items():
+        name, quantity = key.rsplit("_", 1)
+        text = f"largest {name.replace('_', ' ')}" if quantity == "peak" else f"half the largest range of the {name}"
+        result[key] = ("gear", values, {"units": "Pa", "long_name": text.replace("_", " ")})
     return result
 
 
-__all__ = ["GEARS", "pair_loads", "engagement_loads", "tooth_stresses"]
+__all__ = ["GEARS", "pair_loads", "engagement_loads", "stress_peaks", "tooth_stresses"]

@@ -40,6 +40,7 @@ def integrate_histories(
     samples_per_period: int,
     steps_per_mode: int,
     states: np.ndarray | None = None,
+    threads: int | None = 1,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Histories and Poincare states of several runs, each from static equilibrium or a given state.
 
@@ -56,6 +57,9 @@ def integrate_histories(
     states : ndarray, optional
         (runs, 6) start states (those of ``integrate_fast``'s ``state0``); a row of NaN, or none
         given, starts that run at its static equilibrium.
+    threads : int, optional
+        Threads over the lane groups (None: all cores). One by default: a diagnosis's worker
+        processes are its parallelism. The numbers do not depend on it.
 
     Returns
     -------
@@ -102,8 +106,7 @@ def integrate_histories(
         history,
         np.empty((n, 6)),
     )
-    # one thread: a diagnosis's worker processes are its parallelism
-    rest = integrate_lane_groups(batch, threads=1)
+    rest = integrate_lane_groups(batch, threads=threads)
     left = set(rest.tolist())
     results: list[tuple[np.ndarray, np.ndarray] | None] = [
         None if i in left else (history[i][_LANE_CHANNELS].T.copy(), poincare[i]) for i in range(n)
