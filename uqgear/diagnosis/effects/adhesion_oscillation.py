@@ -12,10 +12,12 @@ from ...physics.effects import AdhesionOscillation
 from ..candidates import Candidate
 from .base import EffectFamily
 
-
-#: Steady lines of the accelerometers the frequency starts at, the strongest of distinct frequency: a
-#: +-0.5 % speed wander at 1.3 Hz puts the mesh line's frequency modulation at 4 Hz above a 0.5 %
-#: oscillation's line on the housings of the service plan's faster runs (its index there is 2 to 5).
+#: Steady lines of the accelerometers the frequency starts at, the strongest of distinct frequency. A
+#: speed wander modulates the mesh line's frequency: sidebands at multiples of the wander's frequency,
+#: the same in Hz in every run, with an index of modulation that grows with the mesh frequency, so at
+#: the service plan's faster runs several of them pass the steady-line test (+-0.5 % at 1.3 Hz: its
+#: third, at 4 Hz, twice the power over the floor of a 0.5 % oscillation's line). Each start costs one
+#: batch of simulations, the fit refines the least costly.
 HOUSING_STARTS = 4
 
 
