@@ -13,7 +13,7 @@ from uqgear.diagnosis.effects import effect_family
 from uqgear.diagnosis.fit_problem import FitProblem
 from uqgear.diagnosis.fitting import start_costs
 from uqgear.physics.design import load_design
-from uqgear.physics.effects import AdhesionOscillation
+from uqgear.physics.effects import AdhesionOscillation, Eccentricity
 from uqgear.rig.format import make_rig_dataset
 from uqgear.rig.virtual_rig import simulate_campaign
 
@@ -155,3 +155,35 @@ def test_a_wandering_speed_s_own_line_does_not_hide_a_weaker_stick_slip_from_the
     costs = start_costs(problem, [problem.vector(start, positions) for start in variant.starts])
     best = variant.starts[int(np.argmin(costs))]["adhesion_oscillation.frequency"]
     assert best == pytest.approx(WEAK_STICK_SLIP["frequency"], abs=1.0)
+
+
+#: A weak pinion run-out with its stiffness modulation in proportion (4e-4 m per unit), under speed wander.
+WEAK_RUN_OUT = {"amplitude": 1.5e-7, "shaft": "pinion", "phase": 2.0, "kappa": 1.5e-7 / 4e-4}
+
+
+def test_a_weak_run_out_s_modulation_starts_below_the_housings_sideband_reading(design):
+    rig = simulate_campaign(design, effects=[Eccentricity(WEAK_RUN_OUT)], seed=np.random.SeedSequence(7),
+                            channels=("acc_pinion", "acc_gear"), speed_wander=[(0.006, 1.1)])
+    adhesion = np.asarray(json.loads(rig.attrs["true_parameters"])["adhesion_torque"], dtype=float)
+    case = prepare_case(rig, design, seed=np.random.SeedSequence(0))
+    family = effect_family("eccentricity")
+    hints = signatures.signature_hints(case, signatures.every_channel_locked_lines(case))
+    # noise and wander add to the sidebands: their reading is well above the true modulation
+    reading = hints["eccentricity_pinion"] * family.proportional["kappa"]
+    assert reading > 1.5 * WEAK_RUN_OUT["kappa"]
+    variant = family.variants(design, hints)[0]
+    assert variant.label == "eccentricity[pinion]"
+    # the fit keeps the start of least cost: with the true nominal model and T2, one near the true modulation
+    problem = FitProblem(case, variant)
+    positions = (adhesion - case.adhesion_lower) / (case.adhesion_upper - case.adhesion_lower)
+    costs = start_costs(problem, [problem.vector(start, positions) for start in variant.starts])
+    best = variant.starts[int(np.argmin(costs))]["eccentricity.kappa"]
+    assert WEAK_RUN_OUT["kappa"] / 2 < best < 2 * WEAK_RUN_OUT["kappa"]
+
+
+def test_a_run_out_read_off_the_te_keeps_its_two_modulation_starts(design):
+    family = effect_family("eccentricity")
+    hints = family.hints({"te:shaft_pinion1": np.array([2e-6, 2e-6])}, [])
+    assert "eccentricity_pinion_sidebands" not in hints
+    kappas = sorted({start["eccentricity.kappa"] for start in family.variants(design, hints)[0].starts})
+    assert kappas == pytest.approx([1e-9, 2e-6 * family.proportional["kappa"]])
