@@ -57,9 +57,9 @@ class EccentricityFamily(EffectFamily):
     accelerometers) divided by the modulation per metre of run-out, and
     the modulation at none, at that reading and at :data:`SIDEBAND_SHARES`
     of it: the sidebands hold the noise's and a wandering speed's share
-    too (the virtual rig's healthy campaigns without encoders read a
-    modulation of 4e-4 to 2e-3, a weak run-out's own), so a weak run-out's
-    modulation may lie well below its reading.
+    too (the virtual rig's campaigns without encoders read 4e-4 to 2e-3
+    on a shaft without a run-out, a weak run-out's own modulation), so a
+    weak run-out's modulation may lie well below its reading.
 
     Its fits read as a shaft run-out (:attr:`run_out`): the rules that tell a
     run-out from the gears' own pitch errors apply to it, its modulation being
