@@ -14,10 +14,10 @@ from .base import EffectFamily
 
 #: Steady lines of the accelerometers the frequency starts at, the strongest of distinct frequency. A
 #: speed wander modulates the mesh line's frequency: sidebands at multiples of the wander's frequency,
-#: the same in Hz in every run, with an index of modulation that grows with the mesh frequency, so at
-#: the service plan's faster runs several of them pass the steady-line test (+-0.5 % at 1.3 Hz: its
-#: third, at 4 Hz, twice the power over the floor of a 0.5 % oscillation's line). Each start costs one
-#: batch of simulations, the fit refines the least costly.
+#: the same in Hz in every run, with an index of modulation that grows with the mesh frequency, so
+#: they may pass the steady-line test (+-0.5 % at 1.3 Hz: a line at 4 Hz with twice the power over the
+#: floor of a 0.5 % oscillation's line), and more than one where the wander is larger. Each start
+#: costs one batch of simulations; the fit refines the least costly.
 HOUSING_STARTS = 4
 
 
