@@ -6,7 +6,9 @@ no TE, its strength drawn across its ladder, every second campaign under speed
 wander; two healthy controls) one by one, printing each campaign's verdict as
 it comes, then per family the fraction named right and the fraction right
 counting ``none`` as right where the effect is invisible (the oracle's gap at
-most the noise's), and the controls' verdicts.
+most the noise's), and the controls' verdicts; each campaign's line and each
+miss state the oracle's gap over the noise threshold (how far above noise the
+effect stood).
 
 Usage: ``python benchmarks/diagnosis_encoderless.py --seeds 1 [--n-per-effect 3] [--workers 1] [--out DIR]``.
 """
@@ -21,6 +23,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+from uqgear.diagnosis.settings import DEFAULT_SETTINGS
 from uqgear.validation import diagnose_campaign, planned_campaigns
 from uqgear.validation.campaigns import HEALTHY
 
@@ -36,8 +39,16 @@ def run(seeds: list[int], n_per_effect: int, workers: int, out: Path) -> list[di
             entry["seed"] = seed
             entries.append(entry)
             print(f"{seed:4d} {spec.identifier:40s} {spec.strength_value:10.3g} {entry['verdict']:22s} "
-                  f"detectable={entry['detectable']!s:5s} {time.perf_counter() - clock:5.0f} s", flush=True)
+                  f"detectable={entry['detectable']!s:5s} {visibility(entry):>12s} "
+                  f"{time.perf_counter() - clock:5.0f} s", flush=True)
     return entries
+
+
+def visibility(entry: dict[str, Any]) -> str:
+    """How far above noise the campaign's effect is: the oracle's gap over the noise threshold (``-`` for a control)."""
+    if entry["truth"] == HEALTHY:
+        return "-"
+    return f"{entry['oracle_gap'] / DEFAULT_SETTINGS.verdict.noise_gap:.2f} x noise"
 
 
 def table(entries: list[dict[str, Any]]) -> None:
@@ -51,6 +62,10 @@ def table(entries: list[dict[str, Any]]) -> None:
         right = sum(bool(entry["correct_detectable"]) for entry in cases)
         label = "none (controls)" if truth == HEALTHY else truth
         print(f"{label:22s} {named:4d} / {len(cases):<3d} {right:12d} / {len(cases)}")
+    # each visible effect left unnamed, with how far its oracle gap stood above the noise threshold
+    for entry in entries:
+        if not entry["correct_detectable"]:
+            print(f"  missed: {entry['id']} ({entry['verdict']}), {visibility(entry)}")
 
 
 def main() -> None:

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from uqgear.diagnosis import signatures
 from uqgear.diagnosis.case import prepare_case
 from uqgear.diagnosis.effects import effect_family
+from uqgear.diagnosis.fit_problem import FitProblem
+from uqgear.diagnosis.fitting import start_costs
 from uqgear.physics.design import load_design
+from uqgear.physics.effects import AdhesionOscillation, Eccentricity
 from uqgear.rig.format import make_rig_dataset
+from uqgear.rig.virtual_rig import simulate_campaign
 
 FS, SIZE = 20480.0, 20480
 SPEEDS = np.array([700.0, 1300.0, 2100.0, 3100.0])
@@ -116,3 +122,68 @@ def test_the_run_out_start_reads_the_te_first_and_the_housings_sidebands_without
     # with a TE the TE's first-order lines alone, as before
     with_te = {**housings, "te:shaft_pinion1": np.array([1e-6, 3e-6, np.nan]), "te:shaft_gear1": np.full(3, np.nan)}
     assert family.hints(with_te, []) == {"eccentricity_pinion": pytest.approx(2e-6)}
+
+
+#: A weak stick-slip on a rig without encoders whose speed wanders (known truth of the campaign below).
+WEAK_STICK_SLIP = {"amplitude": 0.008, "frequency": 17.0, "phase": 1.0}
+
+
+@pytest.fixture(scope="module")
+def wandering_encoderless_case(design):
+    """A weak stick-slip at 17 Hz on the housings alone, the pinion speed wandering by +-0.6 % at 1.1 Hz."""
+    rig = simulate_campaign(design, effects=[AdhesionOscillation(WEAK_STICK_SLIP)], seed=np.random.SeedSequence(123),
+                            channels=("acc_pinion", "acc_gear"), speed_wander=[(0.006, 1.1)])
+    adhesion = np.asarray(json.loads(rig.attrs["true_parameters"])["adhesion_torque"], dtype=float)
+    return prepare_case(rig, design, seed=np.random.SeedSequence(0)), adhesion
+
+
+def test_a_wandering_speed_s_own_line_does_not_hide_a_weaker_stick_slip_from_the_starts(
+    design, wandering_encoderless_case
+):
+    case, adhesion = wandering_encoderless_case
+    lines = signatures.steady_modulation_lines(case)
+    # the wander's frequency modulation of the mesh line is the strongest steady line, not the stick-slip
+    assert abs(lines[0]["frequency"] - WEAK_STICK_SLIP["frequency"]) > 5.0
+    assert any(abs(line["frequency"] - WEAK_STICK_SLIP["frequency"]) <= 1.0 for line in lines)
+    hints = signatures.signature_hints(case, signatures.every_channel_locked_lines(case))
+    variant = effect_family("adhesion_oscillation").variants(design, hints)[0]
+    frequencies = sorted({start["adhesion_oscillation.frequency"] for start in variant.starts})
+    assert any(abs(f - WEAK_STICK_SLIP["frequency"]) <= 1.0 for f in frequencies)
+    # the fit keeps the start of least cost: with the true nominal model and T2, one at the stick-slip
+    problem = FitProblem(case, variant)
+    positions = (adhesion - case.adhesion_lower) / (case.adhesion_upper - case.adhesion_lower)
+    costs = start_costs(problem, [problem.vector(start, positions) for start in variant.starts])
+    best = variant.starts[int(np.argmin(costs))]["adhesion_oscillation.frequency"]
+    assert best == pytest.approx(WEAK_STICK_SLIP["frequency"], abs=1.0)
+
+
+#: A weak pinion run-out with its stiffness modulation in proportion (4e-4 m per unit), under speed wander.
+WEAK_RUN_OUT = {"amplitude": 1.5e-7, "shaft": "pinion", "phase": 2.0, "kappa": 1.5e-7 / 4e-4}
+
+
+def test_a_weak_run_out_s_modulation_starts_below_the_housings_sideband_reading(design):
+    rig = simulate_campaign(design, effects=[Eccentricity(WEAK_RUN_OUT)], seed=np.random.SeedSequence(7),
+                            channels=("acc_pinion", "acc_gear"), speed_wander=[(0.006, 1.1)])
+    adhesion = np.asarray(json.loads(rig.attrs["true_parameters"])["adhesion_torque"], dtype=float)
+    case = prepare_case(rig, design, seed=np.random.SeedSequence(0))
+    family = effect_family("eccentricity")
+    hints = signatures.signature_hints(case, signatures.every_channel_locked_lines(case))
+    # noise and wander add to the sidebands: their reading is well above the true modulation
+    reading = hints["eccentricity_pinion"] * family.proportional["kappa"]
+    assert reading > 1.5 * WEAK_RUN_OUT["kappa"]
+    variant = family.variants(design, hints)[0]
+    assert variant.label == "eccentricity[pinion]"
+    # the fit keeps the start of least cost: with the true nominal model and T2, one near the true modulation
+    problem = FitProblem(case, variant)
+    positions = (adhesion - case.adhesion_lower) / (case.adhesion_upper - case.adhesion_lower)
+    costs = start_costs(problem, [problem.vector(start, positions) for start in variant.starts])
+    best = variant.starts[int(np.argmin(costs))]["eccentricity.kappa"]
+    assert WEAK_RUN_OUT["kappa"] / 2 < best < 2 * WEAK_RUN_OUT["kappa"]
+
+
+def test_a_run_out_read_off_the_te_keeps_its_two_modulation_starts(design):
+    family = effect_family("eccentricity")
+    hints = family.hints({"te:shaft_pinion1": np.array([2e-6, 2e-6])}, [])
+    assert "eccentricity_pinion_sidebands" not in hints
+    kappas = sorted({start["eccentricity.kappa"] for start in family.variants(design, hints)[0].starts})
+    assert kappas == pytest.approx([1e-9, 2e-6 * family.proportional["kappa"]])

@@ -35,6 +35,11 @@ def _sideband_modulation(observed: Mapping[str, np.ndarray], shaft: str) -> floa
     return float(np.median(ratios)) if ratios else None
 
 
+#: Shares of the housings' sideband reading the modulation starts at too (the reading over-reads a weak
+#: run-out's modulation: noise and speed wander add to the sidebands, never take from them).
+SIDEBAND_SHARES: tuple[float, float] = (0.1, 1.0 / 3.0)
+
+
 class EccentricityFamily(EffectFamily):
     """A run-out of the pinion or the gear shaft (docs/model/unmodelled-effects.md section 6).
 
@@ -49,7 +54,12 @@ class EccentricityFamily(EffectFamily):
     acceleration that says nothing of the run-out by itself: there the
     run-out starts at the stiffness modulation its shaft's sidebands of the
     mesh line show (their sum over the mesh line, median over runs and
-    accelerometers) divided by the modulation per metre of run-out.
+    accelerometers) divided by the modulation per metre of run-out, and
+    the modulation at none, at that reading and at :data:`SIDEBAND_SHARES`
+    of it: the sidebands hold the noise's and a wandering speed's share
+    too (the virtual rig's campaigns without encoders read 4e-4 to 2e-3
+    on a shaft without a run-out, a weak run-out's own modulation), so a
+    weak run-out's modulation may lie well below its reading.
 
     Its fits read as a shaft run-out (:attr:`run_out`): the rules that tell a
     run-out from the gears' own pitch errors apply to it, its modulation being
@@ -96,12 +106,20 @@ class EccentricityFamily(EffectFamily):
             amplitude = float(np.clip(hints.get(f"eccentricity_{shaft}", 5e-6), 1e-9, 5e-5))
             # no modulation, or as much as the public campaign per metre of run-out (0.03 at 12 um)
             kappa = min(self.proportional["kappa"] * amplitude, 0.1)
-            starts = self.grid(amplitude=(amplitude,), phase=START_PHASES, kappa=(1e-9, kappa))
+            kappas = [1e-9, kappa]
+            if hints.get(f"eccentricity_{shaft}_sidebands"):
+                # read off the housings' sidebands, an upper reading: a share of it too
+                kappas[1:1] = [share * kappa for share in SIDEBAND_SHARES]
+            starts = self.grid(amplitude=(amplitude,), phase=START_PHASES, kappa=kappas)
             variants.append(self.candidate(f"eccentricity[{shaft}]", (("shaft", shaft),), fitted, starts, shaft))
         return variants
 
     def hints(self, observed: Mapping[str, np.ndarray], locked_lines: Sequence[Mapping[str, Any]]) -> dict[str, float]:
         """The run-out of each shaft, m: the TE's median first-order shaft line, else the accelerometers' sidebands.
+
+        A run-out read off the sidebands is marked by
+        ``eccentricity_SHAFT_sidebands`` (1.0): its modulation then starts at
+        shares of the reading too (:meth:`variants`).
 
         Examples
         --------
@@ -111,8 +129,9 @@ class EccentricityFamily(EffectFamily):
         {'eccentricity_pinion': 3e-06}
         >>> housing = {"acc_gear:mesh1": np.array([10.0]), "acc_gear:mesh1_sb_gear+1": np.array([0.02]),
         ...            "acc_gear:mesh1_sb_gear-1": np.array([0.03])}
-        >>> round(family.hints(housing, [])["eccentricity_gear"], 9)  # modulation 0.005 at 2500 per metre
-        2e-06
+        >>> read = family.hints(housing, [])
+        >>> round(read["eccentricity_gear"], 9), read["eccentricity_gear_sidebands"]  # modulation 0.005, 2500 per m
+        (2e-06, 1.0)
         """
         hints = {}
         te = any(key.startswith("te:") for key in observed)
@@ -126,6 +145,7 @@ class EccentricityFamily(EffectFamily):
                 modulation = _sideband_modulation(observed, shaft)
                 if modulation is not None:
                     hints[f"eccentricity_{shaft}"] = modulation / self.proportional["kappa"]
+                    hints[f"eccentricity_{shaft}_sidebands"] = 1.0
         return hints
 
     def campaign_values(self, strength: float, phase: float, rng: np.random.Generator) -> dict[str, object]:

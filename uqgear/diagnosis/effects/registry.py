@@ -122,7 +122,9 @@ def candidates_for(effect: str, design: Design, *, hints: Mapping[str, float] | 
 
     ``hints`` are starting values read off the rig's signature
     (:func:`signature_hints`): ``eccentricity_pinion`` and ``eccentricity_gear``
-    (run-out, m), ``adhesion_frequency`` (Hz).
+    (run-out, m; ``eccentricity_SHAFT_sidebands`` where read off the housings'
+    sidebands), ``adhesion_frequency`` (Hz; without a TE also
+    ``adhesion_frequency_2`` to ``_4``, weaker lines).
     """
     return effect_family(effect).variants(design, dict(hints or {}))
 
