@@ -62,15 +62,7 @@ from uqgear.physics._rhs import (
     smooth_share,
     tooth_factor,
 )
-from uqgear.physics._stepper import (
-    BISECTIONS,
-    F_SINE,
-    crossed_boundary,
-    crossing_fraction,
-    rk4_combine_weighted,
-    rk4_stages,
-    splits_step,
-)
+from uqgear.physics._stepper import BISECTIONS, F_SINE, crossed_boundary, crossing_fraction, rk4_by, splits_step
 
 # positions in the forcing tuple of a pair path
 PAIR_COUNT = 5
@@ -362,16 +354,14 @@ def _pairs_field(s, terms, p, divide):
 @nb.njit(**INLINED)
 def _rk4_pairs(s, h, d1, mid, end, p):
     """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative."""
-    d2, d3, d4, _ = rk4_stages(_pairs_field, divided, s, h, d1, mid, end, p)
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+    return rk4_by(_pairs_field, s, h, d1, mid, end, p)
 
 
 @nb.njit(**INLINED)
 def _rk4_pairs_side(s, h, d1, mid, end, p, apart):
     """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative on one side's mesh damping
     (:func:`side_derivative_pairs`)."""
-    d2, d3, d4, _ = rk4_stages(_pairs_side_field, divided, s, h, d1, mid, end, (p, apart))
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+    return rk4_by(_pairs_side_field, s, h, d1, mid, end, (p, apart))
 
 
 @nb.njit(**INLINED)
