@@ -374,12 +374,17 @@ def ste_terms(tau, sine, cosine, p):
     period to the next, named in :func:`periodic_forcing`).
     """
     ste, ste_tau, ste_tautau = mesh_ste(sine, cosine, p)
-    if p[ECC_AMPLITUDE] != 0.0:
-        angle = p[ECC_OMEGA] * tau + p[ECC_PHASE]
-        ecc = p[ECC_AMPLITUDE] * math.sin(angle)
+    # the slots read before the branch: an array whose last use is inside a branch costs a reference
+    # count on every call (docs/validation/performance.md, "Compile time and inlining")
+    amplitude = p[ECC_AMPLITUDE]
+    omega = p[ECC_OMEGA]
+    phase = p[ECC_PHASE]
+    if amplitude != 0.0:
+        angle = omega * tau + phase
+        ecc = amplitude * math.sin(angle)
         ste += ecc
-        ste_tau += p[ECC_AMPLITUDE] * p[ECC_OMEGA] * math.cos(angle)
-        ste_tautau -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
+        ste_tau += amplitude * omega * math.cos(angle)
+        ste_tautau -= omega * omega * ecc
     return ste, ste_tau, ste_tautau
 
 
