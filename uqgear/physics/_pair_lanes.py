@@ -62,7 +62,7 @@ from uqgear.physics._pairs import (
 )
 from uqgear.physics._quotient import quotient
 from uqgear.physics._rhs import INLINED, JIT_OPTIONS, MAX_PAIRS
-from uqgear.physics._stepper import rk4_by_weighted
+from uqgear.physics._stepper import rk4_combine_weighted, rk4_stages
 
 #: Rows of a pair lane group's work array: those of every lane group, then each pair slot's pitch offset.
 W_OFFSETS = N_ROWS
@@ -146,8 +146,10 @@ def _pair_lane_step(W, table, sub, lane, n_pairs):
     h = row_of(f, T_WIDTH, lane)
     mid = _stage_terms(f, 1, lane)
     d1, force, exact1 = pair_derivative_by(s, _stage_terms(f, 0, lane), e, n_pairs, c, quotient, inverse)
-    new, exact_later = rk4_by_weighted(pair_lane_field, quotient, s, h, row_of(f, T_WEIGHT, lane), d1, mid,
-                                       _stage_terms(f, 2, lane), (e, n_pairs, c, inverse))
+    # the stages and their combination of rk4_by_weighted, called here (one inlined level less to compile)
+    d2, d3, d4, exact_later = rk4_stages(pair_lane_field, quotient, s, h, d1, mid, _stage_terms(f, 2, lane),
+                                         (e, n_pairs, c, inverse))
+    new = rk4_combine_weighted(s, row_of(f, T_WEIGHT, lane), d1, d2, d3, d4)
     b = c[0]
     x = s[2]
     crossed = (
