@@ -12,13 +12,15 @@ import subprocess
 import sys
 import textwrap
 
+import numba as nb
 import numpy as np
 import pytest
 
 import uqgear
-from uqgear.physics import batch_setup, integration
+from uqgear.physics import _lane_loop, _rhs, batch_setup, integration
 from uqgear.physics import effects as E
 from uqgear.physics._lanes import LANES, lane_ready
+from uqgear.physics.model import build_model
 from uqgear.physics.pitch_errors import draw_pitch_errors
 
 # the rule that leaves groups of few runs to the one-sample kernel, as the package sets it
@@ -251,3 +253,33 @@ def test_a_quotient_outside_the_proven_range_is_redone_with_ieee_division(design
     lanes, one = _both(design, samples, n_periods=6, keep_periods=6, initial_states=states, final_state=True)
     assert 0.0 < np.abs(lanes["final_state"].values).max() < 1e-250
     assert _differing(lanes, one) == []
+
+
+def test_a_lane_reads_the_coefficients_of_its_run(design):
+    """The lanes' coefficient rows and the one-sample kernels' coefficients come from the one list of slots
+    (``_rhs.coefficients_by``): every slot of every lane, and the inverses of the divisors."""
+    params = np.array(
+        [build_model(design, 1000.0 + 400.0 * lane, 7000.0, 20e3 + 1e3 * lane).parameters for lane in range(LANES)]
+    )
+    params[:, list(_rhs.COEFFICIENT_SLOTS)] += np.arange(LANES)[:, None] * 1e-3  # each lane its own numbers
+
+    @nb.njit
+    def read(params):
+        W = np.zeros(_lane_loop.N_ROWS * LANES)
+        for lane in range(LANES):
+            _lane_loop.put_coefficients(W, lane, params[lane])
+        out = np.empty((LANES, _rhs.N_COEFFICIENTS + 3))
+        for lane in range(LANES):
+            c, inverse = _lane_loop.lane_coefficients(W, lane)
+            for k in range(_rhs.N_COEFFICIENTS):
+                out[lane, k] = c[k]
+            for k in range(3):
+                out[lane, _rhs.N_COEFFICIENTS + k] = inverse[k]
+        return out
+
+    rows = read(params)
+    for lane in range(LANES):
+        p = params[lane]
+        assert rows[lane, : _rhs.N_COEFFICIENTS].tolist() == list(_rhs.coefficients(p))
+        assert rows[lane, : _rhs.N_COEFFICIENTS].tolist() == [p[slot] for slot in _rhs.COEFFICIENT_SLOTS]
+        assert rows[lane, _rhs.N_COEFFICIENTS :].tolist() == [1 / p[_rhs.M1], 1 / p[_rhs.M2], 1 / p[_rhs.ME]]

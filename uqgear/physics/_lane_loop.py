@@ -31,15 +31,13 @@ from uqgear.physics._lane_tables import (
     _take_schedule,
 )
 from uqgear.physics._rhs import (
-    ADHESION_AMPLITUDE,
-    ECC_AMPLITUDE,
-    ECC_KAPPA,
     INLINED,
     JIT_OPTIONS,
     M1,
     M2,
     ME,
     N_ACCUMULATORS,
+    N_COEFFICIENTS,
     OMEGA_MESH,
     Q_A1_SQ,
     Q_A2_SQ,
@@ -54,19 +52,16 @@ from uqgear.physics._rhs import (
     Q_X_MIN,
     Q_X_SQ,
     Q_X_SUM,
-    RIPPLE_AMPLITUDE,
-    TOOTH_FACTORS,
     TWO_PI,
     coefficients,
+    coefficients_by,
+    periodic_forcing,
     static_transmission_error,
 )
 from uqgear.physics._stepper import build_schedule
 
 #: Separation of a shadow run from its run (scaled state), as in the one-sample kernel.
 SEPARATION = 1e-7
-
-#: Slots a lane reads beyond :func:`~uqgear.physics._rhs.coefficients`.
-N_COEFFICIENTS = 12
 
 # Rows of a lane group's work array: the state, the sub-step's result, its first stage, the mesh
 # force and the bearing accelerations at its start, what is left to do for the lane (REDO_*), each
@@ -88,19 +83,6 @@ N_ROWS = W_INVERSE + 3
 REDO_NONE = 0.0
 REDO_SPLIT = 1.0
 REDO_STEP = 2.0
-
-
-@nb.njit(**INLINED)
-def periodic_forcing(p):
-    """Whether a run's forcing repeats every mesh period: no tooth factors, run-out, torque ripple or
-    adhesion oscillation. A lane group holding another run fills its forcing table every period."""
-    return (
-        p[TOOTH_FACTORS] == 0.0
-        and p[ECC_AMPLITUDE] == 0.0
-        and p[ECC_KAPPA] == 0.0
-        and p[RIPPLE_AMPLITUDE] == 0.0
-        and p[ADHESION_AMPLITUDE] == 0.0
-    )
 
 
 @nb.njit(**INLINED)
@@ -162,24 +144,31 @@ def region_changed(before, after, b):
 
 
 @nb.njit(**INLINED)
+def _row_slot(W, slot, position, lane):
+    """A lane's coefficient at ``position`` from its rows of the work array (a reader of
+    :func:`~uqgear.physics._rhs.coefficients_by`)."""
+    return row_of(W, W_COEFFICIENTS + position, lane)
+
+
+@nb.njit(**INLINED)
 def lane_coefficients(W, lane):
-    """(coefficients, inverses of the divisors) of one lane, as tuples (registers)."""
-    c = (
-        row_of(W, W_COEFFICIENTS, lane),
-        row_of(W, W_COEFFICIENTS + 1, lane),
-        row_of(W, W_COEFFICIENTS + 2, lane),
-        row_of(W, W_COEFFICIENTS + 3, lane),
-        row_of(W, W_COEFFICIENTS + 4, lane),
-        row_of(W, W_COEFFICIENTS + 5, lane),
-        row_of(W, W_COEFFICIENTS + 6, lane),
-        row_of(W, W_COEFFICIENTS + 7, lane),
-        row_of(W, W_COEFFICIENTS + 8, lane),
-        row_of(W, W_COEFFICIENTS + 9, lane),
-        row_of(W, W_COEFFICIENTS + 10, lane),
-        row_of(W, W_COEFFICIENTS + 11, lane),
-    )
+    """(coefficients, inverses of the divisors) of one lane, as tuples (registers): the slots of
+    :func:`~uqgear.physics._rhs.coefficients_by`, from the rows :func:`put_coefficients` wrote."""
+    c = coefficients_by(_row_slot, W, lane)
     inverse = (row_of(W, W_INVERSE, lane), row_of(W, W_INVERSE + 1, lane), row_of(W, W_INVERSE + 2, lane))
     return c, inverse
+
+
+@nb.njit(**INLINED)
+def put_coefficients(W, lane, p):
+    """A lane's coefficients (:func:`~uqgear.physics._rhs.coefficients` of its parameters ``p``) and the
+    inverses 1/m1, 1/m2, 1/m_e of its divisors into the rows :func:`lane_coefficients` reads."""
+    c = coefficients(p)
+    for k in range(N_COEFFICIENTS):
+        W[(W_COEFFICIENTS + k) * LANES + lane] = c[k]
+    W[W_INVERSE * LANES + lane] = 1.0 / p[M1]
+    W[(W_INVERSE + 1) * LANES + lane] = 1.0 / p[M2]
+    W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
 
 
 @nb.njit(**INLINED)
@@ -261,13 +250,7 @@ def _group_layout(members, batch, rows, refused):
                 schedule = layout
             _take_schedule(stages, widths, offsets, refs, lane, schedule, n_sub)
             filled = lane
-        p = params[samples[lane]]
-        c = coefficients(p)
-        for k in range(N_COEFFICIENTS):
-            W[(W_COEFFICIENTS + k) * LANES + lane] = c[k]
-        W[W_INVERSE * LANES + lane] = 1.0 / p[M1]
-        W[(W_INVERSE + 1) * LANES + lane] = 1.0 / p[M2]
-        W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
+        put_coefficients(W, lane, params[samples[lane]])
     return samples, written, W, widths, offsets, refs, stages, first_sub, pairs, steps, stride
 
 

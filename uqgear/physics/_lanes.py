@@ -62,7 +62,6 @@ from uqgear.physics._lane_loop import (
     integrate_group,
     lane_coefficients,
     lane_state,
-    periodic_forcing,
     put_start,
     put_state,
     put_step,
@@ -79,6 +78,7 @@ from uqgear.physics._rhs import (
     ME,
     coefficients,
     contact_region,
+    periodic_forcing,
     state_derivative,
     state_derivative_by,
 )

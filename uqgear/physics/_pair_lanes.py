@@ -13,7 +13,7 @@ as selects), so its numbers are the same, bit for bit.
   e'', e) is a table filled by the one-sample kernel's own
   :func:`~uqgear.physics._pairs._forcing_row_pairs` at the times it evaluates
   it: once per run where the forcing repeats every mesh period
-  (:func:`~uqgear.physics._lane_loop.periodic_forcing`), else every period.
+  (:func:`~uqgear.physics._rhs.periodic_forcing`), else every period.
 - The pairs' pitch offsets change every mesh period (the teeth in mesh
   change); they sit in rows of the work array, set at each period start from
   :func:`~uqgear.physics._pairs._tooth_terms`.
@@ -146,6 +146,7 @@ def _pair_lane_step(W, table, sub, lane, n_pairs):
     h = row_of(f, T_WIDTH, lane)
     mid = _stage_terms(f, 1, lane)
     d1, force, exact1 = pair_derivative_by(s, _stage_terms(f, 0, lane), e, n_pairs, c, quotient, inverse)
+    # the stages and their combination of rk4_by_weighted, called here (one inlined level less to compile)
     d2, d3, d4, exact_later = rk4_stages(pair_lane_field, quotient, s, h, d1, mid, _stage_terms(f, 2, lane),
                                          (e, n_pairs, c, inverse))
     new = rk4_combine_weighted(s, row_of(f, T_WEIGHT, lane), d1, d2, d3, d4)

@@ -62,15 +62,7 @@ from uqgear.physics._rhs import (
     smooth_share,
     tooth_factor,
 )
-from uqgear.physics._stepper import (
-    BISECTIONS,
-    F_SINE,
-    crossed_boundary,
-    crossing_fraction,
-    rk4_combine_weighted,
-    rk4_stages,
-    splits_step,
-)
+from uqgear.physics._stepper import BISECTIONS, F_SINE, crossed_boundary, crossing_fraction, rk4_by, splits_step
 
 # positions in the forcing tuple of a pair path
 PAIR_COUNT = 5
@@ -360,21 +352,6 @@ def _pairs_field(s, terms, p, divide):
 
 
 @nb.njit(**INLINED)
-def _rk4_pairs(s, h, d1, mid, end, p):
-    """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative."""
-    d2, d3, d4, _ = rk4_stages(_pairs_field, divided, s, h, d1, mid, end, p)
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
-
-
-@nb.njit(**INLINED)
-def _rk4_pairs_side(s, h, d1, mid, end, p, apart):
-    """:func:`~uqgear.physics._stepper._rk4` with the pair-resolved derivative on one side's mesh damping
-    (:func:`side_derivative_pairs`)."""
-    d2, d3, d4, _ = rk4_stages(_pairs_side_field, divided, s, h, d1, mid, end, (p, apart))
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
-
-
-@nb.njit(**INLINED)
 def _changes_contact(x, trial_x, terms, b):
     """Whether some pair in mesh changes its contact region from deflection ``x`` to ``trial_x``."""
     changed = False
@@ -455,11 +432,11 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
     same and the parts are the plain RK4 steps, bit for bit; a step that changes no pair's contact is the
     plain RK4 step on either model, as in the pair lanes.
     """
-    trial = _rk4_pairs(s, h, d1, mid, end, p)
+    trial = rk4_by(_pairs_field, s, h, d1, mid, end, p)
     b = p[HALF_BACKLASH]
     apart = _apart(s[2], terms, b)
     if (p[DAMP_IN_SEPARATION] == 0.0) and _changes_contact(s[2], trial[2], terms, b):
-        trial = _rk4_pairs_side(s, h, d1, mid, end, p, apart)
+        trial = rk4_by(_pairs_side_field, s, h, d1, mid, end, (p, apart))
     split_level = math.nan
     for _ in range(2 * MAX_PAIRS):
         theta, split_level = _first_crossing(s, trial, h, terms, p, split_level)
@@ -467,22 +444,23 @@ def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg
             return trial
         h_a = theta * h
         middle = forcing_pairs(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-        part = _rk4_pairs_side(
-            s, h_a, d1, forcing_pairs(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p, apart
+        part = rk4_by(
+            _pairs_side_field, s, h_a, d1, forcing_pairs(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle,
+            (p, apart),
         )
         apart = _apart_after(part[2], s[2], trial[2], terms, b, split_level)
         s = part
         t += h_a
         h -= h_a
         d1, _ = side_derivative_pairs(s, middle, p, apart)
-        trial = _rk4_pairs_side(
+        trial = rk4_by(
+            _pairs_side_field,
             s,
             h,
             d1,
             forcing_pairs(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg),
             forcing_pairs(t + h, t_ref, p, pair_k, period_k, fp, fg),
-            p,
-            apart,
+            (p, apart),
         )
     return trial
 

@@ -6,8 +6,13 @@ parameter vector whose neutral value switches it off, so effects plug in
 without forking the integrator. The accelerations are written once
 (:func:`_accelerations`), as are the mesh damping's switch in separation
 (:func:`mesh_damping`), each pair's share of the mesh stiffness
-(:func:`smooth_share`) and the stiffness modulation (:func:`modulated_scale`).
-The time stepping lives in :mod:`uqgear.physics._stepper`; the kernels above
+(:func:`smooth_share`) and the stiffness modulation (:func:`modulated_scale`);
+the slots the accelerations read are listed once (:func:`coefficients_by`, read
+from a parameter vector and from a lane group's work array), and the time-only
+terms are written once for the constant-speed and the run-up model
+(:func:`drive_acceleration`, :func:`ste_terms`, at the shaft angle's clock).
+docs/model/integrators.md, "Adding a force term or a time-only effect", says
+where a new term goes. The time stepping lives in :mod:`uqgear.physics._stepper`; the kernels above
 it: :mod:`uqgear.physics._pairs` (pitch errors), :mod:`uqgear.physics._kernels`
 (one-sample kernels, which also re-exports every name here) and
 :mod:`uqgear.physics._lanes` (samples as SIMD lanes).
@@ -331,11 +336,75 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
 
 
 @nb.njit(**INLINED)
+def drive_acceleration(tau, t, p):
+    """R1 T1 / I1 + R2 T2 / I2: the relative acceleration the torques drive, with the torque ripple at the
+    shaft angle's clock ``tau`` and the adhesion oscillation at time ``t`` (the same at constant speed).
+
+    The one expression of the torques' time-only effects: the constant-speed forcing
+    (:func:`_time_terms`) and the run-up's (:func:`uqgear.physics._runup_kernels.time_part`) take it
+    from here. A time-only effect on a torque is written here alone (and, if it changes from one mesh
+    period to the next, named in :func:`periodic_forcing`).
+    """
+    drive = p[T1]
+    if p[RIPPLE_AMPLITUDE] != 0.0:
+        drive *= 1.0 + p[RIPPLE_AMPLITUDE] * math.cos(p[RIPPLE_OMEGA] * tau + p[RIPPLE_PHASE])
+    adhesion = p[T2]
+    if p[ADHESION_AMPLITUDE] != 0.0:
+        adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
+    return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2]
+
+
+@nb.njit(**INLINED)
+def mesh_ste(sine, cosine, p):
+    """(e, de/dtau, d2e/dtau2) of the mesh-periodic STE from sin and cos of Omega tau + STE phase."""
+    ste = p[STE_AMPLITUDE] * sine
+    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
+    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
+    return ste, ste_tau, ste_tautau
+
+
+@nb.njit(**INLINED)
+def ste_terms(tau, sine, cosine, p):
+    """(e, de/dtau, d2e/dtau2) of the static transmission error at the shaft angle's clock ``tau``, given
+    sin and cos of Omega tau + STE phase: the mesh-periodic STE plus any shaft run-out term.
+
+    The one expression of the STE's time-only terms; at constant speed tau is t and d2e/dtau2 is e''
+    (the derivative de/dtau, and the cosine it takes, are then not used, and the compiler drops
+    them). A time-only effect on the STE is written here alone (and, if it changes from one mesh
+    period to the next, named in :func:`periodic_forcing`).
+    """
+    ste, ste_tau, ste_tautau = mesh_ste(sine, cosine, p)
+    # the slots read before the branch: an array whose last use is inside a branch costs a reference
+    # count on every call (docs/validation/performance.md, "Compile time and inlining")
+    amplitude = p[ECC_AMPLITUDE]
+    omega = p[ECC_OMEGA]
+    phase = p[ECC_PHASE]
+    if amplitude != 0.0:
+        angle = omega * tau + phase
+        ecc = amplitude * math.sin(angle)
+        ste += ecc
+        ste_tau += amplitude * omega * math.cos(angle)
+        ste_tautau -= omega * omega * ecc
+    return ste, ste_tau, ste_tautau
+
+
+@nb.njit(**INLINED)
+def periodic_forcing(p):
+    """Whether a run's forcing repeats every mesh period: no tooth factors, run-out, torque ripple or
+    adhesion oscillation. A lane group holding another run fills its forcing table every period."""
+    return (
+        p[TOOTH_FACTORS] == 0.0
+        and p[ECC_AMPLITUDE] == 0.0
+        and p[ECC_KAPPA] == 0.0
+        and p[RIPPLE_AMPLITUDE] == 0.0
+        and p[ADHESION_AMPLITUDE] == 0.0
+    )
+
+
+@nb.njit(**INLINED)
 def static_transmission_error(t, p):
-    """e(t): mesh-periodic STE plus any shaft run-out term, m."""
-    ste = p[STE_AMPLITUDE] * math.sin(p[OMEGA_MESH] * t + p[STE_PHASE])
-    if p[ECC_AMPLITUDE] != 0.0:
-        ste += p[ECC_AMPLITUDE] * math.sin(p[ECC_OMEGA] * t + p[ECC_PHASE])
+    """e(t): mesh-periodic STE plus any shaft run-out term, m (:func:`ste_terms`)."""
+    ste, _, _ = ste_terms(t, math.sin(p[OMEGA_MESH] * t + p[STE_PHASE]), 0.0, p)
     return ste
 
 
@@ -346,20 +415,10 @@ def static_transmission_error(t, p):
 
 @nb.njit(**INLINED)
 def _time_terms(t, sine, p):
-    """(relative drive acceleration, e(t), e''(t)) given sin(omega t + STE phase)."""
-    drive = p[T1]
-    if p[RIPPLE_AMPLITUDE] != 0.0:
-        drive *= 1.0 + p[RIPPLE_AMPLITUDE] * math.cos(p[RIPPLE_OMEGA] * t + p[RIPPLE_PHASE])
-    adhesion = p[T2]
-    if p[ADHESION_AMPLITUDE] != 0.0:
-        adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
-    ste = p[STE_AMPLITUDE] * sine
-    ste_acc = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
-    if p[ECC_AMPLITUDE] != 0.0:
-        ecc = p[ECC_AMPLITUDE] * math.sin(p[ECC_OMEGA] * t + p[ECC_PHASE])
-        ste += ecc
-        ste_acc -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
-    return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
+    """(relative drive acceleration, e(t), e''(t)) given sin(omega t + STE phase) (:func:`drive_acceleration`,
+    :func:`ste_terms` at tau = t)."""
+    ste, _, ste_acc = ste_terms(t, sine, 0.0, p)
+    return drive_acceleration(t, t, p), ste, ste_acc
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -390,22 +449,51 @@ def _friction_term(arm_pinion, arm_gear, p):
 
 
 @nb.njit(**INLINED)
-def coefficients(p):
-    """The parameter slots the state-dependent part of the right-hand side reads, as a tuple (registers)."""
+def coefficients_by(read, source, lane):
+    """The parameter slots the state-dependent part of the right-hand side reads, as a tuple (registers):
+    the one list of them. ``read(source, slot, position, lane)`` returns slot ``slot``, which the tuple
+    holds at ``position``: from a parameter vector (:func:`coefficients`) or from a lane group's work
+    array (:func:`uqgear.physics._lane_loop.lane_coefficients`). A force term that needs a parameter
+    appends its slot here, at the next position, and reads it in :func:`_accelerations`."""
     return (
-        p[HALF_BACKLASH],
-        p[CM],
-        p[DAMP_IN_SEPARATION],
-        p[K1],
-        p[K2],
-        p[CLEARANCE1],
-        p[CLEARANCE2],
-        p[C1],
-        p[C2],
-        p[M1],
-        p[M2],
-        p[ME],
+        read(source, HALF_BACKLASH, 0, lane),
+        read(source, CM, 1, lane),
+        read(source, DAMP_IN_SEPARATION, 2, lane),
+        read(source, K1, 3, lane),
+        read(source, K2, 4, lane),
+        read(source, CLEARANCE1, 5, lane),
+        read(source, CLEARANCE2, 6, lane),
+        read(source, C1, 7, lane),
+        read(source, C2, 8, lane),
+        read(source, M1, 9, lane),
+        read(source, M2, 10, lane),
+        read(source, ME, 11, lane),
     )
+
+
+@nb.njit(**INLINED)
+def _slot_of(p, slot, position, lane):
+    """Slot ``slot`` of the parameter vector ``p`` (a reader of :func:`coefficients_by`)."""
+    return p[slot]
+
+
+@nb.njit(**INLINED)
+def coefficients(p):
+    """The parameter slots the state-dependent part of the right-hand side reads (:func:`coefficients_by`)."""
+    return coefficients_by(_slot_of, p, 0)
+
+
+def _listed(what: int) -> tuple[int, ...]:
+    """The slots (``what`` 1) or positions (``what`` 2) :func:`coefficients_by` lists, in order (in Python)."""
+    return tuple(coefficients_by.py_func(lambda source, slot, position, lane: (slot, position)[what - 1], None, 0))
+
+
+#: The parameter slots :func:`coefficients` holds, in its order.
+COEFFICIENT_SLOTS = _listed(1)
+#: Length of :func:`coefficients`.
+N_COEFFICIENTS = len(COEFFICIENT_SLOTS)
+if _listed(2) != tuple(range(N_COEFFICIENTS)):
+    raise RuntimeError("coefficients_by lists its positions out of order")  # pragma: no cover - a source error
 
 
 @nb.njit(**INLINED)

@@ -17,7 +17,10 @@ step's cubic Hermite interpolant in tau, with the right-hand side evaluated
 there.
 
 These helpers inline the ones of :mod:`uqgear.physics._rhs` and
-:mod:`uqgear.physics._stepper`; the module is one of the compiled modules of
+:mod:`uqgear.physics._stepper`: the accelerations, the time terms at the
+angle's clock, the RK4 step (:func:`~uqgear.physics._stepper.rk4_by`) and the
+contact split (:func:`~uqgear.physics._stepper.split_step`) are the
+constant-speed model's, given the warped field and forcing; the module is one of the compiled modules of
 :mod:`uqgear.physics._cache`, so a cached kernel follows their edits.
 """
 
@@ -29,31 +32,16 @@ import numba as nb
 import numpy as np
 
 from uqgear.physics._rhs import (
-    ADHESION_AMPLITUDE,
-    ADHESION_OMEGA,
-    ADHESION_PHASE,
-    DAMP_IN_SEPARATION,
-    ECC_AMPLITUDE,
     ECC_KAPPA,
     ECC_OMEGA,
     ECC_PHASE,
     HALF_BACKLASH,
-    I1,
-    I2,
     INLINED,
     JIT_OPTIONS,
     NO_INVERSE,
     OMEGA_MESH,
-    R1,
-    R2,
-    RIPPLE_AMPLITUDE,
-    RIPPLE_OMEGA,
-    RIPPLE_PHASE,
-    STE_AMPLITUDE,
     STE_PHASE,
     STIFFNESS_SCALE,
-    T1,
-    T2,
     TOOTH_FACTORS,
     _accelerations,
     _friction_term,
@@ -61,24 +49,15 @@ from uqgear.physics._rhs import (
     contact_region,
     dead_zone,
     divided,
+    drive_acceleration,
     mesh_damping,
+    mesh_ste,
     mesh_terms,
     run_out_modulation,
     state_derivative_by,
+    ste_terms,
 )
-from uqgear.physics._stepper import (
-    BISECTIONS,
-    F_ARM_GEAR,
-    F_ARM_PINION,
-    F_K,
-    F_SINE,
-    crossed_boundary,
-    crossing_fraction,
-    rk4_combine_weighted,
-    rk4_stages,
-    splits_step,
-    tooth_extra,
-)
+from uqgear.physics._stepper import F_ARM_GEAR, F_ARM_PINION, F_K, F_SINE, rk4_by, split_step, tooth_extra
 
 #: Region code of :func:`warped_field` for "the mesh damping from x itself".
 FROM_X = 2
@@ -108,15 +87,6 @@ def warp(tau, n, period, knot_t, knot_rate, knot_accel):
 
 
 @nb.njit(**INLINED)
-def mesh_ste(sine, cosine, p):
-    """(e, de/dtau, d2e/dtau2) of the mesh-periodic STE from sin and cos of Omega_ref tau + STE phase."""
-    ste = p[STE_AMPLITUDE] * sine
-    ste_tau = p[STE_AMPLITUDE] * p[OMEGA_MESH] * cosine
-    ste_tautau = -p[STE_AMPLITUDE] * p[OMEGA_MESH] * p[OMEGA_MESH] * sine
-    return ste, ste_tau, ste_tautau
-
-
-@nb.njit(**INLINED)
 def chain_rule(ste_tau, ste_tautau, rate, accel):
     """e'' = e_tautau tau'^2 + e_tau tau'' (the one expression of the STE's acceleration)."""
     return ste_tautau * (rate * rate) + ste_tau * accel
@@ -127,24 +97,13 @@ def time_part(tau, t, rate, accel, sine, cosine, p):
     """(relative drive acceleration, e, e'') of the angle-driven model.
 
     ``sine``/``cosine`` of Omega_ref tau + STE phase. Torque ripple and run-out
-    follow the shaft angles (tau); the adhesion oscillation its own clock (t).
+    follow the shaft angles (tau); the adhesion oscillation its own clock (t): the constant-speed
+    model's time terms (:func:`~uqgear.physics._rhs.drive_acceleration`,
+    :func:`~uqgear.physics._rhs.ste_terms`) at the angle's clock, with
     e'' = e_tautau tau'^2 + e_tau tau'' (chain rule).
     """
-    drive = p[T1]
-    if p[RIPPLE_AMPLITUDE] != 0.0:
-        drive *= 1.0 + p[RIPPLE_AMPLITUDE] * math.cos(p[RIPPLE_OMEGA] * tau + p[RIPPLE_PHASE])
-    adhesion = p[T2]
-    if p[ADHESION_AMPLITUDE] != 0.0:
-        adhesion += p[ADHESION_AMPLITUDE] * math.sin(p[ADHESION_OMEGA] * t + p[ADHESION_PHASE])
-    ste, ste_tau, ste_tautau = mesh_ste(sine, cosine, p)
-    if p[ECC_AMPLITUDE] != 0.0:
-        angle = p[ECC_OMEGA] * tau + p[ECC_PHASE]
-        ecc = p[ECC_AMPLITUDE] * math.sin(angle)
-        ste += ecc
-        ste_tau += p[ECC_AMPLITUDE] * p[ECC_OMEGA] * math.cos(angle)
-        ste_tautau -= p[ECC_OMEGA] * p[ECC_OMEGA] * ecc
-    ste_acc = chain_rule(ste_tau, ste_tautau, rate, accel)
-    return p[R1] * drive / p[I1] + p[R2] * adhesion / p[I2], ste, ste_acc
+    ste, ste_tau, ste_tautau = ste_terms(tau, sine, cosine, p)
+    return drive_acceleration(tau, t, p), ste, chain_rule(ste_tau, ste_tautau, rate, accel)
 
 
 @nb.njit(**INLINED)
@@ -218,36 +177,18 @@ def lane_field(s, terms, context, divide):
 
 @nb.njit(**INLINED)
 def _rk4(s, h, d1, mid, end, c, region):
-    d2, d3, d4, _ = rk4_stages(warped_field, divided, s, h, d1, mid, end, (c, region))
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+    """One RK4 step in warped time (:func:`~uqgear.physics._stepper.rk4_by` with :func:`warped_field`)."""
+    return rk4_by(warped_field, s, h, d1, mid, end, (c, region))
 
 
 @nb.njit(**JIT_OPTIONS)
 def split_at_contact(tau, h, s, d1, trial, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg):
-    """``trial`` redone in two parts where it changes the contact region (as
-    :func:`uqgear.physics._stepper._split_at_contact`, in warped time)."""
-    b = p[HALF_BACKLASH]
-    c = coefficients(p)
-    before = contact_region(s[2], b)
-    after = contact_region(trial[2], b)
-    if before == after:
-        return trial
-    level, entered = crossed_boundary(before, after, b)
-    end = warped_forcing(tau + h, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
-    if p[DAMP_IN_SEPARATION] == 0.0:
-        mid = warped_forcing(tau + 0.5 * h, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
-        trial = _rk4(s, h, d1, mid, end, c, before)
-    theta = crossing_fraction(s[2], d1[2], trial[2], trial[5] * end[4], h, level, BISECTIONS)
-    if not splits_step(theta):
-        return trial
-    h_a = theta * h
-    h_b = h - h_a
-    middle = warped_forcing(tau + h_a, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
-    quarter = warped_forcing(tau + 0.5 * h_a, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
-    part = _rk4(s, h_a, d1, quarter, middle, c, before)
-    d_middle, _ = warped_field(part, middle, (c, entered), divided)
-    late = warped_forcing(tau + h_a + 0.5 * h_b, tau_ref, n, period, warps, p, pair_k, period_k, fp, fg)
-    return _rk4(part, h_b, d_middle, late, end, c, entered)
+    """``trial`` redone in two parts where it changes the contact region: the constant-speed path's
+    :func:`~uqgear.physics._stepper.split_step`, in warped time (:func:`warped_field`, :func:`warped_forcing`)."""
+    return split_step(
+        warped_field, warped_forcing, coefficients(p), tau, h, s, d1, trial, tau_ref, n, period, warps, p, pair_k,
+        period_k, fp, fg,
+    )
 
 
 @nb.njit(**INLINED)

@@ -9,7 +9,7 @@ term, drive, e'' and 1 / tau' at RK4's three stage times) is filled first, each
 lane from the one-run kernel's own :func:`~uqgear.physics._runup_kernels.table_terms`
 and the clock evaluated once for all lanes; a sub-step is then one loop over
 the lanes, RK4 from the one stage sequence
-:func:`~uqgear.physics._stepper.rk4_stages` with the warped field
+:func:`~uqgear.physics._stepper.rk4_by_weighted` with the warped field
 :func:`~uqgear.physics._runup_kernels.lane_field`, divided by
 :func:`~uqgear.physics._quotient.quotient`, compiled into vector instructions
 (:func:`~uqgear.physics._lanes.compile_lane_kernel`). A lane whose quotient the
@@ -28,13 +28,10 @@ import numba as nb
 import numpy as np
 
 from uqgear.physics._lane_loop import (
-    N_COEFFICIENTS,
     N_ROWS,
     REDO_NONE,
     REDO_SPLIT,
     REDO_STEP,
-    W_COEFFICIENTS,
-    W_INVERSE,
     W_REDO,
     W_SLOPE,
     W_STATE,
@@ -42,7 +39,7 @@ from uqgear.physics._lane_loop import (
     _advance,
     lane_coefficients,
     lane_state,
-    periodic_forcing,
+    put_coefficients,
     put_state,
     put_step,
     region_changed,
@@ -55,9 +52,6 @@ from uqgear.physics._rhs import (
     HALF_BACKLASH,
     INLINED,
     JIT_OPTIONS,
-    M1,
-    M2,
-    ME,
     OMEGA_MESH,
     STE_PHASE,
     T1,
@@ -65,7 +59,9 @@ from uqgear.physics._rhs import (
     coefficients,
     contact_region,
     divided,
+    mesh_ste,
     mesh_terms,
+    periodic_forcing,
 )
 from uqgear.physics._runup_kernels import (
     FROM_X,
@@ -74,14 +70,13 @@ from uqgear.physics._runup_kernels import (
     _terms,
     chain_rule,
     lane_field,
-    mesh_ste,
     record_row,
     split_at_contact,
     table_terms,
     warp,
     warped_field,
 )
-from uqgear.physics._stepper import F_SINE, rk4_combine_weighted, rk4_stages
+from uqgear.physics._stepper import F_SINE, rk4_by_weighted
 
 # Fields of a sub-step in the forcing table (field f, lane l at element f * LANES + l of its row):
 # (k, friction term, drive, e'', 1 / tau') at each of RK4's three stage times, then the width h
@@ -114,10 +109,10 @@ def _lane_step(W, table, sub, lane):
     f = table[sub]
     context = (c, inverse)
     d1, exact = lane_field(s, _terms_of(f, 0, lane), context, quotient)
-    d2, d3, d4, exact_later = rk4_stages(
-        lane_field, quotient, s, row_of(f, R_WIDTH, lane), d1, _terms_of(f, 1, lane), _terms_of(f, 2, lane), context
+    new, exact_later = rk4_by_weighted(
+        lane_field, quotient, s, row_of(f, R_WIDTH, lane), row_of(f, R_WEIGHT, lane), d1, _terms_of(f, 1, lane),
+        _terms_of(f, 2, lane), context,
     )
-    new = rk4_combine_weighted(s, row_of(f, R_WEIGHT, lane), d1, d2, d3, d4)
     redo = REDO_SPLIT if region_changed(s[2], new[2], c[0]) else REDO_NONE
     redo = redo if exact & exact_later else REDO_STEP
     put_step(W, lane, new, d1, 0.0, redo)
@@ -160,13 +155,7 @@ def lane_work(states, params):
     ``states`` and ``params``, one per lane)."""
     W = np.zeros(N_ROWS * LANES)
     for lane in range(LANES):
-        p = params[lane]
-        c = coefficients(p)
-        for k in range(N_COEFFICIENTS):
-            W[(W_COEFFICIENTS + k) * LANES + lane] = c[k]
-        W[W_INVERSE * LANES + lane] = 1.0 / p[M1]
-        W[(W_INVERSE + 1) * LANES + lane] = 1.0 / p[M2]
-        W[(W_INVERSE + 2) * LANES + lane] = 1.0 / p[ME]
+        put_coefficients(W, lane, params[lane])
         for j in range(6):
             W[(W_STATE + j) * LANES + lane] = states[lane, j]
     return W

@@ -14,11 +14,14 @@ of stepped over:
   interpolant (one bisection, :func:`crossing_fraction`) and the step is
   redone in two parts.
 
-Every integrator of the package takes its RK4 stages from :func:`rk4_stages`,
-given its right-hand side from :mod:`uqgear.physics._rhs` as a compiled
-function. These helpers are inlined into kernels in other files: a cached
-kernel is keyed on the contents of every compiled module of the package
-(:mod:`uqgear.physics._cache`), so editing this one recompiles them all.
+Every integrator of the package takes its RK4 step from :func:`rk4_by_weighted`
+(the stages of :func:`rk4_stages`, combined), given its right-hand side from
+:mod:`uqgear.physics._rhs` as a compiled function, and its contact split from
+:func:`split_step` (the per-pair path splits at each pair's boundaries in turn;
+the variational pass carries its matrix through the split). These helpers
+are inlined into kernels in other files: a cached kernel is keyed on the
+contents of every compiled module of the package (:mod:`uqgear.physics._cache`),
+so editing this one recompiles them all.
 """
 
 from __future__ import annotations
@@ -30,7 +33,6 @@ import numpy as np
 
 from uqgear.physics._rhs import (
     CONTACT_RATIO,
-    DAMP_IN_SEPARATION,
     ECC_KAPPA,
     ECC_OMEGA,
     ECC_PHASE,
@@ -128,18 +130,34 @@ def _side_field(s, terms, context, divide):
 
 
 @nb.njit(**INLINED)
+def rk4_by_weighted(field, divide, s, h, w, d1, mid, end, context):
+    """One classical RK4 step from ``s`` over ``h`` with first stage ``d1``, the weight w = h / 6 given: the
+    stages of :func:`rk4_stages` with ``field`` and ``context``, combined. The one RK4 step of every
+    integrator of the package. Returns (new state, whether every quotient of the later stages is exact)."""
+    d2, d3, d4, exact = rk4_stages(field, divide, s, h, d1, mid, end, context)
+    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact
+
+
+@nb.njit(**INLINED)
+def rk4_by(field, s, h, d1, mid, end, context):
+    """:func:`rk4_by_weighted` with IEEE divisions and w = h / 6: the new state. (The same two calls, not a
+    call of it: each level of inlined helpers is one more optimisation of the inlined body at compile
+    time.)"""
+    d2, d3, d4, _ = rk4_stages(field, divided, s, h, d1, mid, end, context)
+    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+
+
+@nb.njit(**INLINED)
 def _rk4(s, h, d1, mid, end, p):
     """One classical RK4 step from ``s`` with first stage ``d1`` and the forcing at the midpoint and end."""
-    d2, d3, d4, _ = rk4_stages(_classical_field, divided, s, h, d1, mid, end, p)
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+    return rk4_by(_classical_field, s, h, d1, mid, end, p)
 
 
 @nb.njit(**INLINED)
 def rk4_step_weighted(s, h, w, d1, mid, end, c, divide, inverse):
     """:func:`_rk4` from forcing 4-tuples (k, friction term, drive, e''), :func:`coefficients`, w = h / 6 and a
     quotient function (:func:`state_derivative_by`). Returns (new state, whether every quotient is exact)."""
-    d2, d3, d4, exact = rk4_stages(_table_field, divide, s, h, d1, mid, end, (c, inverse))
-    return rk4_combine_weighted(s, w, d1, d2, d3, d4), exact
+    return rk4_by_weighted(_table_field, divide, s, h, w, d1, mid, end, (c, inverse))
 
 
 @nb.njit(**INLINED)
@@ -192,8 +210,7 @@ def crossing_fraction(x0, v0, x1, v1, h, level, iterations):
 @nb.njit(**INLINED)
 def _rk4_side(s, h, d1, mid, end, p, region):
     """:func:`_rk4` with the later stages on the mesh damping of contact region ``region`` (:func:`side_derivative`)."""
-    d2, d3, d4, _ = rk4_stages(_side_field, divided, s, h, d1, mid, end, (coefficients(p), region))
-    return rk4_combine_weighted(s, h / 6.0, d1, d2, d3, d4)
+    return rk4_by(_side_field, s, h, d1, mid, end, (coefficients(p), region))
 
 
 @nb.njit(**INLINED)
@@ -211,40 +228,53 @@ def crossed_boundary(before, after, b):
     return level, entered
 
 
-@nb.njit(**JIT_OPTIONS)
-def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
+@nb.njit(**INLINED)
+def split_step(field, forcing_at, c, t, h, s, d1, trial, *model):
     """``trial`` (the step from ``s`` over [t, t+h]), redone in two parts where it changes the
-    contact region, split where the cubic Hermite interpolant of x crosses the boundary.
+    contact region, split where the cubic Hermite interpolant of x crosses the boundary: the one
+    contact split of every integrator with one contact boundary (the per-pair path splits at each
+    pair's boundaries in turn, :func:`uqgear.physics._pairs._step_pairs`).
 
-    Each part is integrated with the mesh damping of its own side of the boundary
-    (:func:`side_derivative`), the second from the derivative at the split point on the side the
-    step enters. Without damping in separation the damping force switches at the boundary, and a
-    stage evaluated with the other side's damping costs an error of the order of the step at
-    every crossing (first-order convergence); the crossing is then also located on the step taken
-    with the first side's damping throughout, not on ``trial``, whose later stages mix the two
-    sides. With damping in separation the vector field is continuous there and both sides'
-    damping is the same: the parts are the plain RK4 steps, bit for bit.
+    ``field(state, terms, (c, region), divide)`` is the right-hand side with the mesh damping of
+    contact region ``region`` whatever x is (:func:`_side_field`; in warped time
+    :func:`uqgear.physics._runup_kernels.warped_field`), ``forcing_at(time, *model)`` its forcing
+    terms at any time (:func:`forcing`), ``c`` the :func:`coefficients` and ``d1`` the field at
+    ``s``. Each part is integrated with the mesh damping of its own side of the boundary, the
+    second from the field at the split point on the side the step enters. Without damping in
+    separation the damping force switches at the boundary, and a stage evaluated with the other
+    side's damping costs an error of the order of the step at every crossing (first-order
+    convergence); the crossing is then also located on the step taken with the first side's
+    damping throughout, not on ``trial``, whose later stages mix the two sides. With damping in
+    separation the vector field is continuous there and both sides' damping is the same: the
+    parts are the plain RK4 steps, bit for bit.
     """
-    b = p[HALF_BACKLASH]
+    b = c[0]
     before = contact_region(s[2], b)
     after = contact_region(trial[2], b)
     if before == after:
         return trial
     level, entered = crossed_boundary(before, after, b)
-    end = forcing(t + h, t_ref, p, pair_k, period_k, fp, fg)
-    if p[DAMP_IN_SEPARATION] == 0.0:
-        trial = _rk4_side(s, h, d1, forcing(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg), end, p, before)
-    theta = crossing_fraction(s[2], s[5], trial[2], trial[5], h, level, BISECTIONS)
+    end = forcing_at(t + h, *model)
+    if c[2] == 0.0:
+        trial = rk4_by(field, s, h, d1, forcing_at(t + 0.5 * h, *model), end, (c, before))
+    # the Hermite interpolant of x from its slopes at the step's ends (x' in time, dx/dtau in warped time)
+    d_end, _ = field(trial, end, (c, before), divided)
+    theta = crossing_fraction(s[2], d1[2], trial[2], d_end[2], h, level, BISECTIONS)
     if not splits_step(theta):
         return trial
     h_a = theta * h
     h_b = h - h_a
-    middle = forcing(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-    part = _rk4_side(s, h_a, d1, forcing(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle, p, before)
-    d_middle, _ = side_derivative(part, middle[0], middle[1], middle[2], middle[4], coefficients(p), entered)
-    return _rk4_side(
-        part, h_b, d_middle, forcing(t + h_a + 0.5 * h_b, t_ref, p, pair_k, period_k, fp, fg), end, p, entered
-    )
+    middle = forcing_at(t + h_a, *model)
+    part = rk4_by(field, s, h_a, d1, forcing_at(t + 0.5 * h_a, *model), middle, (c, before))
+    d_middle, _ = field(part, middle, (c, entered), divided)
+    return rk4_by(field, part, h_b, d_middle, forcing_at(t + h_a + 0.5 * h_b, *model), end, (c, entered))
+
+
+@nb.njit(**JIT_OPTIONS)
+def _split_at_contact(t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg):
+    """:func:`split_step` of the constant-speed path: ``trial``, the step from ``s`` over [t, t+h] with first
+    stage ``d1``, redone in two parts where it changes the contact region (pairs in mesh as at ``t_ref``)."""
+    return split_step(_side_field, forcing, coefficients(p), t, h, s, d1, trial, t_ref, p, pair_k, period_k, fp, fg)
 
 
 # ---------------------------------------------------------------- one mesh period tabulated
