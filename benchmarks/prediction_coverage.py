@@ -144,21 +144,27 @@ def one_campaign(
 ) -> dict[str, Any]:
     began = time.perf_counter()
     made = campaign(kind, index, rng, design)
-    calibration = uqgear.Calibration(design=design, seed=index, discrepancy=discrepancy).fit(made["rig"])
+    effect_sets, named, verdict = None, [], None
+    if kind == "effect":
+        # diagnose, then calibrate with the named effects in the model (as a study's calibrate analysis does)
+        diagnosis = Diagnosis(design=design, seed=index).fit(made["rig"])
+        verdict = str(diagnosis.decision_.verdict)
+        try:
+            named = named_effects(diagnosis)
+            effect_sets = draw_effect_sets(named, DRAWS, index)
+        except uqgear.UqgearError:
+            named, effect_sets = [], None
+    calibration = uqgear.Calibration(
+        design=design, seed=index, discrepancy=discrepancy, effects=[effect.central() for effect in named]
+    ).fit(made["rig"])
     entry: dict[str, Any] = {"kind": kind, "converged": bool(calibration.converged_)}
+    if verdict is not None:
+        entry["verdict"] = verdict
     if not calibration.converged_:
         entry["seconds"] = time.perf_counter() - began
         return entry
     space = uqgear.ParameterSpace.from_posterior(calibration, draws=DRAWS, seed=index)
     draws = {name: space.posterior.column(name) for name in space.posterior.names}
-    effect_sets = None
-    if kind == "effect":
-        diagnosis = Diagnosis(design=design, seed=index).fit(made["rig"])
-        entry["verdict"] = str(diagnosis.decision_.verdict)
-        try:
-            effect_sets = draw_effect_sets(named_effects(diagnosis), DRAWS, index)
-        except uqgear.UqgearError:
-            effect_sets = None
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}
     true_values = predict(truth_rows, [tuple(made["effects"])] if made["effects"] else None, design)
     predicted = predict(draws, effect_sets, design, discrepancy_factors(calibration, space) if discrepancy else None)

@@ -64,8 +64,9 @@ plt.show()
 # prediction of the worst peak mesh force over the T2 interval (wet to dry rail)
 # at speeds the campaign never ran (it covers 600-3800 rpm), beside the same from
 # the calibration's prior: how far did the rig data narrow the worst case? The
-# bundled study ``calibrated_prediction`` runs the whole chain, with a diagnosis,
-# from the command line.
+# bundled study ``calibrated_prediction`` runs the whole chain from the command
+# line: a diagnosis first, then the calibration with the diagnosed effect in the
+# model, then the prediction.
 
 design = uqgear.load_design("locomotive")
 t2 = uqgear.Interval.from_adhesion(0.15, 0.33, 23000, 0.625)

@@ -272,9 +272,44 @@ uncertain:
         uqgear.parse_study(text.replace("{analysis: calibration}", "{analysis: nope}"))
 
 
+def test_a_calibration_runs_after_the_diagnosis_whose_effects_it_carries(tmp_path, monkeypatch):
+    text = """
+name: loop
+analyses:
+  - {type: calibrate, name: calibration, rig: eccentricity}
+  - {type: diagnose, name: diagnosis, rig: eccentricity}
+model: {effects: {analysis: diagnosis}}
+"""
+    with pytest.raises(uqgear.StudyError, match="analysis 'calibration' runs before 'diagnosis'"):
+        uqgear.parse_study(text)
+    # effects given by value: the calibration's model carries them at their fitted values
+    given = "model:\n  effects:\n    tooth_damage: {gear: pinion, depth: 0.35, intervals: {depth: [0.3, 0.4]}}\n"
+    study = uqgear.parse_study(
+        "name: loop\nanalyses:\n  - {type: calibrate, name: calibration, rig: eccentricity}\n" + given
+    )
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    class Recording:
+        def __init__(self, **settings):
+            seen.update(settings)
+
+        def fit(self, rig):
+            raise Stop
+
+    monkeypatch.setattr(uqgear.calibration, "Calibration", Recording)
+    with pytest.raises(Stop):
+        uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    (effect,) = seen["effects"]
+    expected = uqgear.make_effect("tooth_damage", {"gear": "pinion", "depth": 0.35})
+    assert (effect.name, dict(effect.values)) == (expected.name, dict(expected.values))
+
+
 def test_bundled_loop_study_validates():
     study = uqgear.load_study("calibrated_prediction")
-    assert [spec.type for spec in study.analyses] == ["calibrate", "diagnose", "prediction"]
+    assert [spec.type for spec in study.analyses] == ["diagnose", "calibrate", "prediction"]
     assert study.calibrated.analysis == "calibration" and study.effects.analysis == "diagnosis"
     assert set(study.calibrated.names) == {"mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"}
 

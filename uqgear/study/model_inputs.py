@@ -171,6 +171,10 @@ def check_order(
             raise StudyError(f"{key}: {source!r} is not a {kind} analysis of the study; expected the name of one")
         position = names.index(source)
         late = [spec.name for spec in analyses[:position] if spec.type not in _RIG_ANALYSES]
+        if kind == "diagnose":
+            # a calibration conditions on the diagnosed effects: without them the effect's share of the gap
+            # moves the calibrated parameters (a damaged tooth lowers the fitted mesh stiffness)
+            late += [spec.name for spec in analyses[:position] if spec.type == "calibrate"]
         if late:
             raise StudyError(
                 f"{key}: analysis {late[0]!r} runs before {source!r} and would not see its result; "

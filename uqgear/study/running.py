@@ -123,7 +123,12 @@ def run_analysis(
         )
     seed = seed if seed is not None else study.seed_sequences()[spec.index]
     key = analysis_key(study, spec)
-    posterior, effects, discrepancy = (None, (), None) if spec.type in RIG_TYPES else model_inputs(study, results or {})
+    if spec.type in RIG_TYPES:
+        # a calibration runs with the study's diagnosed effects (at their fitted values); a diagnosis with none
+        posterior, discrepancy = None, None
+        effects = calibration_effects(study, results or {}) if spec.type == "calibrate" else ()
+    else:
+        posterior, effects, discrepancy = model_inputs(study, results or {})
     if effects:
         simulation = dataclasses.replace(spec.simulation, effects=tuple(effect.central() for effect in effects))
         spec = dataclasses.replace(spec, simulation=simulation)
@@ -144,6 +149,11 @@ def run_analysis(
     if context.notes:
         result.attrs["notes"] = json.dumps(context.notes)
     return result
+
+
+def calibration_effects(study: Study, results: Mapping[str, xr.Dataset]) -> tuple[UncertainEffect, ...]:
+    """The study's diagnosed effects (``model.effects``) a ``calibrate`` analysis conditions on; none without them."""
+    return resolve_effects(study.effects, results) if study.effects is not None else ()
 
 
 def model_inputs(
