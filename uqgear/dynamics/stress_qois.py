@@ -64,7 +64,7 @@ def _rating(design: Design, drive_torque: float, pinion_speed: float, settings: 
     return static_rating(design, drive_torque, pinion_speed, settings, dynamic_factor=1.0)
 
 
-def _operating(samples: xr.Dataset, design: Design, name: str, default: float) -> np.ndarray:
+def _operating(samples: xr.Dataset, name: str, default: float) -> np.ndarray:
     if name in samples.data_vars:
         return np.asarray(samples[name].values, dtype=float)
     return np.full(samples.sizes["sample"], float(default))
@@ -143,7 +143,7 @@ def tooth_stress_qois(
     runs = integrate_histories(
         setups, n_periods, keep_periods, samples_per_period, steps_per_mode, initial_states, threads=threads
     )
-    torques = _operating(samples, design, "drive_torque", design.operation.drive_torque)
+    torques = _operating(samples, "drive_torque", design.operation.drive_torque)
     speeds = np.asarray(samples["pinion_speed"].values, dtype=float)
     first = int(n_periods) - int(keep_periods)
     values = np.array(
@@ -217,17 +217,10 @@ class StressEvaluator(BatchEvaluator):
         self.rating = rating
 
     def __call__(self, samples: xr.Dataset) -> xr.Dataset:
-        completed = samples.copy()
-        for name, value in self.fixed.items():
-            if name not in completed.data_vars:
-                completed[name] = ("sample", np.full(completed.sizes["sample"], float(value)))
-        result = super().__call__(samples)
-        stresses = tooth_stress_qois(self.design, completed, rating=self.rating, **self.stress_options())
+        completed = self.completed(samples)
+        result = super().__call__(completed)
+        stresses = tooth_stress_qois(self.design, completed, rating=self.rating, **stress_options(vars(self)))
         return result.assign({name: stresses[name].variable for name in STRESS_QOIS})
-
-    def stress_options(self) -> dict[str, Any]:
-        """The keyword arguments of :func:`tooth_stress_qois` that this evaluator's settings give."""
-        return stress_options(vars(self))
 
     def key(self) -> str:
         """:meth:`BatchEvaluator.key` with the stresses' rating inputs."""

@@ -716,11 +716,16 @@ class BatchEvaluator:
         self.pitch_errors = pitch_errors
         self.final_state = final_state
 
-    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+    def completed(self, samples: xr.Dataset) -> xr.Dataset:
+        """A copy of ``samples`` with the fixed inputs they do not carry (what a run is given)."""
         samples = samples.copy()
         for name, value in self.fixed.items():
             if name not in samples.data_vars:
                 samples[name] = ("sample", np.full(samples.sizes["sample"], float(value)))
+        return samples
+
+    def __call__(self, samples: xr.Dataset) -> xr.Dataset:
+        samples = self.completed(samples)
         return simulate_batch(
             self.design,
             samples,

@@ -285,8 +285,7 @@ def _with_stresses(
     if kind in ("rating", "simulate"):
         # their own rating inputs: the rating's verdict, the simulated runs' stresses along the path
         return simulation
-    asked = [name for name in options.get("qois", ()) if name in STRESS_QOIS]
-    if not asked:
+    if not any(name in STRESS_QOIS for name in options.get("qois", ())):
         if "rating" in options:
             raise StudyError(
                 f"{path}.rating: only the tooth stress QoIs ({', '.join(STRESS_QOIS[:2])}, ...) take ISO 6336 "

@@ -126,7 +126,7 @@ def run_analysis(
     if spec.type in RIG_TYPES:
         # a calibration runs with the study's diagnosed effects (at their fitted values); a diagnosis with none
         posterior, discrepancy = None, None
-        effects = calibration_effects(study, results or {}) if spec.type == "calibrate" else ()
+        effects = study_effects(study, results or {}) if spec.type == "calibrate" else ()
     else:
         posterior, effects, discrepancy = model_inputs(study, results or {})
     if effects:
@@ -151,8 +151,9 @@ def run_analysis(
     return result
 
 
-def calibration_effects(study: Study, results: Mapping[str, xr.Dataset]) -> tuple[UncertainEffect, ...]:
-    """The study's diagnosed effects (``model.effects``) a ``calibrate`` analysis conditions on; none without them."""
+def study_effects(study: Study, results: Mapping[str, xr.Dataset]) -> tuple[UncertainEffect, ...]:
+    """The study's diagnosed effects (``model.effects``), which every model run and a ``calibrate`` analysis carry;
+    none without them."""
     return resolve_effects(study.effects, results) if study.effects is not None else ()
 
 
@@ -170,8 +171,7 @@ def model_inputs(
         full, discrepancy = resolve_posterior(study.calibrated, study.design, results)
         thinning = np.random.SeedSequence(study.seed, spawn_key=(len(study.analyses),))
         posterior = full.thin(study.calibrated.draws, thinning)
-    effects = resolve_effects(study.effects, results) if study.effects is not None else ()
-    return posterior, effects, discrepancy
+    return posterior, study_effects(study, results), discrepancy
 
 
 def _reusable(path: Path, key: str) -> bool:
