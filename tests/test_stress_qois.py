@@ -200,3 +200,16 @@ def test_a_simulate_analysis_runs_the_studys_effects_and_gives_the_stresses_alon
     assert run["root_stress_path"].sel(bound="upper").values == pytest.approx(upper, rel=1e-12)
     assert float(run["root_stress_peak_pinion"]) == pytest.approx(float(upper[0].max()), rel=1e-12)
     assert run["contact_stress_path"].attrs["units"] == "Pa" and run.sizes["position"] == upper.shape[1]
+
+
+def test_a_bad_rating_block_of_a_simulate_analysis_exits_2_with_one_line(tmp_path, capsys):
+    text = (
+        "name: stress_path\nseed: 2\ndesign: {name: locomotive}\n"
+        "operating_points: {pinion_speed: [2500], drive_torque: 7000, adhesion_torque: 33800}\n"
+        "analyses:\n  - type: simulate\n    rating: {rack_fillet_coefficient: 2.0}\n"
+    )
+    (tmp_path / "study.yaml").write_text(text)
+    assert main(["run", str(tmp_path / "study.yaml"), "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    assert "analyses[0].rating.rack_fillet_coefficient" in captured.err and captured.err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
