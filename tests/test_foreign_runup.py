@@ -127,3 +127,35 @@ def test_bad_ramps_and_settings_are_refused_naming_the_key(change, error, key):
     options["ramps"] = {**ramps, **change.get("ramps", {})}
     with pytest.raises(error, match=key):
         simulate_foreign_runup_campaign(DESIGN, **options)
+
+
+def test_a_run_out_on_a_foreign_run_up_is_named_against_a_healthy_run_up_reference():
+    from uqgear.diagnosis import Diagnosis
+
+    # 2 s from 1500 to 2700 rpm: the diagnosis cuts both campaigns into 8 segments and compares them as steady runs
+    ramps = {"start_speed": [1500.0], "stop_speed": [2700.0], "rate": [600.0], "drive_torque": [7000.0]}
+    gears = draw_gears(DESIGN, 6.0, 2)
+    reference = simulate_foreign_runup_campaign(DESIGN, ramps, gears=gears, seed=1)
+    run_out = Eccentricity({"shaft": "pinion", "amplitude": 20e-6})
+    test = simulate_foreign_runup_campaign(DESIGN, ramps, gears=gears, effects=[run_out], seed=2)
+    summary = Diagnosis(seed=0, workers=1).fit(test, reference=reference).summary_
+    assert summary["verdict"] == "eccentricity"
+    named = summary["change"]["named"]["parameters"]
+    assert named["shaft"] == "pinion" and 10e-6 < named["amplitude"] < 40e-6
+
+
+def test_a_feature_no_record_half_estimates_has_no_spread_and_no_warning():
+    import warnings
+
+    from uqgear.diagnosis.change.detection import _noise_spread
+
+    # (halves, runs, channels, features): the second feature is NaN in every half, as the gear's lines are in
+    # segments shorter than a gear revolution; the first has spreads 1 and 3 over the two runs of each campaign
+    reference = np.array([[[[1.0, np.nan]]], [[[3.0, np.nan]]]]).repeat(2, axis=1)
+    reference[1, 1, 0, 0] = 7.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        spread = _noise_spread(reference, reference, np.array([0, 1]))
+    # pooled (1 + 9 + 1 + 9) / 4 = 5, local 1 and 9: sqrt(local + pooled)
+    np.testing.assert_allclose(spread[:, 0, 0], np.sqrt([1.0 + 5.0, 9.0 + 5.0]))
+    assert np.all(np.isinf(spread[:, 0, 1]))
