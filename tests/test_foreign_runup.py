@@ -160,3 +160,19 @@ def test_a_feature_no_record_half_estimates_has_no_spread_and_no_warning():
     # pooled (1 + 9 + 1 + 9) / 4 = 5, local 1 and 9: sqrt(local + pooled)
     np.testing.assert_allclose(spread[:, 0, 0], np.sqrt([1.0 + 5.0, 9.0 + 5.0]))
     assert np.all(np.isinf(spread[:, 0, 1]))
+
+
+@pytest.mark.parametrize(("key", "value"), [("duration", 0.0), ("start", 0.01), ("stop_speed", float("nan"))])
+def test_one_ramp_refuses_a_length_start_or_speed_it_cannot_run(key, value):
+    arguments = {"start_speed": 1500.0, "stop_speed": 1600.0, "duration": 0.1, "start": 0.1, key: value}
+    with pytest.raises(RigDataError, match=key):
+        simulate_foreign_ramp(
+            DESIGN,
+            arguments.pop("start_speed"),
+            arguments.pop("stop_speed"),
+            arguments.pop("duration"),
+            T1,
+            T2,
+            gears=GEARS,
+            **arguments,
+        )

@@ -202,7 +202,18 @@ def simulate_foreign_ramp(
     >>> speed.size, round(float(speed[0]), -1), round(float(speed[-1]), -1)
     (5120, 1500.0, 1600.0)
     """
+    for key, value, least in (
+        ("start_speed", start_speed, 0.0),
+        ("stop_speed", stop_speed, 0.0),
+        ("duration", duration, 0.0),
+        ("start", start, _GUARD),
+        ("fs", fs, 0.0),
+    ):
+        if not (math.isfinite(value) and value > least):
+            raise RigDataError(f"{key}: expected a finite value > {least:g}; got {value!r}")
     p, fastest = _parameters(design, float(start_speed), float(drive_torque), float(load_torque))
+    # _pair_sum's clock times p[0] is the mesh phase: with p[0] = z1 / (2 pi) and the pinion's angle as the clock
+    # (_ramp_derivative), the mesh, its profile errors and a run-out follow the angle, not a fixed speed
     p[0] = design.z1 / (2.0 * math.pi)
     rows = np.zeros((0, 3)) if wander is None else np.asarray(wander, dtype=float).reshape(-1, 3)
     ramp = np.array(
