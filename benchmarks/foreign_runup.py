@@ -1,7 +1,7 @@
 """The differential diagnosis on run-ups of the foreign virtual rig, against its steady campaigns.
 
-A healthy reference and three test campaigns (healthy, a 20 um pinion run-out, a 30 % damaged
-pinion tooth) of the foreign rig (:mod:`uqgear.rig.foreign_rig`, grade-6 gears drawn from seed
+A healthy reference and four test campaigns (healthy, a 20 um run-out of the pinion, the same of
+the gear, a 30 % damaged pinion tooth) of the foreign rig (:mod:`uqgear.rig.foreign_rig`, grade-6 gears drawn from seed
 11), once as run-ups (:func:`uqgear.rig.foreign_runup.simulate_foreign_runup_campaign`: one ramp
 1200 -> 3800 rpm at 300 rpm/s, 7000 N m, cut into 8 operating points by the diagnosis) and once
 as the 8 steady service runs of 1 s; each test diagnosed against the reference of its kind
@@ -31,6 +31,7 @@ from uqgear.rig.virtual_rig import default_operating_points
 CASES = {
     "healthy": [],
     "eccentricity": [Eccentricity({"shaft": "pinion", "amplitude": 20e-6, "phase": 0.7})],
+    "gear_run_out": [Eccentricity({"shaft": "gear", "amplitude": 20e-6, "phase": 0.7})],
     "tooth_damage": [ToothDamage({"gear": "pinion", "tooth": 5, "depth": 0.3})],
 }
 
