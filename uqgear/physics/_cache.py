@@ -39,6 +39,7 @@ COMPILED_MODULES = (
     "calibration/harmonics.py",
     "rig/foreign_rig.py",
     "rig/foreign_response.py",
+    "rig/foreign_runup.py",
 )
 
 

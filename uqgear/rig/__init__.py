@@ -24,6 +24,7 @@ from .foreign_rig import (
     simulate_foreign_campaign,
     simulate_foreign_run,
 )
+from .foreign_runup import simulate_foreign_runup_campaign
 from .format import (
     CONVENTIONS,
     RIG_COORDINATES,
@@ -83,6 +84,7 @@ __all__ = [
     "ForeignGears",
     "draw_gears",
     "simulate_foreign_campaign",
+    "simulate_foreign_runup_campaign",
     "simulate_foreign_run",
     "register_foreign_physics",
     "foreign_qois",

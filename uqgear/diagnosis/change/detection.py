@@ -350,9 +350,11 @@ def _noise_spread(reference_halves: np.ndarray, test_halves: np.ndarray, carried
     """
     ref_var = (reference_halves[0] - reference_halves[1]) ** 2 / 4.0
     test_var = (test_halves[0] - test_halves[1]) ** 2 / 4.0
-    # a half too short to average a shaft's revolution gives no estimate (NaN): the pool stands in for it
-    pooled = np.nanmean(np.concatenate([ref_var, test_var]), axis=0)
-    pooled = np.where(np.isfinite(pooled), pooled, np.inf)
+    # a half too short to average a shaft's revolution gives no estimate (NaN): the pool stands in for it;
+    # a feature no half estimates (the gear's lines in the short segments of a fast ramp) has no spread: inf
+    both = np.concatenate([ref_var, test_var])
+    count = np.sum(np.isfinite(both), axis=0)
+    pooled = np.where(count > 0, np.nansum(both, axis=0) / np.maximum(count, 1), np.inf)
     local = 0.5 * (ref_var[carried_nearest] + test_var)
     local = np.where(np.isfinite(local), local, pooled[None])
     return np.sqrt(2.0 * 0.5 * (local + pooled[None]))
