@@ -349,8 +349,9 @@ analyses:
     assert bool((upper.isel(quantile=-1) > upper.isel(quantile=0)).all())  # the damping's spread shows
 
 
-def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
-    # a discrepancy known exactly: the rig's DTE mesh harmonic is twice the model's at every operating point
+def _doubling_posterior(path: Path) -> None:
+    """A one-point posterior whose discrepancy is known exactly: the rig's DTE mesh harmonic is twice the model's
+    at every operating point."""
     from uqgear.calibration.discrepancy import DiscrepancyBasis
     from uqgear.calibration.discrepancy_results import Discrepancy, DiscrepancyFit, discrepancy_dataset
 
@@ -366,13 +367,13 @@ def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
                                                           "drive_torque": posterior["drive_torque"].values}))
     posterior.attrs.update(discrepancy_dataset(fit, {"pinion_speed": np.array([2000.0]),
                                                      "drive_torque": np.array([7000.0])}).attrs)
-    posterior.to_netcdf(tmp_path / "posterior.nc")
-    study = uqgear.parse_study(_study_text(tmp_path / "posterior.nc"), base_dir=tmp_path)
-    (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
-    result = uqgear.load_result(path)
-    assert int(result.attrs["discrepancy"]) == 1
+    posterior.to_netcdf(path)
+
+
+def _posterior_grid(study) -> xr.Dataset:
+    """The one-point posterior's parameters at every speed and T2 node of the prediction (T2 major)."""
     t2 = study.uncertain["adhesion_torque"]
-    grid = uqgear.samples_from_mapping(
+    return uqgear.samples_from_mapping(
         {
             "pinion_speed": np.tile([1000.0, 2500.0, 4500.0], 3),
             "adhesion_torque": np.repeat(np.linspace(t2.lower, t2.upper, 3), 3),
@@ -380,6 +381,15 @@ def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
             "zeta_mesh": np.full(9, 0.06),
         }
     )
+
+
+def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
+    _doubling_posterior(tmp_path / "posterior.nc")
+    study = uqgear.parse_study(_study_text(tmp_path / "posterior.nc"), base_dir=tmp_path)
+    (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    assert int(result.attrs["discrepancy"]) == 1
+    grid = _posterior_grid(study)
     settings = {"n_periods": 80, "keep_periods": 30, "steps_per_mode": study.simulation.steps_per_mode}
     direct = uqgear.BatchEvaluator(design, fixed={"drive_torque": 7000.0}, **settings)(grid)
     static = direct["static_mesh_force"].values
@@ -390,6 +400,41 @@ def test_a_calibrated_discrepancy_scales_the_dynamic_part(tmp_path, design):
     np.testing.assert_allclose(result["dte_rms"].sel(bound="upper", quantile=0.5), dte.max(axis=0), rtol=1e-12)
     # the prior's runs, the design's tolerances before the rig data, carry no discrepancy
     assert result["peak_mesh_force_prior"].sel(bound="upper").min() < scaled.max(axis=0).min()
+
+
+def test_a_prediction_bounds_the_tooth_stresses_and_scales_them_with_the_load(tmp_path, design):
+    # the stresses of the model run directly, scaled as the tooth load: the root stress by the ratio of the
+    # discrepancy's peak mesh force to the model's, the flank stress by its square root (Hertz)
+    from uqgear.dynamics.stress_qois import StressEvaluator
+
+    _doubling_posterior(tmp_path / "posterior.nc")
+    text = _study_text(tmp_path / "posterior.nc").replace(
+        "qois: [peak_mesh_force, dte_rms]",
+        "qois: [peak_mesh_force, root_stress_peak_pinion, contact_stress_peak_gear], rating: {face_load_factor: 1.2}",
+    )
+    study = uqgear.parse_study(text, base_dir=tmp_path)
+    (path,) = uqgear.run_study(study, tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    settings = {"n_periods": 80, "keep_periods": 30, "steps_per_mode": study.simulation.steps_per_mode}
+    rating = uqgear.physics.rating.RatingSettings(face_load_factor=1.2)
+    direct = StressEvaluator(design, rating=rating, fixed={"drive_torque": 7000.0}, **settings)(
+        _posterior_grid(study)
+    )
+    peak, static = direct["peak_mesh_force"].values, direct["static_mesh_force"].values
+    ratio = (static + 2.0 * (peak - static)) / peak
+    root = (direct["root_stress_peak_pinion"].values * ratio).reshape(3, 3)
+    flank = (direct["contact_stress_peak_gear"].values * np.sqrt(ratio)).reshape(3, 3)
+    for name, expected in (("root_stress_peak_pinion", root), ("contact_stress_peak_gear", flank)):
+        band = result[name].sel(quantile=0.5)
+        np.testing.assert_allclose(band.sel(bound="upper"), expected.max(axis=0), rtol=1e-12)
+        np.testing.assert_allclose(band.sel(bound="lower"), expected.min(axis=0), rtol=1e-12)
+        assert result[name].attrs["units"] == "Pa" and f"{name}_prior" in result
+    # the discrepancy doubles the dynamic load: every stress above the model's own
+    assert bool((ratio > 1.0).all())
+    # a rating block needs a stress QoI
+    with pytest.raises(uqgear.StudyError, match=r"analyses\[0\]\.rating: only the tooth stress QoIs"):
+        uqgear.parse_study(text.replace("root_stress_peak_pinion, contact_stress_peak_gear", "dte_rms"),
+                           base_dir=tmp_path)
 
 
 @pytest.mark.parametrize(
@@ -435,3 +480,12 @@ def test_each_draw_carries_the_discrepancy_drawn_with_its_parameters():
         np.testing.assert_array_equal(row, beta[int(round(value * 100)) - 4])
     with pytest.raises(uqgear.PosteriorError, match="discrepancy_beta"):
         uqgear.PosteriorDraws(("zeta_mesh",), np.array([[0.04], [0.05]]), discrepancy_beta=beta)
+
+
+def test_a_stress_qoi_from_a_model_without_stresses_is_refused_naming_it(design):
+    posterior = _posterior(np.broadcast_to(np.array([1.05, 0.06]), (1, 2, 2)).copy())
+    space = uqgear.ParameterSpace.from_posterior(posterior, {"adhesion_torque": [25e3, 40e3]}, draws=2, seed=1)
+    model = uqgear.BatchEvaluator(design, fixed={"drive_torque": 7000.0, "pinion_speed": 2000.0},
+                                  n_periods=20, keep_periods=10)
+    with pytest.raises(uqgear.ParameterSpaceError, match="qoi: 'root_stress_peak_pinion' is not among the model's"):
+        uqgear.PosteriorPrediction(["root_stress_peak_pinion"], points=2).fit(model, space)

@@ -206,7 +206,7 @@ ANALYSIS_SCHEMAS: dict[str, dict[str, Checker]] = {
         "points": number("(nodes per interval parameter)", 2, 101, integer=True),
         "draws": number("(draws of the study's distributions without a posterior)", 1, 100_000, integer=True),
         "quantiles": list_of(number("", 0.0, 1.0), unique=True, what="a list of probabilities"),
-        "qois": _qoi_list(),
+        **_STRESS_KEYS,
     },
     "continuation": {
         "parameter": choice(*VARIABLES),

@@ -24,8 +24,8 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import ParameterSpaceError
+from ..dynamics.stress_qois import RUN_QOI_INFO, STRESS_QOIS
 from ..physics.effect_draws import UncertainEffect, draw_effect_sets
-from ..physics.integration import QOI_INFO
 from .checks import check_count
 from .parameter_space import ParameterSpace
 from .parameters import Distribution, Fixed, Interval
@@ -62,7 +62,8 @@ class PosteriorPrediction:
     Parameters
     ----------
     qoi : sequence of str
-        QoIs (:data:`~uqgear.physics.integration.QOI_INFO`).
+        QoIs (:data:`~uqgear.dynamics.stress_qois.RUN_QOI_INFO`: the kernels' and the tooth stresses,
+        these from a model that gives them, :class:`~uqgear.dynamics.stress_qois.StressEvaluator`).
     quantiles : sequence of float
         Quantiles over the draws.
     points : int
@@ -115,9 +116,9 @@ class PosteriorPrediction:
         seed: SeedLike = 0,
         discrepancy: Any = None,
     ) -> None:
-        unknown = [name for name in qoi if name not in QOI_INFO]
+        unknown = [name for name in qoi if name not in RUN_QOI_INFO]
         if unknown or not qoi:
-            raise ParameterSpaceError(f"qoi: expected names of QOI_INFO; got {unknown or list(qoi)}")
+            raise ParameterSpaceError(f"qoi: expected names of RUN_QOI_INFO; got {unknown or list(qoi)}")
         if method not in ("scan", "vertex"):
             raise ParameterSpaceError(f"method: expected 'scan' or 'vertex'; got {method!r}")
         quantile_values = np.asarray(quantiles, dtype=float)
@@ -191,13 +192,16 @@ class PosteriorPrediction:
         result = xr.Dataset(coords={"bound": ["lower", "upper"], "quantile": quantiles, "draw": np.arange(size)})
         result = result.assign_coords(sweep.coords())
         for qoi in self.qoi:
+            if qoi not in outputs and f"{qoi}_max" not in outputs:
+                given = ", ".join(map(str, outputs.data_vars))
+                raise ParameterSpaceError(f"qoi: {qoi!r} is not among the model's outputs ({given})")
             high = outputs[f"{qoi}_max"] if f"{qoi}_max" in outputs else outputs[qoi]
             low = outputs[f"{qoi}_min"] if f"{qoi}_min" in outputs else outputs[qoi]
             high_values = np.asarray(high.values, dtype=float).reshape(shape)
             low_values = np.asarray(low.values, dtype=float).reshape(shape)
             upper, lower = np.nanmax(high_values, axis=-1), np.nanmin(low_values, axis=-1)  # (*sweep, draw)
             stacked = np.stack([lower, upper])  # (bound, *sweep, draw)
-            units, meaning = QOI_INFO[qoi]
+            units, meaning = RUN_QOI_INFO[qoi]
             result[qoi] = (
                 ("bound", "quantile", *dims),
                 np.moveaxis(np.nanquantile(stacked, quantiles, axis=-1), 0, 1),
@@ -217,14 +221,49 @@ class PosteriorPrediction:
 
 
 #: What the discrepancy's factor scales in each QoI: the part above the static response (the mesh force above its
-#: mean, the load factors above 1; the DTE's RMS about its mean and its peak to peak whole); the rest are left alone.
-DYNAMIC_PARTS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms", "dte_peak_to_peak")
+#: mean, the load factors above 1; the DTE's RMS about its mean and its peak to peak whole) and the tooth stresses
+#: with the load (:func:`scale_dynamic_part`); the rest are left alone.
+DYNAMIC_PARTS = (
+    "peak_mesh_force",
+    "dynamic_load_factor",
+    "load_factor_rated",
+    "dte_rms",
+    "dte_peak_to_peak",
+    *STRESS_QOIS,
+)
+
+
+def _load_ratio(outputs: xr.Dataset, suffix: str, factor: np.ndarray) -> np.ndarray:
+    """The peak mesh force with its dynamic part scaled by ``factor``, over the peak as the model gives it."""
+    peak = np.asarray(outputs[f"peak_mesh_force{suffix}"].values, dtype=float)
+    static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
+    return (static + (peak - static) * factor) / peak
 
 
 def scale_dynamic_part(
     name: str, suffix: str, values: np.ndarray, outputs: xr.Dataset, factor: np.ndarray
 ) -> np.ndarray:
-    """One QoI (``name`` + ``suffix``, e.g. ``_max``) with its dynamic part multiplied by ``factor``."""
+    """One QoI (``name`` + ``suffix``, e.g. ``_max``) with its dynamic part multiplied by ``factor``.
+
+    The mesh force and the load factors have their part above the static load scaled, the DTE's RMS and peak to
+    peak are scaled whole. A tooth stress follows the tooth load the mesh force carries: the root stress in
+    proportion to it (ISO 6336-3: sigma_F = F_t Y_F Y_S ... / (b m_n)), the flank stress as its square root
+    (Hertz, ISO 6336-2); both take the ratio of the scaled peak mesh force to the peak (of the same response:
+    ``suffix``).
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> from uqgear.uq.prediction import scale_dynamic_part
+    >>> outputs = xr.Dataset({"peak_mesh_force": ("sample", [150e3]), "static_mesh_force": ("sample", [100e3])})
+    >>> factor = np.array([2.0])
+    >>> float(scale_dynamic_part("peak_mesh_force", "", np.array([150e3]), outputs, factor)[0])
+    200000.0
+    >>> float(scale_dynamic_part("root_stress_peak_pinion", "", np.array([300e6]), outputs, factor)[0]) / 1e6
+    400.0
+    >>> round(float(scale_dynamic_part("contact_stress_peak_gear", "", np.array([1e9]), outputs, factor)[0]) / 1e6, 1)
+    1154.7
+    """
     if name == "peak_mesh_force":
         static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
         return static + (values - static) * factor
@@ -232,9 +271,11 @@ def scale_dynamic_part(
         return 1.0 + (values - 1.0) * factor
     if name == "load_factor_rated":
         # the peak's dynamic part scaled, over the same rated force: the ratio of the scaled peak to the peak
-        peak = np.asarray(outputs[f"peak_mesh_force{suffix}"].values, dtype=float)
-        static = np.asarray(outputs["static_mesh_force"].values, dtype=float)
-        return values * (static + (peak - static) * factor) / peak
+        return values * _load_ratio(outputs, suffix, factor)
+    if name.startswith("root_stress_"):
+        return values * _load_ratio(outputs, suffix, factor)
+    if name.startswith("contact_stress_"):
+        return values * np.sqrt(_load_ratio(outputs, suffix, factor))
     # the RMS about the mean and the peak to peak of the DTE are its dynamic part already
     return values * factor
 
