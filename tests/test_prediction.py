@@ -309,7 +309,10 @@ model: {effects: {analysis: diagnosis}}
 
 def test_bundled_loop_study_validates():
     study = uqgear.load_study("calibrated_prediction")
-    assert [spec.type for spec in study.analyses] == ["diagnose", "calibrate", "prediction"]
+    assert [spec.type for spec in study.analyses] == ["diagnose", "calibrate", "prediction", "rating"]
+    # the prediction bounds a tooth stress with its ISO inputs, so the chain ends in the rating's verdict
+    prediction = study.analyses[2]
+    assert "root_stress_peak_pinion" in prediction.options["qois"] and prediction.simulation.stresses is not None
     assert study.calibrated.analysis == "calibration" and study.effects.analysis == "diagnosis"
     assert set(study.calibrated.names) == {"mesh_stiffness_scale", "zeta_mesh", "backlash", "ste_amplitude", "k1", "k2"}
 
