@@ -8,7 +8,7 @@
     uqgear simulate --speed RPM [--drive-torque NM] [--adhesion-torque NM] [--design NAME|FILE]
                     [--out FILE.png|FILE.nc]
     uqgear synth-rig --design FILE --out FILE.nc [--effect NAME:param=value ...] [--true KEY=VALUE ...] [--seed N]
-                     [--ramp START:STOP:RATE[:TORQUE] ...]
+                     [--ramp START:STOP:RATE[:TORQUE] ...] [--foreign GRADE [--gears-seed N]]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
     uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...] [--reference HEALTHY.nc]
     uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world|encoderless|foreign]
@@ -350,6 +350,7 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     from .physics.design import load_design
     from .physics.effects import parse_effect
     from .rig.virtual_rig import synth_rig
+    from .rig.virtual_runup import parse_ramps, synth_runup_rig
 
     design = load_design(args.design)
     effects = [parse_effect(text) for text in args.effect]
@@ -360,20 +361,26 @@ def _command_synth_rig(args: argparse.Namespace) -> int:
     _check_new_file(out, args.force)
     if args.noise < 0:
         return _fail(f"--noise: expected a relative noise level >= 0; got {args.noise:g}")
-    options: dict[str, Any] = {
-        "effects": effects,
-        "true_parameters": true_parameters,
-        "seed": args.seed,
-        "relative_noise": args.noise,
-    }
-    if args.ramp:
-        from .rig.virtual_runup import parse_ramps, synth_runup_rig
+    options: dict[str, Any] = {"effects": effects, "seed": args.seed, "relative_noise": args.noise}
+    ramps = parse_ramps(args.ramp, option="--ramp") if args.ramp else None
+    rig, gears = "virtual rig", ""
+    if args.foreign is not None:
+        from .rig.foreign_synth import synth_foreign_rig
 
-        synth_runup_rig(design, out, parse_ramps(args.ramp, option="--ramp"), **options)
+        if true_parameters:  # the foreign rig's physics is not the model's: it has no model parameters to set
+            return _fail("--true: the foreign rig (--foreign) has no true model parameters; leave --true out")
+        synth_foreign_rig(design, out, args.foreign, ramps=ramps, gears_seed=args.gears_seed, option="--foreign",
+                          **options)
+        gears_seed = args.seed if args.gears_seed is None else args.gears_seed
+        rig, gears = "foreign virtual rig", f", grade {args.foreign:g} gears of gears seed {gears_seed}"
+    elif args.gears_seed is not None:
+        return _fail("--gears-seed: seeds the gears of the foreign rig; give it with --foreign GRADE")
+    elif ramps is not None:
+        synth_runup_rig(design, out, ramps, true_parameters=true_parameters, **options)
     else:
-        synth_rig(design, out, **options)
+        synth_rig(design, out, true_parameters=true_parameters, **options)
     described = "; ".join(repr(effect) for effect in effects) or "no effect"
-    print(f"virtual rig campaign written to {out} ({design.name}, {described}, seed {args.seed})")
+    print(f"{rig} campaign written to {out} ({design.name}{gears}, {described}, seed {args.seed})")
     return 0
 
 
@@ -616,42 +623,31 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulate a virtual-rig campaign in the rig format",
         description="Simulate a test-rig campaign (8 operating points by default) "
         "with chosen true parameters, sensor noise and unmodelled effects, and write "
-        "it as a uqgear-rig/1 netCDF file.",
+        "it as a uqgear-rig/1 netCDF file; with --foreign, a campaign of the foreign virtual rig.",
     )
-    synth.add_argument(
-        "--design",
-        default="locomotive",
-        metavar="NAME|FILE",
-        help="nominal design (bundled name or YAML file; default: locomotive)",
-    )
+    synth.add_argument("--design", default="locomotive", metavar="NAME|FILE",
+                       help="nominal design (bundled name or YAML file; default: locomotive)")
     synth.add_argument("--out", required=True, metavar="FILE.nc", help="rig file to write")
     synth.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    synth.add_argument(
-        "--effect",
-        action="append",
-        default=[],
-        metavar="NAME:param=value,...",
-        help="add an unmodelled effect, e.g. eccentricity:amplitude=12e-6,kappa=0.03 (repeatable)",
-    )
-    synth.add_argument(
-        "--true",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="true value differing from the nominal design, e.g. mesh_stiffness_scale=0.97 or k1=1.05e9 (repeatable)",
-    )
+    synth.add_argument("--effect", action="append", default=[], metavar="NAME:param=value,...",
+                       help="add an unmodelled effect, e.g. eccentricity:amplitude=12e-6,kappa=0.03 (repeatable)")
+    synth.add_argument("--true", action="append", default=[], metavar="KEY=VALUE",
+                       help="true value differing from the nominal design, e.g. mesh_stiffness_scale=0.97 or "
+                       "k1=1.05e9 (repeatable)")
     synth.add_argument("--seed", type=int, default=0, help="seed of noise and record starts (default 0)")
-    synth.add_argument(
-        "--noise", type=float, default=0.02, help="sensor noise as a fraction of each record's RMS (default 0.02)"
-    )
-    synth.add_argument(
-        "--ramp",
-        action="append",
-        default=[],
-        metavar="START:STOP:RATE[:TORQUE]",
-        help="a run-up (or coast-down) START to STOP rpm at RATE rpm/s, drive torque TORQUE N m (default 7000), "
-        "recorded instead of the steady runs (repeatable)",
-    )
+    synth.add_argument("--noise", type=float, default=0.02,
+                       help="sensor noise as a fraction of each record's RMS (default 0.02)")
+    synth.add_argument("--ramp", action="append", default=[], metavar="START:STOP:RATE[:TORQUE]",
+                       help="a run-up (or coast-down) START to STOP rpm at RATE rpm/s, drive torque TORQUE N m "
+                       "(default 7000), recorded instead of the steady runs (repeatable)")
+    synth.add_argument("--foreign", type=float, metavar="GRADE",
+                       help="record the foreign virtual rig (a gearbox of another model form than the model's) "
+                       "with gears drawn at ISO 1328-1 class GRADE (1 to 11); takes --effect, --noise, --seed "
+                       "and --ramp, not --true")
+    synth.add_argument("--gears-seed", type=int, metavar="N",
+                       help="with --foreign: seed of the drawn gears (default: --seed); one seed gives the same "
+                       "gears steady and with --ramp, so a healthy reference and a test campaign of one "
+                       "--gears-seed and different --seed share their gears, as diagnose --reference needs")
     synth.set_defaults(handler=_command_synth_rig)
 
     calibrate = commands.add_parser(

@@ -25,6 +25,7 @@ from .foreign_rig import (
     simulate_foreign_run,
 )
 from .foreign_runup import simulate_foreign_runup_campaign
+from .foreign_synth import synth_foreign_rig
 from .format import (
     CONVENTIONS,
     RIG_COORDINATES,
@@ -85,6 +86,7 @@ __all__ = [
     "draw_gears",
     "simulate_foreign_campaign",
     "simulate_foreign_runup_campaign",
+    "synth_foreign_rig",
     "simulate_foreign_run",
     "register_foreign_physics",
     "foreign_qois",
