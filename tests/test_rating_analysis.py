@@ -317,3 +317,55 @@ def test_the_verdict_names_the_coexisting_responses_that_raise_the_damage():
     ), line
     ds["damage_from_rest"] = ds["damage"]
     assert "coexisting" not in rating_verdicts(ds)[0]
+
+
+def test_the_verdict_of_a_calibrated_gear_set_says_where_its_worst_speed_lies_beyond_the_campaign():
+    from uqgear.report.rating_sections import rating_verdicts
+
+    safety = np.array([[[1.9, 1.3], [2.4, 2.0]], [[2.0, 1.5], [2.6, 2.2]]])  # worst: pinion at 4600 rpm
+    ds = xr.Dataset(
+        {"safety_factor_root": (("gear", "bound", "pinion_speed"), safety, {"minimum": 1.4})},
+        coords={"gear": ["pinion", "gear"], "bound": ["lower", "upper"], "pinion_speed": [3000.0, 4600.0]},
+    )
+    assert "campaign" not in rating_verdicts(ds)[0]  # no posterior: nothing to be beyond
+    ds.attrs["campaign_range"] = '{"pinion_speed": [600.0, 3800.0], "drive_torque": [5000.0, 8000.0]}'
+    assert rating_verdicts(ds)[0] == (
+        "tooth root: S_F falls to 1.30 (pinion, 4600 rpm) against the required 1.4 (below it), beyond the rig "
+        "campaign's 600-3800 rpm (the model, not the rig data, carries it)"
+    )
+    ds.attrs["campaign_range"] = '{"pinion_speed": [600.0, 4600.0]}'  # the campaign's own top speed is inside
+    assert "campaign" not in rating_verdicts(ds)[0]
+
+
+def test_a_rating_of_the_calibrated_gear_set_records_the_campaign_it_was_learnt_on(tmp_path):
+    # a one-point posterior learnt at 600 and 1000 rpm: the rating runs with its medians and keeps its campaign range
+    import json
+
+    import uqgear
+    from uqgear.report.rating_sections import rating_verdicts
+
+    rows = np.broadcast_to(np.array([1.05, 0.06]), (2, 10, 2)).copy()
+    design = uqgear.load_design("locomotive")
+    xr.Dataset(
+        {"mesh_stiffness_scale": (("chain", "draw"), rows[..., 0]), "zeta_mesh": (("chain", "draw"), rows[..., 1])},
+        coords={"pinion_speed": ("op", [600.0, 1000.0]), "drive_torque": ("op", [7000.0, 7000.0]),
+                "adhesion_torque_lower": ("op", [25e3, 25e3]), "adhesion_torque_upper": ("op", [40e3, 40e3])},
+        attrs={"converged": 1, "parameters": json.dumps(["mesh_stiffness_scale", "zeta_mesh"]),
+               "design": design.to_json()},
+    ).to_netcdf(tmp_path / "posterior.nc")
+    text = f"""
+name: rated
+seed: 1
+operating_points: {{pinion_speed: [2000, 3000], drive_torque: 7000}}
+uncertain:
+  adhesion_torque: {{interval: [25.0e+3, 40.0e+3]}}
+  calibrated: {{posterior: {tmp_path / "posterior.nc"}, draws: 4}}
+simulation: {{n_periods: 80, keep_periods: 30, starts: false}}
+analyses:
+  - {{type: rating, name: rating, method: vertex, history_points: 2}}
+"""
+    (path,) = uqgear.run_study(uqgear.parse_study(text, base_dir=tmp_path), tmp_path / "out", show_progress=False)
+    result = uqgear.load_result(path)
+    assert json.loads(result.attrs["campaign_range"])["pinion_speed"] == [600.0, 1000.0]
+    assert json.loads(result.attrs["fixed_inputs"])["mesh_stiffness_scale"] == 1.05
+    assert all("beyond the rig campaign's 600-1000 rpm" in line for line in rating_verdicts(result))

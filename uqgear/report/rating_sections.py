@@ -78,6 +78,7 @@ def _verdicts(ds: xr.Dataset) -> list[Finding]:
             f"{what}: {symbol} falls to {facts['safety_factor']:.2f} ({facts['gear']}, "
             f"{facts['pinion_speed']:.0f} rpm) against the required {facts['minimum']:g} ({verdict})"
         )
+        text += _beyond_campaign(ds, facts)
         if f"{name}_iso" in ds:
             facts["safety_factor_iso"] = float(ds[f"{name}_iso"].values[index])
             text += f"; ISO's K_v gives {facts['safety_factor_iso']:.2f} there"
@@ -92,6 +93,19 @@ def _verdicts(ds: xr.Dataset) -> list[Finding]:
                 text += _damage_detail(ds, mode, facts)
         findings.append(Finding(text, facts, topic="rating"))
     return findings
+
+
+def _beyond_campaign(ds: xr.Dataset, facts: dict[str, Any]) -> str:
+    """Where a calibrated gear set's worst speed lies beyond the rig campaign's speeds: said, with the range."""
+    campaign = json.loads(str(ds.attrs.get("campaign_range", "{}")))
+    if "pinion_speed" not in campaign:
+        return ""
+    low, high = campaign["pinion_speed"]
+    speed = facts["pinion_speed"]
+    facts["beyond_campaign"] = bool(speed < low - 1e-9 * high or speed > high * (1 + 1e-9))
+    if not facts["beyond_campaign"]:
+        return ""
+    return f", beyond the rig campaign's {low:.0f}-{high:.0f} rpm (the model, not the rig data, carries it)"
 
 
 def _damage_detail(ds: xr.Dataset, mode: str, facts: dict[str, Any]) -> str:

@@ -144,6 +144,11 @@ def rating_analysis(context: AnalysisContext) -> xr.Dataset:
     result.attrs["damage_over_attractors"] = (
         "none" if starts is None else ("guided" if starts.guided else "every start at every history point")
     )
+    if context.posterior is not None:
+        # the calibrated gear set: its parameters at their posterior medians (the fixed inputs); the verdict
+        # says where a speed lies beyond the campaign they were learnt on
+        result.attrs["posterior_source"] = context.posterior.source
+        result.attrs["campaign_range"] = json.dumps(context.posterior.campaign)
     return result
 
 
