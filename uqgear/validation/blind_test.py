@@ -265,7 +265,7 @@ def blindtest(
         Worker processes of each diagnosis.
     report : bool
         Write ``report.html``.
-    suite : {"library", "real_world", "encoderless"}
+    suite : {"library", "real_world", "encoderless", "runup"}
         ``library``: each library effect alone on a clean rig (above).
         ``real_world`` (:func:`plan_real_world`): ``n_per_effect`` campaigns
         of each real-world kind: two effects at once, a transfer-path
@@ -277,6 +277,11 @@ def blindtest(
         its strength drawn across its ladder, half of them under speed
         wander, and ``n_healthy`` (default 2) such healthy controls;
         ``effects`` does not apply.
+        ``runup`` (:func:`~.runup_campaigns.plan_runup`): ``n_per_effect``
+        campaigns of each real-world kind but those whose only nuisance is
+        pitch errors, each recorded as a run-up and a coast-down that the
+        diagnosis cuts into 8 operating points; ``effects``, ``n_healthy``,
+        ``n_ops`` and ``duration`` do not apply.
 
     Returns
     -------

@@ -94,8 +94,11 @@ _RUNUP_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = (
 _PLAN_KEYS = ("plan", "expected_verdict")
 
 
-def ramp_table(plan: str) -> dict[str, np.ndarray]:
+def ramp_table(plan: str, rate: float | None = None) -> dict[str, np.ndarray]:
     """The ramps of a run-up plan: a run-up and a coast-down over its span (start, stop, rate, torque).
+
+    ``rate`` (rpm/s) replaces the plan's own (benchmarks/runup_segments.py
+    compares rates).
 
     Examples
     --------
@@ -106,7 +109,8 @@ def ramp_table(plan: str) -> dict[str, np.ndarray]:
         from ..diagnosis import DiagnosisError
 
         raise DiagnosisError(f"plan: expected one of {', '.join(RAMP_PLANS)}; got {plan!r}")
-    low, high, rate = _RAMP_SPANS[plan]
+    low, high, own_rate = _RAMP_SPANS[plan]
+    rate = own_rate if rate is None else float(rate)
     return {
         "start_speed": np.array([low, high]),
         "stop_speed": np.array([high, low]),
@@ -174,14 +178,18 @@ def runup_campaign(
     effects: Sequence[Effect],
     seed: np.random.SeedSequence,
     title: str,
+    rate: float | None = None,
 ) -> xr.Dataset:
-    """A run-up suite campaign from the virtual rig, with the spec's nuisances (transfer path last)."""
+    """A run-up suite campaign from the virtual rig, with the spec's nuisances (transfer path last).
+
+    ``rate`` (rpm/s) replaces the plan's ramp rate (:func:`ramp_table`).
+    """
     options: dict[str, Any] = {
         key: value for key, value in spec.nuisances.items() if key not in ("transfer_path", "reference")
     }
     rig = simulate_runup_campaign(
         design,
-        ramp_table(spec.plan),
+        ramp_table(spec.plan, rate),
         true_parameters=dict(truth),
         effects=effects,
         seed=seed,
