@@ -28,7 +28,7 @@ from typing import Any, cast
 import numpy as np
 import xarray as xr
 
-from ..diagnosis import effect_family
+from ..diagnosis import DiagnosisError, effect_family
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..rig.transfer_path import apply_transfer_path
@@ -60,6 +60,8 @@ RAMP_PLANS: tuple[str, ...] = (RUNUP_PLAN, RUNUP_LOW_SPEED_PLAN)
 # bounds the rate by 0.05 n / 0.15 s (267 rpm/s at 800 rpm, 150 at 600); the +-0.5 % wander at 1.3 Hz
 # turns a ramp back where 2 pi f a n exceeds the rate (155 rpm/s at 3800 rpm), so 200 rpm/s serves both.
 # The low speeds: 600-1400 rpm at 80 rpm/s, above the +-1 % 0.7 Hz wander's 62 rpm/s at 1400 rpm.
+# Such segments hold 0.58 gear revolutions at 821 rpm: too few to resolve the gear-order lines, which is what
+# the suite's misses come from (docs/validation/blind-tests.md, "Run-up suite"; benchmarks/runup_segments.py).
 _RAMP_SPANS: dict[str, tuple[float, float, float]] = {
     RUNUP_PLAN: (800.0, 3800.0, 200.0),
     RUNUP_LOW_SPEED_PLAN: (600.0, 1400.0, 80.0),
@@ -106,8 +108,6 @@ def ramp_table(plan: str, rate: float | None = None) -> dict[str, np.ndarray]:
     ([800.0, 3800.0], [8000.0, 5000.0])
     """
     if plan not in _RAMP_SPANS:
-        from ..diagnosis import DiagnosisError
-
         raise DiagnosisError(f"plan: expected one of {', '.join(RAMP_PLANS)}; got {plan!r}")
     low, high, own_rate = _RAMP_SPANS[plan]
     rate = own_rate if rate is None else float(rate)
