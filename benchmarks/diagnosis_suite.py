@@ -18,7 +18,7 @@ made in memory are left out, their reference is not kept). The 50 kHz
 figure (6 runs, at most 60 s) is ``python benchmarks/diagnosis.py
 --fifty-khz``.
 
-Usage: ``python benchmarks/diagnosis_suite.py [--suite real_world|foreign] [--seeds 1 2] [--workers 2]
+Usage: ``python benchmarks/diagnosis_suite.py [--suite real_world|foreign|runup] [--seeds 1 2] [--workers 2]
 [--out DIR] [--compare DIR] [--cli] [--profile]``; ``--out`` keeps the blind tests (``DIR/seed-S``),
 ``--compare`` compares every campaign with an earlier ``--out``: the decisions (verdict, named set, best
 candidate, borderline, cannot-tell) that differ, and how far the figures (gaps, shares, scores) moved.
@@ -30,6 +30,12 @@ diagnosed against a healthy reference campaign of it (``uqgear blindtest --suite
 the change test's and the scoring's times, and for each withheld effect how visible it is to the
 change test ("seen": its noise-free change over the change test's threshold, largest over runs,
 channels and features).
+``--suite runup`` times the run-up suite (``uqgear blindtest --suite runup``: the real-world kinds
+recorded as a run-up and a coast-down, cut into 8 operating points) against the steady real-world
+suite: each run-up campaign diagnosed as the blind test does, and after every ``--steady-every``-th
+(default 3) the steady real-world campaign of the same kind and seed, one after the other so that both
+see the same load; it prints the run-up suite's figures (sets exact, controls), per pair the two
+diagnosis times and their ratio, and the median and slowest of each with their ratios.
 Every campaign is timed with the compiled kernels in numba's cache: a bundled rig file and a
 campaign with pitch errors are diagnosed once, untimed, first. Timings taken while other jobs load
 the machine are noisy: the load average is printed with them.
@@ -51,7 +57,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from uqgear.validation import blindtest, diagnose_campaign, planned_campaigns, run_foreign_suite
+from uqgear.validation import blindtest, diagnose_campaign, planned_campaigns, run_foreign_suite, summarise
 
 # the fields compared between two runs of the suite (a speed change must leave the decisions as they
 # were; the figures may move by rounding, which the comparison measures)
@@ -128,7 +134,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, help="keep the blind tests here (DIR/seed-S)")
     parser.add_argument("--compare", type=Path, help="an earlier --out to compare the verdicts with")
-    parser.add_argument("--suite", choices=("real_world", "foreign"), default="real_world")
+    parser.add_argument("--suite", choices=("real_world", "foreign", "runup"), default="real_world")
+    parser.add_argument("--steady-every", type=int, default=3, metavar="K",
+                        help="--suite runup: time the steady campaign of the kind of every K-th run-up campaign")
     parser.add_argument("--profile", action="store_true",
                         help="profile the slowest campaign's diagnosis again on one process: where its CPU goes")
     parser.add_argument("--cli", action="store_true",
@@ -136,6 +144,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.suite == "foreign":
         foreign(args)
+        return
+    if args.suite == "runup":
+        runup(args)
         return
     print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: "
           f"{_load()}", flush=True)
@@ -223,6 +234,7 @@ PROFILE_PARTS = {
     "FFT (band-limiting, resampling)": ("numpy/fft/", "scipy/fft/", "pypocketfft"),
     "line fits of the features": ("uqgear/rig/line_fit.py",),
     "least-squares solver": ("scipy/optimize/",),
+    "cutting ramps into operating points": ("uqgear/rig/ramp_records.py",),
 }
 
 
@@ -353,6 +365,92 @@ def foreign(args: argparse.Namespace) -> None:
           f"{sum(row[8] for row in rows)} / {len(rows)}")
     print(f"load average at the end: {_load()}")
     scratch.cleanup()
+
+
+def _steady_kind(identifier: str) -> str:
+    """The real-world campaign of a run-up campaign's kind: its identifier without the suite's prefix."""
+    return identifier.removeprefix("runup-")
+
+
+def runup(args: argparse.Namespace) -> None:
+    """The run-up suite's figures and diagnosis times against the steady real-world campaigns of the same kinds."""
+    print(f"cpus available: {os.cpu_count()}, workers: {args.workers}, load average: {_load()}", flush=True)
+    scratch = tempfile.TemporaryDirectory()
+    root = args.out if args.out is not None else Path(scratch.name)
+    rig = Path(__file__).resolve().parent.parent / "data" / "rig" / "tooth_damage.nc"
+    with tempfile.TemporaryDirectory() as folder:
+        seconds = _diagnose(rig, Path(folder) / "d", args.workers)
+    print(f"warm-up (untimed): 'uqgear diagnose {rig.name}' in {seconds:.0f} s", flush=True)
+    pairs: list[tuple[int, str, float, float]] = []
+    runup_walls: list[tuple[float, str]] = []
+    for seed in args.seeds:
+        steady = {spec.identifier: (spec, design, one)
+                  for spec, design, one in planned_campaigns(seed, suite="real_world", n_per_effect=1)}
+        planned = planned_campaigns(seed, suite="runup", n_per_effect=1)
+        started = time.perf_counter()
+        campaigns = []
+        for index, (spec, design, one) in enumerate(planned):
+            entry = diagnose_campaign(spec, design, one, root / f"runup-seed-{seed}" / spec.identifier, n_ops=8,
+                                      duration=1.0, workers=args.workers)
+            campaigns.append(entry)
+            wall = float(entry["timing_s"]["total_wall"])
+            runup_walls.append((wall, f"seed {seed} {spec.identifier}"))
+            line = (f"  {spec.identifier:58s} {entry['verdict']:14s} {str(entry['effects_named']):36s} "
+                    f"diagnosis {wall:6.1f} s (campaign {entry['seconds']:5.0f} s)")
+            counterpart = steady.get(_steady_kind(spec.identifier))
+            if args.steady_every > 0 and index % args.steady_every == 0 and counterpart is not None:
+                other = diagnose_campaign(*counterpart, root / f"steady-seed-{seed}" / counterpart[0].identifier,
+                                          n_ops=8, duration=1.0, workers=args.workers)
+                steady_wall = float(other["timing_s"]["total_wall"])
+                pairs.append((seed, spec.identifier, wall, steady_wall))
+                line += f"; steady {steady_wall:6.1f} s, ratio {wall / steady_wall:4.2f}"
+            print(line + f"; load {_load()}", flush=True)
+        names = tuple(dict.fromkeys(name for spec, _, _ in planned for name in spec.truth_set()))
+        content = summarise(campaigns, names, seconds=time.perf_counter() - started, seed_text=str(seed))
+        (root / f"runup-seed-{seed}").mkdir(parents=True, exist_ok=True)
+        (root / f"runup-seed-{seed}" / "blindtest.json").write_text(json.dumps(content, indent=1, default=str))
+        _runup_figures(seed, campaigns, content)
+    walls = [wall for wall, _ in runup_walls]
+    slowest = max(runup_walls)
+    steady_walls = [pair[3] for pair in pairs]
+    print(f"\nrun-up diagnosis per campaign ({len(walls)}): median {statistics.median(walls):.1f} s, slowest "
+          f"{slowest[0]:.1f} s ({slowest[1]})")
+    if pairs:
+        print(f"steady real-world campaigns of the same kinds ({len(pairs)}): median "
+              f"{statistics.median(steady_walls):.1f} s, slowest {max(steady_walls):.1f} s")
+        print(f"ratios run-up / steady: median {statistics.median(walls) / statistics.median(steady_walls):.2f}, "
+              f"slowest {slowest[0] / max(steady_walls):.2f}, per pair median "
+              f"{statistics.median(pair[2] / pair[3] for pair in pairs):.2f} "
+              f"(range {min(p[2] / p[3] for p in pairs):.2f}-{max(p[2] / p[3] for p in pairs):.2f})")
+    if args.profile:
+        profile(root / f"runup-seed-{slowest[1].split()[1]}" / slowest[1].split()[2] / "rig.nc")
+    print(f"load average at the end: {_load()}")
+    scratch.cleanup()
+
+
+def _runup_figures(seed: int, campaigns: list[dict[str, Any]], content: dict[str, Any]) -> None:
+    """Per family named / campaigns it acts in, controls, and the exact sets of a run-up seed."""
+    sets = content["effect_sets"]
+    families: dict[str, list[int]] = {}
+    for campaign in campaigns:
+        for name in campaign["truth_effects"]:
+            named = families.setdefault(name, [0, 0, 0])
+            named[0] += name in campaign["effects_named"]
+            named[1] += name in campaign.get("identifiable_effects", [])
+            named[2] += 1
+    exact = [c for c in campaigns if (set(c["effects_named"]) == set(c["truth_effects"])
+                                      and (c["truth_effects"] or c["verdict"] == c["expected_verdict"]))]
+    controls = [c for c in campaigns if not c["truth_effects"]]
+    print(f"seed {seed}: sets exact {len(exact)} / {len(campaigns)} (set_exact {sets['set_exact']:.2f}); "
+          f"controls with an effect named {sets['controls_with_an_effect_named']} of {sets['n_controls']}; "
+          f"controls with the right verdict {sum(c['verdict'] == c['expected_verdict'] for c in controls)} of "
+          f"{len(controls)}", flush=True)
+    for name, counts in families.items():
+        print(f"  {name:14s} named {counts[0]} / {counts[2]} (visible to the oracle in {counts[1]})")
+    for campaign in campaigns:
+        if campaign not in exact:
+            print(f"  miss: {campaign['id']}: {campaign['verdict']} {campaign['effects_named']} (truth "
+                  f"{campaign['truth_effects'] or campaign['expected_verdict']}); {campaign['reason']}")
 
 
 if __name__ == "__main__":

@@ -57,7 +57,8 @@ def test_plan_rejects_bad_requests():
         B.blindtest("unused", n_ops=2)
     with pytest.raises(DiagnosisError, match="plan: expected one of service, bearing_check"):
         B.operating_points_of("overspeed", load_design("locomotive"))
-    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world, encoderless; got 'fleet'"):
+    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world, encoderless, runup; "
+                       "got 'fleet'"):
         B.planned_campaigns(0, suite="fleet")
 
 

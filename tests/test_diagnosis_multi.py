@@ -514,7 +514,8 @@ def test_real_world_plan_covers_every_kind():
 
 
 def test_an_unknown_blind_test_suite_is_refused(tmp_path):
-    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world, encoderless; got 'lab'"):
+    with pytest.raises(DiagnosisError, match="suite: expected one of library, real_world, encoderless, runup; "
+                       "got 'lab'"):
         blind_test.blindtest(tmp_path / "b", suite="lab")
 
 

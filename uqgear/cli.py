@@ -11,7 +11,7 @@
                      [--ramp START:STOP:RATE[:TORQUE] ...] [--foreign GRADE [--gears-seed N]]
     uqgear calibrate RIG.nc --out DIR [--design FILE] [--params ...]
     uqgear diagnose RIG.nc --out DIR [--design FILE] [--effects ...] [--reference HEALTHY.nc]
-    uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world|encoderless|foreign]
+    uqgear blindtest --out DIR [--n-per-effect N] [--seed S] [--suite library|real_world|encoderless|runup|foreign]
 
 A user mistake (a study that breaks the schema, a missing file, bad YAML, an
 unreachable scheduler, a rig file without usable signal) ends with exit status
@@ -755,12 +755,13 @@ def build_parser() -> argparse.ArgumentParser:
     blind.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     blind.add_argument(
         "--suite",
-        choices=("library", "real_world", "encoderless", "foreign"),
+        choices=("library", "real_world", "encoderless", "runup", "foreign"),
         default="library",
         help="library: each effect alone on a clean rig (default); real_world: two effects at "
         "once, a transfer-path resonance with a healthy reference, speed wander, pitch errors and "
         "healthy controls with those nuisances (--n-per-effect campaigns of each kind); encoderless: "
         "each effect alone on a rig with accelerometers only, no TE, and two such healthy controls; "
+        "runup: the real_world kinds without pitch errors, each recorded as a run-up and a coast-down; "
         "foreign: what changed since a healthy reference on a rig whose physics is not the model's",
     )
     blind.add_argument(

@@ -126,7 +126,9 @@ def apply_transfer_path(
         A ``uqgear-rig/1`` campaign (:func:`uqgear.rig.read_rig`, a virtual
         rig's output); not modified.
     channel : str
-        The signal to filter: ``te``, ``acc_pinion`` or ``acc_gear``.
+        The signal to filter: ``te``, ``acc_pinion`` or ``acc_gear``; its
+        steady records along ``time`` and its run-up and coast-down records
+        (``ramp_<channel>``) along ``ramp_time``, whichever the campaign holds.
     frequency : float
         Resonance frequency f0, Hz, below the Nyquist frequency.
     damping : float
@@ -153,28 +155,50 @@ def apply_transfer_path(
     """
     if not isinstance(campaign, xr.Dataset):
         raise RigDataError(f"transfer path: expected a rig campaign Dataset; got {type(campaign).__name__}")
-    if channel not in SIGNAL_CHANNELS or channel not in campaign.data_vars:
-        present = [name for name in SIGNAL_CHANNELS if name in campaign.data_vars]
+    # the channel's steady records on time and its ramp records on ramp_time: one sensor, one path
+    targets = [
+        (name, dim)
+        for name, dim in ((channel, "time"), (f"ramp_{channel}", "ramp_time"))
+        if channel in SIGNAL_CHANNELS and name in campaign.data_vars
+    ]
+    if not targets:
+        present = [name for name in SIGNAL_CHANNELS if {name, f"ramp_{name}"} & set(campaign.data_vars)]
         raise RigDataError(
             f"transfer path: channel {channel!r}: expected a signal of the campaign, one of "
             f"{', '.join(present) or 'none (the campaign has no signal)'}"
         )
-    if "time" not in campaign.coords:
-        raise RigDataError("transfer path: the campaign has no time coordinate")
-    fs = sampling_rate(np.asarray(campaign["time"].values, dtype=float), where="transfer path: time")
     frequency = _check_positive("frequency", frequency)
     damping = _check_positive("damping", damping)
-    if frequency >= 0.5 * fs:
-        raise RigDataError(
-            f"transfer path: frequency: expected below the Nyquist frequency {0.5 * fs:g} Hz; got {frequency:g}"
-        )
     if damping >= 1.0:
         raise RigDataError(f"transfer path: damping: expected a damping ratio below 1; got {damping:g}")
     if gain is not None:
         gain = _check_positive("gain", gain)
+    out = campaign.copy()
+    peak = math.nan
+    for name, dim in targets:
+        if dim not in campaign.coords:
+            raise RigDataError(f"transfer path: the campaign has no {dim} coordinate")
+        fs = sampling_rate(np.asarray(campaign[dim].values, dtype=float), where=f"transfer path: {dim}")
+        if frequency >= 0.5 * fs:
+            raise RigDataError(
+                f"transfer path: frequency: expected below the Nyquist frequency {0.5 * fs:g} Hz; got {frequency:g}"
+            )
+        out[name], peak = _filtered(campaign[name], dim, frequency, damping, fs, gain)
+    note = (
+        f"{channel} filtered through a transfer-path resonance at {frequency:g} Hz, damping {damping:g}, "
+        f"peak gain {peak:.3g} (uqgear.rig.apply_transfer_path)"
+    )
+    history = str(out.attrs.get("history", "")).strip()
+    out.attrs["history"] = f"{history}; {note}" if history else note
+    return out
+
+
+def _filtered(
+    signal: xr.DataArray, dim: str, frequency: float, damping: float, fs: float, gain: float | None
+) -> tuple[xr.DataArray, float]:
+    """One variable's records along ``dim`` through the resonance, with its attributes; and the peak gain."""
     b, a = transfer_path_coefficients(frequency, damping, fs, gain)
-    signal = campaign[channel]
-    values = np.asarray(signal.transpose(..., "time").values, dtype=float)
+    values = np.asarray(signal.transpose(..., dim).values, dtype=float)
     flat = values.reshape(-1, values.shape[-1])
     run_in = min(flat.shape[1] - 1, int(math.ceil(_RUN_IN_TIME_CONSTANTS * fs / (2 * math.pi * frequency * damping))))
     filtered = np.full_like(flat, np.nan)
@@ -184,31 +208,23 @@ def apply_transfer_path(
         # odd reflection about the first sample: continuous in value and slope, a steady-looking run-in
         head = 2.0 * record[0] - record[run_in:0:-1]
         filtered[row] = scipy.signal.lfilter(b, a, np.concatenate([head, record]))[run_in:]
-    out = campaign.copy()
     attrs = dict(signal.attrs)
     attrs.pop("noise_std", None)
+    peak = float(transfer_path_gain(np.array([frequency]), frequency, damping, fs, gain)[0])
     entry = {
         "kind": "sensor" if gain is None else "resonance",
         "frequency": frequency,
         "damping": damping,
-        "peak_gain": float(transfer_path_gain(np.array([frequency]), frequency, damping, fs, gain)[0]),
+        "peak_gain": peak,
         "discretisation": "bilinear, prewarped at the resonance",
         "fs": fs,
     }
     previous = json.loads(attrs[TRANSFER_PATH_ATTRIBUTE]) if TRANSFER_PATH_ATTRIBUTE in attrs else []
     attrs[TRANSFER_PATH_ATTRIBUTE] = json.dumps(previous + [entry])
-    order = signal.transpose(..., "time").dims
     result = xr.DataArray(
         filtered.reshape(values.shape).astype(signal.dtype, copy=False),
-        dims=order,
-        coords=signal.transpose(..., "time").coords,
+        dims=signal.transpose(..., dim).dims,
+        coords=signal.transpose(..., dim).coords,
         attrs=attrs,
     ).transpose(*signal.dims)
-    out[channel] = result
-    note = (
-        f"{channel} filtered through a transfer-path resonance at {frequency:g} Hz, damping {damping:g}, "
-        f"peak gain {entry['peak_gain']:.3g} (uqgear.rig.apply_transfer_path)"
-    )
-    history = str(out.attrs.get("history", "")).strip()
-    out.attrs["history"] = f"{history}; {note}" if history else note
-    return out
+    return result, peak

@@ -1,7 +1,8 @@
 """Validation of the diagnosis on virtual-rig campaigns whose effects are withheld: the blind test.
 
 :mod:`.campaigns` plans the campaigns of a suite and makes them with the
-virtual rig, :mod:`.oracle` judges how visible their effects are
+virtual rig (:mod:`.runup_campaigns` those recorded as run-ups and
+coast-downs), :mod:`.oracle` judges how visible their effects are
 independently of the diagnosis, :mod:`.blind_test` diagnoses them blind and
 :mod:`.scores` scores the verdicts. The record of what the diagnosis's rules
 were measured on is docs/validation/diagnosis.md.
@@ -29,6 +30,7 @@ from .campaigns import (
 )
 from .foreign_suite import run_foreign_suite
 from .oracle import effect_visibility, oracle_gap
+from .runup_campaigns import plan_runup
 from .scores import blindtest_dataset, set_scores, summarise
 
 __all__ = [
@@ -38,6 +40,7 @@ __all__ = [
     "plan_campaigns",
     "plan_real_world",
     "plan_encoderless",
+    "plan_runup",
     "rig_campaign",
     "summarise",
     "set_scores",

@@ -28,7 +28,9 @@ from ..diagnosis.inputs import as_seed, check_workers
 from ..diagnosis.outputs import json_clean
 from ..diagnosis.settings import DEFAULT_SETTINGS
 from ..physics.design import Design, load_design
+from ..physics.effects import Effect
 from ..rig.format import write_rig
+from ..rig.ramp_records import points_truth
 from ..rig.virtual_rig import DEFAULT_PINION_SPEEDS
 from ..uq.results import json_default, save_result
 from .campaigns import (
@@ -46,6 +48,7 @@ from .campaigns import (
     true_values,
 )
 from .oracle import effect_visibility, oracle_gap
+from .runup_campaigns import RAMP_PLANS, plan_runup, runup_campaign
 from .scores import blindtest_dataset, summarise
 
 # Attributes of a virtual-rig campaign that say what it holds: taken off before the diagnosis sees it.
@@ -78,42 +81,34 @@ def diagnose_campaign(
     # a fourth child leaves the first three (and so every library-suite campaign) as they were
     generation_seed, noise_seed, diagnosis_seed, reference_seed = seed.spawn(4)
     truth = true_values(spec, design)
-    operating_points = operating_points_of(spec.plan, design, n_ops)
-    rig = rig_campaign(
-        spec,
-        design,
-        operating_points,
-        truth,
-        spec.effects(),
-        generation_seed,
-        duration,
-        f"blind-test campaign {spec.identifier}",
-    )
+    if spec.plan in RAMP_PLANS:
+
+        def make(effects: list[Effect], seed: np.random.SeedSequence, title: str) -> xr.Dataset:
+            return runup_campaign(spec, design, truth, effects, seed, title)
+
+    else:
+        operating_points = operating_points_of(spec.plan, design, n_ops)
+
+        def make(effects: list[Effect], seed: np.random.SeedSequence, title: str) -> xr.Dataset:
+            return rig_campaign(spec, design, operating_points, truth, effects, seed, duration, title)
+
+    rig = make(spec.effects(), generation_seed, f"blind-test campaign {spec.identifier}")
     folder.mkdir(parents=True, exist_ok=True)
     write_rig(folder / "rig.nc", rig)
     healthy_seed, learn_seed = reference_seed.spawn(2)
     reference = None
     if spec.nuisances.get("reference"):
         # a healthy campaign of the same rig (its nuisances, its own noise and T2), learned blind too
-        reference = _blind(
-            rig_campaign(
-                spec,
-                design,
-                operating_points,
-                truth,
-                [],
-                healthy_seed,
-                duration,
-                f"healthy reference of {spec.identifier}",
-            )
-        )
+        reference = _blind(make([], healthy_seed, f"healthy reference of {spec.identifier}"))
     diagnosis = Diagnosis(
         design=design,
         seed=DiagnosisSeeds(noise_seed, diagnosis_seed, learn_seed),
         workers=workers,
         reference_route="transfer",
     ).fit(_blind(rig), reference=reference)
-    recorded_truth = json.loads(rig.attrs["true_parameters"])
+    # the true T2 of each operating point the diagnosis read (a ramp's for each of its segments)
+    sources = [str(row.get("source", "steady")) for row in diagnosis.features_.speed]
+    recorded_truth = points_truth(rig, sources) or {}
     known = {**truth, "adhesion_torque": recorded_truth["adhesion_torque"]}
     entry = _judged(
         spec,
@@ -210,6 +205,10 @@ def planned_campaigns(
         plan_seed, campaigns_seed = as_seed(seed).spawn(3)[2].spawn(2)
         healthy = {} if n_healthy is None else {"n_healthy": n_healthy}
         specs = plan_encoderless(n_per_effect, np.random.default_rng(plan_seed), designs=designs, **healthy)
+    elif suite == "runup":
+        # the seed's fourth child, a stream of its own
+        plan_seed, campaigns_seed = as_seed(seed).spawn(4)[3].spawn(2)
+        specs = plan_runup(n_per_effect, np.random.default_rng(plan_seed), designs=designs)
     else:
         plan_seed, campaigns_seed = as_seed(seed).spawn(2)
         if suite == "library":
@@ -266,7 +265,7 @@ def blindtest(
         Worker processes of each diagnosis.
     report : bool
         Write ``report.html``.
-    suite : {"library", "real_world", "encoderless"}
+    suite : {"library", "real_world", "encoderless", "runup"}
         ``library``: each library effect alone on a clean rig (above).
         ``real_world`` (:func:`plan_real_world`): ``n_per_effect`` campaigns
         of each real-world kind: two effects at once, a transfer-path
@@ -278,6 +277,11 @@ def blindtest(
         its strength drawn across its ladder, half of them under speed
         wander, and ``n_healthy`` (default 2) such healthy controls;
         ``effects`` does not apply.
+        ``runup`` (:func:`~.runup_campaigns.plan_runup`): ``n_per_effect``
+        campaigns of each real-world kind but those whose only nuisance is
+        pitch errors, each recorded as a run-up and a coast-down that the
+        diagnosis cuts into 8 operating points; ``effects``, ``n_healthy``,
+        ``n_ops`` and ``duration`` do not apply.
 
     Returns
     -------

@@ -47,9 +47,10 @@ PLANS: tuple[str, ...] = ("service", "bearing_check")
 LOW_SPEED_PLAN = "low_speed"
 LOW_SPEED_PINION_SPEEDS: tuple[float, ...] = (500.0, 600.0, 700.0, 800.0, 950.0, 1100.0, 1250.0, 1400.0)
 
-#: Blind-test suites: the library's effects one at a time on a clean rig, real-world campaigns, or each
-#: effect on a rig without encoders (accelerometers only).
-SUITES: tuple[str, ...] = ("library", "real_world", "encoderless")
+#: Blind-test suites: the library's effects one at a time on a clean rig, real-world campaigns, each
+#: effect on a rig without encoders (accelerometers only), or the real-world campaigns as run-ups and
+#: coast-downs (:mod:`.runup_campaigns`).
+SUITES: tuple[str, ...] = ("library", "real_world", "encoderless", "runup")
 
 #: The encoder-less suite's channels: the two bearing housings' accelerometers, no TE.
 ENCODERLESS_CHANNELS: tuple[str, ...] = ("acc_pinion", "acc_gear")
