@@ -46,7 +46,7 @@ from uqgear.physics.effect_draws import draw_effect_sets
 from uqgear.rig.transfer_path import apply_transfer_path
 from uqgear.rig.virtual_rig import simulate_campaign
 from uqgear.uq.prediction import scale_dynamic_part
-from uqgear.validation.campaigns import _scattered_truth, effect_draw, scattered_values
+from uqgear.validation.campaigns import effect_draw, scattered_truth, scattered_values
 
 QOIS = ("peak_mesh_force", "dynamic_load_factor", "dte_rms")
 #: Held-out operating points: speeds between the campaign's (600-3800 rpm), other drive torques.
@@ -57,7 +57,7 @@ DRAWS = 64
 
 def draw_campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
     """What is random about a campaign (the truth, its effects, the simulation's seed): drawn from ``rng``."""
-    truth = scattered_values(_scattered_truth(rng), design)
+    truth = scattered_values(scattered_truth(rng), design)
     effects, options, transfer = [], {}, None
     if kind == "healthy":
         options["speed_wander"] = [(0.005, 1.3)]

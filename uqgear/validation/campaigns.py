@@ -145,7 +145,7 @@ def plan_campaigns(
         for k in range(count):
             # healthy controls alternate the plans first and the designs second
             design_name = designs[(k // len(PLANS) if truth == HEALTHY else k) % len(designs)]
-            true_parameters = _scattered_truth(rng)
+            true_parameters = scattered_truth(rng)
             if truth == HEALTHY:
                 specs.append(
                     CampaignSpec(
@@ -168,30 +168,35 @@ def plan_campaigns(
 
 # The real-world suite's kinds, each a function of the draw. Strengths are the ladder's strong level
 # (the public campaigns' own) or medium, so that a miss is the rig's doing, not the effect's weakness.
-_RESONANCE: dict[str, object] = {"transfer_path": (2500.0, 0.05)}
-_WANDER: dict[str, object] = {"speed_wander": [(0.005, 1.3)]}
+# The nuisance sets without pitch errors are public: the run-up suite (runup_campaigns) takes them too.
+RESONANCE_NUISANCES: dict[str, object] = {"transfer_path": (2500.0, 0.05)}
+WANDER_NUISANCES: dict[str, object] = {"speed_wander": [(0.005, 1.3)]}
 _PITCH: dict[str, object] = {"pitch_errors": 7}
-_MAINS_NOISE: dict[str, object] = {"line_interference": {50.0: 0.5, 150.0: 0.2}, "relative_noise": 0.03}
-_ALL_NUISANCES: dict[str, object] = {**_WANDER, **_PITCH, **_MAINS_NOISE}
-_ACCELEROMETERS: dict[str, object] = {"channels": ("acc_pinion", "acc_gear")}
+MAINS_NOISE_NUISANCES: dict[str, object] = {"line_interference": {50.0: 0.5, 150.0: 0.2}, "relative_noise": 0.03}
+_ALL_NUISANCES: dict[str, object] = {**WANDER_NUISANCES, **_PITCH, **MAINS_NOISE_NUISANCES}
+ACCELEROMETER_NUISANCES: dict[str, object] = {"channels": ("acc_pinion", "acc_gear")}
 # an eccentric encoder mounting on both shafts: TE lines at 1x pinion and 1x gear rotation, nothing else
-_ENCODER: dict[str, object] = {"encoder_run_out": {"pinion": 8e-6, "gear": 8e-6}}
+ENCODER_NUISANCES: dict[str, object] = {"encoder_run_out": {"pinion": 8e-6, "gear": 8e-6}}
 _REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = (
     # (kind, effects (leading first), nuisances)
     ("two_effects", ("eccentricity", "tooth_damage"), {}),
     ("two_effects", ("torque_ripple", "tooth_damage"), {}),
     ("two_effects_nuisances", ("eccentricity", "friction"), _ALL_NUISANCES),
-    ("resonance_reference", ("eccentricity",), {**_RESONANCE, "reference": True}),
-    ("wander", ("tooth_damage",), _WANDER),
+    ("resonance_reference", ("eccentricity",), {**RESONANCE_NUISANCES, "reference": True}),
+    ("wander", ("tooth_damage",), WANDER_NUISANCES),
     ("pitch_errors", ("eccentricity",), _PITCH),
-    ("control_wander", (), _WANDER),
+    ("control_wander", (), WANDER_NUISANCES),
     ("control_pitch_errors", (), _PITCH),
-    ("control_mains_noise", (), _MAINS_NOISE),
+    ("control_mains_noise", (), MAINS_NOISE_NUISANCES),
     ("control_all_nuisances", (), _ALL_NUISANCES),
-    ("control_resonance_reference", (), {**_RESONANCE, "reference": True}),
+    ("control_resonance_reference", (), {**RESONANCE_NUISANCES, "reference": True}),
     # healthy class-7 gears at low speeds under wander of several levels and rates, 3-5 % noise, with and
     # without the TE: the gear's sidebands crowd their carrier where the order tracking follows the wander
-    ("control_wander_accelerometers", (), {**_WANDER, **_PITCH, "relative_noise": 0.03, **_ACCELEROMETERS}),
+    (
+        "control_wander_accelerometers",
+        (),
+        {**WANDER_NUISANCES, **_PITCH, "relative_noise": 0.03, **ACCELEROMETER_NUISANCES},
+    ),
     (
         "control_low_speed_wander",
         (),
@@ -204,13 +209,13 @@ _REAL_WORLD_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = 
             "speed_wander": [(0.01, 2.0)],
             "pitch_errors": 8,
             "relative_noise": 0.05,
-            **_ACCELEROMETERS,
+            **ACCELEROMETER_NUISANCES,
             "plan": LOW_SPEED_PLAN,
         },
     ),
     # one sensor's artefact: the encoder's mounting run-out alone (unexplained, on te), and beside a run-out
-    ("encoder_run_out", (), {**_ENCODER, "expected_verdict": "unexplained"}),
-    ("encoder_run_out", ("eccentricity",), _ENCODER),
+    ("encoder_run_out", (), {**ENCODER_NUISANCES, "expected_verdict": "unexplained"}),
+    ("encoder_run_out", ("eccentricity",), ENCODER_NUISANCES),
 )
 
 # keys of a kind's nuisances that are not options of the virtual rig
@@ -224,7 +229,7 @@ def effect_draw(name: str, strength: float, rng: np.random.Generator) -> dict[st
     return effect_family(name).campaign_values(strength, phase, rng)
 
 
-def _scattered_truth(rng: np.random.Generator) -> dict[str, float]:
+def scattered_truth(rng: np.random.Generator) -> dict[str, float]:
     """True nominal parameters scattered around the design's."""
     return {
         "mesh_stiffness_scale": float(rng.uniform(0.93, 1.07)),
@@ -258,7 +263,7 @@ def plan_real_world(
     for kind, effect_names, nuisances in _REAL_WORLD_KINDS:
         for k in range(n_per_kind):
             design_name = designs[k % len(designs)]
-            truth = _scattered_truth(rng)
+            truth = scattered_truth(rng)
             plan = str(nuisances.get("plan", "service"))
             expected = str(nuisances.get("expected_verdict", ""))
             rig_nuisances = {key: value for key, value in nuisances.items() if key not in _PLAN_KEYS}
@@ -322,8 +327,8 @@ def plan_encoderless(
     for truth in LIBRARY_EFFECTS + (HEALTHY,):
         for k in range(n_healthy if truth == HEALTHY else n_per_effect):
             design_name = designs[k % len(designs)]
-            scatter = _scattered_truth(rng)
-            nuisances: dict[str, object] = {"channels": ENCODERLESS_CHANNELS, **(_WANDER if k % 2 else {})}
+            scatter = scattered_truth(rng)
+            nuisances: dict[str, object] = {"channels": ENCODERLESS_CHANNELS, **(WANDER_NUISANCES if k % 2 else {})}
             identifier = f"encoderless-{truth}-{k}"
             if truth == HEALTHY:
                 plan = PLANS[k % len(PLANS)]
@@ -347,7 +352,7 @@ def true_values(spec: CampaignSpec, design: Design) -> dict[str, float]:
 
 
 def scattered_values(factors: Mapping[str, float], design: Design) -> dict[str, float]:
-    """Parameters in natural units from a scatter (:func:`_scattered_truth`) applied to the design's values."""
+    """Parameters in natural units from a scatter (:func:`scattered_truth`) applied to the design's values."""
     return {
         "mesh_stiffness_scale": factors["mesh_stiffness_scale"],
         "zeta_mesh": design.zeta_mesh * factors["zeta_mesh_factor"],
@@ -428,6 +433,12 @@ __all__ = [
     "plan_encoderless",
     "ENCODERLESS_CHANNELS",
     "effect_draw",
+    "scattered_truth",
+    "RESONANCE_NUISANCES",
+    "WANDER_NUISANCES",
+    "MAINS_NOISE_NUISANCES",
+    "ACCELEROMETER_NUISANCES",
+    "ENCODER_NUISANCES",
     "true_values",
     "operating_points_of",
     "rig_campaign",

@@ -35,19 +35,19 @@ from ..rig.transfer_path import apply_transfer_path
 from ..rig.virtual_rig import DEFAULT_DRIVE_TORQUES
 from ..rig.virtual_runup import simulate_runup_campaign
 from .campaigns import (
-    _ACCELEROMETERS,
-    _ENCODER,
-    _MAINS_NOISE,
-    _RESONANCE,
-    _WANDER,
+    ACCELEROMETER_NUISANCES,
     DESIGNS,
+    ENCODER_NUISANCES,
     HEALTHY,
+    MAINS_NOISE_NUISANCES,
+    RESONANCE_NUISANCES,
     STRENGTHS,
+    WANDER_NUISANCES,
     CampaignSpec,
-    _scattered_truth,
     check_count,
     check_designs,
     effect_draw,
+    scattered_truth,
 )
 
 #: The run-up suite's test plans: a run-up and a coast-down over the service span, or over the low speeds.
@@ -74,22 +74,22 @@ _RUNUP_KINDS: tuple[tuple[str, tuple[str, ...], dict[str, object]], ...] = (
     # (kind, effects (leading first), nuisances): the real-world kinds without pitch errors
     ("two_effects", ("eccentricity", "tooth_damage"), {}),
     ("two_effects", ("torque_ripple", "tooth_damage"), {}),
-    ("two_effects_nuisances", ("eccentricity", "friction"), {**_WANDER, **_MAINS_NOISE}),
-    ("resonance_reference", ("eccentricity",), {**_RESONANCE, "reference": True}),
-    ("wander", ("tooth_damage",), _WANDER),
-    ("control_wander", (), _WANDER),
-    ("control_mains_noise", (), _MAINS_NOISE),
-    ("control_all_nuisances", (), {**_WANDER, **_MAINS_NOISE}),
-    ("control_resonance_reference", (), {**_RESONANCE, "reference": True}),
-    ("control_wander_accelerometers", (), {**_WANDER, "relative_noise": 0.03, **_ACCELEROMETERS}),
+    ("two_effects_nuisances", ("eccentricity", "friction"), {**WANDER_NUISANCES, **MAINS_NOISE_NUISANCES}),
+    ("resonance_reference", ("eccentricity",), {**RESONANCE_NUISANCES, "reference": True}),
+    ("wander", ("tooth_damage",), WANDER_NUISANCES),
+    ("control_wander", (), WANDER_NUISANCES),
+    ("control_mains_noise", (), MAINS_NOISE_NUISANCES),
+    ("control_all_nuisances", (), {**WANDER_NUISANCES, **MAINS_NOISE_NUISANCES}),
+    ("control_resonance_reference", (), {**RESONANCE_NUISANCES, "reference": True}),
+    ("control_wander_accelerometers", (), {**WANDER_NUISANCES, "relative_noise": 0.03, **ACCELEROMETER_NUISANCES}),
     ("control_low_speed_wander", (), {"speed_wander": [(0.01, 0.7)], "relative_noise": 0.03, **_LOW_SPEED}),
     (
         "control_low_speed_wander_accelerometers",
         (),
-        {"speed_wander": [(0.01, 0.7)], "relative_noise": 0.05, **_ACCELEROMETERS, **_LOW_SPEED},
+        {"speed_wander": [(0.01, 0.7)], "relative_noise": 0.05, **ACCELEROMETER_NUISANCES, **_LOW_SPEED},
     ),
-    ("encoder_run_out", (), {**_ENCODER, "expected_verdict": "unexplained"}),
-    ("encoder_run_out", ("eccentricity",), _ENCODER),
+    ("encoder_run_out", (), {**ENCODER_NUISANCES, "expected_verdict": "unexplained"}),
+    ("encoder_run_out", ("eccentricity",), ENCODER_NUISANCES),
 )
 
 # keys of a kind's nuisances that are not options of the virtual rig
@@ -143,7 +143,7 @@ def plan_runup(n_per_kind: int, rng: np.random.Generator, *, designs: Sequence[s
     for kind, effect_names, nuisances in _RUNUP_KINDS:
         for k in range(n_per_kind):
             design_name = designs[k % len(designs)]
-            truth = _scattered_truth(rng)
+            truth = scattered_truth(rng)
             plan = str(nuisances.get("plan", RUNUP_PLAN))
             expected = str(nuisances.get("expected_verdict", ""))
             rig_nuisances = {key: value for key, value in nuisances.items() if key not in _PLAN_KEYS}
