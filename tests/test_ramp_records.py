@@ -18,7 +18,13 @@ from uqgear.physics.effects import make_effect
 from uqgear.rig.features import extract_features
 from uqgear.rig.format import make_ramp_dataset, make_rig_dataset, read_rig, validate_rig, write_rig
 from uqgear.rig.ramp_format import reversal
-from uqgear.rig.ramp_records import MAX_SPEED_CHANGE, ramp_operating_points, steady_campaign
+from uqgear.rig.ramp_records import (
+    MAX_SPEED_CHANGE,
+    RESOLVED_GEAR_REVOLUTIONS,
+    ramp_operating_points,
+    segment_notes,
+    steady_campaign,
+)
 from uqgear.rig.virtual_rig import simulate_campaign
 from uqgear.rig.virtual_runup import join_campaigns, simulate_runup_campaign
 
@@ -332,5 +338,28 @@ def test_diagnosis_of_a_run_up_names_the_effect_of_steady_runs(design, tmp_path)
         write_rig(tmp_path / "runup.nc", campaign), tmp_path / "out", effects=["eccentricity"], workers=1, report=False
     )
     assert content["verdict"] == "eccentricity", content["reason"]
-    speed = json.loads((tmp_path / "out" / "diagnosis.json").read_text())["rig"]["speed"]
-    assert [row["source"] for row in speed] == ["ramp 0"] * 8
+    record = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
+    assert [row["source"] for row in record["rig"]["speed"]] == ["ramp 0"] * 8
+    # 300 rpm/s from 1500 rpm: segments of 0.25 s hold 1.3 gear revolutions, which the record says
+    (note,) = record["rig_notes"]
+    assert "gear revolutions (operating point 0" in note and "ramp 0" in note
+
+
+def _cut(size: int, speeds: list[float], sources: list[str], fs: float = 20480.0) -> xr.Dataset:
+    coords = {"time": np.arange(size) / fs, "pinion_speed": ("op", speeds), "op_source": ("op", sources)}
+    return xr.Dataset(coords=coords)
+
+
+def test_segment_notes_name_the_shortest_ramp_segment_and_the_rate_that_resolves_the_gear(design):
+    ratio = design.z1 / design.z2
+    # 0.25 s at 1500 and 3000 rpm: 1.30 and 2.60 gear revolutions; the note names the first
+    (note,) = segment_notes(_cut(5120, [3000.0, 1500.0], ["ramp 0", "ramp 1"]), design)
+    revolutions = 0.25 * 1500.0 / 60.0 * ratio
+    assert f"as few as {revolutions:.2f} gear revolutions (operating point 1, 1500 rpm, ramp 1)" in note
+    # the rate: RESOLVED_GEAR_REVOLUTIONS gear revolutions within MAX_SPEED_CHANGE of speed change
+    length = RESOLVED_GEAR_REVOLUTIONS * 60.0 / (1500.0 * ratio)
+    assert f"at most {MAX_SPEED_CHANGE * 1500.0 / length:.0f} rpm/s at 1500 rpm" in note
+    # long enough segments, steady runs and a campaign without op_source get none
+    assert segment_notes(_cut(20480, [1500.0, 3000.0], ["ramp 0", "ramp 0"]), design) == []
+    assert segment_notes(_cut(1024, [600.0, 800.0], ["steady", "steady"]), design) == []
+    assert segment_notes(xr.Dataset(coords={"time": np.arange(8) / 8.0}), design) == []

@@ -268,7 +268,7 @@ class Diagnosis(FittedState):
             start = "calibration posterior medians" if inputs.posterior is not None else "design values"
             content["nominal"]["start"] = start
             maps = result_dataset(outcome, spectra)
-        content = completed(content, maps, inputs.design, reference_summary)
+        content = completed(content, maps, inputs.design, reference_summary, inputs.rig)
         return DiagnosisFit(
             inputs.design, self.steps_, features, outcome.case, outcome.decision, content, maps, outcome=outcome
         )
@@ -290,7 +290,7 @@ class Diagnosis(FittedState):
                 )
             )
             maps = unfitted_dataset(case, decision, self.effects)
-        content = completed(content, maps, inputs.design, reference_summary)
+        content = completed(content, maps, inputs.design, reference_summary, inputs.rig)
         return DiagnosisFit(inputs.design, self.steps_, case, case, decision, content, maps)
 
 

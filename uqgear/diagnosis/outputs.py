@@ -217,16 +217,23 @@ def _strongest_lines(case: RigCase) -> list[float | None]:
 
 
 def completed(
-    content: dict[str, Any], maps: xr.Dataset, design: Design, reference: Mapping[str, Any] | None = None
+    content: dict[str, Any],
+    maps: xr.Dataset,
+    design: Design,
+    reference: Mapping[str, Any] | None = None,
+    rig: xr.Dataset | None = None,
 ) -> dict[str, Any]:
-    """The record with a reference's summary (and its fit's time, where one was fitted) and the design's notes.
+    """The record with a reference's summary (and its fit's time, where one was fitted) and the design's and rig's
+    notes.
 
     ``reference`` is the reference's summary (``file``, and ``seconds`` when
     a model was fitted to it); ``maps`` (``diagnosis.nc``) names its file.
     ``design_notes`` says what the model did with the design's geometry (an
-    undercut tooth).
+    undercut tooth); ``rig_notes`` what the campaign ``rig`` (as the diagnosis read it) cannot show (ramp
+    segments too short for the gear's lines, :func:`uqgear.rig.ramp_records.segment_notes`).
     """
     from ..physics.geometry import geometry_notes
+    from ..rig.ramp_records import segment_notes
 
     if reference is not None:
         content["reference"] = json_clean(dict(reference))
@@ -234,6 +241,7 @@ def completed(
         if "seconds" in reference and isinstance(content.get("timing_s"), dict):
             content["timing_s"]["reference_fit"] = reference["seconds"]
     content["design_notes"] = geometry_notes(design)
+    content["rig_notes"] = segment_notes(rig, design) if rig is not None else []
     return content
 
 

@@ -157,6 +157,12 @@ def _design_notes(content: Mapping[str, Any]) -> list[str]:
             for note in content.get("design_notes") or []]
 
 
+def _rig_notes(content: Mapping[str, Any]) -> list[str]:
+    """Paragraphs saying what the campaign cannot show (ramp segments too short for the gear's lines)."""
+    return [f'<p class="note"><b>Rig data:</b> {html.escape(str(note))}.</p>'
+            for note in content.get("rig_notes") or []]
+
+
 def _percent(value: Any) -> str:
     return "-" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f} %"
 
@@ -180,7 +186,7 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
     if not content:
         return []
     if content.get("change"):
-        return change_findings(content)
+        return [*change_findings(content), *_rig_findings(content)]
     findings = []
     verdict = str(content.get("verdict", "?"))
     reason = str(content.get("reason", "")).rstrip(".")
@@ -277,7 +283,12 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
                                 {key: entry.get(key) for key in ("effect", "shaft", "run_out_m",
                                                                  "share_of_class_gears_below", "classes")},
                                 "cannot_tell"))
-    return findings
+    return [*findings, *_rig_findings(content)]
+
+
+def _rig_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """What the campaign cannot show, on the first screen: a verdict read from it carries that caveat."""
+    return [Finding(f"Rig data: {note}.", {"rig_note": note}, "rig") for note in content.get("rig_notes") or []]
 
 
 def _parameter_text(entry: Mapping[str, Any]) -> str:
@@ -419,6 +430,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
              f'<p>{html.escape(content["reason"])}.</p>',
              *_decision_notes(content),
              *_design_notes(content),
+             *_rig_notes(content),
              "<h2>How far: the gap on held-out runs</h2>",
              _table(["metric", "nominal model", "with effect", "effect", "shrink fraction", "90 % interval"],
                     [[gap["metric"], gap["baseline"], gap["with_effect"], gap["effect"], gap["shrink_fraction"],

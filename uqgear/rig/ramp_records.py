@@ -83,6 +83,13 @@ MAX_SPEED_CHANGE = 0.05
 #: Fewest pinion revolutions in a segment at its mean speed.
 MIN_REVOLUTIONS = 2.0
 
+#: Gear revolutions a ramp segment holds at least for its gear-order lines to compare with steady runs:
+#: on virtual run-ups, segments of 0.6 gear revolutions (200 rpm/s at 820 rpm) read those lines 20-70 % of the
+#: channel's largest line off steady runs at their speeds and left healthy gears ``unexplained``; 1.9
+#: revolutions (60 rpm/s) read them within 4 % and were diagnosed right (docs/validation/blind-tests.md,
+#: "Run-up suite").
+RESOLVED_GEAR_REVOLUTIONS = 2.0
+
 #: Name of the operating points' coordinate telling where each came from.
 OP_SOURCE = "op_source"
 
@@ -474,8 +481,68 @@ def steady_campaign(
     return combined
 
 
+def segment_notes(dataset: xr.Dataset, design: Design) -> list[str]:
+    """What a campaign cut from ramps cannot show: segments too short for the gear's lines.
+
+    A segment of a ramp holds at least :data:`MIN_REVOLUTIONS` of the pinion, but the gear turns z2 / z1
+    times slower; below :data:`RESOLVED_GEAR_REVOLUTIONS` the gear-order lines (the gear's shaft orders and
+    the gear sidebands of the mesh harmonics) are not resolved. The note names the shortest segment and the
+    ramp rate at that speed that would give the segments enough gear revolutions (at most
+    :data:`MAX_SPEED_CHANGE` speed change a segment). Steady runs get no note.
+
+    Parameters
+    ----------
+    dataset : xarray.Dataset
+        A campaign as :func:`steady_campaign` reads it (coordinate ``op_source``).
+    design : Design
+        Its design (the tooth numbers).
+
+    Returns
+    -------
+    list of str
+        One sentence, or none where every ramp segment holds enough gear revolutions.
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> from uqgear.physics.design import load_design
+    >>> from uqgear.rig.ramp_records import segment_notes
+    >>> fs, size = 20480.0, 4198  # segments of 0.205 s, as 200 rpm/s cuts them at 821 rpm
+    >>> campaign = xr.Dataset(coords={"time": np.arange(size) / fs, "pinion_speed": ("op", [821.0, 3779.0]),
+    ...                               "op_source": ("op", ["ramp 0", "ramp 1"])})
+    >>> print(segment_notes(campaign, load_design("locomotive"))[0])  # doctest: +NORMALIZE_WHITESPACE
+    the ramp segments hold as few as 0.58 gear revolutions (operating point 0, 821 rpm, ramp 0): the gear-order
+    lines are not resolved there and can read far off the model's steady runs, so a gear effect or a healthy
+    gear may be judged wrongly; a ramp at most 58 rpm/s at 821 rpm gives its segments 2 gear revolutions
+    """
+    if OP_SOURCE not in dataset.coords or "time" not in dataset.coords:
+        return []
+    sources = [str(source) for source in dataset[OP_SOURCE].values]
+    ramps = [op for op, source in enumerate(sources) if source.startswith("ramp")]
+    if not ramps:
+        return []
+    duration = dataset.sizes["time"] / sampling_rate(np.asarray(dataset["time"].values), where="time")
+    speeds = np.asarray(dataset["pinion_speed"].values, dtype=float)
+    ratio = design.z1 / design.z2
+    revolutions = {op: duration * speeds[op] / 60.0 * ratio for op in ramps}
+    shortest = min(revolutions, key=revolutions.__getitem__)
+    if revolutions[shortest] >= RESOLVED_GEAR_REVOLUTIONS:
+        return []
+    speed = speeds[shortest]
+    # RESOLVED_GEAR_REVOLUTIONS gear revolutions with at most MAX_SPEED_CHANGE of speed change in the segment
+    rate = MAX_SPEED_CHANGE * speed * speed * ratio / (60.0 * RESOLVED_GEAR_REVOLUTIONS)
+    return [
+        f"the ramp segments hold as few as {revolutions[shortest]:.2f} gear revolutions (operating point "
+        f"{shortest}, {speed:.0f} rpm, {sources[shortest]}): the gear-order lines are not resolved there and can "
+        "read far off the model's steady runs, so a gear effect or a healthy gear may be judged wrongly; a ramp at "
+        f"most {rate:.0f} rpm/s at {speed:.0f} rpm gives its segments {RESOLVED_GEAR_REVOLUTIONS:g} gear revolutions"
+    ]
+
+
 __all__ = [
     "DEFAULT_SEGMENTS",
+    "RESOLVED_GEAR_REVOLUTIONS",
+    "segment_notes",
     "MAX_SPEED_CHANGE",
     "MIN_REVOLUTIONS",
     "OP_SOURCE",

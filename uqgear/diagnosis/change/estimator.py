@@ -81,7 +81,7 @@ def change_record(
     maps = unfitted_dataset(case, outcome.decision, effects).assign_coords(dict(extra["coords"]))
     maps = maps.assign(dict(extra["data"]))
     reference = {"file": inputs.reference_source, "route": "change"}
-    return completed(content, maps, inputs.design, reference), maps
+    return completed(content, maps, inputs.design, reference, inputs.rig), maps
 
 
 class ChangeDiagnosis(FittedState):
