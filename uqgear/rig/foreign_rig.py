@@ -178,19 +178,19 @@ def _pair_sum(t, y, p, pin_err, gear_err, eff):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _derivative(t, y, p, pin_err, gear_err, eff, out):  # pragma: no cover - compiled
-    force, m1, m2 = _pair_sum(t, y, p, pin_err, gear_err, eff)
+def _plant_derivative(y, p, eff, force, m1, m2, motor, load, out):  # pragma: no cover - compiled
+    """The plant's equations of motion given the mesh's force and moments and the motor and load torques.
+
+    Written once for every drive of the plant: the speed held at a constant set-point
+    (:func:`_derivative`) and the set-point along a ramp (:mod:`.foreign_runup`). ``out`` receives the
+    derivative of the state (angles of motor, pinion, gear and load; wheel centres and housings along the
+    line of action; then their rates).
+    """
     rb1, rb2 = p[6], p[7]
     jm, j1, j2, jl, ma, mb, mh1, mh2 = p[12], p[13], p[14], p[15], p[16], p[17], p[18], p[19]
     ks1, cs1, ks2, cs2 = p[20], p[21], p[22], p[23]
     kb1, cb1, kb2, cb2, kh1, ch1, kh2, ch2 = p[24], p[25], p[26], p[27], p[28], p[29], p[30], p[31]
-    kc, cc, t1, t2, omega = p[32], p[33], p[34], p[35], p[36]
-    ripple_amp, ripple_order, ripple_phase = eff[8], eff[9], eff[10]
-    adh_amp, adh_freq, adh_phase = eff[11], eff[12], eff[13]
     clear_which, clearance = eff[14], eff[15]
-    motor = t1 * (1.0 + ripple_amp * math.cos(ripple_order * omega * t + ripple_phase))
-    motor += kc * (omega * t - y[0]) + cc * (omega - y[8])
-    load = t2 * (1.0 + adh_amp * math.sin(2.0 * math.pi * adh_freq * t + adh_phase))
     shaft1 = ks1 * (y[0] - y[1]) + cs1 * (y[8] - y[9])
     shaft2 = ks2 * (y[2] - y[3]) + cs2 * (y[10] - y[11])
     d1 = y[4] - y[6]
@@ -212,6 +212,19 @@ def _derivative(t, y, p, pin_err, gear_err, eff, out):  # pragma: no cover - com
     out[13] = (-force - bearing2) / mb
     out[14] = (bearing1 - kh1 * y[6] - ch1 * y[14]) / mh1
     out[15] = (bearing2 - kh2 * y[7] - ch2 * y[15]) / mh2
+
+
+@njit(cache=True)
+def _derivative(t, y, p, pin_err, gear_err, eff, out):  # pragma: no cover - compiled
+    """The plant held at the constant speed p[36] (rad/s) by its speed controller."""
+    force, m1, m2 = _pair_sum(t, y, p, pin_err, gear_err, eff)
+    kc, cc, t1, t2, omega = p[32], p[33], p[34], p[35], p[36]
+    ripple_amp, ripple_order, ripple_phase = eff[8], eff[9], eff[10]
+    adh_amp, adh_freq, adh_phase = eff[11], eff[12], eff[13]
+    motor = t1 * (1.0 + ripple_amp * math.cos(ripple_order * omega * t + ripple_phase))
+    motor += kc * (omega * t - y[0]) + cc * (omega - y[8])
+    load = t2 * (1.0 + adh_amp * math.sin(2.0 * math.pi * adh_freq * t + adh_phase))
+    _plant_derivative(y, p, eff, force, m1, m2, motor, load, out)
 
 
 @njit(cache=True)

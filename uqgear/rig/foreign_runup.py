@@ -42,7 +42,17 @@ from ..common.errors import OperatingPointError, RigDataError
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..uq.seeds import as_seed_sequence, child_seed
-from .foreign_rig import _GUARD, _N_STATE, ForeignGears, _pair_sum, _parameters, _static_state, effect_vector, time_step
+from .foreign_rig import (
+    _GUARD,
+    _N_STATE,
+    ForeignGears,
+    _pair_sum,
+    _parameters,
+    _plant_derivative,
+    _static_state,
+    effect_vector,
+    time_step,
+)
 from .format import make_ramp_dataset
 from .virtual_rig import _WANDER_STREAM, _check_wander, frequency_filter
 from .virtual_runup import _ramp_table
@@ -99,37 +109,13 @@ def _ramp_derivative(t, y, p, pin_err, gear_err, eff, ramp, wander, out):  # pra
     """The foreign plant's derivative with the speed set-point on the ramp; p[0] = z1 / (2 pi) (see caller)."""
     # the mesh at the pinion's real angle: _pair_sum's clock times p[0] is the mesh phase
     force, m1, m2 = _pair_sum(y[1], y, p, pin_err, gear_err, eff)
-    rb1, rb2 = p[6], p[7]
-    jm, j1, j2, jl, ma, mb, mh1, mh2 = p[12], p[13], p[14], p[15], p[16], p[17], p[18], p[19]
-    ks1, cs1, ks2, cs2 = p[20], p[21], p[22], p[23]
-    kb1, cb1, kb2, cb2, kh1, ch1, kh2, ch2 = p[24], p[25], p[26], p[27], p[28], p[29], p[30], p[31]
     kc, cc, t1, t2 = p[32], p[33], p[34], p[35]
     theta_ref, omega_ref = _reference(t, ramp, wander)
+    # the torque ripple follows the motor's angle, the adhesion oscillation its own clock
     motor = t1 * (1.0 + eff[8] * math.cos(eff[9] * y[0] + eff[10]))
     motor += kc * (theta_ref - y[0]) + cc * (omega_ref - y[8])
     load = t2 * (1.0 + eff[11] * math.sin(2.0 * math.pi * eff[12] * t + eff[13]))
-    shaft1 = ks1 * (y[0] - y[1]) + cs1 * (y[8] - y[9])
-    shaft2 = ks2 * (y[2] - y[3]) + cs2 * (y[10] - y[11])
-    d1 = y[4] - y[6]
-    d2 = y[5] - y[7]
-    clear_which, clearance = eff[14], eff[15]
-    if clearance > 0.0:
-        if clear_which == 0 or clear_which == 2:
-            d1 = d1 - clearance if d1 > clearance else (d1 + clearance if d1 < -clearance else 0.0)
-        if clear_which == 1 or clear_which == 2:
-            d2 = d2 - clearance if d2 > clearance else (d2 + clearance if d2 < -clearance else 0.0)
-    bearing1 = kb1 * d1 + cb1 * (y[12] - y[14])
-    bearing2 = kb2 * d2 + cb2 * (y[13] - y[15])
-    for k in range(8):
-        out[k] = y[8 + k]
-    out[8] = (motor - shaft1) / jm
-    out[9] = (shaft1 - rb1 * force + m1) / j1
-    out[10] = (rb2 * force - shaft2 + m2) / j2
-    out[11] = (shaft2 - load) / jl
-    out[12] = (force - bearing1) / ma
-    out[13] = (-force - bearing2) / mb
-    out[14] = (bearing1 - kh1 * y[6] - ch1 * y[14]) / mh1
-    out[15] = (bearing2 - kh2 * y[7] - ch2 * y[15]) / mh2
+    _plant_derivative(y, p, eff, force, m1, m2, motor, load, out)
 
 
 @njit(cache=True)

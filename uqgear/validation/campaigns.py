@@ -257,14 +257,33 @@ def plan_real_world(
     them, the resonance with its reference). True nominal parameters
     scatter as in :func:`plan_campaigns`.
     """
+    return plan_kinds(_REAL_WORLD_KINDS, n_per_kind, rng, designs=designs, default_plan="service")
+
+
+def plan_kinds(
+    kinds: Sequence[tuple[str, tuple[str, ...], Mapping[str, object]]],
+    n_per_kind: int,
+    rng: np.random.Generator,
+    *,
+    designs: Sequence[str] = DESIGNS,
+    default_plan: str = "service",
+    prefix: str = "",
+) -> list[CampaignSpec]:
+    """Campaigns of a suite of kinds (kind, effects with the leading one first, nuisances), ``n_per_kind`` each.
+
+    The real-world suite's rule, shared by every suite built from its kinds: designs alternate, the true
+    nominal parameters scatter (:func:`scattered_truth`), the leading effect is drawn at its ladder's strong
+    level and a second one strong or medium, in this order from ``rng``; a kind's nuisances may name its
+    ``plan`` (else ``default_plan``) and its ``expected_verdict``. Identifiers start with ``prefix``.
+    """
     n_per_kind = check_count("n_per_kind", n_per_kind, 1)
     check_designs(designs)
     specs: list[CampaignSpec] = []
-    for kind, effect_names, nuisances in _REAL_WORLD_KINDS:
+    for kind, effect_names, nuisances in kinds:
         for k in range(n_per_kind):
             design_name = designs[k % len(designs)]
             truth = scattered_truth(rng)
-            plan = str(nuisances.get("plan", "service"))
+            plan = str(nuisances.get("plan", default_plan))
             expected = str(nuisances.get("expected_verdict", ""))
             rig_nuisances = {key: value for key, value in nuisances.items() if key not in _PLAN_KEYS}
             drawn = []
@@ -273,29 +292,21 @@ def plan_real_world(
                 level = 2 if position == 0 else (2, 1)[int(rng.integers(2))]
                 strength = effect_family(name).ladder[level]
                 drawn.append((name, strength, STRENGTHS[level], effect_draw(name, strength, rng)))
-            if drawn:
-                leading = drawn[0]
-                specs.append(
-                    CampaignSpec(
-                        f"{kind}-{'+'.join(effect_names)}-{k}",
-                        leading[0],
-                        leading[2],
-                        leading[1],
-                        design_name,
-                        leading[3],
-                        truth,
-                        plan,
-                        tuple((name, values) for name, _, _, values in drawn[1:]),
-                        rig_nuisances,
-                        expected,
-                    )
+            if not drawn:
+                identifier = f"{prefix}{kind}-{k}"
+                healthy = CampaignSpec(
+                    identifier, HEALTHY, "-", 0.0, design_name, {}, truth, plan, (), rig_nuisances, expected
                 )
-            else:
-                specs.append(
-                    CampaignSpec(
-                        f"{kind}-{k}", HEALTHY, "-", 0.0, design_name, {}, truth, plan, (), rig_nuisances, expected
-                    )
+                specs.append(healthy)
+                continue
+            name, strength, level_name, values = drawn[0]
+            extra = tuple((other, other_values) for other, _, _, other_values in drawn[1:])
+            specs.append(
+                CampaignSpec(
+                    f"{prefix}{kind}-{'+'.join(effect_names)}-{k}", name, level_name, strength, design_name, values,
+                    truth, plan, extra, rig_nuisances, expected,
                 )
+            )
     return specs
 
 
@@ -430,6 +441,7 @@ __all__ = [
     "second_design",
     "plan_campaigns",
     "plan_real_world",
+    "plan_kinds",
     "plan_encoderless",
     "ENCODERLESS_CHANNELS",
     "effect_draw",

@@ -28,7 +28,7 @@ from typing import Any, cast
 import numpy as np
 import xarray as xr
 
-from ..diagnosis import DiagnosisError, effect_family
+from ..diagnosis import DiagnosisError
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..rig.transfer_path import apply_transfer_path
@@ -38,16 +38,11 @@ from .campaigns import (
     ACCELEROMETER_NUISANCES,
     DESIGNS,
     ENCODER_NUISANCES,
-    HEALTHY,
     MAINS_NOISE_NUISANCES,
     RESONANCE_NUISANCES,
-    STRENGTHS,
     WANDER_NUISANCES,
     CampaignSpec,
-    check_count,
-    check_designs,
-    effect_draw,
-    scattered_truth,
+    plan_kinds,
 )
 
 #: The run-up suite's test plans: a run-up and a coast-down over the service span, or over the low speeds.
@@ -133,42 +128,12 @@ def plan_runup(n_per_kind: int, rng: np.random.Generator, *, designs: Sequence[s
     Examples
     --------
     >>> import numpy as np
+    >>> from uqgear.validation.runup_campaigns import plan_runup
     >>> specs = plan_runup(1, np.random.default_rng(0))
     >>> len(specs), specs[0].identifier, specs[0].plan, specs[0].truth_set()
     (14, 'runup-two_effects-eccentricity+tooth_damage-0', 'runup', ['eccentricity', 'tooth_damage'])
     """
-    n_per_kind = check_count("n_per_kind", n_per_kind, 1)
-    check_designs(designs)
-    specs: list[CampaignSpec] = []
-    for kind, effect_names, nuisances in _RUNUP_KINDS:
-        for k in range(n_per_kind):
-            design_name = designs[k % len(designs)]
-            truth = scattered_truth(rng)
-            plan = str(nuisances.get("plan", RUNUP_PLAN))
-            expected = str(nuisances.get("expected_verdict", ""))
-            rig_nuisances = {key: value for key, value in nuisances.items() if key not in _PLAN_KEYS}
-            drawn = []
-            for position, name in enumerate(effect_names):
-                # the leading effect strong; a second one strong or medium
-                level = 2 if position == 0 else (2, 1)[int(rng.integers(2))]
-                strength = effect_family(name).ladder[level]
-                drawn.append((name, strength, STRENGTHS[level], effect_draw(name, strength, rng)))
-            identifier = f"runup-{kind}-{'+'.join(effect_names)}-{k}" if drawn else f"runup-{kind}-{k}"
-            if not drawn:
-                healthy = CampaignSpec(
-                    identifier, HEALTHY, "-", 0.0, design_name, {}, truth, plan, (), rig_nuisances, expected
-                )
-                specs.append(healthy)
-                continue
-            name, strength, level_name, values = drawn[0]
-            extra = tuple((other, other_values) for other, _, _, other_values in drawn[1:])
-            specs.append(
-                CampaignSpec(
-                    identifier, name, level_name, strength, design_name, values, truth, plan, extra, rig_nuisances,
-                    expected,
-                )
-            )
-    return specs
+    return plan_kinds(_RUNUP_KINDS, n_per_kind, rng, designs=designs, default_plan=RUNUP_PLAN, prefix="runup-")
 
 
 def runup_campaign(
