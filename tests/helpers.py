@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import subprocess
 from typing import Any
 
+from uqgear.cli import main
 from uqgear.diagnosis import CandidateScore
 
 
@@ -27,3 +29,18 @@ def candidate_score(effect: str, score: float, shrink: float, low: float | None 
     if "shrink_interval" in figures:
         values["shrink_interval"] = tuple(figures["shrink_interval"])
     return CandidateScore(**values)
+
+
+def cli_in_process(capsys: Any, *args: Any) -> subprocess.CompletedProcess:
+    """The command line run in this process: what it does and refuses, not the interpreter's start.
+
+    Its exit status, standard output and error as a finished process, like a real ``uqgear`` run's
+    (the tests of a user mistake's exit 2 and the smoke run go through a real process).
+    """
+    capsys.readouterr()
+    try:
+        status = main([str(argument) for argument in args])
+    except SystemExit as stop:  # argparse's refusals
+        status = stop.code
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(list(args), status, out, err)

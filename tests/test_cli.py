@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from helpers import cli_in_process as _cli
 
 import uqgear.common
 from uqgear.cli import main
@@ -317,21 +318,6 @@ def test_same_seed_gives_the_same_numbers():
 
 
 # ---------------------------------------------------------------------------- rig data commands
-
-
-def _cli(capsys, *args) -> subprocess.CompletedProcess:
-    """The command line run in this process: what it does and refuses, not the interpreter's start.
-
-    Its exit status, standard output and error as a finished process, like :func:`uqgear`'s
-    (test_user_mistake_exits_2_with_one_line_and_no_output and the smoke run go through a real process).
-    """
-    capsys.readouterr()
-    try:
-        status = main([str(argument) for argument in args])
-    except SystemExit as stop:   # argparse's refusals
-        status = stop.code
-    out, err = capsys.readouterr()
-    return subprocess.CompletedProcess(list(args), status, out, err)
 
 
 @pytest.mark.parametrize("args, message", [

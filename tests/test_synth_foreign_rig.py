@@ -8,13 +8,12 @@ the ramp the command was given (the tachometer), and for what is refused.
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import cli_in_process as _cli
 
-from uqgear.cli import main
 from uqgear.physics.design import load_design
 from uqgear.physics.effects import parse_effect
 from uqgear.rig import read_rig
@@ -26,17 +25,6 @@ from uqgear.uq.seeds import child_seed
 DESIGN = load_design("locomotive")
 RAMP = "1500:1600:500"  # 0.2 s of ramp record
 RAMP_TABLE = {"start_speed": [1500.0], "stop_speed": [1600.0], "rate": [500.0], "drive_torque": [7000.0]}
-
-
-def _cli(capsys, *args) -> subprocess.CompletedProcess:
-    """The command line run in this process (as tests/test_cli.py runs it), as a finished process."""
-    capsys.readouterr()
-    try:
-        status = main([str(argument) for argument in args])
-    except SystemExit as stop:  # argparse's refusals
-        status = stop.code
-    out, err = capsys.readouterr()
-    return subprocess.CompletedProcess(list(args), status, out, err)
 
 
 def _seeds(seed: int) -> tuple[np.random.SeedSequence, np.random.SeedSequence]:
