@@ -105,9 +105,23 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
     identify (90 % interval spanning at least ``NOT_IDENTIFIABLE_SHARE`` of the prior range); the
     share of predicted features within 2 sigma of the data.
     """
-    findings = []
-    diagnostics = content.get("diagnostics") or {}
     converged = bool(content.get("converged"))
+    findings = [_convergence_finding(content, converged)]
+    findings += _warnings_findings(content)
+    findings += _speed_findings(content)
+    findings += _pitch_error_findings(content)
+    estimates = content.get("parameters") if converged else None
+    if estimates:
+        findings += [_estimates_finding(estimates), _identifiability_finding(estimates)]
+    if content.get("discrepancy"):
+        findings.append(discrepancy_finding(content["discrepancy"]))
+    findings += _predictive_check_findings(content)
+    return findings
+
+
+def _convergence_finding(content: Mapping[str, Any], converged: bool) -> Finding:
+    """Whether the sampler converged, with its diagnostics or the reasons it did not."""
+    diagnostics = content.get("diagnostics") or {}
     numbers = {
         key: float(diagnostics[key])
         for key in ("tau_max", "rhat_max", "ess_min", "acceptance_mean")
@@ -133,124 +147,139 @@ def calibration_findings(content: Mapping[str, Any]) -> list[Finding]:
             if message
             else ("NOT converged, so the estimates are not a result" + (": " + "; ".join(reasons) if reasons else ""))
         ) + "."
-    findings.append(
-        Finding(
-            text, {"converged": converged, "reasons": list(diagnostics.get("reasons", [])), **numbers}, "convergence"
-        )
+    return Finding(
+        text, {"converged": converged, "reasons": list(diagnostics.get("reasons", [])), **numbers}, "convergence"
     )
+
+
+def _warnings_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """The assumptions the result leans on (none: no finding)."""
     warnings = [str(w) for w in content.get("warnings") or []]
-    if warnings:
-        findings.append(
-            Finding("Caution, the result leans on: " + "; ".join(warnings) + ".", {"warnings": warnings}, "warnings")
-        )
+    if not warnings:
+        return []
+    return [Finding("Caution, the result leans on: " + "; ".join(warnings) + ".", {"warnings": warnings}, "warnings")]
+
+
+def _speed_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """The widest speed wander within a record and the runs resampled to uniform pinion angle."""
     speed_rows = [row for row in content.get("speed") or [] if row.get("wander") is not None]
-    if speed_rows:
-        widest = max(speed_rows, key=lambda row: row["wander"])
-        tracked = [row["op"] for row in speed_rows if row.get("order_tracked")]
-        findings.append(
-            Finding(
-                f"Pinion speed within a record wandered by up to +-{100 * widest['wander']:.2f} % (run {widest['op']}, "
-                f"{widest['mean_rpm']:.0f} rpm); "
-                + (
-                    f"runs {', '.join(map(str, tracked))} were resampled to uniform pinion angle (order tracking) "
-                    "before their features were read."
-                    if tracked
-                    else "no run needed order tracking."
-                ),
-                {"max_wander": widest["wander"], "order_tracked_runs": tracked},
-                "speed",
-            )
+    if not speed_rows:
+        return []
+    widest = max(speed_rows, key=lambda row: row["wander"])
+    tracked = [row["op"] for row in speed_rows if row.get("order_tracked")]
+    return [
+        Finding(
+            f"Pinion speed within a record wandered by up to +-{100 * widest['wander']:.2f} % (run {widest['op']}, "
+            f"{widest['mean_rpm']:.0f} rpm); "
+            + (
+                f"runs {', '.join(map(str, tracked))} were resampled to uniform pinion angle (order tracking) "
+                "before their features were read."
+                if tracked
+                else "no run needed order tracking."
+            ),
+            {"max_wander": widest["wander"], "order_tracked_runs": tracked},
+            "speed",
         )
+    ]
+
+
+def _pitch_error_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """What the pitch-error correction of the observed harmonics did, or why it was not applied."""
     pitch = content.get("pitch_errors")
-    if pitch:
-        if pitch.get("applied"):
-            text = (
-                f"Pitch errors: the observed mesh harmonics were corrected for random pitch errors "
-                f"({pitch['reason']}; {pitch['draws']} model draws, largest change "
-                f"{100 * pitch['max_abs_log_shift']:.1f} %, median {100 * pitch['median_abs_log_shift']:.2f} %, "
-                f"spread between draws up to {100 * pitch['max_draw_spread']:.1f} %, added to the variance)."
-            )
-        else:
-            text = f"Pitch errors: no correction ({pitch['reason']})."
-        findings.append(
-            Finding(
-                text,
-                {key: pitch.get(key) for key in ("applied", "scale_to_class_7", "classes", "max_abs_log_shift")},
-                "pitch_errors",
-            )
-        )
-    estimates = content.get("parameters") if converged else None
-    if estimates:
-        parts, facts = [], {}
-        for name, entry in estimates.items():
-            label, unit, factor = _display(name)
-            shown = "" if unit in ("1", "SI") else f" {unit}"
-            parts.append(
-                f"{label} {entry['q50'] * factor:.4g}{shown} [{entry['q05'] * factor:.4g}, {entry['q95'] * factor:.4g}]"
-            )
-            facts[name] = {
-                "q05": float(entry["q05"]),
-                "q50": float(entry["q50"]),
-                "q95": float(entry["q95"]),
-                "factor": factor,
-                "unit": unit,
-            }
-        findings.append(
-            Finding(
-                "Estimates, median [90 % credible interval]: " + "; ".join(parts) + ".",
-                {"parameters": facts},
-                "estimates",
-            )
-        )
-        shares = {
-            name: (float(entry["q95"]) - float(entry["q05"])) / (float(entry["prior"][1]) - float(entry["prior"][0]))
-            for name, entry in estimates.items()
-        }
-        weak = [name for name, share in shares.items() if share >= NOT_IDENTIFIABLE_SHARE]
-        if weak:
-            text = (
-                "Not identifiable from these data (posterior close to its prior): "
-                + "; ".join(
-                    f"{_display(name)[0]} (90 % interval spans {100 * shares[name]:.0f} % of the prior range)"
-                    for name in weak
-                )
-                + "."
-            )
-        else:
-            text = (
-                f"Every parameter is identified: the 90 % intervals span at most "
-                f"{100 * max(shares.values()):.0f} % of their prior ranges."
-            )
-        findings.append(
-            Finding(
-                text,
-                {"shares": shares, "not_identifiable": weak, "threshold": NOT_IDENTIFIABLE_SHARE},
-                "identifiability",
-            )
-        )
-    if content.get("discrepancy"):
-        findings.append(discrepancy_finding(content["discrepancy"]))
-    check = content.get("predictive_check") or {}
-    if "fraction_within_2_sigma" in check:
-        share = float(check["fraction_within_2_sigma"])
+    if not pitch:
+        return []
+    if pitch.get("applied"):
         text = (
-            f"Posterior predictive check with the real model {'passed' if check.get('passed') else 'FAILED'}: "
-            f"{100 * share:.0f} % of the {int(check.get('features_used', 0))} features within 2 sigma "
-            f"(noise and model error) of the data, largest |z| {float(check.get('max_abs_z', np.nan)):.3g}."
+            f"Pitch errors: the observed mesh harmonics were corrected for random pitch errors "
+            f"({pitch['reason']}; {pitch['draws']} model draws, largest change "
+            f"{100 * pitch['max_abs_log_shift']:.1f} %, median {100 * pitch['median_abs_log_shift']:.2f} %, "
+            f"spread between draws up to {100 * pitch['max_draw_spread']:.1f} %, added to the variance)."
         )
-        findings.append(
-            Finding(
-                text,
-                {
-                    "fraction_within_2_sigma": share,
-                    "passed": bool(check.get("passed")),
-                    "features_used": int(check.get("features_used", 0)),
-                    "max_abs_z": float(check.get("max_abs_z", np.nan)),
-                },
-                "predictive_check",
+    else:
+        text = f"Pitch errors: no correction ({pitch['reason']})."
+    return [
+        Finding(
+            text,
+            {key: pitch.get(key) for key in ("applied", "scale_to_class_7", "classes", "max_abs_log_shift")},
+            "pitch_errors",
+        )
+    ]
+
+
+def _estimates_finding(estimates: Mapping[str, Any]) -> Finding:
+    """Each parameter's median and 90 % credible interval in engineering units."""
+    parts, facts = [], {}
+    for name, entry in estimates.items():
+        label, unit, factor = _display(name)
+        shown = "" if unit in ("1", "SI") else f" {unit}"
+        parts.append(
+            f"{label} {entry['q50'] * factor:.4g}{shown} [{entry['q05'] * factor:.4g}, {entry['q95'] * factor:.4g}]"
+        )
+        facts[name] = {
+            "q05": float(entry["q05"]),
+            "q50": float(entry["q50"]),
+            "q95": float(entry["q95"]),
+            "factor": factor,
+            "unit": unit,
+        }
+    return Finding(
+        "Estimates, median [90 % credible interval]: " + "; ".join(parts) + ".",
+        {"parameters": facts},
+        "estimates",
+    )
+
+
+def _identifiability_finding(estimates: Mapping[str, Any]) -> Finding:
+    """The parameters whose 90 % interval spans at least ``NOT_IDENTIFIABLE_SHARE`` of their prior range."""
+    shares = {
+        name: (float(entry["q95"]) - float(entry["q05"])) / (float(entry["prior"][1]) - float(entry["prior"][0]))
+        for name, entry in estimates.items()
+    }
+    weak = [name for name, share in shares.items() if share >= NOT_IDENTIFIABLE_SHARE]
+    if weak:
+        text = (
+            "Not identifiable from these data (posterior close to its prior): "
+            + "; ".join(
+                f"{_display(name)[0]} (90 % interval spans {100 * shares[name]:.0f} % of the prior range)"
+                for name in weak
             )
+            + "."
         )
-    return findings
+    else:
+        text = (
+            f"Every parameter is identified: the 90 % intervals span at most "
+            f"{100 * max(shares.values()):.0f} % of their prior ranges."
+        )
+    return Finding(
+        text,
+        {"shares": shares, "not_identifiable": weak, "threshold": NOT_IDENTIFIABLE_SHARE},
+        "identifiability",
+    )
+
+
+def _predictive_check_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """The share of predicted features within 2 sigma of the data (no check recorded: no finding)."""
+    check = content.get("predictive_check") or {}
+    if "fraction_within_2_sigma" not in check:
+        return []
+    share = float(check["fraction_within_2_sigma"])
+    text = (
+        f"Posterior predictive check with the real model {'passed' if check.get('passed') else 'FAILED'}: "
+        f"{100 * share:.0f} % of the {int(check.get('features_used', 0))} features within 2 sigma "
+        f"(noise and model error) of the data, largest |z| {float(check.get('max_abs_z', np.nan)):.3g}."
+    )
+    return [
+        Finding(
+            text,
+            {
+                "fraction_within_2_sigma": share,
+                "passed": bool(check.get("passed")),
+                "features_used": int(check.get("features_used", 0)),
+                "max_abs_z": float(check.get("max_abs_z", np.nan)),
+            },
+            "predictive_check",
+        )
+    ]
 
 
 def _figure_html(figure: Figure, caption: str, dpi: int) -> str:
@@ -397,10 +426,22 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
         raise UqgearError("calibration report: the calibration is not fitted; call fit(rig) first")
     content = calibration.to_dict()
     summary = calibration.summary_
-    converged = calibration.converged_
+    parts = _overview_section(calibration, content)
+    parts += _posterior_section(calibration, summary, truth, dpi)
+    parts += _convergence_section(calibration, dpi)
+    parts += _predictive_section(calibration, dpi)
+    parts += _model_error_section(summary)
+    if "discrepancy" in summary:
+        parts.extend(discrepancy_section(summary["discrepancy"], _table))
+    parts += _emulator_section(calibration)
+    return html_page("uqgear calibration report", _STYLE + HEADLINE_STYLE, parts)
+
+
+def _overview_section(calibration: Calibration, content: Mapping[str, Any]) -> list[str]:
+    """Title, headline, verdict, design notes and the table of the run (data, model runs, times)."""
     verdict = (
         '<p class="ok">Converged: the posterior below is a result.</p>'
-        if converged
+        if calibration.converged_
         else '<p class="bad">NOT converged: the estimates below are not a result.</p>'
         + "<ul>"
         + "".join(f"<li>{html.escape(r)}</li>" for r in calibration.diagnostics_["reasons"])
@@ -410,7 +451,7 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
     design_notes = "".join(
         f'<p class="note"><b>Design:</b> {html.escape(str(note))}.</p>' for note in content.get("design_notes") or []
     )
-    parts = [
+    return [
         "<h1>uqgear calibration report</h1>",
         headline_html(calibration_findings(content), "Details, figures and diagnostics below."),
         verdict,
@@ -426,10 +467,15 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
             ("item", "value"),
         ),
     ]
-    parts.append("<h2>Posterior of the global parameters</h2>")
+
+
+def _posterior_section(
+    calibration: Calibration, summary: Mapping[str, Any], truth: Mapping[str, Any] | None, dpi: int
+) -> list[str]:
+    """The global parameters against their priors, the latent T2 per run, and the corner plot."""
+    parts = ["<h2>Posterior of the global parameters</h2>"]
     rows = []
     for name, entry in summary["parameters"].items():
-        label, unit, factor = _display(name)
         rows.append(
             [
                 name,
@@ -480,40 +526,47 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
             dpi,
         )
     )
-    parts.append("<h2>Convergence diagnostics</h2>")
+    return parts
+
+
+#: The sampler's diagnostics shown in the report, in order.
+_DIAGNOSTIC_KEYS = (
+    "converged",
+    "n_walkers",
+    "n_steps",
+    "burn_in",
+    "thin",
+    "steps_after_burn_in",
+    "tau_max",
+    "rhat_max",
+    "ess_min",
+    "acceptance_mean",
+    "acceptance_min",
+    "acceptance_max",
+)
+
+
+def _convergence_section(calibration: Calibration, dpi: int) -> list[str]:
+    """The sampler's diagnostics, overall and per parameter, and the walker traces."""
     diagnostics = calibration.diagnostics_
-    parts.append(
-        _table(
-            [
-                (key, diagnostics[key])
-                for key in (
-                    "converged",
-                    "n_walkers",
-                    "n_steps",
-                    "burn_in",
-                    "thin",
-                    "steps_after_burn_in",
-                    "tau_max",
-                    "rhat_max",
-                    "ess_min",
-                    "acceptance_mean",
-                    "acceptance_min",
-                    "acceptance_max",
-                )
-            ],
-            ("diagnostic", "value"),
-        )
-    )
-    parts.append(
+    return [
+        "<h2>Convergence diagnostics</h2>",
+        _table([(key, diagnostics[key]) for key in _DIAGNOSTIC_KEYS], ("diagnostic", "value")),
         _table(
             [(name, entry["tau"], entry["ess"], entry["rhat"]) for name, entry in diagnostics["parameters"].items()],
             ("parameter", "autocorrelation time [steps]", "effective sample size", "split R-hat"),
-        )
-    )
-    parts.append(_figure_html(trace_figure(calibration), "Walker traces of the stored draws", dpi))
-    parts.append("<h2>Posterior predictive check (real model)</h2>")
+        ),
+        _figure_html(trace_figure(calibration), "Walker traces of the stored draws", dpi),
+    ]
+
+
+def _predictive_section(calibration: Calibration, dpi: int) -> list[str]:
+    """The posterior predictive check with the real model, and its figure where predictions were kept."""
     check = calibration.predictive_check_
-    parts.append(_table([(key, value) for key, value in check.items()], ("item", "value")))
+    parts = [
+        "<h2>Posterior predictive check (real model)</h2>",
+        _table([(key, value) for key, value in check.items()], ("item", "value")),
+    ]
     if "predicted_median" in calibration.predictive_:
         parts.append(
             _figure_html(
@@ -524,20 +577,27 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
                 dpi,
             )
         )
-    parts.append("<h2>Model error (relative, per channel and harmonic)</h2>")
-    parts.append(
+    return parts
+
+
+def _model_error_section(summary: Mapping[str, Any]) -> list[str]:
+    """The relative model error per channel and harmonic."""
+    return [
+        "<h2>Model error (relative, per channel and harmonic)</h2>",
         _table(
             [
                 (group, entry["q05"], entry["q50"], entry["q95"], entry["n_features"])
                 for group, entry in summary["model_error"].items()
             ],
             ("group", "q05", "q50", "q95", "features"),
-        )
-    )
-    if "discrepancy" in summary:
-        parts.extend(discrepancy_section(summary["discrepancy"], _table))
-    parts.append("<h2>Emulator stages</h2>")
-    parts.append(
+        ),
+    ]
+
+
+def _emulator_section(calibration: Calibration) -> list[str]:
+    """The emulator's stages: leave-one-out errors, acceptance, truncation of the posterior."""
+    return [
+        "<h2>Emulator stages</h2>",
         _table(
             [
                 (
@@ -550,9 +610,8 @@ def calibration_report_html(calibration: Calibration, *, truth: Mapping[str, Any
                 for stage in calibration.emulator_["stages"]
             ],
             ("stage", "LOO error median [log]", "LOO error max [log]", "acceptance", "posterior truncated"),
-        )
-    )
-    return html_page("uqgear calibration report", _STYLE + HEADLINE_STYLE, parts)
+        ),
+    ]
 
 
 def write_calibration_report(

@@ -381,6 +381,43 @@ def _legend(ax: Any, ds: xr.Dataset) -> None:
 def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
     section = _section(ds)
     parameter = str(ds.attrs.get("parameter", "pinion_speed"))
+    _add_branches_figure(section, ds, parameter, dpi)
+    _add_stability_figure(section, ds, parameter, dpi)
+    facts = continuation_facts(ds)
+    section.findings.extend(continuation_sentences(facts))
+    section.findings.extend(_sweep_jump_sentences(facts))
+    table = _bifurcation_table(ds, parameter)
+    if table:
+        section.tables.append(table)
+    section.facts.append(
+        (
+            "continuation",
+            f"{float(ds.attrs.get('continuation_seconds', np.nan)):.1f} s, "
+            f"{int(ds.attrs.get('orbit_passes', 0))} mesh periods integrated",
+        )
+    )
+    if "sweep_seconds" in ds.attrs:
+        section.facts.append(
+            (
+                "brute-force sweeps",
+                f"{float(ds.attrs['sweep_seconds']):.1f} s, {int(ds.attrs.get('model_runs', 0))} runs",
+            )
+        )
+    section.caveats.append(
+        "branches are followed from the period-1 orbit at the start of the range (and the "
+        "period-doubled orbits off it); responses on other branches, tori and chaos are seen "
+        "only in the sweeps"
+    )
+    if _json_attr(ds, "envelope", []):
+        section.caveats.append(
+            "the interval of a bifurcation point is its spread over the cases continued "
+            f"({ds.sizes.get('case', 1)} values across each envelope parameter)"
+        )
+    return section
+
+
+def _add_branches_figure(section: Section, ds: xr.Dataset, parameter: str, dpi: int) -> None:
+    """The branches' Poincaré points and peak mesh force over the brute-force sweeps."""
     figure = new_figure(9.5, 7.5)
     top, bottom = figure.subplots(2, 1, sharex=True)
     _draw_branches(top, ds, "orbit_poincare_x", 1e6, phases=True)
@@ -409,6 +446,10 @@ def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
         "starts from its neighbour's final state.",
         dpi,
     )
+
+
+def _add_stability_figure(section: Section, ds: xr.Dataset, parameter: str, dpi: int) -> None:
+    """The largest Floquet multiplier modulus along the branches."""
     figure = new_figure(9.5, 3.6)
     ax = figure.subplots()
     _draw_branches(ax, ds, "spectral_radius", 1.0)
@@ -417,11 +458,14 @@ def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
     ax.set_xlabel(axis_label(parameter))
     ax.set_title("stability: an orbit is stable while every multiplier lies inside the unit circle", fontsize=9)
     _add_figure(section, figure, "Largest Floquet multiplier modulus along the branches (1: the stability limit).", dpi)
-    facts = continuation_facts(ds)
-    section.findings.extend(continuation_sentences(facts))
+
+
+def _sweep_jump_sentences(facts: dict[str, Any]) -> list[str]:
+    """Per case with sweeps: where the up- and down-sweeps jump and where the continuation folds."""
+    sentences = []
     for entry in facts["cases"]:
         if "jumps_up" in entry:
-            section.findings.append(
+            sentences.append(
                 f"{entry['label']}, brute-force sweeps: the up-sweep jumps "
                 + (
                     ", ".join(f"between {_value(facts, a)} and {_value(facts, b)}" for a, b in entry["jumps_up"])
@@ -438,6 +482,11 @@ def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
                     or "none"
                 )
             )
+    return sentences
+
+
+def _bifurcation_table(ds: xr.Dataset, parameter: str) -> str | None:
+    """The located bifurcations of every case as an HTML table (none located: None)."""
     rows = []
     for case in range(ds.sizes.get("case", 1)):
         for row in _table(ds, case):
@@ -446,37 +495,13 @@ def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
                 f"<td>{row['parameter']:.6g}</td><td>{row['tolerance']:.2g}</td>"
                 f"<td>{row['peak_mesh_force'] / 1e3:.4g}</td><td>{row['sweep']}</td></tr>"
             )
-    if rows:
-        section.tables.append(
-            "<table><tr><th>case</th><th>bifurcation</th><th>branch period</th>"
-            f"<th>{short_name(parameter)}</th><th>within</th><th>peak mesh force [kN]</th>"
-            "<th>sweep that jumps there</th></tr>" + "".join(rows) + "</table>"
-        )
-    section.facts.append(
-        (
-            "continuation",
-            f"{float(ds.attrs.get('continuation_seconds', np.nan)):.1f} s, "
-            f"{int(ds.attrs.get('orbit_passes', 0))} mesh periods integrated",
-        )
+    if not rows:
+        return None
+    return (
+        "<table><tr><th>case</th><th>bifurcation</th><th>branch period</th>"
+        f"<th>{short_name(parameter)}</th><th>within</th><th>peak mesh force [kN]</th>"
+        "<th>sweep that jumps there</th></tr>" + "".join(rows) + "</table>"
     )
-    if "sweep_seconds" in ds.attrs:
-        section.facts.append(
-            (
-                "brute-force sweeps",
-                f"{float(ds.attrs['sweep_seconds']):.1f} s, {int(ds.attrs.get('model_runs', 0))} runs",
-            )
-        )
-    section.caveats.append(
-        "branches are followed from the period-1 orbit at the start of the range (and the "
-        "period-doubled orbits off it); responses on other branches, tori and chaos are seen "
-        "only in the sweeps"
-    )
-    if _json_attr(ds, "envelope", []):
-        section.caveats.append(
-            "the interval of a bifurcation point is its spread over the cases continued "
-            f"({ds.sizes.get('case', 1)} values across each envelope parameter)"
-        )
-    return section
 
 
 __all__ = [

@@ -187,8 +187,23 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         return []
     if content.get("change"):
         return [*change_findings(content), *_rig_findings(content)]
-    findings = []
     verdict = str(content.get("verdict", "?"))
+    gap = content.get("gap") or {}
+    # the line a fleet engineer reads first: verdict, certainty, evidence, next step
+    findings = [at_a_glance(content), _verdict_finding(content, verdict)]
+    findings += _gap_findings(gap)
+    findings.append(_where_finding(content, verdict, gap))
+    findings += _effect_set_findings(content, verdict)
+    findings += _borderline_findings(content)
+    findings += [Finding(f"Cannot tell: {entry['reason']}.",
+                         {key: entry.get(key) for key in ("effect", "shaft", "run_out_m",
+                                                          "share_of_class_gears_below", "classes")},
+                         "cannot_tell") for entry in content.get("cannot_tell") or []]
+    return [*findings, *_rig_findings(content)]
+
+
+def _verdict_finding(content: Mapping[str, Any], verdict: str) -> Finding:
+    """The verdict in one sentence, with the reason the diagnosis gives."""
     reason = str(content.get("reason", "")).rstrip(".")
     if verdict == "none":
         text = "Verdict none: the nominal model reproduces the rig within noise, no effect is needed"
@@ -212,35 +227,42 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         else:
             text = (f"Verdict {verdict}: adding {verdict} to the model explains "
                     + ("part of " if content.get("partial") else "") + "the gap between model and rig")
-    findings.append(Finding(text + (f"; {reason}." if reason else "."),
-                            {"verdict": verdict, "partial": bool(content.get("partial"))}, "verdict"))
-    # the line a fleet engineer reads first: verdict, certainty, evidence, next step
-    findings.insert(0, at_a_glance(content))
-    gap = content.get("gap") or {}
-    if gap and gap.get("baseline") is None:
-        findings.append(Finding("Held-out gap not measured: no feature could be compared with the model on "
-                                "held-out runs.", {"baseline": None}, "gap"))
-    elif gap:
-        def gap_value(value: Any) -> str:
-            return _figure(value, 2, fixed=True)
+    return Finding(text + (f"; {reason}." if reason else "."),
+                   {"verdict": verdict, "partial": bool(content.get("partial"))}, "verdict")
 
-        facts = {key: gap.get(key) for key in ("baseline", "baseline_interval", "with_effect", "effect",
-                                               "effect_named", "shrink_fraction", "shrink_interval",
-                                               "noise_threshold")}
-        text = ("Held-out gap (RMS standardised discrepancy in excess of noise) of the nominal model "
-                + gap_value(gap.get("baseline")))
-        if gap.get("baseline_interval"):
-            low, high = gap["baseline_interval"]
-            text += f" (90 % interval {gap_value(low)} to {gap_value(high)})"
-        baseline, noise = gap.get("baseline"), gap.get("noise_threshold")
-        # a candidate's gap is worth quoting where it was named or where there is a gap to shrink
-        worth = gap.get("effect_named") or (baseline is not None and noise is not None and baseline >= noise)
-        if gap.get("effect") and gap.get("with_effect") is not None and worth:
-            low, high = gap.get("shrink_interval") or [None, None]
-            named = "" if gap.get("effect_named", True) else " (best candidate, not named)"
-            text += (f"; with {gap['effect']}{named} {gap_value(gap['with_effect'])}: a shrink of "
-                     f"{_percent(gap.get('shrink_fraction'))} (90 % interval {_percent(low)} to {_percent(high)})")
-        findings.append(Finding(text + f"; within noise below {_figure(noise)}.", facts, "gap"))
+
+def _gap_findings(gap: Mapping[str, Any]) -> list[Finding]:
+    """The held-out gap of the nominal model, and with the effect, with the shrink and its 90 % interval."""
+    if not gap:
+        return []
+    if gap.get("baseline") is None:
+        return [Finding("Held-out gap not measured: no feature could be compared with the model on "
+                        "held-out runs.", {"baseline": None}, "gap")]
+
+    def gap_value(value: Any) -> str:
+        return _figure(value, 2, fixed=True)
+
+    facts = {key: gap.get(key) for key in ("baseline", "baseline_interval", "with_effect", "effect",
+                                           "effect_named", "shrink_fraction", "shrink_interval",
+                                           "noise_threshold")}
+    text = ("Held-out gap (RMS standardised discrepancy in excess of noise) of the nominal model "
+            + gap_value(gap.get("baseline")))
+    if gap.get("baseline_interval"):
+        low, high = gap["baseline_interval"]
+        text += f" (90 % interval {gap_value(low)} to {gap_value(high)})"
+    baseline, noise = gap.get("baseline"), gap.get("noise_threshold")
+    # a candidate's gap is worth quoting where it was named or where there is a gap to shrink
+    worth = gap.get("effect_named") or (baseline is not None and noise is not None and baseline >= noise)
+    if gap.get("effect") and gap.get("with_effect") is not None and worth:
+        low, high = gap.get("shrink_interval") or [None, None]
+        named = "" if gap.get("effect_named", True) else " (best candidate, not named)"
+        text += (f"; with {gap['effect']}{named} {gap_value(gap['with_effect'])}: a shrink of "
+                 f"{_percent(gap.get('shrink_fraction'))} (90 % interval {_percent(low)} to {_percent(high)})")
+    return [Finding(text + f"; within noise below {_figure(noise)}.", facts, "gap")]
+
+
+def _where_finding(content: Mapping[str, Any], verdict: str, gap: Mapping[str, Any]) -> Finding:
+    """The features where the nominal model misses most on held-out runs."""
     where = content.get("where") or []
     n_op = int((content.get("rig") or {}).get("n_op", 0))
     if verdict == "inconclusive" and gap.get("baseline") is None:
@@ -253,7 +275,12 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
                 + (f"; {len(where)} features beyond 3 sigma in all" if len(where) > 3 else "") + ".")
     else:
         text = "No held-out feature of the nominal model is beyond 3 sigma."
-    findings.append(Finding(text, {"where": [dict(w) for w in where[:3]], "count": len(where)}, "where"))
+    return Finding(text, {"where": [dict(w) for w in where[:3]], "count": len(where)}, "where")
+
+
+def _effect_set_findings(content: Mapping[str, Any], verdict: str) -> list[Finding]:
+    """Each effect's share of the shrink (several named) and the gap left unexplained (a partial verdict)."""
+    findings = []
     effects = content.get("effects") or []
     if len(effects) > 1:
         shares = "; ".join(f"{entry['effect']} ({entry['variant']}) {_percent(entry['shrink_share'])}"
@@ -268,6 +295,12 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
         findings.append(Finding(f"Partial explanation: a held-out gap of {_figure(remaining, 2, fixed=True)} "
                                 f"remains unexplained after {after}.",
                                 {"partial": True, "remaining_gap": remaining}, "partial"))
+    return findings
+
+
+def _borderline_findings(content: Mapping[str, Any]) -> list[Finding]:
+    """The deciding figures whose 90 % interval holds their threshold, or that there are none."""
+    findings = []
     for entry in content.get("borderline") or []:
         low, high = entry["interval"]
         findings.append(Finding(
@@ -278,12 +311,7 @@ def diagnosis_findings(content: Mapping[str, Any]) -> list[Finding]:
     if not content.get("borderline"):
         findings.append(Finding("No borderline figure: none of the figures that decided the verdict has its "
                                 "threshold inside its 90 % interval.", {"borderline": []}, "borderline"))
-    for entry in content.get("cannot_tell") or []:
-        findings.append(Finding(f"Cannot tell: {entry['reason']}.",
-                                {key: entry.get(key) for key in ("effect", "shaft", "run_out_m",
-                                                                 "share_of_class_gears_below", "classes")},
-                                "cannot_tell"))
-    return [*findings, *_rig_findings(content)]
+    return findings
 
 
 def _rig_findings(content: Mapping[str, Any]) -> list[Finding]:
@@ -419,27 +447,51 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
             headline_html(diagnosis_findings(content), "Details below."),
             f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
             f'<p>{html.escape(content["reason"])}.</p>', *change_page_parts(content)])
-    gap = content["gap"]
     figures = _diagnosis_figures(content, ds)
-    parts = ["<h1>Sim-to-real gap diagnosis</h1>",
-             headline_html(diagnosis_findings(content), "Details, maps and the candidate ranking below."),
-             f'<p class="note">rig: {html.escape(str(content["rig"]["source"]))} '
-             f'({html.escape(content["rig"]["title"])}), {content["rig"]["n_op"]} runs, channels '
-             f'{", ".join(content["rig"]["channels"])}</p>',
-             f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
-             f'<p>{html.escape(content["reason"])}.</p>',
-             *_decision_notes(content),
-             *_design_notes(content),
-             *_rig_notes(content),
-             "<h2>How far: the gap on held-out runs</h2>",
-             _table(["metric", "nominal model", "with effect", "effect", "shrink fraction", "90 % interval"],
-                    [[gap["metric"], gap["baseline"], gap["with_effect"], gap["effect"], gap["shrink_fraction"],
-                      "-" if gap["shrink_interval"] is None else
-                      f"{gap['shrink_interval'][0]:.2f} to {gap['shrink_interval'][1]:.2f}"]], (0, 3, 5)),
-             f'<p class="note">{html.escape(gap["evaluated_on"]["scheme"])}. The gap is the RMS standardised '
-             f'discrepancy in excess of noise (each feature capped at 10 sigma); the nominal model is within '
-             f'noise below {gap["noise_threshold"]}.</p>',
-             *_effect_set_html(content, figures)]
+    parts = [*_verdict_parts(content), *_held_out_gap_parts(content), *_effect_set_html(content, figures)]
+    parts += _where_parts(content, ds, figures)
+    parts += _pitch_error_notes(content)
+    parts += _ranking_parts(content)
+    if "amplitude_spectrum" in ds:
+        parts.append("<h2>Spectra on held-out runs: rig, nominal model, model with the effect</h2>"
+                     "<p class=\"note\">The two runs with the largest nominal gap, each predicted by the models "
+                     "fitted without it; model spectra include the rig's noise floor.</p>")
+        parts.append(figures["spectra"])
+    parts += _nominal_fit_parts(content)
+    parts += reference_section_html(content)
+    return html_page(f"uqgear diagnosis: {content['verdict']}", _STYLE + HEADLINE_STYLE, parts)
+
+
+def _verdict_parts(content: Mapping[str, Any]) -> list[str]:
+    """Title, headline, the rig, the verdict with its reason and the notes on decision, design and rig."""
+    return ["<h1>Sim-to-real gap diagnosis</h1>",
+            headline_html(diagnosis_findings(content), "Details, maps and the candidate ranking below."),
+            f'<p class="note">rig: {html.escape(str(content["rig"]["source"]))} '
+            f'({html.escape(content["rig"]["title"])}), {content["rig"]["n_op"]} runs, channels '
+            f'{", ".join(content["rig"]["channels"])}</p>',
+            f'<p class="verdict">verdict: {html.escape(content["verdict"])}</p>',
+            f'<p>{html.escape(content["reason"])}.</p>',
+            *_decision_notes(content),
+            *_design_notes(content),
+            *_rig_notes(content)]
+
+
+def _held_out_gap_parts(content: Mapping[str, Any]) -> list[str]:
+    """How far: the gap on held-out runs of the nominal model and with the effect."""
+    gap = content["gap"]
+    return ["<h2>How far: the gap on held-out runs</h2>",
+            _table(["metric", "nominal model", "with effect", "effect", "shrink fraction", "90 % interval"],
+                   [[gap["metric"], gap["baseline"], gap["with_effect"], gap["effect"], gap["shrink_fraction"],
+                     "-" if gap["shrink_interval"] is None else
+                     f"{gap['shrink_interval'][0]:.2f} to {gap['shrink_interval'][1]:.2f}"]], (0, 3, 5)),
+            f'<p class="note">{html.escape(gap["evaluated_on"]["scheme"])}. The gap is the RMS standardised '
+            f'discrepancy in excess of noise (each feature capped at 10 sigma); the nominal model is within '
+            f'noise below {gap["noise_threshold"]}.</p>']
+
+
+def _where_parts(content: Mapping[str, Any], ds: xr.Dataset, figures: Mapping[str, str]) -> list[str]:
+    """Where: gap maps, the signal per run, the features and families that miss, fixed lines."""
+    parts = []
     if "gap_map_nominal" in ds:
         parts += ["<h2>Where: gap map of the nominal model (held-out runs)</h2>",
                   figures["gap_map_nominal"]]
@@ -467,26 +519,30 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
         parts.append("<p>Line interference (a fixed line on an accelerometer that the TE lacks), left out of the "
                      "low band: " + ", ".join(f"{line['frequency']:.1f} Hz on {html.escape(line['channel'])}"
                                               for line in content["line_interference"]) + ".</p>")
-    parts += _pitch_error_notes(content)
-    parts.append("<h2>Which: candidate effects ranked</h2>")
-    parts.append(_table(
-        ["effect", "variant", "score (nats)", "gain (nats)", "s.e.", "penalty", "gap with effect", "shrink",
-         "shrink 5 %", "shrink 95 %", "fit", "parameters"],
-        [[r["effect"], r["variant"], r["score"], r["delta_log_density"], r["standard_error"], r["penalty"],
-          r["gap_with_effect"], r["shrink_fraction"], r["shrink_interval"][0], r["shrink_interval"][1], r["fit"],
-          ", ".join(f"{k}={_number(v, 4)}" for k, v in r["parameters"].items())] for r in content["ranking"]],
-        (0, 1, 10, 11)))
-    parts.append('<p class="note">Score: held-out log predictive density gain over the nominal model minus '
-                 f'0.5 log(n) per effect parameter; an effect is named at a score of '
-                 f'{content["thresholds"]["score"]:g} or more with a shrink of at least '
-                 f'{content["thresholds"]["shrink_fraction"]:g}.</p>')
-    if "amplitude_spectrum" in ds:
-        parts.append("<h2>Spectra on held-out runs: rig, nominal model, model with the effect</h2>"
-                     "<p class=\"note\">The two runs with the largest nominal gap, each predicted by the models "
-                     "fitted without it; model spectra include the rig's noise floor.</p>")
-        parts.append(figures["spectra"])
+    return parts
+
+
+def _ranking_parts(content: Mapping[str, Any]) -> list[str]:
+    """Which: the candidate effects ranked by held-out score, with the naming rule."""
+    return ["<h2>Which: candidate effects ranked</h2>",
+            _table(
+                ["effect", "variant", "score (nats)", "gain (nats)", "s.e.", "penalty", "gap with effect", "shrink",
+                 "shrink 5 %", "shrink 95 %", "fit", "parameters"],
+                [[r["effect"], r["variant"], r["score"], r["delta_log_density"], r["standard_error"], r["penalty"],
+                  r["gap_with_effect"], r["shrink_fraction"], r["shrink_interval"][0], r["shrink_interval"][1],
+                  r["fit"], ", ".join(f"{k}={_number(v, 4)}" for k, v in r["parameters"].items())]
+                 for r in content["ranking"]],
+                (0, 1, 10, 11)),
+            '<p class="note">Score: held-out log predictive density gain over the nominal model minus '
+            f'0.5 log(n) per effect parameter; an effect is named at a score of '
+            f'{content["thresholds"]["score"]:g} or more with a shrink of at least '
+            f'{content["thresholds"]["shrink_fraction"]:g}.</p>']
+
+
+def _nominal_fit_parts(content: Mapping[str, Any]) -> list[str]:
+    """The nominal model's fitted parameters, T2 per run, periodicity, model error and time."""
     nominal = content["nominal"]
-    parts.append("<h2>Nominal fit</h2>")
+    parts = ["<h2>Nominal fit</h2>"]
     if nominal is None:
         parts.append("<p>Not fitted: the data cannot decide (see the verdict).</p>")
     else:
@@ -496,8 +552,7 @@ def diagnosis_report_html(content: Mapping[str, Any], ds: xr.Dataset) -> str:
                      f'periodic steady response: {", ".join("yes" if p else "no" for p in nominal["periodic_runs"])}; '
                      f'model error (relative): {html.escape(json.dumps(content["model_error"]))}; '
                      f'time: {content["timing_s"].get("total_wall", float("nan")):.0f} s.</p>')
-    parts += reference_section_html(content)
-    return html_page(f"uqgear diagnosis: {content['verdict']}", _STYLE + HEADLINE_STYLE, parts)
+    return parts
 
 
 def write_diagnosis_report(content: Mapping[str, Any], ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:

@@ -419,55 +419,11 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
     scale = display(parameter)[2]
     figure = new_figure(9.0, 6.4 if condition else 5.4)
     top, bottom = figure.subplots(2, 1, height_ratios=(3, 1), sharex=True)
-    points = ds["poincare_x"]
     values = np.asarray(ds[parameter].values, dtype=float)
     if condition:
-        others = [dim for dim in points.dims if dim not in (parameter, "period", condition)]
-        if others:
-            points = points.isel(dict.fromkeys(others, 0))
-        condition_values = np.asarray(ds[condition].values, dtype=float)
-        cmap = colormaps["cividis"]
-        for index, level in enumerate(condition_values):
-            column = points.sel({condition: level}).transpose(parameter, "period").values * 1e6
-            colour = cmap(index / max(len(condition_values) - 1, 1))
-            top.plot(
-                np.repeat(values * scale, column.shape[1]),
-                column.ravel(),
-                linestyle="none",
-                marker=_MARKERS[index % len(_MARKERS)],
-                markersize=2.2,
-                color=colour,
-                alpha=0.8,
-                label=f"{short_name(condition)} = {format_value(condition, level)}",
-            )
-        top.legend(
-            fontsize=7,
-            loc="upper left",
-            bbox_to_anchor=(1.01, 1.0),
-            borderaxespad=0,
-            markerscale=2.5,
-            title="envelope member",
-            title_fontsize=7,
-        )
-        top.set_title(
-            f"bifurcation envelope: union of Poincaré points over {short_name(condition)} "
-            f"in [{format_value(condition, condition_values[0])}, "
-            f"{format_value(condition, condition_values[-1])}]",
-            fontsize=9,
-        )
-        regime = ds["regime"].transpose(parameter, condition, ...)
+        regime = _plot_envelope_points(top, ds, parameter, condition, values * scale)
     else:
-        column = points.transpose(parameter, "period").values * 1e6
-        top.plot(
-            np.repeat(values * scale, column.shape[1]),
-            column.ravel(),
-            linestyle="none",
-            marker=".",
-            markersize=2.0,
-            color="black",
-        )
-        top.set_title("bifurcation diagram: Poincaré points of the DTE", fontsize=9)
-        regime = ds["regime"]
+        regime = _plot_poincare_points(top, ds, parameter, values * scale)
     if draw_sweep_starts(top, ds, parameter, condition, scale):
         top.set_title(
             top.get_title() + "\nwhere two or more responses coexist: blue ▲ up-sweep start, orange ▼ down-sweep start",
@@ -482,16 +438,90 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
         _stiffness_axis(top, k_mean)
     _regime_strip(bottom, regime, parameter, condition)
     if _geometric(values):
-        # a log-spaced sweep (e.g. bearing stiffness over decades) on a log axis, columns evenly spread
-        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+        _log_sweep_axis(bottom)
+    _add_figure(section, figure, _bifurcation_caption(parameter, condition, half_backlash, k_mean), dpi)
+    if k_mean is not None:
+        section.facts.append(("mean mesh stiffness at scale 1", f"{k_mean:.4g} N/m"))
+    section.findings.extend(regime_findings(regime, parameter, condition))
+    section.findings.extend(coexistence_sentences(ds, parameter, condition))
+    section.caveats.append(_classification_caveat(ds))
+    if condition:
+        section.caveats.append(
+            f"the envelope is the union over {ds.sizes[condition]} values of "
+            f"{short_name(condition)} across its interval; regimes confined between "
+            "these values can be missed"
+        )
+    return section
 
-        bottom.set_xscale("log")
-        bottom.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
-        bottom.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
-        bottom.xaxis.set_minor_formatter(NullFormatter())
-    _add_figure(
-        section,
-        figure,
+
+def _plot_envelope_points(top: Any, ds: xr.Dataset, parameter: str, condition: str, shown: np.ndarray) -> xr.DataArray:
+    """Poincaré points per envelope member, one colour and marker each; the regimes over both axes."""
+    points = ds["poincare_x"]
+    others = [dim for dim in points.dims if dim not in (parameter, "period", condition)]
+    if others:
+        points = points.isel(dict.fromkeys(others, 0))
+    condition_values = np.asarray(ds[condition].values, dtype=float)
+    cmap = colormaps["cividis"]
+    for index, level in enumerate(condition_values):
+        column = points.sel({condition: level}).transpose(parameter, "period").values * 1e6
+        colour = cmap(index / max(len(condition_values) - 1, 1))
+        top.plot(
+            np.repeat(shown, column.shape[1]),
+            column.ravel(),
+            linestyle="none",
+            marker=_MARKERS[index % len(_MARKERS)],
+            markersize=2.2,
+            color=colour,
+            alpha=0.8,
+            label=f"{short_name(condition)} = {format_value(condition, level)}",
+        )
+    top.legend(
+        fontsize=7,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        borderaxespad=0,
+        markerscale=2.5,
+        title="envelope member",
+        title_fontsize=7,
+    )
+    top.set_title(
+        f"bifurcation envelope: union of Poincaré points over {short_name(condition)} "
+        f"in [{format_value(condition, condition_values[0])}, "
+        f"{format_value(condition, condition_values[-1])}]",
+        fontsize=9,
+    )
+    return ds["regime"].transpose(parameter, condition, ...)
+
+
+def _plot_poincare_points(top: Any, ds: xr.Dataset, parameter: str, shown: np.ndarray) -> xr.DataArray:
+    """The Poincaré points of one bifurcation diagram; its regimes."""
+    column = ds["poincare_x"].transpose(parameter, "period").values * 1e6
+    top.plot(
+        np.repeat(shown, column.shape[1]),
+        column.ravel(),
+        linestyle="none",
+        marker=".",
+        markersize=2.0,
+        color="black",
+    )
+    top.set_title("bifurcation diagram: Poincaré points of the DTE", fontsize=9)
+    return ds["regime"]
+
+
+def _log_sweep_axis(ax: Any) -> None:
+    """A log-spaced sweep (e.g. bearing stiffness over decades) on a log axis, columns evenly spread."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.set_xscale("log")
+    ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def _bifurcation_caption(parameter: str, condition: str | None, half_backlash: float | np.ndarray | None,
+                         k_mean: float | None) -> str:
+    """The bifurcation figure's caption: what is drawn against what, and the lines added where known."""
+    return (
         f"Bifurcation diagram against {short_name(parameter)}"
         + (f", over {short_name(condition)} (colour and marker)" if condition else "")
         + (
@@ -505,21 +535,8 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
             if k_mean is not None
             else ""
         )
-        + "; below: response regime per column.",
-        dpi,
+        + "; below: response regime per column."
     )
-    if k_mean is not None:
-        section.facts.append(("mean mesh stiffness at scale 1", f"{k_mean:.4g} N/m"))
-    section.findings.extend(regime_findings(regime, parameter, condition))
-    section.findings.extend(coexistence_sentences(ds, parameter, condition))
-    section.caveats.append(_classification_caveat(ds))
-    if condition:
-        section.caveats.append(
-            f"the envelope is the union over {ds.sizes[condition]} values of "
-            f"{short_name(condition)} across its interval; regimes confined between "
-            "these values can be missed"
-        )
-    return section
 
 
 @renderer("regime_map")

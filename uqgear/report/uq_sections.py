@@ -93,45 +93,7 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
     figure = new_figure(9.0, 2.9 * len(qois))
     axes = np.atleast_1d(figure.subplots(len(qois), 1, sharex=True))
     for ax, name in zip(axes, qois):
-        _, unit, factor = display(name)
-        bounds = ds[name]
-        lower = bounds.sel(bound="lower").values * factor
-        upper = bounds.sel(bound="upper").values * factor
-        nominal = ds[f"{name}_nominal"].values * factor if f"{name}_nominal" in ds else None
-        if sweep is not None and lower.ndim == 1:
-            x = np.asarray(ds[sweep].values, dtype=float) * display(sweep)[2]
-            ax.fill_between(
-                x, lower, upper, color=colormaps["cividis"](0.75), alpha=0.6, label=f"envelope over {label}"
-            )
-            ax.plot(x, lower, color="black", linewidth=1.0, linestyle="-")
-            ax.plot(x, upper, color="black", linewidth=1.0, linestyle="-")
-            if nominal is not None:
-                ax.plot(x, nominal, color="black", linestyle="--", linewidth=1.0, label="nominal (midpoints)")
-            _draw_branches(ax, ds, name, x, factor)
-            _draw_coexisting(ax, ds, name, x, factor)
-            flagged = _flags(ds, name)
-            if flagged is not None and flagged.any():
-                ax.plot(
-                    x[flagged],
-                    upper[flagged],
-                    linestyle="none",
-                    marker="x",
-                    color="black",
-                    markersize=6,
-                    label="flagged (non-smooth or surrogate error)",
-                )
-            ax.legend(fontsize=7, loc="best")
-        else:
-            ax.bar(
-                [0],
-                [float(np.ravel(upper)[0] - np.ravel(lower)[0])],
-                bottom=[float(np.ravel(lower)[0])],
-                color=colormaps["cividis"](0.75),
-                edgecolor="black",
-                width=0.4,
-            )
-            ax.set_xticks([])
-        ax.set_ylabel(f"{display(name)[0]} [{unit}]")
+        _plot_interval_bounds(ax, ds, name, sweep, label)
         _interval_findings(section, ds, name, sweep, label)
         section.findings.extend(attractor_bound_sentences(ds, name, sweep))
         section.findings.extend(branch_sentences(ds, name, sweep))
@@ -145,6 +107,56 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
         "checks).",
         dpi,
     )
+    _interval_method_notes(section, ds, qois, sweep, method)
+    return section
+
+
+def _plot_interval_bounds(ax: Any, ds: xr.Dataset, name: str, sweep: str | None, label: str) -> None:
+    """One QoI's bounds: a band over the sweep (with the nominal, branches and flags), or one bar."""
+    _, unit, factor = display(name)
+    bounds = ds[name]
+    lower = bounds.sel(bound="lower").values * factor
+    upper = bounds.sel(bound="upper").values * factor
+    nominal = ds[f"{name}_nominal"].values * factor if f"{name}_nominal" in ds else None
+    if sweep is not None and lower.ndim == 1:
+        x = np.asarray(ds[sweep].values, dtype=float) * display(sweep)[2]
+        ax.fill_between(
+            x, lower, upper, color=colormaps["cividis"](0.75), alpha=0.6, label=f"envelope over {label}"
+        )
+        ax.plot(x, lower, color="black", linewidth=1.0, linestyle="-")
+        ax.plot(x, upper, color="black", linewidth=1.0, linestyle="-")
+        if nominal is not None:
+            ax.plot(x, nominal, color="black", linestyle="--", linewidth=1.0, label="nominal (midpoints)")
+        _draw_branches(ax, ds, name, x, factor)
+        _draw_coexisting(ax, ds, name, x, factor)
+        flagged = _flags(ds, name)
+        if flagged is not None and flagged.any():
+            ax.plot(
+                x[flagged],
+                upper[flagged],
+                linestyle="none",
+                marker="x",
+                color="black",
+                markersize=6,
+                label="flagged (non-smooth or surrogate error)",
+            )
+        ax.legend(fontsize=7, loc="best")
+    else:
+        ax.bar(
+            [0],
+            [float(np.ravel(upper)[0] - np.ravel(lower)[0])],
+            bottom=[float(np.ravel(lower)[0])],
+            color=colormaps["cividis"](0.75),
+            edgecolor="black",
+            width=0.4,
+        )
+        ax.set_xticks([])
+    ax.set_ylabel(f"{display(name)[0]} [{unit}]")
+
+
+def _interval_method_notes(section: Section, ds: xr.Dataset, qois: list[str], sweep: str | None,
+                           method: Any) -> None:
+    """The points the fallback recomputed, the runs the method took, and why bounds were flagged."""
     redone = _flags(ds, qois[0], FLAG_FALLBACK) if qois else None
     if redone is not None and redone.any() and sweep is not None:
         values = np.asarray(ds[sweep].values, dtype=float)
@@ -171,7 +183,6 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
             + _list(reasons)
             + "</details>"
         )
-    return section
 
 
 def _flags(ds: xr.Dataset, name: str, bits: int = _OWN_FLAGS) -> np.ndarray | None:
