@@ -8,6 +8,7 @@ one batch call per round (:func:`optimize_bounds`).
 
 from __future__ import annotations
 
+import functools
 import threading
 import warnings
 from collections.abc import Callable, Sequence
@@ -108,75 +109,94 @@ def optimize_bounds(
     bounds = Bounds.empty(sweep_index, responses_count)
     bounds.observe(values)
     flag_common_problems(bounds, values, regime, regime_names, names)
-    nonfinite_seen = np.zeros(bounds.flag.shape, dtype=bool)
-    lock = threading.Lock()
-
+    outcome = _SearchOutcome(bounds.flag.shape)
     searches = _starting_points(values, screen_nodes, n_starts)
     batcher = _LockstepBatcher(len(searches))
-    failures: list[BaseException] = []
-
-    def search(worker: int, row: int, r: int, sign: float, start: np.ndarray) -> None:
-        def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
-            x = np.clip(x, 0.0, 1.0)
-            steps = np.where(x + step <= 1.0, step, -step)
-            points = np.vstack([x, x + np.diag(steps)])
-            result = batcher.request(worker, row, points)[:, r]
-            if not np.all(np.isfinite(result)):
-                raise _NonFinite
-            return sign * result[0], sign * (result[1:] - result[0]) / steps
-
-        try:
-            minimize(
-                objective,
-                start,
-                jac=True,
-                method="L-BFGS-B",
-                bounds=[(0.0, 1.0)] * dimensions,
-                options={"maxiter": max_iterations, "maxfun": 2 * max_iterations},
-            )
-        except _NonFinite:
-            with lock:
-                nonfinite_seen[row, r] = True
-        except _Aborted:
-            pass
-        except BaseException as error:  # re-raised in the calling thread
-            with lock:
-                failures.append(error)
-        finally:
-            batcher.finish()
-
-    def evaluate(requests: dict[int, tuple[int, np.ndarray]]) -> dict[int, np.ndarray]:
-        workers = sorted(requests)  # the batch does not depend on thread timing
-        rows = np.concatenate([np.full(len(requests[w][1]), requests[w][0]) for w in workers])
-        points = np.vstack([requests[w][1] for w in workers])
-        found, _ = responses(sweep_index[rows], points)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            for row in np.unique(rows):
-                chosen = found[rows == row]
-                bounds.observed_lower[row] = np.fmin(bounds.observed_lower[row], np.nanmin(chosen, axis=0))
-                bounds.observed_upper[row] = np.fmax(bounds.observed_upper[row], np.nanmax(chosen, axis=0))
-        results, position = {}, 0
-        for w in workers:
-            size = len(requests[w][1])
-            results[w] = found[position : position + size]
-            position += size
-        return results
-
-    threads = [threading.Thread(target=search, args=(i, *spec), daemon=True) for i, spec in enumerate(searches)]
+    settings = (step, dimensions, max_iterations)
+    threads = [threading.Thread(target=_search, args=(batcher, outcome, settings, i, *spec), daemon=True)
+               for i, spec in enumerate(searches)]
     for thread in threads:
         thread.start()
     try:
-        batcher.serve(evaluate)
+        batcher.serve(functools.partial(_evaluate_requests, responses, sweep_index, bounds))
     finally:
         for thread in threads:
             thread.join()
-    if failures:
-        raise failures[0]
-    for row, r in zip(*np.nonzero(nonfinite_seen & ~(bounds.flag & FLAG_NONFINITE).astype(bool))):
+    if outcome.failures:
+        raise outcome.failures[0]
+    for row, r in zip(*np.nonzero(outcome.nonfinite_seen & ~(bounds.flag & FLAG_NONFINITE).astype(bool))):
         bounds.add_reason(row, r, FLAG_NONFINITE, f"{names[r]}: non-finite model value met by a local search")
     bounds.lower, bounds.upper = bounds.observed_lower.copy(), bounds.observed_upper.copy()
     return bounds
+
+
+class _SearchOutcome:
+    """What the local searches met, gathered from their threads under one lock."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self.nonfinite_seen = np.zeros(shape, dtype=bool)
+        self.failures: list[BaseException] = []
+        self.lock = threading.Lock()
+
+
+def _search(batcher: _LockstepBatcher, outcome: _SearchOutcome, settings: tuple[float, int, int], worker: int,
+            row: int, r: int, sign: float, start: np.ndarray) -> None:
+    """One L-BFGS-B search (in its own thread) for the minimum (sign +1) or maximum (-1) of response ``r``.
+
+    Its points go to the batcher, which evaluates every search's requests in one batch per round;
+    ``settings`` are the finite-difference step, the dimensions and the iteration limit.
+    """
+    step, dimensions, max_iterations = settings
+
+    def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
+        x = np.clip(x, 0.0, 1.0)
+        steps = np.where(x + step <= 1.0, step, -step)
+        points = np.vstack([x, x + np.diag(steps)])
+        result = batcher.request(worker, row, points)[:, r]
+        if not np.all(np.isfinite(result)):
+            raise _NonFinite
+        return sign * result[0], sign * (result[1:] - result[0]) / steps
+
+    try:
+        minimize(
+            objective,
+            start,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(0.0, 1.0)] * dimensions,
+            options={"maxiter": max_iterations, "maxfun": 2 * max_iterations},
+        )
+    except _NonFinite:
+        with outcome.lock:
+            outcome.nonfinite_seen[row, r] = True
+    except _Aborted:
+        pass
+    except BaseException as error:  # re-raised in the calling thread
+        with outcome.lock:
+            outcome.failures.append(error)
+    finally:
+        batcher.finish()
+
+
+def _evaluate_requests(responses: ModelResponses, sweep_index: np.ndarray, bounds: Bounds,
+                       requests: dict[int, tuple[int, np.ndarray]]) -> dict[int, np.ndarray]:
+    """One round of the searches' points as one model batch; every value found widens the observed bounds."""
+    workers = sorted(requests)  # the batch does not depend on thread timing
+    rows = np.concatenate([np.full(len(requests[w][1]), requests[w][0]) for w in workers])
+    points = np.vstack([requests[w][1] for w in workers])
+    found, _ = responses(sweep_index[rows], points)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for row in np.unique(rows):
+            chosen = found[rows == row]
+            bounds.observed_lower[row] = np.fmin(bounds.observed_lower[row], np.nanmin(chosen, axis=0))
+            bounds.observed_upper[row] = np.fmax(bounds.observed_upper[row], np.nanmax(chosen, axis=0))
+    results, position = {}, 0
+    for w in workers:
+        size = len(requests[w][1])
+        results[w] = found[position : position + size]
+        position += size
+    return results
 
 
 def _starting_points(

@@ -321,6 +321,10 @@ class PolynomialChaos:
                 used[q].reshape(shape),
                 {"units": "1", "long_name": "finite model outputs used"},
             )
+        return xr.Dataset(data_vars, coords=coords, attrs=self._attributes(space, shape))
+
+    def _attributes(self, space: ParameterSpace, shape: tuple[int, ...]) -> dict[str, Any]:
+        """The result's attributes: the method, the distributions it took, its settings and seed."""
         distributions = {
             name: ("uniform on " + space[name].describe() if name in space.interval_names else space[name].describe())
             for name in self._names
@@ -348,7 +352,7 @@ class PolynomialChaos:
             "parameter_space": space.to_json(),
             **seed_attributes(self.seed_sequence),
         }
-        return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+        return attrs
 
     def _surrogate_quantiles(self) -> np.ndarray:
         rng_seed = child_seed(self.seed_sequence, 1)
