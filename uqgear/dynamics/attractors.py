@@ -580,12 +580,53 @@ def _extra_stages(
 def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiStart) -> xr.Dataset:
     """Group the runs of every sample (dims ``sample``, ``start``) into attractors (see the module docstring)."""
     n, labels = runs.sizes["sample"], [str(v) for v in runs["start"].values]
+    grouping = _group_runs(runs, design, settings)
+    members = grouping.members
+    width = max((len(groups) for groups in members), default=0)
+    data: dict[str, Any] = {}
+    for name in ATTRACTOR_QOIS:
+        if name not in runs:
+            continue
+        table = runs[name].transpose("sample", "start").values
+        values = np.full((n, width), np.nan)
+        for i, groups in enumerate(members):
+            for k, group in enumerate(groups):
+                values[i, k] = float(table[i, group[0]])
+        data[name] = (
+            ("sample", "attractor"),
+            values,
+            {"units": RUN_QOI_INFO[name][0], "long_name": RUN_QOI_INFO[name][1]},
+        )
+    data.update(_attractor_starts(members, grouping.regimes, labels, width))
+    out = xr.Dataset(data, coords={"attractor": ("attractor", np.arange(width))})
+    out.attrs.update(settings.to_dict())
+    out.attrs["_membership"] = grouping.membership
+    return out
+
+
+@dataclass(frozen=True)
+class _Grouping:
+    """The runs of every sample grouped into attractors.
+
+    ``members[i][k]``: the starts of sample ``i`` that reached its attractor ``k`` (first found first);
+    ``membership`` (sample, start): the attractor each start reached, -1 where it did not run;
+    ``regimes`` (sample, start): each run's regime.
+    """
+
+    members: list[list[list[int]]]
+    membership: np.ndarray
+    regimes: np.ndarray
+
+
+def _group_runs(runs: xr.Dataset, design: Design | None, settings: MultiStart) -> _Grouping:
+    """Compare each sample's runs start by start: a run is the first attractor it matches, or a new one."""
+    n, n_starts = runs.sizes["sample"], runs.sizes["start"]
     half_backlash = float(design.half_backlash) if design is not None else float(runs.attrs.get("half_backlash", 1.0))
     speed = np.asarray(runs["pinion_speed"].values if "pinion_speed" in runs.coords else runs["pinion_speed"].values)
     speed = speed if speed.ndim == 1 else speed[0]
     z1 = design.z1 if design is not None else int(runs.attrs.get("design_z1", 1))
     members: list[list[list[int]]] = []
-    membership = np.zeros((n, len(labels)), dtype=np.int64)
+    membership = np.zeros((n, n_starts), dtype=np.int64)
     # plain arrays once: per-entry xarray indexing costs more than the comparisons
     compared = {
         name: runs[name].transpose("sample", "start").values.astype(float)
@@ -601,7 +642,7 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
         omega_b = 2.0 * math.pi * z1 * float(np.ravel(speed)[i]) / 60.0 * half_backlash
         found: list[dict[str, Any]] = []
         groups: list[list[int]] = []
-        for j in range(len(labels)):
+        for j in range(n_starts):
             if not ran[i, j]:
                 membership[i, j] = -1
                 continue
@@ -622,21 +663,13 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
                 groups[match].append(j)
                 membership[i, j] = match
         members.append(groups)
-    width = max((len(groups) for groups in members), default=0)
-    data: dict[str, Any] = {}
-    for name in ATTRACTOR_QOIS:
-        if name not in runs:
-            continue
-        table = runs[name].transpose("sample", "start").values
-        values = np.full((n, width), np.nan)
-        for i, groups in enumerate(members):
-            for k, group in enumerate(groups):
-                values[i, k] = float(table[i, group[0]])
-        data[name] = (
-            ("sample", "attractor"),
-            values,
-            {"units": RUN_QOI_INFO[name][0], "long_name": RUN_QOI_INFO[name][1]},
-        )
+    return _Grouping(members, membership, regimes)
+
+
+def _attractor_starts(members: list[list[list[int]]], regimes: np.ndarray, labels: list[str],
+                      width: int) -> dict[str, Any]:
+    """Per attractor: its regime, the starts that reached it (the first, all, their share); per sample the count."""
+    n = len(members)
     regime = np.full((n, width), "", dtype=object)
     first = np.full((n, width), "", dtype=object)
     which = np.full((n, width), "", dtype=object)
@@ -648,27 +681,21 @@ def group_attractors(runs: xr.Dataset, design: Design | None, settings: MultiSta
             first[i, k] = labels[group[0]]
             which[i, k] = ",".join(labels[j] for j in group)
             share[i, k] = len(group) / total
-    data.update(
-        {
-            "regime": (("sample", "attractor"), regime.astype(str), {"long_name": "response regime of the attractor"}),
-            "first_start": (("sample", "attractor"), first.astype(str), {"long_name": "first start that reached it"}),
-            "starts": (("sample", "attractor"), which.astype(str), {"long_name": "starts that reached it"}),
-            "share": (
-                ("sample", "attractor"),
-                share,
-                {"units": "1", "long_name": "share of the starts that reached it"},
-            ),
-            "attractor_count": (
-                "sample",
-                np.array([len(g) for g in members], dtype=np.int64),
-                {"units": "1", "long_name": "distinct steady responses found"},
-            ),
-        }
-    )
-    out = xr.Dataset(data, coords={"attractor": ("attractor", np.arange(width))})
-    out.attrs.update(settings.to_dict())
-    out.attrs["_membership"] = membership
-    return out
+    return {
+        "regime": (("sample", "attractor"), regime.astype(str), {"long_name": "response regime of the attractor"}),
+        "first_start": (("sample", "attractor"), first.astype(str), {"long_name": "first start that reached it"}),
+        "starts": (("sample", "attractor"), which.astype(str), {"long_name": "starts that reached it"}),
+        "share": (
+            ("sample", "attractor"),
+            share,
+            {"units": "1", "long_name": "share of the starts that reached it"},
+        ),
+        "attractor_count": (
+            "sample",
+            np.array([len(g) for g in members], dtype=np.int64),
+            {"units": "1", "long_name": "distinct steady responses found"},
+        ),
+    }
 
 
 def extremes_over_attractors(attractors: xr.Dataset, qois: Sequence[str]) -> xr.Dataset:

@@ -128,6 +128,35 @@ def branches_dataset(
     """The Dataset of followed branches and their bifurcation table (layout in the module docstring)."""
     width = max((len(branch.points) for branch in branches), default=0)
     units = PARAMETER_UNITS.get(parameter, "1")
+    data = _point_variables(branches, width, parameter, units)
+    phases = max((branch.period for branch in branches), default=1)  # Poincare points of the longest orbit
+    data.update(_branch_variables(branches))
+    data.update(_table(branches, bifurcations, units))
+    coords = {
+        "branch": ("branch", np.arange(len(branches))),
+        "point": ("point", np.arange(width)),
+        "state": ("state", list(STATE_NAMES)),
+        "multiplier": ("multiplier", np.arange(6)),
+        "bifurcation": ("bifurcation", np.arange(len(bifurcations))),
+        "phase": ("phase", np.arange(phases)),
+    }
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(
+        {
+            "parameter": parameter,
+            "parameter_units": units,
+            "location_tolerance": float(tolerance),
+            "fixed_inputs": json.dumps({k: float(v) for k, v in fixed.items()}),
+            "design_name": design.name,
+            "half_backlash": float(design.half_backlash),
+            **dict(attrs or {}),
+        }
+    )
+    return ds
+
+
+def _point_variables(branches: Sequence[Branch], width: int, parameter: str, units: str) -> dict[str, Any]:
+    """Per branch point, padded beyond a branch's points: parameter, orbit, multipliers, stability, QoIs."""
     data: dict[str, Any] = {
         "parameter": (
             ("branch", "point"),
@@ -182,62 +211,42 @@ def branches_dataset(
         ),
         {"units": "m", "long_name": "DTE of the orbit at each mesh-period start (its Poincare points)"},
     )
-    data.update(
-        {
-            "branch_period": (
-                "branch",
-                np.array([b.period for b in branches], dtype=np.int64),
-                {"units": "1", "long_name": "n of the branch's period-n orbits"},
-            ),
-            "branch_parent": (
-                "branch",
-                np.array([b.parent for b in branches], dtype=np.int64),
-                {"long_name": "branch switched from (-1: none)"},
-            ),
-            "branch_origin": (
-                "branch",
-                np.array([b.origin for b in branches], dtype=np.int64),
-                {"long_name": "bifurcation switched at (-1: none)"},
-            ),
-            "branch_points": (
-                "branch",
-                np.array([len(b.points) for b in branches], dtype=np.int64),
-                {"units": "1", "long_name": "points on the branch"},
-            ),
-            "branch_end": (
-                "branch",
-                np.array([b.end for b in branches], dtype=str),
-                {"long_name": "why the branch ends"},
-            ),
-        }
-    )
-    data.update(_table(branches, bifurcations, units))
-    coords = {
-        "branch": ("branch", np.arange(len(branches))),
-        "point": ("point", np.arange(width)),
-        "state": ("state", list(STATE_NAMES)),
-        "multiplier": ("multiplier", np.arange(6)),
-        "bifurcation": ("bifurcation", np.arange(len(bifurcations))),
-        "phase": ("phase", np.arange(phases)),
+    return data
+
+
+def _branch_variables(branches: Sequence[Branch]) -> dict[str, Any]:
+    """Per branch: its period, where it was switched from, its points and why it ends."""
+    return {
+        "branch_period": (
+            "branch",
+            np.array([b.period for b in branches], dtype=np.int64),
+            {"units": "1", "long_name": "n of the branch's period-n orbits"},
+        ),
+        "branch_parent": (
+            "branch",
+            np.array([b.parent for b in branches], dtype=np.int64),
+            {"long_name": "branch switched from (-1: none)"},
+        ),
+        "branch_origin": (
+            "branch",
+            np.array([b.origin for b in branches], dtype=np.int64),
+            {"long_name": "bifurcation switched at (-1: none)"},
+        ),
+        "branch_points": (
+            "branch",
+            np.array([len(b.points) for b in branches], dtype=np.int64),
+            {"units": "1", "long_name": "points on the branch"},
+        ),
+        "branch_end": (
+            "branch",
+            np.array([b.end for b in branches], dtype=str),
+            {"long_name": "why the branch ends"},
+        ),
     }
-    ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(
-        {
-            "parameter": parameter,
-            "parameter_units": units,
-            "location_tolerance": float(tolerance),
-            "fixed_inputs": json.dumps({k: float(v) for k, v in fixed.items()}),
-            "design_name": design.name,
-            "half_backlash": float(design.half_backlash),
-            **dict(attrs or {}),
-        }
-    )
-    return ds
 
 
 def _table(branches: Sequence[Branch], bifurcations: Sequence[Bifurcation], units: str) -> dict[str, Any]:
-    n = len(bifurcations)
-    multipliers = np.array([b.point.multipliers for b in bifurcations]).reshape(n, 6)
+    """The bifurcation table: type, branch, location with its tolerance, side, stability, sweep, orbit there."""
     table: dict[str, Any] = {
         "bifurcation_type": (
             "bifurcation",
@@ -295,6 +304,16 @@ def _table(branches: Sequence[Branch], bifurcations: Sequence[Bifurcation], unit
             np.array([_sweep(b) for b in bifurcations], dtype=str),
             {"long_name": "fold of a stable stretch: the sweep direction that jumps there"},
         ),
+    }
+    table.update(_orbit_at_bifurcations(bifurcations))
+    return table
+
+
+def _orbit_at_bifurcations(bifurcations: Sequence[Bifurcation]) -> dict[str, Any]:
+    """The orbit at each bifurcation: its state, Floquet multipliers and QoIs."""
+    n = len(bifurcations)
+    multipliers = np.array([b.point.multipliers for b in bifurcations]).reshape(n, 6)
+    table: dict[str, Any] = {
         "bifurcation_state": (
             ("bifurcation", "state"),
             np.array([b.point.state for b in bifurcations]).reshape(n, 6),

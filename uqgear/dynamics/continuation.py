@@ -451,25 +451,9 @@ class Continuation:
                 current, x, tangent = new, tracer.scaled(new), new.tangent
                 continue
             new.arclength = current.arclength + step
-            merged = False
-            for kind, test in detect(current, new):
-                start_x, start_tangent = x.copy(), tangent.copy()
-
-                def corrected(s: float, start_x: np.ndarray = start_x, t: np.ndarray = start_tangent) -> Any:
-                    return tracer.correct(start_x + s * t, t, period, t)
-
-                located = locate(kind, test, current, new, step, corrected, tolerance, tracer.span, index)
-                if (
-                    kind in (FOLD, BRANCH_POINT)
-                    and period % 2 == 0
-                    and tracer.half_distance(located.point, period) < MERGE_FRACTION * widest
-                ):
-                    # a doubled orbit's two halves meet: the parent's period doubling, reached from this side
-                    merged = True
-                    branch.merged_at = located.parameter
-                    branch.end = f"merges into the period-{period // 2} branch at {located.parameter:.6g}"
-                    break
-                found.append(located)
+            located, merged = _bifurcations_on_step(tracer, branch, index, (current, x, tangent), new, step,
+                                                    tolerance, widest)
+            found += located
             if merged:
                 break
             if period % 2 == 0:
@@ -510,6 +494,44 @@ class Continuation:
         if norm < 1e-8:
             return None
         return replace(point, tangent=heading / norm), heading / norm
+
+
+def _bifurcations_on_step(
+    tracer: _Tracer,
+    branch: Branch,
+    index: int,
+    start: tuple[BranchPoint, np.ndarray, np.ndarray],
+    new: BranchPoint,
+    step: float,
+    tolerance: float,
+    widest: float,
+) -> tuple[list[Bifurcation], bool]:
+    """The bifurcations located on the step from ``start`` (point, scaled point, tangent) to ``new``.
+
+    A fold or branch point where a doubled orbit's halves meet (closer than ``MERGE_FRACTION`` of the
+    ``widest`` distance so far) ends the branch: it merges into its parent, and the second value is True.
+    """
+    current, x, tangent = start
+    period = branch.period
+    found: list[Bifurcation] = []
+    for kind, test in detect(current, new):
+        start_x, start_tangent = x.copy(), tangent.copy()
+
+        def corrected(s: float, start_x: np.ndarray = start_x, t: np.ndarray = start_tangent) -> Any:
+            return tracer.correct(start_x + s * t, t, period, t)
+
+        located = locate(kind, test, current, new, step, corrected, tolerance, tracer.span, index)
+        if (
+            kind in (FOLD, BRANCH_POINT)
+            and period % 2 == 0
+            and tracer.half_distance(located.point, period) < MERGE_FRACTION * widest
+        ):
+            # a doubled orbit's two halves meet: the parent's period doubling, reached from this side
+            branch.merged_at = located.parameter
+            branch.end = f"merges into the period-{period // 2} branch at {located.parameter:.6g}"
+            return found, True
+        found.append(located)
+    return found, False
 
 
 def _drop_fold_pairs(

@@ -634,6 +634,39 @@ def period_labels(ds: xr.Dataset, *, max_period: int | None = None, rtol: float 
     )
 
 
+def _regime_variables(runs: Mapping[str, Any], template: xr.DataArray) -> dict[str, xr.DataArray]:
+    """The classification of every run as variables over the run dims of ``template``."""
+
+    def build(values: np.ndarray, attrs: dict[str, str]) -> xr.DataArray:
+        return template.copy(data=values.reshape(template.shape)).assign_attrs(attrs)
+
+    labels = np.array([str(label) for label in runs["regime"]], dtype=str)
+    reasons = np.array([str(text) for text in runs["regime_reason"]], dtype=str)
+    return {
+        "regime": build(
+            labels,
+            {
+                "long_name": "response regime (period-n, quasi_periodic_or_long_period, "
+                "quasi-periodic, chaotic, uncertain, undetermined)"
+            },
+        ),
+        "response_period": build(
+            runs["response_period"], {"units": "1", "long_name": "period n of a period-n response, 0 otherwise"}
+        ),
+        "zero_one_k": build(runs["zero_one_k"], {"units": "1", "long_name": "median K of the 0-1 test for chaos"}),
+        "lyapunov_per_period": build(
+            runs["lyapunov_per_period"],
+            {
+                "units": "1",
+                "long_name": "largest Lyapunov exponent in nats per mesh period "
+                "(largest_lyapunov in s-1 times the mesh period)",
+            },
+        ),
+        "distinct_points": build(runs["distinct_points"], {"units": "1", "long_name": "distinct Poincare points"}),
+        "regime_reason": build(reasons, {"long_name": "evidence for the regime"}),
+    }
+
+
 def classify_batch(
     ds: xr.Dataset,
     *,
@@ -732,35 +765,8 @@ def classify_batch(
         min_repeats,
     )
 
-    def build(values: np.ndarray, attrs: dict[str, str]) -> xr.DataArray:
-        return template.copy(data=values.reshape(template.shape)).assign_attrs(attrs)
-
-    labels = np.array([str(label) for label in runs["regime"]], dtype=str)
-    reasons = np.array([str(text) for text in runs["regime_reason"]], dtype=str)
     return xr.Dataset(
-        {
-            "regime": build(
-                labels,
-                {
-                    "long_name": "response regime (period-n, quasi_periodic_or_long_period, "
-                    "quasi-periodic, chaotic, uncertain, undetermined)"
-                },
-            ),
-            "response_period": build(
-                runs["response_period"], {"units": "1", "long_name": "period n of a period-n response, 0 otherwise"}
-            ),
-            "zero_one_k": build(runs["zero_one_k"], {"units": "1", "long_name": "median K of the 0-1 test for chaos"}),
-            "lyapunov_per_period": build(
-                runs["lyapunov_per_period"],
-                {
-                    "units": "1",
-                    "long_name": "largest Lyapunov exponent in nats per mesh period "
-                    "(largest_lyapunov in s-1 times the mesh period)",
-                },
-            ),
-            "distinct_points": build(runs["distinct_points"], {"units": "1", "long_name": "distinct Poincare points"}),
-            "regime_reason": build(reasons, {"long_name": "evidence for the regime"}),
-        },
+        _regime_variables(runs, template),
         attrs={
             "max_period": max_period,
             "rtol": rtol,
