@@ -510,6 +510,69 @@ def _record_features(
     return outputs
 
 
+def _checked_channels(signals: xr.Dataset, channels: Sequence[str] | None, where: str) -> list[str]:
+    """The channels to read (default: every rig channel present), each over time, and a mean speed per run."""
+    if channels is None:
+        channels = [name for name in SIGNAL_CHANNELS if name in signals.data_vars]
+        if not channels:
+            raise RigDataError(f"{where}no channel variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}")
+    else:
+        channels = list(channels)
+        if not channels:
+            raise StudyError("channels: expected at least one channel name; got none")
+    for name in channels:
+        if name not in signals.data_vars:
+            present = ", ".join(map(str, signals.data_vars))
+            raise RigDataError(f"{where}{name}: no such channel variable; present: {present}")
+        if "time" not in signals[name].dims:
+            raise RigDataError(f"{where}{name}: expected a 'time' dimension; got dims {signals[name].dims}")
+    if "pinion_speed" not in signals.variables:
+        raise RigDataError(f"{where}pinion_speed: missing (mean pinion speed in rpm over the runs)")
+    speed = signals["pinion_speed"]
+    if "time" in speed.dims:
+        raise RigDataError(
+            f"{where}pinion_speed: expected the mean speed per run, without a 'time' dimension; got dims {speed.dims}"
+        )
+    return channels
+
+
+def _feature_dataset(signals: xr.Dataset, channels: Sequence[str], templates: Sequence[xr.DataArray],
+                     values: Sequence[np.ndarray], definitions: Sequence[FeatureDefinition]) -> xr.Dataset:
+    """Each channel's features over its run dims and ``feature``, with each line's family, order and frequency."""
+    outputs: dict[str, xr.DataArray] = {}
+    for name, template, block in zip(channels, templates, values):
+        units = signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("", ""))[0])
+        outputs[name] = xr.DataArray(
+            block.reshape(template.shape + (len(definitions),)),
+            dims=template.dims + ("feature",),
+            coords=template.coords,
+            attrs={
+                "units": units,
+                "long_name": f"features of {name}",
+                "note": "features with dimensionless=True are ratios without units",
+            },
+        )
+
+    orders = xr.DataArray(
+        [definition.order for definition in definitions],
+        dims="feature",
+        attrs={"units": "1", "long_name": "line order (multiples of the pinion rotation)"},
+    )
+    features = xr.Dataset(outputs).assign_coords(
+        feature=[definition.name for definition in definitions],
+        family=("feature", [definition.family for definition in definitions], {"long_name": "feature family"}),
+        order=orders,
+        dimensionless=(
+            "feature",
+            [definition.dimensionless for definition in definitions],
+            {"long_name": "feature is a ratio without units"},
+        ),
+    )
+    return features.assign_coords(
+        frequency=(signals["pinion_speed"] / 60.0 * orders).assign_attrs(units="Hz", long_name="line frequency")
+    )
+
+
 def extract_features(
     signals: xr.Dataset,
     design: Design,
@@ -602,27 +665,8 @@ def extract_features(
     order_tracking = check_tracking_mode(order_tracking)
     if not isinstance(signals, xr.Dataset):
         raise RigDataError(f"{where}expected an xarray Dataset of channel variables; got {type(signals).__name__}")
-    if channels is None:
-        channels = [name for name in SIGNAL_CHANNELS if name in signals.data_vars]
-        if not channels:
-            raise RigDataError(f"{where}no channel variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}")
-    else:
-        channels = list(channels)
-        if not channels:
-            raise StudyError("channels: expected at least one channel name; got none")
-    for name in channels:
-        if name not in signals.data_vars:
-            present = ", ".join(map(str, signals.data_vars))
-            raise RigDataError(f"{where}{name}: no such channel variable; present: {present}")
-        if "time" not in signals[name].dims:
-            raise RigDataError(f"{where}{name}: expected a 'time' dimension; got dims {signals[name].dims}")
-    if "pinion_speed" not in signals.variables:
-        raise RigDataError(f"{where}pinion_speed: missing (mean pinion speed in rpm over the runs)")
+    channels = _checked_channels(signals, channels, where)
     speed = signals["pinion_speed"]
-    if "time" in speed.dims:
-        raise RigDataError(
-            f"{where}pinion_speed: expected the mean speed per run, without a 'time' dimension; got dims {speed.dims}"
-        )
     definitions = feature_definitions(
         design,
         n_harmonics=n_harmonics,
@@ -658,38 +702,7 @@ def extract_features(
         limit=limit,
         window=window,
     )
-    outputs: dict[str, xr.DataArray] = {}
-    for name, (template, _, _, _), block in zip(channels, prepared, values):
-        units = signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("", ""))[0])
-        outputs[name] = xr.DataArray(
-            block.reshape(template.shape + (len(definitions),)),
-            dims=template.dims + ("feature",),
-            coords=template.coords,
-            attrs={
-                "units": units,
-                "long_name": f"features of {name}",
-                "note": "features with dimensionless=True are ratios without units",
-            },
-        )
-
-    orders = xr.DataArray(
-        [definition.order for definition in definitions],
-        dims="feature",
-        attrs={"units": "1", "long_name": "line order (multiples of the pinion rotation)"},
-    )
-    features = xr.Dataset(outputs).assign_coords(
-        feature=[definition.name for definition in definitions],
-        family=("feature", [definition.family for definition in definitions], {"long_name": "feature family"}),
-        order=orders,
-        dimensionless=(
-            "feature",
-            [definition.dimensionless for definition in definitions],
-            {"long_name": "feature is a ratio without units"},
-        ),
-    )
-    features = features.assign_coords(
-        frequency=(speed / 60.0 * orders).assign_attrs(units="Hz", long_name="line frequency")
-    )
+    features = _feature_dataset(signals, channels, [template for template, _, _, _ in prepared], values, definitions)
     if "order_tracked" in signals.variables:
         features = features.assign_coords({name: signals[name] for name in SPEED_ESTIMATE_VARIABLES})
     features.attrs.update(

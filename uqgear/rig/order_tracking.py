@@ -56,7 +56,7 @@ This module does no file I/O and no plotting.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -323,6 +323,66 @@ def _track_record(
     return _RecordResult(resampled, mean, low, high, tracked, " ".join(estimate.lines))
 
 
+def _checked_channels(signals: xr.Dataset, channels: Sequence[str] | None) -> list[str]:
+    """The channels to track (default: every rig channel present), all of one shape ending in ``time``."""
+    if channels is None:
+        channels = [name for name in SIGNAL_CHANNELS if name in signals.data_vars]
+    channels = list(channels)
+    if not channels:
+        raise RigDataError(
+            f"order tracking: no channel variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}"
+        )
+    if "pinion_speed" not in signals.variables:
+        raise RigDataError("order tracking: pinion_speed: missing (stated mean pinion speed in rpm)")
+    dims = signals[channels[0]].dims
+    for name in channels:
+        if name not in signals.data_vars:
+            raise RigDataError(f"order tracking: {name}: no such channel variable")
+        if signals[name].dims != dims:
+            raise RigDataError(
+                f"order tracking: {name}: dimensions {signals[name].dims} differ from {dims} of {channels[0]}"
+            )
+    if "time" not in dims or dims[-1] != "time":
+        raise RigDataError(f"order tracking: expected channel dimensions ending in 'time'; got {dims}")
+    return channels
+
+
+def _tachometer(signals: xr.Dataset, dims: tuple[Hashable, ...], size: int) -> np.ndarray | None:
+    """The tachometer records (one row per record), None without a tachometer channel."""
+    if TACHOMETER_VARIABLE not in signals.data_vars:
+        return None
+    if signals[TACHOMETER_VARIABLE].dims != dims:
+        raise RigDataError(
+            f"order tracking: {TACHOMETER_VARIABLE}: expected dimensions {dims}; "
+            f"got {signals[TACHOMETER_VARIABLE].dims}"
+        )
+    return np.asarray(signals[TACHOMETER_VARIABLE].values, dtype=float).reshape(-1, size)
+
+
+def _speed_estimates(signals: xr.Dataset, template: xr.DataArray, stated: np.ndarray, statistics: np.ndarray,
+                     tracked: np.ndarray, references: list[str]) -> dict[str, xr.DataArray]:
+    """Per record: the stated and estimated speeds (mean, lowest, highest), whether it was tracked, and on what."""
+    shape = template.shape
+
+    def over_records(values: np.ndarray, attrs: dict) -> xr.DataArray:
+        return xr.DataArray(values.reshape(shape), dims=template.dims, coords=template.coords, attrs=attrs)
+
+    new_speed = np.where(tracked, statistics[0], stated)
+    variables: dict[str, xr.DataArray] = {}
+    variables["pinion_speed_stated"] = over_records(stated, {"units": "rpm", "long_name": "stated mean pinion speed"})
+    variables["pinion_speed"] = over_records(new_speed, dict(signals["pinion_speed"].attrs, units="rpm"))
+    variables["speed_mean"] = over_records(
+        statistics[0], {"units": "rpm", "long_name": "mean pinion speed estimated from the signals"}
+    )
+    variables["speed_min"] = over_records(statistics[1], {"units": "rpm", "long_name": "lowest instantaneous speed"})
+    variables["speed_max"] = over_records(statistics[2], {"units": "rpm", "long_name": "highest instantaneous speed"})
+    variables["order_tracked"] = over_records(tracked, {"long_name": "record resampled to uniform pinion angle"})
+    variables["speed_reference"] = over_records(
+        np.array(references, dtype=object), {"long_name": "lines (or tachometer) the speed estimate rests on"}
+    )
+    return variables
+
+
 def track_orders(
     signals: xr.Dataset,
     design: Design,
@@ -376,25 +436,8 @@ def track_orders(
         An unknown mode.
     """
     mode = check_tracking_mode(mode)
-    if channels is None:
-        channels = [name for name in SIGNAL_CHANNELS if name in signals.data_vars]
-    channels = list(channels)
-    if not channels:
-        raise RigDataError(
-            f"order tracking: no channel variable; expected at least one of {', '.join(SIGNAL_CHANNELS)}"
-        )
-    if "pinion_speed" not in signals.variables:
-        raise RigDataError("order tracking: pinion_speed: missing (stated mean pinion speed in rpm)")
+    channels = _checked_channels(signals, channels)
     dims = signals[channels[0]].dims
-    for name in channels:
-        if name not in signals.data_vars:
-            raise RigDataError(f"order tracking: {name}: no such channel variable")
-        if signals[name].dims != dims:
-            raise RigDataError(
-                f"order tracking: {name}: dimensions {signals[name].dims} differ from {dims} of {channels[0]}"
-            )
-    if "time" not in dims or dims[-1] != "time":
-        raise RigDataError(f"order tracking: expected channel dimensions ending in 'time'; got {dims}")
     fs = sampling_rate(signals["time"].values, where="order tracking: time")
     limit = band_limit_of(band_limit, fs)
     template = signals[channels[0]].isel(time=0, drop=True)
@@ -403,14 +446,7 @@ def track_orders(
     ).ravel()
     size = signals.sizes["time"]
     stacked = np.stack([np.asarray(signals[name].values).reshape(-1, size) for name in channels], axis=1)
-    tachometer = None
-    if TACHOMETER_VARIABLE in signals.data_vars:
-        if signals[TACHOMETER_VARIABLE].dims != dims:
-            raise RigDataError(
-                f"order tracking: {TACHOMETER_VARIABLE}: expected dimensions {dims}; "
-                f"got {signals[TACHOMETER_VARIABLE].dims}"
-            )
-        tachometer = np.asarray(signals[TACHOMETER_VARIABLE].values, dtype=float).reshape(-1, size)
+    tachometer = _tachometer(signals, dims, size)
     n_records = stacked.shape[0]
     statistics = np.full((3, n_records), np.nan)  # mean, min, max speed (rpm)
     tracked = np.zeros(n_records, dtype=bool)
@@ -447,23 +483,8 @@ def track_orders(
     for name, values in outputs.items():
         if values is not None:
             result_ds[name] = signals[name].copy(data=values.reshape(signals[name].shape).astype(signals[name].dtype))
-    shape = template.shape
-
-    def over_records(values: np.ndarray, attrs: dict) -> xr.DataArray:
-        return xr.DataArray(values.reshape(shape), dims=template.dims, coords=template.coords, attrs=attrs)
-
-    new_speed = np.where(tracked, statistics[0], stated)
-    result_ds["pinion_speed_stated"] = over_records(stated, {"units": "rpm", "long_name": "stated mean pinion speed"})
-    result_ds["pinion_speed"] = over_records(new_speed, dict(signals["pinion_speed"].attrs, units="rpm"))
-    result_ds["speed_mean"] = over_records(
-        statistics[0], {"units": "rpm", "long_name": "mean pinion speed estimated from the signals"}
-    )
-    result_ds["speed_min"] = over_records(statistics[1], {"units": "rpm", "long_name": "lowest instantaneous speed"})
-    result_ds["speed_max"] = over_records(statistics[2], {"units": "rpm", "long_name": "highest instantaneous speed"})
-    result_ds["order_tracked"] = over_records(tracked, {"long_name": "record resampled to uniform pinion angle"})
-    result_ds["speed_reference"] = over_records(
-        np.array(references, dtype=object), {"long_name": "lines (or tachometer) the speed estimate rests on"}
-    )
+    for name, variable in _speed_estimates(signals, template, stated, statistics, tracked, references).items():
+        result_ds[name] = variable
     result_ds.attrs["order_tracking"] = mode
     return result_ds
 

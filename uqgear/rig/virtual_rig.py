@@ -50,6 +50,7 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import SupportsFloat, cast
@@ -565,24 +566,10 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     if isinstance(oversampling, bool) or not isinstance(oversampling, (int, np.integer)) or oversampling < 2:
         raise OperatingPointError(f"oversampling: expected an integer >= 2; got {oversampling!r}")
     channels = list(channels)
-    for name in channels:
-        if name not in SIGNAL_CHANNELS:
-            raise OperatingPointError(f"channels: {name!r} is not a rig channel; expected {', '.join(SIGNAL_CHANNELS)}")
-    if not channels:
-        raise OperatingPointError("channels: expected at least one channel")
-    noise_std = dict(noise_std or {})
-    for name, value in noise_std.items():
-        if name not in channels:
-            raise OperatingPointError(f"noise_std.{name}: not among the channels recorded ({', '.join(channels)})")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            raise OperatingPointError(f"noise_std.{name}: expected a standard deviation >= 0 in "
-                                      f"{SIGNAL_CHANNELS[name][0]}; got {value!r}")
-
+    noise_std = _check_noise_std(noise_std, channels)
     wander = _check_wander(speed_wander)
     interference = _check_interference(line_interference, fs)
     encoder = _check_encoder(encoder_run_out)
-    # largest time shift of the wandering shaft against the mean rotation
-    wander_shift = sum(amplitude / (2.0 * math.pi * frequency) for amplitude, frequency in wander) * 2.0
     true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
     pitch, pitch_record = _pitch_errors(design, pitch_errors, seed_sequence)
     top_rng = np.random.default_rng(child_seed(seed_sequence, 0))
@@ -594,64 +581,22 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     if not fs > 6.0 * design.z1 * fastest / 60.0:
         raise OperatingPointError(f"fs: {fs:g} Hz does not resolve the third mesh harmonic at {fastest:g} rpm; "
                                   f"expected more than {6.0 * design.z1 * fastest / 60.0:g} Hz")
-    passband, stopband = fs / 2.56, fs / 2.0
     n_samples = int(round(duration * fs))
-    record_time = np.arange(n_samples) / fs
+    acquisition = _Acquisition(
+        fs=fs, duration=duration, run_in=float(run_in), oversampling=int(oversampling), channels=tuple(channels),
+        noise_std=noise_std, relative_noise=relative_noise, wander=wander, interference=interference,
+        encoder=encoder, record_time=np.arange(n_samples) / fs,
+        # largest time shift of the wandering shaft against the mean rotation
+        wander_shift=sum(amplitude / (2.0 * math.pi * frequency) for amplitude, frequency in wander) * 2.0)
+    plant = _TruePlant(true_design, stiffness_scale, tuple(effects), steps_per_mode, pitch)
     # children derived from the spawn key: the same seed object always gives the same campaign
     run_seeds = [child_seed(seed_sequence, 1 + op) for op in range(n_op)]
     data = {name: np.empty((n_op, n_samples)) for name in channels}
     for op in range(n_op):
-        speed = float(table["pinion_speed"][op])
-        mesh_frequency = design.z1 * speed / 60.0
-        op_seed, *channel_seeds = (child_seed(run_seeds[op], index) for index in range(1 + len(channels)))
-        # arbitrary record start: anywhere within a pinion revolution after the run-in
-        # (never inside the filter's guard interval at the start of the simulation)
-        start = max(run_in, _GUARD) + np.random.default_rng(op_seed).uniform(0.0, 60.0 / speed)
-        per_period = int(math.ceil(oversampling * fs / mesh_frequency))
-        first_period = max(int(math.floor((start - _GUARD - wander_shift) * mesh_frequency)), 0)
-        last_period = int(math.ceil((start + duration + _GUARD + wander_shift) * mesh_frequency)) + 1
-        sim = simulate(true_design, speed, float(table["drive_torque"][op]), float(table["adhesion_torque"][op]),
-                       n_periods=last_period, keep_periods=last_period - first_period,
-                       samples_per_period=per_period, mesh_stiffness_scale=stiffness_scale, effects=effects,
-                       steps_per_mode=steps_per_mode, pitch_errors=pitch)
-        time = sim["time"].values
-        rate = per_period * mesh_frequency
-        keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD - wander_shift)),
-                     int(np.searchsorted(time, start + duration + 0.5 * _GUARD + wander_shift)))
-        # taper only the outer part of the guard intervals, far from the record
-        taper = np.ones(time.size)
-        ramp_left = time < time[0] + _TAPER
-        taper[ramp_left] = 0.5 * (1.0 - np.cos(np.pi * (time[ramp_left] - time[0]) / _TAPER))
-        ramp_right = time > time[-1] - _TAPER
-        taper[ramp_right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[ramp_right]) / _TAPER))
-        sample_time = start + record_time
-        speed_ratio = np.ones(n_samples)
-        if wander:
-            phases = np.random.default_rng(child_seed(run_seeds[op], _WANDER_STREAM)).uniform(
-                0.0, 2.0 * math.pi, len(wander))
-            for (amplitude, frequency), phase in zip(wander, phases):
-                omega = 2.0 * math.pi * frequency
-                sample_time = sample_time + amplitude / omega * (math.cos(phase) - np.cos(omega * record_time + phase))
-                speed_ratio = speed_ratio + amplitude * np.sin(omega * record_time + phase)
-        interference_rng = np.random.default_rng(child_seed(run_seeds[op], _INTERFERENCE_STREAM))
-        for name, channel_seed in zip(channels, channel_seeds):
-            if name == "te":
-                raw, order = sim["te"].values, 0
-            else:
-                raw, order = sim["y1" if name == "acc_pinion" else "y2"].values, 2
-            filtered = _acquire(time, raw, rate, keep, taper, passband, stopband, order)
-            clean = CubicSpline(time[keep], filtered)(sample_time)
-            if order == 2:
-                clean = clean * speed_ratio**2
-            rms = float(np.sqrt(np.mean((clean - clean.mean()) ** 2)))
-            sigma = math.hypot(noise_std.get(name, 0.0), relative_noise * rms)
-            noisy = clean + sigma * np.random.default_rng(channel_seed).standard_normal(n_samples)
-            if order == 2:
-                noisy = add_interference(noisy, interference, record_time, interference_rng)
-            if name == "te" and encoder:
-                noisy = noisy + _encoder_lines(encoder, design, speed, sample_time,
-                                               np.random.default_rng(child_seed(run_seeds[op], _ENCODER_STREAM)))
-            data[name][op] = noisy - noisy.mean() if name == "te" else noisy
+        records = _record_run(design, plant, acquisition, float(table["pinion_speed"][op]),
+                              (float(table["drive_torque"][op]), float(table["adhesion_torque"][op])), run_seeds[op])
+        for name in channels:
+            data[name][op] = records[name]
 
     stamp = datetime.now(UTC).isoformat(timespec="seconds")
     truth = {"mesh_stiffness_scale": stiffness_scale, **true_record,
@@ -665,12 +610,12 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     if pitch_record is not None:
         noise_record["pitch_errors"] = pitch_record
     ds = make_rig_dataset(
-        time=record_time, pinion_speed=table["pinion_speed"], drive_torque=table["drive_torque"],
+        time=acquisition.record_time, pinion_speed=table["pinion_speed"], drive_torque=table["drive_torque"],
         adhesion_torque_lower=table["adhesion_torque_lower"], adhesion_torque_upper=table["adhesion_torque_upper"],
         channels=data, design=design,
         title=title or "uqgear virtual rig campaign",
         source="uqgear virtual rig: 3-DOF gear model (fast RK4 integrator), zero-delay anti-alias low-pass "
-               f"flat to {passband:g} Hz and zero from {stopband:g} Hz, Gaussian sensor noise",
+               f"flat to {acquisition.passband:g} Hz and zero from {acquisition.stopband:g} Hz, Gaussian sensor noise",
         history=f"{stamp}: simulated by uqgear.rig.virtual_rig.simulate_campaign; {duration:g} s records at "
                 f"{fs:g} Hz after a run-in of {run_in:g} s plus a random start within a pinion revolution",
         noise_std=noise_std if relative_noise == 0 and noise_std else None)
@@ -678,6 +623,122 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
                     noise=json.dumps(noise_record), seed_entropy=str(seed_sequence.entropy),
                     seed_spawn_key=json.dumps([int(k) for k in seed_sequence.spawn_key]))
     return ds
+
+
+def _check_noise_std(noise_std: Mapping[str, float] | None, channels: list[str]) -> dict[str, float]:
+    """The channels recorded (at least one, each a rig channel) and the fixed noise of some of them."""
+    for name in channels:
+        if name not in SIGNAL_CHANNELS:
+            raise OperatingPointError(f"channels: {name!r} is not a rig channel; expected {', '.join(SIGNAL_CHANNELS)}")
+    if not channels:
+        raise OperatingPointError("channels: expected at least one channel")
+    noise_std = dict(noise_std or {})
+    for name, value in noise_std.items():
+        if name not in channels:
+            raise OperatingPointError(f"noise_std.{name}: not among the channels recorded ({', '.join(channels)})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            raise OperatingPointError(f"noise_std.{name}: expected a standard deviation >= 0 in "
+                                      f"{SIGNAL_CHANNELS[name][0]}; got {value!r}")
+    return noise_std
+
+
+@dataclass(frozen=True)
+class _Acquisition:
+    """How the rig records: sample rate, record length, run-in, noise, speed wander, interference, encoder."""
+
+    fs: float
+    duration: float
+    run_in: float
+    oversampling: int
+    channels: tuple[str, ...]
+    noise_std: dict[str, float]
+    relative_noise: float
+    wander: list[tuple[float, float]]
+    interference: dict[float, float]
+    encoder: dict[str, float]
+    record_time: np.ndarray
+    wander_shift: float
+
+    @property
+    def passband(self) -> float:
+        """Upper edge of the anti-alias filter's flat band (Hz)."""
+        return self.fs / 2.56
+
+    @property
+    def stopband(self) -> float:
+        """Lower edge of the anti-alias filter's stop band (Hz)."""
+        return self.fs / 2.0
+
+
+@dataclass(frozen=True)
+class _TruePlant:
+    """The gearbox the rig holds: its true design and mesh stiffness scale, effects, integrator steps, pitch errors."""
+
+    design: Design
+    stiffness_scale: float
+    effects: tuple[Effect, ...]
+    steps_per_mode: int
+    pitch: PitchErrors | None
+
+
+def _record_run(design: Design, plant: _TruePlant, acquisition: _Acquisition, speed: float,
+                torques: tuple[float, float], run_seed: np.random.SeedSequence) -> dict[str, np.ndarray]:
+    """One run's records of every channel: simulated with guards, filtered, resampled at the record's times."""
+    channels = acquisition.channels
+    duration, n_samples = acquisition.duration, acquisition.record_time.size
+    wander_shift, record_time = acquisition.wander_shift, acquisition.record_time
+    mesh_frequency = design.z1 * speed / 60.0
+    op_seed, *channel_seeds = (child_seed(run_seed, index) for index in range(1 + len(channels)))
+    # arbitrary record start: anywhere within a pinion revolution after the run-in
+    # (never inside the filter's guard interval at the start of the simulation)
+    start = max(acquisition.run_in, _GUARD) + np.random.default_rng(op_seed).uniform(0.0, 60.0 / speed)
+    per_period = int(math.ceil(acquisition.oversampling * acquisition.fs / mesh_frequency))
+    first_period = max(int(math.floor((start - _GUARD - wander_shift) * mesh_frequency)), 0)
+    last_period = int(math.ceil((start + duration + _GUARD + wander_shift) * mesh_frequency)) + 1
+    sim = simulate(plant.design, speed, torques[0], torques[1],
+                   n_periods=last_period, keep_periods=last_period - first_period,
+                   samples_per_period=per_period, mesh_stiffness_scale=plant.stiffness_scale, effects=plant.effects,
+                   steps_per_mode=plant.steps_per_mode, pitch_errors=plant.pitch)
+    time = sim["time"].values
+    rate = per_period * mesh_frequency
+    keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD - wander_shift)),
+                 int(np.searchsorted(time, start + duration + 0.5 * _GUARD + wander_shift)))
+    # taper only the outer part of the guard intervals, far from the record
+    taper = np.ones(time.size)
+    ramp_left = time < time[0] + _TAPER
+    taper[ramp_left] = 0.5 * (1.0 - np.cos(np.pi * (time[ramp_left] - time[0]) / _TAPER))
+    ramp_right = time > time[-1] - _TAPER
+    taper[ramp_right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[ramp_right]) / _TAPER))
+    sample_time = start + record_time
+    speed_ratio = np.ones(n_samples)
+    if acquisition.wander:
+        phases = np.random.default_rng(child_seed(run_seed, _WANDER_STREAM)).uniform(
+            0.0, 2.0 * math.pi, len(acquisition.wander))
+        for (amplitude, frequency), phase in zip(acquisition.wander, phases):
+            omega = 2.0 * math.pi * frequency
+            sample_time = sample_time + amplitude / omega * (math.cos(phase) - np.cos(omega * record_time + phase))
+            speed_ratio = speed_ratio + amplitude * np.sin(omega * record_time + phase)
+    interference_rng = np.random.default_rng(child_seed(run_seed, _INTERFERENCE_STREAM))
+    records = {}
+    for name, channel_seed in zip(channels, channel_seeds):
+        if name == "te":
+            raw, order = sim["te"].values, 0
+        else:
+            raw, order = sim["y1" if name == "acc_pinion" else "y2"].values, 2
+        filtered = _acquire(time, raw, rate, keep, taper, acquisition.passband, acquisition.stopband, order)
+        clean = CubicSpline(time[keep], filtered)(sample_time)
+        if order == 2:
+            clean = clean * speed_ratio**2
+        rms = float(np.sqrt(np.mean((clean - clean.mean()) ** 2)))
+        sigma = math.hypot(acquisition.noise_std.get(name, 0.0), acquisition.relative_noise * rms)
+        noisy = clean + sigma * np.random.default_rng(channel_seed).standard_normal(n_samples)
+        if order == 2:
+            noisy = add_interference(noisy, acquisition.interference, record_time, interference_rng)
+        if name == "te" and acquisition.encoder:
+            noisy = noisy + _encoder_lines(acquisition.encoder, design, speed, sample_time,
+                                           np.random.default_rng(child_seed(run_seed, _ENCODER_STREAM)))
+        records[name] = noisy - noisy.mean() if name == "te" else noisy
+    return records
 
 
 def true_parameters_of(ds: xr.Dataset) -> dict[str, object]:

@@ -199,6 +199,50 @@ def _record_ramp(
     return out
 
 
+def _simulate_ramp(design: Design, plant: tuple[Design, float, Sequence[Effect], int], table: Mapping[str, np.ndarray],
+                   ramp: int, duration: float, n_samples: int, fs: float, oversampling: int,
+                   wander: list[tuple[float, float]], settings: dict[str, Any],
+                   ramp_seed: np.random.SeedSequence) -> dict[str, np.ndarray]:
+    """One ramp through the true plant (design, stiffness scale, effects, steps per mode), recorded by the rig."""
+    true_design, stiffness_scale, effects, steps_per_mode = plant
+    guard = math.ceil(_GUARD * fs) / fs
+    phases = np.random.default_rng(child_seed(ramp_seed, _WANDER_STREAM)).uniform(0.0, 2.0 * math.pi, len(wander))
+    # every ramp keeps the samples of the shortest (the format's ramps share ramp_time)
+    profile = _profile(
+        float(table["start_speed"][ramp]),
+        float(table["stop_speed"][ramp]),
+        duration,
+        guard,
+        wander,
+        phases,
+    )
+    sim = simulate_runup(
+        true_design,
+        profile,
+        float(table["drive_torque"][ramp]),
+        float(table["adhesion_torque"][ramp]),
+        sample_rate=fs * oversampling,
+        mesh_stiffness_scale=stiffness_scale,
+        effects=effects,
+        steps_per_mode=steps_per_mode,
+    )
+    first = int(round(guard * fs)) * oversampling
+    return _record_ramp(sim, design, first, n_samples, fs, oversampling, settings, ramp_seed)
+
+
+def _noise_record(settings: Mapping[str, Any], wander: list[tuple[float, float]]) -> dict[str, object]:
+    """The campaign's noise, wander, interference and encoder run-out as recorded in its ``noise`` attribute."""
+    noise_record: dict[str, object] = {
+        "relative_noise": settings["relative_noise"],
+        "noise_std": settings["noise_std"],
+        "speed_wander": [list(component) for component in wander],
+        "line_interference": {f"{frequency:g}": amplitude for frequency, amplitude in settings["interference"].items()},
+    }
+    if settings["encoder"]:
+        noise_record["encoder_run_out"] = dict(settings["encoder"])
+    return noise_record
+
+
 def simulate_runup_campaign(
     design: Design,
     ramps: Mapping[str, ArrayLike],
@@ -300,32 +344,11 @@ def simulate_runup_campaign(
             f"fs: {fs:g} Hz does not resolve the third mesh harmonic at {fastest:g} rpm; "
             f"expected more than {6.0 * design.z1 * fastest / 60.0:g} Hz"
         )
-    guard = math.ceil(_GUARD * fs) / fs
     records: dict[str, list[np.ndarray]] = {name: [] for name in ("tachometer", *channels)}
+    plant = (true_design, stiffness_scale, effects, steps_per_mode)
     for ramp in range(table["start_speed"].size):
-        ramp_seed = child_seed(seed_sequence, 1 + ramp)
-        phases = np.random.default_rng(child_seed(ramp_seed, _WANDER_STREAM)).uniform(0.0, 2.0 * math.pi, len(wander))
-        # every ramp keeps the samples of the shortest (the format's ramps share ramp_time)
-        profile = _profile(
-            float(table["start_speed"][ramp]),
-            float(table["stop_speed"][ramp]),
-            float(durations[ramp]) / fs,
-            guard,
-            wander,
-            phases,
-        )
-        sim = simulate_runup(
-            true_design,
-            profile,
-            float(table["drive_torque"][ramp]),
-            float(table["adhesion_torque"][ramp]),
-            sample_rate=fs * oversampling,
-            mesh_stiffness_scale=stiffness_scale,
-            effects=effects,
-            steps_per_mode=steps_per_mode,
-        )
-        first = int(round(guard * fs)) * oversampling
-        recorded = _record_ramp(sim, design, first, n_samples, fs, oversampling, settings, ramp_seed)
+        recorded = _simulate_ramp(design, plant, table, ramp, float(durations[ramp]) / fs, n_samples, fs, oversampling,
+                                  wander, settings, child_seed(seed_sequence, 1 + ramp))
         for name, values in recorded.items():
             records[name].append(values)
     truth = {
@@ -333,14 +356,7 @@ def simulate_runup_campaign(
         **true_record,
         "ramp_adhesion_torque": [float(value) for value in table["adhesion_torque"]],
     }
-    noise_record: dict[str, object] = {
-        "relative_noise": relative_noise,
-        "noise_std": noise_std,
-        "speed_wander": [list(component) for component in wander],
-        "line_interference": {f"{frequency:g}": amplitude for frequency, amplitude in settings["interference"].items()},
-    }
-    if settings["encoder"]:
-        noise_record["encoder_run_out"] = dict(settings["encoder"])
+    noise_record = _noise_record(settings, wander)
     stamp = datetime.now(UTC).isoformat(timespec="seconds")
     ds = make_ramp_dataset(
         time=np.arange(n_samples) / fs,
