@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,7 @@ from .discrepancy import DEFAULT_DISCREPANCY_RANGE, DiscrepancyBasis, tau_grid
 from .errors import CalibrationError
 from .failure import failure_causes
 from .harmonics import HARMONIC_CHANNELS
-from .likelihood import observed_features, operating_points, prior_box
+from .likelihood import Features, observed_features, operating_points, prior_box
 from .pitch_correction import DEFAULT_CLASSES
 from .posterior_fit import PosteriorFit
 from .priors import DEFAULT_PARAMETERS, prior_bounds, resolve_parameters
@@ -45,6 +46,17 @@ from .settings import (
 )
 from .summaries import result_content
 from .training import ModelRuns
+
+
+@dataclass(frozen=True)
+class _Campaign:
+    """A rig campaign as the fit reads it: the data (order-tracked where needed), the nominal design, the
+    observed features, and the seconds order tracking took."""
+
+    rig: xr.Dataset
+    design: Design
+    features: Features
+    tracking_s: float
 
 
 class Calibration:
@@ -300,60 +312,13 @@ class Calibration:
             finished ones).
         """
         wall_start, cpu_start = time.perf_counter(), time.process_time()
-        accepted = accept_rig(rig, self.design)
-        rig, design, tracking_s = accepted.rig, accepted.design, accepted.tracking_s
-        self.rig_source_, self.design_, self.speed_ = accepted.source, design, accepted.speed
+        campaign = self._read_campaign(rig)
         # children derived from the spawn key, so that fitting again repeats the run exactly
         seeds = [child_seed(self.seed, index) for index in range(8)]
-        # the data's features and the prior box are input: a problem with them is the user's (exit 2)
-        features = observed_features(
-            rig,
-            design,
-            channels=self.channels,
-            n_harmonics=self.n_harmonics,
-            min_snr=self.min_snr,
-            model_error_range=self.model_error_range,
-        )
-        self.observed_, self.used_, self.model_error_grid_ = features.observed, features.used, features.model_error_grid
-        self.n_op_, self.operating_ = rig.sizes["op"], operating_points(rig)
-        self.bounds_ = prior_bounds(design, self.parameters, self.priors)
-        self.prior_lower_, self.prior_upper_ = prior_box(self.bounds_, self.parameters, self.operating_)
-        self.n_global_ = len(self.parameters)
-        self.n_dim_ = self.n_global_ + self.n_op_
         # from here on the input is accepted: a failure is ours, reported with its step
         self.steps_ = steps = StepLog()
         stage_rng = np.random.default_rng(seeds[0])
-        model = ModelRuns(
-            design=design,
-            parameters=self.parameters,
-            operating=self.operating_,
-            effects=self.effects,
-            n_harmonics=self.n_harmonics,
-            transient=self.transient,
-            window=self.window,
-            threads=self.threads,
-        )
-        work = PosteriorFit(
-            features,
-            model,
-            bounds=self.bounds_,
-            prior_lower=self.prior_lower_,
-            prior_upper=self.prior_upper_,
-            n_training=self.n_training,
-            degree=self.emulator_degree,
-            walkers=walker_count(self.n_walkers, self.n_dim_),
-            stage_steps=self.stage_steps,
-            max_stages=self.max_stages,
-            error_floor=self.model_error_range[0],
-            discrepancy=(
-                (
-                    DiscrepancyBasis.of_campaign(self.operating_["pinion_speed"], self.operating_["drive_torque"]),
-                    tau_grid(self.discrepancy_range),
-                )
-                if self.discrepancy
-                else None
-            ),
-        )
+        model, work = self._posterior_fit(campaign)
         self.emulator_ = {"stages": work.stages}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
             start_points, truncated = work.search(stage_rng, seeds[1], seeds[2])
@@ -361,7 +326,7 @@ class Calibration:
         self.pitch_errors_ = None
         if self.pitch_correction:
             self.pitch_errors_, start_points, truncated = work.correct_pitch_errors(
-                rig,
+                campaign.rig,
                 start_points,
                 truncated,
                 stage_rng,
@@ -388,22 +353,83 @@ class Calibration:
             self.predictive_, self.predictive_check_ = work.predictive_check(
                 self.posterior_, self.summary_, np.random.default_rng(seeds[4]), draws=self.predictive_draws
             )
-        # read at the end: the pitch-error correction may replace the features, and its resumed search the box
-        features, likelihood = work.features, work.fitted_likelihood()
-        self._features, self._likelihood = features, likelihood
-        self.log_observed_, self.noise_variance_ = features.log_observed, features.noise_variance
-        self.box_lower_, self.box_upper_, self.loo_rms_ = likelihood.box_lower, likelihood.box_upper, likelihood.loo_rms
-        self.model_runs_ = model.count
+        self._keep_fitted(work, model.count)
         self.timing_ = {
             "wall_s": time.perf_counter() - wall_start,
             "cpu_s": time.process_time() - cpu_start,
             "model_runs": int(self.model_runs_),
-            "order_tracking_s": tracking_s,
+            "order_tracking_s": campaign.tracking_s,
             "pitch_correction_s": 0.0 if self.pitch_errors_ is None else self.pitch_errors_.seconds,
             # each step's wall time, in order (the box search, any correction, sampling, the check)
             "steps_s": {entry["step"]: entry["seconds"] for entry in steps.finished},
         }
         return self
+
+    def _read_campaign(self, rig: xr.Dataset | str | os.PathLike[str]) -> _Campaign:
+        """Accept the rig data and read their features, operating points and the prior box (input: errors are
+        the user's)."""
+        accepted = accept_rig(rig, self.design)
+        self.rig_source_, self.design_, self.speed_ = accepted.source, accepted.design, accepted.speed
+        # the data's features and the prior box are input: a problem with them is the user's (exit 2)
+        features = observed_features(
+            accepted.rig,
+            accepted.design,
+            channels=self.channels,
+            n_harmonics=self.n_harmonics,
+            min_snr=self.min_snr,
+            model_error_range=self.model_error_range,
+        )
+        self.observed_, self.used_, self.model_error_grid_ = features.observed, features.used, features.model_error_grid
+        self.n_op_, self.operating_ = accepted.rig.sizes["op"], operating_points(accepted.rig)
+        self.bounds_ = prior_bounds(accepted.design, self.parameters, self.priors)
+        self.prior_lower_, self.prior_upper_ = prior_box(self.bounds_, self.parameters, self.operating_)
+        self.n_global_ = len(self.parameters)
+        self.n_dim_ = self.n_global_ + self.n_op_
+        return _Campaign(accepted.rig, accepted.design, features, accepted.tracking_s)
+
+    def _posterior_fit(self, campaign: _Campaign) -> tuple[ModelRuns, PosteriorFit]:
+        """The model runs of the campaign and the staged posterior fit that drives them."""
+        model = ModelRuns(
+            design=campaign.design,
+            parameters=self.parameters,
+            operating=self.operating_,
+            effects=self.effects,
+            n_harmonics=self.n_harmonics,
+            transient=self.transient,
+            window=self.window,
+            threads=self.threads,
+        )
+        work = PosteriorFit(
+            campaign.features,
+            model,
+            bounds=self.bounds_,
+            prior_lower=self.prior_lower_,
+            prior_upper=self.prior_upper_,
+            n_training=self.n_training,
+            degree=self.emulator_degree,
+            walkers=walker_count(self.n_walkers, self.n_dim_),
+            stage_steps=self.stage_steps,
+            max_stages=self.max_stages,
+            error_floor=self.model_error_range[0],
+            discrepancy=(
+                (
+                    DiscrepancyBasis.of_campaign(self.operating_["pinion_speed"], self.operating_["drive_torque"]),
+                    tau_grid(self.discrepancy_range),
+                )
+                if self.discrepancy
+                else None
+            ),
+        )
+        return model, work
+
+    def _keep_fitted(self, work: PosteriorFit, model_runs: int) -> None:
+        """Keep the features and likelihood the fit ended with, and the model runs it took."""
+        # read at the end: the pitch-error correction may replace the features, and its resumed search the box
+        features, likelihood = work.features, work.fitted_likelihood()
+        self._features, self._likelihood = features, likelihood
+        self.log_observed_, self.noise_variance_ = features.log_observed, features.noise_variance
+        self.box_lower_, self.box_upper_, self.loo_rms_ = likelihood.box_lower, likelihood.box_upper, likelihood.loo_rms
+        self.model_runs_ = model_runs
 
     # ------------------------------------------------------------------ results
 

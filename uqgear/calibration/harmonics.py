@@ -95,6 +95,38 @@ def _shoot(state, p, pair_k, period_k, fp, fg, schedule, scale, tolerance, max_n
     return 0
 
 
+# numba-inlined into _steady_harmonics, itself inlined into its only caller
+@nb.njit(cache=True, inline="always")
+def _fourier_tables(n_harmonics, per_period):
+    """Cosines and sines of the first ``n_harmonics`` mesh harmonics at the samples of one mesh period."""
+    cosines = np.empty((n_harmonics, per_period))
+    sines = np.empty((n_harmonics, per_period))
+    for k in range(n_harmonics):
+        for j in range(per_period):
+            angle = K.TWO_PI * (k + 1) * j / per_period
+            cosines[k, j] = math.cos(angle)
+            sines[k, j] = math.sin(angle)
+    return cosines, sines
+
+
+# numba-inlined into _steady_harmonics, itself inlined into its only caller
+@nb.njit(cache=True, inline="always")
+def _amplitudes(sums, state, start, count, window, omega, n_harmonics, out):
+    """Each channel's mesh-harmonic amplitudes from the Fourier sums over ``count`` samples of ``window`` s:
+    the TE's directly, the accelerations' from the displacement sums and the state change."""
+    for k in range(n_harmonics):
+        out[0, k] = 2.0 * math.hypot(sums[0, k, 0], sums[0, k, 1]) / count
+        w = (k + 1) * omega
+        for channel in range(1, 3):
+            # integral of y'' e^{-ikwt} over whole periods, by parts twice:
+            # dv + ikw dy - (kw)^2 * integral of y e^{-ikwt}
+            dy = state[channel - 1] - start[channel - 1]
+            dv = state[channel + 2] - start[channel + 2]
+            real = dv / window - w * w * sums[channel, k, 0] / count
+            imaginary = w * dy / window - w * w * sums[channel, k, 1] / count
+            out[channel, k] = 2.0 * math.hypot(real, imaginary)
+
+
 # numba-inlined into its only caller (not compiled and emitted twice; see uqgear.physics._kernels.INLINED)
 @nb.njit(cache=True, inline="always")
 def _steady_harmonics(
@@ -124,13 +156,7 @@ def _steady_harmonics(
     period = K.TWO_PI / omega
     h = period / steps
     per_period = steps // stride
-    cosines = np.empty((n_harmonics, per_period))
-    sines = np.empty((n_harmonics, per_period))
-    for k in range(n_harmonics):
-        for j in range(per_period):
-            angle = K.TWO_PI * (k + 1) * j / per_period
-            cosines[k, j] = math.cos(angle)
-            sines[k, j] = math.sin(angle)
+    cosines, sines = _fourier_tables(n_harmonics, per_period)
     found = 0
     if shoot:
         candidate = state.copy()
@@ -175,19 +201,7 @@ def _steady_harmonics(
             previous[c] = state[c]
         if used >= min_periods and periodic >= min_periods:
             break
-    count = used * per_period
-    window = used * period
-    for k in range(n_harmonics):
-        out[0, k] = 2.0 * math.hypot(sums[0, k, 0], sums[0, k, 1]) / count
-        w = (k + 1) * omega
-        for channel in range(1, 3):
-            # integral of y'' e^{-ikwt} over whole periods, by parts twice:
-            # dv + ikw dy - (kw)^2 * integral of y e^{-ikwt}
-            dy = state[channel - 1] - start[channel - 1]
-            dv = state[channel + 2] - start[channel + 2]
-            real = dv / window - w * w * sums[channel, k, 0] / count
-            imaginary = w * dy / window - w * w * sums[channel, k, 1] / count
-            out[channel, k] = 2.0 * math.hypot(real, imaginary)
+    _amplitudes(sums, state, start, used * per_period, used * period, omega, n_harmonics, out)
     info[0] = used
     info[1] = 1.0 if periodic >= min_periods else 0.0
 

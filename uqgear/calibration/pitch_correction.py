@@ -270,104 +270,53 @@ def pitch_error_correction(
     """
     started = time.perf_counter()
     fs = sampling_rate(rig["time"].values, where="rig data: time")
-    duration = rig.sizes["time"] / fs
-    operating = rig[[name for name in OPERATING_VARIABLES if name in rig]]
-    true_parameters = {
-        **{name: float(value) for name, value in point.items()},
-        "adhesion_torque": [float(value) for value in adhesion_torque],
-    }
     shape = features.used.shape
     record_seed, draw_seed = seed.spawn(2)
     draw_rng = np.random.default_rng(draw_seed)
-
-    def simulate(pitch_errors: PitchErrors | None) -> xr.Dataset:
-        """The model's noise-free campaign at the current estimate."""
-        # the same record seed for every simulation: the same record starts, so differences are the pitch errors'
-        return simulate_campaign(
-            design,
-            operating,
-            true_parameters=true_parameters,
-            effects=effects,
-            relative_noise=0.0,
-            fs=fs,
-            duration=duration,
-            run_in=RUN_IN,
-            seed=np.random.SeedSequence(record_seed.entropy, spawn_key=record_seed.spawn_key),
-            channels=[name for name in HARMONIC_CHANNELS if name in rig.data_vars],
-            pitch_errors=pitch_errors,
-        )
-
-    def harmonics(campaign: xr.Dataset) -> xr.Dataset:
-        return observed_harmonics(campaign, design, channels=channels, n_harmonics=n_harmonics)
-
-    def sidebands(campaign: xr.Dataset) -> xr.Dataset:
-        return sideband_amplitudes(campaign, design, channels=channels, n_harmonics=n_harmonics)
-
-    def not_applied(reason: str, scale: float | None, log_sd: float, count: int) -> PitchCorrection:
-        return PitchCorrection(
-            applied=False,
-            reason=reason,
-            scale=scale,
-            log_sd=log_sd,
-            classes=classes,
-            sidebands_used=count,
-            draws=0,
-            shift=np.zeros(shape),
-            variance=np.zeros(shape),
-            seconds=time.perf_counter() - started,
-        )
-
+    model = _ModelCampaign(
+        design=design,
+        operating=rig[[name for name in OPERATING_VARIABLES if name in rig]],
+        true_parameters={
+            **{name: float(value) for name, value in point.items()},
+            "adhesion_torque": [float(value) for value in adhesion_torque],
+        },
+        effects=effects,
+        fs=fs,
+        duration=rig.sizes["time"] / fs,
+        record_seed=record_seed,
+        simulated_channels=[name for name in HARMONIC_CHANNELS if name in rig.data_vars],
+        channels=channels,
+        n_harmonics=n_harmonics,
+    )
     # the gate reads the first sidebands the features already hold: a gear without errors costs nothing
     visible, total = _visible_sidebands(features.observed, channels)
     needed = max(MIN_SIDEBANDS, math.ceil(MIN_VISIBLE_FRACTION * total))
     if visible < needed:
         # nothing to read a level from, and no simulation spent on finding that out
-        return not_applied(
+        return _not_applied(
             f"{visible} of {total} sidebands stand {MIN_SIDEBAND_SNR:g} noise std above the rig's "
             f"noise (at least {needed} needed): no pitch-error level to correct for, or one this "
             "rig's noise hides",
-            None,
-            math.inf,
-            visible,
+            None, math.inf, visible, classes, shape, started,
         )
     observed = sideband_amplitudes(rig, design, channels=channels, n_harmonics=n_harmonics)
-    clean = simulate(None)
-    reference = simulate(draw_pitch_errors(design, REFERENCE_CLASS, draw_rng))
-    scale, log_sd, count = _sideband_level(observed, sidebands(clean), sidebands(reference), channels)
+    clean = model.simulate(None)
+    reference = model.simulate(draw_pitch_errors(design, REFERENCE_CLASS, draw_rng))
+    scale, log_sd, count = _sideband_level(observed, model.sidebands(clean), model.sidebands(reference), channels)
     if scale is None:
-        return not_applied(
+        return _not_applied(
             f"only {count} sidebands of a class-{REFERENCE_CLASS} gear would stand out of this "
             f"rig's noise (at least {MIN_SIDEBANDS} needed): the pitch-error level cannot be read, "
             "and no correction is made",
-            None,
-            log_sd,
-            count,
+            None, log_sd, count, classes, shape, started,
         )
     if scale < MIN_SCALE:
-        return not_applied(
+        return _not_applied(
             f"sidebands at {scale:.2f} of class-{REFERENCE_CLASS} pitch errors (below "
             f"{MIN_SCALE}): their change of the mesh harmonics is below the model-error floor",
-            scale,
-            log_sd,
-            count,
+            scale, log_sd, count, classes, shape, started,
         )
-    with np.errstate(divide="ignore", invalid="ignore"):
-        base = np.log(harmonics(clean)["amplitude"].values)
-        changes = []
-        positions = (np.arange(draws) + 0.5) / draws
-        if classes is None:
-            # the level is uncertain too: the draws' levels sit at stratified quantiles of its log-normal estimate
-            levels = scale * np.exp(min(log_sd, 1.0) * scipy.stats.norm.ppf(positions))
-        else:
-            # evenly over the stated classes; tolerances grow by sqrt(2) a class
-            levels = class_level(classes, positions)
-        for level in levels:
-            scaled = harmonics(simulate(draw_at_level(design, level, draw_rng)))
-            changes.append(np.log(scaled["amplitude"].values) - base)
-    change = np.array(changes)
-    finite = np.all(np.isfinite(change), axis=0)
-    shift = np.where(finite, change.mean(axis=0), 0.0)
-    variance = np.where(finite, change.var(axis=0, ddof=1) if draws > 1 else 0.0, 0.0)
+    shift, variance = _harmonic_changes(model, clean, scale, log_sd, classes, draws, draw_rng)
     read = (
         f"the sidebands read as {scale:.2f} (x/ {math.exp(log_sd):.2f}) of class-{REFERENCE_CLASS} pitch "
         f"errors, about class {REFERENCE_CLASS + 2.0 * math.log2(scale):.1f} ({count} sidebands)"
@@ -386,3 +335,85 @@ def pitch_error_correction(
         variance=variance,
         seconds=time.perf_counter() - started,
     )
+
+
+@dataclass(frozen=True)
+class _ModelCampaign:
+    """The model's noise-free campaign at the current estimate, and the harmonics and sidebands read from it."""
+
+    design: Design
+    operating: xr.Dataset
+    true_parameters: dict[str, Any]
+    effects: Sequence[Effect]
+    fs: float
+    duration: float
+    record_seed: np.random.SeedSequence
+    simulated_channels: list[str]
+    channels: Sequence[str]
+    n_harmonics: int
+
+    def simulate(self, pitch_errors: PitchErrors | None) -> xr.Dataset:
+        """The campaign with ``pitch_errors`` (None: perfect gears)."""
+        # the same record seed for every simulation: the same record starts, so differences are the pitch errors'
+        return simulate_campaign(
+            self.design,
+            self.operating,
+            true_parameters=self.true_parameters,
+            effects=self.effects,
+            relative_noise=0.0,
+            fs=self.fs,
+            duration=self.duration,
+            run_in=RUN_IN,
+            seed=np.random.SeedSequence(self.record_seed.entropy, spawn_key=self.record_seed.spawn_key),
+            channels=self.simulated_channels,
+            pitch_errors=pitch_errors,
+        )
+
+    def harmonics(self, campaign: xr.Dataset) -> xr.Dataset:
+        """The mesh harmonics of a simulated campaign."""
+        return observed_harmonics(campaign, self.design, channels=self.channels, n_harmonics=self.n_harmonics)
+
+    def sidebands(self, campaign: xr.Dataset) -> xr.Dataset:
+        """The sidebands of a simulated campaign."""
+        return sideband_amplitudes(campaign, self.design, channels=self.channels, n_harmonics=self.n_harmonics)
+
+
+def _not_applied(reason: str, scale: float | None, log_sd: float, count: int, classes: tuple[float, float] | None,
+                 shape: tuple[int, ...], started: float) -> PitchCorrection:
+    """No correction, and why."""
+    return PitchCorrection(
+        applied=False,
+        reason=reason,
+        scale=scale,
+        log_sd=log_sd,
+        classes=classes,
+        sidebands_used=count,
+        draws=0,
+        shift=np.zeros(shape),
+        variance=np.zeros(shape),
+        seconds=time.perf_counter() - started,
+    )
+
+
+def _harmonic_changes(model: _ModelCampaign, clean: xr.Dataset, scale: float, log_sd: float,
+                      classes: tuple[float, float] | None, draws: int,
+                      draw_rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and variance over the draws of the change of each log mesh harmonic that pitch errors make."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        base = np.log(model.harmonics(clean)["amplitude"].values)
+        changes = []
+        positions = (np.arange(draws) + 0.5) / draws
+        if classes is None:
+            # the level is uncertain too: the draws' levels sit at stratified quantiles of its log-normal estimate
+            levels = scale * np.exp(min(log_sd, 1.0) * scipy.stats.norm.ppf(positions))
+        else:
+            # evenly over the stated classes; tolerances grow by sqrt(2) a class
+            levels = class_level(classes, positions)
+        for level in levels:
+            scaled = model.harmonics(model.simulate(draw_at_level(model.design, level, draw_rng)))
+            changes.append(np.log(scaled["amplitude"].values) - base)
+    change = np.array(changes)
+    finite = np.all(np.isfinite(change), axis=0)
+    shift = np.where(finite, change.mean(axis=0), 0.0)
+    variance = np.where(finite, change.var(axis=0, ddof=1) if draws > 1 else 0.0, 0.0)
+    return shift, variance
