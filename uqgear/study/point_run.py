@@ -107,6 +107,34 @@ def simulate_point(
         if "frequency" in spectrum.coords
         else spectrum["order"].values * point["pinion_speed"] / 60.0
     )
+    data = _run_variables(run, spectrum, frequency, response, qois, point, label, largest_lyapunov)
+    setup = build_model(run_design, *operating, **model)
+    stresses = _path_stresses(setup, operating, run, simulation, samples_per_period, rating)
+    coords = _point_coords(run, mesh_cycle, spectrum, stresses.pop("position"))
+    attrs = {
+        "z1": run.attrs["z1"],
+        "z2": run.attrs["z2"],
+        "mesh_period": run.attrs["mesh_period"],
+        "n_periods": simulation.n_periods,
+        "keep_periods": simulation.keep_periods,
+        "samples_per_period": samples_per_period,
+        "method": method,
+    }
+    data.update(stresses)
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _run_variables(
+    run: xr.Dataset,
+    spectrum: xr.DataArray,
+    frequency: np.ndarray,
+    response: dynamics.ResponseClass,
+    qois: xr.Dataset,
+    point: Mapping[str, float],
+    label: str,
+    largest_lyapunov: float | None,
+) -> dict[str, Any]:
+    """The run's spectrum, regime, constants, histories, Poincare points, inputs and QoIs as variables."""
     data: dict[str, Any] = {
         "time_s": ("mesh_cycle", run["time"].values, {"units": "s", "long_name": "time"}),
         "spectrum_x": (
@@ -151,9 +179,13 @@ def simulate_point(
         data[name] = ((), float(value), {"units": variable_units_short(name)})
     for qoi in qois.data_vars:
         data[str(qoi)] = ((), float(qois[qoi].values), dict(qois[qoi].attrs))
-    setup = build_model(run_design, *operating, **model)
-    stresses = _path_stresses(setup, operating, run, simulation, samples_per_period, rating)
-    coords = {
+    return data
+
+
+def _point_coords(run: xr.Dataset, mesh_cycle: np.ndarray, spectrum: xr.DataArray,
+                  position: np.ndarray) -> dict[str, Any]:
+    """Time in mesh periods, period index, order, contact position, gear and bound."""
+    coords: dict[str, Any] = {
         "mesh_cycle": ("mesh_cycle", mesh_cycle, {"units": "1", "long_name": "time in mesh periods"}),
         "period": ("period", run["period"].values, {"units": "1", "long_name": "mesh period index"}),
         "order": (
@@ -162,24 +194,14 @@ def simulate_point(
             {"units": "1", "long_name": "order (multiples of the pinion rotation)"},
         ),
     }
-    attrs = {
-        "z1": run.attrs["z1"],
-        "z2": run.attrs["z2"],
-        "mesh_period": run.attrs["mesh_period"],
-        "n_periods": simulation.n_periods,
-        "keep_periods": simulation.keep_periods,
-        "samples_per_period": samples_per_period,
-        "method": method,
-    }
     coords["position"] = (
         "position",
-        stresses.pop("position"),
+        position,
         {"units": "base pitches", "long_name": "contact point on the path of contact from its start"},
     )
     coords["gear"] = ("gear", list(GEARS), {"long_name": "gear of the pair"})
     coords["bound"] = ("bound", ["lower", "upper"], {"long_name": "lowest and highest over the engagements"})
-    data.update(stresses)
-    return xr.Dataset(data, coords=coords, attrs=attrs)
+    return coords
 
 
 def _path_stresses(

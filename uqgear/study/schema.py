@@ -206,6 +206,68 @@ def _calibrated_names(
     return calibrated
 
 
+def _uncertain(uncertain_raw: Mapping[str, Any], points: Mapping[str, Any], design: Design) -> dict[str, Any]:
+    """The study-wide uncertain parameters (``calibrated`` read apart), each a known variable not fixed in
+    ``operating_points``."""
+    uncertain = {}
+    for key, entry in uncertain_raw.items():
+        if key == "calibrated":
+            continue
+        if key not in VARIABLES:
+            raise StudyError(
+                f"uncertain.{key}: unknown parameter; expected one of {', '.join(OPERATING_VARIABLES)} or a design key"
+            )
+        if key in points:
+            raise StudyError(
+                f"uncertain.{key}: also given in operating_points; give a study-wide "
+                "value in one place (an analysis may fix it in its own operating_points)"
+            )
+        parameter = _uncertain_parameter(key, entry, f"uncertain.{key}", design)
+        _check_parameter_range(parameter, f"uncertain.{key}")
+        uncertain[key] = parameter
+    return uncertain
+
+
+def _analyses(analyses_raw: Any, points: Mapping[str, Any], simulation: SimulationSettings,
+              uncertain: Mapping[str, Any]) -> tuple[AnalysisSpec, ...]:
+    """The analyses, a non-empty list with unique names."""
+    if not isinstance(analyses_raw, list) or not analyses_raw:
+        raise _fail("analyses", "a non-empty list of analyses", analyses_raw)
+    analyses = tuple(_analysis(entry, index, points, simulation, uncertain) for index, entry in enumerate(analyses_raw))
+    names = [spec.name for spec in analyses]
+    for index, spec in enumerate(analyses):
+        if names.count(spec.name) > 1:
+            raise StudyError(
+                f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
+                "expected unique names (give each a 'name')"
+            )
+    return analyses
+
+
+def _check_analysis_inputs(spec: AnalysisSpec, design: Design, base_dir: Path | None) -> None:
+    """A run-up's span inside the design's speed range; a rig analysis's rig (and reference) files present."""
+    if spec.type == "runup":
+        _check_runup_span(spec, design)
+    if spec.type in RIG_TYPES:
+        rig = _resolve_rig(spec.options["rig"], base_dir)
+        if not rig.is_file():
+            raise StudyError(
+                f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
+                "netCDF file (relative paths start at the study file's folder) or a bundled "
+                f"campaign ({', '.join(bundled_names('rig'))})"
+            )
+        reference = spec.options.get("reference")
+        if reference is not None:
+            found = _resolve_rig(reference, base_dir)
+            if not found.is_file():
+                raise StudyError(
+                    f"analyses[{spec.index}].reference: file {found} not found; expected a "
+                    "uqgear-rig/1 netCDF file of the same rig with a healthy gearbox (relative "
+                    "paths start at the study file's folder) or a bundled campaign "
+                    f"({', '.join(bundled_names('rig'))})"
+                )
+
+
 def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: str | Path | None = None) -> Study:
     """Validate a parsed study mapping and build a :class:`Study`.
 
@@ -240,69 +302,25 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
     uncertain_raw = raw.get("uncertain") or {}
     if not isinstance(uncertain_raw, Mapping):
         raise _fail("uncertain", "a mapping of parameter name to its interval or distribution", uncertain_raw)
-    uncertain = {}
     base = Path(base_dir) if base_dir else None
     calibrated = (
         parse_calibrated(uncertain_raw["calibrated"], "uncertain.calibrated", base, design)
         if "calibrated" in uncertain_raw
         else None
     )
-    for key, entry in uncertain_raw.items():
-        if key == "calibrated":
-            continue
-        if key not in VARIABLES:
-            raise StudyError(
-                f"uncertain.{key}: unknown parameter; expected one of {', '.join(OPERATING_VARIABLES)} or a design key"
-            )
-        if key in points:
-            raise StudyError(
-                f"uncertain.{key}: also given in operating_points; give a study-wide "
-                "value in one place (an analysis may fix it in its own operating_points)"
-            )
-        parameter = _uncertain_parameter(key, entry, f"uncertain.{key}", design)
-        _check_parameter_range(parameter, f"uncertain.{key}")
-        uncertain[key] = parameter
+    uncertain = _uncertain(uncertain_raw, points, design)
     simulation = _simulation(raw.get("simulation"), "simulation", SimulationSettings(starts=GUIDED_STARTS))
     outputs_raw = check_mapping(raw.get("outputs") or {}, "outputs", {"report": boolean(), "dpi": DPI})
     outputs = Outputs(**outputs_raw)
     execution = check_mapping(
         raw.get("execution") or {}, "execution", {"chunk_size": number("samples per chunk", 1, 1_000_000, integer=True)}
     )
-    analyses_raw = raw["analyses"]
-    if not isinstance(analyses_raw, list) or not analyses_raw:
-        raise _fail("analyses", "a non-empty list of analyses", analyses_raw)
-    analyses = tuple(_analysis(entry, index, points, simulation, uncertain) for index, entry in enumerate(analyses_raw))
-    names = [spec.name for spec in analyses]
-    for index, spec in enumerate(analyses):
-        if names.count(spec.name) > 1:
-            raise StudyError(
-                f"analyses[{index}].name: {spec.name!r} is used by more than one analysis; "
-                "expected unique names (give each a 'name')"
-            )
+    analyses = _analyses(raw["analyses"], points, simulation, uncertain)
     effects = _model(raw.get("model"), base)
     calibrated = _calibrated_names(calibrated, analyses, uncertain)
     check_order(analyses, calibrated, effects)
     for spec in analyses:
-        if spec.type == "runup":
-            _check_runup_span(spec, design)
-        if spec.type in RIG_TYPES:
-            rig = _resolve_rig(spec.options["rig"], Path(base_dir) if base_dir else None)
-            if not rig.is_file():
-                raise StudyError(
-                    f"analyses[{spec.index}].rig: file {rig} not found; expected a uqgear-rig/1 "
-                    "netCDF file (relative paths start at the study file's folder) or a bundled "
-                    f"campaign ({', '.join(bundled_names('rig'))})"
-                )
-            reference = spec.options.get("reference")
-            if reference is not None:
-                found = _resolve_rig(reference, Path(base_dir) if base_dir else None)
-                if not found.is_file():
-                    raise StudyError(
-                        f"analyses[{spec.index}].reference: file {found} not found; expected a "
-                        "uqgear-rig/1 netCDF file of the same rig with a healthy gearbox (relative "
-                        "paths start at the study file's folder) or a bundled campaign "
-                        f"({', '.join(bundled_names('rig'))})"
-                    )
+        _check_analysis_inputs(spec, design, base)
     return Study(
         name=name,
         description=description,
