@@ -30,6 +30,7 @@ from uqgear.physics._lane_tables import (
     _same_schedule,
     _take_schedule,
 )
+from uqgear.physics._pair_extremes import N_EXTREMES, add_pair_extremes, start_extremes
 from uqgear.physics._rhs import (
     INLINED,
     JIT_OPTIONS,
@@ -301,6 +302,10 @@ def integrate_group(
     if lyapunov:
         live[half:] = written[:half]
     acc = _start_lanes(W, runs.states, samples, lyapunov, scales)
+    stresses = batch.stresses
+    extremes = np.empty((LANES, N_EXTREMES))
+    for lane in range(LANES):
+        start_extremes(extremes[lane])
     log_growth = np.zeros(LANES)
     whole_state = batch.poincare.shape[2] >= 6
     first_kept = n_periods - keep_periods
@@ -328,6 +333,10 @@ def integrate_group(
                     for lane in range(lanes):
                         drive_side, back_side = contact_counts(W, lane, pairs[sub])
                         _accumulate(acc, W, lane, drive_side, back_side)
+                    if stresses:
+                        # outside the vectorised loops: a batch without stresses runs the lanes' code alone
+                        _add_lane_extremes(extremes, W, n, j, sub, steps, period, offsets, stages, pairs, samples,
+                                           written, runs)
                     if stride > 0 and j % stride == 0:
                         _record(batch.history, row, W, table[sub], samples, written, n, j, steps, period, params)
                         row += 1
@@ -337,6 +346,25 @@ def integrate_group(
                 _renormalise(W, lane, lane + half, scales[samples[lane]], kept, log_growth)
     _write_out(W, acc, log_growth, samples, written, lyapunov, keep_periods, period, batch.accumulators,
                batch.final_states)
+    if stresses:
+        for lane in range(LANES):
+            if written[lane]:
+                batch.stress_extremes[samples[lane]] = extremes[lane]
+
+
+@nb.njit(**JIT_OPTIONS)
+def _add_lane_extremes(extremes, W, n, j, sub, steps, period, offsets, stages, pairs, samples, written, runs):
+    """Each written lane's tooth-pair loads at the start of grid step ``j`` (sub-step ``sub``) of period ``n``
+    into its extremes, as the one-sample kernel adds them (the same arguments, so the same numbers)."""
+    for lane in range(LANES):
+        if not written[lane]:
+            continue
+        i = samples[lane]
+        add_pair_extremes(
+            extremes[lane], row_of(W, W_STATE + 2, lane), row_of(W, W_STATE + 5, lane),
+            n * period[lane] + offsets[sub, lane], n, j / steps, stages[lane], sub, pairs[sub], runs.params[i],
+            runs.factor_pinion[i], runs.factor_gear[i],
+        )
 
 
 @nb.njit(**JIT_OPTIONS)
