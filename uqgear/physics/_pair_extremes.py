@@ -12,8 +12,8 @@ where they take their other QoIs: :func:`add_pair_extremes`.
 Each pair's load is that of :func:`uqgear.dynamics.tooth_loads.pair_loads`: its elastic force
 ``k_i f(x - e_i)`` plus its share ``k_i / sum_j k_j`` (over the pairs that touch) of the mesh
 damping force ``c_m x'``. The pair stiffness ``k_i`` and offset ``e_i`` are those the pair path
-steps with (:func:`~uqgear.physics._pairs._forcing_row_pairs` from the run's tabulated stages and
-:func:`~uqgear.physics._pairs._tooth_terms`): the Ishikawa pair table or its share of a smooth one,
+steps with (:func:`~uqgear.physics._pairs._forcing_row_pairs` from the run's tabulated stages and the
+period's :func:`~uqgear.physics._pairs._tooth_terms`): the Ishikawa pair table or its share of a smooth one,
 the tooth factors, the stiffness scale and the run-out's modulation, written once for every path.
 """
 
@@ -22,13 +22,12 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from uqgear.physics._pairs import PAIR_K, PAIR_OFFSET, _forcing_row_pairs, _tooth_terms
+from uqgear.physics._pairs import PAIR_K, PAIR_OFFSET, _forcing_row_pairs
 from uqgear.physics._rhs import (
     BASE_PITCH,
     CM,
     HALF_BACKLASH,
     INLINED,
-    JIT_OPTIONS,
     LOA_LENGTH,
     PATH_START,
     PITCH_POSITION,
@@ -43,13 +42,8 @@ N_EXTREMES = 4
 PITCH_TOLERANCE = 1e-12
 
 
-@nb.njit(**JIT_OPTIONS)
-def start_extremes(extremes):
-    """The extremes of a run before its first kept grid step: no load seen (the flank terms are >= 0)."""
-    extremes[E_LOAD_MAX] = -np.inf
-    extremes[E_LOAD_MIN] = np.inf
-    extremes[E_FLANK_PINION] = 0.0
-    extremes[E_FLANK_GEAR] = 0.0
+#: The extremes of a run before its first kept grid step: no load seen (the flank terms are >= 0).
+NO_EXTREMES = (-np.inf, np.inf, 0.0, 0.0)
 
 
 @nb.njit(**INLINED)
@@ -59,34 +53,39 @@ def _pair_load(elastic, k, touching_k, damping):
 
 
 @nb.njit(**INLINED)
-def _add_pair(extremes, load, position, p):
-    """One touching pair's load at ``position`` base pitches on the path of contact into the extremes."""
-    if load > extremes[E_LOAD_MAX]:
-        extremes[E_LOAD_MAX] = load
-    if load < extremes[E_LOAD_MIN]:
-        extremes[E_LOAD_MIN] = load
-    if load > 0.0:
-        pinion = p[PATH_START] + p[BASE_PITCH] * position
-        gear = p[LOA_LENGTH] - pinion
-        flank = load / (pinion * gear / (pinion + gear))
-        pitch = p[PITCH_POSITION]
-        if position <= pitch + PITCH_TOLERANCE and flank > extremes[E_FLANK_PINION]:
-            extremes[E_FLANK_PINION] = flank
-        if position >= pitch - PITCH_TOLERANCE and flank > extremes[E_FLANK_GEAR]:
-            extremes[E_FLANK_GEAR] = flank
+def _add_pair(extremes, load, position, geometry):
+    """``extremes`` (a 4-tuple, slots ``E_*``) with one touching pair's load at ``position`` base pitches on the
+    path of contact; ``geometry``: (path start, base pitch, length of the line of action, pitch point)."""
+    high, low, pinion_flank, gear_flank = extremes
+    start, base_pitch, length, pitch = geometry
+    high = load if load > high else high  # noqa: FURB136
+    low = load if load < low else low  # noqa: FURB136
+    pinion = start + base_pitch * position
+    gear = length - pinion
+    # P+ / rho: a pair at a negative load adds nothing to the flank terms (which start at 0)
+    flank = max(load, 0.0) / (pinion * gear / (pinion + gear))
+    if position <= pitch + PITCH_TOLERANCE:
+        pinion_flank = flank if flank > pinion_flank else pinion_flank  # noqa: FURB136
+    if position >= pitch - PITCH_TOLERANCE:
+        gear_flank = flank if flank > gear_flank else gear_flank  # noqa: FURB136
+    return high, low, pinion_flank, gear_flank
 
 
-@nb.njit(**JIT_OPTIONS)
-def add_pair_extremes(extremes, x, x_velocity, t, n, u, table, sub, n_pairs, p, fp, fg):
-    """The pair loads at state (``x``, ``x_velocity``), time ``t`` of mesh period ``n`` and mesh phase ``u``
-    (base pitches; sub-step ``sub`` of the run's tabulated stages ``table`` starts there, with
-    ``n_pairs`` in mesh) into the run's extremes (slots ``E_*``).
+@nb.njit(**INLINED)
+def add_pair_extremes(extremes, x, x_velocity, t, u, teeth, table, sub, n_pairs, p):
+    """``extremes`` (a 4-tuple, slots ``E_*``) with the pair loads at state (``x``, ``x_velocity``), time ``t`` and
+    mesh phase ``u`` (base pitches; sub-step ``sub`` of the run's tabulated stages ``table`` starts there, with
+    ``n_pairs`` in mesh); ``teeth``: :func:`~uqgear.physics._pairs._tooth_terms` of the mesh period.
 
-    A call, not inlined: it runs once a kept grid step and only where the stresses are asked, and
-    inlined it would add its code to every kernel's compilation.
+    Inlined, on tuples: what the pair forcing computes beyond the pairs' stiffness (the time terms,
+    friction) is then dropped by the compiler, and no array is passed by a call or counted in a
+    branch on every kept grid step (docs/validation/performance.md, "Compile time and inlining").
     """
-    terms = _forcing_row_pairs(t, _tooth_terms(n, p, fp, fg), table, sub, 0, n_pairs, p)
+    # the slots read first, outside any branch
     b = p[HALF_BACKLASH]
+    damping = p[CM] * x_velocity
+    geometry = (p[PATH_START], p[BASE_PITCH], p[LOA_LENGTH], p[PITCH_POSITION])
+    terms = _forcing_row_pairs(t, teeth, table, sub, 0, n_pairs, p)
     k0, k1, k2, k3 = terms[PAIR_K], terms[PAIR_K + 1], terms[PAIR_K + 2], terms[PAIR_K + 3]
     # a slot beyond the pairs in mesh has zero stiffness: no elastic force, not touching
     e0 = k0 * dead_zone(x - terms[PAIR_OFFSET], b)
@@ -98,18 +97,16 @@ def add_pair_extremes(extremes, x, x_velocity, t, n, u, table, sub, n_pairs, p, 
     touching_k += k1 if e1 != 0.0 else 0.0
     touching_k += k2 if e2 != 0.0 else 0.0
     touching_k += k3 if e3 != 0.0 else 0.0
-    if touching_k == 0.0:
-        return
-    damping = p[CM] * x_velocity
     if e0 != 0.0:
-        _add_pair(extremes, _pair_load(e0, k0, touching_k, damping), u, p)
+        extremes = _add_pair(extremes, _pair_load(e0, k0, touching_k, damping), u, geometry)
     if e1 != 0.0:
-        _add_pair(extremes, _pair_load(e1, k1, touching_k, damping), u + 1.0, p)
+        extremes = _add_pair(extremes, _pair_load(e1, k1, touching_k, damping), u + 1.0, geometry)
     if e2 != 0.0:
-        _add_pair(extremes, _pair_load(e2, k2, touching_k, damping), u + 2.0, p)
+        extremes = _add_pair(extremes, _pair_load(e2, k2, touching_k, damping), u + 2.0, geometry)
     if e3 != 0.0:
-        _add_pair(extremes, _pair_load(e3, k3, touching_k, damping), u + 3.0, p)
+        extremes = _add_pair(extremes, _pair_load(e3, k3, touching_k, damping), u + 3.0, geometry)
+    return extremes
 
 
-__all__ = ["E_LOAD_MAX", "E_LOAD_MIN", "E_FLANK_PINION", "E_FLANK_GEAR", "N_EXTREMES", "add_pair_extremes",
-           "start_extremes"]
+__all__ = ["E_LOAD_MAX", "E_LOAD_MIN", "E_FLANK_PINION", "E_FLANK_GEAR", "N_EXTREMES", "NO_EXTREMES",
+           "add_pair_extremes"]
