@@ -29,6 +29,11 @@ ISO's published values: Z_E = 189.8 sqrt(N/mm^2) for steel on steel (ISO
 6336-2 figure of Z_H), the life factors' knee points of case-hardened steel
 (ISO 6336-2 and -3 tables: Z_NT 1.6 / 1.0 / 0.85 at 1e5 / 5e7 / 1e10, Y_NT
 2.5 / 1.0 / 0.85 at 1e3 / 3e6 / 1e10), K_v's continuity at the range limits.
+
+Method B's own spur factors (Y_F, Y_S with the load at the outer point of
+single pair contact, Z_B, Z_D) against two published calculation reports of
+a commercial ISO 6336 code (KISSsoft, ``KISSSOFT_SPUR_STAGES`` below), and
+the worked example 1 of ISO/TR 6336-30 through its transverse section.
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ import numpy as np
 import pytest
 
 import uqgear
+from uqgear.physics.design_parts import MeshDesign
 from uqgear.physics.rating import (
     RatingError,
     RatingSettings,
@@ -340,3 +346,138 @@ def test_iso_tr_6336_30_example_1_through_its_transverse_section():
     # tighter where the report prints five or more figures
     for name in ("Z_H", "Z_E", "F_t"):
         assert ours[name] == pytest.approx(example[name], rel=1e-4), name
+
+
+# KISSsoft calculation reports (KISSsoft Release 03/2017 A, "ISO 6336:2006 Method B", basic
+# rack 1.25 / 0.38 / 1.0 ISO 53 profile A, E 206 GPa, nu 0.3) of the two spur sun-planet
+# stages of the NREL 5 MW drivetrain, published in gfsReboucas/Drivetrain,
+# @NREL_5MW/stage_02.rtf and @NREL_5MW/stage_01.rtf (commit 2a41bf1ce829b76800693e2b52c91e5f74d074d4).
+# Pinion: the sun; gear: a planet (3 planets; F_t is the report's force per mesh). Lengths in mm,
+# angles in degrees, stresses in N/mm^2; each value as printed, with its number of decimals.
+KISSSOFT_SPUR_STAGES = {
+    "stage_02": {
+        "input": {"m": 21.0, "z": (18, 36), "x": (0.3890, 0.5039), "b": 550.0, "k": -1.75, "F_t": 285900.438},
+        "printed": {
+            "a": (584.000, 3),
+            "d_a": ((432.838, 815.663), 3),
+            "d_f": ((341.838, 724.663), 3),
+            "eps_alpha": (1.370, 3),
+            "d_en": ((408.342, 794.110), 3),
+            "Y_F": ((1.47, 1.38), 2),
+            "Y_S": ((2.04, 2.18), 2),
+            "h_Fe": ((24.33, 25.73), 2),
+            "alpha_Fen": ((25.74, 24.68), 2),
+            "s_Fn": ((44.78, 47.70), 2),
+            "rho_F": ((9.52, 8.69), 2),
+            "sigma_F0": ((73.95, 74.21), 2),
+            "Z_H": (2.25, 2),
+            "Z_E": (189.81, 2),
+            "Z_eps": (0.936, 3),
+            "Z_B, Z_D": ((1.08, 1.00), 2),
+            "sigma_H0": (573.40, 2),
+        },
+    },
+    "stage_01": {
+        "input": {"m": 45.0, "z": (19, 17), "x": (0.6170, 0.8021), "b": 491.0, "k": -10.861, "F_t": 779454.877},
+        "printed": {
+            "a": (863.000, 3),
+            "d_a": ((978.808, 905.470), 3),
+            "d_f": ((798.030, 724.692), 3),
+            "eps_alpha": (1.115, 3),
+            "d_en": ((961.716, 887.259), 3),
+            "Y_F": ((1.56, 1.44), 2),
+            "Y_S": ((2.06, 2.14), 2),
+            "h_Fe": ((64.83, 65.24), 2),
+            "alpha_Fen": ((30.75, 33.33), 2),
+            "s_Fn": ((101.18, 104.13), 2),
+            "rho_F": ((18.12, 17.19), 2),
+            "sigma_F0": ((113.46, 108.94), 2),
+            "Z_H": (2.06, 2),
+            "Z_E": (189.81, 2),
+            "Z_eps": (0.981, 3),
+            "Z_B, Z_D": ((1.04, 1.05), 2),
+            "sigma_H0": (759.92, 2),
+        },
+    },
+}
+# Values the report derives from its actual centre distance (with backlash) and its own
+# F_t: ours lie within 1e-4 of them but may differ in the last printed digit.
+KISSSOFT_LAST_DIGIT = ("a", "d_en", "sigma_F0", "sigma_H0")
+# Diameters carry the rounding of the printed profile shifts (4 decimals: +-2 m 5e-5).
+KISSSOFT_SHIFTED = ("d_a", "d_f")
+
+
+def _kisssoft_stage(name):
+    """The stage's sun-planet pair, rated; the report's tip alteration k is the addendum's shortening."""
+    given = KISSSOFT_SPUR_STAGES[name]["input"]
+    keys = {
+        "z1": given["z"][0],
+        "z2": given["z"][1],
+        "module": given["m"] / 1e3,
+        "x1": given["x"][0],
+        "x2": given["x"][1],
+        "face_width": given["b"] / 1e3,
+        "addendum_coefficient": 1.0 + given["k"] / given["m"],
+        "dedendum_coefficient": 1.25,
+        "pressure_angle": 20.0,
+        "youngs_modulus": 206e9,
+        "poisson_ratio": 0.3,
+    }
+    if name == "stage_02":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", uqgear.UqgearWarning)
+            design = uqgear.load_design("locomotive").replace(**keys)
+    else:
+        # Design refuses this pair: its geometry takes the generating rack's flank height from
+        # h_a* (tip shortening is not modelled), so the shortened addendum lifts the model's root
+        # form circles above the mating tips' reach. The rating reads only the tip and root
+        # circles and the path of contact, so the geometry's own design part is rated.
+        design = MeshDesign(**keys)
+    torque = given["F_t"] * given["m"] * given["z"][0] / 2e3
+    rating = static_rating(design, torque, 100.0, dynamic_factor=1.0)
+    geometry = uqgear.physics.geometry.pair_geometry(design)
+    pinion, gear = rating.root
+    return {
+        "a": geometry.centre_distance * 1e3,
+        "d_a": (2e3 * geometry.pinion.tip_radius, 2e3 * geometry.gear.tip_radius),
+        "d_f": (2e3 * geometry.pinion.root_radius, 2e3 * geometry.gear.root_radius),
+        "eps_alpha": geometry.contact_ratio,
+        "d_en": (pinion.load_diameter * 1e3, gear.load_diameter * 1e3),
+        "Y_F": (pinion.form_factor, gear.form_factor),
+        "Y_S": (pinion.stress_correction, gear.stress_correction),
+        "h_Fe": (pinion.moment_arm * 1e3, gear.moment_arm * 1e3),
+        "alpha_Fen": (math.degrees(pinion.load_angle), math.degrees(gear.load_angle)),
+        "s_Fn": (pinion.chord * 1e3, gear.chord * 1e3),
+        "rho_F": (pinion.fillet_radius * 1e3, gear.fillet_radius * 1e3),
+        "sigma_F0": tuple(stress / 1e6 for stress in rating.root_stress_nominal),
+        "Z_H": rating.contact.zone,
+        "Z_E": rating.contact.elasticity / 1e3,
+        "Z_eps": rating.contact.contact_ratio,
+        "Z_B, Z_D": (rating.contact.single_pair_pinion, rating.contact.single_pair_gear),
+        "sigma_H0": rating.contact_stress_nominal / 1e6,
+    }
+
+
+@pytest.mark.parametrize("name", sorted(KISSSOFT_SPUR_STAGES))
+def test_spur_pairs_against_published_kisssoft_method_b_reports(name):
+    """Two spur pairs' method B root and contact factors against a commercial code's reports.
+
+    Every printed factor is within 1 % and rounds to the printed figure: Y_F,
+    Y_S at the outer point of single pair contact, the critical section's h_Fe,
+    alpha_Fen, s_Fn, rho_F, and Z_H, Z_E, Z_eps, Z_B, Z_D, eps_alpha, the tip and
+    root diameters (the latter to the rounding of the printed profile shifts).
+    The centre distance, load diameter d_en and the nominal stresses are within
+    1e-4 (the report computes them at its actual centre distance). Differences:
+    docs/validation/verification.md.
+    """
+    ours = _kisssoft_stage(name)
+    module = KISSSOFT_SPUR_STAGES[name]["input"]["m"]
+    for key, (printed, decimals) in KISSSOFT_SPUR_STAGES[name]["printed"].items():
+        pairs = zip(ours[key], printed) if isinstance(printed, tuple) else [(ours[key], printed)]
+        rounding = 0.5 * 10.0**-decimals + (2.0 * module * 5e-5 if key in KISSSOFT_SHIFTED else 0.0)
+        for mine, theirs in pairs:
+            assert mine == pytest.approx(theirs, rel=0.01), f"{name} {key}: {mine} against {theirs}"
+            if key in KISSSOFT_LAST_DIGIT:
+                assert mine == pytest.approx(theirs, rel=1e-4), f"{name} {key}: {mine} against {theirs}"
+            else:
+                assert abs(mine - theirs) <= rounding + 1e-9, f"{name} {key}: {mine} rounds off {theirs}"

@@ -35,57 +35,9 @@ from uqgear.physics._cache import register_kernel_cache
 register_kernel_cache()
 
 # ---------------------------------------------------------------- parameter slots
-(
-    M1,
-    M2,
-    ME,
-    K1,
-    K2,
-    C1,
-    C2,
-    CM,
-    HALF_BACKLASH,
-    R1,
-    R2,
-    I1,
-    I2,
-    T1,
-    T2,
-    OMEGA_MESH,
-    STE_AMPLITUDE,
-    STE_PHASE,
-    STIFFNESS_SCALE,
-    DAMP_IN_SEPARATION,
-    RIPPLE_AMPLITUDE,
-    RIPPLE_OMEGA,
-    RIPPLE_PHASE,
-    ADHESION_AMPLITUDE,
-    ADHESION_OMEGA,
-    ADHESION_PHASE,
-    ECC_AMPLITUDE,
-    ECC_OMEGA,
-    ECC_PHASE,
-    ECC_KAPPA,
-    FRICTION,
-    CLEARANCE1,
-    CLEARANCE2,
-    PATH_START,
-    BASE_PITCH,
-    LOA_LENGTH,
-    PITCH_POSITION,
-    CONTACT_RATIO,
-    USE_PERIOD_TABLE,
-    Z1,
-    Z2,
-    TOOTH_FACTORS,
-    PITCH_ERRORS,
-) = range(43)
-#: Number of named slots. The parameter vector goes on with the per-tooth pitch offsets
-#: (m): z1 of the pinion from index ``N_PARAMS``, then z2 of the gear (docs/model/equations.md
-#: section 2.6); ``PITCH_ERRORS`` is 1 when any of them is not zero.
-N_PARAMS = 43
-
-#: Names of the parameter slots, in order (for error messages and tests).
+#: Names of the parameter slots, in order: the one list of them. The slot constants below (each its
+#: name in capitals, a global that numba compiles as a constant) take their positions from it, and
+#: import fails where one is missing or out of place.
 PARAMETER_SLOTS = (
     "m1",
     "m2",
@@ -131,6 +83,57 @@ PARAMETER_SLOTS = (
     "tooth_factors",
     "pitch_errors",
 )
+(
+    M1,
+    M2,
+    ME,
+    K1,
+    K2,
+    C1,
+    C2,
+    CM,
+    HALF_BACKLASH,
+    R1,
+    R2,
+    I1,
+    I2,
+    T1,
+    T2,
+    OMEGA_MESH,
+    STE_AMPLITUDE,
+    STE_PHASE,
+    STIFFNESS_SCALE,
+    DAMP_IN_SEPARATION,
+    RIPPLE_AMPLITUDE,
+    RIPPLE_OMEGA,
+    RIPPLE_PHASE,
+    ADHESION_AMPLITUDE,
+    ADHESION_OMEGA,
+    ADHESION_PHASE,
+    ECC_AMPLITUDE,
+    ECC_OMEGA,
+    ECC_PHASE,
+    ECC_KAPPA,
+    FRICTION,
+    CLEARANCE1,
+    CLEARANCE2,
+    PATH_START,
+    BASE_PITCH,
+    LOA_LENGTH,
+    PITCH_POSITION,
+    CONTACT_RATIO,
+    USE_PERIOD_TABLE,
+    Z1,
+    Z2,
+    TOOTH_FACTORS,
+    PITCH_ERRORS,
+) = range(len(PARAMETER_SLOTS))
+#: Number of named slots. The parameter vector goes on with the per-tooth pitch offsets
+#: (m): z1 of the pinion from index ``N_PARAMS``, then z2 of the gear (docs/model/equations.md
+#: section 2.6); ``PITCH_ERRORS`` is 1 when any of them is not zero.
+N_PARAMS = len(PARAMETER_SLOTS)
+if any(globals()[name.upper()] != slot for slot, name in enumerate(PARAMETER_SLOTS)):
+    raise RuntimeError("a parameter slot's constant is not at its name's position")  # pragma: no cover - a source error
 
 # QoI accumulator layout of the batch kernel
 (
