@@ -2,7 +2,15 @@
 
 References: ISO 6336's static stresses at a crawl (the rating, independent of the dynamics), the
 one-sample integrator's history of the same run reduced by ``tooth_stresses`` (an independent path
-through the model), and the interval analysis's bounds against the stresses of its own scan nodes.
+through the model: the pair loads in numpy from the DTE history), and the interval analysis's bounds
+against the stresses of its own scan nodes.
+
+The batch reads the pair loads at its RK4 grid steps (here 32 to 76 a mesh period). A history of the
+same grid gives the same stresses to rounding; a finer one (4 times as many steps, every fourth
+sample on the batch's grid) sees the loads between the batch's grid steps as well, where the peak of
+a pair's load can fall (its entry and exit are not grid points, and the flank term changes with
+the contact point): there the stresses of these runs differ by 0.1 to 0.55 %, within
+:data:`FINER_TOLERANCE`.
 """
 
 from __future__ import annotations
@@ -16,26 +24,33 @@ from uqgear.cli import main
 from uqgear.dynamics.attractors import StartedEvaluator
 from uqgear.dynamics.stress_qois import STRESS_QOIS, StressEvaluator, tooth_stress_qois
 from uqgear.dynamics.tooth_loads import tooth_stresses
-from uqgear.physics.integration import STATE_NAMES, integrate_fast
+from uqgear.physics.integration import STATE_NAMES, integrate_fast, steps_per_period
 from uqgear.physics.rating import RatingSettings, static_rating
 from uqgear.study.settings import SimulationSettings
 
 DESIGN = uqgear.load_design("locomotive")
 RUN = {"n_periods": 60, "keep_periods": 20}
+#: Largest relative difference of a stress QoI between the batch's grid and a history four times finer
+#: (module text: 0.55 % measured on these runs, 0.7 % at eight times finer)
+FINER_TOLERANCE = 1e-2
 
 
-def _one_at_a_time(samples: xr.Dataset, rating: RatingSettings, states=None) -> np.ndarray:
-    """(sample, QoI) stresses of each run integrated alone by the one-sample kernel, in STRESS_QOIS order."""
+def _one_at_a_time(samples: xr.Dataset, rating: RatingSettings, states=None, finer: int = 1) -> np.ndarray:
+    """(sample, QoI) stresses of each run integrated alone by the one-sample kernel, in STRESS_QOIS order, from
+    its history at ``finer`` times the batch's steps per mesh period (1: the batch's own grid)."""
     rows = []
     for i in range(samples.sizes["sample"]):
         values = {name: float(samples[name].values[i]) for name in samples.data_vars}
         torque = values.get("drive_torque", DESIGN.operation.drive_torque)
         setup = uqgear.build_model(DESIGN, values["pinion_speed"], torque, values["adhesion_torque"])
         start = setup.static_state() if states is None else states[i].copy()
-        history, _, _ = integrate_fast(setup, RUN["n_periods"], RUN["keep_periods"], 64, 24, start)
+        per_period = finer * steps_per_period(setup, 24)
+        history, _, _ = integrate_fast(setup, RUN["n_periods"], RUN["keep_periods"], per_period, 24, start)
         iso = static_rating(DESIGN, torque, values["pinion_speed"], rating, dynamic_factor=1.0)
         first = RUN["n_periods"] - RUN["keep_periods"]
-        stresses = tooth_stresses(setup, iso, history[:, 2], first_period=first, samples_per_period=64)
+        stresses = tooth_stresses(
+            setup, iso, history[:, 2], history[:, 5], first_period=first, samples_per_period=per_period
+        )
         rows.append(
             [float(stresses[q].sel(gear=g)) for q, g in (name.rsplit("_", 1) for name in STRESS_QOIS)]
         )
@@ -46,7 +61,9 @@ def test_at_a_crawl_without_transmission_error_the_peaks_are_isos_static_stresse
     samples = uqgear.samples_from_mapping(
         {"pinion_speed": [5.0, 5.0], "drive_torque": [7000.0, 5000.0], "ste_amplitude": [0.0, 0.0]}
     )
-    qois = tooth_stress_qois(DESIGN, samples, n_periods=30, keep_periods=10)
+    # a mesh stiffness without jumps: the Ishikawa table's jump where a pair leaves sets the mesh ringing
+    # even at a crawl, and the batch, which reads every grid step, sees that overshoot (rating.md 10.6)
+    qois = tooth_stress_qois(DESIGN, samples, n_periods=30, keep_periods=10, stiffness="constant")
     for i, torque in enumerate((7000.0, 5000.0)):
         iso = static_rating(DESIGN, torque, 5.0, dynamic_factor=1.0)
         for g, gear in enumerate(("pinion", "gear")):
@@ -66,8 +83,13 @@ def test_the_batch_gives_each_run_the_stresses_of_its_one_sample_history():
         {"pinion_speed": [1500.0, 3000.0, 3600.0, 4400.0], "adhesion_torque": [21e3, 33.8e3, 25e3, 46e3]}
     )
     batch = tooth_stress_qois(DESIGN, samples, rating=rating, steps_per_mode=24, **RUN)
-    alone = _one_at_a_time(samples, rating)
-    assert np.stack([batch[name].values for name in STRESS_QOIS], axis=1) == pytest.approx(alone, rel=1e-12)
+    values = np.stack([batch[name].values for name in STRESS_QOIS], axis=1)
+    # the history on the batch's own grid: the same pair loads, to rounding
+    assert values == pytest.approx(_one_at_a_time(samples, rating), rel=1e-12)
+    # a finer history: the loads between the grid steps too (module text)
+    finer = _one_at_a_time(samples, rating, finer=4)
+    assert values == pytest.approx(finer, rel=FINER_TOLERANCE)
+    assert not np.allclose(values, finer, rtol=1e-6, atol=0.0)
     threaded = tooth_stress_qois(DESIGN, samples, rating=rating, steps_per_mode=24, threads=2, **RUN)
     assert all(np.array_equal(batch[name].values, threaded[name].values) for name in STRESS_QOIS)
     for name in STRESS_QOIS:
@@ -83,7 +105,7 @@ def test_the_stress_evaluator_adds_the_stresses_and_keeps_the_batch_qois_bit_for
     for name in plain.data_vars:
         assert np.array_equal(plain[name].values, with_stresses[name].values, equal_nan=True), name
     full = samples.assign(pinion_speed=("sample", [3000.0] * 3), drive_torque=("sample", [7000.0] * 3))
-    direct = tooth_stress_qois(DESIGN, full, steps_per_mode=32, **RUN)
+    direct = tooth_stress_qois(DESIGN, full, steps_per_mode=24, **RUN)
     for name in STRESS_QOIS:
         assert np.array_equal(with_stresses[name].values, direct[name].values)
     # the rating inputs change the stresses, so they are part of the checkpoint key

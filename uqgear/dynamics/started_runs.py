@@ -13,11 +13,12 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from ..physics.batch_setup import PAIR_EXTREME_INFO
 from ..physics.design import Design
 from ..physics.integration import STATE_NAMES, build_batch, simulate_batch
 from ..physics.rating import RatingSettings
 from .regimes import classify_batch, period_labels
-from .stress_qois import STRESS_QOIS, stress_options, tooth_stress_qois
+from .stress_qois import stress_variables
 
 #: Sample variables of a start state, and of the final state a started run returns.
 INITIAL_VARIABLES = tuple(f"initial_{name}" for name in STATE_NAMES)
@@ -43,7 +44,7 @@ class StartedEvaluator:
         (:func:`~uqgear.dynamics.regimes.period_labels`: ``period-n`` or ``aperiodic``), all the grouping needs.
     stresses : RatingSettings, optional
         Also compute the tooth stress QoIs of every run from its own start
-        (:func:`~uqgear.dynamics.stress_qois.tooth_stress_qois` with these ISO 6336 inputs).
+        (:func:`~uqgear.dynamics.stress_qois.stress_variables` with these ISO 6336 inputs), in the same pass.
     """
 
     def __init__(
@@ -75,17 +76,18 @@ class StartedEvaluator:
                     stiffness=self.options.get("stiffness", "ishikawa"),
                 )
                 states[rest] = np.stack([setup.static_state() for setup in setups])
-        result = final_variables(
-            simulate_batch(self.design, inputs, initial_states=states, final_state=True, **self.options)
+        # the stresses from the same pass (the batch's pair-load extremes)
+        stressed = self.stresses is not None
+        batch = simulate_batch(
+            self.design, inputs, initial_states=states, final_state=True, **{**self.options, "stresses": stressed}
         )
-        classes = classify_batch(result, seed=self.classify_seed) if self.full_regime else period_labels(result)
-        result = result.merge(classes[["regime", "response_period"]], compat="override")
-        if self.stresses is not None:
-            stresses = tooth_stress_qois(
-                self.design, inputs, rating=self.stresses, initial_states=states, **stress_options(self.options)
+        result = final_variables(batch)
+        if stressed:
+            result = result.drop_vars(list(PAIR_EXTREME_INFO)).assign(
+                stress_variables(self.design, inputs, batch, self.stresses)
             )
-            result = result.assign({name: stresses[name].variable for name in STRESS_QOIS})
-        return result
+        classes = classify_batch(result, seed=self.classify_seed) if self.full_regime else period_labels(result)
+        return result.merge(classes[["regime", "response_period"]], compat="override")
 
 
 def final_variables(result: xr.Dataset) -> xr.Dataset:

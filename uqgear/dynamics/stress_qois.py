@@ -1,45 +1,46 @@
 """Tooth root and flank stresses as scalar QoIs of a batch of runs, for every analysis that takes QoIs.
 
 The kernels of :func:`~uqgear.physics.integration.simulate_batch` reduce each
-run to scalar QoIs as they integrate; a tooth's stress needs the load of each
-tooth pair over the mesh cycle, which :func:`~uqgear.dynamics.tooth_loads.tooth_stresses`
-derives from the run's DTE history (:func:`~uqgear.dynamics.tooth_loads.stress_peaks`, its scalar
-part). :func:`tooth_stress_qois` runs the batch's
-histories together (:func:`~uqgear.physics.history_batch.integrate_histories`,
-the same numbers as a run alone) and reduces each to the peak and amplitude of
-the root and flank stress of each gear (:data:`STRESS_QOI_INFO`);
+run to scalar QoIs as they integrate; a tooth's stress follows from the load
+of its pair, and with ``stresses`` they also keep, in the same pass, the
+extremes of the pair loads over the kept grid steps
+(:mod:`uqgear.physics._pair_extremes`). The root stress is a constant of each
+gear times the pair load and the flank stress a constant times
+``sqrt(P+ / rho)`` on that gear's dedendum, so those extremes give the peak
+and amplitude of the root and flank stress of each gear (:data:`STRESS_QOI_INFO`,
+:func:`~uqgear.dynamics.tooth_loads.peaks_from_extremes`):
+:func:`tooth_stress_qois` runs the batch once and converts.
 :class:`StressEvaluator` is :class:`~uqgear.physics.integration.BatchEvaluator`
-with those QoIs beside the kernels' own, so an interval, Monte Carlo,
-polynomial chaos or Sobol analysis bounds a stress as it bounds the mesh force.
+with those QoIs beside the kernels' own, from the same runs, so an interval,
+Monte Carlo, polynomial chaos or Sobol analysis bounds a stress as it bounds
+the mesh force at the cost of the runs alone. The stresses are read at the
+kernels' grid steps (``steps_per_mode`` per period of the highest natural
+frequency): within a few parts in a thousand of those of a history sampled
+finely (:func:`~uqgear.dynamics.tooth_loads.tooth_stresses`; tests/test_stress_qois.py).
 
 The stresses are ISO 6336's (docs/model/rating.md): the root stress at the
 critical section of method B with the load where it acts, the flank stress by
 Hertz with the standard's elasticity and contact-ratio factors, each with the
 rating's load factors K_A, K_Hbeta and K_Halpha and no K_v (the simulated load
-is the dynamic load). At a crawl the peaks are the static ISO stresses.
+is the dynamic load). At a crawl, with a mesh stiffness without jumps, the root
+stress peaks are the static ISO stresses.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from ..physics.batch_setup import build_batch
+from ..physics.batch_setup import PAIR_EXTREME_INFO, build_batch, sample_designs
 from ..physics.design import Design
-from ..physics.history_batch import integrate_histories
-from ..physics.integration import QOI_INFO, BatchEvaluator
-from ..physics.model import ModelSetup
+from ..physics.integration import QOI_INFO, BatchEvaluator, simulate_batch
 from ..physics.pitch_errors import PitchErrors
 from ..physics.rating import RatingSettings, StaticRating, static_rating
-from .tooth_loads import GEARS, stress_peaks
-
-#: History samples per mesh period the stresses are read from (the peaks' resolution along the path
-#: of contact: 64 places a sample every 1/64 of a base pitch, as the rating analysis does).
-STRESS_SAMPLES_PER_PERIOD = 64
+from .tooth_loads import GEARS, peaks_from_extremes
 
 #: The stress QoIs: name -> (units, description); ``<quantity>_<gear>`` for each gear of :data:`GEARS`.
 STRESS_QOI_INFO: dict[str, tuple[str, str]] = {
@@ -70,10 +71,39 @@ def _operating(samples: xr.Dataset, name: str, default: float) -> np.ndarray:
     return np.full(samples.sizes["sample"], float(default))
 
 
-def _run_qois(setup: ModelSetup, rating: StaticRating, x: np.ndarray, first_period: int, samples: int) -> list[float]:
-    peaks = stress_peaks(setup, rating, x, first_period=first_period, samples_per_period=samples)
-    names = (name.rsplit("_", 1) for name in STRESS_QOIS)
-    return [float(peaks[quantity][GEARS.index(gear)]) for quantity, gear in names]
+def stress_variables(
+    design: Design, samples: xr.Dataset, batch: xr.Dataset, rating: RatingSettings | None = None
+) -> dict[str, xr.Variable]:
+    """The stress QoIs (:data:`STRESS_QOI_INFO`) of a batch run with ``stresses``, from its pair-load extremes.
+
+    Parameters
+    ----------
+    design : Design
+    samples : xarray.Dataset
+        The batch's samples (their ``pinion_speed`` and ``drive_torque`` rate each run).
+    batch : xarray.Dataset
+        :func:`~uqgear.physics.integration.simulate_batch`'s result with ``stresses=True``.
+    rating : RatingSettings, optional
+        ISO 6336 inputs (:func:`tooth_stress_qois`).
+
+    Returns
+    -------
+    dict
+        Name -> variable on ``sample``, Pa.
+    """
+    settings = rating if rating is not None else RatingSettings()
+    torques = _operating(samples, "drive_torque", design.operation.drive_torque)
+    speeds = np.asarray(samples["pinion_speed"].values, dtype=float)
+    extremes = np.stack([np.asarray(batch[name].values, dtype=float) for name in PAIR_EXTREME_INFO], axis=1)
+    names = [name.rsplit("_", 1) for name in STRESS_QOIS]
+    values = np.empty((len(speeds), len(STRESS_QOIS)))
+    for i, (run, torque, speed) in enumerate(zip(sample_designs(design, samples), torques, speeds)):
+        peaks = peaks_from_extremes(run, _rating(run, float(torque), float(speed), settings), extremes[i])
+        values[i] = [peaks[quantity][GEARS.index(gear)] for quantity, gear in names]
+    return {
+        name: xr.Variable("sample", values[:, j], {"units": units, "long_name": text})
+        for j, (name, (units, text)) in enumerate(STRESS_QOI_INFO.items())
+    }
 
 
 def tooth_stress_qois(
@@ -89,10 +119,9 @@ def tooth_stress_qois(
     pitch_errors: PitchErrors | None = None,
     rating: RatingSettings | None = None,
     initial_states: np.ndarray | None = None,
-    samples_per_period: int = STRESS_SAMPLES_PER_PERIOD,
     threads: int | None = 1,
 ) -> xr.Dataset:
-    """The tooth stress QoIs of every sample: each run's DTE history turned into root and flank stresses.
+    """The tooth stress QoIs of every sample, from one batch pass that keeps each run's pair-load extremes.
 
     Parameters
     ----------
@@ -106,10 +135,8 @@ def tooth_stress_qois(
         defaults of :class:`~uqgear.physics.rating.RatingSettings` where not given.
     initial_states : ndarray, optional
         (samples, 6) start states; a row of NaN, or none given, starts that run at rest.
-    samples_per_period : int
-        History samples per mesh period.
     threads : int, optional
-        Threads of the history integration (None: all cores); the numbers do not depend on it.
+        Threads of the batch (None: all cores); the numbers do not depend on it.
 
     Returns
     -------
@@ -118,74 +145,56 @@ def tooth_stress_qois(
 
     Examples
     --------
-    At a crawl the pinion's root stress peak is ISO 6336-3's sigma_F at K_v = 1 (within the
-    transmission error's own load variation):
+    At a crawl, with a mesh stiffness without jumps (the Ishikawa table's jump where a pair leaves sets
+    the mesh ringing, which the kernels' steps resolve), the pinion's root stress peak is ISO 6336-3's
+    sigma_F at K_v = 1 (within the transmission error's own load variation):
 
     >>> import uqgear
     >>> from uqgear.physics.rating import static_rating
     >>> from uqgear.dynamics.stress_qois import tooth_stress_qois
     >>> design = uqgear.load_design("locomotive")
     >>> samples = uqgear.samples_from_mapping({"pinion_speed": [5.0], "drive_torque": [7000.0]})
-    >>> qois = tooth_stress_qois(design, samples, n_periods=30, keep_periods=10)
+    >>> qois = tooth_stress_qois(design, samples, n_periods=30, keep_periods=10, stiffness="constant")
     >>> iso = static_rating(design, 7000.0, 5.0, dynamic_factor=1.0)
     >>> abs(float(qois["root_stress_peak_pinion"][0]) / iso.root_stress[0] - 1.0) < 0.01
     True
     """
-    settings = rating if rating is not None else RatingSettings()
-    setups = build_batch(
+    batch = simulate_batch(
         design,
         samples,
+        n_periods=n_periods,
+        keep_periods=keep_periods,
         effects=effects,
         damping_in_separation=damping_in_separation,
         stiffness=stiffness,
+        steps_per_mode=steps_per_mode,
+        threads=threads,
         pitch_errors=pitch_errors,
+        initial_states=_starts(design, samples, initial_states, effects, damping_in_separation, stiffness),
+        stresses=True,
     )
-    runs = integrate_histories(
-        setups, n_periods, keep_periods, samples_per_period, steps_per_mode, initial_states, threads=threads
-    )
-    torques = _operating(samples, "drive_torque", design.operation.drive_torque)
-    speeds = np.asarray(samples["pinion_speed"].values, dtype=float)
-    first = int(n_periods) - int(keep_periods)
-    values = np.array(
-        [
-            _run_qois(
-                setup, _rating(setup.design, float(t), float(n), settings), history[:, 2], first, samples_per_period
-            )
-            for setup, (history, _), t, n in zip(setups, runs, torques, speeds)
-        ]
-    ).reshape(len(setups), len(STRESS_QOIS))
     return xr.Dataset(
-        {
-            name: ("sample", values[:, j], {"units": units, "long_name": text})
-            for j, (name, (units, text)) in enumerate(STRESS_QOI_INFO.items())
-        },
+        stress_variables(design, samples, batch, rating),
         coords={"sample": samples["sample"].values} if "sample" in samples.coords else None,
     )
 
 
-def stress_options(options: Mapping[str, Any]) -> dict[str, Any]:
-    """The keyword arguments of :func:`tooth_stress_qois` among batch options (those of
-    :func:`~uqgear.physics.integration.simulate_batch`), the others left out.
-
-    Examples
-    --------
-    >>> stress_options({"n_periods": 60, "threads": 2, "lyapunov": True})
-    {'n_periods': 60, 'threads': 2}
-    """
-    return {key: options[key] for key in _STRESS_OPTION_KEYS if key in options}
-
-
-#: The batch options that :func:`tooth_stress_qois` takes.
-_STRESS_OPTION_KEYS = (
-    "n_periods",
-    "keep_periods",
-    "steps_per_mode",
-    "effects",
-    "damping_in_separation",
-    "stiffness",
-    "pitch_errors",
-    "threads",
-)
+def _starts(design, samples, states, effects, damping_in_separation, stiffness) -> np.ndarray | None:
+    """The given start states, a row of NaN replaced by that run's static equilibrium."""
+    if states is None:
+        return None
+    states = np.array(states, dtype=float)
+    rest = ~np.all(np.isfinite(states), axis=1)
+    if rest.any():
+        setups = build_batch(
+            design,
+            samples.isel(sample=np.nonzero(rest)[0]),
+            effects=effects,
+            damping_in_separation=damping_in_separation,
+            stiffness=stiffness,
+        )
+        states[rest] = np.stack([setup.static_state() for setup in setups])
+    return states
 
 
 class StressEvaluator(BatchEvaluator):
@@ -213,14 +222,15 @@ class StressEvaluator(BatchEvaluator):
     """
 
     def __init__(self, design: Design, *, rating: RatingSettings | None = None, **options: Any) -> None:
-        super().__init__(design, **options)
+        # the kernels' QoIs and the pair-load extremes of one pass; the QoIs are those without them, bit for bit
+        super().__init__(design, **{**options, "stresses": True})
         self.rating = rating
 
     def __call__(self, samples: xr.Dataset) -> xr.Dataset:
         completed = self.completed(samples)
         result = super().__call__(completed)
-        stresses = tooth_stress_qois(self.design, completed, rating=self.rating, **stress_options(vars(self)))
-        return result.assign({name: stresses[name].variable for name in STRESS_QOIS})
+        stresses = stress_variables(self.design, completed, result, self.rating)
+        return result.drop_vars(list(PAIR_EXTREME_INFO)).assign(stresses)
 
     def key(self) -> str:
         """:meth:`BatchEvaluator.key` with the stresses' rating inputs."""
@@ -230,9 +240,9 @@ class StressEvaluator(BatchEvaluator):
 
 __all__ = [
     "RUN_QOI_INFO",
+    "stress_variables",
     "STRESS_QOI_INFO",
     "STRESS_QOIS",
-    "STRESS_SAMPLES_PER_PERIOD",
     "StressEvaluator",
     "tooth_stress_qois",
 ]

@@ -48,6 +48,7 @@ import numpy as np
 import xarray as xr
 
 from ..physics import _kernels as K
+from ..physics.design import Design
 from ..physics.model import ModelSetup
 from ..physics.rating import StaticRating
 
@@ -294,31 +295,80 @@ def stress_peaks(
     return _peaks(*_stress_arrays(setup, rating, engagement, position))
 
 
-def _stress_arrays(
-    setup: ModelSetup, rating: StaticRating, load: np.ndarray, position: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(root, contact) stresses (gear, engagement, position) of the engagements' loads; module text."""
-    design = setup.design
+def _stress_factors(design: Design, rating: StaticRating) -> tuple[list[float], float]:
+    """(root stress per unit of pair load, per gear; Hertz factor Z_eps Z_E sqrt(K_A K_Hbeta K_Halpha / b))."""
     # the rating's stresses per unit of tangential force at the reference circle, its K_v divided out
-    tangential = load * math.cos(math.radians(design.pressure_angle)) / rating.tangential_force
-    root = np.stack([tangential * actual / rating.dynamic_factor for actual in rating.root_stress])
+    per_load = math.cos(math.radians(design.pressure_angle)) / rating.tangential_force
+    root = [per_load * actual / rating.dynamic_factor for actual in rating.root_stress]
     factors = rating.contact
     # K_A K_Hbeta K_Halpha: sigma_H = Z_B sigma_H0 sqrt(K_A K_v K_Hbeta K_Halpha)
     load_factor = (rating.contact_stress[0] / (factors.single_pair_pinion * rating.contact_stress_nominal)) ** 2
     load_factor /= rating.dynamic_factor
+    return root, factors.contact_ratio * factors.elasticity * math.sqrt(load_factor / design.face_width)
+
+
+def _stress_arrays(
+    setup: ModelSetup, rating: StaticRating, load: np.ndarray, position: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(root, contact) stresses (gear, engagement, position) of the engagements' loads; module text."""
+    per_load, hertz_factor = _stress_factors(setup.design, rating)
+    root = np.stack([load * factor for factor in per_load])
     rho_1, rho_2 = _flank_radii(setup, position)
     in_mesh = position < setup.parameters[K.CONTACT_RATIO]
     reduced = np.where(in_mesh, rho_1 * rho_2 / (rho_1 + rho_2), np.inf)
-    hertz = (
-        factors.contact_ratio
-        * factors.elasticity
-        * np.sqrt(load_factor * np.maximum(load, 0.0) / (design.face_width * reduced))
-    )
+    hertz = hertz_factor * np.sqrt(np.maximum(load, 0.0) / reduced)
     pitch = setup.parameters[K.PITCH_POSITION]
     # each flank where the contact point is on its dedendum, the pitch point C included
     on_dedendum = np.stack([position <= pitch + 1e-12, position >= pitch - 1e-12])
     contact = np.where(on_dedendum[:, None, :], hertz[None, :, :], 0.0)
     return root, contact
+
+
+def peaks_from_extremes(design: Design, rating: StaticRating, extremes) -> dict[str, np.ndarray]:
+    """:func:`stress_peaks` from a run's extremes of its pair loads, as the batch kernels keep them.
+
+    The root stress is a constant of each gear times the pair load, the flank stress a constant
+    times ``sqrt(P+ / rho)`` on that gear's dedendum: the largest and the smallest pair load and per
+    gear the largest ``P+ / rho`` give the peaks and amplitudes as :func:`stress_peaks` forms them.
+
+    Parameters
+    ----------
+    design : Design
+        The run's design.
+    rating : StaticRating
+        As for :func:`tooth_stresses`.
+    extremes : array_like
+        ``pair_load_max``, ``pair_load_min`` (N), ``flank_load_pinion`` and ``flank_load_gear``
+        (N/m): the variables of :data:`~uqgear.physics.batch_setup.PAIR_EXTREME_INFO`, in that order.
+
+    Returns
+    -------
+    dict
+        As :func:`stress_peaks`.
+
+    Examples
+    --------
+    A pair load between 20 kN and 50 kN on the drive side:
+
+    >>> import uqgear
+    >>> from uqgear.physics.rating import static_rating
+    >>> design = uqgear.load_design("locomotive")
+    >>> rating = static_rating(design, 7000.0, 50.0, dynamic_factor=1.0)
+    >>> peaks = peaks_from_extremes(design, rating, [50e3, 20e3, 2e6, 1.5e6])
+    >>> bool(peaks["root_stress_amplitude"][0] == 0.5 * peaks["root_stress_peak"][0])
+    True
+    """
+    high, low, flank_pinion, flank_gear = (float(value) for value in extremes)
+    per_load, hertz_factor = _stress_factors(design, rating)
+    root_high = np.array([max(factor * high, 0.0) for factor in per_load])
+    root_low = np.array([min(factor * low, 0.0) for factor in per_load])
+    contact = hertz_factor * np.sqrt(np.array([flank_pinion, flank_gear]))
+    return {
+        "root_stress_peak": root_high,
+        "root_stress_amplitude": 0.5 * (root_high - root_low),
+        "contact_stress_peak": contact,
+        "contact_stress_amplitude": 0.5 * contact,
+    }
 
 
 def _peaks(root: np.ndarray, contact: np.ndarray) -> dict[str, np.ndarray]:
@@ -345,4 +395,4 @@ def _stress_dataset(loads: xr.Dataset, root: np.ndarray, contact: np.ndarray) ->
     return result
 
 
-__all__ = ["GEARS", "pair_loads", "engagement_loads", "stress_peaks", "tooth_stresses"]
+__all__ = ["GEARS", "pair_loads", "engagement_loads", "peaks_from_extremes", "stress_peaks", "tooth_stresses"]

@@ -76,6 +76,12 @@ class QoiBatch(NamedTuple):
     accumulators, poincare, history, final_states : ndarray
         Written: QoI sums (slots ``Q_*``), the Poincare section, the
         decimated histories and the state at the end of the last period.
+    stresses : bool
+        Also keep the extremes of the tooth-pair loads over the kept grid
+        steps (:mod:`uqgear.physics._pair_extremes`); checked outside the
+        lanes' vectorised sub-step, so a batch without costs nothing.
+    stress_extremes : ndarray, shape (n, N_EXTREMES)
+        Written where ``stresses``: each run's extremes (slots ``E_*``).
     """
 
     runs: RunInputs
@@ -89,6 +95,8 @@ class QoiBatch(NamedTuple):
     poincare: np.ndarray
     history: np.ndarray
     final_states: np.ndarray
+    stresses: bool
+    stress_extremes: np.ndarray
 
 
 @nb.njit(**INLINED)

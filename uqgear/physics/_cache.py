@@ -28,6 +28,7 @@ COMPILED_MODULES = (
     "physics/_quotient.py",
     "physics/_batch_record.py",
     "physics/_pairs.py",
+    "physics/_pair_extremes.py",
     "physics/_kernels.py",
     "physics/_lane_loop.py",
     "physics/_lanes.py",

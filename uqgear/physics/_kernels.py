@@ -26,6 +26,7 @@ import numpy as np
 
 from uqgear.physics import _pairs
 from uqgear.physics._batch_record import run_arrays
+from uqgear.physics._pair_extremes import NO_EXTREMES, add_pair_extremes
 from uqgear.physics._rhs import (  # noqa: F401  (re-exported: the kernel family's one namespace)
     ADHESION_AMPLITUDE,
     ADHESION_OMEGA,
@@ -364,18 +365,25 @@ def _integrate_qoi(
     history,
     lyapunov,
     scale,
+    stresses,
+    extremes,
 ):
     """Integrate one run keeping only accumulators, Poincare points and decimated histories.
 
     ``history`` has shape (channels, points): channel 0 is x; with 4 channels
-    also te, y1'' and y2'' (the rig's channels).
+    also te, y1'' and y2'' (the rig's channels). With ``stresses`` also the
+    extremes of the tooth-pair loads at the kept grid steps, into ``extremes``
+    (:func:`~uqgear.physics._pair_extremes.add_pair_extremes`).
     """
     period = TWO_PI / p[OMEGA_MESH]
     h = period / steps_per_period
     schedule = build_schedule(p, pair_k, period_k, breakpoints, steps_per_period)
     first_kept = n_periods - keep_periods
     first_sub = schedule[0]
+    offsets = schedule[1]
     pairs = schedule[4]
+    table = schedule[5]
+    kept_extremes = NO_EXTREMES
     acc[Q_X_MIN] = np.inf
     acc[Q_X_MAX] = -np.inf
     acc[Q_F_MAX] = -np.inf
@@ -390,10 +398,16 @@ def _integrate_qoi(
         if kept:
             poincare[n - first_kept, 0] = s[2]
             poincare[n - first_kept, 1] = s[5]
+        # the pairs' pitch offsets and tooth factors of the period (read with stresses alone)
+        teeth = _pairs._tooth_terms(n, p, fp, fg)
         for j in range(steps_per_period):
             x = s[2]
             state_y1 = s[0]
             state_y2 = s[1]
+            if kept and stresses:
+                sub = first_sub[j]
+                kept_extremes = add_pair_extremes(kept_extremes, x, s[5], n * period + offsets[sub],
+                                                  j / steps_per_period, teeth, table, sub, pairs[sub], p)
             s, force, a1, a2 = step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
             if kept:
                 acc[Q_X_SUM] += x
@@ -449,6 +463,9 @@ def _integrate_qoi(
                 shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
     for c in range(6):
         state[c] = s[c]
+    if stresses:
+        for e in range(4):
+            extremes[e] = kept_extremes[e]
     if lyapunov:
         acc[Q_LYAPUNOV] = log_growth / (keep_periods * period)
     else:
@@ -481,6 +498,8 @@ def _batch(step, contact, start, stop, order, batch):
             batch.history[i],
             batch.lyapunov,
             batch.scales[i],
+            batch.stresses,
+            batch.stress_extremes[i],
         )
         batch.final_states[i, :] = state
 

@@ -30,11 +30,14 @@ from uqgear.physics._lane_tables import (
     _same_schedule,
     _take_schedule,
 )
+from uqgear.physics._pair_extremes import N_EXTREMES, NO_EXTREMES, add_pair_extremes
+from uqgear.physics._pairs import _tooth_terms
 from uqgear.physics._rhs import (
     INLINED,
     JIT_OPTIONS,
     M1,
     M2,
+    MAX_PAIRS,
     ME,
     N_ACCUMULATORS,
     N_COEFFICIENTS,
@@ -301,6 +304,13 @@ def integrate_group(
     if lyapunov:
         live[half:] = written[:half]
     acc = _start_lanes(W, runs.states, samples, lyapunov, scales)
+    stresses = batch.stresses
+    extremes = np.empty((LANES, N_EXTREMES))
+    # each lane's pitch offsets and tooth factors of the pair slots in the current period
+    teeth = np.zeros((LANES, 2 * MAX_PAIRS))
+    for lane in range(LANES):
+        for e in range(N_EXTREMES):
+            extremes[lane, e] = NO_EXTREMES[e]
     log_growth = np.zeros(LANES)
     whole_state = batch.poincare.shape[2] >= 6
     first_kept = n_periods - keep_periods
@@ -309,6 +319,8 @@ def integrate_group(
         for lane in range(LANES):
             i = samples[lane]
             start_period(W, lane, n, params[i], factor_pinion[i], factor_gear[i])
+            if stresses and written[lane]:
+                _keep_teeth(teeth[lane], n, params[i], factor_pinion[i], factor_gear[i])
             # an empty or refused lane's numbers are never read: its table may lag
             if moving and n > 0 and live[lane]:
                 fill(table, lane, n, period[lane], widths, offsets, stages[lane], pairs, params[i],
@@ -328,6 +340,10 @@ def integrate_group(
                     for lane in range(lanes):
                         drive_side, back_side = contact_counts(W, lane, pairs[sub])
                         _accumulate(acc, W, lane, drive_side, back_side)
+                    if stresses:
+                        # outside the vectorised loops: a batch without stresses runs the lanes' code alone
+                        _add_lane_extremes(extremes, W, n, j, sub, steps, period, offsets, stages, pairs, samples,
+                                           written, params, teeth)
                     if stride > 0 and j % stride == 0:
                         _record(batch.history, row, W, table[sub], samples, written, n, j, steps, period, params)
                         row += 1
@@ -337,6 +353,37 @@ def integrate_group(
                 _renormalise(W, lane, lane + half, scales[samples[lane]], kept, log_growth)
     _write_out(W, acc, log_growth, samples, written, lyapunov, keep_periods, period, batch.accumulators,
                batch.final_states)
+    if stresses:
+        for lane in range(LANES):
+            if written[lane]:
+                batch.stress_extremes[samples[lane]] = extremes[lane]
+
+
+@nb.njit(**INLINED)
+def _keep_teeth(row, n, p, fp, fg):
+    """A lane's pitch offsets and tooth factors of its pair slots in period ``n`` (:func:`_tooth_terms`)."""
+    offsets, factors = _tooth_terms(n, p, fp, fg)
+    for i in range(MAX_PAIRS):
+        row[i] = offsets[i]
+        row[MAX_PAIRS + i] = factors[i]
+
+
+@nb.njit(**INLINED)
+def _add_lane_extremes(extremes, W, n, j, sub, steps, period, offsets, stages, pairs, samples, written, params, teeth):
+    """Each written lane's tooth-pair loads at the start of grid step ``j`` (sub-step ``sub``) of period ``n``
+    into its extremes, as the one-sample kernel adds them (the same arguments, so the same numbers)."""
+    for lane in range(LANES):
+        if not written[lane]:
+            continue
+        row = teeth[lane]
+        tooth_terms = ((row[0], row[1], row[2], row[3]), (row[4], row[5], row[6], row[7]))
+        kept = (extremes[lane, 0], extremes[lane, 1], extremes[lane, 2], extremes[lane, 3])
+        kept = add_pair_extremes(
+            kept, row_of(W, W_STATE + 2, lane), row_of(W, W_STATE + 5, lane), n * period[lane] + offsets[sub, lane],
+            j / steps, tooth_terms, stages[lane], sub, pairs[sub], params[samples[lane]],
+        )
+        for e in range(N_EXTREMES):
+            extremes[lane, e] = kept[e]
 
 
 @nb.njit(**JIT_OPTIONS)

@@ -21,6 +21,7 @@ import xarray as xr
 from ..common.errors import OperatingPointError
 from . import _lanes, _pair_lanes
 from ._batch_record import QoiBatch, RunInputs
+from ._pair_extremes import N_EXTREMES
 from ._rhs import PITCH_ERRORS
 from .design import DESIGN_KEYS, Design
 from .effects import Effect
@@ -59,6 +60,29 @@ def _sample_values(samples: xr.Dataset, design: Design) -> dict[str, np.ndarray]
     return values
 
 
+def sample_designs(design: Design, samples: xr.Dataset) -> list[Design]:
+    """Each sample's design: ``design`` with the design keys the samples set (those :func:`build_batch` builds).
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> samples = uqgear.samples_from_mapping({"pinion_speed": [1000.0, 2000.0], "face_width": [0.1, 0.1]})
+    >>> designs = sample_designs(uqgear.load_design("locomotive"), samples)
+    >>> designs[0].face_width, designs[0] is designs[1]
+    (0.1, True)
+    """
+    values = _sample_values(samples, design)
+    design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
+    designs: dict[tuple, Design] = {}
+    result = []
+    for i in range(samples.sizes["sample"]):
+        design_key = tuple(float(values[key][i]) for key in design_keys)
+        if design_key not in designs:
+            designs[design_key] = design.replace(**dict(zip(design_keys, design_key))) if design_keys else design
+        result.append(designs[design_key])
+    return result
+
+
 def build_batch(
     design: Design,
     samples: xr.Dataset,
@@ -72,7 +96,6 @@ def build_batch(
     if any, are those of every sample)."""
     values = _sample_values(samples, design)
     n = samples.sizes["sample"]
-    design_keys = [key for key in values if key in BATCH_DESIGN_KEYS]
     effect_keys = [key for key in values if "." in key]
     by_name = {effect.name: effect for effect in effects}
     for key in effect_keys:
@@ -85,12 +108,9 @@ def build_batch(
             raise OperatingPointError(
                 f"samples.{key}: unknown parameter of {name}; expected one of {', '.join(by_name[name].PARAMETERS)}"
             )
-    designs: dict[tuple, Design] = {}
+    designs = sample_designs(design, samples)
     setups = []
     for i in range(n):
-        design_key = tuple(float(values[key][i]) for key in design_keys)
-        if design_key not in designs:
-            designs[design_key] = design.replace(**dict(zip(design_keys, design_key))) if design_keys else design
         sample_effects = list(effects)
         if effect_keys:
             changes: dict[str, dict[str, float]] = {}
@@ -100,7 +120,7 @@ def build_batch(
             sample_effects = [e.with_values(**changes[e.name]) if e.name in changes else e for e in effects]
         setups.append(
             build_model(
-                designs[design_key],
+                designs[i],
                 values["pinion_speed"][i],
                 values["drive_torque"][i],
                 values["adhesion_torque"][i],
@@ -192,6 +212,33 @@ def integrate_lane_groups(batch: QoiBatch, threads: int | None) -> np.ndarray:
     return rest
 
 
+#: The extremes of the tooth-pair loads a batch keeps with ``stresses`` (in the slots' order of
+#: :mod:`uqgear.physics._pair_extremes`): name -> (units, description).
+PAIR_EXTREME_INFO: dict[str, tuple[str, str]] = {
+    "pair_load_max": ("N", "largest load of a tooth pair in mesh at the kept grid steps"),
+    "pair_load_min": ("N", "smallest load of a touching tooth pair (negative on the back side)"),
+    "flank_load_pinion": ("N m-1", "largest P+ / rho of a pair with its contact on the pinion's dedendum"),
+    "flank_load_gear": ("N m-1", "largest P+ / rho of a pair with its contact on the gear's dedendum"),
+}
+if len(PAIR_EXTREME_INFO) != N_EXTREMES:
+    raise RuntimeError("PAIR_EXTREME_INFO and the kernels' extremes differ")  # pragma: no cover - a source error
+
+
+def extreme_variables(extremes: np.ndarray) -> dict[str, tuple[Any, ...]]:
+    """A batch's (runs, N_EXTREMES) extremes as Dataset variables on ``sample`` (:data:`PAIR_EXTREME_INFO`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sorted(extreme_variables(np.zeros((2, 4))))[:2]
+    ['flank_load_gear', 'flank_load_pinion']
+    """
+    return {
+        name: ("sample", extremes[:, j].copy(), {"units": units, "long_name": text})
+        for j, (name, (units, text)) in enumerate(PAIR_EXTREME_INFO.items())
+    }
+
+
 #: Share of a lane group's places (eight runs; four with ``lyapunov``) it must fill to be integrated
 #: in lanes. A group's vector work is the same whatever it holds: on 256-bit vectors (the eight lanes
 #: two vectors) a group of one costs about two runs one at a time, and groups pay from about half the
@@ -242,10 +289,13 @@ __all__ = [
     "OPERATING_VARIABLES",
     "BATCH_DESIGN_KEYS",
     "build_batch",
+    "sample_designs",
     "shared_stiffness_tables",
     "breakpoint_table",
     "lane_groups",
     "MINIMUM_FILL",
     "kernel_inputs",
     "integrate_lane_groups",
+    "PAIR_EXTREME_INFO",
+    "extreme_variables",
 ]

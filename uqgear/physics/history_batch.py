@@ -19,6 +19,7 @@ import numpy as np
 
 from ._batch_record import QoiBatch
 from ._lane_tables import STATE_CHANNELS
+from ._pair_extremes import N_EXTREMES
 from ._rhs import N_ACCUMULATORS
 from .batch_setup import integrate_lane_groups, kernel_inputs
 from .integration import integrate_fast, steps_per_period
@@ -105,6 +106,8 @@ def integrate_histories(
         poincare,
         history,
         np.empty((n, 6)),
+        False,
+        np.empty((n, N_EXTREMES)),
     )
     rest = integrate_lane_groups(batch, threads=threads)
     left = set(rest.tolist())

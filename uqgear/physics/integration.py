@@ -26,10 +26,11 @@ import xarray as xr
 from ..common.errors import OperatingPointError
 from . import _kernels as K
 from ._batch_record import QoiBatch
+from ._pair_extremes import N_EXTREMES
 
 # BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
-from .batch_setup import build_batch, integrate_lane_groups, kernel_inputs
+from .batch_setup import build_batch, extreme_variables, integrate_lane_groups, kernel_inputs
 from .design import Design
 from .design_parts import ModalDesign
 from .effect_draws import as_effect
@@ -397,6 +398,7 @@ def simulate_batch(
     initial_states: np.ndarray | None = None,
     final_state: bool = False,
     lanes: bool = True,
+    stresses: bool = False,
 ) -> xr.Dataset:
     """Simulate many parameter samples in parallel, keeping only what is asked.
 
@@ -440,6 +442,11 @@ def simulate_batch(
         (:mod:`uqgear.physics._lanes`; with pitch errors
         :mod:`uqgear.physics._pair_lanes`); False runs every sample on the
         one-sample kernel. The numbers are the same, bit for bit.
+    stresses : bool
+        Also keep, in the same pass, the extremes of the tooth-pair loads over the kept grid
+        steps that the tooth stresses follow from (variables of
+        :data:`~uqgear.physics.batch_setup.PAIR_EXTREME_INFO`;
+        :func:`~uqgear.dynamics.stress_qois.tooth_stress_qois`); the other outputs do not change.
 
     Returns
     -------
@@ -493,6 +500,7 @@ def simulate_batch(
     poincare = np.empty((n, keep_periods, 2))
     channels = 4 if rig_channels and history_per_period > 0 else 1
     history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
+    extremes = np.zeros((n, N_EXTREMES))
     if n:
         batch = QoiBatch(
             kernel_inputs(setups, states),
@@ -506,6 +514,8 @@ def simulate_batch(
             poincare,
             history,
             final_states,
+            bool(stresses),
+            extremes,
         )
         _run_batch(batch, threads, lanes)
     count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
@@ -535,6 +545,8 @@ def simulate_batch(
         name: ("sample", value, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
         for name, value in qois.items()
     }
+    if stresses:
+        data.update(extreme_variables(extremes))
     data["poincare_x"] = (
         ("sample", "period"),
         poincare[:, :, 0],
@@ -659,7 +671,7 @@ class BatchEvaluator:
         Sample variables held constant (added to every sample unless the
         samples carry them).
     n_periods, keep_periods, history_per_period, rig_channels, lyapunov, effects,
-    damping_in_separation, stiffness, steps_per_mode, threads, pitch_errors, final_state
+    damping_in_separation, stiffness, steps_per_mode, threads, pitch_errors, final_state, stresses
         As in :func:`simulate_batch` (``threads`` does not change the
         results, so :meth:`key` leaves it out).
 
@@ -698,6 +710,7 @@ class BatchEvaluator:
         threads: int | None = None,
         pitch_errors: PitchErrors | None = None,
         final_state: bool = False,
+        stresses: bool = False,
     ) -> None:
         _check_counts(n_periods, keep_periods)
         self.design = design
@@ -715,6 +728,7 @@ class BatchEvaluator:
         self.threads = threads
         self.pitch_errors = pitch_errors
         self.final_state = final_state
+        self.stresses = stresses
 
     def completed(self, samples: xr.Dataset) -> xr.Dataset:
         """A copy of ``samples`` with the fixed inputs they do not carry (what a run is given)."""
@@ -741,6 +755,7 @@ class BatchEvaluator:
             threads=self.threads,
             pitch_errors=self.pitch_errors,
             final_state=self.final_state,
+            stresses=self.stresses,
         )
 
     def key(self) -> str:
@@ -763,6 +778,8 @@ class BatchEvaluator:
             settings += (self.pitch_errors.to_dict(),)
         if self.final_state:
             settings += ("final_state",)
+        if self.stresses:
+            settings += ("pair_load_extremes",)
         return repr(settings)
 
 
