@@ -14,7 +14,8 @@ from ..common.errors import UqgearError
 Seed = int | np.random.SeedSequence
 
 
-def _check_positive(name: str, value: Any) -> float:
+def check_positive(name: str, value: Any) -> float:
+    """``value`` as a float, which must be finite and above 0; the :class:`UqgearError` names ``name``."""
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -24,7 +25,8 @@ def _check_positive(name: str, value: Any) -> float:
     return number
 
 
-def _require(ds: xr.Dataset, names: Sequence[str], what: str) -> None:
+def require_variables(ds: xr.Dataset, names: Sequence[str], what: str) -> None:
+    """Refuse, naming ``what``, a ``ds`` that is not a Dataset or lacks one of the variables ``names``."""
     if not isinstance(ds, xr.Dataset):
         raise UqgearError(f"{what}: expected an xarray Dataset; got {type(ds).__name__}")
     missing = [name for name in names if name not in ds.variables]
@@ -35,7 +37,11 @@ def _require(ds: xr.Dataset, names: Sequence[str], what: str) -> None:
         )
 
 
-def _require_attr(ds: xr.Dataset, name: str, what: str) -> float:
+def require_number_attr(ds: xr.Dataset, name: str, what: str) -> float:
+    """The numeric attribute ``name`` of a :func:`~uqgear.physics.integration.simulate` result, as a float.
+
+    Refuses, naming ``what``, a Dataset without the attribute or with one that is not a number.
+    """
     if name not in ds.attrs:
         raise UqgearError(f"{what}: the Dataset lacks the attribute {name!r} (expected a simulate() result)")
     try:

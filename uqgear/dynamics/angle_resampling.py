@@ -45,7 +45,7 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.interpolate import CubicSpline
 
 from ..common.errors import UqgearError
-from .spectra import _time_step
+from .spectra import uniform_time_step
 
 #: Fraction of the Nyquist frequency up to which an order line is read; above it, NaN.
 RESOLVABLE_FRACTION = 0.8
@@ -266,7 +266,7 @@ def resample_to_angle(ds: xr.Dataset, signals: str | Sequence[str] | None = None
     if not isinstance(ds, xr.Dataset):
         raise OrderTrackingError(f"resample_to_angle: expected an xarray Dataset; got {type(ds).__name__}")
     names = _signal_names(ds, signals, "resample_to_angle")
-    step = _time_step(ds, "resample_to_angle")
+    step = uniform_time_step(ds, "resample_to_angle")
     sample_rate = 1.0 / step
     time = np.asarray(ds["time"].values, dtype=float)
     if time.size < 4 * _EDGE_SAMPLES:
@@ -317,8 +317,14 @@ def resample_to_angle(ds: xr.Dataset, signals: str | Sequence[str] | None = None
     return xr.Dataset(data, coords={"angle": angle_coord}, attrs=attrs)
 
 
-def _tracked(ds: xr.Dataset, signals: str | Sequence[str] | None, what: str) -> tuple[xr.Dataset, list[str]]:
-    """The record over ``angle`` (resampled here when it is over ``time``) and the signal names."""
+def angle_record(ds: xr.Dataset, signals: str | Sequence[str] | None, what: str) -> tuple[xr.Dataset, list[str]]:
+    """The record over ``angle`` (resampled here when it is over ``time``) and the signal names.
+
+    The entry of every order analysis: a record already over ``angle`` (with ``samples_per_revolution``)
+    is taken as it is, one over ``time`` goes through :func:`resample_to_angle`; ``signals`` (one name, a
+    list or ``None`` for the run-up signals it has) is checked against it, naming ``what`` in an
+    :class:`OrderTrackingError`.
+    """
     if not isinstance(ds, xr.Dataset):
         raise OrderTrackingError(f"{what}: expected an xarray Dataset; got {type(ds).__name__}")
     if "angle" in ds.dims and "samples_per_revolution" in ds.attrs:

@@ -32,8 +32,8 @@ import numpy as np
 import scipy.signal
 import xarray as xr
 
-from ._checks import _check_positive
-from .angle_resampling import RESOLVABLE_FRACTION, OrderTrackingError, _tracked
+from ._checks import check_positive
+from .angle_resampling import RESOLVABLE_FRACTION, OrderTrackingError, angle_record
 
 # ---------------------------------------------------------------------------- blocks and bins
 
@@ -81,8 +81,11 @@ def speed_bin_edges(speeds: Any, speed_bins: int | Sequence[float]) -> np.ndarra
     return edges
 
 
-def _bin_index(speeds: Any, edges: np.ndarray) -> np.ndarray:
-    """Bin of each speed (-1 outside the edges; the top edge belongs to the last bin)."""
+def speed_bin_index(speeds: Any, edges: np.ndarray) -> np.ndarray:
+    """Bin of each speed (-1 outside the edges; the top edge belongs to the last bin).
+
+    ``edges`` are those of :func:`speed_bin_edges` (rpm); order maps and ramp envelopes bin alike.
+    """
     values = np.asarray(speeds, dtype=float)
     index = np.searchsorted(edges, values, side="right") - 1
     index[values == edges[-1]] = edges.size - 2
@@ -90,8 +93,11 @@ def _bin_index(speeds: Any, edges: np.ndarray) -> np.ndarray:
     return index
 
 
-def _speed_coords(edges: np.ndarray) -> dict[str, xr.Variable]:
-    """``pinion_speed`` (bin centres) with ``bin_lower`` and ``bin_upper`` alongside, all rpm."""
+def speed_bin_coords(edges: np.ndarray) -> dict[str, xr.Variable]:
+    """``pinion_speed`` (bin centres) with ``bin_lower`` and ``bin_upper`` alongside, all rpm.
+
+    The speed coordinates of every result binned on ``edges`` (:func:`speed_bin_edges`).
+    """
     centres = 0.5 * (edges[:-1] + edges[1:])
     return {
         "pinion_speed": xr.Variable(
@@ -142,7 +148,7 @@ def _setup(ds: xr.Dataset, signals: Any, options: dict[str, Any], what: str) -> 
     mesh_order = _mesh_order(ds, options["z1"])
     if options["order_unit"] == "mesh" and mesh_order is None:
         raise OrderTrackingError("order_unit: 'mesh' needs z1 (the Dataset attr 'design_z1' or the z1 argument)")
-    tracked, names = _tracked(ds, signals, what)
+    tracked, names = angle_record(ds, signals, what)
     per_revolution = int(tracked.attrs["samples_per_revolution"])
     try:
         taper = scipy.signal.get_window(options["window"], int(revolutions) * per_revolution, fftbins=True)
@@ -157,7 +163,7 @@ def _setup(ds: xr.Dataset, signals: Any, options: dict[str, Any], what: str) -> 
             f"fewer than one block of {revolutions}"
         )
     edges = speed_bin_edges([block.mean_speed for block in blocks], options["speed_bins"])
-    bins = _bin_index([block.mean_speed for block in blocks], edges)
+    bins = speed_bin_index([block.mean_speed for block in blocks], edges)
     nyquist_order = RESOLVABLE_FRACTION * 0.5 * float(tracked.attrs["sample_rate"])
     limits = np.full(edges.size - 1, np.inf)
     for block, index in zip(blocks, bins, strict=True):
@@ -188,7 +194,7 @@ def _result_coords(setup: _Setup, orders: np.ndarray, unit: str) -> dict[str, An
     return {
         "signal": xr.Variable("signal", np.array(setup.names, dtype=object)),
         "signal_units": xr.Variable("signal", np.array(units, dtype=object)),
-        **_speed_coords(setup.edges),
+        **speed_bin_coords(setup.edges),
         "order": xr.Variable("order", orders, {"units": "1", "long_name": long_name}),
     }
 
@@ -406,7 +412,7 @@ def order_spectrum(
     orders = np.fft.rfftfreq(setup.taper.size, d=1.0 / int(setup.tracked.attrs["samples_per_revolution"]))
     top = np.nanmax(setup.limits)
     if max_order is not None:
-        top = min(top, _check_positive("max_order", max_order) * setup.scale)
+        top = min(top, check_positive("max_order", max_order) * setup.scale)
     kept = orders <= top
     n_bins = setup.edges.size - 1
     total = np.zeros((len(setup.names), n_bins, int(kept.sum())))

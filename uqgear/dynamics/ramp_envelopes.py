@@ -30,8 +30,8 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import UqgearError
-from ._checks import _check_positive
-from .order_maps import _bin_index, _speed_coords, speed_bin_edges
+from ._checks import check_positive
+from .order_maps import speed_bin_coords, speed_bin_edges, speed_bin_index
 
 #: Values of the ``direction`` dim of :func:`up_down_envelopes`.
 RAMP_DIRECTIONS: tuple[str, ...] = ("up", "down")
@@ -129,7 +129,7 @@ def ramp_envelope(ds: xr.Dataset, *, speed_bins: Any = 20, signal: str = "mesh_f
     if not (np.all(np.isfinite(speed)) and np.all(np.isfinite(values))):
         raise RampError(f"ramp_envelope: {signal!r} and the pinion speed should be finite; got NaN or infinity")
     edges = speed_bin_edges(speed, speed_bins)
-    index = _bin_index(speed, edges)
+    index = speed_bin_index(speed, edges)
     count = edges.size - 1
     name = f"peak_{signal}"
     data: dict[str, Any] = {
@@ -157,7 +157,7 @@ def ramp_envelope(ds: xr.Dataset, *, speed_bins: Any = 20, signal: str = "mesh_f
             )
     direction = "up" if speed[-1] >= speed[0] else "down"
     attrs = {"direction": direction, "signal": signal}
-    return xr.Dataset(data, coords=_speed_coords(edges), attrs=attrs)
+    return xr.Dataset(data, coords=speed_bin_coords(edges), attrs=attrs)
 
 
 @dataclass(frozen=True)
@@ -246,7 +246,7 @@ def jump_speeds(
     >>> jump_speeds(envelope)
     (Jump(speed=1150.0, size=-38.0, relative_size=-0.7307692307692307, direction='drop'),)
     """
-    threshold = _check_positive("threshold", threshold)
+    threshold = check_positive("threshold", threshold)
     if isinstance(persistence, bool) or not isinstance(persistence, (int, np.integer)) or persistence < 1:
         raise RampError(f"persistence: expected an integer >= 1 (bins); got {persistence!r}")
     name = variable if variable is not None else f"peak_{envelope.attrs.get('signal', 'mesh_force')}"
@@ -336,7 +336,7 @@ def up_down_envelopes(
     >>> both["peak_mesh_force"].dims, hysteresis_ranges(both)
     (('direction', 'pinion_speed'), ((1300.0, 1700.0),))
     """
-    tolerance = _check_positive("tolerance", tolerance)
+    tolerance = check_positive("tolerance", tolerance)
     for name, run, sense in (("up", up, 1.0), ("down", down, -1.0)):
         speed = _speed(run, f"up_down_envelopes ({name})") if isinstance(run, xr.Dataset) else None
         if speed is None or sense * (speed[-1] - speed[0]) <= 0.0:

@@ -69,7 +69,7 @@ import xarray as xr
 from scipy.cluster.hierarchy import fcluster, linkage
 
 from ..common.errors import UqgearError
-from ._checks import Seed, _check_positive, _require
+from ._checks import Seed, check_positive, require_variables
 from .zero_one import MIN_ZERO_ONE_POINTS, zero_one_frequencies, zero_one_median
 
 #: Regime labels :func:`classify_response` can return besides ``period-n``.
@@ -188,7 +188,7 @@ def detect_period(
         tried); 0 if none.
     """
     max_period = _check_max_period(max_period)
-    rtol = _check_positive("rtol", rtol)
+    rtol = check_positive("rtol", rtol)
     array = _as_points(points)
     scaled = array / _component_scale(array, scale)
     for period in range(1, max_period + 1):
@@ -207,7 +207,7 @@ def count_distinct_points(
     Complete-linkage clustering with the Chebyshev distance on the scaled
     points (``scale`` as in :func:`detect_period`).
     """
-    rtol = _check_positive("rtol", rtol)
+    rtol = check_positive("rtol", rtol)
     array = _as_points(points)
     if array.shape[0] == 1:
         return 1
@@ -350,7 +350,7 @@ def classify_response(
     ResponseClass
         Decision rule in the module docstring.
     """
-    rtol = _check_positive("rtol", rtol)
+    rtol = check_positive("rtol", rtol)
     array = _as_points(poincare_points, "poincare_points")
     if array.shape[0] < MIN_ZERO_ONE_POINTS:
         raise UqgearError(
@@ -489,7 +489,7 @@ def classify_dataset(
     >>> response.label, response.period, response.evidence["distinct_points"]
     ('period-1', 1, 1)
     """
-    _require(ds, ["poincare_x"], "classify_dataset")
+    require_variables(ds, ["poincare_x"], "classify_dataset")
     if set(ds["poincare_x"].dims) != {"period"}:
         raise UqgearError(
             f"classify_dataset: poincare_x should have the single dim 'period'; "
@@ -598,7 +598,7 @@ def period_labels(ds: xr.Dataset, *, max_period: int | None = None, rtol: float 
     >>> period_labels(batch)["regime"].values.tolist()
     ['period-1', 'aperiodic']
     """
-    _require(ds, ["poincare_x"], "period_labels")
+    require_variables(ds, ["poincare_x"], "period_labels")
     poincare_x = ds["poincare_x"].transpose("sample", "period")
     n = poincare_x.sizes["sample"]
     max_period = _resolve_max_period(max_period, poincare_x.sizes["period"])
@@ -718,11 +718,11 @@ def classify_batch(
     >>> (batch["fraction_separation"] > 0).values.tolist()
     [False, True]
     """
-    _require(ds, ["poincare_x"], "classify_batch")
+    require_variables(ds, ["poincare_x"], "classify_batch")
     poincare_x = ds["poincare_x"]
     if "period" not in poincare_x.dims:
         raise UqgearError(f"classify_batch: poincare_x should have a 'period' dim; it has {poincare_x.dims}")
-    rtol = _check_positive("rtol", rtol)
+    rtol = check_positive("rtol", rtol)
     if poincare_x.sizes["period"] < MIN_ZERO_ONE_POINTS:
         raise UqgearError(
             f"classify_batch: expected at least {MIN_ZERO_ONE_POINTS} Poincare periods "

@@ -10,7 +10,7 @@ import numpy as np
 import xarray as xr
 
 from ..common.errors import UqgearError
-from ._checks import _require, _require_attr
+from ._checks import require_number_attr, require_variables
 
 _CONTACT_STATES = {"fraction_drive_contact": 1, "fraction_separation": 0, "fraction_back_contact": -1}
 _CONTACT_LONG_NAMES = {
@@ -38,7 +38,7 @@ def phase_plane(ds: xr.Dataset, variable: str = "x") -> xr.Dataset:
     if not isinstance(variable, str):
         raise UqgearError(f"variable: expected a variable name such as 'x'; got {variable!r}")
     velocity_name = f"{variable}_velocity"
-    _require(ds, [variable, velocity_name], "phase_plane")
+    require_variables(ds, [variable, velocity_name], "phase_plane")
     displacement = ds[variable].copy()
     velocity = ds[velocity_name].copy()
     displacement.attrs = {"units": ds[variable].attrs.get("units", "m"), "long_name": f"{variable} displacement"}
@@ -75,7 +75,7 @@ def contact_fractions(ds: xr.Dataset) -> xr.Dataset:
         (0) and ``fraction_back_contact`` (-1), averaged over ``time`` (other
         dims kept); they add up to 1.
     """
-    _require(ds, ["contact"], "contact_fractions")
+    require_variables(ds, ["contact"], "contact_fractions")
     contact = ds["contact"]
     if "time" not in contact.dims:
         raise UqgearError(f"contact_fractions: 'contact' should have a 'time' dim; it has {contact.dims}")
@@ -123,10 +123,10 @@ def response_qois(ds: xr.Dataset) -> xr.Dataset:
       ``y2_acceleration`` (their mean is zero in a steady state), m s-2;
     * the three contact fractions of :func:`contact_fractions`.
     """
-    _require(ds, ["x", "mesh_force", "y1_acceleration", "y2_acceleration", "contact"], "response_qois")
+    require_variables(ds, ["x", "mesh_force", "y1_acceleration", "y2_acceleration", "contact"], "response_qois")
     if "time" not in ds["x"].dims:
         raise UqgearError(f"response_qois: 'x' should have a 'time' dim; it has {ds['x'].dims}")
-    static_force = _require_attr(ds, "static_mesh_force", "response_qois")
+    static_force = require_number_attr(ds, "static_mesh_force", "response_qois")
     if static_force == 0.0 or not math.isfinite(static_force):
         raise UqgearError(
             f"response_qois: attribute static_mesh_force should be a non-zero number "

@@ -10,7 +10,7 @@ import scipy.signal
 import xarray as xr
 
 from ..common.errors import UqgearError
-from ._checks import _check_positive, _require, _require_attr
+from ._checks import check_positive, require_number_attr, require_variables
 
 
 def _as_signal(signal: Any, dim: str) -> tuple[xr.DataArray, str, Any]:
@@ -78,13 +78,13 @@ def amplitude_spectrum(
         ``amplitude`` with dim ``frequency`` (Hz) or ``order`` (with a
         ``frequency`` coord alongside).
     """
-    sample_rate = _check_positive("sample_rate", sample_rate)
+    sample_rate = check_positive("sample_rate", sample_rate)
     if against not in ("frequency", "order"):
         raise UqgearError(f"against: expected 'frequency' or 'order'; got {against!r}")
     if against == "order":
         if shaft_speed_rpm is None:
             raise UqgearError("shaft_speed_rpm: required for a spectrum against order; got None")
-        shaft_speed_rpm = _check_positive("shaft_speed_rpm", shaft_speed_rpm)
+        shaft_speed_rpm = check_positive("shaft_speed_rpm", shaft_speed_rpm)
     data_array, units, name = _as_signal(signal, dim)
     n_samples = data_array.sizes[dim]
     if n_samples < 2:
@@ -138,7 +138,12 @@ def amplitude_spectrum(
     return result
 
 
-def _time_step(ds: xr.Dataset, what: str) -> float:
+def uniform_time_step(ds: xr.Dataset, what: str) -> float:
+    """The sampling interval (s) of a record's ``time`` coordinate, which must be uniform.
+
+    Refuses, naming ``what``, a record without ``time``, with fewer than 2 samples, or whose steps differ
+    by more than 1e-6 of their mean.
+    """
     if "time" not in ds.coords:
         raise UqgearError(f"{what}: the Dataset has no 'time' coordinate")
     time = np.asarray(ds["time"].values, dtype=float)
@@ -198,16 +203,16 @@ def spectrum_dataset(
     names = [variable] if isinstance(variable, str) else list(variable)
     if not names:
         raise UqgearError("variable: expected at least one variable name; got none")
-    _require(ds, names, "spectrum_dataset")
+    require_variables(ds, names, "spectrum_dataset")
     for name in names:
         if "time" not in ds[name].dims:
             raise UqgearError(
                 f"spectrum_dataset: variable {name!r} has no 'time' dim (dims {ds[name].dims}); expected a time history"
             )
-    sample_rate = 1.0 / _time_step(ds, "spectrum_dataset")
+    sample_rate = 1.0 / uniform_time_step(ds, "spectrum_dataset")
     shaft_speed = None
     if against == "order":
-        shaft_speed = _require_attr(ds, "pinion_speed", "spectrum_dataset")
+        shaft_speed = require_number_attr(ds, "pinion_speed", "spectrum_dataset")
     spectra = {
         name: amplitude_spectrum(
             ds[name], sample_rate, against=against, shaft_speed_rpm=shaft_speed, window=window, remove_mean=remove_mean

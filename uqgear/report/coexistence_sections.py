@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 
 from .finding import Finding
-from .findings import _runs
+from .findings import true_index_runs
 from .presentation import format_value, short_name
 
 #: Colours and markers of the sweep starts (colour-blind safe, told apart by shape as well).
@@ -89,7 +89,7 @@ def coexistence_sentences(ds: xr.Dataset, sweep: str, condition: str | None = No
         if level is not None:
             assert condition is not None  # levels are positions along the condition
             where = f" at {short_name(condition)} = {format_value(condition, float(ds[condition].values[level]))}"
-        for start, stop in _runs(column > 1):
+        for start, stop in true_index_runs(column > 1):
             parts = []
             for index in range(start, min(stop, start + 3) + 1):
                 if forces is None:
@@ -149,7 +149,7 @@ def branch_sentences(ds: xr.Dataset, name: str, sweep: str | None) -> list[str]:
     values = np.asarray(ds[sweep].values, dtype=float)
     nodes = branch_parameters(ds)
     sentences = []
-    for start, stop in _runs(shown):
+    for start, stop in true_index_runs(shown):
         span = (
             f"at {format_value(sweep, values[start])}"
             if start == stop

@@ -19,7 +19,7 @@ from matplotlib import colormaps
 from .finding import Finding
 from .page import new_figure
 from .presentation import axis_label, format_value, short_name
-from .sections import Section, _add_figure, _json_attr, _section, renderer
+from .sections import Section, add_figure, json_attr, renderer, section_from_attrs
 
 #: Stability-changing bifurcations (a stable stretch ends at one of these).
 STABILITY_TYPES = ("fold", "period_doubling", "neimark_sacker", "branch_point")
@@ -46,7 +46,7 @@ def _names(ds: xr.Dataset) -> list[str]:
 def _case_label(ds: xr.Dataset, case: int) -> str:
     names = [name[len("case_") :] for name in _names(ds) if name.startswith("case_")]
     if not names:
-        fixed = _json_attr(ds, "fixed_inputs", {})
+        fixed = json_attr(ds, "fixed_inputs", {})
         shown = [
             f"{short_name(name)} = {format_value(name, float(fixed[name]))}"
             for name in ("drive_torque", "adhesion_torque")
@@ -379,7 +379,7 @@ def _legend(ax: Any, ds: xr.Dataset) -> None:
 
 @renderer("continuation")
 def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     parameter = str(ds.attrs.get("parameter", "pinion_speed"))
     _add_branches_figure(section, ds, parameter, dpi)
     _add_stability_figure(section, ds, parameter, dpi)
@@ -408,7 +408,7 @@ def _render_continuation(ds: xr.Dataset, dpi: int) -> Section:
         "period-doubled orbits off it); responses on other branches, tori and chaos are seen "
         "only in the sweeps"
     )
-    if _json_attr(ds, "envelope", []):
+    if json_attr(ds, "envelope", []):
         section.caveats.append(
             "the interval of a bifurcation point is its spread over the cases continued "
             f"({ds.sizes.get('case', 1)} values across each envelope parameter)"
@@ -437,7 +437,7 @@ def _add_branches_figure(section: Section, ds: xr.Dataset, parameter: str, dpi: 
     bottom.set_ylabel("peak mesh force [kN]")
     bottom.set_xlabel(axis_label(parameter))
     _legend(top, ds)
-    _add_figure(
+    add_figure(
         section,
         figure,
         f"Branches of periodic orbits against {short_name(parameter)} (continuation, "
@@ -457,7 +457,7 @@ def _add_stability_figure(section: Section, ds: xr.Dataset, parameter: str, dpi:
     ax.set_ylabel("largest Floquet multiplier |µ|")
     ax.set_xlabel(axis_label(parameter))
     ax.set_title("stability: an orbit is stable while every multiplier lies inside the unit circle", fontsize=9)
-    _add_figure(section, figure, "Largest Floquet multiplier modulus along the branches (1: the stability limit).", dpi)
+    add_figure(section, figure, "Largest Floquet multiplier modulus along the branches (1: the stability limit).", dpi)
 
 
 def _sweep_jump_sentences(facts: dict[str, Any]) -> list[str]:

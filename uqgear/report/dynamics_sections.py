@@ -16,7 +16,7 @@ from .coexistence_sections import coexistence_sentences, draw_sweep_starts, mark
 from .findings import regime_findings, separation_findings
 from .page import figure_png, new_figure
 from .presentation import (
-    _MARKERS,
+    MARKERS,
     REGIME_CODES,
     REGIME_FIXED_COLOURS,
     REGIME_ORDER,
@@ -26,7 +26,7 @@ from .presentation import (
     regime_legend,
     short_name,
 )
-from .sections import Section, _add_figure, _json_attr, _section, renderer
+from .sections import Section, add_figure, json_attr, renderer, section_from_attrs
 
 #: Dynamic range of the DTE spectra drawn: floored this many dB below their peak.
 SPECTRUM_RANGE_DB = 120.0
@@ -198,15 +198,15 @@ _STRESS_PEAKS = (
 
 @renderer("simulate")
 def _render_simulate(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
-    swept = _json_attr(ds, "swept", [])
+    section = section_from_attrs(ds)
+    swept = json_attr(ds, "swept", [])
     axis = str(ds.attrs.get("spectrum_axis", "order"))
     for index in range(ds.sizes.get("run", 0)):
         run = ds.isel(run=index)
         title = _run_title(run, swept)
         figure = new_figure(9.0, 6.6)
         _draw_simulation(figure, run, axis, title)
-        _add_figure(
+        add_figure(
             section,
             figure,
             title
@@ -310,7 +310,7 @@ def _edges(values: np.ndarray) -> np.ndarray:
 
 
 def _classification_caveat(ds: xr.Dataset) -> str:
-    settings = _json_attr(ds, "simulation_settings", {})
+    settings = json_attr(ds, "simulation_settings", {})
     keep = settings.get("keep_periods", "?")
     repeats = (
         "period-n only where the period repeats at least 10 times (n <= "
@@ -335,7 +335,7 @@ def _half_backlash(ds: xr.Dataset, parameter: str) -> float | np.ndarray | None:
     """Half backlash b in m: one value, one per column when the backlash is swept, None if unknown."""
     if parameter == "backlash":
         return 0.5 * np.asarray(ds[parameter].values, dtype=float)
-    if "backlash" in _json_attr(ds, "envelope", []):
+    if "backlash" in json_attr(ds, "envelope", []):
         return None
     for name, factor in (("half_backlash", 1.0), ("design_backlash", 0.5)):
         value = ds.attrs.get(name)
@@ -394,7 +394,7 @@ def _mean_mesh_stiffness(ds: xr.Dataset) -> float | None:
         design = Design.from_mapping(values)
     except (KeyError, ValueError, TypeError):
         try:
-            design = load_design(str(ds.attrs["design_name"]), _json_attr(ds, "design_overrides", {}) or None)
+            design = load_design(str(ds.attrs["design_name"]), json_attr(ds, "design_overrides", {}) or None)
         except (KeyError, ValueError, TypeError, OSError):
             return None
     return float(mesh_stiffness(design).attrs["k_mean"])
@@ -412,9 +412,9 @@ def _stiffness_axis(ax: Any, k_mean: float) -> None:
 
 @renderer("bifurcation")
 def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     parameter = str(ds.attrs.get("parameter", next(iter(d for d in ds.dims if d != "period"))))
-    envelope = _json_attr(ds, "envelope", [])
+    envelope = json_attr(ds, "envelope", [])
     condition = envelope[0] if envelope else None
     scale = display(parameter)[2]
     figure = new_figure(9.0, 6.4 if condition else 5.4)
@@ -439,7 +439,7 @@ def _render_bifurcation(ds: xr.Dataset, dpi: int) -> Section:
     _regime_strip(bottom, regime, parameter, condition)
     if _geometric(values):
         _log_sweep_axis(bottom)
-    _add_figure(section, figure, _bifurcation_caption(parameter, condition, half_backlash, k_mean), dpi)
+    add_figure(section, figure, _bifurcation_caption(parameter, condition, half_backlash, k_mean), dpi)
     if k_mean is not None:
         section.facts.append(("mean mesh stiffness at scale 1", f"{k_mean:.4g} N/m"))
     section.findings.extend(regime_findings(regime, parameter, condition))
@@ -469,7 +469,7 @@ def _plot_envelope_points(top: Any, ds: xr.Dataset, parameter: str, condition: s
             np.repeat(shown, column.shape[1]),
             column.ravel(),
             linestyle="none",
-            marker=_MARKERS[index % len(_MARKERS)],
+            marker=MARKERS[index % len(MARKERS)],
             markersize=2.2,
             color=colour,
             alpha=0.8,
@@ -541,8 +541,8 @@ def _bifurcation_caption(parameter: str, condition: str | None, half_backlash: f
 
 @renderer("regime_map")
 def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
-    axes_names = _json_attr(ds, "axes", list(ds["regime"].dims)[:2])
+    section = section_from_attrs(ds)
+    axes_names = json_attr(ds, "axes", list(ds["regime"].dims)[:2])
     first, second = axes_names[0], axes_names[1]
     regime = ds["regime"].transpose(first, second)
     figure = new_figure(9.0, 5.2)
@@ -576,7 +576,7 @@ def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
         "U uncertain; blank: period 1)",
         fontsize=9,
     )
-    _add_figure(section, figure, f"Regime map over {short_name(first)} and {short_name(second)}.", dpi)
+    add_figure(section, figure, f"Regime map over {short_name(first)} and {short_name(second)}.", dpi)
     if "fraction_separation" in ds:
         figure = new_figure(9.0, 4.6)
         ax = figure.subplots()
@@ -592,7 +592,7 @@ def _render_regime_map(ds: xr.Dataset, dpi: int) -> Section:
         ax.set_xlabel(axis_label(first))
         ax.set_ylabel(axis_label(second))
         ax.set_title("fraction of time with the teeth apart (contact loss)", fontsize=9)
-        _add_figure(section, figure, "Contact loss over the same grid.", dpi)
+        add_figure(section, figure, "Contact loss over the same grid.", dpi)
     section.findings.extend(regime_findings(regime, first, second))
     section.findings.extend(coexistence_sentences(ds, first, second))
     if "fraction_separation" in ds:

@@ -10,10 +10,10 @@ import numpy as np
 import xarray as xr
 
 from .presentation import REGIME_ORDER, display, format_value, short_name
-from .sections import _json_attr
+from .sections import json_attr
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def true_index_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """Index ranges [start, stop] (inclusive) of consecutive True values."""
     ranges = []
     start = None
@@ -28,7 +28,12 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return ranges
 
 
-def _range_text(name: str, values: np.ndarray, start: int, stop: int) -> str:
+def range_text(name: str, values: np.ndarray, start: int, stop: int) -> str:
+    """Where a stretch ``values[start..stop]`` of the variable ``name`` lies: 'at x' or 'between x and y'.
+
+    The values are formatted as the report shows ``name``; a unit both ends carry is written once, after the
+    upper end.
+    """
     if start == stop:
         return f"at {format_value(name, values[start])}"
     low, high = format_value(name, values[start]), format_value(name, values[stop])
@@ -38,17 +43,17 @@ def _range_text(name: str, values: np.ndarray, start: int, stop: int) -> str:
     return f"between {low} and {high}"
 
 
-def _t2_interval(results: Sequence[xr.Dataset]) -> tuple[float, float, bool] | None:
+def t2_interval(results: Sequence[xr.Dataset]) -> tuple[float, float, bool] | None:
     """(lower, upper, from rail adhesion) of the T2 interval of the study, if T2 is an interval."""
     for ds in results:
-        entry = _json_attr(ds, "uncertain_parameters", {}).get(T2)
+        entry = json_attr(ds, "uncertain_parameters", {}).get(T2)
         if entry and entry.get("kind") == "interval":
             source = str(entry.get("source", ""))
             return float(entry["lower"]), float(entry["upper"]), ("mu in" in source or "adhesion" in source)
     return None
 
 
-def _end(value: float, interval: tuple[float, float, bool] | None) -> str:
+def t2_interval_end(value: float, interval: tuple[float, float, bool] | None) -> str:
     """'low' or 'high' where ``value`` is that end of the T2 interval, else ''."""
     if interval is None or not np.isfinite(value):
         return ""
@@ -58,7 +63,7 @@ def _end(value: float, interval: tuple[float, float, bool] | None) -> str:
     return ""
 
 
-def _condition_text(name: str, values: np.ndarray, present: np.ndarray) -> str:
+def condition_text(name: str, values: np.ndarray, present: np.ndarray) -> str:
     """Where along a second axis a regime occurs: 'when T2 > x', 'for all T2', ..."""
     indices = np.nonzero(present)[0]
     label = short_name(name)
@@ -79,7 +84,8 @@ def _condition_text(name: str, values: np.ndarray, present: np.ndarray) -> str:
     return f"for {label} = {shown}" + (" ..." if indices.size > 6 else "")
 
 
-def _runs_of_values(values: np.ndarray) -> list[tuple[int, int]]:
+def equal_value_runs(values: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges [start, stop] (inclusive) of consecutive equal values, covering ``values`` in order."""
     ranges = []
     start = 0
     for index in range(1, len(values) + 1):
@@ -119,7 +125,7 @@ def regime_findings(regime: xr.DataArray, sweep: str, condition: str | None = No
     )
     groups += [(label, labels == label) for label in others]
     for label, present in groups:
-        ranges = _runs(present.any(axis=1))
+        ranges = true_index_runs(present.any(axis=1))
         if len(ranges) > 3:
             # many short windows (a rich bifurcation diagram): one sentence listing them
             _, unit, factor = display(sweep)
@@ -132,11 +138,11 @@ def regime_findings(regime: xr.DataArray, sweep: str, condition: str | None = No
                 periods = sorted({int(item.split("-", 1)[1]) for item in labels[present]})
                 text += f" (n = {', '.join(map(str, periods))})"
             if condition is not None and condition_values is not None:
-                text += " " + _condition_text(condition, condition_values, present.any(axis=0))
+                text += " " + condition_text(condition, condition_values, present.any(axis=0))
             sentences.append(text)
             continue
         for start, stop in ranges:
-            text = f"{label} {_range_text(sweep, values, start, stop)}"
+            text = f"{label} {range_text(sweep, values, start, stop)}"
             if label.startswith("period-n"):
                 members = labels[start : stop + 1][present[start : stop + 1]]
                 periods = sorted({int(item.split("-", 1)[1]) for item in members})
@@ -144,7 +150,7 @@ def regime_findings(regime: xr.DataArray, sweep: str, condition: str | None = No
                     f"period-{periods[0]} " if len(periods) == 1 else f"period-n (n = {', '.join(map(str, periods))}) "
                 ) + text[len(label) + 1 :]
             if condition is not None and condition_values is not None:
-                text += " " + _condition_text(condition, condition_values, present[start : stop + 1].any(axis=0))
+                text += " " + condition_text(condition, condition_values, present[start : stop + 1].any(axis=0))
             sentences.append(text)
     if not sentences:
         span = f"[{format_value(sweep, values[0])}, {format_value(sweep, values[-1])}]"
@@ -182,7 +188,7 @@ def separation_findings(fraction: xr.DataArray, sweep: str, condition: str) -> l
     label = short_name(condition)
 
     def where(mask: np.ndarray) -> str:
-        return " and ".join(_range_text(sweep, values, a, b) for a, b in _runs(mask))
+        return " and ".join(range_text(sweep, values, a, b) for a, b in true_index_runs(mask))
 
     sentences = []
     for j in sorted({0, levels.size - 1}):
@@ -229,7 +235,7 @@ def _fixed_t2(ds: xr.Dataset) -> float:
     if T2 in ds.coords:
         values = np.unique(np.asarray(ds[T2].values, dtype=float))
         return float(values[0]) if values.size == 1 else float("nan")
-    value = _json_attr(ds, "fixed_inputs", {}).get(T2)
+    value = json_attr(ds, "fixed_inputs", {}).get(T2)
     return float(value) if isinstance(value, (int, float)) else float("nan")
 
 

@@ -24,12 +24,12 @@ from .coexistence_sections import coexistence_headline
 from .continuation_sections import continuation_findings
 from .diagnosis_report import diagnosis_findings
 from .finding import Finding
-from .findings import SPEED, T2, Grid, _condition_text, _end, _runs, _t2_interval, grid, grids
+from .findings import SPEED, T2, Grid, condition_text, grid, grids, t2_interval, t2_interval_end, true_index_runs
 from .prediction_sections import prediction_findings
 from .presentation import display, format_value, short_name
 from .rating_sections import rating_findings
 from .runup_sections import runup_findings
-from .sections import _json_attr
+from .sections import json_attr
 
 # ---------------------------------------------------------------------------- wording
 
@@ -46,7 +46,7 @@ def _t2_lead(value: float, interval: tuple[float, float, bool] | None) -> str:
     """'Wet rail (T2 = 21.15 kN m, low end of its interval)', 'T2 = 30 kN m', ..."""
     if not np.isfinite(value):
         return "At the T2 of each operating point"
-    end = _end(value, interval)
+    end = t2_interval_end(value, interval)
     if not end:
         return f"At T2 = {_t2(value)}"
     if interval is not None and interval[2]:
@@ -59,7 +59,7 @@ def _t2_where(value: float, interval: tuple[float, float, bool] | None) -> str:
     """'T2 = 46.52 kN m (dry rail)' for the middle of a sentence."""
     if not np.isfinite(value):
         return "the T2 of that operating point"
-    end = _end(value, interval)
+    end = t2_interval_end(value, interval)
     if end and interval is not None and interval[2]:
         return f"T2 = {_t2(value)} ({'wet' if end == 'low' else 'dry'} rail)"
     return f"T2 = {_t2(value)}" + (f" ({end} end of its interval)" if end else "")
@@ -91,7 +91,7 @@ def _labels_text(labels: Sequence[str]) -> str:
 
 
 def _ranges(mask: np.ndarray, speeds: np.ndarray) -> list[tuple[float, float]]:
-    return [(float(speeds[a]), float(speeds[b])) for a, b in _runs(mask)]
+    return [(float(speeds[a]), float(speeds[b])) for a, b in true_index_runs(mask)]
 
 
 def _ranges_text(ranges: Sequence[tuple[float, float]], speeds: np.ndarray, top: bool = True) -> str:
@@ -118,7 +118,7 @@ def _resolution(g: Grid) -> str:
 
 def worst_load_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     """The largest dynamic load over every simulated grid run, and where."""
-    interval = _t2_interval(results)
+    interval = t2_interval(results)
     for name in ("peak_mesh_force", "dynamic_load_factor"):
         found = [g for g in grids(results, name) if np.isfinite(g.values.astype(float)).any()]
         if found:
@@ -197,7 +197,7 @@ def separation_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     if not candidates:
         return []
     g = max(candidates, key=lambda item: (item.t2.size >= 2, item.speeds.size, item.t2.size))
-    interval = _t2_interval(results)
+    interval = t2_interval(results)
     ends = [(0, "low"), (g.t2.size - 1, "high")] if g.t2.size >= 2 else [(0, "only")]
     findings = []
     for j, end in ends:
@@ -233,7 +233,7 @@ def back_contact_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     found = grids(results, "fraction_back_contact")
     if not found:
         return []
-    interval = _t2_interval(results)
+    interval = t2_interval(results)
     runs = _finite_runs(found)
     failed = sum(g.values.size for g in found) - runs
     sources = list(dict.fromkeys(g.source for g in found))
@@ -275,14 +275,14 @@ def regime_findings_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
     if not candidates:
         return []
     g = max(candidates, key=lambda item: (item.t2.size, item.speeds.size))
-    interval = _t2_interval(results)
+    interval = t2_interval(results)
     labels = g.values.astype(str)
     other = labels != "period-1"
     found = list(dict.fromkeys(labels.T[other.T].tolist()))  # in order of T2, then speed
     windows: list[dict[str, Any]] = []
     for j in range(g.t2.size):
         if other[:, j].any():
-            ranges = _runs(other[:, j])
+            ranges = true_index_runs(other[:, j])
             windows.append(
                 {
                     "t2": float(g.t2[j]),
@@ -314,7 +314,7 @@ def regime_findings_headline(results: Sequence[xr.Dataset]) -> list[Finding]:
         parts.append(f"at {_t2_where(window['t2'], interval)} {spans}")
     text = f"Response not period-1 (labels found: {_labels_text(found)}): " + "; ".join(parts)
     if quiet.any():
-        condition = _condition_text(T2, g.t2, quiet)
+        condition = condition_text(T2, g.t2, quiet)
         text += f"; period-1 at every speed {condition}"
     return [Finding(text + f" ({g.source}, {span}).", facts, "regimes")]
 
@@ -325,7 +325,7 @@ def sobol_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     for ds in results:
         if str(ds.attrs.get("analysis_type")) != "sobol" or "param" not in ds.dims:
             continue
-        options = _json_attr(ds, "analysis_options", {})
+        options = json_attr(ds, "analysis_options", {})
         level = float(ds.attrs.get("conf_level", options.get("confidence_level", 0.95)))
         parameters = [str(p) for p in ds["param"].values]
         for name in options.get("qois", []):
@@ -411,9 +411,9 @@ def rig_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
     for ds in results:
         kind = str(ds.attrs.get("analysis_type", ""))
         if kind == "calibrate":
-            findings += calibration_findings(_json_attr(ds, "calibration", {}))
+            findings += calibration_findings(json_attr(ds, "calibration", {}))
         elif kind == "diagnose":
-            findings += diagnosis_findings(_json_attr(ds, "diagnosis", {}))
+            findings += diagnosis_findings(json_attr(ds, "diagnosis", {}))
     return findings
 
 
@@ -441,7 +441,7 @@ def headline_note(results: Sequence[xr.Dataset]) -> str:
             continue
         fixed = {
             k: v
-            for k, v in _json_attr(ds, "fixed_inputs", {}).items()
+            for k, v in json_attr(ds, "fixed_inputs", {}).items()
             if isinstance(v, (int, float)) and k not in (SPEED, T2)
         }
         if fixed:

@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 
 from ..common.errors import UqgearError
 from .page import figure_png, new_figure
-from .presentation import _LINE_STYLES, axis_label, display
+from .presentation import LINE_STYLES, axis_label, display
 
 #: Dynamic range of an order map's colour scale: floored this many dB below its peak.
 ORDER_MAP_RANGE_DB = 60.0
@@ -80,7 +80,7 @@ def _draw_envelopes(ax: Axes, envelopes: xr.Dataset) -> None:
             speed,
             values,
             color="black",
-            linestyle=_LINE_STYLES[index],
+            linestyle=LINE_STYLES[index],
             marker=".",
             drawstyle="steps-mid",
             label=f"{direction}",

@@ -18,10 +18,10 @@ import xarray as xr
 from matplotlib import colormaps
 
 from .finding import Finding
-from .findings import T2, _end, _t2_interval
+from .findings import T2, t2_interval, t2_interval_end
 from .page import new_figure
 from .presentation import axis_label, display, format_value, short_name
-from .sections import Section, _add_figure, _json_attr, _list, _section, renderer
+from .sections import Section, add_figure, html_list, json_attr, renderer, section_from_attrs
 
 #: QoIs in the order the first screen prefers them.
 _HEADLINE_QOIS = ("peak_mesh_force", "dynamic_load_factor", "load_factor_rated", "dte_rms")
@@ -54,17 +54,17 @@ def _band(ds: xr.Dataset, name: str, index: dict[str, Any]) -> tuple[float, floa
 
 def _rail(ds: xr.Dataset, value: float) -> str:
     """', wet rail' / ', dry rail' where the worst T2 is an end of a rail-adhesion interval, else ', T2 = ...'."""
-    interval = _t2_interval([ds])
+    interval = t2_interval([ds])
     if interval is None or not np.isfinite(value):
         return ""
-    end = _end(value, interval)
+    end = t2_interval_end(value, interval)
     if end and interval[2]:
         return f", {'wet' if end == 'low' else 'dry'} rail"
     return f", T2 = {format_value(T2, value)}"
 
 
 def _narrowed_text(ds: xr.Dataset) -> str:
-    shares = _json_attr(ds, "narrowing", {})
+    shares = json_attr(ds, "narrowing", {})
     parts = [
         f"{short_name(name)} to {share * 100:.0f} %" if share >= 0.01 else f"{short_name(name)} to {share * 100:.1g} %"
         for name, share in shares.items()
@@ -115,7 +115,7 @@ def _outside_runs(values: np.ndarray, outside: np.ndarray) -> list[tuple[float, 
 def _extrapolation_text(ds: xr.Dataset) -> str | None:
     if "extrapolated" not in ds or not bool(np.asarray(ds["extrapolated"].values).any()):
         return None
-    campaign: dict[str, list[float]] = _json_attr(ds, "campaign_range", {})
+    campaign: dict[str, list[float]] = json_attr(ds, "campaign_range", {})
     flagged = ds["extrapolated"]
     parts = []
     for dim in map(str, flagged.dims):
@@ -188,7 +188,7 @@ def prediction_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
         if name is None or not index:
             continue
         findings.append(_first_statement(ds, name, index))
-        effects = _json_attr(ds, "effects", [])
+        effects = json_attr(ds, "effects", [])
         if effects:
             names = ", ".join(entry["effect"].replace("_", " ") for entry in effects)
             findings.append(
@@ -243,7 +243,7 @@ def _draw_qoi(ax: Any, ds: xr.Dataset, name: str, sweep: str) -> None:
 @renderer("prediction")
 def render_prediction(ds: xr.Dataset, dpi: int) -> Section:
     """Bands of each QoI's bounds over the interval parameters, posterior against prior, against speed."""
-    section = _section(ds)
+    section = section_from_attrs(ds)
     qois = _qois(ds)
     sweep = str(ds["extrapolated"].dims[0]) if "extrapolated" in ds and ds["extrapolated"].ndim else None
     if qois and sweep is not None and ds["extrapolated"].ndim == 1:
@@ -253,23 +253,23 @@ def render_prediction(ds: xr.Dataset, dpi: int) -> Section:
             _draw_qoi(ax, ds, name, sweep)
         axes[-1].set_xlabel(axis_label(sweep))
         quantiles = np.asarray(ds["quantile"].values, dtype=float)
-        _add_figure(
+        add_figure(
             section,
             figure,
-            f"Bounds over {', '.join(short_name(p) for p in _json_attr(ds, 'parameters', []))} of each QoI: "
+            f"Bounds over {', '.join(short_name(p) for p in json_attr(ds, 'parameters', []))} of each QoI: "
             f"bands from the {quantiles[0]:g} to the {quantiles[-1]:g} quantile over the draws, line at the "
             "median; dark: after calibration, light: the prior (design tolerances).",
             dpi,
         )
     section.findings.extend(finding.text for finding in prediction_findings([ds]))
-    calibrated = _json_attr(ds, "calibrated_parameters", [])
+    calibrated = json_attr(ds, "calibrated_parameters", [])
     if calibrated:
         section.facts.append(("calibrated", ", ".join(short_name(n) for n in calibrated)))
         section.facts.append(("posterior", f"{ds.attrs.get('posterior_source', '')}, {ds.attrs.get('draws')} draws"))
     section.facts.append(("interval nodes", str(ds.attrs.get("interval_nodes", ""))))
-    effects = _json_attr(ds, "effects", [])
+    effects = json_attr(ds, "effects", [])
     if effects:
-        section.tables.append(_list([f"{e['effect']}: {e['parameters']}" for e in effects]))
+        section.tables.append(html_list([f"{e['effect']}: {e['parameters']}" for e in effects]))
     return section
 
 

@@ -91,8 +91,10 @@ _SHORT_NAMES = {
     "k2": "gear bearing stiffness",
     "backlash": "backlash",
 }
-_LINE_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)), (0, (3, 1, 1, 1, 1, 1)))
-_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
+#: Line styles of the curves of one figure, in turn (told apart without colour).
+LINE_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)), (0, (3, 1, 1, 1, 1, 1)))
+#: Markers of the point sets of one figure, in turn.
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
 
 
 def display(name: str) -> tuple[str, str, float]:

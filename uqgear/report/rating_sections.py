@@ -19,7 +19,7 @@ from matplotlib import colormaps
 
 from .finding import Finding
 from .page import new_figure
-from .sections import Section, _add_figure, _section, renderer
+from .sections import Section, add_figure, renderer, section_from_attrs
 
 #: Failure modes of a rating: (variable suffix, what fails).
 RATING_MODES = (("root", "tooth root"), ("contact", "flank"))
@@ -150,7 +150,7 @@ def rating_findings(results: Sequence[xr.Dataset]) -> list[Finding]:
 
 @renderer("rating")
 def _render_rating(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     if "dynamic_factor" not in ds:
         return section
     speeds = np.asarray(ds["pinion_speed"].values, dtype=float)
@@ -193,7 +193,7 @@ def _render_rating(ds: xr.Dataset, dpi: int) -> Section:
         ax.set_ylabel(f"{what} safety factor [-]")
         ax.legend(fontsize=7, loc="best")
     axes[-1].set_xlabel("pinion speed [rpm]")
-    _add_figure(section, figure, "Dynamic factor and ISO 6336 safety factors over the interval against speed", dpi)
+    add_figure(section, figure, "Dynamic factor and ISO 6336 safety factors over the interval against speed", dpi)
     section.findings.extend(rating_verdicts(ds))
     return section
 

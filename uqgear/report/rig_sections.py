@@ -11,13 +11,13 @@ import xarray as xr
 from .diagnosis_report import gap_map_plot, spectra_plot
 from .page import figure_png, new_figure
 from .presentation import axis_label
-from .sections import ReportFigure, Section, _add_figure, _json_attr, _section, renderer
+from .sections import ReportFigure, Section, add_figure, json_attr, renderer, section_from_attrs
 
 
 @renderer("diagnose")
 def _render_diagnose(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
-    content = _json_attr(ds, "diagnosis", {})
+    section = section_from_attrs(ds)
+    content = json_attr(ds, "diagnosis", {})
     verdict = str(content.get("verdict", ds.attrs.get("verdict", "?")))
     gap = content.get("gap", {})
     section.facts.append(("rig file", str(ds.attrs.get("rig", (content.get("rig") or {}).get("source", "")))))
@@ -96,8 +96,8 @@ def _render_diagnose(ds: xr.Dataset, dpi: int) -> Section:
 
 @renderer("calibrate")
 def _render_calibrate(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
-    summary = _json_attr(ds, "calibration", {})
+    section = section_from_attrs(ds)
+    summary = json_attr(ds, "calibration", {})
     converged = bool(summary.get("converged"))
     estimates = (
         summary.get("parameters") if converged else (summary.get("unconverged_estimates") or {}).get("parameters", {})
@@ -129,7 +129,7 @@ def _render_calibrate(ds: xr.Dataset, dpi: int) -> Section:
             ax.tick_params(labelsize=7)
         for ax in axes[len(names) :]:
             ax.set_visible(False)
-        _add_figure(section, figure, "Posterior marginals of the calibrated parameters.", dpi)
+        add_figure(section, figure, "Posterior marginals of the calibrated parameters.", dpi)
     check = summary.get("predictive_check") or {}
     if "fraction_within_2_sigma" in check:
         verdict = "passed" if check.get("passed") else "FAILED: the model does not explain these data"

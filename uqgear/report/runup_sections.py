@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from .finding import Finding
 from .order_map_figures import order_map_figure
 from .page import new_figure
-from .sections import Section, _add_figure, _section, renderer
+from .sections import Section, add_figure, renderer, section_from_attrs
 
 #: Relative difference of the run-up and coast-down peaks in a bin above which the bin is in the hysteresis.
 HYSTERESIS_TOLERANCE = 0.1
@@ -174,17 +174,17 @@ def _envelope_figure(ds: xr.Dataset) -> Figure:
 
 @renderer("runup")
 def _render_runup(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     if "peak_mesh_force_case" not in ds:
         return section
-    _add_figure(
+    add_figure(
         section,
         _envelope_figure(ds),
         f"Peak mesh force along the ramps, {_span(ds)} (dotted: jumps; red: folds of the continued branches)",
         dpi,
     )
     if "order_amplitude" in ds:
-        _add_figure(
+        add_figure(
             section,
             order_map_figure(ds[["order_amplitude"]], "te"),
             "Order map of the DTE over the ramp (largest over the interval cases and both senses of travel)",

@@ -53,7 +53,11 @@ def renderer(kind: str) -> Callable[[Renderer], Renderer]:
     return decorate
 
 
-def _json_attr(ds: xr.Dataset | xr.DataArray, name: str, default: Any) -> Any:
+def json_attr(ds: xr.Dataset | xr.DataArray, name: str, default: Any) -> Any:
+    """The attribute ``name`` of ``ds`` decoded from JSON; ``default`` where it is absent or not valid JSON.
+
+    An attribute that is not a string (a number written as such) is returned as it is.
+    """
     value = ds.attrs.get(name)
     if value is None:
         return default
@@ -65,7 +69,13 @@ def _json_attr(ds: xr.Dataset | xr.DataArray, name: str, default: Any) -> Any:
     return value
 
 
-def _section(ds: xr.Dataset) -> Section:
+def section_from_attrs(ds: xr.Dataset) -> Section:
+    """A :class:`Section` for the analysis result ``ds``, with the header facts its attributes give.
+
+    Name, type and description of the analysis, and where present the model runs, the run time, the
+    treatment of multi-valued responses, the simulation settings and the inputs held fixed; every renderer
+    starts from it and adds its figures, findings and tables.
+    """
     name = str(ds.attrs.get("analysis_name", "analysis"))
     kind = str(ds.attrs.get("analysis_type", "unknown"))
     section = Section(
@@ -83,7 +93,7 @@ def _section(ds: xr.Dataset) -> Section:
     treatment = ds.attrs.get("response_treatment")
     if treatment:
         section.facts.append(("multi-valued response", str(treatment)))
-    settings = _json_attr(ds, "simulation_settings", {})
+    settings = json_attr(ds, "simulation_settings", {})
     if settings:
         section.facts.append(
             (
@@ -92,9 +102,9 @@ def _section(ds: xr.Dataset) -> Section:
                 f"{settings.get('keep_periods')} kept" + (", Lyapunov exponent" if settings.get("lyapunov") else ""),
             )
         )
-    points = _json_attr(ds, "operating_points", {})
+    points = json_attr(ds, "operating_points", {})
     # the inputs actually held fixed (with the nominal values of uncertain parameters and defaults)
-    fixed = _json_attr(ds, "fixed_inputs", None) or {
+    fixed = json_attr(ds, "fixed_inputs", None) or {
         key: value for key, value in points.items() if not isinstance(value, list)
     }
     if fixed:
@@ -104,18 +114,21 @@ def _section(ds: xr.Dataset) -> Section:
     return section
 
 
-def _add_figure(section: Section, figure: Figure, caption: str, dpi: int) -> None:
+def add_figure(section: Section, figure: Figure, caption: str, dpi: int) -> None:
+    """Append ``figure``, rendered to PNG at ``dpi``, to ``section`` with its caption."""
     section.figures.append(ReportFigure(caption, figure_png(figure, dpi)))
 
 
-def _table(rows: Sequence[tuple[str, str]], header: tuple[str, str] | None = None, table_id: str = "") -> str:
+def html_table(rows: Sequence[tuple[str, str]], header: tuple[str, str] | None = None, table_id: str = "") -> str:
+    """A two-column HTML table of ``rows`` (text escaped), with an optional header row and ``id``."""
     head = f"<tr><th>{html.escape(header[0])}</th><th>{html.escape(header[1])}</th></tr>" if header else ""
     body = "".join(f"<tr><td>{html.escape(str(a))}</td><td>{html.escape(str(b))}</td></tr>" for a, b in rows)
     identifier = f' id="{table_id}"' if table_id else ""
     return f"<table{identifier}>{head}{body}</table>"
 
 
-def _list(items: Sequence[str], css_class: str = "") -> str:
+def html_list(items: Sequence[str], css_class: str = "") -> str:
+    """An HTML bullet list of ``items`` (text escaped) with an optional CSS class; 'None.' where empty."""
     if not items:
         return "<p>None.</p>"
     css = f' class="{css_class}"' if css_class else ""

@@ -51,13 +51,13 @@ from .finding import HEADLINE_STYLE, headline_html
 from .headline import headline_findings, headline_note
 from .page import figure_html, html_page
 from .presentation import display, format_value
-from .sections import RENDERERS, Section, _json_attr, _list, _section, _table
+from .sections import RENDERERS, Section, html_list, html_table, json_attr, section_from_attrs
 
 REPORT_NAME = "report.html"
 
 
 def _render_generic(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     rows = "".join(
         f"<tr><td>{html.escape(str(name))}</td><td>{html.escape(str(dict(ds[name].sizes)))}</td>"
         f"<td>{html.escape(str(ds[name].attrs.get('units', '')))}</td></tr>"
@@ -87,7 +87,7 @@ details#provenance > summary { font-size: 1.2em; font-weight: bold; cursor: poin
 
 
 def _design_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
-    design = _json_attr(ds, "design", {})
+    design = json_attr(ds, "design", {})
     units = {
         "module": "m",
         "pressure_angle": "deg",
@@ -116,7 +116,7 @@ def _design_notes(ds: xr.Dataset) -> list[str]:
 
     from ..physics.geometry import geometry_notes
 
-    values = _json_attr(ds, "design", {})
+    values = json_attr(ds, "design", {})
     try:
         return geometry_notes(SimpleNamespace(**values))
     except (TypeError, ValueError, AttributeError, ArithmeticError):
@@ -125,7 +125,7 @@ def _design_notes(ds: xr.Dataset) -> list[str]:
 
 def _uncertain_rows(ds: xr.Dataset) -> list[tuple[str, str]]:
     rows = []
-    for name, entry in _json_attr(ds, "uncertain_parameters", {}).items():
+    for name, entry in json_attr(ds, "uncertain_parameters", {}).items():
         if entry.get("kind") == "interval":
             text = f"interval [{format_value(name, entry['lower'])}, {format_value(name, entry['upper'])}]"
         else:
@@ -149,7 +149,7 @@ def _summary_rows(results: Sequence[xr.Dataset], sections: Sequence[Section]) ->
         ("design", f"{first.attrs.get('design_name', '')} (from {first.attrs.get('design_source', '')})"),
         (
             "design overrides",
-            ", ".join(f"{k} = {v}" for k, v in _json_attr(first, "design_overrides", {}).items()) or "none",
+            ", ".join(f"{k} = {v}" for k, v in json_attr(first, "design_overrides", {}).items()) or "none",
         ),
         ("seed", str(first.attrs.get("study_seed", first.attrs.get("seed", "")))),
         (
@@ -178,12 +178,12 @@ def _section_html(section: Section) -> list[str]:
     if section.description:
         parts.append(f"<p>{html.escape(section.description)}</p>")
     if section.facts:
-        parts.append(_table(section.facts))
+        parts.append(html_table(section.facts))
     for figure in section.figures:
         parts.append(figure_html(figure.png, figure.caption))
     parts.extend(section.tables)
-    parts.append("<h3>Findings</h3>" + _list(section.findings))
-    parts.append("<h3>Caveats</h3>" + _list(section.caveats, "caveats"))
+    parts.append("<h3>Findings</h3>" + html_list(section.findings))
+    parts.append("<h3>Caveats</h3>" + html_list(section.caveats, "caveats"))
     parts.append("</section>")
     return parts
 
@@ -212,7 +212,7 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
         kind = str(ds.attrs.get("analysis_type", ""))
         sections.append(RENDERERS.get(kind, _render_generic)(ds, dpi))
     study_name = str(first.attrs.get("study_name", "study"))
-    versions = _json_attr(first, "provenance_versions", {})
+    versions = json_attr(first, "provenance_versions", {})
     if "numba_target_cpu" in first.attrs:
         versions["kernels compiled for (CPU)"] = str(first.attrs["numba_target_cpu"])
     summary = _summary_rows(results, sections)
@@ -223,12 +223,12 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
     ]
     for section in sections:
         if section.findings:
-            parts.append(f"<h3>{html.escape(section.title)}</h3>" + _list(section.findings))
+            parts.append(f"<h3>{html.escape(section.title)}</h3>" + html_list(section.findings))
     parts.append("</section>")
     parts.append('<section id="caveats"><h2>Caveats</h2>')
     caveats = [f"design: {note}" for note in _design_notes(first)]
     caveats += [f"{section.name}: {caveat}" for section in sections for caveat in section.caveats]
-    parts.append(_list(caveats, "caveats"))
+    parts.append(html_list(caveats, "caveats"))
     parts.append("</section>")
     for section in sections:
         parts.extend(_section_html(section))
@@ -236,15 +236,15 @@ def build_report(results: Sequence[xr.Dataset], *, dpi: int = 110) -> str:
     parts += [
         '<details id="provenance"><summary>Provenance: study, design, parameters, versions, seeds</summary>',
         '<section id="summary"><h2>Study summary</h2>',
-        _table(summary, table_id="summary-table"),
+        html_table(summary, table_id="summary-table"),
         '<h3 id="design">Design</h3>',
-        _table(_design_rows(first), ("key", "value"), "design-table"),
+        html_table(_design_rows(first), ("key", "value"), "design-table"),
         '<h3 id="uncertain">Uncertain parameters</h3>',
-        _table(_uncertain_rows(first), ("parameter", "definition"), "uncertain-table")
+        html_table(_uncertain_rows(first), ("parameter", "definition"), "uncertain-table")
         if _uncertain_rows(first)
         else "<p>None.</p>",
         '<h3 id="versions">Versions</h3>',
-        _table(sorted(versions.items()), ("package", "version"), "versions-table"),
+        html_table(sorted(versions.items()), ("package", "version"), "versions-table"),
         "</section>",
     ]
     study_text = str(first.attrs.get("study", ""))

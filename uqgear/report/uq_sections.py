@@ -14,10 +14,10 @@ from matplotlib.figure import Figure
 
 from ..uq.interval import FLAG_FALLBACK, FLAG_NONFINITE, FLAG_NONSMOOTH, FLAG_SURROGATE_ERROR, FLAG_VERTEX_EXCEEDED
 from .coexistence_sections import attractor_bound_sentences, branch_parameters, branch_sentences
-from .findings import _range_text, _runs_of_values
+from .findings import equal_value_runs, range_text
 from .page import new_figure
-from .presentation import _LINE_STYLES, _MARKERS, axis_label, display, format_value, short_name
-from .sections import Section, _add_figure, _json_attr, _list, _section, renderer
+from .presentation import LINE_STYLES, MARKERS, axis_label, display, format_value, short_name
+from .sections import Section, add_figure, html_list, json_attr, renderer, section_from_attrs
 
 # interval flags that say something about the QoI itself (not just "recomputed by the fallback")
 _OWN_FLAGS = FLAG_VERTEX_EXCEEDED | FLAG_SURROGATE_ERROR | FLAG_NONSMOOTH | FLAG_NONFINITE
@@ -34,7 +34,7 @@ def _sweep_dim(ds: xr.Dataset, exclude: Sequence[str]) -> str | None:
 
 
 def _qois_of(ds: xr.Dataset) -> list[str]:
-    options = _json_attr(ds, "analysis_options", {})
+    options = json_attr(ds, "analysis_options", {})
     return [name for name in options.get("qois", []) if name in ds]
 
 
@@ -82,9 +82,9 @@ def _branch_where(ds: xr.Dataset, shown: np.ndarray) -> str:
 
 @renderer("interval")
 def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     qois = _qois_of(ds)
-    options = _json_attr(ds, "analysis_options", {})
+    options = json_attr(ds, "analysis_options", {})
     parameters = options.get("parameters", [])
     sweep = _sweep_dim(ds, ("bound", "check", "node", "sample", "param"))
     label = ", ".join(short_name(p) for p in parameters)
@@ -99,7 +99,7 @@ def _render_interval(ds: xr.Dataset, dpi: int) -> Section:
         section.findings.extend(branch_sentences(ds, name, sweep))
     axes[-1].set_xlabel(axis_label(sweep) if sweep else "")
     method = ds.attrs.get("method", options.get("method", "?"))
-    _add_figure(
+    add_figure(
         section,
         figure,
         f"QoI envelopes over {label} ({method} method; band: lower to upper "
@@ -174,13 +174,13 @@ def _interval_method_notes(section: Section, ds: xr.Dataset, qois: list[str], sw
                 f"{int(ds.attrs.get('fallback_runs', 0))} by the fallback",
             )
         )
-    reasons = _json_attr(ds["flag"], "flag_reasons", []) if "flag" in ds else []
+    reasons = json_attr(ds["flag"], "flag_reasons", []) if "flag" in ds else []
     if reasons:
         section.tables.append(
             "<details><summary>Why bounds were flagged ("
             + str(len(reasons))
             + " entries)</summary>"
-            + _list(reasons)
+            + html_list(reasons)
             + "</details>"
         )
 
@@ -253,7 +253,7 @@ def _render_pbox(ds: xr.Dataset, dpi: int, section: Section, qois: Sequence[str]
     """Bounds of statistics over the interval parameters (a probability box)."""
     sweep = _sweep_dim(ds, ("statistic", "quantile", "bound", "qoi"))
     levels = np.asarray(ds["quantile"].values, dtype=float)
-    intervals = ", ".join(short_name(name) for name in _json_attr(ds, "interval_parameters", {}))
+    intervals = ", ".join(short_name(name) for name in json_attr(ds, "interval_parameters", {}))
     figure = new_figure(9.0, 2.8 * len(qois))
     axes = np.atleast_1d(figure.subplots(len(qois), 1, sharex=sweep is not None))
     for ax, name in zip(axes, qois):
@@ -302,7 +302,7 @@ def _render_pbox(ds: xr.Dataset, dpi: int, section: Section, qois: Sequence[str]
         )
     if sweep is not None:
         axes[-1].set_xlabel(axis_label(sweep))
-    _add_figure(
+    add_figure(
         section,
         figure,
         f"Probability box: Monte Carlo statistics over the random parameters, bounded "
@@ -319,7 +319,7 @@ def _render_pbox(ds: xr.Dataset, dpi: int, section: Section, qois: Sequence[str]
 
 @renderer("monte_carlo")
 def _render_monte_carlo(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     qois = _qois_of(ds)
     if qois and "bound" in ds[qois[0]].dims:
         return _render_pbox(ds, dpi, section, qois)
@@ -377,7 +377,7 @@ def _render_monte_carlo(ds: xr.Dataset, dpi: int) -> Section:
             ax.set_ylabel(f"{display(name)[0]} [{unit}]")
     if sweep is not None:
         axes[-1].set_xlabel(axis_label(sweep))
-    _add_figure(
+    add_figure(
         section,
         figure,
         f"Monte Carlo: mean and quantile band of each QoI ({ds.attrs.get('n_samples', '?')} samples per point).",
@@ -391,7 +391,7 @@ def _render_monte_carlo(ds: xr.Dataset, dpi: int) -> Section:
 
 @renderer("pce")
 def _render_pce(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     qois = _qois_of(ds)
     if not qois:
         return section
@@ -428,7 +428,7 @@ def _render_pce(ds: xr.Dataset, dpi: int) -> Section:
             )
     for ax in axes[len(qois) :]:
         ax.set_visible(False)
-    _add_figure(
+    add_figure(
         section,
         figure,
         "Polynomial chaos validation: surrogate against model at independent check points (all operating points).",
@@ -478,8 +478,8 @@ def _sobol_lines(ds: xr.Dataset, name: str, sweep: str, parameters: Sequence[str
         ax.plot(
             x,
             total,
-            linestyle=_LINE_STYLES[index % len(_LINE_STYLES)],
-            marker=_MARKERS[index % len(_MARKERS)],
+            linestyle=LINE_STYLES[index % len(LINE_STYLES)],
+            marker=MARKERS[index % len(MARKERS)],
             markersize=4,
             color=colour,
             label=short_name(parameter),
@@ -504,8 +504,8 @@ def _sobol_findings(ds: xr.Dataset, name: str, sweep: str | None, parameters: Se
     dominant = np.where(defined, np.argmax(np.nan_to_num(totals, nan=-np.inf), axis=1), -1)
     values = np.asarray(ds[sweep].values, float) if sweep else np.empty(0)
     sentences = []
-    for start, stop in _runs_of_values(dominant):
-        where = "" if sweep is None else " " + _range_text(sweep, values, start, stop)
+    for start, stop in equal_value_runs(dominant):
+        where = "" if sweep is None else " " + range_text(sweep, values, start, stop)
         if dominant[start] < 0:
             sentences.append(f"{title}: indices undefined{where} (the QoI does not vary over the parameters)")
             continue
@@ -522,7 +522,7 @@ def _sobol_findings(ds: xr.Dataset, name: str, sweep: str | None, parameters: Se
 
 @renderer("sobol")
 def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
-    section = _section(ds)
+    section = section_from_attrs(ds)
     qois = [name for name in _qois_of(ds) if "param" in ds[name].dims]
     if not qois:
         return section
@@ -542,7 +542,7 @@ def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
                 if sweep is not None:  # then each point selects one value along it
                     title += f" at {format_value(sweep, float(ds[sweep].values[where[sweep]]))}"
                 ax.set_title(title, fontsize=9)
-            _add_figure(
+            add_figure(
                 section,
                 figure,
                 f"Sobol indices of {display(name)[0]} (bars: first and total "
@@ -550,7 +550,7 @@ def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
                 dpi,
             )
         if sweep is not None and ds.sizes[sweep] >= 2:
-            _add_figure(
+            add_figure(
                 section,
                 _sobol_lines(ds, name, sweep, parameters, level),
                 f"Total-order Sobol indices of {display(name)[0]} against {short_name(sweep)}.",
@@ -558,7 +558,7 @@ def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
             )
         section.findings.extend(_sobol_findings(ds, name, sweep, parameters))
     treatment = str(ds.attrs.get("interval_treatment", ""))
-    distributions = _json_attr(ds, "distribution_assumed", {})
+    distributions = json_attr(ds, "distribution_assumed", {})
     if distributions:
         assumed = [short_name(k) for k, v in distributions.items() if str(v).startswith("uniform on interval")]
         given = [
@@ -576,7 +576,7 @@ def _render_sobol(ds: xr.Dataset, dpi: int) -> Section:
             section.caveats.append("Sobol indices use the distributions " + "; ".join(given))
     elif treatment:
         section.caveats.append(f"Sobol indices: interval parameters {treatment}")
-    held = _json_attr(ds, "held_at_nominal", {})
+    held = json_attr(ds, "held_at_nominal", {})
     if held:
         section.caveats.append(
             "held at nominal values: " + ", ".join(f"{short_name(k)} = {format_value(k, v)}" for k, v in held.items())

@@ -3,7 +3,7 @@
 :mod:`.foreign_rig` records what a rig's sensors give (encoder TE, housing
 accelerations). A prediction of the load a designer sizes against needs the
 mesh force itself, which the foreign physics computes pair by pair
-(``_pair_sum``: each tooth pair's stiffness times its deflection, profile
+(``pair_sum``: each tooth pair's stiffness times its deflection, profile
 errors included, plus its mesh damping). :func:`foreign_qois` integrates the
 same equations of motion (the same parameters, start state and step) and
 reduces the force and the mesh approach over the steady part of each run, as
@@ -40,13 +40,13 @@ from ..common.errors import OperatingPointError
 from ..physics.design import Design
 from ..physics.effects import Effect
 from .foreign_rig import (
-    _N_STATE,
+    N_STATE,
     ForeignGears,
-    _pair_sum,
-    _parameters,
-    _rk4_step,
-    _static_state,
     effect_vector,
+    pair_sum,
+    rk4_step,
+    run_parameters,
+    static_state,
     time_step,
 )
 
@@ -69,17 +69,17 @@ def _integrate_mesh(y0, p, pin_err, gear_err, eff, step, n_steps, first):  # pra
     """RK4 from t = 0 over ``n_steps``; from step ``first`` on, the largest and summed mesh force and the sum and
     sum of squares of the mesh approach (about its value at ``first``, against cancellation), and the count."""
     y = y0.copy()
-    work = np.empty((5, _N_STATE))
+    work = np.empty((5, N_STATE))
     out = np.zeros(5)
     out[_F_MAX] = -np.inf
     reference = 0.0
     t = 0.0
     for index in range(n_steps):
-        _rk4_step(t, y, p, pin_err, gear_err, eff, step, work)
+        rk4_step(t, y, p, pin_err, gear_err, eff, step, work)
         t += step
         if index < first:
             continue
-        force, _, _ = _pair_sum(t, y, p, pin_err, gear_err, eff)
+        force, _, _ = pair_sum(t, y, p, pin_err, gear_err, eff)
         approach = p[6] * y[1] - p[7] * y[2] - y[4] + y[5]
         if index == first:
             reference = approach
@@ -104,11 +104,11 @@ def _one_run(
     start: float, duration: float,
 ) -> dict[str, float]:
     """The QoIs of one run (:data:`FOREIGN_QOI_INFO`)."""
-    p, fastest = _parameters(design, speed, drive_torque, load_torque)
+    p, fastest = run_parameters(design, speed, drive_torque, load_torque)
     _, step = time_step(fastest, _RATE)
     first = int(round(start / step))
     n_steps = first + int(round(duration / step))
-    out = _integrate_mesh(_static_state(p, design), p, gears.pinion, gears.gear, eff, step, n_steps, first)
+    out = _integrate_mesh(static_state(p, design), p, gears.pinion, gears.gear, eff, step, n_steps, first)
     count = out[_COUNT]
     mean_x = out[_X_SUM] / count
     static = load_torque / p[7]

@@ -75,8 +75,10 @@ MOTOR_INERTIA_FACTOR = 1.5
 LOAD_INERTIA_FACTOR = 4.0
 #: Speed controller bandwidth, Hz.
 CONTROLLER_BANDWIDTH = 15.0
-_N_STATE = 16
-_GUARD = 0.05
+#: Length of the foreign plant's state vector.
+N_STATE = 16
+#: Guard interval (s) simulated on each side of a foreign record, outside the record the filter keeps.
+FOREIGN_RECORD_GUARD = 0.05
 
 
 @dataclass(frozen=True)
@@ -124,8 +126,13 @@ def contact_ratio(design: Design) -> float:
 
 
 @njit(cache=True)
-def _pair_sum(t, y, p, pin_err, gear_err, eff):  # pragma: no cover - compiled
-    """Mesh force and the friction moments on pinion and gear at time t, state y."""
+def pair_sum(t, y, p, pin_err, gear_err, eff):  # pragma: no cover - compiled
+    """Mesh force and the friction moments on pinion and gear at time t, state y.
+
+    The mesh of the foreign plant, compiled, with the parameter vector of :func:`run_parameters`, the
+    per-tooth pitch errors and the effect vector of :func:`effect_vector`; the steady runs, the
+    run-ups and the response QoIs all evaluate it.
+    """
     f_mesh, eps, kp, entry, z1, z2 = p[0], p[1], p[2], p[3], p[4], p[5]
     rb1, rb2, r1s, r2s, path = p[6], p[7], p[8], p[9], p[10]
     approach = rb1 * y[1] - rb2 * y[2] - y[4] + y[5]
@@ -178,7 +185,7 @@ def _pair_sum(t, y, p, pin_err, gear_err, eff):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _plant_derivative(y, p, eff, force, m1, m2, motor, load, out):  # pragma: no cover - compiled
+def plant_derivative(y, p, eff, force, m1, m2, motor, load, out):  # pragma: no cover - compiled
     """The plant's equations of motion given the mesh's force and moments and the motor and load torques.
 
     Written once for every drive of the plant: the speed held at a constant set-point
@@ -217,31 +224,35 @@ def _plant_derivative(y, p, eff, force, m1, m2, motor, load, out):  # pragma: no
 @njit(cache=True)
 def _derivative(t, y, p, pin_err, gear_err, eff, out):  # pragma: no cover - compiled
     """The plant held at the constant speed p[36] (rad/s) by its speed controller."""
-    force, m1, m2 = _pair_sum(t, y, p, pin_err, gear_err, eff)
+    force, m1, m2 = pair_sum(t, y, p, pin_err, gear_err, eff)
     kc, cc, t1, t2, omega = p[32], p[33], p[34], p[35], p[36]
     ripple_amp, ripple_order, ripple_phase = eff[8], eff[9], eff[10]
     adh_amp, adh_freq, adh_phase = eff[11], eff[12], eff[13]
     motor = t1 * (1.0 + ripple_amp * math.cos(ripple_order * omega * t + ripple_phase))
     motor += kc * (omega * t - y[0]) + cc * (omega - y[8])
     load = t2 * (1.0 + adh_amp * math.sin(2.0 * math.pi * adh_freq * t + adh_phase))
-    _plant_derivative(y, p, eff, force, m1, m2, motor, load, out)
+    plant_derivative(y, p, eff, force, m1, m2, motor, load, out)
 
 
 @njit(cache=True)
-def _rk4_step(t, y, p, pin_err, gear_err, eff, step, work):  # pragma: no cover - compiled
-    """One fourth-order Runge-Kutta step of the state ``y`` (in place) from time t; ``work`` (5, state) is scratch."""
+def rk4_step(t, y, p, pin_err, gear_err, eff, step, work):  # pragma: no cover - compiled
+    """One fourth-order Runge-Kutta step of the state ``y`` (in place) from time t; ``work`` (5, state) is scratch.
+
+    The step of the foreign plant held at a constant speed set-point, compiled; ``step`` is the time
+    step in s and ``y`` has :data:`N_STATE` entries.
+    """
     k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
     _derivative(t, y, p, pin_err, gear_err, eff, k1)
-    for k in range(_N_STATE):
+    for k in range(N_STATE):
         tmp[k] = y[k] + 0.5 * step * k1[k]
     _derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, k2)
-    for k in range(_N_STATE):
+    for k in range(N_STATE):
         tmp[k] = y[k] + 0.5 * step * k2[k]
     _derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, k3)
-    for k in range(_N_STATE):
+    for k in range(N_STATE):
         tmp[k] = y[k] + step * k3[k]
     _derivative(t + step, tmp, p, pin_err, gear_err, eff, k4)
-    for k in range(_N_STATE):
+    for k in range(N_STATE):
         y[k] += step / 6.0 * (k1[k] + 2.0 * k2[k] + 2.0 * k3[k] + k4[k])
 
 
@@ -250,13 +261,13 @@ def _integrate(y0, p, pin_err, gear_err, eff, step, n_out, per_out):  # pragma: 
     """RK4 from t = 0; returns (n_out, 6): encoder TE, housing accelerations at pinion and gear, time, and the
     bearing deflections (wheel centre less housing) at pinion and gear."""
     y = y0.copy()
-    work = np.empty((5, _N_STATE))
+    work = np.empty((5, N_STATE))
     k1 = work[0]
     out = np.empty((n_out, 6))
     t = 0.0
     for index in range(n_out):
         for _ in range(per_out):
-            _rk4_step(t, y, p, pin_err, gear_err, eff, step, work)
+            rk4_step(t, y, p, pin_err, gear_err, eff, step, work)
             t += step
         _derivative(t, y, p, pin_err, gear_err, eff, k1)
         out[index, 0] = p[6] * y[1] - p[7] * y[2]
@@ -378,8 +389,12 @@ def effect_vector(effects: Sequence[Effect], design: Design) -> np.ndarray:
     return eff
 
 
-def _parameters(design: Design, speed: float, drive_torque: float, load_torque: float) -> tuple[np.ndarray, float]:
-    """The compiled parameter vector of one run and the frequency of its fastest mode, Hz."""
+def run_parameters(design: Design, speed: float, drive_torque: float, load_torque: float) -> tuple[np.ndarray, float]:
+    """The compiled parameter vector of one run and the frequency of its fastest mode, Hz.
+
+    ``speed`` in rpm, the torques in N m; the vector is what :func:`pair_sum`, :func:`rk4_step` and
+    :func:`plant_derivative` read, the fastest mode sets the time step (:func:`time_step`).
+    """
     alpha = math.radians(design.pressure_angle)
     r1, r2 = design.module * design.z1 / 2, design.module * design.z2 / 2
     rb1, rb2 = r1 * math.cos(alpha), r2 * math.cos(alpha)
@@ -476,7 +491,7 @@ def plant_parameters(design: Design) -> dict[str, float]:
     >>> round(plant["k_mean"] / 1e9, 2), plant["kb1"] == load_design("locomotive").k1
     (2.42, True)
     """
-    p, _ = _parameters(design, 1000.0, 1.0, 1.0)
+    p, _ = run_parameters(design, 1000.0, 1.0, 1.0)
     plant = dict(zip(PLANT_NAMES, (float(v) for v in p[12:34])))
     k_mean = p[2] * p[1] * (PAIR_ENTRY_SHARE + (1 - PAIR_ENTRY_SHARE) * 2 / math.pi)
     return {**plant, "rb1": float(p[6]), "rb2": float(p[7]), "k_mean": float(k_mean)}
@@ -494,12 +509,16 @@ def time_step(fastest: float, rate: float) -> tuple[int, float]:
     return per_out, 1.0 / (rate * per_out)
 
 
-def _static_state(p: np.ndarray, design: Design) -> np.ndarray:
-    """Start near the loaded static state at nominal speed (the run-in settles the rest)."""
+def static_state(p: np.ndarray, design: Design) -> np.ndarray:
+    """Start near the loaded static state at nominal speed (the run-in settles the rest).
+
+    ``p`` is the parameter vector of :func:`run_parameters`; the state has :data:`N_STATE` entries,
+    the initial state of the steady runs and the run-ups alike.
+    """
     rb1, rb2, kp, eps = p[6], p[7], p[2], p[1]
     k_mean = kp * eps * (PAIR_ENTRY_SHARE + (1 - PAIR_ENTRY_SHARE) * 2 / math.pi)
     force = p[34] / rb1
-    y = np.zeros(_N_STATE)
+    y = np.zeros(N_STATE)
     h1, h2 = force / p[28], -force / p[30]
     y1, y2 = h1 + force / p[24], h2 - force / p[26]
     theta1 = -p[34] / p[20]
@@ -529,19 +548,19 @@ def simulate_foreign_run(
     unfiltered) as ``bearing_pinion`` and ``bearing_gear``: where a clearance c is set, the bearing carries no
     force while its deflection is within +-c.
     """
-    p, fastest = _parameters(design, speed, drive_torque, load_torque)
+    p, fastest = run_parameters(design, speed, drive_torque, load_torque)
     rate = 4.0 * fs
     per_out, step = time_step(fastest, rate)
-    first = int(round((start - _GUARD) * rate))
-    size = int(round((duration + 2 * _GUARD) * rate))
+    first = int(round((start - FOREIGN_RECORD_GUARD) * rate))
+    size = int(round((duration + 2 * FOREIGN_RECORD_GUARD) * rate))
     n_out = first + size
     out = _integrate(
-        _static_state(p, design), p, gears.pinion, gears.gear, effect_vector(effects, design), step, n_out, per_out
+        static_state(p, design), p, gears.pinion, gears.gear, effect_vector(effects, design), step, n_out, per_out
     )[first:]
     passband, stopband = fs / 2.56, fs / 2.0
     records = {}
     n_samples = int(round(duration * fs))
-    guard = int(round(_GUARD * rate))
+    guard = int(round(FOREIGN_RECORD_GUARD * rate))
     for column, name in ((0, "te"), (1, "acc_pinion"), (2, "acc_gear")):
         signal = out[:, column] - out[:, column].mean()
         filtered = np.fft.irfft(np.fft.rfft(signal) * frequency_filter(size, rate, passband, stopband, 0), n=size)
@@ -639,6 +658,13 @@ __all__ = [
     "draw_gears",
     "effect_vector",
     "plant_parameters",
+    "N_STATE",
+    "FOREIGN_RECORD_GUARD",
+    "pair_sum",
+    "plant_derivative",
+    "rk4_step",
+    "run_parameters",
+    "static_state",
     "register_foreign_physics",
     "simulate_foreign_campaign",
     "simulate_foreign_run",

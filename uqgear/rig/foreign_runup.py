@@ -42,20 +42,21 @@ from ..common.errors import OperatingPointError, RigDataError
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..uq.seeds import as_seed_sequence, child_seed
+from .campaign_checks import check_speed_wander
 from .foreign_rig import (
-    _GUARD,
-    _N_STATE,
+    FOREIGN_RECORD_GUARD,
+    N_STATE,
     ForeignGears,
-    _pair_sum,
-    _parameters,
-    _plant_derivative,
-    _static_state,
     effect_vector,
+    pair_sum,
+    plant_derivative,
+    run_parameters,
+    static_state,
     time_step,
 )
 from .format import make_ramp_dataset
-from .virtual_rig import _WANDER_STREAM, _check_wander, frequency_filter
-from .virtual_runup import _ramp_table
+from .virtual_rig import WANDER_STREAM, frequency_filter
+from .virtual_runup import ramp_table
 
 _RPM = 2.0 * math.pi / 60.0
 
@@ -107,38 +108,38 @@ def _reference_speeds(times, ramp, wander):  # pragma: no cover - compiled
 @njit(cache=True)
 def _ramp_derivative(t, y, p, pin_err, gear_err, eff, ramp, wander, out):  # pragma: no cover - compiled
     """The foreign plant's derivative with the speed set-point on the ramp; p[0] = z1 / (2 pi) (see caller)."""
-    # the mesh at the pinion's real angle: _pair_sum's clock times p[0] is the mesh phase
-    force, m1, m2 = _pair_sum(y[1], y, p, pin_err, gear_err, eff)
+    # the mesh at the pinion's real angle: pair_sum's clock times p[0] is the mesh phase
+    force, m1, m2 = pair_sum(y[1], y, p, pin_err, gear_err, eff)
     kc, cc, t1, t2 = p[32], p[33], p[34], p[35]
     theta_ref, omega_ref = _reference(t, ramp, wander)
     # the torque ripple follows the motor's angle, the adhesion oscillation its own clock
     motor = t1 * (1.0 + eff[8] * math.cos(eff[9] * y[0] + eff[10]))
     motor += kc * (theta_ref - y[0]) + cc * (omega_ref - y[8])
     load = t2 * (1.0 + eff[11] * math.sin(2.0 * math.pi * eff[12] * t + eff[13]))
-    _plant_derivative(y, p, eff, force, m1, m2, motor, load, out)
+    plant_derivative(y, p, eff, force, m1, m2, motor, load, out)
 
 
 @njit(cache=True)
 def _integrate_ramp(y0, p, pin_err, gear_err, eff, ramp, wander, step, n_out, per_out):  # pragma: no cover
     """RK4 from t = 0; returns (n_out, 4): encoder TE, housing accelerations at pinion and gear, pinion speed."""
     y = y0.copy()
-    work = np.empty((5, _N_STATE))
+    work = np.empty((5, N_STATE))
     k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
     out = np.empty((n_out, 4))
     t = 0.0
     for index in range(n_out):
         for _ in range(per_out):
             _ramp_derivative(t, y, p, pin_err, gear_err, eff, ramp, wander, k1)
-            for k in range(_N_STATE):
+            for k in range(N_STATE):
                 tmp[k] = y[k] + 0.5 * step * k1[k]
             _ramp_derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, ramp, wander, k2)
-            for k in range(_N_STATE):
+            for k in range(N_STATE):
                 tmp[k] = y[k] + 0.5 * step * k2[k]
             _ramp_derivative(t + 0.5 * step, tmp, p, pin_err, gear_err, eff, ramp, wander, k3)
-            for k in range(_N_STATE):
+            for k in range(N_STATE):
                 tmp[k] = y[k] + step * k3[k]
             _ramp_derivative(t + step, tmp, p, pin_err, gear_err, eff, ramp, wander, k4)
-            for k in range(_N_STATE):
+            for k in range(N_STATE):
                 y[k] += step / 6.0 * (k1[k] + 2.0 * k2[k] + 2.0 * k3[k] + k4[k])
             t += step
         _ramp_derivative(t, y, p, pin_err, gear_err, eff, ramp, wander, k1)
@@ -192,13 +193,13 @@ def simulate_foreign_ramp(
         ("start_speed", start_speed, 0.0),
         ("stop_speed", stop_speed, 0.0),
         ("duration", duration, 0.0),
-        ("start", start, _GUARD),
+        ("start", start, FOREIGN_RECORD_GUARD),
         ("fs", fs, 0.0),
     ):
         if not (math.isfinite(value) and value > least):
             raise RigDataError(f"{key}: expected a finite value > {least:g}; got {value!r}")
-    p, fastest = _parameters(design, float(start_speed), float(drive_torque), float(load_torque))
-    # _pair_sum's clock times p[0] is the mesh phase: with p[0] = z1 / (2 pi) and the pinion's angle as the clock
+    p, fastest = run_parameters(design, float(start_speed), float(drive_torque), float(load_torque))
+    # pair_sum's clock times p[0] is the mesh phase: with p[0] = z1 / (2 pi) and the pinion's angle as the clock
     # (_ramp_derivative), the mesh, its profile errors and a run-out follow the angle, not a fixed speed
     p[0] = design.z1 / (2.0 * math.pi)
     rows = np.zeros((0, 3)) if wander is None else np.asarray(wander, dtype=float).reshape(-1, 3)
@@ -209,11 +210,11 @@ def simulate_foreign_ramp(
     rate = 4.0 * fs
     per_out, step = time_step(fastest, rate)
     n_samples = int(round(duration * fs)) if samples is None else int(samples)
-    first = int(round((start - _GUARD) * rate))
-    guard = int(round(_GUARD * rate))
+    first = int(round((start - FOREIGN_RECORD_GUARD) * rate))
+    guard = int(round(FOREIGN_RECORD_GUARD * rate))
     size = 4 * n_samples + 2 * guard
     out = _integrate_ramp(
-        _static_state(p, design),
+        static_state(p, design),
         p,
         gears.pinion,
         gears.gear,
@@ -339,10 +340,11 @@ def simulate_foreign_runup_campaign(
     for key, value in (("fs", fs), ("run_in", run_in), ("relative_noise", relative_noise)):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise RigDataError(f"{key}: expected a finite number >= 0; got {value!r}")
-    if fs <= 0 or run_in <= _GUARD:
-        raise RigDataError(f"fs, run_in: expected fs > 0 Hz and run_in > {_GUARD:g} s; got {fs!r} and {run_in!r}")
-    wander = _check_wander(speed_wander)
-    table = _ramp_table(design, ramps, None, np.random.default_rng(child_seed(sequence, 0)))
+    if fs <= 0 or run_in <= FOREIGN_RECORD_GUARD:
+        raise RigDataError(f"fs, run_in: expected fs > 0 Hz and run_in > {FOREIGN_RECORD_GUARD:g} s; "
+                           f"got {fs!r} and {run_in!r}")
+    wander = check_speed_wander(speed_wander)
+    table = ramp_table(design, ramps, None, np.random.default_rng(child_seed(sequence, 0)))
     _check_ramp_speeds(design, table, wander, fs)
     effect_vector(effects, design)  # an effect without foreign physics is refused before any ramp
     n_samples = int(np.round(table["duration"] * fs).min())
@@ -352,7 +354,7 @@ def simulate_foreign_runup_campaign(
         rng = np.random.default_rng(ramp_seed)
         begin, end = float(table["start_speed"][index]), float(table["stop_speed"][index])
         start = run_in + rng.uniform(0.0, 60.0 / begin)
-        phases = np.random.default_rng(child_seed(ramp_seed, _WANDER_STREAM)).uniform(0.0, 2.0 * math.pi, len(wander))
+        phases = np.random.default_rng(child_seed(ramp_seed, WANDER_STREAM)).uniform(0.0, 2.0 * math.pi, len(wander))
         rows = _wander_rows(wander, phases)
         duration = float(table["duration"][index])
         _check_monotone(start, duration, begin, end, rows, fs)

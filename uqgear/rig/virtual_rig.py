@@ -66,7 +66,14 @@ from ..physics.effects import Effect
 from ..physics.integration import BATCH_DESIGN_KEYS, simulate
 from ..physics.model import natural_frequencies
 from ..physics.pitch_errors import PitchErrors, draw_pitch_errors, iso1328_single_pitch_tolerance
-from ..uq.seeds import as_seed_sequence, child_seed
+from ..uq.seeds import child_seed
+from .campaign_checks import (
+    campaign_seed,
+    check_encoder_run_out,
+    check_line_interference,
+    check_positive,
+    check_speed_wander,
+)
 from .features import SIGNAL_CHANNELS
 from .format import make_rig_dataset, write_rig
 from .ramp_records import OP_SOURCE
@@ -84,11 +91,11 @@ DEFAULT_RELATIVE_NOISE = 0.02
 #: Keys ``true_parameters`` accepts besides the batch-variable design keys.
 TRUE_PARAMETER_EXTRAS: tuple[str, ...] = ("mesh_stiffness_scale", "adhesion_torque")
 
-# Guard interval simulated on each side of a record so that the filter's
-# edge effects (it is applied to a finite piece) stay outside the record;
-# the outer part of it is tapered.
-_GUARD = 0.025
-_TAPER = 0.015
+#: Guard interval (s) simulated on each side of a record so that the filter's
+#: edge effects (it is applied to a finite piece) stay outside the record.
+RECORD_GUARD = 0.025
+#: Outer part (s) of the guard interval that is tapered before the filter.
+GUARD_TAPER = 0.015
 
 
 def adhesion_torque_bounds(design: Design, drive_torque: ArrayLike,
@@ -186,7 +193,7 @@ def bearing_check_operating_points(design: Design, drive_torque: float = BEARING
         Dimension ``op``: ``pinion_speed``, ``drive_torque``,
         ``adhesion_torque_lower`` and ``adhesion_torque_upper``.
     """
-    torque = _check_positive("drive_torque", drive_torque)
+    torque = check_positive("drive_torque", drive_torque)
     if isinstance(spread, bool) or not isinstance(spread, (int, float)) or not 0.0 <= spread < 1.0:
         raise OperatingPointError(f"spread: expected a relative half-width in [0, 1); got {spread!r}")
     if mode_frequencies is None:
@@ -260,8 +267,18 @@ def _operating_table(design: Design, operating_points: xr.Dataset | Mapping[str,
     return table
 
 
-def _true_model(design: Design, true_parameters: Mapping[str, object] | None) -> tuple[Design, float, dict]:
-    """The true design, stiffness scale and the JSON-ready record of the truth."""
+def true_model(design: Design, true_parameters: Mapping[str, object] | None) -> tuple[Design, float, dict]:
+    """The true design, stiffness scale and the JSON-ready record of the truth.
+
+    ``true_parameters`` takes ``mesh_stiffness_scale`` (a factor in [0.1, 10], 1 where absent),
+    ``adhesion_torque`` (set per run elsewhere, skipped here) and any batch-variable design key;
+    the steady and the run-up virtual rig read their truth through it.
+
+    Raises
+    ------
+    OperatingPointError
+        An unknown key, a scale outside [0.1, 10] or a design value the design refuses.
+    """
     values = dict(true_parameters or {})
     allowed = set(BATCH_DESIGN_KEYS) | set(TRUE_PARAMETER_EXTRAS)
     unknown = sorted(set(values) - allowed)
@@ -293,9 +310,14 @@ def frequency_filter(size: int, rate: float, passband: float, stopband: float,
     return gain * (2j * np.pi * frequency) ** derivative_order
 
 
-def _acquire(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, taper: np.ndarray,
+def band_limited_record(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, taper: np.ndarray,
              passband: float, stopband: float, derivative_order: int) -> np.ndarray:
-    """Band-limit a simulated signal (optionally differentiated) and return it on ``time[keep]``."""
+    """Band-limit a simulated signal (optionally differentiated) and return it on ``time[keep]``.
+
+    The acquisition chain's anti-alias step, shared by the steady and the run-up virtual rig: the
+    signal less its mean, times ``taper``, filtered by :func:`frequency_filter` (``derivative_order``
+    time derivatives taken in the same pass); the mean is added back to an underived signal.
+    """
     mean = signal.mean()
     tapered = (signal - mean) * taper
     response = frequency_filter(signal.size, rate, passband, stopband, derivative_order)
@@ -305,16 +327,17 @@ def _acquire(time: np.ndarray, signal: np.ndarray, rate: float, keep: slice, tap
     return filtered[keep]
 
 
-# Spawn-key indices of the per-run random streams of the nuisances, above
-# those of the record start and the channels' noise so that adding a
-# nuisance leaves every other draw as it was.
-_WANDER_STREAM = 1000
-_INTERFERENCE_STREAM = 1001
+#: Spawn-key index of a run's speed wander phases. The indices of the per-run random streams of the
+#: nuisances lie above those of the record start and the channels' noise, so that adding a nuisance
+#: leaves every other draw as it was.
+WANDER_STREAM = 1000
+#: Spawn-key index of a run's line interference phases.
+INTERFERENCE_STREAM = 1001
 # The pitch errors are the gears', one draw per campaign: a child of the campaign's seed (whose
 # children 1, 2, ... are the runs', so this one is free for campaigns of up to 1001 runs).
 _PITCH_STREAM = 1002
-# Per-run phases of an encoder's mounting run-out (the record start is arbitrary, so its phase is too).
-_ENCODER_STREAM = 1003
+#: Spawn-key index of a run's encoder run-out phases (the record start is arbitrary, so their phase is too).
+ENCODER_STREAM = 1003
 
 
 def _pitch_errors(design: Design, pitch_errors: int | PitchErrors | Mapping[str, ArrayLike] | None,
@@ -349,48 +372,6 @@ def _pitch_errors(design: Design, pitch_errors: int | PitchErrors | Mapping[str,
     return errors, {**record, **errors.to_dict()}
 
 
-def _check_wander(speed_wander: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
-    components = []
-    for index, component in enumerate(speed_wander):
-        try:
-            amplitude, frequency = (float(value) for value in component)
-        except (TypeError, ValueError):
-            raise OperatingPointError(f"speed_wander[{index}]: expected (relative amplitude, frequency in Hz); "
-                                      f"got {component!r}") from None
-        if not (math.isfinite(amplitude) and 0.0 <= amplitude < 0.2):
-            raise OperatingPointError(f"speed_wander[{index}]: expected a relative amplitude in [0, 0.2); "
-                                      f"got {amplitude!r}")
-        if not (math.isfinite(frequency) and frequency > 0.0):
-            raise OperatingPointError(f"speed_wander[{index}]: expected a frequency > 0 Hz; got {frequency!r}")
-        components.append((amplitude, frequency))
-    return components
-
-
-def _check_interference(line_interference: Mapping[float, float] | None, fs: float) -> dict[float, float]:
-    lines = {}
-    for frequency, amplitude in (line_interference or {}).items():
-        if isinstance(frequency, bool) or not isinstance(frequency, (int, float)) or not 0 < frequency < fs / 2:
-            raise OperatingPointError(f"line_interference: expected frequencies in (0, fs/2) Hz; got {frequency!r}")
-        if isinstance(amplitude, bool) or not isinstance(amplitude, (int, float)) or not math.isfinite(amplitude) \
-                or amplitude < 0:
-            raise OperatingPointError(f"line_interference.{frequency:g}: expected an amplitude >= 0 m s-2; "
-                                      f"got {amplitude!r}")
-        lines[float(frequency)] = float(amplitude)
-    return lines
-
-
-def _check_encoder(encoder_run_out: Mapping[str, float] | None) -> dict[str, float]:
-    checked = {}
-    for shaft, amplitude in (encoder_run_out or {}).items():
-        if shaft not in ("pinion", "gear"):
-            raise OperatingPointError(f"encoder_run_out: expected the shafts 'pinion' and/or 'gear'; got {shaft!r}")
-        if isinstance(amplitude, bool) or not isinstance(amplitude, (int, float)) or not 0.0 <= amplitude < 1e-3:
-            raise OperatingPointError(f"encoder_run_out.{shaft}: expected an amplitude in [0, 1e-3) m; "
-                                      f"got {amplitude!r}")
-        checked[shaft] = float(amplitude)
-    return checked
-
-
 def _encoder_lines(encoder: Mapping[str, float], design: Design, speed: float, sample_time: np.ndarray,
                    rng: np.random.Generator) -> np.ndarray:
     """The TE an eccentric encoder mounting adds: once per revolution of its shaft, at the shaft's actual angle."""
@@ -415,17 +396,6 @@ def add_interference(signal: np.ndarray, interference: Mapping[float, float], re
     for frequency, amplitude in interference.items():
         signal = signal + amplitude * np.cos(2.0 * math.pi * frequency * record_time + rng.uniform(0.0, 2.0 * math.pi))
     return signal
-
-
-def _check_positive(name: str, value: object, lowest: float = 0.0) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)) or float(value) <= lowest:
-        raise OperatingPointError(f"{name}: expected a finite number > {lowest:g}; got {value!r}")
-    return float(value)
-
-
-def _as_seed(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
-    return np.random.SeedSequence() if seed is None else as_seed_sequence(seed, error=OperatingPointError)
 
 
 def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str, ArrayLike] | None = None, *,
@@ -555,9 +525,9 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
     >>> bool((again["te"] == campaign["te"]).all())
     True
     """
-    seed_sequence = _as_seed(seed)
-    fs = _check_positive("fs", fs)
-    duration = _check_positive("duration", duration)
+    seed_sequence = campaign_seed(seed)
+    fs = check_positive("fs", fs)
+    duration = check_positive("duration", duration)
     if isinstance(run_in, bool) or not isinstance(run_in, (int, float)) or not math.isfinite(run_in) or run_in < 0:
         raise OperatingPointError(f"run_in: expected a duration >= 0 s; got {run_in!r}")
     relative_noise = float(relative_noise)
@@ -567,10 +537,10 @@ def simulate_campaign(design: Design, operating_points: xr.Dataset | Mapping[str
         raise OperatingPointError(f"oversampling: expected an integer >= 2; got {oversampling!r}")
     channels = list(channels)
     noise_std = _check_noise_std(noise_std, channels)
-    wander = _check_wander(speed_wander)
-    interference = _check_interference(line_interference, fs)
-    encoder = _check_encoder(encoder_run_out)
-    true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
+    wander = check_speed_wander(speed_wander)
+    interference = check_line_interference(line_interference, fs)
+    encoder = check_encoder_run_out(encoder_run_out)
+    true_design, stiffness_scale, true_record = true_model(design, true_parameters)
     pitch, pitch_record = _pitch_errors(design, pitch_errors, seed_sequence)
     top_rng = np.random.default_rng(child_seed(seed_sequence, 0))
     # one value per run, checked by _operating_table
@@ -691,41 +661,41 @@ def _record_run(design: Design, plant: _TruePlant, acquisition: _Acquisition, sp
     op_seed, *channel_seeds = (child_seed(run_seed, index) for index in range(1 + len(channels)))
     # arbitrary record start: anywhere within a pinion revolution after the run-in
     # (never inside the filter's guard interval at the start of the simulation)
-    start = max(acquisition.run_in, _GUARD) + np.random.default_rng(op_seed).uniform(0.0, 60.0 / speed)
+    start = max(acquisition.run_in, RECORD_GUARD) + np.random.default_rng(op_seed).uniform(0.0, 60.0 / speed)
     per_period = int(math.ceil(acquisition.oversampling * acquisition.fs / mesh_frequency))
-    first_period = max(int(math.floor((start - _GUARD - wander_shift) * mesh_frequency)), 0)
-    last_period = int(math.ceil((start + duration + _GUARD + wander_shift) * mesh_frequency)) + 1
+    first_period = max(int(math.floor((start - RECORD_GUARD - wander_shift) * mesh_frequency)), 0)
+    last_period = int(math.ceil((start + duration + RECORD_GUARD + wander_shift) * mesh_frequency)) + 1
     sim = simulate(plant.design, speed, torques[0], torques[1],
                    n_periods=last_period, keep_periods=last_period - first_period,
                    samples_per_period=per_period, mesh_stiffness_scale=plant.stiffness_scale, effects=plant.effects,
                    steps_per_mode=plant.steps_per_mode, pitch_errors=plant.pitch)
     time = sim["time"].values
     rate = per_period * mesh_frequency
-    keep = slice(int(np.searchsorted(time, start - 0.5 * _GUARD - wander_shift)),
-                 int(np.searchsorted(time, start + duration + 0.5 * _GUARD + wander_shift)))
+    keep = slice(int(np.searchsorted(time, start - 0.5 * RECORD_GUARD - wander_shift)),
+                 int(np.searchsorted(time, start + duration + 0.5 * RECORD_GUARD + wander_shift)))
     # taper only the outer part of the guard intervals, far from the record
     taper = np.ones(time.size)
-    ramp_left = time < time[0] + _TAPER
-    taper[ramp_left] = 0.5 * (1.0 - np.cos(np.pi * (time[ramp_left] - time[0]) / _TAPER))
-    ramp_right = time > time[-1] - _TAPER
-    taper[ramp_right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[ramp_right]) / _TAPER))
+    ramp_left = time < time[0] + GUARD_TAPER
+    taper[ramp_left] = 0.5 * (1.0 - np.cos(np.pi * (time[ramp_left] - time[0]) / GUARD_TAPER))
+    ramp_right = time > time[-1] - GUARD_TAPER
+    taper[ramp_right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[ramp_right]) / GUARD_TAPER))
     sample_time = start + record_time
     speed_ratio = np.ones(n_samples)
     if acquisition.wander:
-        phases = np.random.default_rng(child_seed(run_seed, _WANDER_STREAM)).uniform(
+        phases = np.random.default_rng(child_seed(run_seed, WANDER_STREAM)).uniform(
             0.0, 2.0 * math.pi, len(acquisition.wander))
         for (amplitude, frequency), phase in zip(acquisition.wander, phases):
             omega = 2.0 * math.pi * frequency
             sample_time = sample_time + amplitude / omega * (math.cos(phase) - np.cos(omega * record_time + phase))
             speed_ratio = speed_ratio + amplitude * np.sin(omega * record_time + phase)
-    interference_rng = np.random.default_rng(child_seed(run_seed, _INTERFERENCE_STREAM))
+    interference_rng = np.random.default_rng(child_seed(run_seed, INTERFERENCE_STREAM))
     records = {}
     for name, channel_seed in zip(channels, channel_seeds):
         if name == "te":
             raw, order = sim["te"].values, 0
         else:
             raw, order = sim["y1" if name == "acc_pinion" else "y2"].values, 2
-        filtered = _acquire(time, raw, rate, keep, taper, acquisition.passband, acquisition.stopband, order)
+        filtered = band_limited_record(time, raw, rate, keep, taper, acquisition.passband, acquisition.stopband, order)
         clean = CubicSpline(time[keep], filtered)(sample_time)
         if order == 2:
             clean = clean * speed_ratio**2
@@ -736,7 +706,7 @@ def _record_run(design: Design, plant: _TruePlant, acquisition: _Acquisition, sp
             noisy = add_interference(noisy, acquisition.interference, record_time, interference_rng)
         if name == "te" and acquisition.encoder:
             noisy = noisy + _encoder_lines(acquisition.encoder, design, speed, sample_time,
-                                           np.random.default_rng(child_seed(run_seed, _ENCODER_STREAM)))
+                                           np.random.default_rng(child_seed(run_seed, ENCODER_STREAM)))
         records[name] = noisy - noisy.mean() if name == "te" else noisy
     return records
 
@@ -787,4 +757,5 @@ def synth_rig(design: Design, out_path: str | os.PathLike[str], *, effects: Sequ
 __all__ = ["simulate_campaign", "synth_rig", "default_operating_points", "adhesion_torque_bounds",
            "true_parameters_of", "bearing_check_operating_points", "BEARING_CHECK_DRIVE_TORQUE",
            "BEARING_CHECK_SPEED_FACTORS", "DEFAULT_PINION_SPEEDS", "DEFAULT_DRIVE_TORQUES", "ADHESION_SPREAD",
-           "DEFAULT_RELATIVE_NOISE"]
+           "DEFAULT_RELATIVE_NOISE", "RECORD_GUARD", "GUARD_TAPER", "WANDER_STREAM", "INTERFERENCE_STREAM",
+           "ENCODER_STREAM", "band_limited_record", "true_model"]

@@ -50,25 +50,27 @@ from ..physics.effects import EFFECTS, Effect
 from ..physics.runup import simulate_runup
 from ..physics.speed_profile import SpeedProfile, SpeedProfileError
 from ..uq.seeds import child_seed
+from .campaign_checks import (
+    campaign_seed,
+    check_encoder_run_out,
+    check_line_interference,
+    check_positive,
+    check_speed_wander,
+)
 from .format import make_ramp_dataset, write_rig
 from .sampling import SIGNAL_CHANNELS
 from .virtual_rig import (
-    _ENCODER_STREAM,
-    _GUARD,
-    _INTERFERENCE_STREAM,
-    _TAPER,
-    _WANDER_STREAM,
     DEFAULT_RELATIVE_NOISE,
-    _acquire,
-    _as_seed,
-    _check_encoder,
-    _check_interference,
-    _check_positive,
-    _check_wander,
-    _true_model,
+    ENCODER_STREAM,
+    GUARD_TAPER,
+    INTERFERENCE_STREAM,
+    RECORD_GUARD,
+    WANDER_STREAM,
     add_interference,
     adhesion_torque_bounds,
+    band_limited_record,
     encoder_lines_at,
+    true_model,
 )
 
 #: Keys of a ramp table: required, and optional (``rate`` or ``duration`` gives the length).
@@ -76,8 +78,18 @@ RAMP_KEYS: tuple[str, ...] = ("start_speed", "stop_speed", "drive_torque")
 OPTIONAL_RAMP_KEYS: tuple[str, ...] = ("rate", "duration", "adhesion_torque_lower", "adhesion_torque_upper")
 
 
-def _ramp_table(design: Design, ramps: Mapping[str, ArrayLike], adhesion: ArrayLike | None, rng) -> dict:
-    """Per-ramp arrays: speeds, duration (s), torques and the true adhesion torque."""
+def ramp_table(design: Design, ramps: Mapping[str, ArrayLike], adhesion: ArrayLike | None, rng) -> dict:
+    """Per-ramp arrays: speeds, duration (s), torques and the true adhesion torque.
+
+    ``ramps`` holds :data:`RAMP_KEYS` and optionally :data:`OPTIONAL_RAMP_KEYS` per ramp; where
+    ``adhesion`` is not given the true adhesion torque of each ramp is drawn from ``rng`` inside its
+    a-priori bounds. The virtual and the foreign rig's run-ups read their ramps through it.
+
+    Raises
+    ------
+    OperatingPointError
+        A key missing or unknown, or a value outside its range, naming the key.
+    """
     if not isinstance(ramps, Mapping):
         raise OperatingPointError(f"ramps: expected a mapping of per-ramp arrays; got {type(ramps).__name__}")
     unknown = sorted(set(ramps) - set(RAMP_KEYS) - set(OPTIONAL_RAMP_KEYS))
@@ -177,15 +189,15 @@ def _record_ramp(
     rate = fs * oversampling
     keep = slice(first, first + n_samples * oversampling, oversampling)
     taper = np.ones(time.size)
-    left, right = time < time[0] + _TAPER, time > time[-1] - _TAPER
-    taper[left] = 0.5 * (1.0 - np.cos(np.pi * (time[left] - time[0]) / _TAPER))
-    taper[right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[right]) / _TAPER))
+    left, right = time < time[0] + GUARD_TAPER, time > time[-1] - GUARD_TAPER
+    taper[left] = 0.5 * (1.0 - np.cos(np.pi * (time[left] - time[0]) / GUARD_TAPER))
+    taper[right] = 0.5 * (1.0 - np.cos(np.pi * (time[-1] - time[right]) / GUARD_TAPER))
     record_time = np.arange(n_samples) / fs
-    interference_rng = np.random.default_rng(child_seed(ramp_seed, _INTERFERENCE_STREAM))
+    interference_rng = np.random.default_rng(child_seed(ramp_seed, INTERFERENCE_STREAM))
     out = {"tachometer": sim["pinion_speed"].values[keep]}
     for index, name in enumerate(settings["channels"]):
         raw, order = (sim["te"].values, 0) if name == "te" else (sim["y1" if name == "acc_pinion" else "y2"].values, 2)
-        clean = _acquire(time, raw, rate, keep, taper, fs / 2.56, fs / 2.0, order)
+        clean = band_limited_record(time, raw, rate, keep, taper, fs / 2.56, fs / 2.0, order)
         rms = float(np.sqrt(np.mean((clean - clean.mean()) ** 2)))
         sigma = math.hypot(settings["noise_std"].get(name, 0.0), settings["relative_noise"] * rms)
         noisy = clean + sigma * np.random.default_rng(child_seed(ramp_seed, 1 + index)).standard_normal(n_samples)
@@ -193,7 +205,7 @@ def _record_ramp(
             noisy = add_interference(noisy, settings["interference"], record_time, interference_rng)
         if name == "te" and settings["encoder"]:
             angle = sim["pinion_angle"].values[keep]
-            rng = np.random.default_rng(child_seed(ramp_seed, _ENCODER_STREAM))
+            rng = np.random.default_rng(child_seed(ramp_seed, ENCODER_STREAM))
             noisy = noisy + encoder_lines_at(settings["encoder"], design, angle, rng)
         out[name] = noisy - noisy.mean() if name == "te" else noisy
     return out
@@ -205,8 +217,8 @@ def _simulate_ramp(design: Design, plant: tuple[Design, float, Sequence[Effect],
                    ramp_seed: np.random.SeedSequence) -> dict[str, np.ndarray]:
     """One ramp through the true plant (design, stiffness scale, effects, steps per mode), recorded by the rig."""
     true_design, stiffness_scale, effects, steps_per_mode = plant
-    guard = math.ceil(_GUARD * fs) / fs
-    phases = np.random.default_rng(child_seed(ramp_seed, _WANDER_STREAM)).uniform(0.0, 2.0 * math.pi, len(wander))
+    guard = math.ceil(RECORD_GUARD * fs) / fs
+    phases = np.random.default_rng(child_seed(ramp_seed, WANDER_STREAM)).uniform(0.0, 2.0 * math.pi, len(wander))
     # every ramp keeps the samples of the shortest (the format's ramps share ramp_time)
     profile = _profile(
         float(table["start_speed"][ramp]),
@@ -319,8 +331,8 @@ def simulate_runup_campaign(
     >>> [round(float(speed)) for speed in ops["pinion_speed"]]
     [1533, 1600, 1667]
     """
-    seed_sequence = _as_seed(seed)
-    fs = _check_positive("fs", fs)
+    seed_sequence = campaign_seed(seed)
+    fs = check_positive("fs", fs)
     channels = list(channels)
     noise_std = dict(noise_std or {})
     relative_noise = float(relative_noise)
@@ -329,13 +341,13 @@ def simulate_runup_campaign(
         "channels": channels,
         "noise_std": noise_std,
         "relative_noise": relative_noise,
-        "interference": _check_interference(line_interference, fs),
-        "encoder": _check_encoder(encoder_run_out),
+        "interference": check_line_interference(line_interference, fs),
+        "encoder": check_encoder_run_out(encoder_run_out),
     }
-    wander = _check_wander(speed_wander)
-    true_design, stiffness_scale, true_record = _true_model(design, true_parameters)
+    wander = check_speed_wander(speed_wander)
+    true_design, stiffness_scale, true_record = true_model(design, true_parameters)
     adhesion = (true_parameters or {}).get("adhesion_torque")
-    table = _ramp_table(design, ramps, adhesion, np.random.default_rng(child_seed(seed_sequence, 0)))  # type: ignore[arg-type]
+    table = ramp_table(design, ramps, adhesion, np.random.default_rng(child_seed(seed_sequence, 0)))  # type: ignore[arg-type]
     durations = np.round(table["duration"] * fs).astype(int)
     n_samples = int(durations.min())
     fastest = float(np.maximum(table["start_speed"], table["stop_speed"]).max()) * (1.0 + sum(a for a, _ in wander))
@@ -454,4 +466,5 @@ __all__ = [
     "parse_ramps",
     "synth_runup_rig",
     "join_campaigns",
+    "ramp_table",
 ]

@@ -97,7 +97,8 @@ def _variable_list() -> Checker:
     return list_of(choice(*VARIABLES), unique=True, what="a list of parameter names")
 
 
-_COMMON_KEYS: dict[str, Checker] = {
+#: Keys every analysis entry may have, whatever its type, and the check of each.
+COMMON_ANALYSIS_KEYS: dict[str, Checker] = {
     "type": string(),
     "name": identifier(),
     "description": string(),
@@ -312,7 +313,8 @@ ANALYSIS_DEFAULTS: dict[str, dict[str, Any]] = {
         "qois": ("peak_mesh_force", "dynamic_load_factor", "dte_rms"),
     },
 }
-_REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
+#: Keys an analysis entry of a type must have.
+REQUIRED_ANALYSIS_KEYS: dict[str, tuple[str, ...]] = {
     "bifurcation": ("parameter",),
     "continuation": ("parameter",),
     "regime_map": ("axes",),

@@ -16,17 +16,17 @@ from ..common.errors import StudyError
 from ..dynamics.stress_qois import STRESS_QOIS
 from ..physics.rating import RatingSettings
 from .analysis_schemas import (
-    _COMMON_KEYS,
-    _REQUIRED_KEYS,
     ANALYSIS_DEFAULTS,
     ANALYSIS_SCHEMAS,
+    COMMON_ANALYSIS_KEYS,
     INTERVAL_TYPES,
     MAX_SIMULATE_RUNS,
     PROPAGATING_TYPES,
+    REQUIRED_ANALYSIS_KEYS,
 )
-from .checkers import _fail, check_mapping, choice
-from .parameters import UncertainParameter, ValueSpec, _operating_points
-from .settings import SimulationSettings, _simulation
+from .checkers import check_mapping, choice, expectation_error
+from .parameters import UncertainParameter, ValueSpec, parse_operating_points
+from .settings import SimulationSettings, parse_simulation_settings
 
 
 @dataclass(frozen=True)
@@ -295,25 +295,31 @@ def _with_stresses(
     return dataclasses.replace(simulation, stresses=RatingSettings.from_mapping(options.get("rating")))
 
 
-def _analysis(
+def parse_analysis(
     raw: Any,
     index: int,
     study_points: Mapping[str, ValueSpec],
     study_simulation: SimulationSettings,
     uncertain: Mapping[str, UncertainParameter],
 ) -> AnalysisSpec:
+    """The analysis ``analyses[index]`` of a study as an :class:`AnalysisSpec`.
+
+    Its keys are checked against the schema of its ``type``; its operating points and simulation settings
+    are laid over the study's, and the parameters of a type that propagates uncertainty default to the
+    study's uncertain ones it does not fix. Refusals are :class:`StudyError` naming the entry.
+    """
     path = f"analyses[{index}]"
     if not isinstance(raw, Mapping):
-        raise _fail(path, "a mapping with a 'type' key", raw)
+        raise expectation_error(path, "a mapping with a 'type' key", raw)
     if "type" not in raw:
         raise StudyError(f"{path}.type: missing; expected one of {', '.join(ANALYSIS_SCHEMAS)}")
     kind: str = choice(*ANALYSIS_SCHEMAS)(raw["type"], f"{path}.type")
-    schema = {**_COMMON_KEYS, **ANALYSIS_SCHEMAS[kind]}
-    values = check_mapping(raw, path, schema, required=_REQUIRED_KEYS.get(kind, ()))
+    schema = {**COMMON_ANALYSIS_KEYS, **ANALYSIS_SCHEMAS[kind]}
+    values = check_mapping(raw, path, schema, required=REQUIRED_ANALYSIS_KEYS.get(kind, ()))
     options = dict(ANALYSIS_DEFAULTS[kind])
-    options.update({key: value for key, value in values.items() if key not in _COMMON_KEYS})
+    options.update({key: value for key, value in values.items() if key not in COMMON_ANALYSIS_KEYS})
     if kind in PROPAGATING_TYPES and "parameters" not in options:
-        overridden = _operating_points(raw.get("operating_points"), f"{path}.operating_points")
+        overridden = parse_operating_points(raw.get("operating_points"), f"{path}.operating_points")
         options["parameters"] = tuple(
             name
             for name, parameter in uncertain.items()
@@ -322,15 +328,15 @@ def _analysis(
         if not options["parameters"]:
             raise StudyError(f"{path}.parameters: no uncertain parameters to propagate; define some under 'uncertain'")
     if kind == "runup" and "parameters" not in options:
-        overridden = _operating_points(raw.get("operating_points"), f"{path}.operating_points")
+        overridden = parse_operating_points(raw.get("operating_points"), f"{path}.operating_points")
         # every interval of the study, like the interval analyses; a run-up without intervals runs one case
         options["parameters"] = tuple(
             name for name, parameter in uncertain.items() if name not in overridden and parameter.is_interval
         )
     points = dict(study_points)
-    points.update(_operating_points(raw.get("operating_points"), f"{path}.operating_points"))
+    points.update(parse_operating_points(raw.get("operating_points"), f"{path}.operating_points"))
     simulation = _with_stresses(
-        kind, options, _simulation(raw.get("simulation"), f"{path}.simulation", study_simulation), path
+        kind, options, parse_simulation_settings(raw.get("simulation"), f"{path}.simulation", study_simulation), path
     )
     if kind == "runup" and "pinion_speed" not in options and "pinion_speed" in points and points["pinion_speed"].sweep:
         # without a span of its own, a run-up covers the study's speed sweep

@@ -19,11 +19,16 @@ _NAME_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
 Checker = Callable[[Any, str], Any]
 
 
-def _fail(path: str, expected: str, value: Any) -> StudyError:
+def expectation_error(path: str, expected: str, value: Any) -> StudyError:
+    """The :class:`StudyError` for a study entry at ``path``: what was expected and, shortened, what came.
+
+    Every check of a study file words its refusals through it: ``"<path>: expected <expected>; got <value>"``.
+    """
     return StudyError(f"{path}: expected {expected}; got {shown(value)}")
 
 
-def _type_name(value: Any) -> str:
+def value_kind(value: Any) -> str:
+    """How a refusal names ``value``: 'a mapping', 'a list', or the value itself, shortened."""
     return "a mapping" if isinstance(value, Mapping) else ("a list" if isinstance(value, list) else shown(value))
 
 
@@ -49,19 +54,19 @@ def number(
 
     def check(value: Any, path: str) -> float | int:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         if not math.isfinite(value):
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         if integer:
             if float(value) != int(value):
-                raise _fail(path, expected, value)
+                raise expectation_error(path, expected, value)
             value = int(value)
         else:
             value = float(value)
         if lower is not None and (value < lower or (lower_open and value == lower)):
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         if upper is not None and value > upper:
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         return value
 
     check.expected = expected  # type: ignore[attr-defined]
@@ -73,7 +78,7 @@ def _checker(accepts: Callable[[Any], bool], expected: str) -> Checker:
 
     def check(value: Any, path: str) -> Any:
         if not accepts(value):
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         return value
 
     return check
@@ -108,10 +113,10 @@ def list_of(item: Checker, *, min_length: int = 1, unique: bool = False, what: s
     def check(value: Any, path: str) -> tuple:
         items = value if isinstance(value, list) else [value]
         if isinstance(value, (Mapping, tuple)) or value is None:
-            raise _fail(path, what, value)
+            raise expectation_error(path, what, value)
         checked = tuple(item(entry, f"{path}[{index}]") for index, entry in enumerate(items))
         if len(checked) < min_length:
-            raise _fail(path, f"{what} of at least {min_length} item(s)", value)
+            raise expectation_error(path, f"{what} of at least {min_length} item(s)", value)
         if unique and len(set(checked)) != len(checked):
             repeated = next(entry for entry in checked if checked.count(entry) > 1)
             raise StudyError(f"{path}: expected distinct entries; {repeated!r} is repeated")
@@ -126,7 +131,7 @@ def check_mapping(
     """Validate a mapping against ``schema``: unknown keys, missing keys, each value."""
     where = path or "study"
     if not isinstance(value, Mapping):
-        raise StudyError(f"{where}: expected a mapping with keys {', '.join(schema)}; got {_type_name(value)}")
+        raise StudyError(f"{where}: expected a mapping with keys {', '.join(schema)}; got {value_kind(value)}")
     prefix = f"{path}." if path else ""
     for key in value:
         if not isinstance(key, str) or key not in schema:
@@ -149,10 +154,10 @@ def class_range(lowest: float, highest: float) -> Checker:
             or len(value) != 2
             or not all(isinstance(entry, (int, float)) and not isinstance(entry, bool) for entry in value)
         ):
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         low, high = float(value[0]), float(value[1])
         if not lowest <= low <= high <= highest:
-            raise _fail(path, expected, value)
+            raise expectation_error(path, expected, value)
         return low, high
 
     return check

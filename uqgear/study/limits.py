@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from .checkers import number
-from .settings import _SIMULATION_SCHEMA, check_kept_within
+from .settings import SIMULATION_SCHEMA, check_kept_within
 from .variables import OPERATING_VARIABLES
 
 #: Figure resolution of reports, dots per inch (the study key ``outputs.dpi``).
@@ -40,8 +40,8 @@ def check_run_length(n_periods: Any, keep_periods: Any, *, where: tuple[str, str
 
     ``where`` names the two values in messages.
     """
-    total = _SIMULATION_SCHEMA["n_periods"](n_periods, where[0])
-    kept = _SIMULATION_SCHEMA["keep_periods"](keep_periods, where[1])
+    total = SIMULATION_SCHEMA["n_periods"](n_periods, where[0])
+    kept = SIMULATION_SCHEMA["keep_periods"](keep_periods, where[1])
     check_kept_within(total, kept, where[0], where[1])
     return total, kept
 

@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 
 from ..common.errors import StudyError, UqgearError, shown
-from ..physics.design import _DESIGN_KEYS, STANDARD_GRAVITY, Design
+from ..physics.design import STANDARD_GRAVITY, Design, design_key_bounds
 from ..uq.parameter_space import ParameterSpace
 from ..uq.parameters import Distribution, Interval
-from .checkers import Checker, _fail, check_mapping, choice, list_of, number, string
+from .checkers import Checker, check_mapping, choice, expectation_error, list_of, number, string
 from .variables import OPERATING_VARIABLES, VARIABLE_DESIGN_KEYS, VARIABLES, variable_unit, variable_units_short
 
 # ---------------------------------------------------------------------------- value specs
@@ -76,21 +76,28 @@ def _value_spec(name: str, raw: Any, path: str) -> ValueSpec:
     elif isinstance(raw, (int, float)) and not isinstance(raw, bool):
         result = ValueSpec(name, (element(raw, path),), False)
     else:
-        raise _fail(path, f"a number, a list of numbers or {{start, stop, num}} in {unit}", raw)
+        raise expectation_error(path, f"a number, a list of numbers or {{start, stop, num}} in {unit}", raw)
     if name in VARIABLE_DESIGN_KEYS:
         # the design's own plausibility ranges apply to swept design keys
-        lower, upper, unit_text, _ = _DESIGN_KEYS[name]
+        lower, upper = design_key_bounds(name)
+        unit_text = variable_unit(name)
         for value in result.values:
             if not lower <= value <= upper:
                 raise StudyError(f"{path}: expected values in [{lower:g}, {upper:g}] {unit_text}; got {shown(value)}")
     return result
 
 
-def _operating_points(raw: Any, path: str) -> dict[str, ValueSpec]:
+def parse_operating_points(raw: Any, path: str) -> dict[str, ValueSpec]:
+    """The ``operating_points`` entry at ``path`` as one :class:`ValueSpec` per variable (empty where absent).
+
+    A variable is an operating variable or a batch-variable design key, given as a number, a list of
+    numbers or ``{start, stop, num}``; a swept design key must stay inside the design's plausible range.
+    Refusals are :class:`StudyError` naming the entry.
+    """
     if raw is None:
         return {}
     if not isinstance(raw, Mapping):
-        raise _fail(
+        raise expectation_error(
             path,
             f"a mapping of variable to value(s) (variables: {', '.join(OPERATING_VARIABLES)} or a design key)",
             raw,
@@ -200,14 +207,20 @@ class UncertainParameter:
 
 def _bounds(raw: Any, path: str, element: Checker, unit: str) -> tuple[float, float]:
     if not isinstance(raw, list) or len(raw) != 2:
-        raise _fail(path, f"[lower, upper] in {unit}", raw)
+        raise expectation_error(path, f"[lower, upper] in {unit}", raw)
     lower, upper = element(raw[0], f"{path}[0]"), element(raw[1], f"{path}[1]")
     if not lower < upper:
         raise StudyError(f"{path}: expected lower < upper; got [{lower:g}, {upper:g}]")
     return lower, upper
 
 
-def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) -> UncertainParameter:
+def parse_uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) -> UncertainParameter:
+    """The uncertain parameter ``name`` from its entry at ``path``: an interval or a distribution.
+
+    The adhesion torque may instead be given by the adhesion coefficient range, the axle load and the wheel
+    radius, with the ``design``'s operation filling what the entry leaves out. Refusals are
+    :class:`StudyError` naming the entry.
+    """
     unit = variable_unit(name)
     element = number(unit)
     if name == "adhesion_torque" and isinstance(raw, Mapping) and "interval" not in raw and "distribution" not in raw:
@@ -239,7 +252,7 @@ def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) 
             ),
         )
     if not isinstance(raw, Mapping):
-        raise _fail(
+        raise expectation_error(
             path,
             "a mapping with 'interval: [lower, upper]' or 'distribution: NAME'"
             + (" or adhesion_coefficient/axle_load/wheel_radius" if name == "adhesion_torque" else ""),
@@ -271,10 +284,11 @@ def _uncertain_parameter(name: str, raw: Any, path: str, design: Design | None) 
     raise StudyError(f"{path}: expected {expected}; got keys {', '.join(map(str, raw)) or 'none'}")
 
 
-def _check_parameter_range(parameter: UncertainParameter, path: str) -> None:
+def check_parameter_range(parameter: UncertainParameter, path: str) -> None:
     """Bounds of an uncertain design key or operating variable must be physically plausible."""
     if parameter.name in VARIABLE_DESIGN_KEYS:
-        lower, upper, unit, _ = _DESIGN_KEYS[parameter.name]
+        lower, upper = design_key_bounds(parameter.name)
+        unit = variable_unit(parameter.name)
     elif parameter.name in OPERATING_VARIABLES:
         unit, lower, upper = OPERATING_VARIABLES[parameter.name]
     else:  # pragma: no cover - names are checked before

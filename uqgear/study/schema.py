@@ -35,14 +35,20 @@ import numpy as np
 from ..common.errors import StudyError, UqgearError
 from ..common.resources import bundled_by_name, bundled_names
 from ..common.yamlio import YAMLError, load_yaml
-from ..physics.design import _DESIGN_KEYS, Design, load_design
+from ..physics.design import DESIGN_KEYS, Design, load_design
 from .analysis_schemas import RIG_TYPES
-from .analysis_specs import AnalysisSpec, _analysis
-from .checkers import _fail, _type_name, boolean, check_mapping, identifier, number, string
+from .analysis_specs import AnalysisSpec, parse_analysis
+from .checkers import boolean, check_mapping, expectation_error, identifier, number, string, value_kind
 from .limits import DPI
 from .model_inputs import CalibratedInput, EffectsInput, check_order, parse_calibrated, parse_effects
-from .parameters import UncertainParameter, ValueSpec, _check_parameter_range, _operating_points, _uncertain_parameter
-from .settings import GUIDED_STARTS, SimulationSettings, _simulation
+from .parameters import (
+    UncertainParameter,
+    ValueSpec,
+    check_parameter_range,
+    parse_operating_points,
+    parse_uncertain_parameter,
+)
+from .settings import GUIDED_STARTS, SimulationSettings, parse_simulation_settings
 from .variables import OPERATING_VARIABLES, VARIABLES
 
 
@@ -153,15 +159,15 @@ def _design(raw: Any, base_dir: Path | None) -> tuple[Design, str, dict[str, Any
     elif isinstance(raw, Mapping):
         spec = check_mapping(raw, "design", {"name": string(), "path": string(), "overrides": lambda v, p: v})
     else:
-        raise _fail("design", "a bundled design name, or a mapping with name or path and overrides", raw)
+        raise expectation_error("design", "a bundled design name, or a mapping with name or path and overrides", raw)
     if ("name" in spec) == ("path" in spec):
         raise StudyError("design: expected exactly one of name (a bundled design or a file) and path")
     overrides = spec.get("overrides") or {}
     if not isinstance(overrides, Mapping):
-        raise _fail("design.overrides", "a mapping of design keys to values", overrides)
+        raise expectation_error("design.overrides", "a mapping of design keys to values", overrides)
     for key in overrides:
-        if key not in _DESIGN_KEYS and key != "motor_pole_pairs":
-            raise StudyError(f"design.overrides.{key}: unknown design key; expected one of {', '.join(_DESIGN_KEYS)}")
+        if key not in DESIGN_KEYS and key != "motor_pole_pairs":
+            raise StudyError(f"design.overrides.{key}: unknown design key; expected one of {', '.join(DESIGN_KEYS)}")
     source = spec["path"] if "path" in spec else spec["name"]  # exactly one of them, checked above
     location: str | Path = source
     candidate = Path(source)
@@ -222,8 +228,8 @@ def _uncertain(uncertain_raw: Mapping[str, Any], points: Mapping[str, Any], desi
                 f"uncertain.{key}: also given in operating_points; give a study-wide "
                 "value in one place (an analysis may fix it in its own operating_points)"
             )
-        parameter = _uncertain_parameter(key, entry, f"uncertain.{key}", design)
-        _check_parameter_range(parameter, f"uncertain.{key}")
+        parameter = parse_uncertain_parameter(key, entry, f"uncertain.{key}", design)
+        check_parameter_range(parameter, f"uncertain.{key}")
         uncertain[key] = parameter
     return uncertain
 
@@ -232,8 +238,10 @@ def _analyses(analyses_raw: Any, points: Mapping[str, Any], simulation: Simulati
               uncertain: Mapping[str, Any]) -> tuple[AnalysisSpec, ...]:
     """The analyses, a non-empty list with unique names."""
     if not isinstance(analyses_raw, list) or not analyses_raw:
-        raise _fail("analyses", "a non-empty list of analyses", analyses_raw)
-    analyses = tuple(_analysis(entry, index, points, simulation, uncertain) for index, entry in enumerate(analyses_raw))
+        raise expectation_error("analyses", "a non-empty list of analyses", analyses_raw)
+    analyses = tuple(
+        parse_analysis(entry, index, points, simulation, uncertain) for index, entry in enumerate(analyses_raw)
+    )
     names = [spec.name for spec in analyses]
     for index, spec in enumerate(analyses):
         if names.count(spec.name) > 1:
@@ -288,7 +296,7 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
         The first problem found, with its key path.
     """
     if not isinstance(raw, Mapping):
-        raise StudyError(f"study: expected a mapping with keys {', '.join(_TOP_LEVEL_KEYS)}; got {_type_name(raw)}")
+        raise StudyError(f"study: expected a mapping with keys {', '.join(_TOP_LEVEL_KEYS)}; got {value_kind(raw)}")
     for key in raw:
         if key not in _TOP_LEVEL_KEYS:
             raise StudyError(f"{key}: unknown key; expected one of {', '.join(_TOP_LEVEL_KEYS)}")
@@ -298,10 +306,12 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
     description = string()(raw.get("description", ""), "description")
     seed = number("", 0, 2**63 - 1, integer=True)(raw.get("seed", 0), "seed")
     design, design_source, overrides = _design(raw.get("design"), Path(base_dir) if base_dir else None)
-    points = _operating_points(raw.get("operating_points"), "operating_points")
+    points = parse_operating_points(raw.get("operating_points"), "operating_points")
     uncertain_raw = raw.get("uncertain") or {}
     if not isinstance(uncertain_raw, Mapping):
-        raise _fail("uncertain", "a mapping of parameter name to its interval or distribution", uncertain_raw)
+        raise expectation_error(
+            "uncertain", "a mapping of parameter name to its interval or distribution", uncertain_raw
+        )
     base = Path(base_dir) if base_dir else None
     calibrated = (
         parse_calibrated(uncertain_raw["calibrated"], "uncertain.calibrated", base, design)
@@ -309,7 +319,9 @@ def study_from_mapping(raw: Any, *, text: str = "", path: str = "", base_dir: st
         else None
     )
     uncertain = _uncertain(uncertain_raw, points, design)
-    simulation = _simulation(raw.get("simulation"), "simulation", SimulationSettings(starts=GUIDED_STARTS))
+    simulation = parse_simulation_settings(
+        raw.get("simulation"), "simulation", SimulationSettings(starts=GUIDED_STARTS)
+    )
     outputs_raw = check_mapping(raw.get("outputs") or {}, "outputs", {"report": boolean(), "dpi": DPI})
     outputs = Outputs(**outputs_raw)
     execution = check_mapping(

@@ -119,7 +119,8 @@ def _starts(value: Any, path: str) -> MultiStart | None:
         raise StudyError(str(error)) from None
 
 
-_SIMULATION_SCHEMA: dict[str, Checker] = {
+#: The keys of a ``simulation`` entry and the check of each.
+SIMULATION_SCHEMA: dict[str, Checker] = {
     "n_periods": number("mesh periods", 2, 1_000_000, integer=True),
     "keep_periods": number("mesh periods", 20, 1_000_000, integer=True),
     "lyapunov": boolean(),
@@ -130,11 +131,16 @@ _SIMULATION_SCHEMA: dict[str, Checker] = {
 }
 
 
-def _simulation(raw: Any, path: str, base: SimulationSettings) -> SimulationSettings:
+def parse_simulation_settings(raw: Any, path: str, base: SimulationSettings) -> SimulationSettings:
+    """The ``simulation`` entry at ``path`` laid over ``base`` (the study's settings, or the defaults).
+
+    Keys are those of :data:`SIMULATION_SCHEMA`; ``None`` gives ``base`` itself. Refusals are
+    :class:`StudyError` naming the entry.
+    """
     if raw is None:
         return base
     values = base.to_dict()
-    values.update(check_mapping(raw, path, _SIMULATION_SCHEMA))
+    values.update(check_mapping(raw, path, SIMULATION_SCHEMA))
     settings = SimulationSettings(**values)
     check_kept_within(settings.n_periods, settings.keep_periods, "n_periods", f"{path}.keep_periods")
     return settings

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..physics.design import _DESIGN_KEYS
+from ..physics.design import _DESIGN_KEYS, DESIGN_KEYS
 
 #: Operating variables a study may fix or sweep, with units and plausible ranges.
 #: Design keys (bearing stiffness, backlash, ...) may be swept or made uncertain too.
@@ -14,7 +14,7 @@ OPERATING_VARIABLES: dict[str, tuple[str, float, float]] = {
     "mesh_stiffness_scale": ("1 (factor on the Ishikawa mesh stiffness)", 1e-3, 100.0),
 }
 #: Design keys that may vary between the runs of one batch (the tooth counts may not).
-VARIABLE_DESIGN_KEYS: tuple[str, ...] = tuple(key for key in _DESIGN_KEYS if key not in ("z1", "z2"))
+VARIABLE_DESIGN_KEYS: tuple[str, ...] = tuple(key for key in DESIGN_KEYS if key not in ("z1", "z2"))
 #: Every name an operating point, sweep or uncertain parameter may use.
 VARIABLES: tuple[str, ...] = tuple(OPERATING_VARIABLES) + VARIABLE_DESIGN_KEYS
 
