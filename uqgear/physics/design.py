@@ -88,6 +88,25 @@ def design_key_bounds(key: str) -> tuple[float, float]:
     return float(lower), float(upper)
 
 
+def design_key_unit(key: str) -> str:
+    """The unit (or what the value is) of a design key, as messages and axis labels give it.
+
+    Raises
+    ------
+    DesignError
+        ``key`` is not a design key.
+
+    Examples
+    --------
+    >>> from uqgear.physics.design import design_key_unit
+    >>> design_key_unit("pressure_angle"), design_key_unit("z1")
+    ('deg', 'teeth')
+    """
+    if key not in _ALL_DESIGN_KEYS:
+        raise _unknown_key(key, "")
+    return _ALL_DESIGN_KEYS[key][2]
+
+
 def _unknown_key(key: str, where: str) -> DesignError:
     expected = ", ".join(DESIGN_KEYS + OPTIONAL_DESIGN_KEYS)
     return DesignError(f"{where}{key}: unknown design key; expected one of {expected}")
@@ -476,4 +495,6 @@ __all__ = [
     "DESIGN_KEYS",
     "OPTIONAL_DESIGN_KEYS",
     "STANDARD_GRAVITY",
+    "design_key_bounds",
+    "design_key_unit",
 ]

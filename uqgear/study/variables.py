@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..physics.design import _DESIGN_KEYS, DESIGN_KEYS
+from ..physics.design import DESIGN_KEYS, design_key_unit
 
 #: Operating variables a study may fix or sweep, with units and plausible ranges.
 #: Design keys (bearing stiffness, backlash, ...) may be swept or made uncertain too.
@@ -23,8 +23,8 @@ def variable_unit(name: str) -> str:
     """Unit text of an operating variable or design key."""
     if name in OPERATING_VARIABLES:
         return OPERATING_VARIABLES[name][0]
-    if name in _DESIGN_KEYS:
-        return _DESIGN_KEYS[name][2]
+    if name in DESIGN_KEYS:
+        return design_key_unit(name)
     return ""
 
 
