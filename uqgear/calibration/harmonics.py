@@ -26,7 +26,7 @@ import numpy as np
 import scipy.signal
 import xarray as xr
 
-from ..physics import _kernels as K
+from ..physics import kernels as K
 from ..physics._batch_record import run_arrays
 from ..physics.batch_setup import build_batch, kernel_inputs
 from ..physics.design import Design

@@ -31,8 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..common.errors import OperatingPointError, UqgearError
-from ..physics import _kernels as K
-from ..physics import _variational as V
+from ..physics import kernels as K
 from ..physics.design import Design
 from ..physics.effects import MESH_PERIODIC_EFFECTS
 from ..physics.integration import BATCH_DESIGN_KEYS, steps_per_period
@@ -125,7 +124,7 @@ class MapResult:
     monodromy : ndarray (6, 6) or None
         d(state)/d(start state), when asked for.
     measures : dict
-        Orbit extremes and contact counts (:data:`uqgear.physics._variational.MEASURE_NAMES`).
+        Orbit extremes and contact counts (:data:`uqgear.physics.kernels.MEASURE_NAMES`).
     """
 
     state: np.ndarray
@@ -176,8 +175,8 @@ class PoincareMap:
     def __call__(self, state: np.ndarray, n_periods: int = 1, with_matrix: bool = True) -> MapResult:
         setup = self.setup
         phi = np.empty((6, 6))
-        measures = np.empty(V.N_MEASURES)
-        end = V.orbit_pass(
+        measures = np.empty(K.N_MEASURES)
+        end = K.orbit_pass(
             np.ascontiguousarray(state, dtype=float),
             int(n_periods),
             setup.parameters,
@@ -193,7 +192,7 @@ class PoincareMap:
             measures,
         )
         self.passes += int(n_periods)
-        return MapResult(end, phi if with_matrix else None, dict(zip(V.MEASURE_NAMES, measures.tolist())))
+        return MapResult(end, phi if with_matrix else None, dict(zip(K.MEASURE_NAMES, measures.tolist())))
 
 
 def orbit_qois(measures: Mapping[str, float], setup: ModelSetup) -> dict[str, float]:

@@ -47,7 +47,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from ..physics import _kernels as K
+from ..physics import kernels as K
 from ..physics.design import Design
 from ..physics.model import ModelSetup
 from ..physics.rating import StaticRating

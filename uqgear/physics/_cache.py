@@ -37,6 +37,7 @@ COMPILED_MODULES = (
     "physics/_variational.py",
     "physics/_runup_kernels.py",
     "physics/_runup_lanes.py",
+    "physics/kernels.py",
     "calibration/harmonics.py",
     "rig/foreign_rig.py",
     "rig/foreign_response.py",
