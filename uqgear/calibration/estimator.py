@@ -2,49 +2,32 @@
 
 ``fit`` accepts the rig data (:mod:`~uqgear.calibration.rig_input`) and prepares the features and the prior
 box; the staged search, the pitch-error correction, the final sampling and the predictive check run on a
-:class:`~uqgear.calibration.posterior_fit.PosteriorFit`.
+:class:`~uqgear.calibration.posterior_fit.PosteriorFit`. The estimator's ``__init__`` and its settings record are
+those of :class:`~uqgear.calibration.settings.CalibrationSettings`; the readers of the fitted state
+(:meth:`~uqgear.calibration.record.CalibrationRecord.to_dict`, ...) those of
+:class:`~uqgear.calibration.record.CalibrationRecord`.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import xarray as xr
 
 from ..common.steps import StepLog
 from ..physics.design import Design
-from ..physics.effects import Effect
-from ..physics.geometry import geometry_notes
 from ..uq.seeds import child_seed
 from .convergence import ConvergenceCriteria
-from .discrepancy import DEFAULT_DISCREPANCY_RANGE, DiscrepancyBasis, tau_grid
-from .errors import CalibrationError
-from .failure import failure_causes
-from .harmonics import HARMONIC_CHANNELS
+from .discrepancy import DiscrepancyBasis, tau_grid
 from .likelihood import Features, observed_features, operating_points, prior_box
-from .pitch_correction import DEFAULT_CLASSES
 from .posterior_fit import PosteriorFit
-from .priors import DEFAULT_PARAMETERS, prior_bounds, resolve_parameters
+from .priors import prior_bounds
+from .record import CalibrationRecord
 from .rig_input import accept_rig
 from .sampling import walker_count
-from .settings import (
-    as_seed,
-    check_bool,
-    check_channels,
-    check_design,
-    check_float,
-    check_int,
-    check_model_error_range,
-    check_n_training,
-    check_pitch_classes,
-    check_priors,
-)
-from .summaries import result_content
 from .training import ModelRuns
 
 
@@ -59,7 +42,7 @@ class _Campaign:
     tracking_s: float
 
 
-class Calibration:
+class Calibration(CalibrationRecord):
     """Bayesian calibration of the gear model on rig data (settings here; :meth:`fit` does the work).
 
     Parameters
@@ -191,100 +174,6 @@ class Calibration:
     CalibrationError
     """
 
-    def __init__(
-        self,
-        parameters: Sequence[str] = DEFAULT_PARAMETERS,
-        *,
-        design: Design | None = None,
-        priors: Mapping[str, Sequence[float]] | None = None,
-        channels: Sequence[str] = HARMONIC_CHANNELS,
-        n_harmonics: int = 3,
-        min_snr: float = 5.0,
-        model_error_range: tuple[float, float] = (0.01, 0.5),
-        effects: Sequence[Effect] = (),
-        n_training: int = 256,
-        emulator_degree: int = 3,
-        max_stages: int = 5,
-        n_walkers: int | None = None,
-        stage_steps: int = 1500,
-        chunk_steps: int = 2000,
-        max_steps: int = 30000,
-        autocorr_factor: float = 50.0,
-        rhat_threshold: float = 1.01,
-        min_ess: float = 400.0,
-        predictive_draws: int = 16,
-        transient: float = 0.2,
-        window: float = 0.1,
-        seed: np.random.SeedSequence | int | None = None,
-        threads: int | None = None,
-        pitch_correction: bool = True,
-        pitch_draws: int = 4,
-        pitch_classes: tuple[float, float] | None = DEFAULT_CLASSES,
-        discrepancy: bool = False,
-        discrepancy_range: tuple[float, float] = DEFAULT_DISCREPANCY_RANGE,
-    ) -> None:
-        self.parameters = resolve_parameters(parameters)
-        self.design = check_design(design)
-        self.priors = check_priors(priors, self.parameters)
-        self.channels = check_channels(channels)
-        self.n_harmonics = check_int("n_harmonics", n_harmonics, 1)
-        self.min_snr = check_float("min_snr", min_snr, 0.0, 1e6)
-        self.model_error_range = check_model_error_range(model_error_range)
-        self.effects = tuple(effects)
-        self.n_training = check_n_training(n_training)
-        self.emulator_degree = check_int("emulator_degree", emulator_degree, 1)
-        self.max_stages = check_int("max_stages", max_stages, 1)
-        self.n_walkers = None if n_walkers is None else check_int("n_walkers", n_walkers, 4)
-        self.stage_steps = check_int("stage_steps", stage_steps, 100)
-        self.chunk_steps = check_int("chunk_steps", chunk_steps, 100)
-        self.max_steps = check_int("max_steps", max_steps, self.chunk_steps)
-        self.autocorr_factor = check_float("autocorr_factor", autocorr_factor, 1.0, 1e4)
-        self.rhat_threshold = check_float("rhat_threshold", rhat_threshold, 1.0, 10.0)
-        self.min_ess = check_float("min_ess", min_ess, 1.0, 1e9)
-        self.predictive_draws = check_int("predictive_draws", predictive_draws, 0)
-        self.transient = check_float("transient", transient, 0.0, 100.0, " s")
-        self.window = check_float("window", window, 0.0, 100.0, " s")
-        self.seed = as_seed(seed)
-        self.threads = None if threads is None else check_int("threads", threads, 1)
-        self.pitch_correction = check_bool("pitch_correction", pitch_correction)
-        self.pitch_draws = check_int("pitch_draws", pitch_draws, 2)
-        self.pitch_classes = check_pitch_classes(pitch_classes)
-        self.discrepancy = check_bool("discrepancy", discrepancy)
-        self.discrepancy_range = check_model_error_range(discrepancy_range, "discrepancy_range")
-
-    # ------------------------------------------------------------------ settings record
-
-    def settings(self) -> dict[str, Any]:
-        """The settings as a JSON-ready mapping."""
-        return {
-            "parameters": list(self.parameters),
-            "priors": {k: list(v) for k, v in self.priors.items()},
-            "channels": list(self.channels),
-            "n_harmonics": self.n_harmonics,
-            "min_snr": self.min_snr,
-            "model_error_range": list(self.model_error_range),
-            "effects": [{"name": e.name, "values": dict(e.values)} for e in self.effects],
-            "n_training": self.n_training,
-            "emulator_degree": self.emulator_degree,
-            "max_stages": self.max_stages,
-            "n_walkers": self.n_walkers,
-            "stage_steps": self.stage_steps,
-            "chunk_steps": self.chunk_steps,
-            "max_steps": self.max_steps,
-            "autocorr_factor": self.autocorr_factor,
-            "rhat_threshold": self.rhat_threshold,
-            "min_ess": self.min_ess,
-            "predictive_draws": self.predictive_draws,
-            "transient": self.transient,
-            "window": self.window,
-            "pitch_correction": self.pitch_correction,
-            "pitch_draws": self.pitch_draws,
-            "pitch_classes": None if self.pitch_classes is None else list(self.pitch_classes),
-            "discrepancy": self.discrepancy,
-            "discrepancy_range": list(self.discrepancy_range),
-            "seed_entropy": str(self.seed.entropy),
-        }
-
     # ------------------------------------------------------------------ fit
 
     def fit(self, rig: xr.Dataset | str | os.PathLike[str]) -> Calibration:
@@ -318,7 +207,7 @@ class Calibration:
         # from here on the input is accepted: a failure is ours, reported with its step
         self.steps_ = steps = StepLog()
         stage_rng = np.random.default_rng(seeds[0])
-        model, work = self._posterior_fit(campaign)
+        model, work = _posterior_fit(self, campaign)
         self.emulator_ = {"stages": work.stages}
         with steps.step("search the posterior box (staged emulators and sampling)") as found:
             start_points, truncated = work.search(stage_rng, seeds[1], seeds[2])
@@ -387,41 +276,6 @@ class Calibration:
         self.n_dim_ = self.n_global_ + self.n_op_
         return _Campaign(accepted.rig, accepted.design, features, accepted.tracking_s)
 
-    def _posterior_fit(self, campaign: _Campaign) -> tuple[ModelRuns, PosteriorFit]:
-        """The model runs of the campaign and the staged posterior fit that drives them."""
-        model = ModelRuns(
-            design=campaign.design,
-            parameters=self.parameters,
-            operating=self.operating_,
-            effects=self.effects,
-            n_harmonics=self.n_harmonics,
-            transient=self.transient,
-            window=self.window,
-            threads=self.threads,
-        )
-        work = PosteriorFit(
-            campaign.features,
-            model,
-            bounds=self.bounds_,
-            prior_lower=self.prior_lower_,
-            prior_upper=self.prior_upper_,
-            n_training=self.n_training,
-            degree=self.emulator_degree,
-            walkers=walker_count(self.n_walkers, self.n_dim_),
-            stage_steps=self.stage_steps,
-            max_stages=self.max_stages,
-            error_floor=self.model_error_range[0],
-            discrepancy=(
-                (
-                    DiscrepancyBasis.of_campaign(self.operating_["pinion_speed"], self.operating_["drive_torque"]),
-                    tau_grid(self.discrepancy_range),
-                )
-                if self.discrepancy
-                else None
-            ),
-        )
-        return model, work
-
     def _keep_fitted(self, work: PosteriorFit, model_runs: int) -> None:
         """Keep the features and likelihood the fit ended with, and the model runs it took."""
         # read at the end: the pitch-error correction may replace the features, and its resumed search the box
@@ -431,82 +285,39 @@ class Calibration:
         self.box_lower_, self.box_upper_, self.loo_rms_ = likelihood.box_lower, likelihood.box_upper, likelihood.loo_rms
         self.model_runs_ = model_runs
 
-    # ------------------------------------------------------------------ results
 
-    def failure(self) -> dict[str, Any]:
-        """What keeps the fit from being a result (:func:`~uqgear.calibration.failure.failure_causes`)."""
-        if not hasattr(self, "posterior_"):
-            raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
-        return failure_causes(
-            diagnostics=self.diagnostics_,
-            summary=self.summary_,
-            predictive_check=self.predictive_check_,
-            predictive=self.predictive_,
-            model_error_cap=self.model_error_range[1],
-            discrepancy_cap=self.discrepancy_range[1] if self.discrepancy else None,
-        )
-
-    def discrepancy_at(
-        self,
-        pinion_speed: Sequence[float] | np.ndarray,
-        drive_torque: Sequence[float] | np.ndarray,
-        draws: int,
-        rng: np.random.Generator,
-    ) -> xr.DataArray:
-        """Posterior draws of the fitted discrepancy at operating points (:meth:`Discrepancy.at
-        <uqgear.calibration.discrepancy_results.Discrepancy.at>`), to add to predicted log amplitudes.
-
-        Parameters
-        ----------
-        pinion_speed, drive_torque : array-like (n,)
-            Operating points, rpm and N m.
-        draws : int
-            Number of draws.
-        rng : numpy.random.Generator
-            Source of the draws.
-
-        Returns
-        -------
-        xarray.DataArray
-            (draw, point, channel, harmonic), log-amplitude units.
-
-        Raises
-        ------
-        CalibrationError
-            Not fitted, or fitted without ``discrepancy``.
-
-        Examples
-        --------
-        >>> import numpy as np, uqgear
-        >>> try:
-        ...     uqgear.Calibration().discrepancy_at([2000.0], [6000.0], 10, np.random.default_rng(0))
-        ... except uqgear.UqgearError as error:
-        ...     print(error)
-        calibration: no fitted discrepancy; fit(rig) with discrepancy=True first
-        """
-        fitted = getattr(self, "discrepancy_", None)
-        if fitted is None:
-            raise CalibrationError("calibration: no fitted discrepancy; fit(rig) with discrepancy=True first")
-        return fitted.at(pinion_speed, drive_torque, draws, rng)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The calibration result as a JSON-ready mapping (the content of ``calibration.json``)."""
-        if not hasattr(self, "posterior_"):
-            raise CalibrationError("calibration: not fitted yet; call fit(rig) first")
-        content = result_content(
-            rig=self.rig_source_,
-            converged=self.converged_,
-            design=self.design_.to_dict(),
-            diagnostics=self.diagnostics_,
-            summary=self.summary_,
-            predictive_check=self.predictive_check_,
-            emulator=self.emulator_,
-            timing=self.timing_,
-            settings=self.settings(),
-            speed=self.speed_,
-            failure=self.failure(),
-        )
-        # what the model did with the design's geometry (an undercut tooth), for the report and the record
-        content["design_notes"] = geometry_notes(self.design_)
-        content["pitch_errors"] = None if self.pitch_errors_ is None else self.pitch_errors_.summary(self.used_)
-        return content
+def _posterior_fit(calibration: Calibration, campaign: _Campaign) -> tuple[ModelRuns, PosteriorFit]:
+    """The model runs of the campaign and the staged posterior fit that drives them."""
+    operating = calibration.operating_
+    model = ModelRuns(
+        design=campaign.design,
+        parameters=calibration.parameters,
+        operating=operating,
+        effects=calibration.effects,
+        n_harmonics=calibration.n_harmonics,
+        transient=calibration.transient,
+        window=calibration.window,
+        threads=calibration.threads,
+    )
+    work = PosteriorFit(
+        campaign.features,
+        model,
+        bounds=calibration.bounds_,
+        prior_lower=calibration.prior_lower_,
+        prior_upper=calibration.prior_upper_,
+        n_training=calibration.n_training,
+        degree=calibration.emulator_degree,
+        walkers=walker_count(calibration.n_walkers, calibration.n_dim_),
+        stage_steps=calibration.stage_steps,
+        max_stages=calibration.max_stages,
+        error_floor=calibration.model_error_range[0],
+        discrepancy=(
+            (
+                DiscrepancyBasis.of_campaign(operating["pinion_speed"], operating["drive_torque"]),
+                tau_grid(calibration.discrepancy_range),
+            )
+            if calibration.discrepancy
+            else None
+        ),
+    )
+    return model, work

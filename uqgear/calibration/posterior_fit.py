@@ -5,7 +5,9 @@ accepts the rig data and keeps the results; what changes while it fits (the
 features, once corrected for pitch errors; the current stage's emulated
 likelihood; the stages' record) lives in one :class:`PosteriorFit`, whose
 steps run in the order of :meth:`Calibration.fit
-<uqgear.calibration.estimator.Calibration.fit>`.
+<uqgear.calibration.estimator.Calibration.fit>`: those of the search for the
+posterior's box (:class:`StagedSearch`), then the final sampling and the
+predictive check.
 """
 
 from __future__ import annotations
@@ -36,8 +38,8 @@ from .summaries import posterior_dataset, posterior_summary
 from .training import ModelRuns, train_emulators
 
 
-class PosteriorFit:
-    """Staged emulators, box search, pitch-error correction, final sampling and predictive check of one fit.
+class StagedSearch:
+    """Staged emulators, box search and pitch-error correction: the search for the posterior's box of one fit.
 
     Parameters
     ----------
@@ -71,8 +73,6 @@ class PosteriorFit:
         The current stage's emulated likelihood (None before the first stage).
     stages : list of dict
         A record of each box stage, appended as the search goes on.
-    discrepancy_fit : DiscrepancyFit or None
-        The fitted discrepancy (set by :meth:`final_sampling` with a discrepancy term).
     """
 
     def __init__(
@@ -93,7 +93,6 @@ class PosteriorFit:
     ) -> None:
         self.features, self.model, self.bounds = features, model, bounds
         self.discrepancy = discrepancy
-        self.discrepancy_fit: DiscrepancyFit | None = None
         self.prior_lower, self.prior_upper = prior_lower, prior_upper
         self.n_training, self.degree, self.walkers = n_training, degree, walkers
         self.stage_steps, self.max_stages, self.error_floor = stage_steps, max_stages, error_floor
@@ -254,6 +253,19 @@ class PosteriorFit:
             points, truncated = self.search(rng, seeds[1], seeds[2], start_points=points)
             found.update(stages=self.stages, truncated=truncated)
         return correction, points, truncated
+
+
+class PosteriorFit(StagedSearch):
+    """One fit: the staged search (:class:`StagedSearch`, whose parameters it takes), the final sampling on its
+    last stage's emulators and the posterior predictive check.
+
+    Attributes
+    ----------
+    discrepancy_fit : DiscrepancyFit or None
+        The fitted discrepancy (set by :meth:`final_sampling` with a discrepancy term).
+    """
+
+    discrepancy_fit: DiscrepancyFit | None = None
 
     def final_sampling(
         self,

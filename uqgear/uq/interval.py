@@ -262,20 +262,7 @@ class IntervalAnalysis:
     # -- internals ------------------------------------------------------------------
 
     def _check_space(self, space: ParameterSpace) -> list[str]:
-        if not isinstance(space, ParameterSpace):
-            raise ParameterSpaceError(f"space: expected a ParameterSpace; got {type(space).__name__}")
-        intervals = list(space.interval_names)
-        if not intervals:
-            raise ParameterSpaceError(
-                "space: interval analysis needs at least one Interval parameter; "
-                f"the space has {', '.join(space.names)}"
-            )
-        if self.method == "vertex" and len(intervals) > 16:
-            raise ParameterSpaceError(
-                f"method: vertex with {len(intervals)} intervals needs "
-                f"2^{len(intervals)} runs; expected at most 16 intervals"
-            )
-        return intervals
+        return _interval_names(space, self.method)
 
     def _scan_points(self, dimensions: int) -> int:
         return self.scan_points or _SCAN_POINTS.get(dimensions, 5)
@@ -339,41 +326,66 @@ class IntervalAnalysis:
         return coords
 
     def _attrs(self, space: ParameterSpace, responses: ModelResponses, kind: str) -> dict[str, Any]:
-        attrs: dict[str, Any] = {
-            "analysis": kind,
-            "method": self.method,
-            "interval_parameters": json.dumps(
-                {name: [bound.lower, bound.upper, bound.units] for name, bound in _intervals(space).items()}
-            ),
-            "parameter_space": space.to_json(),
-            "tolerance": self.tolerance,
-            "fallback": self.fallback if self.method in ("vertex", "chebyshev") else "none",
-            "fallback_runs": int(getattr(self, "fallback_runs_", 0)),
-            "runs": int(responses.runs.sum()),
-            "batch_calls": int(responses.batch_calls),
-            "units": json.dumps(responses.units),
-            **seed_attributes(self.seed_sequence),
-        }
-        if self.method == "chebyshev":
-            attrs.update(
-                order=self.order,
-                check_points=self.check_points,
-                reference="Wu, Luo, Zhang, Zhang, Chen (2013) Int J Numer Meth Eng: Chebyshev "
-                "inclusion function at Gauss-Chebyshev nodes, bounds by dense scan of the series",
-            )
-        if self.method == "vertex":
-            attrs.update(check_points=self.check_points + 1)
-        if self.method == "scan" or self.fallback == "scan":
-            attrs.update(scan_points=self._scan_points(len(space.interval_names)))
-        if self.method == "optimize" or self.fallback == "optimize":
-            attrs.update(
-                n_starts=self.n_starts,
-                max_iterations=self.max_iterations,
-                finite_difference_step=self.finite_difference_step,
-            )
-        if self.regime_variables:
-            attrs.update(regime_variables=json.dumps(self.regime_variables))
-        return attrs
+        return _result_attributes(self, space, responses, kind)
+
+
+def _interval_names(space: ParameterSpace, method: str) -> list[str]:
+    """The interval parameters of ``space``, checked as bounds over them by ``method`` need them."""
+    if not isinstance(space, ParameterSpace):
+        raise ParameterSpaceError(f"space: expected a ParameterSpace; got {type(space).__name__}")
+    intervals = list(space.interval_names)
+    if not intervals:
+        raise ParameterSpaceError(
+            "space: interval analysis needs at least one Interval parameter; "
+            f"the space has {', '.join(space.names)}"
+        )
+    if method == "vertex" and len(intervals) > 16:
+        raise ParameterSpaceError(
+            f"method: vertex with {len(intervals)} intervals needs "
+            f"2^{len(intervals)} runs; expected at most 16 intervals"
+        )
+    return intervals
+
+
+def _result_attributes(
+    analysis: IntervalAnalysis, space: ParameterSpace, responses: ModelResponses, kind: str
+) -> dict[str, Any]:
+    """The result's attributes: the analysis ``kind``, the method and the settings it used, runs and seed."""
+    attrs: dict[str, Any] = {
+        "analysis": kind,
+        "method": analysis.method,
+        "interval_parameters": json.dumps(
+            {name: [bound.lower, bound.upper, bound.units] for name, bound in _intervals(space).items()}
+        ),
+        "parameter_space": space.to_json(),
+        "tolerance": analysis.tolerance,
+        "fallback": analysis.fallback if analysis.method in ("vertex", "chebyshev") else "none",
+        "fallback_runs": int(getattr(analysis, "fallback_runs_", 0)),
+        "runs": int(responses.runs.sum()),
+        "batch_calls": int(responses.batch_calls),
+        "units": json.dumps(responses.units),
+        **seed_attributes(analysis.seed_sequence),
+    }
+    if analysis.method == "chebyshev":
+        attrs.update(
+            order=analysis.order,
+            check_points=analysis.check_points,
+            reference="Wu, Luo, Zhang, Zhang, Chen (2013) Int J Numer Meth Eng: Chebyshev "
+            "inclusion function at Gauss-Chebyshev nodes, bounds by dense scan of the series",
+        )
+    if analysis.method == "vertex":
+        attrs.update(check_points=analysis.check_points + 1)
+    if analysis.method == "scan" or analysis.fallback == "scan":
+        attrs.update(scan_points=analysis._scan_points(len(space.interval_names)))
+    if analysis.method == "optimize" or analysis.fallback == "optimize":
+        attrs.update(
+            n_starts=analysis.n_starts,
+            max_iterations=analysis.max_iterations,
+            finite_difference_step=analysis.finite_difference_step,
+        )
+    if analysis.regime_variables:
+        attrs.update(regime_variables=json.dumps(analysis.regime_variables))
+    return attrs
 
 
 def _intervals(space: ParameterSpace) -> dict[str, Interval]:

@@ -23,7 +23,134 @@ from .sampling import UNIT_EPSILON, sample_space
 from .seeds import SeedLike
 
 
-class ParameterSpace:
+class _ParameterView:
+    """The named parameters of a space, read-only: names by kind, units, nominal values, bounds.
+
+    And the maps from the unit hypercube and to standard distributions that
+    sampling and the expansions build on. :class:`ParameterSpace` is the
+    public face.
+    """
+
+    _parameters: Mapping[str, Parameter]
+
+    @property
+    def parameters(self) -> Mapping[str, Parameter]:
+        """Read-only mapping of name to parameter, in definition order."""
+        return self._parameters
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """All parameter names."""
+        return tuple(self._parameters)
+
+    @property
+    def interval_names(self) -> tuple[str, ...]:
+        """Names of the interval parameters."""
+        return tuple(n for n, p in self._parameters.items() if isinstance(p, Interval))
+
+    @property
+    def random_names(self) -> tuple[str, ...]:
+        """Names of the parameters with a distribution."""
+        return tuple(n for n, p in self._parameters.items() if isinstance(p, Distribution))
+
+    @property
+    def fixed_names(self) -> tuple[str, ...]:
+        """Names of the fixed parameters."""
+        return tuple(n for n, p in self._parameters.items() if isinstance(p, Fixed))
+
+    @property
+    def uncertain_names(self) -> tuple[str, ...]:
+        """Names of the interval and random parameters, in definition order."""
+        return tuple(n for n, p in self._parameters.items() if not isinstance(p, Fixed))
+
+    def __getitem__(self, name: str) -> Parameter:
+        try:
+            return self._parameters[name]
+        except KeyError:
+            raise ParameterSpaceError(
+                f"parameter {name!r}: not in the parameter space; known: {', '.join(self.names)}"
+            ) from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._parameters
+
+    def __len__(self) -> int:
+        return len(self._parameters)
+
+    def units(self, name: str) -> str:
+        """Units of parameter ``name``."""
+        return self[name].units
+
+    def nominal(self, name: str) -> float:
+        """Nominal value: interval midpoint, distribution median or the fixed value."""
+        parameter = self[name]
+        if isinstance(parameter, Interval):
+            return parameter.midpoint
+        if isinstance(parameter, Distribution):
+            return parameter.median()
+        return parameter.value
+
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        """Plain mapping (JSON-able) that rebuilds the space via ``ParameterSpace(...)``."""
+        return {name: parameter.to_dict() for name, parameter in self._parameters.items()}
+
+    def to_json(self) -> str:
+        """JSON text of :meth:`to_dict` (for netCDF attributes)."""
+        return json.dumps(self.to_dict(), sort_keys=False)
+
+    def describe(self) -> dict[str, str]:
+        """Name to one-line description."""
+        return {name: parameter.describe() for name, parameter in self._parameters.items()}
+
+    # -- bounds and maps -------------------------------------------------------------
+
+    def bounds(self, name: str) -> tuple[float, float]:
+        """Bounds of an interval; for a distribution the support as chaospy reports it.
+
+        chaospy cuts unbounded distributions numerically (a normal at about
+        +-8.2 standard deviations), so the values are finite.
+        """
+        parameter = self[name]
+        if isinstance(parameter, Interval):
+            return parameter.lower, parameter.upper
+        if isinstance(parameter, Distribution):
+            distribution = parameter.to_chaospy()
+            return float(np.atleast_1d(distribution.lower)[0]), float(np.atleast_1d(distribution.upper)[0])
+        return parameter.value, parameter.value
+
+    # -- mapping from the unit hypercube -------------------------------------------
+
+    def from_unit(self, name: str, unit_values: np.ndarray) -> np.ndarray:
+        """Map values in [0, 1] to parameter ``name``.
+
+        Intervals map linearly onto their bounds (a uniform treatment, used
+        only where the caller asked for one); distributions through their
+        inverse cumulative distribution function.
+        """
+        parameter = self[name]
+        unit_values = np.asarray(unit_values, dtype=float)
+        if isinstance(parameter, Interval):
+            return parameter.lower + unit_values * parameter.width
+        if isinstance(parameter, Distribution):
+            clipped = np.clip(unit_values, UNIT_EPSILON, 1.0 - UNIT_EPSILON)
+            return np.asarray(parameter.to_chaospy().inv(clipped.ravel()), dtype=float).reshape(unit_values.shape)
+        return np.full(unit_values.shape, parameter.value)
+
+    def standardized(self, name: str) -> tuple[Any, float, float]:
+        """Standard chaospy distribution and affine map ``x = location + scale z``.
+
+        Intervals are treated as uniform on their bounds here (for PCE and
+        Sobol indices only).
+        """
+        parameter = self[name]
+        if isinstance(parameter, Interval):
+            return chaospy.Uniform(-1.0, 1.0), parameter.midpoint, 0.5 * parameter.width
+        if isinstance(parameter, Distribution):
+            return parameter.standardized()
+        raise ParameterSpaceError(f"parameter {name!r}: fixed parameters have no distribution")
+
+
+class ParameterSpace(_ParameterView):
     """Named uncertain and fixed parameters.
 
     Parameters
@@ -161,52 +288,6 @@ class ParameterSpace:
         """Names of the calibrated parameters (columns of :attr:`posterior`)."""
         return () if self._posterior is None else self._posterior.names
 
-    # -- inspection -----------------------------------------------------------------
-
-    @property
-    def parameters(self) -> Mapping[str, Parameter]:
-        """Read-only mapping of name to parameter, in definition order."""
-        return self._parameters
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        """All parameter names."""
-        return tuple(self._parameters)
-
-    @property
-    def interval_names(self) -> tuple[str, ...]:
-        """Names of the interval parameters."""
-        return tuple(n for n, p in self._parameters.items() if isinstance(p, Interval))
-
-    @property
-    def random_names(self) -> tuple[str, ...]:
-        """Names of the parameters with a distribution."""
-        return tuple(n for n, p in self._parameters.items() if isinstance(p, Distribution))
-
-    @property
-    def fixed_names(self) -> tuple[str, ...]:
-        """Names of the fixed parameters."""
-        return tuple(n for n, p in self._parameters.items() if isinstance(p, Fixed))
-
-    @property
-    def uncertain_names(self) -> tuple[str, ...]:
-        """Names of the interval and random parameters, in definition order."""
-        return tuple(n for n, p in self._parameters.items() if not isinstance(p, Fixed))
-
-    def __getitem__(self, name: str) -> Parameter:
-        try:
-            return self._parameters[name]
-        except KeyError:
-            raise ParameterSpaceError(
-                f"parameter {name!r}: not in the parameter space; known: {', '.join(self.names)}"
-            ) from None
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._parameters
-
-    def __len__(self) -> int:
-        return len(self._parameters)
-
     def __repr__(self) -> str:
         inner = ", ".join(f"{name!r}: {parameter!r}" for name, parameter in self._parameters.items())
         return f"ParameterSpace({{{inner}}})"
@@ -224,31 +305,6 @@ class ParameterSpace:
             and np.array_equal(self._posterior.values, other._posterior.values)
         )
         return dict(self._parameters) == dict(other._parameters) and same_posterior
-
-    def units(self, name: str) -> str:
-        """Units of parameter ``name``."""
-        return self[name].units
-
-    def nominal(self, name: str) -> float:
-        """Nominal value: interval midpoint, distribution median or the fixed value."""
-        parameter = self[name]
-        if isinstance(parameter, Interval):
-            return parameter.midpoint
-        if isinstance(parameter, Distribution):
-            return parameter.median()
-        return parameter.value
-
-    def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Plain mapping (JSON-able) that rebuilds the space via ``ParameterSpace(...)``."""
-        return {name: parameter.to_dict() for name, parameter in self._parameters.items()}
-
-    def to_json(self) -> str:
-        """JSON text of :meth:`to_dict` (for netCDF attributes)."""
-        return json.dumps(self.to_dict(), sort_keys=False)
-
-    def describe(self) -> dict[str, str]:
-        """Name to one-line description."""
-        return {name: parameter.describe() for name, parameter in self._parameters.items()}
 
     # -- derived spaces -------------------------------------------------------------
 
@@ -268,51 +324,6 @@ class ParameterSpace:
         """Copy where every uncertain parameter not in ``keep`` is fixed at its nominal value."""
         keep = set(keep)
         return self.fix({name: self.nominal(name) for name in self.uncertain_names if name not in keep})
-
-    def bounds(self, name: str) -> tuple[float, float]:
-        """Bounds of an interval; for a distribution the support as chaospy reports it.
-
-        chaospy cuts unbounded distributions numerically (a normal at about
-        +-8.2 standard deviations), so the values are finite.
-        """
-        parameter = self[name]
-        if isinstance(parameter, Interval):
-            return parameter.lower, parameter.upper
-        if isinstance(parameter, Distribution):
-            distribution = parameter.to_chaospy()
-            return float(np.atleast_1d(distribution.lower)[0]), float(np.atleast_1d(distribution.upper)[0])
-        return parameter.value, parameter.value
-
-    # -- mapping from the unit hypercube -------------------------------------------
-
-    def from_unit(self, name: str, unit_values: np.ndarray) -> np.ndarray:
-        """Map values in [0, 1] to parameter ``name``.
-
-        Intervals map linearly onto their bounds (a uniform treatment, used
-        only where the caller asked for one); distributions through their
-        inverse cumulative distribution function.
-        """
-        parameter = self[name]
-        unit_values = np.asarray(unit_values, dtype=float)
-        if isinstance(parameter, Interval):
-            return parameter.lower + unit_values * parameter.width
-        if isinstance(parameter, Distribution):
-            clipped = np.clip(unit_values, UNIT_EPSILON, 1.0 - UNIT_EPSILON)
-            return np.asarray(parameter.to_chaospy().inv(clipped.ravel()), dtype=float).reshape(unit_values.shape)
-        return np.full(unit_values.shape, parameter.value)
-
-    def standardized(self, name: str) -> tuple[Any, float, float]:
-        """Standard chaospy distribution and affine map ``x = location + scale z``.
-
-        Intervals are treated as uniform on their bounds here (for PCE and
-        Sobol indices only).
-        """
-        parameter = self[name]
-        if isinstance(parameter, Interval):
-            return chaospy.Uniform(-1.0, 1.0), parameter.midpoint, 0.5 * parameter.width
-        if isinstance(parameter, Distribution):
-            return parameter.standardized()
-        raise ParameterSpaceError(f"parameter {name!r}: fixed parameters have no distribution")
 
     # -- sampling -------------------------------------------------------------------
 

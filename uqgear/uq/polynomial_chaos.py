@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from typing import Any
 
 import chaospy
@@ -263,112 +263,170 @@ class PolynomialChaos:
         space: ParameterSpace,
     ) -> xr.Dataset:
         mean, variance, first, total = _variance_decomposition(self._coefficients, self._indices)
-        quantile_values = self._surrogate_quantiles()
+        quantile_values = _surrogate_quantiles(
+            self._basis,
+            [dist for dist, _, _ in self._maps],
+            self._coefficients,
+            self.quantiles,
+            self.surrogate_samples,
+            child_seed(self.seed_sequence, 1),
+        )
 
         sweep_dims, shape = self._sweep_dims, self._sweep_shape
-        coords: dict[Hashable, Any] = {d: outputs.coords[d] for d in sweep_dims if d in outputs.coords}
-        coords.update(
-            statistic=("statistic", ["mean", "std", "variance"]),
-            quantile=("quantile", self.quantiles, {"units": "1"}),
-            param=("param", list(self._names)),
-            index=("index", ["S1", "ST"]),
-            order=("order", orders.astype(np.int64)),
-        )
-        data_vars = {}
+        coords = _result_coords(outputs, sweep_dims, self.quantiles, self._names, orders)
+        data_vars: dict[Hashable, Any] = {}
         for q, name in enumerate(self._qoi_names):
-            units = outputs[name].attrs.get("units", "")
             moments = np.stack([mean[q], np.sqrt(variance[q]), variance[q]], axis=-1)
-            data_vars[name] = (
-                (*sweep_dims, "statistic"),
-                moments.reshape(*shape, 3),
-                {
-                    "units": units,
-                    "variance_units": f"({units})^2" if units else "",
-                    "long_name": f"PCE moments of {name}",
-                },
-            )
-            data_vars[f"{name}_quantile"] = (
-                (*sweep_dims, "quantile"),
-                quantile_values[q].reshape(*shape, -1),
-                {
-                    "units": units,
-                    "long_name": f"PCE quantiles of {name}",
-                    "method": f"empirical quantiles of {self.surrogate_samples} surrogate samples",
-                },
-            )
             sobol = np.stack([first[q], total[q]], axis=-1)
-            data_vars[f"{name}_sobol"] = (
-                (*sweep_dims, "param", "index"),
-                sobol.reshape(*shape, len(self._names), 2),
-                {"units": "1", "long_name": f"PCE Sobol indices of {name}"},
+            data_vars.update(
+                _qoi_variables(
+                    name,
+                    outputs[name].attrs.get("units", ""),
+                    sweep_dims,
+                    moments.reshape(*shape, 3),
+                    quantile_values[q].reshape(*shape, -1),
+                    sobol.reshape(*shape, len(self._names), 2),
+                    loo[q].reshape(*shape, orders.size),
+                    chosen[q].reshape(shape),
+                    used[q].reshape(shape),
+                    self.surrogate_samples,
+                )
             )
-            data_vars[f"{name}_loo_error"] = (
-                (*sweep_dims, "order"),
-                loo[q].reshape(*shape, orders.size),
-                {
-                    "units": "1",
-                    "long_name": "relative leave-one-out error: mean "
-                    "squared LOO residual / sample variance (NaN: too few samples)",
-                },
-            )
-            data_vars[f"{name}_order"] = (
-                sweep_dims,
-                chosen[q].reshape(shape),
-                {"units": "1", "long_name": "order chosen by minimal LOO error (-1: no usable order)"},
-            )
-            data_vars[f"{name}_samples_used"] = (
-                sweep_dims,
-                used[q].reshape(shape),
-                {"units": "1", "long_name": "finite model outputs used"},
-            )
-        return xr.Dataset(data_vars, coords=coords, attrs=self._attributes(space, shape))
+        return xr.Dataset(data_vars, coords=coords, attrs=_result_attributes(self, self._names, space, shape))
 
-    def _attributes(self, space: ParameterSpace, shape: tuple[int, ...]) -> dict[str, Any]:
-        """The result's attributes: the method, the distributions it took, its settings and seed."""
-        distributions = {
-            name: ("uniform on " + space[name].describe() if name in space.interval_names else space[name].describe())
-            for name in self._names
-        }
-        attrs = {
-            "method": "polynomial_chaos_regression",
-            "interval_treatment": (
-                "interval parameters treated as uniform on their bounds for the PCE "
-                "(an assumption: an interval implies no distribution)"
-                if space.interval_names
-                else "none (no interval parameters)"
-            ),
-            "distributions": json.dumps(distributions),
-            "basis": "orthonormal polynomials of each standardized input (chaospy.generate_expansion), "
-            "total-degree truncation",
-            "regression": "ordinary least squares; order chosen by minimal leave-one-out error",
-            "sobol_method": "from the coefficients of the orthonormal expansion (Sudret 2008), "
-            "equal to chaospy.Sens_m / Sens_t",
-            "min_order": self.min_order,
-            "max_order": self.max_order,
-            "n_samples": int(self.samples_.sizes["sample"]),
-            "sampling": self.sampling,
-            "runs": int(self.samples_.sizes["sample"]) * int(np.prod(shape, dtype=int)),
-            "surrogate_samples": self.surrogate_samples,
-            "parameter_space": space.to_json(),
-            **seed_attributes(self.seed_sequence),
-        }
-        return attrs
 
-    def _surrogate_quantiles(self) -> np.ndarray:
-        rng_seed = child_seed(self.seed_sequence, 1)
-        unit = unit_hypercube(self.surrogate_samples, len(self._names), "monte_carlo", rng_seed)
-        unit = np.clip(unit, UNIT_EPSILON, 1 - UNIT_EPSILON)
-        standard = np.stack(
-            [np.asarray(dist.inv(unit[:, j]), dtype=float) for j, (dist, _, _) in enumerate(self._maps)], axis=1
-        )
-        coefficients = self._coefficients.reshape(-1, self._indices.shape[0])
-        values = np.empty((coefficients.shape[0], standard.shape[0]))
-        chunk = 8192  # bound the design-matrix memory: chunk x terms floats
-        for start in range(0, standard.shape[0], chunk):
-            design = self._basis(standard[start : start + chunk])
-            values[:, start : start + chunk] = coefficients @ design.T
-        result = np.quantile(values, self.quantiles, axis=1).T  # (qoi*sweep, quantile)
-        return result.reshape(*self._coefficients.shape[:2], self.quantiles.size)
+def _surrogate_quantiles(
+    basis: Callable[[np.ndarray], np.ndarray],
+    distributions: Sequence[Any],
+    coefficients: np.ndarray,
+    quantiles: np.ndarray,
+    surrogate_samples: int,
+    seed: np.random.SeedSequence,
+) -> np.ndarray:
+    """Quantiles (qoi, sweep point, quantile) of the expansions over seeded samples of the standard inputs."""
+    unit = unit_hypercube(surrogate_samples, len(distributions), "monte_carlo", seed)
+    unit = np.clip(unit, UNIT_EPSILON, 1 - UNIT_EPSILON)
+    standard = np.stack([np.asarray(dist.inv(unit[:, j]), dtype=float) for j, dist in enumerate(distributions)], axis=1)
+    flat = coefficients.reshape(-1, coefficients.shape[-1])
+    values = np.empty((flat.shape[0], standard.shape[0]))
+    chunk = 8192  # bound the design-matrix memory: chunk x terms floats
+    for start in range(0, standard.shape[0], chunk):
+        design = basis(standard[start : start + chunk])
+        values[:, start : start + chunk] = flat @ design.T
+    result = np.quantile(values, quantiles, axis=1).T  # (qoi*sweep, quantile)
+    return result.reshape(*coefficients.shape[:2], quantiles.size)
+
+
+def _result_coords(
+    outputs: xr.Dataset,
+    sweep_dims: tuple[Hashable, ...],
+    quantiles: np.ndarray,
+    names: Sequence[str],
+    orders: np.ndarray,
+) -> dict[Hashable, Any]:
+    """The result's coordinates: the sweep's, the statistics, quantile levels, parameters, indices and orders."""
+    coords: dict[Hashable, Any] = {d: outputs.coords[d] for d in sweep_dims if d in outputs.coords}
+    coords.update(
+        statistic=("statistic", ["mean", "std", "variance"]),
+        quantile=("quantile", quantiles, {"units": "1"}),
+        param=("param", list(names)),
+        index=("index", ["S1", "ST"]),
+        order=("order", orders.astype(np.int64)),
+    )
+    return coords
+
+
+def _qoi_variables(
+    name: Hashable,
+    units: str,
+    sweep_dims: tuple[Hashable, ...],
+    moments: np.ndarray,
+    quantiles: np.ndarray,
+    sobol: np.ndarray,
+    loo: np.ndarray,
+    chosen: np.ndarray,
+    used: np.ndarray,
+    surrogate_samples: int,
+) -> dict[Hashable, Any]:
+    """The result's variables of QoI ``name``: moments, quantiles, Sobol indices and the fit's diagnostics."""
+    return {
+        name: (
+            (*sweep_dims, "statistic"),
+            moments,
+            {
+                "units": units,
+                "variance_units": f"({units})^2" if units else "",
+                "long_name": f"PCE moments of {name}",
+            },
+        ),
+        f"{name}_quantile": (
+            (*sweep_dims, "quantile"),
+            quantiles,
+            {
+                "units": units,
+                "long_name": f"PCE quantiles of {name}",
+                "method": f"empirical quantiles of {surrogate_samples} surrogate samples",
+            },
+        ),
+        f"{name}_sobol": (
+            (*sweep_dims, "param", "index"),
+            sobol,
+            {"units": "1", "long_name": f"PCE Sobol indices of {name}"},
+        ),
+        f"{name}_loo_error": (
+            (*sweep_dims, "order"),
+            loo,
+            {
+                "units": "1",
+                "long_name": "relative leave-one-out error: mean "
+                "squared LOO residual / sample variance (NaN: too few samples)",
+            },
+        ),
+        f"{name}_order": (
+            sweep_dims,
+            chosen,
+            {"units": "1", "long_name": "order chosen by minimal LOO error (-1: no usable order)"},
+        ),
+        f"{name}_samples_used": (
+            sweep_dims,
+            used,
+            {"units": "1", "long_name": "finite model outputs used"},
+        ),
+    }
+
+
+def _result_attributes(
+    pce: PolynomialChaos, names: Sequence[str], space: ParameterSpace, shape: tuple[int, ...]
+) -> dict[str, Any]:
+    """The result's attributes: the method, the distributions it took, its settings and seed."""
+    distributions = {
+        name: ("uniform on " + space[name].describe() if name in space.interval_names else space[name].describe())
+        for name in names
+    }
+    attrs = {
+        "method": "polynomial_chaos_regression",
+        "interval_treatment": (
+            "interval parameters treated as uniform on their bounds for the PCE "
+            "(an assumption: an interval implies no distribution)"
+            if space.interval_names
+            else "none (no interval parameters)"
+        ),
+        "distributions": json.dumps(distributions),
+        "basis": "orthonormal polynomials of each standardized input (chaospy.generate_expansion), "
+        "total-degree truncation",
+        "regression": "ordinary least squares; order chosen by minimal leave-one-out error",
+        "sobol_method": "from the coefficients of the orthonormal expansion (Sudret 2008), "
+        "equal to chaospy.Sens_m / Sens_t",
+        "min_order": pce.min_order,
+        "max_order": pce.max_order,
+        "n_samples": int(pce.samples_.sizes["sample"]),
+        "sampling": pce.sampling,
+        "runs": int(pce.samples_.sizes["sample"]) * int(np.prod(shape, dtype=int)),
+        "surrogate_samples": pce.surrogate_samples,
+        "parameter_space": space.to_json(),
+        **seed_attributes(pce.seed_sequence),
+    }
+    return attrs
 
 
 def _uncertain_names(space: ParameterSpace) -> list[str]:

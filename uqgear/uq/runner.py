@@ -265,9 +265,9 @@ class Runner:
         spans = [(start, min(start + self.chunk_size, n_samples)) for start in range(0, n_samples, self.chunk_size)]
         chunks = [samples.isel(sample=slice(start, stop)) for start, stop in spans]
         results: list[xr.Dataset | None] = [None] * len(spans)
-        checkpoint_paths = self._checkpoint_paths(chunks, key, evaluate)
+        checkpoint_paths = _checkpoint_paths(self.checkpoint_dir, chunks, key, evaluate)
         if resume:
-            self._load_checkpoints(checkpoint_paths, spans, results)
+            _load_checkpoints(checkpoint_paths, spans, results)
         reused = sum(result is not None for result in results)
         if self.checkpoint_dir is not None:
             logger.info("%d of %d chunks reused from checkpoints in %s", reused, len(spans), self.checkpoint_dir)
@@ -279,7 +279,7 @@ class Runner:
 
             def finish(index: int, result: Any) -> None:
                 start, stop = spans[index]
-                self._check_result(result, index, start, stop)
+                _check_result(result, index, start, stop)
                 if checkpoint_paths:
                     write_dataset(result, checkpoint_paths[index])
                 results[index] = result
@@ -301,8 +301,8 @@ class Runner:
                     workers=self.workers,
                     attempts=attempts,
                     timeout=self.connect_timeout,
-                    failed=lambda index, made, exc: self._chunk_failed(index, spans[index], made, exc),
-                    retrying=lambda index, attempt, exc: self._log_retry(index, attempt, attempts, exc),
+                    failed=lambda index, made, exc: _chunk_failed(index, spans[index], made, exc),
+                    retrying=lambda index, attempt, exc: _log_retry(index, attempt, attempts, exc),
                 )
 
         self.last_report = RunReport(
@@ -313,37 +313,7 @@ class Runner:
             retried_attempts=retried,
             executor=executor,
         )
-        return self._concatenate([result for result in results if result is not None])
-
-    # ------------------------------------------------------------------ checkpoints
-
-    def _checkpoint_paths(self, chunks: list[xr.Dataset], key: str, evaluate: Any) -> list[Path]:
-        if self.checkpoint_dir is None:
-            return []
-        try:
-            self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ExecutionError(f"checkpoint_dir {self.checkpoint_dir}: cannot create the folder ({exc})") from None
-        width = max(6, len(str(len(chunks) - 1)))
-        names = (
-            f"chunk-{index:0{width}d}-{chunk_hash(chunk, key, evaluate)[:20]}.nc" for index, chunk in enumerate(chunks)
-        )
-        return [self.checkpoint_dir / name for name in names]
-
-    def _load_checkpoints(
-        self, paths: list[Path], spans: list[tuple[int, int]], results: list[xr.Dataset | None]
-    ) -> None:
-        for index, path in enumerate(paths):
-            if not path.is_file():
-                continue
-            try:
-                # encodings of the chunk file (chunk sizes, ...) must not leak into the result
-                result = read_dataset(path).drop_encoding()
-                self._check_result(result, index, *spans[index])
-            except UqgearError as exc:
-                logger.warning("checkpoint %s is unusable and is evaluated again: %s", path, exc)
-                continue
-            results[index] = result
+        return _concatenate([result for result in results if result is not None])
 
     # ------------------------------------------------------------------ execution
 
@@ -367,73 +337,105 @@ class Runner:
                     raise
                 except Exception as exc:
                     if attempt == attempts:
-                        raise self._chunk_failed(index, spans[index], attempts, exc) from exc
+                        raise _chunk_failed(index, spans[index], attempts, exc) from exc
                     retried += 1
-                    self._log_retry(index, attempt, attempts, exc)
+                    _log_retry(index, attempt, attempts, exc)
                     continue
                 finish(index, result)
                 break
         return retried
 
-    # ------------------------------------------------------------------ helpers
 
-    @staticmethod
-    def _check_result(result: Any, index: int, start: int, stop: int) -> None:
-        expected = stop - start
-        if not isinstance(result, xr.Dataset):
-            raise ExecutionError(
-                f"chunk {index}: the model returned {type(result).__name__}; "
-                f"expected an xarray Dataset with dim 'sample' of length {expected}"
-            )
-        if result.sizes.get("sample") != expected:
-            found = result.sizes.get("sample", "no 'sample' dim")
-            raise ExecutionError(
-                f"chunk {index}: the model returned a Dataset with sample length "
-                f"{found}; expected dim 'sample' of length {expected} "
-                f"(samples {start} to {stop - 1})"
-            )
+def _checkpoint_paths(folder: Path | None, chunks: list[xr.Dataset], key: str, evaluate: Any) -> list[Path]:
+    """The checkpoint file of each chunk in ``folder`` (created if missing), named by index and input hash."""
+    if folder is None:
+        return []
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ExecutionError(f"checkpoint_dir {folder}: cannot create the folder ({exc})") from None
+    width = max(6, len(str(len(chunks) - 1)))
+    names = (
+        f"chunk-{index:0{width}d}-{chunk_hash(chunk, key, evaluate)[:20]}.nc" for index, chunk in enumerate(chunks)
+    )
+    return [folder / name for name in names]
 
-    @staticmethod
-    def _chunk_failed(index: int, span: tuple[int, int], attempts: int, exc: BaseException) -> ExecutionError:
-        return ExecutionError(
-            f"chunk {index} (samples {span[0]} to {span[1] - 1}) failed after "
-            f"{attempts} attempt{'s' if attempts > 1 else ''}: "
-            f"{type(exc).__name__}: {exc}"
-        )
 
-    @staticmethod
-    def _log_retry(index: int, attempt: int, attempts: int, exc: BaseException) -> None:
-        logger.warning(
-            "chunk %d failed (%s: %s); evaluating it again (attempt %d of %d)",
-            index,
-            type(exc).__name__,
-            exc,
-            attempt + 1,
-            attempts,
-        )
-
-    @staticmethod
-    def _concatenate(parts: list[xr.Dataset]) -> xr.Dataset:
-        if len(parts) == 1:
-            return parts[0]
+def _load_checkpoints(paths: list[Path], spans: list[tuple[int, int]], results: list[xr.Dataset | None]) -> None:
+    """Put the usable checkpoints among ``paths`` into ``results``; an unusable one is left to evaluate again."""
+    for index, path in enumerate(paths):
+        if not path.is_file():
+            continue
         try:
-            # only variables with a sample dim are stacked; the others (a time axis, ...)
-            # must agree between chunks, which is checked rather than assumed
-            return xr.concat(
-                parts,
-                dim="sample",
-                data_vars="minimal",
-                coords="minimal",
-                compat="equals",
-                join="exact",
-                combine_attrs="override",
-            )
-        except (ValueError, KeyError) as exc:
-            raise ExecutionError(
-                f"the chunk results do not fit together along 'sample' "
-                f"({exc}); expected every chunk to return the same variables "
-                "and the same non-sample coordinates"
-            ) from None
+            # encodings of the chunk file (chunk sizes, ...) must not leak into the result
+            result = read_dataset(path).drop_encoding()
+            _check_result(result, index, *spans[index])
+        except UqgearError as exc:
+            logger.warning("checkpoint %s is unusable and is evaluated again: %s", path, exc)
+            continue
+        results[index] = result
+
+
+def _check_result(result: Any, index: int, start: int, stop: int) -> None:
+    """Refuse a chunk result that is not a Dataset with the chunk's number of samples."""
+    expected = stop - start
+    if not isinstance(result, xr.Dataset):
+        raise ExecutionError(
+            f"chunk {index}: the model returned {type(result).__name__}; "
+            f"expected an xarray Dataset with dim 'sample' of length {expected}"
+        )
+    if result.sizes.get("sample") != expected:
+        found = result.sizes.get("sample", "no 'sample' dim")
+        raise ExecutionError(
+            f"chunk {index}: the model returned a Dataset with sample length "
+            f"{found}; expected dim 'sample' of length {expected} "
+            f"(samples {start} to {stop - 1})"
+        )
+
+
+def _chunk_failed(index: int, span: tuple[int, int], attempts: int, exc: BaseException) -> ExecutionError:
+    """The error of a chunk that failed on every attempt."""
+    return ExecutionError(
+        f"chunk {index} (samples {span[0]} to {span[1] - 1}) failed after "
+        f"{attempts} attempt{'s' if attempts > 1 else ''}: "
+        f"{type(exc).__name__}: {exc}"
+    )
+
+
+def _log_retry(index: int, attempt: int, attempts: int, exc: BaseException) -> None:
+    """Log that a failed chunk is evaluated again."""
+    logger.warning(
+        "chunk %d failed (%s: %s); evaluating it again (attempt %d of %d)",
+        index,
+        type(exc).__name__,
+        exc,
+        attempt + 1,
+        attempts,
+    )
+
+
+def _concatenate(parts: list[xr.Dataset]) -> xr.Dataset:
+    """The chunk results in sample order as one Dataset."""
+    if len(parts) == 1:
+        return parts[0]
+    try:
+        # only variables with a sample dim are stacked; the others (a time axis, ...)
+        # must agree between chunks, which is checked rather than assumed
+        return xr.concat(
+            parts,
+            dim="sample",
+            data_vars="minimal",
+            coords="minimal",
+            compat="equals",
+            join="exact",
+            combine_attrs="override",
+        )
+    except (ValueError, KeyError) as exc:
+        raise ExecutionError(
+            f"the chunk results do not fit together along 'sample' "
+            f"({exc}); expected every chunk to return the same variables "
+            "and the same non-sample coordinates"
+        ) from None
 
 
 __all__ = ["Runner", "RunReport", "Evaluate", "chunk_hash"]

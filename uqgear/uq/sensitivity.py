@@ -216,19 +216,7 @@ class SobolAnalysis:
                 f"outputs: expected an xarray.Dataset with dimension 'sample' of length "
                 f"{size} (one value per Saltelli sample)"
             )
-        # the model's outputs are named by strings
-        qoi_names = [
-            name
-            for name, variable in cast(Mapping[str, xr.DataArray], outputs.data_vars).items()
-            if "sample" in variable.dims and np.issubdtype(variable.dtype, np.number)
-        ]
-        if self.qoi is not None:
-            missing = [name for name in self.qoi if name not in qoi_names]
-            if missing:
-                raise ParameterSpaceError(f"qoi: {', '.join(missing)} not among the outputs ({', '.join(qoi_names)})")
-            qoi_names = list(self.qoi)
-        if not qoi_names:
-            raise ParameterSpaceError("outputs: no numeric variable with dimension 'sample'")
+        qoi_names = _qoi_names(outputs, self.qoi)
         problem = _unit_problem(names)
         bootstrap_seed = int(child_seed(self.seed_sequence, 1).generate_state(1, np.uint32)[0]) % (2**31 - 1) + 1
         data_vars: dict[str, Any] = {}
@@ -247,33 +235,9 @@ class SobolAnalysis:
             data_vars.update(variables)
             if bad:
                 nonfinite[name] = bad
-        coords: dict[Hashable, Any] = {
-            dim: outputs.coords[dim] for dim in outputs.coords if "sample" not in outputs.coords[dim].dims
-        }
-        coords.update(param=("param", list(names)), index=("index", list(SOBOL_INDICES)))
-        if second_order:
-            coords["param_2"] = ("param_2", list(names))
-        attrs = {
-            key: samples.attrs[key]
-            for key in (
-                "n_base",
-                "second_order",
-                "distribution_assumed",
-                "held_at_nominal",
-                "parameter_space",
-                "seed_entropy",
-                "seed_spawn_key",
-            )
-            if key in samples.attrs
-        }
-        attrs.update(
-            method="sobol (SALib.analyze.sobol.analyze, Saltelli 2010 / Jansen estimators)",
-            num_resamples=self.num_resamples,
-            conf_level=self.conf_level,
-            bootstrap_seed=bootstrap_seed,
-            runs=int(np.prod(list(outputs[qoi_names[0]].shape))),
-            nonfinite_outputs=json.dumps(nonfinite),
-        )
+        coords = _result_coords(outputs, names, second_order)
+        attrs = _result_attributes(samples, self, bootstrap_seed, int(np.prod(list(outputs[qoi_names[0]].shape))))
+        attrs.update(nonfinite_outputs=json.dumps(nonfinite))
         return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
     def fit(
@@ -305,23 +269,82 @@ class SobolAnalysis:
     # -- internals ------------------------------------------------------------------
 
     def _parameter_names(self, space: ParameterSpace) -> list[str]:
-        if not isinstance(space, ParameterSpace):
-            raise ParameterSpaceError(f"space: expected a ParameterSpace; got {type(space).__name__}")
-        uncertain = list(space.uncertain_names)
-        names = list(self.parameters) if self.parameters is not None else uncertain
-        for name in names:
-            if name not in uncertain:
-                raise ParameterSpaceError(
-                    f"parameters: {name!r} is not an interval or random parameter of the "
-                    f"space; expected some of {', '.join(uncertain) or '(none)'}"
-                )
-        if len(set(names)) != len(names):
-            raise ParameterSpaceError(f"parameters: duplicate names in {names}")
-        if not names:
-            raise ParameterSpaceError("space: Sobol analysis needs at least one interval or random parameter")
-        if self.second_order and len(names) < 2:
-            raise ParameterSpaceError("second_order: needs at least two analysed parameters")
-        return names
+        return _parameter_names(space, self.parameters, self.second_order)
+
+
+def _parameter_names(space: ParameterSpace, parameters: Sequence[str] | None, second_order: bool) -> list[str]:
+    """The analysed parameters: ``parameters`` (default every uncertain one of ``space``), checked."""
+    if not isinstance(space, ParameterSpace):
+        raise ParameterSpaceError(f"space: expected a ParameterSpace; got {type(space).__name__}")
+    uncertain = list(space.uncertain_names)
+    names = list(parameters) if parameters is not None else uncertain
+    for name in names:
+        if name not in uncertain:
+            raise ParameterSpaceError(
+                f"parameters: {name!r} is not an interval or random parameter of the "
+                f"space; expected some of {', '.join(uncertain) or '(none)'}"
+            )
+    if len(set(names)) != len(names):
+        raise ParameterSpaceError(f"parameters: duplicate names in {names}")
+    if not names:
+        raise ParameterSpaceError("space: Sobol analysis needs at least one interval or random parameter")
+    if second_order and len(names) < 2:
+        raise ParameterSpaceError("second_order: needs at least two analysed parameters")
+    return names
+
+
+def _qoi_names(outputs: xr.Dataset, qoi: Sequence[str] | None) -> list[str]:
+    """The QoIs analysed: ``qoi``, checked against the outputs, or every numeric output with a sample dim."""
+    # the model's outputs are named by strings
+    qoi_names = [
+        name
+        for name, variable in cast(Mapping[str, xr.DataArray], outputs.data_vars).items()
+        if "sample" in variable.dims and np.issubdtype(variable.dtype, np.number)
+    ]
+    if qoi is not None:
+        missing = [name for name in qoi if name not in qoi_names]
+        if missing:
+            raise ParameterSpaceError(f"qoi: {', '.join(missing)} not among the outputs ({', '.join(qoi_names)})")
+        qoi_names = list(qoi)
+    if not qoi_names:
+        raise ParameterSpaceError("outputs: no numeric variable with dimension 'sample'")
+    return qoi_names
+
+
+def _result_coords(outputs: xr.Dataset, names: Sequence[str], second_order: bool) -> dict[Hashable, Any]:
+    """The result's coordinates: the outputs' other than the samples', the parameters and the indices."""
+    coords: dict[Hashable, Any] = {
+        dim: outputs.coords[dim] for dim in outputs.coords if "sample" not in outputs.coords[dim].dims
+    }
+    coords.update(param=("param", list(names)), index=("index", list(SOBOL_INDICES)))
+    if second_order:
+        coords["param_2"] = ("param_2", list(names))
+    return coords
+
+
+def _result_attributes(samples: xr.Dataset, analysis: SobolAnalysis, bootstrap_seed: int, runs: int) -> dict[str, Any]:
+    """The result's attributes: the design's (taken from ``samples``), the method and the bootstrap's settings."""
+    attrs = {
+        key: samples.attrs[key]
+        for key in (
+            "n_base",
+            "second_order",
+            "distribution_assumed",
+            "held_at_nominal",
+            "parameter_space",
+            "seed_entropy",
+            "seed_spawn_key",
+        )
+        if key in samples.attrs
+    }
+    attrs.update(
+        method="sobol (SALib.analyze.sobol.analyze, Saltelli 2010 / Jansen estimators)",
+        num_resamples=analysis.num_resamples,
+        conf_level=analysis.conf_level,
+        bootstrap_seed=bootstrap_seed,
+        runs=runs,
+    )
+    return attrs
 
 
 def _unit_problem(names: Sequence[str]) -> dict[str, Any]:
