@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -26,11 +26,13 @@ import xarray as xr
 from ..common.errors import OperatingPointError
 from . import _kernels as K
 from ._batch_record import QoiBatch
-from ._pair_extremes import N_EXTREMES
+from .batch_dataset import QOI_INFO as QOI_INFO
+from .batch_dataset import STATE_NAMES as STATE_NAMES
+from .batch_dataset import VARIABLE_LONG_NAMES, VARIABLE_UNITS, BatchArrays, batch_dataset
 
 # BATCH_DESIGN_KEYS: the rig, the dynamics and the calibration import it from here
 from .batch_setup import BATCH_DESIGN_KEYS as BATCH_DESIGN_KEYS
-from .batch_setup import build_batch, extreme_variables, integrate_lane_groups, kernel_inputs
+from .batch_setup import build_batch, integrate_lane_groups, kernel_inputs
 from .design import Design
 from .design_parts import ModalDesign
 from .effect_draws import as_effect
@@ -41,67 +43,7 @@ from .scipy_reference import integrate_scipy
 from .threads import spread
 
 METHODS = ("fast", "scipy")
-#: The state vector's components, in order.
-STATE_NAMES = ("y1", "y2", "x", "y1_velocity", "y2_velocity", "x_velocity")
-
-_UNITS = {
-    "y1": "m",
-    "y2": "m",
-    "x": "m",
-    "y1_velocity": "m s-1",
-    "y2_velocity": "m s-1",
-    "x_velocity": "m s-1",
-    "y1_acceleration": "m s-2",
-    "y2_acceleration": "m s-2",
-    "mesh_force": "N",
-    "mesh_stiffness": "N m-1",
-    "ste": "m",
-    "contact": "1",
-    "te": "m",
-}
-_LONG_NAMES = {
-    "y1": "pinion centre displacement along the line of action",
-    "y2": "gear centre displacement along the line of action",
-    "x": "dynamic transmission error (DTE)",
-    "y1_velocity": "pinion centre velocity",
-    "y2_velocity": "gear centre velocity",
-    "x_velocity": "DTE velocity",
-    "y1_acceleration": "pinion centre acceleration",
-    "y2_acceleration": "gear centre acceleration",
-    "mesh_force": "mesh force F = k f(x) + c_m x'",
-    "mesh_stiffness": "mesh stiffness k(t)",
-    "ste": "static transmission error e(t)",
-    "contact": "contact state: 1 drive side, 0 separated, -1 back side",
-    "te": "transmission error R1 theta1 - R2 theta2 = x - y1 + y2 + e",
-}
-
-#: QoIs returned by :func:`simulate_batch`, with units and descriptions.
-QOI_INFO: dict[str, tuple[str, str]] = {
-    "dte_mean": ("m", "mean dynamic transmission error"),
-    "dte_rms": ("m", "RMS of the DTE about its mean"),
-    "dte_peak_to_peak": ("m", "peak-to-peak DTE"),
-    "dynamic_load_factor": (
-        "1",
-        "maximum mesh force / the run's own static mesh force F_T (from its T1 and T2, so it moves with T2)",
-    ),
-    "peak_mesh_force": ("N", "maximum mesh force F = k f(x) + c_m x' in the kept section"),
-    "load_factor_rated": (
-        "1",
-        "maximum mesh force / rated mesh force T1_rated / r_b1 "
-        "(the design's rated drive torque on the pinion base circle)",
-    ),
-    "acc_pinion_rms": ("m s-2", "RMS pinion centre acceleration"),
-    "acc_gear_rms": ("m s-2", "RMS gear centre acceleration"),
-    "fraction_drive_contact": ("1", "fraction of time in drive-side contact"),
-    "fraction_separation": ("1", "fraction of time with the teeth apart"),
-    "fraction_back_contact": ("1", "fraction of time in back-side contact (impact)"),
-    "largest_lyapunov": (
-        "s-1",
-        "largest Lyapunov exponent in 1/s: Benettin log growth over the kept time "
-        "(renormalised once per mesh period; times the mesh period for nats per "
-        "mesh period)",
-    ),
-}
+_UNITS, _LONG_NAMES = VARIABLE_UNITS, VARIABLE_LONG_NAMES
 
 
 def _check_counts(n_periods: int, keep_periods: int) -> None:
@@ -380,6 +322,20 @@ def _run_batch(batch: QoiBatch, threads: int | None, lanes: bool = True) -> None
                 spread(run_range, len(order), threads)
 
 
+def _initial_states(setups: Sequence[ModelSetup], initial_states: np.ndarray | None) -> np.ndarray:
+    """Each run's start: the given states, checked, or each one's static equilibrium."""
+    n = len(setups)
+    if initial_states is None:
+        return np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
+    states = np.array(initial_states, dtype=float)
+    if states.shape != (n, 6) or not np.all(np.isfinite(states)):
+        raise OperatingPointError(
+            f"initial_states: expected finite values of shape ({n}, 6) "
+            f"(y1, y2, x, y1', y2', x' per sample); got shape {states.shape}"
+        )
+    return states
+
+
 def simulate_batch(
     design: Design,
     samples: xr.Dataset,
@@ -481,27 +437,12 @@ def simulate_batch(
         stiffness=stiffness,
         pitch_errors=pitch_errors,
     )
+    steps = _batch_steps(setups, steps_per_mode, max(int(history_per_period), 1))
+    states = _initial_states(setups, initial_states)
     n = len(setups)
-    multiple = max(int(history_per_period), 1)
-    steps = _batch_steps(setups, steps_per_mode, multiple)
-    if initial_states is None:
-        states = np.stack([s.static_state() for s in setups]) if n else np.empty((0, 6))
-    else:
-        states = np.array(initial_states, dtype=float)
-        if states.shape != (n, 6) or not np.all(np.isfinite(states)):
-            raise OperatingPointError(
-                f"initial_states: expected finite values of shape ({n}, 6) "
-                f"(y1, y2, x, y1', y2', x' per sample); got shape {states.shape}"
-            )
-    final_states = np.empty((n, 6))
-    scales = np.stack([s.state_scale() for s in setups]) if n else np.empty((0, 6))
-    history_stride = (steps // history_per_period) if history_per_period > 0 else np.zeros(n, dtype=np.int64)
-    accumulators = np.zeros((n, K.N_ACCUMULATORS))
-    poincare = np.empty((n, keep_periods, 2))
-    channels = 4 if rig_channels and history_per_period > 0 else 1
-    history = np.empty((n, channels, keep_periods * history_per_period if history_per_period > 0 else 0))
-    extremes = np.zeros((n, N_EXTREMES))
+    arrays = BatchArrays.allocate(n, keep_periods, history_per_period, rig_channels)
     if n:
+        history_stride = (steps // history_per_period) if history_per_period > 0 else np.zeros(n, dtype=np.int64)
         batch = QoiBatch(
             kernel_inputs(setups, states),
             steps,
@@ -509,121 +450,33 @@ def simulate_batch(
             keep_periods,
             history_stride.astype(np.int64),
             bool(lyapunov),
-            scales,
-            accumulators,
-            poincare,
-            history,
-            final_states,
+            np.stack([s.state_scale() for s in setups]),
+            arrays.accumulators,
+            arrays.poincare,
+            arrays.history,
+            arrays.final_states,
             bool(stresses),
-            extremes,
+            arrays.extremes,
         )
         _run_batch(batch, threads, lanes)
-    count = np.maximum(accumulators[:, K.Q_COUNT], 1.0)
-    mean_x = accumulators[:, K.Q_X_SUM] / count
-    mean_force = np.array([s.derived["static_mesh_force"] for s in setups])
-    rated_force = np.array([s.derived["rated_mesh_force"] for s in setups])
-    qois = {
-        "dte_mean": mean_x,
-        "dte_rms": np.sqrt(np.maximum(accumulators[:, K.Q_X_SQ] / count - mean_x**2, 0.0)),
-        "dte_peak_to_peak": accumulators[:, K.Q_X_MAX] - accumulators[:, K.Q_X_MIN],
-        "dynamic_load_factor": np.divide(
-            accumulators[:, K.Q_F_MAX], mean_force, out=np.full(n, np.nan), where=mean_force > 0
-        ),
-        "acc_pinion_rms": np.sqrt(accumulators[:, K.Q_A1_SQ] / count),
-        "acc_gear_rms": np.sqrt(accumulators[:, K.Q_A2_SQ] / count),
-        "fraction_drive_contact": accumulators[:, K.Q_N_DRIVE] / count,
-        "fraction_separation": accumulators[:, K.Q_N_SEP] / count,
-        "fraction_back_contact": accumulators[:, K.Q_N_BACK] / count,
-        "peak_mesh_force": accumulators[:, K.Q_F_MAX].copy(),
-        "load_factor_rated": np.divide(
-            accumulators[:, K.Q_F_MAX], rated_force, out=np.full(n, np.nan), where=rated_force > 0
-        ),
-    }
-    if lyapunov:
-        qois["largest_lyapunov"] = accumulators[:, K.Q_LYAPUNOV]
-    data: dict[str, tuple[Any, ...]] = {
-        name: ("sample", value, {"units": QOI_INFO[name][0], "long_name": QOI_INFO[name][1]})
-        for name, value in qois.items()
-    }
-    if stresses:
-        data.update(extreme_variables(extremes))
-    data["poincare_x"] = (
-        ("sample", "period"),
-        poincare[:, :, 0],
-        {"units": "m", "long_name": "DTE once per mesh period"},
-    )
-    data["poincare_x_velocity"] = (
-        ("sample", "period"),
-        poincare[:, :, 1],
-        {"units": "m s-1", "long_name": "DTE velocity once per mesh period"},
-    )
-    data["static_mesh_force"] = ("sample", mean_force, {"units": "N", "long_name": "mean mesh force F_T"})
-    data["mesh_frequency"] = (
-        "sample",
-        np.array([s.mesh_frequency for s in setups]),
-        {"units": "Hz", "long_name": "mesh frequency"},
-    )
-    data["steps_per_period"] = ("sample", steps, {"units": "1", "long_name": "RK4 steps per mesh period"})
-    coords: dict[Hashable, tuple[Any, ...]] = {
-        "period": ("period", np.arange(n_periods - keep_periods, n_periods), {"units": "1"})
-    }
-    for name in samples.data_vars:
-        coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
-    for name in samples.coords:
-        if samples[name].dims == ("sample",) and name not in coords:
-            coords[name] = ("sample", samples[name].values, dict(samples[name].attrs))
-    if history_per_period > 0:
-        data["x_history"] = (
-            ("sample", "mesh_cycle"),
-            history[:, 0],
-            {"units": "m", "long_name": "decimated DTE history"},
-        )
-        if channels == 4:
-            data["te_history"] = (
-                ("sample", "mesh_cycle"),
-                history[:, 1],
-                {"units": "m", "long_name": _LONG_NAMES["te"]},
-            )
-            data["acc_pinion_history"] = (
-                ("sample", "mesh_cycle"),
-                history[:, 2],
-                {"units": "m s-2", "long_name": _LONG_NAMES["y1_acceleration"]},
-            )
-            data["acc_gear_history"] = (
-                ("sample", "mesh_cycle"),
-                history[:, 3],
-                {"units": "m s-2", "long_name": _LONG_NAMES["y2_acceleration"]},
-            )
-        coords["mesh_cycle"] = (
-            "mesh_cycle",
-            n_periods - keep_periods + np.arange(keep_periods * history_per_period) / history_per_period,
-            {"units": "1", "long_name": "time in mesh periods"},
-        )
-    if final_state:
-        data["final_state"] = (
-            ("sample", "state"),
-            final_states,
-            {"units": "m, m, m, m s-1, m s-1, m s-1", "long_name": "state at the end of the last period"},
-        )
-        coords["state"] = ("state", list(STATE_NAMES), {"long_name": "state component"})
-    ds = xr.Dataset(data, coords=coords)
-    half_backlash = np.array([s.parameters[K.HALF_BACKLASH] for s in setups])
-    ds.attrs.update(
-        method="fast",
+    return batch_dataset(
+        design,
+        samples,
+        setups,
+        steps,
+        arrays,
         n_periods=n_periods,
         keep_periods=keep_periods,
+        history_per_period=history_per_period,
+        lyapunov=lyapunov,
+        stresses=stresses,
+        final_state=final_state,
         steps_per_mode=steps_per_mode,
-        design_name=design.name,
-        damping_in_separation=int(damping_in_separation),
+        damping_in_separation=damping_in_separation,
         stiffness=stiffness,
-        effects="; ".join(repr(e) for e in effects) or "none",
-        **{f"design_{key}": value for key, value in design.to_dict().items()},
+        effects=effects,
+        pitch_errors=pitch_errors,
     )
-    if n and np.all(half_backlash == half_backlash[0]):
-        ds.attrs["half_backlash"] = float(half_backlash[0])
-    if pitch_errors is not None:
-        ds.attrs.update(pitch_errors_pinion=pitch_errors.pinion.copy(), pitch_errors_gear=pitch_errors.gear.copy())
-    return ds
 
 
 def samples_from_mapping(values: Mapping[str, Sequence[float] | np.ndarray]) -> xr.Dataset:
