@@ -25,7 +25,7 @@ from ..common.errors import OperatingPointError
 from . import _kernels as K
 from .design import Design
 from .design_parts import MeshDesign, ModalDesign
-from .geometry import pair_geometry
+from .geometry import PairGeometry, pair_geometry
 from .pitch_errors import PitchErrors
 from .stiffness import StiffnessTables, stiffness_tables
 
@@ -319,56 +319,14 @@ def build_model(
         raise OperatingPointError(f"stiffness: expected one of {', '.join(STIFFNESS_MODES)}; got {stiffness!r}")
     geometry = pair_geometry(design)
     tables = cached_tables(design, "ishikawa")
-    if stiffness == "fourier":
-        period_table = cached_tables(design, "fourier").period_stiffness
-    elif stiffness == "constant":
-        # linear-limit studies: k(t) = k_mean through the smooth-table path
-        period_table = np.full_like(tables.period_stiffness, tables.k_mean)
-    else:
-        period_table = tables.period_stiffness
+    period_table = _period_table(design, tables, stiffness)
     me = equivalent_mass(design)
-    r1, r2 = geometry.pinion.base_radius, geometry.gear.base_radius
-    k_mean = tables.k_mean
-    omega_mesh = 2.0 * math.pi * design.z1 * pinion_speed / 60.0
-    if pitch_errors is not None and not isinstance(pitch_errors, PitchErrors):
-        raise OperatingPointError(
-            f"pitch_errors: expected a PitchErrors (per-tooth offsets in m) or None; got {type(pitch_errors).__name__}"
-        )
-    if pitch_errors is not None:
-        pitch_errors.check(design)
-    # the named slots, then the per-tooth pitch offsets of pinion and gear (zero without pitch errors)
-    p = np.zeros(K.N_PARAMS + design.z1 + design.z2)
-    p[K.M1], p[K.M2], p[K.ME] = design.m1, design.m2, me
-    p[K.K1], p[K.K2] = design.k1, design.k2
-    p[K.C1] = 2.0 * design.zeta1 * math.sqrt(design.k1 * design.m1)
-    p[K.C2] = 2.0 * design.zeta2 * math.sqrt(design.k2 * design.m2)
-    p[K.CM] = 2.0 * design.zeta_mesh * math.sqrt(k_mean * mesh_stiffness_scale * me)
-    p[K.HALF_BACKLASH] = design.half_backlash
-    p[K.R1], p[K.R2], p[K.I1], p[K.I2] = r1, r2, design.I1, design.I2
+    _check_pitch_errors(design, pitch_errors)
+    p = _parameters(design, geometry, me, tables.k_mean, stiffness, damping_in_separation)
     p[K.T1], p[K.T2] = drive_torque, adhesion_torque
-    p[K.OMEGA_MESH] = omega_mesh
-    p[K.STE_AMPLITUDE] = design.ste_amplitude
+    p[K.OMEGA_MESH] = 2.0 * math.pi * design.z1 * pinion_speed / 60.0
     p[K.STIFFNESS_SCALE] = mesh_stiffness_scale
-    p[K.DAMP_IN_SEPARATION] = 1.0 if damping_in_separation else 0.0
-    p[K.PATH_START] = geometry.contact_start
-    p[K.BASE_PITCH] = geometry.base_pitch
-    p[K.LOA_LENGTH] = geometry.line_of_action_length
-    p[K.PITCH_POSITION] = (geometry.pitch_point - geometry.contact_start) / geometry.base_pitch
-    p[K.CONTACT_RATIO] = geometry.contact_ratio
-    p[K.USE_PERIOD_TABLE] = 0.0 if stiffness == "ishikawa" else 1.0
-    p[K.Z1], p[K.Z2] = design.z1, design.z2
-    static_force = me * (r1 * drive_torque / design.I1 + r2 * adhesion_torque / design.I2)
-    derived = {
-        "equivalent_mass": me,
-        "k_mean": k_mean,
-        "static_mesh_force": static_force,
-        "omega_n": math.sqrt(k_mean * mesh_stiffness_scale / me),
-        "mesh_frequency": omega_mesh / (2.0 * math.pi),
-        "contact_ratio": geometry.contact_ratio,
-        "pinion_base_radius": r1,
-        "gear_base_radius": r2,
-        "rated_mesh_force": design.operation.drive_torque / r1,
-    }
+    p[K.CM] = 2.0 * design.zeta_mesh * math.sqrt(tables.k_mean * mesh_stiffness_scale * me)
     setup = ModelSetup(
         design=design,
         parameters=p,
@@ -377,26 +335,92 @@ def build_model(
         factor_pinion=np.ones(design.z1),
         factor_gear=np.ones(design.z2),
         breakpoints=np.empty(0),
-        derived=derived,
+        derived=_derived(design, geometry, p, tables.k_mean),
         effects=tuple(effects),
         stiffness=stiffness,
         pitch_errors=pitch_errors,
     )
     if pitch_errors is not None and pitch_errors.any:
-        if geometry.contact_ratio >= K.MAX_PAIRS:
-            raise OperatingPointError(
-                f"pitch_errors: the per-pair path holds at most {K.MAX_PAIRS} pairs in mesh; "
-                f"the contact ratio is {geometry.contact_ratio:.3f}"
-            )
-        p[K.N_PARAMS : K.N_PARAMS + design.z1] = pitch_errors.pinion
-        p[K.N_PARAMS + design.z1 :] = pitch_errors.gear
-        p[K.PITCH_ERRORS] = 1.0
+        _set_pitch_errors(p, design, geometry, pitch_errors)
     for effect in effects:
         effect.apply(setup)
     # the kernel skips per-tooth lookups unless some tooth differs
     p[K.TOOTH_FACTORS] = float(np.any(setup.factor_pinion != 1.0) or np.any(setup.factor_gear != 1.0))
     setup.breakpoints = _breakpoints(setup) if stiffness == "ishikawa" or effects else np.empty(0)
     return setup
+
+
+def _period_table(design: Design, tables: StiffnessTables, stiffness: str) -> np.ndarray:
+    """The one-mesh-period stiffness table of the ``stiffness`` mode (unused by the raw Ishikawa path)."""
+    if stiffness == "fourier":
+        return cached_tables(design, "fourier").period_stiffness
+    if stiffness == "constant":
+        # linear-limit studies: k(t) = k_mean through the smooth-table path
+        return np.full_like(tables.period_stiffness, tables.k_mean)
+    return tables.period_stiffness
+
+
+def _check_pitch_errors(design: Design, pitch_errors: PitchErrors | None) -> None:
+    if pitch_errors is not None and not isinstance(pitch_errors, PitchErrors):
+        raise OperatingPointError(
+            f"pitch_errors: expected a PitchErrors (per-tooth offsets in m) or None; got {type(pitch_errors).__name__}"
+        )
+    if pitch_errors is not None:
+        pitch_errors.check(design)
+
+
+def _parameters(
+    design: Design, geometry: PairGeometry, me: float, k_mean: float, stiffness: str, damping_in_separation: bool
+) -> np.ndarray:
+    """The parameter vector's slots set by the design and the model's options (the operating point's are zero)."""
+    # the named slots, then the per-tooth pitch offsets of pinion and gear (zero without pitch errors)
+    p = np.zeros(K.N_PARAMS + design.z1 + design.z2)
+    p[K.M1], p[K.M2], p[K.ME] = design.m1, design.m2, me
+    p[K.K1], p[K.K2] = design.k1, design.k2
+    p[K.C1] = 2.0 * design.zeta1 * math.sqrt(design.k1 * design.m1)
+    p[K.C2] = 2.0 * design.zeta2 * math.sqrt(design.k2 * design.m2)
+    p[K.HALF_BACKLASH] = design.half_backlash
+    p[K.R1], p[K.R2], p[K.I1], p[K.I2] = (geometry.pinion.base_radius, geometry.gear.base_radius, design.I1, design.I2)
+    p[K.STE_AMPLITUDE] = design.ste_amplitude
+    p[K.DAMP_IN_SEPARATION] = 1.0 if damping_in_separation else 0.0
+    p[K.PATH_START] = geometry.contact_start
+    p[K.BASE_PITCH] = geometry.base_pitch
+    p[K.LOA_LENGTH] = geometry.line_of_action_length
+    p[K.PITCH_POSITION] = (geometry.pitch_point - geometry.contact_start) / geometry.base_pitch
+    p[K.CONTACT_RATIO] = geometry.contact_ratio
+    p[K.USE_PERIOD_TABLE] = 0.0 if stiffness == "ishikawa" else 1.0
+    p[K.Z1], p[K.Z2] = design.z1, design.z2
+    return p
+
+
+def _derived(design: Design, geometry: PairGeometry, p: np.ndarray, k_mean: float) -> dict[str, float]:
+    """Derived quantities of the operating point in ``p`` (its masses, radii, torques and speed)."""
+    me, r1, r2 = float(p[K.ME]), geometry.pinion.base_radius, geometry.gear.base_radius
+    drive_torque, adhesion_torque = float(p[K.T1]), float(p[K.T2])
+    mesh_stiffness_scale, omega_mesh = float(p[K.STIFFNESS_SCALE]), float(p[K.OMEGA_MESH])
+    return {
+        "equivalent_mass": me,
+        "k_mean": k_mean,
+        "static_mesh_force": me * (r1 * drive_torque / design.I1 + r2 * adhesion_torque / design.I2),
+        "omega_n": math.sqrt(k_mean * mesh_stiffness_scale / me),
+        "mesh_frequency": omega_mesh / (2.0 * math.pi),
+        "contact_ratio": geometry.contact_ratio,
+        "pinion_base_radius": r1,
+        "gear_base_radius": r2,
+        "rated_mesh_force": design.operation.drive_torque / r1,
+    }
+
+
+def _set_pitch_errors(p: np.ndarray, design: Design, geometry: PairGeometry, pitch_errors: PitchErrors) -> None:
+    """Write the per-tooth offsets into ``p`` and switch the per-pair path on."""
+    if geometry.contact_ratio >= K.MAX_PAIRS:
+        raise OperatingPointError(
+            f"pitch_errors: the per-pair path holds at most {K.MAX_PAIRS} pairs in mesh; "
+            f"the contact ratio is {geometry.contact_ratio:.3f}"
+        )
+    p[K.N_PARAMS : K.N_PARAMS + design.z1] = pitch_errors.pinion
+    p[K.N_PARAMS + design.z1 :] = pitch_errors.gear
+    p[K.PITCH_ERRORS] = 1.0
 
 
 def _breakpoints(setup: ModelSetup) -> np.ndarray:
