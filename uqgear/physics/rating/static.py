@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..geometry import pair_geometry
+from ..geometry import PairGeometry, pair_geometry
 from .contact import ContactFactors, contact_factors
 from .dynamic import dynamic_factor_model
 from .life import CONTACT_KNEES, ROOT_KNEES, StressLifeCurve
@@ -165,26 +165,74 @@ def static_rating(
     if not (math.isfinite(pinion_speed) and pinion_speed > 0.0):
         raise ValueError(f"pinion_speed: expected a finite speed > 0 rpm; got {pinion_speed!r}")
     geometry = pair_geometry(design)
-    b, m, u = design.face_width, design.module, design.z2 / design.z1
-    d_1 = 2.0 * geometry.pinion.pitch_radius
     force = drive_torque / geometry.pinion.pitch_radius
     k_v = (
         dynamic_factor
         if dynamic_factor is not None
         else float(dynamic_factor_model(design, drive_torque, settings).factor(pinion_speed))
     )
+    sections, root_nominal, root_actual = _root_stresses(design, geometry, settings, force, k_v)
+    factors, contact_nominal, contact_actual = _contact_stresses(design, geometry, settings, force, k_v)
+    lubricant, contact_curve, root_curves = _strength_curves(design, geometry, settings, sections, pinion_speed)
+    per_gear = None if cycles is None else (float(cycles), float(cycles) / (design.z2 / design.z1))
+    contact_strength = tuple(
+        contact_curve.stress[1] if per_gear is None else float(contact_curve.strength(n))
+        for n in (per_gear or (0.0, 0.0))
+    )
+    root_strength = tuple(
+        curve.stress[1] if per_gear is None else float(curve.strength(n))
+        for curve, n in zip(root_curves, per_gear or (0.0, 0.0))
+    )
+    return StaticRating(
+        tangential_force=force,
+        dynamic_factor=k_v,
+        root=sections,
+        contact=factors,
+        root_stress_nominal=root_nominal,
+        root_stress=root_actual,
+        contact_stress_nominal=contact_nominal,
+        contact_stress=contact_actual,
+        contact_curve=(contact_curve, contact_curve),
+        root_curve=root_curves,
+        cycles=per_gear,
+        contact_strength=(contact_strength[0], contact_strength[1]),
+        root_strength=(root_strength[0], root_strength[1]),
+        safety_contact=(contact_strength[0] / contact_actual[0], contact_strength[1] / contact_actual[1]),
+        safety_root=(root_strength[0] / root_actual[0], root_strength[1] / root_actual[1]),
+        lubricant=lubricant,
+    )
+
+
+def _root_stresses(
+    design, geometry: PairGeometry, settings: RatingSettings, force: float, k_v: float
+) -> tuple[tuple[RootSection, RootSection], tuple[float, float], tuple[float, float]]:
+    """Each gear's critical root section, nominal root stress sigma_F0 and root stress sigma_F (ISO 6336-3)."""
+    b, m = design.face_width, design.module
     k_a, k_hb, k_alpha = settings.application_factor, settings.face_load_factor, settings.transverse_load_factor
     depth = (design.addendum_coefficient + design.dedendum_coefficient) * m
     ratio = b / depth
     k_fb = k_hb ** (ratio**2 / (1.0 + ratio + ratio**2))
-    sections = tuple(
+    pinion, gear = (
         root_section(design, name, rack_fillet_coefficient=settings.rack_fillet_coefficient, geometry=geometry)
         for name in ("pinion", "gear")
     )
-    root_nominal = tuple(force / (b * m) * s.form_factor * s.stress_correction for s in sections)
-    root_actual = tuple(s * k_a * k_v * k_fb * k_alpha for s in root_nominal)
+    nominal = (
+        force / (b * m) * pinion.form_factor * pinion.stress_correction,
+        force / (b * m) * gear.form_factor * gear.stress_correction,
+    )
+    actual = (nominal[0] * k_a * k_v * k_fb * k_alpha, nominal[1] * k_a * k_v * k_fb * k_alpha)
+    return (pinion, gear), nominal, actual
+
+
+def _contact_stresses(
+    design, geometry: PairGeometry, settings: RatingSettings, force: float, k_v: float
+) -> tuple[ContactFactors, float, tuple[float, float]]:
+    """The contact factors, the nominal contact stress sigma_H0 and each gear's sigma_H (ISO 6336-2)."""
+    b, u = design.face_width, design.z2 / design.z1
+    d_1 = 2.0 * geometry.pinion.pitch_radius
+    k_a, k_hb, k_alpha = settings.application_factor, settings.face_load_factor, settings.transverse_load_factor
     factors = contact_factors(design, geometry)
-    contact_nominal = (
+    nominal = (
         factors.zone
         * factors.elasticity
         * factors.contact_ratio
@@ -192,10 +240,14 @@ def static_rating(
         * math.sqrt(force / (d_1 * b) * (u + 1.0) / u)
     )
     load = math.sqrt(k_a * k_v * k_hb * k_alpha)
-    contact_actual = (
-        factors.single_pair_pinion * contact_nominal * load,
-        factors.single_pair_gear * contact_nominal * load,
-    )
+    return factors, nominal, (factors.single_pair_pinion * nominal * load, factors.single_pair_gear * nominal * load)
+
+
+def _strength_curves(
+    design, geometry: PairGeometry, settings: RatingSettings, sections: tuple[RootSection, ...], pinion_speed: float
+) -> tuple[tuple[float, float, float], StressLifeCurve, tuple[StressLifeCurve, StressLifeCurve]]:
+    """The lubricant factors (Z_L, Z_v, Z_R), the flank's S-N curve and each gear's root S-N curve."""
+    d_1 = 2.0 * geometry.pinion.pitch_radius
     velocity = math.pi * d_1 * pinion_speed / 60.0
     radii = [
         tooth.base_radius * math.tan(geometry.working_pressure_angle) for tooth in (geometry.pinion, geometry.gear)
@@ -208,37 +260,11 @@ def static_rating(
     contact_curve = _curve(CONTACT_KNEES, h_static, h_endurance, reduced)
     root_curves = []
     for section in sections:
-        static_notch, notch, roughness, size = root_strength_factors(settings, section, m)
+        static_notch, notch, roughness, size = root_strength_factors(settings, section, design.module)
         f_static = material.sigma_Flim * Y_ST * ROOT_KNEES[0][1] * static_notch
         f_endurance = material.sigma_Flim * Y_ST * notch * roughness * size
         root_curves.append(_curve(ROOT_KNEES, f_static, f_endurance, reduced))
-    per_gear = None if cycles is None else (float(cycles), float(cycles) / u)
-    contact_strength = tuple(
-        contact_curve.stress[1] if per_gear is None else float(contact_curve.strength(n))
-        for n in (per_gear or (0.0, 0.0))
-    )
-    root_strength = tuple(
-        curve.stress[1] if per_gear is None else float(curve.strength(n))
-        for curve, n in zip(root_curves, per_gear or (0.0, 0.0))
-    )
-    return StaticRating(
-        tangential_force=force,
-        dynamic_factor=k_v,
-        root=(sections[0], sections[1]),
-        contact=factors,
-        root_stress_nominal=(root_nominal[0], root_nominal[1]),
-        root_stress=(root_actual[0], root_actual[1]),
-        contact_stress_nominal=contact_nominal,
-        contact_stress=contact_actual,
-        contact_curve=(contact_curve, contact_curve),
-        root_curve=(root_curves[0], root_curves[1]),
-        cycles=per_gear,
-        contact_strength=(contact_strength[0], contact_strength[1]),
-        root_strength=(root_strength[0], root_strength[1]),
-        safety_contact=(contact_strength[0] / contact_actual[0], contact_strength[1] / contact_actual[1]),
-        safety_root=(root_strength[0] / root_actual[0], root_strength[1] / root_actual[1]),
-        lubricant=lubricant,
-    )
+    return lubricant, contact_curve, (root_curves[0], root_curves[1])
 
 
 __all__ = [
