@@ -577,13 +577,7 @@ def simulate_runup_batch(
     ({'sample': 2, 'time': 205}, True)
     """
     check_speed_range(design, profile)
-    if "pinion_speed" in samples.data_vars:
-        raise OperatingPointError(
-            "samples: pinion_speed is set by the speed profile; expected no pinion_speed variable"
-        )
-    unknown = [name for name in variables if name not in HISTORY_COLUMNS and name != "te"]
-    if unknown:
-        raise OperatingPointError(f"variables: expected names of {', '.join(HISTORY_COLUMNS)} or te; got {unknown}")
+    _check_batch_request(samples, variables)
     n = samples.sizes.get("sample", 0)
     full = samples.assign(pinion_speed=("sample", np.full(n, profile.start_speed)))
     setups = build_batch(
@@ -597,33 +591,11 @@ def simulate_runup_batch(
         "run_in_periods": run_in_periods,
         "threads": threads,
     }
-    if initial_states is None:
-        states = _run_in(design, full, options)
-    else:
-        states = np.asarray(initial_states, dtype=float)
-        if states.shape != (n, 6) or not np.all(np.isfinite(states)):
-            raise OperatingPointError(
-                f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}"
-            )
+    states = _batch_states(design, full, options, initial_states)
     out_t = _output_times(profile, float(sample_rate))
     plans = _plans(setups, steps_per_mode, profile, out_t)
     steps = np.array([max(band[2] for band in plan.bands) for plan in plans], dtype=np.int64)
-    history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
-    groups = _lane_groups(setups, plans) if lanes else [[i] for i in range(n)]
-    lane_groups = [members for members in groups if len(members) > 1]
-    if lane_groups:
-        # compiled once, before the threads start (the lanes' vector width is a process-wide option)
-        RL.compile_runup_lanes(*_lane_arguments(lane_groups[0], setups, plans, states, 0))
-
-    def run_range(start: int, stop: int) -> None:
-        for members in groups[start:stop]:
-            if len(members) > 1:
-                history[members] = _integrate_lanes(members, setups, plans, states, out_t.size)
-            else:
-                history[members[0]] = _integrate_fast(setups[members[0]], steps_per_mode, profile, out_t,
-                                                      states[members[0]])[0]
-
-    spread(run_range, len(groups), threads)
+    history = _integrate_batch(setups, plans, states, profile, out_t, steps_per_mode, threads, lanes)
     data = _profile_variables(profile, out_t, design.z1)
     everything = _history_variables(history, ("sample", "time"))
     data.update({name: everything[name] for name in variables})
@@ -646,6 +618,60 @@ def simulate_runup_batch(
         )
     )
     return ds
+
+
+def _check_batch_request(samples: xr.Dataset, variables: Sequence[str]) -> None:
+    if "pinion_speed" in samples.data_vars:
+        raise OperatingPointError(
+            "samples: pinion_speed is set by the speed profile; expected no pinion_speed variable"
+        )
+    unknown = [name for name in variables if name not in HISTORY_COLUMNS and name != "te"]
+    if unknown:
+        raise OperatingPointError(f"variables: expected names of {', '.join(HISTORY_COLUMNS)} or te; got {unknown}")
+
+
+def _batch_states(design: Design, full: xr.Dataset, options: dict, initial_states: np.ndarray | None) -> np.ndarray:
+    """Each run's start: the given states, checked, or the state after its run-in at the start speed."""
+    n = full.sizes.get("sample", 0)
+    if initial_states is None:
+        return _run_in(design, full, options)
+    states = np.asarray(initial_states, dtype=float)
+    if states.shape != (n, 6) or not np.all(np.isfinite(states)):
+        raise OperatingPointError(
+            f"initial_states: expected finite values of shape ({n}, 6); got shape {states.shape}"
+        )
+    return states
+
+
+def _integrate_batch(
+    setups: Sequence[ModelSetup],
+    plans: Sequence[_Plan],
+    states: np.ndarray,
+    profile: SpeedProfile,
+    out_t: np.ndarray,
+    steps_per_mode: int,
+    threads: int | None,
+    lanes: bool,
+) -> np.ndarray:
+    """Every run's history, shape (runs, times, HISTORY_COLUMNS): lane groups and lone runs spread over threads."""
+    n = len(setups)
+    history = np.empty((n, out_t.size, len(HISTORY_COLUMNS)))
+    groups = _lane_groups(setups, plans) if lanes else [[i] for i in range(n)]
+    lane_groups = [members for members in groups if len(members) > 1]
+    if lane_groups:
+        # compiled once, before the threads start (the lanes' vector width is a process-wide option)
+        RL.compile_runup_lanes(*_lane_arguments(lane_groups[0], setups, plans, states, 0))
+
+    def run_range(start: int, stop: int) -> None:
+        for members in groups[start:stop]:
+            if len(members) > 1:
+                history[members] = _integrate_lanes(members, setups, plans, states, out_t.size)
+            else:
+                history[members[0]] = _integrate_fast(setups[members[0]], steps_per_mode, profile, out_t,
+                                                      states[members[0]])[0]
+
+    spread(run_range, len(groups), threads)
+    return history
 
 
 __all__ = [
