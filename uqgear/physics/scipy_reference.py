@@ -53,6 +53,25 @@ def pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], in
     return lambda x: K._pairs.pair_contact(x, newest, count, p)
 
 
+def _boundary_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
+    """A terminal event where x crosses ``level``, directed away from the side x is on."""
+
+    def event(t: float, y: np.ndarray) -> float:
+        return y[2] - level
+
+    event.terminal = True  # type: ignore[attr-defined]
+    event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
+    return event
+
+
+def _pair_boundaries(t_ref: float, p: np.ndarray, b: float) -> tuple[np.ndarray, Callable[[float], int]]:
+    """The contact boundaries e_i -+ b of the pairs in mesh at ``t_ref``, and their contact state of x."""
+    newest, count = K._pairs.pair_state(t_ref, p)
+    offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
+    levels = np.unique([e + side for e in offsets for side in (b, -b)])
+    return levels, pair_contact(newest, count, p)
+
+
 def integrate_scipy(
     setup: ModelSetup,
     n_periods: int,
@@ -96,14 +115,6 @@ def integrate_scipy(
 
     contact: Callable[[float], int] = mesh_contact
 
-    def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
-        def event(t: float, y: np.ndarray) -> float:
-            return y[2] - level
-
-        event.terminal = True  # type: ignore[attr-defined]
-        event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
-        return event
-
     for n in range(n_periods):
         kept = n >= first_kept
         if kept:
@@ -113,11 +124,8 @@ def integrate_scipy(
             t_a, t_b = (n + u_a) * period, (n + u_b) * period
             t_ref = 0.5 * (t_a + t_b)
             if with_pairs:
-                newest, count = K._pairs.pair_state(t_ref, p)
-                offsets = [K._pairs.pair_offset(newest - i, p) for i in range(count)]
-                levels = np.unique([e + side for e in offsets for side in (b, -b)])
+                levels, contact = _pair_boundaries(t_ref, p, b)
                 above = state[2] > levels
-                contact = pair_contact(newest, count, p)
             out = np.empty(6)
 
             def fun(t, y, t_ref=t_ref, out=out):
@@ -125,7 +133,7 @@ def integrate_scipy(
                 return out.copy()
 
             while t_a < t_b:
-                events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
+                events = [_boundary_event(level, bool(up)) for level, up in zip(levels, above)]
                 sol = solve_ivp(
                     fun, (t_a, t_b), state, method=solver, rtol=rtol, atol=atol_vector, events=events, dense_output=kept
                 )
