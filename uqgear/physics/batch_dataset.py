@@ -342,3 +342,6 @@ def batch_dataset(
         )
     )
     return ds
+
+
+__all__ = ["batch_dataset", "BatchArrays", "QOI_INFO", "STATE_NAMES", "VARIABLE_UNITS", "VARIABLE_LONG_NAMES"]
