@@ -342,6 +342,65 @@ def integrate_history_pairs(
     )
 
 
+@nb.njit(**INLINED)
+def _start_sums(acc):
+    """Start a run's QoI sums: the extremes at their identities (the sums are zero)."""
+    acc[Q_X_MIN] = np.inf
+    acc[Q_X_MAX] = -np.inf
+    acc[Q_F_MAX] = -np.inf
+    acc[Q_F_MIN] = np.inf
+
+
+@nb.njit(**INLINED)
+def _add_step(acc, x, force, a1, a2, region):
+    """Add one kept grid step (DTE, mesh force, accelerations, contact region) to a run's QoI sums."""
+    acc[Q_X_SUM] += x
+    acc[Q_X_SQ] += x * x
+    if x < acc[Q_X_MIN]:
+        acc[Q_X_MIN] = x
+    if x > acc[Q_X_MAX]:
+        acc[Q_X_MAX] = x
+    if force > acc[Q_F_MAX]:
+        acc[Q_F_MAX] = force
+    if force < acc[Q_F_MIN]:
+        acc[Q_F_MIN] = force
+    acc[Q_A1_SQ] += a1 * a1
+    acc[Q_A2_SQ] += a2 * a2
+    if region == 1:
+        acc[Q_N_DRIVE] += 1.0
+    elif region == 0:
+        acc[Q_N_SEP] += 1.0
+    else:
+        acc[Q_N_BACK] += 1.0
+    acc[Q_COUNT] += 1.0
+
+
+@nb.njit(**INLINED)
+def _renormalised(shadow, s, scale, separation):
+    """(shadow state, distance): the shadow run brought back to ``separation`` from ``s`` (Benettin).
+
+    The distance is the scaled one before; at zero distance the shadow starts again
+    ``separation`` away in x.
+    """
+    distance = 0.0
+    for c in range(6):
+        distance += ((shadow[c] - s[c]) / scale[c]) ** 2
+    distance = math.sqrt(distance)
+    if distance > 0.0:
+        ratio = separation / distance
+        shadow = (
+            s[0] + (shadow[0] - s[0]) * ratio,
+            s[1] + (shadow[1] - s[1]) * ratio,
+            s[2] + (shadow[2] - s[2]) * ratio,
+            s[3] + (shadow[3] - s[3]) * ratio,
+            s[4] + (shadow[4] - s[4]) * ratio,
+            s[5] + (shadow[5] - s[5]) * ratio,
+        )
+    else:
+        shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
+    return shadow, distance
+
+
 # numba-inlined into its callers, so that it is not compiled (and its machine code emitted)
 # a second time as a kernel of its own; ``step`` and ``contact`` are compiled functions
 # (numba compiles one specialisation per pair of functions passed)
@@ -384,10 +443,7 @@ def _integrate_qoi(
     pairs = schedule[4]
     table = schedule[5]
     kept_extremes = NO_EXTREMES
-    acc[Q_X_MIN] = np.inf
-    acc[Q_X_MAX] = -np.inf
-    acc[Q_F_MAX] = -np.inf
-    acc[Q_F_MIN] = np.inf
+    _start_sums(acc)
     separation = 1e-7
     s = (state[0], state[1], state[2], state[3], state[4], state[5])
     shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
@@ -410,26 +466,7 @@ def _integrate_qoi(
                                                   j / steps_per_period, teeth, table, sub, pairs[sub], p)
             s, force, a1, a2 = step(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
             if kept:
-                acc[Q_X_SUM] += x
-                acc[Q_X_SQ] += x * x
-                if x < acc[Q_X_MIN]:
-                    acc[Q_X_MIN] = x
-                if x > acc[Q_X_MAX]:
-                    acc[Q_X_MAX] = x
-                if force > acc[Q_F_MAX]:
-                    acc[Q_F_MAX] = force
-                if force < acc[Q_F_MIN]:
-                    acc[Q_F_MIN] = force
-                acc[Q_A1_SQ] += a1 * a1
-                acc[Q_A2_SQ] += a2 * a2
-                region = contact(x, n, pairs[first_sub[j]], p)
-                if region == 1:
-                    acc[Q_N_DRIVE] += 1.0
-                elif region == 0:
-                    acc[Q_N_SEP] += 1.0
-                else:
-                    acc[Q_N_BACK] += 1.0
-                acc[Q_COUNT] += 1.0
+                _add_step(acc, x, force, a1, a2, contact(x, n, pairs[first_sub[j]], p))
                 if history_stride > 0 and j % history_stride == 0:
                     history[0, row] = x
                     if history.shape[0] >= 4:
@@ -443,24 +480,9 @@ def _integrate_qoi(
                 shadow, _, _, _ = step(n, j, period, shadow, p, pair_k, period_k, fp, fg, schedule)
         if lyapunov:
             # Benettin renormalisation once per mesh period in scaled coordinates
-            distance = 0.0
-            for c in range(6):
-                distance += ((shadow[c] - s[c]) / scale[c]) ** 2
-            distance = math.sqrt(distance)
-            if distance > 0.0:
-                if kept:
-                    log_growth += math.log(distance / separation)
-                ratio = separation / distance
-                shadow = (
-                    s[0] + (shadow[0] - s[0]) * ratio,
-                    s[1] + (shadow[1] - s[1]) * ratio,
-                    s[2] + (shadow[2] - s[2]) * ratio,
-                    s[3] + (shadow[3] - s[3]) * ratio,
-                    s[4] + (shadow[4] - s[4]) * ratio,
-                    s[5] + (shadow[5] - s[5]) * ratio,
-                )
-            else:
-                shadow = (s[0], s[1], s[2] + separation * scale[2], s[3], s[4], s[5])
+            shadow, distance = _renormalised(shadow, s, scale, separation)
+            if kept and distance > 0.0:
+                log_growth += math.log(distance / separation)
     for c in range(6):
         state[c] = s[c]
     if stresses:
