@@ -305,12 +305,9 @@ def integrate_group(
         live[half:] = written[:half]
     acc = _start_lanes(W, runs.states, samples, lyapunov, scales)
     stresses = batch.stresses
-    extremes = np.empty((LANES, N_EXTREMES))
+    extremes = _start_extremes()
     # each lane's pitch offsets and tooth factors of the pair slots in the current period
     teeth = np.zeros((LANES, 2 * MAX_PAIRS))
-    for lane in range(LANES):
-        for e in range(N_EXTREMES):
-            extremes[lane, e] = NO_EXTREMES[e]
     log_growth = np.zeros(LANES)
     whole_state = batch.poincare.shape[2] >= 6
     first_kept = n_periods - keep_periods
@@ -354,9 +351,25 @@ def integrate_group(
     _write_out(W, acc, log_growth, samples, written, lyapunov, keep_periods, period, batch.accumulators,
                batch.final_states)
     if stresses:
-        for lane in range(LANES):
-            if written[lane]:
-                batch.stress_extremes[samples[lane]] = extremes[lane]
+        _write_extremes(batch.stress_extremes, extremes, samples, written)
+
+
+@nb.njit(**INLINED)
+def _start_extremes():
+    """Each lane's tooth-pair load extremes at their start (:data:`NO_EXTREMES`)."""
+    extremes = np.empty((LANES, N_EXTREMES))
+    for lane in range(LANES):
+        for e in range(N_EXTREMES):
+            extremes[lane, e] = NO_EXTREMES[e]
+    return extremes
+
+
+@nb.njit(**INLINED)
+def _write_extremes(out, extremes, samples, written):
+    """Each written lane's extremes into its run's row of ``out``."""
+    for lane in range(LANES):
+        if written[lane]:
+            out[samples[lane]] = extremes[lane]
 
 
 @nb.njit(**INLINED)
