@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from ..physics.batch_setup import PAIR_EXTREME_INFO
+from ..physics.batch_setup import PAIR_EXTREME_INFO, start_states
 from ..physics.design import Design
-from ..physics.integration import STATE_NAMES, build_batch, simulate_batch
+from ..physics.integration import STATE_NAMES, simulate_batch
 from ..physics.rating import RatingSettings
 from .regimes import classify_batch, period_labels
 from .stress_qois import stress_variables
@@ -65,17 +65,15 @@ class StartedEvaluator:
         inputs = samples.drop_vars([name for name in INITIAL_VARIABLES if name in samples.variables])
         states = None
         if all(name in samples.variables for name in INITIAL_VARIABLES):
-            states = np.stack([np.asarray(samples[name].values, dtype=float) for name in INITIAL_VARIABLES], axis=1)
-            rest = ~np.all(np.isfinite(states), axis=1)
-            if rest.any():
-                setups = build_batch(
-                    self.design,
-                    inputs.isel(sample=np.nonzero(rest)[0]),
-                    effects=self.options.get("effects", ()),
-                    damping_in_separation=self.options.get("damping_in_separation", True),
-                    stiffness=self.options.get("stiffness", "ishikawa"),
-                )
-                states[rest] = np.stack([setup.static_state() for setup in setups])
+            given = np.stack([np.asarray(samples[name].values, dtype=float) for name in INITIAL_VARIABLES], axis=1)
+            states = start_states(
+                self.design,
+                inputs,
+                given,
+                effects=self.options.get("effects", ()),
+                damping_in_separation=self.options.get("damping_in_separation", True),
+                stiffness=self.options.get("stiffness", "ishikawa"),
+            )
         # the stresses from the same pass (the batch's pair-load extremes)
         stressed = self.stresses is not None
         batch = simulate_batch(

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from ..physics.batch_setup import PAIR_EXTREME_INFO, build_batch, sample_designs
+from ..physics.batch_setup import PAIR_EXTREME_INFO, sample_designs, start_states
 from ..physics.design import Design
 from ..physics.integration import QOI_INFO, BatchEvaluator, simulate_batch
 from ..physics.pitch_errors import PitchErrors
@@ -170,31 +170,16 @@ def tooth_stress_qois(
         steps_per_mode=steps_per_mode,
         threads=threads,
         pitch_errors=pitch_errors,
-        initial_states=_starts(design, samples, initial_states, effects, damping_in_separation, stiffness),
+        initial_states=start_states(
+            design, samples, initial_states, effects=effects, damping_in_separation=damping_in_separation,
+            stiffness=stiffness,
+        ),
         stresses=True,
     )
     return xr.Dataset(
         stress_variables(design, samples, batch, rating),
         coords={"sample": samples["sample"].values} if "sample" in samples.coords else None,
     )
-
-
-def _starts(design, samples, states, effects, damping_in_separation, stiffness) -> np.ndarray | None:
-    """The given start states, a row of NaN replaced by that run's static equilibrium."""
-    if states is None:
-        return None
-    states = np.array(states, dtype=float)
-    rest = ~np.all(np.isfinite(states), axis=1)
-    if rest.any():
-        setups = build_batch(
-            design,
-            samples.isel(sample=np.nonzero(rest)[0]),
-            effects=effects,
-            damping_in_separation=damping_in_separation,
-            stiffness=stiffness,
-        )
-        states[rest] = np.stack([setup.static_state() for setup in setups])
-    return states
 
 
 class StressEvaluator(BatchEvaluator):

@@ -134,6 +134,45 @@ def build_batch(
     return setups
 
 
+
+def start_states(
+    design: Design,
+    samples: xr.Dataset,
+    states: np.ndarray | None,
+    *,
+    effects: Sequence[Effect] = (),
+    damping_in_separation: bool = True,
+    stiffness: str = "ishikawa",
+) -> np.ndarray | None:
+    """Start states for :func:`~uqgear.physics.integration.simulate_batch`'s ``initial_states``: the given
+    (samples, 6) states, a row with a NaN replaced by that run's static equilibrium (None stays None).
+
+    Examples
+    --------
+    >>> import numpy as np, uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> samples = uqgear.samples_from_mapping({"pinion_speed": [1000.0, 2000.0]})
+    >>> given = np.array([[0.0, 0.0, 1e-5, 0.0, 0.0, 0.0], [np.nan] * 6])
+    >>> states = start_states(design, samples, given)
+    >>> float(states[0, 2]), bool(states[1, 2] == build_batch(design, samples)[1].static_state()[2])
+    (1e-05, True)
+    """
+    if states is None:
+        return None
+    states = np.array(states, dtype=float)
+    rest = ~np.all(np.isfinite(states), axis=1)
+    if rest.any():
+        setups = build_batch(
+            design,
+            samples.isel(sample=np.nonzero(rest)[0]),
+            effects=effects,
+            damping_in_separation=damping_in_separation,
+            stiffness=stiffness,
+        )
+        states[rest] = np.stack([setup.static_state() for setup in setups])
+    return states
+
+
 def shared_stiffness_tables(setups: Sequence[ModelSetup]) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
     """The distinct stiffness tables of a batch's set-ups and, per set-up, the index of its own.
 
@@ -289,6 +328,7 @@ __all__ = [
     "OPERATING_VARIABLES",
     "BATCH_DESIGN_KEYS",
     "build_batch",
+    "start_states",
     "sample_designs",
     "shared_stiffness_tables",
     "breakpoint_table",
