@@ -319,7 +319,7 @@ def _stress_arrays(
     hertz = hertz_factor * np.sqrt(np.maximum(load, 0.0) / reduced)
     pitch = setup.parameters[K.PITCH_POSITION]
     # each flank where the contact point is on its dedendum, the pitch point C included
-    on_dedendum = np.stack([position <= pitch + 1e-12, position >= pitch - 1e-12])
+    on_dedendum = np.stack([position <= pitch + K.PITCH_TOLERANCE, position >= pitch - K.PITCH_TOLERANCE])
     contact = np.where(on_dedendum[:, None, :], hertz[None, :, :], 0.0)
     return root, contact
 

@@ -38,7 +38,7 @@ from uqgear.physics._rhs import (
 # and on the gear's dedendum (N/m)
 E_LOAD_MAX, E_LOAD_MIN, E_FLANK_PINION, E_FLANK_GEAR = range(4)
 N_EXTREMES = 4
-#: Tolerance of the dedendum test at the pitch point, base pitches (that of :mod:`uqgear.dynamics.tooth_loads`).
+#: Tolerance of the dedendum test at the pitch point, base pitches (:mod:`uqgear.dynamics.tooth_loads` applies it too).
 PITCH_TOLERANCE = 1e-12
 
 

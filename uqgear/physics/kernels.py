@@ -7,7 +7,8 @@ model inside compiled loops of their own: the periodic-orbit shooting and its Fl
 (:mod:`uqgear.dynamics.tooth_loads`) and the calibration's steady harmonics
 (:mod:`uqgear.calibration.harmonics`). They take what they need from here: the parameter vector's
 slots (:data:`PARAMETER_SLOTS`, each a constant named as its slot in capitals), the one-sample
-stepping kernels and the variational orbit pass. The names are those of the private kernel modules
+stepping kernels, the variational orbit pass, and the tolerance of the pitch point's dedendum test
+the tooth-stress extremes apply (:data:`PITCH_TOLERANCE`). The names are those of the private kernel modules
 (:mod:`uqgear.physics._rhs`, :mod:`uqgear.physics._kernels`, :mod:`uqgear.physics._variational`);
 a module that compiles a call to one of them is listed in :data:`uqgear.physics._cache.COMPILED_MODULES`
 so that its cached machine code follows the kernels'.
@@ -24,6 +25,7 @@ Examples
 from __future__ import annotations
 
 from ._kernels import advance, scheduled_step
+from ._pair_extremes import PITCH_TOLERANCE
 from ._rhs import (
     BASE_PITCH,
     CM,
@@ -68,6 +70,7 @@ __all__ = [
     "PATH_START",
     "PITCH_ERRORS",
     "PITCH_POSITION",
+    "PITCH_TOLERANCE",
     "STE_AMPLITUDE",
     "STIFFNESS_SCALE",
     "TOOTH_FACTORS",
