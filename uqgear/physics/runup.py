@@ -19,7 +19,7 @@ inverse angle) with events at the contact boundaries, the reference;
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -48,6 +48,7 @@ from .integration import (
     simulate_batch,
 )
 from .model import HISTORY_COLUMNS, ModelSetup
+from .scipy_reference import boundary_event
 from .speed_profile import RPM, SpeedProfile
 from .threads import spread
 
@@ -299,14 +300,6 @@ def _integrate_scipy(
             float(profile.acceleration(tc)) / omega_ref,
         )
 
-    def make_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
-        def event(t: float, y: np.ndarray) -> float:
-            return y[2] - level
-
-        event.terminal = True  # type: ignore[attr-defined]
-        event.direction = -1 if is_above else 1  # type: ignore[attr-defined]
-        return event
-
     for n in range(n_periods):
         for i in range(phases.size - 1):
             t_a, t_b = edges_t[n, i], min(edges_t[n, i + 1], profile.duration)
@@ -320,7 +313,7 @@ def _integrate_scipy(
                 return np.array(d)
 
             while t_a < t_b:
-                events = [make_event(level, bool(up)) for level, up in zip(levels, above)]
+                events = [boundary_event(level, bool(up)) for level, up in zip(levels, above)]
                 sol = solve_ivp(
                     fun,
                     (t_a, t_b),

@@ -53,8 +53,9 @@ def pair_contact(newest: int, count: int, p: np.ndarray) -> Callable[[float], in
     return lambda x: K._pairs.pair_contact(x, newest, count, p)
 
 
-def _boundary_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
-    """A terminal event where x crosses ``level``, directed away from the side x is on."""
+def boundary_event(level: float, is_above: bool) -> Callable[[float, np.ndarray], float]:
+    """A terminal :func:`scipy.integrate.solve_ivp` event where x (the state's third entry) crosses ``level``,
+    directed away from the side x is on (``is_above``): the contact boundaries of the scipy references."""
 
     def event(t: float, y: np.ndarray) -> float:
         return y[2] - level
@@ -133,7 +134,7 @@ def integrate_scipy(
                 return out.copy()
 
             while t_a < t_b:
-                events = [_boundary_event(level, bool(up)) for level, up in zip(levels, above)]
+                events = [boundary_event(level, bool(up)) for level, up in zip(levels, above)]
                 sol = solve_ivp(
                     fun, (t_a, t_b), state, method=solver, rtol=rtol, atol=atol_vector, events=events, dense_output=kept
                 )
@@ -165,4 +166,4 @@ def integrate_scipy(
     return history, poincare, stats
 
 
-__all__ = ["integrate_scipy", "record_grid", "pair_contact"]
+__all__ = ["integrate_scipy", "record_grid", "pair_contact", "boundary_event"]
