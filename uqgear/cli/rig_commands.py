@@ -131,6 +131,18 @@ def add_rig_commands(commands: Any) -> None:
     _add_blindtest(commands)
 
 
+def _add_campaign_arguments(parser: Any) -> None:
+    """The rig file, the output folder and the nominal design: what ``calibrate`` and ``diagnose`` both take."""
+    parser.add_argument("rig", metavar="RIG.nc")
+    parser.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
+    parser.add_argument(
+        "--design",
+        metavar="NAME|FILE",
+        help="nominal design, replacing the rig file's "
+        "(whose copy is then not checked; default: the rig file's design)",
+    )
+
+
 def _add_calibrate(commands: Any) -> None:
     calibrate = commands.add_parser(
         "calibrate",
@@ -139,14 +151,7 @@ def _add_calibrate(commands: Any) -> None:
         "amplitude and bearing stiffness (and T2 per run) against a rig file with "
         "emcee; write DIR/posterior.nc, DIR/calibration.json, DIR/report.html.",
     )
-    calibrate.add_argument("rig", metavar="RIG.nc")
-    calibrate.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
-    calibrate.add_argument(
-        "--design",
-        metavar="NAME|FILE",
-        help="nominal design, replacing the rig file's "
-        "(whose copy is then not checked; default: the rig file's design)",
-    )
+    _add_campaign_arguments(calibrate)
     calibrate.add_argument(
         "--params",
         nargs="+",
@@ -181,14 +186,7 @@ def _add_diagnose(commands: Any) -> None:
         "held-out operating points; write DIR/diagnosis.json, DIR/diagnosis.nc, "
         "DIR/report.html.",
     )
-    diagnose.add_argument("rig", metavar="RIG.nc")
-    diagnose.add_argument("--out", required=True, metavar="DIR", help="new or empty output folder")
-    diagnose.add_argument(
-        "--design",
-        metavar="NAME|FILE",
-        help="nominal design, replacing the rig file's "
-        "(whose copy is then not checked; default: the rig file's design)",
-    )
+    _add_campaign_arguments(diagnose)
     diagnose.add_argument(
         "--effects", nargs="+", metavar="NAME", help="candidate effects (default: all six of the library)"
     )
