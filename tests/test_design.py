@@ -10,7 +10,7 @@ import pytest
 import uqgear
 import uqgear.common
 from uqgear.common.errors import DesignError
-from uqgear.physics.design import DESIGN_KEYS, load_design
+from uqgear.physics.design import DESIGN_KEYS, design_key_bounds, design_key_unit, load_design
 from uqgear.physics.geometry import pair_geometry
 
 
@@ -180,3 +180,16 @@ def test_replace_checks_the_geometry_only_when_a_geometry_key_changes(design, mo
     assert calls == []
     design.replace(x2=0.1)
     assert len(calls) == 1
+
+
+def test_a_design_keys_unit_is_the_one_validation_states_and_unknown_keys_are_refused():
+    # the unit is the text the missing-key message quotes
+    design = load_design("locomotive").to_dict()
+    del design["pressure_angle"]
+    expected = rf"pressure_angle: missing design key \(expected {design_key_unit('pressure_angle')}\)"
+    with pytest.raises(DesignError, match=expected):
+        uqgear.Design.from_mapping(design)
+    assert design_key_unit("z1") == "teeth"
+    for lookup in (design_key_unit, design_key_bounds):
+        with pytest.raises(DesignError, match=r"stiffnes: unknown design key; expected one of z1, z2"):
+            lookup("stiffnes")
