@@ -15,7 +15,7 @@ the default prior's 0.6); with ``--without-backlash`` backlash, which the foreig
 calibrated.
 
 Usage: ``python benchmarks/calibration_discrepancy.py [--campaign foreign|healthy] [--discrepancy]
-[--effective-priors] [--without-backlash] [--seed S] [--threads N] [--json PATH]``
+[--effective-priors] [--without-backlash] [--seed S] [--threads N] [--max-steps N] [--json PATH]``
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def foreign_campaign(seed: int):
 
 
 def run(campaign: str, discrepancy: bool, seed: int, threads: int | None, effective_priors: bool = False,
-        without_backlash: bool = False) -> dict:
+        without_backlash: bool = False, max_steps: int | None = None) -> dict:
     rig = foreign_campaign(seed) if campaign == "foreign" else uqgear.example_rig_file("healthy")
     truth = HEALTHY_TRUTH if campaign == "healthy" else {}
     options: dict = {"discrepancy": True} if discrepancy else {}
@@ -55,6 +55,8 @@ def run(campaign: str, discrepancy: bool, seed: int, threads: int | None, effect
         options["priors"] = EFFECTIVE_PRIORS
     if without_backlash:
         options["parameters"] = [name for name in DEFAULT_PARAMETERS if name != "backlash"]
+    if max_steps is not None:
+        options["max_steps"] = max_steps
     start = time.perf_counter()
     calibration = Calibration(seed=seed, threads=threads, **options).fit(rig)
     wall = time.perf_counter() - start
@@ -92,9 +94,11 @@ def main() -> None:
     parser.add_argument("--without-backlash", action="store_true", help="every default parameter but backlash")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--max-steps", type=int, default=None, help="the sampler's step limit (default: the setting's)")
     parser.add_argument("--json", type=Path, default=None, help="also write the record here")
     args = parser.parse_args()
-    record = run(args.campaign, args.discrepancy, args.seed, args.threads, args.effective_priors, args.without_backlash)
+    record = run(args.campaign, args.discrepancy, args.seed, args.threads, args.effective_priors, args.without_backlash,
+                 args.max_steps)
     text = json.dumps(record, indent=2, default=float)
     print(text)
     if args.json is not None:
