@@ -62,7 +62,7 @@ from uqgear.physics._rhs import (
     smooth_share,
     tooth_factor,
 )
-from uqgear.physics._stepper import BISECTIONS, F_SINE, crossed_boundary, crossing_fraction, rk4_by, splits_step
+from uqgear.physics._stepper import BISECTIONS, F_SINE, crossed_boundary, crossing_fraction, rk4_by, split_parts
 
 # positions in the forcing tuple of a pair path
 PAIR_COUNT = 5
@@ -371,14 +371,17 @@ def _apart(x, terms, b):
 
 
 @nb.njit(**INLINED)
-def _first_crossing(s, trial, h, terms, p, split_level):
-    """(fraction of the step, boundary level) where the first pair changes its contact state ((2.0, nan) if none).
+def _first_crossing(field, s, d1, trial, end, h, context, split_level, terms):
+    """(fraction of the step, boundary level) where the first pair changes its contact state ((2.0, nan) if none):
+    the first crossing of the per-pair split (:func:`~uqgear.physics._stepper.split_parts`), on the Hermite
+    interpolant of x from x' (s[5]) at the step's ends.
 
     A boundary a step was split at already (``split_level``) is not split at again: the first part ends
     on the interpolated crossing, a little short of or beyond its own, and the classical path
     (:func:`~uqgear.physics._stepper._split_at_contact`) splits a step once at the boundary it crosses. So
     both paths take the same steps where the pairs' offsets coincide.
     """
+    p, _ = context
     b = p[HALF_BACKLASH]
     first = 2.0
     first_level = math.nan
@@ -399,70 +402,25 @@ def _first_crossing(s, trial, h, terms, p, split_level):
 
 
 @nb.njit(**INLINED)
-def _apart_after(x, before_x, trial_x, terms, b, level):
-    """Whether no pair touches on the side a step split at boundary ``level`` enters: a pair that crosses that
-    boundary over the step (from ``before_x`` to ``trial_x``) is in the region it enters, the others where ``x``
-    (the split point) puts them."""
+def _apart_after(part, before, trial, level, p, terms):
+    """Whether no pair touches on the side a step split at boundary ``level`` enters: the side after the split of
+    the per-pair path (:func:`~uqgear.physics._stepper.split_parts`). A pair that crosses that boundary over the
+    step (from ``before`` to ``trial``) is in the region it enters, the others where ``part`` (ending on the split
+    point) puts them."""
+    b = p[HALF_BACKLASH]
+    x = part[2]
     touching = False
     for i in range(int(terms[PAIR_COUNT])):
         offset = terms[PAIR_OFFSET + i]
-        before = contact_region(before_x - offset, b)
-        after = contact_region(trial_x - offset, b)
+        start = contact_region(before[2] - offset, b)
+        after = contact_region(trial[2] - offset, b)
         region = contact_region(x - offset, b)
-        if before != after:
-            crossed, entered = crossed_boundary(before, after, b)
+        if start != after:
+            crossed, entered = crossed_boundary(start, after, b)
             if offset + crossed == level:
                 region = entered
         touching |= region != 0
     return not touching
-
-
-@nb.njit(**INLINED)
-def _step_pairs(t, h, s, d1, mid, end, terms, t_ref, p, pair_k, period_k, fp, fg):
-    """One RK4 step over [t, t+h] (one pair set), redone in parts at each pair's contact change.
-
-    The classical path splits once, at |x| = b; here several pairs may change
-    state within a step, so the remainder is checked again (at most
-    ``2 MAX_PAIRS`` splits: each pair has two boundaries), each boundary once.
-    Each part runs on the mesh damping of its own side (:func:`side_derivative_pairs`), as the classical
-    split does (:func:`~uqgear.physics._stepper._split_at_contact`): without damping in separation the
-    damping force switches where the last pair leaves contact, and a stage on the other side's damping
-    costs an error of the order of the step at every crossing. The crossing is then located on the step
-    taken on the first side's damping throughout. With damping in separation both sides' damping is the
-    same and the parts are the plain RK4 steps, bit for bit; a step that changes no pair's contact is the
-    plain RK4 step on either model, as in the pair lanes.
-    """
-    trial = rk4_by(_pairs_field, s, h, d1, mid, end, p)
-    b = p[HALF_BACKLASH]
-    apart = _apart(s[2], terms, b)
-    if (p[DAMP_IN_SEPARATION] == 0.0) and _changes_contact(s[2], trial[2], terms, b):
-        trial = rk4_by(_pairs_side_field, s, h, d1, mid, end, (p, apart))
-    split_level = math.nan
-    for _ in range(2 * MAX_PAIRS):
-        theta, split_level = _first_crossing(s, trial, h, terms, p, split_level)
-        if not splits_step(theta):
-            return trial
-        h_a = theta * h
-        middle = forcing_pairs(t + h_a, t_ref, p, pair_k, period_k, fp, fg)
-        part = rk4_by(
-            _pairs_side_field, s, h_a, d1, forcing_pairs(t + 0.5 * h_a, t_ref, p, pair_k, period_k, fp, fg), middle,
-            (p, apart),
-        )
-        apart = _apart_after(part[2], s[2], trial[2], terms, b, split_level)
-        s = part
-        t += h_a
-        h -= h_a
-        d1, _ = side_derivative_pairs(s, middle, p, apart)
-        trial = rk4_by(
-            _pairs_side_field,
-            s,
-            h,
-            d1,
-            forcing_pairs(t + 0.5 * h, t_ref, p, pair_k, period_k, fp, fg),
-            forcing_pairs(t + h, t_ref, p, pair_k, period_k, fp, fg),
-            (p, apart),
-        )
-    return trial
 
 
 @nb.njit(**INLINED)
@@ -506,27 +464,37 @@ def scheduled_step_pairs(n, j, period, s, p, pair_k, period_k, fp, fg, schedule)
 @nb.njit(**INLINED)
 def substep_pairs(t, h, s, teeth, table, sub, n_pairs, t_ref, p, pair_k, period_k, fp, fg):
     """Sub-step ``sub`` of :func:`scheduled_step_pairs` over [t, t+h] from ``s`` (``teeth``: :func:`_tooth_terms`
-    of its mesh period, ``table``: its schedule's tabulated stages, ``t_ref``: its reference time).
+    of its mesh period, ``table``: its schedule's tabulated stages, ``t_ref``: its reference time): one RK4 step
+    (one pair set), redone in parts at each pair's contact change.
+
+    The classical path splits once, at |x| = b; here several pairs may change state within a step, so the
+    remainder is checked again (at most ``2 MAX_PAIRS`` splits: each pair has two boundaries), each boundary
+    once, by :func:`~uqgear.physics._stepper.split_parts` (:func:`_first_crossing`, :func:`_apart_after`).
+    Each part runs on the mesh damping of its own side (:func:`side_derivative_pairs`), as the classical
+    split does (:func:`~uqgear.physics._stepper._split_at_contact`): without damping in separation the
+    damping force switches where the last pair leaves contact, and a stage on the other side's damping
+    costs an error of the order of the step at every crossing. The crossing is then located on the step
+    taken on the first side's damping throughout. With damping in separation both sides' damping is the
+    same and the parts are the plain RK4 steps, bit for bit; a step that changes no pair's contact is the
+    plain RK4 step on either model, as in the pair lanes.
 
     Returns (new state, first RK4 stage, mesh force at the start). The one-sample pair step, also
     what a pair lane's redone sub-step is (:mod:`uqgear.physics._pair_lanes`).
     """
     terms = _forcing_row_pairs(t, teeth, table, sub, 0, n_pairs, p)
     d1, force = derivative_pairs(s, terms, p)
-    new = _step_pairs(
-        t,
-        h,
-        s,
-        d1,
-        _forcing_row_pairs(t + 0.5 * h, teeth, table, sub, 1, n_pairs, p),
-        _forcing_row_pairs(t + h, teeth, table, sub, 2, n_pairs, p),
-        terms,
-        t_ref,
-        p,
-        pair_k,
-        period_k,
-        fp,
-        fg,
+    mid = _forcing_row_pairs(t + 0.5 * h, teeth, table, sub, 1, n_pairs, p)
+    end = _forcing_row_pairs(t + h, teeth, table, sub, 2, n_pairs, p)
+    trial = rk4_by(_pairs_field, s, h, d1, mid, end, p)
+    b = p[HALF_BACKLASH]
+    if not _changes_contact(s[2], trial[2], terms, b):
+        return trial, d1, force
+    apart = _apart(s[2], terms, b)
+    if p[DAMP_IN_SEPARATION] == 0.0:
+        trial = rk4_by(_pairs_side_field, s, h, d1, mid, end, (p, apart))
+    new = split_parts(
+        _pairs_side_field, forcing_pairs, _first_crossing, _apart_after, 2 * MAX_PAIRS, False, p, apart, t, h, s,
+        d1, trial, end, terms, (t_ref, p, pair_k, period_k, fp, fg),
     )
     return new, d1, force
 

@@ -17,8 +17,10 @@ of stepped over:
 Every integrator of the package takes its RK4 step from :func:`rk4_by_weighted`
 (the stages of :func:`rk4_stages`, combined), given its right-hand side from
 :mod:`uqgear.physics._rhs` as a compiled function, and its contact split from
-:func:`split_step` (the per-pair path splits at each pair's boundaries in turn;
-the variational pass carries its matrix through the split). These helpers
+:func:`split_parts`, the one control flow of a split, given the path's rules as
+compiled functions (:func:`split_step` splits once at the one boundary; the
+per-pair path splits at each pair's boundaries in turn; the variational pass
+keeps its own split, which carries its matrix through the parts). These helpers
 are inlined into kernels in other files: a cached kernel is keyed on the
 contents of every compiled module of the package (:mod:`uqgear.physics._cache`),
 so editing this one recompiles them all.
@@ -228,12 +230,83 @@ def crossed_boundary(before, after, b):
     return level, entered
 
 
+# inlined by numba (its IR copied into the caller) rather than by LLVM: each path calls it once, and its loop is
+# then compiled in the caller alone, not also as a function of its own (the one-run and pair kernels compile
+# as fast as with the loop written in each path); numba's inliner takes no star argument, hence ``model``
+# as a tuple
+@nb.njit(**JIT_OPTIONS, inline="always")
+def split_parts(field, forcing_at, first_crossing, side_after, splits, same_end, fc, side, t, h, s, d1, trial, end,
+                rules, model):
+    """``trial`` (the step from ``s`` over [t, t+h] on the mesh damping of contact side ``side``), redone in
+    parts at its contact crossings, at most ``splits`` of them: the one control flow of every contact split
+    of the fast path (one boundary, :func:`split_step`; several pairs, each with its own boundaries,
+    :func:`uqgear.physics._pairs.substep_pairs`).
+
+    ``field(state, terms, (fc, side), divide)`` is the right-hand side with the mesh damping of
+    contact side ``side`` whatever x is, ``forcing_at(time, *model)`` its forcing terms at any time
+    (``model`` a tuple), ``d1`` the field at ``s`` and ``end`` the forcing at the end of ``trial``.
+    The path's rules, given as compiled functions and specialised at compile time:
+
+    * ``first_crossing(field, s, d1, trial, end, h, (fc, side), done, rules)``: (fraction of the step,
+      boundary level) of the first crossing on the step's cubic Hermite interpolant, not at the
+      boundary ``done`` split at already (NaN before the first split); a fraction outside
+      :func:`splits_step` ends the splitting;
+    * ``side_after(part, s, trial, level, fc, rules)``: the contact side the step enters at the
+      split at ``level`` (``part`` ends on the split point, ``trial`` is the step split).
+
+    The remaining step [t, t+h] after a split ends where the step ends: where ``same_end`` is true its
+    forcing there is ``end``, else it is computed again at t + h (a flag, not a function: one compiled
+    function less per path, and a constant the compiler folds).
+
+    Each part runs on the mesh damping of its own side, the remainder from the field at the split
+    point on the side it enters. The variational pass (:func:`uqgear.physics._variational._substep`)
+    keeps its own split: it carries the 6 x 6 matrix Phi through every stage of each part in place
+    (restored from a copy when the step is redone), applies the saltation matrix's jump in the mesh
+    damping between the parts, adds the derivative of the split point's position
+    (:func:`uqgear.physics._variational._crossing_sensitivity`, two more two-part steps from the
+    unsplit step's rows of Phi), locates its crossing more finely and records each part's extremes;
+    this driver carries the state alone.
+    """
+    level = math.nan
+    for _ in range(splits):
+        theta, level = first_crossing(field, s, d1, trial, end, h, (fc, side), level, rules)
+        if not splits_step(theta):
+            return trial
+        h_a = theta * h
+        middle = forcing_at(t + h_a, *model)
+        part = rk4_by(field, s, h_a, d1, forcing_at(t + 0.5 * h_a, *model), middle, (fc, side))
+        side = side_after(part, s, trial, level, fc, rules)
+        s = part
+        t += h_a
+        h -= h_a
+        d1, _ = field(s, middle, (fc, side), divided)
+        if not same_end:
+            end = forcing_at(t + h, *model)
+        trial = rk4_by(field, s, h, d1, forcing_at(t + 0.5 * h, *model), end, (fc, side))
+    return trial
+
+
+@nb.njit(**INLINED)
+def _boundary_crossing(field, s, d1, trial, end, h, context, done, rules):
+    """The first crossing of :func:`split_step`: at the boundary level ``rules`` gives, on the Hermite
+    interpolant of x from its slopes at the step's ends (the field's: x' in time, dx/dtau in warped time)."""
+    level = rules[0]
+    d_end, _ = field(trial, end, context, divided)
+    return crossing_fraction(s[2], d1[2], trial[2], d_end[2], h, level, BISECTIONS), level
+
+
+@nb.njit(**INLINED)
+def _entered_region(part, s, trial, level, c, rules):
+    """The side after the split of :func:`split_step`: the region entered, which ``rules`` gives."""
+    return rules[1]
+
+
 @nb.njit(**INLINED)
 def split_step(field, forcing_at, c, t, h, s, d1, trial, *model):
     """``trial`` (the step from ``s`` over [t, t+h]), redone in two parts where it changes the
-    contact region, split where the cubic Hermite interpolant of x crosses the boundary: the one
-    contact split of every integrator with one contact boundary (the per-pair path splits at each
-    pair's boundaries in turn, :func:`uqgear.physics._pairs._step_pairs`).
+    contact region, split where the cubic Hermite interpolant of x crosses the boundary: the
+    contact split of every integrator with one contact boundary, one split by :func:`split_parts`
+    (the per-pair path splits at each pair's boundaries in turn, :func:`uqgear.physics._pairs.substep_pairs`).
 
     ``field(state, terms, (c, region), divide)`` is the right-hand side with the mesh damping of
     contact region ``region`` whatever x is (:func:`_side_field`; in warped time
@@ -246,7 +319,8 @@ def split_step(field, forcing_at, c, t, h, s, d1, trial, *model):
     convergence); the crossing is then also located on the step taken with the first side's
     damping throughout, not on ``trial``, whose later stages mix the two sides. With damping in
     separation the vector field is continuous there and both sides' damping is the same: the
-    parts are the plain RK4 steps, bit for bit.
+    parts are the plain RK4 steps, bit for bit. The boundary and the region entered are those of
+    ``trial`` as given.
     """
     b = c[0]
     before = contact_region(s[2], b)
@@ -257,17 +331,10 @@ def split_step(field, forcing_at, c, t, h, s, d1, trial, *model):
     end = forcing_at(t + h, *model)
     if c[2] == 0.0:
         trial = rk4_by(field, s, h, d1, forcing_at(t + 0.5 * h, *model), end, (c, before))
-    # the Hermite interpolant of x from its slopes at the step's ends (x' in time, dx/dtau in warped time)
-    d_end, _ = field(trial, end, (c, before), divided)
-    theta = crossing_fraction(s[2], d1[2], trial[2], d_end[2], h, level, BISECTIONS)
-    if not splits_step(theta):
-        return trial
-    h_a = theta * h
-    h_b = h - h_a
-    middle = forcing_at(t + h_a, *model)
-    part = rk4_by(field, s, h_a, d1, forcing_at(t + 0.5 * h_a, *model), middle, (c, before))
-    d_middle, _ = field(part, middle, (c, entered), divided)
-    return rk4_by(field, part, h_b, d_middle, forcing_at(t + h_a + 0.5 * h_b, *model), end, (c, entered))
+    return split_parts(
+        field, forcing_at, _boundary_crossing, _entered_region, 1, True, c, before, t, h, s, d1, trial, end,
+        (level, entered), model,
+    )
 
 
 @nb.njit(**JIT_OPTIONS)
