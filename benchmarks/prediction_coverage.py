@@ -19,11 +19,15 @@ With ``--discrepancy`` the calibration learns a model-discrepancy term and the p
 dynamic part of each response scaled by a draw of the DTE's first-mesh-harmonic discrepancy, as the study's
 ``prediction`` analysis does).
 
-Prints coverage per kind and QoI. Minutes per campaign (a calibration, and a diagnosis on
+Prints coverage per kind and QoI, and where the truth falls among the predictive draws (its probability
+integral transform: the share of draws below it), which tells bands that are too wide from bands that are right
+and were lucky. Minutes per campaign (a calibration, and a diagnosis on
 ``effect`` campaigns).
 
 Usage: ``python benchmarks/prediction_coverage.py [--per-kind 2] [--kinds healthy effect structural] [--seed 1]
-[--discrepancy] [--first K] [--skip J] [--run-kinds KIND ...] [--json out.json]``; ``--first``, ``--skip`` and
+[--discrepancy] [--first K] [--skip J] [--run-kinds KIND ...] [--without-artefacts] [--json out.json]``;
+``--without-artefacts`` simulates the same campaigns without their speed wander, encoder run-out or transfer
+path (what the calibration's bands owe to them); ``--first``, ``--skip`` and
 ``--run-kinds`` calibrate a
 part of the ``--per-kind`` x ``--kinds`` campaigns (the same campaigns as the whole run: the ones left out still take
 their random draws), so that the kinds can run side by side in separate processes.
@@ -73,11 +77,16 @@ def draw_campaign(kind: str, index: int, rng: np.random.Generator, design: uqgea
     return {"truth": truth, "effects": effects, "options": options, "transfer": transfer, "seed": seed}
 
 
-def campaign(kind: str, index: int, rng: np.random.Generator, design: uqgear.Design) -> dict[str, Any]:
+def campaign(
+    kind: str, index: int, rng: np.random.Generator, design: uqgear.Design, artefacts: bool = True
+) -> dict[str, Any]:
+    """The campaign's rig, truth and effects; without ``artefacts`` the rig has neither its speed wander, encoder
+    run-out nor transfer path (the same truth, effects, noise and seed)."""
     drawn = draw_campaign(kind, index, rng, design)
+    options = drawn["options"] if artefacts else {}
     rig = simulate_campaign(design, true_parameters=drawn["truth"], effects=drawn["effects"], seed=drawn["seed"],
-                            run_in=0.3, **drawn["options"])
-    if drawn["transfer"] is not None:
+                            run_in=0.3, **options)
+    if artefacts and drawn["transfer"] is not None:
         rig = apply_transfer_path(rig, "acc_pinion", *drawn["transfer"])
     return {"rig": rig, "truth": drawn["truth"], "effects": drawn["effects"]}
 
@@ -140,10 +149,11 @@ def discrepancy_factors(calibration: uqgear.Calibration, space: uqgear.Parameter
 
 
 def one_campaign(
-    kind: str, index: int, rng: np.random.Generator, design: uqgear.Design, discrepancy: bool = False
+    kind: str, index: int, rng: np.random.Generator, design: uqgear.Design, discrepancy: bool = False,
+    artefacts: bool = True,
 ) -> dict[str, Any]:
     began = time.perf_counter()
-    made = campaign(kind, index, rng, design)
+    made = campaign(kind, index, rng, design, artefacts)
     effect_sets, named, verdict = None, [], None
     if kind == "effect":
         # diagnose, then calibrate with the named effects in the model (as a study's calibrate analysis does)
@@ -168,10 +178,13 @@ def one_campaign(
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}
     true_values = predict(truth_rows, [tuple(made["effects"])] if made["effects"] else None, design)
     predicted = predict(draws, effect_sets, design, discrepancy_factors(calibration, space) if discrepancy else None)
-    entry["covered"] = {}
+    entry["covered"], entry["pit"] = {}, {}
     for qoi in QOIS:
         low, high = np.quantile(predicted[qoi], [0.05, 0.95], axis=0)
         entry["covered"][qoi] = ((true_values[qoi][0] >= low) & (true_values[qoi][0] <= high)).tolist()
+        # where the truth falls in the predictive draws: uniform over campaigns for a calibrated prediction,
+        # bunched at 0.5 for bands wider than the errors, at 0 and 1 for bands too narrow
+        entry["pit"][qoi] = np.mean(predicted[qoi] < true_values[qoi][0], axis=0).tolist()
     if kind == "healthy":
         rng_prior = np.random.default_rng(index)
         box = prior_bounds(design, space.posterior.names)
@@ -190,6 +203,8 @@ def main() -> None:
     parser.add_argument("--first", type=int, help="calibrate only the first FIRST campaigns of each kind")
     parser.add_argument("--skip", type=int, default=0, help="and not the first SKIP of them")
     parser.add_argument("--run-kinds", nargs="+", help="calibrate only these kinds (the others' draws still taken)")
+    parser.add_argument("--without-artefacts", action="store_true",
+                        help="the same campaigns without speed wander, encoder run-out or transfer path")
     parser.add_argument("--json")
     args = parser.parse_args()
     design = uqgear.load_design("locomotive")
@@ -203,7 +218,7 @@ def main() -> None:
             if not args.skip <= index < first or kind not in run_kinds:
                 draw_campaign(kind, index, rng, design)
                 continue
-            entry = one_campaign(kind, index, rng, design, args.discrepancy)
+            entry = one_campaign(kind, index, rng, design, args.discrepancy, not args.without_artefacts)
             entries.append(entry)
             print(json.dumps(entry), flush=True)
     for kind in run_kinds:
@@ -212,6 +227,14 @@ def main() -> None:
             flags = [flag for e in found for flag in e["covered"][qoi]]
             share = np.mean(flags) if flags else float("nan")
             print(f"{kind:10s} {qoi:20s} 90 % band covers the truth in {share * 100:5.1f} % of {len(flags)} points")
+        for qoi in QOIS:
+            pits = np.array([value for e in found for value in e["pit"][qoi]])
+            if pits.size:
+                # a calibrated prediction puts half its truths in the central half and a tenth in each outer tenth
+                central = np.mean((pits >= 0.25) & (pits <= 0.75))
+                tails = np.mean((pits < 0.1) | (pits > 0.9))
+                print(f"{kind:10s} {qoi:20s} truth's place in the draws: central half {central * 100:5.1f} % "
+                      f"(50 % if calibrated), outer tenths {tails * 100:5.1f} % (20 %)")
         ratios = [e["spread_ratio"] for e in found if "spread_ratio" in e]
         if ratios:
             print(f"{kind:10s} worst-case spread, prior / posterior: {', '.join(f'{r:.1f}x' for r in ratios)}")
