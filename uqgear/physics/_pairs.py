@@ -60,6 +60,7 @@ from uqgear.physics._rhs import (
     modulated_scale,
     run_out_modulation,
     smooth_share,
+    teeth_factor,
     tooth_factor,
 )
 from uqgear.physics._stepper import BISECTIONS, F_SINE, crossed_boundary, crossing_fraction, rk4_by, split_parts
@@ -192,10 +193,10 @@ def _tooth_terms(n, p, fp, fg):
     j1, j2, j3 = _earlier(j0, 1, z2), _earlier(j0, 2, z2), _earlier(j0, 3, z2)
     f0 = f1 = f2 = f3 = 1.0
     if p[TOOTH_FACTORS] != 0.0:
-        f0 = fp[i0] * fg[j0]
-        f1 = fp[i1] * fg[j1]
-        f2 = fp[i2] * fg[j2]
-        f3 = fp[i3] * fg[j3]
+        f0 = teeth_factor(i0, j0, fp, fg)
+        f1 = teeth_factor(i1, j1, fp, fg)
+        f2 = teeth_factor(i2, j2, fp, fg)
+        f3 = teeth_factor(i3, j3, fp, fg)
     return (
         (_teeth_offset(i0, j0, p), _teeth_offset(i1, j1, p), _teeth_offset(i2, j2, p), _teeth_offset(i3, j3, p)),
         (f0, f1, f2, f3),

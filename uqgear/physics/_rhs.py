@@ -6,7 +6,9 @@ parameter vector whose neutral value switches it off, so effects plug in
 without forking the integrator. The accelerations are written once
 (:func:`_accelerations`), as are the mesh damping's switch in separation
 (:func:`mesh_damping`), each pair's share of the mesh stiffness
-(:func:`smooth_share`) and the stiffness modulation (:func:`modulated_scale`);
+(:func:`smooth_share`), its tooth factor (:func:`teeth_factor`) and the stiffness
+modulation (:func:`run_out_modulation`), and :func:`mesh_terms` lists where a
+pair's stiffness is assembled from them;
 the slots the accelerations read are listed once (:func:`coefficients_by`, read
 from a parameter vector and from a lane group's work array), and the time-only
 terms are written once for the constant-speed and the run-up model
@@ -237,6 +239,15 @@ def _friction_arms(kp, position, position_ref, p):
 
 
 @nb.njit(**INLINED)
+def table_stiffness(t, p, period_k):
+    """k(t): a smooth period table's mesh stiffness of healthy teeth at ``t`` (N/m, before the stiffness scale),
+    read at ``t``'s phase in its mesh period."""
+    phase = p[OMEGA_MESH] * t / TWO_PI
+    phase -= math.floor(phase)
+    return _interp_uniform(period_k, phase, 1.0)
+
+
+@nb.njit(**INLINED)
 def smooth_share(t, u_ref, u, p, pair_k, period_k):
     """(r, sum_i k_p(u + i)): a smooth stiffness table's share factor, and the pairs' Ishikawa sum.
 
@@ -254,9 +265,7 @@ def smooth_share(t, u_ref, u, p, pair_k, period_k):
     while u_ref + i < eps:
         healthy += _interp_uniform(pair_k, u + i, eps)
         i += 1
-    phase = p[OMEGA_MESH] * t / TWO_PI
-    phase -= math.floor(phase)
-    return _interp_uniform(period_k, phase, 1.0) / healthy, healthy
+    return table_stiffness(t, p, period_k) / healthy, healthy
 
 
 @nb.njit(**INLINED)
@@ -282,10 +291,17 @@ def modulated_scale(t, p):
 
 
 @nb.njit(**INLINED)
+def teeth_factor(pinion_tooth, gear_tooth, factor_pinion, factor_gear):
+    """The stiffness factor f_pinion f_gear of pinion tooth ``pinion_tooth`` meshing with gear tooth
+    ``gear_tooth`` (1 for healthy teeth): the one expression of a pair's tooth factor."""
+    return factor_pinion[pinion_tooth] * factor_gear[gear_tooth]
+
+
+@nb.njit(**INLINED)
 def tooth_factor(tooth, p, factor_pinion, factor_gear):
     """The stiffness factor f_pinion f_gear of the pair that entered the mesh in period ``tooth``
     (pinion tooth ``tooth mod z1`` on gear tooth ``tooth mod z2``; 1 for healthy teeth)."""
-    return factor_pinion[tooth % int(p[Z1])] * factor_gear[tooth % int(p[Z2])]
+    return teeth_factor(tooth % int(p[Z1]), tooth % int(p[Z2]), factor_pinion, factor_gear)
 
 
 @nb.njit(**JIT_OPTIONS)
@@ -294,9 +310,28 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
 
     The pairs in contact (and each pair's friction direction) are those at
     ``t_ref``, a time strictly inside the current sub-step, so a sub-step
-    ending on a breakpoint keeps one smooth stiffness branch. Each pair's
-    stiffness is its share of a smooth table (:func:`smooth_share`) times its
-    tooth factors.
+    ending on a breakpoint keeps one smooth stiffness branch.
+
+    Pair i's stiffness is k_p(u + i) r f s(t): its Ishikawa stiffness (the ``pair_k`` table), with a
+    smooth period table its share factor r (:func:`smooth_share`, of the table's k(t),
+    :func:`table_stiffness`), its tooth factor f (:func:`tooth_factor`, :func:`teeth_factor`) and
+    the stiffness scale with the run-out's modulation s(t) (:func:`run_out_modulation`). It is
+    assembled from these pieces in three places:
+
+    * here, at any time: the one-sample kernels' split parts (:func:`forcing`) and the run-up
+      kernels and lanes;
+    * the tabulated stage: :func:`uqgear.physics._stepper._tabulate_stage` stores k_p r of each pair
+      for one mesh period, and the tooth factors (``_stepper.tooth_extra``) and s(t)
+      (``_stepper.scaled_forcing``) act on it in every period (``_stepper._forcing_row``, the lane
+      tables, the run-up's schedule);
+    * per pair, for pitch errors: :func:`uqgear.physics._pairs._pair` at any time, and
+      ``_pairs._row_pair`` from a tabulated stage with the tooth factors of ``_pairs._tooth_terms``
+      and s(t) applied in ``_pairs._forcing_row_pairs``.
+
+    A stiffness factor goes into the shared piece it belongs to (a factor of one pair's teeth:
+    :func:`teeth_factor`; of the whole mesh at a time: :func:`run_out_modulation`; of the share:
+    :func:`smooth_share`), which every path calls. The pair loads of
+    :mod:`uqgear.dynamics.tooth_loads` assemble the same product in numpy, for whole histories.
 
     Returns
     -------
@@ -331,9 +366,7 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
         i += 1
     if smooth:
         # the pairs' healthy sum replaced by the smooth curve, which carries their healthy share
-        phase = p[OMEGA_MESH] * t / TWO_PI
-        phase -= math.floor(phase)
-        k += _interp_uniform(period_k, phase, 1.0) - healthy
+        k += table_stiffness(t, p, period_k) - healthy
     scale = modulated_scale(t, p)
     return k * scale, arm_pinion * scale, arm_gear * scale
 

@@ -61,7 +61,9 @@ from uqgear.physics._rhs import (
     forcing,
     run_out_modulation,
     side_derivative,
+    smooth_share,
     state_derivative_by,
+    table_stiffness,
     tooth_factor,
 )
 
@@ -374,12 +376,9 @@ def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
         arm_gear += gear
         i += 1
     if p[USE_PERIOD_TABLE] != 0.0:
-        # the smooth curve, each pair its share of it (smooth_share): what tooth factors and friction act on
-        phase = p[OMEGA_MESH] * t / TWO_PI
-        phase -= math.floor(phase)
-        smooth = _interp_uniform(period_k, phase, 1.0)
-        ratio = smooth / k
-        k = smooth
+        # the smooth curve, each pair its share of it: what tooth factors and friction act on
+        ratio, _ = smooth_share(t, u_ref, u, p, pair_k, period_k)
+        k = table_stiffness(t, p, period_k)
         arm_pinion = 0.0
         arm_gear = 0.0
         for j in range(i):
