@@ -16,7 +16,7 @@ terms are written once for the constant-speed and the run-up model
 docs/model/integrators.md, "Adding a force term or a time-only effect", says
 where a new term goes. The time stepping lives in :mod:`uqgear.physics._stepper`; the kernels above
 it: :mod:`uqgear.physics._pairs` (pitch errors), :mod:`uqgear.physics._kernels`
-(one-sample kernels, which also re-exports every name here) and
+(one-sample kernels, which also re-exports the names its callers read from here) and
 :mod:`uqgear.physics._lanes` (samples as SIMD lanes).
 
 These helpers are inlined into kernels in other files: a cached kernel is
