@@ -26,6 +26,7 @@ from uqgear.calibration import (
     write_calibration,
 )
 from uqgear.common.errors import RigDataError
+from uqgear.physics.effects import make_effect
 from uqgear.physics.integration import samples_from_mapping
 from uqgear.rig.format import make_rig_dataset, read_rig, write_rig
 from uqgear.rig.virtual_rig import simulate_campaign
@@ -112,6 +113,22 @@ def test_model_harmonics_match_the_virtual_rig_line_fit(design):
     model = model_harmonics(design, samples)
     assert model["periodic"].values.all()
     np.testing.assert_allclose(model["amplitude"].values, observed, rtol=2e-3)
+
+
+def test_harmonics_under_a_gear_run_out_are_its_revolution_average(design):
+    """A gear run-out modulates the mesh once per gear revolution: the model's harmonics average it over whole
+    gear revolutions, as a rig's records some revolutions long do, whatever its phase."""
+    ops = {"pinion_speed": [900.0, 2400.0], "drive_torque": [6500.0, 7000.0], "adhesion_torque": [31000.0, 33500.0]}
+    samples = samples_from_mapping(ops)
+    by_phase = []
+    for phase in (0.0, 1.3, 2.6, 3.9, 5.2):
+        run_out = make_effect("eccentricity", {"shaft": "gear", "amplitude": 12e-6, "phase": phase, "kappa": 0.03})
+        by_phase.append(np.log(model_harmonics(design, samples, effects=[run_out])["amplitude"].values))
+    # over 1/5 of a gear revolution (900 rpm, 0.1 s) the mesh line moved by 1-2 % with the phase
+    assert np.ptp(by_phase, axis=0).max() < 1e-3
+    rig = simulate_campaign(design, ops, effects=[run_out], relative_noise=0.0, seed=4, duration=1.0, run_in=0.4)
+    observed = observed_harmonics(rig, design)["amplitude"].values
+    np.testing.assert_allclose(np.exp(by_phase[-1][:, :, 0]), observed[:, :, 0], rtol=5e-3)
 
 
 def test_observed_harmonics_amplitude_and_noise_of_a_known_signal(design):

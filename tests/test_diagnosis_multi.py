@@ -549,6 +549,9 @@ def test_run_out_and_tooth_damage_together_are_both_named(design, tmp_path):
     assert damage["parameters"]["depth"] == pytest.approx(0.35, rel=0.3)
     low, high = damage["parameter_intervals"]["depth"]
     assert low <= damage["parameters"]["depth"] <= high
+    # which tooth is open (an amplitude spectrum cannot tell): every tooth of the 101-tooth gear, none for the run-out
+    assert damage["parameter_choices"] == {"tooth": [float(tooth) for tooth in range(design.z2)]}
+    assert "parameter_choices" not in run_out
     remaining = content["remaining_gap"]
     assert remaining["model"] == ["nominal", run_out["variant"], damage["variant"]] or \
         remaining["model"] == ["nominal", damage["variant"], run_out["variant"]]
@@ -560,6 +563,7 @@ def test_run_out_and_tooth_damage_together_are_both_named(design, tmp_path):
     maps.close()
     page = (tmp_path / "report.html").read_text()
     assert "The named effects (forward selection)" in page and "What remains" in page
+    assert "tooth not identified (any of 101)" in page
 
 
 @pytest.fixture(scope="module")

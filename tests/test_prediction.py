@@ -132,6 +132,58 @@ def test_effect_draws_follow_the_reported_interval():
     assert abs(median - 0.35) < 0.003 and abs(low - 0.30) < 0.003 and abs(high - 0.42) < 0.003
 
 
+def test_a_tooth_left_open_is_drawn_evenly_and_travels_through_the_diagnosis_json():
+    effect = UncertainEffect(
+        "tooth_damage", {"gear": "pinion", "tooth": 0.0, "depth": 0.35}, {"depth": (0.30, 0.42)},
+        {"tooth": range(21)},
+    )
+    draws = draw_effect_sets([effect], 21000, seed=2)
+    counts = np.bincount([int(effects[0].values["tooth"]) for effects in draws], minlength=21)
+    # a fair 21-sided draw: each count 1000 +- 3 sd (sd = sqrt(21000 * p (1 - p)) = 30.9)
+    assert counts.size == 21 and np.all(np.abs(counts - 1000) < 93)
+    depths = np.array([effects[0].values["depth"] for effects in draws])
+    assert abs(np.median(depths) - 0.35) < 0.003  # the interval's draws as without choices
+    assert effect.central().values["tooth"] == 0.0
+    (back,) = named_effects({"verdict": "tooth_damage", "effects": [effect.to_dict()]})
+    assert back == effect
+
+
+def test_which_tooth_matters_only_over_a_window_of_part_revolutions(design):
+    # 21 pinion teeth: 210 mesh periods are 10 revolutions, 200 are 9.5 (the damaged tooth meets the mesh 9 or 10
+    # times, depending on which tooth it is)
+    samples = uqgear.samples_from_mapping({"pinion_speed": [3100.0], "adhesion_torque": [33e3]})
+    spread = {}
+    for keep in (200, 210):
+        values = [
+            float(
+                uqgear.BatchEvaluator(
+                    design, effects=[uqgear.make_effect("tooth_damage", {"tooth": tooth, "depth": 0.35})],
+                    fixed={"drive_torque": 7000.0}, n_periods=keep + 200, keep_periods=keep,
+                )(samples)["dte_rms"][0]
+            )
+            for tooth in (0.0, 5.0, 11.0)
+        ]
+        spread[keep] = np.ptp(values) / np.mean(values)
+    assert spread[210] < 1e-5 < 1e-3 < spread[200]
+
+
+def test_bad_choices_are_refused_naming_the_parameter():
+    with pytest.raises(uqgear.UqgearError, match=r"tooth_damage\.tooth: given both an interval and choices"):
+        UncertainEffect("tooth_damage", {"depth": 0.3}, {"tooth": (0.0, 3.0)}, {"tooth": [0, 1]})
+    with pytest.raises(uqgear.UqgearError, match=r"tooth_damage\.tooth: expected at least one value"):
+        UncertainEffect("tooth_damage", {"depth": 0.3}, {}, {"tooth": []})
+    with pytest.raises(uqgear.UqgearError, match=r"tooth_damage\.colour: choices for an unknown parameter"):
+        UncertainEffect("tooth_damage", {"depth": 0.3}, {}, {"colour": [1.0]})
+    with pytest.raises(uqgear.UqgearError, match=r"tooth_damage\.depth"):
+        UncertainEffect("tooth_damage", {"depth": 0.3}, {}, {"depth": [0.3, 2.0]})
+    with pytest.raises(uqgear.StudyError, match=r"model\.effects\.tooth_damage\.tooth: expected a list"):
+        uqgear.parse_study(
+            "name: s\nuncertain: {adhesion_torque: {interval: [30000, 40000]}}\n"
+            "analyses:\n  - {type: interval, name: m}\n"
+            "model:\n  effects:\n    tooth_damage: {depth: 0.3, choices: {tooth: 3}}\n"
+        )
+
+
 def test_diagnosis_without_a_named_effect_is_refused():
     with pytest.raises(uqgear.UqgearError, match="names no effect \\(verdict: inconclusive\\)"):
         named_effects({"verdict": "inconclusive", "effects": []})

@@ -243,6 +243,32 @@ def _harmonics_batch(
 # ---------------------------------------------------------------------------
 
 
+def averaging_revolution(design: Design, effects: Sequence[Effect]) -> int:
+    """Mesh periods of the revolution a window without mesh periodicity is a whole number of.
+
+    A gear's revolution (``z2`` periods) where an effect repeats over it (a
+    gear run-out, a damaged gear tooth), otherwise the pinion's (``z1``).
+    Whole pinion revolutions keep pinion-order lines off the mesh harmonics.
+    A gear-locked effect needs whole gear revolutions: a shorter window sees
+    a part of its cycle (its stiffness modulation read at one place of the
+    revolution), so the harmonics depend on its phase and a calibration's
+    mesh stiffness and damping absorb the difference, where a rig's records,
+    some gear revolutions long, average over the cycle.
+
+    Examples
+    --------
+    >>> import uqgear
+    >>> design = uqgear.load_design("locomotive")
+    >>> averaging_revolution(design, [uqgear.make_effect("eccentricity", {"shaft": "gear"})])
+    101
+    >>> averaging_revolution(design, [uqgear.make_effect("tooth_damage", {"gear": "pinion"})])
+    21
+    """
+    if any(effect.repeat_shaft == "gear" for effect in effects):
+        return int(design.z2)
+    return int(design.z1)
+
+
 def model_harmonics(
     design: Design,
     samples: xr.Dataset,
@@ -270,7 +296,7 @@ def model_harmonics(
     effects : sequence of Effect
         Model extensions. Effects other than friction and bearing clearance
         break the mesh periodicity: then no shooting, and the averaging
-        window is a whole number of pinion revolutions.
+        window is a whole number of revolutions (:func:`averaging_revolution`).
     n_harmonics : int
         Mesh harmonics k = 1..n_harmonics.
     transient, window : float
@@ -305,11 +331,11 @@ def model_harmonics(
     stride = steps // samples_per_period
     mesh_frequency = np.array([s.mesh_frequency for s in setups])
     periodic_model = all(effect.name in MESH_PERIODIC_EFFECTS for effect in effects)
+    revolution = averaging_revolution(design, effects)
     transient_periods = np.ceil(transient * mesh_frequency).astype(np.int64)
     window_periods = np.maximum(np.ceil(window * mesh_frequency).astype(np.int64), 2)
     if not periodic_model:
-        # whole pinion revolutions keep pinion-order lines off the mesh harmonics
-        window_periods = (np.ceil(window_periods / design.z1) * design.z1).astype(np.int64)
+        window_periods = (np.ceil(window_periods / revolution) * revolution).astype(np.int64)
     scales = _state_scales(setups)
     out = np.zeros((n, 3, int(n_harmonics)))
     info = np.zeros((n, 2))

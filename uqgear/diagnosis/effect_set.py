@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 from ..physics.effect_draws import UncertainEffect
@@ -31,6 +32,9 @@ class SelectedEffect:
         The rule that added it (:func:`~.verdict.named.decide` on top of its base).
     gap_interval : pair of float
         Bootstrap 5 % and 95 % quantiles of the held-out gap with it.
+    choices : mapping of str to tuple of float
+        Parameters the fit leaves open, with the values each can take (its
+        family's :meth:`~.effects.base.EffectFamily.open_choices`).
     """
 
     entry: CandidateScore
@@ -38,12 +42,13 @@ class SelectedEffect:
     shrink_share: float
     decision: Decision
     gap_interval: tuple[float, float] = (math.nan, math.nan)
+    choices: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
 
     def to_uncertain(self) -> UncertainEffect:
         """The effect with its fitted parameters and their 90 % intervals (what a prediction samples)."""
         entry = self.entry
         intervals = {name: (low, high) for name, (low, high) in entry.parameter_intervals().items()}
-        return UncertainEffect(entry.effect, entry.parameters(), intervals)
+        return UncertainEffect(entry.effect, entry.parameters(), intervals, self.choices)
 
     def to_effect(self) -> Effect:
         """The effect at its fitted parameters (``BatchEvaluator(..., effects=diagnosis.effects_)``)."""
@@ -52,11 +57,13 @@ class SelectedEffect:
     def summary(self) -> dict[str, Any]:
         """JSON-ready: effect, variant, fitted parameters with their 90 % intervals, shrink share, scores."""
         entry = self.entry
+        choices = {key: list(values) for key, values in self.choices.items()}
         return {
             "effect": entry.effect,
             "variant": entry.label,
             "parameters": entry.parameters(),
             "parameter_intervals": entry.parameter_intervals(),
+            **({"parameter_choices": choices} if choices else {}),
             "shrink_share": self.shrink_share,
             "score": entry.score,
             "shrink_fraction": entry.shrink_fraction,

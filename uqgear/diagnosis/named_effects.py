@@ -105,7 +105,12 @@ def named_effects(source: Any, *, where: str = "") -> tuple[UncertainEffect, ...
         entries = content.get("effects") or []
         try:
             effects = tuple(
-                UncertainEffect(entry["effect"], entry.get("parameters", {}), entry.get("parameter_intervals", {}))
+                UncertainEffect(
+                    entry["effect"],
+                    entry.get("parameters", {}),
+                    entry.get("parameter_intervals", {}),
+                    entry.get("parameter_choices", {}),
+                )
                 for entry in entries
             )
         except (KeyError, TypeError) as exc:

@@ -49,7 +49,7 @@ from .nominal import allow_pitch_errors, check_nominal, fit_nominal_model, nomin
 from .result import DiagnosisResult
 from .scoring import CandidateScore, bootstrap_gap
 from .screening import ScoredCandidates, effect_gains, fits_ahead, scored_in_full, screen_and_promote, with_effect_gains
-from .selection import NamedSet, phase_named_run_out, round_fits, selected_effects
+from .selection import NamedSet, open_choices, phase_named_run_out, round_fits, selected_effects
 from .settings import DiagnosisSettings
 from .side_by_side import Outcome
 from .signatures import every_channel_locked_lines, frequency_locked_lines, signature_hints
@@ -399,7 +399,9 @@ def with_phase_named_shaft(state: DiagnosisState, named: NamedSet, *, allowance_
             decision, fitted.reason, gap, set_named=bool(named.selected), effect=family.name
         )
         interval = bootstrap_gap(fitted.entry.held.z, state.rng, state.settings.verdict.bootstrap_resamples)
-        chosen = SelectedEffect(fitted.entry, fitted.gap_before, fitted.share, added, interval)
+        chosen = SelectedEffect(
+            fitted.entry, fitted.gap_before, fitted.share, added, interval, open_choices(state, fitted.entry)
+        )
         named = replace(named, selected=[*named.selected, chosen], decision=whole)
     state.timings["sideband_phases"] = time.perf_counter() - clock
     return named

@@ -22,7 +22,7 @@ from .allowances.pitch_errors import first_order_reads
 from .allowances.sideband_phase import ModulationEvidence, fit_modulated_run_out, modulation_evidence, shafts_tested
 from .decision import Decision
 from .effect_set import SelectedEffect, SelectionRound
-from .effects import EffectFamily
+from .effects import EffectFamily, hooks_of
 from .scoring import CandidateScore
 from .screening import best_per_effect, fits_ahead, found, scored_in_full, screen, supersedes
 from .settings import DiagnosisSettings
@@ -170,9 +170,14 @@ def selected_effects(
     shares = shrink_shares(state.nominal_gap, entries[0].shrink_fraction, [entry.gap_with_effect for entry in entries])
     befores = [state.nominal_gap] + [entry.gap_with_effect for entry in entries[:-1]]
     return [
-        SelectedEffect(entry, before, share, decision, interval)
+        SelectedEffect(entry, before, share, decision, interval, open_choices(state, entry))
         for entry, before, share, decision, interval in zip(entries, befores, shares, decisions, intervals)
     ]
+
+
+def open_choices(state: DiagnosisState, entry: CandidateScore) -> dict[str, tuple[float, ...]]:
+    """The parameters the fit of ``entry`` leaves open, with their values (its family's hook)."""
+    return hooks_of(entry.effect).open_choices(entry.parameters(), state.case.design)
 
 
 @dataclass(frozen=True)

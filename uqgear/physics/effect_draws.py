@@ -8,6 +8,13 @@ whose median is the fitted value and whose 5 % and 95 % quantiles are the
 interval's ends: the diagnosis' intervals are Laplace intervals kept inside
 the parameter's bounds, so they can be lopsided around the fit, and a split
 normal keeps both sides; draws are then clipped into the effect's bounds.
+
+A parameter the data leave open among a few values (which tooth is damaged:
+an amplitude spectrum is the same for every tooth) is listed with those
+values in ``choices``; each draw takes one of them at random. It matters
+wherever a quantity is taken over a window that is not a whole number of
+revolutions: the damaged tooth then meets the mesh once more or once less in
+it, depending on which tooth it is.
 """
 
 from __future__ import annotations
@@ -37,6 +44,9 @@ class UncertainEffect:
     intervals : mapping of str to (float, float)
         90 % interval of each uncertain parameter; the others are held at
         their fitted value.
+    choices : mapping of str to sequence of float
+        Values a parameter the data leave open can take, equally likely
+        (each draw takes one; :meth:`central` keeps the fitted value).
 
     Examples
     --------
@@ -49,11 +59,20 @@ class UncertainEffect:
     >>> sets = draw_effect_sets([run_out], 3, seed=0)
     >>> [round(effects[0].values["amplitude"] * 1e6, 2) for effects in sets]
     [12.02, 11.98, 12.08]
+
+    A damaged pinion tooth whose place the data do not tell:
+
+    >>> damage = UncertainEffect("tooth_damage", {"gear": "pinion", "depth": 0.3},
+    ...                          {"depth": (0.28, 0.32)}, choices={"tooth": range(21)})
+    >>> teeth = {int(effects[0].values["tooth"]) for effects in draw_effect_sets([damage], 200, seed=0)}
+    >>> sorted(teeth) == list(range(21))
+    True
     """
 
     name: str
     values: Mapping[str, Any]
     intervals: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    choices: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.name not in EFFECTS:
@@ -71,7 +90,28 @@ class UncertainEffect:
                 raise EffectError(f"{self.name}.{key}: expected an interval with low <= high; got [{low}, {high}]")
             intervals[key] = (low, high)
         object.__setattr__(self, "intervals", intervals)
+        object.__setattr__(self, "choices", self._checked_choices(dict(self.choices)))
         self.central()  # validates the fitted values against the effect's bounds
+
+    def _checked_choices(self, choices: Mapping[str, Any]) -> dict[str, tuple[float, ...]]:
+        checked = {}
+        for key, values in choices.items():
+            if key not in EFFECTS[self.name].PARAMETERS:
+                raise EffectError(f"{self.name}.{key}: choices for an unknown parameter")
+            if key in self.intervals:
+                raise EffectError(f"{self.name}.{key}: given both an interval and choices; expected one of them")
+            try:
+                options = tuple(float(v) for v in values)
+            except (TypeError, ValueError):
+                raise EffectError(
+                    f"{self.name}.{key}: expected a list of values to choose from; got {values!r}"
+                ) from None
+            if not options:
+                raise EffectError(f"{self.name}.{key}: expected at least one value to choose from; got none")
+            for option in options:  # each must make a valid effect
+                make_effect(self.name, {**self.values, key: option})
+            checked[key] = options
+        return checked
 
     def central(self) -> Effect:
         """The effect at its fitted parameters."""
@@ -87,15 +127,23 @@ class UncertainEffect:
             z = rng.standard_normal()
             side = (high - fitted) if z > 0 else (fitted - low)
             values[key] = float(np.clip(fitted + z * max(side, 0.0) / Z95, specs[key].lower, specs[key].upper))
+        # after the intervals, so that an effect without choices draws the same numbers as before
+        for key in sorted(self.choices):
+            options = self.choices[key]
+            values[key] = options[int(rng.integers(len(options)))]
         return make_effect(self.name, values)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: ``{"effect", "parameters", "parameter_intervals"}`` (a diagnosis' layout)."""
-        return {
+        """JSON-ready: ``{"effect", "parameters", "parameter_intervals"}`` and, where the data leave a parameter
+        open, ``"parameter_choices"`` (a diagnosis' layout)."""
+        out: dict[str, Any] = {
             "effect": self.name,
             "parameters": dict(self.values),
             "parameter_intervals": {key: list(bounds) for key, bounds in self.intervals.items()},
         }
+        if self.choices:
+            out["parameter_choices"] = {key: list(options) for key, options in self.choices.items()}
+        return out
 
 
 def draw_effect_sets(effects: Sequence[UncertainEffect], n: int, seed: Any) -> list[tuple[Effect, ...]]:

@@ -46,6 +46,25 @@ class Effect:
     #: calibration's harmonic kernel apply); an effect with a slower or unrelated period does not.
     mesh_periodic: ClassVar[bool] = False
 
+    @property
+    def repeat_shaft(self) -> str | None:
+        """The shaft (``pinion`` or ``gear``) over whose revolution the effect repeats, or None.
+
+        None where it repeats every mesh period or is locked to no shaft (a
+        frequency in Hz). An average over a window that is not a whole number
+        of that shaft's revolutions depends on where in the revolution the
+        window lies.
+
+        Examples
+        --------
+        >>> import uqgear
+        >>> uqgear.make_effect("eccentricity", {"shaft": "gear"}).repeat_shaft
+        'gear'
+        >>> uqgear.make_effect("friction").repeat_shaft is None
+        True
+        """
+        return None
+
     def __init__(self, values: Mapping[str, Any] | None = None) -> None:
         values = dict(values or {})
         unknown = sorted(set(values) - set(self.PARAMETERS) - set(self.CHOICES))
@@ -108,6 +127,10 @@ class Eccentricity(Effect):
         setup.set_slot("ecc_phase", self.values["phase"])
         setup.set_slot("ecc_kappa", self.values["kappa"])
 
+    @property
+    def repeat_shaft(self) -> str | None:
+        return str(self.values["shaft"])
+
 
 class ToothDamage(Effect):
     """Local tooth damage: the single-pair stiffness of one tooth reduced by
@@ -129,6 +152,10 @@ class ToothDamage(Effect):
                 f"tooth_damage.tooth: expected 0..{factors.size - 1} for the {self.values['gear']}; got {tooth}"
             )
         factors[tooth] *= 1.0 - self.values["depth"]
+
+    @property
+    def repeat_shaft(self) -> str | None:
+        return str(self.values["gear"])
 
 
 class Friction(Effect):
@@ -165,6 +192,10 @@ class TorqueRipple(Effect):
         setup.set_slot("ripple_amplitude", self.values["amplitude"])
         setup.set_slot("ripple_omega", 6.0 * pole_pairs * setup.pinion_rotation)
         setup.set_slot("ripple_phase", self.values["phase"])
+
+    @property
+    def repeat_shaft(self) -> str | None:
+        return "pinion"  # 6 p cycles per pinion revolution
 
 
 class AdhesionOscillation(Effect):

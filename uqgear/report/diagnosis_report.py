@@ -320,10 +320,15 @@ def _rig_findings(content: Mapping[str, Any]) -> list[Finding]:
 
 
 def _parameter_text(entry: Mapping[str, Any]) -> str:
-    """Fitted parameters of a named effect with their 90 % intervals where the fit gave them."""
+    """Fitted parameters of a named effect with their 90 % intervals where the fit gave them; a parameter the
+    data leave open is said to be open (the fit's value is a placeholder there)."""
     intervals = entry.get("parameter_intervals") or {}
+    choices = entry.get("parameter_choices") or {}
     texts = []
     for key, value in (entry.get("parameters") or {}).items():
+        if key in choices:
+            texts.append(f"{key} not identified (any of {len(choices[key])})")
+            continue
         text = f"{key}={_number(value, 4)}"
         if key in intervals and intervals[key] is not None and None not in intervals[key]:
             low, high = intervals[key]

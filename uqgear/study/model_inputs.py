@@ -149,8 +149,9 @@ def parse_effects(raw: Any, path: str, base_dir: Path | None) -> EffectsInput:
             raise StudyError(f"{path}.{family}: unknown effect; expected one of {', '.join(EFFECTS)} or analysis")
         values = dict(values or {})
         intervals = values.pop("intervals", {}) or {}
+        choices = values.pop("choices", {}) or {}
         try:
-            listed.append(UncertainEffect(family, values, intervals))
+            listed.append(UncertainEffect(family, values, intervals, choices))
         except UqgearError as exc:
             raise StudyError(f"{path}.{exc}") from None
     return EffectsInput(None, None, tuple(listed))

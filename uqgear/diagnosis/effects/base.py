@@ -176,6 +176,25 @@ class EffectFamily:
         """
         return None if self.run_out is None else str(values.get(self.run_out.shaft))
 
+    def open_choices(self, values: Mapping[str, Any], design: Design) -> dict[str, tuple[float, ...]]:
+        """Parameters a fit with ``values`` leaves open, with the values each can take (default: none).
+
+        A prediction with the named effect draws each of them at random
+        (:class:`~uqgear.physics.effect_draws.UncertainEffect`'s ``choices``)
+        instead of holding the placeholder the fit used.
+
+        Examples
+        --------
+        >>> import uqgear
+        >>> from uqgear.diagnosis.effects import hooks_of
+        >>> design = uqgear.load_design("locomotive")
+        >>> hooks_of("eccentricity").open_choices({"shaft": "pinion"}, design)
+        {}
+        >>> len(hooks_of("tooth_damage").open_choices({"gear": "pinion"}, design)["tooth"])
+        21
+        """
+        return {}
+
     def parameter_name(self, parameter: str) -> str:
         """A parameter's name as fits and starts key it, ``FAMILY.PARAMETER``.
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -17,7 +18,8 @@ class ToothDamageFamily(EffectFamily):
 
     Variants: one per gear, its depth fitted from a start grid spanning
     weak to strong damage. Which tooth does not change an amplitude
-    spectrum, so tooth 0 stands for any. Its response repeats over its
+    spectrum, so tooth 0 stands for any in the fits, and a prediction draws
+    the tooth among the gear's teeth (:meth:`open_choices`). Its response repeats over its
     gear's revolution. Hints: none on any channel (the start grid already
     spans weak to strong damage).
     """
@@ -34,6 +36,10 @@ class ToothDamageFamily(EffectFamily):
             self.candidate(f"tooth_damage[{gear}]", (("gear", gear), ("tooth", 0.0)), fitted, starts, gear)
             for gear in ("pinion", "gear")
         ]
+
+    def open_choices(self, values: Mapping[str, Any], design: Design) -> dict[str, tuple[float, ...]]:
+        teeth = design.z1 if values.get("gear", "pinion") == "pinion" else design.z2
+        return {"tooth": tuple(float(tooth) for tooth in range(int(teeth)))}
 
     def campaign_values(self, strength: float, phase: float, rng: np.random.Generator) -> dict[str, object]:
         return {
