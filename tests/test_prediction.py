@@ -176,6 +176,13 @@ def test_bad_choices_are_refused_naming_the_parameter():
         UncertainEffect("tooth_damage", {"depth": 0.3}, {}, {"colour": [1.0]})
     with pytest.raises(uqgear.UqgearError, match=r"tooth_damage\.depth"):
         UncertainEffect("tooth_damage", {"depth": 0.3}, {}, {"depth": [0.3, 2.0]})
+    for field, given in (("choices", "[0, 1]"), ("intervals", "3")):
+        with pytest.raises(uqgear.StudyError, match=rf"model\.effects\.tooth_damage\.{field}: expected a mapping"):
+            uqgear.parse_study(
+                "name: s\nuncertain: {adhesion_torque: {interval: [30000, 40000]}}\n"
+                "analyses:\n  - {type: interval, name: m}\n"
+                f"model:\n  effects:\n    tooth_damage: {{depth: 0.3, {field}: {given}}}\n"
+            )
     with pytest.raises(uqgear.StudyError, match=r"model\.effects\.tooth_damage\.tooth: expected a list"):
         uqgear.parse_study(
             "name: s\nuncertain: {adhesion_torque: {interval: [30000, 40000]}}\n"

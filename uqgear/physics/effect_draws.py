@@ -79,7 +79,7 @@ class UncertainEffect:
             raise EffectError(f"effect {self.name!r}: unknown; expected one of {', '.join(EFFECTS)}")
         object.__setattr__(self, "values", dict(self.values))
         intervals = {}
-        for key, bounds in dict(self.intervals).items():
+        for key, bounds in self._mapping("intervals", "[low, high]").items():
             if key not in EFFECTS[self.name].PARAMETERS:
                 raise EffectError(f"{self.name}.{key}: an interval for an unknown parameter")
             try:
@@ -90,8 +90,15 @@ class UncertainEffect:
                 raise EffectError(f"{self.name}.{key}: expected an interval with low <= high; got [{low}, {high}]")
             intervals[key] = (low, high)
         object.__setattr__(self, "intervals", intervals)
-        object.__setattr__(self, "choices", self._checked_choices(dict(self.choices)))
+        object.__setattr__(self, "choices", self._checked_choices(self._mapping("choices", "[values]")))
         self.central()  # validates the fitted values against the effect's bounds
+
+    def _mapping(self, name: str, each: str) -> dict[str, Any]:
+        """The field ``name`` as a dict, or an error naming it (a study's YAML can give it any shape)."""
+        raw = getattr(self, name)
+        if not isinstance(raw, Mapping):
+            raise EffectError(f"{self.name}.{name}: expected a mapping of parameter to {each}; got {raw!r}")
+        return dict(raw)
 
     def _checked_choices(self, choices: Mapping[str, Any]) -> dict[str, tuple[float, ...]]:
         checked = {}
@@ -127,7 +134,7 @@ class UncertainEffect:
             z = rng.standard_normal()
             side = (high - fitted) if z > 0 else (fitted - low)
             values[key] = float(np.clip(fitted + z * max(side, 0.0) / Z95, specs[key].lower, specs[key].upper))
-        # after the intervals, so that an effect without choices draws the same numbers as before
+        # after the intervals: an effect without choices takes its intervals' draws alone from the stream
         for key in sorted(self.choices):
             options = self.choices[key]
             values[key] = options[int(rng.integers(len(options)))]
