@@ -329,8 +329,9 @@ def mesh_terms(t, t_ref, p, pair_k, period_k, factor_pinion, factor_gear):
       and s(t) applied in ``_pairs._forcing_row_pairs``.
 
     A stiffness factor goes into the shared piece it belongs to (a factor of one pair's teeth:
-    :func:`teeth_factor`; of the whole mesh at a time: :func:`run_out_modulation`; of the share:
-    :func:`smooth_share`), which every path calls. The pair loads of
+    :func:`teeth_factor`; of the whole mesh at a time: :func:`run_out_modulation`; of the table's
+    k(t): :func:`table_stiffness`, which :func:`smooth_share` and the tabulated stage, dividing by the
+    pairs' sum it has just taken, turn into the share), which every path calls. The pair loads of
     :mod:`uqgear.dynamics.tooth_loads` assemble the same product in numpy, for whole histories.
 
     Returns

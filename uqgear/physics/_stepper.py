@@ -61,7 +61,6 @@ from uqgear.physics._rhs import (
     forcing,
     run_out_modulation,
     side_derivative,
-    smooth_share,
     state_derivative_by,
     table_stiffness,
     tooth_factor,
@@ -376,9 +375,11 @@ def _tabulate_stage(t, t_ref, p, pair_k, period_k, row):
         arm_gear += gear
         i += 1
     if p[USE_PERIOD_TABLE] != 0.0:
-        # the smooth curve, each pair its share of it: what tooth factors and friction act on
-        ratio, _ = smooth_share(t, u_ref, u, p, pair_k, period_k)
-        k = table_stiffness(t, p, period_k)
+        # the smooth curve, each pair its share of it (smooth_share's rule, r = k(t) / the pairs' sum, from the
+        # sum just taken): what tooth factors and friction act on
+        smooth = table_stiffness(t, p, period_k)
+        ratio = smooth / k
+        k = smooth
         arm_pinion = 0.0
         arm_gear = 0.0
         for j in range(i):
