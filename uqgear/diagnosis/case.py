@@ -20,7 +20,7 @@ from ..physics.design import Design
 from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
 from ..rig.features import SIGNAL_CHANNELS
-from ..rig.order_tracking import speed_summary, track_orders
+from ..rig.order_tracking import TrackerImage, speed_summary, track_orders, tracker_image
 from .allowances.interference import NOTCH_HALF_WIDTH, LineInterference, interference_lines
 from .discrepancy import FeatureLayout, NoiseModel, line_noise_sigma, noise_model
 from .errors import DiagnosisError
@@ -143,6 +143,9 @@ class RigCase:
     # before it: a fit with effects is scored with its own model's allowance (with_own_allowance); None: none
     pitch_allowance: AppliedPitchAllowance | None = None
     model_error_before_allowance: Mapping[str, float] | None = None
+    # per run: what the rig's order tracking took from the mesh sidebands, which the model's features lose
+    # alike (None where the record was not resampled on its own lines); empty: no run
+    tracking: tuple[TrackerImage | None, ...] = ()
 
     @property
     def n_op(self) -> int:
@@ -330,6 +333,7 @@ def prepare_case(
     noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
     noise = [noise_by_speed[float(speed)] for speed in speeds]
     simulator = CampaignSimulator(design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode)
+    speed = speed_summary(rig)
     return RigCase(
         rig=rig,
         design=design,
@@ -350,9 +354,10 @@ def prepare_case(
         usable=usable,
         simulator=simulator,
         model_error=errors,
-        speed=speed_summary(rig),
+        speed=speed,
         tracking_s=tracking_s,
         interference=interference,
+        tracking=tuple(tracker_image(row, channels, design.z1) for row in speed),
     )
 
 

@@ -16,6 +16,7 @@ from threadpoolctl import ThreadpoolController, threadpool_limits
 from ..physics.design import Design
 from ..physics.effects import Effect
 from ..physics.pitch_errors import PitchErrors
+from ..rig.order_tracking import TrackerImage
 from .processing import RunProcessor
 from .simulation import CampaignSimulator, SimulatedRun
 
@@ -37,6 +38,9 @@ class RunContext(Protocol):
 
     @property
     def line_gain(self) -> np.ndarray | None: ...
+
+    @property
+    def tracking(self) -> tuple[TrackerImage | None, ...]: ...
 
 
 #: What a run's records can be reduced to, and the :class:`~.processing.RunProcessor` method that does it.
@@ -116,7 +120,9 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
     runs = case.simulator.runs(op, tasks)
     stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
     reduce = getattr(case.processors[op], REDUCTIONS[reductions.pop()])
-    features = reduce(stacked).reshape(len(runs), len(case.channels), -1)
+    # the rig's record was resampled on its own mesh lines: the model's sidebands are read as that left them
+    tracking = case.tracking[op] if case.tracking else None
+    features = reduce(stacked, tracking).reshape(len(runs), len(case.channels), -1)
     if case.transfer is not None:
         # the rig sees the gear through its transfer paths: the model's features as the rig would record them
         transferred = features * case.transfer[op]

@@ -13,6 +13,7 @@ import scipy.linalg
 from ..physics.design import Design
 from ..rig import features as feature_module
 from ..rig.features import feature_definitions
+from ..rig.order_tracking import TrackerImage
 
 #: Fewest low-band bins whose median :meth:`RunProcessor.band_floor` reads: the median of n
 #: white-noise bins scatters by about 1.44 / sqrt(n) of the density (36 % at 16 bins).
@@ -81,6 +82,7 @@ class RunProcessor:
             self.fs / self.size,
         )
         self.line_noise = self._line_noise_scale()
+        self._sideband_layout = _sideband_layout(self.columns, design, options)
         in_band = (frequencies >= self.low_band[0]) & (frequencies <= self.low_band[1])
         self._band_bins = np.flatnonzero(in_band)
         edge = (self._band_bins == 0) | ((self.size % 2 == 0) & (self._band_bins == self.size // 2))
@@ -165,16 +167,23 @@ class RunProcessor:
                 out[usable, self.columns["low_band_rms"]] = self.low_band_rms(records[usable])
         return out
 
-    def model_features(self, records: np.ndarray) -> np.ndarray:
+    def model_features(self, records: np.ndarray, tracking: TrackerImage | None = None) -> np.ndarray:
         """Features (R, F) of noise-free model records (R, N) without NaN.
 
         The same line fit, low-band power, RMS and kurtosis as :meth:`features`;
         the noise floor and the crest factor, which describe noisy records,
         are left NaN (they are not compared), which saves most of the time.
+        With ``tracking`` (the rig's record of this run was resampled on its
+        own mesh lines) the rows are runs of C channels each, in the image's
+        channel order, and their mesh sidebands are read as that tracking
+        leaves them (:meth:`~uqgear.rig.order_tracking.TrackerImage.sidebands`).
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
         out = np.full((records.shape[0], len(self.definitions)), np.nan)
-        out[:, self.line_columns] = self.fit.amplitudes(records)
+        if tracking is None:
+            out[:, self.line_columns] = self.fit.amplitudes(records)
+        else:
+            out[:, self.line_columns] = np.abs(self._line_phasors(records, tracking))
         centred = records - records.mean(axis=1, keepdims=True)
         out[:, self.columns["low_band_rms"]] = self._centred_low_band_rms(centred)
         square = centred * centred
@@ -186,7 +195,7 @@ class RunProcessor:
             )
         return out
 
-    def model_phasors(self, records: np.ndarray) -> np.ndarray:
+    def model_phasors(self, records: np.ndarray, tracking: TrackerImage | None = None) -> np.ndarray:
         """:meth:`features` (noise floor included) with each line's complex phasor in place of its amplitude (R, F).
 
         For model records with lines at every shaft order (pitch errors), whose
@@ -194,10 +203,10 @@ class RunProcessor:
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
         out = self.features(records, lines=False).astype(complex)
-        out[:, self.line_columns] = self.fit.phasors(records)
+        out[:, self.line_columns] = self._line_phasors(records, tracking)
         return out
 
-    def model_line_phasors(self, records: np.ndarray) -> np.ndarray:
+    def model_line_phasors(self, records: np.ndarray, tracking: TrackerImage | None = None) -> np.ndarray:
         """Each line's complex phasor (R, F) as in :meth:`model_phasors`, every other feature NaN.
 
         For tests that read the lines' phases alone (the sideband phase sums):
@@ -206,8 +215,24 @@ class RunProcessor:
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
         out = np.full((records.shape[0], len(self.definitions)), np.nan, dtype=complex)
-        out[:, self.line_columns] = self.fit.phasors(records)
+        out[:, self.line_columns] = self._line_phasors(records, tracking)
         return out
+
+    def _line_phasors(self, records: np.ndarray, tracking: TrackerImage | None) -> np.ndarray:
+        """The line phasors (R, lines) of model records, their mesh sidebands as ``tracking`` leaves them."""
+        phasors = self.fit.phasors(records)
+        if tracking is None or self._sideband_layout is None:
+            return phasors
+        mesh_columns, plus_columns, minus_columns, offsets = self._sideband_layout
+        n_channels = len(tracking.accelerations)
+        full = np.full((records.shape[0], len(self.definitions)), np.nan, dtype=complex)
+        full[:, self.line_columns] = phasors
+        runs = full.reshape(-1, n_channels, len(self.definitions))
+        mesh, plus, minus = runs[..., mesh_columns], runs[..., plus_columns], runs[..., minus_columns]
+        plus, minus = tracking.sidebands(mesh, plus, minus, offsets)
+        runs[..., plus_columns] = plus
+        runs[..., minus_columns] = minus
+        return runs.reshape(records.shape[0], -1)[:, self.line_columns]
 
     def _line_noise_scale(self) -> np.ndarray:
         """Per-quadrature standard deviation of each line's fitted amplitude for unit white noise.
@@ -229,6 +254,28 @@ class RunProcessor:
         line_scale[fit.inside] = per_centre[fit.groups]
         scale[self.line_columns] = line_scale
         return scale
+
+
+def _sideband_layout(
+    columns: Mapping[str, int], design: Design, options: Mapping[str, Any]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The columns of each mesh harmonic (K,) and of its sidebands above and below (K, M), with their offsets (M,).
+
+    Offsets are in pinion orders: the pinion's ``j`` and the gear's
+    ``j z1 / z2``. None where the feature set has no mesh sidebands.
+    """
+    harmonics = range(1, int(options["n_harmonics"]) + 1)
+    shafts = [(shaft, j) for shaft in ("pinion", "gear") for j in range(1, int(options["n_sidebands"]) + 1)]
+    names = [f"mesh{k}" for k in harmonics]
+    names += [f"mesh{k}_sb_{shaft}{sign}{j}" for k in harmonics for shaft, j in shafts for sign in "+-"]
+    if not shafts or any(name not in columns for name in names):
+        return None
+    mesh = np.array([columns[f"mesh{k}"] for k in harmonics])
+    plus = np.array([[columns[f"mesh{k}_sb_{shaft}+{j}"] for shaft, j in shafts] for k in harmonics])
+    minus = np.array([[columns[f"mesh{k}_sb_{shaft}-{j}"] for shaft, j in shafts] for k in harmonics])
+    ratio = design.z1 / design.z2
+    offsets = np.array([j * (1.0 if shaft == "pinion" else ratio) for shaft, j in shafts])
+    return mesh, plus, minus, offsets
 
 
 __all__ = ["RunProcessor"]

@@ -45,10 +45,13 @@ run-out, gear pitch errors) cannot be told from speed wander in a record of a
 few gear revolutions, so in a resampled record the phase-modulation half of
 such a sideband is taken as wander (a lone gear-order sideband of a
 synthetic test reads about 35 % low after tracking; projecting the gear orders
-out of the estimate instead absorbs the wander itself, tried and rejected);
-wander faster than half the pinion rotation frequency is outside the
-estimate's band. Records that need no tracking keep their gear sidebands
-intact.
+out of the estimate would absorb the wander itself); wander faster than half
+the pinion rotation frequency is outside the estimate's band. Records that
+need no tracking keep their gear sidebands intact. A model compared with a
+resampled record must lose the same share of its sidebands:
+:class:`TrackerImage` removes it from a constant-speed record's line
+phasors to first order, with the weights the estimate gave each line
+(``speed_reference_weight``).
 
 This module does no file I/O and no plotting.
 """
@@ -124,12 +127,16 @@ class AngleEstimate:
         The lines used, e.g. ``("te:mesh1", "te:mesh2")``.
     reason : str
         Why no estimate could be made (empty when there is one).
+    weights : tuple of float
+        Each line's weight in the estimate (summing to 1; empty for a
+        tachometer, whose angle rests on no line).
     """
 
     angle: np.ndarray | None
     angle_std: float
     lines: tuple[str, ...]
     reason: str = ""
+    weights: tuple[float, ...] = ()
 
 
 def _lowpass(values: np.ndarray, cutoff: float, fs: float) -> np.ndarray:
@@ -200,6 +207,7 @@ def estimate_pinion_angle(
     centred = [np.asarray(record, dtype=float) - float(np.mean(record)) for record in records]
     densities = [_noise_density(record, fs) for record in centred]
     used: list[tuple[int, int]] = []
+    weights = np.zeros(0)
     angle_std = math.nan
     for _ in range(_PASSES):
         rows = np.stack([centred[channel] * np.exp(-1j * k * z1 * angle) for channel, k in candidates])
@@ -227,7 +235,7 @@ def estimate_pinion_angle(
         if float(np.max(np.abs(correction))) * z1 * n_harmonics < 1e-4:
             break
     lines = tuple(f"{names[channel]}:mesh{k}" for channel, k in used)
-    return AngleEstimate(angle - angle[0], angle_std, lines)
+    return AngleEstimate(angle - angle[0], angle_std, lines, weights=tuple(float(w) for w in weights))
 
 
 def tachometer_angle(speed_signal: np.ndarray, fs: float) -> AngleEstimate:
@@ -265,6 +273,7 @@ class _RecordResult:
     high: float
     tracked: bool
     lines: str
+    weights: str = ""  # each line's weight in the angle estimate, as lines
 
 
 def _track_record(
@@ -320,7 +329,8 @@ def _track_record(
         uniform = np.linspace(angle[0], angle[-1], size)
         instant_rate = np.interp(uniform, angle, rate)
         resampled[list(acceleration_rows)] /= (instant_rate / mean) ** 2
-    return _RecordResult(resampled, mean, low, high, tracked, " ".join(estimate.lines))
+    weights = " ".join(repr(weight) for weight in estimate.weights)
+    return _RecordResult(resampled, mean, low, high, tracked, " ".join(estimate.lines), weights)
 
 
 def _checked_channels(signals: xr.Dataset, channels: Sequence[str] | None) -> list[str]:
@@ -360,7 +370,7 @@ def _tachometer(signals: xr.Dataset, dims: tuple[Hashable, ...], size: int) -> n
 
 
 def _speed_estimates(signals: xr.Dataset, template: xr.DataArray, stated: np.ndarray, statistics: np.ndarray,
-                     tracked: np.ndarray, references: list[str]) -> dict[str, xr.DataArray]:
+                     tracked: np.ndarray, references: list[str], weights: list[str]) -> dict[str, xr.DataArray]:
     """Per record: the stated and estimated speeds (mean, lowest, highest), whether it was tracked, and on what."""
     shape = template.shape
 
@@ -379,6 +389,9 @@ def _speed_estimates(signals: xr.Dataset, template: xr.DataArray, stated: np.nda
     variables["order_tracked"] = over_records(tracked, {"long_name": "record resampled to uniform pinion angle"})
     variables["speed_reference"] = over_records(
         np.array(references, dtype=object), {"long_name": "lines (or tachometer) the speed estimate rests on"}
+    )
+    variables["speed_reference_weight"] = over_records(
+        np.array(weights, dtype=object), {"long_name": "weight of each line of speed_reference in the estimate"}
     )
     return variables
 
@@ -424,8 +437,10 @@ def track_orders(
         elsewhere), and over the non-time dimensions: ``pinion_speed_stated``,
         ``speed_mean``, ``speed_min``, ``speed_max`` (rpm; min and max of the
         instantaneous speed over the record without its first and last 5 %),
-        ``order_tracked`` (bool) and ``speed_reference`` (the lines or the
-        tachometer used, or why no estimate could be made).
+        ``order_tracked`` (bool), ``speed_reference`` (the lines or the
+        tachometer used, or why no estimate could be made) and
+        ``speed_reference_weight`` (each line's weight in the estimate, as
+        space-separated numbers; empty for a tachometer).
 
     Raises
     ------
@@ -451,6 +466,7 @@ def track_orders(
     statistics = np.full((3, n_records), np.nan)  # mean, min, max speed (rpm)
     tracked = np.zeros(n_records, dtype=bool)
     references: list[str] = []
+    weights: list[str] = []
     outputs: dict[str, np.ndarray | None] = dict.fromkeys(channels)
     acceleration_rows = [
         index
@@ -473,6 +489,7 @@ def track_orders(
         statistics[:, record] = (result.mean, result.low, result.high)
         tracked[record] = result.tracked
         references.append(result.lines)
+        weights.append(result.weights)
         if result.records is not None:
             for index, name in enumerate(channels):
                 output = outputs[name]
@@ -483,10 +500,119 @@ def track_orders(
     for name, values in outputs.items():
         if values is not None:
             result_ds[name] = signals[name].copy(data=values.reshape(signals[name].shape).astype(signals[name].dtype))
-    for name, variable in _speed_estimates(signals, template, stated, statistics, tracked, references).items():
+    for name, variable in _speed_estimates(signals, template, stated, statistics, tracked, references, weights).items():
         result_ds[name] = variable
     result_ds.attrs["order_tracking"] = mode
     return result_ds
+
+
+@dataclass(frozen=True)
+class TrackerImage:
+    """What a record's order tracking from its own mesh lines does to a constant-speed record's mesh sidebands.
+
+    The angle estimate of :func:`estimate_pinion_angle` reads the phase of
+    the mesh harmonics inside half a pinion order, so it takes the phase
+    modulation of the mesh by a gear-order effect (a gear run-out, gear pitch
+    errors) for wander and resampling removes it. A model run at constant
+    speed has no wander, but compared with such a record it must lose the
+    same share of its sidebands. To first order in the sidebands (a few
+    percent of their mesh line), the resampled record is
+    ``x(t) - x'(t) dtheta(t) / Omega`` with ``dtheta`` the estimate's
+    deviation from a uniform angle: the weighted phase modulation of the
+    lines the estimate read, each over its order, passed through the
+    demodulation filter; accelerations are also divided by the squared
+    speed ratio, as :func:`track_orders` divides them.
+
+    Attributes
+    ----------
+    channels, harmonics, weights : tuple
+        Per line of the estimate: its channel (index), mesh harmonic ``k`` and weight.
+    z1 : int
+        Pinion teeth.
+    accelerations : tuple of bool
+        Per channel, whether it is an acceleration (divided by the squared speed ratio).
+
+    Examples
+    --------
+    A record whose mesh line carries a pure phase modulation at a gear order
+    loses both sidebands when the estimate reads that line alone:
+
+    >>> import numpy as np
+    >>> image = TrackerImage(channels=(0,), harmonics=(1,), weights=(1.0,), z1=20, accelerations=(False,))
+    >>> mesh = np.array([[[2.0]]])                      # (run, channel, harmonic)
+    >>> depth = 0.01                                    # rad of phase modulation
+    >>> plus = 1j * mesh[..., None] * depth / 2         # (run, channel, harmonic, offset)
+    >>> minus = 1j * mesh[..., None] * depth / 2
+    >>> after_plus, after_minus = image.sidebands(mesh, plus, minus, np.array([0.05]))
+    >>> bool(np.abs(after_plus).max() < 1e-6 * abs(plus).max())
+    True
+    """
+
+    channels: tuple[int, ...]
+    harmonics: tuple[int, ...]
+    weights: tuple[float, ...]
+    z1: int
+    accelerations: tuple[bool, ...]
+
+    def deviation(self, mesh: np.ndarray, plus: np.ndarray, minus: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """The estimate's angle deviation (R, M), rad of pinion angle, as a phasor at each offset order.
+
+        ``mesh`` (R, C, K): each channel's mesh harmonics; ``plus`` and
+        ``minus`` (R, C, K, M): their upper and lower sidebands at the
+        ``offsets`` (M, pinion orders, positive), all as phasors ``a - i b``
+        of ``a cos + b sin``.
+        """
+        deviation = np.zeros((mesh.shape[0], offsets.size), dtype=complex)
+        for channel, harmonic, weight in zip(self.channels, self.harmonics, self.weights):
+            line = mesh[:, channel, harmonic - 1][:, None]
+            upper, lower = plus[:, channel, harmonic - 1], minus[:, channel, harmonic - 1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                modulation = -1j * (upper / line - np.conj(lower / line))
+            deviation += weight * np.where(np.isfinite(modulation), modulation, 0.0) / (harmonic * self.z1)
+        # the demodulation filter: a third-order Butterworth run forward and back
+        return deviation / (1.0 + (offsets / _BAND_FRACTION) ** 6)
+
+    def sidebands(
+        self, mesh: np.ndarray, plus: np.ndarray, minus: np.ndarray, offsets: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The upper and lower sidebands (R, C, K, M) after the tracking (arguments as :meth:`deviation`)."""
+        deviation = self.deviation(mesh, plus, minus, offsets)[:, None, None, :]
+        orders = (np.arange(1, mesh.shape[2] + 1) * self.z1)[None, None, :, None]
+        line = np.where(np.isfinite(mesh), mesh, 0.0)[..., None]
+        shift_plus = -0.5j * orders * line * deviation
+        shift_minus = -0.5j * orders * line * np.conj(deviation)
+        scaled = np.array(self.accelerations, dtype=bool)[None, :, None, None]
+        # the division by the squared speed ratio: an amplitude modulation of -2 dtheta' / Omega
+        shift_plus = shift_plus + np.where(scaled, -1j * offsets * line * deviation, 0.0)
+        shift_minus = shift_minus + np.where(scaled, 1j * offsets * line * np.conj(deviation), 0.0)
+        return plus + shift_plus, minus + shift_minus
+
+
+def tracker_image(row: dict[str, object], channels: Sequence[str], z1: int) -> TrackerImage | None:
+    """The :class:`TrackerImage` of one record's :func:`speed_summary` row, or None.
+
+    None where the record was not resampled, or was resampled on a
+    tachometer (which reads the true angle and takes nothing from the
+    sidebands).
+    """
+    reference = str(row.get("reference", ""))
+    weights = row.get("reference_weights") or []
+    if not row.get("order_tracked") or not reference or not isinstance(weights, list):
+        return None
+    lines = reference.split()
+    if len(lines) != len(weights) or any(":mesh" not in line for line in lines):
+        return None
+    index = {name: position for position, name in enumerate(channels)}
+    parsed = [line.split(":mesh") for line in lines]
+    if any(channel not in index for channel, _ in parsed):
+        return None
+    return TrackerImage(
+        channels=tuple(index[channel] for channel, _ in parsed),
+        harmonics=tuple(int(harmonic) for _, harmonic in parsed),
+        weights=tuple(float(weight) for weight in weights),
+        z1=int(z1),
+        accelerations=tuple(SIGNAL_CHANNELS.get(name, ("",))[0] == "m s-2" for name in channels),
+    )
 
 
 def speed_summary(tracked: xr.Dataset) -> list[dict[str, object]]:
@@ -514,6 +640,9 @@ def speed_summary(tracked: xr.Dataset) -> list[dict[str, object]]:
                 "reference": str(np.asarray(pick["speed_reference"].values).ravel()[0]),
             }
         )
+        if "speed_reference_weight" in pick:
+            text = str(np.asarray(pick["speed_reference_weight"].values).ravel()[0])
+            rows[-1]["reference_weights"] = [float(value) for value in text.split()]
         if "op_source" in pick.coords:
             # a campaign with ramp records: which record the operating point comes from
             rows[-1]["source"] = str(np.asarray(pick["op_source"].values).ravel()[0])
@@ -530,5 +659,7 @@ __all__ = [
     "resample_to_angle",
     "track_orders",
     "check_tracking_mode",
+    "TrackerImage",
+    "tracker_image",
     "speed_summary",
 ]
