@@ -119,10 +119,17 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
     # integrated together: runs of one operating point share SIMD lanes (each run's numbers as alone)
     runs = case.simulator.runs(op, tasks)
     stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
-    reduce = getattr(case.processors[op], REDUCTIONS[reductions.pop()])
-    # the rig's record was resampled on its own mesh lines: the model's sidebands are read as that left them
-    tracking = case.tracking[op] if case.tracking else None
-    features = reduce(stacked, tracking).reshape(len(runs), len(case.channels), -1)
+    reduction = reductions.pop()
+    reduce = getattr(case.processors[op], REDUCTIONS[reduction])
+    # The rig's record was resampled on its own mesh lines: the features the fits compare read the
+    # model's sidebands as that resampling left them. The pitch-error allowance's draws and the sideband
+    # phase sums (the phasor reductions) read the model as it runs: their rules were set on that reading,
+    # and read through the tracking the allowance no longer covers a class-7 gear under speed wander
+    # (docs/validation/diagnosis.md, "Speed wander and gear-order sidebands").
+    tracking = case.tracking[op] if case.tracking and reduction == "features" else None
+    features = (reduce(stacked) if tracking is None else reduce(stacked, tracking)).reshape(
+        len(runs), len(case.channels), -1
+    )
     if case.transfer is not None:
         # the rig sees the gear through its transfer paths: the model's features as the rig would record them
         transferred = features * case.transfer[op]

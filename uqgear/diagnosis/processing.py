@@ -195,7 +195,7 @@ class RunProcessor:
             )
         return out
 
-    def model_phasors(self, records: np.ndarray, tracking: TrackerImage | None = None) -> np.ndarray:
+    def model_phasors(self, records: np.ndarray) -> np.ndarray:
         """:meth:`features` (noise floor included) with each line's complex phasor in place of its amplitude (R, F).
 
         For model records with lines at every shaft order (pitch errors), whose
@@ -203,10 +203,10 @@ class RunProcessor:
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
         out = self.features(records, lines=False).astype(complex)
-        out[:, self.line_columns] = self._line_phasors(records, tracking)
+        out[:, self.line_columns] = self.fit.phasors(records)
         return out
 
-    def model_line_phasors(self, records: np.ndarray, tracking: TrackerImage | None = None) -> np.ndarray:
+    def model_line_phasors(self, records: np.ndarray) -> np.ndarray:
         """Each line's complex phasor (R, F) as in :meth:`model_phasors`, every other feature NaN.
 
         For tests that read the lines' phases alone (the sideband phase sums):
@@ -215,13 +215,13 @@ class RunProcessor:
         """
         records = np.atleast_2d(np.asarray(records, dtype=float))
         out = np.full((records.shape[0], len(self.definitions)), np.nan, dtype=complex)
-        out[:, self.line_columns] = self._line_phasors(records, tracking)
+        out[:, self.line_columns] = self.fit.phasors(records)
         return out
 
-    def _line_phasors(self, records: np.ndarray, tracking: TrackerImage | None) -> np.ndarray:
+    def _line_phasors(self, records: np.ndarray, tracking: TrackerImage) -> np.ndarray:
         """The line phasors (R, lines) of model records, their mesh sidebands as ``tracking`` leaves them."""
         phasors = self.fit.phasors(records)
-        if tracking is None or self._sideband_layout is None:
+        if self._sideband_layout is None:
             return phasors
         mesh_columns, plus_columns, minus_columns, offsets = self._sideband_layout
         n_channels = len(tracking.accelerations)
