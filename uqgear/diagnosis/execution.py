@@ -62,6 +62,9 @@ class RunTask:
     # what the records are reduced to (:data:`REDUCTIONS`): features, or complex line phasors with the
     # other features (real part), or the line phasors alone
     reduction: str = "features"
+    # whether the features read the model's mesh sidebands as the rig's order tracking left the rig's
+    # where it resampled the record (:class:`~uqgear.rig.order_tracking.TrackerImage`)
+    tracked: bool = True
 
 
 # The BLAS and OpenMP thread pools of this process, found on first use (finding them inspects every
@@ -113,20 +116,19 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
         # an internal invariant (run_groups makes the groups): the step log reports it as internal
         raise RuntimeError(f"execute_group: expected runs of one operating point; got runs {sorted(ops)}")
     op = ops.pop()
-    reductions = {task.reduction for task in tasks}
-    if len(reductions) != 1 or not reductions <= set(REDUCTIONS):
+    reductions = {(task.reduction, task.tracked) for task in tasks}
+    if len(reductions) != 1 or not {reduction for reduction, _ in reductions} <= set(REDUCTIONS):
         raise RuntimeError(f"execute_group: expected runs reduced alike, one of {REDUCTIONS}; got {reductions}")
     # integrated together: runs of one operating point share SIMD lanes (each run's numbers as alone)
     runs = case.simulator.runs(op, tasks)
     stacked = np.concatenate([np.stack([run.records[channel] for channel in case.channels]) for run in runs])
-    reduction = reductions.pop()
+    reduction, tracked = reductions.pop()
     reduce = getattr(case.processors[op], REDUCTIONS[reduction])
     # The rig's record was resampled on its own mesh lines: the features the fits compare read the
-    # model's sidebands as that resampling left them. The pitch-error allowance's draws and the sideband
-    # phase sums (the phasor reductions) read the model as it runs: their rules were set on that reading,
-    # and read through the tracking the allowance no longer covers a class-7 gear under speed wander
-    # (docs/validation/diagnosis.md, "Speed wander and gear-order sidebands").
-    tracking = case.tracking[op] if case.tracking and reduction == "features" else None
+    # model's sidebands as that resampling left them, unless the task says otherwise (under the
+    # pitch-error allowance, :meth:`~.fit_problem.FitProblem.run_task`). The phasor reductions (the
+    # allowance's draws, the sideband phase sums) read the model as it runs.
+    tracking = case.tracking[op] if tracked and case.tracking and reduction == "features" else None
     features = (reduce(stacked) if tracking is None else reduce(stacked, tracking)).reshape(
         len(runs), len(case.channels), -1
     )

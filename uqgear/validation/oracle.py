@@ -88,7 +88,12 @@ def effect_visibility(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any
     names = list(spec.truth_set())
 
     def features(chosen: Sequence[Effect]) -> np.ndarray:
-        tasks = [RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free") for op in range(case.n_op)]
+        # read as the diagnosis read its fits on this case (untracked under the pitch-error allowance)
+        tracked = case.pitch_allowance is None
+        tasks = [
+            RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free", tracked=tracked)
+            for op in range(case.n_op)
+        ]
         return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
 
     recorded = expected_rig_features(
