@@ -179,9 +179,12 @@ class FitProblem:
         periodic = np.zeros((len(vectors), case.n_op), dtype=bool)
         tasks: list[RunTask] = []
         where: list[tuple[int, int, tuple[Any, ...]]] = []
+        # runs simulated before the reading changed (the nominal fit, before the pitch-error allowance)
+        # serve only where no record was resampled: there both readings are the same
+        reading = self.tracked and any(image is not None for image in case.tracking)
         for index, v in enumerate(vectors):
             for op in range(case.n_op) if ops is None else ops[index]:
-                key = (op, self.tracked, float(v[self.n_global + op]), *np.round(v[: self.n_global], 12))
+                key = (op, reading, float(v[self.n_global + op]), *np.round(v[: self.n_global], 12))
                 if key in self._cache:
                     out[index, op], periodic[index, op] = self._cache[key]
                     continue
