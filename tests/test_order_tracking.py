@@ -211,7 +211,7 @@ def test_the_tracker_image_takes_from_a_model_record_what_the_tracker_takes(desi
     """
     from uqgear.diagnosis.case import FEATURE_OPTIONS
     from uqgear.diagnosis.processing import RunProcessor
-    from uqgear.rig.order_tracking import tracker_image
+    from uqgear.rig.order_tracking import accelerations, tracker_image
 
     channels = ("acc_pinion", "acc_gear")
     records = np.stack([
@@ -224,7 +224,7 @@ def test_the_tracker_image_takes_from_a_model_record_what_the_tracker_takes(desi
     signals["pinion_speed"] = ("op", [speed])
     tracked = track_orders(signals, design, mode="always")
     row = speed_summary(tracked)[0]
-    image = tracker_image(row, channels, design.z1)
+    image = tracker_image(row, channels, design.z1, accelerations(tracked, channels))
     assert image is not None and math.isclose(sum(image.weights), 1.0)
     processor = RunProcessor(design, speed, FS, N, dict(FEATURE_OPTIONS, band_limit=FS / 2.56))
     resampled = np.stack([np.asarray(tracked[name].values[0]) for name in channels])
@@ -241,4 +241,5 @@ def test_the_tracker_image_takes_from_a_model_record_what_the_tracker_takes(desi
     meshes = [processor.columns[f"mesh{k}"] for k in (1, 2, 3)]
     assert np.allclose(imaged[:, meshes], plain[:, meshes], rtol=1e-12, atol=0.0)
     # a record resampled on a tachometer takes nothing from the sidebands
-    assert tracker_image({**row, "reference": "pinion_speed_signal", "reference_weights": []}, channels, 21) is None
+    tachometer = {**row, "reference": "pinion_speed_signal", "reference_weights": []}
+    assert tracker_image(tachometer, channels, 21, (True, True)) is None

@@ -20,7 +20,7 @@ from ..physics.design import Design
 from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
 from ..rig.features import SIGNAL_CHANNELS
-from ..rig.order_tracking import TrackerImage, speed_summary, track_orders, tracker_image
+from ..rig.order_tracking import TrackerImage, accelerations, speed_summary, track_orders, tracker_image
 from .allowances.interference import NOTCH_HALF_WIDTH, LineInterference, interference_lines
 from .discrepancy import FeatureLayout, NoiseModel, line_noise_sigma, noise_model
 from .errors import DiagnosisError
@@ -150,6 +150,20 @@ class RigCase:
     @property
     def n_op(self) -> int:
         return int(self.speeds.size)
+
+    @property
+    def reads_tracked(self) -> bool:
+        """Whether model runs are read as the rig's order tracking left the rig's records (:attr:`tracking`).
+
+        Not under the pitch-error allowance: its widening of every sideband
+        is read off model runs as they come (the rules of section 6.4 were
+        set on that reading), and a candidate is judged on the same footing
+        as the allowance it has to beat. Read through the tracking, a
+        gear-order candidate on a class-7 gear under speed wander matches the
+        tracked pitch-error sidebands the allowance does not cover
+        (docs/validation/diagnosis.md, "Speed wander and gear-order sidebands").
+        """
+        return self.pitch_allowance is None
 
     @property
     def run_out_allowance(self) -> dict[str, float]:
@@ -334,6 +348,7 @@ def prepare_case(
     noise = [noise_by_speed[float(speed)] for speed in speeds]
     simulator = CampaignSimulator(design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode)
     speed = speed_summary(rig)
+    scaled = accelerations(rig, channels)
     return RigCase(
         rig=rig,
         design=design,
@@ -357,7 +372,7 @@ def prepare_case(
         speed=speed,
         tracking_s=tracking_s,
         interference=interference,
-        tracking=tuple(tracker_image(row, channels, design.z1) for row in speed),
+        tracking=tuple(tracker_image(row, channels, design.z1, scaled) for row in speed),
     )
 
 

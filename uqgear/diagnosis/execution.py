@@ -126,7 +126,7 @@ def execute_group(case: RunContext, tasks: Sequence[RunTask]) -> list[tuple[np.n
     reduce = getattr(case.processors[op], REDUCTIONS[reduction])
     # The rig's record was resampled on its own mesh lines: the features the fits compare read the
     # model's sidebands as that resampling left them, unless the task says otherwise (under the
-    # pitch-error allowance, :meth:`~.fit_problem.FitProblem.run_task`). The phasor reductions (the
+    # pitch-error allowance, :attr:`~.case.RigCase.reads_tracked`). The phasor reductions (the
     # allowance's draws, the sideband phase sums) read the model as it runs.
     tracking = case.tracking[op] if tracked and case.tracking and reduction == "features" else None
     features = (reduce(stacked) if tracking is None else reduce(stacked, tracking)).reshape(

@@ -151,17 +151,11 @@ class FitProblem:
 
     @property
     def tracked(self) -> bool:
-        """Whether the model's sidebands are read as the rig's order tracking left the rig's (:class:`RunTask`).
+        """Whether this model's runs are read through the rig's order tracking.
 
-        Not under the pitch-error allowance: its widening of every sideband
-        is read off model runs as they come (the rules of section 6.4 were
-        set on that reading), and a candidate is judged on the same footing
-        as the allowance it has to beat. Read through the tracking, a
-        gear-order candidate on a class-7 gear under speed wander matches the
-        tracked pitch-error sidebands the allowance does not cover
-        (docs/validation/diagnosis.md, "Speed wander and gear-order sidebands").
+        :attr:`~uqgear.diagnosis.case.RigCase.reads_tracked` of its case.
         """
-        return self.case.pitch_allowance is None
+        return self.case.reads_tracked
 
     def model_features(
         self, vectors: Sequence[np.ndarray], ops: Sequence[Sequence[int]] | None = None

@@ -333,6 +333,13 @@ def _track_record(
     return _RecordResult(resampled, mean, low, high, tracked, " ".join(estimate.lines), weights)
 
 
+def accelerations(signals: xr.Dataset, channels: Sequence[str]) -> tuple[bool, ...]:
+    """Per channel, whether it is an acceleration (its ``units``, else the rig format's): resampling rescales those."""
+    return tuple(
+        signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("",))[0]) == "m s-2" for name in channels
+    )
+
+
 def _checked_channels(signals: xr.Dataset, channels: Sequence[str] | None) -> list[str]:
     """The channels to track (default: every rig channel present), all of one shape ending in ``time``."""
     if channels is None:
@@ -468,11 +475,7 @@ def track_orders(
     references: list[str] = []
     weights: list[str] = []
     outputs: dict[str, np.ndarray | None] = dict.fromkeys(channels)
-    acceleration_rows = [
-        index
-        for index, name in enumerate(channels)
-        if signals[name].attrs.get("units", SIGNAL_CHANNELS.get(name, ("",))[0]) == "m s-2"
-    ]
+    acceleration_rows = [index for index, scaled in enumerate(accelerations(signals, channels)) if scaled]
     for record in range(n_records):
         result = _track_record(
             stacked[record].astype(float),
@@ -588,12 +591,15 @@ class TrackerImage:
         return plus + shift_plus, minus + shift_minus
 
 
-def tracker_image(row: dict[str, object], channels: Sequence[str], z1: int) -> TrackerImage | None:
+def tracker_image(
+    row: dict[str, object], channels: Sequence[str], z1: int, scaled: Sequence[bool]
+) -> TrackerImage | None:
     """The :class:`TrackerImage` of one record's :func:`speed_summary` row, or None.
 
-    None where the record was not resampled, or was resampled on a
-    tachometer (which reads the true angle and takes nothing from the
-    sidebands).
+    ``scaled``: per channel, whether :func:`track_orders` rescaled it as an
+    acceleration (:func:`accelerations` of the tracked signals). None where
+    the record was not resampled, or was resampled on a tachometer (which
+    reads the true angle and takes nothing from the sidebands).
     """
     reference = str(row.get("reference", ""))
     weights = row.get("reference_weights") or []
@@ -611,7 +617,7 @@ def tracker_image(row: dict[str, object], channels: Sequence[str], z1: int) -> T
         harmonics=tuple(int(harmonic) for _, harmonic in parsed),
         weights=tuple(float(weight) for weight in weights),
         z1=int(z1),
-        accelerations=tuple(SIGNAL_CHANNELS.get(name, ("",))[0] == "m s-2" for name in channels),
+        accelerations=tuple(bool(value) for value in scaled),
     )
 
 
@@ -659,6 +665,7 @@ __all__ = [
     "resample_to_angle",
     "track_orders",
     "check_tracking_mode",
+    "accelerations",
     "TrackerImage",
     "tracker_image",
     "speed_summary",

@@ -88,10 +88,9 @@ def effect_visibility(case: RigCase, spec: CampaignSpec, truth: Mapping[str, Any
     names = list(spec.truth_set())
 
     def features(chosen: Sequence[Effect]) -> np.ndarray:
-        # read as the diagnosis read its fits on this case (untracked under the pitch-error allowance)
-        tracked = case.pitch_allowance is None
+        # read as the diagnosis read its fits on this case
         tasks = [
-            RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free", tracked=tracked)
+            RunTask(op, design, scale, float(adhesion[op]), tuple(chosen), "free", tracked=case.reads_tracked)
             for op in range(case.n_op)
         ]
         return np.stack([values for values, _ in execute_runs(case, tasks)])[..., case.layout.columns]
