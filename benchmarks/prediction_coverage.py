@@ -150,7 +150,7 @@ def discrepancy_factors(calibration: uqgear.Calibration, space: uqgear.Parameter
 
 def one_campaign(
     kind: str, index: int, rng: np.random.Generator, design: uqgear.Design, discrepancy: bool = False,
-    artefacts: bool = True,
+    artefacts: bool = True, model_error_floor: float | None = None,
 ) -> dict[str, Any]:
     began = time.perf_counter()
     made = campaign(kind, index, rng, design, artefacts)
@@ -164,8 +164,11 @@ def one_campaign(
             effect_sets = draw_effect_sets(named, DRAWS, index)
         except uqgear.UqgearError:
             named, effect_sets = [], None
+    options: dict[str, Any] = {}
+    if model_error_floor is not None:
+        options["model_error_range"] = (model_error_floor, 0.5)
     calibration = uqgear.Calibration(
-        design=design, seed=index, discrepancy=discrepancy, effects=[effect.central() for effect in named]
+        design=design, seed=index, discrepancy=discrepancy, effects=[effect.central() for effect in named], **options
     ).fit(made["rig"])
     entry: dict[str, Any] = {"kind": kind, "converged": bool(calibration.converged_)}
     if verdict is not None:
@@ -173,6 +176,12 @@ def one_campaign(
     if not calibration.converged_:
         entry["seconds"] = time.perf_counter() - began
         return entry
+    # the truth's z-score against each parameter's posterior: about standard normal where calibrated
+    entry["z"] = {
+        name: round(float((made["truth"][name] - np.median(values)) / np.std(values)), 2)
+        for name in calibration.parameters
+        for values in [calibration.posterior_[name].values.ravel()]
+    }
     space = uqgear.ParameterSpace.from_posterior(calibration, draws=DRAWS, seed=index)
     draws = {name: space.posterior.column(name) for name in space.posterior.names}
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}
@@ -205,6 +214,8 @@ def main() -> None:
     parser.add_argument("--run-kinds", nargs="+", help="calibrate only these kinds (the others' draws still taken)")
     parser.add_argument("--without-artefacts", action="store_true",
                         help="the same campaigns without speed wander, encoder run-out or transfer path")
+    parser.add_argument("--model-error-floor", type=float, default=None,
+                        help="the model-error prior's lower end (default: the calibration's)")
     parser.add_argument("--json")
     args = parser.parse_args()
     design = uqgear.load_design("locomotive")
@@ -218,7 +229,8 @@ def main() -> None:
             if not args.skip <= index < first or kind not in run_kinds:
                 draw_campaign(kind, index, rng, design)
                 continue
-            entry = one_campaign(kind, index, rng, design, args.discrepancy, not args.without_artefacts)
+            entry = one_campaign(kind, index, rng, design, args.discrepancy, not args.without_artefacts,
+                                 args.model_error_floor)
             entries.append(entry)
             print(json.dumps(entry), flush=True)
     for kind in run_kinds:
@@ -235,6 +247,9 @@ def main() -> None:
                 tails = np.mean((pits < 0.1) | (pits > 0.9))
                 print(f"{kind:10s} {qoi:20s} truth's place in the draws: central half {central * 100:5.1f} % "
                       f"(50 % if calibrated), outer tenths {tails * 100:5.1f} % (20 %)")
+        z = np.array([value for e in found for value in e["z"].values()])
+        if z.size:
+            print(f"{kind:10s} parameters: RMS z {np.sqrt(np.mean(z ** 2)):.2f} (1 if calibrated) over {z.size}")
         ratios = [e["spread_ratio"] for e in found if "spread_ratio" in e]
         if ratios:
             print(f"{kind:10s} worst-case spread, prior / posterior: {', '.join(f'{r:.1f}x' for r in ratios)}")

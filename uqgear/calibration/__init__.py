@@ -37,7 +37,10 @@ the sum of
   differences are systematic, not independent from feature to feature as the
   likelihood assumes. With a 0.2 % floor the 90 % intervals of
   ``zeta_mesh``, ``k1`` and ``k2`` on ``healthy.nc`` were too narrow to hold
-  the truth; with 0.5 % they held it narrowly, with 1 % comfortably.
+  the truth; with 0.5 % they held it narrowly, with 1 % comfortably. The
+  discrepancy term does not take that difference up (it is smooth in the
+  operating point, the difference is not), so the floor is the same with it
+  (docs/validation/calibration.md, "A model-error floor of 1 %").
 
 Model discrepancy (``discrepancy=True``)
 ----------------------------------------
