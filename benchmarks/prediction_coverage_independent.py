@@ -17,9 +17,9 @@ another implementation's.
 Prints one JSON record per file (parameter z-scores of the truth against the posterior, coverage, the truth's
 place among the draws) and the pooled coverage.
 
-Usage: ``python benchmarks/prediction_coverage_independent.py --rig-dir ../shared/data/rig
-[--model-error-floor 0.01] [--without-discrepancy] [--files healthy ...] [--json out.json]``
-(``healthy`` and ``eccentricity`` are bundled; the others are read from ``--rig-dir``).
+Usage: ``python benchmarks/prediction_coverage_independent.py [--model-error-floor 0.01] [--without-discrepancy]
+[--files healthy ...] [--rig-dir data/rig] [--json out.json]`` (the campaigns are read from the repository's
+``data/rig``, or another folder of the same files).
 """
 
 from __future__ import annotations
@@ -61,20 +61,16 @@ EFFECTS = {
     "adhesion_oscillation": {"amplitude": 0.05, "frequency": 12.0, "phase": 4.72},
     "friction": {"coefficient": 0.08},
 }
-BUNDLED = ("healthy", "eccentricity")
+RIG_DIR = Path(__file__).resolve().parent.parent / "data" / "rig"
 
 
-def load(name: str, rig_dir: Path | None) -> xr.Dataset:
-    if name in BUNDLED:
-        return uqgear.example_rig_file(name)
-    if rig_dir is None:
-        raise SystemExit(f"{name}: not bundled; give --rig-dir")
+def load(name: str, rig_dir: Path) -> xr.Dataset:
     with xr.open_dataset(rig_dir / f"{name}.nc") as rig:
         return rig.load()
 
 
 def one_file(
-    name: str, rig_dir: Path | None, floor: float | None, design: uqgear.Design, discrepancy: bool = True
+    name: str, rig_dir: Path, floor: float | None, design: uqgear.Design, discrepancy: bool = True
 ) -> dict[str, Any]:
     began = time.perf_counter()
     effects = [make_effect(name, EFFECTS[name])] if name in EFFECTS else []
@@ -105,7 +101,7 @@ def one_file(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rig-dir", type=Path, default=None)
+    parser.add_argument("--rig-dir", type=Path, default=RIG_DIR)
     parser.add_argument("--files", nargs="+", default=list(TRUTH))
     parser.add_argument("--model-error-floor", type=float, default=None,
                         help="the model-error prior's lower end (default: the calibration's)")
