@@ -182,6 +182,10 @@ def one_campaign(
         for name in calibration.parameters
         for values in [calibration.posterior_[name].values.ravel()]
     }
+    # the model-error level each (channel, harmonic) group's residuals support, % (posterior median)
+    entry["model_error_q50"] = {
+        group: round(level["q50"] * 100, 3) for group, level in calibration.summary_["model_error"].items()
+    }
     space = uqgear.ParameterSpace.from_posterior(calibration, draws=DRAWS, seed=index)
     draws = {name: space.posterior.column(name) for name in space.posterior.names}
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}

@@ -14,8 +14,8 @@ carry the small systematic differences between two implementations of the model 
 is set for: the pair tells a floor that is too wide on the model's own data from one that is too narrow on
 another implementation's.
 
-Prints one JSON record per file (parameter z-scores of the truth against the posterior, coverage, the truth's
-place among the draws) and the pooled coverage.
+Prints one JSON record per file (parameter z-scores of the truth against the posterior, the model-error level
+of each group, coverage, the truth's place among the draws) and the pooled coverage.
 
 Usage: ``python benchmarks/prediction_coverage_independent.py [--model-error-floor 0.01] [--without-discrepancy]
 [--files healthy ...] [--rig-dir data/rig] [--json out.json]`` (the campaigns are read from the repository's
@@ -84,6 +84,10 @@ def one_file(
     for parameter in calibration.parameters:
         values = calibration.posterior_[parameter].values.ravel()
         entry["z"][parameter] = round(float((truth[parameter] - np.median(values)) / np.std(values)), 2)
+    # the model-error level each (channel, harmonic) group's residuals support, % (posterior median)
+    entry["model_error_q50"] = {
+        group: round(level["q50"] * 100, 3) for group, level in calibration.summary_["model_error"].items()
+    }
     space = uqgear.ParameterSpace.from_posterior(calibration, draws=DRAWS, seed=0, allow_unconverged=True)
     draws = {key: space.posterior.column(key) for key in space.posterior.names}
     effect_sets = [tuple(effects)] * DRAWS if effects else None
