@@ -148,6 +148,44 @@ def discrepancy_factors(calibration: uqgear.Calibration, space: uqgear.Parameter
     return np.exp(np.nan_to_num(delta.sel(channel="te", harmonic=1).values))
 
 
+def calibration_options(model_error_floor: float | None) -> dict[str, Any]:
+    """The calibration's settings beside the defaults: the model-error prior's lower end where given."""
+    return {} if model_error_floor is None else {"model_error_range": (model_error_floor, 0.5)}
+
+
+def posterior_record(calibration: uqgear.Calibration, truth: dict[str, float]) -> dict[str, Any]:
+    """The truth's z-score against each parameter's posterior, and each group's supported model-error level."""
+    return {
+        # about standard normal where the posterior is calibrated
+        "z": {
+            name: round(float((truth[name] - np.median(values)) / np.std(values)), 2)
+            for name in calibration.parameters
+            for values in [calibration.posterior_[name].values.ravel()]
+        },
+        # the model-error level each (channel, harmonic) group's residuals support, % (posterior median)
+        "model_error_q50": {
+            group: round(level["q50"] * 100, 3) for group, level in calibration.summary_["model_error"].items()
+        },
+    }
+
+
+def scored(predicted: dict[str, np.ndarray], true_values: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Per QoI and held-out point: whether the 90 % band holds the truth, and the share of draws below it."""
+    covered, pit = {}, {}
+    for qoi in QOIS:
+        low, high = np.quantile(predicted[qoi], [0.05, 0.95], axis=0)
+        covered[qoi] = ((true_values[qoi][0] >= low) & (true_values[qoi][0] <= high)).tolist()
+        # where the truth falls in the predictive draws: uniform over campaigns for a calibrated prediction,
+        # bunched at 0.5 for bands wider than the errors, at 0 and 1 for bands too narrow
+        pit[qoi] = np.mean(predicted[qoi] < true_values[qoi][0], axis=0).tolist()
+    return {"covered": covered, "pit": pit}
+
+
+def place_shares(pits: np.ndarray) -> tuple[float, float]:
+    """Shares of truths in the central half and in the outer tenths of their draws (0.5 and 0.2 if calibrated)."""
+    return float(np.mean((pits >= 0.25) & (pits <= 0.75))), float(np.mean((pits < 0.1) | (pits > 0.9)))
+
+
 def one_campaign(
     kind: str, index: int, rng: np.random.Generator, design: uqgear.Design, discrepancy: bool = False,
     artefacts: bool = True, model_error_floor: float | None = None,
@@ -164,11 +202,9 @@ def one_campaign(
             effect_sets = draw_effect_sets(named, DRAWS, index)
         except uqgear.UqgearError:
             named, effect_sets = [], None
-    options: dict[str, Any] = {}
-    if model_error_floor is not None:
-        options["model_error_range"] = (model_error_floor, 0.5)
     calibration = uqgear.Calibration(
-        design=design, seed=index, discrepancy=discrepancy, effects=[effect.central() for effect in named], **options
+        design=design, seed=index, discrepancy=discrepancy, effects=[effect.central() for effect in named],
+        **calibration_options(model_error_floor),
     ).fit(made["rig"])
     entry: dict[str, Any] = {"kind": kind, "converged": bool(calibration.converged_)}
     if verdict is not None:
@@ -176,28 +212,13 @@ def one_campaign(
     if not calibration.converged_:
         entry["seconds"] = time.perf_counter() - began
         return entry
-    # the truth's z-score against each parameter's posterior: about standard normal where calibrated
-    entry["z"] = {
-        name: round(float((made["truth"][name] - np.median(values)) / np.std(values)), 2)
-        for name in calibration.parameters
-        for values in [calibration.posterior_[name].values.ravel()]
-    }
-    # the model-error level each (channel, harmonic) group's residuals support, % (posterior median)
-    entry["model_error_q50"] = {
-        group: round(level["q50"] * 100, 3) for group, level in calibration.summary_["model_error"].items()
-    }
+    entry.update(posterior_record(calibration, made["truth"]))
     space = uqgear.ParameterSpace.from_posterior(calibration, draws=DRAWS, seed=index)
     draws = {name: space.posterior.column(name) for name in space.posterior.names}
     truth_rows = {k: np.array([v]) for k, v in made["truth"].items()}
     true_values = predict(truth_rows, [tuple(made["effects"])] if made["effects"] else None, design)
     predicted = predict(draws, effect_sets, design, discrepancy_factors(calibration, space) if discrepancy else None)
-    entry["covered"], entry["pit"] = {}, {}
-    for qoi in QOIS:
-        low, high = np.quantile(predicted[qoi], [0.05, 0.95], axis=0)
-        entry["covered"][qoi] = ((true_values[qoi][0] >= low) & (true_values[qoi][0] <= high)).tolist()
-        # where the truth falls in the predictive draws: uniform over campaigns for a calibrated prediction,
-        # bunched at 0.5 for bands wider than the errors, at 0 and 1 for bands too narrow
-        entry["pit"][qoi] = np.mean(predicted[qoi] < true_values[qoi][0], axis=0).tolist()
+    entry.update(scored(predicted, true_values))
     if kind == "healthy":
         rng_prior = np.random.default_rng(index)
         box = prior_bounds(design, space.posterior.names)
@@ -247,8 +268,7 @@ def main() -> None:
             pits = np.array([value for e in found for value in e["pit"][qoi]])
             if pits.size:
                 # a calibrated prediction puts half its truths in the central half and a tenth in each outer tenth
-                central = np.mean((pits >= 0.25) & (pits <= 0.75))
-                tails = np.mean((pits < 0.1) | (pits > 0.9))
+                central, tails = place_shares(pits)
                 print(f"{kind:10s} {qoi:20s} truth's place in the draws: central half {central * 100:5.1f} % "
                       f"(50 % if calibrated), outer tenths {tails * 100:5.1f} % (20 %)")
         z = np.array([value for e in found for value in e["z"].values()])

@@ -32,7 +32,16 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from prediction_coverage import DRAWS, QOIS, discrepancy_factors, predict
+from prediction_coverage import (
+    DRAWS,
+    QOIS,
+    calibration_options,
+    discrepancy_factors,
+    place_shares,
+    posterior_record,
+    predict,
+    scored,
+)
 
 import uqgear
 from uqgear.physics.effects import make_effect
@@ -74,19 +83,12 @@ def one_file(
 ) -> dict[str, Any]:
     began = time.perf_counter()
     effects = [make_effect(name, EFFECTS[name])] if name in EFFECTS else []
-    options: dict[str, Any] = {} if floor is None else {"model_error_range": (floor, 0.5)}
-    calibration = uqgear.Calibration(design=design, seed=0, discrepancy=discrepancy, effects=effects, **options).fit(
-        load(name, rig_dir)
-    )
-    entry: dict[str, Any] = {"file": name, "converged": bool(calibration.converged_)}
+    calibration = uqgear.Calibration(
+        design=design, seed=0, discrepancy=discrepancy, effects=effects, **calibration_options(floor)
+    ).fit(load(name, rig_dir))
     truth = TRUTH[name]
-    entry["z"] = {}
-    for parameter in calibration.parameters:
-        values = calibration.posterior_[parameter].values.ravel()
-        entry["z"][parameter] = round(float((truth[parameter] - np.median(values)) / np.std(values)), 2)
-    # the model-error level each (channel, harmonic) group's residuals support, % (posterior median)
-    entry["model_error_q50"] = {
-        group: round(level["q50"] * 100, 3) for group, level in calibration.summary_["model_error"].items()
+    entry: dict[str, Any] = {
+        "file": name, "converged": bool(calibration.converged_), **posterior_record(calibration, truth)
     }
     space = uqgear.ParameterSpace.from_posterior(calibration, draws=DRAWS, seed=0, allow_unconverged=True)
     draws = {key: space.posterior.column(key) for key in space.posterior.names}
@@ -94,11 +96,7 @@ def one_file(
     true_values = predict({k: np.array([v]) for k, v in truth.items()}, [tuple(effects)] if effects else None, design)
     factors = discrepancy_factors(calibration, space) if discrepancy else None
     predicted = predict(draws, effect_sets, design, factors)
-    entry["covered"], entry["pit"] = {}, {}
-    for qoi in QOIS:
-        low, high = np.quantile(predicted[qoi], [0.05, 0.95], axis=0)
-        entry["covered"][qoi] = ((true_values[qoi][0] >= low) & (true_values[qoi][0] <= high)).tolist()
-        entry["pit"][qoi] = np.mean(predicted[qoi] < true_values[qoi][0], axis=0).round(3).tolist()
+    entry.update(scored(predicted, true_values))
     entry["seconds"] = round(time.perf_counter() - began, 1)
     return entry
 
@@ -124,9 +122,9 @@ def main() -> None:
     for qoi in QOIS:
         flags = [flag for entry in entries for flag in entry["covered"][qoi]]
         pits = np.array([value for entry in entries for value in entry["pit"][qoi]])
+        central, tails = place_shares(pits)
         print(f"{qoi:20s} covered {np.mean(flags) * 100:5.1f} % of {len(flags)}; truth's place: central half "
-              f"{np.mean((pits >= 0.25) & (pits <= 0.75)) * 100:5.1f} % (50 %), outer tenths "
-              f"{np.mean((pits < 0.1) | (pits > 0.9)) * 100:5.1f} % (20 %)")
+              f"{central * 100:5.1f} % (50 %), outer tenths {tails * 100:5.1f} % (20 %)")
     if args.json:
         args.json.write_text(json.dumps(entries, indent=2))
 
