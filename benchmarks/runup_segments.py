@@ -1,4 +1,4 @@
-"""Run-up segments against steady runs at their speeds: what the ramp rate does to the gear-order lines.
+"""Run-up segments against steady runs at their speeds, and against the diagnosis's model read through them.
 
 For one campaign of the run-up blind suite (``--campaign``, a prefix of its
 identifier; ``--seed``) and each ramp rate (``--rates``, rpm/s), the
@@ -10,7 +10,13 @@ revolutions it holds at the slowest segment, and per channel the largest
 difference between the segment's and the steady run's amplitude of a line
 at gear orders (``shaft_gear*``, ``*_sb_gear*``) as a multiple of the
 channel's largest steady line (mesh harmonics, sidebands, shaft orders), and
-how many gear-order lines differ by more than 1 % of it. ``--diagnose``
+how many gear-order lines differ by more than 1 % of it; then the same
+against the diagnosis's own model of each segment (driven through the speeds
+the segment swept from shortly before it, cleaned and order-tracked as the
+segment was: :mod:`uqgear.rig.ramp_segments`) and against a steady run at
+the segment's mean speed read the same way, per channel the largest
+difference of a gear-order line and of any line over the segment's largest
+line (and of any line from 1200 rpm up). ``--diagnose``
 then diagnoses the campaign (with its noise and nuisances) at each rate
 as the blind test does and prints the verdict and the named set (a
 campaign diagnosed against a healthy reference is diagnosed here without
@@ -84,6 +90,7 @@ def main() -> None:
                   f"{float(differences[op, line]):9.3g} x the largest steady line ({where}); "
                   f"gear-order lines off by more than 1 % of it: {int(np.sum(differences > 0.01))} of "
                   f"{differences.size}")
+        _through_segments(spec, design, truth, points, adhesion)
         if args.diagnose:
             started = time.perf_counter()
             generation, noise, diagnosis, learn = seed.spawn(4)
@@ -92,6 +99,45 @@ def main() -> None:
                                reference_route="transfer").fit(_blind(noisy))
             print(f"  diagnosis: {fitted.decision_.verdict}, named {[c.entry.effect for c in fitted.effects_]} "
                   f"(truth {spec.truth_set()}) in {time.perf_counter() - started:.0f} s", flush=True)
+
+
+def _through_segments(spec, design, truth, points, adhesion) -> None:
+    """The diagnosis's model of each segment at the true parameters and effects against the segment, read two
+    ways: through the speeds the segment swept (the diagnosis's reading) and as a steady run at its mean speed;
+    per channel the largest difference of a gear-order line and of any line over the channel's largest line at
+    that segment, and the same from the segments at 1200 rpm and up."""
+    import dataclasses
+
+    from uqgear.diagnosis.case import prepare_case
+    from uqgear.diagnosis.execution import RunTask, execute_run
+    from uqgear.diagnosis.simulation import CampaignSimulator
+    from uqgear.rig.virtual_rig import true_model
+
+    case = prepare_case(points, design, seed=np.random.SeedSequence(0))
+    steady = CampaignSimulator(design, case.speeds, case.drive_torques, case.fs, case.size, case.channels)
+    true_design, scale, _ = true_model(design, truth)
+    for label, simulator in (("through the segment", case.simulator), ("as a steady run", steady)):
+        reading = dataclasses.replace(case, simulator=simulator)
+        worst: dict[str, list[tuple[float, float, float]]] = {channel: [] for channel in case.channels}
+        for op in range(case.speeds.size):
+            task = RunTask(op, true_design, scale, float(adhesion[op]), tuple(spec.effects()), "free")
+            model, _ = execute_run(reading, task)
+            names = case.processors[op].names
+            lines = [index for index, name in enumerate(names) if name.startswith(("mesh", "shaft"))]
+            gear = [index for index in lines if "gear" in names[index]]
+            for c, channel in enumerate(case.channels):
+                observed, modelled = np.abs(case.observed_all[op, c]), np.abs(model[c])
+                difference = np.abs(observed - modelled) / float(np.nanmax(observed[lines]))
+                worst[channel].append(
+                    (float(np.nanmax(difference[gear])), float(np.nanmax(difference[lines])), float(case.speeds[op]))
+                )
+        for channel, rows in worst.items():
+            gear_line = max(rows, key=lambda row: row[0])
+            any_line = max(rows, key=lambda row: row[1])
+            upper = max(row[1] for row in rows if row[2] >= 1200.0)
+            print(f"  {channel:11s} read {label}: largest |segment - model| over the segment's largest line: a "
+                  f"gear-order line {gear_line[0]:8.3g} ({gear_line[2]:.0f} rpm), any line {any_line[1]:8.3g} "
+                  f"({any_line[2]:.0f} rpm), any line from 1200 rpm {upper:8.3g}")
 
 
 def _noise_free(spec, design, truth, rate, options):

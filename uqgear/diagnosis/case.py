@@ -21,6 +21,7 @@ from ..physics.pitch_errors import PitchErrors
 from ..rig import features as feature_module
 from ..rig.features import SIGNAL_CHANNELS
 from ..rig.order_tracking import TrackerImage, accelerations, speed_summary, track_orders, tracker_image
+from ..rig.ramp_segments import segment_profiles
 from .allowances.interference import NOTCH_HALF_WIDTH, LineInterference, interference_lines
 from .discrepancy import FeatureLayout, NoiseModel, line_noise_sigma, noise_model
 from .errors import DiagnosisError
@@ -346,8 +347,12 @@ def prepare_case(
     rng = np.random.default_rng(seed)
     noise_by_speed = {speed: noise_model(processor, rng) for speed, processor in cache.items()}
     noise = [noise_by_speed[float(speed)] for speed in speeds]
-    simulator = CampaignSimulator(design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode)
     speed = speed_summary(rig)
+    # a ramp segment's runs are read through the speeds it swept, where its record was resampled to uniform angle
+    segments = segment_profiles(rig, tracked=[bool(row["order_tracked"]) for row in speed])
+    simulator = CampaignSimulator(
+        design, speeds, rig["drive_torque"].values, fs, size, channels, steps_per_mode, segments=segments
+    )
     scaled = accelerations(rig, channels)
     return RigCase(
         rig=rig,

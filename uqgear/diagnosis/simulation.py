@@ -20,8 +20,12 @@ from ..physics.design import Design, design_key_bounds
 from ..physics.effects import Effect
 from ..physics.history_batch import STATE_HISTORY_COLUMNS, integrate_histories
 from ..physics.integration import steps_per_period
-from ..physics.model import ModelSetup, build_model
+from ..physics.model import HISTORY_COLUMNS, ModelSetup, build_model
 from ..physics.pitch_errors import PitchErrors
+from ..physics.runup import runup_history
+from ..physics.speed_profile import SpeedProfile
+from ..rig.order_tracking import angle_resampled, tachometer_angle
+from ..rig.ramp_segments import SEGMENT_GUARD, SEGMENT_LEAD, SegmentCleaner, SegmentProfile
 from ..rig.virtual_rig import frequency_filter
 from .errors import DiagnosisError
 
@@ -38,6 +42,9 @@ _PERIODIC_TOLERANCE = 1e-2
 # Guard on each side of a non-periodic window, so that the band-limiting
 # filter's wrap-around stays outside the record.
 _GUARD = 0.025
+# Output rate of a ramp segment's simulation, in rig sampling rates: the band-limiting then reads the
+# rig's sample times on this grid by linear interpolation, as it reads a steady run's upsampled grid.
+_RAMP_OVERSAMPLING = 2
 # Highest mesh-stiffness scale for which the step count is fixed in advance,
 # so that finite-difference neighbours integrate on the same grid.
 MAX_STIFFNESS_SCALE = 1.5
@@ -47,6 +54,7 @@ MAX_STIFFNESS_SCALE = 1.5
 
 #: How the steady response of a model with an effect repeats: over a mesh
 #: period, a pinion or a gear revolution, or not at all (simulated in full).
+#: A ramp segment's run is simulated in full whatever its periodicity.
 PERIODICITIES = ("mesh", "pinion", "gear", "free")
 
 
@@ -91,6 +99,16 @@ class SimulatedRun:
     records: dict[str, np.ndarray]
     periodic: bool
     window: str
+
+
+@dataclass(frozen=True)
+class _SegmentReading:
+    """What every model run of one ramp segment shares: its speed profile, its cleaning, its pinion angle."""
+
+    segment: SegmentProfile
+    profile: SpeedProfile
+    cleaner: SegmentCleaner
+    angle: np.ndarray
 
 
 class RigGrid:
@@ -230,6 +248,10 @@ class CampaignSimulator:
         Rig channels to produce.
     steps_per_mode : int
         RK4 steps per period of the fastest mode.
+    segments : sequence of SegmentProfile or None, optional
+        Per run, the ramp segment it was cut from (:func:`uqgear.rig.ramp_segments.segment_profiles`):
+        such a run is simulated through the speeds the segment swept and read as the rig read it
+        (:meth:`ramp_run`); None (the default for every run) for a steady run.
     """
 
     def __init__(
@@ -241,6 +263,7 @@ class CampaignSimulator:
         size: int,
         channels: Sequence[str],
         steps_per_mode: int = 24,
+        segments: Sequence[SegmentProfile | None] | None = None,
     ) -> None:
         self.design = design
         self.speeds = np.asarray(speeds, dtype=float)
@@ -252,6 +275,10 @@ class CampaignSimulator:
         self.steps_per_mode = int(steps_per_mode)
         self.grid = RigGrid(self.fs, self.size, self.channels)
         self.stopband = self.grid.stopband
+        self.segments = tuple(segments) if segments is not None else (None,) * self.speeds.size
+        if len(self.segments) != self.speeds.size:
+            raise RuntimeError(f"internal: {len(self.segments)} segment profiles for {self.speeds.size} runs")
+        self.segment_runner = SegmentRunner(self)
         # the stiffest bearings a fit may propose (candidates.nominal_parameters), inside the design's range
         stiff = design.replace(
             k1=min(design.k1 * 2.0, design_key_bounds("k1")[1]), k2=min(design.k2 * 2.0, design_key_bounds("k2")[1])
@@ -332,6 +359,8 @@ class CampaignSimulator:
                 raise DiagnosisError(
                     f"periodicity: expected one of {', '.join(PERIODICITIES)}; got {run.periodicity!r}"
                 )
+        if self.segments[op] is not None and all(run.pitch_errors is None for run in runs):
+            return [self.ramp_run(op, run) for run in runs]
         setups = [self._setup(op, run) for run in runs]
         run_in = self.run_in_periods(op)
         results: list[SimulatedRun | None] = [None] * len(runs)
@@ -354,6 +383,10 @@ class CampaignSimulator:
         for index, (signals, _) in zip(whole, simulated):
             results[index] = self._whole(op, {name: values[:samples] for name, values in signals.items()})
         return results  # type: ignore[return-value]
+
+    def ramp_run(self, op: int, run: ModelRun) -> SimulatedRun:
+        """Model records of a ramp segment's run, read as the rig read the segment (:class:`SegmentRunner`)."""
+        return self.segment_runner.run(op, run)
 
     def _setup(self, op: int, run: ModelRun) -> ModelSetup:
         return build_model(
@@ -400,7 +433,7 @@ class CampaignSimulator:
         period = window / f_mesh
         rate = per_period * f_mesh
         factor = self.grid.upsampling(rate)
-        raw = np.stack([self._raw(signals, channel)[:kept] for channel in self.channels])
+        raw = np.stack([_raw_signal(signals, channel)[:kept] for channel in self.channels])
         values = self.grid.resampled(
             ("periodic", op),
             raw - raw.mean(axis=1, keepdims=True),
@@ -417,14 +450,88 @@ class CampaignSimulator:
         rate = self.samples_per_period[op] * self.mesh_frequency(op)
         size = signals["te"].size
         factor = self.grid.upsampling(rate)
-        raw = np.stack([self._raw(signals, channel) for channel in self.channels])
+        raw = np.stack([_raw_signal(signals, channel) for channel in self.channels])
         centred = (raw - raw.mean(axis=1, keepdims=True)) * self.grid.edge_taper(size, rate)
         values = self.grid.resampled(("free", op), centred, rate, factor, rate * factor, _GUARD, periodic=False)
         return SimulatedRun(dict(zip(self.channels, values)), False, "free")
 
-    @staticmethod
-    def _raw(signals: Mapping[str, np.ndarray], channel: str) -> np.ndarray:
-        """The simulated displacement a channel is made of (accelerations: its second derivative)."""
-        if channel == "te":
-            return signals["te"]
-        return signals["y1" if channel == "acc_pinion" else "y2"]
+
+
+def _raw_signal(signals: Mapping[str, np.ndarray], channel: str) -> np.ndarray:
+    """The simulated displacement a channel is made of (accelerations: its second derivative)."""
+    if channel == "te":
+        return signals["te"]
+    return signals["y1" if channel == "acc_pinion" else "y2"]
+
+
+class SegmentRunner:
+    """The runs of a campaign's ramp segments, each driven through the speeds its segment swept.
+
+    Built by :class:`CampaignSimulator` (its ``segments``); what every run of
+    one segment shares (its speed profile, cleaning and pinion angle) is
+    built once per segment.
+    """
+
+    def __init__(self, campaign: CampaignSimulator) -> None:
+        self.campaign = campaign
+        self._readings: dict[int, _SegmentReading] = {}
+
+    def run(self, op: int, run: ModelRun) -> SimulatedRun:
+        """Model records of a ramp segment's run, read as the rig read the segment.
+
+        The model runs through the segment's speed profile from
+        :data:`~uqgear.rig.ramp_segments.SEGMENT_LEAD` s before its first sample
+        (after a run-in at the speed there) to a guard after its last; the
+        records are band-limited and read at the rig's sample times like a
+        steady run's, cleaned as the segment was
+        (:class:`~uqgear.rig.ramp_segments.SegmentCleaner`) and resampled to
+        uniform angle with the model's own angle, as the order tracking
+        resampled the rig's. The speed-varying model takes no pitch errors: a
+        run with them is read as a steady run (:meth:`CampaignSimulator.runs`).
+        """
+        reading = self._segment_reading(op)
+        profile = reading.profile
+        rate = self.campaign.fs * _RAMP_OVERSAMPLING
+        _, history = runup_history(
+            run.design,
+            profile,
+            float(self.campaign.drive_torques[op]),
+            float(run.adhesion_torque),
+            sample_rate=rate,
+            mesh_stiffness_scale=float(run.mesh_stiffness_scale),
+            effects=reading.segment.turned_effects(self.campaign.design, tuple(run.effects), profile, SEGMENT_LEAD),
+            steps_per_mode=self.campaign.steps_per_mode,
+            run_in_periods=int(math.ceil(_RUN_IN * self.campaign.design.z1 * profile.start_speed / 60.0)),
+        )
+        signals = {name: history[:, HISTORY_COLUMNS.index(name)] for name in ("y1", "y2", "x")}
+        signals["te"] = signals["x"] - signals["y1"] + signals["y2"] + history[:, HISTORY_COLUMNS.index("ste")]
+        raw = np.stack([_raw_signal(signals, channel) for channel in self.campaign.channels])
+        size = raw.shape[1]
+        factor = self.campaign.grid.upsampling(rate)
+        centred = (raw - raw.mean(axis=1, keepdims=True)) * self.campaign.grid.edge_taper(size, rate)
+        # zeros after the tapered end: a length whose FFT is fast (the band-limiting costs up to ten times
+        # more on a length with a large prime factor)
+        padded = np.pad(centred, ((0, 0), (0, scipy.fft.next_fast_len(size, real=True) - size)))
+        values = self.campaign.grid.resampled(
+            ("ramp", op, padded.shape[1]), padded, rate, factor, rate * factor, SEGMENT_LEAD, periodic=False
+        )
+        channels = self.campaign.channels
+        cleaned = np.stack([reading.cleaner.clean(row, channel) for row, channel in zip(values, channels)])
+        rows = [index for index, channel in enumerate(channels) if channel != "te"]
+        tracked = angle_resampled(cleaned, reading.angle, self.campaign.fs, rows)
+        return SimulatedRun(dict(zip(self.campaign.channels, tracked)), False, "ramp")
+
+    def _segment_reading(self, op: int) -> _SegmentReading:
+        """How the model's records of ramp segment ``op`` are made and read, built once per segment."""
+        if op not in self._readings:
+            segment = self.campaign.segments[op]
+            if segment is None:
+                raise RuntimeError(f"internal: run {op} is not a ramp segment")
+            speed = segment.speed_at(self.campaign.grid.rig_time)
+            angle = tachometer_angle(speed, self.campaign.fs).angle
+            if angle is None:
+                raise RuntimeError(f"internal: the speed of ramp segment {op} leaves the model's range")
+            profile = segment.profile(SEGMENT_LEAD, SEGMENT_GUARD)
+            cleaner = SegmentCleaner(speed, self.campaign.fs, self.campaign.design)
+            self._readings[op] = _SegmentReading(segment, profile, cleaner, angle)
+        return self._readings[op]

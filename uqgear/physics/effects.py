@@ -101,8 +101,32 @@ class Effect:
         """A copy with some parameters changed (validated)."""
         return type(self)({**self.values, **changes})
 
+    def turned(self, design: Any, pinion_teeth: int, seconds: float) -> Effect:
+        """The same effect seen by a run whose shafts have turned on by ``pinion_teeth`` teeth of the pinion
+        (and as many of the gear) and whose clock has run on by ``seconds``.
+
+        A run that starts there gives the forcing the original run gives from that point on: a model of a
+        stretch of a longer record starts where that stretch lies. Whole teeth keep the mesh phase. The
+        default, for an effect locked to no shaft or clock (friction, a clearance), is the effect itself.
+
+        Examples
+        --------
+        >>> import uqgear
+        >>> design = uqgear.load_design("locomotive")
+        >>> uqgear.make_effect("tooth_damage", {"gear": "gear", "tooth": 3}).turned(design, 5, 0.0)
+        ToothDamage(gear='gear', tooth=99.0, depth=0.3)
+        >>> uqgear.make_effect("friction").turned(design, 5, 1.0)
+        Friction(coefficient=0.05)
+        """
+        return self
+
     def apply(self, setup) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+def _wrapped(phase: float) -> float:
+    """A phase in [-pi, pi), inside every effect's phase range."""
+    return (phase + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class Eccentricity(Effect):
@@ -131,6 +155,10 @@ class Eccentricity(Effect):
     def repeat_shaft(self) -> str | None:
         return str(self.values["shaft"])
 
+    def turned(self, design: Any, pinion_teeth: int, seconds: float) -> Effect:
+        teeth = design.z1 if self.values["shaft"] == "pinion" else design.z2
+        return self.with_values(phase=_wrapped(self.values["phase"] + 2.0 * math.pi * pinion_teeth / teeth))
+
 
 class ToothDamage(Effect):
     """Local tooth damage: the single-pair stiffness of one tooth reduced by
@@ -156,6 +184,11 @@ class ToothDamage(Effect):
     @property
     def repeat_shaft(self) -> str | None:
         return str(self.values["gear"])
+
+    def turned(self, design: Any, pinion_teeth: int, seconds: float) -> Effect:
+        # the tooth entering contact at the start is the one pinion_teeth teeth on
+        teeth = design.z1 if self.values["gear"] == "pinion" else design.z2
+        return self.with_values(tooth=float((int(round(self.values["tooth"])) - pinion_teeth) % teeth))
 
 
 class Friction(Effect):
@@ -197,6 +230,11 @@ class TorqueRipple(Effect):
     def repeat_shaft(self) -> str | None:
         return "pinion"  # 6 p cycles per pinion revolution
 
+    def turned(self, design: Any, pinion_teeth: int, seconds: float) -> Effect:
+        pole_pairs = int(round(self.values["pole_pairs"])) or int(design.motor_pole_pairs or 0)
+        turn = 6.0 * pole_pairs * 2.0 * math.pi * pinion_teeth / design.z1
+        return self.with_values(phase=_wrapped(self.values["phase"] + turn))
+
 
 class AdhesionOscillation(Effect):
     """Wheel/rail stick-slip: T2(t) = T2 (1 + a sin(2 pi f_s t + phase))."""
@@ -207,6 +245,10 @@ class AdhesionOscillation(Effect):
         "frequency": EffectParameter(12.0, 0.5, 200.0, "Hz", "stick-slip frequency f_s"),
         "phase": EffectParameter(0.0, -2 * math.pi, 2 * math.pi, "rad", "phase"),
     }
+
+    def turned(self, design: Any, pinion_teeth: int, seconds: float) -> Effect:
+        turn = 2.0 * math.pi * self.values["frequency"] * seconds
+        return self.with_values(phase=_wrapped(self.values["phase"] + turn))
 
     def apply(self, setup) -> None:
         setup.set_slot("adhesion_amplitude", self.values["amplitude"] * setup.slot("T2"))

@@ -457,40 +457,22 @@ def simulate_runup(
     (513, 36.75, 1)
     """
     _check_method(method)
-    check_speed_range(design, profile)
-    samples = samples_from_mapping(
+    setup, out_t, history, bands = _run(
+        design,
+        profile,
+        (drive_torque, adhesion_torque, mesh_stiffness_scale),
         {
-            "pinion_speed": [profile.start_speed],
-            "drive_torque": [drive_torque],
-            "adhesion_torque": [adhesion_torque],
-            "mesh_stiffness_scale": [mesh_stiffness_scale],
-        }
+            "effects": tuple(effects),
+            "damping_in_separation": damping_in_separation,
+            "stiffness": stiffness,
+            "steps_per_mode": steps_per_mode,
+            "run_in_periods": run_in_periods,
+            "threads": 1,
+        },
+        sample_rate,
+        initial_state,
+        (method, rtol, atol),
     )
-    options = {
-        "effects": tuple(effects),
-        "damping_in_separation": damping_in_separation,
-        "stiffness": stiffness,
-        "steps_per_mode": steps_per_mode,
-        "run_in_periods": run_in_periods,
-        "threads": 1,
-    }
-    setup = build_batch(
-        design, samples, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
-    )[0]
-    if initial_state is None:
-        state0 = _run_in(design, samples, options)[0]
-    else:
-        state0 = np.asarray(initial_state, dtype=float)
-        if state0.shape != (6,) or not np.all(np.isfinite(state0)):
-            raise OperatingPointError(
-                f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}"
-            )
-    out_t = _output_times(profile, float(sample_rate))
-    bands: list[tuple[int, int, int]] = []
-    if method == "fast":
-        history, bands = _integrate_fast(setup, steps_per_mode, profile, out_t, state0)
-    else:
-        history = _integrate_scipy(setup, profile, out_t, state0, rtol, atol)
     steps = max((band[2] for band in bands), default=0)
     data = _profile_variables(profile, out_t, design.z1)
     data.update(_history_variables(history, ("time",)))
@@ -613,6 +595,94 @@ def simulate_runup_batch(
     return ds
 
 
+def _run(
+    design: Design,
+    profile: SpeedProfile,
+    loads: tuple[float, float, float],
+    options: dict[str, Any],
+    sample_rate: float,
+    initial_state: np.ndarray | None,
+    solver: tuple[str, float, float | None],
+) -> tuple[ModelSetup, np.ndarray, np.ndarray, list[tuple[int, int, int]]]:
+    """One run through ``profile``: its set-up, output times, history rows and bands (:func:`simulate_runup`)."""
+    check_speed_range(design, profile)
+    drive_torque, adhesion_torque, mesh_stiffness_scale = loads
+    samples = samples_from_mapping(
+        {
+            "pinion_speed": [profile.start_speed],
+            "drive_torque": [drive_torque],
+            "adhesion_torque": [adhesion_torque],
+            "mesh_stiffness_scale": [mesh_stiffness_scale],
+        }
+    )
+    setup = build_batch(
+        design,
+        samples,
+        effects=options["effects"],
+        damping_in_separation=options["damping_in_separation"],
+        stiffness=options["stiffness"],
+    )[0]
+    if initial_state is None:
+        state0 = _run_in(design, samples, options)[0]
+    else:
+        state0 = np.asarray(initial_state, dtype=float)
+        if state0.shape != (6,) or not np.all(np.isfinite(state0)):
+            raise OperatingPointError(
+                f"initial_state: expected 6 finite values (y1, y2, x, y1', y2', x'); got shape {state0.shape}"
+            )
+    out_t = _output_times(profile, float(sample_rate))
+    method, rtol, atol = solver
+    if method == "fast":
+        history, bands = _integrate_fast(setup, options["steps_per_mode"], profile, out_t, state0)
+        return setup, out_t, history, bands
+    return setup, out_t, _integrate_scipy(setup, profile, out_t, state0, rtol, atol), []
+
+
+def runup_history(
+    design: Design,
+    profile: SpeedProfile,
+    drive_torque: float,
+    adhesion_torque: float,
+    *,
+    sample_rate: float,
+    mesh_stiffness_scale: float = 1.0,
+    effects: Sequence[Effect] = (),
+    steps_per_mode: int = 24,
+    run_in_periods: int = RUN_IN_PERIODS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fast path of :func:`simulate_runup` as arrays: output times (s) and history rows (time, column).
+
+    The columns are :data:`uqgear.physics.model.HISTORY_COLUMNS`; the numbers are those of
+    :func:`simulate_runup` with the same arguments, bit for bit, without building its Dataset (which
+    costs as much as integrating a fraction of a second: a caller that simulates many short runs and
+    reads two or three columns, the diagnosis's model of a ramp segment, skips it).
+
+    Examples
+    --------
+    >>> import numpy as np, uqgear
+    >>> from uqgear.physics.runup import runup_history
+    >>> design = uqgear.load_design("locomotive")
+    >>> ramp = uqgear.SpeedProfile.linear(2000.0, 2200.0, 0.05)
+    >>> times, history = runup_history(design, ramp, 7000.0, 33.8e3, sample_rate=10240.0, run_in_periods=40)
+    >>> run = uqgear.simulate_runup(design, ramp, 7000.0, 33.8e3, sample_rate=10240.0, run_in_periods=40)
+    >>> history.shape, bool(np.array_equal(history[:, 0], run["y1"].values))
+    ((513, 12), True)
+    """
+    options = {
+        "effects": tuple(effects),
+        "damping_in_separation": True,
+        "stiffness": "ishikawa",
+        "steps_per_mode": steps_per_mode,
+        "run_in_periods": run_in_periods,
+        "threads": 1,
+    }
+    _, out_t, history, _ = _run(
+        design, profile, (drive_torque, adhesion_torque, mesh_stiffness_scale), options, sample_rate, None,
+        ("fast", 1e-10, None),
+    )
+    return out_t, history
+
+
 def _check_batch_request(samples: xr.Dataset, variables: Sequence[str]) -> None:
     if "pinion_speed" in samples.data_vars:
         raise OperatingPointError(
@@ -669,6 +739,7 @@ def _integrate_batch(
 
 __all__ = [
     "simulate_runup",
+    "runup_history",
     "simulate_runup_batch",
     "check_speed_range",
     "step_bands",

@@ -38,6 +38,7 @@ from .format import (
     write_rig,
 )
 from .ramp_records import ramp_operating_points, steady_campaign
+from .ramp_segments import SegmentCleaner, SegmentProfile, segment_profiles
 from .transfer_path import apply_transfer_path, transfer_path_gain
 from .usability import check_usable_signal, record_states
 from .virtual_rig import (
@@ -60,6 +61,9 @@ __all__ = [
     "make_rig_dataset",
     "make_ramp_dataset",
     "ramp_operating_points",
+    "SegmentCleaner",
+    "SegmentProfile",
+    "segment_profiles",
     "steady_campaign",
     "write_rig",
     "SIGNAL_CHANNELS",

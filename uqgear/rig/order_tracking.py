@@ -265,6 +265,42 @@ def resample_to_angle(records: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return CubicSpline(grid, fine, axis=-1)(instants)
 
 
+def angle_resampled(
+    records: np.ndarray, angle: np.ndarray, fs: float, acceleration_rows: Sequence[int] = ()
+) -> np.ndarray:
+    """Records (C, N) at uniform pinion ``angle`` (rad, one per sample), as the order tracking leaves them.
+
+    :func:`resample_to_angle`, and the rows ``acceleration_rows`` (accelerations)
+    divided by (rate / mean rate)^2 at the resampled instants: the shaft turned at
+    rate(t) there, and a response that follows the angle has accelerations scaled
+    by that square. The model's records of a ramp segment go through this with the
+    model's own angle (:mod:`uqgear.rig.ramp_segments`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from uqgear.rig.order_tracking import angle_resampled
+    >>> fs = 4096.0
+    >>> time = np.arange(4096) / fs
+    >>> angle = 2 * np.pi * (20.0 * time + 2.0 * time**2)  # 20 -> 24 rev/s
+    >>> record = np.cos(5 * angle)[None, :]  # the fifth order
+    >>> tracked = angle_resampled(record, angle, fs)
+    >>> uniform = np.linspace(angle[0], angle[-1], time.size)
+    >>> bool(np.max(np.abs(tracked[0, 50:-50] - np.cos(5 * uniform[50:-50]))) < 1e-3)
+    True
+    """
+    resampled = resample_to_angle(records, angle)
+    if acceleration_rows:
+        size = angle.size
+        # rpm, computed as the tracking's speed summary computes them
+        mean = (angle[-1] - angle[0]) / ((size - 1) / fs) * 60.0 / (2.0 * math.pi)
+        rate = np.gradient(angle) * fs * 60.0 / (2.0 * math.pi)
+        uniform = np.linspace(angle[0], angle[-1], size)
+        instant_rate = np.interp(uniform, angle, rate)
+        resampled[list(acceleration_rows)] /= (instant_rate / mean) ** 2
+    return resampled
+
+
 @dataclass(frozen=True)
 class _RecordResult:
     records: np.ndarray | None  # resampled (C, N) or None when left as it is
@@ -322,13 +358,7 @@ def _track_record(
     bins = abs(mean - stated) / 60.0 * top_order * duration
     significant = smear > _NOISE_MARGIN * top_order * estimate.angle_std or estimate.angle_std == 0.0
     tracked = mode == "always" or (mode == "auto" and significant and (smear > _SMEAR_LIMIT or bins > _BIN_LIMIT))
-    resampled = resample_to_angle(records, angle) if tracked else None
-    if resampled is not None and acceleration_rows:
-        # at the resampled instants the shaft turned at rate(t); a response that
-        # follows the angle has accelerations scaled by (rate / mean)^2
-        uniform = np.linspace(angle[0], angle[-1], size)
-        instant_rate = np.interp(uniform, angle, rate)
-        resampled[list(acceleration_rows)] /= (instant_rate / mean) ** 2
+    resampled = angle_resampled(records, angle, fs, acceleration_rows) if tracked else None
     weights = " ".join(repr(weight) for weight in estimate.weights)
     return _RecordResult(resampled, mean, low, high, tracked, " ".join(estimate.lines), weights)
 

@@ -23,7 +23,11 @@ Segment length, one for all segments of a campaign:
   speed (10-20 % for the gear mesh), so a 5 % sweep keeps the averaging well
   inside that;
 * segments of one ramp do not overlap (each sample counts once, as in separate
-  steady runs).
+  steady runs);
+* no segment reaches into the first or last :data:`RAMP_SETTLING` s of a ramp
+  record: a record may begin or end where the ramp starts or stops, and the
+  jump of the angular acceleration there sets the gear ringing, which neither a
+  steady run nor the model's reading of a segment holds.
 
 Segments per ramp: by default the ramps of a campaign share
 :data:`DEFAULT_SEGMENTS` (8) operating points, ``8 // ramps`` each (at least
@@ -41,16 +45,13 @@ that many segments over its own span.
 Where the campaign holds steady runs too, the segments take the steady
 records' length (so that all operating points share ``time``), and a ramp too
 fast for that length is refused; with ramps alone the length is the longest
-that meets the three rules (or ``segment_duration`` where given, checked
+that meets the rules (or ``segment_duration`` where given, checked
 against them). Ramp and steady records must then share the sampling rate.
 
-Each segment is taken without two parts of the response that change with
-the speed it sweeps and that a steady run does not have: the straight-line
-trend of ``te`` (the quasi-static deflection follows the speed) and a
-linear-in-time change of each mesh harmonic's amplitude and phase, fitted at
-the tachometer's pinion angle jointly with every line of the feature set;
-left in, it leaks into the lines nearest the mesh harmonics (the gear-order
-sidebands of a segment of one or two gear revolutions).
+Each segment is cleaned by :class:`~uqgear.rig.ramp_segments.SegmentCleaner`
+(without the straight-line trend of ``te`` and the linear-in-time change of
+each mesh harmonic); the diagnosis reads its model of a segment through the
+same cleaning (:mod:`uqgear.rig.ramp_segments`).
 
 The operating points carry the coordinate ``op_source``: ``steady`` or
 ``ramp <index>``, reported by the calibration and the diagnosis with the
@@ -64,15 +65,14 @@ import math
 
 import numpy as np
 import xarray as xr
-from threadpoolctl import threadpool_limits
 
 from ..common.errors import RigDataError
 from ..physics.design import Design
-from .features import feature_definitions
 from .format import RIG_COORDINATES, rig_design
 from .order_tracking import TACHOMETER_VARIABLE
 from .ramp_format import RAMP_CHANNELS, RAMP_COORDINATES, RAMP_TACHOMETER, RAMP_VARIABLES, has_ramps
-from .sampling import DEFAULT_BAND_FRACTION, SIGNAL_CHANNELS, sampling_rate
+from .ramp_segments import OP_SOURCE, SEGMENT_ANGLE, SEGMENT_LEAD, SEGMENT_TIME, SegmentCleaner
+from .sampling import SIGNAL_CHANNELS, sampling_rate
 
 #: Operating points the ramps of a campaign share by default (segments per ramp: this // ramps, at least 1).
 DEFAULT_SEGMENTS = 8
@@ -83,38 +83,51 @@ MAX_SPEED_CHANGE = 0.05
 #: Fewest pinion revolutions in a segment at its mean speed.
 MIN_REVOLUTIONS = 2.0
 
-#: Gear revolutions a ramp segment holds at least for its gear-order lines to compare with steady runs:
-#: on virtual run-ups, segments of 0.6 gear revolutions (200 rpm/s at 820 rpm) read those lines 20-70 % of the
-#: channel's largest line off steady runs at their speeds and left healthy gears ``unexplained``; 1.9
-#: revolutions (60 rpm/s) read them within 4 % and were diagnosed right (docs/validation/blind-tests.md,
-#: "Run-up suite").
+#: Gear revolutions a ramp segment holds at least for its gear-order lines to be resolved: below, the lines
+#: a gear effect puts there depend on where in the gear's turn the segment lies, which the model of a
+#: segment (:mod:`uqgear.rig.ramp_segments`) follows along one ramp but not from one ramp record to
+#: another (each starts at an angle of its own), nor to which tooth is damaged (the fits take tooth 0).
 RESOLVED_GEAR_REVOLUTIONS = 2.0
 
-#: Name of the operating points' coordinate telling where each came from.
-OP_SOURCE = "op_source"
+#: Time (s) left out at either end of a ramp record. A record may begin or end where the ramp starts or
+#: stops: the angular acceleration jumps there and sets the gear ringing, which neither a steady run nor the
+#: model's reading of a segment (:data:`uqgear.rig.ramp_segments.SEGMENT_LEAD`: the same time of ramp
+#: before the segment) holds. 0.15 s is about 8 time constants of the slowest linear decay of the reference
+#: design (18 ms).
+RAMP_SETTLING = SEGMENT_LEAD
 
 
-def _starts(speed: np.ndarray, segments: int, size: int, turn: tuple[int, int] = (0, 1)) -> np.ndarray:
+
+def _starts(
+    speed: np.ndarray, segments: int, size: int, turn: tuple[int, int] = (0, 1), margin: int = 0
+) -> np.ndarray:
     """First sample of each segment of ``size`` samples centred at evenly spaced speeds of a ramp.
 
     ``turn`` = (r, R): the ramp takes every R-th of ``segments x R`` evenly
-    spaced speeds, from the r-th in rising speed (ramps taking turns).
+    spaced speeds, from the r-th in rising speed (ramps taking turns). No
+    segment reaches into the first or last ``margin`` samples.
     """
     half = size // 2
-    last_centre = speed.size - size + half
+    first_centre = margin + half
+    last_centre = speed.size - margin - size + half
     # a monotone envelope of the tachometer places each target speed once, whatever the noise
     rising = speed[-1] >= speed[0]
     envelope = np.maximum.accumulate(speed) if rising else -np.minimum.accumulate(speed)
     offset, stride = turn
     if stride == 1:
-        targets = np.linspace(envelope[half], envelope[last_centre], segments)
+        targets = np.linspace(envelope[first_centre], envelope[last_centre], segments)
     else:
         # the turns are counted in rising speed, whichever way the ramp goes
-        ends = sorted((abs(envelope[half]), abs(envelope[last_centre])))
+        ends = sorted((abs(envelope[first_centre]), abs(envelope[last_centre])))
         speeds = np.linspace(ends[0], ends[1], segments * stride)[offset::stride]
         targets = speeds if rising else np.sort(-speeds)
-    centres = np.clip(np.searchsorted(envelope, targets, side="left"), half, last_centre)
+    centres = np.clip(np.searchsorted(envelope, targets, side="left"), first_centre, last_centre)
     return np.asarray(centres - half, dtype=int)
+
+
+def settling_samples(fs: float) -> int:
+    """Samples left out at either end of a ramp record sampled at ``fs`` Hz (:data:`RAMP_SETTLING`)."""
+    return int(math.ceil(RAMP_SETTLING * fs))
 
 
 def _segment_speeds(speed: np.ndarray, starts: np.ndarray, size: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
@@ -129,11 +142,15 @@ def _segment_speeds(speed: np.ndarray, starts: np.ndarray, size: int, fs: float)
 def _violation(
     speeds: np.ndarray, segments: int, size: int, fs: float, max_speed_change: float, stride: int = 1
 ) -> tuple[int, str] | None:
-    """The first ramp and rule a segment length breaks, or None where it meets all three."""
-    if segments * size > speeds.shape[1]:
-        return 0, f"{segments} segments of {size} samples do not fit in a ramp of {speeds.shape[1]} samples"
+    """The first ramp and rule a segment length breaks, or None where it meets them all."""
+    margin = settling_samples(fs)
+    if segments * size > speeds.shape[1] - 2 * margin:
+        return 0, (
+            f"{segments} segments of {size} samples do not fit in a ramp of {speeds.shape[1]} samples less "
+            f"{RAMP_SETTLING:g} s at either end"
+        )
     for ramp, speed in enumerate(speeds):
-        starts = _starts(speed, segments, size, (ramp % stride, stride))
+        starts = _starts(speed, segments, size, (ramp % stride, stride), margin)
         if segments > 1 and np.any(np.diff(starts) < size):
             return ramp, f"segments of {size / fs:g} s overlap (the ramp is too short or too fast for {segments})"
         mean, change = _segment_speeds(speed, starts, size, fs)
@@ -157,11 +174,12 @@ def _longest_size(
 ) -> int:
     """The longest segment (samples) that meets the rules in every ramp, by bisection."""
     low = max(4, int(math.ceil(MIN_REVOLUTIONS * 60.0 / float(speeds.min()) * fs)))
-    high = speeds.shape[1] // segments
+    high = (speeds.shape[1] - 2 * settling_samples(fs)) // segments
     if high < low:
         raise RigDataError(
             f"{where}: {RAMP_TACHOMETER}: the ramps of {speeds.shape[1]} samples are too short for {segments} "
-            f"segments of at least {MIN_REVOLUTIONS:g} pinion revolutions"
+            f"segments of at least {MIN_REVOLUTIONS:g} pinion revolutions and {RAMP_SETTLING:g} s left out at "
+            "either end"
         )
     broken = _violation(speeds, segments, low, fs, max_speed_change, stride)
     if broken is not None:
@@ -228,77 +246,25 @@ def points_truth(ds: xr.Dataset, sources: list[str]) -> dict | None:
     return json.loads(text) if isinstance(text, str) else None
 
 
-def _line_orders(design: Design, fs: float, top_speed: float) -> tuple[np.ndarray, np.ndarray]:
-    """Orders of the feature set's lines and of its mesh harmonics within the usable band at the top speed."""
-    definitions = [d for d in feature_definitions(design) if d.is_line]
-    limit = DEFAULT_BAND_FRACTION * fs * 60.0 / top_speed
-    lines = np.array(sorted({d.order for d in definitions if d.order < limit}))
-    carriers = np.array(sorted({d.order for d in definitions if d.family == "mesh_harmonic" and d.order < limit}))
-    return lines, carriers
-
-
-def _carrier_drift(
-    records: np.ndarray, tachometer: np.ndarray, fs: float, lines: np.ndarray, carriers: np.ndarray
-) -> np.ndarray:
-    """The part of each record (R, N) that is a linear-in-time amplitude change of the carrier lines.
-
-    Per record: one least-squares fit at the pinion angle integrated from the
-    tachometer of every line of the feature set (``lines``, orders, constant
-    amplitude) and of ``t cos``, ``t sin`` of the ``carriers`` (mesh
-    harmonics; t from the segment's centre); the latter part is returned.
-    """
-    drift = np.zeros_like(records)
-    size = records.shape[1]
-    centred = (np.arange(size) - 0.5 * (size - 1)) / size
-    # one thread: a fit of a few thousand samples on ~100 columns gains nothing from BLAS threads, which spin on
-    # the cores another process works on (measured on 2 busy cores: 0.6 s a fit threaded, 0.04 s on one thread)
-    with threadpool_limits(1):
-        for row, (record, speed) in enumerate(zip(records, tachometer)):
-            if np.all(np.isfinite(record)):
-                drift[row] = _drift_fit(record, speed, fs, lines, carriers, centred)
-    return drift
-
-
-def _drift_fit(
-    record: np.ndarray, speed: np.ndarray, fs: float, lines: np.ndarray, carriers: np.ndarray, centred: np.ndarray
-) -> np.ndarray:
-    """The linear-in-time carrier part of one record (:func:`_carrier_drift`)."""
-    size = record.size
-    rate = 2.0 * math.pi * speed / 60.0
-    angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
-    phases = np.concatenate([lines, carriers])[None, :] * angle[:, None]
-    constant = np.concatenate([np.cos(phases[:, : lines.size]), np.sin(phases[:, : lines.size])], axis=1)
-    trend = centred[:, None] * np.concatenate([np.cos(phases[:, lines.size :]), np.sin(phases[:, lines.size :])], 1)
-    basis = np.concatenate([np.ones((size, 1)), centred[:, None], constant, trend], axis=1)
-    coefficients = np.linalg.lstsq(basis, record, rcond=None)[0]
-    return trend @ coefficients[-trend.shape[1] :]
-
-
 def _segment_dataset(
     ds: xr.Dataset, size: int, segments: tuple[int, int], fs: float, speeds: np.ndarray, design: Design
 ) -> xr.Dataset:
     """The ramps' segments (``segments`` = (per ramp, stride of the turns)) as steady-format operating points."""
     count, stride = segments
-    starts = np.concatenate([_starts(speed, count, size, (ramp % stride, stride)) for ramp, speed in enumerate(speeds)])
+    margin = settling_samples(fs)
+    starts = np.concatenate(
+        [_starts(speed, count, size, (ramp % stride, stride), margin) for ramp, speed in enumerate(speeds)]
+    )
     ramps = np.repeat(np.arange(speeds.shape[0]), count)
     index = starts[:, None] + np.arange(size)[None, :]
     tachometer = speeds[ramps[:, None], index]
     data_vars: dict[str, tuple] = {}
-    lines = _line_orders(design, fs, float(speeds.max()))
+    cleaners = [SegmentCleaner(row, fs, design) for row in tachometer]
     for ramp_name, name in RAMP_CHANNELS.items():
         if ramp_name not in ds.data_vars:
             continue
-        values = np.asarray(ds[ramp_name].values, dtype=float)[ramps[:, None], index]
-        # the order tracking divides accelerations by (speed / mean speed)^2 (a response that follows the angle):
-        # the drift is taken out of what it will see
-        scale = (tachometer / tachometer.mean(axis=1, keepdims=True)) ** 2 if name != "te" else 1.0
-        values = values - scale * _carrier_drift(values / scale, tachometer, fs, *lines)
-        if name == "te":
-            # encoders have no absolute zero: each steady record is stored without its mean; a segment also
-            # without its straight-line trend, the quasi-static deflection changing with the speed it sweeps
-            time = np.arange(size) - 0.5 * (size - 1)
-            slope = values @ time / float(time @ time)
-            values = values - values.mean(axis=1, keepdims=True) - slope[:, None] * time[None, :]
+        cut = np.asarray(ds[ramp_name].values, dtype=float)[ramps[:, None], index]
+        values = np.stack([cleaner.clean(row, name) for cleaner, row in zip(cleaners, cut)])
         attrs = dict(ds[ramp_name].attrs)
         attrs["units"], attrs["long_name"] = SIGNAL_CHANNELS[name]
         data_vars[name] = (("op", "time"), values.astype(np.float32), attrs)
@@ -307,10 +273,15 @@ def _segment_dataset(
         tachometer.astype(np.float32),
         {"units": "rpm", "long_name": "pinion speed (tachometer)"},
     )
+    # where each segment starts on its ramp: the pinion angle turned (trapezoidal rule on the tachometer, as the
+    # order tracking integrates it) and the time since the ramp record's first sample
+    turned = [np.concatenate([[0.0], np.cumsum(0.5 * (row[1:] + row[:-1]))]) * (np.pi / 30.0 / fs) for row in speeds]
     coords: dict[str, tuple] = {
         "time": ("time", np.arange(size) / fs),
         "pinion_speed": ("op", tachometer.mean(axis=1)),
         OP_SOURCE: ("op", np.array([f"ramp {ramp}" for ramp in ramps], dtype=object)),
+        SEGMENT_ANGLE: ("op", np.array([turned[ramp][start] for ramp, start in zip(ramps, starts)])),
+        SEGMENT_TIME: ("op", starts / fs),
     }
     for name in ("drive_torque", "adhesion_torque_lower", "adhesion_torque_upper"):
         coords[name] = ("op", np.asarray(ds[f"ramp_{name}"].values, dtype=float)[ramps])
@@ -318,6 +289,8 @@ def _segment_dataset(
     for name, (_, units, long_name) in RIG_COORDINATES.items():
         out[name].attrs.update(units=units, long_name=long_name)
     out[OP_SOURCE].attrs["long_name"] = "record the operating point comes from: steady, or a ramp's segment"
+    out[SEGMENT_ANGLE].attrs.update(units="rad", long_name="pinion angle at the segment's start from its ramp's")
+    out[SEGMENT_TIME].attrs.update(units="s", long_name="time of the segment's start from its ramp's")
     return out
 
 
@@ -367,7 +340,7 @@ def ramp_operating_points(
 
     Examples
     --------
-    A 4 s run-up from 1000 to 2000 rpm in eight segments:
+    A 4 s run-up from 1000 to 2000 rpm in eight segments (none within 0.15 s of either end):
 
     >>> import numpy as np
     >>> import uqgear
@@ -380,9 +353,9 @@ def ramp_operating_points(
     ...                           design=uqgear.load_design("locomotive"), title="run-up", source="example", history="")
     >>> ops = ramp_operating_points(ramps)
     >>> ops.sizes["op"], round(ops.sizes["time"] / 20480, 3)
-    (8, 0.205)
+    (8, 0.213)
     >>> np.round(ops["pinion_speed"].values).tolist()
-    [1026.0, 1161.0, 1297.0, 1432.0, 1568.0, 1703.0, 1839.0, 1974.0]
+    [1064.0, 1189.0, 1313.0, 1438.0, 1562.0, 1687.0, 1811.0, 1936.0]
     """
     if not has_ramps(ds) or RAMP_TACHOMETER not in ds.data_vars:
         raise RigDataError(f"{where}: {RAMP_TACHOMETER}: no ramp records to cut into operating points")
@@ -459,7 +432,13 @@ def steady_campaign(
     if not steady:
         return ramps
     drop = [name for name in (*RAMP_VARIABLES, *RAMP_COORDINATES) if name in ds.variables]
-    runs = ds.drop_vars(drop).assign_coords({OP_SOURCE: ("op", np.full(ds.sizes["op"], "steady", dtype=object))})
+    runs = ds.drop_vars(drop).assign_coords(
+        {
+            OP_SOURCE: ("op", np.full(ds.sizes["op"], "steady", dtype=object)),
+            SEGMENT_ANGLE: ("op", np.full(ds.sizes["op"], np.nan)),
+            SEGMENT_TIME: ("op", np.full(ds.sizes["op"], np.nan)),
+        }
+    )
     if TACHOMETER_VARIABLE not in runs.data_vars:
         runs[TACHOMETER_VARIABLE] = (
             ("op", "time"),
@@ -486,7 +465,8 @@ def segment_notes(dataset: xr.Dataset, design: Design) -> list[str]:
 
     A segment of a ramp holds at least :data:`MIN_REVOLUTIONS` of the pinion, but the gear turns z2 / z1
     times slower; below :data:`RESOLVED_GEAR_REVOLUTIONS` the gear-order lines (the gear's shaft orders and
-    the gear sidebands of the mesh harmonics) are not resolved. The note names the shortest segment and the
+    the gear sidebands of the mesh harmonics) are not resolved, and a gear effect's share of them depends on
+    the gear's angle over the segment. The note names the shortest segment and the
     ramp rate at that speed that would give the segments enough gear revolutions (at most
     :data:`MAX_SPEED_CHANGE` speed change a segment). Steady runs get no note.
 
@@ -512,8 +492,10 @@ def segment_notes(dataset: xr.Dataset, design: Design) -> list[str]:
     ...                               "op_source": ("op", ["ramp 0", "ramp 1"])})
     >>> print(segment_notes(campaign, load_design("locomotive"))[0])  # doctest: +NORMALIZE_WHITESPACE
     the ramp segments hold as few as 0.58 gear revolutions (operating point 0, 821 rpm, ramp 0): the gear-order
-    lines are not resolved there and can read far off the model's steady runs, so a gear effect or a healthy
-    gear may be judged wrongly; a ramp at most 58 rpm/s at 821 rpm gives its segments 2 gear revolutions
+    lines are not resolved there, and what a gear effect puts into them depends on where in the gear's turn the
+    segment lies, which the model follows along one ramp but not from one ramp record to another, nor to the
+    damaged tooth, so a gear effect may be judged wrongly; a ramp at most 58 rpm/s at 821 rpm gives its segments
+    2 gear revolutions
     """
     if OP_SOURCE not in dataset.coords or "time" not in dataset.coords:
         return []
@@ -533,9 +515,11 @@ def segment_notes(dataset: xr.Dataset, design: Design) -> list[str]:
     rate = MAX_SPEED_CHANGE * speed * speed * ratio / (60.0 * RESOLVED_GEAR_REVOLUTIONS)
     return [
         f"the ramp segments hold as few as {revolutions[shortest]:.2f} gear revolutions (operating point "
-        f"{shortest}, {speed:.0f} rpm, {sources[shortest]}): the gear-order lines are not resolved there and can "
-        "read far off the model's steady runs, so a gear effect or a healthy gear may be judged wrongly; a ramp at "
-        f"most {rate:.0f} rpm/s at {speed:.0f} rpm gives its segments {RESOLVED_GEAR_REVOLUTIONS:g} gear revolutions"
+        f"{shortest}, {speed:.0f} rpm, {sources[shortest]}): the gear-order lines are not resolved there, and what "
+        "a gear effect puts into them depends on where in the gear's turn the segment lies, which the model follows "
+        "along one ramp but not from one ramp record to another, nor to the damaged tooth, so a gear effect may be "
+        f"judged wrongly; a ramp at most {rate:.0f} rpm/s at {speed:.0f} rpm gives its segments "
+        f"{RESOLVED_GEAR_REVOLUTIONS:g} gear revolutions"
     ]
 
 
@@ -545,6 +529,7 @@ __all__ = [
     "segment_notes",
     "MAX_SPEED_CHANGE",
     "MIN_REVOLUTIONS",
+    "RAMP_SETTLING",
     "OP_SOURCE",
     "ramp_operating_points",
     "steady_campaign",

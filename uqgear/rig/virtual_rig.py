@@ -76,7 +76,7 @@ from .campaign_checks import (
 )
 from .features import SIGNAL_CHANNELS
 from .format import make_rig_dataset, write_rig
-from .ramp_records import OP_SOURCE
+from .ramp_segments import SOURCE_COORDINATES
 
 #: Pinion speeds (rpm) and drive torques (N m) of the public campaigns.
 DEFAULT_PINION_SPEEDS: tuple[float, ...] = (600.0, 800.0, 1250.0, 1700.0, 2200.0, 2800.0, 3400.0, 3800.0)
@@ -224,9 +224,10 @@ def _operating_table(design: Design, operating_points: xr.Dataset | Mapping[str,
     if operating_points is None:
         operating_points = default_operating_points()
     if isinstance(operating_points, xr.Dataset):
-        # op_source labels where a campaign's operating point came from (ramp_records); not a quantity
+        # where a campaign's operating point came from (ramp_records: its source, a segment's place on its
+        # ramp) is not a quantity it ran at
         raw = {str(name): operating_points[name].values for name in operating_points.variables
-               if operating_points[name].dims == ("op",) and name != OP_SOURCE}
+               if operating_points[name].dims == ("op",) and name not in SOURCE_COORDINATES}
     elif isinstance(operating_points, Mapping):
         raw = {str(name): np.asarray(values, dtype=float) for name, values in operating_points.items()}
     else:

@@ -318,18 +318,18 @@ def simulate_runup_campaign(
 
     Examples
     --------
-    A 0.5 s run-up 1500 -> 1700 rpm, then cut into speed bins:
+    A 1 s run-up 1500 -> 1700 rpm, then cut into speed bins (none within 0.15 s of either end):
 
     >>> import uqgear
     >>> from uqgear.rig.virtual_runup import simulate_runup_campaign
     >>> design = uqgear.load_design("locomotive")
-    >>> ramps = {"start_speed": [1500.0], "stop_speed": [1700.0], "rate": [400.0], "drive_torque": [7000.0]}
+    >>> ramps = {"start_speed": [1500.0], "stop_speed": [1700.0], "rate": [200.0], "drive_torque": [7000.0]}
     >>> campaign = simulate_runup_campaign(design, ramps, seed=3, channels=["te"])
     >>> dict(campaign.sizes), sorted(campaign.data_vars)
-    ({'ramp': 1, 'ramp_time': 10240}, ['ramp_pinion_speed_signal', 'ramp_te'])
+    ({'ramp': 1, 'ramp_time': 20480}, ['ramp_pinion_speed_signal', 'ramp_te'])
     >>> ops = uqgear.ramp_operating_points(campaign, segments=3)
     >>> [round(float(speed)) for speed in ops["pinion_speed"]]
-    [1533, 1600, 1667]
+    [1553, 1600, 1647]
     """
     seed_sequence = campaign_seed(seed)
     fs = check_positive("fs", fs)
