@@ -456,7 +456,6 @@ class CampaignSimulator:
         return SimulatedRun(dict(zip(self.channels, values)), False, "free")
 
 
-
 def _raw_signal(signals: Mapping[str, np.ndarray], channel: str) -> np.ndarray:
     """The simulated displacement a channel is made of (accelerations: its second derivative)."""
     if channel == "te":
