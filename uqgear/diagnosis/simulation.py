@@ -24,7 +24,7 @@ from ..physics.model import HISTORY_COLUMNS, ModelSetup, build_model
 from ..physics.pitch_errors import PitchErrors
 from ..physics.runup import runup_history
 from ..physics.speed_profile import SpeedProfile
-from ..rig.order_tracking import angle_resampled, tachometer_angle
+from ..rig.order_tracking import angle_resampled, integrated_angle
 from ..rig.ramp_segments import SEGMENT_GUARD, SEGMENT_LEAD, SegmentCleaner, SegmentProfile
 from ..rig.virtual_rig import frequency_filter
 from .errors import DiagnosisError
@@ -527,9 +527,7 @@ class SegmentRunner:
             if segment is None:
                 raise RuntimeError(f"internal: run {op} is not a ramp segment")
             speed = segment.speed_at(self.campaign.grid.rig_time)
-            angle = tachometer_angle(speed, self.campaign.fs).angle
-            if angle is None:
-                raise RuntimeError(f"internal: the speed of ramp segment {op} leaves the model's range")
+            angle = integrated_angle(speed, self.campaign.fs)
             profile = segment.profile(SEGMENT_LEAD, SEGMENT_GUARD)
             cleaner = SegmentCleaner(speed, self.campaign.fs, self.campaign.design)
             self._readings[op] = _SegmentReading(segment, profile, cleaner, angle)

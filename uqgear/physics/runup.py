@@ -461,14 +461,7 @@ def simulate_runup(
         design,
         profile,
         (drive_torque, adhesion_torque, mesh_stiffness_scale),
-        {
-            "effects": tuple(effects),
-            "damping_in_separation": damping_in_separation,
-            "stiffness": stiffness,
-            "steps_per_mode": steps_per_mode,
-            "run_in_periods": run_in_periods,
-            "threads": 1,
-        },
+        _run_options(effects, damping_in_separation, stiffness, steps_per_mode, run_in_periods, 1),
         sample_rate,
         initial_state,
         (method, rtol, atol),
@@ -558,14 +551,7 @@ def simulate_runup_batch(
     setups = build_batch(
         design, full, effects=effects, damping_in_separation=damping_in_separation, stiffness=stiffness
     )
-    options = {
-        "effects": tuple(effects),
-        "damping_in_separation": damping_in_separation,
-        "stiffness": stiffness,
-        "steps_per_mode": steps_per_mode,
-        "run_in_periods": run_in_periods,
-        "threads": threads,
-    }
+    options = _run_options(effects, damping_in_separation, stiffness, steps_per_mode, run_in_periods, threads)
     states = _batch_states(design, full, options, initial_states)
     out_t = _output_times(profile, float(sample_rate))
     plans = _plans(setups, steps_per_mode, profile, out_t)
@@ -593,6 +579,25 @@ def simulate_runup_batch(
         )
     )
     return ds
+
+
+def _run_options(
+    effects: Sequence[Effect],
+    damping_in_separation: bool,
+    stiffness: str,
+    steps_per_mode: int,
+    run_in_periods: int,
+    threads: int | None,
+) -> dict[str, Any]:
+    """The model and integration options a run-up passes to its run-in and its set-ups."""
+    return {
+        "effects": tuple(effects),
+        "damping_in_separation": damping_in_separation,
+        "stiffness": stiffness,
+        "steps_per_mode": steps_per_mode,
+        "run_in_periods": run_in_periods,
+        "threads": threads,
+    }
 
 
 def _run(
@@ -668,14 +673,7 @@ def runup_history(
     >>> history.shape, bool(np.array_equal(history[:, 0], run["y1"].values))
     ((513, 12), True)
     """
-    options = {
-        "effects": tuple(effects),
-        "damping_in_separation": True,
-        "stiffness": "ishikawa",
-        "steps_per_mode": steps_per_mode,
-        "run_in_periods": run_in_periods,
-        "threads": 1,
-    }
+    options = _run_options(effects, True, "ishikawa", steps_per_mode, run_in_periods, 1)
     _, out_t, history, _ = _run(
         design, profile, (drive_torque, adhesion_torque, mesh_stiffness_scale), options, sample_rate, None,
         ("fast", 1e-10, None),

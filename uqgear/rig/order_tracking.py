@@ -238,14 +238,27 @@ def estimate_pinion_angle(
     return AngleEstimate(angle - angle[0], angle_std, lines, weights=tuple(float(w) for w in weights))
 
 
+def integrated_angle(speed: np.ndarray, fs: float) -> np.ndarray:
+    """Pinion angle (rad, 0 at the first sample) integrated from speeds in rpm sampled at ``fs`` Hz (trapezoidal
+    rule): the tachometer's angle, and the one a ramp segment's cleaning and model read.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from uqgear.rig.order_tracking import integrated_angle
+    >>> round(float(integrated_angle(np.full(1001, 600.0), 1000.0)[-1] / (2 * np.pi)), 6)  # 10 rev/s for 1 s
+    10.0
+    """
+    rate = 2.0 * math.pi * np.asarray(speed, dtype=float) / 60.0
+    return np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
+
+
 def tachometer_angle(speed_signal: np.ndarray, fs: float) -> AngleEstimate:
-    """Pinion angle (rad) integrated from an instantaneous speed record in rpm (trapezoidal rule)."""
+    """Pinion angle (rad) integrated from an instantaneous speed record in rpm (:func:`integrated_angle`)."""
     speed = np.asarray(speed_signal, dtype=float)
     if not np.all(np.isfinite(speed)) or np.any(speed <= 0):
         return AngleEstimate(None, math.nan, (), f"{TACHOMETER_VARIABLE} has non-finite or non-positive speeds")
-    rate = 2.0 * math.pi * speed / 60.0
-    angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
-    return AngleEstimate(angle, 0.0, (TACHOMETER_VARIABLE,))
+    return AngleEstimate(integrated_angle(speed, fs), 0.0, (TACHOMETER_VARIABLE,))
 
 
 def resample_to_angle(records: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -692,6 +705,7 @@ __all__ = [
     "AngleEstimate",
     "estimate_pinion_angle",
     "tachometer_angle",
+    "integrated_angle",
     "resample_to_angle",
     "track_orders",
     "check_tracking_mode",

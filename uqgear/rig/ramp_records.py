@@ -69,7 +69,7 @@ import xarray as xr
 from ..common.errors import RigDataError
 from ..physics.design import Design
 from .format import RIG_COORDINATES, rig_design
-from .order_tracking import TACHOMETER_VARIABLE
+from .order_tracking import TACHOMETER_VARIABLE, integrated_angle
 from .ramp_format import RAMP_CHANNELS, RAMP_COORDINATES, RAMP_TACHOMETER, RAMP_VARIABLES, has_ramps
 from .ramp_segments import OP_SOURCE, SEGMENT_ANGLE, SEGMENT_LEAD, SEGMENT_TIME, SegmentCleaner
 from .sampling import SIGNAL_CHANNELS, sampling_rate
@@ -273,9 +273,9 @@ def _segment_dataset(
         tachometer.astype(np.float32),
         {"units": "rpm", "long_name": "pinion speed (tachometer)"},
     )
-    # where each segment starts on its ramp: the pinion angle turned (trapezoidal rule on the tachometer, as the
-    # order tracking integrates it) and the time since the ramp record's first sample
-    turned = [np.concatenate([[0.0], np.cumsum(0.5 * (row[1:] + row[:-1]))]) * (np.pi / 30.0 / fs) for row in speeds]
+    # where each segment starts on its ramp: the pinion angle turned (as the order tracking integrates the
+    # tachometer) and the time since the ramp record's first sample
+    turned = [integrated_angle(row, fs) for row in speeds]
     coords: dict[str, tuple] = {
         "time": ("time", np.arange(size) / fs),
         "pinion_speed": ("op", tachometer.mean(axis=1)),

@@ -37,8 +37,8 @@ from ..physics.design import Design
 from ..physics.effects import Effect
 from ..physics.speed_profile import SpeedProfile
 from .features import feature_definitions
-from .order_tracking import TACHOMETER_VARIABLE
-from .sampling import DEFAULT_BAND_FRACTION
+from .order_tracking import TACHOMETER_VARIABLE, integrated_angle
+from .sampling import DEFAULT_BAND_FRACTION, sampling_rate
 
 #: Time (s) the model is driven through the ramp before a segment's first sample: the gear's response
 #: at a speed depends on the speeds before it; 0.15 s is about 8 time constants of the slowest linear
@@ -183,8 +183,7 @@ def segment_profiles(dataset: xr.Dataset, tracked: Sequence[bool] | None = None)
     """
     if OP_SOURCE not in dataset.coords or TACHOMETER_VARIABLE not in dataset.data_vars:
         return (None,) * int(dataset.sizes.get("op", 0))
-    time = np.asarray(dataset["time"].values, dtype=float)
-    fs = 1.0 / float(time[1] - time[0])
+    fs = sampling_rate(dataset["time"].values, where="time")
     speeds = np.asarray(dataset[TACHOMETER_VARIABLE].values, dtype=float)
     size = speeds.shape[0]
     angles, times = (
@@ -249,8 +248,7 @@ class SegmentCleaner:
         speed = np.asarray(speed, dtype=float)
         size = speed.size
         lines, carriers = line_orders(design, fs, float(np.max(speed)))
-        rate = 2.0 * math.pi * speed / 60.0
-        angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) / fs)])
+        angle = integrated_angle(speed, fs)
         centred = (np.arange(size) - 0.5 * (size - 1)) / size
         phases = np.concatenate([lines, carriers])[None, :] * angle[:, None]
         constant = np.concatenate([np.cos(phases[:, : lines.size]), np.sin(phases[:, : lines.size])], axis=1)
